@@ -1,0 +1,87 @@
+"""Canonical channel names of the rig-session format and their quantities.
+
+The names, corners and sign conventions are those of
+``shared/spec/rig-session.md``: vertical displacements positive up; shock
+deflection, velocity and force, spring force and tire force positive in
+compression.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "CORNERS",
+    "AERO_INPUTS",
+    "WHEELLOADER_INPUTS",
+    "RIG_INPUTS",
+    "RESPONSE_KINDS",
+    "RESPONSE_CHANNELS",
+    "SHOCK_VELOCITIES",
+    "SHOCK_FORCES",
+    "ALL_CHANNELS",
+    "quantity_of",
+    "corner_of",
+    "kind_of",
+]
+
+CORNERS = ("LF", "RF", "LR", "RR")
+AERO_INPUTS = ("aero_heave", "aero_roll", "aero_pitch")
+WHEELLOADER_INPUTS = tuple(f"wheelloader_{c}" for c in CORNERS)
+#: The 7 rig inputs, in the order used for every input vector.
+RIG_INPUTS = AERO_INPUTS + WHEELLOADER_INPUTS
+
+#: Measured response kinds and their physical quantity.
+RESPONSE_KINDS = {
+    "shock_velocity": "velocity",
+    "shock_force": "force",
+    "shock_travel": "displacement",
+    "tire_force": "force",
+    "ride_height": "displacement",
+    "chassis_accel": "acceleration",
+    "wheel_accel": "acceleration",
+    "spring_force": "force",
+}
+RESPONSE_CHANNELS = tuple(f"{k}_{c}" for k in RESPONSE_KINDS for c in CORNERS)
+SHOCK_VELOCITIES = tuple(f"shock_velocity_{c}" for c in CORNERS)
+SHOCK_FORCES = tuple(f"shock_force_{c}" for c in CORNERS)
+ALL_CHANNELS = RIG_INPUTS + RESPONSE_CHANNELS
+
+_INPUT_QUANTITY = {"aero_heave": "force", "aero_roll": "moment", "aero_pitch": "moment"}
+_INPUT_QUANTITY.update({w: "displacement" for w in WHEELLOADER_INPUTS})
+
+
+def kind_of(channel):
+    """Return the response kind of a channel (``"tire_force_LF"`` -> ``"tire_force"``).
+
+    Rig inputs return their own name.
+    """
+    if channel in _INPUT_QUANTITY:
+        return channel
+    kind, _, corner = channel.rpartition("_")
+    if kind in RESPONSE_KINDS and corner in CORNERS:
+        return kind
+    raise ValueError(
+        f"unknown channel {channel!r}; canonical channels are the rig inputs "
+        f"{list(RIG_INPUTS)} and '<kind>_<corner>' with kind in {list(RESPONSE_KINDS)} "
+        f"and corner in {list(CORNERS)}"
+    )
+
+
+def corner_of(channel):
+    """Return the corner of a per-corner channel, or ``None`` for aero inputs."""
+    if channel in AERO_INPUTS:
+        return None
+    kind_of(channel)
+    return channel.rpartition("_")[2]
+
+
+def quantity_of(channel):
+    """Return the physical quantity of a canonical channel (key of ``units.TO_SI``).
+
+    Examples
+    --------
+    >>> quantity_of("aero_roll"), quantity_of("shock_velocity_RR")
+    ('moment', 'velocity')
+    """
+    if channel in _INPUT_QUANTITY:
+        return _INPUT_QUANTITY[channel]
+    return RESPONSE_KINDS[kind_of(channel)]

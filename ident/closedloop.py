@@ -1,0 +1,685 @@
+"""Closed-loop simulation of a linear vehicle model with nonlinear shock absorbers.
+
+This is the one simulator of the project: the virtual rig runs the physical
+full-car model through it, the planner runs identified models through it.
+
+The linear part is a :class:`LoopPlant`: an LTI system with inputs
+``[u_rig (7), dF (4)]`` and outputs ``y`` (the shock velocities among them),
+written around a baseline linear damping ``c_bar`` (Eq. 20 of the seed paper):
+the applied shock force of corner ``i`` is ``F_i = c_bar_i v_i + dF_i``. Each
+shock is a static force-velocity curve ``f`` (piecewise linear) behind a
+first-order lag ``tau dF/dt + F = f(v)``.
+
+Notes
+-----
+Discretization. The plant is held in modal form (one complex state per
+conjugate pole pair or real pole) and every mode is discretized *exactly* for
+inputs that are piecewise linear between samples (first-order hold)::
+
+    x[k+1] = exp(lam h) x[k] + g0 (B u[k]) + g1 (B u[k+1])
+
+so the state at step ``k+1`` depends on the input at ``k+1``: with the shocks
+in the loop this is an algebraic loop ``v[k] = v_free[k] + D_eff dF(v[k])``.
+It is solved at every step by Newton's method on the 4 shock equations (never
+broken by a one-sample delay). The lag is discretized the same way (exact for
+a piecewise-linear ``f(v(t))``). The only approximation is that ``dF`` is
+piecewise linear between internal samples; ``oversample`` refines the
+internal step (rig inputs are interpolated linearly, consistent with the hold).
+
+The rig-input part of the response does not depend on the shocks: it is
+computed once per drive (:func:`rig_response`) and shared by all setups.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+from scipy import signal
+
+from ident.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES
+
+__all__ = [
+    "ModalSystem",
+    "LoopPlant",
+    "RigResponse",
+    "Response",
+    "BatchResponse",
+    "modal_form",
+    "foh_coefficients",
+    "lag_coefficients",
+    "rig_response",
+    "simulate",
+    "simulate_batch",
+]
+
+log = logging.getLogger(__name__)
+
+_REAL_TOL = 1e-9  # |Im(lam)| / |lam| below which a pole is taken as real
+
+
+@dataclass(frozen=True, eq=False)
+class ModalSystem:
+    """A continuous-time LTI system in diagonal (modal) form.
+
+    ``x' = diag(lam) x + B u``, ``y = Re(C x) + D u``. A complex conjugate pole
+    pair is held as one complex state (the one with positive imaginary part)
+    whose output coefficients carry the factor 2; a real pole is a state with
+    real coefficients.
+
+    Attributes
+    ----------
+    lam : ndarray of complex, shape (n,)
+        Poles [rad/s].
+    B : ndarray of complex, shape (n, m)
+    C : ndarray of complex, shape (p, n)
+    D : ndarray of float, shape (p, m)
+    """
+
+    lam: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+
+    @property
+    def n_states(self):
+        """Number of modal states (pairs count once)."""
+        return self.lam.size
+
+    def frequency_response(self, f_hz):
+        """Frequency response ``H[output, input, frequency]``, shape (p, m, n_f).
+
+        Uses ``Re(C x)`` with the conjugate pair restored exactly:
+        ``H = (C diag(1/(s-lam)) B + conj(C) diag(1/(s-conj(lam))) conj(B)) / 2 + D``
+        for the modal states (real poles give the same formula).
+        """
+        s = 2j * np.pi * np.atleast_1d(np.asarray(f_hz, dtype=float))
+        r1 = 1.0 / (s[None, :] - self.lam[:, None])  # (n, nf)
+        r2 = 1.0 / (s[None, :] - np.conj(self.lam)[:, None])
+        H = 0.5 * (np.einsum("pn,nf,nm->pmf", self.C, r1, self.B)
+                   + np.einsum("pn,nf,nm->pmf", np.conj(self.C), r2, np.conj(self.B)))
+        return H + self.D[:, :, None]
+
+    def select(self, outputs=None, inputs=None):
+        """Return the subsystem of some outputs and inputs (index arrays)."""
+        C, D, B = self.C, self.D, self.B
+        if outputs is not None:
+            C, D = C[outputs], D[outputs]
+        if inputs is not None:
+            B, D = B[:, inputs], D[:, inputs]
+        return ModalSystem(self.lam, B, C, D)
+
+
+def modal_form(A, B, C, D, *, max_condition=1e10):
+    """Convert a real state-space system to :class:`ModalSystem`.
+
+    Parameters
+    ----------
+    A, B, C, D : array_like
+        Real matrices of shapes (n, n), (n, m), (p, n), (p, m).
+    max_condition : float
+        Largest accepted condition number of the eigenvector matrix.
+
+    Returns
+    -------
+    ModalSystem
+
+    Raises
+    ------
+    ValueError
+        If ``A`` is (nearly) defective: its eigenvectors are too ill
+        conditioned for a modal realization.
+    """
+    A, B, C, D = (np.asarray(x, dtype=float) for x in (A, B, C, D))
+    lam, V = np.linalg.eig(A)
+    cond = np.linalg.cond(V)
+    if not np.isfinite(cond) or cond > max_condition:
+        raise ValueError(
+            f"modal_form: the state matrix is nearly defective (eigenvector condition number "
+            f"{cond:.3g} > {max_condition:.3g}); perturb repeated poles or use another realization"
+        )
+    Bm = np.linalg.solve(V, B)
+    Cm = C @ V
+    keep, scale = [], []
+    for i, li in enumerate(lam):
+        if abs(li.imag) <= _REAL_TOL * max(abs(li), 1e-300):
+            keep.append(i)
+            scale.append(1.0)
+        elif li.imag > 0:
+            keep.append(i)
+            scale.append(2.0)
+    keep = np.array(keep, dtype=int)
+    scale = np.array(scale)
+    lam_k = lam[keep].copy()
+    real = scale == 1.0
+    lam_k[real] = lam_k[real].real
+    Bk = Bm[keep]
+    Ck = Cm[:, keep] * scale[None, :]
+    # real modes: make the coefficients real (eigenvector of a real pole is real up to a phase)
+    for j in np.flatnonzero(real):
+        ph = np.exp(-1j * np.angle(Bk[j][np.argmax(np.abs(Bk[j]))])) if np.any(Bk[j]) else 1.0
+        Bk[j] *= ph
+        Ck[:, j] /= ph
+    order = np.lexsort((lam_k.imag, lam_k.real))
+    return ModalSystem(lam=lam_k[order], B=Bk[order], C=Ck[:, order], D=D.copy())
+
+
+def foh_coefficients(lam, h):
+    """Exact first-order-hold discretization coefficients of modes ``x' = lam x + u``.
+
+    Parameters
+    ----------
+    lam : array_like of complex, shape (n,)
+        Continuous poles [rad/s].
+    h : float
+        Step [s].
+
+    Returns
+    -------
+    phi, g0, g1 : ndarray of complex, shape (n,)
+        ``x[k+1] = phi x[k] + g0 u[k] + g1 u[k+1]`` for ``u`` linear over the step.
+    """
+    lam = np.asarray(lam, dtype=complex)
+    z = lam * h
+    phi = np.exp(z)
+    small = np.abs(z) < 1e-3
+    zs = np.where(small, 1.0, z)
+    # g1n = (e^z - 1)/z, g2n = (e^z - 1 - z)/z^2 (normalized by h); series for small z
+    em1 = np.expm1(zs)
+    g1n = np.where(small, 1 + z / 2 + z**2 / 6 + z**3 / 24, em1 / zs)
+    g2n = np.where(small, 0.5 + z / 6 + z**2 / 24 + z**3 / 120, (em1 - zs) / zs**2)
+    g1 = g2n * h
+    g0 = (g1n - g2n) * h
+    return phi, g0, g1
+
+
+def lag_coefficients(lag_s, h):
+    """First-order-hold discretization of the shock lag ``tau F' + F = f``.
+
+    Returns ``(alpha, b0, b1)`` such that ``F[k] = alpha F[k-1] + b1 f[k-1] + b0 f[k]``,
+    exact when ``f(v(t))`` is linear over the step; ``tau = 0`` gives ``F = f``.
+    """
+    tau = np.asarray(lag_s, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        alpha = np.where(tau > 0, np.exp(-h / np.where(tau > 0, tau, 1.0)), 0.0)
+        r = np.where(tau > 0, tau / h * (1 - alpha), 0.0)
+    b0 = 1 - r
+    b1 = r - alpha
+    return alpha, b0, b1
+
+
+@dataclass(frozen=True, eq=False)
+class LoopPlant:
+    """A linear vehicle model ready for the closed loop with shocks.
+
+    Attributes
+    ----------
+    modal : ModalSystem
+        Inputs ``RIG_INPUTS + dF_LF..dF_RR`` (11), outputs ``output_names``.
+    output_names : tuple of str
+        Canonical channel names; must contain the 4 ``shock_velocity_XX``.
+    cbar_n_s_m : ndarray, shape (4,)
+        Baseline linear damping the model is written around [N/(m/s)].
+    name : str
+    """
+
+    modal: ModalSystem
+    output_names: tuple
+    cbar_n_s_m: np.ndarray
+    name: str = "plant"
+    velocity_idx: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        missing = [v for v in SHOCK_VELOCITIES if v not in self.output_names]
+        if missing:
+            raise ValueError(f"plant {self.name!r}: outputs lack {missing}; the shock loop needs "
+                             "the 4 shock velocities")
+        if self.modal.B.shape[1] != 11:
+            raise ValueError(f"plant {self.name!r}: needs 11 inputs (7 rig + 4 dF), "
+                             f"got {self.modal.B.shape[1]}")
+        cbar = np.asarray(self.cbar_n_s_m, dtype=float).reshape(4)
+        object.__setattr__(self, "cbar_n_s_m", cbar)
+        idx = np.array([self.output_names.index(v) for v in SHOCK_VELOCITIES])
+        object.__setattr__(self, "velocity_idx", idx)
+
+    @classmethod
+    def from_state_space(cls, A, B, C, D, output_names, cbar_n_s_m, *, name="plant"):
+        """Build from real state-space matrices whose last 4 inputs are ``dF``."""
+        return cls(modal_form(A, B, C, D), tuple(output_names), np.asarray(cbar_n_s_m, float),
+                   name=name)
+
+
+@dataclass(frozen=True, eq=False)
+class RigResponse:
+    """The part of a plant's response driven by the rig inputs alone (``dF = 0``).
+
+    Computed once per drive and shared by every setup.
+
+    Attributes
+    ----------
+    x : ndarray of complex, shape (n_modes, n_fine)
+        Modal states on the internal grid.
+    u_fine : ndarray, shape (n_fine, 7)
+        Rig inputs interpolated on the internal grid.
+    fs_hz : float
+        The drive's sample rate [Hz].
+    oversample : int
+        Internal steps per drive sample.
+    """
+
+    x: np.ndarray
+    u_fine: np.ndarray
+    fs_hz: float
+    oversample: int
+    n_samples: int
+    plant_name: str
+
+
+def _interp_fine(u, r):
+    """Linear interpolation of (N, m) samples onto r sub-steps: (N-1)*r + 1 rows."""
+    if r == 1:
+        return np.ascontiguousarray(u, dtype=float)
+    n = u.shape[0]
+    t = np.arange((n - 1) * r + 1) / r
+    return np.column_stack([np.interp(t, np.arange(n), u[:, j]) for j in range(u.shape[1])])
+
+
+def _modal_filter(phi, g0, g1, w, axis=-1):
+    """Run the exact-hold recursion of every mode: w has the mode axis first."""
+    # x[k] = phi x[k-1] + g1 w[k] + g0 w[k-1], zero initial state
+    out = np.empty(w.shape, dtype=complex)
+    for i in range(phi.size):
+        out[i] = signal.lfilter([g1[i], g0[i]], [1.0, -phi[i]], w[i], axis=axis)
+    return out
+
+
+def _drive_array(drive):
+    if hasattr(drive, "as_array"):
+        return np.asarray(drive.as_array(), dtype=float), float(drive.fs_hz)
+    raise TypeError(f"drive must be an ident.drive.Drive, got {type(drive).__name__}")
+
+
+def rig_response(plant, drive, *, oversample=4):
+    """Compute the setup-independent, rig-input part of the response.
+
+    Parameters
+    ----------
+    plant : LoopPlant
+    drive : ident.drive.Drive
+    oversample : int
+        Internal steps per drive sample (>= 1).
+
+    Returns
+    -------
+    RigResponse
+    """
+    r = _check_oversample(oversample)
+    u, fs = _drive_array(drive)
+    u_fine = _interp_fine(u, r)
+    h = 1.0 / (fs * r)
+    phi, g0, g1 = foh_coefficients(plant.modal.lam, h)
+    w = plant.modal.B[:, :7] @ u_fine.T  # (n, n_fine)
+    x = _modal_filter(phi, g0, g1, w)
+    return RigResponse(x=x, u_fine=u_fine, fs_hz=fs, oversample=r, n_samples=u.shape[0],
+                       plant_name=plant.name)
+
+
+def _check_oversample(oversample):
+    if isinstance(oversample, bool) or not isinstance(oversample, (int, np.integer)) or oversample < 1:
+        raise ValueError(f"oversample must be a positive integer, got {oversample!r}")
+    return int(oversample)
+
+
+# ----------------------------------------------------------------------------------------------
+# the compiled loop
+# ----------------------------------------------------------------------------------------------
+
+import numba as _nb  # noqa: E402
+
+
+@_nb.njit(cache=True, inline="always")
+def _pwl(v, kv, kf, nk, slo, shi):
+    """Force and slope of a piecewise-linear curve with linear end extensions."""
+    if v <= kv[0]:
+        return kf[0] + slo * (v - kv[0]), slo
+    if v >= kv[nk - 1]:
+        return kf[nk - 1] + shi * (v - kv[nk - 1]), shi
+    lo = 0
+    hi = nk - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if kv[mid] <= v:
+            lo = mid
+        else:
+            hi = mid
+    s = (kf[hi] - kf[lo]) / (kv[hi] - kv[lo])
+    return kf[lo] + s * (v - kv[lo]), s
+
+
+@_nb.njit(cache=True)
+def _solve_small(J, r, m):
+    """Solve J d = r in place (r <- d) by Gaussian elimination with partial pivoting."""
+    for c in range(m):
+        p = c
+        big = abs(J[c, c])
+        for i in range(c + 1, m):
+            if abs(J[i, c]) > big:
+                big = abs(J[i, c])
+                p = i
+        if p != c:
+            for j in range(m):
+                tmp = J[c, j]
+                J[c, j] = J[p, j]
+                J[p, j] = tmp
+            tmp = r[c]
+            r[c] = r[p]
+            r[p] = tmp
+        for i in range(c + 1, m):
+            fct = J[i, c] / J[c, c]
+            for j in range(c, m):
+                J[i, j] -= fct * J[c, j]
+            r[i] -= fct * r[c]
+    for c in range(m - 1, -1, -1):
+        acc = r[c]
+        for j in range(c + 1, m):
+            acc -= J[c, j] * r[j]
+        r[c] = acc / J[c, c]
+
+
+@_nb.njit(cache=True)
+def _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
+              alpha, b0, b1, dF_out, v_out, F_out):
+    """Time loop of one setup. Returns the largest Newton iteration count (-1: no convergence)."""
+    n = phi.size
+    m = 4
+    N = v_rig.shape[0]
+    x = np.zeros(n, dtype=np.complex128)
+    dF_prev = np.zeros(m)
+    F_prev = np.zeros(m)
+    f_prev = np.zeros(m)
+    v = np.zeros(m)
+    vfree = np.zeros(m)
+    c0 = np.zeros(m)
+    fv = np.zeros(m)
+    sv = np.zeros(m)
+    res = np.zeros(m)
+    J = np.zeros((m, m))
+    worst = 0
+    failed = False
+    for k in range(N):
+        # predictor: x[k] without the unknown g1 * B dF[k] term
+        for i in range(n):
+            acc = 0j
+            for j in range(m):
+                acc += Bf[i, j] * dF_prev[j]
+            x[i] = phi[i] * x[i] + g0[i] * acc
+        for c in range(m):
+            acc = 0.0
+            for i in range(n):
+                acc += (Cv[c, i] * x[i]).real
+            vfree[c] = v_rig[k, c] + acc
+            c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c]
+        # Newton on r(v) = v - vfree - Deff (c0 + b0 f(v) - cbar v) = 0, from the last v
+        it = 0
+        while True:
+            for c in range(m):
+                fv[c], sv[c] = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+            for c in range(m):
+                acc = 0.0
+                for j in range(m):
+                    acc += Deff[c, j] * (c0[j] + b0[j] * fv[j] - cbar[j] * v[j])
+                    J[c, j] = -Deff[c, j] * (b0[j] * sv[j] - cbar[j])
+                res[c] = vfree[c] + acc - v[c]
+                J[c, c] += 1.0
+            _solve_small(J, res, m)
+            step = 0.0
+            scale = 1e-9
+            damp = 1.0 if it < 25 else 0.5
+            for c in range(m):
+                v[c] += damp * res[c]
+                step = max(step, abs(res[c]))
+                scale = max(scale, abs(v[c]))
+            it += 1
+            if step <= 1e-11 * scale:
+                break
+            if it >= 80:
+                failed = True
+                break
+        if it > worst:
+            worst = it
+        for c in range(m):
+            fv[c], sv[c] = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+            F = c0[c] + b0[c] * fv[c]
+            dF = F - cbar[c] * v[c]
+            dF_out[k, c] = dF
+            v_out[k, c] = v[c]
+            F_out[k, c] = F
+            F_prev[c] = F
+            f_prev[c] = fv[c]
+            dF_prev[c] = dF
+        # corrector: complete x[k] with g1 * B dF[k]
+        for i in range(n):
+            acc = 0j
+            for j in range(m):
+                acc += Bf[i, j] * dF_prev[j]
+            x[i] += g1[i] * acc
+    return -1 if failed else worst
+
+
+@_nb.njit(cache=True, parallel=True)
+def _loop_batch(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
+                alpha, b0, b1, dF_out, v_out, F_out, iters):
+    for s in _nb.prange(kv.shape[0]):
+        iters[s] = _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv[s], kf[s], nk[s],
+                             slo[s], shi[s], alpha[s], b0[s], b1[s], dF_out[s], v_out[s],
+                             F_out[s])
+
+
+# ----------------------------------------------------------------------------------------------
+# setups
+# ----------------------------------------------------------------------------------------------
+
+def _setup_models(setup, where):
+    """Return the 4 shock models (LF, RF, LR, RR) of a setup."""
+    if isinstance(setup, Mapping):
+        missing = [c for c in CORNERS if c not in setup]
+        extra = [c for c in setup if c not in CORNERS]
+        if missing or extra:
+            raise ValueError(f"{where}: a setup needs exactly the corners {list(CORNERS)}; "
+                             f"missing {missing}, unknown {extra}")
+        models = [setup[c] for c in CORNERS]
+    else:
+        models = list(setup)
+        if len(models) != 4:
+            raise ValueError(f"{where}: a setup needs 4 shock models (LF, RF, LR, RR), "
+                             f"got {len(models)}")
+    for c, mdl in zip(CORNERS, models):
+        if not hasattr(mdl, "to_pwl") or not hasattr(mdl, "lag_s"):
+            raise TypeError(f"{where}: corner {c} is {type(mdl).__name__}, not a shock model "
+                            "(ident.shocks.ShockModel); resolve shock ids with the library first")
+    return models
+
+
+def _pack_setups(setups, h):
+    """Pack setups into padded arrays for the compiled loop."""
+    S = len(setups)
+    pwls = [[m.to_pwl() for m in models] for models in setups]
+    K = max(p.v_knots_m_s.size for row in pwls for p in row)
+    kv = np.zeros((S, 4, K))
+    kf = np.zeros((S, 4, K))
+    nk = np.zeros((S, 4), dtype=np.int64)
+    slo = np.zeros((S, 4))
+    shi = np.zeros((S, 4))
+    lag = np.zeros((S, 4))
+    for s, (row, models) in enumerate(zip(pwls, setups)):
+        for c, (p, mdl) in enumerate(zip(row, models)):
+            k = p.v_knots_m_s.size
+            kv[s, c, :k] = p.v_knots_m_s
+            kf[s, c, :k] = p.f_knots_n
+            kv[s, c, k:] = p.v_knots_m_s[-1]
+            kf[s, c, k:] = p.f_knots_n[-1]
+            nk[s, c] = k
+            slo[s, c] = p.slope_below
+            shi[s, c] = p.slope_above
+            lag[s, c] = mdl.lag_s
+    alpha, b0, b1 = lag_coefficients(lag, h)
+    return kv, kf, nk, slo, shi, alpha, b0, b1
+
+
+# ----------------------------------------------------------------------------------------------
+# results and public functions
+# ----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class BatchResponse:
+    """Closed-loop responses of several setups to one drive.
+
+    Attributes
+    ----------
+    channels : dict of str -> ndarray, shape (n_setups, n_samples)
+        Every plant output plus ``shock_force_XX`` (the applied force), SI,
+        at the drive's sample rate.
+    fs_hz : float
+    setups : tuple
+        The setups as given (tuples of 4 shock models).
+    newton_iterations : ndarray of int, shape (n_setups,)
+        Largest Newton iteration count per setup.
+    settings : dict
+        ``oversample``, ``plant``, ``drive``.
+    """
+
+    channels: dict
+    fs_hz: float
+    setups: tuple
+    newton_iterations: np.ndarray
+    settings: dict
+
+    @property
+    def n_setups(self):
+        """Number of setups."""
+        return len(self.setups)
+
+    @property
+    def time_s(self):
+        """Sample times [s], shape (n_samples,)."""
+        n = next(iter(self.channels.values())).shape[-1]
+        return np.arange(n) / self.fs_hz
+
+    def response(self, i):
+        """The :class:`Response` of setup `i`."""
+        return Response(channels={k: v[i] for k, v in self.channels.items()}, fs_hz=self.fs_hz,
+                        setup=self.setups[i], newton_iterations=int(self.newton_iterations[i]),
+                        settings=self.settings)
+
+
+@dataclass(frozen=True, eq=False)
+class Response:
+    """Closed-loop response of one setup to one drive (see :class:`BatchResponse`)."""
+
+    channels: dict
+    fs_hz: float
+    setup: tuple
+    newton_iterations: int
+    settings: dict
+
+    @property
+    def time_s(self):
+        """Sample times [s], shape (n_samples,)."""
+        n = next(iter(self.channels.values())).shape[-1]
+        return np.arange(n) / self.fs_hz
+
+
+def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None):
+    """Simulate several shock setups on one plant and drive, in closed loop.
+
+    Parameters
+    ----------
+    plant : LoopPlant
+    drive : ident.drive.Drive
+        The 7 rig inputs, SI.
+    setups : sequence of setups
+        Each a mapping corner -> shock model or a sequence of 4 shock models
+        (LF, RF, LR, RR) with ``to_pwl()`` and ``lag_s`` (:mod:`ident.shocks`).
+    oversample : int, default 4
+        Internal steps per drive sample.
+    outputs : sequence of str, optional
+        Plant outputs to return (default all); ``shock_force_XX`` are always
+        returned.
+    rig : RigResponse, optional
+        A precomputed :func:`rig_response` of this plant, drive and
+        oversampling (reuse it across calls).
+
+    Returns
+    -------
+    BatchResponse
+
+    Raises
+    ------
+    ValueError
+        On a malformed setup, an unknown output, or if Newton's method does
+        not converge (an unstable or ill-posed loop).
+    """
+    r = _check_oversample(oversample)
+    models = [_setup_models(s, f"setup {i}") for i, s in enumerate(setups)]
+    if not models:
+        raise ValueError("simulate_batch: no setups given")
+    if rig is None:
+        rig = rig_response(plant, drive, oversample=r)
+    elif rig.oversample != r or rig.plant_name != plant.name:
+        raise ValueError("simulate_batch: the given rig response was computed for another plant "
+                         "or oversampling; recompute it with rig_response()")
+    fs = rig.fs_hz
+    h = 1.0 / (fs * r)
+    md = plant.modal
+    vi = plant.velocity_idx
+    phi, g0, g1 = foh_coefficients(md.lam, h)
+    Bf = np.ascontiguousarray(md.B[:, 7:])
+    Cv = np.ascontiguousarray(md.C[vi])
+    Deff = (np.real(Cv @ (g1[:, None] * Bf)) + md.D[np.ix_(vi, np.arange(7, 11))])
+    v_rig = np.ascontiguousarray((np.real(Cv @ rig.x) + md.D[vi, :7] @ rig.u_fine.T).T)
+    packed = _pack_setups(models, h)
+    S, Nf = len(models), v_rig.shape[0]
+    dF = np.zeros((S, Nf, 4))
+    v = np.zeros((S, Nf, 4))
+    F = np.zeros((S, Nf, 4))
+    iters = np.zeros(S, dtype=np.int64)
+    _loop_batch(phi, g0, g1, Bf, Cv, np.ascontiguousarray(Deff), v_rig, plant.cbar_n_s_m,
+                *packed, dF, v, F, iters)
+    if np.any(iters < 0):
+        bad = np.flatnonzero(iters < 0).tolist()
+        raise ValueError(f"closed loop of plant {plant.name!r}: Newton's method did not converge "
+                         f"for setups {bad}; the shock loop is ill-posed (check the shock curves "
+                         "and the model's stability, or raise oversample)")
+    # outputs at the drive's samples: rig part + shock part
+    names = list(plant.output_names) if outputs is None else list(outputs)
+    unknown = [o for o in names if o not in plant.output_names]
+    if unknown:
+        raise ValueError(f"unknown outputs {unknown}; the plant has {list(plant.output_names)}")
+    oi = np.array([plant.output_names.index(o) for o in names], dtype=int)
+    C, D = md.C[oi], md.D[oi]
+    sl = slice(None, None, r)
+    y_rig = np.real(C @ rig.x[:, sl]) + D[:, :7] @ rig.u_fine[sl].T  # (p, N)
+    w = np.einsum("nm,skm->snk", Bf, dF)  # (S, n, Nf)
+    xs = np.empty_like(w)
+    for i in range(phi.size):
+        xs[:, i] = signal.lfilter([g1[i], g0[i]], [1.0, -phi[i]], w[:, i], axis=-1)
+    y = (y_rig[None] + np.real(np.einsum("pn,snk->spk", C, xs[:, :, sl]))
+         + np.einsum("pm,skm->spk", D[:, 7:], dF[:, sl]))
+    channels = {name: y[:, j] for j, name in enumerate(names)}
+    for c, name in enumerate(SHOCK_FORCES):
+        channels[name] = F[:, sl, c]
+    settings = {"oversample": r, "plant": plant.name,
+                "drive": getattr(drive, "name", None) if drive is not None else None}
+    return BatchResponse(channels=channels, fs_hz=fs, setups=tuple(tuple(m) for m in models),
+                         newton_iterations=iters, settings=settings)
+
+
+def simulate(plant, drive, setup, *, oversample=4, outputs=None, rig=None):
+    """Simulate one shock setup on a plant and a drive in closed loop.
+
+    Same as :func:`simulate_batch` with one setup; returns a :class:`Response`.
+    """
+    return simulate_batch(plant, drive, [setup], oversample=oversample, outputs=outputs,
+                          rig=rig).response(0)

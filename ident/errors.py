@@ -1,0 +1,64 @@
+"""Exception and warning classes shared by :mod:`ident` and :mod:`planner`.
+
+Every error raised on user input subclasses :class:`ValueError` or
+:class:`TypeError` so that callers who do not know the project still catch it,
+and a project class so that callers who do can catch a whole family.
+"""
+
+__all__ = [
+    "ShockplanError",
+    "SessionError",
+    "ShockModelError",
+    "VehicleError",
+    "DriveError",
+    "IdentificationError",
+    "ModelFileError",
+    "PlannerError",
+    "ShockplanWarning",
+    "LowCoherenceWarning",
+    "FitWarning",
+]
+
+
+class ShockplanError(ValueError):
+    """Base class of the project's value errors (bad input with a fix hint)."""
+
+
+class SessionError(ShockplanError):
+    """A rig session folder, manifest or run file is malformed."""
+
+
+class ShockModelError(ShockplanError):
+    """A shock model or shock library is malformed."""
+
+
+class VehicleError(ShockplanError):
+    """A vehicle parameter file is malformed."""
+
+
+class DriveError(ShockplanError):
+    """A drive file or drive specification is malformed."""
+
+
+class IdentificationError(ShockplanError):
+    """The experiment or the data cannot identify the requested model."""
+
+
+class ModelFileError(ShockplanError):
+    """A saved model file is corrupt or of an unsupported version."""
+
+
+class PlannerError(ShockplanError):
+    """A setup, objective or planning request is malformed."""
+
+
+class ShockplanWarning(UserWarning):
+    """Base class of the project's warnings (a result is computed but doubtful)."""
+
+
+class LowCoherenceWarning(ShockplanWarning):
+    """An estimate rests on frequencies with poor coherence or no excitation."""
+
+
+class FitWarning(ShockplanWarning):
+    """A parametric fit did not converge or had to be modified (e.g. poles reflected)."""
