@@ -1,0 +1,1073 @@
+"""Rig sessions: the manifest, the shock library and the run files of a rig test.
+
+A session folder (``shared/spec/rig-session.md``) holds ``session.toml`` (the
+manifest), ``shocks.toml`` (the shock models named by the runs' setups) and one
+run file per rig run (CSV with a header row, or Parquet). This module reads and
+writes that layout and checks it once, at the boundary, so that everything
+downstream can trust a :class:`Session`.
+
+One checking engine serves every table of signals: :func:`read_run_table`
+(files: sessions now, standalone drive files later) and :func:`make_session`
+(in-memory runs) both go through it, and :func:`read_session` and
+:func:`make_session` share the same session-level checks (setups against the
+shock library, run roles, duplicate names, one common sample rate).
+
+Notes
+-----
+Inside the package every value is SI and every channel has its canonical name
+(:mod:`ident.channels`). Files may be in ``"imperial"`` units (the manifest's
+``units`` key; run files take the unit system of the manifest) and may name
+their columns differently (the manifest's ``[channels]`` table maps canonical
+names to file columns). Values may carry static offsets; :meth:`Run.dynamic`
+gives the dynamic part (the run's mean removed) on which everything downstream
+works.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import os
+import re
+import secrets
+import shutil
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from ident._io import atomic_path, atomic_write_text, read_toml
+from ident.channels import ALL_CHANNELS, CORNERS, RIG_INPUTS, quantity_of
+from ident.errors import SessionError
+from ident.units import check_units, from_si, to_si
+
+__all__ = [
+    "SESSION_FORMAT",
+    "MANIFEST_NAME",
+    "RUN_ROLES",
+    "RTOL_TIME_STEP",
+    "RunTable",
+    "Run",
+    "Session",
+    "read_run_table",
+    "write_run_table",
+    "read_session",
+    "write_session",
+    "make_session",
+]
+
+logger = logging.getLogger(__name__)
+
+#: Value of the manifest's ``format`` key understood by this version.
+SESSION_FORMAT = "rig-session/1"
+#: File name of the manifest inside a session folder.
+MANIFEST_NAME = "session.toml"
+#: Allowed values of a run's ``role``.
+RUN_ROLES = ("baseline", "swap", "validation", "other")
+#: Largest accepted deviation of a time step from the mean step, relative to the step;
+#: also the relative tolerance on equal sample rates across the runs of a session.
+RTOL_TIME_STEP = 1e-6
+
+_TIME = "time"
+_RUN_FORMATS = {"csv": ".csv", "parquet": ".parquet"}
+_MANIFEST_KEYS = ("format", "name", "units", "shock_library", "run", "channels")
+_RUN_KEYS = ("name", "file", "setup", "role")
+_CANONICAL = frozenset(ALL_CHANNELS)
+
+
+# --------------------------------------------------------------------------------------
+# Results
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class RunTable:
+    """A checked table of signals read from one run (or drive) file.
+
+    Attributes
+    ----------
+    time_s : ndarray, shape (n_samples,)
+        Sample times [s], strictly increasing and uniformly sampled (read-only).
+    channels : dict of str to ndarray, shape (n_samples,)
+        Canonical channel name -> samples in SI units (float64, read-only), in
+        :data:`ident.channels.ALL_CHANNELS` order.
+    fs_hz : float
+        Sample rate [Hz], derived from `time_s`.
+    path : pathlib.Path
+        The file the table was read from.
+    """
+
+    time_s: np.ndarray
+    channels: dict
+    fs_hz: float
+    path: Path
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Run:
+    """One rig run of a session: its shock setup and its measured signals (SI).
+
+    Attributes
+    ----------
+    name : str
+        Run name, unique within the session.
+    file : str
+        The run file as written in the manifest (relative to the session folder).
+    setup : dict of str to str
+        Corner (``LF``, ``RF``, ``LR``, ``RR``) -> shock id in the session's library.
+    role : {"baseline", "swap", "validation", "other"}
+        What the run is for (default ``"other"``).
+    time_s : ndarray, shape (n_samples,)
+        Sample times [s] (read-only).
+    channels : dict of str to ndarray, shape (n_samples,)
+        Canonical channel name -> samples in SI units, static offsets included
+        (float64, read-only). All 7 rig inputs are present in a checked run.
+    fs_hz : float
+        Sample rate [Hz].
+
+    Notes
+    -----
+    The arrays are copied to read-only float64 on construction; the data are
+    checked by :func:`read_session` and :func:`make_session`, not here.
+    """
+
+    name: str
+    file: str
+    setup: dict
+    role: str = "other"
+    time_s: np.ndarray
+    channels: dict
+    fs_hz: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "setup", dict(self.setup))
+        object.__setattr__(self, "time_s", _frozen_array(self.time_s))
+        object.__setattr__(
+            self, "channels", {k: _frozen_array(v) for k, v in dict(self.channels).items()}
+        )
+        object.__setattr__(self, "fs_hz", float(self.fs_hz))
+
+    @property
+    def n_samples(self):
+        """int: Number of samples of the run."""
+        return int(self.time_s.shape[0])
+
+    def dynamic(self, channel):
+        """Return the dynamic part of a channel: its samples minus the run's mean.
+
+        Parameters
+        ----------
+        channel : str
+            Canonical channel name (e.g. ``"tire_force_LF"``).
+
+        Returns
+        -------
+        ndarray, shape (n_samples,)
+            The signal in SI units with its mean over the run removed (a new array).
+
+        Raises
+        ------
+        SessionError
+            If the run has no such channel.
+        """
+        try:
+            x = self.channels[channel]
+        except KeyError:
+            raise SessionError(
+                f"run {self.name!r} has no channel {channel!r}; it has "
+                f"{list(self.channels)}"
+            ) from None
+        return x - x.mean()
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Session:
+    """A checked rig session: runs, their setups and the shock library.
+
+    Attributes
+    ----------
+    path : pathlib.Path or None
+        The session folder it was read from (``None`` when built in memory).
+    name : str
+        Session name.
+    units : {"SI", "imperial"}
+        Unit system of the files (the default when the session is written again);
+        the arrays in memory are always SI.
+    runs : tuple of Run
+        The runs, in manifest order.
+    shocks : ShockLibrary
+        Ordered mapping shock id -> shock model (:mod:`ident.shocks`).
+    shock_library_file : str
+        The shock library as named in the manifest (relative to the folder).
+    fs_hz : float
+        The sample rate shared by all runs [Hz].
+    channel_map : dict of str to str
+        The manifest's ``[channels]`` table (canonical name -> file column).
+    extra : dict
+        Manifest keys this version does not know, kept so that writing the
+        session again preserves them.
+    """
+
+    path: Path | None
+    name: str
+    units: str
+    runs: tuple
+    shocks: Mapping
+    shock_library_file: str
+    fs_hz: float
+    channel_map: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        object.__setattr__(self, "runs", tuple(self.runs))
+
+    @property
+    def run_names(self):
+        """tuple of str: The run names, in manifest order."""
+        return tuple(r.name for r in self.runs)
+
+    def run(self, name):
+        """Return the run called `name`.
+
+        Raises
+        ------
+        SessionError
+            If the session has no such run (the message lists the runs).
+        """
+        for r in self.runs:
+            if r.name == name:
+                return r
+        raise SessionError(
+            f"session {self.name!r} has no run {name!r}; its runs are {list(self.run_names)}"
+        )
+
+
+# --------------------------------------------------------------------------------------
+# The checking engine for tables of signals
+# --------------------------------------------------------------------------------------
+
+
+def _frozen_array(x):
+    """Return a read-only float64 array that no one else can modify."""
+    if (isinstance(x, np.ndarray) and x.dtype == np.float64 and not x.flags.writeable
+            and x.base is None):
+        return x  # already read-only and owning its data (made here): no second copy
+    a = np.array(x, dtype=np.float64)  # a copy: the caller's array stays writable
+    a.flags.writeable = False
+    return a
+
+
+def _check_channel_map(channel_map, *, where):
+    """Validate a ``{canonical: column}`` mapping; return it as a plain dict."""
+    if channel_map is None:
+        return {}
+    if not isinstance(channel_map, Mapping):
+        raise SessionError(
+            f"{where}: [channels] must be a table of canonical name = \"your column\", "
+            f"got {type(channel_map).__name__}"
+        )
+    seen = {}
+    for canonical, column in channel_map.items():
+        if canonical != _TIME and canonical not in _CANONICAL:
+            raise SessionError(
+                f"{where}: [channels] maps {canonical!r}, which is not a canonical "
+                f"channel; keys are canonical names ('time', the rig inputs "
+                f"{list(RIG_INPUTS)} or '<kind>_<corner>' such as 'tire_force_LF'), "
+                "values are your column names"
+            )
+        if not isinstance(column, str) or not column:
+            raise SessionError(
+                f"{where}: [channels] {canonical} = {column!r}: the value must be the "
+                "column name (a non-empty string) that holds this channel in the run files"
+            )
+        if column in seen:
+            raise SessionError(
+                f"{where}: [channels] maps both {seen[column]!r} and {canonical!r} to "
+                f"column {column!r}; each column can hold only one channel"
+            )
+        seen[column] = canonical
+    return dict(channel_map)
+
+
+def _label(canonical, column):
+    return f"{column!r}" if column == canonical else f"{column!r} ({canonical})"
+
+
+def _is_number(value):
+    if isinstance(value, (bool, np.bool_)):
+        return False
+    try:
+        float(value)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def _as_numeric(values, *, label, where, time=None):
+    """Return `values` as float64, or raise naming the first non-numeric entry."""
+    a = np.asarray(values)
+    if a.ndim != 1:
+        raise SessionError(
+            f"{where}: column {label} must be one-dimensional (one value per sample), "
+            f"got shape {a.shape}"
+        )
+    if a.dtype.kind in "iuf":
+        return a.astype(np.float64, copy=False)
+    for i, v in enumerate(a):
+        if not _is_number(v):
+            at = "" if time is None else f", t={time[i]:.6g} s"
+            shown = v.item() if isinstance(v, np.generic) else v
+            raise SessionError(
+                f"{where}: column {label} is not numeric (data row {i + 1}{at}: "
+                f"{shown!r}); export plain numbers"
+            )
+    return a.astype(np.float64)
+
+
+def _check_columns(columns, *, where, units, channel_map, required):
+    """The checking engine: map, check and convert a table of raw columns.
+
+    Parameters
+    ----------
+    columns : mapping of str to array_like, shape (n_rows,)
+        Column name (as in the file) -> raw values in `units`.
+    where : str
+        Prefix of every error message (file, run).
+    units : {"SI", "imperial"}
+        Unit system of the values.
+    channel_map : dict of str to str
+        Checked ``{canonical: column}`` mapping (may be empty).
+    required : iterable of str
+        Canonical channels that must be present.
+
+    Returns
+    -------
+    time_s : ndarray, shape (n_samples,)
+    channels : dict of str to ndarray, shape (n_samples,)
+        SI, read-only, in :data:`ident.channels.ALL_CHANNELS` order.
+    fs_hz : float
+    """
+    source = {c: channel_map.get(c, c) for c in (_TIME,) + ALL_CHANNELS}
+    by_column = {col: c for c, col in source.items()}
+    present = {}  # canonical -> column
+    for col in columns:
+        if col in by_column:
+            present[by_column[col]] = col
+        else:
+            logger.debug("%s: column %r is not a canonical channel; ignored", where, col)
+
+    first = next(iter(columns.values()), ())
+    n_rows = np.shape(first)[0] if np.ndim(first) >= 1 else 0
+    if n_rows < 2:
+        raise SessionError(
+            f"{where}: has {n_rows} data row(s); a run needs at least 2 samples"
+        )
+    if _TIME not in present:
+        hint = (f" (mapped to column {source[_TIME]!r} by [channels])"
+                if source[_TIME] != _TIME else "")
+        raise SessionError(
+            f"{where}: no 'time' column{hint}; add a column 'time' in seconds or map "
+            "your time column in the manifest's [channels] table (time = \"your column\")"
+        )
+    missing = [c for c in required if c not in present]
+    if missing:
+        names = ", ".join(_label(c, source[c]) for c in missing)
+        raise SessionError(
+            f"{where}: missing required channel(s) {names}; add the column(s) or, if "
+            "your export names them differently, map them in the manifest's [channels] "
+            "table (canonical = \"your column\")"
+        )
+
+    t = _as_numeric(columns[present[_TIME]], label=_label(_TIME, present[_TIME]),
+                    where=where)
+    bad = ~np.isfinite(t)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SessionError(
+            f"{where}: column {_label(_TIME, present[_TIME])} has {int(bad.sum())} "
+            f"NaN/inf value(s), the first at data row {i + 1}; fill or cut the run"
+        )
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        i = int(np.argmax(dt <= 0))
+        raise SessionError(
+            f"{where}: time is not strictly increasing at data row {i + 2} "
+            f"(t={t[i]:.9g} s then {t[i + 1]:.9g} s); sort the samples and remove "
+            "duplicated rows"
+        )
+    # against the median step, so that a gap is reported where it is, not at row 2
+    typical = float(np.median(dt))
+    off = np.abs(dt - typical) > RTOL_TIME_STEP * typical
+    if off.any():
+        i = int(np.argmax(off))
+        raise SessionError(
+            f"{where}: time is not uniformly sampled: step {dt[i]:.9g} s at data row "
+            f"{i + 2} (t={t[i + 1]:.9g} s) vs the typical step {typical:.9g} s (relative "
+            f"tolerance {RTOL_TIME_STEP:g}); resample the run to a uniform rate, fill "
+            "missing samples, or write time with full precision"
+        )
+    step = (t[-1] - t[0]) / (t.size - 1)
+
+    channels = {}
+    for canonical in ALL_CHANNELS:
+        if canonical not in present:
+            continue
+        col = present[canonical]
+        label = _label(canonical, col)
+        x = _as_numeric(columns[col], label=label, where=where, time=t)
+        bad = ~np.isfinite(x)
+        if bad.any():
+            t0 = t[int(np.argmax(bad))]
+            raise SessionError(
+                f"{where}: column {label} has {int(bad.sum())} NaN/inf value(s) from "
+                f"t={t0:.6g} s; fill or cut the run"
+            )
+        channels[canonical] = _frozen_array(to_si(x, quantity_of(canonical), units))
+    return _frozen_array(t), channels, float(1.0 / step)
+
+
+def _check_units(units, *, where):
+    try:
+        return check_units(units, where=where)
+    except ValueError as exc:
+        raise SessionError(str(exc)) from None
+
+
+def _check_required(required, *, where):
+    required = tuple(required)
+    unknown = [c for c in required if c not in _CANONICAL]
+    if unknown:
+        raise SessionError(
+            f"{where}: required channel(s) {unknown} are not canonical channels; "
+            f"see ident.channels.ALL_CHANNELS"
+        )
+    return required
+
+
+# --------------------------------------------------------------------------------------
+# Run tables (files)
+# --------------------------------------------------------------------------------------
+
+
+def _file_kind(path, *, where):
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        return "csv"
+    if suffix in (".parquet", ".pq"):
+        return "parquet"
+    raise SessionError(
+        f"{where}: unsupported file type {path.suffix!r}; run files are CSV (.csv, with "
+        "a header row) or Parquet (.parquet)"
+    )
+
+
+def _read_columns(path, *, where):
+    """Read a CSV or Parquet file into ``{column: 1-D ndarray}``."""
+    import pandas as pd
+    import pyarrow
+
+    kind = _file_kind(path, where=where)
+    try:
+        if kind == "csv":
+            with open(path, newline="", encoding="utf-8-sig") as fh:
+                header = next(csv.reader(fh), None)
+            if not header:
+                raise SessionError(
+                    f"{where}: the file is empty; a run file has a header row and one "
+                    "row per sample"
+                )
+            frame = pd.read_csv(path, encoding="utf-8-sig")
+            names = [h.strip() for h in header]
+        else:
+            frame = pd.read_parquet(path)
+            names = [str(c).strip() for c in frame.columns]
+    except SessionError:
+        raise
+    except (OSError, ValueError, UnicodeDecodeError, pyarrow.ArrowException) as exc:
+        raise SessionError(
+            f"{where}: cannot read the file as {kind.upper()} ({type(exc).__name__}: "
+            f"{exc}); check that it is a valid, non-empty {kind.upper()} file"
+        ) from None
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise SessionError(
+            f"{where}: duplicated column name(s) {dupes}; give every column a unique name"
+        )
+    if len(names) != frame.shape[1]:  # pragma: no cover - pandas always agrees
+        raise SessionError(f"{where}: could not parse the header row; check the file")
+    return {name: frame.iloc[:, j].to_numpy() for j, name in enumerate(names)}
+
+
+def read_run_table(path, *, units="SI", channel_map=None, required=(), where=None):
+    """Read, check and convert one run (or drive) file to SI and canonical names.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A CSV file with a header row (``.csv``) or a Parquet file (``.parquet``).
+    units : {"SI", "imperial"}
+        Unit system of the values in the file; each channel is converted to SI by
+        its quantity (:func:`ident.channels.quantity_of`); ``time`` is in seconds.
+    channel_map : mapping of str to str, optional
+        ``{canonical name: file column}`` for exports whose names differ (the
+        manifest's ``[channels]`` table). ``time`` may be mapped too.
+    required : iterable of str
+        Canonical channels that must be present (e.g. ``ident.channels.RIG_INPUTS``).
+    where : str, optional
+        How to name the file in error messages (default: the path), e.g.
+        ``"run 'swap-LF' (runs/swap-LF.csv)"``.
+
+    Returns
+    -------
+    RunTable
+        Times [s], shape (n_samples,); SI channels, each shape (n_samples,); the
+        sample rate [Hz]. Columns that are not canonical channels are ignored
+        (logged at debug level).
+
+    Raises
+    ------
+    SessionError
+        If the file is missing, unreadable or empty, of an unsupported type, has
+        fewer than 2 rows, duplicated column names, no ``time``, misses a
+        required channel, holds a non-numeric or NaN/inf value in a used column,
+        or its time is not strictly increasing and uniformly sampled (relative
+        step tolerance :data:`RTOL_TIME_STEP`); or if `units`, `channel_map` or
+        `required` is invalid.
+
+    Examples
+    --------
+    >>> import tempfile, os
+    >>> p = os.path.join(tempfile.mkdtemp(), "run.csv")
+    >>> _ = open(p, "w").write("time,aero_heave,Note\\n0.0,1.0,a\\n0.01,2.0,b\\n")
+    >>> table = read_run_table(p, units="imperial")
+    >>> table.fs_hz, list(table.channels), float(table.channels["aero_heave"][1])
+    (100.0, ['aero_heave'], 8.896443230521)
+    """
+    path = Path(path)
+    where = str(path) if where is None else where
+    units = _check_units(units, where=f"{where}: units")
+    channel_map = _check_channel_map(channel_map, where=where)
+    required = _check_required(required, where=where)
+    if not path.exists():
+        at = "" if where == str(path) else f" ({path})"
+        raise SessionError(f"{where}: file not found{at}; check the path")
+    if not path.is_file():
+        raise SessionError(f"{where}: {path} is not a file; give the path of a run file")
+    columns = _read_columns(path, where=where)
+    time_s, channels, fs_hz = _check_columns(
+        columns, where=where, units=units, channel_map=channel_map, required=required
+    )
+    return RunTable(time_s=time_s, channels=channels, fs_hz=fs_hz, path=path)
+
+
+def _in_memory_columns(time_s, channels, *, where):
+    """Build the engine's column table from in-memory SI data (canonical names only)."""
+    channels = dict(channels)
+    unknown = [c for c in channels if c not in _CANONICAL]
+    if unknown:
+        raise SessionError(
+            f"{where}: unknown channel name(s) {unknown}; use canonical names "
+            "(ident.channels.ALL_CHANNELS)"
+        )
+    if np.ndim(time_s) != 1:
+        raise SessionError(
+            f"{where}: time_s must be one-dimensional, got shape {np.shape(time_s)}"
+        )
+    n = np.shape(time_s)[0]
+    for c, x in channels.items():
+        if np.shape(x) != (n,):
+            raise SessionError(
+                f"{where}: channel {c!r} has shape {np.shape(x)}; expected ({n},) like time_s"
+            )
+    return {_TIME: time_s, **channels}
+
+
+def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
+    """Write a table of signals as a CSV or Parquet run file, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Output file; ``.csv`` or ``.parquet`` chooses the format.
+    time_s : array_like, shape (n_samples,)
+        Sample times [s], strictly increasing and uniform.
+    channels : mapping of str to array_like, shape (n_samples,)
+        Canonical channel name -> samples in SI units.
+    units : {"SI", "imperial"}
+        Unit system of the written values (converted from SI by each channel's
+        quantity).
+    overwrite : bool
+        Replace an existing file.
+
+    Notes
+    -----
+    Columns are ``time``, the rig inputs, then the responses, in
+    :data:`ident.channels.ALL_CHANNELS` order. CSV floats are written with full
+    precision (shortest repr that round-trips). The data are checked by the same
+    engine as :func:`read_run_table`, so a written file always reads back.
+
+    Raises
+    ------
+    SessionError
+        If a channel name is not canonical, a shape differs from `time_s`, or the
+        data fail the run-file checks (NaN/inf, non-uniform time, < 2 samples).
+    ValueError
+        If `units` or the file type is invalid.
+    FileExistsError
+        If `path` exists and `overwrite` is false.
+    """
+    import pandas as pd
+
+    path = Path(path)
+    where = str(path)
+    kind = _file_kind(path, where=where)
+    units = _check_units(units, where=f"{where}: units")
+    columns = _in_memory_columns(time_s, channels, where=where)
+    t, si, _ = _check_columns(columns, where=where, units="SI", channel_map={},
+                              required=())
+    frame = pd.DataFrame(
+        {_TIME: t, **{c: from_si(x, quantity_of(c), units) for c, x in si.items()}}
+    )
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        if kind == "csv":
+            frame.to_csv(tmp, index=False)
+        else:
+            frame.to_parquet(tmp, index=False)
+
+
+# --------------------------------------------------------------------------------------
+# Session-level checks (shared by read_session and make_session)
+# --------------------------------------------------------------------------------------
+
+
+def _check_setup(setup, shocks, *, where, library):
+    """Return the setup as ``{corner: id}`` in CORNERS order, or raise."""
+    if not isinstance(setup, Mapping):
+        raise SessionError(
+            f"{where}: setup must be a table {{ LF = \"id\", RF = \"id\", LR = \"id\", "
+            f"RR = \"id\" }}, got {setup!r}"
+        )
+    unknown = [c for c in setup if c not in CORNERS]
+    if unknown:
+        raise SessionError(
+            f"{where}: setup names unknown corner(s) {unknown}; corners are "
+            f"{', '.join(CORNERS)}"
+        )
+    missing = [c for c in CORNERS if c not in setup]
+    if missing:
+        raise SessionError(
+            f"{where}: setup is missing corner(s) {', '.join(missing)}; give a shock id "
+            f"for all four corners {', '.join(CORNERS)}"
+        )
+    for corner in CORNERS:
+        sid = setup[corner]
+        if not isinstance(sid, str) or sid not in shocks:
+            raise SessionError(
+                f"{where}: setup {corner} = {sid!r} is not in the shock library "
+                f"{library} (known ids: {', '.join(map(str, shocks)) or 'none'}); add it "
+                "to the library or fix the id"
+            )
+    return {c: setup[c] for c in CORNERS}
+
+
+def _check_role(role, *, where):
+    if role not in RUN_ROLES:
+        raise SessionError(
+            f"{where}: role {role!r} is not one of {', '.join(RUN_ROLES)}; fix or omit "
+            "it (default 'other')"
+        )
+    return role
+
+
+def _check_unique_names(names, *, where):
+    seen = set()
+    for name in names:
+        if name in seen:
+            raise SessionError(
+                f"{where}: run name {name!r} is used more than once; run names must be "
+                "unique"
+            )
+        seen.add(name)
+
+
+def _check_run_set(runs, *, where):
+    """Check there are runs with unique names sharing one sample rate; return it."""
+    if not runs:
+        raise SessionError(
+            f"{where}: the session has no runs; add at least one [[run]] with name, "
+            "file and setup"
+        )
+    _check_unique_names([r.name for r in runs], where=where)
+    first = runs[0]
+    for r in runs[1:]:
+        if abs(r.fs_hz - first.fs_hz) > RTOL_TIME_STEP * first.fs_hz:
+            raise SessionError(
+                f"{where}: runs {first.name!r} ({first.fs_hz:.9g} Hz) and {r.name!r} "
+                f"({r.fs_hz:.9g} Hz) have different sample rates; all runs of a session "
+                "share one sample rate: resample them to a common rate"
+            )
+    return first.fs_hz
+
+
+def _run_where(name, file_path):
+    return f"run {name!r} ({file_path})"
+
+
+# --------------------------------------------------------------------------------------
+# Sessions
+# --------------------------------------------------------------------------------------
+
+
+def _manifest_paths(path):
+    path = Path(path)
+    if path.is_dir() or path.suffix.lower() != ".toml":
+        folder, manifest = path, path / MANIFEST_NAME
+    else:
+        folder, manifest = path.parent, path
+    if not folder.is_dir():
+        raise SessionError(
+            f"{folder}: session folder not found; give the folder holding "
+            f"{MANIFEST_NAME}, shocks.toml and the run files"
+        )
+    if not manifest.is_file():
+        raise SessionError(
+            f"{manifest}: session manifest not found; a session folder holds "
+            f"{MANIFEST_NAME} (see shared/spec/rig-session.md)"
+        )
+    return folder, manifest
+
+
+def _manifest_str(doc, key, *, where, default=None):
+    value = doc.get(key, default)
+    if not isinstance(value, str) or not value.strip():
+        raise SessionError(
+            f"{where}: '{key}' must be a non-empty string, got {value!r}"
+        )
+    return value
+
+
+def _parse_run_entries(entries, *, where):
+    """Check the manifest's ``[[run]]`` entries (structure only); return plain dicts."""
+    if entries is None or (isinstance(entries, list) and not entries):
+        raise SessionError(
+            f"{where}: no runs; add at least one [[run]] with name, file and setup"
+        )
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise SessionError(
+            f"{where}: 'run' must be an array of tables ([[run]] sections)"
+        )
+    parsed = []
+    for i, entry in enumerate(entries, start=1):
+        label = f"{where}: [[run]] #{i}"
+        if isinstance(entry.get("name"), str) and entry["name"].strip():
+            label = f"{where}: run {entry['name']!r}"
+        for key in ("name", "file", "setup"):
+            if key not in entry:
+                raise SessionError(
+                    f"{label}: missing '{key}'; every [[run]] needs name, file and setup"
+                )
+        name = _manifest_str(entry, "name", where=label)
+        file = _manifest_str(entry, "file", where=label)
+        role = _check_role(entry.get("role", "other"), where=label)
+        unknown = [k for k in entry if k not in _RUN_KEYS]
+        if unknown:
+            logger.warning("%s: unknown key(s) %s are ignored", label, unknown)
+        parsed.append({"name": name, "file": file, "setup": entry["setup"],
+                       "role": role, "label": label})
+    return parsed
+
+
+def read_session(path):
+    """Read and check a rig session folder.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The session folder, or its ``session.toml``.
+
+    Returns
+    -------
+    Session
+        Runs with SI signals under canonical names, the shock library and the
+        common sample rate. Responses are loaded as present; which ones a stage
+        needs (e.g. ``shock_velocity_XX`` for identification) is that stage's check.
+
+    Raises
+    ------
+    SessionError
+        One clear message naming the file, run, channel or field, and the fix, if:
+        the folder or manifest is missing; the manifest is not valid TOML; its
+        ``format`` is missing or not ``"rig-session/1"``; ``units`` is unknown;
+        there are no runs; a run lacks name, file or setup; two runs share a name;
+        a setup names an unknown corner, misses a corner or names a shock id not in
+        the library; a role is invalid; ``[channels]`` names an unknown canonical
+        channel; the shock library is missing or malformed (the
+        :class:`~ident.errors.ShockModelError` is chained); a run file is missing,
+        unreadable, has fewer than 2 rows, misses one of the 7 rig inputs, holds
+        NaN/inf or non-numeric values, or has non-uniform time; or the runs have
+        different sample rates.
+    """
+    from ident.errors import ShockModelError
+    from ident.shocks import read_shock_library
+
+    folder, manifest = _manifest_paths(path)
+    where = str(manifest)
+    doc = read_toml(manifest, error=SessionError, what="session manifest")
+
+    fmt = doc.get("format")
+    if fmt is None:
+        raise SessionError(
+            f"{where}: missing 'format'; the manifest must start with "
+            f"format = \"{SESSION_FORMAT}\""
+        )
+    if fmt != SESSION_FORMAT:
+        raise SessionError(
+            f"{where}: format {fmt!r} is not supported; this version reads "
+            f"format = \"{SESSION_FORMAT}\""
+        )
+    units = _check_units(doc.get("units", "SI"), where=f"{where}: units")
+    name = _manifest_str(doc, "name", where=where, default=folder.resolve().name)
+    library_file = _manifest_str(doc, "shock_library", where=where, default="shocks.toml")
+    channel_map = _check_channel_map(doc.get("channels"), where=where)
+    entries = _parse_run_entries(doc.get("run"), where=where)
+    extra = {k: v for k, v in doc.items() if k not in _MANIFEST_KEYS}
+
+    library_path = folder / library_file
+    if not library_path.is_file():
+        raise SessionError(
+            f"{where}: shock_library {library_file!r} not found ({library_path}); "
+            "put the shock library beside the manifest or fix the path"
+        )
+    try:
+        shocks = read_shock_library(library_path)
+    except ShockModelError as exc:
+        raise SessionError(f"{where}: shock_library {library_file!r}: {exc}") from exc
+
+    setups = [_check_setup(e["setup"], shocks, where=e["label"], library=library_file)
+              for e in entries]
+    # before reading any run file: a cheap, manifest-only mistake
+    _check_unique_names([e["name"] for e in entries], where=where)
+
+    runs = []
+    for e, setup in zip(entries, setups):
+        file_path = folder / e["file"]
+        run_where = _run_where(e["name"], file_path)
+        if not file_path.is_file():
+            raise SessionError(
+                f"{run_where}: run file not found; fix the run's 'file' in {where} "
+                "(paths are relative to the manifest)"
+            )
+        table = read_run_table(file_path, units=units, channel_map=channel_map,
+                               required=RIG_INPUTS, where=run_where)
+        runs.append(Run(name=e["name"], file=e["file"], setup=setup, role=e["role"],
+                        time_s=table.time_s, channels=table.channels,
+                        fs_hz=table.fs_hz))
+    fs_hz = _check_run_set(runs, where=where)
+    logger.info("read session %r: %d run(s) at %.6g Hz from %s", name, len(runs),
+                fs_hz, folder)
+    return Session(path=folder, name=name, units=units, runs=tuple(runs), shocks=shocks,
+                   shock_library_file=library_file, fs_hz=fs_hz,
+                   channel_map=channel_map, extra=extra)
+
+
+def make_session(name, runs, shocks, *, units="SI"):
+    """Build a checked :class:`Session` from in-memory runs.
+
+    Parameters
+    ----------
+    name : str
+        Session name.
+    runs : iterable of Run
+        The runs, with SI signals under canonical names; each ``fs_hz`` must agree
+        with its ``time_s``.
+    shocks : ShockLibrary or mapping of str to ShockModel
+        The shock models named by the runs' setups.
+    units : {"SI", "imperial"}
+        Unit system used when the session is written (the arrays stay SI).
+
+    Returns
+    -------
+    Session
+        With ``path=None``, ``shock_library_file="shocks.toml"`` and no
+        ``[channels]`` mapping.
+
+    Raises
+    ------
+    SessionError
+        On the same problems :func:`read_session` reports for a run's setup,
+        role, rig inputs, samples and time, duplicated run names and different
+        sample rates (one engine checks both), or a run's ``fs_hz`` that
+        disagrees with its ``time_s``.
+    """
+    from ident.shocks import ShockLibrary
+
+    where = f"session {name!r}"
+    if not isinstance(name, str) or not name.strip():
+        raise SessionError(f"session name must be a non-empty string, got {name!r}")
+    units = _check_units(units, where=f"{where}: units")
+    if not isinstance(shocks, ShockLibrary):
+        shocks = ShockLibrary(shocks)
+    checked = []
+    for r in runs:
+        if not isinstance(r, Run):
+            raise SessionError(f"{where}: runs must be Run objects, got {type(r).__name__}")
+        run_where = _run_where(r.name, r.file)
+        setup = _check_setup(r.setup, shocks, where=run_where, library="of the session")
+        role = _check_role(r.role, where=run_where)
+        columns = _in_memory_columns(r.time_s, r.channels, where=run_where)
+        time_s, channels, fs_hz = _check_columns(
+            columns, where=run_where, units="SI", channel_map={}, required=RIG_INPUTS
+        )
+        if abs(fs_hz - r.fs_hz) > RTOL_TIME_STEP * fs_hz:
+            raise SessionError(
+                f"{run_where}: fs_hz = {r.fs_hz:.9g} Hz disagrees with its time_s "
+                f"({fs_hz:.9g} Hz); pass fs_hz = 1 / time step"
+            )
+        checked.append(Run(name=r.name, file=r.file, setup=setup, role=role,
+                           time_s=time_s, channels=channels, fs_hz=fs_hz))
+    fs_hz = _check_run_set(checked, where=where)
+    return Session(path=None, name=name, units=units, runs=tuple(checked), shocks=shocks,
+                   shock_library_file="shocks.toml", fs_hz=fs_hz)
+
+
+def _safe_stem(name):
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "run"
+    return stem
+
+
+def _toml_value(value):
+    """Render one TOML value (string, number, inline table) via tomli_w."""
+    return tomli_w.dumps({"x": value}).partition("=")[2].strip()
+
+
+def _manifest_text(session, *, units, files):
+    head = {"format": SESSION_FORMAT, "name": session.name, "units": units,
+            "shock_library": "shocks.toml"}
+    for key, value in session.extra.items():
+        if key in _MANIFEST_KEYS:
+            logger.warning("session extra key %r clashes with a manifest key; not written",
+                           key)
+            continue
+        head[key] = value
+    parts = [tomli_w.dumps(head)]
+    for run, file in zip(session.runs, files):
+        setup = ", ".join(f"{c} = {_toml_value(run.setup[c])}" for c in CORNERS)
+        parts.append(
+            "\n[[run]]\n"
+            f"name = {_toml_value(run.name)}\n"
+            f"file = {_toml_value(file)}\n"
+            f"setup = {{ {setup} }}\n"
+            f"role = {_toml_value(run.role)}\n"
+        )
+    return "".join(parts)
+
+
+def _check_target(target, *, overwrite):
+    if target.is_file() or (target.exists() and not target.is_dir()):
+        raise FileExistsError(
+            f"{target}: exists and is not a folder; choose another output folder"
+        )
+    if target.is_dir() and any(target.iterdir()) and not overwrite:
+        raise FileExistsError(
+            f"{target}: folder already exists and is not empty; choose another output "
+            "folder or pass overwrite=True (--overwrite on the command line)"
+        )
+
+
+def _sibling(target, tag):
+    while True:
+        candidate = target.parent / f".{target.name}.{tag}-{secrets.token_hex(4)}"
+        try:
+            candidate.mkdir()  # honours the umask, unlike tempfile.mkdtemp (0700)
+            return candidate
+        except FileExistsError:  # pragma: no cover - 32 random bits collided
+            continue
+
+
+def write_session(session, path, *, units=None, run_format="csv", overwrite=False):
+    """Write a session folder: ``session.toml``, ``shocks.toml`` and ``runs/``.
+
+    Parameters
+    ----------
+    session : Session
+        The session to write.
+    path : str or os.PathLike
+        The output folder.
+    units : {"SI", "imperial"}, optional
+        Unit system of every written value (default: ``session.units``).
+    run_format : {"csv", "parquet"}
+        File format of the run files, written as ``runs/<name>.csv`` (or
+        ``.parquet``); characters unsafe in file names become ``_``.
+    overwrite : bool
+        Replace an existing non-empty folder.
+
+    Returns
+    -------
+    pathlib.Path
+        The written folder.
+
+    Notes
+    -----
+    Everything is built in a temporary sibling folder that is renamed into place
+    at the end, so a failure leaves nothing half-written; an existing folder is
+    replaced only after the new one is complete. The manifest has no
+    ``[channels]`` table (written files use canonical names); unknown manifest
+    keys kept in ``session.extra`` are written back.
+
+    Raises
+    ------
+    FileExistsError
+        If `path` is a non-empty folder and `overwrite` is false, or is a file.
+    ValueError
+        If `units` or `run_format` is invalid.
+    SessionError
+        If a run's data fail the run-file checks.
+    """
+    from ident.shocks import write_shock_library
+
+    units = _check_units(session.units if units is None else units, where="units")
+    if run_format not in _RUN_FORMATS:
+        raise ValueError(
+            f"run_format {run_format!r} is not supported; use 'csv' or 'parquet'"
+        )
+    target = Path(path)
+    _check_target(target, overwrite=overwrite)
+    target.parent.mkdir(parents=True, exist_ok=True)
+
+    files, used = [], set()
+    for run in session.runs:
+        stem, k = _safe_stem(run.name), 1
+        while stem.lower() in used:
+            k += 1
+            stem = f"{_safe_stem(run.name)}-{k}"
+        used.add(stem.lower())
+        files.append(f"runs/{stem}{_RUN_FORMATS[run_format]}")
+
+    tmp = _sibling(target, "tmp")
+    try:
+        (tmp / "runs").mkdir()
+        write_shock_library(session.shocks, tmp / "shocks.toml", units=units)
+        for run, file in zip(session.runs, files):
+            write_run_table(tmp / file, run.time_s, run.channels, units=units)
+        atomic_write_text(tmp / MANIFEST_NAME,
+                          _manifest_text(session, units=units, files=files))
+        _check_target(target, overwrite=overwrite)  # it may have appeared meanwhile
+        if target.exists():
+            old = _sibling(target, "old")
+            os.replace(target, old)  # old is an empty folder: replaced atomically
+            try:
+                os.replace(tmp, target)
+            except OSError:
+                os.replace(old, target)
+                raise
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, target)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    logger.info("wrote session %r (%d run(s), %s units) to %s", session.name,
+                len(session.runs), units, target)
+    return target

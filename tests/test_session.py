@@ -1,0 +1,605 @@
+"""Tests of ident.session: rig-session folders and run tables."""
+
+from __future__ import annotations
+
+import inspect
+import re
+import shutil
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import tomli_w
+from numpy.testing import assert_allclose, assert_array_equal
+
+import ident.session as session_mod
+from ident.channels import ALL_CHANNELS, CORNERS, RIG_INPUTS
+from ident.errors import SessionError
+from ident.session import (
+    Run,
+    RunTable,
+    Session,
+    make_session,
+    read_run_table,
+    read_session,
+    write_run_table,
+    write_session,
+)
+
+RTOL_ROUND_TRIP = 1e-12  # float64 written with repr, plus one SI <-> imperial factor
+IN_M = 0.0254  # in -> m, by definition
+LBF_N = 4.4482216152605  # lbf -> N, by definition
+
+FS_HZ = 100.0
+N_SAMPLES = 200
+SHOCKS_TOML = """\
+units = "SI"
+
+[[shock]]
+id = "B20"
+kind = "linear"
+damping = 3502.5
+
+[[shock]]
+id = "D8"
+kind = "linear"
+damping = 1500.0
+
+[[shock]]
+id = "F12"
+kind = "linear"
+damping = 2100.0
+"""
+RESPONSES = ("shock_velocity_LF", "shock_velocity_RF", "shock_velocity_LR",
+             "shock_velocity_RR", "tire_force_LF", "ride_height_RR")
+RUN_SPECS = (  # name, role, setup
+    ("baseline-1", "baseline", ("B20", "B20", "B20", "B20")),
+    ("swap-LF", "swap", ("D8", "B20", "B20", "B20")),
+    ("validation", "validation", ("F12", "F12", "B20", "B20")),
+)
+# a typical size per channel, so the random data look like rig data [SI]
+SCALE = {"aero_heave": 800.0, "aero_roll": 300.0, "aero_pitch": 500.0,
+         "wheelloader": 0.01, "shock_velocity": 0.2, "tire_force": 2000.0,
+         "ride_height": 0.05}
+
+
+def _scale(channel):
+    return SCALE.get(channel, SCALE.get(channel.rpartition("_")[0]))
+
+
+def _random_run(rng, name, role, setup, *, fs_hz=FS_HZ, n=N_SAMPLES):
+    time_s = 3.0 + np.arange(n) / fs_hz
+    channels = {c: _scale(c) * (rng.standard_normal(n) + rng.uniform(-2, 2))
+                for c in RIG_INPUTS + RESPONSES}
+    return Run(name=name, file=f"runs/{name}.csv", setup=dict(zip(CORNERS, setup)),
+               role=role, time_s=time_s, channels=channels, fs_hz=fs_hz)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(20240917)
+
+
+@pytest.fixture
+def shocks(tmp_path):
+    from ident.shocks import read_shock_library
+
+    path = tmp_path / "library.toml"
+    path.write_text(SHOCKS_TOML)
+    return read_shock_library(path)
+
+
+@pytest.fixture
+def session(rng, shocks):
+    runs = [_random_run(rng, *spec) for spec in RUN_SPECS]
+    return make_session("synthetic 8-post", runs, shocks)
+
+
+@pytest.fixture
+def session_dir(session, tmp_path):
+    return write_session(session, tmp_path / "session")
+
+
+def _assert_same_data(a, b):
+    assert [r.name for r in a.runs] == [r.name for r in b.runs]
+    assert a.fs_hz == pytest.approx(b.fs_hz, rel=RTOL_ROUND_TRIP)
+    for ra, rb in zip(a.runs, b.runs):
+        assert ra.setup == rb.setup and ra.role == rb.role
+        assert list(ra.channels) == list(rb.channels)
+        assert_allclose(rb.time_s, ra.time_s, rtol=RTOL_ROUND_TRIP, atol=0)
+        for c in ra.channels:
+            assert_allclose(rb.channels[c], ra.channels[c], rtol=RTOL_ROUND_TRIP, atol=0,
+                            err_msg=f"{ra.name}: {c}")
+
+
+# --------------------------------------------------------------------------------------
+# round trips
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("run_format", ["csv", "parquet"])
+def test_write_read_round_trip(session, tmp_path, run_format):
+    folder = write_session(session, tmp_path / "out", run_format=run_format)
+    assert sorted(p.name for p in (folder / "runs").iterdir()) == sorted(
+        f"{name}.{run_format}" for name, _, _ in RUN_SPECS)
+    back = read_session(folder)
+    _assert_same_data(session, back)
+    assert back.path == folder and back.name == session.name and back.units == "SI"
+    assert back.shock_library_file == "shocks.toml"
+    assert list(back.shocks) == ["B20", "D8", "F12"]
+    assert back.fs_hz == pytest.approx(FS_HZ, rel=RTOL_ROUND_TRIP)
+    assert back.run("swap-LF").file == f"runs/swap-LF.{run_format}"
+    # the manifest path works as well as the folder
+    assert read_session(folder / "session.toml").run_names == back.run_names
+
+
+def test_manifest_is_the_spec_layout(session_dir):
+    doc = tomllib.loads((session_dir / "session.toml").read_text())
+    assert doc["format"] == "rig-session/1" and doc["units"] == "SI"
+    assert doc["shock_library"] == "shocks.toml" and "channels" not in doc
+    assert doc["run"][1] == {"name": "swap-LF", "file": "runs/swap-LF.csv", "role": "swap",
+                             "setup": {"LF": "D8", "RF": "B20", "LR": "B20", "RR": "B20"}}
+    header = pd.read_csv(session_dir / "runs" / "baseline-1.csv", nrows=0).columns
+    assert list(header) == ["time", *RIG_INPUTS,
+                            *[c for c in ALL_CHANNELS if c in RESPONSES]]
+
+
+def test_csv_is_written_at_full_precision(rng, tmp_path):
+    time_s = np.arange(50) / 64.0
+    channels = {"aero_heave": rng.standard_normal(50) * np.exp(rng.uniform(-30, 30, 50)),
+                "tire_force_RR": rng.standard_normal(50)}
+    write_run_table(tmp_path / "t.csv", time_s, channels)
+    table = read_run_table(tmp_path / "t.csv")
+    assert_array_equal(table.time_s, time_s)  # SI to SI: repr round trip is exact
+    for c, x in channels.items():
+        assert_array_equal(table.channels[c], x)
+    assert table.fs_hz == 64.0 and table.path == tmp_path / "t.csv"
+    with pytest.raises(FileExistsError, match="t.csv: already exists"):
+        write_run_table(tmp_path / "t.csv", time_s, channels)
+
+
+def test_imperial_twin(session, tmp_path):
+    si_dir = write_session(session, tmp_path / "si")
+    imp_dir = write_session(session, tmp_path / "imperial", units="imperial")
+    assert tomllib.loads((imp_dir / "session.toml").read_text())["units"] == "imperial"
+
+    si_file = pd.read_csv(si_dir / "runs" / "swap-LF.csv")
+    imp_file = pd.read_csv(imp_dir / "runs" / "swap-LF.csv")
+    expected_factor = {"time": 1.0, "wheelloader_LF": IN_M, "ride_height_RR": IN_M,
+                       "shock_velocity_LR": IN_M, "aero_heave": LBF_N,
+                       "tire_force_LF": LBF_N, "aero_roll": LBF_N * IN_M}
+    for column, factor in expected_factor.items():  # file values in in, in/s, lbf, lbf*in
+        assert_allclose(imp_file[column] * factor, si_file[column], rtol=RTOL_ROUND_TRIP,
+                        atol=0, err_msg=column)
+    library = tomllib.loads((imp_dir / "shocks.toml").read_text())
+    assert library["units"] == "imperial"
+    assert library["shock"][0]["damping"] == pytest.approx(3502.5 * IN_M / LBF_N,
+                                                           rel=RTOL_ROUND_TRIP)
+
+    si, imp = read_session(si_dir), read_session(imp_dir)
+    assert imp.units == "imperial" and si.units == "SI"
+    _assert_same_data(si, imp)
+    assert imp.shocks["B20"].to_pwl().force(1.0) == pytest.approx(3502.5,
+                                                                 rel=RTOL_ROUND_TRIP)
+    # writing the imperial session again keeps its unit system by default
+    again = write_session(imp, tmp_path / "again")
+    assert tomllib.loads((again / "session.toml").read_text())["units"] == "imperial"
+
+
+def test_channels_mapping(session, tmp_path):
+    folder = tmp_path / "team"
+    (folder / "runs").mkdir(parents=True)
+    (folder / "shocks.toml").write_text(SHOCKS_TOML)
+    run = session.runs[0]
+    team = {f"wheelloader_{c}": f"WL_{c}_Disp" for c in CORNERS}
+    team["time"] = "Time [s]"
+    frame = pd.DataFrame({team.get(c, c): x for c, x in
+                          {"time": run.time_s, **run.channels}.items()})
+    frame["Comment"] = "free text"  # not a channel: ignored
+    frame["wheelloader_LF"] = 99.0  # the mapped column wins over a canonical-looking one
+    frame.to_csv(folder / "runs" / "b1.csv", index=False)
+    (folder / "session.toml").write_text(
+        'format = "rig-session/1"\nname = "team export"\nunits = "SI"\n'
+        'shock_library = "shocks.toml"\n\n[[run]]\nname = "b1"\nfile = "runs/b1.csv"\n'
+        'setup = { LF = "B20", RF = "B20", LR = "B20", RR = "B20" }\n\n'
+        + tomli_w.dumps({"channels": team})
+    )
+    back = read_session(folder)
+    assert back.channel_map == team
+    got = back.run("b1")
+    assert got.role == "other"
+    assert list(got.channels) == list(run.channels)
+    for c, x in run.channels.items():
+        assert_allclose(got.channels[c], x, rtol=RTOL_ROUND_TRIP, atol=0, err_msg=c)
+    # written back with canonical names and no mapping
+    again = write_session(back, tmp_path / "canonical")
+    assert "channels" not in tomllib.loads((again / "session.toml").read_text())
+    _assert_same_data(back, read_session(again))
+
+
+def test_unknown_manifest_keys_are_preserved(session_dir, tmp_path):
+    text = (session_dir / "session.toml").read_text()
+    text = text.replace('units = "SI"\n', 'units = "SI"\nrig = "8-post"\n', 1)
+    text += '\n[notes]\ndriver = "none"\n'
+    (session_dir / "session.toml").write_text(text)
+    back = read_session(session_dir)
+    assert back.extra == {"rig": "8-post", "notes": {"driver": "none"}}
+    again = read_session(write_session(back, tmp_path / "again"))
+    assert again.extra == back.extra
+
+
+def test_run_dynamic_lookup_and_read_only(session):
+    run = session.run("swap-LF")
+    assert run.n_samples == N_SAMPLES
+    x = run.channels["tire_force_LF"]
+    dyn = run.dynamic("tire_force_LF")
+    assert_allclose(dyn, x - x.mean(), rtol=0, atol=1e-12 * np.abs(x).max())
+    assert abs(dyn.mean()) < 1e-12 * np.abs(x).max()
+    with pytest.raises(ValueError, match="read-only"):
+        x[0] = 0.0
+    with pytest.raises(SessionError, match="run 'swap-LF' has no channel 'spring_force_LF'"):
+        run.dynamic("spring_force_LF")
+    with pytest.raises(SessionError, match=r"no run 'nope'; its runs are \['baseline-1'"):
+        session.run("nope")
+
+
+def test_make_session_copies_and_does_not_require_responses(rng, shocks):
+    run = _random_run(rng, "only-inputs", "other", ("B20",) * 4)
+    run = Run(name=run.name, file=run.file, setup=run.setup, time_s=run.time_s,
+              channels={c: run.channels[c] for c in RIG_INPUTS}, fs_hz=run.fs_hz)
+    s = make_session("inputs only", [run], shocks, units="imperial")
+    assert isinstance(s, Session) and s.path is None and s.units == "imperial"
+    assert list(s.runs[0].channels) == list(RIG_INPUTS)  # no shock_velocity_XX needed here
+
+
+# --------------------------------------------------------------------------------------
+# bad input: one clear SessionError each
+# --------------------------------------------------------------------------------------
+
+
+def _edit_manifest(edit):
+    def mutate(folder):
+        path = folder / "session.toml"
+        doc = tomllib.loads(path.read_text())
+        edit(doc)
+        path.write_text(tomli_w.dumps(doc))
+    return mutate
+
+
+def _edit_run(edit, name="swap-LF"):
+    def mutate(folder):
+        path = folder / "runs" / f"{name}.csv"
+        frame = edit(pd.read_csv(path))
+        frame.to_csv(path, index=False)
+    return mutate
+
+
+def _set(frame, column, rows, value):
+    frame[column] = frame[column].astype(object if isinstance(value, str) else float)
+    frame.loc[rows, column] = value
+    return frame
+
+
+def _shift_time(frame, row, dt):
+    frame.loc[row, "time"] += dt
+    return frame
+
+
+def _swap_times(frame):
+    frame.loc[[10, 11], "time"] = frame.loc[[11, 10], "time"].to_numpy()
+    return frame
+
+
+def _write(relpath, text):
+    def mutate(folder):
+        (folder / relpath).write_text(text)
+    return mutate
+
+
+def _remove(relpath):
+    def mutate(folder):
+        target = folder / relpath
+        shutil.rmtree(target) if target.is_dir() else target.unlink()
+    return mutate
+
+
+BAD_SESSIONS = [
+    # id, mutation of a good session folder, regex the message must contain
+    ("missing-folder", _remove("."), r"session: session folder not found"),
+    ("missing-manifest", _remove("session.toml"),
+     r"session\.toml: session manifest not found"),
+    ("invalid-toml", _write("session.toml", 'format = "rig-session/1\n'),
+     r"session\.toml: not valid TOML"),
+    ("no-format", _edit_manifest(lambda d: d.pop("format")),
+     r"session\.toml: missing 'format'.*rig-session/1"),
+    ("bad-format", _edit_manifest(lambda d: d.update(format="rig-session/2")),
+     r"session\.toml: format 'rig-session/2' is not supported"),
+    ("unknown-units", _edit_manifest(lambda d: d.update(units="metric")),
+     r"session\.toml: units: unknown unit system 'metric'"),
+    ("no-runs", _edit_manifest(lambda d: d.pop("run")), r"session\.toml: no runs"),
+    ("run-without-name", _edit_manifest(lambda d: d["run"][0].pop("name")),
+     r"\[\[run\]\] #1: missing 'name'"),
+    ("run-without-file", _edit_manifest(lambda d: d["run"][1].pop("file")),
+     r"run 'swap-LF': missing 'file'"),
+    ("run-without-setup", _edit_manifest(lambda d: d["run"][1].pop("setup")),
+     r"run 'swap-LF': missing 'setup'"),
+    ("duplicate-run-names", _edit_manifest(lambda d: d["run"][2].update(name="swap-LF")),
+     r"session\.toml: run name 'swap-LF' is used more than once"),
+    ("setup-not-a-table", _edit_manifest(lambda d: d["run"][1].update(setup="B20")),
+     r"run 'swap-LF': setup must be a table"),
+    ("setup-unknown-corner", _edit_manifest(lambda d: d["run"][1]["setup"].update(FL="B20")),
+     r"run 'swap-LF': setup names unknown corner\(s\) \['FL'\]"),
+    ("setup-missing-corner", _edit_manifest(lambda d: d["run"][1]["setup"].pop("RR")),
+     r"run 'swap-LF': setup is missing corner\(s\) RR"),
+    ("setup-unknown-shock", _edit_manifest(lambda d: d["run"][1]["setup"].update(LF="X9")),
+     r"run 'swap-LF': setup LF = 'X9' is not in the shock library shocks\.toml "
+     r"\(known ids: B20, D8, F12\)"),
+    ("bad-role", _edit_manifest(lambda d: d["run"][0].update(role="Baseline")),
+     r"run 'baseline-1': role 'Baseline' is not one of baseline, swap, validation"),
+    ("channels-unknown-canonical",
+     _edit_manifest(lambda d: d.update(channels={"wheel_LF": "WL_LF"})),
+     r"session\.toml: \[channels\] maps 'wheel_LF', which is not a canonical channel"),
+    ("missing-shock-library", _remove("shocks.toml"),
+     r"session\.toml: shock_library 'shocks\.toml' not found"),
+    ("bad-shock-library", _write("shocks.toml", '[[shock]]\nid = "B20"\nkind = "magic"\n'),
+     r"session\.toml: shock_library 'shocks\.toml': .*shocks\.toml"),
+    ("missing-run-file", _remove("runs/swap-LF.csv"),
+     r"run 'swap-LF' \(.*swap-LF\.csv\): run file not found"),
+    ("empty-run-file", _write("runs/swap-LF.csv", ""),
+     r"run 'swap-LF' \(.*swap-LF\.csv\): the file is empty"),
+    ("header-only-run", _edit_run(lambda f: f.iloc[:0]),
+     r"run 'swap-LF' .*: has 0 data row\(s\); a run needs at least 2 samples"),
+    ("one-row-run", _edit_run(lambda f: f.iloc[:1]),
+     r"run 'swap-LF' .*: has 1 data row\(s\)"),
+    ("missing-time", _edit_run(lambda f: f.drop(columns="time")),
+     r"run 'swap-LF' .*: no 'time' column"),
+    ("missing-rig-input", _edit_run(lambda f: f.drop(columns=["aero_roll", "wheelloader_RR"])),
+     r"run 'swap-LF' .*: missing required channel\(s\) 'aero_roll', 'wheelloader_RR'; "
+     r".*\[channels\]"),
+    ("nan-samples", _edit_run(lambda f: _set(f, "tire_force_LF", [50, 51, 120], np.nan)),
+     r"run 'swap-LF' .*: column 'tire_force_LF' has 3 NaN/inf value\(s\) from t=3\.5 s"),
+    ("inf-sample", _edit_run(lambda f: _set(f, "aero_heave", [7], np.inf)),
+     r"run 'swap-LF' .*: column 'aero_heave' has 1 NaN/inf value\(s\) from t=3\.07 s"),
+    ("non-numeric", _edit_run(lambda f: _set(f, "wheelloader_LF", [10], "abc")),
+     r"run 'swap-LF' .*: column 'wheelloader_LF' is not numeric \(data row 11, t=3\.1 s"),
+    ("time-not-increasing", _edit_run(_swap_times),
+     r"run 'swap-LF' .*: time is not strictly increasing at data row 12"),
+    ("time-not-uniform", _edit_run(lambda f: _shift_time(f, 100, 0.003)),
+     r"run 'swap-LF' .*: time is not uniformly sampled: step 0\.013 s at data row 101"),
+    ("dropped-sample", _edit_run(lambda f: f.drop(index=150)),
+     r"run 'swap-LF' .*: time is not uniformly sampled: step 0\.02 s at data row 151 "
+     r"\(t=4\.51 s\) vs the typical step 0\.01 s"),
+    ("time-jitter-above-tolerance", _edit_run(lambda f: _shift_time(f, 100, 1e-7)),
+     r"time is not uniformly sampled"),
+    ("different-sample-rates", _edit_run(lambda f: f.assign(time=f["time"] * 2)),
+     r"runs 'baseline-1' \(100 Hz\) and 'swap-LF' \(50 Hz\) have different sample rates"),
+]
+
+
+@pytest.mark.parametrize("mutate, match", [c[1:] for c in BAD_SESSIONS],
+                         ids=[c[0] for c in BAD_SESSIONS])
+def test_bad_session_raises_one_clear_error(session_dir, mutate, match):
+    mutate(session_dir)
+    with pytest.raises(SessionError, match=match):
+        read_session(session_dir)
+
+
+def test_time_jitter_within_tolerance_is_accepted(session_dir):
+    _edit_run(lambda f: _shift_time(f, 100, 1e-9))(session_dir)  # 1e-7 of the step
+    assert read_session(session_dir).fs_hz == pytest.approx(FS_HZ, rel=1e-6)
+
+
+def test_shock_library_error_is_chained(session_dir):
+    from ident.errors import ShockModelError
+
+    _write("shocks.toml", "units = \"SI\"\n")(session_dir)
+    with pytest.raises(SessionError) as info:
+        read_session(session_dir)
+    assert isinstance(info.value.__cause__, ShockModelError)
+
+
+def _table(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+BAD_TABLES = [
+    # id, file name, file text (None: no file), keyword arguments, regex
+    ("missing-file", "gone.csv", None, {}, r"gone\.csv: file not found"),
+    ("unsupported-suffix", "run.xlsx", "time\n0\n1\n", {}, r"unsupported file type '\.xlsx'"),
+    ("corrupt-parquet", "run.parquet", "not parquet", {},
+     r"run\.parquet: cannot read the file as PARQUET"),
+    ("duplicated-columns", "run.csv", "time,aero_heave,aero_heave\n0,1,2\n1,1,2\n", {},
+     r"duplicated column name\(s\) \['aero_heave'\]"),
+    ("required-missing", "run.csv", "time,aero_heave\n0,1\n1,1\n",
+     {"required": RIG_INPUTS}, r"missing required channel\(s\) 'aero_roll'.*\[channels\]"),
+    ("required-mapped-missing", "run.csv", "time,aero_heave\n0,1\n1,1\n",
+     {"required": ["aero_heave", "wheelloader_LF"],
+      "channel_map": {"wheelloader_LF": "WL_LF_Disp"}},
+     r"missing required channel\(s\) 'WL_LF_Disp' \(wheelloader_LF\)"),
+    ("required-not-canonical", "run.csv", "time\n0\n1\n", {"required": ["heave"]},
+     r"required channel\(s\) \['heave'\] are not canonical"),
+    ("bad-units", "run.csv", "time\n0\n1\n", {"units": "cgs"},
+     r"units: unknown unit system 'cgs'"),
+    ("map-two-channels-to-one-column", "run.csv", "time,X\n0,1\n1,1\n",
+     {"channel_map": {"aero_roll": "X", "aero_pitch": "X"}},
+     r"\[channels\] maps both 'aero_roll' and 'aero_pitch' to column 'X'"),
+    ("map-value-not-a-string", "run.csv", "time\n0\n1\n",
+     {"channel_map": {"aero_roll": 3}}, r"\[channels\] aero_roll = 3"),
+    ("where-names-the-run", "run.csv", "time,aero_heave\n0,1\n1,nan\n",
+     {"where": "drive 'lap-7'"},
+     r"^drive 'lap-7': column 'aero_heave' has 1 NaN/inf value\(s\) from t=1 s"),
+    ("nan-in-time", "run.csv", "time,aero_heave\n0,1\n,1\n2,1\n", {},
+     r"column 'time' has 1 NaN/inf value\(s\), the first at data row"),
+    ("bool-column", "run.csv", "time,aero_heave\n0,True\n1,False\n", {},
+     r"column 'aero_heave' is not numeric \(data row 1, t=0 s: True\)"),
+]
+
+
+@pytest.mark.parametrize("name, text, kwargs, match", [c[1:] for c in BAD_TABLES],
+                         ids=[c[0] for c in BAD_TABLES])
+def test_bad_run_table_raises_one_clear_error(tmp_path, name, text, kwargs, match):
+    path = tmp_path / name
+    if text is not None:
+        path.write_text(text)
+    with pytest.raises(SessionError, match=match):
+        read_run_table(path, **kwargs)
+
+
+def test_read_run_table_maps_converts_and_ignores(tmp_path):
+    path = _table(tmp_path, "drive.csv",
+                  "Zeit,WL_LF_Disp,aero_roll,Note\n10,1.0,2.0,a\n10.5,2.0,4.0,b\n11,3,6,c\n")
+    table = read_run_table(path, units="imperial",
+                           channel_map={"time": "Zeit", "wheelloader_LF": "WL_LF_Disp"})
+    assert isinstance(table, RunTable) and table.fs_hz == 2.0
+    assert list(table.channels) == ["aero_roll", "wheelloader_LF"]  # ALL_CHANNELS order
+    assert_array_equal(table.time_s, [10.0, 10.5, 11.0])
+    assert_allclose(table.channels["wheelloader_LF"], np.array([1.0, 2.0, 3.0]) * IN_M,
+                    rtol=RTOL_ROUND_TRIP)
+    assert_allclose(table.channels["aero_roll"], np.array([2.0, 4.0, 6.0]) * LBF_N * IN_M,
+                    rtol=RTOL_ROUND_TRIP)
+    assert not table.channels["aero_roll"].flags.writeable
+
+
+BAD_RUNS = [
+    # id, change to the second run, regex
+    ("unknown-shock", {"setup": dict(zip(CORNERS, ("B20", "B20", "Z1", "B20")))},
+     r"run 'swap-LF' \(runs/swap-LF\.csv\): setup LR = 'Z1' is not in the shock library "
+     r"of the session \(known ids: B20, D8, F12\)"),
+    ("bad-role", {"role": "sweep"}, r"run 'swap-LF' .*role 'sweep' is not one of"),
+    ("missing-rig-input", {"drop": "aero_pitch"},
+     r"run 'swap-LF' .*missing required channel\(s\) 'aero_pitch'"),
+    ("non-canonical-channel", {"add": "ShockVel_LF"},
+     r"run 'swap-LF' .*unknown channel name\(s\) \['ShockVel_LF'\]"),
+    ("nan", {"nan": "shock_velocity_RF"},
+     r"run 'swap-LF' .*column 'shock_velocity_RF' has 1 NaN/inf value\(s\) from t=3\.05 s"),
+    ("different-sample-rates", {"fs_hz": 200.0},
+     r"runs 'baseline-1' \(100 Hz\) and 'swap-LF' \(200 Hz\) have different sample rates"),
+    ("fs-disagrees-with-time", {"fs_hz_only": 99.0},
+     r"run 'swap-LF' .*fs_hz = 99 Hz disagrees with its time_s \(100 Hz\)"),
+    ("duplicate-names", {"name": "baseline-1"},
+     r"run name 'baseline-1' is used more than once"),
+]
+
+
+@pytest.mark.parametrize("change, match", [c[1:] for c in BAD_RUNS],
+                         ids=[c[0] for c in BAD_RUNS])
+def test_make_session_uses_the_same_checks(rng, shocks, change, match):
+    runs = [_random_run(rng, *spec) for spec in RUN_SPECS]
+    r = runs[1]
+    channels = dict(r.channels)
+    fields = {"name": change.get("name", r.name), "file": r.file,
+              "setup": change.get("setup", r.setup), "role": change.get("role", r.role),
+              "time_s": r.time_s, "fs_hz": change.get("fs_hz_only", r.fs_hz)}
+    if "drop" in change:
+        del channels[change["drop"]]
+    if "add" in change:
+        channels[change["add"]] = channels["aero_heave"]
+    if "nan" in change:
+        channels[change["nan"]] = np.where(np.arange(N_SAMPLES) == 5, np.nan,
+                                           channels[change["nan"]])
+    if "fs_hz" in change:
+        fields["time_s"] = np.arange(N_SAMPLES) / change["fs_hz"]
+        fields["fs_hz"] = change["fs_hz"]
+    runs[1] = Run(channels=channels, **fields)
+    with pytest.raises(SessionError, match=match):
+        make_session("bad", runs, shocks)
+
+
+def test_make_session_needs_runs(shocks):
+    with pytest.raises(SessionError, match="session 'empty': the session has no runs"):
+        make_session("empty", [], shocks)
+
+
+# --------------------------------------------------------------------------------------
+# atomic writes
+# --------------------------------------------------------------------------------------
+
+
+def _snapshot(folder):
+    return {p.relative_to(folder): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file()}
+
+
+def _leftovers(folder):
+    """Hidden temporary siblings that write_session may have left behind."""
+    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
+
+
+def test_existing_folder_is_left_untouched_without_overwrite(session, tmp_path):
+    target = tmp_path / "busy"
+    target.mkdir()
+    (target / "notes.txt").write_text("keep me")
+    before = _snapshot(target)
+    with pytest.raises(FileExistsError, match=r"busy: folder already exists and is not empty"):
+        write_session(session, target)
+    assert _snapshot(target) == before
+    assert _leftovers(tmp_path) == []
+
+    write_session(session, target, overwrite=True)
+    assert not (target / "notes.txt").exists()
+    _assert_same_data(session, read_session(target))
+    assert _leftovers(tmp_path) == []
+
+
+def test_empty_existing_folder_is_accepted(session, tmp_path):
+    (tmp_path / "empty").mkdir()
+    assert read_session(write_session(session, tmp_path / "empty")).run_names == tuple(
+        name for name, _, _ in RUN_SPECS)
+
+
+def test_failure_while_writing_leaves_nothing_half_written(session, tmp_path, monkeypatch):
+    target = tmp_path / "old"
+    write_session(session, target)
+    before = _snapshot(target)
+    real = session_mod.write_run_table
+
+    def failing(path, *args, **kwargs):
+        if Path(path).stem == "swap-LF":  # the second of three runs
+            raise OSError("disk full")
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(session_mod, "write_run_table", failing)
+    with pytest.raises(OSError, match="disk full"):
+        write_session(session, target, overwrite=True)
+    with pytest.raises(OSError, match="disk full"):
+        write_session(session, tmp_path / "new")
+    assert _snapshot(target) == before
+    assert not (tmp_path / "new").exists() and _leftovers(tmp_path) == []
+
+
+def test_write_session_rejects_bad_options(session, tmp_path):
+    with pytest.raises(ValueError, match="run_format 'xlsx' is not supported"):
+        write_session(session, tmp_path / "x", run_format="xlsx")
+    with pytest.raises(ValueError, match="unknown unit system 'metric'"):
+        write_session(session, tmp_path / "x", units="metric")
+    (tmp_path / "file").write_text("")
+    with pytest.raises(FileExistsError, match="is not a folder"):
+        write_session(session, tmp_path / "file", overwrite=True)
+
+
+def test_run_names_are_made_safe_file_names(rng, shocks, tmp_path):
+    runs = [_random_run(rng, "a/b c", "other", ("B20",) * 4),
+            _random_run(rng, "a_b_c", "other", ("B20",) * 4)]
+    folder = write_session(make_session("names", runs, shocks), tmp_path / "s")
+    back = read_session(folder)
+    assert [r.file for r in back.runs] == ["runs/a_b_c.csv", "runs/a_b_c-2.csv"]
+    assert back.run_names == ("a/b c", "a_b_c")
+
+
+# --------------------------------------------------------------------------------------
+# documentation
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", session_mod.__all__)
+def test_public_names_are_documented(name):
+    obj = getattr(session_mod, name)
+    if inspect.isfunction(obj) or inspect.isclass(obj):
+        doc = inspect.getdoc(obj)
+        assert doc and len(doc) > 40, f"{name} needs a docstring"
+        if inspect.isfunction(obj) and name.startswith(("read_", "write_", "make_")):
+            assert re.search(r"^Raises\n-+", doc, re.M), f"{name}: no Raises section"
