@@ -24,7 +24,8 @@ It is solved at every step by Newton's method on the 4 shock equations (never
 broken by a one-sample delay). The lag is discretized the same way (exact for
 a piecewise-linear ``f(v(t))``). The only approximation is that ``dF`` is
 piecewise linear between internal samples; ``oversample`` refines the
-internal step (rig inputs are interpolated linearly, consistent with the hold).
+internal step; rig inputs are refined onto the internal grid by band-limited
+(polyphase) interpolation, since rig signals are samples of continuous signals.
 
 The rig-input part of the response does not depend on the shocks: it is
 computed once per drive (:func:`rig_response`) and shared by all setups.
@@ -277,13 +278,18 @@ class RigResponse:
     plant_name: str
 
 
-def _interp_fine(u, r):
-    """Linear interpolation of (N, m) samples onto r sub-steps: (N-1)*r + 1 rows."""
+def _refine(u, r):
+    """Band-limited interpolation of (N, m) drive samples onto r sub-steps: (N-1)*r + 1 rows.
+
+    Rig signals are samples of continuous, band-limited signals (not piecewise
+    linear between samples), so the hold assumption of the discretization is
+    applied on the fine grid only, where its error is ``sinc^2(f / (r fs))``.
+    """
     if r == 1:
         return np.ascontiguousarray(u, dtype=float)
-    n = u.shape[0]
-    t = np.arange((n - 1) * r + 1) / r
-    return np.column_stack([np.interp(t, np.arange(n), u[:, j]) for j in range(u.shape[1])])
+    from ident.drive import resample_bandlimited
+
+    return np.ascontiguousarray(resample_bandlimited(u, r, 1, axis=0)[: (u.shape[0] - 1) * r + 1])
 
 
 def _modal_filter(phi, g0, g1, w, axis=-1):
@@ -317,7 +323,7 @@ def rig_response(plant, drive, *, oversample=4):
     """
     r = _check_oversample(oversample)
     u, fs = _drive_array(drive)
-    u_fine = _interp_fine(u, r)
+    u_fine = _refine(u, r)
     h = 1.0 / (fs * r)
     phi, g0, g1 = foh_coefficients(plant.modal.lam, h)
     w = plant.modal.B[:, :7] @ u_fine.T  # (n, n_fine)
