@@ -135,6 +135,7 @@ def modal_form(A, B, C, D, *, max_condition=1e10):
     """
     A, B, C, D = (np.asarray(x, dtype=float) for x in (A, B, C, D))
     lam, V = np.linalg.eig(A)
+    lam, V = lam.astype(complex), V.astype(complex)  # eig returns real arrays for real spectra
     cond = np.linalg.cond(V)
     if not np.isfinite(cond) or cond > max_condition:
         raise ValueError(

@@ -25,7 +25,7 @@ import numpy as np
 
 from ident._io import read_toml
 from ident.channels import CORNERS, RIG_INPUTS
-from ident.errors import SessionError
+from ident.errors import SessionError, ShockModelError
 from ident.units import check_units, to_si
 
 __all__ = [
@@ -159,11 +159,14 @@ def read_rig_plan(path):
     doc = read_toml(path, error=SessionError, what="rig plan")
     if doc.get("format") != "rig-plan/1":
         raise SessionError(f"{where}: 'format' is {doc.get('format')!r}; expected \"rig-plan/1\"")
-    units = check_units(doc.get("units", "SI"), where=f"{where}: 'units'")
+    units = check_units(doc.get("units", "SI"), where=f"{where}: 'units'", error=SessionError)
     lib_file = doc.get("shock_library")
     if not isinstance(lib_file, str):
         raise SessionError(f"{where}: 'shock_library' (path to a shocks TOML file) is missing")
-    shocks = read_shock_library(path.parent / lib_file)
+    try:
+        shocks = read_shock_library(path.parent / lib_file)
+    except ShockModelError as exc:
+        raise SessionError(f"{where}: shock_library: {exc}") from exc
     fs = _num(doc, "fs_hz", where, 100.0)
     duration = _num(doc, "duration_s", where, 800.0)
     seed = _num(doc, "seed", where, 0, positive=False, integer=True)
@@ -183,7 +186,9 @@ def read_rig_plan(path):
             raise SessionError(f"{w}: 'setup' must name a shock for each of {list(CORNERS)}, "
                                f"got {setup!r}")
         for c, sid in setup.items():
-            shocks.get(sid, where=f"{w}: setup {c}")
+            if sid not in shocks:
+                raise SessionError(f"{w}: setup {c} names unknown shock id {sid!r}; the shock "
+                                   f"library {lib_file} has {list(shocks)}")
         role = entry.get("role", "other")
         if role not in _ROLES:
             raise SessionError(f"{w}: role {role!r} is not one of {list(_ROLES)}")

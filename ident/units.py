@@ -58,7 +58,7 @@ UNIT_LABELS = {
 }
 
 
-def check_units(units, *, where="units"):
+def check_units(units, *, where="units", error=ValueError):
     """Return the canonical unit-system name, or raise a clear ``ValueError``.
 
     Parameters
@@ -67,6 +67,9 @@ def check_units(units, *, where="units"):
         ``"SI"`` or ``"imperial"`` (case-insensitive).
     where : str
         Where the value came from (file and key), used in the message.
+    error : type
+        Exception class to raise (a ``ValueError`` subclass of the caller's
+        family, e.g. ``SessionError``).
 
     Raises
     ------
@@ -77,7 +80,7 @@ def check_units(units, *, where="units"):
         for name in UNIT_SYSTEMS:
             if units.strip().lower() == name.lower():
                 return name
-    raise ValueError(
+    raise error(
         f"{where}: unknown unit system {units!r}; use \"SI\" or \"imperial\""
     )
 

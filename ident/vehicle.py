@@ -266,7 +266,7 @@ def vehicle_from_dict(doc, *, where="vehicle"):
     fmt = doc.get("format", "vehicle/1")
     if fmt != "vehicle/1":
         raise VehicleError(f"{where}: format {fmt!r} is not supported; expected \"vehicle/1\"")
-    units = check_units(doc.get("units", "SI"), where=f"{where}: 'units'")
+    units = check_units(doc.get("units", "SI"), where=f"{where}: 'units'", error=VehicleError)
     unknown = set(doc) - set(_KEYS) - {"format", "units", "name", "description"}
     if unknown:
         raise VehicleError(
@@ -414,7 +414,8 @@ class FullCarModel:
         import control
 
         return control.ss(self.A, self.B, self.C, self.D, inputs=list(self.input_names),
-                          outputs=list(self.output_names), name=self.params.name)
+                          outputs=list(self.output_names),
+                          name=self.params.name.replace(".", ""))  # control forbids '.' in names
 
     def loop_plant(self, cbar_n_s_m=None):
         """The model as an :class:`ident.closedloop.LoopPlant` around linear damping `cbar_n_s_m`.

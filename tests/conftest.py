@@ -1,0 +1,56 @@
+"""Shared fixtures: a seeded random generator, the paper car, virtual-rig sessions."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ident.channels import CORNERS
+
+
+@pytest.fixture
+def rng():
+    """A seeded random generator (fresh for each test)."""
+    return np.random.default_rng(20090412)
+
+
+@pytest.fixture(scope="session")
+def paper_vehicle():
+    """The seed paper's Table 1 car, SI."""
+    from ident.vehicle import example_vehicle
+
+    return example_vehicle()
+
+
+@pytest.fixture(scope="session")
+def paper_model(paper_vehicle):
+    """The 7-DOF full-car state-space model of the paper car."""
+    from ident.vehicle import build_full_car
+
+    return build_full_car(paper_vehicle)
+
+
+@pytest.fixture(scope="session")
+def paper_plan():
+    """The built-in plan: the paper's identification experiment."""
+    from ident.rig import default_plan
+
+    return default_plan()
+
+
+@pytest.fixture(scope="session")
+def linear_session(paper_plan):
+    """One 800 s run of the paper drive with linear B20 shocks (no shock loop error)."""
+    from ident.rig import PlanRun, simulate_session
+
+    plan = replace(paper_plan, runs=(PlanRun("linear", {c: "B20" for c in CORNERS}, "baseline",
+                                             1, 800.0),))
+    return simulate_session(plan)
+
+
+@pytest.fixture(scope="session")
+def paper_session(paper_plan):
+    """The paper's experiment (5 runs x 800 s) from the virtual rig."""
+    from ident.rig import simulate_session
+
+    return simulate_session(paper_plan)

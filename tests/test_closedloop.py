@@ -1,0 +1,210 @@
+"""Tests of ident.closedloop: modal discretization and the shock loop."""
+
+import numpy as np
+import pytest
+from scipy import integrate, signal
+
+from ident.channels import CORNERS, RIG_INPUTS
+from ident.closedloop import (foh_coefficients, lag_coefficients, modal_form, rig_response,
+                              simulate, simulate_batch)
+from ident.drive import Drive, make_noise_drive
+from ident.shocks import DigressiveShock, LinearShock, TableShock
+from ident.units import to_si
+from ident.vehicle import close_shock_loop
+
+RTOL_EXACT = 1e-9  # exact discretizations: round-off only
+RTOL_LOOP_R8 = 3e-3  # piecewise-linear dF between internal samples at 8x oversampling
+C20 = to_si(20.0, "damping", "imperial")
+C30 = to_si(30.0, "damping", "imperial")
+
+
+def _drive(duration_s=60.0, seed=3, scale=1.0):
+    peak = {"aero_heave": 2000.0 * scale, "aero_roll": 2.0e4 * scale, "aero_pitch": 4.0e4 * scale}
+    peak.update({w: 0.02 * scale for w in RIG_INPUTS[3:]})
+    return make_noise_drive(duration_s=duration_s, fs_hz=100.0, peak=peak, seed=seed)
+
+
+def _n8():
+    k = to_si(1.0, "damping", "imperial")
+    v = to_si(2.0, "velocity", "imperial")
+    return DigressiveShock("N8", bump_low_n_s_m=22 * k, bump_knee_m_s=v, bump_high_n_s_m=5.5 * k,
+                           rebound_low_n_s_m=34 * k, rebound_knee_m_s=v, rebound_high_n_s_m=8.5 * k,
+                           lag_s=0.004)
+
+
+def test_modal_form_frequency_response_is_exact(paper_model):
+    plant = paper_model.loop_plant()
+    f = np.linspace(0.1, 40, 57)
+    np.testing.assert_allclose(plant.modal.frequency_response(f), paper_model.frequency_response(f),
+                               rtol=1e-9, atol=1e-12 * np.abs(paper_model.frequency_response(f)).max())
+
+
+def test_modal_form_real_poles():
+    # an overdamped 2nd-order system and a first-order one: real poles only
+    A = np.array([[0.0, 1.0, 0.0], [-4.0, -10.0, 0.0], [0.0, 0.0, -3.0]])
+    B = np.array([[0.0], [1.0], [2.0]])
+    C = np.array([[1.0, 0.5, 1.0]])
+    D = np.array([[0.25]])
+    md = modal_form(A, B, C, D)
+    assert np.all(md.lam.imag == 0)
+    f = np.array([0.0, 0.3, 2.0])
+    ref = np.array([(C @ np.linalg.solve(2j * np.pi * fk * np.eye(3) - A, B) + D)[0, 0] for fk in f])
+    np.testing.assert_allclose(md.frequency_response(f)[0, 0], ref, rtol=1e-12)
+
+
+def test_modal_form_rejects_defective_matrix():
+    with pytest.raises(ValueError, match="defective"):
+        modal_form(np.array([[0.0, 1.0], [0.0, 0.0]]), np.ones((2, 1)), np.ones((1, 2)), np.zeros((1, 1)))
+
+
+@pytest.mark.parametrize("lam", [-3 + 20j, -0.5, 1e-4j - 1e-3, -200 + 5j])
+def test_foh_coefficients_known_answer(lam):
+    h = 0.01
+    phi, g0, g1 = foh_coefficients(np.array([lam]), h)
+    w0 = integrate.quad(lambda s: np.exp(lam * (h - s)).real * (1 - s / h), 0, h, epsabs=1e-15)[0] + 1j * \
+        integrate.quad(lambda s: np.exp(lam * (h - s)).imag * (1 - s / h), 0, h, epsabs=1e-15)[0]
+    w1 = integrate.quad(lambda s: np.exp(lam * (h - s)).real * s / h, 0, h, epsabs=1e-15)[0] + 1j * \
+        integrate.quad(lambda s: np.exp(lam * (h - s)).imag * s / h, 0, h, epsabs=1e-15)[0]
+    assert phi[0] == pytest.approx(np.exp(lam * h), rel=1e-14)
+    assert g0[0] == pytest.approx(w0, rel=1e-9)
+    assert g1[0] == pytest.approx(w1, rel=1e-9)
+
+
+def test_foh_series_branch_is_continuous():
+    h = 1.0
+    z = np.array([0.99e-3, 1.01e-3]) * (1 + 1j) / np.sqrt(2)
+    _, g0, g1 = foh_coefficients(z / h, h)
+    assert g0[0] == pytest.approx(g0[1], rel=1e-4) and g1[0] == pytest.approx(g1[1], rel=1e-4)
+
+
+def test_lag_is_exact_for_a_ramp():
+    """tau F' + F = t has the exact solution F = t - tau (1 - exp(-t / tau))."""
+    tau, h = 0.004, 0.0025
+    alpha, b0, b1 = lag_coefficients(tau, h)
+    t = np.arange(200) * h
+    F = signal.lfilter([b0, b1], [1.0, -alpha], t)
+    np.testing.assert_allclose(F, t - tau * (1 - np.exp(-t / tau)), rtol=1e-10, atol=1e-15)
+    assert lag_coefficients(0.0, h) == (0.0, 1.0, 0.0)
+
+
+def test_linear_shocks_equal_lsim(paper_model):
+    """With shocks equal to c_bar the loop carries dF = 0: the recursion is exact FOH."""
+    drive = _drive(20.0)
+    res = simulate(paper_model.loop_plant(C20), drive, [LinearShock("B", C20)] * 4, oversample=1)
+    A, B, C, D = close_shock_loop(paper_model.A, paper_model.B, paper_model.C, paper_model.D, [C20] * 4)
+    _, y, _ = signal.lsim((A, B[:, :7], C, D[:, :7]), drive.as_array(), drive.time_s, interp=True)
+    for j, name in enumerate(paper_model.output_names):
+        np.testing.assert_allclose(res.channels[name], y[:, j], rtol=0,
+                                   atol=RTOL_EXACT * np.abs(y[:, j]).max())
+    np.testing.assert_allclose(res.channels["shock_force_LF"], C20 * y[:, 0], rtol=1e-9,
+                               atol=1e-9 * np.abs(C20 * y[:, 0]).max())
+
+
+def _rel_rms(a, b):
+    return np.sqrt(np.mean((a - b) ** 2) / np.mean(b**2))
+
+
+def test_loop_converges_second_order(paper_model):
+    """Shocks far from c_bar: the error against the exact linear loop falls as h^2."""
+    drive = _drive(20.0)
+    shocks = [LinearShock("B", C20)] * 4
+    errs = []
+    for r in (2, 4, 8):
+        exact = simulate(paper_model.loop_plant(C20), drive, shocks, oversample=r)
+        loop = simulate(paper_model.loop_plant(C30), drive, shocks, oversample=r)
+        errs.append(max(_rel_rms(loop.channels[n], exact.channels[n])
+                        for n in ("shock_velocity_LF", "tire_force_LF", "ride_height_LF")))
+    assert errs[2] < RTOL_LOOP_R8
+    assert errs[0] / errs[1] > 3.0 and errs[1] / errs[2] > 3.0  # 4 for an exact h^2 law
+
+
+def test_result_does_not_depend_on_cbar(paper_model):
+    drive = _drive(20.0)
+    setup = [_n8(), LinearShock("B", C20), _n8(), LinearShock("B", C20)]
+    a = simulate(paper_model.loop_plant(C20), drive, setup, oversample=8)
+    b = simulate(paper_model.loop_plant(0.6 * C20), drive, setup, oversample=8)
+    for n in ("shock_velocity_LF", "tire_force_RR", "ride_height_LR", "shock_force_LF"):
+        assert _rel_rms(a.channels[n], b.channels[n]) < RTOL_LOOP_R8
+
+
+def test_batch_equals_single(paper_model):
+    drive = _drive(10.0)
+    plant = paper_model.loop_plant(C20)
+    setups = [[_n8()] * 4, [LinearShock("B", C20)] * 4,
+              {"LF": _n8(), "RF": LinearShock("X", 0.5 * C20), "LR": _n8(), "RR": _n8()}]
+    rig = rig_response(plant, drive, oversample=4)
+    batch = simulate_batch(plant, drive, setups, oversample=4, rig=rig)
+    for i, s in enumerate(setups):
+        one = simulate(plant, drive, s, oversample=4)
+        for n in ("shock_velocity_RF", "tire_force_LR", "shock_force_LF"):
+            np.testing.assert_allclose(batch.channels[n][i], one.channels[n], rtol=1e-12, atol=1e-12)
+
+
+def test_same_curve_as_table_or_digressive_is_identical(paper_model):
+    d = _n8()
+    v = np.concatenate([[-10.0], d.to_pwl().v_knots_m_s, [10.0]])  # far knots: end slopes
+    t = TableShock("T", v, d.force(v), lag_s=d.lag_s)
+    drive = _drive(10.0)
+    plant = paper_model.loop_plant(C20)
+    a = simulate(plant, drive, [d] * 4)
+    b = simulate(plant, drive, [t] * 4)
+    np.testing.assert_allclose(a.channels["tire_force_LF"], b.channels["tire_force_LF"], rtol=1e-12)
+
+
+def test_lagged_linear_shock_matches_complex_damping(paper_model):
+    """A linear shock with lag is the damping c / (1 + j w tau) in the frequency domain."""
+    from ident.frf import frf_from_arrays
+
+    tau = 0.01
+    drive = _drive(400.0, seed=11)
+    res = simulate(paper_model.loop_plant(C20), drive, [LinearShock("L", C20, lag_s=tau)] * 4,
+                   oversample=8)
+    u = drive.as_array()
+    names = ["shock_velocity_LF", "tire_force_RR"]
+    frf = frf_from_arrays(u, np.column_stack([res.channels[n] for n in names]), fs=100.0,
+                          nperseg=4096)
+    f = frf.f_hz
+    band = (f > 0.5) & (f < 20)
+    # analytic: open-loop plant closed with complex damping
+    A, B, C, D = paper_model.A, paper_model.B, paper_model.C, paper_model.D
+    for o, name in enumerate(names):
+        oi = paper_model.output_names.index(name)
+        for k in np.flatnonzero(band)[::25]:
+            s = 2j * np.pi * f[k]
+            G = C @ np.linalg.solve(s * np.eye(A.shape[0]) - A, B) + D
+            cd = np.diag([C20 / (1 + s * tau)] * 4)
+            Gv_r, Gv_f = G[:4, :7], G[:4, 7:]
+            v = np.linalg.solve(np.eye(4) - Gv_f @ cd, Gv_r)
+            Hk = G[oi, :7] + G[oi, 7:] @ cd @ v
+            ok = frf.partial_coherence[o, :, k] > 0.99
+            err = np.abs(20 * np.log10(np.abs(frf.H[o, ok, k] / Hk[ok])))
+            assert np.all(err < 0.5), (name, f[k], err)
+
+
+BAD = [
+    (lambda m: [LinearShock("B", C20)] * 3, ValueError, "4 shock models"),
+    (lambda m: {"LF": m, "RF": m, "LR": m}, ValueError, "missing"),
+    (lambda m: ["B20"] * 4, TypeError, "not a shock model"),
+]
+
+
+@pytest.mark.parametrize("make,exc,match", BAD)
+def test_bad_setups(paper_model, make, exc, match):
+    drive = _drive(2.0)
+    with pytest.raises(exc, match=match):
+        simulate(paper_model.loop_plant(), drive, make(LinearShock("B", C20)))
+
+
+def test_bad_options(paper_model):
+    drive = _drive(2.0)
+    shocks = [LinearShock("B", C20)] * 4
+    with pytest.raises(ValueError, match="oversample"):
+        simulate(paper_model.loop_plant(), drive, shocks, oversample=0)
+    with pytest.raises(ValueError, match="unknown outputs"):
+        simulate(paper_model.loop_plant(), drive, shocks, outputs=["tire_force_XX"])
+    with pytest.raises(TypeError, match="Drive"):
+        simulate(paper_model.loop_plant(), np.zeros((10, 7)), shocks)
+    plant = paper_model.loop_plant()
+    rig = rig_response(plant, drive, oversample=2)
+    with pytest.raises(ValueError, match="another plant or oversampling"):
+        simulate(plant, drive, shocks, oversample=4, rig=rig)
