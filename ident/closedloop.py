@@ -103,6 +103,14 @@ class ModalSystem:
                    + np.einsum("pn,nf,nm->pmf", np.conj(self.C), r2, np.conj(self.B)))
         return H + self.D[:, :, None]
 
+    def pruned(self, rtol=1e-13):
+        """Drop modes that no input drives or no output reads (relative to the largest)."""
+        bn = np.abs(self.B).max(axis=1) if self.B.size else np.zeros(self.lam.size)
+        cn = np.abs(self.C).max(axis=0) if self.C.size else np.zeros(self.lam.size)
+        g = bn * cn
+        keep = g > rtol * (g.max() if g.size and g.max() > 0 else 1.0)
+        return ModalSystem(self.lam[keep], self.B[keep], self.C[:, keep], self.D)
+
     def select(self, outputs=None, inputs=None):
         """Return the subsystem of some outputs and inputs (index arrays)."""
         C, D, B = self.C, self.D, self.B
@@ -214,12 +222,20 @@ def lag_coefficients(lag_s, h):
 
 @dataclass(frozen=True, eq=False)
 class LoopPlant:
-    """A linear vehicle model ready for the closed loop with shocks.
+    """A linear vehicle model ready for the closed loop with shocks (Eq. 20).
+
+    The response is ``y = H~rig u_rig + H~shocks dF``: two modal systems, one
+    driven by the 7 rig inputs (simulated once per drive) and one by the 4
+    shock-force deviations (stepped in the shock loop, so it should be
+    compact). They may share poles (the physical model) or not (an identified
+    model fitted pair by pair).
 
     Attributes
     ----------
-    modal : ModalSystem
-        Inputs ``RIG_INPUTS + dF_LF..dF_RR`` (11), outputs ``output_names``.
+    rig : ModalSystem
+        Inputs ``RIG_INPUTS`` (7), outputs ``output_names``.
+    shock : ModalSystem
+        Inputs ``dF_LF..dF_RR`` (4), outputs ``output_names``.
     output_names : tuple of str
         Canonical channel names; must contain the 4 ``shock_velocity_XX``.
     cbar_n_s_m : ndarray, shape (4,)
@@ -227,7 +243,8 @@ class LoopPlant:
     name : str
     """
 
-    modal: ModalSystem
+    rig: ModalSystem
+    shock: ModalSystem
     output_names: tuple
     cbar_n_s_m: np.ndarray
     name: str = "plant"
@@ -238,9 +255,11 @@ class LoopPlant:
         if missing:
             raise ValueError(f"plant {self.name!r}: outputs lack {missing}; the shock loop needs "
                              "the 4 shock velocities")
-        if self.modal.B.shape[1] != 11:
-            raise ValueError(f"plant {self.name!r}: needs 11 inputs (7 rig + 4 dF), "
-                             f"got {self.modal.B.shape[1]}")
+        p = len(self.output_names)
+        for part, m in ((self.rig, 7), (self.shock, 4)):
+            if part.B.shape[1] != m or part.C.shape[0] != p:
+                raise ValueError(f"plant {self.name!r}: a part has {part.B.shape[1]} inputs and "
+                                 f"{part.C.shape[0]} outputs; expected {m} and {p}")
         cbar = np.asarray(self.cbar_n_s_m, dtype=float).reshape(4)
         object.__setattr__(self, "cbar_n_s_m", cbar)
         idx = np.array([self.output_names.index(v) for v in SHOCK_VELOCITIES])
@@ -248,9 +267,15 @@ class LoopPlant:
 
     @classmethod
     def from_state_space(cls, A, B, C, D, output_names, cbar_n_s_m, *, name="plant"):
-        """Build from real state-space matrices whose last 4 inputs are ``dF``."""
-        return cls(modal_form(A, B, C, D), tuple(output_names), np.asarray(cbar_n_s_m, float),
-                   name=name)
+        """Build from real state-space matrices with inputs ``[u_rig (7), dF (4)]``."""
+        md = modal_form(A, B, C, D)
+        return cls(md.select(inputs=slice(0, 7)).pruned(), md.select(inputs=slice(7, 11)).pruned(),
+                   tuple(output_names), np.asarray(cbar_n_s_m, float), name=name)
+
+    def frequency_response(self, f_hz):
+        """``H[output, input, frequency]`` with inputs rig (7) then dF (4), shape (p, 11, n_f)."""
+        return np.concatenate([self.rig.frequency_response(f_hz),
+                               self.shock.frequency_response(f_hz)], axis=1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -262,7 +287,7 @@ class RigResponse:
     Attributes
     ----------
     x : ndarray of complex, shape (n_modes, n_fine)
-        Modal states on the internal grid.
+        Modal states of the plant's rig part on the internal grid.
     u_fine : ndarray, shape (n_fine, 7)
         Rig inputs interpolated on the internal grid.
     fs_hz : float
@@ -326,8 +351,8 @@ def rig_response(plant, drive, *, oversample=4):
     u, fs = _drive_array(drive)
     u_fine = _refine(u, r)
     h = 1.0 / (fs * r)
-    phi, g0, g1 = foh_coefficients(plant.modal.lam, h)
-    w = plant.modal.B[:, :7] @ u_fine.T  # (n, n_fine)
+    phi, g0, g1 = foh_coefficients(plant.rig.lam, h)
+    w = plant.rig.B @ u_fine.T  # (n, n_fine)
     x = _modal_filter(phi, g0, g1, w)
     return RigResponse(x=x, u_fine=u_fine, fs_hz=fs, oversample=r, n_samples=u.shape[0],
                        plant_name=plant.name)
@@ -646,13 +671,13 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
                          "or oversampling; recompute it with rig_response()")
     fs = rig.fs_hz
     h = 1.0 / (fs * r)
-    md = plant.modal
+    ms, mr = plant.shock, plant.rig
     vi = plant.velocity_idx
-    phi, g0, g1 = foh_coefficients(md.lam, h)
-    Bf = np.ascontiguousarray(md.B[:, 7:])
-    Cv = np.ascontiguousarray(md.C[vi])
-    Deff = (np.real(Cv @ (g1[:, None] * Bf)) + md.D[np.ix_(vi, np.arange(7, 11))])
-    v_rig = np.ascontiguousarray((np.real(Cv @ rig.x) + md.D[vi, :7] @ rig.u_fine.T).T)
+    phi, g0, g1 = foh_coefficients(ms.lam, h)
+    Bf = np.ascontiguousarray(ms.B)
+    Cv = np.ascontiguousarray(ms.C[vi])
+    Deff = np.real(Cv @ (g1[:, None] * Bf)) + ms.D[vi]
+    v_rig = np.ascontiguousarray((np.real(mr.C[vi] @ rig.x) + mr.D[vi] @ rig.u_fine.T).T)
     packed = _pack_setups(models, h)
     S, N = len(models), rig.n_samples
     dF = np.zeros((S, N, 4))
@@ -672,10 +697,10 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     if unknown:
         raise ValueError(f"unknown outputs {unknown}; the plant has {list(plant.output_names)}")
     oi = np.array([plant.output_names.index(o) for o in names], dtype=int)
-    C, D = md.C[oi], md.D[oi]
     sl = slice(None, None, r)
-    y_rig = np.real(C @ rig.x[:, sl]) + D[:, :7] @ rig.u_fine[sl].T  # (p, N)
-    y = y_rig[None] + np.real(xs @ C.T).transpose(0, 2, 1) + (dF @ D[:, 7:].T).transpose(0, 2, 1)
+    y_rig = np.real(mr.C[oi] @ rig.x[:, sl]) + mr.D[oi] @ rig.u_fine[sl].T  # (p, N)
+    y = (y_rig[None] + np.real(xs @ ms.C[oi].T).transpose(0, 2, 1)
+         + (dF @ ms.D[oi].T).transpose(0, 2, 1))
     channels = {name: y[:, j] for j, name in enumerate(names)}
     for c, name in enumerate(SHOCK_FORCES):
         channels[name] = F[:, :, c]

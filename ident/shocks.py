@@ -21,6 +21,10 @@ Kinds (``kind`` in ``shocks.toml``):
     :class:`DigressiveShock`, two slopes per side (low speed up to a knee, high
     speed beyond), separate for bump and rebound.
 
+Every ``[[shock]]`` table may also give ``count``, an integer >= 0: how many
+of that shock the team has (its inventory, used by the planner to skip setups
+that need more units than exist). Omitted means unlimited (``count=None``).
+
 Examples
 --------
 >>> b20 = LinearShock("B20", 3502.5)
@@ -371,6 +375,9 @@ class ShockModel:
         ``lag_s * dF/dt + F = f(v)``; 0 (the default) is none. Must be >= 0.
     description : str, keyword-only
         Free text kept through read/write of a library.
+    count : int or None, keyword-only
+        How many of this shock the team has (inventory), an integer >= 0;
+        ``None`` (the default) is unlimited. TOML key ``count``.
 
     Notes
     -----
@@ -387,6 +394,7 @@ class ShockModel:
     id: str
     lag_s: float = field(default=0.0, kw_only=True)
     description: str = field(default="", kw_only=True)
+    count: int | None = field(default=None, kw_only=True)
 
     def __post_init__(self):
         if not isinstance(self.id, str) or not self.id.strip() or self.id != self.id.strip():
@@ -397,6 +405,17 @@ class ShockModel:
         if not isinstance(self.description, str):
             raise _model_error(self._who, "description", f"must be a string, got "
                                f"{type(self.description).__name__}", "give free text")
+        if self.count is not None:
+            if not isinstance(self.count, (numbers.Integral, np.integer)) or isinstance(
+                    self.count, (bool, np.bool_)):
+                raise _model_error(self._who, "count", f"must be an integer, got "
+                                   f"{type(self.count).__name__} {self.count!r}",
+                                   "give the number of units the team has (or None for "
+                                   "unlimited)")
+            if self.count < 0:
+                raise _model_error(self._who, "count", f"= {self.count} is not >= 0",
+                                   "give the number of units the team has (0 or more)")
+            object.__setattr__(self, "count", int(self.count))
         self._validate()
         pwl = self._build_pwl()
         problem = _passivity_problem(pwl)
@@ -498,7 +517,7 @@ class ShockModel:
         -------
         dict
             Keys ``id``, ``kind``, ``description`` (if not empty), the kind's
-            keys, ``lag`` (if not 0).
+            keys, ``lag`` (if not 0), ``count`` (if not None).
 
         Raises
         ------
@@ -515,6 +534,8 @@ class ShockModel:
                         else float(value))
         if self.lag_s:
             out["lag"] = float(self.lag_s)
+        if self.count is not None:
+            out["count"] = int(self.count)
         return out
 
 
@@ -880,7 +901,7 @@ def _model_from_toml(table, units, where, index):
         raise _fail(label, "kind", f"is {kind!r}, an unknown kind",
                     f"use one of {list(SHOCK_KINDS)}")
     cls = SHOCK_KINDS[kind]
-    allowed = {"id", "kind", "lag", "description", *cls._TOML_FIELDS}
+    allowed = {"id", "kind", "lag", "description", "count", *cls._TOML_FIELDS}
     extra = [k for k in table if k not in allowed]
     if extra:
         raise _fail(label, extra[0], f"is not a key of a {kind!r} shock",
@@ -899,8 +920,15 @@ def _model_from_toml(table, units, where, index):
             raise _fail(label, "description", f"must be a string, got "
                         f"{type(table['description']).__name__}", "write it in quotes")
         kwargs["description"] = table["description"]
+    if "count" in table:
+        if not isinstance(table["count"], int) or isinstance(table["count"], bool):
+            raise _fail(label, "count", f"must be an integer, got "
+                        f"{type(table['count']).__name__} {table['count']!r}",
+                        "write a whole number without quotes or decimal point, or omit it "
+                        "for unlimited")
+        kwargs["count"] = table["count"]
     keys = {attr: key for key, (attr, _, _) in cls._TOML_FIELDS.items()}
-    keys.update(lag_s="lag", id="id", description="description")
+    keys.update(lag_s="lag", id="id", description="description", count="count")
     try:
         return cls(raw_id, **kwargs)
     except ShockModelError as exc:
@@ -922,8 +950,9 @@ def read_shock_library(path):
         "imperial") and ``[[shock]]`` tables with ``id``, ``kind`` ("linear":
         ``damping``; "table": ``velocity``, ``force``; "digressive":
         ``bump_low``, ``bump_knee``, ``bump_high``, ``rebound_low``,
-        ``rebound_knee``, ``rebound_high``), optional ``lag`` [s] and
-        ``description``.
+        ``rebound_knee``, ``rebound_high``), optional ``lag`` [s],
+        ``description`` and ``count`` (inventory, integer >= 0; omitted =
+        unlimited).
 
     Returns
     -------

@@ -223,6 +223,18 @@ def test_write_read_round_trip(tmp_path, units):
     assert f'units = "{units}"' in path.read_text()
 
 
+def test_count_inventory_round_trip_and_default(tmp_path):
+    assert LinearShock("B20", 3502.5).count is None  # default: unlimited
+    models = [LinearShock("B20", 3502.5, count=2), _d8(), TableShock(
+        "T0", [-0.1, 0.0, 0.1], [-10.0, 0.0, 10.0], count=0)]
+    assert models[0].to_toml_dict()["count"] == 2
+    assert "count" not in models[1].to_toml_dict()
+    path = write_shock_library(models, tmp_path / "s.toml", units="imperial")
+    back = read_shock_library(path)
+    assert [back[i].count for i in ("B20", "D8", "T0")] == [2, None, 0]
+    assert isinstance(LinearShock("B", 1.0, count=np.int64(3)).count, int)
+
+
 def _values(model):
     return [(key, getattr(model, attr)) for key, (attr, _, _) in model._TOML_FIELDS.items()]
 
@@ -403,6 +415,11 @@ BAD_MODELS = [
     ("rms nan", lambda: _d8().equivalent_damping(math.nan), r"v_rms_m_s = nan"),
     ("duplicate ids", lambda: ShockLibrary.from_models([_d8(), _d8()]),
      r"duplicate shock id 'D8'"),
+    ("negative count", lambda: LinearShock("B", 1.0, count=-1), r"shock 'B': count = -1 is "
+     r"not >= 0"),
+    ("float count", lambda: LinearShock("B", 1.0, count=2.0), r"count must be an integer, got "
+     r"float"),
+    ("bool count", lambda: LinearShock("B", 1.0, count=True), r"count must be an integer"),
     ("bad write units", lambda: _d8().to_toml_dict("metric"), r"unknown unit system 'metric'"),
 ]
 
@@ -465,6 +482,10 @@ BAD_FILES = [
      '[[shock]]\nid = "K"\nkind = "digressive"\nbump_low = 1.0\nbump_knee = 0.0\n'
      "bump_high = 1.0\nrebound_low = 1.0\nrebound_knee = 0.1\nrebound_high = 1.0\n",
      r"key 'bump_knee' = 0 m/s is not > 0"),
+    ("float count", _HEAD + "count = 2.0\n", r"#1 \('B20'\): key 'count' must be an integer, "
+     r"got float"),
+    ("string count", _HEAD + 'count = "2"\n', r"key 'count' must be an integer, got str"),
+    ("negative count", _HEAD + "count = -2\n", r"#1 \('B20'\): key 'count' = -2 is not >= 0"),
     ("duplicate id", _HEAD + _HEAD, r"\[\[shock\]\] #2 \('B20'\): key 'id' repeats"),
 ]
 
