@@ -103,6 +103,34 @@ class ModalSystem:
                    + np.einsum("pn,nf,nm->pmf", np.conj(self.C), r2, np.conj(self.B)))
         return H + self.D[:, :, None]
 
+    def to_real(self):
+        """Real block-diagonal (modal) state-space matrices ``(A, B, C, D)``.
+
+        A complex mode ``lam = s + j w`` with coefficients ``b``, ``c`` becomes
+        the 2x2 block ``[[s, -w], [w, s]]`` on ``[Re x, Im x]`` with inputs
+        ``[Re b; Im b]`` and outputs ``[Re c, -Im c]``; a real mode stays one state.
+        Well conditioned (no polynomial expansion, no eigenvector matrix).
+        """
+        real = self.lam.imag == 0
+        n = int(real.sum() + 2 * (~real).sum())
+        m, p = self.B.shape[1], self.C.shape[0]
+        A = np.zeros((n, n))
+        B = np.zeros((n, m))
+        C = np.zeros((p, n))
+        k = 0
+        for i, lam in enumerate(self.lam):
+            if real[i]:
+                A[k, k] = lam.real
+                B[k] = self.B[i].real
+                C[:, k] = self.C[:, i].real
+                k += 1
+            else:
+                A[k:k + 2, k:k + 2] = [[lam.real, -lam.imag], [lam.imag, lam.real]]
+                B[k], B[k + 1] = self.B[i].real, self.B[i].imag
+                C[:, k], C[:, k + 1] = self.C[:, i].real, -self.C[:, i].imag
+                k += 2
+        return A, B, C, self.D.copy()
+
     def pruned(self, rtol=1e-13):
         """Drop modes that no input drives or no output reads (relative to the largest)."""
         bn = np.abs(self.B).max(axis=1) if self.B.size else np.zeros(self.lam.size)
@@ -310,12 +338,16 @@ def _refine(u, r):
     Rig signals are samples of continuous, band-limited signals (not piecewise
     linear between samples), so the hold assumption of the discretization is
     applied on the fine grid only, where its error is ``sinc^2(f / (r fs))``.
+    The record is extended by its end values over the filter's length first,
+    so a drive that starts or ends at an offset does not ring there.
     """
     if r == 1:
         return np.ascontiguousarray(u, dtype=float)
-    from ident.drive import resample_bandlimited
+    from ident.drive import _FIR_HALF_LENGTH, resample_bandlimited
 
-    return np.ascontiguousarray(resample_bandlimited(u, r, 1, axis=0)[: (u.shape[0] - 1) * r + 1])
+    pad = _FIR_HALF_LENGTH + 1
+    up = resample_bandlimited(np.pad(u, ((pad, pad), (0, 0)), mode="edge"), r, 1, axis=0)
+    return np.ascontiguousarray(up[pad * r: pad * r + (u.shape[0] - 1) * r + 1])
 
 
 def _modal_filter(phi, g0, g1, w, axis=-1):

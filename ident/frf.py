@@ -94,6 +94,10 @@ class Frf:
     fs_hz : float
     settings : dict
         ``method``, ``window``, ``nperseg``, ``noverlap``, ``runs``, ...
+    H_raw : ndarray or None
+        The estimate before conditioning (set by :func:`ident.condition.condition_frf`).
+    replaced : ndarray of bool or None
+        Frequencies replaced by residual fits in conditioning, (n_out, n_in, n_f).
     """
 
     f_hz: np.ndarray
@@ -109,6 +113,8 @@ class Frf:
     cbar_n_s_m: np.ndarray
     fs_hz: float
     settings: dict = field(default_factory=dict)
+    H_raw: np.ndarray | None = None
+    replaced: np.ndarray | None = None
 
     def index(self, output, input):
         """Return ``(output index, input index)`` of a pair, with a clear error."""

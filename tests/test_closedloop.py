@@ -208,3 +208,16 @@ def test_bad_options(paper_model):
     rig = rig_response(plant, drive, oversample=2)
     with pytest.raises(ValueError, match="another plant or oversampling"):
         simulate(plant, drive, shocks, oversample=4, rig=rig)
+
+
+def test_refined_drive_keeps_offsets_and_samples():
+    """Band-limited refinement passes the drive samples through and does not ring at
+    the ends of a drive with a static offset."""
+    from ident.closedloop import _refine
+
+    u = np.full((400, 2), 0.01)
+    u[:, 1] += 0.001 * np.sin(2 * np.pi * 3.0 * np.arange(400) / 100.0)
+    fine = _refine(u, 8)
+    assert fine.shape == (399 * 8 + 1, 2)
+    np.testing.assert_allclose(fine[:, 0], 0.01, rtol=1e-4)
+    np.testing.assert_allclose(fine[::8], u, atol=2e-6)

@@ -1,0 +1,207 @@
+"""Conditioning of an estimated FRF before the parametric fit (seed paper, Eq. 31).
+
+Two steps, per input/output pair:
+
+1. Where the coherence is poor at the low and high ends of the band, the
+   estimate is replaced by a residual fit ``H(f) = K exp(j phi) / f^N`` (a
+   straight line in dB against log frequency with a constant phase), fitted to
+   the good estimates next to the poor region (Eq. 31; the paper does the same
+   at low frequencies).
+2. The magnitude in dB and the unwrapped phase are smoothed by a zero-phase
+   Butterworth low-pass along the frequency axis that removes variations of
+   ``smooth_width_hz`` or less (the paper: 4th order, 0.6 Hz, ``filtfilt``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+from scipy import signal
+
+from ident.frf import Frf
+
+__all__ = ["condition_frf", "residual_fit"]
+
+log = logging.getLogger(__name__)
+
+#: Largest |N| accepted for a residual fit (a 4-pole roll-off); steeper fits are clipped.
+MAX_RESIDUAL_ORDER = 4.0
+
+
+def residual_fit(f_hz, h, weight=None, *, n_range=(-MAX_RESIDUAL_ORDER, MAX_RESIDUAL_ORDER)):
+    """Fit ``K exp(j phi) / f^N`` to frequency-response samples (Eq. 31).
+
+    Parameters
+    ----------
+    f_hz : ndarray, shape (n,)
+        Frequencies [Hz], all > 0.
+    h : ndarray of complex, shape (n,)
+    weight : ndarray, shape (n,), optional
+        Non-negative weights (e.g. coherence).
+    n_range : (float, float)
+        Bounds on ``N``. A response does not grow toward DC or toward high
+        frequency, so :func:`condition_frf` uses ``N <= 0`` at the low end and
+        ``N >= 0`` at the high end (a window on the flank of a resonance
+        would otherwise extrapolate without bound).
+
+    Returns
+    -------
+    K : float
+    phi : float
+        [rad]
+    N : float
+        Roll-off order (``20 N`` dB/decade), clipped to `n_range`.
+
+    Examples
+    --------
+    >>> f = np.linspace(10, 20, 50)
+    >>> K, phi, N = residual_fit(f, 3.0 * np.exp(0.5j) / f**2)
+    >>> round(K, 6), round(phi, 6), round(N, 6)
+    (3.0, 0.5, 2.0)
+    """
+    f_hz = np.asarray(f_hz, dtype=float)
+    h = np.asarray(h)
+    w = np.ones(f_hz.size) if weight is None else np.asarray(weight, dtype=float)
+    ok = (np.abs(h) > 0) & (f_hz > 0) & (w > 0)
+    if ok.sum() < 2:
+        raise ValueError("residual_fit needs at least 2 usable points (nonzero, positive weight)")
+    x, y, w = np.log(f_hz[ok]), np.log(np.abs(h[ok])), w[ok]
+    A = np.column_stack([np.ones_like(x), -x]) * np.sqrt(w)[:, None]
+    (lnK, N), *_ = np.linalg.lstsq(A, y * np.sqrt(w), rcond=None)
+    N = float(np.clip(N, *n_range))
+    lnK = float(np.sum(w * (y + N * x)) / np.sum(w))
+    phi = float(np.angle(np.sum(w * h[ok] / np.abs(h[ok]))))
+    return float(np.exp(lnK)), phi, N
+
+
+def _good_span(good, run):
+    """First and last index of the span whose ends start/finish `run` consecutive good points."""
+    n = good.size
+    if run > n:
+        return None
+    csum = np.concatenate([[0], np.cumsum(good.astype(int))])
+    full = (csum[run:] - csum[:-run]) == run  # window starting at k is all good
+    starts = np.flatnonzero(full)
+    if starts.size == 0:
+        return None
+    return int(starts[0]), int(starts[-1] + run - 1)
+
+
+def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_window_hz=1.0,
+                  min_good_hz=0.2, min_span_ratio=4.0, smooth_width_hz=0.6, smooth_order=4,
+                  residual=True, smooth=True):
+    """Condition an estimated FRF for the parametric fit.
+
+    Parameters
+    ----------
+    frf : Frf
+        From :func:`ident.frf.estimate_frf`.
+    coherence_min : float
+        Partial coherence at or above which an estimate counts as good.
+        Frequencies flagged for an input (no independent energy) are never good.
+    band_hz : (float, float)
+        Band of interest [Hz]; outside it the residual fits take over.
+    residual_window_hz : float
+        Width of good data next to a poor end used for its residual fit [Hz].
+    min_good_hz : float
+        The good span of a pair starts and ends with this much consecutive
+        good data [Hz] (isolated good points in a poor end do not count).
+    min_span_ratio : float
+        The good span must reach from ``f_lo`` to at least ``min_span_ratio *
+        f_lo`` (two octaves by default) for its ends to be replaced: a pair
+        good only around a resonance is poor *inside* the band, and residual
+        fits from the sides of a peak would be meaningless there.
+    smooth_width_hz : float
+        Variations of this width or less are removed by the smoothing [Hz]
+        (paper: 0.6).
+    smooth_order : int
+        Order of the Butterworth smoothing filter (paper: 4).
+    residual, smooth : bool
+        Turn either step off.
+
+    Returns
+    -------
+    Frf
+        A copy with ``H`` conditioned, ``H_raw`` the input estimate,
+        ``replaced`` the mask of frequencies replaced by residual fits
+        (n_out, n_in, n_f), and the options in ``settings["conditioning"]``.
+
+    Notes
+    -----
+    A pair without any good span (coherence poor everywhere: a response too
+    small to measure) keeps its smoothed estimate; the parametric fit's
+    coherence weighting or the small magnitude keeps it harmless (the paper:
+    such estimates "may be replaced by a small frequency response").
+    """
+    if not isinstance(frf, Frf):
+        raise TypeError(f"condition_frf needs an Frf, got {type(frf).__name__}")
+    if not 0 < coherence_min < 1:
+        raise ValueError(f"coherence_min must be in (0, 1), got {coherence_min!r}")
+    f = frf.f_hz
+    df = f[1] - f[0]
+    lo_b, hi_b = band_hz
+    if not 0 <= lo_b < hi_b <= f[-1]:
+        raise ValueError(f"band_hz {band_hz} must lie within 0..{f[-1]:g} Hz")
+    H = frf.H.copy()
+    p, m, nf = H.shape
+    replaced = np.zeros(H.shape, dtype=bool)
+    inband = np.flatnonzero((f >= lo_b) & (f <= hi_b))
+    run = max(2, int(round(min_good_hz / df)))
+    win = max(3, int(round(residual_window_hz / df)))
+    poor_pairs = []
+    for o in range(p):
+        for i in range(m):
+            good = (frf.partial_coherence[o, i] >= coherence_min) & ~frf.flagged[i]
+            span = _good_span(good[inband], run) if residual else None
+            if span is not None and f[inband[span[1]]] < min_span_ratio * f[inband[span[0]]]:
+                span = None
+            if span is None:
+                if residual:
+                    poor_pairs.append((frf.output_names[o], frf.input_names[i]))
+                continue
+            k_lo, k_hi = inband[span[0]], inband[span[1]]
+            wgt = frf.partial_coherence[o, i]
+            # high end: from the last good point up
+            sel = np.arange(max(k_lo, k_hi - win + 1), k_hi + 1)
+            sel = sel[good[sel]]
+            if k_hi < nf - 1 and sel.size >= 2:
+                K, phi, N = residual_fit(f[sel], H[o, i, sel], wgt[sel],
+                                         n_range=(0.0, MAX_RESIDUAL_ORDER))
+                idx = np.arange(k_hi + 1, nf)
+                H[o, i, idx] = K * np.exp(1j * phi) / f[idx] ** N
+                replaced[o, i, idx] = True
+            # low end: from the first good point down (DC takes the first bin's value)
+            sel = np.arange(k_lo, min(k_hi, k_lo + win - 1) + 1)
+            sel = sel[good[sel]]
+            if k_lo > 0 and sel.size >= 2:
+                K, phi, N = residual_fit(f[sel], H[o, i, sel], wgt[sel],
+                                         n_range=(-MAX_RESIDUAL_ORDER, 0.0))
+                idx = np.arange(max(k_lo - 1, 0), 0, -1)
+                H[o, i, idx] = K * np.exp(1j * phi) / f[idx] ** N
+                H[o, i, 0] = H[o, i, 1]
+                replaced[o, i, : k_lo] = True
+    if smooth:
+        wn = 2 * df / smooth_width_hz
+        if not 0 < wn < 1:
+            raise ValueError(f"smooth_width_hz={smooth_width_hz} must exceed two frequency "
+                             f"steps ({2 * df:.3g} Hz)")
+        sos = signal.butter(smooth_order, wn, output="sos")
+        mag = 20 * np.log10(np.maximum(np.abs(H), 1e-300))
+        ph = np.unwrap(np.angle(H), axis=-1)
+        mag = signal.sosfiltfilt(sos, mag, axis=-1)
+        ph = signal.sosfiltfilt(sos, ph, axis=-1)
+        H = 10 ** (mag / 20) * np.exp(1j * ph)
+    if poor_pairs:
+        log.info("%d input/output pairs have no span of coherence >= %g; kept smoothed",
+                 len(poor_pairs), coherence_min)
+    settings = dict(frf.settings)
+    settings["conditioning"] = {
+        "coherence_min": coherence_min, "band_hz": tuple(band_hz),
+        "residual_window_hz": residual_window_hz, "min_good_hz": min_good_hz,
+        "min_span_ratio": min_span_ratio,
+        "smooth_width_hz": smooth_width_hz, "smooth_order": smooth_order,
+        "residual": residual, "smooth": smooth, "poor_pairs": poor_pairs}
+    return dataclasses.replace(frf, H=H, H_raw=frf.H if frf.H_raw is None else frf.H_raw,
+                               replaced=replaced, settings=settings)

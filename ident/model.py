@@ -1,0 +1,547 @@
+"""The identified vehicle model: rational fits of a conditioned FRF, realized for simulation.
+
+``fit_model(frf)`` fits a transfer function to every input/output pair of a
+conditioned FRF (seed paper: ``invfreqs`` per pair; here also a common-pole
+vector fit) and returns a :class:`VehicleModel`: the FRF it came from (with
+coherence), the fitted pole-residue form of every pair with its fit error,
+the baseline damping ``c_bar``, channel names, units and sample rate. The
+model converts to an :class:`ident.closedloop.LoopPlant` for closed-loop
+simulation with any shocks, to a python-control state-space system in real
+modal form, and to discrete time; it is saved to and loaded from one ``.npz``
+file with a format version, and exported to MATLAB ``.mat``.
+
+Notes
+-----
+Every pair ``(o, i)`` is ``H(s) = sum_k r_k / (s - p_k) + d`` over its own
+poles (pole-residue form: no polynomial is ever expanded in unscaled ``s``).
+Conjugate poles are stored once (``Im p > 0``) with the factor 2 carried by the
+realization, as in :class:`ident.closedloop.ModalSystem`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import logging
+import warnings
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ident._io import atomic_path
+from ident.channels import CORNERS, RIG_INPUTS, quantity_of
+from ident.errors import FitWarning, IdentificationError, ModelFileError
+from ident.frf import DF_INPUTS, MODEL_INPUTS, Frf
+
+__all__ = [
+    "VehicleModel",
+    "fit_model",
+    "load_model",
+    "has_feedthrough",
+    "balanced_reduce",
+    "MODEL_FORMAT",
+    "MODEL_VERSION",
+]
+
+log = logging.getLogger(__name__)
+
+MODEL_FORMAT = "shockplan-model"
+MODEL_VERSION = 1
+#: Default fit weights (seed paper): 1 in 0.5-10 Hz, 0.5 in 10-20 Hz, 0 elsewhere.
+PAPER_WEIGHTS = ((0.5, 10.0, 1.0), (10.0, 20.0, 0.5))
+
+
+def has_feedthrough(output, input):
+    """Whether a pair has direct feedthrough (numerator order = denominator order).
+
+    Tire force and ride height from the wheelloader of the same corner (seed
+    paper), and accelerations from the forces acting on their own body:
+    chassis accelerations from the aero loads and the shock forces, a wheel's
+    acceleration from its wheelloader (through the tire) and its shock.
+    """
+    kind, _, corner = output.rpartition("_")
+    if input.startswith("wheelloader_"):
+        same = input.endswith("_" + corner)
+        return same and kind in ("tire_force", "ride_height", "wheel_accel")
+    if kind == "chassis_accel":
+        return True
+    if kind == "wheel_accel" and input.startswith("dF_"):
+        return input.endswith("_" + corner)
+    return False
+
+
+def _band_weight(f_hz, spec):
+    w = np.zeros(f_hz.size)
+    for lo, hi, val in spec:
+        w[(f_hz >= lo) & (f_hz <= hi)] = val
+    return w
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleModel:
+    """An identified vehicle model (see the module docstring).
+
+    Attributes
+    ----------
+    name : str
+    input_names, output_names : tuple of str
+        ``MODEL_INPUTS`` (7 rig inputs, 4 ``dF``) and the output channels.
+    poles, residues : ndarray of complex, shape (n_out, n_in, n_max)
+        Per pair, padded with NaN beyond ``n_poles``; conjugate pairs stored once.
+    direct : ndarray, shape (n_out, n_in)
+    n_poles : ndarray of int, shape (n_out, n_in)
+        Stored poles per pair (a conjugate pair counts once).
+    order : ndarray of int, shape (n_out, n_in)
+        Denominator order per pair (0 for a pair fitted as zero).
+    fit_error : ndarray, shape (n_out, n_in)
+        Relative weighted fit error per pair.
+    cbar_n_s_m : ndarray, shape (4,)
+        Baseline damping the model is written around [N/(m/s)].
+    fs_hz : float
+        Sample rate of the data [Hz].
+    units : str
+        Unit system of the session (for display and export).
+    frf : Frf or None
+        The conditioned FRF the model was fitted to (with ``H_raw`` and coherence).
+    settings : dict
+        How the model was made (fit method, weights, orders, session).
+    """
+
+    name: str
+    input_names: tuple
+    output_names: tuple
+    poles: np.ndarray
+    residues: np.ndarray
+    direct: np.ndarray
+    n_poles: np.ndarray
+    order: np.ndarray
+    fit_error: np.ndarray
+    cbar_n_s_m: np.ndarray
+    fs_hz: float
+    units: str = "SI"
+    frf: Frf | None = field(default=None, repr=False)
+    settings: dict = field(default_factory=dict)
+
+    # -- evaluation -------------------------------------------------------------------------
+    def frequency_response(self, f_hz):
+        """Frequency response of the fitted model, shape (n_out, n_in, n_f)."""
+        s = 2j * np.pi * np.atleast_1d(np.asarray(f_hz, dtype=float))
+        p = np.nan_to_num(self.poles)[..., None]
+        r = np.nan_to_num(self.residues)[..., None]
+        real = (self.poles.imag == 0)[..., None]
+        terms = r / (s - p) + np.where(real, 0.0, np.conj(r) / (s - np.conj(p)))
+        valid = (np.arange(self.poles.shape[-1]) < self.n_poles[..., None])[..., None]
+        return np.sum(np.where(valid, terms, 0.0), axis=2) + self.direct[..., None]
+
+    def pair_modal(self, inputs):
+        """Modal system of the given input columns (union of the pairs' poles).
+
+        Parameters
+        ----------
+        inputs : sequence of int
+            Input indices.
+
+        Returns
+        -------
+        ident.closedloop.ModalSystem
+            One state per stored pole per pair, driven by its input with B = 1
+            and read by its output with C = residue (x2 for conjugate pairs).
+        """
+        from ident.closedloop import ModalSystem
+
+        inputs = list(inputs)
+        p = len(self.output_names)
+        lam, Bs, Cs = [], [], []
+        for jj, i in enumerate(inputs):
+            for o in range(p):
+                for k in range(int(self.n_poles[o, i])):
+                    pole, res = self.poles[o, i, k], self.residues[o, i, k]
+                    real = pole.imag == 0
+                    lam.append(pole.real if real else pole)
+                    b = np.zeros(len(inputs), dtype=complex)
+                    b[jj] = 1.0
+                    c = np.zeros(p, dtype=complex)
+                    c[o] = res.real if real else 2 * res
+                    Bs.append(b)
+                    Cs.append(c)
+        n = len(lam)
+        B = np.array(Bs).reshape(n, len(inputs))
+        C = np.array(Cs).reshape(n, p).T
+        return ModalSystem(np.array(lam, dtype=complex), B, C.reshape(p, n),
+                           self.direct[:, inputs].astype(float))
+
+    def loop_plant(self, *, reduce_rtol=1e-4):
+        """The model as an :class:`ident.closedloop.LoopPlant` for closed-loop simulation.
+
+        Parameters
+        ----------
+        reduce_rtol : float or None
+            The shock part (stepped at every sample of the shock loop) is
+            reduced by balanced truncation to a relative error bound
+            ``reduce_rtol`` per output (outputs scaled by their peak gain);
+            ``None`` keeps the exact pole-residue realization. The rig part is
+            simulated once per drive and kept exact.
+        """
+        from ident.closedloop import LoopPlant
+
+        rig = self.pair_modal(range(7)).pruned()
+        shock = self.pair_modal(range(7, 11)).pruned()
+        if reduce_rtol is not None and shock.n_states > 0:
+            shock = balanced_reduce(shock, rtol=reduce_rtol)
+        return LoopPlant(rig, shock, tuple(self.output_names), self.cbar_n_s_m, name=self.name)
+
+    def to_control(self, *, inputs=None):
+        """A python-control ``StateSpace`` in real block-diagonal modal form.
+
+        Parameters
+        ----------
+        inputs : sequence of int, optional
+            Input columns (default all 11).
+        """
+        import control
+
+        idx = list(range(len(self.input_names))) if inputs is None else list(inputs)
+        A, B, C, D = self.pair_modal(idx).to_real()
+        return control.ss(A, B, C, D, inputs=[self.input_names[i] for i in idx],
+                          outputs=list(self.output_names), name="identified")
+
+    def discretize(self, fs_hz=None, *, method="tustin", prewarp_hz=None):
+        """Discrete-time python-control system (Tustin by default, optional pre-warp).
+
+        Parameters
+        ----------
+        fs_hz : float, optional
+            Sample rate [Hz]; default the data's.
+        method : {"tustin", "zoh", "foh"}
+        prewarp_hz : float, optional
+            Frequency matched exactly by the Tustin transform [Hz].
+        """
+        import control
+
+        fs = self.fs_hz if fs_hz is None else float(fs_hz)
+        if not fs > 0:
+            raise ValueError(f"fs_hz must be positive, got {fs_hz!r}")
+        m = {"tustin": "bilinear", "zoh": "zoh", "foh": "foh"}.get(method)
+        if m is None:
+            raise ValueError(f"method must be 'tustin', 'zoh' or 'foh', got {method!r}")
+        pw = None if prewarp_hz is None else 2 * np.pi * float(prewarp_hz)
+        return control.sample_system(self.to_control(), 1.0 / fs, method=m, prewarp_frequency=pw)
+
+    def summary(self):
+        """Per-pair summary table (order, fit error, median coherence in band), a DataFrame."""
+        import pandas as pd
+
+        rows = []
+        coh = None
+        if self.frf is not None:
+            band = self.settings.get("band_hz", (0.5, 20.0))
+            sel = (self.frf.f_hz >= band[0]) & (self.frf.f_hz <= band[1])
+            coh = np.median(self.frf.partial_coherence[:, :, sel], axis=-1)
+        for o, out in enumerate(self.output_names):
+            for i, inp in enumerate(self.input_names):
+                rows.append({"output": out, "input": inp, "order": int(self.order[o, i]),
+                             "fit_error": float(self.fit_error[o, i]),
+                             "median_coherence": float(coh[o, i]) if coh is not None else np.nan})
+        return pd.DataFrame(rows)
+
+    # -- files -------------------------------------------------------------------------------
+    def save(self, path, *, overwrite=False):
+        """Save to one ``.npz`` file (atomic), with the format name and version."""
+        meta = {"format": MODEL_FORMAT, "version": MODEL_VERSION, "name": self.name,
+                "input_names": list(self.input_names), "output_names": list(self.output_names),
+                "fs_hz": self.fs_hz, "units": self.units, "settings": _jsonable(self.settings),
+                "has_frf": self.frf is not None}
+        arrays = {"poles": self.poles, "residues": self.residues, "direct": self.direct,
+                  "n_poles": self.n_poles, "order": self.order, "fit_error": self.fit_error,
+                  "cbar_n_s_m": self.cbar_n_s_m}
+        if self.frf is not None:
+            fr = self.frf
+            arrays.update({"frf_f_hz": fr.f_hz, "frf_H": fr.H, "frf_multiple_coherence":
+                           fr.multiple_coherence, "frf_partial_coherence": fr.partial_coherence,
+                           "frf_input_condition": fr.input_condition,
+                           "frf_independent_fraction": fr.independent_fraction,
+                           "frf_flagged": fr.flagged})
+            if fr.H_raw is not None:
+                arrays["frf_H_raw"] = fr.H_raw
+            if fr.replaced is not None:
+                arrays["frf_replaced"] = fr.replaced
+            meta["frf"] = {"input_names": list(fr.input_names),
+                           "output_names": list(fr.output_names), "n_averages": fr.n_averages,
+                           "settings": _jsonable(fr.settings)}
+        buf = io.BytesIO()
+        np.savez_compressed(buf, meta=np.array(json.dumps(meta)), **arrays)
+        path = Path(path)
+        with atomic_path(path, overwrite=overwrite) as tmp:
+            tmp.write_bytes(buf.getvalue())
+        return path
+
+    def export_mat(self, path, *, overwrite=False):
+        """Export to a MATLAB ``.mat`` file: real modal A, B, C, D, names, FRF and coherence."""
+        from scipy.io import savemat
+
+        A, B, C, D = self.pair_modal(range(len(self.input_names))).to_real()
+        data = {"A": A, "B": B, "C": C, "D": D, "input_names": np.array(self.input_names, dtype=object),
+                "output_names": np.array(self.output_names, dtype=object),
+                "cbar_n_s_m": self.cbar_n_s_m, "fs_hz": self.fs_hz, "fit_error": self.fit_error,
+                "order": self.order, "units_note": "SI inside: N, m, m/s, N*m"}
+        if self.frf is not None:
+            data.update({"f_hz": self.frf.f_hz, "H": self.frf.H,
+                         "partial_coherence": self.frf.partial_coherence,
+                         "multiple_coherence": self.frf.multiple_coherence})
+        path = Path(path)
+        with atomic_path(path, overwrite=overwrite) as tmp:
+            with open(tmp, "wb") as fh:
+                savemat(fh, data, do_compression=True)
+        return path
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.floating,)):
+        return float(obj)
+    return obj
+
+
+def load_model(path):
+    """Load a :class:`VehicleModel` saved by :meth:`VehicleModel.save`.
+
+    Raises
+    ------
+    ModelFileError
+        If the file is missing, not a shockplan model, corrupt, or of another
+        format version.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError(f"{path}: model file not found; run 'shockplan identify' to make one")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+        meta = json.loads(str(data.pop("meta")))
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+        raise ModelFileError(f"{path}: not a readable shockplan model file ({exc}); the file is "
+                             "corrupt or of another kind; re-run 'shockplan identify'") from None
+    if meta.get("format") != MODEL_FORMAT:
+        raise ModelFileError(f"{path}: format {meta.get('format')!r} is not {MODEL_FORMAT!r}")
+    if meta.get("version") != MODEL_VERSION:
+        raise ModelFileError(f"{path}: model file version {meta.get('version')!r}; this shockplan "
+                             f"reads version {MODEL_VERSION}; re-identify with this version")
+    try:
+        frf = None
+        if meta.get("has_frf"):
+            fm = meta["frf"]
+            frf = Frf(f_hz=data["frf_f_hz"], H=data["frf_H"], input_names=tuple(fm["input_names"]),
+                      output_names=tuple(fm["output_names"]),
+                      multiple_coherence=data["frf_multiple_coherence"],
+                      partial_coherence=data["frf_partial_coherence"],
+                      input_condition=data["frf_input_condition"],
+                      independent_fraction=data["frf_independent_fraction"],
+                      flagged=data["frf_flagged"], n_averages=int(fm["n_averages"]),
+                      cbar_n_s_m=data["cbar_n_s_m"], fs_hz=float(meta["fs_hz"]),
+                      settings=fm["settings"], H_raw=data.get("frf_H_raw"),
+                      replaced=data.get("frf_replaced"))
+        return VehicleModel(name=meta["name"], input_names=tuple(meta["input_names"]),
+                            output_names=tuple(meta["output_names"]), poles=data["poles"],
+                            residues=data["residues"], direct=data["direct"],
+                            n_poles=data["n_poles"], order=data["order"],
+                            fit_error=data["fit_error"], cbar_n_s_m=data["cbar_n_s_m"],
+                            fs_hz=float(meta["fs_hz"]), units=meta.get("units", "SI"), frf=frf,
+                            settings=meta.get("settings", {}))
+    except KeyError as exc:
+        raise ModelFileError(f"{path}: model file lacks {exc}; the file is corrupt; re-run "
+                             "'shockplan identify'") from None
+
+
+def balanced_reduce(modal, *, rtol=1e-4):
+    """Balanced truncation of a stable modal system to a relative error bound.
+
+    Outputs and inputs are scaled by their peak gains first, so the bound
+    ``2 * sum(truncated Hankel singular values) <= rtol * largest`` is relative
+    per channel. Returns a :class:`ident.closedloop.ModalSystem`.
+    """
+    from scipy import linalg
+
+    from ident.closedloop import modal_form
+
+    A, B, C, D = modal.to_real()
+    if np.any(np.linalg.eigvals(A).real >= 0):
+        raise IdentificationError("balanced_reduce needs a stable system; reflect unstable poles first")
+    f = np.geomspace(0.3, 30, 60)
+    H = modal.frequency_response(f)
+    so = np.maximum(np.abs(H).max(axis=(1, 2)), 1e-300)  # per output
+    si = np.maximum(np.abs(H / so[:, None, None]).max(axis=(0, 2)), 1e-300)  # per input
+    Bs, Cs = B * si[None, :], C / so[:, None]
+    P = linalg.solve_continuous_lyapunov(A, -Bs @ Bs.T)
+    Q = linalg.solve_continuous_lyapunov(A.T, -Cs.T @ Cs)
+
+    def _sqrt(M):
+        w, V = np.linalg.eigh((M + M.T) / 2)
+        return V * np.sqrt(np.clip(w, 0, None))
+
+    Lp, Lq = _sqrt(P), _sqrt(Q)
+    U, sv, Vt = np.linalg.svd(Lq.T @ Lp)
+    tail = 2 * np.cumsum(sv[::-1])[::-1]  # tail[k] = 2 * sum(sv[k:])
+    r = int(np.searchsorted(-tail, -rtol * sv[0]))  # smallest r with tail[r] <= rtol * sv0
+    r = max(1, min(r, sv.size))
+    s = 1.0 / np.sqrt(sv[:r])
+    T = (Lp @ Vt[:r].T) * s[None, :]
+    Ti = (U[:, :r].T @ Lq.T) * s[:, None]
+    Ar, Br, Cr = Ti @ A @ T, Ti @ Bs / si[None, :], so[:, None] * (Cs @ T)
+    red = modal_form(Ar, Br, Cr, D)
+    log.info("balanced truncation: %d -> %d states (bound %.2g)", A.shape[0], r,
+             tail[r] / sv[0] if r < sv.size else 0.0)
+    return red
+
+
+# ----------------------------------------------------------------------------------------------
+# fitting
+# ----------------------------------------------------------------------------------------------
+
+def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_hz=(0.5, 20.0),
+              max_order=10, n_poles_vf=None, name=None, units="SI"):
+    """Fit a rational model to every input/output pair of a conditioned FRF.
+
+    Parameters
+    ----------
+    frf : Frf
+        Conditioned FRF (:func:`ident.condition.condition_frf`).
+    method : {"invfreqs", "vf"}
+        ``invfreqs``: a transfer function per pair (output-error Gauss-Newton
+        from a Levi / Sanathanan-Koerner start, as MATLAB's ``invfreqs``).
+        ``vf``: vector fitting with one set of poles common to all pairs.
+    orders : "auto", int or dict
+        Denominator order per pair: ``"auto"`` picks the smallest order 2..
+        `max_order` whose fit error stops improving; an int for all pairs; a
+        dict ``{(output, input): order}`` overriding ``auto``.
+    weighting : {"paper", "coherence"}
+        ``paper``: 1 in 0.5-10 Hz, 0.5 in 10-20 Hz. ``coherence``: the paper
+        weights times the partial coherence.
+    band_hz : (float, float)
+        Frequencies used by the fit [Hz].
+    n_poles_vf : int, optional
+        Number of poles for ``vf`` (default: chosen like ``auto``, even, up to
+        ``2 * max_order``).
+
+    Returns
+    -------
+    VehicleModel
+    """
+    from ident import fit as fitmod
+
+    if not isinstance(frf, Frf):
+        raise TypeError(f"fit_model needs an Frf, got {type(frf).__name__}")
+    if method not in ("invfreqs", "vf"):
+        raise ValueError(f"method must be 'invfreqs' or 'vf', got {method!r}")
+    if weighting not in ("paper", "coherence"):
+        raise ValueError(f"weighting must be 'paper' or 'coherence', got {weighting!r}")
+    f = frf.f_hz
+    sel = (f >= band_hz[0]) & (f <= band_hz[1])
+    fb = f[sel]
+    w0 = _band_weight(fb, [(max(lo, band_hz[0]), min(hi, band_hz[1]), v) for lo, hi, v in PAPER_WEIGHTS])
+    if not np.any(w0 > 0):
+        w0 = np.ones(fb.size)
+    p, m = len(frf.output_names), len(frf.input_names)
+    Hb = frf.H[:, :, sel]
+    W = np.broadcast_to(w0, Hb.shape).copy()
+    if weighting == "coherence":
+        W *= np.clip(frf.partial_coherence[:, :, sel], 0, 1)
+    settings = {"method": method, "orders": orders if isinstance(orders, (str, int)) else "dict",
+                "weighting": weighting, "band_hz": tuple(band_hz), "max_order": max_order}
+    nmax = 2 * max_order
+    poles = np.full((p, m, nmax), np.nan, dtype=complex)
+    residues = np.full((p, m, nmax), np.nan, dtype=complex)
+    direct = np.zeros((p, m))
+    n_poles = np.zeros((p, m), dtype=int)
+    order = np.zeros((p, m), dtype=int)
+    err = np.zeros((p, m))
+    if method == "invfreqs":
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", FitWarning)
+            for o in range(p):
+                for i in range(m):
+                    ft = has_feedthrough(frf.output_names[o], frf.input_names[i])
+                    rel = 0 if ft else -1
+                    key = (frf.output_names[o], frf.input_names[i])
+                    if isinstance(orders, dict) and key in orders:
+                        n = int(orders[key])
+                        tf = fitmod.fit_tf(fb, Hb[o, i], weight=W[o, i], n_den=n, n_num=n + rel)
+                    elif isinstance(orders, (int, np.integer)) and not isinstance(orders, bool):
+                        tf = fitmod.fit_tf(fb, Hb[o, i], weight=W[o, i], n_den=int(orders),
+                                           n_num=int(orders) + rel)
+                    else:
+                        tf, _ = fitmod.select_order(fb, Hb[o, i], weight=W[o, i],
+                                                    orders=range(2, max_order + 1),
+                                                    relative_num=rel)
+                    _store(tf.poles, tf.residues, tf.direct, o, i, poles, residues, direct, n_poles)
+                    order[o, i] = len(tf.poles)
+                    err[o, i] = tf.fit_error
+        _summarize_warnings(caught)
+    else:
+        vf = _fit_vf(fitmod, fb, Hb, W, frf, n_poles_vf, max_order)
+        settings["n_poles_vf"] = int(len(vf.poles))
+        for o in range(p):
+            for i in range(m):
+                _store(vf.poles, vf.residues[:, o, i], vf.direct[o, i], o, i, poles, residues,
+                       direct, n_poles)
+                order[o, i] = len(vf.poles)
+                err[o, i] = vf.fit_error[o, i]
+    keep = max(1, int(n_poles.max()))
+    return VehicleModel(name=name or "identified model", input_names=tuple(frf.input_names),
+                        output_names=tuple(frf.output_names), poles=poles[:, :, :keep],
+                        residues=residues[:, :, :keep], direct=direct, n_poles=n_poles,
+                        order=order, fit_error=err, cbar_n_s_m=np.asarray(frf.cbar_n_s_m, float),
+                        fs_hz=frf.fs_hz, units=units, frf=frf, settings=settings)
+
+
+def _store(pole_list, res_list, d, o, i, poles, residues, direct, n_poles):
+    """Keep one pole of each conjugate pair (Im > 0) and the real poles."""
+    pl = np.asarray(pole_list, dtype=complex)
+    rl = np.asarray(res_list, dtype=complex)
+    tol = 1e-9 * np.maximum(np.abs(pl), 1e-300)
+    keep = (pl.imag > tol) | (np.abs(pl.imag) <= tol)
+    pk, rk = pl[keep], rl[keep]
+    real = np.abs(pk.imag) <= tol[keep]
+    pk = np.where(real, pk.real, pk)
+    rk = np.where(real, rk.real, rk)
+    k = pk.size
+    poles[o, i, :k] = pk
+    residues[o, i, :k] = rk
+    direct[o, i] = float(np.real(d))
+    n_poles[o, i] = k
+
+
+def _summarize_warnings(caught):
+    msgs = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
+    if msgs:
+        warnings.warn(f"{len(msgs)} pair fits needed attention (e.g. {msgs[0]}); see the model "
+                      "summary's fit errors", FitWarning, stacklevel=3)
+
+
+def _fit_vf(fitmod, fb, Hb, W, frf, n_poles_vf, max_order):
+    """Common-pole vector fit with the order chosen like select_order."""
+    # scale every pair to unit peak so that one weight serves all
+    scale = np.maximum(np.abs(Hb).max(axis=-1, keepdims=True), 1e-300)
+    Hs = Hb / scale
+    if n_poles_vf is not None:
+        vf = fitmod.fit_common_poles(fb, Hs, weight=W, n_poles=int(n_poles_vf))
+    else:
+        best, prev = None, np.inf
+        for n in range(4, 2 * max_order + 1, 2):
+            cand = fitmod.fit_common_poles(fb, Hs, weight=W, n_poles=n)
+            e = float(np.sqrt(np.mean(cand.fit_error**2)))
+            if best is not None and e > (1 - 0.1) * prev:
+                break
+            best, prev = cand, e
+        vf = best
+    return dataclasses.replace(vf, residues=vf.residues * scale[None, :, :, 0],
+                               direct=vf.direct * scale[:, :, 0])
