@@ -403,13 +403,13 @@ def _check_oversample(oversample):
 import numba as _nb  # noqa: E402
 
 
-@_nb.njit(cache=True, inline="always")
+@_nb.njit(cache=True, error_model="numpy", inline="always")
 def _pwl(v, kv, kf, nk, slo, shi):
-    """Force and slope of a piecewise-linear curve with linear end extensions."""
+    """Force, slope and segment index of a piecewise-linear curve with linear end extensions."""
     if v <= kv[0]:
-        return kf[0] + slo * (v - kv[0]), slo
+        return kf[0] + slo * (v - kv[0]), slo, 0
     if v >= kv[nk - 1]:
-        return kf[nk - 1] + shi * (v - kv[nk - 1]), shi
+        return kf[nk - 1] + shi * (v - kv[nk - 1]), shi, nk
     lo = 0
     hi = nk - 1
     while hi - lo > 1:
@@ -419,10 +419,82 @@ def _pwl(v, kv, kf, nk, slo, shi):
         else:
             hi = mid
     s = (kf[hi] - kf[lo]) / (kv[hi] - kv[lo])
-    return kf[lo] + s * (v - kv[lo]), s
+    return kf[lo] + s * (v - kv[lo]), s, hi
 
 
-@_nb.njit(cache=True)
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _segment_line(seg, kv, kf, nk, slo, shi):
+    """Slope and intercept of segment `seg` (0: below the knots, nk: above, else between
+    knots seg-1 and seg): f = a + s v on it."""
+    if seg <= 0:
+        return slo, kf[0] - slo * kv[0]
+    if seg >= nk:
+        return shi, kf[nk - 1] - shi * kv[nk - 1]
+    s = (kf[seg] - kf[seg - 1]) / (kv[seg] - kv[seg - 1])
+    return s, kf[seg - 1] - s * kv[seg - 1]
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _segment_of(v, kv, nk, guess):
+    """Segment index of v (as _pwl), checking the guessed segment first."""
+    if guess <= 0:
+        if v <= kv[0]:
+            return 0
+    elif guess >= nk:
+        if v >= kv[nk - 1]:
+            return nk
+    elif kv[guess - 1] < v < kv[guess]:
+        return guess
+    if v <= kv[0]:
+        return 0
+    if v >= kv[nk - 1]:
+        return nk
+    lo = 0
+    hi = nk - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if kv[mid] <= v:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+@_nb.njit(cache=True, error_model="numpy")
+def _invert_small(J, Jinv, m):
+    """Jinv <- inverse of J (Gauss-Jordan with partial pivoting); J is overwritten."""
+    for i in range(m):
+        for j in range(m):
+            Jinv[i, j] = 1.0 if i == j else 0.0
+    for c in range(m):
+        p = c
+        big = abs(J[c, c])
+        for i in range(c + 1, m):
+            if abs(J[i, c]) > big:
+                big = abs(J[i, c])
+                p = i
+        if p != c:
+            for j in range(m):
+                t = J[c, j]
+                J[c, j] = J[p, j]
+                J[p, j] = t
+                t = Jinv[c, j]
+                Jinv[c, j] = Jinv[p, j]
+                Jinv[p, j] = t
+        d = 1.0 / J[c, c]
+        for j in range(m):
+            J[c, j] *= d
+            Jinv[c, j] *= d
+        for i in range(m):
+            if i != c:
+                fct = J[i, c]
+                if fct != 0.0:
+                    for j in range(m):
+                        J[i, j] -= fct * J[c, j]
+                        Jinv[i, j] -= fct * Jinv[c, j]
+
+
+@_nb.njit(cache=True, error_model="numpy")
 def _solve_small(J, r, m):
     """Solve J d = r in place (r <- d) by Gaussian elimination with partial pivoting."""
     for c in range(m):
@@ -452,18 +524,21 @@ def _solve_small(J, r, m):
         r[c] = acc / J[c, c]
 
 
-@_nb.njit(cache=True)
+@_nb.njit(cache=True, error_model="numpy")
 def _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
-              alpha, b0, b1, r, dF_out, F_out, x_out):
+              alpha, b0, b1, r, Cy, Dy, y_rig, y_out, F_out):
     """Time loop of one setup on the internal grid.
 
-    Stores dF and F at every r-th step (the output samples) and the modal state driven
-    by dF there. Returns the largest Newton iteration count (-1: no convergence).
+    At every r-th step (an output sample) writes the outputs
+    ``y_rig + Re(Cy x) + Dy dF`` and the applied shock forces. Returns the largest
+    Newton iteration count (-1: no convergence).
     """
     n = phi.size
     m = 4
+    p = Cy.shape[0]
     N = v_rig.shape[0]
     x = np.zeros(n, dtype=np.complex128)
+    bd = np.zeros(n, dtype=np.complex128)  # B dF of the last step
     dF_prev = np.zeros(m)
     F_prev = np.zeros(m)
     f_prev = np.zeros(m)
@@ -472,80 +547,137 @@ def _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
     c0 = np.zeros(m)
     fv = np.zeros(m)
     sv = np.zeros(m)
+    seg = np.zeros(m, dtype=np.int64)
+    for c in range(m):
+        seg[c] = _segment_of(0.0, kv[c], nk[c], 0)
+    av = np.zeros(m)
+    vnew = np.zeros(m)
     res = np.zeros(m)
     J = np.zeros((m, m))
+    Jinv = np.zeros((m, m))
+    jvalid = False
     worst = 0
     failed = False
     for k in range(N):
         # predictor: x[k] without the unknown g1 * B dF[k] term
         for i in range(n):
-            acc = 0j
-            for j in range(m):
-                acc += Bf[i, j] * dF_prev[j]
-            x[i] = phi[i] * x[i] + g0[i] * acc
+            x[i] = phi[i] * x[i] + g0[i] * bd[i]
         for c in range(m):
             acc = 0.0
             for i in range(n):
                 acc += (Cv[c, i] * x[i]).real
             vfree[c] = v_rig[k, c] + acc
             c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c]
-        # Newton on r(v) = v - vfree - Deff (c0 + b0 f(v) - cbar v) = 0, from the last v
+        # Solve v = vfree + Deff (c0 + b0 f(v) - cbar v). f is piecewise linear, so on a
+        # fixed set of segments (f = a + s v) this is linear: J v = vfree + Deff (c0 + b0 a)
+        # with J = I - Deff diag(b0 s - cbar). Assume the last step's segments, solve with
+        # the cached inverse, and accept when v stays on them (exact); otherwise move to
+        # the new segments (a Newton step) and repeat. Damped Newton if segments cycle.
         it = 0
         while True:
+            if not jvalid:
+                for c in range(m):
+                    sl_c, a_c = _segment_line(seg[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+                    sv[c] = sl_c
+                    av[c] = a_c
+                for c in range(m):
+                    for j in range(m):
+                        J[c, j] = -Deff[c, j] * (b0[j] * sv[j] - cbar[j])
+                    J[c, c] += 1.0
+                _invert_small(J, Jinv, m)
+                jvalid = True
             for c in range(m):
-                fv[c], sv[c] = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+                acc = vfree[c]
+                for j in range(m):
+                    acc += Deff[c, j] * (c0[j] + b0[j] * av[j])
+                res[c] = acc
+            same = True
             for c in range(m):
                 acc = 0.0
                 for j in range(m):
-                    acc += Deff[c, j] * (c0[j] + b0[j] * fv[j] - cbar[j] * v[j])
-                    J[c, j] = -Deff[c, j] * (b0[j] * sv[j] - cbar[j])
-                res[c] = vfree[c] + acc - v[c]
-                J[c, c] += 1.0
-            _solve_small(J, res, m)
-            step = 0.0
-            scale = 1e-9
-            damp = 1.0 if it < 25 else 0.5
+                    acc += Jinv[c, j] * res[j]
+                vnew[c] = acc
             for c in range(m):
-                v[c] += damp * res[c]
-                step = max(step, abs(res[c]))
-                scale = max(scale, abs(v[c]))
+                s2 = _segment_of(vnew[c], kv[c], nk[c], seg[c])
+                if s2 != seg[c]:
+                    same = False
+                    seg[c] = s2
             it += 1
-            if step <= 1e-11 * scale:
+            if same:
+                for c in range(m):
+                    v[c] = vnew[c]
                 break
-            if it >= 80:
-                failed = True
+            jvalid = False
+            if it >= 12:
+                # segments cycle at a kink: damped Newton from the last accepted v
+                itn = 0
+                while True:
+                    for c in range(m):
+                        fv[c], sv[c], seg[c] = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+                    for c in range(m):
+                        acc = 0.0
+                        for j in range(m):
+                            acc += Deff[c, j] * (c0[j] + b0[j] * fv[j] - cbar[j] * v[j])
+                            J[c, j] = -Deff[c, j] * (b0[j] * sv[j] - cbar[j])
+                        res[c] = vfree[c] + acc - v[c]
+                        J[c, c] += 1.0
+                    _solve_small(J, res, m)
+                    step = 0.0
+                    scale = 1e-9
+                    for c in range(m):
+                        v[c] += 0.5 * res[c]
+                        step = max(step, abs(res[c]))
+                        scale = max(scale, abs(v[c]))
+                    itn += 1
+                    if step <= 1e-12 * scale:
+                        break
+                    if itn >= 200:
+                        failed = True
+                        break
+                it += itn
+                jvalid = False
                 break
+        for c in range(m):
+            fv[c], sv_unused, s3 = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+            if s3 != seg[c]:
+                seg[c] = s3
+                jvalid = False
         if it > worst:
             worst = it
-        store = k % r == 0
         for c in range(m):
-            fv[c], sv[c] = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
             F = c0[c] + b0[c] * fv[c]
             dF = F - cbar[c] * v[c]
             F_prev[c] = F
             f_prev[c] = fv[c]
             dF_prev[c] = dF
-            if store:
-                dF_out[k // r, c] = dF
-                F_out[k // r, c] = F
         # corrector: complete x[k] with g1 * B dF[k]
         for i in range(n):
             acc = 0j
             for j in range(m):
                 acc += Bf[i, j] * dF_prev[j]
+            bd[i] = acc
             x[i] += g1[i] * acc
-            if store:
-                x_out[k // r, i] = x[i]
+        if k % r == 0:
+            kk = k // r
+            for c in range(m):
+                F_out[kk, c] = F_prev[c]
+            for o in range(p):
+                acc = y_rig[kk, o]
+                for i in range(n):
+                    acc += (Cy[o, i] * x[i]).real
+                for j in range(m):
+                    acc += Dy[o, j] * dF_prev[j]
+                y_out[o, kk] = acc
     return -1 if failed else worst
 
 
-@_nb.njit(cache=True, parallel=True)
+@_nb.njit(cache=True, error_model="numpy", parallel=True)
 def _loop_batch(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
-                alpha, b0, b1, r, dF_out, F_out, x_out, iters):
+                alpha, b0, b1, r, Cy, Dy, y_rig, y_out, F_out, iters):
     for s in _nb.prange(kv.shape[0]):
         iters[s] = _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv[s], kf[s], nk[s],
-                             slo[s], shi[s], alpha[s], b0[s], b1[s], r, dF_out[s], F_out[s],
-                             x_out[s])
+                             slo[s], shi[s], alpha[s], b0[s], b1[s], r, Cy, Dy, y_rig,
+                             y_out[s], F_out[s])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -710,30 +842,28 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     Cv = np.ascontiguousarray(ms.C[vi])
     Deff = np.real(Cv @ (g1[:, None] * Bf)) + ms.D[vi]
     v_rig = np.ascontiguousarray((np.real(mr.C[vi] @ rig.x) + mr.D[vi] @ rig.u_fine.T).T)
-    packed = _pack_setups(models, h)
-    S, N = len(models), rig.n_samples
-    dF = np.zeros((S, N, 4))
-    F = np.zeros((S, N, 4))
-    xs = np.zeros((S, N, phi.size), dtype=complex)
-    iters = np.zeros(S, dtype=np.int64)
-    _loop_batch(phi, g0, g1, Bf, Cv, np.ascontiguousarray(Deff), v_rig, plant.cbar_n_s_m,
-                *packed, r, dF, F, xs, iters)
-    if np.any(iters < 0):
-        bad = np.flatnonzero(iters < 0).tolist()
-        raise ValueError(f"closed loop of plant {plant.name!r}: Newton's method did not converge "
-                         f"for setups {bad}; the shock loop is ill-posed (check the shock curves "
-                         "and the model's stability, or raise oversample)")
-    # outputs at the drive's samples: rig part + shock part
     names = list(plant.output_names) if outputs is None else list(outputs)
     unknown = [o for o in names if o not in plant.output_names]
     if unknown:
         raise ValueError(f"unknown outputs {unknown}; the plant has {list(plant.output_names)}")
     oi = np.array([plant.output_names.index(o) for o in names], dtype=int)
     sl = slice(None, None, r)
-    y_rig = np.real(mr.C[oi] @ rig.x[:, sl]) + mr.D[oi] @ rig.u_fine[sl].T  # (p, N)
-    y = (y_rig[None] + np.real(xs @ ms.C[oi].T).transpose(0, 2, 1)
-         + (dF @ ms.D[oi].T).transpose(0, 2, 1))
-    channels = {name: y[:, j] for j, name in enumerate(names)}
+    y_rig = np.ascontiguousarray((np.real(mr.C[oi] @ rig.x[:, sl])
+                                  + mr.D[oi] @ rig.u_fine[sl].T).T)  # (N, p)
+    packed = _pack_setups(models, h)
+    S, N = len(models), rig.n_samples
+    y = np.empty((S, len(names), N))
+    F = np.empty((S, N, 4))  # (setup, sample, corner): written per sample in the kernel
+    iters = np.zeros(S, dtype=np.int64)
+    _loop_batch(phi, g0, g1, Bf, Cv, np.ascontiguousarray(Deff), v_rig, plant.cbar_n_s_m,
+                *packed, r, np.ascontiguousarray(ms.C[oi]), np.ascontiguousarray(ms.D[oi]),
+                y_rig, y, F, iters)
+    if np.any(iters < 0):
+        bad = np.flatnonzero(iters < 0).tolist()
+        raise ValueError(f"closed loop of plant {plant.name!r}: Newton's method did not converge "
+                         f"for setups {bad}; the shock loop is ill-posed (check the shock curves "
+                         "and the model's stability, or raise oversample)")
+    channels = {name: y[:, j, :] for j, name in enumerate(names)}
     for c, name in enumerate(SHOCK_FORCES):
         channels[name] = F[:, :, c]
     settings = {"oversample": r, "plant": plant.name,
