@@ -129,8 +129,8 @@ class VehicleModel:
     def frequency_response(self, f_hz):
         """Frequency response of the fitted model, shape (n_out, n_in, n_f)."""
         s = 2j * np.pi * np.atleast_1d(np.asarray(f_hz, dtype=float))
-        p = np.nan_to_num(self.poles)[..., None]
-        r = np.nan_to_num(self.residues)[..., None]
+        p = np.where(np.isnan(self.poles), -1.0, self.poles)[..., None]  # padding: a dummy
+        r = np.nan_to_num(self.residues)[..., None]  # stable pole with zero residue
         real = (self.poles.imag == 0)[..., None]
         terms = r / (s - p) + np.where(real, 0.0, np.conj(r) / (s - np.conj(p)))
         valid = (np.arange(self.poles.shape[-1]) < self.n_poles[..., None])[..., None]

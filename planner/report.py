@@ -1,0 +1,678 @@
+"""Reports of predicted and ranked setups: CSV, Excel workbook and summary plots.
+
+The input is a *ranking table*: a :class:`pandas.DataFrame` with one row per
+setup, indexed by setup name (or with a column ``setup``), holding
+
+- the shock ids ``LF, RF, LR, RR`` (:data:`ident.channels.CORNERS`);
+- metric columns named as in :mod:`ident.metrics` (``tire_force_rms_LF``,
+  ``ride_height_rms_front``, ...), SI;
+- optionally interval columns ``<metric>_lo`` and ``<metric>_hi`` (SI);
+- optionally the columns of :class:`planner.objective.Scores` (``score``,
+  ``score_<group>``, ``feasible``, ``violations``, ``rank``), a
+  ``screening_rank`` and a note ``unresolved`` (str); any other column is
+  carried along unchanged.
+
+:func:`write_predictions_csv` writes the rig-session spec's predictions CSV;
+:func:`write_ranking` writes a folder with ``ranking.csv``, ``ranking.xlsx``,
+``pareto.png`` and ``top_setups.png``.
+
+Column order of every written table (the spec's "Predictions"): ``setup, LF,
+RF, LR, RR``, then the spec's metrics in :data:`ident.metrics.METRIC_NAMES`
+order (those present), then the other metric columns, then every further
+column in table order. The ranking files put ``rank`` first.
+
+Notes
+-----
+Values are SI inside; :func:`ranking_to_units` converts metric and interval
+columns for files and display. Scores are ratios to the baseline and have no
+unit. Plots use the object-oriented matplotlib API only (thread-safe, no
+GUI). Every file is written atomically and nothing existing is replaced
+unless ``overwrite=True``.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ident._io import atomic_path, atomic_write_bytes, check_can_write
+from ident.channels import CORNERS
+from ident.errors import PlannerError
+from ident.metrics import METRIC_NAMES, METRIC_QUANTITY
+from ident.units import UNIT_LABELS, check_units, from_si
+
+__all__ = [
+    "INTERVAL_SUFFIXES",
+    "RANKING_FILES",
+    "metric_of_column",
+    "ranking_columns",
+    "ranking_to_units",
+    "write_predictions_csv",
+    "write_ranking",
+]
+
+log = logging.getLogger(__name__)
+
+#: Suffixes of the lower and upper interval columns of a metric.
+INTERVAL_SUFFIXES = ("_lo", "_hi")
+#: Files written by :func:`write_ranking` (key -> file name); plots only when possible.
+RANKING_FILES = {"csv": "ranking.csv", "xlsx": "ranking.xlsx", "pareto": "pareto.png",
+                 "top_setups": "top_setups.png"}
+#: Metrics shown in ``top_setups.png`` without an objective (those present).
+DEFAULT_KEY_METRICS = tuple(f"tire_force_rms_{c}" for c in CORNERS) + (
+    "ride_height_rms_front", "ride_height_rms_rear")
+#: At most this many metrics in ``top_setups.png``.
+MAX_KEY_METRICS = 6
+#: Setups labelled by name in ``pareto.png``.
+N_PARETO_LABELS = 5
+#: Number formats of the Excel sheet.
+SCORE_FORMAT = "0.0000"
+INTEGER_FORMAT = "0"
+_INT_COLUMNS = ("rank", "screening_rank")
+_MAX_WIDTH = 50
+_GREY_FILL = "E7E6E6"
+_GREY_FONT = "7F7F7F"
+
+
+# ----------------------------------------------------------------------------------------------
+# table helpers (compute)
+# ----------------------------------------------------------------------------------------------
+
+def metric_of_column(column):
+    """Return the metric a column holds (interval suffix stripped), or None.
+
+    Examples
+    --------
+    >>> metric_of_column("tire_force_rms_LF_hi"), metric_of_column("score")
+    ('tire_force_rms_LF', None)
+    """
+    if not isinstance(column, str):
+        return None
+    if column in METRIC_QUANTITY:
+        return column
+    for suffix in INTERVAL_SUFFIXES:
+        if column.endswith(suffix) and column[: -len(suffix)] in METRIC_QUANTITY:
+            return column[: -len(suffix)]
+    return None
+
+
+def _check_table(table, where, *, corners=True):
+    """Return the table indexed by setup name (a copy), or raise a clear error."""
+    if not isinstance(table, pd.DataFrame):
+        raise TypeError(f"{where}: table must be a pandas DataFrame indexed by setup name, got "
+                        f"{type(table).__name__}")
+    if "setup" in table.columns:
+        table = table.set_index("setup")
+    else:
+        table = table.copy()
+    table.index = table.index.map(str)
+    table.index.name = "setup"
+    if len(table) == 0:
+        raise PlannerError(f"{where}: the table has no rows; predict at least one setup")
+    if not table.index.is_unique:
+        dup = table.index[table.index.duplicated()].unique().tolist()[:5]
+        raise PlannerError(f"{where}: the table repeats setup name(s) {dup}; give each setup "
+                           "a unique name")
+    if corners:
+        missing = [c for c in CORNERS if c not in table.columns]
+        if missing:
+            raise PlannerError(f"{where}: the table has no shock column(s) {missing}; a "
+                               f"predictions table holds the shock id of every corner "
+                               f"{list(CORNERS)} (join the setups to the metrics)")
+    return table
+
+
+def ranking_columns(table, *, rank_first=False):
+    """Column order of a written table (without ``setup``, which is the index).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        A ranking table indexed by setup name.
+    rank_first : bool
+        Put ``rank`` (if present) first.
+
+    Returns
+    -------
+    list of str
+        ``[rank,] LF, RF, LR, RR`` (those present), the spec's metrics in
+        :data:`ident.metrics.METRIC_NAMES` order, the other metric columns
+        (table order), then every further column in table order.
+
+    Examples
+    --------
+    >>> t = pd.DataFrame(columns=["score", "ride_height_rms_front", "RR", "LR", "RF", "LF",
+    ...                           "tire_force_rms_LF", "rank", "tire_force_rms_LF_lo"])
+    >>> ranking_columns(t, rank_first=True)  # doctest: +NORMALIZE_WHITESPACE
+    ['rank', 'LF', 'RF', 'LR', 'RR', 'tire_force_rms_LF', 'ride_height_rms_front', 'score',
+     'tire_force_rms_LF_lo']
+    """
+    cols = list(table.columns)
+    first = ["rank"] if rank_first and "rank" in cols else []
+    first += [c for c in CORNERS if c in cols]
+    first += [m for m in METRIC_NAMES if m in cols]
+    first += [c for c in cols if c in METRIC_QUANTITY and c not in first]
+    return first + [c for c in cols if c not in first]
+
+
+def ranking_to_units(table, units):
+    """Convert the metric and interval columns of a ranking table from SI.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Ranking table (SI).
+    units : {"SI", "imperial"}
+
+    Returns
+    -------
+    pandas.DataFrame
+        A copy; every metric column and its ``_lo``/``_hi`` columns converted
+        with :func:`ident.units.from_si` (quantity from
+        :data:`ident.metrics.METRIC_QUANTITY`), every other column unchanged.
+
+    Raises
+    ------
+    TypeError
+        If `table` is not a DataFrame.
+    ValueError
+        If `units` is unknown.
+    PlannerError
+        If a metric column is not numeric.
+
+    Examples
+    --------
+    >>> t = pd.DataFrame({"tire_force_rms_LF": [4.4482216152605], "score": [0.9]})
+    >>> ranking_to_units(t, "imperial").round(12).iloc[0].tolist()
+    [1.0, 0.9]
+    """
+    if not isinstance(table, pd.DataFrame):
+        raise TypeError(f"ranking_to_units: table must be a pandas DataFrame, got "
+                        f"{type(table).__name__}")
+    units = check_units(units, where="ranking_to_units")
+    out = table.copy()
+    if units == "SI":
+        return out
+    for col in out.columns:
+        metric = metric_of_column(col)
+        if metric is None:
+            continue
+        values = out[col]
+        if not pd.api.types.is_numeric_dtype(values) or pd.api.types.is_bool_dtype(values):
+            raise PlannerError(f"ranking_to_units: metric column {col!r} is not numeric (dtype "
+                               f"{values.dtype}); metric values are numbers in SI")
+        out[col] = from_si(values.to_numpy(dtype=float, na_value=np.nan),
+                           METRIC_QUANTITY[metric], units)
+    return out
+
+
+def _sorted_by_rank(table):
+    if "rank" not in table.columns:
+        return table
+    return table.sort_values("rank", kind="stable", na_position="last")
+
+
+def _file_frame(table, units, *, rank_first):
+    """The table as written: converted, columns ordered, ``setup`` a column."""
+    conv = ranking_to_units(table, units)[ranking_columns(table, rank_first=rank_first)]
+    frame = conv.reset_index()
+    if rank_first and "rank" in frame.columns:
+        frame = frame[["rank", "setup"] + [c for c in frame.columns if c not in ("rank", "setup")]]
+    return frame
+
+
+def _write_csv(frame, path, *, overwrite):
+    text = frame.to_csv(index=False, lineterminator="\n")  # floats: shortest round-trip repr
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def write_predictions_csv(table, path, *, units="SI", overwrite=False):
+    """Write the rig-session spec's predictions CSV.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Ranking table (SI), indexed by setup name or with a column ``setup``;
+        must hold the shock columns ``LF, RF, LR, RR``.
+    path : str or path
+        Output file.
+    units : {"SI", "imperial"}
+        Unit system of the metric values in the file (the drive's).
+    overwrite : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    pathlib.Path
+        The written path.
+
+    Raises
+    ------
+    TypeError
+        If `table` is not a DataFrame.
+    ValueError
+        If `units` is unknown.
+    PlannerError
+        If the table is empty, repeats a setup name, lacks a shock column,
+        or has a non-numeric metric column.
+    FileExistsError
+        If `path` exists and `overwrite` is false.
+
+    Notes
+    -----
+    Columns ``setup, LF, RF, LR, RR``, the metrics (spec order first), then
+    further columns (intervals, scores, ranks) in table order; rows in the
+    table's order; floats at full precision (they read back bit-identical);
+    NaN as an empty field. Written atomically.
+    """
+    path = Path(path)
+    table = _check_table(table, "write_predictions_csv")
+    units = check_units(units, where="write_predictions_csv")
+    check_can_write(path, overwrite=overwrite)
+    _write_csv(_file_frame(table, units, rank_first=False), path, overwrite=overwrite)
+    log.info("wrote predictions of %d setups (%s) to %s", len(table), units, path)
+    return path
+
+
+# ----------------------------------------------------------------------------------------------
+# Excel
+# ----------------------------------------------------------------------------------------------
+
+def _metric_unit(metric, units):
+    return UNIT_LABELS[units][METRIC_QUANTITY[metric]]
+
+
+def _header(col, units):
+    metric = metric_of_column(col)
+    return f"{col} [{_metric_unit(metric, units)}]" if metric is not None else str(col)
+
+
+def _metric_decimals(values):
+    """Decimals that show about 4 significant digits of a column's typical value (>= 3)."""
+    v = np.abs(np.asarray(values, dtype=float))
+    v = v[np.isfinite(v) & (v > 0)]
+    if v.size == 0:
+        return 3
+    return int(min(max(3, 3 - math.floor(math.log10(float(np.median(v))))), 10))
+
+
+def _number_formats(frame):
+    """Excel number format per column of the file frame (None: general)."""
+    formats = {}
+    decimals = {m: _metric_decimals(frame[m]) for m in frame.columns if m in METRIC_QUANTITY}
+    for col in frame.columns:
+        metric = metric_of_column(col)
+        if metric is not None:
+            d = decimals.get(metric)
+            if d is None:
+                d = _metric_decimals(frame[col])
+            formats[col] = "0." + "0" * d
+        elif col == "score" or str(col).startswith("score_"):
+            formats[col] = SCORE_FORMAT
+        elif col in _INT_COLUMNS:
+            formats[col] = INTEGER_FORMAT
+        else:
+            formats[col] = None
+    return formats
+
+
+def _cell(value):
+    """A value Excel can hold: NaN/inf and missing become empty cells."""
+    if value is None or value is pd.NA or value is pd.NaT:
+        return None
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    return str(value)
+
+
+def _shown_width(value, fmt):
+    if value is None:
+        return 0
+    if isinstance(value, float) and fmt and fmt.startswith("0."):
+        return len(f"{value:.{len(fmt) - 2}f}")
+    if isinstance(value, float) and fmt == INTEGER_FORMAT:
+        return len(f"{value:.0f}")
+    if isinstance(value, bool):
+        return 5
+    return len(str(value))
+
+
+def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
+    from openpyxl import Workbook
+    from openpyxl.styles import Border, Font, PatternFill, Side
+    from openpyxl.utils import get_column_letter
+
+    wb = Workbook()
+    ws = wb.active
+    ws.title = "ranking"
+    cols = list(frame.columns)
+    formats = _number_formats(frame)
+    headers = [_header(c, units) for c in cols]
+    ws.append(headers)
+    bold = Font(bold=True)
+    rule = Border(bottom=Side(style="thin"))
+    for cell in ws[1]:
+        cell.font = bold
+        cell.border = rule
+    grey_fill = PatternFill("solid", fgColor=_GREY_FILL)
+    grey_font = Font(color=_GREY_FONT)
+    widths = [len(h) for h in headers]
+    columns = [frame[c].tolist() for c in cols]
+    for r in range(len(frame)):
+        row = [_cell(col[r]) for col in columns]
+        ws.append(row)
+        for j, (value, col) in enumerate(zip(row, cols)):
+            widths[j] = max(widths[j], _shown_width(value, formats[col]))
+        if infeasible[r]:
+            for cell in ws[r + 2]:
+                cell.fill = grey_fill
+                cell.font = grey_font
+    for j, col in enumerate(cols, start=1):
+        if formats[col]:
+            for (cell,) in ws.iter_rows(min_row=2, min_col=j, max_col=j):
+                cell.number_format = formats[col]
+        ws.column_dimensions[get_column_letter(j)].width = min(widths[j - 1] + 2, _MAX_WIDTH)
+    setup_col = cols.index("setup") + 1
+    ws.freeze_panes = ws.cell(row=2, column=setup_col + 1).coordinate
+    ws.auto_filter.ref = f"A1:{get_column_letter(len(cols))}{len(frame) + 1}"
+
+    about = wb.create_sheet("about")
+    rows = [("shockplan ranking", None),
+            ("units", units),
+            ("setups", len(frame)),
+            ("feasible setups", int(len(frame) - np.sum(infeasible))),
+            ("scores", "lower is better; the baseline scores the sum of the weights"),
+            ("rows", "sorted by rank; greyed rows are infeasible (see 'violations')"),
+            (None, None)]
+    if objective is not None:
+        rows += [("objective", objective.name)]
+        if objective.source:
+            rows += [("objective file", objective.source)]
+        rows += [("baseline", baseline if baseline is not None else "(first setup scored)"),
+                 (None, None)]
+    for row in rows:
+        about.append(list(row))
+    about["A1"].font = Font(bold=True, size=12)
+    if objective is not None:
+        group_of = {m: g for g, ms in objective.groups.items() for m in ms}
+        about.append(["weight", "metric", "group"])
+        for cell in about[about.max_row]:
+            cell.font = bold
+        for metric, w in objective.weights.items():
+            about.append([w, metric, group_of.get(metric, "")])
+        if objective.limits:
+            about.append([])
+            about.append(["limit", "metric", "max_ratio (x baseline)", "max [SI]",
+                          f"max [{units}]"])
+            for cell in about[about.max_row]:
+                cell.font = bold
+            for metric, spec in objective.limits.items():
+                mx = spec.get("max")
+                q = METRIC_QUANTITY[metric]
+                about.append(["", metric, spec.get("max_ratio"),
+                              None if mx is None else f"{mx:.6g} {UNIT_LABELS['SI'][q]}",
+                              None if mx is None else
+                              f"{float(from_si(mx, q, units)):.6g} {UNIT_LABELS[units][q]}"])
+        about.append([])
+    metric_cols = [c for c in cols if c in METRIC_QUANTITY]
+    if metric_cols:
+        about.append(["metric", "unit"])
+        for cell in about[about.max_row]:
+            cell.font = bold
+        for m in metric_cols:
+            about.append([m, _metric_unit(m, units)])
+    about.column_dimensions["A"].width = 22
+    about.column_dimensions["B"].width = 30
+    for letter in "CDE":
+        about.column_dimensions[letter].width = 22
+    buf = io.BytesIO()
+    wb.save(buf)
+    return buf.getvalue()
+
+
+# ----------------------------------------------------------------------------------------------
+# plots
+# ----------------------------------------------------------------------------------------------
+
+def _new_figure(size):
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=size, layout="constrained")
+
+
+def _save_png(fig, path, *, overwrite, dpi=110):
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    atomic_write_bytes(path, buf.getvalue(), overwrite=overwrite)
+
+
+def _pareto_figure(table, baseline):
+    """score_grip vs score_platform: all setups, the Pareto front, the best labelled."""
+    from planner.objective import pareto_front
+
+    x, y = "score_grip", "score_platform"
+    xv = table[x].to_numpy(dtype=float)
+    yv = table[y].to_numpy(dtype=float)
+    feasible = (table["feasible"].to_numpy(dtype=bool) if "feasible" in table.columns
+                else np.ones(len(table), dtype=bool))
+    front = pareto_front(table, x, y)
+    fig = _new_figure((7.0, 5.5))
+    ax = fig.add_subplot()
+    ax.scatter(xv[feasible & ~front], yv[feasible & ~front], s=18, color="C0", alpha=0.6,
+               label="feasible")
+    if (~feasible).any():
+        ax.scatter(xv[~feasible], yv[~feasible], s=18, marker="x", color="0.6",
+                   label="infeasible")
+    if front.any():
+        order = np.argsort(xv[front], kind="stable")
+        fx, fy = xv[front][order], yv[front][order]
+        ax.step(fx, fy, where="post", color="C3", lw=1.2, alpha=0.8)
+        ax.scatter(fx, fy, s=40, color="C3", zorder=3, label="Pareto front")
+    if baseline is not None and baseline in table.index:
+        b = table.index.get_loc(baseline)
+        ax.scatter([xv[b]], [yv[b]], s=120, marker="*", color="k", zorder=4,
+                   label=f"baseline ({baseline})")
+    best = _best_order(table)[:N_PARETO_LABELS]
+    for k in best:
+        if np.isfinite(xv[k]) and np.isfinite(yv[k]):
+            ax.annotate(str(table.index[k]), (xv[k], yv[k]), xytext=(4, 4),
+                        textcoords="offset points", fontsize=7)
+    ax.set_xlabel(f"{x} (lower is better)")
+    ax.set_ylabel(f"{y} (lower is better)")
+    ax.set_title(f"Grip vs platform: {int(front.sum())} setups on the Pareto front")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
+def _best_order(table):
+    """Row positions, best first: by rank, else by score, else table order."""
+    n = len(table)
+    for col in ("rank", "score"):
+        if col in table.columns:
+            v = table[col].to_numpy(dtype=float, na_value=np.nan)
+            return np.lexsort((np.arange(n), np.where(np.isnan(v), np.inf, v)))
+    return np.arange(n)
+
+
+def _key_metrics(table, objective):
+    if objective is not None:
+        weighted = [m for m, w in objective.weights.items() if w > 0 and m in table.columns]
+        if len(weighted) > MAX_KEY_METRICS:
+            w = np.array([objective.weights[m] for m in weighted])
+            keep = set(np.argsort(-w, kind="stable")[:MAX_KEY_METRICS])
+            weighted = [m for k, m in enumerate(weighted) if k in keep]
+        if weighted:
+            return weighted
+    chosen = [m for m in DEFAULT_KEY_METRICS if m in table.columns]
+    return chosen or [c for c in ranking_columns(table) if c in METRIC_QUANTITY][:MAX_KEY_METRICS]
+
+
+def _resolve_baseline(table, objective, baseline):
+    """The setup metrics are normalized by in ``top_setups.png``, or None (the best)."""
+    if baseline is not None:
+        if baseline not in table.index:
+            raise PlannerError(f"write_ranking: baseline setup {baseline!r} is not in the table; "
+                               "give a setup name of the table or None")
+        return baseline
+    if objective is None:
+        return None
+    if objective.baseline is not None:
+        return objective.baseline if objective.baseline in table.index else None
+    # score_setups normalized by its first setup: the row scoring exactly the total weight
+    if "score" not in table.columns:
+        return str(table.index[0])
+    score = table["score"].to_numpy(dtype=float, na_value=np.nan)
+    hit = np.flatnonzero(np.isclose(score, objective.total_weight, rtol=1e-12, atol=0))
+    if hit.size == 0:
+        return None
+    return str(table.index[0]) if 0 in hit else str(table.index[hit[0]])
+
+
+def _top_figure(table, metrics, reference, top):
+    """Grouped bars of key metrics of the best setups, relative to a reference row."""
+    order = _best_order(table)[:top]
+    sub = table.iloc[order]
+    ref_name = reference if reference is not None else str(sub.index[0])
+    ref = table.loc[ref_name]
+    n_s, n_m = len(sub), len(metrics)
+    width = 0.8 / n_m
+    fig = _new_figure((max(6.0, 0.9 * n_s + 2.5), 5.2))
+    ax = fig.add_subplot()
+    x = np.arange(n_s)
+    for k, m in enumerate(metrics):
+        base = float(ref[m])
+        scale = 1.0 / base if np.isfinite(base) and base != 0 else np.nan
+        v = sub[m].to_numpy(dtype=float, na_value=np.nan) * scale
+        yerr = None
+        if f"{m}_lo" in sub.columns and f"{m}_hi" in sub.columns:
+            lo = sub[f"{m}_lo"].to_numpy(dtype=float, na_value=np.nan) * scale
+            hi = sub[f"{m}_hi"].to_numpy(dtype=float, na_value=np.nan) * scale
+            yerr = np.vstack([np.clip(v - lo, 0, None), np.clip(hi - v, 0, None)])
+            yerr = np.nan_to_num(yerr)
+        ax.bar(x - 0.4 + (k + 0.5) * width, v, width, yerr=yerr, capsize=2,
+               color=f"C{k % 10}", label=m, error_kw={"lw": 0.8})
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    labels = [str(s) for s in sub.index]
+    if "feasible" in sub.columns:
+        labels = [s if f else f"{s}\n(infeasible)" for s, f in
+                  zip(labels, sub["feasible"].to_numpy(dtype=bool))]
+    ax.set_xticks(x, labels, rotation=30, ha="right", fontsize=8)
+    what = "baseline" if reference is not None else "best setup"
+    ax.set_ylabel(f"metric / {what} ({ref_name}) [-]")
+    fig.suptitle(f"Top {n_s} setups: key metrics relative to the {what}")
+    ax.grid(True, axis="y", lw=0.3, alpha=0.5)
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", fontsize=7,
+               ncol=min(n_m, 6), frameon=False)
+    return fig
+
+
+# ----------------------------------------------------------------------------------------------
+# the report folder
+# ----------------------------------------------------------------------------------------------
+
+def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, overwrite=False,
+                  top=10):
+    """Write the ranking of setups as CSV, Excel workbook and plots.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Ranking table (SI; see the module docstring), e.g. predictions joined
+        with :attr:`planner.objective.Scores.table`.
+    out_dir : str or path
+        Output folder (created if missing).
+    units : {"SI", "imperial"}
+        Unit system of the metric values in the files.
+    objective : planner.objective.Objective, optional
+        Its weights, groups and limits go to the workbook's "about" sheet; its
+        weighted metrics are the key metrics of ``top_setups.png``.
+    baseline : str, optional
+        Setup the metrics of ``top_setups.png`` are normalized by; default the
+        objective's baseline (or the setup it was normalized by), else the
+        best setup.
+    overwrite : bool
+        Replace existing files.
+    top : int
+        Number of best setups in ``top_setups.png``.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        ``"csv"``: ``ranking.csv``; ``"xlsx"``: ``ranking.xlsx``;
+        ``"pareto"``: ``pareto.png`` (only with columns ``score_grip`` and
+        ``score_platform``); ``"top_setups"``: ``top_setups.png`` (only with
+        metric columns).
+
+    Raises
+    ------
+    TypeError
+        If `table` is not a DataFrame or `objective` not an Objective.
+    ValueError
+        If `units` is unknown or `top` is not an integer >= 1.
+    PlannerError
+        As :func:`write_predictions_csv`; or `baseline` not in the table.
+    FileExistsError
+        If a file to write exists and `overwrite` is false (checked for every
+        file before anything is written).
+
+    Notes
+    -----
+    ``ranking.csv``: rows sorted by ``rank`` when present, columns ``rank,
+    setup, LF, RF, LR, RR``, metrics, further columns. ``ranking.xlsx``: the
+    same on sheet "ranking" with units in the metric headers (``"tire_force_rms_LF
+    [lbf]"``), a bold header, panes frozen below the header and right of
+    ``setup``, metric formats with about 4 significant digits (at least
+    ``0.000``), ``0.0000`` for scores, ``0`` for ranks, fitted widths, an
+    autofilter and infeasible rows greyed; sheet "about" holds the units and
+    the objective.
+    """
+    from planner.objective import Objective
+
+    table = _check_table(table, "write_ranking")
+    units = check_units(units, where="write_ranking")
+    if objective is not None and not isinstance(objective, Objective):
+        raise TypeError(f"write_ranking: objective must be a planner.objective.Objective or "
+                        f"None, got {type(objective).__name__}")
+    if isinstance(top, bool) or not isinstance(top, (int, np.integer)) or top < 1:
+        raise ValueError(f"write_ranking: top must be an integer >= 1, got {top!r}")
+    out_dir = Path(out_dir)
+    ref = _resolve_baseline(table, objective, baseline)
+    key_metrics = _key_metrics(table, objective)
+    keys = ["csv", "xlsx"]
+    if {"score_grip", "score_platform"} <= set(table.columns):
+        keys.append("pareto")
+    if key_metrics:
+        keys.append("top_setups")
+    paths = {k: out_dir / RANKING_FILES[k] for k in keys}
+    for path in paths.values():
+        check_can_write(path, overwrite=overwrite)
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    ranked = _sorted_by_rank(table)
+    frame = _file_frame(ranked, units, rank_first=True)
+    _write_csv(frame, paths["csv"], overwrite=overwrite)
+    infeasible = (~ranked["feasible"].to_numpy(dtype=bool) if "feasible" in ranked.columns
+                  else np.zeros(len(ranked), dtype=bool))
+    about_base = ref if ref is not None else (objective.baseline if objective else None)
+    atomic_write_bytes(paths["xlsx"], _workbook_bytes(
+        frame, units=units, objective=objective, baseline=about_base, infeasible=infeasible),
+        overwrite=overwrite)
+    if "pareto" in paths:
+        _save_png(_pareto_figure(table, ref), paths["pareto"], overwrite=overwrite)
+    if "top_setups" in paths:
+        _save_png(_top_figure(table, key_metrics, ref, int(top)), paths["top_setups"],
+                  overwrite=overwrite)
+    log.info("wrote the ranking of %d setups (%s) to %s: %s", len(table), units, out_dir,
+             ", ".join(p.name for p in paths.values()))
+    return paths

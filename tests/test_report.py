@@ -1,0 +1,245 @@
+"""Tests of planner.report: predictions CSV (spec column order, units, precision), the
+ranking folder (CSV, workbook layout read back with openpyxl, PNGs), overwrite refusal and
+bad inputs."""
+
+import doctest
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless; the module itself never touches pyplot
+
+import numpy as np
+import pandas as pd
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from openpyxl import load_workbook
+
+import planner.report as report_mod
+from ident.channels import CORNERS
+from ident.errors import PlannerError
+from ident.metrics import METRIC_NAMES, METRIC_QUANTITY
+from ident.units import TO_SI
+from planner.objective import default_objective, score_setups
+from planner.report import (
+    metric_of_column,
+    ranking_columns,
+    ranking_to_units,
+    write_predictions_csv,
+    write_ranking,
+)
+
+N_SETUPS = 20
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+RTOL_UNITS = 1e-15  # one division by a constant factor: round-off only
+SHOCK_IDS = ("B20", "D8", "C12")
+
+
+@pytest.fixture
+def table(rng):
+    """20 setups: shocks, all spec metrics (SI) with intervals, then default-objective scores."""
+    names = ["baseline"] + [f"setup-{k:02d}" for k in range(1, N_SETUPS)]
+    shocks = {c: rng.choice(SHOCK_IDS, N_SETUPS) for c in CORNERS}
+    typical = {"force": 450.0, "displacement": 0.004, "velocity": 0.12}
+    metrics = {m: typical[METRIC_QUANTITY[m]] * rng.uniform(0.8, 1.2, N_SETUPS)
+               for m in reversed(METRIC_NAMES)}  # scrambled order: the writer reorders
+    t = pd.DataFrame({**metrics, **shocks}, index=pd.Index(names, name="setup"))
+    t.loc[["setup-02", "setup-05", "setup-11"], "shock_travel_rms_LF"] = (
+        1.4 * t.loc["baseline", "shock_travel_rms_LF"])  # over the default 1.25 x limit
+    for m in METRIC_NAMES:
+        t[f"{m}_lo"] = t[m] * 0.95
+        t[f"{m}_hi"] = t[m] * 1.07
+    scores = score_setups(t, default_objective())
+    t = t.join(scores.table)
+    t["unresolved"] = ""
+    t.loc["setup-03", "unresolved"] = "screening interval overlaps the best"
+    assert (~t["feasible"]).sum() > 0  # some setups violate the travel limits
+    return t
+
+
+def test_metric_of_column_and_order():
+    assert metric_of_column("shock_travel_rms_RR_lo") == "shock_travel_rms_RR"
+    assert metric_of_column("tire_force_rms_norm_LF") == "tire_force_rms_norm_LF"
+    assert metric_of_column("rank") is None and metric_of_column("LF") is None
+    assert metric_of_column(3) is None
+
+
+def test_ranking_to_units_converts_metrics_and_intervals_only(table):
+    imp = ranking_to_units(table, "imperial")
+    for col in table.columns:
+        m = metric_of_column(col)
+        if m is None:
+            assert imp[col].equals(table[col]), col
+        else:
+            assert_allclose(imp[col], table[col] / TO_SI[METRIC_QUANTITY[m]], rtol=RTOL_UNITS)
+    si = ranking_to_units(table, "si")
+    pd.testing.assert_frame_equal(si, table)
+    assert si is not table
+
+
+def test_predictions_csv_spec_columns_units_and_precision(table, tmp_path):
+    si_path = write_predictions_csv(table, tmp_path / "pred_si.csv")
+    imp_path = write_predictions_csv(table, tmp_path / "pred_imp.csv", units="imperial")
+    si = pd.read_csv(si_path, keep_default_na=False, na_values=[""])
+    imp = pd.read_csv(imp_path, keep_default_na=False, na_values=[""])
+    n_m = len(METRIC_NAMES)
+    assert list(si.columns[:5]) == ["setup", *CORNERS]
+    assert list(si.columns[5:5 + n_m]) == list(METRIC_NAMES)  # the spec's order
+    assert set(si.columns[5 + n_m:]) == {c for c in table.columns
+                                         if c not in CORNERS and c not in METRIC_NAMES}
+    assert si["setup"].tolist() == table.index.tolist()  # row order as given
+    for c in CORNERS:
+        assert si[c].tolist() == table[c].tolist()
+    for m in METRIC_NAMES:  # full precision: bit-identical round trip
+        assert_array_equal(si[m].to_numpy(), table[m].to_numpy())
+        assert_allclose(imp[m], si[m] / TO_SI[METRIC_QUANTITY[m]], rtol=RTOL_UNITS)
+        assert_allclose(imp[f"{m}_hi"], si[f"{m}_hi"] / TO_SI[METRIC_QUANTITY[m]],
+                        rtol=RTOL_UNITS)
+    assert_array_equal(imp["score"], si["score"])
+    assert list(imp.columns) == list(si.columns)
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_predictions_csv_accepts_a_setup_column_and_refuses_overwrite(table, tmp_path):
+    path = tmp_path / "pred.csv"
+    write_predictions_csv(table.reset_index(), path)
+    before = path.read_bytes()
+    with pytest.raises(FileExistsError, match=r"pred\.csv.*--overwrite"):
+        write_predictions_csv(table, path)
+    assert path.read_bytes() == before
+    write_predictions_csv(table.iloc[:3], path, overwrite=True)
+    assert len(pd.read_csv(path)) == 3
+
+
+def test_write_ranking_files(table, tmp_path):
+    out = tmp_path / "report"
+    paths = write_ranking(table, out, units="imperial", objective=default_objective(), top=8)
+    assert set(paths) == {"csv", "xlsx", "pareto", "top_setups"}
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["ranking.csv", "ranking.xlsx", "pareto.png", "top_setups.png"])  # no temp files
+    for key in ("pareto", "top_setups"):
+        data = paths[key].read_bytes()
+        assert len(data) > 1000 and data[:8] == PNG_MAGIC
+    csv = pd.read_csv(paths["csv"], keep_default_na=False, na_values=[""])
+    assert list(csv.columns[:6]) == ["rank", "setup", *CORNERS]
+    assert list(csv.columns[6:6 + len(METRIC_NAMES)]) == list(METRIC_NAMES)
+    assert csv["rank"].tolist() == list(range(1, N_SETUPS + 1))
+    ranked = table.sort_values("rank")
+    assert csv["setup"].tolist() == ranked.index.tolist()
+    m = "ride_height_rms_front"
+    assert_allclose(csv[m], ranked[m] / TO_SI["displacement"], rtol=RTOL_UNITS)
+
+
+def test_ranking_workbook_layout(table, tmp_path):
+    paths = write_ranking(table, tmp_path, units="imperial", objective=default_objective())
+    wb = load_workbook(paths["xlsx"])
+    assert wb.sheetnames == ["ranking", "about"]
+    ws = wb["ranking"]
+    header = [c.value for c in ws[1]]
+    assert header[:6] == ["rank", "setup", *CORNERS]
+    assert "tire_force_rms_LF [lbf]" in header
+    assert "ride_height_rms_front [in]" in header
+    assert "shock_velocity_rms_RR_hi [in/s]" in header
+    assert "score" in header and "score_grip" in header
+    assert all(c.font.bold for c in ws[1])
+    assert ws.freeze_panes == "C2"  # below the header, right of the setup column
+    assert ws.auto_filter.ref == f"A1:{ws.cell(1, len(header)).column_letter}{N_SETUPS + 1}"
+    col = {h: k + 1 for k, h in enumerate(header)}
+    assert ws.cell(2, col["tire_force_rms_LF [lbf]"]).number_format == "0.000"
+    # ~0.16 in: 4 significant digits need 4 decimals
+    assert ws.cell(2, col["ride_height_rms_front [in]"]).number_format == "0.0000"
+    assert ws.cell(2, col["score"]).number_format == "0.0000"
+    assert ws.cell(2, col["rank"]).number_format == "0"
+    ranked = table.sort_values("rank")
+    values = [ws.cell(r, col["tire_force_rms_LF [lbf]"]).value for r in range(2, N_SETUPS + 2)]
+    assert_allclose(values, ranked["tire_force_rms_LF"] / TO_SI["force"], rtol=RTOL_UNITS)
+    width = ws.column_dimensions[ws.cell(1, col["tire_force_rms_LF [lbf]"]).column_letter].width
+    assert width >= len("tire_force_rms_LF [lbf]")
+    # infeasible rows greyed, feasible ones not
+    for r in range(2, N_SETUPS + 2):
+        feasible = ws.cell(r, col["feasible"]).value
+        fill = ws.cell(r, col["setup"]).fill
+        assert (fill.fill_type == "solid") == (not feasible)
+    about = wb["about"]
+    cells = [[c.value for c in row] for row in about.iter_rows()]
+    assert ["units", "imperial"] in [row[:2] for row in cells]
+    assert ["objective", "grip and platform"] in [row[:2] for row in cells]
+    assert [0.125, "tire_force_rms_LF", "grip"] in [row[:3] for row in cells]
+    assert any(row[1] == "shock_travel_rms_LF" and row[2] == 1.25 for row in cells)
+
+
+def test_ranking_without_scores_and_si(table, tmp_path):
+    plain = table[[*CORNERS, *METRIC_NAMES]]
+    paths = write_ranking(plain, tmp_path, top=3)
+    assert set(paths) == {"csv", "xlsx", "top_setups"}  # no score columns: no Pareto plot
+    ws = load_workbook(paths["xlsx"])["ranking"]
+    assert ws.freeze_panes == "B2"  # no rank column: setup first
+    header = [c.value for c in ws[1]]
+    assert "tire_force_rms_LF [N]" in header
+    ride = header.index("ride_height_rms_front [m]") + 1
+    assert ws.cell(2, ride).number_format == "0.000000"  # ~0.004 m: 4 significant digits
+
+
+def test_write_ranking_refuses_overwrite_before_writing_anything(table, tmp_path):
+    (tmp_path / "pareto.png").write_bytes(b"keep")
+    with pytest.raises(FileExistsError, match=r"pareto\.png.*--overwrite"):
+        write_ranking(table, tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pareto.png"]
+    paths = write_ranking(table, tmp_path, overwrite=True)
+    assert paths["pareto"].read_bytes()[:8] == PNG_MAGIC
+
+
+def test_baseline_normalization_of_top_setups(table):
+    obj = default_objective()
+    assert report_mod._resolve_baseline(table, obj, None) == "baseline"
+    assert report_mod._resolve_baseline(table.iloc[::-1], obj, None) == "baseline"
+    assert report_mod._resolve_baseline(table, None, None) is None
+    with pytest.raises(PlannerError, match="baseline setup 'nope'"):
+        report_mod._resolve_baseline(table, None, "nope")
+    assert report_mod._key_metrics(table, obj) == list(obj.weights)
+    fig = report_mod._top_figure(table, list(obj.weights), "baseline", 5)
+    from matplotlib.container import BarContainer
+
+    bars = [c for c in fig.axes[0].containers if isinstance(c, BarContainer)][0]
+    # the first metric's bars, best setups first, with error bars from _lo/_hi
+    assert bars.errorbar is not None
+    best = table.sort_values("rank").iloc[:5]
+    m = list(obj.weights)[0]
+    assert_allclose([b.get_height() for b in bars.patches],
+                    best[m] / table.loc["baseline", m], rtol=1e-12)
+
+
+@pytest.mark.parametrize("change, kwargs, error, match", [
+    (lambda t: t.drop(columns="RR"), {}, PlannerError, r"no shock column\(s\) \['RR'\]"),
+    (lambda t: t.iloc[:0], {}, PlannerError, "no rows"),
+    (lambda t: t.rename(index={"setup-01": "baseline"}), {}, PlannerError, "repeats setup"),
+    (lambda t: t.assign(tire_force_rms_LF="x"), {"units": "imperial"}, PlannerError,
+     "not numeric"),
+    (lambda t: t, {"units": "metric"}, ValueError, "unknown unit system"),
+    (lambda t: t.to_numpy(), {}, TypeError, "must be a pandas DataFrame"),
+])
+def test_predictions_csv_bad_inputs(table, tmp_path, change, kwargs, error, match):
+    with pytest.raises(error, match=match):
+        write_predictions_csv(change(table), tmp_path / "p.csv", **kwargs)
+    assert not (tmp_path / "p.csv").exists()
+
+
+@pytest.mark.parametrize("kwargs, error, match", [
+    ({"top": 0}, ValueError, "top must be an integer >= 1"),
+    ({"top": 2.5}, ValueError, "top must be"),
+    ({"objective": "grip"}, TypeError, "objective must be"),
+    ({"baseline": "nope"}, PlannerError, "not in the table"),
+])
+def test_write_ranking_bad_inputs(table, tmp_path, kwargs, error, match):
+    with pytest.raises(error, match=match):
+        write_ranking(table, tmp_path / "r", **kwargs)
+    assert not (tmp_path / "r").exists()
+
+
+def test_public_functions_documented_and_doctests_pass():
+    for name in report_mod.__all__:
+        obj = getattr(report_mod, name)
+        if callable(obj):
+            assert obj.__doc__, name
+    result = doctest.testmod(report_mod, optionflags=doctest.ELLIPSIS)
+    assert result.failed == 0 and result.attempted > 0
+    assert ranking_columns(pd.DataFrame(columns=["x", "LF"])) == ["LF", "x"]
