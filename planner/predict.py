@@ -85,6 +85,8 @@ def as_loop_plant(model, *, reduce_rtol=1e-4):
 
     if isinstance(model, LoopPlant):
         return model
+    if hasattr(model, "frequency_response") and hasattr(model, "velocity_idx"):
+        return model  # a frequency-response plant (planner.uncertainty.FrfPlant): screening only
     if isinstance(model, VehicleModel):
         return model.loop_plant(reduce_rtol=reduce_rtol)
     if isinstance(model, VehicleParams):
@@ -178,7 +180,12 @@ def predict_setups(model, drive, setups, library, *, oversample=4, chunk_size=16
     from ident.closedloop import rig_response, simulate_batch
     from ident.metrics import compute_metrics
 
+    from ident.closedloop import LoopPlant
+
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
+    if not isinstance(plant, LoopPlant):
+        raise TypeError(f"time-domain prediction needs a state-space model, got "
+                        f"{type(plant).__name__}; use planner.screen for frequency-response plants")
     drive = prepare_drive(drive, _model_fs(model))
     models = resolve_setups(setups, library)
     outputs = [o for o in METRIC_OUTPUTS if o in plant.output_names]

@@ -75,7 +75,7 @@ def metric_rows(plant):
     return names, np.array(rows)
 
 
-def drive_spectrum(drive, *, n_bands=96, f_min_hz=0.2, nperseg=None):
+def drive_spectrum(drive, *, n_bands=96, f_min_hz=0.2, nperseg=None, weight=None):
     """The drive's cross-spectral matrix aggregated into log-spaced bands.
 
     Parameters
@@ -87,6 +87,10 @@ def drive_spectrum(drive, *, n_bands=96, f_min_hz=0.2, nperseg=None):
         Lowest band edge [Hz].
     nperseg : int, optional
         Welch block length; default about 10 s of samples (0.1 Hz resolution).
+    weight : callable, optional
+        ``weight(f_hz) -> ndarray``: a power weight applied line by line before
+        the lines are summed into bands (e.g. the metric filter's ``|B|^4``, so
+        that its steep edges are integrated exactly, not at band centres).
 
     Returns
     -------
@@ -112,15 +116,15 @@ def drive_spectrum(drive, *, n_bands=96, f_min_hz=0.2, nperseg=None):
     fc = np.zeros(n_bands)
     wsum = np.zeros(n_bands)
     tot = np.real(np.einsum("iif->f", Pxy))
+    wf = np.ones(f.size) if weight is None else np.asarray(weight(f), dtype=float)
     for k in np.flatnonzero(ok):
-        S[band[k]] += Pxy[:, :, k] * df
+        S[band[k]] += Pxy[:, :, k] * (df * wf[k])
         fc[band[k]] += f[k] * tot[k]
         wsum[band[k]] += tot[k]
     empty = wsum <= 0
     fc[~empty] /= wsum[~empty]
     fc[empty] = np.sqrt(edges[:-1] * edges[1:])[empty]
-    keep = np.any(np.abs(S) > 0, axis=(1, 2))
-    return fc[keep], S[keep]
+    return fc, S
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -180,7 +184,7 @@ def _inv4(M, K):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _screen_one(w, Hvs, Hys, P, Q, d0, wband, cbar, sig0, kv, kf, nk, slo, shi, lag,
+def _screen_one(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
                 max_iter, tol, out, sig_out):
     nf = w.size
     p = Hys.shape[1]
@@ -260,19 +264,19 @@ def _screen_one(w, Hvs, Hys, P, Q, d0, wband, cbar, sig0, kv, kf, nk, slo, shi, 
             quad = 0.0
             for a in range(4):
                 for b in range(4):
-                    quad += (W[a] * P[k, a, b] * np.conj(W[b])).real
+                    quad += (W[a] * PB[k, a, b] * np.conj(W[b])).real
             pw += quad
-            out[o] += wband[k, o] * pw
+            out[o] += pw
     for o in range(p):
         out[o] = math.sqrt(max(out[o], 0.0))
     return it + 1
 
 
 @nb.njit(cache=True, error_model="numpy", parallel=True)
-def _screen_batch(w, Hvs, Hys, P, Q, d0, wband, cbar, sig0, kv, kf, nk, slo, shi, lag,
+def _screen_batch(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
                   max_iter, tol, out, sig_out, iters):
     for s in nb.prange(kv.shape[0]):
-        iters[s] = _screen_one(w, Hvs, Hys, P, Q, d0, wband, cbar, sig0, kv[s], kf[s], nk[s],
+        iters[s] = _screen_one(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv[s], kf[s], nk[s],
                                slo[s], shi[s], lag[s], max_iter, tol, out[s], sig_out[s])
 
 
@@ -310,7 +314,15 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
     drive = prepare_drive(drive, getattr(model, "fs_hz", None))
     models = resolve_setups(setups, library)
     names, L = metric_rows(plant)
+    sos = signal.butter(4, band_hz, "bandpass", fs=drive.fs_hz, output="sos")
+
+    def b4(f_hz):  # power response of the metric filter applied forward and backward
+        return np.abs(signal.sosfreqz(sos, worN=f_hz, fs=drive.fs_hz)[1]) ** 4
+
     f, S = drive_spectrum(drive, n_bands=n_bands)
+    _, SB = drive_spectrum(drive, n_bands=n_bands, weight=b4)
+    keep = np.any(np.abs(S) > 0, axis=(1, 2))
+    f, S, SB = f[keep], S[keep], SB[keep]
     w = 2 * np.pi * f
     H = plant.frequency_response(f)  # (p_all, 11, nf)
     vi = plant.velocity_idx
@@ -318,14 +330,14 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
     Hvs = np.ascontiguousarray(np.transpose(H[vi, 7:], (2, 0, 1)))  # (nf, 4, 4)
     Hyr = np.einsum("mo,oif->fmi", L, H[:, :7])  # (nf, p, 7)
     Hys = np.ascontiguousarray(np.einsum("mo,oif->fmi", L, H[:, 7:]))  # (nf, p, 4)
-    # S[k, i, j] = E[conj(U_i) U_j]; the power of y = H u is H^* ... use E[Y Y^*] = H S^T H^H
+    # S[k, i, j] = sum conj(U_i) U_j: the power of y = H u is H S^T H^H
     St = np.transpose(S, (0, 2, 1))
-    P = np.ascontiguousarray(Hvr @ St @ np.conj(np.transpose(Hvr, (0, 2, 1))))
-    Q = np.ascontiguousarray(Hvr @ St @ np.conj(np.transpose(Hyr, (0, 2, 1))))  # (nf, 4, p)
-    d0 = np.ascontiguousarray(np.real(np.einsum("fmi,fij,fmj->fm", Hyr, St, np.conj(Hyr))))
-    sos = signal.butter(4, band_hz, "bandpass", fs=drive.fs_hz, output="sos")
-    _, hb = signal.sosfreqz(sos, worN=f, fs=drive.fs_hz)
-    wband = np.ascontiguousarray(np.broadcast_to((np.abs(hb) ** 4)[:, None], (f.size, len(names))))
+    SBt = np.transpose(SB, (0, 2, 1))
+    HvrH = np.conj(np.transpose(Hvr, (0, 2, 1)))
+    P = np.ascontiguousarray(Hvr @ St @ HvrH)  # velocity power per band (linearization)
+    PB = np.ascontiguousarray(Hvr @ SBt @ HvrH)  # the same, metric-filter weighted
+    QB = np.ascontiguousarray(Hvr @ SBt @ np.conj(np.transpose(Hyr, (0, 2, 1))))  # (nf, 4, p)
+    d0 = np.ascontiguousarray(np.real(np.einsum("fmi,fij,fmj->fm", Hyr, SBt, np.conj(Hyr))))
     sig0 = np.sqrt(np.maximum(np.real(np.einsum("faa->a", P)), 1e-18))
     h = 1.0 / drive.fs_hz
     out = np.zeros((len(models), len(names)))
@@ -340,7 +352,7 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
         chunk = models[a:a + chunk_size]
         kv, kf, nk, slo, shi, *_ = _pack_setups(chunk, h)
         lag = np.array([[m.lag_s for m in row] for row in chunk])
-        _screen_batch(w, Hvs, Hys, P, Q, d0, wband, plant.cbar_n_s_m, sig0, kv, kf, nk, slo,
+        _screen_batch(w, Hvs, Hys, P, PB, QB, d0, plant.cbar_n_s_m, sig0, kv, kf, nk, slo,
                       shi, lag, int(max_iter), float(tol), out[a:a + len(chunk)],
                       sig[a:a + len(chunk)], iters[a:a + len(chunk)])
     if np.any(iters >= max_iter):

@@ -1,0 +1,183 @@
+"""Rank shock setups: screen many, simulate the best, score, attach uncertainty.
+
+``rank_setups(model, drive, library, ...)``:
+
+1. takes the setups given (a setups CSV) or enumerates them from the library
+   with constraints (:func:`planner.setups.enumerate_setups`);
+2. screens all of them in the frequency domain (:mod:`planner.screen`) and
+   scores them with the objective (:mod:`planner.objective`);
+3. simulates the best `top` of them (and the baseline) in the time domain with
+   the nonlinear shocks (:mod:`planner.predict`) and scores those;
+4. reports how well the screening ranks agree with the time-domain ranks
+   (Spearman), and for an identified model gives every metric an interval and
+   flags setup pairs whose order the model does not resolve
+   (:mod:`planner.uncertainty`).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from ident.channels import CORNERS
+from ident.errors import PlannerError
+
+__all__ = ["Ranking", "rank_setups"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class Ranking:
+    """The result of :func:`rank_setups`.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        The setups simulated in the time domain, best first: shock ids, metrics
+        (SI), ``<metric>_lo/_hi`` intervals (identified models), ``score``,
+        ``score_<group>``, ``feasible``, ``violations``, ``rank``,
+        ``screening_rank``, ``unresolved``.
+    screening : pandas.DataFrame
+        Every setup's screening metrics, scores and ranks.
+    baseline : str
+        The setup the objective normalizes against.
+    objective : planner.objective.Objective
+    agreement : dict
+        ``spearman`` between screening and time-domain scores over the
+        simulated setups, and ``same_best``.
+    settings : dict
+    """
+
+    table: pd.DataFrame
+    screening: pd.DataFrame
+    baseline: str
+    objective: object
+    agreement: dict
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def best(self):
+        """Name of the best feasible setup."""
+        return self.table.index[0]
+
+
+def _choose_baseline(setups, objective, baseline):
+    from planner.setups import Setup
+
+    names = [s.name for s in setups]
+    if isinstance(baseline, Setup):
+        return baseline
+    wanted = baseline if baseline is not None else objective.baseline
+    if wanted is not None:
+        if wanted in names:
+            return setups[names.index(wanted)]
+        raise PlannerError(f"baseline setup {wanted!r} is not among the setups; name one of the "
+                           f"setups (e.g. {names[0]!r}) or pass the baseline setup")
+    return setups[0]
+
+
+def rank_setups(model, drive, library, *, setups=None, constraints=None, objective=None,
+                baseline=None, top=40, n_check=20, oversample=4, uncertainty=True, n_draws=40,
+                seed=0, band_hz=(1.0, 20.0), progress=False):
+    """Rank shock setups on a model and a drive.
+
+    Parameters
+    ----------
+    model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
+    drive : ident.drive.Drive
+    library : ident.shocks.ShockLibrary
+    setups : sequence of planner.setups.Setup, optional
+        The candidates; default: enumerated from `library` with `constraints`.
+    constraints : dict, optional
+        Keyword arguments of :func:`planner.setups.enumerate_setups`
+        (``symmetry``, ``axles``, ``fixed``, ``shocks``, ``respect_inventory``,
+        ``max_setups``).
+    objective : planner.objective.Objective, optional
+        Default :func:`planner.objective.default_objective`.
+    baseline : str or Setup, optional
+        The setup metrics are normalized against; default the objective's
+        ``baseline`` if it names a setup, else the first setup. It is added to
+        the candidates if missing.
+    top : int
+        Setups (best by screening) simulated in the time domain.
+    n_check : int
+        Further setups, spread evenly over the screening ranks below the
+        top, also simulated, so that the screening/time-domain agreement is
+        measured over the whole range (near the top the scores are close and
+        a rank correlation among near-ties says little).
+    oversample : int
+        Internal steps per sample of the time-domain shock loop.
+    uncertainty : bool
+        Attach Monte Carlo intervals and unresolved pairs (identified models only).
+    n_draws, seed : int
+        Monte Carlo draws and seed.
+
+    Returns
+    -------
+    Ranking
+    """
+    from scipy.stats import spearmanr
+
+    from planner.objective import default_objective, score_setups
+    from planner.predict import predict_setups
+    from planner.screen import screen_setups
+    from planner.setups import enumerate_setups
+    from planner.uncertainty import prediction_uncertainty, unresolved_pairs
+
+    objective = default_objective() if objective is None else objective
+    if setups is None:
+        setups = enumerate_setups(library, **(constraints or {}))
+    elif constraints:
+        raise PlannerError("give either setups or constraints, not both")
+    setups = list(setups)
+    if not setups:
+        raise PlannerError("no setups to rank")
+    base = _choose_baseline(setups, objective, baseline)
+    if base.name not in {s.name for s in setups}:
+        setups = [base] + setups
+    if top < 1:
+        raise PlannerError(f"top must be at least 1, got {top}")
+    # 1. screening of everything
+    screened = screen_setups(model, drive, setups, library, band_hz=band_hz, progress=progress)
+    sc = score_setups(screened.table, objective, baseline=base.name).table
+    screening = pd.concat([screened.table, sc], axis=1)
+    # 2. time domain on the best `top` by screening (plus the baseline)
+    order = sc.sort_values("rank").index.tolist()
+    chosen = order[:top]
+    rest = order[top:]
+    if n_check and rest:
+        pick = np.unique(np.linspace(0, len(rest) - 1, min(n_check, len(rest))).round().astype(int))
+        chosen += [rest[k] for k in pick]
+    if base.name not in chosen:
+        chosen.append(base.name)
+    by_name = {s.name: s for s in setups}
+    cand = [by_name[n] for n in chosen]
+    td = predict_setups(model, drive, cand, library, oversample=oversample, band_hz=band_hz,
+                        progress=progress)
+    scores = score_setups(td.table, objective, baseline=base.name)
+    table = pd.concat([td.table, scores.table], axis=1)
+    table["screening_rank"] = sc.loc[table.index, "rank"].to_numpy()
+    # 3. agreement between screening and time domain over the simulated setups
+    rho = float(spearmanr(sc.loc[table.index, "score"], table["score"]).statistic) \
+        if len(table) > 2 else float("nan")
+    agreement = {"spearman": rho, "n": int(len(table)),
+                 "same_best": bool(table["rank"].idxmin() == sc.loc[table.index, "rank"].idxmin())}
+    # 4. uncertainty (identified models)
+    settings = {"top": top, "n_check": n_check, "oversample": oversample, "band_hz": tuple(band_hz),
+                "n_setups": len(setups), "model": td.settings.get("model"),
+                "drive": td.settings.get("drive")}
+    table["unresolved"] = ""
+    if uncertainty and getattr(model, "frf", None) is not None:
+        unc = prediction_uncertainty(model, drive, cand, library, n_draws=n_draws, seed=seed,
+                                     band_hz=band_hz)
+        table = unc.intervals(table)
+        pairs = unresolved_pairs(td.table, unc, objective, baseline=base.name)
+        table["unresolved"] = [" ".join(pairs.get(n, [])) for n in table.index]
+        settings["uncertainty"] = unc.settings
+    table = table.sort_values("rank")
+    return Ranking(table=table, screening=screening.sort_values("rank"), baseline=base.name,
+                   objective=objective, agreement=agreement, settings=settings)
