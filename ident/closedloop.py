@@ -132,11 +132,17 @@ class ModalSystem:
         return A, B, C, self.D.copy()
 
     def pruned(self, rtol=1e-13):
-        """Drop modes that no input drives or no output reads (relative to the largest)."""
-        bn = np.abs(self.B).max(axis=1) if self.B.size else np.zeros(self.lam.size)
-        cn = np.abs(self.C).max(axis=0) if self.C.size else np.zeros(self.lam.size)
-        g = bn * cn
-        keep = g > rtol * (g.max() if g.size and g.max() > 0 else 1.0)
+        """Drop modes that no input drives or no output reads.
+
+        Scale-aware: each input column of B and each output row of C is
+        normalized by its own largest entry first (outputs in different units,
+        e.g. N and m, must not prune each other).
+        """
+        if self.lam.size == 0:
+            return self
+        Bn = np.abs(self.B) / np.maximum(np.abs(self.B).max(axis=0, keepdims=True), 1e-300)
+        Cn = np.abs(self.C) / np.maximum(np.abs(self.C).max(axis=1, keepdims=True), 1e-300)
+        keep = (Bn.max(axis=1) > rtol) & (Cn.max(axis=0) > rtol)
         return ModalSystem(self.lam[keep], self.B[keep], self.C[:, keep], self.D)
 
     def select(self, outputs=None, inputs=None):

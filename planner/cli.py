@@ -73,6 +73,166 @@ def cmd_vehicle_modes(args):
     return 0
 
 
+def _load_any_model(path):
+    """An identified model (.npz), a vehicle TOML (the known physical model) or 'paper'."""
+    from ident.model import load_model
+    from ident.vehicle import build_full_car, example_vehicle, read_vehicle
+
+    if path == "paper":
+        return build_full_car(example_vehicle())
+    p = Path(path)
+    if p.suffix.lower() == ".toml":
+        return build_full_car(read_vehicle(p))
+    return load_model(p)
+
+
+def _static_loads(model):
+    params = getattr(model, "params", None)
+    if params is None:
+        return None
+    return dict(zip(("LF", "RF", "LR", "RR"), params.static_corner_load_n))
+
+
+def cmd_identify(args):
+    """``shockplan identify``: rig session -> identified vehicle model."""
+    import warnings
+
+    from ident.model import identify_session
+    from ident.session import read_session
+
+    session = read_session(args.session)
+    out = Path(args.out)
+    from ident._io import check_can_write
+
+    check_can_write(out, overwrite=args.overwrite)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = identify_session(session, frf_method=args.frf_method, nperseg=args.nperseg,
+                                 coherence_min=args.coherence_min, fit_method=args.method)
+    model.save(out, overwrite=args.overwrite)
+    table = model.summary()
+    print(f"identified '{session.name}' ({len(session.runs)} runs, {session.fs_hz:g} Hz, "
+          f"{model.frf.n_averages} blocks) with {args.method}: {len(table)} pairs")
+    rows = [(r.output, r.input, r.order, f"{r.fit_error:.4f}", f"{r.median_coherence:.3f}")
+            for r in table.itertuples()]
+    if not args.all_pairs:
+        worst = table.sort_values("fit_error", ascending=False).head(12)
+        rows = [(r.output, r.input, r.order, f"{r.fit_error:.4f}", f"{r.median_coherence:.3f}")
+                for r in worst.itertuples()]
+        print("the 12 pairs with the largest fit error (--all-pairs for every pair):")
+    print(_fmt_table(rows, ["output", "input", "order", "fit error", "median coh 0.5-20 Hz"]))
+    print(f"median fit error {table.fit_error.median():.4f}, orders "
+          f"{int(table.order.min())}..{int(table.order.max())}; c_bar "
+          f"{', '.join(f'{c:.0f}' for c in model.cbar_n_s_m)} N/(m/s)")
+    for w in caught:
+        print(f"warning: {w.message}")
+    print(f"wrote model {out}")
+    if args.mat:
+        model.export_mat(args.mat, overwrite=args.overwrite)
+        print(f"wrote MATLAB export {args.mat}")
+    if args.plots:
+        from ident.plots import write_frf_plots
+
+        paths = write_frf_plots(model, args.plots, units=session.units)
+        print(f"wrote {len(paths)} FRF plots to {args.plots}")
+    return 0
+
+
+def _read_inputs(args):
+    from ident.drive import read_drive
+    from ident.shocks import read_shock_library
+
+    model = _load_any_model(args.model)
+    drive = read_drive(args.drive, units=args.units)
+    library = read_shock_library(args.shocks)
+    return model, drive, library
+
+
+def cmd_predict(args):
+    """``shockplan predict``: metrics of every setup of a setups CSV (spec's predictions CSV)."""
+    from planner.predict import predict_setups
+    from planner.report import write_predictions_csv
+    from planner.setups import read_setups
+
+    model, drive, library = _read_inputs(args)
+    setups = read_setups(args.setups, library)
+    from ident._io import check_can_write
+
+    check_can_write(Path(args.out), overwrite=args.overwrite)
+    pred = predict_setups(model, drive, setups, library, oversample=args.oversample,
+                          static_loads_n=None, progress=not args.quiet)
+    write_predictions_csv(pred.table, args.out, units=args.units, overwrite=args.overwrite)
+    print(f"predicted {len(setups)} setups on drive '{drive.name}' ({drive.duration_s:g} s): "
+          f"wrote {args.out} ({args.units})")
+    return 0
+
+
+def _parse_fixed(items):
+    fixed = {}
+    for item in items or ():
+        corner, sep, sid = item.partition("=")
+        if not sep:
+            raise ValueError(f"--fixed {item!r}: write CORNER=SHOCK_ID, e.g. --fixed LF=B20")
+        fixed[corner.strip()] = sid.strip()
+    return fixed
+
+
+def cmd_rank(args):
+    """``shockplan rank``: rank setups (screen, simulate the best, score) and write a report."""
+    from planner.objective import default_objective, read_objective
+    from planner.rank import rank_setups
+    from planner.report import write_ranking
+    from planner.setups import Setup, read_setups
+
+    model, drive, library = _read_inputs(args)
+    objective = default_objective() if args.objective is None else read_objective(args.objective)
+    setups, constraints = None, None
+    if args.setups:
+        setups = read_setups(args.setups, library)
+    else:
+        constraints = {"symmetry": args.symmetry, "axles": args.axles,
+                       "fixed": _parse_fixed(args.fixed) or None}
+        if args.only:
+            constraints["shocks"] = [s.strip() for s in args.only.split(",") if s.strip()]
+    baseline = None
+    if args.baseline:
+        ids = [s.strip() for s in args.baseline.split(",")]
+        if len(ids) == 1:
+            ids = ids * 4
+        if len(ids) != 4:
+            raise ValueError("--baseline takes one shock id (all corners) or four (LF,RF,LR,RR)")
+        baseline = Setup("baseline", dict(zip(("LF", "RF", "LR", "RR"), ids)))
+        baseline.resolve(library)
+    out = Path(args.out)
+    ranking = rank_setups(model, drive, library, setups=setups, constraints=constraints,
+                          objective=objective, baseline=baseline, top=args.top,
+                          oversample=args.oversample, uncertainty=not args.no_uncertainty,
+                          progress=not args.quiet)
+    files = write_ranking(ranking.table, out, units=args.units, objective=objective,
+                          baseline=ranking.baseline, overwrite=args.overwrite)
+    write_ranking_screening = out / "screening.csv"
+    from planner.report import write_predictions_csv
+
+    write_predictions_csv(ranking.screening, write_ranking_screening, units=args.units,
+                          overwrite=args.overwrite)
+    print(_ranking_summary(ranking, args.units))
+    print("wrote " + ", ".join(str(p) for p in list(files.values()) + [write_ranking_screening]))
+    return 0
+
+
+def _ranking_summary(ranking, units, n=5):
+    t = ranking.table
+    lines = [f"screened {len(ranking.screening)} setups, simulated {len(t)} in the time domain; "
+             f"screening vs time-domain Spearman {ranking.agreement['spearman']:.3f}",
+             f"baseline '{ranking.baseline}' scores {ranking.objective.total_weight:.3f}; best:"]
+    rows = []
+    for name, r in t.head(n).iterrows():
+        rows.append((int(r["rank"]), name, f"{r['score']:.4f}",
+                     "yes" if r.get("feasible", True) else "no", r.get("unresolved", "") or "-"))
+    lines.append(_fmt_table(rows, ["rank", "setup", "score", "feasible", "not resolved from"]))
+    return "\n".join(lines)
+
+
 def cmd_demo(args):
     """``shockplan demo``: the main job end to end on the built-in example."""
     from planner.demo import run_demo
@@ -109,6 +269,54 @@ def build_parser():
     sim.add_argument("--noise", type=float, help="measurement noise, fraction of channel RMS")
     sim.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
     sim.set_defaults(func=cmd_rig_simulate)
+
+    ident_p = sub.add_parser("identify", help="identify a vehicle model from a rig session")
+    ident_p.add_argument("session", help="rig session folder (or its session.toml)")
+    ident_p.add_argument("--out", required=True, help="model file to write (.npz)")
+    ident_p.add_argument("--method", choices=["invfreqs", "vf"], default="invfreqs",
+                         help="per-pair rational fits (invfreqs) or common-pole vector fitting")
+    ident_p.add_argument("--frf-method", choices=["global", "sequential"], default="global",
+                         help="least squares over all runs (Eq. 23) or sequential (Eqs. 25-28)")
+    ident_p.add_argument("--nperseg", type=int, help="Welch block length [samples]")
+    ident_p.add_argument("--coherence-min", type=float, default=0.9,
+                         help="coherence below which band ends are replaced (default %(default)s)")
+    ident_p.add_argument("--plots", help="folder for FRF-vs-fit plots (PNG)")
+    ident_p.add_argument("--mat", help="also export the model to this MATLAB .mat file")
+    ident_p.add_argument("--all-pairs", action="store_true", help="print every pair's summary")
+    ident_p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    ident_p.set_defaults(func=cmd_identify)
+
+    for name, helptext, func in (("predict", "predict every setup of a setups CSV", cmd_predict),
+                                 ("rank", "rank shock setups and write a report", cmd_rank)):
+        sp = sub.add_parser(name, help=helptext)
+        sp.add_argument("--model", required=True, help="identified model (.npz), a vehicle TOML "
+                        "(the known physical model) or 'paper'")
+        sp.add_argument("--drive", required=True, help="drive file (CSV or Parquet)")
+        sp.add_argument("--shocks", required=True, help="shock library TOML")
+        sp.add_argument("--units", choices=["SI", "imperial"], default="SI",
+                        help="unit system of the drive file and of the outputs (default SI)")
+        sp.add_argument("--oversample", type=int, default=4,
+                        help="internal steps per sample of the shock loop (default %(default)s)")
+        sp.add_argument("--out", required=True, help="predictions CSV" if name == "predict"
+                        else "output folder")
+        sp.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+        if name == "predict":
+            sp.add_argument("--setups", required=True, help="setups CSV")
+        else:
+            sp.add_argument("--setups", help="setups CSV (default: enumerate from the library)")
+            sp.add_argument("--symmetry", choices=["left-right", "none"], default="left-right")
+            sp.add_argument("--axles", choices=["independent", "same"], default="independent")
+            sp.add_argument("--fixed", action="append", metavar="CORNER=ID",
+                            help="fix a corner's shock (repeatable)")
+            sp.add_argument("--only", help="comma-separated shock ids to consider")
+            sp.add_argument("--baseline", help="baseline shock id(s): one for all corners or "
+                            "LF,RF,LR,RR (default: the first setup)")
+            sp.add_argument("--objective", help="objective TOML (default: grip and platform)")
+            sp.add_argument("--top", type=int, default=40,
+                            help="setups simulated in the time domain (default %(default)s)")
+            sp.add_argument("--no-uncertainty", action="store_true",
+                            help="skip the Monte Carlo intervals")
+        sp.set_defaults(func=func)
 
     veh = sub.add_parser("vehicle", help="vehicle model tools")
     veh_sub = veh.add_subparsers(dest="vehicle_command", required=True)
