@@ -452,23 +452,30 @@ def _check_identifiable(session, per_run, Suu, band, cbar):
     force_scale = np.array([max(np.mean([np.mean(pr[0].dynamic(f"shock_velocity_{c}") ** 2)
                                          for pr in per_run]), 1e-30) for c in CORNERS])
     force_scale = force_scale * np.maximum(cbar, 1.0) ** 2
-    d = np.sqrt(np.real(np.einsum("fii->fi", Suu)))
-    d = np.where(d > 0, d, 1.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.linalg.inv(Suu / (d[:, :, None] * d[:, None, :]))
-        indep = 1.0 / np.real(np.einsum("fii->fi", inv))
     problems = []
+    zero = []
     for i, c in enumerate(CORNERS):
         changed = [pr[0].name for pr in per_run if pr[5][i] > 1e-8 * force_scale[i]]
         if energy[i] <= 1e-8 * force_scale[i] * len(per_run) or not changed:
+            zero.append(i)
             problems.append(f"corner {c}: the shock force equals c_bar*v in every run (dF = 0: "
                             f"no run has a different shock there)")
-            continue
-        frac = np.nanmedian(indep[band, 7 + i])
-        if not frac >= MIN_INDEPENDENT_FRACTION:
-            problems.append(f"corner {c}: dF is a linear function of the rig inputs in every run "
-                            f"(independent fraction {frac:.2g}; runs with dF: {changed}); "
-                            "linear or identical shocks cannot separate shock from rig inputs")
+    if not zero:
+        d = np.sqrt(np.real(np.einsum("fii->fi", Suu)))
+        d = np.where(d > 0, d, 1.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            try:
+                inv = np.linalg.inv(Suu / (d[:, :, None] * d[:, None, :]))
+                indep = 1.0 / np.real(np.einsum("fii->fi", inv))
+            except np.linalg.LinAlgError:
+                indep = np.zeros(Suu.shape[:2])
+        for i, c in enumerate(CORNERS):
+            frac = np.nanmedian(indep[band, 7 + i])
+            if not frac >= MIN_INDEPENDENT_FRACTION:
+                changed = [pr[0].name for pr in per_run if pr[5][i] > 1e-8 * force_scale[i]]
+                problems.append(f"corner {c}: dF is a linear function of the rig inputs in every "
+                                f"run (independent fraction {frac:.2g}; runs with dF: {changed}); "
+                                "linear or identical shocks cannot separate shock from rig inputs")
     if problems:
         raise IdentificationError(
             f"session '{session.name}' cannot identify the shock inputs (seed paper Eq. 17: with "

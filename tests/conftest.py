@@ -54,3 +54,23 @@ def paper_session(paper_plan):
     from ident.rig import simulate_session
 
     return simulate_session(paper_plan)
+
+
+@pytest.fixture(scope="session")
+def identified_model(paper_session):
+    """The paper session identified with the default settings."""
+    import warnings
+
+    from ident.model import identify_session
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return identify_session(paper_session)
+
+
+@pytest.fixture(scope="session")
+def validation_drive(paper_plan, paper_vehicle):
+    """A 300 s paper drive of another seed than the identification runs."""
+    from ident.rig import make_plan_drive
+
+    return make_plan_drive(paper_plan, paper_vehicle, seed=77, duration_s=300.0)

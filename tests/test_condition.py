@@ -1,0 +1,63 @@
+"""Tests of ident.condition: residual fits and smoothing of an FRF."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from ident.condition import condition_frf, residual_fit
+from ident.frf import Frf
+
+
+def test_residual_fit_known_answer():
+    f = np.linspace(12, 20, 40)
+    K, phi, N = residual_fit(f, 5.0 * np.exp(-1j) / f**3)
+    assert (K, phi, N) == pytest.approx((5.0, -1.0, 3.0), rel=1e-9)
+    K, phi, N = residual_fit(f, 5.0 / f**3, n_range=(-4.0, 1.0))
+    assert N == 1.0  # clipped
+
+
+def _synthetic_frf(rng):
+    f = np.arange(2049) * 100 / 4096
+    s = 2j * np.pi * f
+    wn, z = 2 * np.pi * 4.0, 0.2
+    h = wn**2 / (s**2 + 2 * z * wn * s + wn**2)
+    H = np.tile(h, (1, 11, 1))
+    coh = np.ones_like(H, dtype=float)
+    coh[..., (f < 1.0) | (f > 15.0)] = 0.3  # poor ends
+    noisy = H * (1 + np.where(coh < 0.9, 0.5, 0.01) * (rng.standard_normal(H.shape)
+                                                       + 1j * rng.standard_normal(H.shape)))
+    return Frf(f_hz=f, H=noisy, input_names=tuple(f"u{i}" for i in range(11)), output_names=("y",),
+               multiple_coherence=coh[:, 0], partial_coherence=coh,
+               input_condition=np.ones(f.size), independent_fraction=np.ones((11, f.size)),
+               flagged=np.zeros((11, f.size), bool), n_averages=40, cbar_n_s_m=np.zeros(4),
+               fs_hz=100.0), h
+
+
+def test_conditioning_replaces_poor_ends_and_smooths(rng):
+    frf, h = _synthetic_frf(rng)
+    c = condition_frf(frf)
+    f = frf.f_hz
+    assert c.replaced[0, 0, f > 15.5].all() and c.replaced[0, 0, (f > 0) & (f < 0.9)].all()
+    assert not c.replaced[0, 0, (f > 1.5) & (f < 14.5)].any()
+    band = (f > 0.5) & (f < 20)
+    raw_err = np.abs(np.log(np.abs(frf.H[0, 0, band]) / np.abs(h[band])))
+    new_err = np.abs(np.log(np.abs(c.H[0, 0, band]) / np.abs(h[band])))
+    assert new_err.max() < 0.2 and new_err.max() < 0.3 * raw_err.max()  # poor ends tamed
+    assert c.H_raw is frf.H and c.settings["conditioning"]["smooth_width_hz"] == 0.6
+    # high end rolls off like the true 1/f^2
+    k20, k40 = np.argmin(abs(f - 20.0)), np.argmin(abs(f - 40.0))
+    assert abs(c.H[0, 0, k40]) < 0.5 * abs(c.H[0, 0, k20])
+
+
+def test_conditioning_options():
+    frf, _ = _synthetic_frf(np.random.default_rng(0))
+    off = condition_frf(frf, residual=False, smooth=False)
+    np.testing.assert_allclose(off.H, frf.H)
+    with pytest.raises(ValueError, match="coherence_min"):
+        condition_frf(frf, coherence_min=1.5)
+    with pytest.raises(TypeError, match="Frf"):
+        condition_frf(np.zeros(3))
+    with pytest.raises(ValueError, match="smooth_width_hz"):
+        condition_frf(frf, smooth_width_hz=0.01)
+    assert dataclasses.is_dataclass(off)

@@ -1,0 +1,103 @@
+"""Tests of ident.frf: multi-input FRF estimation from rig runs."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from ident.channels import CORNERS
+from ident.errors import IdentificationError
+from ident.frf import MODEL_INPUTS, block_spectra, default_nperseg, estimate_frf, frf_from_arrays
+
+DB_STRONG = 0.5  # raw H1 on strong, coherent pairs (partial coherence > 0.99): leakage only
+ATOL_FIR = 3e-3  # transient leakage of a 3-tap memory into 1024-sample Hamming blocks
+
+
+def test_convention_and_known_answer(rng):
+    """H1 of y = FIR(u): S_xy = conj(X) Y, so H = S_uy / S_uu is the filter's response."""
+    b = np.array([0.5, 0.3, -0.2])
+    u = rng.standard_normal((40960, 2))
+    y = np.column_stack([signal.lfilter(b, 1, u[:, 0]) + 2 * u[:, 1]])
+    frf = frf_from_arrays(u, y, fs=100.0, nperseg=1024)
+    _, h = signal.freqz(b, 1, worN=frf.f_hz, fs=100.0)
+    np.testing.assert_allclose(frf.H[0, 0], h, rtol=0, atol=ATOL_FIR)
+    np.testing.assert_allclose(frf.H[0, 1], 2.0, rtol=0, atol=ATOL_FIR)
+    assert np.all(frf.multiple_coherence > 0.9999)
+    assert frf.H.shape == (1, 2, 513) and frf.n_averages == 79
+
+
+def test_block_spectra_checks():
+    with pytest.raises(ValueError, match="nperseg"):
+        block_spectra(np.zeros((2, 100)), fs=100.0, nperseg=200)
+    with pytest.raises(ValueError, match="noverlap"):
+        block_spectra(np.zeros((2, 1000)), fs=100.0, nperseg=100, noverlap=100)
+    assert default_nperseg(80000) == 4096
+
+
+def test_paper_session_strong_pairs_match_truth(paper_session, paper_model):
+    frf = estimate_frf(paper_session)
+    assert frf.input_names == MODEL_INPUTS
+    np.testing.assert_allclose(frf.cbar_n_s_m, paper_session.shocks["B20"].c_n_s_m, rtol=1e-12)
+    Ht = paper_model.frequency_response(frf.f_hz, damping_n_s_m=frf.cbar_n_s_m)
+    band = (frf.f_hz >= 0.5) & (frf.f_hz <= 20)
+    checked = 0
+    for o, name in enumerate(frf.output_names):
+        ht = Ht[paper_model.output_names.index(name)]
+        ok = (frf.partial_coherence[o] > 0.99) & band
+        err = np.abs(20 * np.log10(np.abs(frf.H[o][ok]) / np.abs(ht[ok])))
+        assert err.size == 0 or err.max() < DB_STRONG, name
+        checked += ok.sum()
+    assert checked > 0.3 * frf.H.shape[0] * frf.H.shape[1] * band.sum()
+    assert not frf.flagged[:, band].any()  # every swap run excites its dF
+    assert frf.input_condition.shape == frf.f_hz.shape
+
+
+def test_sequential_agrees_with_global(paper_session):
+    g = estimate_frf(paper_session)
+    s = estimate_frf(paper_session, method="sequential")
+    band = (g.f_hz >= 1) & (g.f_hz <= 15)
+    o = g.output_names.index("shock_velocity_LF")
+    for i in (3, 7):  # wheelloader_LF, dF_LF: strong direct paths
+        ratio = np.abs(s.H[o, i, band] / g.H[o, i, band])
+        assert np.median(np.abs(20 * np.log10(ratio))) < 0.1
+
+
+def _linear_session(paper_plan, setups):
+    from ident.rig import PlanRun, simulate_session
+
+    runs = tuple(PlanRun(f"r{k}", s, "baseline" if k == 0 else "swap", 1, 60.0)
+                 for k, s in enumerate(setups))
+    return simulate_session(replace(paper_plan, runs=runs))
+
+
+def test_refuses_linear_identical_shocks(paper_plan):
+    same = {c: "B20" for c in CORNERS}
+    s = _linear_session(paper_plan, [same, same])
+    with pytest.raises(IdentificationError, match=r"Eq\. 17.*swap"):
+        estimate_frf(s, nperseg=1024)
+
+
+def test_refuses_linear_dependent_shocks_and_names_corner(paper_plan):
+    """c_bar unlike the shocks: dF != 0 but a linear function of the rig inputs (Eq. 16)."""
+    same = {c: "B20" for c in CORNERS}
+    s = _linear_session(paper_plan, [same, same])
+    with pytest.raises(IdentificationError, match="linear function of the rig inputs"):
+        estimate_frf(s, nperseg=1024, cbar_n_s_m=1000.0)
+    swapped = dict(same, LF="N8")
+    s2 = _linear_session(paper_plan, [same, swapped])
+    with pytest.raises(IdentificationError, match="corner RF"):
+        estimate_frf(s2, nperseg=1024)
+
+
+def test_missing_shock_velocity(paper_plan):
+    from ident.session import Run
+
+    same = {c: "B20" for c in CORNERS}
+    s = _linear_session(paper_plan, [same])
+    run = s.runs[0]
+    ch = {k: v for k, v in run.channels.items() if k != "shock_velocity_RR"}
+    bad = replace(s, runs=(Run(name=run.name, file=run.file, setup=run.setup, role=run.role,
+                               time_s=run.time_s, channels=ch, fs_hz=run.fs_hz),))
+    with pytest.raises(IdentificationError, match="shock_velocity_RR"):
+        estimate_frf(bad)
