@@ -1,9 +1,19 @@
 """``shockplan demo``: the main job on the built-in example, end to end.
 
-Writes everything to one output folder and returns a short text summary.
-Stages: the virtual rig writes the seed paper's identification experiment on
-the paper's car as a rig session; the per-run RMS metrics of the session are
-tabulated. (Identification and ranking join the demo as they land.)
+1. The virtual rig runs the seed paper's identification experiment on the
+   paper's car (Table 1) and writes it as a rig session.
+2. The session is identified (FRF over all runs, conditioning, per-pair
+   rational fits) and the model saved, with FRF-vs-fit plots.
+3. A track-like drive is made (and written as a drive file).
+4. Every left/right-symmetric setup of the built-in crate of shocks (linear,
+   digressive, asymmetric, blow-off, a dyno table, with lags) is screened,
+   the best are simulated in the time domain with the nonlinear shocks,
+   scored against the baseline (the identification's B20 shocks) with
+   intervals from the identification's random error, and written as a
+   ranking (CSV, formatted XLSX, Pareto and top-setup plots).
+
+Everything goes to one output folder, built in a temporary sibling and moved
+into place at the end.
 """
 
 from __future__ import annotations
@@ -11,14 +21,19 @@ from __future__ import annotations
 import logging
 import shutil
 import tempfile
+import warnings
 from pathlib import Path
 
-__all__ = ["run_demo"]
+__all__ = ["run_demo", "DEMO_LIBRARY_PATH"]
 
 log = logging.getLogger(__name__)
 
+DEMO_LIBRARY_PATH = Path(__file__).parent / "data" / "library.toml"
+_PLOT_OUTPUTS = tuple(f"{k}_{c}" for k in ("shock_velocity", "tire_force", "ride_height")
+                      for c in ("LF", "RF", "LR", "RR"))
 
-def run_demo(out, *, overwrite=False, progress=True):
+
+def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     """Run the demo into folder `out`.
 
     Parameters
@@ -29,6 +44,8 @@ def run_demo(out, *, overwrite=False, progress=True):
         Replace an existing folder once the new results are complete.
     progress : bool
         Show progress bars.
+    drive_s : float
+        Duration of the track drive [s].
 
     Returns
     -------
@@ -40,13 +57,17 @@ def run_demo(out, *, overwrite=False, progress=True):
     FileExistsError
         If `out` exists, is not empty and `overwrite` is false.
     """
-    import pandas as pd
-
     from ident._io import check_can_write
-    from ident.metrics import compute_metrics
+    from ident.drive import make_track_drive, write_drive
+    from ident.model import identify_session
+    from ident.plots import write_frf_plots
     from ident.rig import default_plan, simulate_session
     from ident.session import write_session
-    from ident.vehicle import example_vehicle, modal_summary
+    from ident.shocks import read_shock_library
+    from ident.vehicle import build_full_car, example_vehicle, modal_summary
+    from planner.rank import rank_setups
+    from planner.report import write_predictions_csv, write_ranking
+    from planner.setups import Setup
 
     out = Path(out)
     if out.exists() and any(out.iterdir()):
@@ -56,34 +77,58 @@ def run_demo(out, *, overwrite=False, progress=True):
     try:
         vehicle = example_vehicle()
         plan = default_plan()
+        units = plan.units
         session = simulate_session(plan, vehicle, progress=progress)
-        write_session(session, work / "session", units=plan.units)
+        write_session(session, work / "session", units=units)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = identify_session(session)
+        model.save(work / "model.npz")
+        truth_model = build_full_car(vehicle)
+        order = [truth_model.output_names.index(o) for o in model.output_names]
+
+        def truth(f_hz):  # the known closed-loop FRF around the model's c_bar (the ideal)
+            return truth_model.frequency_response(f_hz, damping_n_s_m=model.cbar_n_s_m)[order]
+
+        write_frf_plots(model, work / "frf_plots", outputs=_PLOT_OUTPUTS, units=units,
+                        truth=truth)
+        model.summary().to_csv(work / "model_summary.csv", index=False)
+        drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
+                                 wheelbase_m=vehicle.a_m + vehicle.b_m,
+                                 track_width_m=vehicle.track_front_m, name="demo track")
+        write_drive(drive, work / "track_drive.csv", units=units)
+        library = read_shock_library(DEMO_LIBRARY_PATH)
+        baseline = Setup("baseline", {c: "B20" for c in ("LF", "RF", "LR", "RR")})
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ranking = rank_setups(model, drive, library, baseline=baseline, top=20,
+                                  progress=progress)
+        files = write_ranking(ranking.table, work / "ranking", units=units,
+                              objective=ranking.objective, baseline=ranking.baseline)
+        write_predictions_csv(ranking.screening, work / "ranking" / "screening.csv", units=units)
         modes = modal_summary(vehicle).table()
-        modes.to_csv(work / "modes.csv", index=False)
-        rows = []
-        for run in session.runs:
-            m = compute_metrics(run, static_loads_n=dict(zip(("LF", "RF", "LR", "RR"),
-                                                             vehicle.static_corner_load_n)))
-            rows.append(m.as_series(units=plan.units).rename(run.name))
-        metrics = pd.DataFrame(rows)
-        metrics.index.name = "run"
-        metrics.to_csv(work / "session_metrics.csv")
         if out.exists():
             shutil.rmtree(out)
         work.rename(out)
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
+    best = ranking.table.iloc[0]
     lines = [
         f"shockplan demo -> {out}",
-        f"  vehicle: {vehicle.name}",
+        f"  vehicle: {vehicle.name}; modes [Hz]: " + ", ".join(
+            f"{lab} {f:.1f}" for lab, f in zip(modes["mode"], modes["undamped_hz"])),
         f"  rig session: {out / 'session'} ({len(session.runs)} runs x "
         f"{session.runs[0].n_samples / session.fs_hz:g} s at {session.fs_hz:g} Hz)",
-        "  natural frequencies [Hz]: " + ", ".join(
-            f"{lab} {f:.2f}" for lab, f in zip(modes["mode"], modes["undamped_hz"])),
-        f"  per-run metrics ({plan.units}): {out / 'session_metrics.csv'}",
+        f"  identified model: {out / 'model.npz'} (median fit error "
+        f"{float(model.summary().fit_error.median()):.4f}); FRF plots: {out / 'frf_plots'}",
+        f"  ranked {len(ranking.screening)} setups of {len(library)} shocks on a "
+        f"{drive_s:g} s track drive; {len(ranking.table)} simulated in the time domain "
+        f"(screening vs time domain Spearman {ranking.agreement['spearman']:.3f})",
+        f"  best: {ranking.best} (score {best['score']:.4f} vs baseline "
+        f"{ranking.objective.total_weight:.3f}; grip {best.get('score_grip', float('nan')):.4f},"
+        f" platform {best.get('score_platform', float('nan')):.4f})",
+        "  top 5: " + ", ".join(ranking.table.index[:5]),
+        "  ranking: " + ", ".join(str(out / "ranking" / Path(p).name) for p in files.values()),
     ]
-    cols = [c for c in ("tire_force_rms_LF", "ride_height_rms_front", "shock_velocity_rms_LF")
-            if c in metrics]
-    lines.append(metrics[cols].to_string(float_format=lambda x: f"{x:.4g}"))
     return "\n".join(lines)
