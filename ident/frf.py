@@ -22,6 +22,38 @@ output explained by the *conditioned* input (input ``i`` with the linear
 effect of the other inputs removed, autospectrum ``1 / [S_uu^-1]_ii``) with
 the residual: a weak path under strong inputs gets a low partial coherence
 even where the multiple coherence of the output is near 1.
+
+Local polynomial method (``estimator="lpm"``; Pintelon & Schoukens, *System
+Identification*, 2nd ed., Ch. 7). Welch blocks cut the record, so each block
+also holds the response to inputs before it (transient leakage): a random
+error that falls only with the total record length, not with the averaging.
+The LPM instead takes each run's full-record DFT (no window, means removed)
+and, around every target frequency ``f0``, fits in a window of ``2R + 1``
+consecutive DFT lines of every run, jointly over the runs::
+
+    Y_r(k) = sum_i P_i(x_k) U_r,i(k) + T_r(x_k) + E_r(k),   x_k = (f_k - f0) / (R df)
+
+with ``P_i`` (the FRF, shared by all runs) and ``T_r`` (the transient of run
+``r``: leakage is a smooth function of frequency) polynomials of degree ``D``;
+``H_i(f0) = P_i(0)``. Target frequencies need not be DFT lines (``P_i`` is
+evaluated at the offset of ``f0``), so runs of any length can be combined,
+each on its own DFT grid. The transient terms are eliminated per run by
+projecting every window onto the complement of the degree-``D`` polynomials
+(exact by Frisch-Waugh-Lovell); the remaining least-squares problem for all
+outputs at once (one regressor) is solved by SVD with columns scaled to unit
+norm. With ``nu = rows - unknowns`` residual degrees of freedom, ``SSE_o``
+the residual power of output ``o`` and ``C = (A^H A)^-1`` for the local
+regressor ``A`` (transients removed), the estimate's variance is
+``var(H_oi) = SSE_o / nu * C_ii``. The reported quantities follow the Welch
+definitions on the local problem: the *conditioned input power* is
+``1 / C_ii``, so the partial coherence is
+``gamma2 = |H|^2 / (|H|^2 + nu var(H))`` (the H1 formula, conditioned
+explained power over itself plus the residual power), the independent
+fraction is ``1 / (||a_i||^2 C_ii)`` (the fraction of the input's local
+power, transients removed, that no other regressor of the local model
+explains), and ``n_averages = nu + n_in`` so that the H1 random-error formula
+``sqrt((1 - gamma2) / (2 (n_averages - n_in) gamma2))`` gives exactly the
+LPM's relative standard error of ``|H|``.
 """
 
 from __future__ import annotations
@@ -46,6 +78,9 @@ __all__ = [
     "shock_force_deviation",
     "baseline_damping",
     "default_nperseg",
+    "ESTIMATORS",
+    "LPM_DEGREE",
+    "LPM_COHERENCE_DOF",
 ]
 
 log = logging.getLogger(__name__)
@@ -60,6 +95,24 @@ MODEL_INPUTS = RIG_INPUTS + DF_INPUTS
 MIN_INDEPENDENT_FRACTION = 1e-2
 #: Frequencies where the independent fraction of a dF is below this are flagged.
 FLAG_INDEPENDENT_FRACTION = 1e-3
+
+#: The FRF estimators of :func:`estimate_frf` and :func:`frf_from_arrays`.
+ESTIMATORS = ("welch", "lpm")
+#: Default degree of the local polynomials (FRF and transient) of the LPM.
+LPM_DEGREE = 2
+#: The default LPM window has at least this many rows (lines x runs) per unknown.
+LPM_ROWS_PER_UNKNOWN = 2
+#: Default ``lpm_coherence_dof``: the LPM reports its standard error as the
+#: partial coherence an H1 estimate with this many degrees of freedom (the
+#: seed paper's 40 Welch blocks per run) would have for the same random error,
+#: so :func:`ident.condition.condition_frf`'s threshold 0.9 keeps the meaning it
+#: has in the paper: a relative standard error of ``sqrt(0.1 / 0.9 / 40)`` = 5.3 %.
+LPM_COHERENCE_DOF = 40
+#: Singular values of the column-scaled local LPM regressor below this fraction
+#: of the largest count as zero (that direction is undetermined: coherence ~0).
+LPM_RCOND = 1e-10
+#: Target frequencies per batched LPM solve (memory ~ chunk x rows x columns).
+_LPM_CHUNK = 256
 
 
 @dataclass(frozen=True, eq=False)
@@ -209,26 +262,247 @@ def _solve_h1(Suu, Suy, Syy):
     return Ht, mult, partial, cond, indep
 
 
-def frf_from_arrays(u, y, *, fs, window="hamming", nperseg=None, noverlap=None,
-                    input_names=None, output_names=None):
-    """H1 estimate of a multi-input, multi-output response from one record.
+# ----------------------------------------------------------------------------------------------
+# local polynomial method
+# ----------------------------------------------------------------------------------------------
+
+def _lpm_default_half_width(inputs, degree):
+    """Default LPM half-width ``R`` [lines] from the runs' input records.
+
+    The smallest ``R`` (at least ``degree + 1``) whose local problems have at
+    least :data:`LPM_ROWS_PER_UNKNOWN` rows per unknown:
+
+    - all runs together: ``n_runs (2R + 1) >= 2 (n_in + n_runs)(D + 1)``
+      (an FRF polynomial per input, a transient polynomial per run);
+    - inputs repeated identically in several runs (the same rig drive in
+      every run, as in the paper's plan) add no information with the
+      repeats, so for them alone, with ``g`` distinct realizations:
+      ``g (2R + 1) >= 2 (n_repeated + g)(D + 1)``.
+
+    Paper session (5 runs of one drive, 11 inputs, D = 2): the first rule
+    gives R = 10, the second (7 rig inputs, g = 1) R = 24.
 
     Parameters
     ----------
-    u : ndarray, shape (n_samples, n_in)
-        Inputs (SI).
-    y : ndarray, shape (n_samples, n_out)
+    inputs : list of ndarray, shape (n_in, n_samples_r)
+        Each run's input records (time domain).
+    degree : int
+    """
+    n_runs, m, nd = len(inputs), inputs[0].shape[0], degree + 1
+    needs = [(LPM_ROWS_PER_UNKNOWN * (m + n_runs) * nd, n_runs)]
+    n_rep, g_rep = 0, n_runs
+    for i in range(m):
+        power = np.array([np.mean(x[i] ** 2) for x in inputs])
+        live = [x[i] for x, pw in zip(inputs, power) if pw > 1e-10 * power.max()]
+        distinct = []
+        for a in live:
+            tol = 1e-9 * np.sqrt(np.mean(a ** 2))
+            if not any(a.shape == b.shape and np.allclose(a, b, rtol=0, atol=tol) for b in distinct):
+                distinct.append(a)
+        if len(distinct) < len(live):
+            n_rep += 1
+            g_rep = min(g_rep, len(distinct))
+    if n_rep:
+        needs.append((LPM_ROWS_PER_UNKNOWN * (n_rep + g_rep) * nd, g_rep))
+    lines = max(int(np.ceil(rows / runs)) for rows, runs in needs)
+    return max(int(np.ceil((lines - 1) / 2)), nd)
+
+
+def _check_lpm_args(degree, half_width, coherence_dof, inputs, names):
+    """Check the LPM options once; return (degree, half_width, coherence_dof).
+
+    ``inputs``: each run's input records, shape (n_in, n_samples_r).
+    """
+    if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or not 0 <= degree <= 6:
+        raise ValueError(f"lpm_degree must be an integer in 0..6, got {degree!r}")
+    degree = int(degree)
+    if half_width is None:
+        half_width = _lpm_default_half_width(inputs, degree)
+    elif isinstance(half_width, bool) or not isinstance(half_width, (int, np.integer)) or half_width < 1:
+        raise ValueError(f"lpm_half_width must be a positive integer (DFT lines), got {half_width!r}")
+    half_width = int(half_width)
+    if (isinstance(coherence_dof, bool) or not isinstance(coherence_dof, (int, np.integer))
+            or coherence_dof < 1):
+        raise ValueError(f"lpm_coherence_dof must be a positive integer, got {coherence_dof!r}")
+    n_runs, n_in = len(inputs), inputs[0].shape[0]
+    lines, nd = 2 * half_width + 1, degree + 1
+    dof = n_runs * (lines - nd) - n_in * nd
+    if dof < 1:
+        raise ValueError(
+            f"lpm_half_width={half_width} with lpm_degree={degree} leaves no residual degrees of "
+            f"freedom ({n_runs} run(s) x {lines} lines for {(n_in + n_runs) * nd} unknowns); use a "
+            f"wider window (default: {_lpm_default_half_width(inputs, degree)}) or a lower degree")
+    for x, name in zip(inputs, names):
+        n = x.shape[-1]
+        if n // 2 < lines:
+            raise ValueError(
+                f"run '{name}' has {n} samples: {n // 2} DFT lines, fewer than the LPM window of "
+                f"{lines} lines (lpm_half_width={half_width}); use longer runs or a smaller "
+                "lpm_half_width")
+    return degree, half_width, int(coherence_dof)
+
+
+def _lpm_solve(spectra, n_samples, n_in, f_hz, fs, degree, half_width, coherence_dof):
+    """Local polynomial method over several runs (see the module notes).
+
+    Parameters
+    ----------
+    spectra : list of ndarray of complex, shape (n_in + n_out, n_samples_r // 2 + 1)
+        Full-record DFTs (``numpy.fft.rfft``, no window) of each run, inputs first.
+    n_samples : list of int
+        Record length of each run.
+    n_in : int
+    f_hz : ndarray, shape (n_f,)
+        Target frequencies [Hz].
+    fs : float
+    degree, half_width : int
+        ``D`` and ``R``.
+    coherence_dof : float
+        ``nu_c`` of the partial coherence ``|H|^2 / (|H|^2 + nu_c var(H))``.
+
+    Returns
+    -------
+    H : ndarray of complex, shape (n_out, n_in, n_f)
+    mult : ndarray, shape (n_out, n_f)
+    partial : ndarray, shape (n_out, n_in, n_f)
+    cond : ndarray, shape (n_f,)
+        Condition number of the column-scaled normal matrix ``A^H A``.
+    indep : ndarray, shape (n_in, n_f)
+    dof : int
+        Residual degrees of freedom ``nu`` of each local problem.
+    """
+    from threadpoolctl import threadpool_limits
+
+    n_runs = len(spectra)
+    m, p = n_in, spectra[0].shape[0] - n_in
+    lines, nd = 2 * half_width + 1, degree + 1
+    ncol = m * nd  # columns ordered input-major: i * nd + d
+    dof = n_runs * (lines - nd) - ncol
+    # projector onto the complement of the polynomials of degree <= D over a window
+    # of consecutive lines: removes any transient T_r, whatever the window's offset
+    q, _ = np.linalg.qr(np.vander(np.arange(-half_width, half_width + 1) / half_width, nd,
+                                  increasing=True))
+    proj = np.eye(lines) - q @ q.T
+    n_ref = max(n_samples)
+    idx, xpow = [], []
+    for n in n_samples:
+        pos = np.asarray(f_hz, dtype=float) * n / fs  # target in this run's lines
+        start = np.clip(np.rint(pos).astype(int) - half_width, 1, n // 2 - lines + 1)
+        k = start[:, None] + np.arange(lines)  # DC (line 0) is never used: means removed
+        x = (k - pos[:, None]) * (n_ref / n) / half_width  # common frequency variable
+        idx.append(k)
+        xpow.append(x[..., None] ** np.arange(nd))  # (n_f, lines, nd)
+    n_f = f_hz.size
+    H = np.empty((n_f, m, p), dtype=complex)
+    partial = np.empty((n_f, m, p))
+    mult = np.empty((n_f, p))
+    cond = np.empty(n_f)
+    indep = np.empty((n_f, m))
+    col0 = np.arange(m) * nd
+    with threadpool_limits(1):  # many tiny LAPACK calls: threads only contend
+        for a in range(0, n_f, _LPM_CHUNK):
+            sl = slice(a, min(a + _LPM_CHUNK, n_f))
+            t = sl.stop - sl.start
+            A = np.empty((t, n_runs, lines, m, nd), dtype=complex)
+            B = np.empty((t, n_runs, lines, p), dtype=complex)
+            for r, X in enumerate(spectra):
+                W = np.moveaxis(X[:, idx[r][sl]], 0, -1)  # (t, lines, m + p)
+                A[:, r] = W[..., :m, None] * xpow[r][sl][:, :, None, :]
+                B[:, r] = W[..., m:]
+            ypow = np.sum(np.abs(B) ** 2, axis=(1, 2))  # (t, p)
+            A = (proj @ A.reshape(t, n_runs, lines, ncol)).reshape(t, n_runs * lines, ncol)
+            B = (proj @ B).reshape(t, n_runs * lines, p)
+            sc = np.sqrt(np.sum(np.abs(A) ** 2, axis=1))  # (t, ncol)
+            sc = np.where(sc > 0, sc, 1.0)
+            As = A / sc[:, None, :]
+            U, sv, Vh = np.linalg.svd(As, full_matrices=False)
+            keep = sv > LPM_RCOND * sv[:, :1]
+            floor = LPM_RCOND * sv[:, :1]
+            inv_s = np.where(keep, 1.0 / np.where(keep, sv, 1.0), 0.0)
+            V = np.conj(np.swapaxes(Vh, 1, 2))
+            th = V @ (inv_s[..., None] * (np.conj(np.swapaxes(U, 1, 2)) @ B))  # (t, ncol, p)
+            sse = np.sum(np.abs(B - As @ th) ** 2, axis=1)  # (t, p)
+            # diag of (As^H As)^-1; undetermined directions count with the floor (~infinite)
+            inv_s2 = 1.0 / np.maximum(sv, np.maximum(floor, 1e-300)) ** 2
+            cdiag = np.einsum("tkc,tk->tc", np.abs(Vh) ** 2, inv_s2)[:, col0]  # (t, m)
+            h = th[:, col0, :] / sc[:, col0, None]  # (t, m, p)
+            H[sl] = h
+            # var(H) = SSE / dof * C_ii, C_ii = cdiag / sc_i^2 in unscaled units
+            var = sse[:, None, :] / dof * (cdiag / sc[:, col0] ** 2)[:, :, None]
+            num = np.abs(h) ** 2
+            den = num + coherence_dof * var
+            partial[sl] = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+            mult[sl] = np.clip(1.0 - sse / np.where(ypow > 0, ypow, 1.0), 0.0, 1.0) * (ypow > 0)
+            indep[sl] = np.clip(1.0 / cdiag, 0.0, 1.0)
+            smin = sv[:, -1]
+            cond[sl] = np.where(smin > 0, (sv[:, 0] / np.where(smin > 0, smin, 1.0)) ** 2, np.inf)
+    return (np.transpose(H, (2, 1, 0)), mult.T, np.transpose(partial, (2, 1, 0)), cond,
+            indep.T, dof)
+
+
+def _as_runs(u, y):
+    """``u``, ``y`` as lists of 2-D runs (one array = one run); checked."""
+    multi = isinstance(u, (list, tuple)) and len(u) > 0 and np.ndim(u[0]) == 2
+    us = [np.asarray(a, dtype=float) for a in (u if multi else [u])]
+    ys = [np.asarray(a, dtype=float) for a in (y if multi else [y])]
+    if len(us) != len(ys):
+        raise ValueError(f"u and y must hold the same number of runs, got {len(us)} and {len(ys)}")
+    for k, (a, b) in enumerate(zip(us, ys)):
+        if a.ndim != 2 or b.ndim != 2 or a.shape[0] != b.shape[0]:
+            where = f"run {k}: " if multi else ""
+            raise ValueError(f"{where}u and y must be 2-D with the same number of rows (samples), "
+                             f"got {a.shape} and {b.shape}")
+        if a.shape[1] != us[0].shape[1] or b.shape[1] != ys[0].shape[1]:
+            raise ValueError(f"run {k}: every run must have the same channels; got u {a.shape} "
+                             f"and y {b.shape}, run 0 has u {us[0].shape} and y {ys[0].shape}")
+    return us, ys
+
+
+def _check_estimator(estimator):
+    if estimator not in ESTIMATORS:
+        raise ValueError(f"estimator must be one of {list(ESTIMATORS)}, got {estimator!r}")
+
+
+def frf_from_arrays(u, y, *, fs, window="hamming", nperseg=None, noverlap=None,
+                    input_names=None, output_names=None, estimator="welch",
+                    lpm_degree=LPM_DEGREE, lpm_half_width=None,
+                    lpm_coherence_dof=LPM_COHERENCE_DOF):
+    """Multi-input, multi-output FRF estimate from one record or several runs.
+
+    Parameters
+    ----------
+    u : ndarray, shape (n_samples, n_in), or list of such (one per run)
+        Inputs (SI). Runs may differ in length.
+    y : ndarray, shape (n_samples, n_out), or list of such (one per run)
         Outputs (SI).
     fs : float
         Sample rate [Hz].
     window, nperseg, noverlap
         Welch settings (:func:`block_spectra`); ``nperseg`` defaults to
-        :func:`default_nperseg`.
+        :func:`default_nperseg` of the shortest run. For ``estimator="lpm"``
+        only ``nperseg`` is used: the estimate is on the same frequency grid
+        ``k fs / nperseg``.
+    estimator : {"welch", "lpm"}
+        ``welch``: H1 from Welch blocks (every run's blocks summed).
+        ``lpm``: local polynomial method on the full-record DFTs (module notes).
+    lpm_degree : int
+        Degree ``D`` of the local FRF and transient polynomials (LPM only).
+    lpm_half_width : int, optional
+        Half-width ``R`` of the local window [DFT lines of each run] (LPM only);
+        default the smallest with ``rows >= 2 x unknowns``:
+        ``n_runs (2R + 1) >= 2 (n_in + n_runs)(D + 1)``.
 
     Returns
     -------
     Frf
-        With ``cbar_n_s_m`` zeros and ``settings["method"] = "h1"``.
+        With ``cbar_n_s_m`` zeros and ``settings["method"] = "h1"`` (Welch)
+        or ``"lpm"``.
+
+    Raises
+    ------
+    ValueError
+        For arrays of the wrong shape, runs with different channels, or bad
+        Welch or LPM settings.
 
     Examples
     --------
@@ -239,31 +513,60 @@ def frf_from_arrays(u, y, *, fs, window="hamming", nperseg=None, noverlap=None,
     >>> frf = frf_from_arrays(u, 2 * u, fs=100.0, nperseg=256)
     >>> bool(np.allclose(frf.H, 2.0))
     True
+    >>> frf = frf_from_arrays(u, 2 * u, fs=100.0, nperseg=256, estimator="lpm")
+    >>> bool(np.allclose(frf.H, 2.0)), frf.settings["lpm_half_width"]
+    (True, 6)
     """
-    u = np.asarray(u, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if u.ndim != 2 or y.ndim != 2 or u.shape[0] != y.shape[0]:
-        raise ValueError(f"u and y must be 2-D with the same number of rows (samples), got "
-                         f"{u.shape} and {y.shape}")
-    nperseg = default_nperseg(u.shape[0]) if nperseg is None else nperseg
-    f, X = block_spectra(np.vstack([u.T, y.T]), fs=fs, window=window, nperseg=nperseg,
-                         noverlap=noverlap)
-    m = u.shape[1]
-    U, Y = X[:m], X[m:]
-    Suu = np.einsum("ifk,jfk->fij", np.conj(U), U)
-    Suy = np.einsum("ifk,ofk->fio", np.conj(U), Y)
-    Syy = np.real(np.einsum("ofk,ofk->fo", np.conj(Y), Y))
+    _check_estimator(estimator)
+    us, ys = _as_runs(u, y)
+    n_min = min(a.shape[0] for a in us)
+    nperseg = default_nperseg(n_min) if nperseg is None else nperseg
+    n_in, n_out = us[0].shape[1], ys[0].shape[1]
+    names = dict(input_names=tuple(input_names or (f"u{i}" for i in range(n_in))),
+                 output_names=tuple(output_names or (f"y{o}" for o in range(n_out))))
+    if estimator == "lpm":
+        nperseg, _ = _check_spectral_args(fs, window, nperseg, noverlap, n_min)
+        degree, half, nu_c = _check_lpm_args(lpm_degree, lpm_half_width, lpm_coherence_dof,
+                                             [a.T for a in us], [f"{k}" for k in range(len(us))])
+        f = np.fft.rfftfreq(nperseg, 1.0 / fs)
+        spectra = [np.fft.rfft(np.vstack([a.T, b.T]), axis=-1) for a, b in zip(us, ys)]
+        H, mult, partial, cond, indep, dof = _lpm_solve(
+            spectra, [a.shape[0] for a in us], n_in, f, float(fs), degree, half, nu_c)
+        return Frf(f_hz=f, H=H, **names, multiple_coherence=mult, partial_coherence=partial,
+                   input_condition=cond, independent_fraction=indep,
+                   flagged=indep < FLAG_INDEPENDENT_FRACTION, n_averages=nu_c + n_in,
+                   cbar_n_s_m=np.zeros(4), fs_hz=float(fs),
+                   settings=_lpm_settings(nperseg, fs, degree, half, dof, nu_c, us, n_in))
+    Suu = Suy = Syy = 0
+    n_avg = 0
+    for a, b in zip(us, ys):
+        f, X = block_spectra(np.vstack([a.T, b.T]), fs=fs, window=window, nperseg=nperseg,
+                             noverlap=noverlap)
+        U, Y = X[:n_in], X[n_in:]
+        Suu = Suu + np.einsum("ifk,jfk->fij", np.conj(U), U)
+        Suy = Suy + np.einsum("ifk,ofk->fio", np.conj(U), Y)
+        Syy = Syy + np.real(np.einsum("ofk,ofk->fo", np.conj(Y), Y))
+        n_avg += U.shape[-1]
     Ht, mult, partial, cond, indep = _solve_h1(Suu, Suy, Syy)
-    n_in, n_out = u.shape[1], y.shape[1]
-    return Frf(f_hz=f, H=np.transpose(Ht, (2, 1, 0)),
-               input_names=tuple(input_names or (f"u{i}" for i in range(n_in))),
-               output_names=tuple(output_names or (f"y{o}" for o in range(n_out))),
+    return Frf(f_hz=f, H=np.transpose(Ht, (2, 1, 0)), **names,
                multiple_coherence=mult.T, partial_coherence=np.transpose(partial, (2, 1, 0)),
                input_condition=cond, independent_fraction=indep.T,
-               flagged=indep.T < FLAG_INDEPENDENT_FRACTION, n_averages=U.shape[-1],
+               flagged=indep.T < FLAG_INDEPENDENT_FRACTION, n_averages=n_avg,
                cbar_n_s_m=np.zeros(4), fs_hz=float(fs),
                settings={"method": "h1", "window": window, "nperseg": int(nperseg),
                          "noverlap": int(nperseg // 2 if noverlap is None else noverlap)})
+
+
+def _lpm_settings(nperseg, fs, degree, half, dof, nu_c, runs, n_in):
+    """The settings an LPM estimate carries (``runs``: arrays or lengths)."""
+    n = [int(getattr(r, "shape", (r,))[0]) for r in runs]
+    lines = 2 * half + 1
+    return {"estimator": "lpm", "method": "lpm", "nperseg": int(nperseg),
+            "grid_df_hz": float(fs) / int(nperseg), "lpm_degree": degree, "lpm_half_width": half,
+            "lpm_lines": lines, "lpm_rows": len(n) * lines,
+            "lpm_unknowns": (n_in + len(n)) * (degree + 1), "lpm_dof": int(dof),
+            "lpm_coherence_dof": nu_c,
+            "resolution_hz": [float(fs) / k for k in n]}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -357,7 +660,9 @@ def _check_session(session):
 
 
 def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, window="hamming",
-                 nperseg=None, noverlap=None, band_hz=(0.5, 20.0)):
+                 nperseg=None, noverlap=None, band_hz=(0.5, 20.0), estimator="welch",
+                 lpm_degree=LPM_DEGREE, lpm_half_width=None,
+                 lpm_coherence_dof=LPM_COHERENCE_DOF):
     """Estimate the closed-loop multi-input FRF of a rig session (Eqs. 18-28).
 
     Parameters
@@ -376,14 +681,32 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
         (``shock_force_XX`` excluded: the force is an input).
     window, nperseg, noverlap
         Welch settings; ``nperseg`` defaults to :func:`default_nperseg` of the
-        shortest run.
+        shortest run. With ``estimator="lpm"`` only ``nperseg`` is used: it
+        sets the frequency grid ``k fs / nperseg`` (the Welch grid, so
+        conditioning and fitting see the same frequencies).
     band_hz : (float, float)
         Band used for the identifiability check [Hz].
+    estimator : {"welch", "lpm"}
+        ``welch`` (default): H1 from Welch blocks. ``lpm``: the local
+        polynomial method on each run's full-record DFT, jointly over all
+        runs with a transient polynomial per run (module notes); free of the
+        transient-leakage error of Welch blocks. Only with ``method="global"``.
+    lpm_degree : int
+        Degree ``D`` of the local FRF and transient polynomials (LPM only).
+    lpm_half_width : int, optional
+        Half-width ``R`` of the local window [DFT lines of each run]; default
+        the smallest ``R`` with ``n_runs (2R + 1) >= 2 (11 + n_runs)(D + 1)``
+        (rows at least twice the unknowns): R = 10 (21 lines of 1/800 Hz,
+        105 rows, 48 unknowns, 57 residual degrees of freedom) for the
+        paper's 5 runs of 800 s.
 
     Returns
     -------
     Frf
-        Inputs :data:`MODEL_INPUTS`.
+        Inputs :data:`MODEL_INPUTS`. For the LPM, ``n_averages`` is the
+        residual degrees of freedom of each local problem plus the number of
+        inputs, and ``settings`` holds ``estimator``, ``lpm_degree``,
+        ``lpm_half_width``, ``lpm_rows``, ``lpm_unknowns``, ``lpm_dof``.
 
     Raises
     ------
@@ -396,6 +719,10 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     """
     if method not in ("global", "sequential"):
         raise ValueError(f"method must be 'global' or 'sequential', got {method!r}")
+    _check_estimator(estimator)
+    if estimator == "lpm" and method != "global":
+        raise ValueError(f"estimator='lpm' solves all runs jointly (method='global'); got "
+                         f"method={method!r}; use method='global' or estimator='welch'")
     _check_session(session)
     outs = _output_channels(session, outputs)
     cbar = baseline_damping(session) if cbar_n_s_m is None else np.broadcast_to(
@@ -405,6 +732,9 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     nperseg = default_nperseg(n_min) if nperseg is None else nperseg
     nperseg, noverlap = _check_spectral_args(fs, window, nperseg, noverlap, n_min)
     m = len(MODEL_INPUTS)
+    if estimator == "lpm":
+        return _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, lpm_degree, lpm_half_width,
+                                 lpm_coherence_dof)
     per_run = []
     for run in session.runs:
         _, dF = shock_force_deviation(run, session.shocks, cbar)
@@ -416,14 +746,16 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
                         np.einsum("ifk,ofk->fio", np.conj(U), Y),
                         np.real(np.einsum("ofk,ofk->fo", np.conj(Y), Y)), U.shape[-1],
                         np.mean(dF**2, axis=1)))
-    settings = {"method": method, "window": window, "nperseg": nperseg, "noverlap": noverlap,
-                "runs": [r.name for r in session.runs], "band_hz": tuple(band_hz)}
+    settings = {"estimator": "welch", "method": method, "window": window, "nperseg": nperseg,
+                "noverlap": noverlap, "runs": [r.name for r in session.runs],
+                "band_hz": tuple(band_hz)}
     band = (f >= band_hz[0]) & (f <= band_hz[1])
     Suu = sum(pr[1] for pr in per_run)
     Suy = sum(pr[2] for pr in per_run)
     Syy = sum(pr[3] for pr in per_run)
     n_avg = sum(pr[4] for pr in per_run)
-    _check_identifiable(session, per_run, Suu, band, cbar)
+    _check_identifiable(session, [pr[0] for pr in per_run], [pr[5] for pr in per_run], band,
+                        cbar, Suu=Suu)
     if method == "global":
         Ht, mult, partial, cond, indep = _solve_h1(Suu, Suy, Syy)
         H = np.transpose(Ht, (2, 1, 0))
@@ -432,6 +764,14 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
         H, mult, partial, cond, indep = _sequential(session, per_run, outs, f)
     mult = mult.T  # (n_out, n_f)
     flagged = indep.T < FLAG_INDEPENDENT_FRACTION
+    _warn_flagged(session, flagged, band, band_hz, stacklevel=3)
+    return Frf(f_hz=f, H=H, input_names=MODEL_INPUTS, output_names=outs,
+               multiple_coherence=mult,
+               partial_coherence=partial, input_condition=cond, independent_fraction=indep.T,
+               flagged=flagged, n_averages=n_avg, cbar_n_s_m=cbar, fs_hz=fs, settings=settings)
+
+
+def _warn_flagged(session, flagged, band, band_hz, *, stacklevel):
     nflag = flagged[7:, band].sum(axis=1)
     if np.any(nflag):
         bad = {c: int(n) for c, n in zip(CORNERS, nflag) if n}
@@ -439,40 +779,83 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
             f"session '{session.name}': the shock-force deviation has almost no independent energy "
             f"at some frequencies in {band_hz[0]:g}-{band_hz[1]:g} Hz (count per corner: {bad}); "
             "those frequencies are flagged in Frf.flagged and the conditioning step replaces them",
-            LowCoherenceWarning, stacklevel=2)
+            LowCoherenceWarning, stacklevel=stacklevel + 1)
+
+
+def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width, coherence_dof):
+    """The ``estimator="lpm"`` branch of :func:`estimate_frf` (arguments checked there)."""
+    fs = session.fs_hz
+    m = len(MODEL_INPUTS)
+    runs = list(session.runs)
+    n_samples = [r.n_samples for r in runs]
+    records, dF_pow = [], []
+    for run in runs:
+        _, dF = shock_force_deviation(run, session.shocks, cbar)
+        records.append(np.vstack([np.vstack([run.dynamic(c) for c in RIG_INPUTS]), dF,
+                                  np.vstack([run.dynamic(o) for o in outs])]))
+        dF_pow.append(np.mean(dF**2, axis=1))
+    degree, half_width, coherence_dof = _check_lpm_args(
+        degree, half_width, coherence_dof, [x[:m] for x in records], [r.name for r in runs])
+    spectra = [np.fft.rfft(x, axis=-1) for x in records]
+    del records
+    f = np.fft.rfftfreq(nperseg, 1.0 / fs)
+    band = (f >= band_hz[0]) & (f <= band_hz[1])
+    # dF = 0 everywhere is refused before the solve (the solve would not fail, only be useless)
+    _check_identifiable(session, runs, dF_pow, band, cbar)
+    H, mult, partial, cond, indep, dof = _lpm_solve(spectra, n_samples, m, f, float(fs), degree,
+                                                    half_width, coherence_dof)
+    _check_identifiable(session, runs, dF_pow, band, cbar, indep=indep.T)
+    flagged = indep < FLAG_INDEPENDENT_FRACTION
+    _warn_flagged(session, flagged, band, band_hz, stacklevel=4)
+    settings = _lpm_settings(nperseg, fs, degree, half_width, dof, coherence_dof, n_samples, m)
+    settings.update(method="global", runs=[r.name for r in runs], band_hz=tuple(band_hz))
     return Frf(f_hz=f, H=H, input_names=MODEL_INPUTS, output_names=outs,
-               multiple_coherence=mult,
-               partial_coherence=partial, input_condition=cond, independent_fraction=indep.T,
-               flagged=flagged, n_averages=n_avg, cbar_n_s_m=cbar, fs_hz=fs, settings=settings)
+               multiple_coherence=mult, partial_coherence=partial, input_condition=cond,
+               independent_fraction=indep, flagged=flagged, n_averages=coherence_dof + m,
+               cbar_n_s_m=cbar, fs_hz=fs, settings=settings)
 
 
-def _check_identifiable(session, per_run, Suu, band, cbar):
-    """Refuse experiments whose dF inputs are zero or dependent on the rig inputs (Eq. 17)."""
-    energy = np.sum([pr[5] for pr in per_run], axis=0)  # (4,) dF power summed over runs
-    force_scale = np.array([max(np.mean([np.mean(pr[0].dynamic(f"shock_velocity_{c}") ** 2)
-                                         for pr in per_run]), 1e-30) for c in CORNERS])
+def _check_identifiable(session, runs, dF_power, band, cbar, *, Suu=None, indep=None):
+    """Refuse experiments whose dF inputs are zero or dependent on the rig inputs (Eq. 17).
+
+    Parameters
+    ----------
+    runs : list of Run
+    dF_power : list of ndarray, shape (4,)
+        Mean square ``dF`` per corner of each run.
+    Suu : ndarray, shape (n_f, 11, 11), optional
+        Input spectral matrix (Welch): the independent fraction is ``1 / [Sn^-1]_ii``.
+    indep : ndarray, shape (n_f, 11), optional
+        The independent fraction itself (LPM). Without `Suu` and `indep` only
+        the ``dF = 0`` check is made.
+    """
+    energy = np.sum(dF_power, axis=0)  # (4,) dF power summed over runs
+    force_scale = np.array([max(np.mean([np.mean(r.dynamic(f"shock_velocity_{c}") ** 2)
+                                         for r in runs]), 1e-30) for c in CORNERS])
     force_scale = force_scale * np.maximum(cbar, 1.0) ** 2
     problems = []
     zero = []
     for i, c in enumerate(CORNERS):
-        changed = [pr[0].name for pr in per_run if pr[5][i] > 1e-8 * force_scale[i]]
-        if energy[i] <= 1e-8 * force_scale[i] * len(per_run) or not changed:
+        changed = [r.name for r, pw in zip(runs, dF_power) if pw[i] > 1e-8 * force_scale[i]]
+        if energy[i] <= 1e-8 * force_scale[i] * len(runs) or not changed:
             zero.append(i)
             problems.append(f"corner {c}: the shock force equals c_bar*v in every run (dF = 0: "
                             f"no run has a different shock there)")
-    if not zero:
-        d = np.sqrt(np.real(np.einsum("fii->fi", Suu)))
-        d = np.where(d > 0, d, 1.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            try:
-                inv = np.linalg.inv(Suu / (d[:, :, None] * d[:, None, :]))
-                indep = 1.0 / np.real(np.einsum("fii->fi", inv))
-            except np.linalg.LinAlgError:
-                indep = np.zeros(Suu.shape[:2])
+    if not zero and (Suu is not None or indep is not None):
+        if indep is None:
+            d = np.sqrt(np.real(np.einsum("fii->fi", Suu)))
+            d = np.where(d > 0, d, 1.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                try:
+                    inv = np.linalg.inv(Suu / (d[:, :, None] * d[:, None, :]))
+                    indep = 1.0 / np.real(np.einsum("fii->fi", inv))
+                except np.linalg.LinAlgError:
+                    indep = np.zeros(Suu.shape[:2])
         for i, c in enumerate(CORNERS):
             frac = np.nanmedian(indep[band, 7 + i])
             if not frac >= MIN_INDEPENDENT_FRACTION:
-                changed = [pr[0].name for pr in per_run if pr[5][i] > 1e-8 * force_scale[i]]
+                changed = [r.name for r, pw in zip(runs, dF_power)
+                           if pw[i] > 1e-8 * force_scale[i]]
                 problems.append(f"corner {c}: dF is a linear function of the rig inputs in every "
                                 f"run (independent fraction {frac:.2g}; runs with dF: {changed}); "
                                 "linear or identical shocks cannot separate shock from rig inputs")

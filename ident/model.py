@@ -555,7 +555,8 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
                         n = len(sk.poles)
                         tf = fitmod.fit_tf(fb, Hb[o, i], weight=W[o, i], n_den=n, n_num=n + rel)
                     pk, rk, dk, changed = _regularize(tf.poles, fb, Hb[o, i], W[o, i], rel == 0,
-                                                      f_max, f_min_hz=f_min)
+                                                      f_max, f_min_hz=f_min,
+                                                      zero_dc=_is_derivative(frf.output_names[o]))
                     n_regularized += changed
                     _store(pk, rk, dk, o, i, poles, residues, direct, n_poles)
                     order[o, i] = len(tf.poles)
@@ -569,7 +570,8 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
             for i in range(m):
                 ft = has_feedthrough(frf.output_names[o], frf.input_names[i])
                 pk, rk, dk, changed = _regularize(vf.poles, fb, Hb[o, i], W[o, i], ft, f_max,
-                                                  f_min_hz=f_min)
+                                                  f_min_hz=f_min,
+                                                  zero_dc=_is_derivative(frf.output_names[o]))
                 n_regularized += changed
                 _store(pk, rk, dk, o, i, poles, residues, direct, n_poles)
                 order[o, i] = len(vf.poles)
@@ -592,7 +594,13 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
 ZETA_MIN = 0.02
 
 
-def _regularize(pl, fb, h, w, feedthrough, f_max_hz, zeta_min=ZETA_MIN, f_min_hz=None):
+#: Output kinds that are time derivatives of a displacement: a static input gives them zero
+#: response, so their fits are constrained to zero DC gain.
+DERIVATIVE_KINDS = ("shock_velocity", "chassis_accel", "wheel_accel")
+
+
+def _regularize(pl, fb, h, w, feedthrough, f_max_hz, zeta_min=ZETA_MIN, f_min_hz=None,
+                zero_dc=False):
     """Bound a fit's poles and refit residues.
 
     Damping >= zeta_min, ``2 pi f_min <= |p| <= 2 pi f_max``: outside the fitted
@@ -609,6 +617,10 @@ def _regularize(pl, fb, h, w, feedthrough, f_max_hz, zeta_min=ZETA_MIN, f_min_hz
         Frequencies [Hz], data and weights of the fit.
     feedthrough : bool
         Whether the pair has a direct term.
+    zero_dc : bool
+        Constrain the DC gain to zero (outputs that are derivatives: the fit
+        band starts at 0.5 Hz, and a road drive's large low-frequency
+        displacement would otherwise meet a spurious static gain).
 
     Returns
     -------
@@ -638,6 +650,20 @@ def _regularize(pl, fb, h, w, feedthrough, f_max_hz, zeta_min=ZETA_MIN, f_min_hz
     sw = np.sqrt(np.maximum(w, 0))
     A = np.vstack([(X * sw[:, None]).real, (X * sw[:, None]).imag])
     b = np.concatenate([(h * sw).real, (h * sw).imag])
+    if zero_dc:
+        row = []
+        for p, rl in zip(new, real):
+            if rl:
+                row.append(-1.0 / p.real)
+            else:
+                row += [np.real(-1.0 / p - 1.0 / np.conj(p)), np.real(-1j / p + 1j / np.conj(p))]
+        if feedthrough:
+            row.append(1.0)
+        row = np.array(row)
+        big = 1e8 * max(np.abs(A).max(), 1e-300) / max(np.abs(row).max(), 1e-300)
+        A = np.vstack([A, big * row])
+        b = np.concatenate([b, [0.0]])
+        changed = True
     scale = np.maximum(np.abs(A).max(axis=0), 1e-300)
     coef = np.linalg.lstsq(A / scale, b, rcond=None)[0] / scale
     res, k = [], 0
@@ -667,6 +693,10 @@ def _store(pole_list, res_list, d, o, i, poles, residues, direct, n_poles):
     residues[o, i, :k] = rk
     direct[o, i] = float(np.real(d))
     n_poles[o, i] = k
+
+
+def _is_derivative(output):
+    return output.rpartition("_")[0] in DERIVATIVE_KINDS
 
 
 def _fit_error(pk, rk, d, fb, h, w):

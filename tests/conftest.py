@@ -74,3 +74,30 @@ def validation_drive(paper_plan, paper_vehicle):
     from ident.rig import make_plan_drive
 
     return make_plan_drive(paper_plan, paper_vehicle, seed=77, duration_s=300.0)
+
+
+@pytest.fixture(scope="session")
+def demo_library():
+    """The built-in shock crate of the demo (11 shocks)."""
+    from ident.shocks import read_shock_library
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    return read_shock_library(DEMO_LIBRARY_PATH)
+
+
+@pytest.fixture(scope="session")
+def track_drive(paper_vehicle):
+    """A 60 s track-like drive for the paper car."""
+    from ident.drive import make_track_drive
+
+    return make_track_drive(duration_s=60.0, fs_hz=100.0, seed=3,
+                            wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,
+                            track_width_m=paper_vehicle.track_front_m, name="track test")
+
+
+@pytest.fixture(scope="session")
+def baseline_setup():
+    """The B20 baseline setup."""
+    from planner.setups import Setup
+
+    return Setup("baseline", {c: "B20" for c in CORNERS})

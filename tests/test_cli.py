@@ -45,5 +45,64 @@ def test_demo(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["-q", "demo", "--out", str(out)]) == 0
     assert (out / "session" / "session.toml").is_file()
-    assert (out / "session_metrics.csv").is_file()
-    assert "shockplan demo" in capsys.readouterr().out
+    assert (out / "model.npz").is_file() and any((out / "frf_plots").glob("*.png"))
+    for name in ("ranking.csv", "ranking.xlsx", "pareto.png", "top_setups.png", "screening.csv"):
+        assert (out / "ranking" / name).is_file(), name
+    text = capsys.readouterr().out
+    assert "shockplan demo" in text and "best:" in text
+    assert str(out) in text and ".demo." not in text  # final paths, not the temporary folder
+
+
+def _small_session(tmp_path):
+    out = tmp_path / "sess"
+    assert main(["-q", "rig", "simulate", "--duration", "120", "--out", str(out),
+                 "--units", "SI"]) == 0
+    return out
+
+
+@pytest.mark.slow
+def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
+    from ident.drive import make_track_drive, write_drive
+    from ident.model import load_model
+    from ident.shocks import read_shock_library, write_shock_library
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    sess = _small_session(tmp_path)
+    model = tmp_path / "model.npz"
+    assert main(["-q", "identify", str(sess), "--out", str(model), "--nperseg", "1024",
+                 "--plots", str(tmp_path / "plots"), "--mat", str(tmp_path / "m.mat")]) == 0
+    out = capsys.readouterr().out
+    assert "fit error" in out and "wrote model" in out
+    assert load_model(model).settings["session"] == "paper identification experiment"
+    assert any((tmp_path / "plots").glob("frf_*.png")) and (tmp_path / "m.mat").is_file()
+    # the drive and the shocks in imperial units, setups CSV per the spec
+    drive = make_track_drive(duration_s=30.0, fs_hz=100.0, seed=2,
+                             wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,
+                             track_width_m=paper_vehicle.track_front_m)
+    write_drive(drive, tmp_path / "drive.csv", units="imperial")
+    write_shock_library(read_shock_library(DEMO_LIBRARY_PATH), tmp_path / "shocks.toml",
+                        units="imperial")
+    (tmp_path / "setups.csv").write_text("setup,LF,RF,LR,RR\nbaseline,B20,B20,B20,B20\n"
+                                         "firm,L28,L28,DF,DF\n")
+    pred = tmp_path / "pred.csv"
+    assert main(["-q", "predict", "--model", str(model), "--drive", str(tmp_path / "drive.csv"),
+                 "--shocks", str(tmp_path / "shocks.toml"), "--setups",
+                 str(tmp_path / "setups.csv"), "--out", str(pred), "--units", "imperial"]) == 0
+    import pandas as pd
+
+    table = pd.read_csv(pred)
+    assert list(table.columns[:6]) == ["setup", "LF", "RF", "LR", "RR", "tire_force_rms_LF"]
+    assert table["setup"].tolist() == ["baseline", "firm"]
+    assert 5 < table["tire_force_rms_LF"].iloc[0] < 1000  # lbf on a smooth track
+    rank_dir = tmp_path / "rank"
+    assert main(["-q", "rank", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
+                 "--shocks", str(tmp_path / "shocks.toml"), "--units", "imperial",
+                 "--only", "B20,L12,L28,DM", "--baseline", "B20", "--top", "6",
+                 "--out", str(rank_dir)]) == 0
+    assert (rank_dir / "ranking.xlsx").is_file() and "best" in capsys.readouterr().out
+    # bad input: a setup with an unknown shock id, one line naming it
+    (tmp_path / "bad.csv").write_text("setup,LF,RF,LR,RR\nx,B20,B20,B20,ZZZ\n")
+    assert main(["-q", "predict", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
+                 "--shocks", str(tmp_path / "shocks.toml"), "--setups", str(tmp_path / "bad.csv"),
+                 "--out", str(tmp_path / "p2.csv"), "--units", "imperial"]) == 2
+    assert "ZZZ" in capsys.readouterr().err

