@@ -735,7 +735,8 @@ def _fit_vf(fitmod, fb, Hb, W, frf, n_poles_vf, max_order):
                                direct=vf.direct * scale[:, :, 0])
 
 
-def identify_session(session, *, frf_method="global", cbar_n_s_m=None, nperseg=None,
+def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_m=None,
+                     nperseg=None,
                      coherence_min=0.9, smooth_width_hz=0.6, fit_method="invfreqs",
                      orders="auto", weighting="paper", band_hz=(0.5, 20.0), max_order=10):
     """Identify a vehicle model from a rig session: estimate, condition, fit.
@@ -743,8 +744,12 @@ def identify_session(session, *, frf_method="global", cbar_n_s_m=None, nperseg=N
     Parameters
     ----------
     session : ident.session.Session
+    estimator : {"lpm", "welch"}
+        FRF estimator (:func:`ident.frf.estimate_frf`): the local polynomial
+        method (default; free of the transient leakage that makes Welch H1
+        estimates of weak paths noisy) or the paper's Welch H1.
     frf_method : {"global", "sequential"}
-        :func:`ident.frf.estimate_frf`.
+        :func:`ident.frf.estimate_frf` (``sequential`` needs ``estimator="welch"``).
     cbar_n_s_m, nperseg
         :func:`ident.frf.estimate_frf`.
     coherence_min, smooth_width_hz
@@ -760,11 +765,13 @@ def identify_session(session, *, frf_method="global", cbar_n_s_m=None, nperseg=N
     from ident.condition import condition_frf
     from ident.frf import estimate_frf
 
-    frf = estimate_frf(session, method=frf_method, cbar_n_s_m=cbar_n_s_m, nperseg=nperseg)
+    frf = estimate_frf(session, method=frf_method, cbar_n_s_m=cbar_n_s_m, nperseg=nperseg,
+                       estimator=estimator)
     frf = condition_frf(frf, coherence_min=coherence_min, smooth_width_hz=smooth_width_hz)
     model = fit_model(frf, method=fit_method, orders=orders, weighting=weighting,
                       band_hz=band_hz, max_order=max_order, name=session.name,
                       units=session.units)
     settings = dict(model.settings, session=session.name,
-                    runs=[r.name for r in session.runs], frf_method=frf_method)
+                    runs=[r.name for r in session.runs], frf_method=frf_method,
+                    estimator=estimator)
     return dataclasses.replace(model, settings=settings)

@@ -107,7 +107,8 @@ def cmd_identify(args):
     check_can_write(out, overwrite=args.overwrite)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        model = identify_session(session, frf_method=args.frf_method, nperseg=args.nperseg,
+        model = identify_session(session, estimator=args.estimator,
+                                 frf_method=args.frf_method, nperseg=args.nperseg,
                                  coherence_min=args.coherence_min, fit_method=args.method)
     model.save(out, overwrite=args.overwrite)
     table = model.summary()
@@ -275,6 +276,9 @@ def build_parser():
     ident_p.add_argument("--out", required=True, help="model file to write (.npz)")
     ident_p.add_argument("--method", choices=["invfreqs", "vf"], default="invfreqs",
                          help="per-pair rational fits (invfreqs) or common-pole vector fitting")
+    ident_p.add_argument("--estimator", choices=["lpm", "welch"], default="lpm",
+                         help="FRF estimator: local polynomial method (default, leakage-free) "
+                         "or the paper's Welch H1")
     ident_p.add_argument("--frf-method", choices=["global", "sequential"], default="global",
                          help="least squares over all runs (Eq. 23) or sequential (Eqs. 25-28)")
     ident_p.add_argument("--nperseg", type=int, help="Welch block length [samples]")

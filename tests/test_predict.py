@@ -37,10 +37,6 @@ def _compare(model_a, model_b, drive, setups, library):
     return err, sa, sb
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known gap: median 0.17 % passes, but the max is 2.4 % (> 2 %) for blow-off shocks at the "
-    "front (55 lbf/(in/s) low speed, far from the identification's 20): the loop amplifies "
-    "the weak paths' FRF error; needs a leakage-free FRF estimator"))
 def test_identified_matches_known_on_library_setups(identified_model, paper_model,
                                                     validation_drive, demo_library,
                                                     baseline_setup):
