@@ -82,15 +82,19 @@ def test_bad_setups(paper_model, track_drive, demo_library):
         predict_setups(object(), track_drive, [bad], demo_library)
 
 
+GAP_NOISY = (
+    "known gap (2 % noise): median 0.71 % passes, but one extreme setup (DF front, blow-off "
+    "BO rear: 55 lbf/(in/s) low-speed damping, far from the identification's 20) gives 31 % "
+    "on front ride height; without noise the same check gives 0.07 % median / 0.25 % max")
+
+
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "known gap: the paper's identification drive barely excites the wheelloader paths below "
-    "~2 Hz (the aero moments dominate there), and a road-like drive lives there; identified "
-    "predictions on it are off by ~3 % median / ~45 % max. Needs a leakage-free FRF "
-    "estimator and/or low-frequency wheelloader excitation in the plan"))
-def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, baseline_setup):
-    """A car that is not the 7-DOF model: chassis torsion and unequal half-tracks, 2 %
-    measurement noise, identified and validated on a track-like drive."""
+@pytest.mark.parametrize("noise", [0.0, pytest.param(0.02, marks=pytest.mark.xfail(
+    strict=True, reason=GAP_NOISY))])
+def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, baseline_setup,
+                                    noise):
+    """A car that is not the 7-DOF model: chassis torsion and unequal half-tracks, with and
+    without 2 % measurement noise, identified and validated on a track-like drive."""
     import warnings
     from dataclasses import replace
 
@@ -102,7 +106,7 @@ def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, bas
     car = paper_vehicle.replace(torsion_stiffness_n_m_rad=3.0e5, cg_lateral_offset_m=0.04,
                                 track_rear_m=1.70)
     assert "twist" in modal_summary(car).labels
-    session = simulate_session(replace(paper_plan, noise=0.02), car)
+    session = simulate_session(replace(paper_plan, noise=noise), car)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = identify_session(session)
