@@ -35,12 +35,12 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Mapping
 
 import numpy as np
 from scipy import signal
 
-from ident.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES
+from ident.channels import CORNERS, SHOCK_FORCES, SHOCK_VELOCITIES
 
 __all__ = [
     "ModalSystem",
@@ -530,6 +530,93 @@ def _solve_small(J, r, m):
         r[c] = acc / J[c, c]
 
 
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av, vnew, res,
+                J, Jinv, state):
+    """Solve one step of the shock loop in place; return the iteration count (-1: failed).
+
+    Solves ``v = vfree + Deff (c0 + b0 f(v) - cbar v)`` for the 4 shock velocities and
+    leaves ``f(v)`` in `fv`. `seg`, `Jinv` and ``state[0]`` (1: `Jinv` valid for `seg`)
+    carry over between steps. Shared by the modal and the FIR simulators.
+    """
+    m = 4
+    # Solve v = vfree + Deff (c0 + b0 f(v) - cbar v). f is piecewise linear, so on a
+    # fixed set of segments (f = a + s v) this is linear: J v = vfree + Deff (c0 + b0 a)
+    # with J = I - Deff diag(b0 s - cbar). Assume the last step's segments, solve with
+    # the cached inverse, and accept when v stays on them (exact); otherwise move to
+    # the new segments (a Newton step) and repeat. Damped Newton if segments cycle.
+    it = 0
+    while True:
+        if state[0] == 0:
+            for c in range(m):
+                sl_c, a_c = _segment_line(seg[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+                sv[c] = sl_c
+                av[c] = a_c
+            for c in range(m):
+                for j in range(m):
+                    J[c, j] = -Deff[c, j] * (b0[j] * sv[j] - cbar[j])
+                J[c, c] += 1.0
+            _invert_small(J, Jinv, m)
+            state[0] = 1
+        for c in range(m):
+            acc = vfree[c]
+            for j in range(m):
+                acc += Deff[c, j] * (c0[j] + b0[j] * av[j])
+            res[c] = acc
+        same = True
+        for c in range(m):
+            acc = 0.0
+            for j in range(m):
+                acc += Jinv[c, j] * res[j]
+            vnew[c] = acc
+        for c in range(m):
+            s2 = _segment_of(vnew[c], kv[c], nk[c], seg[c])
+            if s2 != seg[c]:
+                same = False
+                seg[c] = s2
+        it += 1
+        if same:
+            for c in range(m):
+                v[c] = vnew[c]
+            break
+        state[0] = 0
+        if it >= 12:
+            # segments cycle at a kink: damped Newton from the last accepted v
+            itn = 0
+            while True:
+                for c in range(m):
+                    fv[c], sv[c], seg[c] = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+                for c in range(m):
+                    acc = 0.0
+                    for j in range(m):
+                        acc += Deff[c, j] * (c0[j] + b0[j] * fv[j] - cbar[j] * v[j])
+                        J[c, j] = -Deff[c, j] * (b0[j] * sv[j] - cbar[j])
+                    res[c] = vfree[c] + acc - v[c]
+                    J[c, c] += 1.0
+                _solve_small(J, res, m)
+                step = 0.0
+                scale = 1e-9
+                for c in range(m):
+                    v[c] += 0.5 * res[c]
+                    step = max(step, abs(res[c]))
+                    scale = max(scale, abs(v[c]))
+                itn += 1
+                if step <= 1e-12 * scale:
+                    break
+                if itn >= 200:
+                    return -1
+                    break
+            it += itn
+            state[0] = 0
+            break
+    for c in range(m):
+        fv[c], sv_unused, s3 = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+        if s3 != seg[c]:
+            seg[c] = s3
+            state[0] = 0
+    return it
+
+
 @_nb.njit(cache=True, error_model="numpy")
 def _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
               alpha, b0, b1, r, Cy, Dy, y_rig, y_out, F_out):
@@ -561,7 +648,7 @@ def _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
     res = np.zeros(m)
     J = np.zeros((m, m))
     Jinv = np.zeros((m, m))
-    jvalid = False
+    state = np.zeros(1, dtype=np.int64)  # 1: Jinv is valid for seg
     worst = 0
     failed = False
     for k in range(N):
@@ -574,80 +661,11 @@ def _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
                 acc += (Cv[c, i] * x[i]).real
             vfree[c] = v_rig[k, c] + acc
             c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c]
-        # Solve v = vfree + Deff (c0 + b0 f(v) - cbar v). f is piecewise linear, so on a
-        # fixed set of segments (f = a + s v) this is linear: J v = vfree + Deff (c0 + b0 a)
-        # with J = I - Deff diag(b0 s - cbar). Assume the last step's segments, solve with
-        # the cached inverse, and accept when v stays on them (exact); otherwise move to
-        # the new segments (a Newton step) and repeat. Damped Newton if segments cycle.
-        it = 0
-        while True:
-            if not jvalid:
-                for c in range(m):
-                    sl_c, a_c = _segment_line(seg[c], kv[c], kf[c], nk[c], slo[c], shi[c])
-                    sv[c] = sl_c
-                    av[c] = a_c
-                for c in range(m):
-                    for j in range(m):
-                        J[c, j] = -Deff[c, j] * (b0[j] * sv[j] - cbar[j])
-                    J[c, c] += 1.0
-                _invert_small(J, Jinv, m)
-                jvalid = True
-            for c in range(m):
-                acc = vfree[c]
-                for j in range(m):
-                    acc += Deff[c, j] * (c0[j] + b0[j] * av[j])
-                res[c] = acc
-            same = True
-            for c in range(m):
-                acc = 0.0
-                for j in range(m):
-                    acc += Jinv[c, j] * res[j]
-                vnew[c] = acc
-            for c in range(m):
-                s2 = _segment_of(vnew[c], kv[c], nk[c], seg[c])
-                if s2 != seg[c]:
-                    same = False
-                    seg[c] = s2
-            it += 1
-            if same:
-                for c in range(m):
-                    v[c] = vnew[c]
-                break
-            jvalid = False
-            if it >= 12:
-                # segments cycle at a kink: damped Newton from the last accepted v
-                itn = 0
-                while True:
-                    for c in range(m):
-                        fv[c], sv[c], seg[c] = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
-                    for c in range(m):
-                        acc = 0.0
-                        for j in range(m):
-                            acc += Deff[c, j] * (c0[j] + b0[j] * fv[j] - cbar[j] * v[j])
-                            J[c, j] = -Deff[c, j] * (b0[j] * sv[j] - cbar[j])
-                        res[c] = vfree[c] + acc - v[c]
-                        J[c, c] += 1.0
-                    _solve_small(J, res, m)
-                    step = 0.0
-                    scale = 1e-9
-                    for c in range(m):
-                        v[c] += 0.5 * res[c]
-                        step = max(step, abs(res[c]))
-                        scale = max(scale, abs(v[c]))
-                    itn += 1
-                    if step <= 1e-12 * scale:
-                        break
-                    if itn >= 200:
-                        failed = True
-                        break
-                it += itn
-                jvalid = False
-                break
-        for c in range(m):
-            fv[c], sv_unused, s3 = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
-            if s3 != seg[c]:
-                seg[c] = s3
-                jvalid = False
+        it = _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av,
+                         vnew, res, J, Jinv, state)
+        if it < 0:
+            failed = True
+            it = 80
         if it > worst:
             worst = it
         for c in range(m):

@@ -70,9 +70,8 @@ import numpy as np
 from scipy import signal
 
 from ident.channels import CORNERS, SHOCK_FORCES, SHOCK_VELOCITIES
-from ident.closedloop import (BatchResponse, _check_oversample, _drive_array, _invert_small,
-                              _pack_setups, _pwl, _refine, _segment_line, _segment_of,
-                              _setup_models, _solve_small)
+from ident.closedloop import (BatchResponse, _check_oversample, _drive_array, _pack_setups,
+                              _refine, _segment_of, _setup_models, _shock_step)
 from ident.errors import FitWarning
 from ident.frf import MODEL_INPUTS, Frf
 
@@ -452,7 +451,7 @@ def _fir_loop_one(hrev, D0, v_free, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, r
     res = np.zeros(m)
     J = np.zeros((m, m))
     Jinv = np.zeros((m, m))
-    jvalid = False
+    state = np.zeros(1, dtype=np.int64)  # 1: Jinv is valid for seg
     worst = 0
     failed = False
     for k in range(N):
@@ -461,77 +460,12 @@ def _fir_loop_one(hrev, D0, v_free, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, r
         for c in range(m):
             vfree[c] = v_free[c, k] + hist[c]
             c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c]
-        # v = vfree + D0 (c0 + b0 f(v) - cbar v): as in ident.closedloop._loop_one with
-        # Deff = D0: linear on the assumed segments, solved with the cached inverse and
-        # accepted when v stays on them; damped Newton if the segments cycle at a kink.
-        it = 0
-        while True:
-            if not jvalid:
-                for c in range(m):
-                    sl_c, a_c = _segment_line(seg[c], kv[c], kf[c], nk[c], slo[c], shi[c])
-                    sv[c] = sl_c
-                    av[c] = a_c
-                for c in range(m):
-                    for j in range(m):
-                        J[c, j] = -D0[c, j] * (b0[j] * sv[j] - cbar[j])
-                    J[c, c] += 1.0
-                _invert_small(J, Jinv, m)
-                jvalid = True
-            for c in range(m):
-                acc = vfree[c]
-                for j in range(m):
-                    acc += D0[c, j] * (c0[j] + b0[j] * av[j])
-                res[c] = acc
-            same = True
-            for c in range(m):
-                acc = 0.0
-                for j in range(m):
-                    acc += Jinv[c, j] * res[j]
-                vnew[c] = acc
-            for c in range(m):
-                s2 = _segment_of(vnew[c], kv[c], nk[c], seg[c])
-                if s2 != seg[c]:
-                    same = False
-                    seg[c] = s2
-            it += 1
-            if same:
-                for c in range(m):
-                    v[c] = vnew[c]
-                break
-            jvalid = False
-            if it >= 12:
-                itn = 0
-                while True:
-                    for c in range(m):
-                        fv[c], sv[c], seg[c] = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
-                    for c in range(m):
-                        acc = 0.0
-                        for j in range(m):
-                            acc += D0[c, j] * (c0[j] + b0[j] * fv[j] - cbar[j] * v[j])
-                            J[c, j] = -D0[c, j] * (b0[j] * sv[j] - cbar[j])
-                        res[c] = vfree[c] + acc - v[c]
-                        J[c, c] += 1.0
-                    _solve_small(J, res, m)
-                    step = 0.0
-                    scale = 1e-9
-                    for c in range(m):
-                        v[c] += 0.5 * res[c]
-                        step = max(step, abs(res[c]))
-                        scale = max(scale, abs(v[c]))
-                    itn += 1
-                    if step <= 1e-12 * scale:
-                        break
-                    if itn >= 200:
-                        failed = True
-                        break
-                it += itn
-                jvalid = False
-                break
-        for c in range(m):
-            fv[c], sv_unused, s3 = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
-            if s3 != seg[c]:
-                seg[c] = s3
-                jvalid = False
+        # v = vfree + D0 (c0 + b0 f(v) - cbar v): the modal simulator's step with Deff = D0
+        it = _shock_step(vfree, c0, D0, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av, vnew,
+                         res, J, Jinv, state)
+        if it < 0:
+            failed = True
+            it = 80
         if it > worst:
             worst = it
         for c in range(m):

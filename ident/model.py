@@ -32,9 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from ident._io import atomic_path
-from ident.channels import CORNERS, RIG_INPUTS, quantity_of
 from ident.errors import FitWarning, IdentificationError, ModelFileError
-from ident.frf import DF_INPUTS, MODEL_INPUTS, Frf
+from ident.frf import Frf
 
 __all__ = [
     "VehicleModel",
@@ -373,11 +372,9 @@ def _modal_gramians(modal, Bs, Cs):
     """
     lam = modal.lam
     real = lam.imag == 0
-    # expanded complex system: each pair mode -> (x, conj x) with B halved? No: the real
-    # system's complex states are x (and its conjugate); y = Re(c x) = (c x + conj(c x)) / 2
-    lam_f, B_f, C_f, T_rows = [], [], [], []
+    # expanded complex system: each pair mode -> (x, conj x); y = Re(c x) = (c x + conj(c x)) / 2
+    lam_f, B_f, C_f = [], [], []
     n_real = int(real.sum() + 2 * (~real).sum())
-    T = np.zeros((n_real, 0), dtype=complex)
     cols = []
     k = 0
     for i, li in enumerate(lam):

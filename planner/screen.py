@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 from scipy import signal
 
-from ident.channels import CORNERS, RIG_INPUTS
+from ident.channels import CORNERS
 from ident.errors import PlannerError
 
 __all__ = ["screen_setups", "drive_spectrum", "metric_rows"]
