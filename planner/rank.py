@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from ident.channels import CORNERS
 from ident.errors import PlannerError
 
 __all__ = ["Ranking", "rank_setups"]

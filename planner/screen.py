@@ -34,7 +34,6 @@ import pandas as pd
 from scipy import signal
 
 from ident.channels import CORNERS
-from ident.errors import PlannerError
 
 __all__ = ["screen_setups", "drive_spectrum", "metric_rows"]
 
