@@ -59,6 +59,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _REAL_TOL = 1e-9  # |Im(lam)| / |lam| below which a pole is taken as real
+_MODE_BLOCK = 64  # rig modes filtered at a time (memory: block x internal samples, complex)
 
 
 @dataclass(frozen=True, eq=False)
@@ -316,21 +317,26 @@ class LoopPlant:
 class RigResponse:
     """The part of a plant's response driven by the rig inputs alone (``dF = 0``).
 
-    Computed once per drive and shared by every setup.
+    Computed once per drive and shared by every setup. Only what the loop and
+    the outputs need is kept (the modal states are accumulated in blocks of
+    modes and dropped), so memory does not grow with the model's order.
 
     Attributes
     ----------
-    x : ndarray of complex, shape (n_modes, n_fine)
-        Modal states of the plant's rig part on the internal grid.
+    v_fine : ndarray, shape (n_fine, 4)
+        Shock velocities on the internal grid.
+    y : ndarray, shape (n_outputs, n_samples)
+        Every plant output at the drive's samples.
     u_fine : ndarray, shape (n_fine, 7)
-        Rig inputs interpolated on the internal grid.
+        Rig inputs refined onto the internal grid.
     fs_hz : float
         The drive's sample rate [Hz].
     oversample : int
         Internal steps per drive sample.
     """
 
-    x: np.ndarray
+    v_fine: np.ndarray
+    y: np.ndarray
     u_fine: np.ndarray
     fs_hz: float
     oversample: int
@@ -389,11 +395,19 @@ def rig_response(plant, drive, *, oversample=4):
     u, fs = _drive_array(drive)
     u_fine = _refine(u, r)
     h = 1.0 / (fs * r)
-    phi, g0, g1 = foh_coefficients(plant.rig.lam, h)
-    w = plant.rig.B @ u_fine.T  # (n, n_fine)
-    x = _modal_filter(phi, g0, g1, w)
-    return RigResponse(x=x, u_fine=u_fine, fs_hz=fs, oversample=r, n_samples=u.shape[0],
-                       plant_name=plant.name)
+    mr = plant.rig
+    vi = plant.velocity_idx
+    phi, g0, g1 = foh_coefficients(mr.lam, h)
+    v_fine = (mr.D[vi] @ u_fine.T).T
+    sl = slice(None, None, r)
+    y = mr.D @ u_fine[sl].T
+    for a in range(0, mr.n_states, _MODE_BLOCK):  # bounded memory: a block of modes at a time
+        b = slice(a, a + _MODE_BLOCK)
+        x = _modal_filter(phi[b], g0[b], g1[b], mr.B[b] @ u_fine.T)  # (block, n_fine)
+        v_fine += np.real(mr.C[vi][:, b] @ x).T
+        y += np.real(mr.C[:, b] @ x[:, sl])
+    return RigResponse(v_fine=np.ascontiguousarray(v_fine), y=y, u_fine=u_fine, fs_hz=fs,
+                       oversample=r, n_samples=u.shape[0], plant_name=plant.name)
 
 
 def _check_oversample(oversample):
@@ -865,15 +879,13 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     Bf = np.ascontiguousarray(ms.B)
     Cv = np.ascontiguousarray(ms.C[vi])
     Deff = np.real(Cv @ (g1[:, None] * Bf)) + ms.D[vi]
-    v_rig = np.ascontiguousarray((np.real(mr.C[vi] @ rig.x) + mr.D[vi] @ rig.u_fine.T).T)
+    v_rig = rig.v_fine
     names = list(plant.output_names) if outputs is None else list(outputs)
     unknown = [o for o in names if o not in plant.output_names]
     if unknown:
         raise ValueError(f"unknown outputs {unknown}; the plant has {list(plant.output_names)}")
     oi = np.array([plant.output_names.index(o) for o in names], dtype=int)
-    sl = slice(None, None, r)
-    y_rig = np.ascontiguousarray((np.real(mr.C[oi] @ rig.x[:, sl])
-                                  + mr.D[oi] @ rig.u_fine[sl].T).T)  # (N, p)
+    y_rig = np.ascontiguousarray(rig.y[oi].T)  # (N, p)
     packed = _pack_setups(models, h)
     S, N = len(models), rig.n_samples
     y = np.empty((S, len(names), N))

@@ -124,6 +124,7 @@ class VehicleModel:
     units: str = "SI"
     frf: Frf | None = field(default=None, repr=False)
     settings: dict = field(default_factory=dict)
+    _plants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     # -- evaluation -------------------------------------------------------------------------
     def frequency_response(self, f_hz):
@@ -185,13 +186,20 @@ class VehicleModel:
             ``None`` keeps the exact pole-residue realization. The rig part is
             simulated once per drive and kept exact.
         """
+        from threadpoolctl import threadpool_limits
+
         from ident.closedloop import LoopPlant
 
+        if reduce_rtol in self._plants:  # built once per model and bound (frozen model)
+            return self._plants[reduce_rtol]
         rig = self.pair_modal(range(7)).pruned()
         shock = self.pair_modal(range(7, 11)).pruned()
         if reduce_rtol is not None and shock.n_states > 0:
-            shock = balanced_reduce(shock, rtol=reduce_rtol)
-        return LoopPlant(rig, shock, tuple(self.output_names), self.cbar_n_s_m, name=self.name)
+            with threadpool_limits(1):  # small dense algebra; threads only contend here
+                shock = balanced_reduce(shock, rtol=reduce_rtol)
+        plant = LoopPlant(rig, shock, tuple(self.output_names), self.cbar_n_s_m, name=self.name)
+        self._plants[reduce_rtol] = plant
+        return plant
 
     def to_control(self, *, inputs=None):
         """A python-control ``StateSpace`` in real block-diagonal modal form.

@@ -1,0 +1,694 @@
+"""Benchmark of the planner: time-domain prediction, screening and ranking memory.
+
+Run::
+
+    python benchmarks/bench_planner.py [--repeat N] [--ref-seconds S] [--ref-setups K]
+                                       [--ref-screen-setups M] [--accuracy-setups A]
+                                       [--memory-setups P]
+
+Two models, each reported: the known paper car
+(``ident.vehicle.build_full_car(example_vehicle())``) and a model identified from
+the paper session (``ident.rig.simulate_session()`` then
+``ident.model.identify_session``, built once and not timed). The identified one is
+the product's case. One drive: ``ident.drive.make_track_drive(duration_s=120,
+fs_hz=100, seed=1, ...)`` with the paper car's wheelbase and track. Shocks: the
+built-in crate ``planner/data/library.toml``; setups from
+``planner.setups.enumerate_setups`` with its defaults (left/right symmetric) and
+with ``symmetry="none", max_setups=None`` (every corner free); both respect the
+crate's inventory (two shock kinds exist twice only), so there are slightly fewer
+than 11^2 and 11^4.
+
+Prints, one figure per line, each timing with the machine's 1-minute load average
+at that moment:
+
+1. time-domain prediction: one warm-up call (numba: compile or cache load), then
+   per model and for ``oversample`` 2 and 4 (the default) the median, min and max
+   wall time of ``--repeat`` calls of ``planner.predict.predict_setups(model, drive,
+   setups, library, oversample=...)`` on all symmetric setups, as setups per second:
+   with the model object as given (as ``rank_setups`` calls it: each call turns it
+   into a :class:`ident.closedloop.LoopPlant`, a balanced truncation for an
+   identified model) and with a LoopPlant built beforehand. Every call also
+   computes the setup-independent rig response. Both are also timed alone (the first
+   also with BLAS limited to one thread by ``threadpoolctl``: on a busy 2-core
+   machine multithreaded BLAS can be many times slower). This
+   process's ``ru_maxrss`` after the timed calls (it includes the identification);
+2. accuracy of oversample 2 and 4: the metrics of ``--accuracy-setups`` setups
+   against ``oversample=16`` (max and median relative difference over setups and
+   metrics), since throughput trades against it; ``ru_maxrss`` after the
+   oversample-16 run (the engine keeps the rig part's modal states on the internal
+   grid, which grows with the oversampling and the model's rig modes);
+3. a straightforward time-domain reference: for ``--ref-setups`` setups, one at a
+   time, ``scipy.integrate.solve_ivp`` (RK45, ``rtol=1e-6``, ``atol`` 1e-6 of each
+   state's RMS from a first loose pass) on the same closed loop as the engine (the
+   model's LoopPlant: its shock part in real modal form, the nonlinear shock curves,
+   one lag state per lagged shock, ``dF = F - c_bar v``) over the first
+   ``--ref-seconds`` of the drive, scaled to 120 s. The setup-independent rig
+   contribution (``v_rig``, ``y_rig``) is taken from the engine's ``rig_response``
+   on a 16x grid, linearly interpolated, and not charged to the reference (the
+   engine computes it once per call too): this favours the reference. Printed:
+   reference setups/s, the ratio engine / reference, and the engine
+   (``oversample=16``) against the reference on that segment (relative RMS
+   difference), which shows that both simulate the same loop;
+4. screening: ``planner.screen.screen_setups(model, drive, setups, library)`` on the
+   symmetric setups and on every-corner-free setups, as setups per second: with the
+   model object as given (each call builds its LoopPlant) and with a LoopPlant
+   built beforehand. Reference: the same stochastic linearization (same bands,
+   same secant-accelerated fixed point on the shock-velocity RMS, same tolerance)
+   in plain numpy, a Python loop over setups and over frequency bands with one
+   4x4 ``numpy.linalg.solve`` per band and iteration, for ``--ref-screen-setups``
+   setups; its setup-independent part is computed once and not charged; the ratio
+   engine / reference and the largest relative difference of the metrics;
+5. memory of ranking ``--memory-setups`` (default 100,000) screened setups: in a
+   child process started at the beginning, while this one is small (on Linux a
+   forked process's ``ru_maxrss`` includes its parent's high-water mark, so a child
+   started after the identification and the predictions would report theirs), the
+   identified model is handed over in a temporary file, the every-corner-free
+   setups are cycled (renamed) up to that count, then ``screen_setups`` and
+   ``planner.objective.score_setups`` with ``default_objective()`` and the
+   baseline the setup with B20 at every corner; the ``tracemalloc`` peak of that
+   screening + scoring and the child's ``ru_maxrss`` (which also counts the
+   imports and the model);
+6. ``target: ...: PASS/FAIL`` lines: time-domain >= 200 setups/s (oversample 4,
+   the default) and screening >= 10,000 setups/s (every-corner-free setups), each
+   for each model given as is (the product's path); peak memory < 2 GB (the
+   child's ``ru_maxrss``, the larger and all-inclusive figure).
+
+This is a script, not part of the package: it prints. It writes only a temporary
+model file for the child process (removed at the end); numba may update its own
+cache in ``ident/__pycache__`` and ``planner/__pycache__``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import tracemalloc
+import warnings
+from pathlib import Path
+
+import numpy as np
+from scipy import signal
+from scipy.integrate import solve_ivp
+from threadpoolctl import threadpool_limits
+
+# benchmark the working tree this script lives in, installed or not
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from ident.channels import CORNERS, RIG_INPUTS  # noqa: E402
+from ident.closedloop import rig_response, simulate  # noqa: E402
+from ident.drive import Drive, make_track_drive  # noqa: E402
+from ident.shocks import read_shock_library  # noqa: E402
+from ident.vehicle import build_full_car, example_vehicle  # noqa: E402
+from planner.objective import default_objective, score_setups  # noqa: E402
+from planner.predict import as_loop_plant, predict_setups  # noqa: E402
+from planner.screen import drive_spectrum, metric_rows, screen_setups  # noqa: E402
+from planner.setups import Setup, enumerate_setups  # noqa: E402
+
+LIBRARY_PATH = ROOT / "planner" / "data" / "library.toml"
+DRIVE_S = 120.0
+FS_HZ = 100.0
+DRIVE_SEED = 1
+#: Oversampling factors timed, the default last; and the accuracy reference.
+OVERSAMPLES = (2, 4)
+OVERSAMPLE_DEFAULT = 4
+OVERSAMPLE_FINE = 16
+#: The issue's targets.
+TARGET_TIME_SETUPS_S = 200.0
+TARGET_SCREEN_SETUPS_S = 10_000.0
+TARGET_MEMORY_BYTES = 2 * 2**30
+#: Reference integration tolerance (as bench_rig.py) and the loose first pass that
+#: measures each state's size for the absolute tolerance.
+REF_RTOL = 1e-6
+REF_ATOL_OF_RMS = 1e-6
+SCALE_PASS_RTOL = 1e-3
+#: Channels compared between engine and time-domain reference.
+COMPARED = ("shock_velocity_LF", "tire_force_LF", "ride_height_LF")
+#: Screening settings (screen_setups' defaults), mirrored by the reference.
+BAND_HZ = (1.0, 20.0)
+N_BANDS = 96
+MAX_ITER = 30
+TOL = 1e-5
+
+
+def _mib(n_bytes):
+    return n_bytes / 2**20
+
+
+def _load():
+    return f"1-min load {os.getloadavg()[0]:.2f}"
+
+
+def _maxrss_bytes():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def _engine_version():
+    """The repository's commit, flagged if ident/ or planner/ have uncommitted changes."""
+    try:
+        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "ident",
+                                "planner"], capture_output=True, text=True,
+                               check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown (not a git checkout)"
+    return head + (" + uncommitted changes in ident/ or planner/" if dirty else "")
+
+
+def _jit_source():
+    """How the compiled shock loop was obtained: "compile", "cache load" or "unknown"."""
+    from ident import closedloop
+
+    stats = getattr(getattr(closedloop, "_loop_batch", None), "stats", None)
+    if stats is None:
+        return "unknown"
+    if sum(stats.cache_misses.values()):
+        return "compile"
+    return "cache load" if sum(stats.cache_hits.values()) else "unknown"
+
+
+def _time(fn, repeat):
+    """Wall times and the 1-min load after each of `repeat` calls; the last result."""
+    times, loads, out = [], [], None
+    for _ in range(repeat):
+        out = None
+        gc.collect()
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+        loads.append(os.getloadavg()[0])
+    return times, loads, out
+
+
+def _rate_line(label, n, times, loads):
+    """Print setups/s from the median time; return that rate."""
+    med = statistics.median(times)
+    rate = n / med
+    print(f"{label}: {rate:,.0f} setups/s ({n} setups, median {med:.3f} s of {len(times)}, "
+          f"min {min(times):.3f}, max {max(times):.3f}; 1-min load after each: "
+          + ", ".join(f"{x:.2f}" for x in loads) + ")")
+    return rate
+
+
+def _spread_idx(n_items, k, *, skip_ends=False):
+    """k indices spread evenly over range(n_items) (optionally away from both ends)."""
+    if skip_ends:
+        return np.linspace(0, n_items - 1, k + 2).round().astype(int)[1:-1].tolist()
+    return np.unique(np.linspace(0, n_items - 1, k).round().astype(int)).tolist()
+
+
+def drive_segment(drive, duration_s):
+    """The first `duration_s` of a drive (``round(duration_s * fs) + 1`` samples)."""
+    n = int(round(duration_s * drive.fs_hz)) + 1
+    if n > drive.n_samples:
+        raise ValueError(f"--ref-seconds {duration_s} is longer than the drive "
+                         f"({drive.duration_s:g} s); give a shorter segment")
+    return Drive(name=f"{drive.name} [0, {duration_s:g} s]", fs_hz=drive.fs_hz,
+                 channels={c: drive.channels[c][:n] for c in RIG_INPUTS})
+
+
+# ---------------------------------------------------------------------------------------
+# time-domain reference: solve_ivp on the plant's closed loop, one setup at a time
+# ---------------------------------------------------------------------------------------
+
+def rig_part(plant, seg, r):
+    """The setup-independent rig contribution on an r-times finer grid (engine's rig_response).
+
+    Returns
+    -------
+    v_rig : ndarray, shape (4, n_fine)
+        Shock velocities from the rig inputs alone.
+    y_rig : ndarray, shape (p, n_samples)
+        Every plant output from the rig inputs alone, at the drive's samples.
+    fs_fine : float
+    """
+    rr = rig_response(plant, seg, oversample=r)
+    mr = plant.rig
+    vi = plant.velocity_idx
+    v_rig = rr.v_fine.T
+    y_rig = rr.y
+    return v_rig, y_rig, seg.fs_hz * r
+
+
+def reference_closed_loop(plant, shocks, v_rig, y_rig, fs_fine, fs_out, *, rtol, atol):
+    """Integrate the shock loop of a LoopPlant with ``solve_ivp`` (RK45).
+
+    State: the plant's shock part in real modal form ``x`` (``x' = A x + B dF``)
+    and one force per lagged shock (``tau F' + F = f(v)``). ``v = v_rig(t) + C_v x``
+    (the shock velocities have no feedthrough from ``dF``), ``F_i = f_i(v_i)`` for a
+    shock without lag, ``dF = F - c_bar v``. ``v_rig`` is linear between its samples.
+
+    Returns
+    -------
+    elapsed_s : float
+        Wall time of ``solve_ivp`` alone.
+    nfev : int
+    y : ndarray, shape (p, n_out)
+        Every plant output at ``k / fs_out``.
+    state_rms : ndarray
+        RMS of every ODE state over the output samples.
+    """
+    A, B, C, D = plant.shock.to_real()
+    vi = plant.velocity_idx
+    if np.any(D[vi] != 0):
+        raise ValueError("the reference assumes no feedthrough from dF to the shock velocities")
+    A, B, Cv = (np.ascontiguousarray(M) for M in (A, B, C[vi]))
+    nx = A.shape[0]
+    cbar = plant.cbar_n_s_m
+    lag = np.array([s.lag_s for s in shocks])
+    lagged = np.flatnonzero(lag > 0)
+    static = np.flatnonzero(lag == 0)
+    tau = lag[lagged]
+    dV = np.diff(v_rig, axis=1)
+    k_last = v_rig.shape[1] - 2
+
+    def velocities(t, x):
+        p = t * fs_fine
+        k = min(int(p), k_last)
+        return v_rig[:, k] + (p - k) * dV[:, k] + Cv @ x
+
+    def rhs(t, s):
+        x = s[:nx]
+        v = velocities(t, x)
+        F = np.empty(4)
+        ds = np.empty_like(s)
+        for i in static:
+            F[i] = shocks[i].force(v[i])
+        for j, i in enumerate(lagged):
+            F[i] = s[nx + j]
+            ds[nx + j] = (shocks[i].force(v[i]) - s[nx + j]) / tau[j]
+        ds[:nx] = A @ x + B @ (F - cbar * v)
+        return ds
+
+    n_out = y_rig.shape[1]
+    t_eval = np.arange(n_out) / fs_out
+    t0 = time.perf_counter()
+    sol = solve_ivp(rhs, (0.0, t_eval[-1]), np.zeros(nx + lagged.size), method="RK45",
+                    t_eval=t_eval, rtol=rtol, atol=atol)
+    elapsed = time.perf_counter() - t0
+    if not sol.success:
+        raise RuntimeError(f"reference solve_ivp failed: {sol.message}")
+    X = sol.y[:nx]
+    V = np.column_stack([velocities(t, X[:, k]) for k, t in enumerate(t_eval)])
+    F = np.empty((4, n_out))
+    for i in static:
+        F[i] = shocks[i].force(V[i])
+    for j, i in enumerate(lagged):
+        F[i] = sol.y[nx + j]
+    dF = F - cbar[:, None] * V
+    y = y_rig + C @ X + D @ dF
+    return elapsed, int(sol.nfev), y, np.sqrt(np.mean(sol.y**2, axis=1))
+
+
+def rel_rms(a, b):
+    """``rms(a - b) / rms(b)``."""
+    return float(np.sqrt(np.mean((a - b) ** 2) / np.mean(b**2)))
+
+
+# ---------------------------------------------------------------------------------------
+# screening reference: plain numpy, one setup and one band at a time
+# ---------------------------------------------------------------------------------------
+
+def screening_inputs(plant, drive):
+    """The setup-independent arrays of the screening (as ``screen_setups`` builds them)."""
+    names, L = metric_rows(plant)
+    sos = signal.butter(4, BAND_HZ, "bandpass", fs=drive.fs_hz, output="sos")
+
+    def b4(f_hz):
+        return np.abs(signal.sosfreqz(sos, worN=f_hz, fs=drive.fs_hz)[1]) ** 4
+
+    f, S = drive_spectrum(drive, n_bands=N_BANDS)
+    _, SB = drive_spectrum(drive, n_bands=N_BANDS, weight=b4)
+    keep = np.any(np.abs(S) > 0, axis=(1, 2))
+    f, S, SB = f[keep], S[keep], SB[keep]
+    H = plant.frequency_response(f)
+    vi = plant.velocity_idx
+    Hvr = np.transpose(H[vi, :7], (2, 0, 1))                    # (nf, 4, 7)
+    Hvs = np.transpose(H[vi, 7:], (2, 0, 1))                    # (nf, 4, 4)
+    Hyr = np.einsum("mo,oif->fmi", L, H[:, :7])                 # (nf, p, 7)
+    Hys = np.einsum("mo,oif->fmi", L, H[:, 7:])                 # (nf, p, 4)
+    St, SBt = np.transpose(S, (0, 2, 1)), np.transpose(SB, (0, 2, 1))
+    HvrH = np.conj(np.transpose(Hvr, (0, 2, 1)))
+    return {"names": names, "w": 2 * np.pi * f, "Hvs": Hvs, "Hys": Hys,
+            "P": Hvr @ St @ HvrH, "PB": Hvr @ SBt @ HvrH,
+            "QB": Hvr @ SBt @ np.conj(np.transpose(Hyr, (0, 2, 1))),
+            "d0": np.real(np.einsum("fmi,fij,fmj->fm", Hyr, SBt, np.conj(Hyr))),
+            "cbar": plant.cbar_n_s_m}
+
+
+def screen_reference_one(shocks, pre):
+    """Metrics (RMS) of one setup by stochastic linearization, plain numpy per band."""
+    w, Hvs, Hys, P, PB, QB, d0, cbar = (pre[k] for k in ("w", "Hvs", "Hys", "P", "PB", "QB",
+                                                         "d0", "cbar"))
+    lag = np.array([s.lag_s for s in shocks])
+    eye = np.eye(4)
+    sig = np.sqrt(np.maximum(np.real(np.einsum("faa->a", P)), 1e-18))
+    s_prev, h_prev = np.zeros(4), np.zeros(4)
+
+    def ceq(sigma):
+        return np.array([float(s.equivalent_damping(max(x, 1e-9))) for s, x in zip(shocks, sigma)])
+
+    for it in range(MAX_ITER):
+        c = ceq(sig)
+        svv = np.zeros(4)
+        for k in range(w.size):
+            d = c / (1.0 + 1j * w[k] * lag) - cbar
+            K = np.linalg.solve(eye - Hvs[k] * d[None, :], eye)     # (I - H_vs diag(d))^-1
+            svv += np.real(np.einsum("ca,ab,cb->c", K, P[k], np.conj(K)))
+        new = np.sqrt(np.maximum(svv, 0.0))
+        change = float(np.max(np.abs(new - sig) / np.maximum(sig, 1e-12)))
+        h = new - sig
+        nxt = np.where(new > 0, new, 0.5 * sig)
+        if it > 0:  # secant step on h(sigma) = g(sigma) - sigma, safeguarded to a factor 2
+            for i in range(4):
+                dh, ds = h[i] - h_prev[i], sig[i] - s_prev[i]
+                if dh != 0.0 and ds != 0.0:
+                    cand = sig[i] - h[i] * ds / dh
+                    if 0.5 * sig[i] < cand < 2.0 * sig[i]:
+                        nxt[i] = cand
+        s_prev, h_prev, sig = sig, h, nxt
+        if change < TOL:
+            break
+    c = ceq(sig)
+    power = np.zeros(d0.shape[1])
+    for k in range(w.size):
+        d = c / (1.0 + 1j * w[k] * lag) - cbar
+        K = np.linalg.solve(eye - Hvs[k] * d[None, :], eye)
+        W = (Hys[k] * d[None, :]) @ K                                 # (p, 4)
+        power += (d0[k] + 2.0 * np.real(np.einsum("pb,bp->p", W, QB[k]))
+                  + np.real(np.einsum("pa,ab,pb->p", W, PB[k], np.conj(W))))
+    return np.sqrt(np.maximum(power, 0.0))
+
+
+# ---------------------------------------------------------------------------------------
+# memory child
+# ---------------------------------------------------------------------------------------
+
+def _make_drive(vehicle):
+    return make_track_drive(duration_s=DRIVE_S, fs_hz=FS_HZ, seed=DRIVE_SEED,
+                            wheelbase_m=vehicle.a_m + vehicle.b_m,
+                            track_width_m=vehicle.track_front_m, name="bench track")
+
+
+def memory_child(n_setups):
+    """Read a model path from stdin, screen and score `n_setups` setups; print lines and JSON.
+
+    Started before the parent grows (see :func:`start_memory_child`): on Linux a
+    process's ``ru_maxrss`` includes the high-water mark of the process it was
+    forked from, so a child forked late would report the parent's peak.
+    """
+    from ident.model import load_model
+
+    line = sys.stdin.readline().strip()
+    if not line:
+        return  # the parent gave up
+    warnings.simplefilter("ignore")
+    model = load_model(line)
+    library = read_shock_library(LIBRARY_PATH)
+    drive = _make_drive(example_vehicle())
+    base = enumerate_setups(library, symmetry="none", max_setups=None)
+    tracemalloc.start()
+    setups = list(base)
+    rep = 1
+    while len(setups) < n_setups:
+        setups.extend(Setup(f"{s.name} #{rep}", dict(s.shocks)) for s in base)
+        rep += 1
+    del setups[n_setups:]
+    held = tracemalloc.get_traced_memory()[0]
+    tracemalloc.stop()
+    rss0 = _maxrss_bytes()
+    baseline = "/".join(["B20"] * 4)
+    print(f"memory: {len(setups):,} setups: the {len(base):,} every-corner-free setups and "
+          f"renamed copies ({rep} rounds, the last cut); the copies hold {_mib(held):.0f} MiB "
+          "(traced)")
+    gc.collect()
+    tracemalloc.start()
+    try:
+        t0 = time.perf_counter()
+        screened = screen_setups(model, drive, setups, library)
+        scores = score_setups(screened.table, default_objective(), baseline=baseline)
+        elapsed = time.perf_counter() - t0
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    rss = _maxrss_bytes()
+    n_feasible = int(scores.table["feasible"].sum())
+    print(f"memory: screen_setups + score_setups (identified model as given, baseline "
+          f"{baseline!r}) of {len(setups):,} setups: tracemalloc peak {_mib(peak):.0f} MiB "
+          f"({elapsed:.1f} s under tracemalloc, not a timing figure; {_load()}; "
+          f"{n_feasible:,} feasible)")
+    print(f"memory: child process ru_maxrss {_mib(rss):.0f} MiB (imports, model, drive, setups "
+          f"and the screening + scoring; before screening: {_mib(rss0):.0f} MiB)")
+    print(json.dumps({"peak": peak, "rss": rss, "n": len(setups)}))
+
+
+def start_memory_child(n_setups):
+    """Start the memory child now, while this process is small; it waits for a model path."""
+    return subprocess.Popen([sys.executable, __file__, "--memory-child",
+                             "--memory-setups", str(n_setups)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def run_memory_child(proc, model):
+    """Hand `model` (saved to a temporary file) to the waiting child; print its lines."""
+    with tempfile.TemporaryDirectory(prefix="bench_planner_") as tmp:
+        path = Path(tmp) / "model.npz"
+        model.save(path)
+        out, err = proc.communicate(str(path) + "\n")
+    if proc.returncode != 0:
+        print(out, end="")
+        print(err, end="", file=sys.stderr)
+        raise RuntimeError("the memory child process failed")
+    lines = out.strip().splitlines()
+    for line in lines[:-1]:
+        print(line)
+    return json.loads(lines[-1])
+
+
+# ---------------------------------------------------------------------------------------
+# per model
+# ---------------------------------------------------------------------------------------
+
+def bench_time_domain(label, model, drive, setups, library, args):
+    """Time-domain throughput, accuracy vs oversample 16, and the solve_ivp reference."""
+    t0 = time.perf_counter()
+    plant = as_loop_plant(model)
+    t_plant = time.perf_counter() - t0
+    rates, prebuilt, tables = {}, {}, {}
+    for ov in OVERSAMPLES:
+        times, loads, pred = _time(lambda: predict_setups(model, drive, setups, library,
+                                                          oversample=ov), args.repeat)
+        rates[ov] = _rate_line(f"time domain [{label}]: predict_setups, model as given, "
+                               f"oversample {ov}", len(setups), times, loads)
+        times, loads, pred = _time(lambda: predict_setups(plant, drive, setups, library,
+                                                          oversample=ov), args.repeat)
+        prebuilt[ov] = _rate_line(f"time domain [{label}]: predict_setups, prebuilt LoopPlant, "
+                                  f"oversample {ov}", len(setups), times, loads)
+        tables[ov] = pred.table
+    with threadpool_limits(1):
+        t0 = time.perf_counter()
+        as_loop_plant(model)
+        t_plant_1 = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rig_response(plant, drive, oversample=OVERSAMPLE_DEFAULT)
+    t_rig = time.perf_counter() - t0
+    print(f"time domain [{label}]: setup-independent work in every call: model -> LoopPlant "
+          f"{t_plant:.2f} s (with BLAS limited to 1 thread: {t_plant_1:.2f} s), rig_response "
+          f"(oversample {OVERSAMPLE_DEFAULT}) {t_rig:.2f} s ({_load()}); plant: "
+          f"{plant.shock.n_states} shock-loop modes, {plant.rig.n_states} rig modes")
+    print(f"memory: this process's ru_maxrss after the timed predictions [{label}]: "
+          f"{_mib(_maxrss_bytes()):.0f} MiB (high-water mark since the start, identification "
+          "included)")
+
+    # accuracy against oversample 16
+    idx = _spread_idx(len(setups), args.accuracy_setups)
+    few = [setups[i] for i in idx]
+    fine = predict_setups(plant, drive, few, library, oversample=OVERSAMPLE_FINE).table
+    print(f"memory: this process's ru_maxrss after predicting {len(few)} setups at oversample "
+          f"{OVERSAMPLE_FINE} [{label}]: {_mib(_maxrss_bytes()):.0f} MiB")
+    metrics = [c for c in fine.columns if c not in CORNERS]
+    ref = fine[metrics].to_numpy(dtype=float)
+    for ov in OVERSAMPLES:
+        got = tables[ov].loc[[s.name for s in few], metrics].to_numpy(dtype=float)
+        err = np.abs(got - ref) / np.abs(ref)
+        print(f"accuracy [{label}]: oversample {ov} vs {OVERSAMPLE_FINE}, {len(few)} setups x "
+              f"{len(metrics)} metrics: max relative difference {100 * err.max():.3f} %, "
+              f"median {100 * np.median(err):.4f} %")
+
+    # reference: solve_ivp, one setup at a time, on a segment
+    seg = drive_segment(drive, args.ref_seconds)
+    v_rig, y_rig, fs_fine = rig_part(plant, seg, OVERSAMPLE_FINE)
+    ref_times, worst = [], 0.0
+    for i in _spread_idx(len(setups), args.ref_setups, skip_ends=True):
+        s = setups[i]
+        shocks = s.resolve(library)
+        # loose first pass: each state's size, for the absolute tolerance
+        _, _, _, rms = reference_closed_loop(plant, shocks, v_rig, y_rig, fs_fine, seg.fs_hz,
+                                             rtol=SCALE_PASS_RTOL, atol=1e-12)
+        atol = REF_ATOL_OF_RMS * np.maximum(rms, 1e-6 * max(rms.max(), 1e-30))
+        el, nfev, y, _ = reference_closed_loop(plant, shocks, v_rig, y_rig, fs_fine, seg.fs_hz,
+                                               rtol=REF_RTOL, atol=atol)
+        ref_times.append(el)
+        print(f"reference [{label}]: solve_ivp RK45 rtol={REF_RTOL:g}, setup {s.name!r}, "
+              f"{args.ref_seconds:g} s of drive: {el:.2f} s ({nfev} RHS evaluations; {_load()})")
+        eng = simulate(plant, seg, shocks, oversample=OVERSAMPLE_FINE)
+        for ch in COMPARED:
+            o = plant.output_names.index(ch)
+            worst = max(worst, rel_rms(eng.channels[ch], y[o]))
+    per_setup_ref = statistics.mean(ref_times) * DRIVE_S / args.ref_seconds
+    ref_rate = 1.0 / per_setup_ref
+    print(f"reference [{label}]: scaled to {DRIVE_S:g} s: {per_setup_ref:.1f} s per setup = "
+          f"{ref_rate:.4f} setups/s (the shared rig contribution not charged)")
+    for ov in OVERSAMPLES:
+        print(f"ratio engine / reference throughput [{label}], oversample {ov}: "
+              f"{rates[ov] / ref_rate:,.0f}x (prebuilt LoopPlant: {prebuilt[ov] / ref_rate:,.0f}x)")
+    print(f"reference [{label}]: engine (oversample {OVERSAMPLE_FINE}) vs reference on the "
+          f"segment, largest relative RMS difference over {list(COMPARED)}: {100 * worst:.3f} %")
+    return rates, plant
+
+
+def bench_screening(label, model, plant, drive, sym, free, library, args):
+    """Screening throughput (model as given and prebuilt plant) and the numpy reference."""
+    rate = {}
+    for what, m in (("model as given", model), ("prebuilt LoopPlant", plant)):
+        for name, ss in (("symmetric", sym), ("every corner free", free)):
+            times, loads, out = _time(lambda: screen_setups(m, drive, ss, library), args.repeat)
+            rate[(what, name)] = _rate_line(f"screening [{label}]: {name}, {what}", len(ss),
+                                            times, loads)
+    engine = out.table  # prebuilt plant, every corner free
+    pre = screening_inputs(plant, drive)
+    idx = _spread_idx(len(free), args.ref_screen_setups)
+    t0 = time.perf_counter()
+    ref = np.array([screen_reference_one(free[i].resolve(library), pre) for i in idx])
+    el = time.perf_counter() - t0
+    ref_rate = len(idx) / el
+    print(f"reference [{label}]: numpy screening, {len(idx)} setups one by one, "
+          f"{pre['w'].size} bands: {el:.2f} s = {ref_rate:.1f} setups/s ({_load()})")
+    got = engine.iloc[idx][pre["names"]].to_numpy(dtype=float)
+    diff = float(np.max(np.abs(got - ref) / np.abs(ref)))
+    print(f"reference [{label}]: engine vs numpy screening metrics, largest relative "
+          f"difference: {diff:.2e}")
+    key = ("model as given", "every corner free")
+    print(f"ratio engine / reference screening throughput [{label}] (every corner free, model as "
+          f"given): {rate[key] / ref_rate:,.0f}x; with a prebuilt LoopPlant: "
+          f"{rate[('prebuilt LoopPlant', 'every corner free')] / ref_rate:,.0f}x")
+    return rate[key]
+
+
+# ---------------------------------------------------------------------------------------
+# main
+# ---------------------------------------------------------------------------------------
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--repeat", type=int, default=2,
+                        help="timed calls of each prediction and screening (default 2)")
+    parser.add_argument("--ref-seconds", type=float, default=10.0,
+                        help="seconds of drive the solve_ivp reference integrates (default 10)")
+    parser.add_argument("--ref-setups", type=int, default=2,
+                        help="setups the solve_ivp reference runs, per model (default 2)")
+    parser.add_argument("--ref-screen-setups", type=int, default=20,
+                        help="setups the numpy screening reference runs, per model (default 20)")
+    parser.add_argument("--accuracy-setups", type=int, default=4,
+                        help="setups compared with oversample 16 (default 4)")
+    parser.add_argument("--memory-setups", type=int, default=100_000,
+                        help="setups screened and scored for the memory figure (default 100000)")
+    parser.add_argument("--memory-child", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.memory_child:
+        memory_child(args.memory_setups)
+        return
+    for name in ("repeat", "ref_setups", "ref_screen_setups", "accuracy_setups",
+                 "memory_setups"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name.replace('_', '-')} must be >= 1")
+    if not 0 < args.ref_seconds <= DRIVE_S:
+        parser.error(f"--ref-seconds must be in (0, {DRIVE_S:g}]")
+
+    child = start_memory_child(args.memory_setups)  # before this process grows
+    try:
+        _main(args, child)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+
+
+def _main(args, child):
+    print(f"engine version: {_engine_version()}")
+    print(f"machine: {os.cpu_count()} CPUs, 1-min load average before the run: "
+          f"{os.getloadavg()[0]:.2f} (timings are only comparable on an idle machine)")
+    vehicle = example_vehicle()
+    library = read_shock_library(LIBRARY_PATH)
+    drive = _make_drive(vehicle)
+    sym = list(enumerate_setups(library))
+    free = list(enumerate_setups(library, symmetry="none", max_setups=None))
+    print(f"inputs: {len(library)} shocks ({LIBRARY_PATH.relative_to(ROOT)}); drive "
+          f"make_track_drive {DRIVE_S:g} s at {FS_HZ:g} Hz, seed {DRIVE_SEED}; "
+          f"{len(sym)} symmetric setups, {len(free):,} every-corner-free setups "
+          "(the crate's inventory respected)")
+
+    # the models (not timed)
+    from ident.model import identify_session
+    from ident.rig import simulate_session
+
+    car = build_full_car(vehicle)
+    # warm-up before the virtual rig below, which runs the same compiled shock loop
+    t0 = time.perf_counter()
+    predict_setups(car, drive, sym[:2], library, oversample=OVERSAMPLES[0])
+    print(f"warm-up: first predict_setups call, 2 setups (numba {_jit_source()}): "
+          f"{time.perf_counter() - t0:.2f} s")
+    t0 = time.perf_counter()
+    screen_setups(car, drive, sym[:2], library)
+    print(f"warm-up: first screen_setups call, 2 setups (numba cache load or compile): "
+          f"{time.perf_counter() - t0:.2f} s")
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        identified = identify_session(simulate_session())
+    gc.collect()
+    print(f"models: known paper car (build_full_car); identified model from the paper session "
+          f"(simulate_session + identify_session, {time.perf_counter() - t0:.0f} s, NOT timed)")
+
+    models = (("known car", car), ("identified", identified))
+    td_rate, sc_rate = {}, {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for label, model in models:
+            rates, plant = bench_time_domain(label, model, drive, sym, library, args)
+            td_rate[label] = rates[OVERSAMPLE_DEFAULT]
+            sc_rate[label] = bench_screening(label, model, plant, drive, sym, free, library, args)
+            del plant
+            gc.collect()
+
+    mem = run_memory_child(child, identified)
+
+    for label, _ in models:
+        r = td_rate[label]
+        print(f"target: time-domain prediction >= {TARGET_TIME_SETUPS_S:g} setups/s [{label}, "
+              f"oversample {OVERSAMPLE_DEFAULT}]: {r:,.1f} setups/s: "
+              f"{'PASS' if r >= TARGET_TIME_SETUPS_S else 'FAIL'}")
+    for label, _ in models:
+        r = sc_rate[label]
+        print(f"target: screening >= {TARGET_SCREEN_SETUPS_S:,.0f} setups/s [{label}, "
+              f"{len(free):,} setups, model as given]: {r:,.0f} setups/s: "
+              f"{'PASS' if r >= TARGET_SCREEN_SETUPS_S else 'FAIL'}")
+    worst = max(mem["rss"], mem["peak"])
+    print(f"target: peak memory of screening + scoring {mem['n']:,} setups < "
+          f"{_mib(TARGET_MEMORY_BYTES) / 1024:g} GB (child ru_maxrss {_mib(mem['rss']):.0f} MiB, "
+          f"tracemalloc peak {_mib(mem['peak']):.0f} MiB; {_load()} at the end): "
+          f"{'PASS' if worst < TARGET_MEMORY_BYTES else 'FAIL'}")
+
+
+if __name__ == "__main__":
+    main()
