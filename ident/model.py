@@ -190,15 +190,16 @@ class VehicleModel:
 
         from ident.closedloop import LoopPlant
 
-        if reduce_rtol in self._plants:  # built once per model and bound (frozen model)
-            return self._plants[reduce_rtol]
+        cache = self.__dict__.setdefault("_plants", {})  # built once per model and bound
+        if reduce_rtol in cache:
+            return cache[reduce_rtol]
         rig = self.pair_modal(range(7)).pruned()
         shock = self.pair_modal(range(7, 11)).pruned()
         if reduce_rtol is not None and shock.n_states > 0:
             with threadpool_limits(1):  # small dense algebra; threads only contend here
                 shock = balanced_reduce(shock, rtol=reduce_rtol)
         plant = LoopPlant(rig, shock, tuple(self.output_names), self.cbar_n_s_m, name=self.name)
-        self._plants[reduce_rtol] = plant
+        cache[reduce_rtol] = plant
         return plant
 
     def to_control(self, *, inputs=None):
