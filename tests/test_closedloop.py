@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from scipy import integrate, signal
 
-from ident.channels import CORNERS, RIG_INPUTS
+from ident.channels import RIG_INPUTS
 from ident.closedloop import (foh_coefficients, lag_coefficients, modal_form, rig_response,
                               simulate, simulate_batch)
-from ident.drive import Drive, make_noise_drive
+from ident.drive import make_noise_drive
 from ident.shocks import DigressiveShock, LinearShock, TableShock
 from ident.units import to_si
 from ident.vehicle import close_shock_loop

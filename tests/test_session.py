@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import inspect
-import re
 import shutil
 import tomllib
 from pathlib import Path
@@ -594,12 +592,3 @@ def test_run_names_are_made_safe_file_names(rng, shocks, tmp_path):
 # documentation
 # --------------------------------------------------------------------------------------
 
-
-@pytest.mark.parametrize("name", session_mod.__all__)
-def test_public_names_are_documented(name):
-    obj = getattr(session_mod, name)
-    if inspect.isfunction(obj) or inspect.isclass(obj):
-        doc = inspect.getdoc(obj)
-        assert doc and len(doc) > 40, f"{name} needs a docstring"
-        if inspect.isfunction(obj) and name.startswith(("read_", "write_", "make_")):
-            assert re.search(r"^Raises\n-+", doc, re.M), f"{name}: no Raises section"

@@ -3,7 +3,6 @@
 import copy
 import dataclasses
 import doctest
-import inspect
 import pickle
 import re
 from itertools import product
@@ -410,16 +409,6 @@ def test_missing_setups_file_raises(tmp_path):
 
 
 # ---------------------------------------------------------------- documentation
-
-
-def test_every_public_name_is_documented():
-    for name in setups_mod.__all__:
-        obj = getattr(setups_mod, name)
-        if inspect.isclass(obj) or inspect.isfunction(obj):
-            assert inspect.getdoc(obj), name
-            for meth_name, meth in inspect.getmembers(obj, inspect.isfunction):
-                if not meth_name.startswith("_"):
-                    assert inspect.getdoc(meth), f"{name}.{meth_name}"
 
 
 def test_docstring_examples_run():
