@@ -53,9 +53,7 @@ from __future__ import annotations
 import argparse
 import gc
 import os
-import resource
 import statistics
-import subprocess
 import sys
 import time
 import tracemalloc
@@ -73,6 +71,8 @@ from ident.condition import condition_frf  # noqa: E402
 from ident.frf import estimate_frf  # noqa: E402
 from ident.model import fit_model, identify_session  # noqa: E402
 from ident.rig import simulate_session  # noqa: E402
+from _common import engine_version as _engine_version  # noqa: E402
+from _common import load as _load, maxrss_mib as _maxrss_mib, mib as _mib  # noqa: E402
 
 #: The issue's target for ``identify_session`` on the paper session [s].
 TARGET_S = 20.0
@@ -83,29 +83,12 @@ REF_OUTPUTS = ("shock_velocity_LF", "tire_force_LF", "ride_height_LF", "ride_hei
 COMPARE_BAND_HZ = (0.5, 20.0)
 
 
-def _mib(n_bytes):
-    return n_bytes / 2**20
 
 
-def _load():
-    return f"1-min load {os.getloadavg()[0]:.2f}"
 
 
-def _maxrss_mib():
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def _engine_version():
-    """The repository's commit, flagged if ident/ has uncommitted changes."""
-    repo = Path(__file__).resolve().parents[1]
-    try:
-        head = subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"],
-                              capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(repo), "status", "--porcelain", "ident"],
-                               capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown (not a git checkout)"
-    return head + (" + uncommitted changes in ident/" if dirty else "")
 
 
 class _Caught:

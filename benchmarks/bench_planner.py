@@ -103,15 +103,18 @@ from threadpoolctl import threadpool_limits
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ident.channels import CORNERS, RIG_INPUTS  # noqa: E402
+from ident.channels import CORNERS  # noqa: E402
 from ident.closedloop import rig_response, simulate  # noqa: E402
-from ident.drive import Drive, make_track_drive  # noqa: E402
+from ident.drive import make_track_drive  # noqa: E402
 from ident.shocks import read_shock_library  # noqa: E402
 from ident.vehicle import build_full_car, example_vehicle  # noqa: E402
 from planner.objective import default_objective, score_setups  # noqa: E402
 from planner.predict import as_loop_plant, predict_setups  # noqa: E402
 from planner.screen import drive_spectrum, metric_rows, screen_setups  # noqa: E402
 from planner.setups import Setup, enumerate_setups  # noqa: E402
+from _common import drive_segment, rel_rms  # noqa: E402
+from _common import engine_version as _engine_version  # noqa: E402
+from _common import jit_source as _jit_source, load as _load, mib as _mib  # noqa: E402
 
 LIBRARY_PATH = ROOT / "planner" / "data" / "library.toml"
 DRIVE_S = 120.0
@@ -139,41 +142,16 @@ MAX_ITER = 30
 TOL = 1e-5
 
 
-def _mib(n_bytes):
-    return n_bytes / 2**20
 
 
-def _load():
-    return f"1-min load {os.getloadavg()[0]:.2f}"
 
 
 def _maxrss_bytes():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
-def _engine_version():
-    """The repository's commit, flagged if ident/ or planner/ have uncommitted changes."""
-    try:
-        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
-                              capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "ident",
-                                "planner"], capture_output=True, text=True,
-                               check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown (not a git checkout)"
-    return head + (" + uncommitted changes in ident/ or planner/" if dirty else "")
 
 
-def _jit_source():
-    """How the compiled shock loop was obtained: "compile", "cache load" or "unknown"."""
-    from ident import closedloop
-
-    stats = getattr(getattr(closedloop, "_loop_batch", None), "stats", None)
-    if stats is None:
-        return "unknown"
-    if sum(stats.cache_misses.values()):
-        return "compile"
-    return "cache load" if sum(stats.cache_hits.values()) else "unknown"
 
 
 def _time(fn, repeat):
@@ -206,14 +184,6 @@ def _spread_idx(n_items, k, *, skip_ends=False):
     return np.unique(np.linspace(0, n_items - 1, k).round().astype(int)).tolist()
 
 
-def drive_segment(drive, duration_s):
-    """The first `duration_s` of a drive (``round(duration_s * fs) + 1`` samples)."""
-    n = int(round(duration_s * drive.fs_hz)) + 1
-    if n > drive.n_samples:
-        raise ValueError(f"--ref-seconds {duration_s} is longer than the drive "
-                         f"({drive.duration_s:g} s); give a shorter segment")
-    return Drive(name=f"{drive.name} [0, {duration_s:g} s]", fs_hz=drive.fs_hz,
-                 channels={c: drive.channels[c][:n] for c in RIG_INPUTS})
 
 
 # ---------------------------------------------------------------------------------------
@@ -232,8 +202,6 @@ def rig_part(plant, seg, r):
     fs_fine : float
     """
     rr = rig_response(plant, seg, oversample=r)
-    mr = plant.rig
-    vi = plant.velocity_idx
     v_rig = rr.v_fine.T
     y_rig = rr.y
     return v_rig, y_rig, seg.fs_hz * r
@@ -309,9 +277,6 @@ def reference_closed_loop(plant, shocks, v_rig, y_rig, fs_fine, fs_out, *, rtol,
     return elapsed, int(sol.nfev), y, np.sqrt(np.mean(sol.y**2, axis=1))
 
 
-def rel_rms(a, b):
-    """``rms(a - b) / rms(b)``."""
-    return float(np.sqrt(np.mean((a - b) ** 2) / np.mean(b**2)))
 
 
 # ---------------------------------------------------------------------------------------

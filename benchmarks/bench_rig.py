@@ -52,7 +52,6 @@ import gc
 import os
 import resource
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -65,11 +64,13 @@ from scipy.integrate import solve_ivp
 # benchmark the working tree this script lives in, installed or not
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ident.channels import CORNERS, RIG_INPUTS  # noqa: E402
-from ident.drive import Drive  # noqa: E402
+from ident.channels import CORNERS  # noqa: E402
 from ident.rig import NOMINAL_V_RMS_M_S, default_plan, make_plan_drive, simulate_session  # noqa: E402
 from ident.session import write_session  # noqa: E402
 from ident.vehicle import build_full_car, example_vehicle  # noqa: E402
+from _common import drive_segment, rel_rms  # noqa: E402
+from _common import engine_version as _engine_version  # noqa: E402
+from _common import jit_source as _jit_source, mib as _mib  # noqa: E402
 
 #: The issue's target for the whole default plan, in memory [s].
 TARGET_S = 5.0
@@ -85,33 +86,10 @@ ACCURACY_LIMIT = 0.01
 COMPARED = ("shock_velocity_LF", "tire_force_LF", "ride_height_LF")
 
 
-def _mib(n_bytes):
-    return n_bytes / 2**20
 
 
-def _jit_source():
-    """How the first call got the compiled loop: "cache load", "compile" or "unknown"."""
-    from ident import closedloop
-
-    stats = getattr(getattr(closedloop, "_loop_batch", None), "stats", None)
-    if stats is None:
-        return "unknown"
-    if sum(stats.cache_misses.values()):
-        return "compile"
-    return "cache load" if sum(stats.cache_hits.values()) else "unknown"
 
 
-def _engine_version():
-    """The repository's commit, flagged if ident/ has uncommitted changes."""
-    repo = Path(__file__).resolve().parents[1]
-    try:
-        head = subprocess.run(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"],
-                              capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(repo), "status", "--porcelain", "ident"],
-                               capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown (not a git checkout)"
-    return head + (" + uncommitted changes in ident/" if dirty else "")
 
 
 def _run_plan():
@@ -172,14 +150,6 @@ def tracemalloc_peak():
 # 2. the reference: solve_ivp on the same continuous closed loop
 # ---------------------------------------------------------------------------------------
 
-def drive_segment(drive, duration_s):
-    """The first `duration_s` of a drive (``round(duration_s * fs) + 1`` samples)."""
-    n = int(round(duration_s * drive.fs_hz)) + 1
-    if n > drive.n_samples:
-        raise ValueError(f"--ref-seconds {duration_s} is longer than the drive "
-                         f"({drive.duration_s:g} s); give a shorter segment")
-    return Drive(name=f"{drive.name} [0, {duration_s:g} s]", fs_hz=drive.fs_hz,
-                 channels={c: drive.channels[c][:n] for c in RIG_INPUTS})
 
 
 def reference_run(model, shocks, u, fs_u_hz, fs_out_hz):
@@ -294,9 +264,6 @@ def engine_run(model, shocks, drive, oversample):
                      oversample=oversample)
 
 
-def rel_rms(a, b):
-    """``rms(a - b) / rms(b)``."""
-    return float(np.sqrt(np.mean((a - b) ** 2) / np.mean(b**2)))
 
 
 # ---------------------------------------------------------------------------------------
