@@ -10,6 +10,18 @@ Two steps, per input/output pair:
 2. The magnitude in dB and the unwrapped phase are smoothed by a zero-phase
    Butterworth low-pass along the frequency axis that removes variations of
    ``smooth_width_hz`` or less (the paper: 4th order, 0.6 Hz, ``filtfilt``).
+   Smoothing is there to remove random error, so it is held to the
+   estimate's own uncertainty: with the standard error ``sigma`` of each
+   estimate (from its partial coherence and number of averages, as
+   :mod:`ident.frf` reports them) and ``d`` the distance between the smoothed
+   and the unsmoothed estimate, the result is ``H + w (H_s - H)`` with
+   ``w = 1 / (1 + (d / (k sigma))^2)``, ``k = smooth_tolerance``. It never
+   moves an estimate by more than ``k sigma / 2``: noisy estimates are smoothed
+   fully, while a notch or a sharp peak that the data resolve (a low-noise
+   estimate the smoothing would flatten) is kept. ``smooth_tolerance=None``
+   smooths unconditionally, as the paper does; on the paper's noise-free
+   experiment that flattens notches within 40 dB of a pair's peak by several
+   dB, which the fits then reproduce.
 """
 
 from __future__ import annotations
@@ -22,9 +34,12 @@ from scipy import signal
 
 from ident.frf import Frf
 
-__all__ = ["condition_frf", "residual_fit"]
+__all__ = ["condition_frf", "residual_fit", "frf_standard_error", "SMOOTH_TOLERANCE"]
 
 log = logging.getLogger(__name__)
+
+#: Default ``smooth_tolerance``: smoothing moves an estimate by at most one standard error.
+SMOOTH_TOLERANCE = 2.0
 
 #: Largest |N| accepted for a residual fit (a 4-pole roll-off); steeper fits are clipped.
 MAX_RESIDUAL_ORDER = 4.0
@@ -76,6 +91,40 @@ def residual_fit(f_hz, h, weight=None, *, n_range=(-MAX_RESIDUAL_ORDER, MAX_RESI
     return float(np.exp(lnK)), phi, N
 
 
+def frf_standard_error(frf):
+    """Standard error of each FRF estimate (complex) from its partial coherence.
+
+    ``sigma = |H| sqrt((1 - gamma2) / (gamma2 nu))`` with ``nu = n_averages -
+    n_in`` (the multi-input H1 random error; for the LPM exactly its
+    least-squares standard error, see :mod:`ident.frf`).
+
+    Parameters
+    ----------
+    frf : Frf
+
+    Returns
+    -------
+    ndarray, shape (n_out, n_in, n_f)
+        In the units of ``frf.H``; ``inf`` where the coherence is 0.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from ident.frf import frf_from_arrays
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal((20000, 1))
+    >>> frf = frf_from_arrays(u, 2 * u + 0.2 * rng.standard_normal((20000, 1)), fs=100.0,
+    ...                       nperseg=256, estimator="welch")
+    >>> bool(np.median(frf_standard_error(frf)) < 0.02)
+    True
+    """
+    nu = max(int(frf.n_averages) - len(frf.input_names), 1)
+    g2 = np.clip(frf.partial_coherence, 0.0, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.sqrt((1.0 - g2) / (g2 * nu))
+    return np.where(g2 > 0, np.abs(frf.H) * rel, np.inf)
+
+
 def _good_span(good, run):
     """First and last index of the span whose ends start/finish `run` consecutive good points."""
     n = good.size
@@ -91,7 +140,7 @@ def _good_span(good, run):
 
 def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_window_hz=1.0,
                   min_good_hz=0.2, min_span_ratio=4.0, smooth_width_hz=0.6, smooth_order=4,
-                  residual=True, smooth=True):
+                  smooth_tolerance=SMOOTH_TOLERANCE, residual=True, smooth=True):
     """Condition an estimated FRF for the parametric fit.
 
     Parameters
@@ -118,6 +167,10 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         (paper: 0.6).
     smooth_order : int
         Order of the Butterworth smoothing filter (paper: 4).
+    smooth_tolerance : float or None
+        Largest departure of the smoothed from the unsmoothed estimate, in
+        standard errors of the estimate, doubled (module notes): default
+        :data:`SMOOTH_TOLERANCE`; None smooths unconditionally (the paper).
     residual, smooth : bool
         Turn either step off.
 
@@ -139,6 +192,12 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         raise TypeError(f"condition_frf needs an Frf, got {type(frf).__name__}")
     if not 0 < coherence_min < 1:
         raise ValueError(f"coherence_min must be in (0, 1), got {coherence_min!r}")
+    if smooth_tolerance is not None and not (
+            isinstance(smooth_tolerance, (int, float, np.integer, np.floating))
+            and not isinstance(smooth_tolerance, bool)
+            and np.isfinite(smooth_tolerance) and smooth_tolerance > 0):
+        raise ValueError(f"smooth_tolerance must be a positive number or None, got "
+                         f"{smooth_tolerance!r}")
     f = frf.f_hz
     df = f[1] - f[0]
     lo_b, hi_b = band_hz
@@ -192,7 +251,18 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         ph = np.unwrap(np.angle(H), axis=-1)
         mag = signal.sosfiltfilt(sos, mag, axis=-1)
         ph = signal.sosfiltfilt(sos, ph, axis=-1)
-        H = 10 ** (mag / 20) * np.exp(1j * ph)
+        Hs = 10 ** (mag / 20) * np.exp(1j * ph)
+        if smooth_tolerance is None:
+            H = Hs
+        else:
+            # hold the smoothing to the estimate's uncertainty (module notes); the residual
+            # fits' frequencies are smoothed fully (they have no standard error of their own)
+            sigma = np.where(replaced, np.inf, frf_standard_error(frf) * (np.abs(H) > 0))
+            d = np.abs(Hs - H)
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                ratio = np.where(d > 0, d / (smooth_tolerance * sigma), 0.0)
+                w = 1.0 / (1.0 + np.minimum(np.nan_to_num(ratio, nan=0.0), 1e150) ** 2)
+            H = H + w * (Hs - H)
     if poor_pairs:
         log.info("%d input/output pairs have no span of coherence >= %g; kept smoothed",
                  len(poor_pairs), coherence_min)
@@ -202,6 +272,7 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         "residual_window_hz": residual_window_hz, "min_good_hz": min_good_hz,
         "min_span_ratio": min_span_ratio,
         "smooth_width_hz": smooth_width_hz, "smooth_order": smooth_order,
+        "smooth_tolerance": smooth_tolerance,
         "residual": residual, "smooth": smooth, "poor_pairs": poor_pairs}
     return dataclasses.replace(frf, H=H, H_raw=frf.H if frf.H_raw is None else frf.H_raw,
                                replaced=replaced, settings=settings)

@@ -274,6 +274,41 @@ def make_plan_drive(plan, vehicle, *, seed, duration_s, name=None):
                                 track_width_m=vehicle.track_front_m, name=name)
 
 
+def _fine_drive(drive, r):
+    """The drive interpolated band-limited onto the simulation grid (``r`` steps per sample)."""
+    from ident.closedloop import _refine
+    from ident.drive import Drive
+
+    u = _refine(drive.as_array(), r)
+    return Drive(name=drive.name, fs_hz=drive.fs_hz * r,
+                 channels={c: u[:, j] for j, c in enumerate(RIG_INPUTS)},
+                 settings=dict(drive.settings, refined_by=r))
+
+
+def _daq_sample(channels, r, n_samples):
+    """Sample simulation-grid signals as a rig's data acquisition does.
+
+    Every channel passes the same zero-phase anti-aliasing low-pass
+    (:func:`ident.drive.resample_bandlimited`, flat to 1e-5 up to 0.8 of the
+    output Nyquist frequency, below -80 dB above 1.2 of it) before it is
+    decimated by ``r``. The nonlinear shock forces have content above the
+    Nyquist frequency; sampled without the filter it folds into the band,
+    acts like input noise on ``dF`` and biases the identified FRFs. The
+    common filter cancels in every input/output relation.
+    """
+    from ident.drive import _FIR_HALF_LENGTH, resample_bandlimited
+
+    names = list(channels)
+    x = np.stack([np.asarray(channels[c], dtype=float) for c in names], axis=1)
+    if r == 1:
+        out = x
+    else:
+        pad = (_FIR_HALF_LENGTH + 1) * r
+        x = np.pad(x, ((pad, pad), (0, 0)), mode="edge")
+        out = resample_bandlimited(x, 1, r, axis=0)[pad // r: pad // r + n_samples]
+    return {c: np.ascontiguousarray(out[:, j]) for j, c in enumerate(names)}
+
+
 def _loop_damping(models):
     """Baseline damping per corner: each shock's equivalent damping at a nominal velocity."""
     return np.array([float(m.equivalent_damping(NOMINAL_V_RMS_M_S)) for m in models])
@@ -306,7 +341,7 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
     vehicle = example_vehicle() if vehicle is None else vehicle
     model = build_full_car(vehicle)
     runs = []
-    drives = {}
+    drives, fine_drives = {}, {}
     iterator = plan.runs
     if progress:
         from tqdm.auto import tqdm
@@ -320,11 +355,17 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
         drive = drives[key]
         models = [plan.shocks[pr.setup[c]] for c in CORNERS]
         plant = model.loop_plant(_loop_damping(models))
-        resp = simulate(plant, drive, models, oversample=plan.oversample)
+        fine = fine_drives.get(key)
+        if fine is None:
+            fine = fine_drives[key] = _fine_drive(drive, plan.oversample)
+        resp = simulate(plant, fine, models, oversample=1)
+        # the rig inputs are recorded as commanded (the drive file's samples: in band the
+        # acquisition filter passes them to 1e-5)
+        sampled = _daq_sample(resp.channels, plan.oversample, drive.n_samples)
         channels = dict(drive.channels)
         rng = np.random.default_rng([pr.seed, i, 7])
-        for name, y in resp.channels.items():
-            y = np.asarray(y, dtype=float)
+        for name in resp.channels:
+            y = sampled[name]
             if plan.noise > 0:
                 y = y + rng.standard_normal(y.shape) * plan.noise * np.std(y)
             channels[name] = y

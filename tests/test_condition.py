@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ident.condition import condition_frf, residual_fit
+from ident.condition import SMOOTH_TOLERANCE, condition_frf, frf_standard_error, residual_fit
 from ident.frf import Frf
 
 
@@ -50,6 +50,56 @@ def test_conditioning_replaces_poor_ends_and_smooths(rng):
     assert abs(c.H[0, 0, k40]) < 0.5 * abs(c.H[0, 0, k20])
 
 
+NOTCH_DB_TOL = 1.0  # a resolved notch kept through smoothing (issue 3's 1 dB criterion)
+N_AVG = 40  # the paper's 40 averages
+
+
+def _notch_frf(rng, coherence):
+    """A lightly damped notch at 8 Hz (55 dB below the peak) on a 4 Hz resonance, with random error
+    exactly as large as the coherence says (one input)."""
+    f = np.arange(2049) * 100 / 4096
+    s = 2j * np.pi * f
+    wn, wz = 2 * np.pi * 4.0, 2 * np.pi * 8.0
+    h = (s**2 + 2 * 0.005 * wz * s + wz**2) / (s**2 + 2 * 0.2 * wn * s + wn**2) * (wn / wz) ** 2
+    coh = np.full((1, 1, f.size), coherence)
+    frf = Frf(f_hz=f, H=h[None, None, :], input_names=("u",), output_names=("y",),
+              multiple_coherence=coh[:, 0], partial_coherence=coh,
+              input_condition=np.ones(f.size), independent_fraction=np.ones((1, f.size)),
+              flagged=np.zeros((1, f.size), bool), n_averages=N_AVG, cbar_n_s_m=np.zeros(4),
+              fs_hz=100.0)
+    sigma = frf_standard_error(frf)
+    noise = sigma * (rng.standard_normal(h.shape) + 1j * rng.standard_normal(h.shape)) / np.sqrt(2)
+    return dataclasses.replace(frf, H=frf.H + noise), h
+
+
+def test_smoothing_keeps_resolved_structure(rng):
+    """Smoothing is held to the estimate's standard error: a well-resolved notch survives,
+    the paper's unconditional smoothing flattens it."""
+    frf, h = _notch_frf(rng, 0.9999)
+    f = frf.f_hz
+    k = np.argmin(np.abs(h[f < 20]))
+    assert f[k] == pytest.approx(8.0, abs=0.05)
+    kept = condition_frf(frf, residual=False)
+    paper = condition_frf(frf, residual=False, smooth_tolerance=None)
+    err = lambda c: abs(20 * np.log10(abs(c.H[0, 0, k]) / abs(h[k])))  # noqa: E731
+    assert err(kept) < NOTCH_DB_TOL < 3 * NOTCH_DB_TOL < err(paper)
+    # never moved by more than smooth_tolerance / 2 standard errors
+    moved = np.abs(kept.H - frf.H) / frf_standard_error(frf)
+    assert moved.max() <= SMOOTH_TOLERANCE / 2 * (1 + 1e-9)
+    assert kept.settings["conditioning"]["smooth_tolerance"] == SMOOTH_TOLERANCE
+
+
+def test_smoothing_removes_random_error(rng):
+    """Where the estimate is noisy (coherence 0.5) the smoothing is (almost) the paper's."""
+    frf, h = _notch_frf(rng, 0.5)
+    band = (frf.f_hz > 1) & (frf.f_hz < 20)
+    c = condition_frf(frf, residual=False)
+    paper = condition_frf(frf, residual=False, smooth_tolerance=None)
+    raw = np.median(np.abs(frf.H[0, 0, band] / h[band] - 1))
+    assert np.median(np.abs(c.H[0, 0, band] / h[band] - 1)) < 0.5 * raw
+    assert np.median(np.abs(c.H[0, 0, band] / paper.H[0, 0, band] - 1)) < 0.2 * raw
+
+
 def test_conditioning_options():
     frf, _ = _synthetic_frf(np.random.default_rng(0))
     off = condition_frf(frf, residual=False, smooth=False)
@@ -60,4 +110,7 @@ def test_conditioning_options():
         condition_frf(np.zeros(3))
     with pytest.raises(ValueError, match="smooth_width_hz"):
         condition_frf(frf, smooth_width_hz=0.01)
+    for bad in (0.0, -1.0, np.nan, "2"):
+        with pytest.raises(ValueError, match="smooth_tolerance"):
+            condition_frf(frf, smooth_tolerance=bad)
     assert dataclasses.is_dataclass(off)

@@ -11,6 +11,9 @@ from ident.errors import IdentificationError
 from ident.frf import MODEL_INPUTS, block_spectra, default_nperseg, estimate_frf, frf_from_arrays
 
 DB_STRONG = 0.5  # raw H1 on strong, coherent pairs (partial coherence > 0.99): leakage only
+DB_TOL, DEG_TOL = 1.0, 5.0  # issue 3: identified vs true closed-loop FRF
+PEAK_RANGE = 0.01  # issue 3: checked where the true magnitude is within 40 dB of the pair's peak
+BAND_HZ = (0.5, 20.0)  # issue 3's band
 ATOL_FIR = 3e-3  # transient leakage of a 3-tap memory into 1024-sample Hamming blocks
 
 
@@ -35,22 +38,45 @@ def test_block_spectra_checks():
     assert default_nperseg(80000) == 4096
 
 
-def test_paper_session_strong_pairs_match_truth(paper_session, paper_model):
+def _truth_errors(frf, paper_model, band=BAND_HZ):
+    """dB and degree errors of an estimate vs the true closed-loop FRF, and the strong mask.
+
+    Strong: the true magnitude is within 40 dB of that pair's peak in the band.
+    """
+    Ht = paper_model.frequency_response(frf.f_hz, damping_n_s_m=frf.cbar_n_s_m)
+    Ht = Ht[[paper_model.output_names.index(o) for o in frf.output_names]]
+    sel = (frf.f_hz >= band[0]) & (frf.f_hz <= band[1])
+    ht, h = Ht[:, :, sel], frf.H[:, :, sel]
+    strong = np.abs(ht) >= PEAK_RANGE * np.abs(ht).max(axis=-1, keepdims=True)
+    err_db = np.abs(20 * np.log10(np.abs(h) / np.abs(ht)))
+    err_deg = np.abs(np.angle(h / ht, deg=True))
+    return err_db, err_deg, strong, sel
+
+
+def test_paper_session_matches_truth(paper_session, paper_model):
+    """Issue criterion: on the paper's experiment, every input/output pair of the identified
+    FRF is within 1 dB and 5 deg of the true closed-loop FRF wherever the true magnitude is
+    within 40 dB of the pair's peak, 0.5-20 Hz (default estimator, raw)."""
     frf = estimate_frf(paper_session)
     assert frf.input_names == MODEL_INPUTS
     np.testing.assert_allclose(frf.cbar_n_s_m, paper_session.shocks["B20"].c_n_s_m, rtol=1e-12)
-    Ht = paper_model.frequency_response(frf.f_hz, damping_n_s_m=frf.cbar_n_s_m)
-    band = (frf.f_hz >= 0.5) & (frf.f_hz <= 20)
-    checked = 0
-    for o, name in enumerate(frf.output_names):
-        ht = Ht[paper_model.output_names.index(name)]
-        ok = (frf.partial_coherence[o] > 0.99) & band
-        err = np.abs(20 * np.log10(np.abs(frf.H[o][ok]) / np.abs(ht[ok])))
-        assert err.size == 0 or err.max() < DB_STRONG, name
-        checked += ok.sum()
-    assert checked > 0.3 * frf.H.shape[0] * frf.H.shape[1] * band.sum()
-    assert not frf.flagged[:, band].any()  # every swap run excites its dF
+    err_db, err_deg, strong, sel = _truth_errors(frf, paper_model)
+    bad = ((err_db > DB_TOL) | (err_deg > DEG_TOL)) & strong
+    failing = [(frf.output_names[o], frf.input_names[i]) for o, i in zip(*np.nonzero(bad.any(-1)))]
+    assert not failing, f"{len(failing)} of {bad.shape[0] * bad.shape[1]} pairs: {failing[:5]}"
+    assert strong.mean() > 0.5  # the criterion covers most of the band
+    assert not frf.flagged[:, sel].any()  # every swap run excites its dF
     assert frf.input_condition.shape == frf.f_hz.shape
+
+
+def test_paper_session_welch_coherent_pairs(paper_session, paper_model):
+    """The paper's Welch H1: where partial coherence > 0.99 (and within 40 dB of the peak)
+    the estimate is within 0.5 dB of the truth; leakage is its only error there."""
+    frf = estimate_frf(paper_session, estimator="welch")
+    err_db, _, strong, sel = _truth_errors(frf, paper_model)
+    ok = (frf.partial_coherence[:, :, sel] > 0.99) & strong
+    assert err_db[ok].max() < DB_STRONG
+    assert ok.sum() > 0.3 * ok.size
 
 
 def test_sequential_agrees_with_global(paper_session):

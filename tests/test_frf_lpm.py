@@ -220,5 +220,5 @@ def test_paper_session_lpm_beats_welch(paper_session, paper_model):
         deg = np.abs(np.angle(h / ht, deg=True))
         ok = np.all(((db <= 1) & (deg <= 5)) | ~strong, axis=-1)
         counts[est] = int(ok.sum())
-    # measured: Welch 72, LPM 169 of 308
-    assert counts["lpm"] >= 150 and counts["lpm"] > 2 * counts["welch"]
+    # measured: Welch 75, LPM 308 of 308 (test_frf checks that every pair passes)
+    assert counts["lpm"] > 3 * counts["welch"]

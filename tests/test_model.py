@@ -13,6 +13,15 @@ from ident.model import VehicleModel, balanced_reduce, has_feedthrough, load_mod
 # known model's RMS metrics within 0.5 % median and 1.5 % max (no measurement noise)
 RTOL_METRICS_MEDIAN = 0.005
 RTOL_METRICS_MAX = 0.015
+# with 2 % measurement noise on every response channel: 1 % median, 3 % max
+RTOL_NOISE_MEDIAN = 0.01
+RTOL_NOISE_MAX = 0.03
+# the fitted model's FRF vs the truth (issue 3's 1 dB / 5 deg wherever the true magnitude is
+# within 40 dB of the pair's peak, 0.5-20 Hz): the raw estimate meets it on every pair
+# (tests/test_frf.py); the rational fits (order <= 10) on all but a few deep cross-axle
+# notches at the 40 dB edge (measured 306 of 308)
+MIN_FITTED_PAIRS_OK = 300
+DB_TOL, DEG_TOL, PEAK_RANGE = 1.0, 5.0, 0.01
 METRIC_OUTPUTS = [f"{k}_{c}" for k in ("tire_force", "ride_height", "shock_travel",
                                        "shock_velocity") for c in CORNERS]
 
@@ -37,6 +46,37 @@ def test_truth_round_trip_metrics(identified_model, paper_model, paper_session, 
                          _paper_setups(paper_session))
     assert np.median(err) < RTOL_METRICS_MEDIAN
     assert err.max() < RTOL_METRICS_MAX
+
+
+def test_fitted_frf_matches_truth(identified_model, paper_model):
+    """The fitted transfer functions against the true closed-loop FRFs (issue 3 criterion)."""
+    f = identified_model.frf.f_hz
+    f = f[(f >= 0.5) & (f <= 20.0)]
+    Ht = paper_model.frequency_response(f, damping_n_s_m=identified_model.cbar_n_s_m)
+    Ht = Ht[[paper_model.output_names.index(o) for o in identified_model.output_names]]
+    H = identified_model.frequency_response(f)
+    strong = np.abs(Ht) >= PEAK_RANGE * np.abs(Ht).max(axis=-1, keepdims=True)
+    bad = ((np.abs(20 * np.log10(np.abs(H) / np.abs(Ht))) > DB_TOL)
+           | (np.abs(np.angle(H / Ht, deg=True)) > DEG_TOL)) & strong
+    assert (~bad.any(-1)).sum() >= MIN_FITTED_PAIRS_OK
+
+
+@pytest.mark.slow
+def test_truth_round_trip_metrics_with_noise(paper_plan, paper_model, validation_drive):
+    """The same round trip with 2 % measurement noise on every response channel."""
+    import warnings
+    from dataclasses import replace
+
+    from ident.model import identify_session
+    from ident.rig import simulate_session
+
+    session = simulate_session(replace(paper_plan, noise=0.02))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify_session(session)
+    err = _metric_errors(model, paper_model, validation_drive, _paper_setups(session))
+    assert np.median(err) < RTOL_NOISE_MEDIAN
+    assert err.max() < RTOL_NOISE_MAX
 
 
 def test_model_structure(identified_model):
