@@ -10,18 +10,26 @@ Two steps, per input/output pair:
 2. The magnitude in dB and the unwrapped phase are smoothed by a zero-phase
    Butterworth low-pass along the frequency axis that removes variations of
    ``smooth_width_hz`` or less (the paper: 4th order, 0.6 Hz, ``filtfilt``).
-   Smoothing is there to remove random error, so it is held to the
-   estimate's own uncertainty: with the standard error ``sigma`` of each
-   estimate (from its partial coherence and number of averages, as
-   :mod:`ident.frf` reports them) and ``d`` the distance between the smoothed
-   and the unsmoothed estimate, the result is ``H + w (H_s - H)`` with
-   ``w = 1 / (1 + (d / (k sigma))^2)``, ``k = smooth_tolerance``. It never
-   moves an estimate by more than ``k sigma / 2``: noisy estimates are smoothed
-   fully, while a notch or a sharp peak that the data resolve (a low-noise
-   estimate the smoothing would flatten) is kept. ``smooth_tolerance=None``
-   smooths unconditionally, as the paper does; on the paper's noise-free
-   experiment that flattens notches within 40 dB of a pair's peak by several
-   dB, which the fits then reproduce.
+
+Both steps are there to remove random error, so both are held to the
+estimate's own uncertainty: with the standard error ``sigma`` of each estimate
+(from its partial coherence and number of averages, as :mod:`ident.frf`
+reports them) and ``d`` the distance between the replacement ``H_c`` (residual
+fit or smoothed value) and the estimate ``H``, the result is ``H + w (H_c -
+H)`` with ``w = 1 / (1 + (d / (k sigma))^2)``, ``k = tolerance``. No
+estimate moves by more than ``k sigma / 2``:
+
+- an estimate without information (coherence near 0) is replaced fully, as
+  in the paper;
+- a poor-coherence region that is a sharp fall after a resonance rather than
+  the end of the band (a residual fit from the flank of the peak would
+  extrapolate its level for a decade) keeps what its data say;
+- a notch or a sharp peak that the data resolve (a low-noise estimate the
+  smoothing would flatten) is kept, noisy estimates are smoothed fully.
+
+``tolerance=None`` replaces and smooths unconditionally, as the paper does;
+on the paper's noise-free experiment that flattens notches within 40 dB of a
+pair's peak by several dB, which the fits then reproduce.
 """
 
 from __future__ import annotations
@@ -30,16 +38,20 @@ import dataclasses
 import logging
 
 import numpy as np
-from scipy import signal
+from scipy import ndimage, signal
 
 from ident.frf import Frf
 
-__all__ = ["condition_frf", "residual_fit", "frf_standard_error", "SMOOTH_TOLERANCE"]
+__all__ = ["condition_frf", "residual_fit", "frf_standard_error", "TOLERANCE"]
 
 log = logging.getLogger(__name__)
 
-#: Default ``smooth_tolerance``: smoothing moves an estimate by at most one standard error.
-SMOOTH_TOLERANCE = 2.0
+#: Default ``tolerance``: conditioning moves an estimate by at most one standard error.
+TOLERANCE = 2.0
+
+#: Neighbouring estimates on the FRF grid that share most of their data (the LPM's local window
+#: spans about this many grid lines): the averaged estimate's error counts them once.
+_CORRELATED_BINS = 3.0
 
 #: Largest |N| accepted for a residual fit (a 4-pole roll-off); steeper fits are clipped.
 MAX_RESIDUAL_ORDER = 4.0
@@ -125,6 +137,19 @@ def frf_standard_error(frf):
     return np.where(g2 > 0, np.abs(frf.H) * rel, np.inf)
 
 
+def _weight(h, hc, sigma, k):
+    """``w = 1 / (1 + (|hc - h| / (k sigma))^2)`` (module notes)."""
+    d = np.abs(hc - h)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        ratio = np.where(d > 0, d / (k * sigma), 0.0)
+        return 1.0 / (1.0 + np.minimum(np.nan_to_num(ratio, nan=0.0), 1e150) ** 2)
+
+
+def _held(h, hc, sigma, k):
+    """``h + w (hc - h)`` with :func:`_weight` (module notes)."""
+    return h + _weight(h, hc, sigma, k) * (hc - h)
+
+
 def _good_span(good, run):
     """First and last index of the span whose ends start/finish `run` consecutive good points."""
     n = good.size
@@ -140,7 +165,7 @@ def _good_span(good, run):
 
 def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_window_hz=1.0,
                   min_good_hz=0.2, min_span_ratio=4.0, smooth_width_hz=0.6, smooth_order=4,
-                  smooth_tolerance=SMOOTH_TOLERANCE, residual=True, smooth=True):
+                  tolerance=TOLERANCE, residual=True, smooth=True):
     """Condition an estimated FRF for the parametric fit.
 
     Parameters
@@ -167,10 +192,11 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         (paper: 0.6).
     smooth_order : int
         Order of the Butterworth smoothing filter (paper: 4).
-    smooth_tolerance : float or None
-        Largest departure of the smoothed from the unsmoothed estimate, in
-        standard errors of the estimate, doubled (module notes): default
-        :data:`SMOOTH_TOLERANCE`; None smooths unconditionally (the paper).
+    tolerance : float or None
+        Largest departure of the conditioned from the estimated FRF (residual
+        fits and smoothing), in standard errors of the estimate, doubled
+        (module notes): default :data:`TOLERANCE`; None replaces and smooths
+        unconditionally (the paper).
     residual, smooth : bool
         Turn either step off.
 
@@ -192,12 +218,12 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         raise TypeError(f"condition_frf needs an Frf, got {type(frf).__name__}")
     if not 0 < coherence_min < 1:
         raise ValueError(f"coherence_min must be in (0, 1), got {coherence_min!r}")
-    if smooth_tolerance is not None and not (
-            isinstance(smooth_tolerance, (int, float, np.integer, np.floating))
-            and not isinstance(smooth_tolerance, bool)
-            and np.isfinite(smooth_tolerance) and smooth_tolerance > 0):
-        raise ValueError(f"smooth_tolerance must be a positive number or None, got "
-                         f"{smooth_tolerance!r}")
+    if tolerance is not None and not (
+            isinstance(tolerance, (int, float, np.integer, np.floating))
+            and not isinstance(tolerance, bool)
+            and np.isfinite(tolerance) and tolerance > 0):
+        raise ValueError(f"tolerance must be a positive number or None, got "
+                         f"{tolerance!r}")
     f = frf.f_hz
     df = f[1] - f[0]
     lo_b, hi_b = band_hz
@@ -209,6 +235,23 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
     inband = np.flatnonzero((f >= lo_b) & (f <= hi_b))
     run = max(2, int(round(min_good_hz / df)))
     win = max(3, int(round(residual_window_hz / df)))
+    sigma = frf_standard_error(frf) if tolerance is not None else None
+    if sigma is not None:
+        # the residual fits are judged against the estimate averaged over the smoothing width
+        # (its random error down by the square root of the independent estimates averaged), so
+        # that a systematic departure (a fall after a resonance) shows and noise does not
+        n_w = max(1, int(round(smooth_width_hz / df)))
+        H_avg = (ndimage.uniform_filter1d(H.real, n_w, axis=-1, mode="nearest")
+                 + 1j * ndimage.uniform_filter1d(H.imag, n_w, axis=-1, mode="nearest"))
+        sigma_avg = sigma / np.sqrt(max(1.0, n_w / _CORRELATED_BINS))
+
+    def _blend(o, i, idx, hc):
+        """The replacement hc at idx, held to the estimate's uncertainty (module notes)."""
+        if sigma is None:
+            return hc
+        w = _weight(H_avg[o, i, idx], hc, sigma_avg[o, i, idx], tolerance)
+        return H[o, i, idx] + w * (hc - H[o, i, idx])
+
     poor_pairs = []
     for o in range(p):
         for i in range(m):
@@ -229,7 +272,7 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
                 K, phi, N = residual_fit(f[sel], H[o, i, sel], wgt[sel],
                                          n_range=(0.0, MAX_RESIDUAL_ORDER))
                 idx = np.arange(k_hi + 1, nf)
-                H[o, i, idx] = K * np.exp(1j * phi) / f[idx] ** N
+                H[o, i, idx] = _blend(o, i, idx, K * np.exp(1j * phi) / f[idx] ** N)
                 replaced[o, i, idx] = True
             # low end: from the first good point down (DC takes the first bin's value)
             sel = np.arange(k_lo, min(k_hi, k_lo + win - 1) + 1)
@@ -238,7 +281,7 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
                 K, phi, N = residual_fit(f[sel], H[o, i, sel], wgt[sel],
                                          n_range=(-MAX_RESIDUAL_ORDER, 0.0))
                 idx = np.arange(max(k_lo - 1, 0), 0, -1)
-                H[o, i, idx] = K * np.exp(1j * phi) / f[idx] ** N
+                H[o, i, idx] = _blend(o, i, idx, K * np.exp(1j * phi) / f[idx] ** N)
                 H[o, i, 0] = H[o, i, 1]
                 replaced[o, i, : k_lo] = True
     if smooth:
@@ -252,17 +295,12 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         mag = signal.sosfiltfilt(sos, mag, axis=-1)
         ph = signal.sosfiltfilt(sos, ph, axis=-1)
         Hs = 10 ** (mag / 20) * np.exp(1j * ph)
-        if smooth_tolerance is None:
+        if tolerance is None:
             H = Hs
         else:
             # hold the smoothing to the estimate's uncertainty (module notes); the residual
             # fits' frequencies are smoothed fully (they have no standard error of their own)
-            sigma = np.where(replaced, np.inf, frf_standard_error(frf) * (np.abs(H) > 0))
-            d = np.abs(Hs - H)
-            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                ratio = np.where(d > 0, d / (smooth_tolerance * sigma), 0.0)
-                w = 1.0 / (1.0 + np.minimum(np.nan_to_num(ratio, nan=0.0), 1e150) ** 2)
-            H = H + w * (Hs - H)
+            H = _held(H, Hs, np.where(replaced, np.inf, sigma), tolerance)
     if poor_pairs:
         log.info("%d input/output pairs have no span of coherence >= %g; kept smoothed",
                  len(poor_pairs), coherence_min)
@@ -272,7 +310,7 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         "residual_window_hz": residual_window_hz, "min_good_hz": min_good_hz,
         "min_span_ratio": min_span_ratio,
         "smooth_width_hz": smooth_width_hz, "smooth_order": smooth_order,
-        "smooth_tolerance": smooth_tolerance,
+        "tolerance": tolerance,
         "residual": residual, "smooth": smooth, "poor_pairs": poor_pairs}
     return dataclasses.replace(frf, H=H, H_raw=frf.H if frf.H_raw is None else frf.H_raw,
                                replaced=replaced, settings=settings)

@@ -515,6 +515,10 @@ def frf_from_arrays(u, y, *, fs, window="hamming", nperseg=None, noverlap=None,
     lpm_coherence_dof : int
         ``nu_c`` of the LPM's partial coherence (module notes); default
         :data:`LPM_COHERENCE_DOF`.
+    exact_linear : bool
+        :func:`shock_force_deviation`: ``dF = 0`` exactly at corners whose
+        shock is linear at ``c_bar`` without lag (default), instead of the
+        measured (noisy) ``F - c_bar v``.
 
     Returns
     -------
@@ -597,7 +601,7 @@ def _lpm_settings(nperseg, fs, degree, half, dof, nu_c, runs, n_in):
 # sessions
 # ----------------------------------------------------------------------------------------------
 
-def shock_force_deviation(run, shocks, cbar_n_s_m):
+def shock_force_deviation(run, shocks, cbar_n_s_m, *, exact_linear=True):
     """The shock forces and their deviations ``dF = F - c_bar v`` of one run.
 
     Parameters
@@ -609,6 +613,16 @@ def shock_force_deviation(run, shocks, cbar_n_s_m):
         velocity.
     shocks : ident.shocks.ShockLibrary
     cbar_n_s_m : array_like, shape (4,)
+    exact_linear : bool
+        A corner whose shock is, per the library, linear with ``c == c_bar``
+        (relative 1e-9) and without lag has ``dF = 0`` exactly, whatever the
+        measured force and velocity say. Measurement noise on those channels
+        would otherwise enter the regression as noise on the ``dF`` inputs,
+        which biases ``H~shocks`` toward zero (errors in variables): with 2 %
+        noise on every channel, the baseline run and the unswapped corners of
+        the swap runs would add 5 to 10 times the noise of the swapped corner
+        alone. False uses the measurements everywhere (a linear shock known to
+        depart from its nominal rate).
 
     Returns
     -------
@@ -622,6 +636,10 @@ def shock_force_deviation(run, shocks, cbar_n_s_m):
     dF = np.empty_like(F)
     for i, c in enumerate(CORNERS):
         v = run.dynamic(f"shock_velocity_{c}")
+        if exact_linear and _is_cbar_linear(shocks.get(run.setup[c], where=f"run '{run.name}' "
+                                                        f"setup {c}"), cbar[i]):
+            F[i], dF[i] = cbar[i] * v, 0.0
+            continue
         if f"shock_force_{c}" in run.channels:
             F[i] = run.dynamic(f"shock_force_{c}")
         else:
@@ -632,6 +650,14 @@ def shock_force_deviation(run, shocks, cbar_n_s_m):
             F[i] -= F[i].mean()
         dF[i] = F[i] - cbar[i] * v
     return F, dF
+
+
+def _is_cbar_linear(model, cbar):
+    """True if a shock model is linear with rate ``cbar`` (relative 1e-9) and has no lag."""
+    from ident.shocks import LinearShock
+
+    return (isinstance(model, LinearShock) and model.lag_s == 0
+            and abs(model.c_n_s_m - cbar) <= 1e-9 * abs(cbar))
 
 
 def baseline_damping(session, *, runs=None):
@@ -686,7 +712,7 @@ def _check_session(session):
 def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, window="hamming",
                  nperseg=None, noverlap=None, band_hz=(0.5, 20.0), estimator="lpm",
                  lpm_degree=LPM_DEGREE, lpm_half_width=None,
-                 lpm_coherence_dof=LPM_COHERENCE_DOF):
+                 lpm_coherence_dof=LPM_COHERENCE_DOF, exact_linear=True):
     """Estimate the closed-loop multi-input FRF of a rig session (Eqs. 18-28).
 
     Parameters
@@ -768,10 +794,10 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     m = len(MODEL_INPUTS)
     if estimator == "lpm":
         return _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, lpm_degree, lpm_half_width,
-                                 lpm_coherence_dof)
+                                 lpm_coherence_dof, exact_linear)
     per_run = []
     for run in session.runs:
-        _, dF = shock_force_deviation(run, session.shocks, cbar)
+        _, dF = shock_force_deviation(run, session.shocks, cbar, exact_linear=exact_linear)
         x = np.vstack([np.vstack([run.dynamic(c) for c in RIG_INPUTS]), dF,
                        np.vstack([run.dynamic(o) for o in outs])])
         f, X = block_spectra(x, fs=fs, window=window, nperseg=nperseg, noverlap=noverlap)
@@ -780,7 +806,8 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
                         np.einsum("ifk,ofk->fio", np.conj(U), Y),
                         np.real(np.einsum("ofk,ofk->fo", np.conj(Y), Y)), U.shape[-1],
                         np.mean(dF**2, axis=1)))
-    settings = {"estimator": "welch", "method": method, "window": window, "nperseg": nperseg,
+    settings = {"estimator": "welch", "exact_linear": bool(exact_linear), "method": method,
+                "window": window, "nperseg": nperseg,
                 "noverlap": noverlap, "runs": [r.name for r in session.runs],
                 "band_hz": tuple(band_hz)}
     band = (f >= band_hz[0]) & (f <= band_hz[1])
@@ -817,7 +844,8 @@ def _warn_flagged(session, flagged, band, band_hz, *, stacklevel):
             LowCoherenceWarning, stacklevel=stacklevel + 1)
 
 
-def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width, coherence_dof):
+def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width, coherence_dof,
+                      exact_linear):
     """The ``estimator="lpm"`` branch of :func:`estimate_frf` (arguments checked there)."""
     fs = session.fs_hz
     m = len(MODEL_INPUTS)
@@ -825,7 +853,7 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
     n_samples = [r.n_samples for r in runs]
     records, dF_pow = [], []
     for run in runs:
-        _, dF = shock_force_deviation(run, session.shocks, cbar)
+        _, dF = shock_force_deviation(run, session.shocks, cbar, exact_linear=exact_linear)
         records.append(np.vstack([np.vstack([run.dynamic(c) for c in RIG_INPUTS]), dF,
                                   np.vstack([run.dynamic(o) for o in outs])]))
         dF_pow.append(np.mean(dF**2, axis=1))
@@ -843,7 +871,8 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
     flagged = indep < FLAG_INDEPENDENT_FRACTION
     _warn_flagged(session, flagged, band, band_hz, stacklevel=3)
     settings = _lpm_settings(nperseg, fs, degree, half_width, dof, coherence_dof, n_samples, m)
-    settings.update(method="global", runs=[r.name for r in runs], band_hz=tuple(band_hz))
+    settings.update(method="global", runs=[r.name for r in runs], band_hz=tuple(band_hz),
+                    exact_linear=bool(exact_linear))
     return Frf(f_hz=f, H=H, input_names=MODEL_INPUTS, output_names=outs,
                multiple_coherence=mult, partial_coherence=partial, input_condition=cond,
                independent_fraction=indep, flagged=flagged, n_averages=coherence_dof + m,

@@ -93,6 +93,10 @@ _KEYS = {
     "damping": ("damping", False),
     "torsion_stiffness": ("rotational_stiffness", False),
     "torsion_inertia": ("inertia", False),
+    "tire_damping": ("damping", False),
+    "front_tire_damping": ("damping", False),
+    "rear_tire_damping": ("damping", False),
+    "tire_damping_corner": ("frequency", False),
 }
 
 
@@ -134,6 +138,15 @@ class VehicleParams:
     torsion_inertia_kg_m2 : float or None
         Inertia of the twist coordinate [kg*m^2]; default a quarter of the
         roll inertia.
+    tire_damping_n_s_m : ndarray, shape (4,) or None
+        Tire damping per corner [N/(m/s)], in parallel with the tire rate;
+        ``None`` (or zeros) for the paper's undamped tire.
+    tire_damping_corner_hz : float
+        The tire damper acts as a dashpot below this frequency [Hz] and as a
+        stiff spring ``c * 2 pi f`` above it (a damper in series with that
+        spring: a viscous tire force on a displacement-driven pad would need
+        the pad's velocity, an improper response). Default 100 Hz, well above
+        a rig's band.
     """
 
     name: str
@@ -151,11 +164,16 @@ class VehicleParams:
     cg_lateral_offset_m: float = 0.0
     torsion_stiffness_n_m_rad: float | None = None
     torsion_inertia_kg_m2: float | None = None
+    tire_damping_n_s_m: np.ndarray | None = None
+    tire_damping_corner_hz: float = 100.0
 
     def __post_init__(self):
         for f in fields(self):
             val = getattr(self, f.name)
-            if f.name in ("unsprung_mass_kg", "spring_rate_n_m", "tire_rate_n_m", "damping_n_s_m"):
+            if f.name == "tire_damping_n_s_m" and val is None:
+                continue
+            if f.name in ("unsprung_mass_kg", "spring_rate_n_m", "tire_rate_n_m", "damping_n_s_m",
+                          "tire_damping_n_s_m"):
                 arr = np.array(val, dtype=float).reshape(-1)
                 if arr.shape != (4,):
                     raise VehicleError(
@@ -172,7 +190,7 @@ class VehicleParams:
             v = np.asarray(val, dtype=float)
             if not np.all(np.isfinite(v)):
                 raise VehicleError(f"vehicle {self.name!r}: {f.name} is not finite; give a number")
-            allow_zero = f.name == "damping_n_s_m"
+            allow_zero = f.name in ("damping_n_s_m", "tire_damping_n_s_m")
             if np.any(v < 0) or (not allow_zero and np.any(v == 0)):
                 raise VehicleError(
                     f"vehicle {self.name!r}: {f.name} must be positive, got {val}; check the sign and units"
@@ -183,6 +201,11 @@ class VehicleParams:
                 f"vehicle {self.name!r}: cg_lateral_offset ({self.cg_lateral_offset_m} m) must be "
                 f"smaller than half the track ({half} m)"
             )
+
+    @property
+    def has_tire_damping(self):
+        """True if any tire has damping."""
+        return self.tire_damping_n_s_m is not None and bool(np.any(self.tire_damping_n_s_m > 0))
 
     @property
     def has_torsion(self):
@@ -290,6 +313,15 @@ def vehicle_from_dict(doc, *, where="vehicle"):
         )
     if "torsion_inertia" in v and "torsion_stiffness" not in v:
         raise VehicleError(f"{where}: 'torsion_inertia' needs 'torsion_stiffness'; add it or remove both")
+    ctire = v.get("tire_damping")
+    ctf, ctr = v.get("front_tire_damping", ctire), v.get("rear_tire_damping", ctire)
+    if (ctf is None) != (ctr is None):
+        raise VehicleError(
+            f"{where}: give 'tire_damping' or both 'front_tire_damping' and 'rear_tire_damping'"
+        )
+    if "tire_damping_corner" in v and ctf is None:
+        raise VehicleError(f"{where}: 'tire_damping_corner' needs 'tire_damping'; add it or "
+                           "remove both")
     return VehicleParams(
         name=str(doc.get("name", Path(str(where)).stem)),
         track_front_m=tf,
@@ -306,6 +338,8 @@ def vehicle_from_dict(doc, *, where="vehicle"):
         cg_lateral_offset_m=v.get("cg_lateral_offset", 0.0),
         torsion_stiffness_n_m_rad=v.get("torsion_stiffness"),
         torsion_inertia_kg_m2=v.get("torsion_inertia"),
+        tire_damping_n_s_m=None if ctf is None else _per_axle(ctf, ctr),
+        tire_damping_corner_hz=v.get("tire_damping_corner", 100.0),
     )
 
 
@@ -378,6 +412,10 @@ def write_vehicle(params, path, *, units="SI", overwrite=False):
         doc["torsion_stiffness"] = c(p.torsion_stiffness_n_m_rad, "rotational_stiffness")
         if p.torsion_inertia_kg_m2 is not None:
             doc["torsion_inertia"] = c(p.torsion_inertia_kg_m2, "inertia")
+    if p.tire_damping_n_s_m is not None:
+        doc["front_tire_damping"] = c(p.tire_damping_n_s_m[0], "damping")
+        doc["rear_tire_damping"] = c(p.tire_damping_n_s_m[2], "damping")
+        doc["tire_damping_corner"] = c(p.tire_damping_corner_hz, "frequency")
     atomic_write_toml(path, doc, overwrite=overwrite)
 
 
@@ -507,7 +545,10 @@ def build_full_car(params):
     ``q = [chassis coordinates, z_t]``,
     ``M = diag(J_C, M_t)``, ``K = [[T' Ks T (+ K_psi), -T' Ks], [-Ks T, Ks + Kt]]``,
     ``L = [[E, 0, T'], [0, Kt, -I]]`` where ``E`` maps the aero heave force,
-    roll and pitch moments onto the chassis coordinates.
+    roll and pitch moments onto the chassis coordinates. With tire damping
+    (``VehicleParams.tire_damping_n_s_m``) each tire also carries
+    ``F_d = k_d (z_r - z_t - delta)`` with ``c delta' = F_d`` and ``k_d = c
+    2 pi f_c``: 4 more states ``delta`` after ``[q, q']``.
 
     Examples
     --------
@@ -529,38 +570,63 @@ def build_full_car(params):
     L = np.block([[E, np.zeros((nc, 4)), T.T], [np.zeros((4, 3)), Kt, -np.eye(4)]])
     nq = nc + 4
     Minv = np.diag(1.0 / np.diag(M))
-    A = np.block([[np.zeros((nq, nq)), np.eye(nq)], [-Minv @ K, np.zeros((nq, nq))]])
-    B = np.vstack([np.zeros((nq, 11)), Minv @ L])
-
     # selectors on q: corner displacement and wheel displacement
     Sc = np.hstack([T, np.zeros((4, 4))])  # z_corner = Sc q
     St = np.hstack([np.zeros((4, nc)), np.eye(4)])  # z_t = St q
-    Zq = np.zeros((4, nq))
     Zu = np.zeros((4, 11))
     Ur = np.zeros((4, 11))
     Ur[:, 3:7] = np.eye(4)  # z_r = Ur u
-    acc_q = -Minv @ K  # q'' = acc_q q + acc_u u
-    acc_u = Minv @ L
+    # tire dampers (Maxwell: dashpot c in series with k_d = c w_c), states delta (4):
+    # F_d = k_d (z_r - z_t - delta), delta' = w_c (z_r - z_t - delta); none without damping
+    nd = 4 if p.has_tire_damping else 0
+    wc = 2 * np.pi * p.tire_damping_corner_hz
+    Kd = np.diag(p.tire_damping_n_s_m * wc) if nd else np.zeros((4, 4))
+    # q'' = acc_q q + acc_d delta + acc_u u
+    acc_q = -Minv @ (K + St.T @ Kd @ St)
+    acc_d = -Minv @ St.T @ Kd
+    acc_u = Minv @ (L + St.T @ Kd @ Ur)
+    n = 2 * nq + nd
+    A = np.zeros((n, n))
+    A[:nq, nq:2 * nq] = np.eye(nq)
+    A[nq:2 * nq, :nq] = acc_q
+    B = np.zeros((n, 11))
+    B[nq:2 * nq] = acc_u
+    if nd:
+        A[nq:2 * nq, 2 * nq:] = acc_d[:, :nd]
+        A[2 * nq:, :nq] = -wc * St
+        A[2 * nq:, 2 * nq:] = -wc * np.eye(nd)
+        B[2 * nq:] = wc * Ur
+
+    def row(q=None, v=None, d=None):
+        out = np.zeros((4, n))
+        if q is not None:
+            out[:, :nq] = q
+        if v is not None:
+            out[:, nq:2 * nq] = v
+        if d is not None and nd:
+            out[:, 2 * nq:] = d
+        return out
+
     rows_C, rows_D = [], []
     # shock velocity = z_t' - z_corner'
-    rows_C.append(np.hstack([Zq, St - Sc]))
+    rows_C.append(row(v=St - Sc))
     rows_D.append(Zu)
     # shock travel = z_t - z_corner
-    rows_C.append(np.hstack([St - Sc, Zq]))
+    rows_C.append(row(q=St - Sc))
     rows_D.append(Zu)
-    # tire force = Kt (z_r - z_t)
-    rows_C.append(np.hstack([-Kt @ St, Zq]))
-    rows_D.append(Kt @ Ur)
+    # tire force = Kt (z_r - z_t) + F_d
+    rows_C.append(row(q=-(Kt + Kd) @ St, d=-Kd))
+    rows_D.append((Kt + Kd) @ Ur)
     # ride height = z_corner - z_r
-    rows_C.append(np.hstack([Sc, Zq]))
+    rows_C.append(row(q=Sc))
     rows_D.append(-Ur)
     # chassis accel = Sc q'', wheel accel = St q''
-    rows_C.append(np.hstack([Sc @ acc_q, Zq]))
+    rows_C.append(row(q=Sc @ acc_q, d=Sc @ acc_d))
     rows_D.append(Sc @ acc_u)
-    rows_C.append(np.hstack([St @ acc_q, Zq]))
+    rows_C.append(row(q=St @ acc_q, d=St @ acc_d))
     rows_D.append(St @ acc_u)
     # spring force = Ks (z_t - z_corner)
-    rows_C.append(np.hstack([Ks @ (St - Sc), Zq]))
+    rows_C.append(row(q=Ks @ (St - Sc)))
     rows_D.append(Zu)
     C = np.vstack(rows_C)
     D = np.vstack(rows_D)
@@ -642,6 +708,9 @@ def modal_summary(model, *, damping_n_s_m=None):
     zeta = np.ones(nq)
     modal_disp = (ms[:, None] * vec).T  # physical mode shapes, one per row
     used = set()
+    if p.has_tire_damping:  # the tire dampers' relaxation roots (near -2 pi f_c) are no modes
+        wc = 2 * np.pi * p.tire_damping_corner_hz
+        used.update(np.argsort(np.abs(lam + wc))[:4].tolist())
     for i in range(nq):
         best, score = None, -1.0
         for j in range(lam.size):

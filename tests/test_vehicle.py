@@ -187,6 +187,63 @@ def test_generalized_car_torsion_and_unequal_half_tracks(paper_vehicle):
     assert (H0[tire, m.input_names.index("aero_roll")] * car.corner_y_m).sum() == pytest.approx(-1, rel=1e-6)
 
 
+TIRE_DAMPING_N_S_M = 800.0  # a racing tire's order of magnitude (about 4.6 lbf/(in/s))
+
+
+def _complex_stiffness_frf(car, f_hz, c_shock):
+    """The same car solved directly in the frequency domain (second formulation): the tire
+    damper as the complex stiffness of a dashpot in series with k_d = c 2 pi f_c."""
+    T = car.corner_matrix
+    nc = T.shape[1]
+    Ks, Kt = np.diag(car.spring_rate_n_m), np.diag(car.tire_rate_n_m)
+    M = np.diag(np.concatenate([car.chassis_inertia, car.unsprung_mass_kg]))
+    Kc = T.T @ Ks @ T
+    K = np.block([[Kc, -T.T @ Ks], [-Ks @ T, Ks + Kt]])
+    St = np.hstack([np.zeros((4, nc)), np.eye(4)])
+    Sv = St - np.hstack([T, np.zeros((4, 4))])  # shock deflection = Sv q
+    Cd = Sv.T @ np.diag(c_shock) @ Sv
+    wc = 2 * np.pi * car.tire_damping_corner_hz
+    out = []
+    for f in f_hz:
+        jw = 2j * np.pi * f
+        kd = car.tire_damping_n_s_m * wc * jw / (jw + wc)  # Maxwell element
+        Ktot = Kt + np.diag(kd)
+        q = np.linalg.solve(-(2 * np.pi * f) ** 2 * M + jw * Cd + K + St.T @ np.diag(kd) @ St,
+                            St.T @ Ktot)  # response to the 4 wheelloaders
+        out.append(Ktot @ (np.eye(4) - St @ q))  # tire forces
+    return np.stack(out, axis=-1)  # (4 tire forces, 4 wheelloaders, n_f)
+
+
+def test_tire_damping_matches_complex_stiffness(paper_vehicle):
+    """Tire damping: the state-space model equals a direct frequency-domain solution, damps
+    wheel hop, and leaves the static response alone."""
+    car = paper_vehicle.replace(tire_damping_n_s_m=np.full(4, TIRE_DAMPING_N_S_M))
+    m = build_full_car(car)
+    assert m.A.shape == (18, 18) and car.has_tire_damping and not paper_vehicle.has_tire_damping
+    f = np.array([0.5, 2.0, 5.0, 12.0, 18.0, 30.0])
+    H = m.frequency_response(f, damping_n_s_m=car.damping_n_s_m)
+    tire = [m.output_names.index(f"tire_force_{c}") for c in CORNERS]
+    wl = [m.input_names.index(f"wheelloader_{c}") for c in CORNERS]
+    ref = _complex_stiffness_frf(car, f, car.damping_n_s_m)
+    np.testing.assert_allclose(H[np.ix_(tire, wl)], ref, rtol=1e-9)
+    # DC: as without tire damping; wheel hop: more damped
+    H0 = build_full_car(paper_vehicle).frequency_response([0.0])
+    np.testing.assert_allclose(m.frequency_response([0.0]), H0, rtol=1e-9, atol=1e-9)
+    a, b = modal_summary(car), modal_summary(paper_vehicle)
+    assert a.labels == b.labels
+    hop = [i for i, lab in enumerate(a.labels) if lab.startswith("hop")]
+    assert np.all(a.damping_ratio[hop] > b.damping_ratio[hop] + 0.05)
+
+
+def test_tire_damping_file_round_trip(tmp_path, paper_vehicle):
+    car = paper_vehicle.replace(tire_damping_n_s_m=np.array([700.0, 700.0, 900.0, 900.0]),
+                                tire_damping_corner_hz=150.0)
+    write_vehicle(car, tmp_path / "car.toml", units="imperial")
+    back = read_vehicle(tmp_path / "car.toml")
+    np.testing.assert_allclose(back.tire_damping_n_s_m, car.tire_damping_n_s_m, rtol=1e-12)
+    assert back.tire_damping_corner_hz == pytest.approx(150.0, rel=1e-12)
+
+
 BAD_VEHICLES = [
     ("format = 'vehicle/2'\n", "format"),
     ("units = 'metric'\n", "unknown unit system"),
@@ -197,6 +254,9 @@ BAD_VEHICLES = [
     ("DELETE:track", "track"),
     ("cg_lateral_offset = 40.0\n", "cg_lateral_offset"),
     ("torsion_inertia = 1000.0\n", "torsion_stiffness"),
+    ("front_tire_damping = 4.0\n", "rear_tire_damping"),
+    ("tire_damping_corner = 100.0\n", "needs 'tire_damping'"),
+    ("tire_damping = -4.0\n", "must be positive"),
 ]
 
 
