@@ -14,17 +14,20 @@ Notes
 -----
 Discretization. The plant is held in modal form (one complex state per
 conjugate pole pair or real pole) and every mode is discretized *exactly* for
-inputs that are piecewise linear between samples (first-order hold)::
+inputs that follow the parabola through the last three samples (a quadratic
+hold, :func:`hold_coefficients`)::
 
-    x[k+1] = exp(lam h) x[k] + g0 (B u[k]) + g1 (B u[k+1])
+    x[k+1] = exp(lam h) x[k] + g1 (B u[k+1]) + g0 (B u[k]) + gm (B u[k-1])
 
 so the state at step ``k+1`` depends on the input at ``k+1``: with the shocks
 in the loop this is an algebraic loop ``v[k] = v_free[k] + D_eff dF(v[k])``.
 It is solved at every step by Newton's method on the 4 shock equations (never
-broken by a one-sample delay). The lag is discretized the same way (exact for
-a piecewise-linear ``f(v(t))``). The only approximation is that ``dF`` is
-piecewise linear between internal samples; ``oversample`` refines the
-internal step; rig inputs are refined onto the internal grid by band-limited
+broken by a one-sample delay). The lag is discretized the same way. The only
+approximation is the hold of ``dF`` (and of the rig inputs) between internal
+samples: its error falls as ``h^3`` (a first-order hold's as ``h^2``; its
+``sinc^2`` droop alone costs 1 % of a tire-force RMS at 2 internal steps per
+100 Hz sample, the quadratic hold 0.07 %). ``oversample`` refines the internal
+step; rig inputs are refined onto the internal grid by band-limited
 (polyphase) interpolation, since rig signals are samples of continuous signals.
 
 The rig-input part of the response does not depend on the shocks: it is
@@ -50,6 +53,8 @@ __all__ = [
     "BatchResponse",
     "modal_form",
     "foh_coefficients",
+    "hold_coefficients",
+    "lag_hold_coefficients",
     "lag_coefficients",
     "rig_response",
     "simulate",
@@ -240,6 +245,84 @@ def foh_coefficients(lam, h):
     return phi, g0, g1
 
 
+def _phi_functions(z):
+    """``phi_1..phi_3(z) = (e^z - sum_{j<n} z^j / j!) / z^n`` (series for small |z|)."""
+    small = np.abs(z) < 1e-2
+    zs = np.where(small, 1.0, z)
+    em1 = np.expm1(zs)
+    p1 = np.where(small, 1 + z / 2 + z**2 / 6 + z**3 / 24 + z**4 / 120, em1 / zs)
+    p2 = np.where(small, 1 / 2 + z / 6 + z**2 / 24 + z**3 / 120 + z**4 / 720, (em1 - zs) / zs**2)
+    p3 = np.where(small, 1 / 6 + z / 24 + z**2 / 120 + z**3 / 720 + z**4 / 5040,
+                  (em1 - zs - zs**2 / 2) / zs**3)
+    return p1, p2, p3
+
+
+def hold_coefficients(lam, h):
+    """Exact discretization of modes ``x' = lam x + u`` for a quadratic hold.
+
+    Over the step ``[t_k, t_k+1]`` the input is the parabola through
+    ``u[k-1], u[k], u[k+1]``, integrated exactly:
+    ``x[k+1] = phi x[k] + g1 u[k+1] + g0 u[k] + gm u[k-1]``. The local error is
+    ``O(h^4)`` (``O(h^3)`` globally) against the first-order hold's ``O(h^3)``
+    (``O(h^2)``): on a rig drive sampled at 100 Hz the first-order hold's droop
+    ``sinc^2(f h)`` alone costs 1 % of a tire-force RMS at 2 internal steps per
+    sample. Only ``g1`` multiplies the unknown newest input, so the shock loop
+    stays a 4x4 algebraic equation per step. A mode much faster than the step
+    follows its input exactly at the samples (as with the first-order hold).
+
+    Parameters
+    ----------
+    lam : array_like of complex, shape (n,)
+        Continuous poles [rad/s].
+    h : float
+        Step [s].
+
+    Returns
+    -------
+    phi, g1, g0, gm : ndarray of complex, shape (n,)
+
+    Examples
+    --------
+    A parabola is integrated exactly: ``x' = -x + t^2`` from ``x(0) = 0``.
+
+    >>> phi, g1, g0, gm = hold_coefficients([-1.0], 0.1)
+    >>> t = np.arange(-1, 11) * 0.1
+    >>> x = 0.0
+    >>> for k in range(1, 11):
+    ...     x = phi[0] * x + g1[0] * t[k + 1]**2 + g0[0] * t[k]**2 + gm[0] * t[k - 1]**2
+    >>> exact = 1.0**2 - 2 * 1.0 + 2 - 2 * np.exp(-1.0)
+    >>> bool(abs(x.real - exact) < 1e-12)
+    True
+    """
+    lam = np.asarray(lam, dtype=complex)
+    z = lam * h
+    p1, p2, p3 = _phi_functions(z)
+    # int_0^h e^{lam (h - t)} t^n dt = n! h^(n+1) phi_(n+1)(z); parabola through t = -h, 0, h
+    g1 = h * (p2 / 2 + p3)
+    g0 = h * (p1 - 2 * p3)
+    gm = h * (p3 - p2 / 2)
+    return np.exp(z), g1, g0, gm
+
+
+def lag_hold_coefficients(lag_s, h):
+    """Quadratic-hold discretization of the shock lag ``tau F' + F = f`` (see
+    :func:`hold_coefficients`).
+
+    Returns ``(alpha, b0, b1, bm)`` such that
+    ``F[k] = alpha F[k-1] + b0 f[k] + b1 f[k-1] + bm f[k-2]``; ``tau = 0`` gives
+    ``F = f``.
+    """
+    tau = np.asarray(lag_s, dtype=float)
+    pos = tau > 0
+    ts = np.where(pos, tau, 1.0)
+    phi, g1, g0, gm = hold_coefficients(-1.0 / ts, h)
+    alpha = np.where(pos, phi.real, 0.0)
+    b0 = np.where(pos, g1.real / ts, 1.0)
+    b1 = np.where(pos, g0.real / ts, 0.0)
+    bm = np.where(pos, gm.real / ts, 0.0)
+    return alpha, b0, b1, bm
+
+
 def lag_coefficients(lag_s, h):
     """First-order-hold discretization of the shock lag ``tau F' + F = f``.
 
@@ -326,13 +409,17 @@ class RigResponse:
     v_fine : ndarray, shape (n_fine, 4)
         Shock velocities on the internal grid.
     y : ndarray, shape (n_outputs, n_samples)
-        Every plant output at the drive's samples.
+        The outputs ``output_names`` at the drive's samples.
     u_fine : ndarray, shape (n_fine, 7)
         Rig inputs refined onto the internal grid.
     fs_hz : float
         The drive's sample rate [Hz].
     oversample : int
         Internal steps per drive sample.
+    n_samples : int
+    plant_name : str
+    output_names : tuple of str
+        The plant outputs in ``y``.
     """
 
     v_fine: np.ndarray
@@ -342,6 +429,7 @@ class RigResponse:
     oversample: int
     n_samples: int
     plant_name: str
+    output_names: tuple = ()
 
 
 def _refine(u, r):
@@ -362,12 +450,12 @@ def _refine(u, r):
     return np.ascontiguousarray(up[pad * r: pad * r + (u.shape[0] - 1) * r + 1])
 
 
-def _modal_filter(phi, g0, g1, w, axis=-1):
-    """Run the exact-hold recursion of every mode: w has the mode axis first."""
-    # x[k] = phi x[k-1] + g1 w[k] + g0 w[k-1], zero initial state
+def _modal_filter(phi, g1, g0, gm, w, axis=-1):
+    """Run the hold recursion of every mode: w has the mode axis first."""
+    # x[k] = phi x[k-1] + g1 w[k] + g0 w[k-1] + gm w[k-2], zero initial state
     out = np.empty(w.shape, dtype=complex)
     for i in range(phi.size):
-        out[i] = signal.lfilter([g1[i], g0[i]], [1.0, -phi[i]], w[i], axis=axis)
+        out[i] = signal.lfilter([g1[i], g0[i], gm[i]], [1.0, -phi[i]], w[i], axis=axis)
     return out
 
 
@@ -377,7 +465,7 @@ def _drive_array(drive):
     raise TypeError(f"drive must be an ident.drive.Drive, got {type(drive).__name__}")
 
 
-def rig_response(plant, drive, *, oversample=4):
+def rig_response(plant, drive, *, oversample=4, outputs=None):
     """Compute the setup-independent, rig-input part of the response.
 
     Parameters
@@ -386,28 +474,44 @@ def rig_response(plant, drive, *, oversample=4):
     drive : ident.drive.Drive
     oversample : int
         Internal steps per drive sample (>= 1).
+    outputs : sequence of str, optional
+        Plant outputs to compute (default all); modes that none of them (nor a
+        shock velocity) reads are skipped.
 
     Returns
     -------
     RigResponse
     """
     r = _check_oversample(oversample)
+    names = _check_outputs(plant, outputs)
     u, fs = _drive_array(drive)
     u_fine = _refine(u, r)
     h = 1.0 / (fs * r)
-    mr = plant.rig
     vi = plant.velocity_idx
-    phi, g0, g1 = foh_coefficients(mr.lam, h)
-    v_fine = (mr.D[vi] @ u_fine.T).T
+    oi = np.array([plant.output_names.index(o) for o in names], dtype=int)
+    mr = plant.rig.select(outputs=np.concatenate([vi, oi])).pruned()
+    Cv, Cy = mr.C[:4], mr.C[4:]
+    phi, g1, g0, gm = hold_coefficients(mr.lam, h)
+    v_fine = (mr.D[:4] @ u_fine.T).T
     sl = slice(None, None, r)
-    y = mr.D @ u_fine[sl].T
+    y = mr.D[4:] @ u_fine[sl].T
     for a in range(0, mr.n_states, _MODE_BLOCK):  # bounded memory: a block of modes at a time
         b = slice(a, a + _MODE_BLOCK)
-        x = _modal_filter(phi[b], g0[b], g1[b], mr.B[b] @ u_fine.T)  # (block, n_fine)
-        v_fine += np.real(mr.C[vi][:, b] @ x).T
-        y += np.real(mr.C[:, b] @ x[:, sl])
+        x = _modal_filter(phi[b], g1[b], g0[b], gm[b], mr.B[b] @ u_fine.T)  # (block, n_fine)
+        v_fine += np.real(Cv[:, b] @ x).T
+        y += np.real(Cy[:, b] @ x[:, sl])
     return RigResponse(v_fine=np.ascontiguousarray(v_fine), y=y, u_fine=u_fine, fs_hz=fs,
-                       oversample=r, n_samples=u.shape[0], plant_name=plant.name)
+                       oversample=r, n_samples=u.shape[0], plant_name=plant.name,
+                       output_names=tuple(names))
+
+
+def _check_outputs(plant, outputs):
+    """The output names asked for (default all), checked against the plant."""
+    names = list(plant.output_names) if outputs is None else list(outputs)
+    unknown = [o for o in names if o not in plant.output_names]
+    if unknown:
+        raise ValueError(f"unknown outputs {unknown}; the plant has {list(plant.output_names)}")
+    return names
 
 
 def _check_oversample(oversample):
@@ -631,24 +735,82 @@ def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg,
     return it
 
 
+#: Output samples gathered before one matrix product writes them (the loop's states are
+#: buffered so the outputs cost a BLAS product per block, not a scalar sum per sample).
+_OUT_BLOCK = 64
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _predict(pr, pi, g0r, g0i, gmr, gmi, Cvr, Cvi, xr, xi, bdr, bdi, bpr, bpi, acc4):
+    """x <- phi x + g0 (B dF[k-1]) + gm (B dF[k-2]); acc4 <- Re(Cv x)."""
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    a3 = 0.0
+    for i in range(pr.size):
+        tr = (pr[i] * xr[i] - pi[i] * xi[i] + g0r[i] * bdr[i] - g0i[i] * bdi[i]
+              + gmr[i] * bpr[i] - gmi[i] * bpi[i])
+        ti = (pr[i] * xi[i] + pi[i] * xr[i] + g0r[i] * bdi[i] + g0i[i] * bdr[i]
+              + gmr[i] * bpi[i] + gmi[i] * bpr[i])
+        xr[i] = tr
+        xi[i] = ti
+        a0 += Cvr[0, i] * tr - Cvi[0, i] * ti
+        a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
+        a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
+        a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
+    acc4[0] = a0
+    acc4[1] = a1
+    acc4[2] = a2
+    acc4[3] = a3
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _correct(g1r, g1i, Br, Bi, dF, xr, xi, bdr, bdi, bpr, bpi):
+    """B dF[k] -> bd (bd -> bp); x <- x + g1 (B dF[k])."""
+    d0 = dF[0]
+    d1 = dF[1]
+    d2 = dF[2]
+    d3 = dF[3]
+    for i in range(g1r.size):
+        ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
+        ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
+        bpr[i] = bdr[i]
+        bpi[i] = bdi[i]
+        bdr[i] = ur
+        bdi[i] = ui
+        xr[i] += g1r[i] * ur - g1i[i] * ui
+        xi[i] += g1r[i] * ui + g1i[i] * ur
+
+
 @_nb.njit(cache=True, error_model="numpy")
-def _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
-              alpha, b0, b1, r, Cy, Dy, y_rig, y_out, F_out):
+def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
+              kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, CyrT, CyiT, DyT, y_rig, y_out, F_out):
     """Time loop of one setup on the internal grid.
 
-    At every r-th step (an output sample) writes the outputs
-    ``y_rig + Re(Cy x) + Dy dF`` and the applied shock forces. Returns the largest
+    The modal states are held as separate real and imaginary arrays (the mode loops
+    vectorize). At every r-th step (an output sample) the states and ``dF`` are buffered;
+    every :data:`_OUT_BLOCK` samples the outputs ``y_rig + Re(Cy x) + Dy dF`` are written
+    by one matrix product, and the applied shock forces per sample. Returns the largest
     Newton iteration count (-1: no convergence).
     """
-    n = phi.size
+    n = pr.size
     m = 4
-    p = Cy.shape[0]
+    p = CyrT.shape[1]
     N = v_rig.shape[0]
-    x = np.zeros(n, dtype=np.complex128)
-    bd = np.zeros(n, dtype=np.complex128)  # B dF of the last step
+    n_out = y_out.shape[1]
+    xr = np.zeros(n)
+    xi = np.zeros(n)
+    bdr = np.zeros(n)  # B dF of the last step
+    bdi = np.zeros(n)
+    bpr = np.zeros(n)  # B dF of the step before
+    bpi = np.zeros(n)
+    Xr = np.zeros((_OUT_BLOCK, n))
+    Xi = np.zeros((_OUT_BLOCK, n))
+    Db = np.zeros((_OUT_BLOCK, m))
     dF_prev = np.zeros(m)
     F_prev = np.zeros(m)
     f_prev = np.zeros(m)
+    f_prev2 = np.zeros(m)
     v = np.zeros(m)
     vfree = np.zeros(m)
     c0 = np.zeros(m)
@@ -663,18 +825,18 @@ def _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
     J = np.zeros((m, m))
     Jinv = np.zeros((m, m))
     state = np.zeros(1, dtype=np.int64)  # 1: Jinv is valid for seg
+    acc4 = np.zeros(m)
     worst = 0
     failed = False
+    col = 0
+    kk0 = 0
     for k in range(N):
-        # predictor: x[k] without the unknown g1 * B dF[k] term
-        for i in range(n):
-            x[i] = phi[i] * x[i] + g0[i] * bd[i]
+        # predictor: x[k] without the unknown g1 * B dF[k] term, and v_free from it
+        _predict(pr, pi, g0r, g0i, gmr, gmi, Cvr, Cvi, xr, xi, bdr, bdi, bpr, bpi, acc4)
         for c in range(m):
-            acc = 0.0
-            for i in range(n):
-                acc += (Cv[c, i] * x[i]).real
-            vfree[c] = v_rig[k, c] + acc
-            c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c]
+            vfree[c] = v_rig[k, c] + acc4[c]
+        for c in range(m):
+            c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
         it = _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av,
                          vnew, res, J, Jinv, state)
         if it < 0:
@@ -684,38 +846,41 @@ def _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
             worst = it
         for c in range(m):
             F = c0[c] + b0[c] * fv[c]
-            dF = F - cbar[c] * v[c]
             F_prev[c] = F
+            f_prev2[c] = f_prev[c]
             f_prev[c] = fv[c]
-            dF_prev[c] = dF
+            dF_prev[c] = F - cbar[c] * v[c]
         # corrector: complete x[k] with g1 * B dF[k]
-        for i in range(n):
-            acc = 0j
-            for j in range(m):
-                acc += Bf[i, j] * dF_prev[j]
-            bd[i] = acc
-            x[i] += g1[i] * acc
+        _correct(g1r, g1i, Br, Bi, dF_prev, xr, xi, bdr, bdi, bpr, bpi)
         if k % r == 0:
             kk = k // r
             for c in range(m):
                 F_out[kk, c] = F_prev[c]
-            for o in range(p):
-                acc = y_rig[kk, o]
-                for i in range(n):
-                    acc += (Cy[o, i] * x[i]).real
-                for j in range(m):
-                    acc += Dy[o, j] * dF_prev[j]
-                y_out[o, kk] = acc
+                Db[col, c] = dF_prev[c]
+            for i in range(n):
+                Xr[col, i] = xr[i]
+                Xi[col, i] = xi[i]
+            col += 1
+            if col == _OUT_BLOCK or kk == n_out - 1:
+                Y = (np.dot(Xr[:col], CyrT) - np.dot(Xi[:col], CyiT)
+                     + np.dot(Db[:col], DyT))  # (col, p)
+                for j in range(col):
+                    for o in range(p):
+                        y_out[o, kk0 + j] = y_rig[kk0 + j, o] + Y[j, o]
+                kk0 += col
+                col = 0
     return -1 if failed else worst
 
 
 @_nb.njit(cache=True, error_model="numpy", parallel=True)
-def _loop_batch(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv, kf, nk, slo, shi,
-                alpha, b0, b1, r, Cy, Dy, y_rig, y_out, F_out, iters):
+def _loop_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
+                kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, CyrT, CyiT, DyT, y_rig, y_out,
+                F_out, iters):
     for s in _nb.prange(kv.shape[0]):
-        iters[s] = _loop_one(phi, g0, g1, Bf, Cv, Deff, v_rig, cbar, kv[s], kf[s], nk[s],
-                             slo[s], shi[s], alpha[s], b0[s], b1[s], r, Cy, Dy, y_rig,
-                             y_out[s], F_out[s])
+        iters[s] = _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
+                             v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s], b0[s],
+                             b1[s], bm[s], r, CyrT, CyiT, DyT, y_rig, y_out[s], F_out[s])
+    return
 
 
 # ----------------------------------------------------------------------------------------------
@@ -743,8 +908,12 @@ def _setup_models(setup, where):
     return models
 
 
-def _pack_setups(setups, h):
-    """Pack setups into padded arrays for the compiled loop."""
+def _pack_setups(setups, h, *, hold="quadratic"):
+    """Pack setups into padded arrays for the compiled loop.
+
+    The lag coefficients are those of :func:`lag_hold_coefficients` (``alpha, b0,
+    b1, bm``), or with ``hold="linear"`` of :func:`lag_coefficients` (``alpha, b0, b1``).
+    """
     S = len(setups)
     pwls = [[m.to_pwl() for m in models] for models in setups]
     K = max(p.v_knots_m_s.size for row in pwls for p in row)
@@ -765,8 +934,9 @@ def _pack_setups(setups, h):
             slo[s, c] = p.slope_below
             shi[s, c] = p.slope_above
             lag[s, c] = mdl.lag_s
-    alpha, b0, b1 = lag_coefficients(lag, h)
-    return kv, kf, nk, slo, shi, alpha, b0, b1
+    if hold == "linear":
+        return (kv, kf, nk, slo, shi) + tuple(lag_coefficients(lag, h))
+    return (kv, kf, nk, slo, shi) + tuple(lag_hold_coefficients(lag, h))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -867,7 +1037,7 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     if not models:
         raise ValueError("simulate_batch: no setups given")
     if rig is None:
-        rig = rig_response(plant, drive, oversample=r)
+        rig = rig_response(plant, drive, oversample=r, outputs=outputs)
     elif rig.oversample != r or rig.plant_name != plant.name:
         raise ValueError("simulate_batch: the given rig response was computed for another plant "
                          "or oversampling; recompute it with rig_response()")
@@ -875,25 +1045,31 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     h = 1.0 / (fs * r)
     ms, mr = plant.shock, plant.rig
     vi = plant.velocity_idx
-    phi, g0, g1 = foh_coefficients(ms.lam, h)
+    phi, g1, g0, gm = hold_coefficients(ms.lam, h)
     Bf = np.ascontiguousarray(ms.B)
     Cv = np.ascontiguousarray(ms.C[vi])
     Deff = np.real(Cv @ (g1[:, None] * Bf)) + ms.D[vi]
     v_rig = rig.v_fine
-    names = list(plant.output_names) if outputs is None else list(outputs)
-    unknown = [o for o in names if o not in plant.output_names]
-    if unknown:
-        raise ValueError(f"unknown outputs {unknown}; the plant has {list(plant.output_names)}")
+    names = _check_outputs(plant, outputs)
+    missing = [o for o in names if o not in rig.output_names]
+    if missing:
+        raise ValueError(f"simulate_batch: the given rig response lacks outputs {missing}; "
+                         "compute it with rig_response(..., outputs=...) including them")
     oi = np.array([plant.output_names.index(o) for o in names], dtype=int)
-    y_rig = np.ascontiguousarray(rig.y[oi].T)  # (N, p)
+    y_rig = np.ascontiguousarray(rig.y[[rig.output_names.index(o) for o in names]].T)  # (N, p)
     packed = _pack_setups(models, h)
     S, N = len(models), rig.n_samples
     y = np.empty((S, len(names), N))
     F = np.empty((S, N, 4))  # (setup, sample, corner): written per sample in the kernel
     iters = np.zeros(S, dtype=np.int64)
-    _loop_batch(phi, g0, g1, Bf, Cv, np.ascontiguousarray(Deff), v_rig, plant.cbar_n_s_m,
-                *packed, r, np.ascontiguousarray(ms.C[oi]), np.ascontiguousarray(ms.D[oi]),
-                y_rig, y, F, iters)
+    def split(a):
+        a = np.asarray(a)
+        return np.ascontiguousarray(a.real, dtype=float), np.ascontiguousarray(a.imag, dtype=float)
+
+    Cy = ms.C[oi]
+    _loop_batch(*split(phi), *split(g1), *split(g0), *split(gm), *split(Bf.T), *split(Cv),
+                np.ascontiguousarray(Deff), v_rig, plant.cbar_n_s_m, *packed, r,
+                *split(Cy.T), np.ascontiguousarray(ms.D[oi].T, dtype=float), y_rig, y, F, iters)
     if np.any(iters < 0):
         bad = np.flatnonzero(iters < 0).tolist()
         raise ValueError(f"closed loop of plant {plant.name!r}: Newton's method did not converge "

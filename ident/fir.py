@@ -637,7 +637,7 @@ def simulate_fir_batch(plant, drive, setups, *, oversample=4, outputs=None, loop
     Lm = hrev.shape[2]
     v_rig = np.ascontiguousarray(_refine(np.ascontiguousarray(y_rig[vi].T), r).T)  # (4, Nf)
     Nf = v_rig.shape[1]
-    kv, kf, nk, slo, shi, alpha, b0, b1 = _pack_setups(models, 1.0 / (fs * r))
+    kv, kf, nk, slo, shi, alpha, b0, b1 = _pack_setups(models, 1.0 / (fs * r), hold="linear")
     v_free = np.empty((S, 4, Nf))
     v_free[:] = v_rig
     dfh = np.zeros((S, 4, Lm + Nf))

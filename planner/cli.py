@@ -299,7 +299,7 @@ def build_parser():
         sp.add_argument("--shocks", required=True, help="shock library TOML")
         sp.add_argument("--units", choices=["SI", "imperial"], default="SI",
                         help="unit system of the drive file and of the outputs (default SI)")
-        sp.add_argument("--oversample", type=int, default=4,
+        sp.add_argument("--oversample", type=int, default=2,
                         help="internal steps per sample of the shock loop (default %(default)s)")
         sp.add_argument("--out", required=True, help="predictions CSV" if name == "predict"
                         else "output folder")

@@ -80,7 +80,7 @@ def _choose_baseline(setups, objective, baseline):
 
 
 def rank_setups(model, drive, library, *, setups=None, constraints=None, objective=None,
-                baseline=None, top=40, n_check=20, oversample=4, uncertainty=True, n_draws=40,
+                baseline=None, top=40, n_check=20, oversample=2, uncertainty=True, n_draws=40,
                 seed=0, band_hz=(1.0, 20.0), progress=False):
     """Rank shock setups on a model and a drive.
 

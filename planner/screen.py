@@ -34,6 +34,7 @@ import pandas as pd
 from scipy import signal
 
 from ident.channels import CORNERS
+from ident.model import LOOP_REDUCE_RTOL
 
 __all__ = ["screen_setups", "drive_spectrum", "metric_rows"]
 
@@ -280,7 +281,8 @@ def _screen_batch(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv, kf, nk, slo, shi, l
 
 
 def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands=96,
-                  max_iter=30, tol=1e-5, reduce_rtol=1e-4, chunk_size=20000, progress=False):
+                  max_iter=30, tol=1e-5, reduce_rtol=LOOP_REDUCE_RTOL, chunk_size=20000,
+                  progress=False):
     """Predict setups' metrics fast, with each shock linearized (see the module docstring).
 
     Parameters
