@@ -1043,7 +1043,7 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
                          "or oversampling; recompute it with rig_response()")
     fs = rig.fs_hz
     h = 1.0 / (fs * r)
-    ms, mr = plant.shock, plant.rig
+    ms = plant.shock
     vi = plant.velocity_idx
     phi, g1, g0, gm = hold_coefficients(ms.lam, h)
     Bf = np.ascontiguousarray(ms.B)
