@@ -528,56 +528,58 @@ import numba as _nb  # noqa: E402
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
-def _pwl(v, kv, kf, nk, slo, shi):
-    """Force, slope and segment index of a piecewise-linear curve with linear end extensions."""
-    if v <= kv[0]:
-        return kf[0] + slo * (v - kv[0]), slo, 0
-    if v >= kv[nk - 1]:
-        return kf[nk - 1] + shi * (v - kv[nk - 1]), shi, nk
+def _pwl(v, kv, kf, c, nk, slo, shi):
+    """Force, slope and segment index of the piecewise-linear curve of row `c` of the knot
+    arrays (linear end extensions). Rows are indexed in place: no array views are made in
+    the shock loop's inner steps."""
+    if v <= kv[c, 0]:
+        return kf[c, 0] + slo * (v - kv[c, 0]), slo, 0
+    if v >= kv[c, nk - 1]:
+        return kf[c, nk - 1] + shi * (v - kv[c, nk - 1]), shi, nk
     lo = 0
     hi = nk - 1
     while hi - lo > 1:
         mid = (lo + hi) // 2
-        if kv[mid] <= v:
+        if kv[c, mid] <= v:
             lo = mid
         else:
             hi = mid
-    s = (kf[hi] - kf[lo]) / (kv[hi] - kv[lo])
-    return kf[lo] + s * (v - kv[lo]), s, hi
+    s = (kf[c, hi] - kf[c, lo]) / (kv[c, hi] - kv[c, lo])
+    return kf[c, lo] + s * (v - kv[c, lo]), s, hi
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
-def _segment_line(seg, kv, kf, nk, slo, shi):
-    """Slope and intercept of segment `seg` (0: below the knots, nk: above, else between
-    knots seg-1 and seg): f = a + s v on it."""
+def _segment_line(seg, kv, kf, c, nk, slo, shi):
+    """Slope and intercept of segment `seg` of row `c` (0: below the knots, nk: above, else
+    between knots seg-1 and seg): f = a + s v on it."""
     if seg <= 0:
-        return slo, kf[0] - slo * kv[0]
+        return slo, kf[c, 0] - slo * kv[c, 0]
     if seg >= nk:
-        return shi, kf[nk - 1] - shi * kv[nk - 1]
-    s = (kf[seg] - kf[seg - 1]) / (kv[seg] - kv[seg - 1])
-    return s, kf[seg - 1] - s * kv[seg - 1]
+        return shi, kf[c, nk - 1] - shi * kv[c, nk - 1]
+    s = (kf[c, seg] - kf[c, seg - 1]) / (kv[c, seg] - kv[c, seg - 1])
+    return s, kf[c, seg - 1] - s * kv[c, seg - 1]
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
-def _segment_of(v, kv, nk, guess):
-    """Segment index of v (as _pwl), checking the guessed segment first."""
+def _segment_of(v, kv, c, nk, guess):
+    """Segment index of v on row `c` (as _pwl), checking the guessed segment first."""
     if guess <= 0:
-        if v <= kv[0]:
+        if v <= kv[c, 0]:
             return 0
     elif guess >= nk:
-        if v >= kv[nk - 1]:
+        if v >= kv[c, nk - 1]:
             return nk
-    elif kv[guess - 1] < v < kv[guess]:
+    elif kv[c, guess - 1] < v < kv[c, guess]:
         return guess
-    if v <= kv[0]:
+    if v <= kv[c, 0]:
         return 0
-    if v >= kv[nk - 1]:
+    if v >= kv[c, nk - 1]:
         return nk
     lo = 0
     hi = nk - 1
     while hi - lo > 1:
         mid = (lo + hi) // 2
-        if kv[mid] <= v:
+        if kv[c, mid] <= v:
             lo = mid
         else:
             hi = mid
@@ -648,15 +650,88 @@ def _solve_small(J, r, m):
         r[c] = acc / J[c, c]
 
 
-@_nb.njit(cache=True, error_model="numpy", inline="always")
+#: Segment-change passes tried with rank-1 updates of the cached inverse before the full
+#: solve (with its damped Newton fallback) takes over.
+_FAST_ITERATIONS = 6
+#: Rank-1 updates of the cached inverse before it is recomputed from scratch.
+_MAX_RANK1_UPDATES = 64
+
+
+@_nb.njit(cache=True, error_model="numpy")
 def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av, vnew, res,
                 J, Jinv, state):
     """Solve one step of the shock loop in place; return the iteration count (-1: failed).
 
     Solves ``v = vfree + Deff (c0 + b0 f(v) - cbar v)`` for the 4 shock velocities and
-    leaves ``f(v)`` in `fv`. `seg`, `Jinv` and ``state[0]`` (1: `Jinv` valid for `seg`)
-    carry over between steps. Shared by the modal and the FIR simulators.
+    leaves ``f(v)`` in `fv`. `seg`, `Jinv` and ``state[0]`` (0: `Jinv` invalid; k >= 1:
+    valid for `seg`, k - 1 rank-1 updates since it was computed) carry over between steps.
+    Shared by the modal and the FIR simulators.
+
+    The common cases first: every shock stays on its segment, or some move to another
+    segment (a zero crossing of a digressive shock, a knee), handled by Sherman-Morrison
+    updates of the cached inverse. Anything else goes to :func:`_shock_step_full`. Not
+    inlined: the time loop checks the first case itself (an inlined body with many array
+    arguments costs more in reference counting than the solve).
     """
+    if state[0] >= 1:
+        for it in range(1, _FAST_ITERATIONS + 1):
+            for c in range(4):
+                acc = vfree[c]
+                for j in range(4):
+                    acc += Deff[c, j] * (c0[j] + b0[j] * av[j])
+                res[c] = acc
+            for c in range(4):
+                acc = 0.0
+                for j in range(4):
+                    acc += Jinv[c, j] * res[j]
+                vnew[c] = acc
+            same = True
+            for c in range(4):
+                s2 = _segment_of(vnew[c], kv, c, nk[c], seg[c])
+                if s2 == seg[c]:
+                    continue
+                same = False
+                sl2, a2 = _segment_line(s2, kv, kf, c, nk[c], slo[c], shi[c])
+                seg[c] = s2
+                av[c] = a2
+                if sl2 != sv[c]:
+                    # column c of J = I - Deff diag(b0 s - cbar) changes by u = -Deff[:, c] b0 ds:
+                    # Sherman-Morrison, Jinv <- Jinv - (Jinv u)(Jinv[c, :]) / (1 + (Jinv u)[c])
+                    dsc = b0[c] * (sl2 - sv[c])
+                    for r_ in range(4):
+                        acc = 0.0
+                        for j in range(4):
+                            acc -= Jinv[r_, j] * Deff[j, c] * dsc
+                        res[r_] = acc  # res reused as Jinv u
+                    den = 1.0 + res[c]
+                    if abs(den) < 1e-8:
+                        state[0] = 0
+                        break
+                    for j in range(4):
+                        J[0, j] = Jinv[c, j] / den  # J's first row reused as scratch
+                    for r_ in range(4):
+                        for j in range(4):
+                            Jinv[r_, j] -= res[r_] * J[0, j]
+                    sv[c] = sl2
+                    state[0] += 1
+            if same:
+                for c in range(4):
+                    v[c] = vnew[c]
+                    fv[c] = av[c] + sv[c] * vnew[c]
+                if state[0] > _MAX_RANK1_UPDATES:
+                    state[0] = 0  # refresh the inverse at the next step (rounding)
+                return it
+            if state[0] == 0 or state[0] > _MAX_RANK1_UPDATES:
+                state[0] = 0
+                break
+    return _shock_step_full(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av,
+                            vnew, res, J, Jinv, state)
+
+
+@_nb.njit(cache=True, error_model="numpy")
+def _shock_step_full(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av, vnew,
+                     res, J, Jinv, state):
+    """:func:`_shock_step` in full: segment changes, re-inversion, damped Newton."""
     m = 4
     # Solve v = vfree + Deff (c0 + b0 f(v) - cbar v). f is piecewise linear, so on a
     # fixed set of segments (f = a + s v) this is linear: J v = vfree + Deff (c0 + b0 a)
@@ -667,7 +742,7 @@ def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg,
     while True:
         if state[0] == 0:
             for c in range(m):
-                sl_c, a_c = _segment_line(seg[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+                sl_c, a_c = _segment_line(seg[c], kv, kf, c, nk[c], slo[c], shi[c])
                 sv[c] = sl_c
                 av[c] = a_c
             for c in range(m):
@@ -688,7 +763,7 @@ def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg,
                 acc += Jinv[c, j] * res[j]
             vnew[c] = acc
         for c in range(m):
-            s2 = _segment_of(vnew[c], kv[c], nk[c], seg[c])
+            s2 = _segment_of(vnew[c], kv, c, nk[c], seg[c])
             if s2 != seg[c]:
                 same = False
                 seg[c] = s2
@@ -703,7 +778,7 @@ def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg,
             itn = 0
             while True:
                 for c in range(m):
-                    fv[c], sv[c], seg[c] = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+                    fv[c], sv[c], seg[c] = _pwl(v[c], kv, kf, c, nk[c], slo[c], shi[c])
                 for c in range(m):
                     acc = 0.0
                     for j in range(m):
@@ -727,59 +802,20 @@ def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg,
             it += itn
             state[0] = 0
             break
+    if state[0] >= 1:  # accepted on the cached segments: f is their line there
+        for c in range(m):
+            fv[c] = av[c] + sv[c] * v[c]
+        return it
     for c in range(m):
-        fv[c], sv_unused, s3 = _pwl(v[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+        fv[c], sl_c, s3 = _pwl(v[c], kv, kf, c, nk[c], slo[c], shi[c])
         if s3 != seg[c]:
             seg[c] = s3
-            state[0] = 0
     return it
 
 
 #: Output samples gathered before one matrix product writes them (the loop's states are
 #: buffered so the outputs cost a BLAS product per block, not a scalar sum per sample).
 _OUT_BLOCK = 64
-
-
-@_nb.njit(cache=True, error_model="numpy", inline="always")
-def _predict(pr, pi, g0r, g0i, gmr, gmi, Cvr, Cvi, xr, xi, bdr, bdi, bpr, bpi, acc4):
-    """x <- phi x + g0 (B dF[k-1]) + gm (B dF[k-2]); acc4 <- Re(Cv x)."""
-    a0 = 0.0
-    a1 = 0.0
-    a2 = 0.0
-    a3 = 0.0
-    for i in range(pr.size):
-        tr = (pr[i] * xr[i] - pi[i] * xi[i] + g0r[i] * bdr[i] - g0i[i] * bdi[i]
-              + gmr[i] * bpr[i] - gmi[i] * bpi[i])
-        ti = (pr[i] * xi[i] + pi[i] * xr[i] + g0r[i] * bdi[i] + g0i[i] * bdr[i]
-              + gmr[i] * bpi[i] + gmi[i] * bpr[i])
-        xr[i] = tr
-        xi[i] = ti
-        a0 += Cvr[0, i] * tr - Cvi[0, i] * ti
-        a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
-        a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
-        a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
-    acc4[0] = a0
-    acc4[1] = a1
-    acc4[2] = a2
-    acc4[3] = a3
-
-
-@_nb.njit(cache=True, error_model="numpy", inline="always")
-def _correct(g1r, g1i, Br, Bi, dF, xr, xi, bdr, bdi, bpr, bpi):
-    """B dF[k] -> bd (bd -> bp); x <- x + g1 (B dF[k])."""
-    d0 = dF[0]
-    d1 = dF[1]
-    d2 = dF[2]
-    d3 = dF[3]
-    for i in range(g1r.size):
-        ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
-        ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
-        bpr[i] = bdr[i]
-        bpi[i] = bdi[i]
-        bdr[i] = ur
-        bdi[i] = ui
-        xr[i] += g1r[i] * ur - g1i[i] * ui
-        xi[i] += g1r[i] * ui + g1i[i] * ur
 
 
 @_nb.njit(cache=True, error_model="numpy")
@@ -818,27 +854,65 @@ def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_ri
     sv = np.zeros(m)
     seg = np.zeros(m, dtype=np.int64)
     for c in range(m):
-        seg[c] = _segment_of(0.0, kv[c], nk[c], 0)
+        seg[c] = _segment_of(0.0, kv, c, nk[c], 0)
     av = np.zeros(m)
     vnew = np.zeros(m)
     res = np.zeros(m)
     J = np.zeros((m, m))
     Jinv = np.zeros((m, m))
-    state = np.zeros(1, dtype=np.int64)  # 1: Jinv is valid for seg
-    acc4 = np.zeros(m)
+    state = np.zeros(1, dtype=np.int64)  # >= 1: Jinv is valid for seg
     worst = 0
     failed = False
     col = 0
     kk0 = 0
     for k in range(N):
         # predictor: x[k] without the unknown g1 * B dF[k] term, and v_free from it
-        _predict(pr, pi, g0r, g0i, gmr, gmi, Cvr, Cvi, xr, xi, bdr, bdi, bpr, bpi, acc4)
-        for c in range(m):
-            vfree[c] = v_rig[k, c] + acc4[c]
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        for i in range(n):
+            tr = (pr[i] * xr[i] - pi[i] * xi[i] + g0r[i] * bdr[i] - g0i[i] * bdi[i]
+                  + gmr[i] * bpr[i] - gmi[i] * bpi[i])
+            ti = (pr[i] * xi[i] + pi[i] * xr[i] + g0r[i] * bdi[i] + g0i[i] * bdr[i]
+                  + gmr[i] * bpi[i] + gmi[i] * bpr[i])
+            xr[i] = tr
+            xi[i] = ti
+            a0 += Cvr[0, i] * tr - Cvi[0, i] * ti
+            a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
+            a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
+            a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
+        vfree[0] = v_rig[k, 0] + a0
+        vfree[1] = v_rig[k, 1] + a1
+        vfree[2] = v_rig[k, 2] + a2
+        vfree[3] = v_rig[k, 3] + a3
         for c in range(m):
             c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
-        it = _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av,
-                         vnew, res, J, Jinv, state)
+        # the commonest case inline (every shock on its segment, as _shock_step checks first);
+        # the rest in _shock_step
+        it = 0
+        if state[0] >= 1:
+            for c in range(m):
+                acc = vfree[c]
+                for j in range(m):
+                    acc += Deff[c, j] * (c0[j] + b0[j] * av[j])
+                res[c] = acc
+            same = True
+            for c in range(m):
+                acc = 0.0
+                for j in range(m):
+                    acc += Jinv[c, j] * res[j]
+                vnew[c] = acc
+                if _segment_of(acc, kv, c, nk[c], seg[c]) != seg[c]:
+                    same = False
+            if same:
+                for c in range(m):
+                    v[c] = vnew[c]
+                    fv[c] = av[c] + sv[c] * vnew[c]
+                it = 1
+        if it == 0:
+            it = _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av,
+                             vnew, res, J, Jinv, state)
         if it < 0:
             failed = True
             it = 80
@@ -851,7 +925,19 @@ def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_ri
             f_prev[c] = fv[c]
             dF_prev[c] = F - cbar[c] * v[c]
         # corrector: complete x[k] with g1 * B dF[k]
-        _correct(g1r, g1i, Br, Bi, dF_prev, xr, xi, bdr, bdi, bpr, bpi)
+        d0 = dF_prev[0]
+        d1 = dF_prev[1]
+        d2 = dF_prev[2]
+        d3 = dF_prev[3]
+        for i in range(n):
+            ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
+            ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
+            bpr[i] = bdr[i]
+            bpi[i] = bdi[i]
+            bdr[i] = ur
+            bdi[i] = ui
+            xr[i] += g1r[i] * ur - g1i[i] * ui
+            xi[i] += g1r[i] * ui + g1i[i] * ur
         if k % r == 0:
             kk = k // r
             for c in range(m):

@@ -445,7 +445,7 @@ def _fir_loop_one(hrev, D0, v_free, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, r
     sv = np.zeros(m)
     seg = np.zeros(m, dtype=np.int64)
     for c in range(m):
-        seg[c] = _segment_of(0.0, kv[c], nk[c], 0)
+        seg[c] = _segment_of(0.0, kv, c, nk[c], 0)
     av = np.zeros(m)
     vnew = np.zeros(m)
     res = np.zeros(m)
