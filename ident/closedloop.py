@@ -665,73 +665,11 @@ def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg,
     Solves ``v = vfree + Deff (c0 + b0 f(v) - cbar v)`` for the 4 shock velocities and
     leaves ``f(v)`` in `fv`. `seg`, `Jinv` and ``state[0]`` (0: `Jinv` invalid; k >= 1:
     valid for `seg`, k - 1 rank-1 updates since it was computed) carry over between steps.
-    Shared by the modal and the FIR simulators.
-
-    The common cases first: every shock stays on its segment, or some move to another
-    segment (a zero crossing of a digressive shock, a knee), handled by Sherman-Morrison
-    updates of the cached inverse. Anything else goes to :func:`_shock_step_full`. Not
-    inlined: the time loop checks the first case itself (an inlined body with many array
-    arguments costs more in reference counting than the solve).
+    Shared by the modal and the FIR simulators; the modal time loop first tries the
+    common cases inline (every shock on its segment, or segment changes by rank-1 updates
+    of the cached inverse) and calls this for the rest. Not inlined: an inlined body with
+    many array arguments costs more in reference counting than the solve.
     """
-    if state[0] >= 1:
-        for it in range(1, _FAST_ITERATIONS + 1):
-            for c in range(4):
-                acc = vfree[c]
-                for j in range(4):
-                    acc += Deff[c, j] * (c0[j] + b0[j] * av[j])
-                res[c] = acc
-            for c in range(4):
-                acc = 0.0
-                for j in range(4):
-                    acc += Jinv[c, j] * res[j]
-                vnew[c] = acc
-            same = True
-            for c in range(4):
-                s2 = _segment_of(vnew[c], kv, c, nk[c], seg[c])
-                if s2 == seg[c]:
-                    continue
-                same = False
-                sl2, a2 = _segment_line(s2, kv, kf, c, nk[c], slo[c], shi[c])
-                seg[c] = s2
-                av[c] = a2
-                if sl2 != sv[c]:
-                    # column c of J = I - Deff diag(b0 s - cbar) changes by u = -Deff[:, c] b0 ds:
-                    # Sherman-Morrison, Jinv <- Jinv - (Jinv u)(Jinv[c, :]) / (1 + (Jinv u)[c])
-                    dsc = b0[c] * (sl2 - sv[c])
-                    for r_ in range(4):
-                        acc = 0.0
-                        for j in range(4):
-                            acc -= Jinv[r_, j] * Deff[j, c] * dsc
-                        res[r_] = acc  # res reused as Jinv u
-                    den = 1.0 + res[c]
-                    if abs(den) < 1e-8:
-                        state[0] = 0
-                        break
-                    for j in range(4):
-                        J[0, j] = Jinv[c, j] / den  # J's first row reused as scratch
-                    for r_ in range(4):
-                        for j in range(4):
-                            Jinv[r_, j] -= res[r_] * J[0, j]
-                    sv[c] = sl2
-                    state[0] += 1
-            if same:
-                for c in range(4):
-                    v[c] = vnew[c]
-                    fv[c] = av[c] + sv[c] * vnew[c]
-                if state[0] > _MAX_RANK1_UPDATES:
-                    state[0] = 0  # refresh the inverse at the next step (rounding)
-                return it
-            if state[0] == 0 or state[0] > _MAX_RANK1_UPDATES:
-                state[0] = 0
-                break
-    return _shock_step_full(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av,
-                            vnew, res, J, Jinv, state)
-
-
-@_nb.njit(cache=True, error_model="numpy")
-def _shock_step_full(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av, vnew,
-                     res, J, Jinv, state):
-    """:func:`_shock_step` in full: segment changes, re-inversion, damped Newton."""
     m = 4
     # Solve v = vfree + Deff (c0 + b0 f(v) - cbar v). f is piecewise linear, so on a
     # fixed set of segments (f = a + s v) this is linear: J v = vfree + Deff (c0 + b0 a)
@@ -888,28 +826,60 @@ def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_ri
         vfree[3] = v_rig[k, 3] + a3
         for c in range(m):
             c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
-        # the commonest case inline (every shock on its segment, as _shock_step checks first);
-        # the rest in _shock_step
+        # the common cases inline: every shock on its segment, or segment changes (a zero
+        # crossing of a digressive shock, a knee) by Sherman-Morrison updates of the cached
+        # inverse of J = I - Deff diag(b0 s - cbar); the rest in _shock_step
         it = 0
         if state[0] >= 1:
-            for c in range(m):
-                acc = vfree[c]
-                for j in range(m):
-                    acc += Deff[c, j] * (c0[j] + b0[j] * av[j])
-                res[c] = acc
-            same = True
-            for c in range(m):
-                acc = 0.0
-                for j in range(m):
-                    acc += Jinv[c, j] * res[j]
-                vnew[c] = acc
-                if _segment_of(acc, kv, c, nk[c], seg[c]) != seg[c]:
-                    same = False
-            if same:
+            for it_ in range(1, _FAST_ITERATIONS + 1):
                 for c in range(m):
-                    v[c] = vnew[c]
-                    fv[c] = av[c] + sv[c] * vnew[c]
-                it = 1
+                    acc = vfree[c]
+                    for j in range(m):
+                        acc += Deff[c, j] * (c0[j] + b0[j] * av[j])
+                    res[c] = acc
+                for c in range(m):
+                    acc = 0.0
+                    for j in range(m):
+                        acc += Jinv[c, j] * res[j]
+                    vnew[c] = acc
+                same = True
+                for c in range(m):
+                    s2 = _segment_of(vnew[c], kv, c, nk[c], seg[c])
+                    if s2 == seg[c]:
+                        continue
+                    same = False
+                    sl2, a2 = _segment_line(s2, kv, kf, c, nk[c], slo[c], shi[c])
+                    seg[c] = s2
+                    av[c] = a2
+                    if sl2 != sv[c]:
+                        dsc = b0[c] * (sl2 - sv[c])
+                        for r_ in range(m):
+                            acc = 0.0
+                            for j in range(m):
+                                acc -= Jinv[r_, j] * Deff[j, c] * dsc
+                            res[r_] = acc
+                        den = 1.0 + res[c]
+                        if abs(den) < 1e-8:
+                            state[0] = 0
+                            break
+                        for j in range(m):
+                            J[0, j] = Jinv[c, j] / den
+                        for r_ in range(m):
+                            for j in range(m):
+                                Jinv[r_, j] -= res[r_] * J[0, j]
+                        sv[c] = sl2
+                        state[0] += 1
+                if same:
+                    for c in range(m):
+                        v[c] = vnew[c]
+                        fv[c] = av[c] + sv[c] * vnew[c]
+                    it = it_
+                    if state[0] > _MAX_RANK1_UPDATES:
+                        state[0] = 0
+                    break
+                if state[0] == 0 or state[0] > _MAX_RANK1_UPDATES:
+                    state[0] = 0
+                    break
         if it == 0:
             it = _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av,
                              vnew, res, J, Jinv, state)

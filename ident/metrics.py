@@ -254,7 +254,7 @@ def _filtfilt(x, sos, padlen, axis, label):
 
 
 #: Smallest batch (samples in all) filtered by the compiled path; below it, scipy directly.
-_FAST_MIN_SIZE = 200_000
+_FAST_MIN_SIZE = 20_000
 
 
 def _sosfilt_inplace(sos, zi0, x0, buf, n):

@@ -150,7 +150,7 @@ def _model_fs(model):
     return getattr(model, "fs_hz", None)
 
 
-def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=16,
+def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64,
                    band_hz=(1.0, 20.0), static_loads_n=None, reduce_rtol=LOOP_REDUCE_RTOL,
                    progress=False):
     """Predict the metrics of shock setups on a model and drive (time domain).
