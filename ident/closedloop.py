@@ -219,30 +219,17 @@ def modal_form(A, B, C, D, *, max_condition=1e10):
 def foh_coefficients(lam, h):
     """Exact first-order-hold discretization coefficients of modes ``x' = lam x + u``.
 
-    Parameters
-    ----------
-    lam : array_like of complex, shape (n,)
-        Continuous poles [rad/s].
-    h : float
-        Step [s].
+    ``lam`` [rad/s] and ``h`` [s] as in :func:`hold_coefficients` (the quadratic hold the
+    simulator uses); the first-order hold is kept as the textbook reference.
 
     Returns
     -------
     phi, g0, g1 : ndarray of complex, shape (n,)
         ``x[k+1] = phi x[k] + g0 u[k] + g1 u[k+1]`` for ``u`` linear over the step.
     """
-    lam = np.asarray(lam, dtype=complex)
-    z = lam * h
-    phi = np.exp(z)
-    small = np.abs(z) < 1e-3
-    zs = np.where(small, 1.0, z)
-    # g1n = (e^z - 1)/z, g2n = (e^z - 1 - z)/z^2 (normalized by h); series for small z
-    em1 = np.expm1(zs)
-    g1n = np.where(small, 1 + z / 2 + z**2 / 6 + z**3 / 24, em1 / zs)
-    g2n = np.where(small, 0.5 + z / 6 + z**2 / 24 + z**3 / 120, (em1 - zs) / zs**2)
-    g1 = g2n * h
-    g0 = (g1n - g2n) * h
-    return phi, g0, g1
+    z = np.asarray(lam, dtype=complex) * h
+    p1, p2, _ = _phi_functions(z)
+    return np.exp(z), (p1 - p2) * h, p2 * h
 
 
 def _phi_functions(z):
