@@ -60,7 +60,8 @@ class Ranking:
 
     @property
     def best(self):
-        """Name of the best feasible setup."""
+        """Name of the best setup: the best feasible one (the top row, even if infeasible,
+        when no setup is feasible)."""
         return self.table.index[0]
 
 
@@ -69,6 +70,13 @@ def _choose_baseline(setups, objective, baseline):
 
     names = [s.name for s in setups]
     if isinstance(baseline, Setup):
+        if baseline.name in names:
+            listed = setups[names.index(baseline.name)]
+            if listed.ids() != baseline.ids():
+                raise PlannerError(
+                    f"baseline setup {baseline.name!r} ({'/'.join(baseline.ids())}) has the name "
+                    f"of a listed setup with other shocks ({'/'.join(listed.ids())}); rename the "
+                    "baseline or pass its name to use the listed one")
         return baseline
     wanted = baseline if baseline is not None else objective.baseline
     if wanted is not None:
@@ -121,13 +129,16 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     """
     from scipy.stats import spearmanr
 
-    from planner.objective import default_objective, score_setups
+    from planner.objective import Objective, default_objective, score_setups
     from planner.predict import predict_setups
     from planner.screen import screen_setups
     from planner.setups import enumerate_setups
     from planner.uncertainty import prediction_uncertainty, unresolved_pairs
 
     objective = default_objective() if objective is None else objective
+    if not isinstance(objective, Objective):
+        raise TypeError(f"objective must be a planner.objective.Objective (read one with "
+                        f"read_objective), got {type(objective).__name__}")
     if setups is None:
         setups = enumerate_setups(library, **(constraints or {}))
     elif constraints:

@@ -1,0 +1,275 @@
+"""Tests of planner.rank: screening, time-domain check of the best and a spread, agreement,
+settings, baselines, uncertainty on an identified model and bad inputs."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from scipy.stats import spearmanr
+
+from ident.channels import CORNERS
+from ident.errors import PlannerError
+from ident.metrics import METRIC_NAMES
+from planner.objective import Objective, default_objective, score_setups
+from planner.predict import predict_setups
+from planner.rank import Ranking, rank_setups
+from planner.screen import screen_setups
+from planner.setups import Setup, enumerate_setups
+
+RTOL_SUM = 1e-14  # a weighted sum of metric ratios, summed in another order: round-off only
+TOP = 5
+N_CHECK = 4
+RANKING_COLUMNS = ("score", "score_grip", "score_platform", "feasible", "violations", "rank",
+                   "screening_rank", "unresolved")
+
+
+def _candidates(library, baseline):
+    """The baseline and every 4th symmetric setup of the crate (31 setups)."""
+    return [baseline] + list(enumerate_setups(library)[::4])
+
+
+@pytest.fixture(scope="module")
+def ranking(paper_model, track_drive, demo_library, baseline_setup):
+    """A ranking of 31 setups on the known car and the 60 s track drive."""
+    return rank_setups(paper_model, track_drive, demo_library,
+                       setups=_candidates(demo_library, baseline_setup), top=TOP,
+                       n_check=N_CHECK, uncertainty=False)
+
+
+# ---------------------------------------------------------------- layout and content
+
+
+def test_result_has_the_documented_fields(ranking):
+    """A Ranking: the simulated setups' table with metrics, scores and ranks (best first), the
+    screening of every setup, the baseline, the objective, the agreement and the settings."""
+    assert isinstance(ranking, Ranking)
+    t = ranking.table
+    assert list(t.columns[:4]) == ["LF", "RF", "LR", "RR"]
+    assert set(METRIC_NAMES) <= set(t.columns)
+    assert all(c in t.columns for c in RANKING_COLUMNS)
+    assert not any(c.endswith(("_lo", "_hi")) for c in t.columns)  # no uncertainty asked
+    assert t["rank"].tolist() == list(range(1, len(t) + 1))
+    assert (t["unresolved"] == "").all()
+    s = ranking.screening
+    assert len(s) == 31 and s.index.is_unique
+    assert s["rank"].tolist() == list(range(1, 31 + 1))
+    assert set(METRIC_NAMES) <= set(s.columns) and "score" in s.columns
+    assert ranking.baseline == "baseline" and ranking.objective == default_objective()
+    assert set(ranking.agreement) == {"spearman", "n", "same_best"}
+
+
+def test_simulated_setups_are_the_top_and_a_spread(ranking):
+    """The time domain checks the `top` best by screening, `n_check` setups spread evenly over
+    the remaining screening ranks (the first and last of them included) and the baseline."""
+    t = ranking.table
+    n = len(ranking.screening)
+    assert_array_equal(t["screening_rank"], ranking.screening.loc[t.index, "rank"])
+    base_rank = ranking.screening.loc["baseline", "rank"]
+    assert base_rank > TOP  # so the baseline is an extra row here
+    ranks = sorted(t["screening_rank"])
+    assert ranks[:TOP] == list(range(1, TOP + 1))
+    checks = [r for r in ranks[TOP:] if r != base_rank]
+    assert len(checks) == N_CHECK and len(t) == TOP + N_CHECK + 1
+    assert checks[0] == TOP + 1 and checks[-1] == n
+    gaps = np.diff(checks)
+    assert gaps.max() - gaps.min() <= 1
+
+
+def test_rows_are_the_screening_and_time_domain_predictions(ranking, paper_model, track_drive,
+                                                            demo_library, baseline_setup):
+    """The screening table is screen_setups of every setup; the ranking table holds
+    predict_setups of the simulated ones, scored by the objective against the baseline."""
+    setups = _candidates(demo_library, baseline_setup)
+    names = list(METRIC_NAMES)
+    sc = screen_setups(paper_model, track_drive, setups, demo_library)
+    assert_array_equal(ranking.screening.loc[sc.table.index, names].to_numpy(float),
+                       sc.table[names].to_numpy(float))
+    simulated = [s for s in setups if s.name in ranking.table.index]
+    td = predict_setups(paper_model, track_drive, simulated, demo_library)
+    assert_array_equal(ranking.table.loc[td.table.index, names].to_numpy(float),
+                       td.table[names].to_numpy(float))
+    scores = score_setups(ranking.table[names], ranking.objective, baseline="baseline").table
+    assert_allclose(ranking.table["score"], scores.loc[ranking.table.index, "score"],
+                    rtol=RTOL_SUM)
+    assert ranking.table.loc["baseline", "score"] == ranking.objective.total_weight
+
+
+def test_best_is_the_best_of_its_own_table(ranking):
+    """The final best is rank 1 of the time-domain table: feasible, and no feasible setup of
+    the table scores lower."""
+    t = ranking.table
+    assert ranking.best == t.index[0] == t["rank"].idxmin()
+    assert t.loc[ranking.best, "feasible"]
+    assert t.loc[ranking.best, "score"] == t.loc[t["feasible"], "score"].min()
+
+
+def test_agreement_is_the_spearman_of_screening_and_time_domain(ranking):
+    """The reported Spearman is that of the screening and time-domain scores over the
+    simulated setups, a number in [-1, 1]; same_best says whether screening's best won."""
+    t = ranking.table
+    a = ranking.agreement
+    rho = spearmanr(ranking.screening.loc[t.index, "score"], t["score"]).statistic
+    assert isinstance(a["spearman"], float) and -1.0 <= a["spearman"] <= 1.0
+    assert a["spearman"] == pytest.approx(rho, abs=1e-12)
+    assert a["spearman"] > 0.5  # 10 setups spread over the range of a good screening
+    assert a["n"] == len(t)
+    assert a["same_best"] == (ranking.best == ranking.screening.index[0])
+
+
+def test_settings_are_remembered(ranking):
+    """The settings keep the options, the number of setups, the model and the drive."""
+    st = ranking.settings
+    assert (st["top"], st["n_check"], st["oversample"], st["band_hz"]) == (TOP, N_CHECK, 2,
+                                                                          (1.0, 20.0))
+    assert st["n_setups"] == 31
+    assert st["model"] == "Boggs et al. (SAE 2009) Table 1 car" and st["drive"] == "track test"
+    assert "uncertainty" not in st
+
+
+# ---------------------------------------------------------------- options
+
+
+def test_constraints_enumerate_and_default_baseline_is_first(paper_model, track_drive,
+                                                             demo_library):
+    """Without setups the candidates are enumerated with the constraints; with no baseline
+    named (default objective) the first setup is the baseline. A known model has no FRF, so
+    uncertainty=True adds nothing."""
+    r = rank_setups(paper_model, track_drive, demo_library,
+                    constraints={"shocks": ["B20", "L12", "L28"]}, top=2, n_check=1,
+                    uncertainty=True)
+    assert len(r.screening) == 9 and r.settings["n_setups"] == 9
+    assert r.baseline == "B20/B20/B20/B20" and r.baseline in r.table.index
+    assert r.table.loc[r.baseline, "score"] == 1.0
+    assert not any(c.endswith(("_lo", "_hi")) for c in r.table.columns)
+    assert "uncertainty" not in r.settings and (r.table["unresolved"] == "").all()
+
+
+def test_baseline_setup_is_added_and_objective_baseline_is_used(paper_model, track_drive,
+                                                                demo_library, baseline_setup):
+    """A baseline Setup not among the setups is added to them; an objective naming a setup
+    as its baseline normalizes against it; n_check=0 simulates no spread."""
+    pool = list(enumerate_setups(demo_library)[:6])
+    r = rank_setups(paper_model, track_drive, demo_library, setups=pool,
+                    baseline=baseline_setup, top=2, n_check=1, uncertainty=False)
+    assert r.baseline == "baseline" and len(r.screening) == 7
+    assert "baseline" in r.table.index and r.settings["n_setups"] == 7
+    obj = dataclasses.replace(default_objective(), baseline=pool[3].name)
+    r2 = rank_setups(paper_model, track_drive, demo_library, setups=pool, objective=obj,
+                     top=2, n_check=0, uncertainty=False)
+    assert r2.baseline == pool[3].name and r2.objective is obj
+    assert r2.table.loc[pool[3].name, "score"] == pytest.approx(obj.total_weight, rel=RTOL_SUM)
+    assert len(r2.table) == 3  # the top 2 and the baseline, no spread
+
+
+def test_custom_objective_ranks_by_its_own_metric(paper_model, track_drive, demo_library,
+                                                  baseline_setup):
+    """An objective of the front tire-force RMS alone: the best has the lowest of it."""
+    obj = Objective("front grip", {"tire_force_rms_LF": 1.0, "tire_force_rms_RF": 1.0})
+    r = rank_setups(paper_model, track_drive, demo_library,
+                    setups=_candidates(demo_library, baseline_setup), objective=obj,
+                    baseline="baseline", top=3, n_check=2, uncertainty=False)
+    t = r.table
+    front = t["tire_force_rms_LF"] / t.loc["baseline", "tire_force_rms_LF"] + \
+        t["tire_force_rms_RF"] / t.loc["baseline", "tire_force_rms_RF"]
+    assert r.best == front.idxmin()
+    assert r.settings["top"] == 3 and "score_grip" not in t.columns
+
+
+def test_too_few_simulated_setups_give_no_spearman(paper_model, track_drive, demo_library,
+                                                   baseline_setup):
+    """With two simulated setups a rank correlation is meaningless: NaN."""
+    pool = list(enumerate_setups(demo_library)[:3])
+    r = rank_setups(paper_model, track_drive, demo_library, setups=[baseline_setup] + pool,
+                    top=1, n_check=0, uncertainty=False)
+    assert len(r.table) == r.agreement["n"] <= 2
+    assert math.isnan(r.agreement["spearman"])
+
+
+def test_uncertainty_on_an_identified_model(identified_model, track_drive, demo_library,
+                                            baseline_setup):
+    """An identified model (with its FRF): every metric gets an interval containing the
+    time-domain value, the unresolved notes name simulated setups, the settings keep the
+    Monte Carlo settings."""
+    r = rank_setups(identified_model, track_drive, demo_library,
+                    setups=[baseline_setup] + list(enumerate_setups(demo_library)[::10]),
+                    top=3, n_check=2, uncertainty=True, n_draws=4, seed=5)
+    t = r.table
+    for m in METRIC_NAMES:
+        lo, hi = t[f"{m}_lo"].to_numpy(float), t[f"{m}_hi"].to_numpy(float)
+        assert np.all(lo <= t[m].to_numpy(float)) and np.all(t[m].to_numpy(float) <= hi), m
+        assert np.all(hi > lo), m
+    for note in t["unresolved"]:
+        assert all(name in t.index for name in note.split())
+    unc = r.settings["uncertainty"]
+    assert unc["n_draws"] == 4 and unc["seed"] == 5 and unc["quantiles"] == (0.025, 0.975)
+    assert unc["n_averages"] == identified_model.frf.n_averages
+
+
+# ---------------------------------------------------------------- bad inputs
+
+
+def test_bad_inputs(paper_model, track_drive, demo_library, baseline_setup):
+    """Setups and constraints together, no setups, a baseline (argument or objective's) not
+    among the setups, top < 1 and an unknown shock id give clear errors."""
+    setups = _candidates(demo_library, baseline_setup)[:4]
+    with pytest.raises(PlannerError, match="either setups or constraints"):
+        rank_setups(paper_model, track_drive, demo_library, setups=setups,
+                    constraints={"symmetry": "none"}, uncertainty=False)
+    with pytest.raises(PlannerError, match="no setups to rank"):
+        rank_setups(paper_model, track_drive, demo_library, setups=[], uncertainty=False)
+    with pytest.raises(PlannerError, match=r"baseline setup 'nope' is not among the setups"):
+        rank_setups(paper_model, track_drive, demo_library, setups=setups, baseline="nope",
+                    uncertainty=False)
+    obj = dataclasses.replace(default_objective(), baseline="soft")
+    with pytest.raises(PlannerError, match=r"baseline setup 'soft' is not among the setups"):
+        rank_setups(paper_model, track_drive, demo_library, setups=setups, objective=obj,
+                    uncertainty=False)
+    with pytest.raises(PlannerError, match="top must be at least 1, got 0"):
+        rank_setups(paper_model, track_drive, demo_library, setups=setups, top=0,
+                    uncertainty=False)
+    with pytest.raises(PlannerError, match="Z99"):
+        rank_setups(paper_model, track_drive, demo_library,
+                    setups=setups + [dataclasses.replace(baseline_setup, name="bad",
+                                                         shocks={"LF": "Z99", "RF": "B20",
+                                                                 "LR": "B20", "RR": "B20"})],
+                    uncertainty=False)
+
+
+def test_objective_on_metrics_not_predicted(paper_model, track_drive, demo_library,
+                                            baseline_setup):
+    """An objective weighting a metric the prediction does not give (normalized tire force,
+    which needs static loads) is refused with the metric named."""
+    obj = Objective("norm", {"tire_force_rms_norm_LF": 1.0})
+    with pytest.raises(PlannerError, match=r"no column\(s\) \['tire_force_rms_norm_LF'\]"):
+        rank_setups(paper_model, track_drive, demo_library,
+                    setups=_candidates(demo_library, baseline_setup)[:4], objective=obj,
+                    uncertainty=False)
+    # an unknown metric cannot even make an objective
+    with pytest.raises(PlannerError, match="unknown metric 'grip'"):
+        rank_setups(paper_model, track_drive, demo_library,
+                    setups=_candidates(demo_library, baseline_setup)[:4],
+                    objective=Objective("bad", {"grip": 1.0}), uncertainty=False)
+
+
+def test_objective_of_wrong_type_is_a_type_error(paper_model, track_drive, demo_library,
+                                                 baseline_setup):
+    """An objective that is not an Objective should be a TypeError naming the type (as
+    score_setups does), not an AttributeError from inside rank_setups."""
+    with pytest.raises(TypeError, match="Objective"):
+        rank_setups(paper_model, track_drive, demo_library,
+                    setups=_candidates(demo_library, baseline_setup)[:4],
+                    objective={"tire_force_rms_LF": 1.0}, uncertainty=False)
+
+
+def test_baseline_setup_named_like_another_setup_is_refused(paper_model, track_drive,
+                                                            demo_library, baseline_setup):
+    """A baseline Setup with the name of a listed setup but other shocks is an error, not a
+    silent swap for the listed one."""
+    pool = _candidates(demo_library, baseline_setup)[:4]
+    other = Setup(pool[1].name, {c: "L28" for c in CORNERS})
+    assert other.ids() != pool[1].ids()
+    with pytest.raises(PlannerError, match="has the name of a listed setup"):
+        rank_setups(paper_model, track_drive, demo_library, setups=pool, baseline=other,
+                    uncertainty=False)

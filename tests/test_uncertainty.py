@@ -1,0 +1,286 @@
+"""Tests of planner.uncertainty: the Bendat-Piersol random error, the FRF plant, Monte Carlo
+intervals on an FRF of known coherence, and unresolved setup pairs."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from ident.frf import MODEL_INPUTS, Frf
+from planner.objective import Objective
+from planner.screen import screen_setups
+from planner.setups import enumerate_setups
+from planner.uncertainty import (
+    MAX_RELATIVE_ERROR,
+    FrfPlant,
+    Uncertainty,
+    frf_relative_error,
+    prediction_uncertainty,
+    unresolved_pairs,
+)
+
+N_AVERAGES = 51  # the paper's 5 runs of 800 s in Welch blocks: 51 averages, 11 inputs
+# For small errors the draws are a linear function of the perturbation, which scales with the
+# Bendat-Piersol error: interval widths scale with it. Second-order terms (|e|^2 against e)
+# leave a spread of the width ratio over setups and metrics that grows with the error:
+# coherence 0.99 -> 0.9 (eps 1.1 -> 3.7 % a line): measured 0.59 % worst, 0.13 % median;
+# coherence 0.9 -> 0.5 (eps 3.7 -> 11 % a line): measured 1.7 % worst, 0.40 % median.
+RTOL_WIDTH_SCALING_SMALL = 0.015
+RTOL_WIDTH_SCALING_LARGE = 0.04
+# Linear interpolation of a response that is itself linear in frequency: round-off only.
+RTOL_EXACT = 1e-12
+# The FRF plant samples the known car's response every 0.05 Hz and interpolates linearly
+# at the band centres: the curvature near the 1.5 Hz body and 15 Hz wheel-hop resonances
+# moves the screened metrics by < 0.1 % (measured 0.034 %).
+RTOL_FRF_PLANT = 0.005
+
+
+def _frf(plant, g2, *, n_averages=N_AVERAGES, df=0.05, replaced=None):
+    """An Frf holding `plant`'s exact response on a 0-50 Hz grid, with partial coherence `g2`
+    (a number or an array broadcast to (n_out, 11, n_f))."""
+    f = np.arange(0.0, 50.0 + df / 2, df)
+    H = plant.frequency_response(f)
+    pc = np.broadcast_to(np.asarray(g2, dtype=float), H.shape).copy()
+    return Frf(f_hz=f, H=H, input_names=MODEL_INPUTS, output_names=plant.output_names,
+               multiple_coherence=np.ones((H.shape[0], f.size)), partial_coherence=pc,
+               input_condition=np.ones(f.size), independent_fraction=np.ones((11, f.size)),
+               flagged=np.zeros((11, f.size), dtype=bool), n_averages=n_averages,
+               cbar_n_s_m=plant.cbar_n_s_m, fs_hz=100.0,
+               settings={"conditioning": {"smooth_width_hz": 0.6}}, replaced=replaced)
+
+
+def _coherence_frf(g2, n_averages=N_AVERAGES, replaced=None):
+    """A minimal stand-in for an Frf: just what frf_relative_error reads (1 output, 11 inputs)."""
+    pc = np.asarray(g2, dtype=float).reshape(1, 1, -1) * np.ones((1, 11, 1))
+    return SimpleNamespace(partial_coherence=pc, n_averages=n_averages,
+                           input_names=MODEL_INPUTS, replaced=replaced)
+
+
+@pytest.fixture(scope="module")
+def known_plant(paper_model):
+    """The paper car's loop plant (around its nominal damping)."""
+    return paper_model.loop_plant()
+
+
+@pytest.fixture(scope="module")
+def few_setups(demo_library, baseline_setup):
+    """The baseline and 6 symmetric setups spread over the crate."""
+    return [baseline_setup] + list(enumerate_setups(demo_library)[::20])
+
+
+# ---------------------------------------------------------------- random error
+
+
+def test_relative_error_known_answers():
+    """``sqrt((1 - g2) / (2 n_d g2))`` with n_d = 51 averages - 11 inputs = 40, by hand:
+    g2 = 0.5 -> sqrt(0.5 / 40) = sqrt(1/80); 0.9 -> sqrt(0.1 / 72); 0.99 -> sqrt(0.01 / 79.2);
+    0.2 -> sqrt(0.8 / 16); perfect coherence -> 0; no coherence -> the cap (1)."""
+    eps = frf_relative_error(_coherence_frf([0.5, 0.9, 0.99, 0.2, 1.0, 0.0]))
+    expected = [0.11180339887498948, 0.03726779962499649, 0.011236664374387367,
+                0.22360679774997896, 0.0, 1.0]
+    assert eps.shape == (1, 11, 6)
+    for k in range(11):
+        assert_allclose(eps[0, k], expected, rtol=RTOL_EXACT, atol=0)
+    assert MAX_RELATIVE_ERROR == 1.0
+
+
+def test_relative_error_few_averages_and_cap():
+    """Fewer averages than inputs count as one degree of freedom: g2 = 0.5 ->
+    sqrt(0.5 / (2 * 0.5)) = 0.7071; g2 = 0.3 -> sqrt(0.7 / 0.6) = 1.08, capped at 1."""
+    eps = frf_relative_error(_coherence_frf([0.5, 0.3, 0.9], n_averages=5))
+    assert_allclose(eps[0, 0], [0.7071067811865476, 1.0, 0.23570226039551584], rtol=RTOL_EXACT)
+    # more averages, less error: as 1 / sqrt(n_d)
+    e40 = frf_relative_error(_coherence_frf([0.9], n_averages=51))[0, 0, 0]
+    e160 = frf_relative_error(_coherence_frf([0.9], n_averages=171))[0, 0, 0]
+    assert e160 == pytest.approx(e40 / 2, rel=RTOL_EXACT)
+
+
+def test_relative_error_falls_with_coherence():
+    """The error falls strictly as the coherence rises (below the cap)."""
+    g2 = np.linspace(0.05, 1.0, 40)
+    eps = frf_relative_error(_coherence_frf(g2))[0, 0]
+    assert np.all(np.diff(eps) < 0)
+
+
+def test_replaced_lines_take_the_median_of_measured_lines():
+    """Lines replaced in conditioning get the median error of the pair's measured lines; a
+    pair replaced everywhere keeps the median of its own lines."""
+    g2 = np.array([0.5, 0.9, 0.99, 0.1, 0.2])
+    replaced = np.zeros((1, 11, 5), dtype=bool)
+    replaced[0, 0, 3:] = True  # input 0: the last two lines replaced
+    replaced[0, 1, :] = True  # input 1: every line replaced
+    eps = frf_relative_error(_coherence_frf(g2, replaced=replaced))
+    plain = frf_relative_error(_coherence_frf(g2))
+    measured = plain[0, 0, :3]
+    assert_allclose(eps[0, 0], np.r_[measured, np.median(measured), np.median(measured)],
+                    rtol=RTOL_EXACT)
+    assert eps[0, 0, 3] == pytest.approx(np.sqrt(0.1 / 72), rel=RTOL_EXACT)  # the 0.9 line
+    assert_allclose(eps[0, 1], np.median(plain[0, 1]), rtol=RTOL_EXACT)
+    assert_array_equal(eps[0, 2:], plain[0, 2:])
+
+
+# ---------------------------------------------------------------- FRF plant
+
+
+def test_frf_plant_interpolates_linearly():
+    """A response linear in frequency is reproduced exactly between and beyond the grid
+    lines (the end segments extend); the shock velocities are found by name."""
+    from ident.channels import SHOCK_VELOCITIES
+
+    rng = np.random.default_rng(4)
+    names = ("ride_height_LF",) + SHOCK_VELOCITIES
+    a = rng.standard_normal((5, 11)) + 1j * rng.standard_normal((5, 11))
+    b = rng.standard_normal((5, 11)) + 1j * rng.standard_normal((5, 11))
+    grid = np.array([0.0, 0.7, 1.0, 3.5, 10.0])
+    H = a[..., None] + b[..., None] * grid
+    plant = FrfPlant(grid, H, names, np.full(4, 3000.0), name="lin")
+    f = np.array([0.0, 0.3, 0.7, 2.2, 9.99, 10.0, 12.0])
+    assert_allclose(plant.frequency_response(f), a[..., None] + b[..., None] * f,
+                    rtol=RTOL_EXACT)
+    assert plant.velocity_idx.tolist() == [1, 2, 3, 4]
+    assert plant.cbar_n_s_m.dtype == float and plant.name == "lin"
+    with pytest.raises(ValueError):
+        FrfPlant(grid, H, names[:-1] + ("tire_force_RR",), np.full(4, 3000.0))
+
+
+def test_screening_an_frf_plant_matches_the_state_space_plant(known_plant, track_drive,
+                                                              demo_library, few_setups):
+    """The FRF plant of the known car screens like the car itself (the same model, sampled)."""
+    frf = _frf(known_plant, 1.0)
+    a = screen_setups(FrfPlant(frf.f_hz, frf.H, frf.output_names, frf.cbar_n_s_m), track_drive,
+                      few_setups, demo_library)
+    b = screen_setups(known_plant, track_drive, few_setups, demo_library)
+    names = a.metric_names
+    assert names == b.metric_names
+    assert_allclose(a.table[names].to_numpy(float), b.table[names].to_numpy(float),
+                    rtol=RTOL_FRF_PLANT)
+
+
+# ---------------------------------------------------------------- Monte Carlo intervals
+
+
+def _unc(plant, g2, drive, setups, library, **kw):
+    return prediction_uncertainty(SimpleNamespace(frf=_frf(plant, g2)), drive, setups, library,
+                                  **{"n_draws": 20, "seed": 1, **kw})
+
+
+def test_perfect_coherence_gives_no_spread(known_plant, track_drive, demo_library,
+                                           few_setups):
+    """Coherence 1 is no random error: every draw reproduces the nominal prediction."""
+    u = _unc(known_plant, 1.0, track_drive, few_setups, demo_library, n_draws=3)
+    assert u.draws.shape == (3, len(few_setups), 14)
+    assert np.all(u.draws == 1.0)
+    assert np.all(u.ratio_lo.to_numpy() == 1.0) and np.all(u.ratio_hi.to_numpy() == 1.0)
+
+
+def test_lower_coherence_widens_intervals_as_the_random_error(known_plant, track_drive,
+                                                              demo_library, few_setups):
+    """Same draws (seed), lower coherence: every interval is wider, by the ratio of the
+    Bendat-Piersol errors, eps(0.9) / eps(0.99) = sqrt(0.1 / 0.9 * 0.99 / 0.01) = 3.3166
+    and eps(0.5) / eps(0.9) = 3."""
+    w = {}
+    for g2 in (0.99, 0.9, 0.5):
+        u = _unc(known_plant, g2, track_drive, few_setups, demo_library)
+        w[g2] = (u.ratio_hi - u.ratio_lo).to_numpy()
+        # the intervals contain the point prediction
+        assert np.all(u.ratio_lo.to_numpy() < 1.0) and np.all(u.ratio_hi.to_numpy() > 1.0)
+    assert np.all(w[0.99] > 0)
+    assert np.all(w[0.9] > w[0.99]) and np.all(w[0.5] > w[0.9])
+    assert_allclose(w[0.9] / w[0.99], np.sqrt(0.1 / 0.9 * 0.99 / 0.01),
+                    rtol=RTOL_WIDTH_SCALING_SMALL)
+    assert_allclose(w[0.5] / w[0.9], 3.0, rtol=RTOL_WIDTH_SCALING_LARGE)
+
+
+def test_intervals_seed_quantiles_and_settings(known_plant, track_drive, demo_library,
+                                               few_setups):
+    """Same seed, same draws; another seed, other draws; the bounds are the draws' quantiles;
+    intervals() scales a table's metrics by them, matching rows by setup name."""
+    u = _unc(known_plant, 0.9, track_drive, few_setups, demo_library, n_draws=6,
+             quantiles=(0.0, 1.0))
+    again = _unc(known_plant, 0.9, track_drive, few_setups, demo_library, n_draws=6,
+                 quantiles=(0.0, 1.0))
+    other = _unc(known_plant, 0.9, track_drive, few_setups, demo_library, n_draws=6, seed=2)
+    assert_array_equal(u.draws, again.draws)
+    assert not np.allclose(u.draws, other.draws)
+    assert_array_equal(u.ratio_lo.to_numpy(), u.draws.min(axis=0))
+    assert_array_equal(u.ratio_hi.to_numpy(), u.draws.max(axis=0))
+    assert list(u.ratio_lo.index) == [s.name for s in few_setups]
+    assert u.settings == {"n_draws": 6, "seed": 1, "quantiles": (0.0, 1.0),
+                          "n_averages": N_AVERAGES, "smooth_width_hz": 0.6}
+    pred = screen_setups(known_plant, track_drive, few_setups, demo_library).table.iloc[::-1]
+    t = u.intervals(pred)
+    for m in u.metric_names:
+        assert_allclose(t[f"{m}_lo"], pred[m] * u.ratio_lo.loc[pred.index, m], rtol=RTOL_EXACT)
+        assert_allclose(t[f"{m}_hi"], pred[m] * u.ratio_hi.loc[pred.index, m], rtol=RTOL_EXACT)
+    assert "tire_force_rms_LF_lo" not in pred.columns  # the input table is left alone
+
+
+def test_prediction_uncertainty_bad_inputs(paper_model, known_plant, track_drive, demo_library,
+                                           few_setups):
+    """A model without an FRF, and fewer than 2 draws, are refused (documented)."""
+    with pytest.raises(ValueError, match="needs an identified model with its FRF"):
+        prediction_uncertainty(paper_model, track_drive, few_setups, demo_library)
+    with pytest.raises(ValueError, match="n_draws must be at least 2, got 1"):
+        prediction_uncertainty(SimpleNamespace(frf=_frf(known_plant, 0.9)), track_drive,
+                               few_setups, demo_library, n_draws=1)
+
+
+# ---------------------------------------------------------------- unresolved pairs
+
+
+def _pairs_case(rng, n_draws=200, noise=0.02):
+    """Metrics (one weighted metric) of a baseline and four setups: close_a and close_b 0.5 %
+    apart, far well below, and the Monte Carlo ratios: 2 % noise on every non-baseline setup."""
+    names = ["tire_force_rms_LF", "shock_travel_rms_LF"]
+    setups = ["baseline", "close_a", "close_b", "far", "worse"]
+    values = np.array([[100.0, 0.01], [90.0, 0.01], [90.5, 0.01], [50.0, 0.01], [130.0, 0.01]])
+    scores = pd.DataFrame(values, index=setups, columns=names)
+    draws = 1.0 + noise * rng.standard_normal((n_draws, len(setups), len(names)))
+    draws[:, 0, :] = 1.0
+    ratio = pd.DataFrame(np.ones((len(setups), len(names))), index=setups, columns=names)
+    unc = Uncertainty(ratio_lo=ratio, ratio_hi=ratio, draws=draws, metric_names=names)
+    return scores, unc
+
+
+OBJ_ONE = Objective("one metric", {"tire_force_rms_LF": 1.0})
+
+
+def test_close_setups_are_unresolved_far_ones_are_not(rng):
+    """Two setups 0.5 % apart under 2 % noise swap in about 40 % of the draws: unresolved;
+    setups 10 % or more apart (> 3.5 standard deviations of the difference) are resolved."""
+    scores, unc = _pairs_case(rng)
+    pairs = unresolved_pairs(scores, unc, OBJ_ONE, baseline="baseline")
+    assert set(pairs) == set(scores.index)
+    assert pairs["close_a"] == ["close_b"] and pairs["close_b"] == ["close_a"]
+    assert pairs["far"] == [] and pairs["worse"] == [] and pairs["baseline"] == []
+
+
+def test_unresolved_threshold_and_top(rng):
+    """A pair swapping in a known fraction of the draws is flagged above max_flip only;
+    `top` keeps pairs among the best setups."""
+    names = ["tire_force_rms_LF"]
+    setups = ["baseline", "a", "b", "c"]
+    scores = pd.DataFrame([[100.0], [80.0], [81.0], [95.0]], index=setups, columns=names)
+    draws = np.ones((20, 4, 1))
+    draws[:3, 1, 0] = 1.05  # a = 84 > b = 81 in 3 of 20 draws: 15 %
+    draws[:2, 3, 0] = 0.8  # c = 76 < a, b in 2 of 20 draws: 10 % (a: 84 in 2 of those)
+    ratio = pd.DataFrame(np.ones((4, 1)), index=setups, columns=names)
+    unc = Uncertainty(ratio_lo=ratio, ratio_hi=ratio, draws=draws, metric_names=names)
+    strict = unresolved_pairs(scores, unc, OBJ_ONE, baseline="baseline", max_flip=0.05)
+    assert strict == {"a": ["b", "c"], "b": ["a", "c"], "c": ["a", "b"], "baseline": []}
+    loose = unresolved_pairs(scores, unc, OBJ_ONE, baseline="baseline", max_flip=0.12)
+    assert loose == {"a": ["b"], "b": ["a"], "c": [], "baseline": []}
+    assert unresolved_pairs(scores, unc, OBJ_ONE, baseline="baseline", max_flip=0.2) == {
+        s: [] for s in ["a", "b", "c", "baseline"]}
+    top2 = unresolved_pairs(scores, unc, OBJ_ONE, baseline="baseline", top=2)
+    assert top2 == {"a": ["b"], "b": ["a"]}
+
+
+def test_unresolved_pairs_match_rows_by_name(rng):
+    """The scores' rows may come in another order than the draws' setups."""
+    scores, unc = _pairs_case(rng)
+    shuffled = scores.iloc[[3, 0, 4, 2, 1]]
+    assert unresolved_pairs(shuffled, unc, OBJ_ONE, baseline="baseline") == unresolved_pairs(
+        scores, unc, OBJ_ONE, baseline="baseline")
