@@ -515,27 +515,6 @@ import numba as _nb  # noqa: E402
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
-def _pwl(v, kv, kf, c, nk, slo, shi):
-    """Force, slope and segment index of the piecewise-linear curve of row `c` of the knot
-    arrays (linear end extensions). Rows are indexed in place: no array views are made in
-    the shock loop's inner steps."""
-    if v <= kv[c, 0]:
-        return kf[c, 0] + slo * (v - kv[c, 0]), slo, 0
-    if v >= kv[c, nk - 1]:
-        return kf[c, nk - 1] + shi * (v - kv[c, nk - 1]), shi, nk
-    lo = 0
-    hi = nk - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if kv[c, mid] <= v:
-            lo = mid
-        else:
-            hi = mid
-    s = (kf[c, hi] - kf[c, lo]) / (kv[c, hi] - kv[c, lo])
-    return kf[c, lo] + s * (v - kv[c, lo]), s, hi
-
-
-@_nb.njit(cache=True, error_model="numpy", inline="always")
 def _segment_line(seg, kv, kf, c, nk, slo, shi):
     """Slope and intercept of segment `seg` of row `c` (0: below the knots, nk: above, else
     between knots seg-1 and seg): f = a + s v on it."""
@@ -573,9 +552,36 @@ def _segment_of(v, kv, c, nk, guess):
     return hi
 
 
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _pwl(v, kv, kf, c, nk, slo, shi):
+    """Force, slope and segment index of the piecewise-linear curve of row `c` of the knot
+    arrays (linear end extensions). Rows are indexed in place: no array views are made in
+    the shock loop's inner steps."""
+    seg = _segment_of(v, kv, c, nk, -1)
+    s, a = _segment_line(seg, kv, kf, c, nk, slo, shi)
+    return a + s * v, s, seg
+
+
 @_nb.njit(cache=True, error_model="numpy")
+def _solver_state(kv, nk):
+    """Fresh per-setup state of :func:`_shock_step`: ``v, vfree, c0, fv, sv, seg, av, vnew,
+    res, J, Jinv, state`` (velocities at rest, each shock on the segment holding 0)."""
+    m = 4
+    seg = np.zeros(m, dtype=np.int64)
+    for c in range(m):
+        seg[c] = _segment_of(0.0, kv, c, nk[c], 0)
+    return (np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), seg, np.zeros(m),
+            np.zeros(m), np.zeros(m), np.zeros((m, m)), np.zeros((m, m)),
+            np.zeros(1, dtype=np.int64))
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
 def _invert_small(J, Jinv, m):
-    """Jinv <- inverse of J (Gauss-Jordan with partial pivoting); J is overwritten."""
+    """Jinv <- inverse of J (Gauss-Jordan with partial pivoting); J is overwritten.
+
+    Real or complex (numba specializes per dtype); inlined, so the screening's per-band
+    solve (:mod:`planner.screen`) costs no call.
+    """
     for i in range(m):
         for j in range(m):
             Jinv[i, j] = 1.0 if i == j else 0.0
@@ -605,36 +611,6 @@ def _invert_small(J, Jinv, m):
                     for j in range(m):
                         J[i, j] -= fct * J[c, j]
                         Jinv[i, j] -= fct * Jinv[c, j]
-
-
-@_nb.njit(cache=True, error_model="numpy")
-def _solve_small(J, r, m):
-    """Solve J d = r in place (r <- d) by Gaussian elimination with partial pivoting."""
-    for c in range(m):
-        p = c
-        big = abs(J[c, c])
-        for i in range(c + 1, m):
-            if abs(J[i, c]) > big:
-                big = abs(J[i, c])
-                p = i
-        if p != c:
-            for j in range(m):
-                tmp = J[c, j]
-                J[c, j] = J[p, j]
-                J[p, j] = tmp
-            tmp = r[c]
-            r[c] = r[p]
-            r[p] = tmp
-        for i in range(c + 1, m):
-            fct = J[i, c] / J[c, c]
-            for j in range(c, m):
-                J[i, j] -= fct * J[c, j]
-            r[i] -= fct * r[c]
-    for c in range(m - 1, -1, -1):
-        acc = r[c]
-        for j in range(c + 1, m):
-            acc -= J[c, j] * r[j]
-        r[c] = acc / J[c, c]
 
 
 #: Segment-change passes tried with rank-1 updates of the cached inverse before the full
@@ -711,19 +687,24 @@ def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg,
                         J[c, j] = -Deff[c, j] * (b0[j] * sv[j] - cbar[j])
                     res[c] = vfree[c] + acc - v[c]
                     J[c, c] += 1.0
-                _solve_small(J, res, m)
+                # Newton step J d = res; Jinv is scratch here (state[0] is reset below)
+                _invert_small(J, Jinv, m)
+                for c in range(m):
+                    acc = 0.0
+                    for j in range(m):
+                        acc += Jinv[c, j] * res[j]
+                    vnew[c] = acc
                 step = 0.0
                 scale = 1e-9
                 for c in range(m):
-                    v[c] += 0.5 * res[c]
-                    step = max(step, abs(res[c]))
+                    v[c] += 0.5 * vnew[c]
+                    step = max(step, abs(vnew[c]))
                     scale = max(scale, abs(v[c]))
                 itn += 1
                 if step <= 1e-12 * scale:
                     break
                 if itn >= 200:
                     return -1
-                    break
             it += itn
             state[0] = 0
             break
@@ -772,20 +753,7 @@ def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_ri
     F_prev = np.zeros(m)
     f_prev = np.zeros(m)
     f_prev2 = np.zeros(m)
-    v = np.zeros(m)
-    vfree = np.zeros(m)
-    c0 = np.zeros(m)
-    fv = np.zeros(m)
-    sv = np.zeros(m)
-    seg = np.zeros(m, dtype=np.int64)
-    for c in range(m):
-        seg[c] = _segment_of(0.0, kv, c, nk[c], 0)
-    av = np.zeros(m)
-    vnew = np.zeros(m)
-    res = np.zeros(m)
-    J = np.zeros((m, m))
-    Jinv = np.zeros((m, m))
-    state = np.zeros(1, dtype=np.int64)  # >= 1: Jinv is valid for seg
+    v, vfree, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = _solver_state(kv, nk)
     worst = 0
     failed = False
     col = 0

@@ -71,7 +71,7 @@ from scipy import signal
 
 from ident.channels import CORNERS, SHOCK_FORCES, SHOCK_VELOCITIES
 from ident.closedloop import (BatchResponse, _check_oversample, _drive_array, _pack_setups,
-                              _refine, _segment_of, _setup_models, _shock_step)
+                              _refine, _setup_models, _shock_step, _solver_state)
 from ident.errors import FitWarning
 from ident.frf import MODEL_INPUTS, Frf
 
@@ -437,21 +437,8 @@ def _fir_loop_one(hrev, D0, v_free, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, r
     Lm = hrev.shape[2]
     F_prev = np.zeros(m)
     f_prev = np.zeros(m)
-    v = np.zeros(m)
-    vfree = np.zeros(m)
     hist = np.zeros(m)
-    c0 = np.zeros(m)
-    fv = np.zeros(m)
-    sv = np.zeros(m)
-    seg = np.zeros(m, dtype=np.int64)
-    for c in range(m):
-        seg[c] = _segment_of(0.0, kv, c, nk[c], 0)
-    av = np.zeros(m)
-    vnew = np.zeros(m)
-    res = np.zeros(m)
-    J = np.zeros((m, m))
-    Jinv = np.zeros((m, m))
-    state = np.zeros(1, dtype=np.int64)  # 1: Jinv is valid for seg
+    v, vfree, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = _solver_state(kv, nk)
     worst = 0
     failed = False
     for k in range(N):

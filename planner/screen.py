@@ -34,6 +34,7 @@ import pandas as pd
 from scipy import signal
 
 from ident.channels import CORNERS
+from ident.closedloop import _invert_small
 from ident.model import LOOP_REDUCE_RTOL
 
 __all__ = ["screen_setups", "drive_spectrum", "metric_rows"]
@@ -151,36 +152,14 @@ def _ceq(sig, kv, kf, nk, slo, shi):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _inv4(M, K):
-    """K <- inverse of the complex 4x4 M (Gauss-Jordan with partial pivoting); M destroyed."""
-    for i in range(4):
-        for j in range(4):
-            K[i, j] = 1.0 if i == j else 0.0
-    for c in range(4):
-        p = c
-        big = abs(M[c, c])
-        for i in range(c + 1, 4):
-            if abs(M[i, c]) > big:
-                big = abs(M[i, c])
-                p = i
-        if p != c:
-            for j in range(4):
-                t = M[c, j]
-                M[c, j] = M[p, j]
-                M[p, j] = t
-                t = K[c, j]
-                K[c, j] = K[p, j]
-                K[p, j] = t
-        d = 1.0 / M[c, c]
-        for j in range(4):
-            M[c, j] *= d
-            K[c, j] *= d
-        for i in range(4):
-            if i != c:
-                fct = M[i, c]
-                for j in range(4):
-                    M[i, j] -= fct * M[c, j]
-                    K[i, j] -= fct * K[c, j]
+def _loop_inverse(Hv, D, M, K):
+    """K <- (I - Hv diag(D))^-1 for one band: Hv (4, 4) the velocity responses to dF, D the
+    shocks' linearized damping minus c_bar (complex, with the lag)."""
+    for a in range(4):
+        for b in range(4):
+            M[a, b] = -Hv[a, b] * D[b]
+        M[a, a] += 1.0
+    _invert_small(M, K, 4)
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -204,11 +183,7 @@ def _screen_one(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv, kf, nk, slo, shi, lag
         for k in range(nf):
             for c in range(4):
                 D[c] = ceq[c] / (1.0 + 1j * w[k] * lag[c]) - cbar[c]
-            for a in range(4):
-                for b in range(4):
-                    M[a, b] = -Hvs[k, a, b] * D[b]
-                M[a, a] += 1.0
-            _inv4(M, K)
+            _loop_inverse(Hvs[k], D, M, K)
             for c in range(4):
                 acc = 0.0
                 for a in range(4):
@@ -244,11 +219,7 @@ def _screen_one(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv, kf, nk, slo, shi, lag
     for k in range(nf):
         for c in range(4):
             D[c] = ceq[c] / (1.0 + 1j * w[k] * lag[c]) - cbar[c]
-        for a in range(4):
-            for b in range(4):
-                M[a, b] = -Hvs[k, a, b] * D[b]
-            M[a, a] += 1.0
-        _inv4(M, K)
+        _loop_inverse(Hvs[k], D, M, K)
         for o in range(p):
             # W = H_ys diag(D) K (row o)
             for b in range(4):
