@@ -7,9 +7,11 @@ Two steps, per input/output pair:
    straight line in dB against log frequency with a constant phase), fitted to
    the good estimates next to the poor region (Eq. 31; the paper does the same
    at low frequencies).
-2. The magnitude in dB and the unwrapped phase are smoothed by a zero-phase
-   Butterworth low-pass along the frequency axis that removes variations of
-   ``smooth_width_hz`` or less (the paper: 4th order, 0.6 Hz, ``filtfilt``).
+2. The estimate is smoothed by a zero-phase Butterworth low-pass along the
+   frequency axis that removes variations of ``smooth_width_hz`` or less (the
+   paper: 4th order, 0.6 Hz, ``filtfilt``), on its real and imaginary parts
+   (default) or, as the paper does, on the magnitude in dB and the unwrapped
+   phase (``smooth_domain="log"``; biased where the estimate is noisy).
 
 Both steps are there to remove random error, so both are held to the
 estimate's own uncertainty: with the standard error ``sigma`` of each estimate
@@ -42,10 +44,13 @@ from scipy import ndimage, signal
 
 from ident.frf import Frf
 
-__all__ = ["condition_frf", "residual_fit", "frf_standard_error", "TOLERANCE"]
+__all__ = ["condition_frf", "residual_fit", "frf_standard_error", "conditioned_standard_error",
+           "conditioned_error_kernel", "TOLERANCE"]
 
 log = logging.getLogger(__name__)
 
+#: Default ``smooth_domain`` of :func:`condition_frf`.
+SMOOTH_DOMAIN = "complex"
 #: Default ``tolerance``: conditioning moves an estimate by at most one standard error.
 TOLERANCE = 2.0
 
@@ -137,17 +142,145 @@ def frf_standard_error(frf):
     return np.where(g2 > 0, np.abs(frf.H) * rel, np.inf)
 
 
+def _raw_error_correlation(settings, f_hz, n_lags):
+    """Correlation of the raw estimate's errors between grid lines ``0..n_lags-1`` apart.
+
+    LPM: each line's estimate is the intercept of a local polynomial of degree
+    ``D`` over ``2R + 1`` DFT lines of every run; two lines ``L`` grid steps
+    apart share the DFT lines their windows overlap on, so their errors are
+    correlated as the intercept weights ``g`` (of a degree-``D`` fit) overlap:
+    ``rho(L) = sum_k g_k g_(k + L s) / sum_k g_k^2``, ``s`` the DFT lines of the
+    longest run per grid step. Welch: blocks' spectra of neighbouring lines are
+    correlated through the window's kernel, ``rho(L) = |sum w^2 exp(-2 pi j L
+    n / N)|^2 / (sum w^2)^2``.
+    """
+    st = settings
+    df = float(f_hz[1] - f_hz[0])
+    lags = np.arange(n_lags, dtype=float)
+    if st.get("estimator") == "lpm" or st.get("method") == "lpm":
+        half, deg = int(st["lpm_half_width"]), int(st["lpm_degree"])
+        x = np.arange(-half, half + 1) / half
+        X = np.vander(x, deg + 1, increasing=True)
+        g = np.linalg.pinv(X)[0]  # intercept weights
+        step = float(st.get("grid_df_hz", df)) / min(st.get("resolution_hz", [df]))
+        k = np.arange(-half, half + 1, dtype=float)
+        rho = np.array([np.sum(g * np.interp(k + L * step, k, g, left=0.0, right=0.0))
+                        for L in lags]) / np.sum(g**2)
+        return np.clip(rho, -1.0, 1.0)
+    nperseg = int(st.get("nperseg", 2 * (f_hz.size - 1)))
+    w2 = signal.get_window(st.get("window", "hamming"), nperseg) ** 2
+    n = np.arange(nperseg)
+    kern = np.abs(np.exp(-2j * np.pi * np.outer(lags, n) / nperseg) @ w2) ** 2
+    return kern / kern[0]
+
+
+def _smoothing_kernel(settings, f_hz, width_hz, order):
+    """The smoothing's impulse response ``s`` (unit sum) and the raw errors' correlation
+    ``rho`` at lags ``-2n..2n`` (:func:`_raw_error_correlation`)."""
+    df = float(f_hz[1] - f_hz[0])
+    sos = signal.butter(int(order), min(2 * df / width_hz, 0.99), output="sos")
+    n = int(np.ceil(10 * width_hz / df)) | 1
+    impulse = np.zeros(2 * n + 1)
+    impulse[n] = 1.0
+    kern = signal.sosfiltfilt(sos, impulse)
+    kern /= kern.sum()
+    rho = _raw_error_correlation(settings, f_hz, 2 * n + 1)
+    return kern, np.concatenate([rho[:0:-1], rho])
+
+
+def _smoothing_factors(settings, f_hz, width_hz, order):
+    """``(s^T R s, sum_j s_j rho_j, acf)``: the smoothed error's variance and its covariance
+    with the raw error, relative to the raw error's variance, and the smoothed error's
+    correlation at lags 0, 1, ... grid lines."""
+    kern, full = _smoothing_kernel(settings, f_hz, width_hz, order)
+    srho = np.convolve(kern, full, mode="full")  # (s * rho)(L), lag 0 in the middle
+    c0 = float(srho[srho.size // 2])
+    srs = np.convolve(srho, kern[::-1], mode="full")  # (s * rho * s)(L)
+    acf = srs[srs.size // 2:]
+    return float(acf[0]), c0, acf / acf[0]
+
+
+def conditioned_error_kernel(frf):
+    """How the conditioning's smoothing shapes the estimate's random error.
+
+    The smoothing (a zero-phase Butterworth along frequency, on the dB
+    magnitude and unwrapped phase: for small errors, a linear filter ``s`` on
+    the relative error) averages neighbouring estimates whose errors are
+    themselves correlated (``rho``: the raw estimate's errors are correlated
+    over its estimation window). The fully smoothed error's variance is
+    ``s^T R s`` times the raw one's (``R`` the Toeplitz matrix of ``rho``), and
+    its correlation between lines ``L`` apart is ``(s * rho * s)(L) / s^T R s``.
+
+    Parameters
+    ----------
+    frf : Frf
+
+    Returns
+    -------
+    factor : float
+        Variance of the fully smoothed over the raw estimate's error (1
+        without smoothing).
+    lag_hz : ndarray, shape (n,)
+        Lags [Hz], from 0.
+    acf : ndarray, shape (n,)
+        Correlation of the smoothed estimate's errors at those lags.
+    """
+    df = float(frf.f_hz[1] - frf.f_hz[0])
+    cond = frf.settings.get("conditioning") or {}
+    width = cond.get("smooth_width_hz")
+    if not cond.get("smooth", width is not None) or width is None:
+        rho = _raw_error_correlation(frf.settings, frf.f_hz, 16)
+        return 1.0, np.arange(rho.size) * df, rho
+    factor, _, acf = _smoothing_factors(frf.settings, frf.f_hz, width,
+                                        cond.get("smooth_order", 4))
+    return factor, np.arange(acf.size) * df, acf
+
+
+def conditioned_standard_error(frf):
+    """Standard error of each line of a conditioned FRF (complex), shape (n_out, n_in, n_f).
+
+    ``frf.sigma`` where conditioning set it (:func:`condition_frf`: the raw
+    error, reduced where the smoothing took effect, kept where the
+    conditioning held the estimate to its data); otherwise the raw error
+    (:func:`frf_standard_error`) reduced as full smoothing would reduce it
+    (:func:`conditioned_error_kernel`), or the raw error for an FRF that was
+    not smoothed.
+
+    Parameters
+    ----------
+    frf : Frf
+
+    Returns
+    -------
+    ndarray, shape (n_out, n_in, n_f)
+        In the units of ``frf.H``; ``inf`` where the coherence is 0.
+    """
+    if getattr(frf, "sigma", None) is not None:
+        return frf.sigma
+    cond = frf.settings.get("conditioning") or {}
+    width = cond.get("smooth_width_hz")
+    if not cond.get("smooth", width is not None) or width is None:
+        return frf_standard_error(frf)
+    factor, _, _ = _smoothing_factors(frf.settings, frf.f_hz, width, cond.get("smooth_order", 4))
+    return frf_standard_error(frf) * np.sqrt(factor)
+
+
+def _blended_error(sigma, w, factor, c0):
+    """Standard error of ``H + w (H_s - H)``: ``H`` with error ``sigma``, ``H_s`` its smoothing.
+
+    ``var = sigma^2 ((1 - w)^2 + w^2 factor + 2 w (1 - w) c0)`` with ``factor`` the
+    smoothing's variance reduction and ``c0`` the covariance of a raw error with
+    its smoothed value (both relative to ``sigma^2``).
+    """
+    return sigma * np.sqrt((1 - w) ** 2 + w**2 * factor + 2 * w * (1 - w) * c0)
+
+
 def _weight(h, hc, sigma, k):
     """``w = 1 / (1 + (|hc - h| / (k sigma))^2)`` (module notes)."""
     d = np.abs(hc - h)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         ratio = np.where(d > 0, d / (k * sigma), 0.0)
         return 1.0 / (1.0 + np.minimum(np.nan_to_num(ratio, nan=0.0), 1e150) ** 2)
-
-
-def _held(h, hc, sigma, k):
-    """``h + w (hc - h)`` with :func:`_weight` (module notes)."""
-    return h + _weight(h, hc, sigma, k) * (hc - h)
 
 
 def _good_span(good, run):
@@ -165,7 +298,7 @@ def _good_span(good, run):
 
 def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_window_hz=1.0,
                   min_good_hz=0.2, min_span_ratio=4.0, smooth_width_hz=0.6, smooth_order=4,
-                  tolerance=TOLERANCE, residual=True, smooth=True):
+                  tolerance=TOLERANCE, residual=True, smooth=True, smooth_domain=SMOOTH_DOMAIN):
     """Condition an estimated FRF for the parametric fit.
 
     Parameters
@@ -199,6 +332,16 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         unconditionally (the paper).
     residual, smooth : bool
         Turn either step off.
+    smooth_domain : {"complex", "log"}
+        What the smoothing filters: the real and imaginary parts (default
+        :data:`SMOOTH_DOMAIN`), or the magnitude in dB and the unwrapped phase
+        (the paper). Averaging the logarithm of a noisy magnitude is biased
+        upward where the estimate's error is comparable to the response
+        (``E ln|1 + e| > 0`` for ``|e|`` near 1 and above): on the paper's plan
+        with 5 % noise, the conditioned estimates of coherence below 0.1 erred
+        by 1.8 of their standard errors (RMS) against 1.0 for complex
+        smoothing, and the identified model's metrics by 0.18 % median
+        against 0.15 %.
 
     Returns
     -------
@@ -216,6 +359,8 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
     """
     if not isinstance(frf, Frf):
         raise TypeError(f"condition_frf needs an Frf, got {type(frf).__name__}")
+    if smooth_domain not in ("complex", "log"):
+        raise ValueError(f"smooth_domain must be 'complex' or 'log', got {smooth_domain!r}")
     if not 0 < coherence_min < 1:
         raise ValueError(f"coherence_min must be in (0, 1), got {coherence_min!r}")
     if tolerance is not None and not (
@@ -284,23 +429,32 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
                 H[o, i, idx] = _blend(o, i, idx, K * np.exp(1j * phi) / f[idx] ** N)
                 H[o, i, 0] = H[o, i, 1]
                 replaced[o, i, : k_lo] = True
+    sigma_raw = frf_standard_error(frf)
+    sigma_c = sigma_raw
     if smooth:
         wn = 2 * df / smooth_width_hz
         if not 0 < wn < 1:
             raise ValueError(f"smooth_width_hz={smooth_width_hz} must exceed two frequency "
                              f"steps ({2 * df:.3g} Hz)")
         sos = signal.butter(smooth_order, wn, output="sos")
-        mag = 20 * np.log10(np.maximum(np.abs(H), 1e-300))
-        ph = np.unwrap(np.angle(H), axis=-1)
-        mag = signal.sosfiltfilt(sos, mag, axis=-1)
-        ph = signal.sosfiltfilt(sos, ph, axis=-1)
-        Hs = 10 ** (mag / 20) * np.exp(1j * ph)
+        if smooth_domain == "complex":
+            Hs = (signal.sosfiltfilt(sos, H.real, axis=-1)
+                  + 1j * signal.sosfiltfilt(sos, H.imag, axis=-1))
+        else:
+            mag = 20 * np.log10(np.maximum(np.abs(H), 1e-300))
+            ph = np.unwrap(np.angle(H), axis=-1)
+            mag = signal.sosfiltfilt(sos, mag, axis=-1)
+            ph = signal.sosfiltfilt(sos, ph, axis=-1)
+            Hs = 10 ** (mag / 20) * np.exp(1j * ph)
         if tolerance is None:
-            H = Hs
+            w = np.ones(H.shape)
         else:
             # hold the smoothing to the estimate's uncertainty (module notes); the residual
             # fits' frequencies are smoothed fully (they have no standard error of their own)
-            H = _held(H, Hs, np.where(replaced, np.inf, sigma), tolerance)
+            w = _weight(H, Hs, np.where(replaced, np.inf, sigma), tolerance)
+        H = H + w * (Hs - H)
+        factor, c0, _ = _smoothing_factors(frf.settings, frf.f_hz, smooth_width_hz, smooth_order)
+        sigma_c = _blended_error(sigma_raw, w, factor, c0)
     if poor_pairs:
         log.info("%d input/output pairs have no span of coherence >= %g; kept smoothed",
                  len(poor_pairs), coherence_min)
@@ -310,7 +464,7 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         "residual_window_hz": residual_window_hz, "min_good_hz": min_good_hz,
         "min_span_ratio": min_span_ratio,
         "smooth_width_hz": smooth_width_hz, "smooth_order": smooth_order,
-        "tolerance": tolerance,
+        "tolerance": tolerance, "smooth_domain": smooth_domain,
         "residual": residual, "smooth": smooth, "poor_pairs": poor_pairs}
     return dataclasses.replace(frf, H=H, H_raw=frf.H if frf.H_raw is None else frf.H_raw,
-                               replaced=replaced, settings=settings)
+                               replaced=replaced, settings=settings, sigma=sigma_c)

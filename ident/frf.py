@@ -68,6 +68,19 @@ problem:
   ``1 / [Sn^-1]_ii`` on the local regressor; about 0.3 for the paper session,
   whose rig inputs are the same drive in every run);
 - input condition: that of the column-scaled normal matrix ``A^H A``.
+
+Errors in variables. A measured ``dF_i = F_i - c_bar_i v_i`` carries the
+noise ``N_i = n_F - c_bar_i n_v`` of the force and velocity sensors, and the
+velocity output of the same corner carries ``n_v`` too, so least squares
+estimates ``H~shocks`` biased: toward zero by ``S_N / S_dF`` and, for the
+corner's own velocity, by the cross-power ``E[conj(N) n_v] = -c_bar S_nv``.
+On the paper's plan the bias is second order in the noise level: with 2 %
+sensor noise it is below the random error; with 5 % the velocity channels'
+noise alone gives metric errors of 0.16 % median and 1.3 % max. A
+bias-compensated solve with the noise spectra measured at the linear
+``c_bar`` corners (where ``F - c_bar v`` is pure noise) was tried and left out:
+on one realization it moved the worst error from 1.5 % to 0.8-2.9 % depending
+on where it stopped compensating, with the median unchanged (docs/DESIGN.md).
 """
 
 from __future__ import annotations
@@ -116,6 +129,10 @@ ESTIMATORS = ("welch", "lpm")
 LPM_DEGREE = 2
 #: The default LPM window has at least this many rows (lines x runs) per unknown.
 LPM_ROWS_PER_UNKNOWN = 2
+#: An input's records in several runs count as one realization unless an eigen-direction of
+#: their Gram matrix holds at least this fraction of the largest one's energy
+#: (:func:`_distinct_realizations`).
+LPM_DISTINCT_FRACTION = 0.1
 #: Default ``lpm_coherence_dof``: the LPM reports its standard error as the
 #: partial coherence an H1 estimate with this many degrees of freedom (the
 #: seed paper's 40 Welch blocks per run) would have for the same random error,
@@ -170,6 +187,10 @@ class Frf:
         The estimate before conditioning (set by :func:`ident.condition.condition_frf`).
     replaced : ndarray of bool or None
         Frequencies replaced by residual fits in conditioning, (n_out, n_in, n_f).
+    sigma : ndarray or None
+        Standard error of each line of ``H`` (complex, ``E|H - H_true|^2 =
+        sigma^2``), (n_out, n_in, n_f); set by conditioning
+        (:func:`ident.condition.conditioned_standard_error`).
     """
 
     f_hz: np.ndarray
@@ -187,6 +208,7 @@ class Frf:
     settings: dict = field(default_factory=dict)
     H_raw: np.ndarray | None = None
     replaced: np.ndarray | None = None
+    sigma: np.ndarray | None = None
 
     def index(self, output, input):
         """Return ``(output index, input index)`` of a pair, with a clear error."""
@@ -285,6 +307,42 @@ def _solve_h1(Suu, Suy, Syy):
 # local polynomial method
 # ----------------------------------------------------------------------------------------------
 
+def _distinct_realizations(records):
+    """Number of realizations among runs' records of one input that carry their own information.
+
+    Records of the same length are compared by the eigenvalues ``lambda`` of
+    their Gram matrix (records scaled to unit norm): an eigen-direction whose
+    ``lambda`` is below :data:`LPM_DISTINCT_FRACTION` of the largest is not a
+    realization of its own. Copies of one drive count once whether they are
+    exact, scaled, or differ by measurement noise (0.5 % input noise leaves
+    ``lambda_2 / lambda_1`` at about 1e-5): the noise is all that tells them
+    apart, and a local regression that leans on it amplifies the noise by
+    ``1 / (noise fraction)`` (the failure of a noisy session of the paper's
+    plan, whose runs all play one drive, with the half-width of 5 distinct
+    runs: 5 % median metric error). Records of different lengths are distinct.
+
+    Parameters
+    ----------
+    records : list of ndarray, shape (n_samples_r,)
+
+    Returns
+    -------
+    int
+    """
+    groups = {}
+    for x in records:
+        groups.setdefault(x.shape[0], []).append(x)
+    count = 0
+    for xs in groups.values():
+        if len(xs) == 1:
+            count += 1
+            continue
+        X = np.array([x / max(np.linalg.norm(x), 1e-300) for x in xs])
+        lam = np.linalg.eigvalsh(X @ X.T)
+        count += int(np.sum(lam > LPM_DISTINCT_FRACTION * lam[-1]))
+    return count
+
+
 def _lpm_default_half_width(inputs, degree):
     """Default LPM half-width ``R`` [lines] from the runs' input records.
 
@@ -293,9 +351,10 @@ def _lpm_default_half_width(inputs, degree):
 
     - all runs together: ``n_runs (2R + 1) >= 2 (n_in + n_runs)(D + 1)``
       (an FRF polynomial per input, a transient polynomial per run);
-    - inputs repeated identically in several runs (the same rig drive in
-      every run, as in the paper's plan) add no information with the
-      repeats, so for them alone, with ``g`` distinct realizations:
+    - inputs repeated in several runs (the same rig drive in every run, as in
+      the paper's plan, exact or up to scale and measurement noise:
+      :func:`_distinct_realizations`) add no information with the repeats,
+      so for them alone, with ``g`` distinct realizations:
       ``g (2R + 1) >= 2 (n_repeated + g)(D + 1)``.
 
     Paper session (5 runs of one drive, 11 inputs, D = 2): the first rule
@@ -311,16 +370,13 @@ def _lpm_default_half_width(inputs, degree):
     needs = [(LPM_ROWS_PER_UNKNOWN * (m + n_runs) * nd, n_runs)]
     n_rep, g_rep = 0, n_runs
     for i in range(m):
-        power = np.array([np.mean(x[i] ** 2) for x in inputs])
-        live = [x[i] for x, pw in zip(inputs, power) if pw > 1e-10 * power.max()]
-        distinct = []
-        for a in live:
-            tol = 1e-9 * np.sqrt(np.mean(a ** 2))
-            if not any(a.shape == b.shape and np.allclose(a, b, rtol=0, atol=tol) for b in distinct):
-                distinct.append(a)
-        if len(distinct) < len(live):
+        records = [x[i] - np.mean(x[i]) for x in inputs]
+        power = np.array([np.mean(r ** 2) for r in records])
+        live = [r for r, pw in zip(records, power) if pw > 1e-10 * power.max()]
+        distinct = _distinct_realizations(live) if live else 0
+        if distinct < len(live):
             n_rep += 1
-            g_rep = min(g_rep, len(distinct))
+            g_rep = min(g_rep, distinct)
     if n_rep:
         needs.append((LPM_ROWS_PER_UNKNOWN * (n_rep + g_rep) * nd, g_rep))
     lines = max(int(np.ceil(rows / runs)) for rows, runs in needs)
@@ -758,6 +814,9 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     lpm_coherence_dof : int
         ``nu_c`` of the LPM's partial coherence (module notes); default
         :data:`LPM_COHERENCE_DOF`.
+    exact_linear : bool
+        :func:`shock_force_deviation`: ``dF = 0`` exactly at corners whose
+        shock is linear at ``c_bar`` without lag (default).
 
     Returns
     -------

@@ -17,14 +17,15 @@ oversampled internally.
 
 from __future__ import annotations
 
+import difflib
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ident._io import read_toml
-from ident.channels import CORNERS, RIG_INPUTS
+from ident.channels import CORNERS, RESPONSE_KINDS, RIG_INPUTS, kind_of
 from ident.errors import SessionError, ShockModelError
 from ident.units import check_units, to_si
 
@@ -84,8 +85,10 @@ class RigPlan:
     oversample : int
         Internal simulation steps per sample.
     noise : float
-        Measurement noise on every response channel, as a fraction of that
-        channel's RMS (white Gaussian, seeded per run).
+        Measurement noise on every response channel: white Gaussian noise
+        (seeded per run) whose standard deviation is this fraction of the
+        channel's RMS over the whole session (a sensor's noise floor, the same
+        in every run).
     drive : dict
         Drive settings in SI (``kind`` and its options).
     shocks : ident.shocks.ShockLibrary
@@ -94,6 +97,16 @@ class RigPlan:
         Unit system of the session to write.
     source : str or None
         The plan file.
+    input_noise : float
+        Measurement noise on every recorded rig input (wheelloaders and aero
+        loads), as a fraction of that input's RMS over the session. The rig still plays the
+        commanded drive; only the recorded channels are noisy, so the inputs of
+        runs that share a drive differ by their noise.
+    channel_noise : dict
+        Per-channel overrides of `noise` and `input_noise`: a key is a
+        canonical channel (``"tire_force_LF"``), a response kind
+        (``"tire_force"``), ``"wheelloader"`` or ``"aero"``; the most specific
+        key wins (:meth:`noise_level`).
     """
 
     name: str
@@ -105,6 +118,38 @@ class RigPlan:
     runs: tuple
     units: str = "SI"
     source: str | None = None
+    input_noise: float = 0.0
+    channel_noise: dict = field(default_factory=dict)
+
+    def noise_level(self, channel):
+        """Measurement noise of one recorded channel, a fraction of its RMS.
+
+        The channel's own key in `channel_noise`, else its kind's (a response
+        kind, ``wheelloader`` or ``aero``), else `input_noise` for rig inputs
+        and `noise` for responses.
+
+        Examples
+        --------
+        >>> from dataclasses import replace
+        >>> plan = replace(default_plan(), noise=0.02, input_noise=0.005,
+        ...                channel_noise={"tire_force": 0.01, "tire_force_LF": 0.03})
+        >>> [plan.noise_level(c) for c in ("tire_force_LF", "tire_force_RR", "ride_height_LF",
+        ...                                 "wheelloader_LF", "aero_roll")]
+        [0.03, 0.01, 0.02, 0.005, 0.005]
+        """
+        if channel in self.channel_noise:
+            return float(self.channel_noise[channel])
+        group = _noise_group(channel)
+        if group in self.channel_noise:
+            return float(self.channel_noise[group])
+        return float(self.input_noise if channel in RIG_INPUTS else self.noise)
+
+
+def _noise_group(channel):
+    """The `channel_noise` key of a channel's kind: response kind, 'wheelloader' or 'aero'."""
+    if channel in RIG_INPUTS:
+        return "aero" if channel.startswith("aero_") else "wheelloader"
+    return kind_of(channel)
 
 
 def _num(doc, key, where, default=None, *, positive=True, integer=False):
@@ -143,7 +188,11 @@ def read_rig_plan(path):
     -----
     Keys: ``format = "rig-plan/1"``, ``name``, ``units``, ``fs_hz``,
     ``duration_s`` (default per run), ``oversample`` (default 8), ``seed``,
-    ``noise`` (default 0), ``shock_library`` (path relative to the plan);
+    ``noise`` (default 0: measurement noise of the response channels, a
+    fraction of each channel's RMS), ``input_noise`` (default 0: the same for
+    the recorded rig inputs), ``[channel_noise]`` (optional overrides: a
+    channel, a response kind, ``wheelloader`` or ``aero`` -> fraction),
+    ``shock_library`` (path relative to the plan);
     ``[drive]`` with ``kind`` = ``noise`` (``f_max_hz``, ``filter_order``,
     ``taper_s``, ``peak_wheelloader`` [length], ``peak_aero_heave`` [force],
     ``roll_moment_multiple`` and ``pitch_moment_multiple``: peak moments as
@@ -201,8 +250,40 @@ def read_rig_plan(path):
         raise SessionError(f"{where}: duplicate run names {dup}; make them unique")
     return RigPlan(name=str(doc.get("name", path.stem)), fs_hz=fs,
                    oversample=_num(doc, "oversample", where, 8, integer=True),
-                   noise=_num(doc, "noise", where, 0.0, positive=False),
-                   drive=drive, shocks=shocks, runs=tuple(runs), units=units, source=where)
+                   noise=_noise_num(doc, "noise", where),
+                   drive=drive, shocks=shocks, runs=tuple(runs), units=units, source=where,
+                   input_noise=_noise_num(doc, "input_noise", where),
+                   channel_noise=_parse_channel_noise(doc.get("channel_noise", {}),
+                                                      f"{where}: [channel_noise]"))
+
+
+#: Keys of ``[channel_noise]`` besides the canonical channels.
+NOISE_GROUPS = tuple(RESPONSE_KINDS) + ("wheelloader", "aero")
+
+
+def _noise_num(doc, key, where):
+    val = _num(doc, key, where, 0.0, positive=False)
+    if val < 0 or val >= 1:
+        raise SessionError(f"{where}: '{key}' = {val!r} must be a fraction of the channel RMS in "
+                           "[0, 1) (e.g. 0.02 for 2 %)")
+    return val
+
+
+def _parse_channel_noise(table, where):
+    from ident.channels import ALL_CHANNELS
+
+    if not isinstance(table, dict):
+        raise SessionError(f"{where}: must be a table of channel or kind = fraction")
+    out = {}
+    for key in table:
+        if key not in ALL_CHANNELS and key not in NOISE_GROUPS:
+            close = difflib.get_close_matches(str(key), list(NOISE_GROUPS) + list(ALL_CHANNELS),
+                                              n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise SessionError(f"{where}: unknown key {key!r}{hint}; use a canonical channel, a "
+                               f"response kind {list(RESPONSE_KINDS)}, 'wheelloader' or 'aero'")
+        out[key] = _noise_num(table, key, where)
+    return out
 
 
 def _parse_drive(d, units, where):
@@ -340,7 +421,7 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
     plan = default_plan() if plan is None else plan
     vehicle = example_vehicle() if vehicle is None else vehicle
     model = build_full_car(vehicle)
-    runs = []
+    runs, clean = [], []
     drives, fine_drives = {}, {}
     iterator = plan.runs
     if progress:
@@ -363,14 +444,26 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
         # acquisition filter passes them to 1e-5)
         sampled = _daq_sample(resp.channels, plan.oversample, drive.n_samples)
         channels = dict(drive.channels)
-        rng = np.random.default_rng([pr.seed, i, 7])
-        for name in resp.channels:
-            y = sampled[name]
-            if plan.noise > 0:
-                y = y + rng.standard_normal(y.shape) * plan.noise * np.std(y)
-            channels[name] = y
+        channels.update(sampled)
         log.info("run %s: %d samples, Newton iterations <= %d", pr.name, drive.n_samples,
                  resp.newton_iterations)
+        clean.append((pr, channels, drive))
+    # sensor noise: a noise floor per channel, the same in every run (a sensor's property),
+    # sized as a fraction of the channel's RMS over the whole session
+    rms = {}
+    for _, channels, _ in clean:
+        for name, x in channels.items():
+            rms.setdefault(name, []).append(np.mean((x - np.mean(x)) ** 2))
+    for i, (pr, channels, drive) in enumerate(clean):
+        rng = np.random.default_rng([pr.seed, i, 7])
+        rng_in = np.random.default_rng([pr.seed, i, 8])  # its own stream: inputs, then outputs
+        for name in [c for c in channels if c not in RIG_INPUTS] + list(RIG_INPUTS):
+            level = plan.noise_level(name)
+            if level > 0:
+                x = channels[name]
+                gen = rng_in if name in RIG_INPUTS else rng
+                channels[name] = x + gen.standard_normal(x.shape) * level * np.sqrt(
+                    np.mean(rms[name]))
         runs.append(Run(name=pr.name, file=f"runs/{pr.name}.csv", setup=dict(pr.setup),
                         role=pr.role, time_s=drive.time_s, channels=channels, fs_hz=drive.fs_hz))
     return make_session(plan.name, runs, plan.shocks, units=plan.units)

@@ -9,9 +9,12 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from dataclasses import replace
 from pathlib import Path
 
-__all__ = ["main", "build_parser"]
+import numpy as np
+
+__all__ = ["main", "build_parser", "noise_report"]
 
 log = logging.getLogger("shockplan")
 
@@ -32,7 +35,6 @@ def _load_vehicle(path):
 
 def cmd_rig_simulate(args):
     """``shockplan rig simulate``: run a rig plan on the virtual rig, write a session."""
-    from dataclasses import replace
 
     from ident.rig import default_plan, read_rig_plan, simulate_session
     from ident.session import write_session
@@ -42,6 +44,8 @@ def cmd_rig_simulate(args):
         plan = replace(plan, runs=tuple(replace(r, duration_s=args.duration) for r in plan.runs))
     if args.noise is not None:
         plan = replace(plan, noise=args.noise)
+    if args.input_noise is not None:
+        plan = replace(plan, input_noise=args.input_noise)
     vehicle = _load_vehicle(args.vehicle)
     out = Path(args.out)
     from ident._io import check_can_write
@@ -110,10 +114,13 @@ def cmd_identify(args):
         model = identify_session(session, estimator=args.estimator,
                                  frf_method=args.frf_method, nperseg=args.nperseg,
                                  coherence_min=args.coherence_min, fit_method=args.method)
+    noise = noise_report(model, session)
+    model = replace(model, settings=dict(model.settings, noise=noise))
     model.save(out, overwrite=args.overwrite)
     table = model.summary()
     print(f"identified '{session.name}' ({len(session.runs)} runs, {session.fs_hz:g} Hz, "
-          f"{model.frf.n_averages} blocks) with {args.method}: {len(table)} pairs")
+          f"estimator {model.frf.settings.get('estimator')}) with {args.method}: "
+          f"{len(table)} pairs")
     rows = [(r.output, r.input, r.order, f"{r.fit_error:.4f}", f"{r.median_coherence:.3f}")
             for r in table.itertuples()]
     if not args.all_pairs:
@@ -125,6 +132,7 @@ def cmd_identify(args):
     print(f"median fit error {table.fit_error.median():.4f}, orders "
           f"{int(table.order.min())}..{int(table.order.max())}; c_bar "
           f"{', '.join(f'{c:.0f}' for c in model.cbar_n_s_m)} N/(m/s)")
+    print(_noise_summary(table, noise))
     for w in caught:
         print(f"warning: {w.message}")
     print(f"wrote model {out}")
@@ -137,6 +145,58 @@ def cmd_identify(args):
         paths = write_frf_plots(model, args.plots, units=session.units)
         print(f"wrote {len(paths)} FRF plots to {args.plots}")
     return 0
+
+
+def noise_report(model, session, *, n_draws=20, seed=0):
+    """How much the identified model rests on noise: per pair (the model's summary) and in
+    metrics.
+
+    The expected metric error is the random part of :func:`planner.uncertainty.
+    prediction_uncertainty` (95 %) for the session's own first baseline run: its
+    recorded rig inputs as the drive and its shocks as the setup.
+
+    Returns
+    -------
+    dict
+        ``noise_limited_pairs``, ``zero_pairs`` (counts), ``expected_metric_error_pct``
+        (metric -> half-width of the 95 % interval [%]), ``reference`` (run and setup).
+    """
+    from ident.channels import CORNERS, RIG_INPUTS
+    from ident.drive import Drive
+    from planner.setups import Setup
+    from planner.uncertainty import prediction_uncertainty
+
+    table = model.summary()
+    base = next((r for r in session.runs if r.role == "baseline"), session.runs[0])
+    drive = Drive(name=f"run {base.name}", fs_hz=session.fs_hz,
+                  channels={c: base.dynamic(c) for c in RIG_INPUTS})
+    setup = Setup("reference", {c: base.setup[c] for c in CORNERS})
+    unc = prediction_uncertainty(model, drive, [setup], session.shocks, n_draws=n_draws,
+                                 seed=seed)
+    lo, hi = unc.components["random_lo"].iloc[0], unc.components["random_hi"].iloc[0]
+    half = {m: 100 * float(max(hi[m] - 1, 1 - lo[m])) for m in unc.metric_names}
+    return {"noise_limited_pairs": int((table.status == "noise-limited").sum()),
+            "zero_pairs": int((table.status == "zero").sum()),
+            "expected_metric_error_pct": half,
+            "reference": {"run": base.name, "setup": "/".join(setup.ids())}}
+
+
+def _noise_summary(table, noise):
+    """Lines for the terminal: pairs resting on noise and the metric error to expect."""
+    half = noise["expected_metric_error_pct"]
+    worst = max(half, key=half.get)
+    lines = [f"noise: {noise['noise_limited_pairs']} pairs noise-limited (relative noise of the "
+             f"conditioned FRF >= 10 %), {noise['zero_pairs']} fitted as zero (nothing above "
+             "the noise); expected metric error from the identification's random error "
+             f"(95 %, the session's run '{noise['reference']['run']}'): median "
+             f"{np.median(list(half.values())):.3f} %, max {half[worst]:.3f} % ({worst})"]
+    banded = table[table.noise_bands_hz != ""].sort_values("noise_level", ascending=False)
+    if len(banded):
+        lines.append(f"{len(banded)} pairs have bands resting on noise (within 40 dB of their "
+                     "peak), e.g.:")
+        lines += [f"  {r.output} <- {r.input}: {r.noise_bands_hz} Hz"
+                  for r in banded.head(3).itertuples()]
+    return "\n".join(lines)
 
 
 def _read_inputs(args):
@@ -267,7 +327,10 @@ def build_parser():
                      "(default: the plan's)")
     sim.add_argument("--format", choices=["csv", "parquet"], default="csv", help="run file format")
     sim.add_argument("--duration", type=float, help="override every run's duration [s]")
-    sim.add_argument("--noise", type=float, help="measurement noise, fraction of channel RMS")
+    sim.add_argument("--noise", type=float, help="measurement noise of the response channels, "
+                     "fraction of each channel's RMS (overrides the plan's 'noise')")
+    sim.add_argument("--input-noise", type=float, help="measurement noise of the recorded rig "
+                     "inputs, fraction of each input's RMS (overrides the plan's 'input_noise')")
     sim.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
     sim.set_defaults(func=cmd_rig_simulate)
 

@@ -183,7 +183,7 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     table["unresolved"] = ""
     if uncertainty and getattr(model, "frf", None) is not None:
         unc = prediction_uncertainty(model, drive, cand, library, n_draws=n_draws, seed=seed,
-                                     band_hz=band_hz)
+                                     band_hz=band_hz, predictions=td, oversample=oversample)
         table = unc.intervals(table)
         pairs = unresolved_pairs(td.table, unc, objective, baseline=base.name)
         table["unresolved"] = [" ".join(pairs.get(n, [])) for n in table.index]

@@ -27,17 +27,21 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numba as nb
 import numpy as np
 import pandas as pd
 from scipy import signal
+from tqdm.auto import tqdm
 
-from ident.channels import CORNERS
+from ident.channels import CORNERS, SHOCK_VELOCITIES
 from ident.closedloop import _invert_small
 from ident.model import LOOP_REDUCE_RTOL
 
-__all__ = ["screen_setups", "drive_spectrum", "metric_rows"]
+__all__ = ["screen_setups", "screen_response", "DriveBands", "drive_bands", "drive_spectrum",
+           "metric_rows"]
 
 log = logging.getLogger(__name__)
 
@@ -251,6 +255,127 @@ def _screen_batch(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv, kf, nk, slo, shi, l
                                slo[s], shi[s], lag[s], max_iter, tol, out[s], sig_out[s])
 
 
+@dataclass(frozen=True, eq=False)
+class DriveBands:
+    """A drive's rig-input spectra in log-spaced bands, as the screening integrates them.
+
+    Computed once per drive (:func:`drive_bands`) and shared by every screening
+    of any model on that drive.
+
+    Attributes
+    ----------
+    f_hz : ndarray, shape (n_bands,)
+        Power-weighted band centres [Hz] (empty bands dropped).
+    S, SB : ndarray of complex, shape (n_bands, 7, 7)
+        Band power of the rig inputs (:func:`drive_spectrum`), unweighted and
+        weighted by the metric filter's ``|B|^4``.
+    fs_hz : float
+        The drive's sample rate [Hz].
+    band_hz : (float, float)
+        Metric band [Hz].
+    drive_name : str
+    """
+
+    f_hz: np.ndarray
+    S: np.ndarray
+    SB: np.ndarray
+    fs_hz: float
+    band_hz: tuple
+    drive_name: str
+
+
+def drive_bands(drive, *, band_hz=(1.0, 20.0), n_bands=96):
+    """The band spectra of a drive for screening (see :class:`DriveBands`).
+
+    Parameters
+    ----------
+    drive : ident.drive.Drive
+        At the rate the metrics are taken at.
+    band_hz : (float, float)
+        Metric band [Hz]: the metric filter's power response ``|B(f)|^4``
+        (Butterworth order 4, forward and backward) weights ``SB``.
+    n_bands : int
+        Log-spaced bands (:func:`drive_spectrum`).
+
+    Returns
+    -------
+    DriveBands
+    """
+    sos = signal.butter(4, band_hz, "bandpass", fs=drive.fs_hz, output="sos")
+
+    def b4(f_hz):  # power response of the metric filter applied forward and backward
+        return np.abs(signal.sosfreqz(sos, worN=f_hz, fs=drive.fs_hz)[1]) ** 4
+
+    f, S = drive_spectrum(drive, n_bands=n_bands)
+    _, SB = drive_spectrum(drive, n_bands=n_bands, weight=b4)
+    keep = np.any(np.abs(S) > 0, axis=(1, 2))
+    return DriveBands(f_hz=f[keep], S=S[keep], SB=SB[keep], fs_hz=float(drive.fs_hz),
+                      band_hz=tuple(band_hz), drive_name=drive.name)
+
+
+def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, tol=1e-5,
+                    chunk_size=20000, progress=False):
+    """Screen setups on a frequency response given at the band centres (the engine).
+
+    Parameters
+    ----------
+    H : ndarray of complex, shape (n_out, 11, n_bands)
+        The model's response at ``bands.f_hz``, inputs rig (7) then dF (4).
+    output_names : sequence of str
+        Must hold the 4 shock velocities.
+    cbar_n_s_m : ndarray, shape (4,)
+    bands : DriveBands
+    models : list of 4-tuples of shock models
+    max_iter, tol, chunk_size, progress
+        As :func:`screen_setups`.
+
+    Returns
+    -------
+    names : list of str
+        Metric names.
+    metrics : ndarray, shape (n_setups, n_metrics)
+        SI.
+    sigma : ndarray, shape (n_setups, 4)
+        Linearized shock-velocity RMS [m/s].
+    iterations : ndarray of int, shape (n_setups,)
+    """
+    from ident.closedloop import _pack_setups
+
+    outs = list(output_names)
+    vi = np.array([outs.index(v) for v in SHOCK_VELOCITIES])
+    names, L = metric_rows(SimpleNamespace(output_names=outs))
+    w = 2 * np.pi * bands.f_hz
+    Hvr = np.transpose(H[vi, :7], (2, 0, 1))  # (nf, 4, 7)
+    Hvs = np.ascontiguousarray(np.transpose(H[vi, 7:], (2, 0, 1)))  # (nf, 4, 4)
+    Hyr = np.einsum("mo,oif->fmi", L, H[:, :7])  # (nf, p, 7)
+    Hys = np.ascontiguousarray(np.einsum("mo,oif->fmi", L, H[:, 7:]))  # (nf, p, 4)
+    # S[k, i, j] = sum conj(U_i) U_j: the power of y = H u is H S^T H^H
+    St = np.transpose(bands.S, (0, 2, 1))
+    SBt = np.transpose(bands.SB, (0, 2, 1))
+    HvrH = np.conj(np.transpose(Hvr, (0, 2, 1)))
+    P = np.ascontiguousarray(Hvr @ St @ HvrH)  # velocity power per band (linearization)
+    PB = np.ascontiguousarray(Hvr @ SBt @ HvrH)  # the same, metric-filter weighted
+    QB = np.ascontiguousarray(Hvr @ SBt @ np.conj(np.transpose(Hyr, (0, 2, 1))))  # (nf, 4, p)
+    d0 = np.ascontiguousarray(np.real(np.einsum("fmi,fij,fmj->fm", Hyr, SBt, np.conj(Hyr))))
+    sig0 = np.sqrt(np.maximum(np.real(np.einsum("faa->a", P)), 1e-18))
+    h = 1.0 / bands.fs_hz
+    cbar = np.asarray(cbar_n_s_m, dtype=float)
+    out = np.zeros((len(models), len(names)))
+    sig = np.zeros((len(models), 4))
+    iters = np.zeros(len(models), dtype=np.int64)
+    starts = range(0, len(models), chunk_size)
+    if progress:
+        starts = tqdm(starts, desc="screen", unit="chunk")
+    for a in starts:
+        chunk = models[a:a + chunk_size]
+        kv, kf, nk, slo, shi, *_ = _pack_setups(chunk, h)
+        lag = np.array([[m.lag_s for m in row] for row in chunk])
+        _screen_batch(w, Hvs, Hys, P, PB, QB, d0, cbar, sig0, kv, kf, nk, slo,
+                      shi, lag, int(max_iter), float(tol), out[a:a + len(chunk)],
+                      sig[a:a + len(chunk)], iters[a:a + len(chunk)])
+    return names, out, sig, iters
+
+
 def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands=96,
                   max_iter=30, tol=1e-5, reduce_rtol=LOOP_REDUCE_RTOL, chunk_size=20000,
                   progress=False):
@@ -280,53 +405,15 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
         shock-velocity RMS per setup and corner and the iteration counts.
     """
     from planner.predict import Predictions, as_loop_plant, prepare_drive, resolve_setups
-    from ident.closedloop import _pack_setups
 
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
     drive = prepare_drive(drive, getattr(model, "fs_hz", None))
     models = resolve_setups(setups, library)
-    names, L = metric_rows(plant)
-    sos = signal.butter(4, band_hz, "bandpass", fs=drive.fs_hz, output="sos")
-
-    def b4(f_hz):  # power response of the metric filter applied forward and backward
-        return np.abs(signal.sosfreqz(sos, worN=f_hz, fs=drive.fs_hz)[1]) ** 4
-
-    f, S = drive_spectrum(drive, n_bands=n_bands)
-    _, SB = drive_spectrum(drive, n_bands=n_bands, weight=b4)
-    keep = np.any(np.abs(S) > 0, axis=(1, 2))
-    f, S, SB = f[keep], S[keep], SB[keep]
-    w = 2 * np.pi * f
-    H = plant.frequency_response(f)  # (p_all, 11, nf)
-    vi = plant.velocity_idx
-    Hvr = np.transpose(H[vi, :7], (2, 0, 1))  # (nf, 4, 7)
-    Hvs = np.ascontiguousarray(np.transpose(H[vi, 7:], (2, 0, 1)))  # (nf, 4, 4)
-    Hyr = np.einsum("mo,oif->fmi", L, H[:, :7])  # (nf, p, 7)
-    Hys = np.ascontiguousarray(np.einsum("mo,oif->fmi", L, H[:, 7:]))  # (nf, p, 4)
-    # S[k, i, j] = sum conj(U_i) U_j: the power of y = H u is H S^T H^H
-    St = np.transpose(S, (0, 2, 1))
-    SBt = np.transpose(SB, (0, 2, 1))
-    HvrH = np.conj(np.transpose(Hvr, (0, 2, 1)))
-    P = np.ascontiguousarray(Hvr @ St @ HvrH)  # velocity power per band (linearization)
-    PB = np.ascontiguousarray(Hvr @ SBt @ HvrH)  # the same, metric-filter weighted
-    QB = np.ascontiguousarray(Hvr @ SBt @ np.conj(np.transpose(Hyr, (0, 2, 1))))  # (nf, 4, p)
-    d0 = np.ascontiguousarray(np.real(np.einsum("fmi,fij,fmj->fm", Hyr, SBt, np.conj(Hyr))))
-    sig0 = np.sqrt(np.maximum(np.real(np.einsum("faa->a", P)), 1e-18))
-    h = 1.0 / drive.fs_hz
-    out = np.zeros((len(models), len(names)))
-    sig = np.zeros((len(models), 4))
-    iters = np.zeros(len(models), dtype=np.int64)
-    starts = range(0, len(models), chunk_size)
-    if progress:
-        from tqdm.auto import tqdm
-
-        starts = tqdm(starts, desc="screen", unit="chunk")
-    for a in starts:
-        chunk = models[a:a + chunk_size]
-        kv, kf, nk, slo, shi, *_ = _pack_setups(chunk, h)
-        lag = np.array([[m.lag_s for m in row] for row in chunk])
-        _screen_batch(w, Hvs, Hys, P, PB, QB, d0, plant.cbar_n_s_m, sig0, kv, kf, nk, slo,
-                      shi, lag, int(max_iter), float(tol), out[a:a + len(chunk)],
-                      sig[a:a + len(chunk)], iters[a:a + len(chunk)])
+    bands = drive_bands(drive, band_hz=band_hz, n_bands=n_bands)
+    H = plant.frequency_response(bands.f_hz)  # (p_all, 11, nf)
+    names, out, sig, iters = screen_response(H, plant.output_names, plant.cbar_n_s_m, bands,
+                                             models, max_iter=max_iter, tol=tol,
+                                             chunk_size=chunk_size, progress=progress)
     if np.any(iters >= max_iter):
         log.warning("screening: %d setups did not reach the tolerance in %d iterations",
                     int(np.sum(iters >= max_iter)), max_iter)
@@ -334,7 +421,7 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
     table = pd.concat([ids, pd.DataFrame(out, columns=names)], axis=1)
     table.index = pd.Index([s.name for s in setups], name="setup")
     settings = {"kind": "screening", "model": plant.name, "drive": drive.name,
-                "band_hz": tuple(band_hz), "n_bands": int(f.size), "fs_hz": drive.fs_hz,
+                "band_hz": tuple(band_hz), "n_bands": int(bands.f_hz.size), "fs_hz": drive.fs_hz,
                 "tol": tol, "max_iter": max_iter}
     return Predictions(table=table, setups=tuple(setups), settings=settings,
                        diagnostics={"shock_velocity_rms_linearized": sig, "iterations": iters})

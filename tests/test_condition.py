@@ -5,7 +5,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ident.condition import TOLERANCE, condition_frf, frf_standard_error, residual_fit
+from ident.condition import (
+    TOLERANCE,
+    condition_frf,
+    conditioned_error_kernel,
+    conditioned_standard_error,
+    frf_standard_error,
+    residual_fit,
+)
 from ident.frf import Frf
 
 
@@ -78,15 +85,17 @@ def _notch_frf(rng, coherence):
 
 def test_smoothing_keeps_resolved_structure(rng):
     """Smoothing is held to the estimate's standard error: a well-resolved notch survives,
-    the paper's unconditional smoothing flattens it."""
+    the paper's unconditional smoothing (dB and phase) flattens it; unconditional complex
+    smoothing keeps it too (a zero near the axis is a smooth path through the complex plane)."""
     frf, h = _notch_frf(rng, 0.9999)
     f = frf.f_hz
     k = np.argmin(np.abs(h[f < 20]))
     assert f[k] == pytest.approx(8.0, abs=0.05)
     kept = condition_frf(frf, residual=False)
-    paper = condition_frf(frf, residual=False, tolerance=None)
+    paper = condition_frf(frf, residual=False, tolerance=None, smooth_domain="log")
     err = lambda c: abs(20 * np.log10(abs(c.H[0, 0, k]) / abs(h[k])))  # noqa: E731
     assert err(kept) < NOTCH_DB_TOL < 3 * NOTCH_DB_TOL < err(paper)
+    assert err(condition_frf(frf, residual=False, tolerance=None)) < NOTCH_DB_TOL
     # never moved by more than tolerance / 2 standard errors
     moved = np.abs(kept.H - frf.H) / frf_standard_error(frf)
     assert moved.max() <= TOLERANCE / 2 * (1 + 1e-9)
@@ -118,3 +127,63 @@ def test_conditioning_options():
         with pytest.raises(ValueError, match="tolerance"):
             condition_frf(frf, tolerance=bad)
     assert dataclasses.is_dataclass(off)
+
+
+# complex noise with |e| ~ 1 (coherence 0.02 of 40 averages: relative error 1.1): the mean of
+# ln|1 + e| is ~0.3 for that size, so dB smoothing lifts the magnitude by ~30 %; complex smoothing
+# is unbiased, its error is the remaining random error of ~25 lines averaged (~0.2)
+RTOL_UNBIASED = 0.1  # |median smoothed| / |H| - 1 over 1-20 Hz, complex smoothing
+LOG_BIAS_MIN = 0.15  # the same for dB smoothing: at least this much above
+# the RMS of ~1750 smoothed errors that are correlated over ~25 lines: ~70 independent values,
+# a relative scatter of the RMS of ~1 / sqrt(2 x 70) = 8 %
+RTOL_SMOOTHED_ERROR = 0.2
+
+
+def _flat_noisy_frf(rng, coherence):
+    """H = 1 at every line (one pair) with random error as large as the coherence says,
+    independent from line to line (as a boxcar-window estimate's)."""
+    f = np.arange(2049) * 100 / 4096
+    coh = np.full((1, 1, f.size), coherence)
+    frf = Frf(f_hz=f, H=np.ones((1, 1, f.size), complex), input_names=("u",),
+              output_names=("y",), multiple_coherence=coh[:, 0], partial_coherence=coh,
+              input_condition=np.ones(f.size), independent_fraction=np.ones((1, f.size)),
+              flagged=np.zeros((1, f.size), bool), n_averages=N_AVG + 1,
+              cbar_n_s_m=np.zeros(4), fs_hz=100.0,
+              settings={"estimator": "welch", "window": "boxcar", "nperseg": 4096})
+    sigma = frf_standard_error(frf)
+    e = sigma * (rng.standard_normal(sigma.shape) + 1j * rng.standard_normal(sigma.shape))
+    return dataclasses.replace(frf, H=frf.H + e / np.sqrt(2))
+
+
+def test_complex_smoothing_is_unbiased_where_log_smoothing_is_not(rng):
+    """Averaging ln|H| of estimates whose error is as large as the response lifts them
+    (E ln|1 + e| > 0); averaging H does not."""
+    frf = _flat_noisy_frf(rng, 0.02)
+    band = (frf.f_hz > 1) & (frf.f_hz < 20)
+    cplx = condition_frf(frf, residual=False, tolerance=None)
+    log_ = condition_frf(frf, residual=False, tolerance=None, smooth_domain="log")
+    assert cplx.settings["conditioning"]["smooth_domain"] == "complex"
+    assert abs(np.median(np.abs(cplx.H[0, 0, band])) - 1) < RTOL_UNBIASED
+    assert np.median(np.abs(log_.H[0, 0, band])) - 1 > LOG_BIAS_MIN
+    with pytest.raises(ValueError, match="smooth_domain"):
+        condition_frf(frf, smooth_domain="dB")
+
+
+def test_conditioned_standard_error_matches_the_smoothed_error(rng):
+    """Fully smoothed white errors: the standard error conditioning reports is the RMS of the
+    error left (within the scatter of ~2000 lines); held smoothing keeps more of the raw error;
+    without smoothing the raw error stands."""
+    frf = _flat_noisy_frf(rng, 0.5)
+    band = (frf.f_hz > 2) & (frf.f_hz < 45)
+    full = condition_frf(frf, residual=False, tolerance=None)
+    sig = conditioned_standard_error(full)[0, 0, band]
+    err = np.abs(full.H[0, 0, band] - 1)
+    assert np.sqrt(np.mean(err**2)) == pytest.approx(np.median(sig), rel=RTOL_SMOOTHED_ERROR)
+    factor, lag_hz, acf = conditioned_error_kernel(full)
+    assert 0 < factor < 0.2 and acf[0] == 1.0 and abs(acf[lag_hz > 2.0]).max() < 0.01
+    np.testing.assert_allclose(sig, frf_standard_error(frf)[0, 0, band] * np.sqrt(factor),
+                               rtol=1e-12)
+    held = condition_frf(frf, residual=False)
+    assert np.all(conditioned_standard_error(held) >= conditioned_standard_error(full) * (1 - 1e-12))
+    raw = condition_frf(frf, residual=False, smooth=False)
+    np.testing.assert_allclose(conditioned_standard_error(raw), frf_standard_error(frf))

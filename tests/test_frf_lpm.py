@@ -161,6 +161,46 @@ def test_session_truth_round_trip_linear_swaps(paper_plan, paper_model):
     assert not lpm.flagged[:, sel].any()
 
 
+def test_distinct_realizations_counts_copies_once(rng):
+    """Exact, scaled and noisy copies of one drive are one realization; independent drives
+    and runs of other lengths are their own."""
+    from ident.frf import _distinct_realizations
+
+    x = rng.standard_normal(4000)
+    noisy = [x + 0.005 * rng.standard_normal(x.size) for _ in range(4)]
+    assert _distinct_realizations([x, x.copy(), 3 * x]) == 1
+    assert _distinct_realizations([x] + noisy) == 1  # 0.5 % input noise
+    # drives that share half their power (correlation 0.5): eigenvalues 2, 0.5, 0.5
+    assert _distinct_realizations([x + rng.standard_normal(x.size) for _ in range(3)]) == 3
+    # 80 % shared (correlation 0.8): 2.6, 0.2, 0.2, below LPM_DISTINCT_FRACTION
+    assert _distinct_realizations([x + 0.5 * rng.standard_normal(x.size) for _ in range(3)]) == 1
+    assert _distinct_realizations([rng.standard_normal(4000) for _ in range(4)]) == 4
+    assert _distinct_realizations([x, x[:3000]]) == 2
+    assert _distinct_realizations([x]) == 1
+
+
+def test_noisy_inputs_of_one_drive_keep_the_repeated_drive_window(paper_plan):
+    """The paper's plan plays one drive in every run. With noise on the recorded inputs the
+    runs' rig inputs are no longer equal to the bit, but they carry no more information: the
+    LPM keeps the window it needs for one realization (R = 24), not that of five (R = 10,
+    which made a noisy session's metric errors 5 % median and 28 % max)."""
+    base = {c: "B20" for c in CORNERS}
+    setups = [base] + [dict(base, **{c: "N8"}) for c in CORNERS]
+    clean = _session(paper_plan, setups, 60.0)
+    from ident.rig import PlanRun, simulate_session
+
+    runs = tuple(PlanRun(f"r{k}", st, "baseline" if k == 0 else "swap", 1, 60.0)
+                 for k, st in enumerate(setups))
+    noisy = simulate_session(replace(paper_plan, runs=runs, noise=0.02, input_noise=0.005))
+    r_clean = estimate_frf(clean, nperseg=1024).settings["lpm_half_width"]
+    r_noisy = estimate_frf(noisy, nperseg=1024).settings["lpm_half_width"]
+    assert r_clean == r_noisy == 24
+    per_run = [replace(r, seed=k) for k, r in enumerate(runs)]
+    other = simulate_session(replace(paper_plan, runs=tuple(per_run), noise=0.02,
+                                     input_noise=0.005))
+    assert estimate_frf(other, nperseg=1024).settings["lpm_half_width"] == 10
+
+
 def test_refuses_linear_identical_shocks(paper_plan):
     same = {c: "B20" for c in CORNERS}
     s = _session(paper_plan, [same, same], 60.0)

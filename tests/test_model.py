@@ -143,6 +143,9 @@ def test_save_load_and_export(tmp_path, identified_model):
     f = np.array([1.0, 5.0])
     np.testing.assert_allclose(back.frequency_response(f), identified_model.frequency_response(f))
     np.testing.assert_allclose(back.frf.H, identified_model.frf.H)
+    np.testing.assert_array_equal(back.noise_level, identified_model.noise_level)
+    np.testing.assert_array_equal(back.frf.sigma, identified_model.frf.sigma)
+    assert back.summary().equals(identified_model.summary())
     with pytest.raises(FileExistsError, match="overwrite"):
         identified_model.save(path)
     from scipy.io import loadmat
@@ -181,3 +184,75 @@ def test_vector_fitting_method(identified_model):
     # common poles: every pair has the same number of poles
     assert len(set(vf.n_poles.ravel().tolist())) == 1
     assert np.median(vf.fit_error) < 0.2
+
+
+# a 2-pole resonance measured with 3 % relative error a line: the fit needs 2 poles and stops
+# there (the noise floor); a higher order only fits noise
+NOISY_PAIR_MAX_ORDER = 4
+
+
+def _noisy_pair_frf(rng):
+    """One output (tire_force_LF), 11 inputs: a 4 Hz resonance from every input, exact except
+    input 0 (3 % relative error a line, coherence to match) and input 1 (pure noise: nothing
+    but error, coherence 0.01)."""
+    import dataclasses
+
+    from ident.condition import condition_frf
+    from ident.frf import MODEL_INPUTS, Frf
+
+    f = np.arange(2049) * 100 / 4096
+    s = 2j * np.pi * f
+    wn = 2 * np.pi * 4.0
+    h = 1e5 * wn**2 / (s**2 + 2 * 0.15 * wn * s + wn**2)
+    H = np.tile(h, (1, 11, 1)).astype(complex)
+    coh = np.full(H.shape, 1.0 - 1e-12)
+    coh[0, 0] = 1 / (1 + 40 * 0.03**2)  # |H|^2 / (|H|^2 + 40 var), var = (0.03 |H|)^2
+    coh[0, 1] = 0.01
+    e = (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)) / np.sqrt(2)
+    H[0, 0] = h * (1 + 0.03 * e)
+    H[0, 1] = 1e3 * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size))
+    frf = Frf(f_hz=f, H=H, input_names=MODEL_INPUTS, output_names=("tire_force_LF",),
+              multiple_coherence=np.ones((1, f.size)), partial_coherence=coh,
+              input_condition=np.ones(f.size), independent_fraction=np.ones((11, f.size)),
+              flagged=np.zeros((11, f.size), bool), n_averages=51, cbar_n_s_m=np.zeros(4),
+              fs_hz=100.0, settings={"estimator": "welch", "window": "hamming",
+                                     "nperseg": 4096})
+    return condition_frf(frf), dataclasses.replace(frf, partial_coherence=np.ones(H.shape))
+
+
+def test_fits_stop_at_the_noise_and_refuse_to_make_up_dynamics(rng):
+    """Order selection stops where the fit reaches the data's noise; a pair that is nothing
+    but noise is fitted as zero, says so (status, warning) and simulates as zero."""
+    import warnings
+
+    from ident.condition import condition_frf
+    from ident.errors import LowCoherenceWarning
+    from ident.model import ZERO_FIT_NOISE, fit_model
+
+    frf, overconfident = _noisy_pair_frf(rng)
+    with pytest.warns(LowCoherenceWarning, match="1 pair.*no response above the noise"):
+        model = fit_model(frf)
+    assert model.order[0, 1] == 0 and model.n_poles[0, 1] == 0
+    assert model.noise_level[0, 1] >= ZERO_FIT_NOISE
+    table = model.summary().set_index("input")
+    assert table.loc["aero_roll", "status"] == "zero"
+    assert table.loc["aero_heave", "status"] == "fit" and table.loc["aero_pitch", "status"] == "fit"
+    assert np.all(model.frequency_response([1.0, 4.0, 10.0])[0, 1] == 0)
+    assert model.settings["zero_pairs"] == [["tire_force_LF", "aero_roll"]]
+    assert 2 <= model.order[0, 0] <= NOISY_PAIR_MAX_ORDER
+    assert model.fit_error[0, 0] <= 1.5 * model.noise_level[0, 0]
+    assert table.loc["aero_roll", "noise_bands_hz"].startswith("0.5")
+    assert table.loc["aero_pitch", "noise_bands_hz"] == ""
+    # told the data are exact, the pure-noise pair is fitted with poles
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        naive = fit_model(condition_frf(overconfident))
+    assert naive.order[0, 1] > 0 and naive.settings["zero_pairs"] == []
+
+
+def test_noise_bands_of_an_identified_model(identified_model):
+    """The noise-free paper session: every pair fitted, none at the noise level."""
+    table = identified_model.summary()
+    assert set(table.status) == {"fit"}
+    assert table.noise_level.max() < 0.01
+    assert {"noise_level", "status", "noise_bands_hz"} <= set(table)

@@ -10,6 +10,7 @@ from ident.metrics import METRIC_NAMES
 from planner.objective import default_objective, score_setups
 from planner.predict import predict_setups
 from planner.setups import Setup, enumerate_setups
+from ident.vehicle import build_full_car
 
 # issue: identified vs known model predictions within 0.5 % median and 2 % max, ranks agree
 RTOL_ID_MEDIAN = 0.005
@@ -18,6 +19,12 @@ SPEARMAN_MIN = 0.98
 # generalized car (torsion, unequal half-tracks), 2 % noise, track drive: 1 % median, 3 % max
 RTOL_GEN_MEDIAN = 0.01
 RTOL_GEN_MAX = 0.03
+# issue 8: the paper's plan (one drive in every run) with 2 % response and 0.5 % input noise,
+# 40+ setups: 0.2 % median, 1 % max, Spearman >= 0.995, the same best setup. Measured with
+# 200 s runs (the CI version): 0.10 % / 0.41 %, Spearman 0.9995; 800 s: 0.07 % / 0.29 %
+RTOL_NOISY_PAPER_MEDIAN = 0.002
+RTOL_NOISY_PAPER_MAX = 0.01
+SPEARMAN_NOISY_PAPER = 0.995
 
 
 def _setups(library, baseline, n):
@@ -111,3 +118,35 @@ def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, bas
     err, sa, sb = _compare(model, truth, drive, setups, demo_library)
     assert np.median(err) < RTOL_GEN_MEDIAN
     assert err.max() < RTOL_GEN_MAX
+
+
+@pytest.mark.slow
+def test_noisy_session_of_the_papers_plan(paper_vehicle, paper_plan, demo_library,
+                                          baseline_setup):
+    """The paper's plan (the same drive in every run, a linear baseline) with noisy sensors,
+    identified with the defaults: the case whose default estimator once failed (6 % median,
+    21.5 % max)."""
+    import warnings
+    from dataclasses import replace
+
+    from ident.drive import make_track_drive
+    from ident.model import identify_session
+    from ident.rig import simulate_session
+
+    runs = tuple(replace(r, duration_s=200.0) for r in paper_plan.runs)
+    session = simulate_session(replace(paper_plan, runs=runs, noise=0.02, input_noise=0.005))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify_session(session)
+    assert model.frf.settings["lpm_half_width"] == 24
+    drive = make_track_drive(duration_s=60.0, fs_hz=100.0, seed=7,
+                             wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,
+                             track_width_m=paper_vehicle.track_front_m)
+    truth = build_full_car(paper_vehicle).loop_plant(model.cbar_n_s_m)
+    setups = _setups(demo_library, baseline_setup, 40)
+    assert len(setups) >= 41
+    err, sa, sb = _compare(model, truth, drive, setups, demo_library)
+    assert np.median(err) < RTOL_NOISY_PAPER_MEDIAN
+    assert err.max() < RTOL_NOISY_PAPER_MAX
+    assert spearmanr(sa["score"], sb["score"]).statistic >= SPEARMAN_NOISY_PAPER
+    assert sa["rank"].idxmin() == sb["rank"].idxmin()

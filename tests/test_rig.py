@@ -107,6 +107,34 @@ def test_measurement_noise(paper_plan):
                                   noisy.runs[0].channels["aero_heave"])
 
 
+def test_noise_floor_per_channel_and_inputs(paper_plan):
+    """Per-kind and per-channel overrides, input noise on the recorded rig inputs only, and one
+    noise floor per channel for the whole session (a sensor's, not a run's): a swap run whose
+    shock velocity is larger gets the same noise as the baseline's."""
+    runs = (PlanRun("b", {c: "B20" for c in CORNERS}, "baseline", 5, 100.0),
+            PlanRun("s", {"LF": "N8", "RF": "B20", "LR": "B20", "RR": "B20"}, "swap", 5, 100.0))
+    clean = simulate_session(replace(paper_plan, runs=runs))
+    plan = replace(paper_plan, runs=runs, noise=0.02, input_noise=0.005,
+                   channel_noise={"tire_force": 0.0, "ride_height_RR": 0.05, "aero": 0.0})
+    noisy = simulate_session(plan)
+
+    def session_rms(name):
+        return np.sqrt(np.mean([np.mean((r.channels[name] - r.channels[name].mean()) ** 2)
+                                for r in clean.runs]))
+
+    for name, level in (("shock_velocity_LF", 0.02), ("ride_height_RR", 0.05),
+                        ("wheelloader_LF", 0.005), ("wheelloader_RR", 0.005)):
+        for a, b in zip(clean.runs, noisy.runs):
+            got = np.std(b.channels[name] - a.channels[name])
+            assert got == pytest.approx(level * session_rms(name), rel=RTOL_NOISE)
+    for name in ("tire_force_LF", "aero_heave", "aero_roll"):
+        for a, b in zip(clean.runs, noisy.runs):
+            np.testing.assert_array_equal(a.channels[name], b.channels[name])
+    # the swapped corner's velocity differs between runs, its noise does not
+    v = [np.std(r.channels["shock_velocity_LF"]) for r in clean.runs]
+    assert abs(v[1] / v[0] - 1) > 0.1
+
+
 @pytest.mark.parametrize("kind", ["sweep", "track"])
 def test_other_drive_kinds(paper_plan, kind):
     drive = {"kind": kind, "amplitude_wheelloader_m": 0.005, "f_start_hz": 0.5,
@@ -146,6 +174,12 @@ BAD_PLANS = [
                          'setup = { LF = "B20", RF = "B20", LR = "B20" }'), "setup"),
     (lambda t: t.replace('fs_hz = 100.0', 'fs_hz = -100.0'), "positive"),
     (lambda t: t.replace('role = "swap"', 'role = "party"', 1), "role"),
+    (lambda t: t.replace("noise = 0.0 ", "noise = 1.5 "), "'noise' = 1.5 must be a fraction"),
+    (lambda t: t.replace("noise = 0.0 ", "input_noise = -0.1\nnoise = 0.0 "), "'input_noise'"),
+    (lambda t: t.replace("[drive]", "[channel_noise]\ntire_forces = 0.01\n\n[drive]"),
+     "unknown key 'tire_forces' .did you mean 'tire_force'"),
+    (lambda t: t.replace("[drive]", "[channel_noise]\nwheelloader = 2.0\n\n[drive]"),
+     "'wheelloader' = 2.0"),
 ]
 
 
@@ -170,3 +204,20 @@ def test_plan_missing_shock_library(tmp_path):
 
 def test_default_plan_reads():
     assert default_plan().name == "paper identification experiment"
+
+
+def test_plan_noise_keys(tmp_path):
+    from ident.rig import DEFAULT_PLAN_PATH
+
+    (tmp_path / "paper_shocks.toml").write_text(
+        (DEFAULT_PLAN_PATH.parent / "paper_shocks.toml").read_text())
+    path = tmp_path / "plan.toml"
+    path.write_text(_plan_text().replace("noise = 0.0 ", "noise = 0.02\ninput_noise = 0.005 ")
+                    .replace("[drive]", "[channel_noise]\nshock_force = 0.01\n"
+                             "wheelloader_LF = 0.001\n\n[drive]"))
+    plan = read_rig_plan(path)
+    assert (plan.noise, plan.input_noise) == (0.02, 0.005)
+    assert plan.channel_noise == {"shock_force": 0.01, "wheelloader_LF": 0.001}
+    assert [plan.noise_level(c) for c in ("shock_force_RR", "shock_velocity_RR",
+                                          "wheelloader_LF", "wheelloader_RF")] == [
+        0.01, 0.02, 0.001, 0.005]
