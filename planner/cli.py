@@ -294,6 +294,74 @@ def _ranking_summary(ranking, units, n=5):
     return "\n".join(lines)
 
 
+def cmd_optimize(args):
+    """``shockplan optimize``: the best damper curve per corner group, mapped to the crate."""
+    import warnings
+
+    from ident.drive import read_drive
+    from ident.shocks import read_shock_library
+    from ident.units import from_si
+    from planner.objective import default_objective, read_objective
+    from planner.optimize import optimize_curves, read_curve_constraints, write_optimum
+
+    out = Path(args.out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.overwrite:
+        from ident._io import check_can_write
+
+        check_can_write(out, overwrite=False)
+    model = _load_any_model(args.model)
+    drives = [read_drive(d, units=args.units) for d in args.drive]
+    library = read_shock_library(args.shocks)
+    objective = default_objective() if args.objective is None else read_objective(args.objective)
+    constraints = None if args.constraints is None else read_curve_constraints(args.constraints)
+    weights = None
+    if args.drive_weights:
+        try:
+            weights = [float(w) for w in args.drive_weights.split(",")]
+        except ValueError:
+            raise ValueError(f"--drive-weights {args.drive_weights!r}: give numbers separated "
+                             "by commas, one per --drive") from None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        opt = optimize_curves(model, drives, library, objective=objective,
+                              baseline=args.baseline, symmetry=args.symmetry,
+                              constraints=constraints, drive_weights=weights,
+                              aggregate="worst" if args.worst_case else "sum",
+                              robust=args.robust, oversample=args.oversample,
+                              max_iter=args.max_iter, progress=not args.quiet)
+    files = write_optimum(opt, library, out, units=args.units, overwrite=args.overwrite)
+    t = opt.table
+    s = opt.solver
+    lines = [f"optimized {len(opt.curves)} curve(s) ({opt.space.symmetry}) on "
+             f"{len(drives)} drive(s): IPOPT {s['status']} after {s['iterations']} iterations, "
+             f"{s['n_eval']} closed-loop evaluations, {s['build_s'] + s['solve_s']:.1f} s",
+             f"verified in the time domain (baseline {t.loc[opt.baseline.name, 'score']:.4f}): "
+             f"{opt.verdict()}"]
+    close = t[t["kind"] == "closest"]
+    if len(close):
+        lines.append("closest crate setups: " + ", ".join(
+            f"{n} ({r['score']:.4f}, distance {r['distance']:.2f})" for n, r in close.iterrows()))
+    if opt.stationarity is not None and len(opt.stationarity):
+        change = float(opt.stationarity.relative_change.min())
+        lines.append("stationarity: every knot force moved by +-5 % " + (
+            f"worsens the score (by {100 * change:.3f} % at least)" if change >= 0 else
+            f"improves the score by at most {-100 * change:.3f} %"))
+    ref = (0.05, 0.1, 0.25)  # m/s
+    for sid, m in opt.shocks.items():
+        vals = ", ".join(
+            f"{from_si(m.force(v), 'force', args.units):.0f}/"
+            f"{from_si(m.force(-v), 'force', args.units):.0f}" for v in ref)
+        unit_v = "m/s" if args.units == "SI" else "in/s"
+        vs = "/".join(f"{from_si(v, 'velocity', args.units):.3g}" for v in ref)
+        lines.append(f"{sid}: bump/rebound force at {vs} {unit_v}: {vals} "
+                     f"{'N' if args.units == 'SI' else 'lbf'}")
+    for w in caught:
+        lines.append(f"warning: {w.message}")
+    lines.append("wrote " + ", ".join(str(p) for p in files.values()))
+    print("\n".join(lines))
+    return 0
+
+
 def cmd_demo(args):
     """``shockplan demo``: the main job end to end on the built-in example."""
     from planner.demo import run_demo
@@ -384,6 +452,35 @@ def build_parser():
             sp.add_argument("--no-uncertainty", action="store_true",
                             help="skip the Monte Carlo intervals")
         sp.set_defaults(func=func)
+
+    opt = sub.add_parser("optimize", help="the best damper curve per corner group, mapped to "
+                         "the crate")
+    opt.add_argument("--model", required=True, help="identified model (.npz), a vehicle TOML "
+                     "(the known physical model) or 'paper'")
+    opt.add_argument("--drive", required=True, action="append",
+                     help="drive file (CSV or Parquet); repeat for several drives")
+    opt.add_argument("--shocks", required=True, help="the crate: shock library TOML")
+    opt.add_argument("--objective", help="objective TOML (default: grip and platform)")
+    opt.add_argument("--baseline", help="baseline shock id(s): one for all corners or "
+                     "LF,RF,LR,RR (default: the crate's first shock)")
+    opt.add_argument("--symmetry", choices=["left-right", "axle", "none"], default="left-right",
+                     help="a curve per axle (default), one for the car, or one per corner")
+    opt.add_argument("--constraints", help="curve constraints TOML (default: buildable race "
+                     "shock bounds)")
+    opt.add_argument("--drive-weights", help="weights of the drives, comma-separated")
+    opt.add_argument("--worst-case", action="store_true",
+                     help="minimize the worst drive's score instead of the weighted sum")
+    opt.add_argument("--robust", action="store_true", help="hold the objective's limits "
+                     "with the identified model's 95 %% intervals")
+    opt.add_argument("--units", choices=["SI", "imperial"], default="SI",
+                     help="unit system of the drive files and outputs (default SI)")
+    opt.add_argument("--oversample", type=int, default=2,
+                     help="internal steps per sample (default %(default)s)")
+    opt.add_argument("--max-iter", type=int, default=80, help="IPOPT iterations "
+                     "(default %(default)s)")
+    opt.add_argument("--out", required=True, help="output folder")
+    opt.add_argument("--overwrite", action="store_true", help="replace an existing folder")
+    opt.set_defaults(func=cmd_optimize)
 
     veh = sub.add_parser("vehicle", help="vehicle model tools")
     veh_sub = veh.add_subparsers(dest="vehicle_command", required=True)

@@ -11,6 +11,10 @@
    scored against the baseline (the identification's B20 shocks) with
    intervals from the identification's random error, and written as a
    ranking (CSV, formatted XLSX, Pareto and top-setup plots).
+5. The best force-velocity curve per axle is optimized on the same model and
+   drive (:mod:`planner.optimize`), verified in the time domain, mapped to the
+   crate, and written for a shock builder: how much better than the crate's
+   best a new shock could be.
 
 Everything goes to one output folder, built in a temporary sibling and moved
 into place at the end.
@@ -65,6 +69,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     from ident.session import write_session
     from ident.shocks import read_shock_library
     from ident.vehicle import build_full_car, example_vehicle, modal_summary
+    from planner.optimize import optimize_curves, write_optimum
     from planner.rank import rank_setups
     from planner.report import write_predictions_csv, write_ranking
     from planner.setups import Setup
@@ -106,6 +111,11 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         files = write_ranking(ranking.table, work / "ranking", units=units,
                               objective=ranking.objective, baseline=ranking.baseline)
         write_predictions_csv(ranking.screening, work / "ranking" / "screening.csv", units=units)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            optimum = optimize_curves(model, drive, library, baseline=baseline,
+                                      progress=progress)
+        write_optimum(optimum, library, work / "optimize", units=units)
         modes = modal_summary(vehicle).table()
         if out.exists():
             shutil.rmtree(out)
@@ -130,5 +140,8 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         f" platform {best.get('score_platform', float('nan')):.4f})",
         "  top 5: " + ", ".join(ranking.table.index[:5]),
         "  ranking: " + ", ".join(str(out / "ranking" / Path(p).name) for p in files.values()),
+        f"  optimized curves (front, rear): {optimum.verdict()}; closest crate setup "
+        f"{optimum.table.index[optimum.table['kind'] == 'closest'][0]}; files in "
+        f"{out / 'optimize'}",
     ]
     return "\n".join(lines)

@@ -48,8 +48,12 @@ def test_demo(tmp_path, capsys):
     assert (out / "model.npz").is_file() and any((out / "frf_plots").glob("*.png"))
     for name in ("ranking.csv", "ranking.xlsx", "pareto.png", "top_setups.png", "screening.csv"):
         assert (out / "ranking" / name).is_file(), name
+    for name in ("optimal_shocks.toml", "optimal_setup.csv", "optimize.xlsx", "curves.png",
+                 "convergence.csv"):
+        assert (out / "optimize" / name).is_file(), name
     text = capsys.readouterr().out
     assert "shockplan demo" in text and "best:" in text
+    assert "optimized curves" in text and "better" in text
     assert str(out) in text and ".demo." not in text  # final paths, not the temporary folder
 
 
@@ -111,3 +115,34 @@ def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
                  "--shocks", str(tmp_path / "shocks.toml"), "--setups", str(tmp_path / "bad.csv"),
                  "--out", str(tmp_path / "p2.csv"), "--units", "imperial"]) == 2
     assert "ZZZ" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_optimize_command(tmp_path, capsys, paper_vehicle):
+    """``shockplan optimize`` end to end on a short drive (imperial files), and its refusals:
+    constraints no curve meets (one line naming them, nothing written), an existing folder."""
+    from ident.drive import make_track_drive, write_drive
+    from ident.shocks import read_shock_library
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    drive = make_track_drive(duration_s=30.0, fs_hz=100.0, seed=2,
+                             wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,
+                             track_width_m=paper_vehicle.track_front_m)
+    write_drive(drive, tmp_path / "drive.csv", units="imperial")
+    out = tmp_path / "opt"
+    args = ["-q", "optimize", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
+            "--shocks", str(DEMO_LIBRARY_PATH), "--baseline", "B20", "--units", "imperial",
+            "--max-iter", "15"]
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[bump]\nlow_speed_slope = [20000.0, 30000.0]\n[shape]\nmax_force = 50.0\n')
+    assert main(args + ["--constraints", str(bad), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "cannot all hold" in err and "max force" in err and err.count("\n") == 1
+    assert not out.exists()
+    assert main(args + ["--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "verified in the time domain" in text and "better than the crate's best" in text
+    lib = read_shock_library(out / "optimal_shocks.toml")
+    assert lib.get("OPT-front").kind == "table" and "lbf" in text
+    assert main(args + ["--out", str(out)]) == 2
+    assert "already exists" in capsys.readouterr().err
