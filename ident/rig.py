@@ -47,7 +47,7 @@ DEFAULT_PLAN_PATH = Path(__file__).parent / "data" / "paper_plan.toml"
 #: Any value gives the same closed loop; a typical one keeps the feedback small.
 NOMINAL_V_RMS_M_S = 0.1
 
-_DRIVE_KINDS = ("noise", "sweep", "track")
+_DRIVE_KINDS = ("noise", "sweep", "track", "multisine")
 _ROLES = ("baseline", "swap", "validation", "other")
 
 
@@ -64,6 +64,9 @@ class PlanRun:
     seed : int
         Drive seed (the same seed gives the same drive).
     duration_s : float
+    drive : ident.drive.Drive or None
+        A drive of its own (read from the plan's ``drive`` file); None plays the
+        plan's generated drive (``seed``, ``duration_s``).
     """
 
     name: str
@@ -71,6 +74,7 @@ class PlanRun:
     role: str
     seed: int
     duration_s: float
+    drive: object = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -198,8 +202,12 @@ def read_rig_plan(path):
     ``roll_moment_multiple`` and ``pitch_moment_multiple``: peak moments as
     multiples of the chassis' spring roll/pitch stiffness per degree),
     ``sweep`` (``amplitude_wheelloader``, ``f_start_hz``, ``f_stop_hz``) or
-    ``track`` (``speed_m_s``); ``[[run]]`` tables with ``name``, ``setup``,
-    ``role``, optional ``seed`` and ``duration_s``.
+    ``track`` (``speed_m_s``) or ``multisine`` (``f_min_hz``, ``f_max_hz``,
+    ``rms_wheelloader`` [length], ``rms_aero_heave`` [force], and the roll and
+    pitch moments' RMS as ``roll_moment_multiple``/``pitch_moment_multiple``
+    of the stiffness per degree); ``[[run]]`` tables with ``name``,
+    ``setup``, ``role``, optional ``seed`` and ``duration_s``, or ``drive``: a
+    drive file (relative to the plan, in its units) the run plays instead.
     """
     from ident.shocks import read_shock_library
 
@@ -241,9 +249,24 @@ def read_rig_plan(path):
         role = entry.get("role", "other")
         if role not in _ROLES:
             raise SessionError(f"{w}: role {role!r} is not one of {list(_ROLES)}")
+        drive_file = entry.get("drive")
+        run_drive = None
+        if drive_file is not None:
+            if not isinstance(drive_file, str) or not drive_file:
+                raise SessionError(f"{w}: 'drive' must be the path of a drive file (relative "
+                                   f"to the plan), got {drive_file!r}")
+            from ident.drive import read_drive
+
+            try:
+                run_drive = read_drive(path.parent / drive_file, units=units,
+                                       name=Path(drive_file).stem)
+            except SessionError as exc:
+                raise SessionError(f"{w}: drive: {exc}") from exc
         runs.append(PlanRun(name=name, setup={c: setup[c] for c in CORNERS}, role=role,
                             seed=_num(entry, "seed", w, seed, positive=False, integer=True),
-                            duration_s=_num(entry, "duration_s", w, duration)))
+                            duration_s=(run_drive.duration_s if run_drive is not None else
+                                        _num(entry, "duration_s", w, duration)),
+                            drive=run_drive))
     names = [r.name for r in runs]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -308,6 +331,17 @@ def _parse_drive(d, units, where):
         out["f_start_hz"] = _num(d, "f_start_hz", where, 0.5)
         out["f_stop_hz"] = _num(d, "f_stop_hz", where, 25.0)
         out["taper_s"] = _num(d, "taper_s", where, 1.0, positive=False)
+    elif kind == "multisine":
+        out["f_min_hz"] = _num(d, "f_min_hz", where, 0.3)
+        out["f_max_hz"] = _num(d, "f_max_hz", where, 25.0)
+        out["taper_s"] = _num(d, "taper_s", where, 1.0, positive=False)
+        out["rms_wheelloader_m"] = to_si(_num(d, "rms_wheelloader", where, 0.006 if units == "SI"
+                                              else 0.25, positive=False), "displacement", units)
+        out["rms_aero_heave_n"] = to_si(_num(d, "rms_aero_heave", where, 550.0 if units == "SI"
+                                             else 125.0, positive=False), "force", units)
+        out["roll_moment_multiple"] = _num(d, "roll_moment_multiple", where, 0.75, positive=False)
+        out["pitch_moment_multiple"] = _num(d, "pitch_moment_multiple", where, 0.75,
+                                            positive=False)
     else:
         out["speed_m_s"] = _num(d, "speed_m_s", where, 50.0)
     return out
@@ -345,6 +379,15 @@ def make_plan_drive(plan, vehicle, *, seed, duration_s, name=None):
         return drv.make_noise_drive(duration_s=duration_s, fs_hz=plan.fs_hz, peak=peak, seed=seed,
                                     f_max_hz=d["f_max_hz"], filter_order=d["filter_order"],
                                     taper_s=d["taper_s"], name=name)
+    if d["kind"] == "multisine":
+        deg = np.pi / 180
+        rms = {w: d["rms_wheelloader_m"] for w in RIG_INPUTS[3:]}
+        rms["aero_heave"] = d["rms_aero_heave_n"]
+        rms["aero_roll"] = d["roll_moment_multiple"] * vehicle.roll_stiffness_n_m_rad * deg
+        rms["aero_pitch"] = d["pitch_moment_multiple"] * vehicle.pitch_stiffness_n_m_rad * deg
+        return drv.make_multisine_drive(duration_s=duration_s, fs_hz=plan.fs_hz, rms=rms,
+                                        seed=seed, f_min_hz=d["f_min_hz"],
+                                        f_max_hz=d["f_max_hz"], taper_s=d["taper_s"], name=name)
     if d["kind"] == "sweep":
         amp = {w: d["amplitude_wheelloader_m"] for w in RIG_INPUTS[3:]}
         return drv.make_sweep_drive(duration_s=duration_s, fs_hz=plan.fs_hz, amplitude=amp,
@@ -429,11 +472,16 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
 
         iterator = tqdm(plan.runs, desc="virtual rig", unit="run")
     for i, pr in enumerate(iterator):
-        key = (pr.seed, pr.duration_s)
+        key = (pr.seed, pr.duration_s) if pr.drive is None else ("file", id(pr.drive))
         if key not in drives:
-            drives[key] = make_plan_drive(plan, vehicle, seed=pr.seed, duration_s=pr.duration_s,
-                                          name=f"{plan.name} seed {pr.seed}")
+            drives[key] = pr.drive if pr.drive is not None else make_plan_drive(
+                plan, vehicle, seed=pr.seed, duration_s=pr.duration_s,
+                name=f"{plan.name} seed {pr.seed}")
         drive = drives[key]
+        if abs(drive.fs_hz - plan.fs_hz) > 1e-9 * plan.fs_hz:
+            raise SessionError(f"run '{pr.name}': its drive '{drive.name}' is sampled at "
+                               f"{drive.fs_hz:g} Hz, the plan at {plan.fs_hz:g} Hz; resample "
+                               "the drive or set the plan's fs_hz")
         models = [plan.shocks[pr.setup[c]] for c in CORNERS]
         plant = model.loop_plant(_loop_damping(models))
         fine = fine_drives.get(key)
