@@ -56,6 +56,7 @@ __all__ = [
     "read_session",
     "write_session",
     "make_session",
+    "append_runs",
 ]
 
 logger = logging.getLogger(__name__)
@@ -1071,3 +1072,178 @@ def write_session(session, path, *, units=None, run_format="csv", overwrite=Fals
     logger.info("wrote session %r (%d run(s), %s units) to %s", session.name,
                 len(session.runs), units, target)
     return target
+
+
+# --------------------------------------------------------------------------------------
+# Appending runs to an existing session
+# --------------------------------------------------------------------------------------
+
+
+def _write_mapped_run_table(path, time_s, channels, *, units, channel_map):
+    """Write a run file whose columns are named by a session's ``[channels]`` map.
+
+    As :func:`write_run_table` (same checks, never overwrites), but a canonical
+    channel (or ``time``) that `channel_map` maps is written under its column name,
+    so that the session's manifest reads the file.
+    """
+    import pandas as pd
+
+    path = Path(path)
+    where = str(path)
+    kind = _file_kind(path, where=where)
+    columns = _in_memory_columns(time_s, channels, where=where)
+    t, si, _ = _check_columns(columns, where=where, units="SI", channel_map={},
+                              required=())
+    data = {channel_map.get(_TIME, _TIME): t}
+    for c, x in si.items():
+        column = channel_map.get(c, c)
+        if column in data:
+            raise SessionError(
+                f"{where}: the session's [channels] table makes column {column!r} hold "
+                f"two channels; fix the manifest's [channels] table"
+            )
+        data[column] = from_si(x, quantity_of(c), units)
+    frame = pd.DataFrame(data)
+    with atomic_path(path, overwrite=False) as tmp:
+        if kind == "csv":
+            frame.to_csv(tmp, index=False)
+        else:
+            frame.to_parquet(tmp, index=False)
+
+
+def append_runs(path, runs, *, run_format="csv"):
+    """Append runs to an existing session folder, leaving everything in it as it was.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The session folder, or its ``session.toml``.
+    runs : iterable of Run
+        The new runs (SI, canonical names; ``file`` is ignored: each is written
+        to ``runs/<name>.csv`` or ``.parquet``, with ``-2``, ``-3`` ... added
+        if a file of that name exists).
+    run_format : {"csv", "parquet"}
+        File format of the new run files.
+
+    Returns
+    -------
+    Session
+        The session as read back from the folder, old runs first.
+
+    Raises
+    ------
+    SessionError
+        If the folder is not a valid session (:func:`read_session`); a new run's
+        name is already a run of the session or is repeated; its setup names a
+        shock not in the session's library, its role is invalid, it lacks a
+        rig input, or its sample rate differs from the session's (the checks
+        of :func:`make_session`); or the manifest cannot take appended
+        ``[[run]]`` tables (e.g. it writes its runs as an inline array). Nothing
+        is changed then.
+    ValueError
+        If `run_format` is invalid or there are no runs.
+    TypeError
+        If a run is not a :class:`Run`.
+
+    Notes
+    -----
+    The existing manifest is kept byte for byte: the new ``[[run]]`` tables are
+    appended to its text (comments, ``[channels]`` and unknown keys stay). New
+    run files are written in the session's unit system, with the column names
+    of its ``[channels]`` table, and are never written over an existing file;
+    existing run files and ``shocks.toml`` are not touched. The new manifest is
+    written to a temporary file in the folder, read back whole with
+    :func:`read_session`, and only then renamed over ``session.toml``; on any
+    failure the new run files are removed, so a session is never left
+    half-written.
+    """
+    if run_format not in _RUN_FORMATS:
+        raise ValueError(
+            f"run_format {run_format!r} is not supported; use 'csv' or 'parquet'"
+        )
+    runs = list(runs)
+    if not runs:
+        raise ValueError("append_runs: no runs to append; give at least one Run")
+    for r in runs:
+        if not isinstance(r, Run):
+            raise TypeError(f"append_runs: runs must be Run objects, got {type(r).__name__}")
+    folder, manifest = _manifest_paths(path)
+    where = str(manifest)
+    existing = read_session(folder)
+    for r in runs:
+        if r.name in existing.run_names:
+            raise SessionError(
+                f"{where}: run {r.name!r} already exists in session {existing.name!r}; "
+                "give the new run another name (nothing was written)"
+            )
+    # the checks of a whole session (setups, roles, rig inputs, one sample rate)
+    combined = make_session(existing.name, list(existing.runs) + runs, existing.shocks,
+                            units=existing.units)
+    new_runs = combined.runs[len(existing.runs):]
+
+    runs_dir = folder / "runs"
+    taken = {r.file.replace("\\", "/").lower() for r in existing.runs}
+    if runs_dir.is_dir():
+        taken |= {f"runs/{p.name}".lower() for p in runs_dir.iterdir()}
+    files = []
+    for run in new_runs:
+        stem, k = _safe_stem(run.name), 1
+        file = f"runs/{stem}{_RUN_FORMATS[run_format]}"
+        while file.lower() in taken:
+            k += 1
+            file = f"runs/{stem}-{k}{_RUN_FORMATS[run_format]}"
+        taken.add(file.lower())
+        files.append(file)
+
+    old = manifest.read_bytes()
+    blocks = []
+    for run, file in zip(new_runs, files):
+        setup = ", ".join(f"{c} = {_toml_value(run.setup[c])}" for c in CORNERS)
+        blocks.append(
+            "\n[[run]]\n"
+            f"name = {_toml_value(run.name)}\n"
+            f"file = {_toml_value(file)}\n"
+            f"setup = {{ {setup} }}\n"
+            f"role = {_toml_value(run.role)}\n"
+        )
+    text = ("" if not old or old.endswith(b"\n") else "\n") + "".join(blocks)
+
+    written, tmp = [], None
+    try:
+        runs_dir.mkdir(exist_ok=True)
+        for run, file in zip(new_runs, files):
+            _write_mapped_run_table(folder / file, run.time_s, run.channels,
+                                    units=existing.units, channel_map=existing.channel_map)
+            written.append(folder / file)
+        tmp = folder / f".{manifest.stem}.append-{secrets.token_hex(4)}.toml"
+        tmp.write_bytes(old + text.encode("utf-8"))
+        shutil.copymode(manifest, tmp)
+        try:
+            result = read_session(tmp)
+        except SessionError as exc:
+            raise SessionError(
+                f"{where}: the session with the new runs appended does not read back "
+                f"({exc}); nothing was changed"
+            ) from exc
+        expected = existing.run_names + tuple(r.name for r in new_runs)
+        if result.run_names != expected:  # pragma: no cover - a manifest TOML oddity
+            raise SessionError(
+                f"{where}: appending [[run]] tables gave the runs {list(result.run_names)}, "
+                f"not {list(expected)}; add the runs by hand (nothing was changed)"
+            )
+        if manifest.read_bytes() != old:
+            raise SessionError(
+                f"{where}: the manifest changed while the runs were being appended; try "
+                "again (nothing was changed)"
+            )
+        os.replace(tmp, manifest)
+        tmp = None
+    except BaseException:
+        for p in written:
+            p.unlink(missing_ok=True)
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)
+        raise
+    logger.info("appended %d run(s) to session %r in %s", len(new_runs), existing.name,
+                folder)
+    return result

@@ -362,6 +362,32 @@ def cmd_optimize(args):
     return 0
 
 
+def cmd_import(args):
+    """``shockplan import``: real rig files (RPC III, MDF4, TDMS) appended to a session."""
+    from ident.formats import import_runs
+
+    names = None if args.names is None else [n.strip() for n in args.names.split(",")]
+    session = import_runs(args.out, args.files, format=args.format, channel_map=args.map,
+                          setup=args.setup, role=args.role, names=names, shocks=args.shocks,
+                          units=args.units)
+    added = len(args.files)
+    print(f"imported {added} run(s) into session '{session.name}' at {args.out}: now "
+          f"{len(session.runs)} runs at {session.fs_hz:g} Hz ({session.units})")
+    return 0
+
+
+def cmd_export_drive(args):
+    """``shockplan export-drive``: a drive file written as the RPC III file a rig plays."""
+    from ident.drive import read_drive
+    from ident.formats import export_drive_rpc3
+
+    drive = read_drive(args.drive, units=args.units)
+    path = export_drive_rpc3(drive, args.out, channel_map=args.map, overwrite=args.overwrite)
+    print(f"wrote drive '{drive.name}' ({drive.duration_s:g} s at {drive.fs_hz:g} Hz) as RPC III "
+          f"to {path}")
+    return 0
+
+
 def cmd_demo(args):
     """``shockplan demo``: the main job end to end on the built-in example."""
     from planner.demo import run_demo
@@ -481,6 +507,34 @@ def build_parser():
     opt.add_argument("--out", required=True, help="output folder")
     opt.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     opt.set_defaults(func=cmd_optimize)
+
+    imp = sub.add_parser("import", help="append real rig files (RPC III, MDF4, TDMS) to a "
+                         "session")
+    imp.add_argument("files", nargs="+", help="the rig's files, one run each")
+    imp.add_argument("--format", required=True, choices=["rpc3", "mdf", "tdms"])
+    imp.add_argument("--map", required=True, help="channel-map TOML: canonical channel -> the "
+                     "file's channel, units, sign, scale, offset")
+    imp.add_argument("--setup", required=True, help="the runs' shocks: LF,RF,LR,RR ids")
+    imp.add_argument("--out", required=True, help="session folder (created, or appended to)")
+    imp.add_argument("--shocks", help="shock library TOML (needed for a new session)")
+    imp.add_argument("--role", default="other",
+                     choices=["baseline", "swap", "validation", "other"])
+    imp.add_argument("--names", help="run names, comma-separated (default: the file names)")
+    imp.add_argument("--units", choices=["SI", "imperial"],
+                     help="units of a new session's run files (default SI)")
+    imp.set_defaults(func=cmd_import)
+
+    exp = sub.add_parser("export-drive", help="write a drive file as the RPC III file a rig "
+                         "controller plays")
+    exp.add_argument("drive", help="drive file (CSV or Parquet)")
+    exp.add_argument("--format", required=True, choices=["rpc3"])
+    exp.add_argument("--map", help="the rig's channel map (channel names, units, signs); "
+                     "default canonical names in mm, N, N*m")
+    exp.add_argument("--units", choices=["SI", "imperial"], default="SI",
+                     help="units of the drive file (default SI)")
+    exp.add_argument("--out", required=True, help="RPC III file to write (.drv, .rsp, .tim)")
+    exp.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    exp.set_defaults(func=cmd_export_drive)
 
     veh = sub.add_parser("vehicle", help="vehicle model tools")
     veh_sub = veh.add_subparsers(dest="vehicle_command", required=True)
