@@ -49,6 +49,8 @@ __all__ = ["condition_frf", "residual_fit", "frf_standard_error", "conditioned_s
 
 log = logging.getLogger(__name__)
 
+#: Default smoothing width [Hz] (the paper's).
+SMOOTH_WIDTH_HZ = 0.6
 #: Default ``smooth_domain`` of :func:`condition_frf`.
 SMOOTH_DOMAIN = "complex"
 #: Default ``tolerance``: conditioning moves an estimate by at most one standard error.
@@ -297,7 +299,7 @@ def _good_span(good, run):
 
 
 def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_window_hz=1.0,
-                  min_good_hz=0.2, min_span_ratio=4.0, smooth_width_hz=0.6, smooth_order=4,
+                  min_good_hz=0.2, min_span_ratio=4.0, smooth_width_hz=None, smooth_order=4,
                   tolerance=TOLERANCE, residual=True, smooth=True, smooth_domain=SMOOTH_DOMAIN):
     """Condition an estimated FRF for the parametric fit.
 
@@ -320,9 +322,12 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
         f_lo`` (two octaves by default) for its ends to be replaced: a pair
         good only around a resonance is poor *inside* the band, and residual
         fits from the sides of a peak would be meaningless there.
-    smooth_width_hz : float
-        Variations of this width or less are removed by the smoothing [Hz]
-        (paper: 0.6).
+    smooth_width_hz : float, optional
+        Variations of this width or less are removed by the smoothing [Hz].
+        Default :data:`SMOOTH_WIDTH_HZ` (the paper's 0.6 Hz), or, on a grid too
+        coarse for it (short runs estimated with Welch blocks), the narrowest
+        the grid allows, 2.5 grid steps (logged); a width given explicitly
+        must exceed two grid steps.
     smooth_order : int
         Order of the Butterworth smoothing filter (paper: 4).
     tolerance : float or None
@@ -371,6 +376,12 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
                          f"{tolerance!r}")
     f = frf.f_hz
     df = f[1] - f[0]
+    if smooth_width_hz is None:
+        smooth_width_hz = SMOOTH_WIDTH_HZ
+        if 2 * df >= smooth_width_hz:
+            smooth_width_hz = 2.5 * df
+            log.info("condition_frf: the FRF's grid (%.3g Hz) is too coarse for %g Hz of "
+                     "smoothing; smoothing %.3g Hz", df, SMOOTH_WIDTH_HZ, smooth_width_hz)
     lo_b, hi_b = band_hz
     if not 0 <= lo_b < hi_b <= f[-1]:
         raise ValueError(f"band_hz {band_hz} must lie within 0..{f[-1]:g} Hz")

@@ -142,6 +142,8 @@ LPM_COHERENCE_DOF = 40
 #: Singular values of the column-scaled local LPM regressor below this fraction
 #: of the largest count as zero (that direction is undetermined: coherence ~0).
 LPM_RCOND = 1e-10
+#: The LPM's default grid is at least this fine [Hz] (the paper session's is 0.024 Hz).
+LPM_GRID_HZ = 0.1
 #: Target frequencies per batched LPM solve (memory ~ chunk x rows x columns).
 _LPM_CHUNK = 256
 
@@ -848,7 +850,13 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
         np.asarray(cbar_n_s_m, dtype=float), (4,)).copy()
     fs = session.fs_hz
     n_min = min(r.n_samples for r in session.runs)
-    nperseg = default_nperseg(n_min) if nperseg is None else nperseg
+    if nperseg is None:
+        nperseg = default_nperseg(n_min)
+        if estimator == "lpm":
+            # the LPM's grid only names the target frequencies: keep it at least as fine as
+            # LPM_GRID_HZ for short runs (60 s runs would give 0.39 Hz, too coarse to smooth)
+            nperseg = min(max(nperseg, int(2 ** np.ceil(np.log2(fs / LPM_GRID_HZ)))),
+                          int(2 ** np.floor(np.log2(n_min))))
     nperseg, noverlap = _check_spectral_args(fs, window, nperseg, noverlap, n_min)
     m = len(MODEL_INPUTS)
     if estimator == "lpm":

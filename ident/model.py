@@ -966,7 +966,7 @@ def _fit_vf(fitmod, fb, Hb, W, frf, n_poles_vf, max_order):
 
 def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_m=None,
                      nperseg=None,
-                     coherence_min=0.9, smooth_width_hz=0.6, smooth_domain=None,
+                     coherence_min=0.9, smooth_width_hz=None, smooth_domain=None,
                      fit_method="invfreqs",
                      orders="auto", weighting="paper", band_hz=(0.5, 20.0), max_order=10):
     """Identify a vehicle model from a rig session: estimate, condition, fit.

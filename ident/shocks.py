@@ -504,6 +504,44 @@ class ShockModel:
         """
         return self._pwl._equivalent_damping(v_rms_m_s, f"shock {self.id!r}")
 
+    def scaled(self, force_scale=1.0, *, lag_s=None, id=None):
+        """A copy with every force multiplied by `force_scale` and optionally another lag.
+
+        The what-if of a shock that comes back from the dyno off by some
+        percent, or fades when hot: the same kind of model, forces and
+        damping coefficients scaled (velocities kept), so the curve is
+        ``force_scale * f(v)`` exactly.
+
+        Parameters
+        ----------
+        force_scale : float
+            Force multiplier, > 0.
+        lag_s : float, optional
+            The copy's lag [s] (>= 0); default this shock's.
+        id : str, optional
+            The copy's id; default this shock's.
+
+        Returns
+        -------
+        ShockModel
+            Same class; the inventory ``count`` is kept.
+
+        Examples
+        --------
+        >>> LinearShock("B20", 3500.0).scaled(1.1).c_n_s_m
+        3850.0000000000005
+        """
+        import dataclasses
+
+        s = _check_scalar(self._who, "force_scale", force_scale, minimum=0.0, strict=True)
+        changes = {attr: np.asarray(getattr(self, attr), dtype=float) * s
+                   if shape == "vector" else float(getattr(self, attr)) * s
+                   for attr, quantity, shape in self._TOML_FIELDS.values()
+                   if quantity in ("force", "damping")}
+        changes["lag_s"] = self.lag_s if lag_s is None else lag_s
+        changes["id"] = self.id if id is None else id
+        return dataclasses.replace(self, **changes)
+
     def to_toml_dict(self, units="SI"):
         """Return this shock as one ``[[shock]]`` table of ``shocks.toml``.
 

@@ -97,6 +97,8 @@ _KEYS = {
     "front_tire_damping": ("damping", False),
     "rear_tire_damping": ("damping", False),
     "tire_damping_corner": ("frequency", False),
+    "front_arb_rate": ("stiffness", False),
+    "rear_arb_rate": ("stiffness", False),
 }
 
 
@@ -166,12 +168,21 @@ class VehicleParams:
     torsion_inertia_kg_m2: float | None = None
     tire_damping_n_s_m: np.ndarray | None = None
     tire_damping_corner_hz: float = 100.0
+    arb_rate_n_m: np.ndarray | None = None
 
     def __post_init__(self):
         for f in fields(self):
             val = getattr(self, f.name)
-            if f.name == "tire_damping_n_s_m" and val is None:
+            if f.name in ("tire_damping_n_s_m", "arb_rate_n_m") and val is None:
                 continue
+            if f.name == "arb_rate_n_m":
+                arr = np.array(val, dtype=float).reshape(-1)
+                if arr.shape != (2,):
+                    raise VehicleError(f"vehicle {self.name!r}: arb_rate_n_m must have 2 values "
+                                       f"(front, rear), got {arr.size}")
+                arr.setflags(write=False)
+                object.__setattr__(self, f.name, arr)
+                val = arr
             if f.name in ("unsprung_mass_kg", "spring_rate_n_m", "tire_rate_n_m", "damping_n_s_m",
                           "tire_damping_n_s_m"):
                 arr = np.array(val, dtype=float).reshape(-1)
@@ -190,7 +201,7 @@ class VehicleParams:
             v = np.asarray(val, dtype=float)
             if not np.all(np.isfinite(v)):
                 raise VehicleError(f"vehicle {self.name!r}: {f.name} is not finite; give a number")
-            allow_zero = f.name in ("damping_n_s_m", "tire_damping_n_s_m")
+            allow_zero = f.name in ("damping_n_s_m", "tire_damping_n_s_m", "arb_rate_n_m")
             if np.any(v < 0) or (not allow_zero and np.any(v == 0)):
                 raise VehicleError(
                     f"vehicle {self.name!r}: {f.name} must be positive, got {val}; check the sign and units"
@@ -261,9 +272,29 @@ class VehicleParams:
         return out + self.unsprung_mass_kg * G_M_S2
 
     @property
+    def has_arb(self):
+        """True if an axle has an anti-roll bar."""
+        return self.arb_rate_n_m is not None and bool(np.any(self.arb_rate_n_m > 0))
+
+    @property
+    def suspension_stiffness(self):
+        """Suspension stiffness between wheel and chassis at the corners [N/m], shape (4, 4).
+
+        ``F = K t`` gives the elastic suspension forces (compression positive)
+        for shock travels ``t`` (LF, RF, LR, RR): the spring wheel rates on the
+        diagonal plus the anti-roll bars, ``k [[1, -1], [-1, 1]]`` per axle.
+        """
+        K = np.diag(self.spring_rate_n_m)
+        if self.arb_rate_n_m is not None:
+            for k, (l, r) in zip(self.arb_rate_n_m, ((0, 1), (2, 3))):
+                K[np.ix_([l, r], [l, r])] += k * np.array([[1.0, -1.0], [-1.0, 1.0]])
+        return K
+
+    @property
     def roll_stiffness_n_m_rad(self):
-        """Suspension (spring) roll stiffness of the chassis [N*m/rad]."""
-        return float(np.sum(self.spring_rate_n_m * self.corner_y_m**2))
+        """Suspension (springs and anti-roll bars) roll stiffness of the chassis [N*m/rad]."""
+        y = self.corner_y_m
+        return float(y @ self.suspension_stiffness @ y)
 
     @property
     def pitch_stiffness_n_m_rad(self):
@@ -340,6 +371,8 @@ def vehicle_from_dict(doc, *, where="vehicle"):
         torsion_inertia_kg_m2=v.get("torsion_inertia"),
         tire_damping_n_s_m=None if ctf is None else _per_axle(ctf, ctr),
         tire_damping_corner_hz=v.get("tire_damping_corner", 100.0),
+        arb_rate_n_m=(None if "front_arb_rate" not in v and "rear_arb_rate" not in v
+                      else [v.get("front_arb_rate", 0.0), v.get("rear_arb_rate", 0.0)]),
     )
 
 
@@ -355,7 +388,8 @@ def read_vehicle(path):
         ``pitch_inertia``, ``front_unsprung_mass``, ``rear_unsprung_mass`` (per
         corner), ``front_spring_rate``, ``rear_spring_rate`` (wheel rates),
         ``tire_stiffness`` (or per axle), optional ``damping``,
-        ``cg_lateral_offset``, ``torsion_stiffness``, ``torsion_inertia``.
+        ``cg_lateral_offset``, ``torsion_stiffness``, ``torsion_inertia``,
+        ``front_arb_rate``, ``rear_arb_rate`` (anti-roll bars, at the wheels).
         Masses are mass (lbm in imperial files), not weight.
 
     Returns
@@ -416,6 +450,9 @@ def write_vehicle(params, path, *, units="SI", overwrite=False):
         doc["front_tire_damping"] = c(p.tire_damping_n_s_m[0], "damping")
         doc["rear_tire_damping"] = c(p.tire_damping_n_s_m[2], "damping")
         doc["tire_damping_corner"] = c(p.tire_damping_corner_hz, "frequency")
+    if p.arb_rate_n_m is not None:
+        doc["front_arb_rate"] = c(p.arb_rate_n_m[0], "stiffness")
+        doc["rear_arb_rate"] = c(p.arb_rate_n_m[1], "stiffness")
     atomic_write_toml(path, doc, overwrite=overwrite)
 
 
@@ -559,7 +596,7 @@ def build_full_car(params):
     p = params
     T = p.corner_matrix
     nc = T.shape[1]
-    Ks, Kt = np.diag(p.spring_rate_n_m), np.diag(p.tire_rate_n_m)
+    Ks, Kt = p.suspension_stiffness, np.diag(p.tire_rate_n_m)
     M = np.diag(np.concatenate([p.chassis_inertia, p.unsprung_mass_kg]))
     Kc = T.T @ Ks @ T
     if p.has_torsion:
@@ -625,8 +662,8 @@ def build_full_car(params):
     rows_D.append(Sc @ acc_u)
     rows_C.append(row(q=St @ acc_q, d=St @ acc_d))
     rows_D.append(St @ acc_u)
-    # spring force = Ks (z_t - z_corner)
-    rows_C.append(row(q=Ks @ (St - Sc)))
+    # spring force = k_spring (z_t - z_corner) (the coil alone, not the anti-roll bar)
+    rows_C.append(row(q=np.diag(p.spring_rate_n_m) @ (St - Sc)))
     rows_D.append(Zu)
     C = np.vstack(rows_C)
     D = np.vstack(rows_D)

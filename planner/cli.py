@@ -362,6 +362,55 @@ def cmd_optimize(args):
     return 0
 
 
+def cmd_plan(args):
+    """``shockplan plan``: the next rig runs (optimal experiment design) and the run sheet."""
+    from ident.drive import read_drive
+    from ident.model import load_model
+    from ident.session import read_session
+    from ident.shocks import read_shock_library
+    from planner.design import design_experiment, read_rig
+    from planner.objective import default_objective, read_objective
+    from planner.testplan import write_plan
+
+    out = Path(args.out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.overwrite:
+        from ident._io import check_can_write
+
+        check_can_write(out, overwrite=False)
+    if (args.vehicle is None) == (args.model is None):
+        raise ValueError("give either --vehicle (before rig day: the known car, a vehicle TOML "
+                         "or 'paper') or --model with --session (between runs)")
+    session = None
+    if args.model is not None:
+        if args.session is None:
+            raise ValueError("--model needs --session: the runs the model was identified from "
+                             "are the plan's prior information")
+        model = load_model(args.model)
+        session = read_session(args.session)
+    else:
+        model = _load_vehicle(None if args.vehicle == "paper" else args.vehicle)
+    library = read_shock_library(args.shocks)
+    objective = default_objective() if args.objective is None else read_objective(args.objective)
+    drives = [read_drive(d, units=args.units) for d in args.drive] if args.drive else None
+    rig = read_rig(args.rig) if args.rig else None
+    plan = design_experiment(model, library, budget_min=args.budget_min,
+                             criterion=args.criterion, session=session, objective=objective,
+                             baseline=args.baseline, drives=drives, rig=rig,
+                             baseline_every=args.baseline_every, n_validation=args.validate)
+    files = write_plan(plan, out, units=args.units, overwrite=args.overwrite)
+    t = plan.table()
+    rows = [(n, r["name"], f"{r['start_min']:.1f}", f"{r['duration_s'] / 60:.1f}", r["purpose"],
+             "/".join(r[c] for c in ("LF", "RF", "LR", "RR")), r["changed"] or "-",
+             f"{100 * r['share']:.0f} %") for n, r in t.iterrows()]
+    print(f"planned {len(t)} runs in {plan.total_min:.1f} of {plan.budget_min:g} min "
+          f"(criterion {plan.criterion}; cvxpy {plan.solver['status']} in "
+          f"{plan.solver['solve_s']:.1f} s; {plan.solver['n_candidates']} candidate runs)")
+    print(_fmt_table(rows, ["run", "name", "start min", "min", "purpose", "LF/RF/LR/RR",
+                            "changed", "share"]))
+    print("wrote " + ", ".join(str(p) for p in files.values()))
+    return 0
+
+
 def cmd_import(args):
     """``shockplan import``: real rig files (RPC III, MDF4, TDMS) appended to a session."""
     from ident.formats import import_runs
@@ -386,6 +435,77 @@ def cmd_export_drive(args):
     print(f"wrote drive '{drive.name}' ({drive.duration_s:g} s at {drive.fs_hz:g} Hz) as RPC III "
           f"to {path}")
     return 0
+
+
+def cmd_whatif(args):
+    """``shockplan whatif``: every setup under every perturbation; robust ranking, files."""
+    from ident.drive import read_drive
+    from ident.shocks import read_shock_library
+    from planner.objective import default_objective, read_objective
+    from planner.setups import Setup, read_setups
+    from planner.whatif import (FRAGILE_SHARE, RANK_TOLERANCE, evaluate_whatif,
+                                read_perturbations, write_whatif)
+
+    out = Path(args.out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.overwrite:
+        from ident._io import check_can_write
+
+        check_can_write(out, overwrite=False)
+    model = _load_any_model(args.model)
+    library = read_shock_library(args.shocks)
+    drives = [read_drive(d, units=args.units) for d in args.drive]
+    perturbations = read_perturbations(args.perturb)
+    objective = default_objective() if args.objective is None else read_objective(args.objective)
+    if args.setups:
+        setups = read_setups(args.setups, library)
+    else:
+        if args.top < 1:
+            raise ValueError(f"--top must be at least 1, got {args.top}")
+        setups = read_setups(args.ranking, library)[: args.top]
+    baseline = None
+    if args.baseline:
+        names = [s.name for s in setups]
+        ids = [s.strip() for s in args.baseline.split(",")]
+        if args.baseline in names or (len(ids) == 1 and ids[0] not in library):
+            baseline = args.baseline
+        else:
+            ids = ids * 4 if len(ids) == 1 else ids
+            if len(ids) != 4:
+                raise ValueError("--baseline takes a setup name, one shock id (all corners) or "
+                                 "four (LF,RF,LR,RR)")
+            baseline = Setup("baseline", dict(zip(("LF", "RF", "LR", "RR"), ids)))
+            baseline.resolve(library)
+    result = evaluate_whatif(
+        model, drives, setups, library, perturbations, objective=objective, baseline=baseline,
+        method=args.method, oversample=args.oversample,
+        rank_tolerance=RANK_TOLERANCE if args.rank_tolerance is None else args.rank_tolerance,
+        fragile_share=FRAGILE_SHARE if args.fragile_share is None else args.fragile_share,
+        progress=not args.quiet)
+    files = write_whatif(result, out, units=args.units, overwrite=args.overwrite)
+    print(_whatif_summary(result))
+    print(f"wrote {len(files)} files to {out}: " + ", ".join(sorted(files)[:6])
+          + (" ..." if len(files) > 6 else ""))
+    return 0
+
+
+def _whatif_summary(result, n=10):
+    st = result.settings
+    rob = result.robust
+    lines = [f"{st['n_setups']} setups x {st['n_conditions']} conditions "
+             f"({result.perturbations.design}, {st['method']}): {st['n_evaluations']} "
+             f"evaluations in {st['elapsed_s']:.1f} s; baseline '{result.baseline}'"]
+    rows = []
+    for name, r in rob.head(n).iterrows():
+        rows.append((name, int(r["nominal_rank"]), f"{r['mean_score']:.4f}",
+                     f"{r['worst_score']:.4f}", f"{int(r['best_rank'])}-{int(r['worst_rank'])}",
+                     f"{100 * r['moved_share']:.0f} %", "FRAGILE" if r["fragile"] else "-"))
+    lines.append(_fmt_table(rows, ["setup", "nominal", "mean score", "worst score", "ranks",
+                                   "moved", "rank"]))
+    fr = result.fragile
+    lines.append(f"fragile ranks: {', '.join(fr)}" if fr else
+                 f"no fragile ranks (rank moved > {st['rank_tolerance']} places in more than "
+                 f"{100 * st['fragile_share']:.0f} % of conditions)")
+    return "\n".join(lines)
 
 
 def cmd_demo(args):
@@ -507,6 +627,65 @@ def build_parser():
     opt.add_argument("--out", required=True, help="output folder")
     opt.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     opt.set_defaults(func=cmd_optimize)
+
+    pl = sub.add_parser("plan", help="the next rig runs (optimal experiment design) and the "
+                        "rig-day run sheet")
+    pl.add_argument("--vehicle", help="before rig day: the known car, a vehicle TOML or 'paper'")
+    pl.add_argument("--model", help="between runs: the model identified so far (.npz)")
+    pl.add_argument("--session", help="the session the model came from (with --model)")
+    pl.add_argument("--shocks", required=True, help="the crate: shock library TOML")
+    pl.add_argument("--budget-min", type=float, required=True,
+                    help="rig time for the plan [min], swaps included")
+    pl.add_argument("--criterion", choices=["d", "a", "decision"], default="d",
+                    help="D-optimal (default), A-optimal, or the ranking's decisions")
+    pl.add_argument("--objective", help="objective TOML (decision criterion, predictions)")
+    pl.add_argument("--drive", action="append", help="the team's drive (decision criterion, "
+                    "validation runs); repeatable")
+    pl.add_argument("--rig", help="rig TOML: swap_min, run_overhead_min")
+    pl.add_argument("--baseline", help="the car's setup at the start: one shock id or "
+                    "LF,RF,LR,RR (default: the session's baseline, or the crate's first shock)")
+    pl.add_argument("--validate", type=int, default=0,
+                    help="validation runs of the current best setups on --drive")
+    pl.add_argument("--baseline-every", type=int, default=0,
+                    help="repeat the baseline after every this many runs (drift)")
+    pl.add_argument("--units", choices=["SI", "imperial"], default="SI",
+                    help="units of the drive files read and written (default SI)")
+    pl.add_argument("--out", required=True, help="output folder")
+    pl.add_argument("--overwrite", action="store_true", help="replace an existing folder")
+    pl.set_defaults(func=cmd_plan)
+
+    wi = sub.add_parser("whatif", help="what-if study: setups under spring, shock, drive and "
+                        "vehicle changes; robust ranking")
+    wi.add_argument("--model", required=True, help="identified model (.npz), a vehicle TOML "
+                    "(the known physical model) or 'paper'")
+    wi.add_argument("--drive", required=True, action="append",
+                    help="drive file (CSV or Parquet); repeat for several drives")
+    wi.add_argument("--shocks", required=True, help="the crate: shock library TOML")
+    wi.add_argument("--perturb", required=True, help="perturbation TOML "
+                    "(format = \"shockplan-whatif/1\")")
+    src = wi.add_mutually_exclusive_group(required=True)
+    src.add_argument("--setups", help="setups CSV")
+    src.add_argument("--ranking", help="a ranking CSV (shockplan rank's ranking.csv): its top "
+                     "--top setups")
+    wi.add_argument("--top", type=int, default=10,
+                    help="setups taken from --ranking (default %(default)s)")
+    wi.add_argument("--objective", help="objective TOML (default: grip and platform)")
+    wi.add_argument("--baseline", help="baseline shock id(s): one for all corners or "
+                    "LF,RF,LR,RR, or a setup name (default: the first setup)")
+    wi.add_argument("--method", choices=["time", "screening"], default="time",
+                    help="time domain (default, the reference) or frequency-domain screening")
+    wi.add_argument("--rank-tolerance", type=int, default=None,
+                    help="places a rank may move before it counts as moved (default 1)")
+    wi.add_argument("--fragile-share", type=float, default=None,
+                    help="share of conditions with a moved rank that makes it fragile "
+                    "(default 0.1)")
+    wi.add_argument("--units", choices=["SI", "imperial"], default="SI",
+                    help="units of the drive files and outputs (default SI)")
+    wi.add_argument("--oversample", type=int, default=2,
+                    help="internal steps per sample (default %(default)s)")
+    wi.add_argument("--out", required=True, help="output folder")
+    wi.add_argument("--overwrite", action="store_true", help="replace an existing folder")
+    wi.set_defaults(func=cmd_whatif)
 
     imp = sub.add_parser("import", help="append real rig files (RPC III, MDF4, TDMS) to a "
                          "session")

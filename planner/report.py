@@ -14,12 +14,17 @@ setup, indexed by setup name (or with a column ``setup``), holding
 
 :func:`write_predictions_csv` writes the rig-session spec's predictions CSV;
 :func:`write_ranking` writes a folder with ``ranking.csv``, ``ranking.xlsx``,
-``pareto.png`` and ``top_setups.png``.
+``pareto.png`` and ``top_setups.png``. The workbook is laid out to print
+(:func:`print_setup`: landscape, one page wide, header repeated); its helpers
+(:func:`column_label`, :func:`text_width`, :func:`wrap_lines`,
+:func:`fit_column_width`) also lay out :mod:`planner.testplan`'s run sheet.
 
-Column order of every written table (the spec's "Predictions"): ``setup, LF,
+Column order of every written CSV (the spec's "Predictions"): ``setup, LF,
 RF, LR, RR``, then the spec's metrics in :data:`ident.metrics.METRIC_NAMES`
 order (those present), then the other metric columns, then every further
-column in table order. The ranking files put ``rank`` first.
+column in table order. The ranking files put ``rank`` first; the workbook
+puts the key columns first and the intervals on their own sheet (see
+:func:`write_ranking`).
 
 Notes
 -----
@@ -40,6 +45,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from openpyxl import Workbook
+from openpyxl.styles import Alignment, Border, Font, PatternFill, Side
+from openpyxl.utils import get_column_letter
+from openpyxl.worksheet.page import PageMargins
+from openpyxl.worksheet.properties import PageSetupProperties
+
 from ident._io import atomic_path, atomic_write_bytes, check_can_write
 from ident.channels import CORNERS
 from ident.errors import PlannerError
@@ -48,8 +59,14 @@ from ident.units import UNIT_LABELS, check_units, from_si
 
 __all__ = [
     "INTERVAL_SUFFIXES",
+    "PAPER_SIZE",
     "RANKING_FILES",
+    "column_label",
+    "fit_column_width",
+    "text_width",
+    "wrap_lines",
     "metric_of_column",
+    "print_setup",
     "ranking_columns",
     "ranking_to_units",
     "write_predictions_csv",
@@ -77,6 +94,21 @@ _INT_COLUMNS = ("rank", "screening_rank")
 _MAX_WIDTH = 50
 _GREY_FILL = "E7E6E6"
 _GREY_FONT = "7F7F7F"
+#: Excel paper codes of the printed workbooks per unit system: ISO A4 for SI files, US
+#: letter for imperial ones (the unit system a team writes says where it prints).
+PAPER_SIZE = {"SI": 9, "imperial": 1}
+#: Page margins of the printed workbooks [in]: narrow, so one page wide stays readable.
+PRINT_MARGINS_IN = {"left": 0.4, "right": 0.4, "top": 0.45, "bottom": 0.55, "header": 0.2,
+                    "footer": 0.25}
+#: A header cell wraps to at most this many lines before its column widens.
+HEADER_MAX_LINES = 4
+#: Font sizes of the printed tables [pt]: values, headers (bold), long notes.
+DATA_PT, HEADER_PT, NOTE_PT = 10, 9, 9
+#: Text wider than this wraps (violations, unresolved pairs) [Excel width units].
+TEXT_WIDTH = 26
+# The cell's padding [Excel width units] and the height of a line of each font [pt].
+_PAD_W = 1.5
+_LINE_PT = {"data": 13.0, "header": 12.0, "note": 12.0}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -99,6 +131,170 @@ def metric_of_column(column):
         if column.endswith(suffix) and column[: -len(suffix)] in METRIC_QUANTITY:
             return column[: -len(suffix)]
     return None
+
+
+def column_label(column):
+    """A column's name for people: words instead of underscores, ``rms`` as ``RMS``.
+
+    Examples
+    --------
+    >>> column_label("tire_force_rms_LF"), column_label("score_platform")
+    ('tire force RMS LF', 'score platform')
+    """
+    return " ".join("RMS" if w == "rms" else w for w in str(column).split("_") if w)
+
+
+def text_width(text, *, size=11, bold=False):
+    """Width of a text in Excel width units (a digit of 11 pt Calibri), estimated.
+
+    Per-character widths of Calibri (digits 1.1: the unit is rounded down to
+    whole pixels, and LibreOffice draws the columns a little narrower than
+    Excel; most lower-case letters 0.85, narrow ones 0.5, capitals 1.15,
+    ``M``/``W`` 1.5, space and punctuation about 0.5), scaled by the font size
+    and 5 % for bold. Good to about a character over a header; enough to size
+    columns and count wrapped lines.
+
+    Examples
+    --------
+    >>> round(text_width("0.0809"), 2), round(text_width("0.0809", size=9), 2)
+    (6.0, 4.91)
+    """
+    w = 0.0
+    for ch in str(text):
+        if ch.isdigit():
+            w += 1.1
+        elif ch in "MWmw":
+            w += 1.5
+        elif ch.isupper():
+            w += 1.15
+        elif ch in "ijlrtf":
+            w += 0.5
+        elif ch.islower():
+            w += 0.85
+        elif ch in " .,:;'!|":
+            w += 0.5
+        else:
+            w += 0.65
+    return w * size / 11 * (1.05 if bold else 1.0)
+
+
+def wrap_lines(text, width, *, size=11, bold=False):
+    """Lines of `text` wrapped at spaces into `width` (a longer word stays whole).
+
+    Parameters
+    ----------
+    text : str
+    width : float
+        [Excel width units] (see :func:`text_width`).
+    size : float
+        Font size [pt].
+    bold : bool
+
+    Returns
+    -------
+    list of str
+        The lines (none for an empty text).
+
+    Examples
+    --------
+    >>> wrap_lines("tire force RMS LF [lbf]", 8)
+    ['tire force', 'RMS LF', '[lbf]']
+    """
+    lines, line = [], ""
+    for word in str(text).split():
+        trial = f"{line} {word}" if line else word
+        if line and text_width(trial, size=size, bold=bold) > width:
+            lines.append(line)
+            line = word
+        else:
+            line = trial
+    return lines + ([line] if line else [])
+
+
+def fit_column_width(header, data_width, *, size=11, bold=True, max_lines=HEADER_MAX_LINES,
+                     max_width=_MAX_WIDTH):
+    """Width of a column whose header wraps at spaces, and the header's lines.
+
+    Parameters
+    ----------
+    header : str
+    data_width : float
+        Width of the widest value shown in the column [Excel width units, a
+        digit of 11 pt Calibri; see :func:`text_width`].
+    size : float
+        The header's font size [pt].
+    bold : bool
+        The header's font is bold.
+    max_lines : int
+        The header wraps to at most this many lines (the column widens instead).
+    max_width : float
+        The widest column [Excel width units].
+
+    Returns
+    -------
+    width : float
+        At least the data's and the header's longest word (up to `max_width`),
+        without the cell's padding.
+    lines : int
+        Lines of the header at that width.
+
+    Examples
+    --------
+    >>> w, lines = fit_column_width("tire force RMS LF [lbf]", 6, size=9)
+    >>> w, lines
+    (6, 3)
+    """
+    words = str(header).split() or [""]
+    widest = max(text_width(w, size=size, bold=bold) for w in words)
+    width = min(max(data_width, widest, 1), max_width)
+
+    def lines(w):
+        return max(len(wrap_lines(header, w, size=size, bold=bold)), 1)
+
+    while lines(width) > max_lines and width < max_width:
+        width += 0.5
+    return width, lines(width)
+
+
+def print_setup(ws, *, units, area, title_rows=None, landscape=True, footer=None):
+    """Set a worksheet to print one page wide (any number tall).
+
+    Parameters
+    ----------
+    ws : openpyxl.worksheet.worksheet.Worksheet
+    units : {"SI", "imperial"}
+        Chooses the paper (:data:`PAPER_SIZE`: A4 for SI, letter for imperial).
+    area : str
+        The print area, e.g. ``"A1:K62"``.
+    title_rows : str, optional
+        Rows repeated at the top of every page, e.g. ``"1:1"`` (print titles).
+    landscape : bool
+    footer : str, optional
+        Left footer text (the page number is on the right).
+
+    Notes
+    -----
+    Fit to one page wide and as many tall as it takes, margins
+    :data:`PRINT_MARGINS_IN`, centred horizontally, no printed gridlines (the
+    writers draw borders).
+    """
+    units = check_units(units, where="print_setup")
+    ws.page_setup.orientation = "landscape" if landscape else "portrait"
+    ws.page_setup.paperSize = PAPER_SIZE[units]
+    ws.page_setup.fitToWidth = 1
+    ws.page_setup.fitToHeight = 0
+    ws.sheet_properties.pageSetUpPr = PageSetupProperties(fitToPage=True)
+    ws.page_margins = PageMargins(**PRINT_MARGINS_IN)
+    ws.print_options.horizontalCentered = True
+    ws.print_options.gridLines = False
+    ws.print_area = area
+    if title_rows:
+        ws.print_title_rows = title_rows
+    if footer:
+        ws.oddFooter.left.text = str(footer).replace("&", "&&")
+        ws.oddFooter.left.size = 8
+    ws.oddFooter.right.text = "page &P of &N"
+    ws.oddFooter.right.size = 8
 
 
 def _check_table(table, where, *, corners=True):
@@ -290,7 +486,11 @@ def _metric_unit(metric, units):
 
 def _header(col, units):
     metric = metric_of_column(col)
-    return f"{col} [{_metric_unit(metric, units)}]" if metric is not None else str(col)
+    if metric is not None and metric != col:  # an interval column
+        return f"{column_label(metric)} {col[len(metric) + 1:]} [{_metric_unit(metric, units)}]"
+    if metric is not None:
+        return f"{column_label(col)} [{_metric_unit(metric, units)}]"
+    return column_label(col)
 
 
 def _metric_decimals(values):
@@ -335,57 +535,183 @@ def _cell(value):
     return str(value)
 
 
-def _shown_width(value, fmt):
+def _shown_text(value, fmt):
+    """The text a cell shows with number format `fmt` (None: general)."""
     if value is None:
-        return 0
-    if isinstance(value, float) and fmt and fmt.startswith("0."):
-        return len(f"{value:.{len(fmt) - 2}f}")
-    if isinstance(value, float) and fmt == INTEGER_FORMAT:
-        return len(f"{value:.0f}")
+        return ""
     if isinstance(value, bool):
-        return 5
-    return len(str(value))
+        return "yes" if value else "no"
+    if isinstance(value, float) and fmt and fmt.startswith("0."):
+        return f"{value:.{len(fmt) - 2}f}"
+    if isinstance(value, float) and fmt == INTEGER_FORMAT:
+        return f"{value:.0f}"
+    return str(value)
 
 
-def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
-    from openpyxl import Workbook
-    from openpyxl.styles import Border, Font, PatternFill, Side
-    from openpyxl.utils import get_column_letter
+def _sheet_columns(frame, objective):
+    """The "ranking" sheet's columns (key ones first) and the "intervals" sheet's.
 
-    wb = Workbook()
-    ws = wb.active
-    ws.title = "ranking"
+    Key columns: ``rank, setup, LF, RF, LR, RR, score, score_<group>,
+    feasible``, the objective's weighted metrics; then the other metrics (file
+    order), then the further columns, long text last (``unresolved``,
+    ``violations``: they wrap in a narrow column at the right edge). The
+    intervals go to their own sheet, in the metrics' order.
+    """
     cols = list(frame.columns)
-    formats = _number_formats(frame)
-    headers = [_header(c, units) for c in cols]
-    ws.append(headers)
-    bold = Font(bold=True)
-    rule = Border(bottom=Side(style="thin"))
-    for cell in ws[1]:
-        cell.font = bold
-        cell.border = rule
+    intervals = [c for c in cols if metric_of_column(c) not in (None, c)]
+    key = [c for c in ("rank", "setup", *CORNERS, "score") if c in cols]
+    key += [c for c in cols if str(c).startswith("score_")]
+    key += [c for c in ("feasible",) if c in cols]
+    if objective is not None:
+        key += [m for m, w in objective.weights.items() if w > 0 and m in cols]
+    metrics = [c for c in cols if c in METRIC_QUANTITY and c not in key]
+    last = [c for c in _TEXT_LAST if c in cols]
+    main = key + metrics + [c for c in cols if c not in key and c not in metrics
+                            and c not in intervals and c not in last] + last
+    order = [m for m in main if m in METRIC_QUANTITY]
+    order += [m for m in dict.fromkeys(metric_of_column(c) for c in intervals) if m not in order]
+    ordered = [c for m in order for c in (f"{m}_lo", f"{m}_hi") if c in intervals]
+    return main, ordered
+
+
+_TEXT_LAST = ("unresolved", "violations")
+_RULE = Side(style="thin", color="A6A6A6")
+_WRAP_HEAD = Alignment(wrap_text=True, horizontal="center", vertical="bottom")
+_FONT = "Calibri"
+#: Booleans shown as yes/no (LibreOffice; Excel shows TRUE/FALSE whatever the format).
+YES_NO_FORMAT = '"yes";"yes";"no"'
+
+
+def _write_table_sheet(ws, frame, cols, formats, headers, infeasible, *, group_headers=None):
+    """Write `frame[cols]` under a one- or two-row header; return the last row.
+
+    `group_headers` (optional): ``{column: label}``, a first header row with
+    the label merged over each run of consecutive columns sharing it; columns
+    without one get their header merged over both rows. Widths fit the values
+    and the wrapped headers; text wider than :data:`TEXT_WIDTH` wraps in a
+    smaller font; infeasible rows are greyed.
+    """
+    head_font = Font(name=_FONT, size=HEADER_PT, bold=True)
+    fonts = {(size, grey): Font(name=_FONT, size=size, color=_GREY_FONT if grey else None)
+             for size in (DATA_PT, NOTE_PT) for grey in (False, True)}
     grey_fill = PatternFill("solid", fgColor=_GREY_FILL)
-    grey_font = Font(color=_GREY_FONT)
-    widths = [len(h) for h in headers]
+    n_head = 2 if group_headers else 1
     columns = [frame[c].tolist() for c in cols]
+    widths, head_lines, long_text = [], [], []
+    for j, col in enumerate(cols):
+        shown = max((text_width(_shown_text(_cell(v), formats[col]), size=DATA_PT)
+                     for v in columns[j]), default=0)
+        long_text.append(shown > TEXT_WIDTH)
+        data = TEXT_WIDTH if long_text[-1] else shown
+        w, lines = fit_column_width(headers[j], data, size=HEADER_PT)
+        widths.append(w + _PAD_W)
+        head_lines.append(lines)
+    for j, (col, head) in enumerate(zip(cols, headers), start=1):
+        if group_headers and col not in group_headers:
+            ws.cell(row=1, column=j, value=head)
+            ws.merge_cells(start_row=1, start_column=j, end_row=2, end_column=j)
+        else:
+            ws.cell(row=n_head, column=j, value=head)
+    group_lines = 1
+    if group_headers:
+        j = 0
+        while j < len(cols):
+            label, k = group_headers.get(cols[j]), j
+            while (label is not None and k + 1 < len(cols)
+                   and group_headers.get(cols[k + 1]) == label):
+                k += 1
+            if label is not None:
+                ws.cell(row=1, column=j + 1, value=label)
+                ws.merge_cells(start_row=1, start_column=j + 1, end_row=1, end_column=k + 1)
+                span = sum(widths[j:k + 1]) - _PAD_W
+                group_lines = max(group_lines, len(wrap_lines(label, span, size=HEADER_PT,
+                                                               bold=True)))
+            j = k + 1
+    # a group's first column gets a heavier left rule, so groups read apart
+    starts = {j for j, c in enumerate(cols) if group_headers and group_headers.get(c)
+              and (j == 0 or group_headers.get(cols[j - 1]) != group_headers.get(c))}
+    heavy = Side(style="medium", color="595959")
+
+    def boxed(j, bottom=None):
+        left = heavy if j in starts else _RULE
+        return Border(left=left, right=_RULE, top=_RULE, bottom=bottom or _RULE)
+
+    for r in range(1, n_head + 1):
+        for j in range(1, len(cols) + 1):
+            cell = ws.cell(row=r, column=j)
+            cell.font = head_font
+            cell.alignment = _WRAP_HEAD
+            cell.border = boxed(j - 1, Side(style="medium") if r == n_head else None)
+    line = _LINE_PT["header"]
+    if group_headers:
+        ws.row_dimensions[1].height = line * group_lines + 3
+        ws.row_dimensions[2].height = line * max(
+            [n for n, c in zip(head_lines, cols) if c in group_headers] or [1]) + 3
+    else:
+        ws.row_dimensions[1].height = line * max(head_lines) + 3
+    wrapped = Alignment(wrap_text=True, vertical="top")
+    top = Alignment(vertical="top")
+    data_borders = [boxed(j) for j in range(len(cols))]
     for r in range(len(frame)):
         row = [_cell(col[r]) for col in columns]
         ws.append(row)
-        for j, (value, col) in enumerate(zip(row, cols)):
-            widths[j] = max(widths[j], _shown_width(value, formats[col]))
-        if infeasible[r]:
-            for cell in ws[r + 2]:
+        excel_row = n_head + 1 + r
+        height = _LINE_PT["data"]
+        for j, (value, col) in enumerate(zip(row, cols), start=1):
+            cell = ws.cell(row=excel_row, column=j)
+            cell.border = data_borders[j - 1]
+            size = NOTE_PT if long_text[j - 1] else DATA_PT
+            cell.font = fonts[size, bool(infeasible[r])]
+            if infeasible[r]:
                 cell.fill = grey_fill
-                cell.font = grey_font
-    for j, col in enumerate(cols, start=1):
-        if formats[col]:
-            for (cell,) in ws.iter_rows(min_row=2, min_col=j, max_col=j):
+            if formats[col]:
                 cell.number_format = formats[col]
-        ws.column_dimensions[get_column_letter(j)].width = min(widths[j - 1] + 2, _MAX_WIDTH)
-    setup_col = cols.index("setup") + 1
-    ws.freeze_panes = ws.cell(row=2, column=setup_col + 1).coordinate
-    ws.auto_filter.ref = f"A1:{get_column_letter(len(cols))}{len(frame) + 1}"
+            elif isinstance(value, bool):
+                cell.number_format = YES_NO_FORMAT
+            cell.alignment = top
+            if long_text[j - 1] and isinstance(value, str) and value:
+                cell.alignment = wrapped
+                n = len(wrap_lines(value, widths[j - 1] - _PAD_W, size=NOTE_PT))
+                height = max(height, _LINE_PT["note"] * n + 2)
+        ws.row_dimensions[excel_row].height = height
+    for j, w in enumerate(widths, start=1):
+        ws.column_dimensions[get_column_letter(j)].width = round(min(w, _MAX_WIDTH), 2)
+    return n_head + len(frame)
 
+
+def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
+    wb = Workbook()
+    ws = wb.active
+    ws.title = "ranking"
+    formats = _number_formats(frame)
+    main, interval_cols = _sheet_columns(frame, objective)
+    last_row = _write_table_sheet(ws, frame, main, formats, [_header(c, units) for c in main],
+                                  infeasible)
+    last_col = get_column_letter(len(main))
+    setup_col = main.index("setup") + 1
+    ws.freeze_panes = ws.cell(row=2, column=setup_col + 1).coordinate
+    ws.auto_filter.ref = f"A1:{last_col}{last_row}"
+    what = f"shockplan ranking ({units})"
+    if objective is not None:
+        what += f", objective '{objective.name}'"
+    print_setup(ws, units=units, area=f"A1:{last_col}{last_row}", title_rows="1:1",
+                footer=what + "; rows sorted by rank, infeasible ones greyed")
+
+    if interval_cols:
+        iv = wb.create_sheet("intervals")
+        cols = [c for c in ("rank", "setup") if c in frame.columns] + interval_cols
+        heads = [column_label(c) if metric_of_column(c) is None else c[-2:] for c in cols]
+        groups = {c: f"{column_label(metric_of_column(c))} "
+                     f"[{_metric_unit(metric_of_column(c), units)}]"
+                  for c in interval_cols}
+        last = _write_table_sheet(iv, frame, cols, formats, heads, infeasible,
+                                  group_headers=groups)
+        iv.freeze_panes = iv.cell(row=3, column=cols.index("setup") + 2).coordinate
+        letter = get_column_letter(len(cols))
+        print_setup(iv, units=units, area=f"A1:{letter}{last}", title_rows="1:2",
+                    footer=f"{what}: interval of each prediction (lo, hi)")
+
+    bold = Font(name=_FONT, bold=True)
     about = wb.create_sheet("about")
     rows = [("shockplan ranking", None),
             ("units", units),
@@ -393,6 +719,8 @@ def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
             ("feasible setups", int(len(frame) - np.sum(infeasible))),
             ("scores", "lower is better; the baseline scores the sum of the weights"),
             ("rows", "sorted by rank; greyed rows are infeasible (see 'violations')"),
+            ("sheets", "ranking: key columns first; intervals: the predictions' intervals"
+             if interval_cols else "ranking: key columns first"),
             (None, None)]
     if objective is not None:
         rows += [("objective", objective.name)]
@@ -402,7 +730,7 @@ def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
                  (None, None)]
     for row in rows:
         about.append(list(row))
-    about["A1"].font = Font(bold=True, size=12)
+    about["A1"].font = Font(name=_FONT, bold=True, size=12)
     if objective is not None:
         group_of = {m: g for g, ms in objective.groups.items() for m in ms}
         about.append(["weight", "metric", "group"])
@@ -424,17 +752,19 @@ def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
                               None if mx is None else
                               f"{float(from_si(mx, q, units)):.6g} {UNIT_LABELS[units][q]}"])
         about.append([])
-    metric_cols = [c for c in cols if c in METRIC_QUANTITY]
+    metric_cols = [c for c in frame.columns if c in METRIC_QUANTITY]
     if metric_cols:
-        about.append(["metric", "unit"])
+        about.append(["metric", "unit", "column (ranking.csv)"])
         for cell in about[about.max_row]:
             cell.font = bold
         for m in metric_cols:
-            about.append([m, _metric_unit(m, units)])
-    about.column_dimensions["A"].width = 22
+            about.append([column_label(m), _metric_unit(m, units), m])
+    about.column_dimensions["A"].width = 24
     about.column_dimensions["B"].width = 30
     for letter in "CDE":
-        about.column_dimensions[letter].width = 22
+        about.column_dimensions[letter].width = 24
+    print_setup(about, units=units, area=f"A1:E{about.max_row}", landscape=False,
+                footer="shockplan ranking: about")
     buf = io.BytesIO()
     wb.save(buf)
     return buf.getvalue()
@@ -629,13 +959,26 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
     Notes
     -----
     ``ranking.csv``: rows sorted by ``rank`` when present, columns ``rank,
-    setup, LF, RF, LR, RR``, metrics, further columns. ``ranking.xlsx``: the
-    same on sheet "ranking" with units in the metric headers (``"tire_force_rms_LF
-    [lbf]"``), a bold header, panes frozen below the header and right of
-    ``setup``, metric formats with about 4 significant digits (at least
-    ``0.000``), ``0.0000`` for scores, ``0`` for ranks, fitted widths, an
-    autofilter and infeasible rows greyed; sheet "about" holds the units and
-    the objective.
+    setup, LF, RF, LR, RR``, metrics, further columns. ``ranking.xlsx``, to
+    read and to print:
+
+    - sheet "ranking": the key columns first (``rank, setup, LF, RF, LR, RR,
+      score, score_<group>, feasible``, the objective's weighted metrics),
+      then the other metrics, then the further columns with the long texts
+      last (``unresolved``, ``violations``, wrapped); headers are labels
+      (:func:`column_label`) with the units of the metrics (``"tire force RMS
+      LF [lbf]"``), bold and wrapped; panes frozen below the header and right
+      of ``setup``; metric formats with about 4 significant digits (at least
+      ``0.000``), ``0.0000`` for scores, ``0`` for ranks, booleans as yes/no;
+      fitted widths, an autofilter, infeasible rows greyed;
+    - sheet "intervals" (when the table has ``_lo``/``_hi`` columns):
+      ``rank, setup`` and each metric's ``lo``, ``hi`` under its label;
+    - sheet "about": the units, the objective, the metrics' labels, units and
+      CSV columns.
+
+    Every sheet prints landscape ("about" portrait), one page wide, the header
+    repeated on every page, on A4 (SI) or US letter (imperial)
+    (:func:`print_setup`).
     """
     from planner.objective import Objective
 

@@ -146,3 +146,56 @@ def test_optimize_command(tmp_path, capsys, paper_vehicle):
     assert lib.get("OPT-front").kind == "table" and "lbf" in text
     assert main(args + ["--out", str(out)]) == 2
     assert "already exists" in capsys.readouterr().err
+
+
+def test_whatif_command(tmp_path, capsys, paper_vehicle, track_drive):
+    """``shockplan whatif`` on the known paper car from a ranking CSV's top setups (imperial
+    files), and its refusals: a perturbation file with a bad key (one line naming it)."""
+    import textwrap
+
+    import pandas as pd
+
+    from ident.drive import Drive, write_drive
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    n = int(20 * track_drive.fs_hz)
+    write_drive(Drive("short", track_drive.fs_hz, {c: x[:n] for c, x in track_drive.channels.items()}),
+                tmp_path / "drive.csv", units="imperial")
+    (tmp_path / "ranking.csv").write_text(
+        "setup,LF,RF,LR,RR,score\nbaseline,B20,B20,B20,B20,1.0\nsoft,L12,L12,L12,L12,0.97\n"
+        "firm,L28,L28,L28,L28,0.95\nmixed,L28,L28,DM,DM,0.96\n")
+    (tmp_path / "perturb.toml").write_text(textwrap.dedent("""
+        format = "shockplan-whatif/1"
+        units = "imperial"
+        design = "monte-carlo"
+        n_draws = 6
+        seed = 2
+        [[factor]]
+        name = "rear springs"
+        kind = "spring_rate"
+        corners = ["LR", "RR"]
+        distribution = { kind = "uniform", low = 0.9, high = 1.1 }
+        [[factor]]
+        name = "tolerance"
+        kind = "shock_scale"
+        corners = ["LF", "RF", "LR", "RR"]
+        independent = true
+        distribution = { kind = "normal", mean = 1.0, sd = 0.025 }
+        """))
+    out = tmp_path / "whatif"
+    args = ["-q", "whatif", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
+            "--shocks", str(DEMO_LIBRARY_PATH), "--ranking", str(tmp_path / "ranking.csv"),
+            "--top", "3", "--units", "imperial", "--baseline", "baseline"]
+    assert main(args + ["--perturb", str(tmp_path / "perturb.toml"), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "3 setups x 7 conditions" in text and "baseline 'baseline'" in text
+    rob = pd.read_csv(out / "robust.csv", index_col="setup")
+    assert set(rob.index) == {"baseline", "soft", "firm"}
+    assert (out / "whatif.xlsx").is_file() and (out / "rank_stability.png").is_file()
+    (tmp_path / "bad.toml").write_text('format = "shockplan-whatif/1"\n[[factor]]\nname = "m"\n'
+                                       'kind = "vehicle"\nparameter = "mass"\nlevels = [1.1]\n')
+    assert main(args + ["--perturb", str(tmp_path / "bad.toml"), "--out",
+                        str(tmp_path / "w2")]) == 2
+    err = capsys.readouterr().err
+    assert "'parameter'" in err and "bad.toml" in err and err.count("\n") == 1
+    assert not (tmp_path / "w2").exists()

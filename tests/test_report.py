@@ -1,6 +1,6 @@
 """Tests of planner.report: predictions CSV (spec column order, units, precision), the
-ranking folder (CSV, workbook layout read back with openpyxl, PNGs), overwrite refusal and
-bad inputs."""
+ranking folder (CSV, workbook layout and print setup read back with openpyxl, PNGs),
+overwrite refusal and bad inputs."""
 
 
 import matplotlib
@@ -11,16 +11,22 @@ import pandas as pd
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from openpyxl import load_workbook
+from openpyxl.utils import get_column_letter
 
 import planner.report as report_mod
 from ident.channels import CORNERS
 from ident.errors import PlannerError
 from ident.metrics import METRIC_NAMES, METRIC_QUANTITY
-from ident.units import TO_SI
+from ident.units import TO_SI, UNIT_LABELS
 from planner.objective import default_objective, score_setups
 from planner.report import (
+    DATA_PT,
+    HEADER_PT,
+    PAPER_SIZE,
+    column_label,
     metric_of_column,
     ranking_to_units,
+    text_width,
     write_predictions_csv,
     write_ranking,
 )
@@ -127,53 +133,119 @@ def test_write_ranking_files(table, tmp_path):
 
 
 def test_ranking_workbook_layout(table, tmp_path):
-    paths = write_ranking(table, tmp_path, units="imperial", objective=default_objective())
+    obj = default_objective()
+    paths = write_ranking(table, tmp_path, units="imperial", objective=obj)
     wb = load_workbook(paths["xlsx"])
-    assert wb.sheetnames == ["ranking", "about"]
+    assert wb.sheetnames == ["ranking", "intervals", "about"]
     ws = wb["ranking"]
     header = [c.value for c in ws[1]]
-    assert header[:6] == ["rank", "setup", *CORNERS]
-    assert "tire_force_rms_LF [lbf]" in header
-    assert "ride_height_rms_front [in]" in header
-    assert "shock_velocity_rms_RR_hi [in/s]" in header
-    assert "score" in header and "score_grip" in header
-    assert all(c.font.bold for c in ws[1])
+    # key columns first: rank, setup, shocks, scores, feasible, the weighted metrics
+    weighted = [f"{column_label(m)} [{'lbf' if 'force' in m else 'in'}]" for m in obj.weights]
+    assert header[:10] == ["rank", "setup", *CORNERS, "score", "score grip", "score platform",
+                           "feasible"]
+    assert header[10:10 + len(weighted)] == weighted
+    assert "tire force RMS LF [lbf]" in header
+    assert "ride height RMS front [in]" in header
+    assert "shock velocity RMS RR [in/s]" in header  # the other metrics follow
+    assert header.index("shock travel RMS LF [in]") > header.index("ride height RMS rear [in]")
+    assert header[-2:] == ["unresolved", "violations"]  # long text last
+    assert not any(str(h).endswith(("lo [in]", "hi [in]", "_lo", "_hi")) for h in header)
+    assert all(c.font.bold and c.alignment.wrap_text for c in ws[1])
     assert ws.freeze_panes == "C2"  # below the header, right of the setup column
     assert ws.auto_filter.ref == f"A1:{ws.cell(1, len(header)).column_letter}{N_SETUPS + 1}"
     col = {h: k + 1 for k, h in enumerate(header)}
-    assert ws.cell(2, col["tire_force_rms_LF [lbf]"]).number_format == "0.000"
+    assert ws.cell(2, col["tire force RMS LF [lbf]"]).number_format == "0.000"
     # ~0.16 in: 4 significant digits need 4 decimals
-    assert ws.cell(2, col["ride_height_rms_front [in]"]).number_format == "0.0000"
+    assert ws.cell(2, col["ride height RMS front [in]"]).number_format == "0.0000"
     assert ws.cell(2, col["score"]).number_format == "0.0000"
     assert ws.cell(2, col["rank"]).number_format == "0"
     ranked = table.sort_values("rank")
-    values = [ws.cell(r, col["tire_force_rms_LF [lbf]"]).value for r in range(2, N_SETUPS + 2)]
+    values = [ws.cell(r, col["tire force RMS LF [lbf]"]).value for r in range(2, N_SETUPS + 2)]
     assert_allclose(values, ranked["tire_force_rms_LF"] / TO_SI["force"], rtol=RTOL_UNITS)
-    width = ws.column_dimensions[ws.cell(1, col["tire_force_rms_LF [lbf]"]).column_letter].width
-    assert width >= len("tire_force_rms_LF [lbf]")
+    # widths fit the shown values and the header's longest word (the header wraps)
+    for h in ("tire force RMS LF [lbf]", "setup", "score platform"):
+        j = col[h]
+        width = ws.column_dimensions[ws.cell(1, j).column_letter].width
+        fmt = ws.cell(2, j).number_format
+        shown = [format(v, f".{len(fmt) - 2}f") if isinstance(v, float) else str(v)
+                 for v in (ws.cell(r, j).value for r in range(2, N_SETUPS + 2))]
+        assert width >= max(text_width(t, size=DATA_PT) for t in shown), h
+        assert width >= max(text_width(w, size=HEADER_PT, bold=True) for w in h.split()), h
     # infeasible rows greyed, feasible ones not
     for r in range(2, N_SETUPS + 2):
         feasible = ws.cell(r, col["feasible"]).value
         fill = ws.cell(r, col["setup"]).fill
         assert (fill.fill_type == "solid") == (not feasible)
+    # the intervals: rank, setup, then lo and hi under each metric's label, rows as ranked
+    iv = wb["intervals"]
+    groups = [c.value for c in iv[1]]
+    subs = [c.value for c in iv[2]]
+    assert groups[:2] == ["rank", "setup"] and subs[2:4] == ["lo", "hi"]
+    assert groups[2] == "tire force RMS LF [lbf]"
+    assert "shock velocity RMS RR [in/s]" in groups
+    j = groups.index("ride height RMS front [in]") + 1
+    assert iv.freeze_panes == "C3"
+    lo = [iv.cell(r, j).value for r in range(3, N_SETUPS + 3)]
+    hi = [iv.cell(r, j + 1).value for r in range(3, N_SETUPS + 3)]
+    assert [iv.cell(r, 2).value for r in range(3, N_SETUPS + 3)] == ranked.index.tolist()
+    assert_allclose(lo, ranked["ride_height_rms_front_lo"] / TO_SI["displacement"],
+                    rtol=RTOL_UNITS)
+    assert_allclose(hi, ranked["ride_height_rms_front_hi"] / TO_SI["displacement"],
+                    rtol=RTOL_UNITS)
     about = wb["about"]
     cells = [[c.value for c in row] for row in about.iter_rows()]
     assert ["units", "imperial"] in [row[:2] for row in cells]
     assert ["objective", "grip and platform"] in [row[:2] for row in cells]
     assert [0.125, "tire_force_rms_LF", "grip"] in [row[:3] for row in cells]
     assert any(row[1] == "shock_travel_rms_LF" and row[2] == 1.25 for row in cells)
+    assert ["tire force RMS LF", "lbf", "tire_force_rms_LF"] in [row[:3] for row in cells]
+
+
+def test_ranking_workbook_prints_one_page_wide(table, tmp_path):
+    """Every sheet: fit to one page wide (any number tall), the header rows repeated on every
+    page, a print area over the whole table, landscape (the about sheet portrait), paper by
+    units (A4 for SI, letter for imperial), narrow margins, a page number."""
+    for units, paper in (("imperial", PAPER_SIZE["imperial"]), ("SI", PAPER_SIZE["SI"])):
+        paths = write_ranking(table, tmp_path / units, units=units, objective=default_objective())
+        wb = load_workbook(paths["xlsx"])
+        expect = {"ranking": ("landscape", "$1:$1", N_SETUPS + 1),
+                  "intervals": ("landscape", "$1:$2", N_SETUPS + 2),
+                  "about": ("portrait", None, None)}
+        for name, (orientation, titles, last_row) in expect.items():
+            ws = wb[name]
+            ps = ws.page_setup
+            assert ws.sheet_properties.pageSetUpPr.fitToPage, name
+            assert (int(ps.fitToWidth), int(ps.fitToHeight)) == (1, 0), name
+            assert ps.orientation == orientation, name
+            assert int(ps.paperSize) == paper, name
+            assert ws.print_title_rows == titles, name
+            area = ws.print_area if isinstance(ws.print_area, str) else ws.print_area[0]
+            last_col = get_column_letter(ws.max_column)
+            if last_row is not None:
+                assert area.endswith(f"$A$1:${last_col}${last_row}"), (name, area)
+            assert ws.page_margins.left <= 0.5 and ws.page_margins.right <= 0.5
+            assert "&P" in ws.oddFooter.right.text
+            assert not ws.print_options.gridLines  # the cells have borders instead
+        assert wb["ranking"].cell(2, 1).border.bottom.style == "thin"
 
 
 def test_ranking_without_scores_and_si(table, tmp_path):
     plain = table[[*CORNERS, *METRIC_NAMES]]
     paths = write_ranking(plain, tmp_path, top=3)
     assert set(paths) == {"csv", "xlsx", "top_setups"}  # no score columns: no Pareto plot
-    ws = load_workbook(paths["xlsx"])["ranking"]
+    wb = load_workbook(paths["xlsx"])
+    assert wb.sheetnames == ["ranking", "about"]  # no intervals: no intervals sheet
+    ws = wb["ranking"]
     assert ws.freeze_panes == "B2"  # no rank column: setup first
     header = [c.value for c in ws[1]]
-    assert "tire_force_rms_LF [N]" in header
-    ride = header.index("ride_height_rms_front [m]") + 1
+    assert header[:5] == ["setup", *CORNERS]
+    # no objective: the metrics in the spec's order
+    assert header[5:5 + len(METRIC_NAMES)] == [
+        f"{column_label(m)} [{UNIT_LABELS['SI'][METRIC_QUANTITY[m]]}]" for m in METRIC_NAMES]
+    assert "tire force RMS LF [N]" in header
+    ride = header.index("ride height RMS front [m]") + 1
     assert ws.cell(2, ride).number_format == "0.000000"  # ~0.004 m: 4 significant digits
+    assert int(ws.page_setup.paperSize) == PAPER_SIZE["SI"]
 
 
 def test_write_ranking_refuses_overwrite_before_writing_anything(table, tmp_path):

@@ -1,0 +1,981 @@
+"""Rig-day files of an experiment plan: the plan the virtual rig runs, the drives, the run sheet.
+
+``write_plan(plan, out_dir)`` writes, into a folder built aside and moved into
+place:
+
+- ``plan.toml``: a rig plan (``format = "rig-plan/1"``, :mod:`ident.rig`) whose
+  runs play the drive files below, so ``shockplan rig simulate --plan`` runs it
+  as is; a real rig's session of the same runs is what ``shockplan identify``
+  expects next;
+- ``shocks.toml``: the crate (the plan's shock library);
+- ``drives/<run drive>.csv``: every drive the runs play;
+- ``test_plan.xlsx``: the run sheet (:func:`write_run_sheet`), to print and
+  fill in on rig day, and to read back (:func:`read_run_sheet`);
+- ``test_plan.csv``: the same rows (:func:`run_sheet_rows`);
+- ``design.png``: the criterion against rig time, run by run.
+
+The run sheet
+-------------
+Sheet "run sheet": a header block (car, rig, date, crate, budget, criterion,
+planned rig time, baseline, units), then one block of rows per run, in rig
+order. The run's columns (number, planned start ``h:mm`` from the first run,
+duration, purpose, drive file, the shock at each corner, swap time) are merged
+over its block; a shock changed before the run (:attr:`PlannedRun.changed
+<planner.design.PlannedRun>`) is filled amber and bold. Under each key metric
+(the objective's weighted ones, units in the header), the block's rows hold
+the prediction, its interval (``lo-hi``, when the model was identified) and an
+empty cell for the measured value, so the three read down one column. The
+shock temperatures (one per corner) and the notes are empty cells over the
+block. Sheet "crate" lists the crate's shocks with their forces at reference
+velocities (:data:`REFERENCE_VELOCITIES`) and the runs that use them; sheet
+"information" holds each run's share of the criterion, the criterion's values,
+the solver's report and the design settings.
+
+Every sheet prints landscape (the information sheet portrait), one page wide,
+the table's header repeated on every page, on A4 for SI and US letter for
+imperial (:data:`planner.report.PAPER_SIZE`).
+"""
+
+from __future__ import annotations
+
+import datetime
+import functools
+import logging
+import math
+import re
+import shutil
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import tomli_w
+from openpyxl import Workbook, load_workbook
+from openpyxl.styles import Alignment, Border, Font, PatternFill, Side
+from openpyxl.utils import get_column_letter
+from openpyxl.worksheet.pagebreak import Break
+
+from ident._io import atomic_path, check_can_write
+from ident.channels import CORNERS
+from ident.drive import write_drive
+from ident.errors import PlannerError
+from ident.metrics import METRIC_QUANTITY
+from ident.shocks import write_shock_library
+from ident.units import UNIT_LABELS, check_units, from_si, to_si
+from planner.design import ExperimentPlan
+from planner.report import (PRINT_MARGINS_IN, column_label, fit_column_width, print_setup,
+                             text_width, wrap_lines)
+
+__all__ = ["write_plan", "plan_toml", "run_sheet_rows", "design_figure", "write_run_sheet",
+           "read_run_sheet", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES"]
+
+log = logging.getLogger(__name__)
+
+_ROLE = {"identification": "swap", "baseline repeat": "baseline", "validation": "validation"}
+
+#: Cell A1 of the sheet "run sheet" starts with this; :func:`read_run_sheet` checks it.
+RUN_SHEET_TITLE = "shockplan run sheet"
+#: Key metrics on the run sheet: the plan's first ones (all are in ``test_plan.csv``).
+MAX_SHEET_METRICS = 6
+#: Fill of a shock changed before a run (amber: mid-grey on a black-and-white printer).
+CHANGED_FILL = "FFC000"
+#: Fill of the plan's own cells (predictions, intervals): white cells are written in.
+PLAN_FILL = "F2F2F2"
+#: Velocities at which the crate sheet gives each shock's force (the sheet's units).
+REFERENCE_VELOCITIES = {"SI": (0.025, 0.05, 0.1, 0.25), "imperial": (1.0, 2.0, 5.0, 10.0)}
+#: Significant digits of the printed predictions and intervals.
+SIGNIFICANT_DIGITS = 3
+_TEMPERATURE_UNIT = {"SI": "°C", "imperial": "°F"}
+# landscape paper [in] of planner.report.PAPER_SIZE: A4 for SI, US letter for imperial
+_PAPER_IN = {"SI": (11.69, 8.27), "imperial": (11.0, 8.5)}
+_CRITERIA = {"d": "D-optimal (sum of log det M)", "a": "A-optimal (- sum of tr M^-1)",
+             "decision": "decision (- variance of the top setups' score differences)"}
+_FONT = "Calibri"
+_DATA_PT, _HEAD_PT, _SMALL_PT, _SHOCK_PT = 10, 9, 8.5, 11
+_PAD = 2.0  # cell padding [Excel width units]
+# rows of a run's block: height [pt]; the measured row leaves room to write by hand
+_ROW_PT = {"predicted": 14.0, "interval": 12.5, "measured": 26.0}
+_LINE_PT = 12.0  # a header line of 9 pt text
+# the run sheet's fixed column headers (read_run_sheet matches them)
+_HEAD = {"run": "run", "start": "start [h:mm]", "duration_min": "duration [min]",
+         "purpose": "purpose", "drive_file": "drive file (in drives/)", "swap_min": "swap [min]",
+         "row": "", "notes": "notes"}
+_SHOCKS_GROUP = "shock fitted (changed: filled)"
+_METRICS_GROUP = "key metrics"
+_TEMPS_GROUP = "shock temperature"
+_DRIVE_DIR = "drives"
+
+
+def plan_toml(plan, *, units="SI", drive_dir=_DRIVE_DIR, shock_library="shocks.toml"):
+    """The rig plan of an experiment plan, as TOML text (``format = "rig-plan/1"``).
+
+    Parameters
+    ----------
+    plan : planner.design.ExperimentPlan
+    units : {"SI", "imperial"}
+        Units of the plan and its drive files.
+    drive_dir : str
+        Folder of the drive files, relative to the plan.
+    shock_library : str
+        The crate's file, relative to the plan.
+
+    Returns
+    -------
+    str
+    """
+    fs = next(iter(plan.drives.values())).fs_hz
+    runs = []
+    for r in plan.runs:
+        role = "baseline" if r.setup.ids() == plan.baseline.ids() else _ROLE[r.purpose]
+        runs.append({"name": r.name, "setup": dict(zip(CORNERS, r.setup.ids())),
+                     "role": role, "drive": f"{drive_dir}/{r.drive}.csv"})
+    doc = {"format": "rig-plan/1", "name": f"{plan.settings.get('car')} design "
+                                            f"({plan.criterion}, {plan.budget_min:g} min)",
+           "units": units, "shock_library": shock_library, "fs_hz": float(fs), "run": runs}
+    header = (f"Experiment plan by shockplan plan: criterion {plan.criterion}, budget "
+              f"{plan.budget_min:g} min, planned {plan.total_min:.1f} min on rig "
+              f"'{plan.rig.name}'.\nRun it on the virtual rig with: shockplan rig simulate "
+              "--plan plan.toml --out SESSION")
+    return "".join(f"# {line}\n" for line in header.splitlines()) + tomli_w.dumps(doc)
+
+
+def run_sheet_rows(plan, *, units="SI"):
+    """The run sheet's rows (one per run, rig order) as a DataFrame, metrics in `units`.
+
+    Columns: ``run``, ``start``, ``start_min``, ``duration_min``, ``purpose``,
+    ``drive_file``, ``LF`` .. ``RR``, ``changed``, ``swap_min``, the predicted key
+    metrics with ``_lo``/``_hi``, ``share``.
+    """
+    units = check_units(units, where="units", error=PlannerError)
+    rows = []
+    for r in plan.runs:
+        h, m = divmod(int(round(r.start_min)), 60)
+        row = {"run": r.number, "start": f"{h:d}:{m:02d}", "start_min": round(r.start_min, 2),
+               "duration_min": round(r.duration_s / 60, 2), "purpose": r.purpose,
+               "drive_file": f"{_DRIVE_DIR}/{r.drive}.csv"}
+        row.update(dict(zip(CORNERS, r.setup.ids())))
+        row.update({"changed": " ".join(r.changed), "swap_min": r.swap_min})
+        pred = plan.predictions.loc[r.number] if r.number in plan.predictions.index else {}
+        for col, val in (pred.items() if len(pred) else []):
+            base = col[:-3] if col.endswith(("_lo", "_hi")) else col
+            row[col] = float(from_si(val, METRIC_QUANTITY[base], units))
+        row["share"] = round(r.share, 4)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def design_figure(plan):
+    """The criterion against rig time, run by run (matplotlib Figure)."""
+    from matplotlib.figure import Figure  # heavy; only when the figure is drawn
+
+    fig = Figure(figsize=(7.5, 4.2), layout="constrained")
+    ax = fig.subplots()
+    c = plan.curve
+    ax.step(c["time_min"], c["criterion"], where="post", color="tab:blue", lw=2)
+    ax.plot(c["time_min"], c["criterion"], "o", color="tab:blue", ms=4)
+    for r, t, v in zip(c["run"][1:], c["time_min"][1:], c["criterion"][1:]):
+        ax.annotate(str(int(r)), (t, v), textcoords="offset points", xytext=(3, -10),
+                    fontsize=8)
+    if plan.values.get("greedy") is not None:
+        ax.axhline(plan.values["greedy"], color="0.5", ls="--", lw=1,
+                   label=f"cvxpy-free greedy ({plan.values['greedy_min']:.0f} min)")
+    ax.axvline(plan.budget_min, color="tab:red", lw=1, label=f"budget {plan.budget_min:g} min")
+    names = {"d": "sum of log det (D-optimal)", "a": "- sum of tr M^-1 (A-optimal)",
+             "decision": "- variance of score differences"}
+    ax.set(xlabel="rig time [min]", ylabel=names.get(plan.criterion, "criterion"),
+           title=f"information gained against rig time ({len(plan.runs)} runs)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    return fig
+
+
+# ----------------------------------------------------------------------------------------------
+# the run sheet (Excel)
+# ----------------------------------------------------------------------------------------------
+
+def _decimals(value):
+    """Decimals that show `value` to :data:`SIGNIFICANT_DIGITS` (whole numbers stay whole)."""
+    if value is None or not np.isfinite(value) or value == 0:
+        return 0
+    return int(min(max(SIGNIFICANT_DIGITS - 1 - math.floor(math.log10(abs(value))), 0), 6))
+
+
+def _number(value):
+    """A float for a cell, None for a missing or non-finite value."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+def _wrap(text, width, size=_HEAD_PT, bold=True):
+    """Lines of `text` wrapped at spaces into `width` [Excel width units], at least one."""
+    return wrap_lines(text, width, size=size, bold=bold) or [""]
+
+
+def _metric_header(metric, units):
+    return f"{column_label(metric)} [{UNIT_LABELS[units][METRIC_QUANTITY[metric]]}]"
+
+
+def _sheet_metrics(plan):
+    keys = [c for c in plan.predictions.columns if c in METRIC_QUANTITY]
+    if len(keys) > MAX_SHEET_METRICS:
+        log.info("run sheet: %d key metrics; the sheet shows the first %d (all are in "
+                 "test_plan.csv)", len(keys), MAX_SHEET_METRICS)
+    return keys[:MAX_SHEET_METRICS]
+
+
+@functools.cache
+def _fonts():
+    def f(size=_DATA_PT, **kw):
+        return Font(name=_FONT, size=size, **kw)
+
+    return {"data": f(), "bold": f(bold=True), "head": f(_HEAD_PT, bold=True),
+            "small": f(_SMALL_PT, color="595959"), "label": f(_SMALL_PT, italic=True,
+                                                               color="595959"),
+            "shock": f(_SHOCK_PT), "changed": f(_SHOCK_PT, bold=True),
+            "title": f(14, bold=True), "note": f(_HEAD_PT, italic=True)}
+
+
+_THIN = Side(style="thin", color="A6A6A6")
+_HEAVY = Side(style="medium", color="000000")
+
+
+@functools.cache
+def _border(*, left=False, top=False, bottom=False):
+    return Border(left=_HEAVY if left else _THIN, right=_THIN, top=_HEAVY if top else _THIN,
+                  bottom=_HEAVY if bottom else _THIN)
+
+
+def _run_sheet_columns(units, metrics):
+    """The table's columns: key, group header (or None), header, group start."""
+    cols = [("run", None, _HEAD["run"]), ("start", None, _HEAD["start"]),
+            ("duration_min", None, _HEAD["duration_min"]), ("purpose", None, _HEAD["purpose"]),
+            ("drive_file", None, _HEAD["drive_file"])]
+    cols += [(c, _SHOCKS_GROUP, c) for c in CORNERS]
+    cols += [("swap_min", None, _HEAD["swap_min"]), ("row", _METRICS_GROUP, _HEAD["row"])]
+    cols += [(m, _METRICS_GROUP, _metric_header(m, units)) for m in metrics]
+    temps = f"{_TEMPS_GROUP} [{_TEMPERATURE_UNIT[units]}]"
+    cols += [(f"temp_{c}", temps, c) for c in CORNERS]
+    cols += [("notes", None, _HEAD["notes"])]
+    starts = {"run", CORNERS[0], "swap_min", "row", f"temp_{CORNERS[0]}", "notes"}
+    return [(k, g, h, k in starts) for k, g, h in cols]
+
+
+def _header_block(ws, plan, units, date, label_col, intervals):
+    """Rows 1-7: the title, two columns of facts, the legend; returns the next free row."""
+    fonts = _fonts()
+    s = plan.settings
+    car = s.get("car") or "car"
+    ws.cell(row=1, column=1, value=f"{RUN_SHEET_TITLE}: {car}").font = fonts["title"]
+    ws.row_dimensions[1].height = 21
+    n = len(plan.runs)
+    rig = plan.rig
+    left = [("car", car),
+            ("rig", f"{rig.name}: {rig.swap_min:g} min to swap a corner's shock, "
+                    f"{rig.run_overhead_min:g} min a run besides its drive"),
+            ("date", date),
+            ("crate", str(s.get("crate") or "(not from a file)")),
+            ("objective", str(s.get("objective") or ""))]
+    right = [("budget", f"{plan.budget_min:g} min"),
+             ("planned rig time", f"{plan.total_min:.1f} min, {n} run{'s' * (n != 1)}"),
+             ("criterion", _CRITERIA.get(plan.criterion, plan.criterion)),
+             ("baseline", "/".join(plan.baseline.ids())),
+             ("units", units)]
+    for k, ((la, va), (lb, vb)) in enumerate(zip(left, right)):
+        r = 2 + k
+        for col, label, value in ((1, la, va), (label_col, lb, vb)):
+            ws.cell(row=r, column=col, value=label).font = fonts["bold"]
+            ws.merge_cells(start_row=r, start_column=col, end_row=r, end_column=col + 1)
+            ws.cell(row=r, column=col + 2, value=value).font = fonts["data"]
+        ws.row_dimensions[r].height = 14
+    legend = (f"Filled shock: changed before the run. Grey cells are the plan's (predictions"
+              f"{', intervals' if intervals else ''}); write the measured values, the shock "
+              "temperatures and notes in the white cells. Start times count from the first "
+              "run's start.")
+    ws.cell(row=7, column=1, value=legend).font = fonts["note"]
+    ws.row_dimensions[7].height = 14
+    return 9
+
+
+def _write_run_table(ws, units, rows, metrics, cols, top, intervals):
+    """The table header at rows `top`, `top` + 1 and the runs' blocks; returns the last row."""
+    fonts = _fonts()
+    plan_fill = PatternFill("solid", fgColor=PLAN_FILL)
+    changed_fill = PatternFill("solid", fgColor=CHANGED_FILL)
+    center = Alignment(horizontal="center", vertical="center", wrap_text=True)
+    left_mid = Alignment(horizontal="left", vertical="center", wrap_text=True)
+    right_mid = Alignment(horizontal="right", vertical="center")
+    right = Alignment(horizontal="right")
+    top_left = Alignment(vertical="top", wrap_text=True)
+    kinds = [k for k in ("predicted", "interval", "measured") if k != "interval" or intervals]
+
+    # shown texts -> widths
+    shown = {k: [] for k, *_ in cols}
+    for _, row in rows.iterrows():
+        shown["run"].append(str(row["run"]))
+        shown["start"].append(row["start"])
+        shown["duration_min"].append(f"{row['duration_min']:g}")
+        shown["purpose"].append(max(str(row["purpose"]).split(), key=len))
+        shown["drive_file"].append(max(Path(row["drive_file"]).name.split(), key=len))
+        shown["swap_min"].append(f"{row['swap_min']:g}")
+        for c in CORNERS:
+            shown[c].append(str(row[c]))
+        for m in metrics:
+            v = _number(row.get(m))
+            if v is not None:
+                d = _decimals(v)
+                shown[m].append(f"{v:.{d}f}")
+                lo, hi = _number(row.get(f"{m}_lo")), _number(row.get(f"{m}_hi"))
+                if intervals and lo is not None and hi is not None:
+                    shown[m].append(f"{lo:.{d}f}\u2013{hi:.{d}f}")
+    shown["row"] = list(kinds)
+    minimum = {"notes": 22.0, "drive_file": 9.0}
+    widths = {}
+    head_lines = {}
+    for key, group, head, _ in cols:
+        size = _SHOCK_PT if key in CORNERS else _DATA_PT
+        data = max([text_width(t, size=size, bold=key in CORNERS) for t in shown[key]] or [0])
+        if key.startswith("temp_"):
+            data = max(data, 4.5)  # room for three hand-written digits
+        data = max(data, minimum.get(key, 0))
+        w, lines = fit_column_width(head, data, size=_HEAD_PT)
+        widths[key], head_lines[key] = w + _PAD, lines
+    for j, (key, *_) in enumerate(cols, start=1):
+        ws.column_dimensions[get_column_letter(j)].width = round(widths[key], 2)
+
+    # header: groups on the first row, headers on the second; single columns span both
+    h1, h2 = top, top + 1
+    j = 0
+    while j < len(cols):
+        key, group, head, start = cols[j]
+        cell = ws.cell(row=h1, column=j + 1, value=group if group else head)
+        cell.font, cell.alignment = fonts["head"], center
+        cell.border = _border(left=start, top=True)
+        if group is None:
+            ws.cell(row=h1, column=j + 1).border = _border(left=start, top=True, bottom=True)
+            ws.merge_cells(start_row=h1, start_column=j + 1, end_row=h2, end_column=j + 1)
+            j += 1
+            continue
+        k = j
+        while k + 1 < len(cols) and cols[k + 1][1] == group:
+            k += 1
+        if k > j:
+            ws.merge_cells(start_row=h1, start_column=j + 1, end_row=h1, end_column=k + 1)
+        for i in range(j, k + 1):
+            c = ws.cell(row=h2, column=i + 1, value=cols[i][2])
+            c.font, c.alignment = fonts["head"], center
+            c.border = _border(left=cols[i][3], bottom=True)
+        j = k + 1
+    group_lines = 1
+    for group in {g for _, g, _, _ in cols if g is not None}:
+        span = sum(widths[k] for k, g, *_ in cols if g == group) - _PAD
+        group_lines = max(group_lines, len(_wrap(group, span)))
+    ws.row_dimensions[h1].height = _LINE_PT * group_lines + 4
+    ws.row_dimensions[h2].height = _LINE_PT * max(
+        [head_lines[k] for k, g, *_ in cols if g is not None] or [1]) + 4
+    for j, (key, group, head, start) in enumerate(cols, start=1):
+        if group is None:  # the merged single header: lines over both rows
+            need = _LINE_PT * head_lines[key] + 4
+            spare = need - ws.row_dimensions[h1].height - ws.row_dimensions[h2].height
+            if spare > 0:
+                ws.row_dimensions[h2].height += spare
+
+    # the runs' blocks
+    r0 = h2 + 1
+    merged_keys = [k for k, *_ in cols if k not in metrics and k != "row"]
+    col_of = {k: j for j, (k, *_) in enumerate(cols, start=1)}
+    start_of = {k: s for k, _, _, s in cols}
+    blocks = []
+    for n, (_, row) in enumerate(rows.iterrows()):
+        r_end = r0 + len(kinds) - 1
+        end = n == len(rows) - 1  # the last block closes the table with a heavy rule
+        changed = set(str(row["changed"]).split())
+        values = {"run": int(row["run"]), "start": float(row["start_min"]) / 1440.0,
+                  "duration_min": float(row["duration_min"]), "purpose": row["purpose"],
+                  "drive_file": Path(row["drive_file"]).name,
+                  "swap_min": float(row["swap_min"]), "notes": None}
+        values.update({c: row[c] for c in CORNERS})
+        values.update({f"temp_{c}": None for c in CORNERS})
+        for key in merged_keys:
+            j = col_of[key]
+            cell = ws.cell(row=r0, column=j, value=values[key])
+            cell.border = _border(left=start_of[key], top=True, bottom=end)
+            cell.font = fonts["data"]
+            cell.alignment = center
+            if key in CORNERS:
+                cell.font = fonts["changed"] if key in changed else fonts["shock"]
+                if key in changed:
+                    cell.fill = changed_fill
+            elif key == "start":
+                cell.number_format = "[h]:mm"
+            elif key in ("duration_min", "swap_min"):
+                cell.number_format = 'General;-General;"-"'
+            elif key == "run":
+                cell.font = fonts["bold"]
+            elif key in ("purpose", "drive_file"):
+                cell.alignment = left_mid
+            elif key == "notes":
+                cell.alignment = top_left
+            if key in ("run", "start", "duration_min", "purpose", "drive_file", "swap_min"):
+                cell.fill = plan_fill
+            if len(kinds) > 1:
+                ws.merge_cells(start_row=r0, start_column=j, end_row=r_end, end_column=j)
+        for i, kind in enumerate(kinds):
+            r = r0 + i
+            bottom = end and r == r_end
+            ws.row_dimensions[r].height = _ROW_PT[kind]
+            lab = ws.cell(row=r, column=col_of["row"], value=kind)
+            lab.font, lab.alignment = fonts["label"], right_mid
+            lab.border = _border(left=True, top=i == 0, bottom=bottom)
+            if kind != "measured":
+                lab.fill = plan_fill
+            for m in metrics:
+                cell = ws.cell(row=r, column=col_of[m])
+                cell.border = _border(top=i == 0, bottom=bottom)
+                v = _number(row.get(m))
+                d = _decimals(v)
+                if kind == "predicted" and v is not None:
+                    cell.value = v
+                    cell.number_format = "0" if d == 0 else "0." + "0" * d
+                    cell.font = fonts["data"]
+                elif kind == "interval":
+                    lo, hi = _number(row.get(f"{m}_lo")), _number(row.get(f"{m}_hi"))
+                    if lo is not None and hi is not None:
+                        cell.value = f"{lo:.{d}f}\u2013{hi:.{d}f}"
+                    cell.font = fonts["small"]
+                    cell.alignment = right
+                elif kind == "measured":
+                    cell.font = fonts["data"]
+                if kind != "measured":
+                    cell.fill = plan_fill
+        blocks.append((r0, r_end, sum(_ROW_PT[k] for k in kinds)))
+        r0 = r_end + 1
+    _keep_blocks_whole(ws, blocks, units, sum(widths.values()), len(cols), top)
+    return r0 - 1
+
+
+def _keep_blocks_whole(ws, blocks, units, width_units, n_cols, top):
+    """Page breaks between runs, so that no run's block splits over two pages.
+
+    The sheet prints one page wide: the scale is the printable width over the
+    table's (Excel's 7 px a width unit plus 5 px a column, at 96 px/in); a page
+    then holds the printable height over that scale, less the repeated header
+    (and the header block on the first page), with 6 % to spare for the
+    application's own rounding.
+    """
+    paper_w, paper_h = _PAPER_IN[units]
+    m = PRINT_MARGINS_IN
+    table_in = (7.0 * width_units + 5.0 * n_cols) / 96.0
+    scale = min(1.0, (paper_w - m["left"] - m["right"]) / table_in)
+    page_pt = 0.94 * (paper_h - m["top"] - m["bottom"]) * 72.0 / scale
+
+    def height(r):
+        return ws.row_dimensions[r].height or 15.0
+
+    titles = height(top) + height(top + 1)
+    used = sum(height(r) for r in range(1, top + 2))
+    for first, last, h in blocks:
+        if used + h > page_pt and used > titles:
+            ws.row_breaks.append(Break(id=first - 1))
+            used = titles
+        used += h
+
+
+def _grouped_header(ws, top, heads, starts, widths):
+    """Two header rows at `top`: group labels merged over their columns, the columns' own
+    headers below (a column without a group spans both rows). `heads`: (header, group)."""
+    fonts = _fonts()
+    center = Alignment(horizontal="center", vertical="center", wrap_text=True)
+    n = len(heads)
+    lines1, lines2 = [1], [1]
+    j = 0
+    while j < n:
+        head, group = heads[j]
+        cell = ws.cell(row=top, column=j + 1, value=group or head)
+        cell.font, cell.alignment = fonts["head"], center
+        cell.border = _border(left=j in starts, top=True, bottom=group is None)
+        if group is None:
+            ws.merge_cells(start_row=top, start_column=j + 1, end_row=top + 1, end_column=j + 1)
+            lines2.append(len(_wrap(head, widths[j] - _PAD)) - lines1[0])
+            j += 1
+            continue
+        k = j
+        while k + 1 < n and heads[k + 1][1] == group:
+            k += 1
+        if k > j:
+            ws.merge_cells(start_row=top, start_column=j + 1, end_row=top, end_column=k + 1)
+        lines1.append(len(_wrap(group, sum(widths[j:k + 1]) - _PAD)))
+        for i in range(j, k + 1):
+            c = ws.cell(row=top + 1, column=i + 1, value=heads[i][0])
+            c.font, c.alignment = fonts["head"], center
+            c.border = _border(left=i in starts, bottom=True)
+            lines2.append(len(_wrap(heads[i][0], widths[i] - _PAD)))
+        j = k + 1
+    ws.row_dimensions[top].height = _LINE_PT * max(lines1) + 4
+    ws.row_dimensions[top + 1].height = _LINE_PT * max(lines2) + 4
+
+
+def _crate_sheet(ws, plan, units, footer):
+    """Sheet "crate": every shock of the crate, its forces and the runs that fit it."""
+    fonts = _fonts()
+    lib = plan.library
+    v_ref = REFERENCE_VELOCITIES[units]
+    v_unit = UNIT_LABELS[units]["velocity"]
+    f_unit = UNIT_LABELS[units]["force"]
+    used = {sid: [] for sid in lib.ids}
+    for r in plan.runs:
+        for sid in dict.fromkeys(r.setup.ids()):
+            used.setdefault(sid, []).append(str(r.number))
+    ws.cell(row=1, column=1, value=f"crate: {lib.source or '(not from a file)'}").font = \
+        fonts["title"]
+    ws.row_dimensions[1].height = 21
+    nv = len(v_ref)
+    heads = [("id", None), ("kind", None), ("lag [ms]", None), ("count", None),
+             ("used in runs", None)]
+    heads += [(f"{v:g} {v_unit}", f"bump force [{f_unit}] at") for v in v_ref]
+    heads += [(f"{v:g} {v_unit}", f"rebound force [{f_unit}] at") for v in v_ref]
+    heads += [("description", None)]
+    force_cols = range(5, 5 + 2 * nv)
+    rows = []
+    v_si = to_si(np.asarray(v_ref, dtype=float), "velocity", units)
+    for sid in lib.ids:
+        m = lib[sid]
+        bump = from_si(np.asarray(m.force(v_si), dtype=float), "force", units)
+        reb = from_si(np.abs(np.asarray(m.force(-v_si), dtype=float)), "force", units)
+        rows.append([sid, m.kind, 1e3 * m.lag_s, "unlimited" if m.count is None else m.count,
+                     " ".join(used.get(sid, [])) or "-"]
+                    + [float(x) for x in bump] + [float(x) for x in reb]
+                    + [m.description or ""])
+    widths = []
+    for j, (head, group) in enumerate(heads):
+        texts = [f"{v:.0f}" if j in force_cols else f"{v:g}" if isinstance(v, float)
+                 else str(v) for v in (row[j] for row in rows)]
+        data = max([text_width(t, size=_DATA_PT, bold=j == 0) for t in texts] or [0])
+        cap = 36.0 if head == "description" else 16.0
+        w, _ = fit_column_width(head, min(data, cap), size=_HEAD_PT, max_lines=2)
+        widths.append(w + _PAD)
+        ws.column_dimensions[get_column_letter(j + 1)].width = round(w + _PAD, 2)
+    top = 3
+    starts = {5, 5 + nv, len(heads) - 1}
+    _grouped_header(ws, top, heads, starts, widths)
+    center = Alignment(horizontal="center", vertical="top")
+    wrapped = Alignment(vertical="top", wrap_text=True)
+    for i, values in enumerate(rows):
+        r = top + 2 + i
+        lines = 1
+        for j, v in enumerate(values):
+            cell = ws.cell(row=r, column=j + 1, value=v)
+            cell.font = fonts["bold"] if j == 0 else fonts["data"]
+            cell.border = _border(left=j in starts)
+            cell.alignment = Alignment(vertical="top")
+            if j in force_cols:
+                cell.number_format = "0"
+            elif j == 2:
+                cell.number_format = "0.#" if v % 1 else "0"
+            elif j in (3, 4):
+                cell.alignment = center
+            elif j == len(values) - 1:
+                cell.alignment = wrapped
+                # 15 % spare: prose is wider than the estimate's average letter
+                lines = len(_wrap(v, 0.85 * (widths[j] - _PAD), size=_DATA_PT, bold=False))
+        ws.row_dimensions[r].height = 13.5 * lines + 1
+    last = top + 1 + len(rows)
+    n = len(heads)
+    note = ws.cell(row=last + 2, column=1, value=(
+        "Forces of the static curve (before the lag) at the velocities in the header, bump "
+        "(compression) and rebound each as a magnitude. 'used in runs': the runs (see the run "
+        "sheet) that fit the shock at any corner."))
+    note.font = fonts["note"]
+    note.alignment = Alignment(wrap_text=True, vertical="top")
+    ws.merge_cells(start_row=last + 2, start_column=1, end_row=last + 2, end_column=n)
+    ws.row_dimensions[last + 2].height = _LINE_PT * len(_wrap(note.value, sum(widths) - _PAD,
+                                                              bold=False)) + 4
+    ws.freeze_panes = ws.cell(row=top + 2, column=2).coordinate
+    print_setup(ws, units=units, area=f"A1:{get_column_letter(n)}{last + 2}",
+                title_rows=f"{top}:{top + 1}", footer=footer)
+
+
+def _information_sheet(ws, plan, units, footer):
+    """Sheet "information": each run's share, the criterion's values, the solver, settings."""
+    fonts = _fonts()
+    ws.cell(row=1, column=1, value="information gained by the plan").font = fonts["title"]
+    ws.row_dimensions[1].height = 21
+    r = 3
+    heads = ["run", "name", "purpose", "setup", "share of the criterion [%]",
+             "criterion after the run", "rig time at its end [min]"]
+    widths = (6, 34, 15, 20, 12, 12, 12)
+    for j, h in enumerate(heads, start=1):
+        c = ws.cell(row=r, column=j, value=h)
+        c.font = fonts["head"]
+        c.alignment = Alignment(wrap_text=True, horizontal="center", vertical="bottom")
+        c.border = _border(top=True, bottom=True)
+    ws.row_dimensions[r].height = 2 * _LINE_PT + 4
+    curve = plan.curve.set_index("run")
+    for run in plan.runs:
+        r += 1
+        crit = float(curve.loc[run.number, "criterion"]) if run.number in curve.index else None
+        end = float(curve.loc[run.number, "time_min"]) if run.number in curve.index else None
+        vals = [run.number, run.name, run.purpose, "/".join(run.setup.ids()),
+                100.0 * run.share, crit, end]
+        fmts = [None, None, None, None, "0.0", "0.00", "0.0"]
+        for j, (v, f) in enumerate(zip(vals, fmts), start=1):
+            c = ws.cell(row=r, column=j, value=v)
+            c.font = fonts["data"]
+            c.border = _border()
+            if j == 1:
+                c.alignment = Alignment(horizontal="center")
+            if f:
+                c.number_format = f
+    r += 2
+    meaning = {"prior": "the session's runs alone (none before rig day)",
+               "relaxed": "the relaxed optimum (runs as real numbers), every band",
+               "relaxed_design_bands": "the relaxed optimum on the design's band groups",
+               "plan": "the planned runs (rounded and ordered), every band",
+               "greedy": "a cvxpy-free greedy plan of the same budget",
+               "greedy_min": "the greedy plan's rig time [min]"}
+    sections = [(f"criterion: {_CRITERIA.get(plan.criterion, plan.criterion)}, larger is "
+                 "better", [(k, v, meaning.get(k, "")) for k, v in plan.values.items()]),
+                ("solver", [(k, v, "") for k, v in plan.solver.items()]),
+                ("settings", [(k, v, "") for k, v in plan.settings.items()])]
+    for title, items in sections:
+        ws.cell(row=r, column=2, value=title).font = fonts["bold"]
+        for k, v, note in items:
+            r += 1
+            ws.cell(row=r, column=2, value=str(k)).font = fonts["data"]
+            if isinstance(v, float):
+                cell = ws.cell(row=r, column=3, value=v if math.isfinite(v) else None)
+                cell.number_format = "0.000" if abs(v) < 1e4 else "0"
+            elif v is None or isinstance(v, (bool, int, str)):
+                cell = ws.cell(row=r, column=3, value=v if v is not None else "-")
+            else:
+                cell = ws.cell(row=r, column=3, value=str(v))
+            cell.font = fonts["data"]
+            cell.alignment = Alignment(horizontal="left")
+            if note:
+                ws.cell(row=r, column=4, value=note).font = fonts["small"]
+        r += 2
+    for j, w in enumerate(widths, start=1):
+        ws.column_dimensions[get_column_letter(j)].width = w
+    print_setup(ws, units=units, area=f"A1:{get_column_letter(len(widths))}{r - 2}",
+                title_rows=None, landscape=False, footer=footer)
+
+
+def write_run_sheet(plan, path, *, units="SI", overwrite=False):
+    """Write the rig-day run sheet ``test_plan.xlsx`` of an experiment plan.
+
+    Parameters
+    ----------
+    plan : planner.design.ExperimentPlan
+    path : str or path
+        The workbook to write (``.xlsx``).
+    units : {"SI", "imperial"}
+        Units of the predictions, forces and temperatures on the sheet; also
+        the paper (A4 for SI, US letter for imperial).
+    overwrite : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    pathlib.Path
+        The written path.
+
+    Raises
+    ------
+    TypeError
+        If `plan` is not an ExperimentPlan.
+    PlannerError
+        If `units` is unknown.
+    FileExistsError
+        If `path` exists and `overwrite` is false (nothing is written).
+
+    Notes
+    -----
+    See the module docstring for the layout. The date is the plan's
+    (``plan.settings["date"]``), else today. Written atomically (a temporary
+    file in the same folder, renamed). Read it back with :func:`read_run_sheet`.
+    """
+    if not isinstance(plan, ExperimentPlan):
+        raise TypeError(f"write_run_sheet: plan must be a planner.design.ExperimentPlan (from "
+                        f"design_experiment), got {type(plan).__name__}")
+    units = check_units(units, where="write_run_sheet: units", error=PlannerError)
+    path = Path(path)
+    check_can_write(path, overwrite=overwrite)
+    date = plan.settings.get("date") or datetime.date.today().isoformat()
+    metrics = _sheet_metrics(plan)
+    rows = run_sheet_rows(plan, units=units)
+    cols = _run_sheet_columns(units, metrics)
+    footer = f"{RUN_SHEET_TITLE}: {plan.settings.get('car') or 'car'}, {date}"
+
+    wb = Workbook()
+    ws = wb.active
+    ws.title = "run sheet"
+    label_col = [k for k, *_ in cols].index("row") + 1
+    intervals = bool(metrics) and all(f"{m}_lo" in rows and f"{m}_hi" in rows for m in metrics)
+    top = _header_block(ws, plan, units, str(date), label_col, intervals)
+    last = _write_run_table(ws, units, rows, metrics, cols, top, intervals)
+    last_col = get_column_letter(len(cols))
+    ws.freeze_panes = ws.cell(row=top + 2, column=2).coordinate
+    print_setup(ws, units=units, area=f"A1:{last_col}{last}", title_rows=f"{top}:{top + 1}",
+                footer=footer)
+    _crate_sheet(wb.create_sheet("crate"), plan, units, footer)
+    _information_sheet(wb.create_sheet("information"), plan, units, footer)
+    wb.properties.title = f"{RUN_SHEET_TITLE}: {plan.settings.get('car') or 'car'}"
+    wb.properties.creator = "shockplan"
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        wb.save(tmp)
+    log.info("wrote the run sheet of %d runs (%s) to %s", len(plan.runs), units, path)
+    return path
+
+
+# ----------------------------------------------------------------------------------------------
+# reading it back
+# ----------------------------------------------------------------------------------------------
+
+def _not_a_run_sheet(path, why):
+    return PlannerError(f"{path}: not a shockplan run sheet ({why}); give the test_plan.xlsx "
+                        "that write_run_sheet or 'shockplan plan' wrote")
+
+
+def _merged_value(ws, row, col):
+    """The value shown at (row, col): a merged range's top-left value."""
+    cell = ws.cell(row=row, column=col)
+    if cell.value is not None:
+        return cell.value
+    for rng in ws.merged_cells.ranges:
+        if rng.min_row <= row <= rng.max_row and rng.min_col <= col <= rng.max_col:
+            return ws.cell(row=rng.min_row, column=rng.min_col).value
+    return None
+
+
+def _minutes(value, where):
+    """A start cell (time, duration, day fraction or "h:mm" text) in minutes."""
+    if isinstance(value, datetime.timedelta):
+        return value.total_seconds() / 60.0
+    if isinstance(value, datetime.time):
+        return value.hour * 60 + value.minute + value.second / 60.0
+    if isinstance(value, datetime.datetime):
+        return value.hour * 60 + value.minute + value.second / 60.0
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value) * 1440.0
+    if isinstance(value, str):
+        m = re.fullmatch(r"\s*(\d+):(\d{1,2})(?::(\d{1,2}))?\s*", value)
+        if m:
+            return int(m[1]) * 60 + int(m[2]) + int(m[3] or 0) / 60.0
+    raise PlannerError(f"{where}: start {value!r} is not a time; write it as h:mm")
+
+
+def _read_number(value, where, what):
+    if value is None or (isinstance(value, str) and not value.strip()):
+        return np.nan
+    if isinstance(value, bool):
+        raise PlannerError(f"{where}: {what} is {value!r}, not a number; write a number or "
+                           "leave the cell empty")
+    if isinstance(value, (int, float)):
+        return float(value)
+    try:
+        return float(str(value).replace(",", "."))
+    except ValueError:
+        raise PlannerError(f"{where}: {what} is {value!r}, not a number; write a number or "
+                           "leave the cell empty") from None
+
+
+def read_run_sheet(path):
+    """Read a run sheet (``test_plan.xlsx``) back: one row per run, as filled in.
+
+    Parameters
+    ----------
+    path : str or path
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per run in sheet order, columns ``run``, ``start`` (``h:mm``),
+        ``start_min``, ``duration_min``, ``purpose``, ``drive_file``
+        (``drives/<name>.csv``), ``LF`` .. ``RR``, ``changed`` (corners whose
+        shock differs from the run before, the first run from the baseline),
+        ``swap_min``, every key metric's prediction (SI), ``<metric>_measured``
+        (SI, NaN where empty), ``shock_temp_<corner>_c`` [degC] and ``notes``.
+        ``attrs`` holds ``units`` and the header block (``header``: label ->
+        text).
+
+    Raises
+    ------
+    PlannerError
+        If the file is missing or not a workbook, is not a shockplan run sheet
+        (no sheet "run sheet" titled :data:`RUN_SHEET_TITLE`, or its table has
+        lost a column), or a measured value or temperature is not a number;
+        the message names the file (and cell) and the fix.
+
+    Notes
+    -----
+    Predictions round-trip at full precision (the cells hold the numbers;
+    the format only rounds what is shown); intervals are shown text and are
+    not read (``test_plan.csv`` has them).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise PlannerError(f"{path}: run sheet not found; check the path")
+    try:
+        wb = load_workbook(path, data_only=True)
+    except (zipfile.BadZipFile, KeyError, OSError, ValueError) as exc:
+        raise _not_a_run_sheet(path, f"not an Excel workbook: {exc}") from None
+    if "run sheet" not in wb.sheetnames:
+        raise _not_a_run_sheet(path, f"no sheet 'run sheet', only {wb.sheetnames}")
+    ws = wb["run sheet"]
+    title = ws.cell(row=1, column=1).value
+    if not (isinstance(title, str) and title.startswith(RUN_SHEET_TITLE)):
+        raise _not_a_run_sheet(path, f"cell A1 is {title!r}, not '{RUN_SHEET_TITLE}: <car>'")
+    h1 = next((r for r in range(2, min(ws.max_row, 60) + 1)
+               if ws.cell(row=r, column=1).value == _HEAD["run"]), None)
+    if h1 is None:
+        raise _not_a_run_sheet(path, "no table header 'run' in column A")
+    header = {}
+    for r in range(2, h1):
+        cells = [ws.cell(row=r, column=c).value for c in range(1, ws.max_column + 1)]
+        for j, v in enumerate(cells):
+            if isinstance(v, str) and j + 2 < len(cells) and cells[j + 2] is not None \
+                    and cells[j + 1] is None:
+                header.setdefault(v, str(cells[j + 2]))
+    try:
+        units = check_units(header.get("units", ""), where=f"{path}: header 'units'",
+                            error=PlannerError)
+    except PlannerError:
+        raise _not_a_run_sheet(path, "the header block has no 'units'") from None
+    labels = {column_label(m): m for m in METRIC_QUANTITY}
+    heads = {v: k for k, v in _HEAD.items()}
+    col = {}
+    for j in range(1, ws.max_column + 1):
+        g, h = _merged_value(ws, h1, j), ws.cell(row=h1 + 1, column=j).value
+        if g == _SHOCKS_GROUP and h in CORNERS:
+            col[h] = j
+        elif isinstance(g, str) and g.startswith(_TEMPS_GROUP) and h in CORNERS:
+            col[f"temp_{h}"] = j
+        elif g == _METRICS_GROUP and h in (None, ""):
+            col["row"] = j
+        elif g == _METRICS_GROUP and isinstance(h, str):
+            m = labels.get(h.split(" [")[0])
+            if m is None:
+                raise _not_a_run_sheet(path, f"unknown key metric {h!r} in column "
+                                             f"{get_column_letter(j)}")
+            col[m] = j
+        elif g in heads:
+            col[heads[g]] = j
+    need = ["run", "start", "duration_min", "purpose", "drive_file", *CORNERS, "swap_min",
+            "row"]
+    missing = [k for k in need if k not in col]
+    if missing:
+        raise _not_a_run_sheet(path, f"its table has no column(s) {missing}")
+    metrics = [k for k in col if k in METRIC_QUANTITY]
+    baseline = header.get("baseline", "").split("/")
+    prev = baseline if len(baseline) == 4 else None
+    out = []
+    r = h1 + 2
+    while r <= ws.max_row:
+        run = ws.cell(row=r, column=col["run"]).value
+        if run is None:
+            r += 1
+            continue
+        where = f"{path}: run sheet, run {run} (row {r})"
+        rows = {}
+        k = r
+        while k <= ws.max_row and (k == r or ws.cell(row=k, column=col["run"]).value is None):
+            kind = ws.cell(row=k, column=col["row"]).value
+            if kind is None:
+                break
+            rows[kind] = k
+            k += 1
+        ids = [str(ws.cell(row=r, column=col[c]).value) for c in CORNERS]
+        start = _minutes(ws.cell(row=r, column=col["start"]).value, where)
+        h, mm = divmod(int(round(start)), 60)
+        drive = ws.cell(row=r, column=col["drive_file"]).value
+        rec = {"run": int(run), "start": f"{h:d}:{mm:02d}", "start_min": start,
+               "duration_min": _read_number(ws.cell(row=r, column=col["duration_min"]).value,
+                                            where, "duration"),
+               "purpose": ws.cell(row=r, column=col["purpose"]).value,
+               "drive_file": (None if drive is None else f"{_DRIVE_DIR}/{drive}"
+                              if str(drive).endswith(".csv") else f"{_DRIVE_DIR}/{drive}.csv")}
+        rec.update(dict(zip(CORNERS, ids)))
+        rec["changed"] = (" ".join(c for c, a, b in zip(CORNERS, prev, ids) if a != b)
+                          if prev is not None else "")
+        swap = ws.cell(row=r, column=col["swap_min"]).value
+        rec["swap_min"] = 0.0 if swap in (None, "-") else _read_number(swap, where, "swap")
+        for m in metrics:
+            q = METRIC_QUANTITY[m]
+            p = ws.cell(row=rows.get("predicted", r), column=col[m]).value
+            rec[m] = float(to_si(_read_number(p, where, m), q, units))
+            cell = ws.cell(row=rows["measured"], column=col[m]) if "measured" in rows else None
+            meas = _read_number(cell.value, f"{where}, cell {cell.coordinate}",
+                                f"measured {m}") if cell is not None else np.nan
+            rec[f"{m}_measured"] = float(to_si(meas, q, units))
+        for c in CORNERS:
+            if f"temp_{c}" in col:
+                cell = ws.cell(row=r, column=col[f"temp_{c}"])
+                t = _read_number(cell.value, f"{where}, cell {cell.coordinate}",
+                                 f"shock temperature {c}")
+                rec[f"shock_temp_{c}_c"] = (t - 32.0) * 5.0 / 9.0 if units == "imperial" else t
+        if "notes" in col:
+            note = ws.cell(row=r, column=col["notes"]).value
+            rec["notes"] = "" if note is None else str(note)
+        out.append(rec)
+        prev = ids
+        r = max(k, r + 1)
+    if not out:
+        raise _not_a_run_sheet(path, "its table has no runs")
+    frame = pd.DataFrame(out)
+    frame.attrs["units"] = units
+    frame.attrs["header"] = header
+    return frame
+
+
+# ----------------------------------------------------------------------------------------------
+# the folder
+# ----------------------------------------------------------------------------------------------
+
+def write_plan(plan, out_dir, *, units="SI", overwrite=False):
+    """Write an experiment plan's rig-day files (see the module docstring).
+
+    Parameters
+    ----------
+    plan : planner.design.ExperimentPlan
+    out_dir : str or path
+    units : {"SI", "imperial"}
+    overwrite : bool
+        Replace an existing folder.
+
+    Returns
+    -------
+    dict of str -> pathlib.Path
+
+    Raises
+    ------
+    FileExistsError
+        If `out_dir` exists and is not empty, and `overwrite` is false (checked first).
+    """
+    units = check_units(units, where="units", error=PlannerError)
+    out = Path(out_dir)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        check_can_write(out, overwrite=overwrite)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    names = {"plan": "plan.toml", "shocks": "shocks.toml", "xlsx": "test_plan.xlsx",
+             "csv": "test_plan.csv", "figure": "design.png", "drives": _DRIVE_DIR}
+    try:
+        (work / _DRIVE_DIR).mkdir()
+        for name, drive in plan.drives.items():
+            write_drive(drive, work / _DRIVE_DIR / f"{name}.csv", units=units)
+        write_shock_library(plan.library, work / names["shocks"], units=units)
+        (work / names["plan"]).write_text(plan_toml(plan, units=units), encoding="utf-8")
+        rows = run_sheet_rows(plan, units=units)
+        rows.to_csv(work / names["csv"], index=False, float_format="%.6g")
+        write_run_sheet(plan, work / names["xlsx"], units=units)
+        design_figure(plan).savefig(work / names["figure"], dpi=110)
+        if out.exists():
+            shutil.rmtree(out)
+        work.rename(out)
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+    return {k: out / v for k, v in names.items()}

@@ -1,0 +1,317 @@
+"""Tests of planner.testplan: the run sheet (layout, print setup, highlighted swaps, reading
+it back as filled in), overwrite refusal, refusal of other workbooks, and the plan folder
+(``write_plan``, its ``plan.toml`` read by ``ident.rig.read_rig_plan``)."""
+
+import dataclasses
+import datetime
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless; the module itself never touches pyplot
+
+import numpy as np
+import pandas as pd
+import pytest
+from numpy.testing import assert_allclose
+from openpyxl import Workbook, load_workbook
+from openpyxl.utils import get_column_letter
+
+from ident.channels import CORNERS
+from ident.errors import PlannerError
+from ident.metrics import METRIC_QUANTITY
+from ident.rig import read_rig_plan
+from ident.units import TO_SI
+from planner.design import design_experiment
+from planner.report import PAPER_SIZE, write_ranking
+from planner.testplan import (
+    CHANGED_FILL,
+    RUN_SHEET_TITLE,
+    read_run_sheet,
+    run_sheet_rows,
+    write_plan,
+    write_run_sheet,
+)
+
+#: The plan: a budget that buys identification runs and two validation runs.
+BUDGET_MIN = 90.0
+N_VALIDATION = 2
+#: SI -> sheet units -> SI is a division and a multiplication by one constant: round-off.
+RTOL_UNITS = 1e-12
+#: run_sheet_rows rounds start times and durations to 0.01 min.
+ATOL_MIN = 0.005 + 1e-9
+#: Intervals made up for the sheet's interval rows: +-5 % of the prediction.
+INTERVAL = 0.05
+
+
+@pytest.fixture(scope="module")
+def plan(paper_vehicle, demo_library):
+    """A plan on the paper car and the demo crate, with validation runs (about 15 s)."""
+    return design_experiment(paper_vehicle, demo_library, budget_min=BUDGET_MIN,
+                             baseline="B20", n_validation=N_VALIDATION)
+
+
+@pytest.fixture(scope="module")
+def plan_with_intervals(plan):
+    """The plan with intervals on its predictions, as an identified model gives."""
+    pred = plan.predictions.copy()
+    for m in list(pred.columns):
+        pred[f"{m}_lo"] = pred[m] * (1 - INTERVAL)
+        pred[f"{m}_hi"] = pred[m] * (1 + INTERVAL)
+    return dataclasses.replace(plan, predictions=pred)
+
+
+def _blocks(ws):
+    """Row of the table header and {run number: first row of its block}."""
+    top = next(r for r in range(1, 30) if ws.cell(r, 1).value == "run")
+    runs = {ws.cell(r, 1).value: r for r in range(top + 2, ws.max_row + 1)
+            if isinstance(ws.cell(r, 1).value, int)}
+    return top, runs
+
+
+def test_plan_has_validation_runs(plan):
+    purposes = [r.purpose for r in plan.runs]
+    assert purposes.count("validation") == N_VALIDATION
+    assert "identification" in purposes
+
+
+@pytest.mark.parametrize("units", ["SI", "imperial"])
+def test_run_sheet_reads_back_to_the_plans_runs(plan, tmp_path, units):
+    path = write_run_sheet(plan, tmp_path / "test_plan.xlsx", units=units)
+    wb = load_workbook(path)
+    assert wb.sheetnames == ["run sheet", "crate", "information"]
+    assert wb["run sheet"]["A1"].value.startswith(RUN_SHEET_TITLE)
+    assert not list(tmp_path.glob(".*.tmp"))  # written atomically, nothing left over
+
+    back = read_run_sheet(path)
+    table = plan.table()
+    assert back["run"].tolist() == table.index.tolist()
+    for col in ("purpose", *CORNERS, "changed"):
+        assert back[col].tolist() == table[col].tolist(), col
+    assert back["drive_file"].tolist() == [f"drives/{d}.csv" for d in table["drive"]]
+    assert_allclose(back["start_min"], table["start_min"], atol=ATOL_MIN)
+    assert_allclose(back["duration_min"], table["duration_s"] / 60, atol=ATOL_MIN)
+    assert_allclose(back["swap_min"], table["swap_min"], atol=ATOL_MIN)
+    assert back["start"].tolist() == run_sheet_rows(plan)["start"].tolist()
+    metrics = list(plan.predictions.columns)
+    assert_allclose(back[metrics].to_numpy(), plan.predictions.to_numpy(), rtol=RTOL_UNITS)
+    assert back[[f"{m}_measured" for m in metrics]].isna().all().all()  # nothing measured yet
+    assert back[[f"shock_temp_{c}_c" for c in CORNERS]].isna().all().all()
+    assert (back["notes"] == "").all()
+    assert back.attrs["units"] == units
+
+
+def test_run_sheet_header_block(plan, tmp_path):
+    ws = load_workbook(write_run_sheet(plan, tmp_path / "a.xlsx"))["run sheet"]
+    texts = [c.value for row in ws.iter_rows(max_row=8) for c in row if c.value is not None]
+    header = read_run_sheet(tmp_path / "a.xlsx").attrs["header"]
+    assert header["car"] == plan.settings["car"]
+    assert header["date"] == datetime.date.today().isoformat()  # the plan has no date
+    assert header["crate"] == plan.settings["crate"]
+    assert header["budget"] == f"{BUDGET_MIN:g} min"
+    assert header["planned rig time"].startswith(f"{plan.total_min:.1f} min")
+    assert header["criterion"].startswith("D-optimal")
+    assert header["baseline"] == "B20/B20/B20/B20"
+    assert any("Filled shock" in str(t) for t in texts)
+    dated = dataclasses.replace(plan, settings={**plan.settings, "date": "2009-04-20"})
+    write_run_sheet(dated, tmp_path / "b.xlsx")
+    assert read_run_sheet(tmp_path / "b.xlsx").attrs["header"]["date"] == "2009-04-20"
+
+
+@pytest.mark.parametrize("units", ["SI", "imperial"])
+def test_run_sheet_prints_one_page_wide(plan_with_intervals, tmp_path, units):
+    wb = load_workbook(write_run_sheet(plan_with_intervals, tmp_path / "p.xlsx", units=units))
+    ws = wb["run sheet"]
+    top, runs = _blocks(ws)
+    for sheet, orientation in (("run sheet", "landscape"), ("crate", "landscape"),
+                               ("information", "portrait")):
+        s = wb[sheet]
+        ps = s.page_setup
+        assert s.sheet_properties.pageSetUpPr.fitToPage, sheet
+        assert (int(ps.fitToWidth), int(ps.fitToHeight)) == (1, 0), sheet
+        assert ps.orientation == orientation, sheet
+        assert int(ps.paperSize) == PAPER_SIZE[units], sheet
+        assert s.print_area, sheet
+        assert "&P" in s.oddFooter.right.text
+    # the table's two header rows repeat on every page; the area covers the whole table
+    assert ws.print_title_rows == f"${top}:${top + 1}"
+    last_row = max(runs.values()) + 2  # predicted, interval, measured
+    area = ws.print_area if isinstance(ws.print_area, str) else ws.print_area[0]
+    assert area.endswith(f"$A$1:${get_column_letter(ws.max_column)}${last_row}")
+    assert ws.max_row == last_row
+    assert ws.freeze_panes == f"B{top + 2}"
+    assert wb["crate"].print_title_rows == "$3:$4"
+    # every block is whole on a page: page breaks fall just before a run's block
+    for brk in ws.row_breaks.brk:
+        assert brk.id + 1 in runs.values()
+
+
+def test_changed_corners_are_highlighted(plan, tmp_path):
+    ws = load_workbook(write_run_sheet(plan, tmp_path / "h.xlsx"))["run sheet"]
+    top, runs = _blocks(ws)
+    col = {ws.cell(top + 1, j).value: j for j in range(1, 12)}
+    assert [r.number for r in plan.runs] == list(runs)
+    n_changed = 0
+    for r in plan.runs:
+        for c in CORNERS:
+            cell = ws.cell(runs[r.number], col[c])
+            assert cell.value == dict(zip(CORNERS, r.setup.ids()))[c]
+            filled = cell.fill.fill_type == "solid" and cell.fill.fgColor.rgb.endswith(
+                CHANGED_FILL)
+            assert filled == (c in r.changed), (r.number, c)
+            assert cell.font.bold == (c in r.changed)
+            n_changed += c in r.changed
+    assert n_changed > 0  # the plan swaps shocks
+
+
+def test_interval_rows_show_the_intervals(plan_with_intervals, tmp_path):
+    plan = plan_with_intervals
+    ws = load_workbook(write_run_sheet(plan, tmp_path / "i.xlsx", units="imperial"))[
+        "run sheet"]
+    top, runs = _blocks(ws)
+    head = [ws.cell(top + 1, j).value for j in range(1, ws.max_column + 1)]
+    j = head.index("tire force RMS LF [lbf]") + 1
+    groups = [ws.cell(top, j).value for j in range(1, ws.max_column + 1)]
+    label = groups.index("key metrics") + 1  # the group's first column labels the rows
+    for r in plan.runs:
+        row = runs[r.number]
+        assert [ws.cell(row + k, label).value for k in range(3)] == [
+            "predicted", "interval", "measured"]
+        text = ws.cell(row + 1, j).value
+        lo, hi = (float(x) for x in text.split("\u2013"))
+        pred = plan.predictions.loc[r.number]
+        assert lo == pytest.approx(pred["tire_force_rms_LF_lo"] / TO_SI["force"], rel=0.01)
+        assert hi == pytest.approx(pred["tire_force_rms_LF_hi"] / TO_SI["force"], rel=0.01)
+        assert ws.cell(row + 2, j).value is None  # the measured value: written on rig day
+    back = read_run_sheet(tmp_path / "i.xlsx")
+    assert back["run"].tolist() == [r.number for r in plan.runs]
+    metrics = [m for m in plan.predictions.columns if m in METRIC_QUANTITY]
+    assert_allclose(back[metrics].to_numpy(), plan.predictions[metrics].to_numpy(),
+                    rtol=RTOL_UNITS)
+
+
+def test_measured_values_read_back_in_si(plan, tmp_path):
+    path = write_run_sheet(plan, tmp_path / "m.xlsx", units="imperial")
+    wb = load_workbook(path)
+    ws = wb["run sheet"]
+    top, runs = _blocks(ws)
+    head = {ws.cell(top + 1, j).value: j for j in range(1, ws.max_column + 1)}
+    groups = [ws.cell(top, j).value for j in range(1, ws.max_column + 1)]
+    temp_lf = groups.index("shock temperature [°F]") + 1
+    notes = groups.index("notes") + 1
+    row = runs[3] + 1  # run 3's measured row (no intervals: predicted, measured)
+    ws.cell(row, head["tire force RMS LF [lbf]"], 1000.0)
+    ws.cell(row, head["ride height RMS front [in]"], "1,5")  # a decimal comma is read
+    ws.cell(runs[3], temp_lf, 212)
+    ws.cell(runs[3], notes, "LF damper weeps oil")
+    wb.save(path)
+    back = read_run_sheet(path).set_index("run")
+    assert back.loc[3, "tire_force_rms_LF_measured"] == pytest.approx(1000.0 * TO_SI["force"])
+    assert back.loc[3, "ride_height_rms_front_measured"] == pytest.approx(1.5 * 0.0254)
+    assert back.loc[3, "shock_temp_LF_c"] == pytest.approx(100.0)
+    assert back.loc[3, "notes"] == "LF damper weeps oil"
+    assert np.isnan(back.loc[4, "tire_force_rms_LF_measured"])
+    ws.cell(row, head["tire force RMS LF [lbf]"], "about 1000")
+    wb.save(path)
+    with pytest.raises(PlannerError, match=r"m\.xlsx.*run 3.*'about 1000', not a number"):
+        read_run_sheet(path)
+
+
+def test_write_run_sheet_refuses_an_existing_file(plan, tmp_path):
+    path = tmp_path / "test_plan.xlsx"
+    path.write_bytes(b"keep")
+    with pytest.raises(FileExistsError, match=r"test_plan\.xlsx.*overwrite"):
+        write_run_sheet(plan, path)
+    assert path.read_bytes() == b"keep"
+    write_run_sheet(plan, path, overwrite=True)
+    assert read_run_sheet(path)["run"].tolist() == [r.number for r in plan.runs]
+
+
+@pytest.mark.parametrize("kwargs, error, match", [
+    ({"units": "metric"}, PlannerError, "unknown unit system"),
+])
+def test_write_run_sheet_bad_inputs(plan, tmp_path, kwargs, error, match):
+    with pytest.raises(error, match=match):
+        write_run_sheet(plan, tmp_path / "x.xlsx", **kwargs)
+    with pytest.raises(TypeError, match="ExperimentPlan"):
+        write_run_sheet(plan.table(), tmp_path / "x.xlsx")
+    assert not (tmp_path / "x.xlsx").exists()
+
+
+def _other_workbook(path):
+    wb = Workbook()
+    wb.active.title = "run sheet"
+    wb.active["A1"] = "my own run sheet"
+    wb.save(path)
+
+
+def _ranking_workbook(path):
+    t = pd.DataFrame({c: ["B20"] for c in CORNERS} | {"tire_force_rms_LF": [1000.0]},
+                     index=pd.Index(["baseline"], name="setup"))
+    write_ranking(t, path.parent / "ranking")
+    (path.parent / "ranking" / "ranking.xlsx").rename(path)
+
+
+def _not_a_workbook(path):
+    path.write_text("run,start\n1,0:00\n")
+
+
+def _run_sheet_without_shocks(path, plan):
+    write_run_sheet(plan, path)
+    wb = load_workbook(path)
+    ws = wb["run sheet"]
+    top, _ = _blocks(ws)
+    for j in range(1, ws.max_column + 1):
+        if ws.cell(top + 1, j).value == "LR":
+            ws.cell(top + 1, j).value = "left rear"
+    wb.save(path)
+
+
+@pytest.mark.parametrize("make, match", [
+    (_other_workbook, r"not a shockplan run sheet \(cell A1 is 'my own run sheet'"),
+    (_ranking_workbook, r"not a shockplan run sheet \(no sheet 'run sheet'"),
+    (_not_a_workbook, r"not a shockplan run sheet \(not an Excel workbook"),
+    (None, "run sheet not found"),
+    ("no LR", r"no column\(s\) \['LR'\]"),
+])
+def test_read_run_sheet_refuses_other_files(plan, tmp_path, make, match):
+    path = tmp_path / "book.xlsx"
+    if make == "no LR":
+        _run_sheet_without_shocks(path, plan)
+    elif make is not None:
+        make(path)
+    with pytest.raises(PlannerError, match=match) as info:
+        read_run_sheet(path)
+    assert "book.xlsx" in str(info.value)
+
+
+def test_write_plan_files_and_rig_plan(plan, tmp_path):
+    files = write_plan(plan, tmp_path / "plan", units="imperial")
+    assert sorted(p.name for p in (tmp_path / "plan").iterdir()) == sorted(
+        ["plan.toml", "shocks.toml", "test_plan.xlsx", "test_plan.csv", "design.png", "drives"])
+    assert not [p for p in tmp_path.iterdir() if p.name != "plan"]  # the work folder is gone
+    for key, path in files.items():
+        assert path.exists(), key
+    assert sorted(p.name for p in files["drives"].iterdir()) == sorted(
+        f"{name}.csv" for name in plan.drives)
+
+    rig = read_rig_plan(files["plan"])
+    assert rig.units == "imperial"
+    assert [r.name for r in rig.runs] == [r.name for r in plan.runs]
+    assert [r.setup for r in rig.runs] == [dict(zip(CORNERS, r.setup.ids())) for r in plan.runs]
+    for rr, pr in zip(rig.runs, plan.runs):
+        fs = plan.drives[pr.drive].fs_hz
+        assert rr.duration_s == pytest.approx(pr.duration_s, abs=1.0 / fs)  # one sample
+        assert rr.drive.duration_s == pytest.approx(plan.drives[pr.drive].duration_s,
+                                                    abs=1.0 / fs)
+    roles = {r.name: r.role for r in rig.runs}
+    assert [roles[r.name] for r in plan.runs if r.purpose == "validation"] == [
+        "validation"] * N_VALIDATION
+    assert set(rig.shocks.ids) == set(plan.library.ids)
+
+    back = read_run_sheet(files["xlsx"])
+    csv = pd.read_csv(files["csv"], keep_default_na=False)
+    assert back["run"].tolist() == csv["run"].tolist() == [r.number for r in plan.runs]
+    assert back["drive_file"].tolist() == csv["drive_file"].tolist()
+    assert all((tmp_path / "plan" / f).is_file() for f in back["drive_file"])
+    with pytest.raises(FileExistsError, match="overwrite"):
+        write_plan(plan, tmp_path / "plan")

@@ -1,0 +1,445 @@
+"""Tests of planner.whatif: perturbation files, designs, spring/bar feedback, robust ranks."""
+
+import textwrap
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ident.channels import CORNERS
+from ident.errors import PlannerError
+
+#: The stiffened plant and the rebuilt physical model are the same linear system: they
+#: agree to rounding (1e-13 measured; the modal forms differ).
+EXACT_RTOL = 1e-9
+#: Spring/bar what-if on the identified paper model against the known model with the
+#: changed spring (the issue's bar: 0.5 % median, 2 % max over 20 setups; measured
+#: 0.016 % / 0.069 %, the identified model's own error).
+WHATIF_MEDIAN, WHATIF_MAX = 0.005, 0.02
+#: The same simulator on the same setups: bit-for-bit up to summation order.
+SAME_PATH_RTOL = 1e-12
+
+
+def _toml(tmp_path, text, name="whatif.toml"):
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(text))
+    return p
+
+
+@pytest.fixture(scope="module")
+def short_drive(track_drive):
+    """The first 20 s of the track drive (small what-if cases)."""
+    from ident.drive import Drive
+
+    n = int(20 * track_drive.fs_hz)
+    return Drive("track 20 s", track_drive.fs_hz,
+                 {c: x[:n] for c, x in track_drive.channels.items()})
+
+
+@pytest.fixture(scope="module")
+def twenty_setups(demo_library):
+    """20 left/right-symmetric setups of the demo crate, drawn with a fixed seed."""
+    from planner.setups import enumerate_setups
+
+    setups = enumerate_setups(demo_library)
+    pick = np.random.default_rng(11).choice(len(setups), 20, replace=False)
+    return [setups[i] for i in sorted(pick)]
+
+
+def _metrics(table):
+    return [c for c in table.columns if c not in CORNERS]
+
+
+# ----------------------------------------------------------------------------------------------
+# shock scaling and the anti-roll bar in the vehicle
+# ----------------------------------------------------------------------------------------------
+
+def test_scaled_shock_is_the_scaled_curve(demo_library):
+    v = np.linspace(-0.6, 0.6, 41)
+    for m in demo_library.values():
+        s = m.scaled(1.08, lag_s=m.lag_s + 0.002, id=f"{m.id}-hot")
+        assert type(s) is type(m) and s.id == f"{m.id}-hot"
+        np.testing.assert_allclose(s.force(v), 1.08 * m.force(v), rtol=1e-14, atol=1e-9)
+        assert s.lag_s == pytest.approx(m.lag_s + 0.002)
+    with pytest.raises(Exception, match="force_scale"):
+        next(iter(demo_library.values())).scaled(0.0)
+
+
+def test_arb_roll_stiffness_and_file_round_trip(paper_vehicle, tmp_path):
+    from ident.vehicle import read_vehicle, write_vehicle
+
+    v = paper_vehicle.replace(arb_rate_n_m=[20000.0, 5000.0])
+    extra = 20000.0 * v.track_front_m ** 2 + 5000.0 * v.track_rear_m ** 2
+    assert v.roll_stiffness_n_m_rad == pytest.approx(paper_vehicle.roll_stiffness_n_m_rad + extra)
+    write_vehicle(v, tmp_path / "car.toml", units="imperial")
+    back = read_vehicle(tmp_path / "car.toml")
+    np.testing.assert_allclose(back.arb_rate_n_m, v.arb_rate_n_m, rtol=1e-12)
+    assert paper_vehicle.arb_rate_n_m is None  # the paper's car has no bars
+
+
+# ----------------------------------------------------------------------------------------------
+# the stiffened plant (known answer: the physical model rebuilt with the change)
+# ----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("change", ["rear springs +10%", "front bar", "LF spring -10%"])
+def test_stiffened_plant_is_the_changed_car(paper_vehicle, change):
+    from ident.vehicle import build_full_car
+    from planner.whatif import stiffened_plant
+
+    k = paper_vehicle.spring_rate_n_m
+    if change == "rear springs +10%":
+        change_kw = dict(spring_n_m=[0, 0, 0.1 * k[2], 0.1 * k[3]])
+        changed = paper_vehicle.replace(spring_rate_n_m=k * [1, 1, 1.1, 1.1])
+    elif change == "LF spring -10%":
+        change_kw = dict(spring_n_m=[-0.1 * k[0], 0, 0, 0])
+        changed = paper_vehicle.replace(spring_rate_n_m=k * [0.9, 1, 1, 1])
+    else:
+        change_kw = dict(arb_n_m=[30000.0, 0.0])
+        changed = paper_vehicle.replace(arb_rate_n_m=[30000.0, 0.0])
+    plant = build_full_car(paper_vehicle).loop_plant()
+    stiff = stiffened_plant(plant, **change_kw)
+    truth = build_full_car(changed).loop_plant(cbar_n_s_m=plant.cbar_n_s_m)
+    f = np.linspace(0.3, 30.0, 120)
+    H1, H2 = stiff.frequency_response(f), truth.frequency_response(f)
+    scale = np.abs(H2).max(axis=2, keepdims=True)
+    live = scale[..., 0] > 1e-12
+    err = (np.abs(H1 - H2) / np.maximum(scale, 1e-300)).max(axis=2)
+    assert err[live].max() < EXACT_RTOL
+
+
+def test_stiffened_plant_needs_travel_outputs(paper_vehicle):
+    from ident.closedloop import LoopPlant
+    from ident.vehicle import build_full_car
+    from planner.whatif import stiffened_plant
+
+    plant = build_full_car(paper_vehicle).loop_plant()
+    keep = [i for i, n in enumerate(plant.output_names) if not n.startswith("shock_travel")]
+    cut = LoopPlant(plant.rig.select(outputs=keep), plant.shock.select(outputs=keep),
+                    tuple(plant.output_names[i] for i in keep), plant.cbar_n_s_m, name="cut")
+    with pytest.raises(PlannerError, match="shock_travel"):
+        stiffened_plant(cut, spring_n_m=[1000.0, 0, 0, 0])
+
+
+# ----------------------------------------------------------------------------------------------
+# designs and files
+# ----------------------------------------------------------------------------------------------
+
+def test_design_sizes_and_seed(tmp_path):
+    from planner.whatif import Factor, perturbation_set
+
+    tol = Factor("tol", "shock_scale", targets=CORNERS, independent=True, levels=(0.95, 1.05),
+                 distribution=("uniform", 0.95, 1.05))
+    spring = Factor("rear", "spring_rate", targets=("LR", "RR"), change="add",
+                    levels=(-5000.0, 0.0, 5000.0))
+    oat = perturbation_set([tol, spring], design="one-at-a-time")
+    assert len(oat.perturbations) == 1 + 4 * 2 + 3
+    assert oat.perturbations[0].name == "nominal"
+    fac = perturbation_set([tol, spring], design="factorial")
+    assert len(fac.perturbations) == 1 + 2 ** 4 * 3
+    spring_mc = Factor("rear", "spring_rate", targets=("LR", "RR"), change="add",
+                       distribution=("normal", 0.0, 2000.0))
+    a = perturbation_set([tol, spring_mc], design="monte-carlo", n_draws=30, seed=4)
+    b = perturbation_set([tol, spring_mc], design="monte-carlo", n_draws=30, seed=4)
+    assert len(a.perturbations) == 31
+    ta, tb = a.table(), b.table()
+    pd.testing.assert_frame_equal(ta, tb)
+    lf = ta["tol LF"].iloc[1:]
+    assert lf.between(0.95, 1.05).all() and lf.std() > 0.02  # uniform, spread
+    assert (ta["tol LF"].iloc[1:] != ta["tol RF"].iloc[1:]).all()  # independent corners
+    np.testing.assert_array_equal(ta["rear"].iloc[1:], ta["rear"].iloc[1:])  # one draw per axle
+
+
+def test_read_perturbations_units_and_files(tmp_path, track_drive):
+    from ident.drive import write_drive
+    from ident.units import to_si
+    from planner.whatif import read_perturbations
+
+    write_drive(track_drive, tmp_path / "bumpy.csv", units="imperial")
+    p = _toml(tmp_path, """
+        format = "shockplan-whatif/1"
+        units = "imperial"
+        design = "one-at-a-time"
+        [[factor]]
+        name = "rear springs"
+        kind = "spring_rate"
+        corners = ["LR", "RR"]
+        change = "add"
+        levels = [-50.0, 50.0]
+        [[factor]]
+        name = "track"
+        kind = "drive_file"
+        levels = ["bumpy.csv"]
+        [[factor]]
+        name = "section"
+        kind = "drive_window"
+        levels = [[0.0, 20.0]]
+        """)
+    ps = read_perturbations(p)
+    f = ps.factors[0]
+    assert f.levels[1] == pytest.approx(to_si(50.0, "stiffness", "imperial"))
+    assert ps.factors[1].levels[0].n_samples == track_drive.n_samples
+    assert [q.name for q in ps.perturbations][:3] == ["nominal", "rear springs -8756 N/m",
+                                                        "rear springs +8756 N/m"]
+
+
+BAD_FILES = {
+    "unknown parameter": ("""
+        [[factor]]
+        name = "mass"
+        kind = "vehicle"
+        parameter = "sprung_weight"
+        levels = [1.1]
+        """, "'parameter'"),
+    "unknown key": ("""
+        [[factor]]
+        name = "rear"
+        kind = "spring_rate"
+        corner = ["LR"]
+        levels = [1.1]
+        """, "'corner'"),
+    "unknown corner": ("""
+        [[factor]]
+        name = "rear"
+        kind = "spring_rate"
+        corners = ["LB"]
+        levels = [1.1]
+        """, "'corners'"),
+    "negative multiplier": ("""
+        [[factor]]
+        name = "tol"
+        kind = "shock_scale"
+        corners = ["LF"]
+        levels = [-0.9]
+        """, "'levels'"),
+    "bad window": ("""
+        [[factor]]
+        name = "section"
+        kind = "drive_window"
+        levels = [[30.0, 10.0]]
+        """, "'levels'"),
+    "missing levels": ("""
+        [[factor]]
+        name = "tol"
+        kind = "shock_scale"
+        corners = ["LF"]
+        distribution = { kind = "uniform", low = 0.9, high = 1.1 }
+        """, "'levels'"),
+    "bad distribution": ("""
+        design = "monte-carlo"
+        [[factor]]
+        name = "tol"
+        kind = "shock_scale"
+        corners = ["LF"]
+        distribution = { kind = "uniform", low = 1.1, high = 0.9 }
+        """, "'distribution'"),
+    "missing drive file": ("""
+        [[factor]]
+        name = "other"
+        kind = "drive_file"
+        levels = ["nowhere.csv"]
+        """, "'levels'"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_FILES))
+def test_bad_perturbation_files_name_the_key(tmp_path, case):
+    from planner.whatif import read_perturbations
+
+    body, key = BAD_FILES[case]
+    p = _toml(tmp_path, 'format = "shockplan-whatif/1"\n' + textwrap.dedent(body))
+    with pytest.raises(PlannerError) as err:
+        read_perturbations(p)
+    msg = str(err.value)
+    assert key in msg and str(p) in msg
+
+
+# ----------------------------------------------------------------------------------------------
+# evaluation
+# ----------------------------------------------------------------------------------------------
+
+def test_shock_scale_is_predict_on_scaled_shocks(paper_model, short_drive, demo_library,
+                                                 twenty_setups):
+    from ident.shocks import ShockLibrary
+    from planner.predict import predict_setups
+    from planner.whatif import Factor, evaluate_whatif, perturbation_set
+
+    setups = twenty_setups[:6]
+    ps = perturbation_set([Factor("dyno", "shock_scale", targets=CORNERS, levels=(1.08,))])
+    w = evaluate_whatif(paper_model, short_drive, setups, demo_library, ps, baseline=setups[0])
+    scaled = ShockLibrary([m.scaled(1.08) for m in demo_library.values()])
+    ref = predict_setups(paper_model, short_drive, setups, scaled).table
+    got = w.condition("dyno x1.08").loc[ref.index]
+    for m in _metrics(ref):
+        np.testing.assert_allclose(got[m].to_numpy(float), ref[m].to_numpy(float),
+                                   rtol=SAME_PATH_RTOL)
+    nominal = predict_setups(paper_model, short_drive, setups, demo_library).table
+    np.testing.assert_allclose(w.condition().loc[nominal.index, "tire_force_rms_LF"],
+                               nominal["tire_force_rms_LF"], rtol=SAME_PATH_RTOL)
+
+
+def test_shock_scale_by_id_and_lag_change(paper_model, short_drive, demo_library, twenty_setups):
+    from ident.shocks import ShockLibrary
+    from planner.predict import predict_setups
+    from planner.whatif import Factor, evaluate_whatif, perturbation_set
+
+    setups = twenty_setups[:5]
+    sid = setups[0].ids()[2]
+    ps = perturbation_set([Factor("fade", "shock_scale", targets=(f"id:{sid}",), levels=(0.9,)),
+                           Factor("lag", "shock_lag", targets=("LF", "RF"), change="add",
+                                  levels=(0.004,))])
+    w = evaluate_whatif(paper_model, short_drive, setups, demo_library, ps, baseline=setups[0])
+    lib = ShockLibrary([m.scaled(0.9) if m.id == sid else m for m in demo_library.values()])
+    ref = predict_setups(paper_model, short_drive, setups, lib).table
+    got = w.condition(f"fade x0.9").loc[ref.index]
+    np.testing.assert_allclose(got["ride_height_rms_rear"], ref["ride_height_rms_rear"],
+                               rtol=SAME_PATH_RTOL)
+    lagged = w.condition("lag +0.004 s")
+    assert (lagged["score"] != w.condition()["score"]).any()
+
+
+def test_drive_window_and_scale(paper_model, track_drive, demo_library, twenty_setups):
+    from ident.drive import Drive
+    from planner.predict import predict_setups
+    from planner.whatif import Factor, evaluate_whatif, perturbation_set
+
+    setups = twenty_setups[:4]
+    ps = perturbation_set([Factor("section", "drive_window", levels=((10.0, 30.0),)),
+                           Factor("bumps", "drive_scale",
+                                  targets=tuple(f"wheelloader_{c}" for c in CORNERS),
+                                  levels=(1.2,))])
+    w = evaluate_whatif(paper_model, track_drive, setups, demo_library, ps, baseline=setups[0])
+    fs = track_drive.fs_hz
+    win = Drive("w", fs, {c: x[int(10 * fs):int(30 * fs)] for c, x in track_drive.channels.items()})
+    ref = predict_setups(paper_model, win, setups, demo_library).table
+    got = w.condition("section 10-30 s").loc[ref.index]
+    np.testing.assert_allclose(got["tire_force_rms_RR"], ref["tire_force_rms_RR"],
+                               rtol=SAME_PATH_RTOL)
+    # a linear car with the wheel inputs x1.2 and no aero: every response x1.2 up to the shocks'
+    # nonlinearity; the ride-height RMS grows by about 20 %
+    bumps = w.table[w.table["perturbation"] == "bumps x1.2"]
+    assert bumps["ride_height_rms_front_change_pct"].between(10.0, 30.0).all()
+
+
+def test_vehicle_parameter_on_known_and_identified(paper_vehicle, short_drive, demo_library,
+                                                   twenty_setups, identified_model):
+    from planner.predict import predict_setups
+    from planner.whatif import Factor, evaluate_whatif, perturbation_set
+
+    setups = twenty_setups[:4]
+    ps = perturbation_set([Factor("heavier", "vehicle", targets=("sprung_mass",),
+                                  levels=(1.1,))])
+    w = evaluate_whatif(paper_vehicle, short_drive, setups, demo_library, ps,
+                        baseline=setups[0])
+    heavy = paper_vehicle.replace(sprung_mass_kg=1.1 * paper_vehicle.sprung_mass_kg)
+    ref = predict_setups(heavy, short_drive, setups, demo_library).table
+    got = w.condition("heavier x1.1").loc[ref.index]
+    np.testing.assert_allclose(got["tire_force_rms_LF"], ref["tire_force_rms_LF"], rtol=1e-9)
+    with pytest.raises(PlannerError, match="'parameter' = 'sprung_mass'.*known vehicle"):
+        evaluate_whatif(identified_model, short_drive, setups, demo_library, ps,
+                        baseline=setups[0])
+
+
+def test_negative_rate_and_window_outside_are_refused(paper_vehicle, short_drive,
+                                                      demo_library, twenty_setups):
+    from planner.whatif import Factor, evaluate_whatif, perturbation_set
+
+    setups = twenty_setups[:2]
+    k = paper_vehicle.spring_rate_n_m[2]
+    ps = perturbation_set([Factor("rear", "spring_rate", targets=("LR",), change="add",
+                                  levels=(-1.5 * k,))])
+    with pytest.raises(PlannerError, match="spring_rate negative"):
+        evaluate_whatif(paper_vehicle, short_drive, setups, demo_library, ps)
+    ps = perturbation_set([Factor("section", "drive_window", levels=((5.0, 25.0),))])
+    with pytest.raises(PlannerError, match="'levels': window 5-25 s is outside"):
+        evaluate_whatif(paper_vehicle, short_drive, setups, demo_library, ps)
+    ps = perturbation_set([Factor("rear", "spring_rate", targets=("LR",), levels=(1.1,))])
+    with pytest.raises(PlannerError, match="baseline_rate"):
+        from planner.predict import as_loop_plant
+
+        evaluate_whatif(as_loop_plant(paper_vehicle), short_drive, setups, demo_library, ps)
+
+
+@pytest.mark.slow
+def test_spring_and_bar_whatif_on_identified_model_match_the_known_car(
+        identified_model, paper_vehicle, track_drive, demo_library, twenty_setups):
+    """Issue 11: +-10 % rear springs and a front bar on the identified paper model, against
+    the known model with the changed parts, 20 setups."""
+    from planner.whatif import Factor, evaluate_whatif, perturbation_set
+
+    k = paper_vehicle.spring_rate_n_m
+    ps = perturbation_set([
+        Factor("rear springs", "spring_rate", targets=("LR", "RR"), levels=(0.9, 1.1),
+               baseline_rate=k[2:]),
+        Factor("front bar", "arb_rate", targets=("front",), change="add",
+               levels=(0.5 * k[0],))])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ident = evaluate_whatif(identified_model, track_drive, twenty_setups, demo_library, ps,
+                                baseline=twenty_setups[0])
+    known = evaluate_whatif(paper_vehicle, track_drive, twenty_setups, demo_library, ps,
+                            baseline=twenty_setups[0])
+    from ident.metrics import METRIC_QUANTITY
+
+    metrics = [c for c in ident.table.columns if c in METRIC_QUANTITY]
+    names = [p.name for p in ps.perturbations[1:]]
+    assert names == ["rear springs x0.9", "rear springs x1.1", "front bar +1.121e+05 N/m"]
+    for name in names:
+        a = ident.condition(name)[metrics]
+        b = known.condition(name).loc[a.index, metrics]
+        err = np.abs(a.to_numpy(float) / b.to_numpy(float) - 1.0)
+        assert np.median(err) < WHATIF_MEDIAN and err.max() < WHATIF_MAX, name
+        # and the change is real: larger than the agreement
+        nominal = known.condition().loc[a.index, metrics].to_numpy(float)
+        effect = np.abs(b.to_numpy(float) / nominal - 1.0)
+        assert np.median(effect) > 3 * np.median(err), name
+
+
+def test_robust_ranking_flags_a_setup_that_moves():
+    from planner.whatif import _robust_table
+
+    rows = []
+    # A stays first; B and C swap in 3 of 4 conditions (one place); D falls 2 places once
+    ranks = {"nominal": dict(A=1, B=2, C=3, D=4, E=5), "p1": dict(A=1, B=3, C=2, D=4, E=5),
+             "p2": dict(A=1, B=3, C=2, D=4, E=5), "p3": dict(A=1, B=2, C=4, D=3, E=5),
+             "p4": dict(A=1, B=2, C=3, D=5, E=4)}
+    nominal = ranks["nominal"]
+    for p, rk in ranks.items():
+        for s, r in rk.items():
+            rows.append({"drive": "d", "perturbation": p, "setup": s, "rank": r,
+                         "score": 0.9 + 0.01 * r, "feasible": True,
+                         "rank_change": r - nominal[s]})
+    rob = _robust_table(pd.DataFrame(rows), list("ABCDE"), rank_tolerance=0, fragile_share=0.5)
+    assert not rob.loc["A", "fragile"] and rob.loc["A", "best_share"] == 1.0
+    assert rob.loc["B", "moved_share"] == pytest.approx(0.4)
+    assert rob.loc["C", "fragile"]  # moved in 3 of 5
+    rob1 = _robust_table(pd.DataFrame(rows), list("ABCDE"), rank_tolerance=1, fragile_share=0.1)
+    assert not rob1["fragile"].any()  # nobody moves more than one place
+    assert rob1.index[0] == "A" and rob1.loc["C", "worst_rank"] == 4
+
+
+def test_effects_figures_and_files(paper_vehicle, short_drive, demo_library, twenty_setups,
+                                   tmp_path):
+    from planner.whatif import (Factor, evaluate_whatif, factor_effects, perturbation_set,
+                                rank_stability_figure, tornado_figure, write_whatif)
+
+    setups = twenty_setups[:4]
+    ps = perturbation_set([
+        Factor("rear springs", "spring_rate", targets=("LR", "RR"), levels=(0.9, 1.1)),
+        Factor("dyno", "shock_scale", targets=CORNERS, levels=(0.95, 1.05))])
+    w = evaluate_whatif(paper_vehicle, short_drive, setups, demo_library, ps, baseline=setups[0])
+    eff = factor_effects(w, setups[1].name)
+    assert set(eff.index) == {"rear springs", "dyno"}
+    # the effect of each level is that condition's change, read back
+    row = w.table[(w.table["setup"] == setups[1].name)
+                  & (w.table["perturbation"] == "dyno x1.05")]
+    assert eff.loc["dyno", "change_high"] == pytest.approx(float(row["score_change"].iloc[0]))
+    assert tornado_figure(w, setups[1].name).axes
+    assert rank_stability_figure(w).axes
+    files = write_whatif(w, tmp_path / "out", units="imperial", top=2)
+    assert {"whatif.xlsx", "whatif.csv", "robust.csv", "rank_stability.png"} <= set(files)
+    assert sum(k.startswith("tornado") for k in files) == 2
+    back = pd.read_csv(files["whatif.csv"])
+    assert len(back) == len(w.table)
+    with pytest.raises(FileExistsError):
+        write_whatif(w, tmp_path / "out")
