@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import os
 import tempfile
 from pathlib import Path
@@ -14,7 +15,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 import tomli_w
 
 __all__ = ["read_toml", "atomic_write_text", "atomic_write_bytes", "atomic_write_toml",
-           "atomic_path", "check_can_write"]
+           "atomic_path", "check_can_write", "check_output", "did_you_mean"]
 
 
 def read_toml(path, *, error=ValueError, what="TOML file"):
@@ -27,6 +28,11 @@ def read_toml(path, *, error=ValueError, what="TOML file"):
             return tomllib.load(fh)
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{path}: not valid TOML ({exc}); fix the syntax") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not a text file (byte {exc.start}: {exc.reason}); a {what} is "
+                    "UTF-8 TOML text") from None
+    except OSError as exc:
+        raise error(f"{path}: cannot read the {what} ({exc.strerror}); check the file") from None
 
 
 class atomic_path:
@@ -68,6 +74,67 @@ def check_can_write(path, *, overwrite):
             f"{path}: already exists; choose another output path or pass overwrite=True "
             "(--overwrite on the command line)"
         )
+
+
+def check_output(path, *, overwrite, folder=False, what="--out"):
+    """Check, before any computation, that an output can be written at `path`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output file (or folder, with ``folder=True``).
+    overwrite : bool
+        Whether an existing output may be replaced.
+    folder : bool
+        The output is a folder: an existing empty folder is fine; an existing
+        file is not.
+    what : str
+        How to name the output in messages (the option).
+
+    Raises
+    ------
+    FileExistsError
+        If the output exists (a non-empty folder, or a file) and `overwrite` is false,
+        or a folder is wanted where a file is (and the other way round).
+    PermissionError
+        If the nearest existing folder on the path cannot be written in (read-only
+        folder or file system): probed by creating and removing a file there.
+    """
+    path = Path(path)
+    if folder:
+        if path.exists() and not path.is_dir():
+            raise FileExistsError(f"{path}: {what} exists and is not a folder; choose another "
+                                  "output folder")
+        if path.is_dir() and any(path.iterdir()) and not overwrite:
+            raise FileExistsError(f"{path}: {what} folder already exists and is not empty; "
+                                  "choose another output folder or pass --overwrite")
+    else:
+        if path.is_dir():
+            raise FileExistsError(f"{path}: {what} is a folder; give a file name")
+        check_can_write(path, overwrite=overwrite)
+    parent = path if folder and path.is_dir() else path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise FileExistsError(f"{path}: {what}: {parent} is a file, not a folder; choose "
+                              "another output path")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".shockplan-probe-", dir=parent)
+    except OSError as exc:
+        raise PermissionError(f"{path}: {what}: folder {parent} is not writable "
+                              f"({exc.strerror}); choose a folder you can write in") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def did_you_mean(word, choices, *, cutoff=0.75):
+    """`` (did you mean 'x'?)`` for the closest of `choices` to `word`, or ``""``.
+
+    The `cutoff` (difflib's similarity ratio) is stricter than difflib's 0.6, so that a
+    key of the user's own ('notes') is not taken for a typo of a known one ('units').
+    """
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=cutoff)
+    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 def atomic_write_bytes(path, data, *, overwrite=True):

@@ -13,11 +13,14 @@ __all__ = [
     "AERO_INPUTS",
     "WHEELLOADER_INPUTS",
     "RIG_INPUTS",
+    "RIG_KINDS",
     "RESPONSE_KINDS",
     "RESPONSE_CHANNELS",
     "SHOCK_VELOCITIES",
     "SHOCK_FORCES",
     "ALL_CHANNELS",
+    "rig_inputs_of",
+    "missing_aero",
     "quantity_of",
     "corner_of",
     "kind_of",
@@ -26,7 +29,8 @@ __all__ = [
 CORNERS = ("LF", "RF", "LR", "RR")
 AERO_INPUTS = ("aero_heave", "aero_roll", "aero_pitch")
 WHEELLOADER_INPUTS = tuple(f"wheelloader_{c}" for c in CORNERS)
-#: The 7 rig inputs, in the order used for every input vector.
+#: The 7 rig inputs, in the order used for every input vector. A 4-post rig (no aero
+#: actuators) has only the :data:`WHEELLOADER_INPUTS` (:func:`rig_inputs_of`).
 RIG_INPUTS = AERO_INPUTS + WHEELLOADER_INPUTS
 
 #: Measured response kinds and their physical quantity.
@@ -47,6 +51,35 @@ ALL_CHANNELS = RIG_INPUTS + RESPONSE_CHANNELS
 
 _INPUT_QUANTITY = {"aero_heave": "force", "aero_roll": "moment", "aero_pitch": "moment"}
 _INPUT_QUANTITY.update({w: "displacement" for w in WHEELLOADER_INPUTS})
+
+
+def rig_inputs_of(channels):
+    """Return the rig inputs among some channel names, in :data:`RIG_INPUTS` order.
+
+    A run of a 7-post or 8-post rig has all seven; a 4-post run only the four
+    wheelloaders (the spec's "Run files").
+
+    Examples
+    --------
+    >>> rig_inputs_of(["time", "wheelloader_RF", "wheelloader_LF", "tire_force_LF"])
+    ('wheelloader_LF', 'wheelloader_RF')
+    """
+    return tuple(c for c in RIG_INPUTS if c in channels)
+
+
+def missing_aero(channels):
+    """Aero inputs missing from channels that hold some but not all three (else ``[]``).
+
+    The aero channels come all three (a rig with aero actuators) or not at all
+    (a 4-post rig).
+
+    Examples
+    --------
+    >>> missing_aero(["aero_heave", "wheelloader_LF"]), missing_aero(["wheelloader_LF"])
+    (['aero_roll', 'aero_pitch'], [])
+    """
+    present = [c for c in AERO_INPUTS if c in channels]
+    return [c for c in AERO_INPUTS if c not in channels] if present else []
 
 
 def kind_of(channel):
@@ -85,3 +118,8 @@ def quantity_of(channel):
     if channel in _INPUT_QUANTITY:
         return _INPUT_QUANTITY[channel]
     return RESPONSE_KINDS[kind_of(channel)]
+
+
+#: The rigs a session or plan may come from: 7- and 8-post rigs have aero actuators, a
+#: 4-post rig has the wheel pads only.
+RIG_KINDS = ("7-post", "8-post", "4-post")

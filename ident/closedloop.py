@@ -43,7 +43,8 @@ from typing import Mapping
 import numpy as np
 from scipy import signal
 
-from ident.channels import CORNERS, SHOCK_FORCES, SHOCK_VELOCITIES
+from ident.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES, WHEELLOADER_INPUTS
+from ident.drive import check_drive_inputs
 
 __all__ = [
     "ModalSystem",
@@ -338,7 +339,8 @@ class LoopPlant:
     Attributes
     ----------
     rig : ModalSystem
-        Inputs ``RIG_INPUTS`` (7), outputs ``output_names``.
+        Inputs ``RIG_INPUTS`` (7), outputs ``output_names``; the columns of
+        inputs not in `rig_inputs` are zero.
     shock : ModalSystem
         Inputs ``dF_LF..dF_RR`` (4), outputs ``output_names``.
     output_names : tuple of str
@@ -346,6 +348,11 @@ class LoopPlant:
     cbar_n_s_m : ndarray, shape (4,)
         Baseline linear damping the model is written around [N/(m/s)].
     name : str
+    rig_inputs : tuple of str
+        The rig inputs the model has (default all 7): a model identified on a
+        4-post rig has the 4 wheelloaders only, and :func:`rig_response`
+        refuses a drive with nonzero content on the others
+        (:func:`ident.drive.check_drive_inputs`).
     """
 
     rig: ModalSystem
@@ -353,6 +360,7 @@ class LoopPlant:
     output_names: tuple
     cbar_n_s_m: np.ndarray
     name: str = "plant"
+    rig_inputs: tuple = RIG_INPUTS
     velocity_idx: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -365,6 +373,12 @@ class LoopPlant:
             if part.B.shape[1] != m or part.C.shape[0] != p:
                 raise ValueError(f"plant {self.name!r}: a part has {part.B.shape[1]} inputs and "
                                  f"{part.C.shape[0]} outputs; expected {m} and {p}")
+        rig_inputs = tuple(self.rig_inputs)
+        if (any(c not in RIG_INPUTS for c in rig_inputs)
+                or any(w not in rig_inputs for w in WHEELLOADER_INPUTS)):
+            raise ValueError(f"plant {self.name!r}: rig_inputs {list(rig_inputs)} must be rig "
+                             f"inputs of {list(RIG_INPUTS)} including the 4 wheelloaders")
+        object.__setattr__(self, "rig_inputs", tuple(c for c in RIG_INPUTS if c in rig_inputs))
         cbar = np.asarray(self.cbar_n_s_m, dtype=float).reshape(4)
         object.__setattr__(self, "cbar_n_s_m", cbar)
         idx = np.array([self.output_names.index(v) for v in SHOCK_VELOCITIES])
@@ -468,10 +482,18 @@ def rig_response(plant, drive, *, oversample=4, outputs=None):
     Returns
     -------
     RigResponse
+
+    Raises
+    ------
+    ident.errors.DriveError
+        If the drive has nonzero content on a rig input the plant does not
+        have (an aero drive on a 4-post model); the message names the drive file.
     """
     r = _check_oversample(oversample)
     names = _check_outputs(plant, outputs)
     u, fs = _drive_array(drive)
+    if plant.rig_inputs != RIG_INPUTS:
+        check_drive_inputs(drive, plant.rig_inputs, model=plant.name)
     u_fine = _refine(u, r)
     h = 1.0 / (fs * r)
     vi = plant.velocity_idx
@@ -1020,7 +1042,7 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     ----------
     plant : LoopPlant
     drive : ident.drive.Drive
-        The 7 rig inputs, SI.
+        The 7 rig inputs, SI (a 4-post drive: aero inputs zero).
     setups : sequence of setups
         Each a mapping corner -> shock model or a sequence of 4 shock models
         (LF, RF, LR, RR) with ``to_pwl()`` and ``lag_s`` (:mod:`ident.shocks`).

@@ -3,7 +3,11 @@
 A drive holds the rig inputs of :data:`ident.channels.RIG_INPUTS`, in SI:
 ``aero_heave`` [N], ``aero_roll`` [N*m], ``aero_pitch`` [N*m] and
 ``wheelloader_LF/RF/LR/RR`` [m] (wheel-pad displacement, up positive), on a
-uniform time grid starting at 0 s.
+uniform time grid starting at 0 s. A 4-post drive gives only the wheelloaders:
+its aero inputs are zero (``Drive.rig_inputs`` records what was given, and a
+drive file written from it has no aero columns). :func:`check_drive_inputs`
+refuses a drive with nonzero content on a rig input a model was not identified
+with (a 4-post model and an aero drive).
 
 Three generators make drives:
 
@@ -42,7 +46,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from .channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS
+from .channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero, rig_inputs_of
 from .errors import DriveError
 from .units import check_units
 
@@ -56,10 +60,18 @@ __all__ = [
     "write_drive",
     "resample_drive",
     "resample_bandlimited",
+    "check_drive_inputs",
+    "drive_label",
     "ISO8608_N0_CYCLES_M",
 ]
 
 logger = logging.getLogger(__name__)
+
+#: Fewest samples of a drive file: the metrics' zero-phase band-pass pads by 27 samples.
+MIN_DRIVE_SAMPLES = 28
+#: Wheel-pad RMS above which a drive file is implausible for a shaker rig [m] (race-car
+#: rig drives are a few mm RMS; an inch file read as SI gives 25x its value in metres).
+PLAUSIBLE_WHEELLOADER_RMS_M = 0.05
 
 #: Reference spatial frequency of ISO 8608 road spectra [cycles/m].
 ISO8608_N0_CYCLES_M = 0.1
@@ -94,17 +106,23 @@ class Drive:
     channels : dict of str to ndarray, shape (n_samples,)
         Every rig input of :data:`ident.channels.RIG_INPUTS` -> samples in SI
         (``aero_heave`` [N], ``aero_roll`` and ``aero_pitch`` [N*m],
-        ``wheelloader_XX`` [m]), float64 and read-only, in that order.
+        ``wheelloader_XX`` [m]), float64 and read-only, in that order. Give
+        all seven, or only the four wheelloaders (a 4-post drive: the aero
+        inputs are then zero arrays).
     settings : dict
         How the drive was made (generator and its arguments, or the file it
         was read from), so that a drive explains itself.
+    rig_inputs : tuple of str
+        The rig inputs given on construction, in ``RIG_INPUTS`` order: all
+        seven, or the four wheelloaders (set from `channels`, not an argument).
 
     Raises
     ------
     DriveError
-        On construction, if a rig input is missing or unknown, the channels
-        differ in length or are not one-dimensional, a value is NaN/inf, there
-        are fewer than 2 samples, or `fs_hz` is not a positive number.
+        On construction, if a wheelloader is missing, only some of the three
+        aero inputs are given, a channel is unknown, the channels differ in
+        length or are not one-dimensional, a value is NaN/inf, there are fewer
+        than 2 samples, or `fs_hz` is not a positive number.
 
     Notes
     -----
@@ -117,6 +135,7 @@ class Drive:
     fs_hz: float
     channels: dict
     settings: dict = field(default_factory=dict)
+    rig_inputs: tuple = field(init=False, repr=False)
 
     def __post_init__(self):
         where = f"drive {self.name!r}"
@@ -129,17 +148,20 @@ class Drive:
                 f"{type(self.channels).__name__}"
             )
         unknown = [c for c in self.channels if c not in RIG_INPUTS]
-        missing = [c for c in RIG_INPUTS if c not in self.channels]
+        missing = [c for c in WHEELLOADER_INPUTS if c not in self.channels]
+        missing += missing_aero(self.channels)
         if unknown or missing:
             raise DriveError(
-                f"{where}: a drive holds exactly the 7 rig inputs {list(RIG_INPUTS)}; "
+                f"{where}: a drive holds the 7 rig inputs {list(RIG_INPUTS)} (or, for a "
+                "4-post rig, the 4 wheelloaders only); "
                 + (f"missing {missing}" if missing else "")
                 + ("; " if missing and unknown else "")
                 + (f"unknown {unknown}" if unknown else "")
                 + " (give a zero array for an unused input)"
             )
+        given = rig_inputs_of(self.channels)
         channels = {}
-        for c in RIG_INPUTS:
+        for c in given:
             try:
                 x = np.array(self.channels[c], dtype=np.float64)
             except (TypeError, ValueError):
@@ -163,8 +185,12 @@ class Drive:
                 f"{where}: the channels differ in length ({lengths}); give every rig "
                 "input the same number of samples"
             )
-        if channels[RIG_INPUTS[0]].size < 2:
+        if channels[WHEELLOADER_INPUTS[0]].size < 2:
             raise DriveError(f"{where}: has fewer than 2 samples")
+        zero = np.zeros(channels[WHEELLOADER_INPUTS[0]].size)
+        zero.flags.writeable = False
+        channels = {c: channels.get(c, zero) for c in RIG_INPUTS}  # 4-post: aero inputs zero
+        object.__setattr__(self, "rig_inputs", given)
         object.__setattr__(self, "channels", channels)
         object.__setattr__(self, "settings", dict(self.settings))
 
@@ -189,7 +215,8 @@ class Drive:
         Returns
         -------
         ndarray, shape (n_samples, 7)
-            Columns in :data:`ident.channels.RIG_INPUTS` order, SI (a new array).
+            Columns in :data:`ident.channels.RIG_INPUTS` order, SI (a new array;
+            zero columns for the aero inputs of a 4-post drive).
         """
         return np.column_stack([self.channels[c] for c in RIG_INPUTS])
 
@@ -747,7 +774,8 @@ def read_drive(path, *, units="SI", channel_map=None, name=None):
     ----------
     path : str or os.PathLike
         A ``.csv`` (header row) or ``.parquet`` file with a ``time`` column [s]
-        and the 7 rig inputs; other columns are ignored.
+        and the 7 rig inputs, or only the 4 wheelloaders (a 4-post drive: no
+        aero columns, the aero inputs are zero); other columns are ignored.
     units : {"SI", "imperial"}
         Unit system of the values in the file (``--units`` of the CLI).
     channel_map : Mapping of str to str, optional
@@ -764,24 +792,48 @@ def read_drive(path, *, units="SI", channel_map=None, name=None):
     Raises
     ------
     SessionError
-        If the file is missing or unreadable, lacks ``time`` or a rig input,
-        holds NaN/inf or non-numeric values, or its time is not uniform (the
-        checks of :func:`ident.session.read_run_table`).
+        If the file is missing or unreadable, lacks ``time`` or a wheelloader,
+        has some but not all three aero columns, holds NaN/inf or non-numeric
+        values, or its time is not uniform (the checks of
+        :func:`ident.session.read_run_table`).
     """
     from .session import read_run_table
 
     path = Path(path)
     table = read_run_table(path, units=units, channel_map=channel_map,
-                           required=RIG_INPUTS, where=f"drive file {path}")
+                           required=WHEELLOADER_INPUTS, where=f"drive file {path}")
+    n = table.time_s.size
+    if n < MIN_DRIVE_SAMPLES:
+        raise DriveError(f"drive file {path}: {n} samples; a drive needs at least "
+                         f"{MIN_DRIVE_SAMPLES} (the metrics' zero-phase band-pass), and seconds "
+                         "of data for RMS values that mean something; give a longer drive")
+    _check_plausible(table.channels, where=f"drive file {path}", units=check_units(units))
     settings = {"kind": "file", "path": str(path), "units": check_units(units),
                 "channel_map": dict(channel_map or {}),
                 "t0_s": float(table.time_s[0])}
     return Drive(name=name or path.stem, fs_hz=table.fs_hz,
-                 channels={c: table.channels[c] for c in RIG_INPUTS}, settings=settings)
+                 channels={c: table.channels[c] for c in rig_inputs_of(table.channels)},
+                 settings=settings)
+
+
+def _check_plausible(channels, *, where, units):
+    """Warn (logging) when the wheel-pad motion is beyond what a rig plays: wrong units?"""
+    rms = {c: float(np.sqrt(np.mean((channels[c] - channels[c].mean()) ** 2)))
+           for c in WHEELLOADER_INPUTS if c in channels}
+    worst = max(rms, key=rms.get)
+    if rms[worst] > PLAUSIBLE_WHEELLOADER_RMS_M:
+        hint = ("is the file in imperial units (--units imperial)?" if units == "SI" else
+                "check the file's units")
+        logger.warning("%s: %s has an RMS of %.0f mm, more than %.0f mm that a shaker rig "
+                       "plays; the predictions will be absurd (tire forces of tens of kN): %s",
+                       where, worst, 1e3 * rms[worst], 1e3 * PLAUSIBLE_WHEELLOADER_RMS_M, hint)
 
 
 def write_drive(drive, path, *, units="SI", overwrite=False):
-    """Write a drive file (``time`` and the 7 rig inputs), atomically.
+    """Write a drive file (``time`` and the drive's rig inputs), atomically.
+
+    The columns are ``drive.rig_inputs``: the 7 rig inputs, or the 4
+    wheelloaders of a 4-post drive.
 
     Parameters
     ----------
@@ -807,7 +859,8 @@ def write_drive(drive, path, *, units="SI", overwrite=False):
 
     if not isinstance(drive, Drive):
         raise TypeError(f"write_drive: drive must be a Drive, got {type(drive).__name__}")
-    write_run_table(path, drive.time_s, drive.channels, units=units, overwrite=overwrite)
+    write_run_table(path, drive.time_s, {c: drive.channels[c] for c in drive.rig_inputs},
+                    units=units, overwrite=overwrite)
 
 
 # --------------------------------------------------------------------------------------
@@ -905,6 +958,63 @@ def resample_drive(drive, fs_hz):
     else:
         x = resample_bandlimited(drive.as_array(), up, down, axis=0)
         data = {c: x[:, j] for j, c in enumerate(RIG_INPUTS)}
+    data = {c: data[c] for c in drive.rig_inputs}  # a 4-post drive stays one
     settings = dict(drive.settings, resampled_from_hz=drive.fs_hz, resample_up=up,
                     resample_down=down)
     return Drive(name=drive.name, fs_hz=fs_new, channels=data, settings=settings)
+
+
+# --------------------------------------------------------------------------------------
+# Drives and the rig inputs of a model
+# --------------------------------------------------------------------------------------
+
+
+def drive_label(drive):
+    """How messages name a drive: ``"drive file <path>"`` if it was read from one, else
+    ``"drive '<name>'"``."""
+    path = drive.settings.get("path") if isinstance(drive.settings, Mapping) else None
+    return f"drive file {path}" if path else f"drive {drive.name!r}"
+
+
+def check_drive_inputs(drive, rig_inputs, *, model=None):
+    """Refuse a drive that excites rig inputs a model does not have.
+
+    A model identified on a 4-post rig (no aero actuators) has the rig inputs
+    ``wheelloader_XX`` only: it knows nothing of the aero loads, so a drive
+    with aero content cannot be predicted on it. A drive whose extra channels
+    are all exactly zero (or absent: a 4-post drive) is accepted: it asks for
+    nothing the model lacks.
+
+    Parameters
+    ----------
+    drive : Drive
+    rig_inputs : sequence of str
+        The model's rig inputs (e.g. ``VehicleModel.rig_inputs``,
+        ``LoopPlant.rig_inputs``).
+    model : str, optional
+        The model's name, for the message.
+
+    Raises
+    ------
+    DriveError
+        If a channel not in `rig_inputs` has a nonzero sample; the message
+        names the drive file and the channels.
+
+    Examples
+    --------
+    >>> from ident.channels import WHEELLOADER_INPUTS
+    >>> d = make_sweep_drive(duration_s=4.0, fs_hz=100.0, amplitude={"aero_heave": 500.0},
+    ...                      f_start_hz=1.0, f_stop_hz=10.0, channels=["aero_heave"])
+    >>> check_drive_inputs(d, WHEELLOADER_INPUTS, model="4-post car")
+    Traceback (most recent call last):
+    ...
+    ident.errors.DriveError: drive 'sweep': has nonzero content on ['aero_heave'], but model '4-post car' has no such rig input (it was identified from a session with the rig inputs ['wheelloader_LF', 'wheelloader_RF', 'wheelloader_LR', 'wheelloader_RR'], e.g. a 4-post rig without aero actuators); remove those columns from the drive (or zero them), or predict with a model identified with them
+    """
+    extra = [c for c in RIG_INPUTS if c not in rig_inputs and np.any(drive.channels[c] != 0)]
+    if extra:
+        who = f"model {model!r}" if model else "the model"
+        raise DriveError(
+            f"{drive_label(drive)}: has nonzero content on {extra}, but {who} has no such rig "
+            f"input (it was identified from a session with the rig inputs {list(rig_inputs)}, "
+            "e.g. a 4-post rig without aero actuators); remove those columns from the drive "
+            "(or zero them), or predict with a model identified with them")

@@ -1,7 +1,8 @@
 """Multi-input frequency-response estimation from rig runs (seed paper, Eqs. 11-28).
 
-The inputs of the identified model are the 7 rig inputs and the 4 shock-force
-deviations ``dF_i = F_i - c_bar_i v_i`` (Eq. 19), where ``c_bar`` is a baseline
+The inputs of the identified model are the session's rig inputs (the 7 of
+:data:`ident.channels.RIG_INPUTS`, or the 4 wheelloaders of a 4-post rig) and
+the 4 shock-force deviations ``dF_i = F_i - c_bar_i v_i`` (Eq. 19), where ``c_bar`` is a baseline
 linear damping per corner. Runs with different shocks make ``dF`` linearly
 independent of the rig inputs (Eqs. 21-24), so the closed-loop responses
 around ``c_bar`` (``H~rig`` and ``H~shocks`` of Eq. 20) can be estimated for
@@ -88,17 +89,21 @@ from __future__ import annotations
 import logging
 import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy import signal
 
-from ident.channels import CORNERS, RESPONSE_CHANNELS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES
+from ident.channels import (CORNERS, RESPONSE_CHANNELS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES,
+                            rig_inputs_of)
 from ident.errors import IdentificationError, LowCoherenceWarning
 
 __all__ = [
     "Frf",
     "DF_INPUTS",
     "MODEL_INPUTS",
+    "model_inputs",
+    "embed_inputs",
     "block_spectra",
     "estimate_frf",
     "frf_from_arrays",
@@ -114,8 +119,67 @@ log = logging.getLogger(__name__)
 
 #: Names of the shock-force-deviation inputs.
 DF_INPUTS = tuple(f"dF_{c}" for c in CORNERS)
-#: The 11 inputs of an identified model, in order.
+#: The 11 inputs of an identified model of a rig with aero actuators, in order (a 4-post
+#: model has 8: :func:`model_inputs`).
 MODEL_INPUTS = RIG_INPUTS + DF_INPUTS
+
+
+def model_inputs(session):
+    """The inputs of a model identified from a session: its rig inputs, then ``dF_XX``.
+
+    The rig inputs are those of the session's runs (the spec: every run has
+    the same set): the 7 of :data:`ident.channels.RIG_INPUTS` on a 7/8-post
+    rig, the 4 wheelloaders on a 4-post rig (8 inputs in all).
+    """
+    return rig_inputs_of(session.runs[0].channels) + DF_INPUTS
+
+
+def embed_inputs(X, input_names, *, axis=1, fill=0.0):
+    """Place per-input data of some model inputs into the 11 :data:`MODEL_INPUTS` columns.
+
+    A 4-post model's FRF has the inputs ``wheelloader_XX`` and ``dF_XX``; the
+    loop and the screening work on the canonical 11 columns, where the absent
+    aero inputs get `fill` (a zero response: the model says nothing about
+    them, and a drive that excites them is refused,
+    :func:`ident.drive.check_drive_inputs`).
+
+    Parameters
+    ----------
+    X : ndarray
+        Per-input data along `axis`, in the order of `input_names`.
+    input_names : sequence of str
+        Names of `X`'s columns, a subset of :data:`MODEL_INPUTS`.
+    axis : int
+    fill : scalar
+        Value of the absent inputs' columns.
+
+    Returns
+    -------
+    ndarray
+        `X` itself if it already has the 11 inputs, else a new array with 11
+        entries along `axis`.
+
+    Examples
+    --------
+    >>> H = np.ones((2, 8, 3))
+    >>> names = ("wheelloader_LF", "wheelloader_RF", "wheelloader_LR", "wheelloader_RR") + DF_INPUTS
+    >>> embed_inputs(H, names)[0, :, 0]
+    array([0., 0., 0., 1., 1., 1., 1., 1., 1., 1., 1.])
+    """
+    names = tuple(input_names)
+    if names == MODEL_INPUTS:
+        return X
+    unknown = [n for n in names if n not in MODEL_INPUTS]
+    if unknown:
+        raise ValueError(f"embed_inputs: unknown inputs {unknown}; model inputs are "
+                         f"{list(MODEL_INPUTS)}")
+    X = np.asarray(X)
+    shape = list(X.shape)
+    shape[axis] = len(MODEL_INPUTS)
+    out = np.full(shape, fill, dtype=X.dtype)
+    idx = [MODEL_INPUTS.index(n) for n in names]
+    np.moveaxis(out, axis, 0)[idx] = np.moveaxis(X, axis, 0)
+    return out
 
 #: A corner whose dF keeps less than this fraction of its energy once the rig
 #: inputs are accounted for (median over 0.5-20 Hz) is not identifiable (Eq. 17).
@@ -237,6 +301,10 @@ def default_nperseg(n_samples):
     (40.96 s, 0.024 Hz resolution) at 100 Hz.
     """
     return int(2 ** np.round(np.log2(max(n_samples / 20, 16))))
+
+
+#: Shortest spectral block [samples] (and so the shortest run) an FRF is estimated from.
+MIN_NPERSEG = 16
 
 
 def _check_spectral_args(fs, window, nperseg, noverlap, n_min):
@@ -759,6 +827,25 @@ def _output_channels(session, outputs):
 
 
 def _check_session(session):
+    rig = [c for c in RIG_INPUTS if all(c in r.channels for r in session.runs)]
+    flat = {}
+    for run in session.runs:
+        where = run.file if session.path is None else Path(session.path) / run.file
+        const = [c for c in rig if np.ptp(run.channels[c]) == 0]
+        flat[run.name] = const
+        if const and len(const) == len(rig):
+            raise IdentificationError(
+                f"run '{run.name}' ({where}): every rig input is constant ({', '.join(const)}: "
+                f"e.g. {const[0]} = {run.channels[const[0]][0]:g} throughout); the rig did not "
+                "move in this run: drop the run or export its rig input channels")
+    for c in rig:
+        if all(c in flat[r.name] for r in session.runs):
+            run = session.runs[0]
+            where = run.file if session.path is None else Path(session.path) / run.file
+            raise IdentificationError(
+                f"rig input {c!r} is constant in every run (e.g. run '{run.name}' ({where})), so "
+                "its response cannot be identified; check the channel in the run files (a "
+                "dead sensor, or a channel map to the wrong column)")
     for run in session.runs:
         missing = [v for v in SHOCK_VELOCITIES if v not in run.channels]
         if missing:
@@ -823,8 +910,10 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     Returns
     -------
     Frf
-        Inputs :data:`MODEL_INPUTS`. For the LPM, ``n_averages`` is
-        ``lpm_coherence_dof + 11`` (module notes) and ``settings`` holds
+        Inputs :func:`model_inputs`: the session's rig inputs (7, or the 4
+        wheelloaders of a 4-post session: the Eq. 17 rank is then 8), then the
+        4 ``dF``. For the LPM, ``n_averages`` is ``lpm_coherence_dof + n_in``
+        (module notes) and ``settings`` holds
         ``estimator``, ``lpm_degree``, ``lpm_half_width``, ``lpm_rows``,
         ``lpm_unknowns``, ``lpm_dof`` (residual degrees of freedom),
         ``lpm_coherence_dof``, ``resolution_hz`` (per run).
@@ -857,15 +946,27 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
             # LPM_GRID_HZ for short runs (60 s runs would give 0.39 Hz, too coarse to smooth)
             nperseg = min(max(nperseg, int(2 ** np.ceil(np.log2(fs / LPM_GRID_HZ)))),
                           int(2 ** np.floor(np.log2(n_min))))
+    if isinstance(nperseg, (int, np.integer)) and not isinstance(nperseg, bool) \
+            and n_min < max(nperseg, MIN_NPERSEG):
+        nperseg = max(nperseg, MIN_NPERSEG)
+        short = min(session.runs, key=lambda r: r.n_samples)
+        where = short.file if session.path is None else Path(session.path) / short.file
+        raise IdentificationError(
+            f"run '{short.name}' ({where}): {short.n_samples} samples "
+            f"({short.n_samples / fs:g} s), fewer than the {nperseg} of one spectral block "
+            f"(nperseg, {nperseg / fs:g} s); record runs of at least {nperseg / fs:g} s (the "
+            f"paper's are 800 s; 60 s or more is advised) or pass a smaller --nperseg")
     nperseg, noverlap = _check_spectral_args(fs, window, nperseg, noverlap, n_min)
-    m = len(MODEL_INPUTS)
+    inputs = model_inputs(session)
+    rig = inputs[:-len(DF_INPUTS)]
+    m = len(inputs)
     if estimator == "lpm":
         return _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, lpm_degree, lpm_half_width,
                                  lpm_coherence_dof, exact_linear)
     per_run = []
     for run in session.runs:
         _, dF = shock_force_deviation(run, session.shocks, cbar, exact_linear=exact_linear)
-        x = np.vstack([np.vstack([run.dynamic(c) for c in RIG_INPUTS]), dF,
+        x = np.vstack([np.vstack([run.dynamic(c) for c in rig]), dF,
                        np.vstack([run.dynamic(o) for o in outs])])
         f, X = block_spectra(x, fs=fs, window=window, nperseg=nperseg, noverlap=noverlap)
         U, Y = X[:m], X[m:]
@@ -893,7 +994,7 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     mult = mult.T  # (n_out, n_f)
     flagged = indep.T < FLAG_INDEPENDENT_FRACTION
     _warn_flagged(session, flagged, band, band_hz, stacklevel=2)
-    return Frf(f_hz=f, H=H, input_names=MODEL_INPUTS, output_names=outs,
+    return Frf(f_hz=f, H=H, input_names=inputs, output_names=outs,
                multiple_coherence=mult,
                partial_coherence=partial, input_condition=cond, independent_fraction=indep.T,
                flagged=flagged, n_averages=n_avg, cbar_n_s_m=cbar, fs_hz=fs, settings=settings)
@@ -901,7 +1002,7 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
 
 def _warn_flagged(session, flagged, band, band_hz, *, stacklevel):
     """Warn about flagged dF frequencies; `stacklevel` as for a warning raised in the caller."""
-    nflag = flagged[7:, band].sum(axis=1)
+    nflag = flagged[-len(DF_INPUTS):, band].sum(axis=1)
     if np.any(nflag):
         bad = {c: int(n) for c, n in zip(CORNERS, nflag) if n}
         warnings.warn(
@@ -915,13 +1016,15 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
                       exact_linear):
     """The ``estimator="lpm"`` branch of :func:`estimate_frf` (arguments checked there)."""
     fs = session.fs_hz
-    m = len(MODEL_INPUTS)
+    inputs = model_inputs(session)
+    rig = inputs[:-len(DF_INPUTS)]
+    m = len(inputs)
     runs = list(session.runs)
     n_samples = [r.n_samples for r in runs]
     records, dF_pow = [], []
     for run in runs:
         _, dF = shock_force_deviation(run, session.shocks, cbar, exact_linear=exact_linear)
-        records.append(np.vstack([np.vstack([run.dynamic(c) for c in RIG_INPUTS]), dF,
+        records.append(np.vstack([np.vstack([run.dynamic(c) for c in rig]), dF,
                                   np.vstack([run.dynamic(o) for o in outs])]))
         dF_pow.append(np.mean(dF**2, axis=1))
     degree, half_width, coherence_dof = _check_lpm_args(
@@ -940,7 +1043,7 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
     settings = _lpm_settings(nperseg, fs, degree, half_width, dof, coherence_dof, n_samples, m)
     settings.update(method="global", runs=[r.name for r in runs], band_hz=tuple(band_hz),
                     exact_linear=bool(exact_linear))
-    return Frf(f_hz=f, H=H, input_names=MODEL_INPUTS, output_names=outs,
+    return Frf(f_hz=f, H=H, input_names=inputs, output_names=outs,
                multiple_coherence=mult, partial_coherence=partial, input_condition=cond,
                independent_fraction=indep, flagged=flagged, n_averages=coherence_dof + m,
                cbar_n_s_m=cbar, fs_hz=fs, settings=settings)
@@ -954,9 +1057,10 @@ def _check_identifiable(session, runs, dF_power, band, cbar, *, Suu=None, indep=
     runs : list of Run
     dF_power : list of ndarray, shape (4,)
         Mean square ``dF`` per corner of each run.
-    Suu : ndarray, shape (n_f, 11, 11), optional
+    Suu : ndarray, shape (n_f, n_in, n_in), optional
         Input spectral matrix (Welch): the independent fraction is ``1 / [Sn^-1]_ii``.
-    indep : ndarray, shape (n_f, 11), optional
+        Inputs: the rig inputs (7, or 4 on a 4-post rig), then the 4 ``dF``.
+    indep : ndarray, shape (n_f, n_in), optional
         The independent fraction itself (LPM). Without `Suu` and `indep` only
         the ``dF = 0`` check is made.
     """
@@ -983,7 +1087,7 @@ def _check_identifiable(session, runs, dF_power, band, cbar, *, Suu=None, indep=
                 except np.linalg.LinAlgError:
                     indep = np.zeros(Suu.shape[:2])
         for i, c in enumerate(CORNERS):
-            frac = np.nanmedian(indep[band, 7 + i])
+            frac = np.nanmedian(indep[band, indep.shape[1] - len(CORNERS) + i])
             if not frac >= MIN_INDEPENDENT_FRACTION:
                 changed = [r.name for r, pw in zip(runs, dF_power)
                            if pw[i] > 1e-8 * force_scale[i]]
@@ -1002,6 +1106,7 @@ def _check_identifiable(session, runs, dF_power, band, cbar, *, Suu=None, indep=
 def _sequential(session, per_run, outs, f):
     """Eqs. 25-28: rig FRF from baseline runs, then each shock input from its swap runs."""
     n_f, p = f.size, len(outs)
+    r = per_run[0][1].shape[1] - len(CORNERS)  # rig inputs: 7, or 4 on a 4-post rig
     dF_pow = np.array([pr[5] for pr in per_run])  # (runs, 4)
     F_scale = dF_pow.max(axis=0) + 1e-300
     zero = dF_pow <= 1e-10 * F_scale[None, :]
@@ -1011,16 +1116,16 @@ def _sequential(session, per_run, outs, f):
             f"session '{session.name}': method='sequential' needs baseline runs whose shocks are "
             "linear and equal to c_bar (dF = 0 at every corner); none found. Use "
             "method='global' (it handles nonlinear baseline shocks)")
-    Suu_r = sum(per_run[k][1][:, :7, :7] for k in base)
-    Suy_r = sum(per_run[k][2][:, :7, :] for k in base)
+    Suu_r = sum(per_run[k][1][:, :r, :r] for k in base)
+    Suy_r = sum(per_run[k][2][:, :r, :] for k in base)
     Syy_r = sum(per_run[k][3] for k in base)
     Ht_r, mult, part_r, cond, indep_r = _solve_h1(Suu_r, Suy_r, Syy_r)
-    H = np.zeros((p, 11, n_f), dtype=complex)
-    partial = np.zeros((p, 11, n_f))
-    H[:, :7] = np.transpose(Ht_r, (2, 1, 0))
-    partial[:, :7] = np.transpose(part_r, (2, 1, 0))
-    indep = np.ones((n_f, 11))
-    indep[:, :7] = indep_r
+    H = np.zeros((p, r + 4, n_f), dtype=complex)
+    partial = np.zeros((p, r + 4, n_f))
+    H[:, :r] = np.transpose(Ht_r, (2, 1, 0))
+    partial[:, :r] = np.transpose(part_r, (2, 1, 0))
+    indep = np.ones((n_f, r + 4))
+    indep[:, :r] = indep_r
     for i, c in enumerate(CORNERS):
         swaps = [k for k in range(len(per_run)) if not zero[k, i] and zero[k, np.arange(4) != i].all()]
         if not swaps:
@@ -1029,11 +1134,11 @@ def _sequential(session, per_run, outs, f):
                 f"only the {c} shock differs from the baseline; add one or use method='global'")
         # dY = Y - H_rig U_rig, per block: from the cross spectra
         # S_fdy = S_fy - S_fu H_rig^T ; S_ff ; S_dydy = S_yy - 2 Re(...) + ...
-        S_ff = sum(np.real(per_run[k][1][:, 7 + i, 7 + i]) for k in swaps)
-        S_fy = sum(per_run[k][2][:, 7 + i, :] for k in swaps)  # (f, p)
-        S_fu = sum(per_run[k][1][:, 7 + i, :7] for k in swaps)  # (f, 7)
-        S_uu = sum(per_run[k][1][:, :7, :7] for k in swaps)
-        S_uy = sum(per_run[k][2][:, :7, :] for k in swaps)
+        S_ff = sum(np.real(per_run[k][1][:, r + i, r + i]) for k in swaps)
+        S_fy = sum(per_run[k][2][:, r + i, :] for k in swaps)  # (f, p)
+        S_fu = sum(per_run[k][1][:, r + i, :r] for k in swaps)  # (f, r)
+        S_uu = sum(per_run[k][1][:, :r, :r] for k in swaps)
+        S_uy = sum(per_run[k][2][:, :r, :] for k in swaps)
         S_yy = sum(per_run[k][3] for k in swaps)
         S_fdy = S_fy - np.einsum("fj,fjp->fp", S_fu, Ht_r)
         S_dydy = (S_yy - 2 * np.real(np.einsum("fjp,fjp->fp", np.conj(Ht_r), S_uy))
@@ -1041,12 +1146,12 @@ def _sequential(session, per_run, outs, f):
         with np.errstate(divide="ignore", invalid="ignore"):
             Hs = S_fdy / S_ff[:, None]
             coh = np.where(S_dydy > 0, np.abs(S_fdy) ** 2 / (S_ff[:, None] * S_dydy), 0.0)
-        H[:, 7 + i] = Hs.T
-        partial[:, 7 + i] = np.clip(coh, 0, 1).T
+        H[:, r + i] = Hs.T
+        partial[:, r + i] = np.clip(coh, 0, 1).T
         # independence of dF from the rig inputs in its swap runs
         with np.errstate(divide="ignore", invalid="ignore"):
             # power of dF explained by the rig inputs: S_fu S_uu^-1 S_uf, S_uf = conj(S_fu)
             expl = np.real(np.einsum("fj,fjk,fk->f", S_fu,
                                      np.linalg.pinv(S_uu, hermitian=True), np.conj(S_fu)))
-            indep[:, 7 + i] = np.clip(1 - expl / S_ff, 0, 1)
+            indep[:, r + i] = np.clip(1 - expl / S_ff, 0, 1)
     return H, mult, partial, cond, indep

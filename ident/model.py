@@ -29,12 +29,14 @@ import multiprocessing
 import os
 import warnings
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ident._io import atomic_path
+from ident.channels import RIG_INPUTS
 from ident.errors import FitWarning, IdentificationError, LowCoherenceWarning, ModelFileError
 from ident.frf import Frf
 
@@ -118,7 +120,9 @@ class VehicleModel:
     ----------
     name : str
     input_names, output_names : tuple of str
-        ``MODEL_INPUTS`` (7 rig inputs, 4 ``dF``) and the output channels.
+        The inputs (the session's rig inputs, then the 4 ``dF``: the 11
+        ``MODEL_INPUTS`` of a 7/8-post rig, 8 for a 4-post rig without aero
+        channels) and the output channels.
     poles, residues : ndarray of complex, shape (n_out, n_in, n_max)
         Per pair, padded with NaN beyond ``n_poles``; conjugate pairs stored once.
     direct : ndarray, shape (n_out, n_in)
@@ -160,6 +164,17 @@ class VehicleModel:
     settings: dict = field(default_factory=dict)
     noise_level: np.ndarray | None = None
     _plants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @property
+    def rig_inputs(self):
+        """tuple of str: The rig inputs the model was identified with (``input_names`` without
+        the ``dF_XX``): the 7 of ``RIG_INPUTS``, or the 4 wheelloaders of a 4-post session.
+
+        Models saved before 4-post sessions existed have all seven. A drive
+        with nonzero content on another rig input is refused in prediction
+        (:func:`ident.drive.check_drive_inputs`).
+        """
+        return tuple(n for n in self.input_names if not n.startswith("dF_"))
 
     # -- evaluation -------------------------------------------------------------------------
     def frequency_response(self, f_hz):
@@ -226,23 +241,39 @@ class VehicleModel:
             keeps 11 of 520 shock modes and its predicted metrics move by at
             most 0.019 % (119 setups, track drive; a noisy generalized car's
             model: 0.018 %, 78 modes), against 0.012 % and 28 modes at 0.01.
+
+        Notes
+        -----
+        The plant's rig part always has the 7 columns of
+        :data:`ident.channels.RIG_INPUTS`: those of rig inputs the model does
+        not have (the aero inputs of a 4-post model) are zero, and
+        ``LoopPlant.rig_inputs`` names the ones it has, so the simulator
+        refuses a drive that excites the others.
         """
         from threadpoolctl import threadpool_limits
 
-        from ident.closedloop import LoopPlant
+        from ident.closedloop import LoopPlant, ModalSystem
 
         cache = self.__dict__.setdefault("_plants", {})  # built once per model and bound
         if reduce_rtol in cache:
             return cache[reduce_rtol]
-        rig = self.pair_modal(range(7)).pruned()
-        shock = self.pair_modal(range(7, 11)).pruned()
+        n_rig = len(self.rig_inputs)
+        rig = self.pair_modal(range(n_rig)).pruned()
+        shock = self.pair_modal(range(n_rig, n_rig + 4)).pruned()
         if reduce_rtol is not None:
             with threadpool_limits(1):  # small dense algebra; threads only contend here
                 if shock.n_states > 0:
                     shock = balanced_reduce(shock, rtol=reduce_rtol)
                 if rig.n_states > 0:
                     rig = balanced_reduce(rig, rtol=min(reduce_rtol, RIG_REDUCE_RTOL))
-        plant = LoopPlant(rig, shock, tuple(self.output_names), self.cbar_n_s_m, name=self.name)
+        cols = [RIG_INPUTS.index(c) for c in self.rig_inputs]
+        if cols != list(range(len(RIG_INPUTS))):  # a 4-post model: zero aero columns
+            B = np.zeros((rig.n_states, len(RIG_INPUTS)), dtype=rig.B.dtype)
+            D = np.zeros((rig.D.shape[0], len(RIG_INPUTS)))
+            B[:, cols], D[:, cols] = rig.B, rig.D
+            rig = ModalSystem(rig.lam, B, rig.C, D)
+        plant = LoopPlant(rig, shock, tuple(self.output_names), self.cbar_n_s_m, name=self.name,
+                          rig_inputs=self.rig_inputs)
         cache[reduce_rtol] = plant
         return plant
 
@@ -252,7 +283,7 @@ class VehicleModel:
         Parameters
         ----------
         inputs : sequence of int, optional
-            Input columns (default all 11).
+            Input columns (default all: 11, or 8 for a 4-post model).
         """
         import control
 
@@ -440,13 +471,29 @@ def load_model(path):
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"{path}: model file not found; run 'shockplan identify' to make one")
+    with open(path, "rb") as fh:
+        magic = fh.read(4)
+    if magic != b"PK\x03\x04":  # np.load would try other formats (pickle) and advise on them
+        what = "empty" if not magic else "not a .npz archive"
+        raise ModelFileError(f"{path}: not a shockplan model file ({what}); the file is corrupt "
+                             "or of another kind; re-run 'shockplan identify'")
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
         meta = json.loads(str(data.pop("meta")))
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
-        raise ModelFileError(f"{path}: not a readable shockplan model file ({exc}); the file is "
+    except ValueError as exc:
+        why = ("holds Python objects, which shockplan never writes" if "allow_pickle" in str(exc)
+               else str(exc))
+        raise ModelFileError(f"{path}: not a shockplan model file ({why}); the file is "
                              "corrupt or of another kind; re-run 'shockplan identify'") from None
+    except (OSError, KeyError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
+            UnicodeDecodeError) as exc:
+        raise ModelFileError(f"{path}: not a readable shockplan model file ({type(exc).__name__}: "
+                             f"{exc}); the file is corrupt or of another kind; re-run "
+                             "'shockplan identify'") from None
+    if not isinstance(meta, dict):
+        raise ModelFileError(f"{path}: not a shockplan model file (its 'meta' is not a table); "
+                             "re-run 'shockplan identify'")
     if meta.get("format") != MODEL_FORMAT:
         raise ModelFileError(f"{path}: format {meta.get('format')!r} is not {MODEL_FORMAT!r}")
     if meta.get("version") != MODEL_VERSION:
@@ -477,6 +524,9 @@ def load_model(path):
     except KeyError as exc:
         raise ModelFileError(f"{path}: model file lacks {exc}; the file is corrupt; re-run "
                              "'shockplan identify'") from None
+    except (TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise ModelFileError(f"{path}: model file is corrupt ({type(exc).__name__}: {exc}); "
+                             "re-run 'shockplan identify'") from None
 
 
 def _modal_gramians(modal, Bs, Cs):

@@ -9,6 +9,11 @@ built-in default plan is the seed paper's identification experiment: one
 with one corner swapped to a nonlinear dynamic shock of about 8 lbf/(in/s)
 equivalent damping, at 100 Hz.
 
+A plan's ``rig`` is ``"7-post"`` (default) or ``"8-post"`` (rigs with aero
+actuators: every run records the 7 rig inputs) or ``"4-post"`` (no aero
+actuators: the physical model is driven with the aero inputs zero and the runs
+have no aero channels, as the spec's "Run files" says of a 4-post rig).
+
 Each run is simulated with :func:`ident.closedloop.simulate` on the physical
 full-car model, closed around the equivalent linear damping of that run's
 shocks (so the feedback carries only their nonlinear, dynamic residual) and
@@ -25,8 +30,10 @@ from pathlib import Path
 import numpy as np
 
 from ident._io import read_toml
-from ident.channels import CORNERS, RESPONSE_KINDS, RIG_INPUTS, kind_of
-from ident.errors import SessionError, ShockModelError
+from ident.channels import (CORNERS, RESPONSE_KINDS, RIG_INPUTS, RIG_KINDS, WHEELLOADER_INPUTS,
+                            kind_of)
+from ident.drive import Drive, check_drive_inputs
+from ident.errors import DriveError, SessionError, ShockModelError
 from ident.units import check_units, to_si
 
 __all__ = [
@@ -38,6 +45,7 @@ __all__ = [
     "simulate_session",
     "DEFAULT_PLAN_PATH",
     "NOMINAL_V_RMS_M_S",
+    "RIG_KINDS",
 ]
 
 log = logging.getLogger(__name__)
@@ -48,6 +56,7 @@ DEFAULT_PLAN_PATH = Path(__file__).parent / "data" / "paper_plan.toml"
 NOMINAL_V_RMS_M_S = 0.1
 
 _DRIVE_KINDS = ("noise", "sweep", "track", "multisine")
+#: The rigs a plan may name (key ``rig``): a 4-post rig has no aero actuators.
 _ROLES = ("baseline", "swap", "validation", "other")
 
 
@@ -111,6 +120,9 @@ class RigPlan:
         canonical channel (``"tire_force_LF"``), a response kind
         (``"tire_force"``), ``"wheelloader"`` or ``"aero"``; the most specific
         key wins (:meth:`noise_level`).
+    rig : {"7-post", "8-post", "4-post"}
+        The rig: a ``"4-post"`` rig has no aero actuators (its runs have no
+        aero channels and the model is driven with zero aero loads).
     """
 
     name: str
@@ -124,6 +136,17 @@ class RigPlan:
     source: str | None = None
     input_noise: float = 0.0
     channel_noise: dict = field(default_factory=dict)
+    rig: str = "7-post"
+
+    def __post_init__(self):
+        if self.rig not in RIG_KINDS:
+            raise SessionError(f"rig plan {self.name!r}: rig {self.rig!r} is not one of "
+                               f"{list(RIG_KINDS)}")
+
+    @property
+    def aero(self):
+        """bool: Whether the rig has aero actuators (every rig but a 4-post)."""
+        return self.rig != "4-post"
 
     def noise_level(self, channel):
         """Measurement noise of one recorded channel, a fraction of its RMS.
@@ -154,6 +177,27 @@ def _noise_group(channel):
     if channel in RIG_INPUTS:
         return "aero" if channel.startswith("aero_") else "wheelloader"
     return kind_of(channel)
+
+
+#: Keys of a rig plan and of its [[run]] tables (a near miss is refused: a typo would
+#: silently fall back to a default).
+_PLAN_KEYS = ("format", "name", "units", "shock_library", "fs_hz", "duration_s", "oversample",
+              "seed", "noise", "input_noise", "channel_noise", "rig", "drive", "run")
+_PLAN_RUN_KEYS = ("name", "setup", "role", "seed", "duration_s", "drive")
+
+
+def _check_keys(table, known, where):
+    """Refuse a key that is a near miss of a known one; log other unknown keys."""
+    if not isinstance(table, dict):
+        raise SessionError(f"{where}: must be a table, got {table!r}")
+    for key in table:
+        if key in known:
+            continue
+        close = difflib.get_close_matches(str(key), known, n=1)
+        if close:
+            raise SessionError(f"{where}: unknown key {key!r} (did you mean {close[0]!r}?); "
+                               f"the keys are {', '.join(known)}")
+        log.warning("%s: unknown key %r is ignored", where, key)
 
 
 def _num(doc, key, where, default=None, *, positive=True, integer=False):
@@ -196,7 +240,9 @@ def read_rig_plan(path):
     fraction of each channel's RMS), ``input_noise`` (default 0: the same for
     the recorded rig inputs), ``[channel_noise]`` (optional overrides: a
     channel, a response kind, ``wheelloader`` or ``aero`` -> fraction),
-    ``shock_library`` (path relative to the plan);
+    ``shock_library`` (path relative to the plan), ``rig`` (``"7-post"``
+    (default), ``"8-post"`` or ``"4-post"``: no aero actuators, runs without
+    aero channels);
     ``[drive]`` with ``kind`` = ``noise`` (``f_max_hz``, ``filter_order``,
     ``taper_s``, ``peak_wheelloader`` [length], ``peak_aero_heave`` [force],
     ``roll_moment_multiple`` and ``pitch_moment_multiple``: peak moments as
@@ -214,6 +260,7 @@ def read_rig_plan(path):
     path = Path(path)
     where = str(path)
     doc = read_toml(path, error=SessionError, what="rig plan")
+    _check_keys(doc, _PLAN_KEYS, where)
     if doc.get("format") != "rig-plan/1":
         raise SessionError(f"{where}: 'format' is {doc.get('format')!r}; expected \"rig-plan/1\"")
     units = check_units(doc.get("units", "SI"), where=f"{where}: 'units'", error=SessionError)
@@ -228,16 +275,25 @@ def read_rig_plan(path):
     duration = _num(doc, "duration_s", where, 800.0)
     seed = _num(doc, "seed", where, 0, positive=False, integer=True)
     drive = _parse_drive(doc.get("drive", {}), units, f"{where}: [drive]")
+    rig = doc.get("rig", "7-post")
+    if rig not in RIG_KINDS:
+        close = difflib.get_close_matches(str(rig), RIG_KINDS, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise SessionError(f"{where}: rig {rig!r} is not one of {list(RIG_KINDS)}{hint}; "
+                           "'4-post' is a rig without aero actuators")
     runs = []
     entries = doc.get("run", [])
     if not isinstance(entries, list) or not entries:
         raise SessionError(f"{where}: no [[run]] tables; add at least one run")
     for i, entry in enumerate(entries):
         w = f"{where}: run {i + 1}"
+        if not isinstance(entry, dict):
+            raise SessionError(f"{w}: must be a [[run]] table, got {entry!r}")
         name = entry.get("name")
         if not isinstance(name, str) or not name:
             raise SessionError(f"{w}: 'name' is missing")
         w = f"{where}: run '{name}'"
+        _check_keys(entry, _PLAN_RUN_KEYS, w)
         setup = entry.get("setup")
         if not isinstance(setup, dict) or sorted(setup) != sorted(CORNERS):
             raise SessionError(f"{w}: 'setup' must name a shock for each of {list(CORNERS)}, "
@@ -271,13 +327,21 @@ def read_rig_plan(path):
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise SessionError(f"{where}: duplicate run names {dup}; make them unique")
+    taper = drive.get("taper_s", 0.0)
+    for r in runs:
+        if r.drive is None and r.duration_s * fs < 2 * taper * fs + 2:
+            raise SessionError(
+                f"{where}: run '{r.name}': duration_s = {r.duration_s:g} s is too short for "
+                f"[drive] taper_s = {taper:g} s (faded in and out); give at least "
+                f"{2 * taper + 2 / fs:g} s or shorten taper_s")
     return RigPlan(name=str(doc.get("name", path.stem)), fs_hz=fs,
                    oversample=_num(doc, "oversample", where, 8, integer=True),
                    noise=_noise_num(doc, "noise", where),
                    drive=drive, shocks=shocks, runs=tuple(runs), units=units, source=where,
                    input_noise=_noise_num(doc, "input_noise", where),
                    channel_noise=_parse_channel_noise(doc.get("channel_noise", {}),
-                                                      f"{where}: [channel_noise]"))
+                                                      f"{where}: [channel_noise]"),
+                   rig=rig)
 
 
 #: Keys of ``[channel_noise]`` besides the canonical channels.
@@ -401,11 +465,10 @@ def make_plan_drive(plan, vehicle, *, seed, duration_s, name=None):
 def _fine_drive(drive, r):
     """The drive interpolated band-limited onto the simulation grid (``r`` steps per sample)."""
     from ident.closedloop import _refine
-    from ident.drive import Drive
 
     u = _refine(drive.as_array(), r)
     return Drive(name=drive.name, fs_hz=drive.fs_hz * r,
-                 channels={c: u[:, j] for j, c in enumerate(RIG_INPUTS)},
+                 channels={c: u[:, j] for j, c in enumerate(RIG_INPUTS) if c in drive.rig_inputs},
                  settings=dict(drive.settings, refined_by=r))
 
 
@@ -454,8 +517,14 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
     -------
     ident.session.Session
         In memory (``path`` None); write it with :func:`ident.session.write_session`.
-        Every run holds the 7 rig inputs, ``shock_force_XX`` and every output
-        of the full-car model.
+        Every run holds the 7 rig inputs (the 4 wheelloaders on a 4-post
+        rig), ``shock_force_XX`` and every output of the full-car model.
+
+    Raises
+    ------
+    SessionError
+        If a run's drive is sampled at another rate than the plan, or, on a
+        4-post plan, a run's drive file moves an aero input.
     """
     from ident.closedloop import simulate
     from ident.session import Run, make_session
@@ -478,6 +547,17 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
                 plan, vehicle, seed=pr.seed, duration_s=pr.duration_s,
                 name=f"{plan.name} seed {pr.seed}")
         drive = drives[key]
+        if not plan.aero and drive.rig_inputs != WHEELLOADER_INPUTS:
+            if pr.drive is not None:
+                try:
+                    check_drive_inputs(drive, WHEELLOADER_INPUTS, model=f"{plan.rig} rig")
+                except DriveError as exc:
+                    raise SessionError(f"run '{pr.name}': {exc}") from exc
+            # a 4-post rig has no aero actuators: the drive's wheelloaders, aero loads zero
+            drive = drives[key] = Drive(name=drive.name, fs_hz=drive.fs_hz,
+                                        channels={c: drive.channels[c]
+                                                  for c in WHEELLOADER_INPUTS},
+                                        settings=dict(drive.settings, rig=plan.rig))
         if abs(drive.fs_hz - plan.fs_hz) > 1e-9 * plan.fs_hz:
             raise SessionError(f"run '{pr.name}': its drive '{drive.name}' is sampled at "
                                f"{drive.fs_hz:g} Hz, the plan at {plan.fs_hz:g} Hz; resample "
@@ -491,7 +571,7 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
         # the rig inputs are recorded as commanded (the drive file's samples: in band the
         # acquisition filter passes them to 1e-5)
         sampled = _daq_sample(resp.channels, plan.oversample, drive.n_samples)
-        channels = dict(drive.channels)
+        channels = {c: drive.channels[c] for c in drive.rig_inputs}
         channels.update(sampled)
         log.info("run %s: %d samples, Newton iterations <= %d", pr.name, drive.n_samples,
                  resp.newton_iterations)
@@ -505,7 +585,8 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
     for i, (pr, channels, drive) in enumerate(clean):
         rng = np.random.default_rng([pr.seed, i, 7])
         rng_in = np.random.default_rng([pr.seed, i, 8])  # its own stream: inputs, then outputs
-        for name in [c for c in channels if c not in RIG_INPUTS] + list(RIG_INPUTS):
+        for name in ([c for c in channels if c not in RIG_INPUTS]
+                     + [c for c in RIG_INPUTS if c in channels]):
             level = plan.noise_level(name)
             if level > 0:
                 x = channels[name]

@@ -38,8 +38,9 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from ident._io import atomic_path, atomic_write_text, read_toml
-from ident.channels import ALL_CHANNELS, CORNERS, RIG_INPUTS, quantity_of
+from ident._io import atomic_path, atomic_write_text, did_you_mean, read_toml
+from ident.channels import (ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS,
+                             missing_aero, quantity_of, rig_inputs_of)
 from ident.errors import SessionError
 from ident.units import check_units, from_si, to_si
 
@@ -75,6 +76,11 @@ _TIME = "time"
 _RUN_FORMATS = {"csv": ".csv", "parquet": ".parquet"}
 _MANIFEST_KEYS = ("format", "name", "units", "shock_library", "run", "channels")
 _RUN_KEYS = ("name", "file", "setup", "role")
+_MANIFEST_TYPES = {"format": str, "name": str, "units": str, "shock_library": str, "run": list,
+                   "channels": dict}
+#: Optional manifest keys that state the sample rate [Hz]: checked against the run files
+#: (the rate itself always comes from their ``time`` column).
+_RATE_KEYS = ("fs_hz", "fs", "sample_rate", "sample_rate_hz", "sampling_rate_hz")
 _CANONICAL = frozenset(ALL_CHANNELS)
 
 
@@ -124,7 +130,8 @@ class Run:
         Sample times [s] (read-only).
     channels : dict of str to ndarray, shape (n_samples,)
         Canonical channel name -> samples in SI units, static offsets included
-        (float64, read-only). All 7 rig inputs are present in a checked run.
+        (float64, read-only). A checked run has all 7 rig inputs, or the 4
+        wheelloaders only (a 4-post rig: no aero channels).
     fs_hz : float
         Sample rate [Hz].
 
@@ -223,6 +230,16 @@ class Session:
 
     def __post_init__(self):
         object.__setattr__(self, "runs", tuple(self.runs))
+
+    @property
+    def rig_inputs(self):
+        """tuple of str: The rig inputs of the session's runs, in ``RIG_INPUTS`` order.
+
+        All 7 on a rig with aero actuators (7-post, 8-post), the 4 wheelloaders
+        on a 4-post rig; every run of a checked session has the same set, and
+        it is the identified model's rig inputs.
+        """
+        return rig_inputs_of(self.runs[0].channels) if self.runs else RIG_INPUTS
 
     @property
     def run_names(self):
@@ -327,6 +344,24 @@ def _as_numeric(values, *, label, where, time=None):
     return a.astype(np.float64)
 
 
+def _seconds(values):
+    """A datetime or timedelta time column as float seconds (from its first sample).
+
+    Parquet (and pandas) keep timestamps as datetime64; read as numbers they would be
+    nanoseconds since 1970. Other columns are returned unchanged.
+    """
+    a = np.asarray(values)
+    if a.dtype.kind == "O" and a.size and hasattr(a[0], "to_datetime64"):
+        import pandas as pd
+
+        a = pd.to_datetime(pd.Series(a), utc=True).dt.tz_localize(None).to_numpy()
+    if a.dtype.kind == "M" and a.size:
+        return (a - a[0]) / np.timedelta64(1, "s")
+    if a.dtype.kind == "m":
+        return a / np.timedelta64(1, "s")
+    return values
+
+
 def _check_columns(columns, *, where, units, channel_map, required):
     """The checking engine: map, check and convert a table of raw columns.
 
@@ -372,16 +407,21 @@ def _check_columns(columns, *, where, units, channel_map, required):
             f"{where}: no 'time' column{hint}; add a column 'time' in seconds or map "
             "your time column in the manifest's [channels] table (time = \"your column\")"
         )
+    # rig inputs (the wheelloaders required): the aero channels come all three or none (4-post)
+    partial = missing_aero(present) if set(WHEELLOADER_INPUTS) <= set(required) else []
+    required = tuple(c for c in partial if c not in required) + tuple(required)
     missing = [c for c in required if c not in present]
     if missing:
         names = ", ".join(_label(c, source[c]) for c in missing)
+        four_post = (" (a 4-post run, without aero actuators, has no aero channels at all)"
+                     if partial else "")
         raise SessionError(
             f"{where}: missing required channel(s) {names}; add the column(s) or, if "
             "your export names them differently, map them in the manifest's [channels] "
-            "table (canonical = \"your column\")"
+            f"table (canonical = \"your column\"){four_post}"
         )
 
-    t = _as_numeric(columns[present[_TIME]], label=_label(_TIME, present[_TIME]),
+    t = _as_numeric(_seconds(columns[present[_TIME]]), label=_label(_TIME, present[_TIME]),
                     where=where)
     bad = ~np.isfinite(t)
     if bad.any():
@@ -425,7 +465,17 @@ def _check_columns(columns, *, where, units, channel_map, required):
                 f"{where}: column {label} has {int(bad.sum())} NaN/inf value(s) from "
                 f"t={t0:.6g} s; fill or cut the run"
             )
-        channels[canonical] = _frozen_array(to_si(x, quantity_of(canonical), units))
+        with np.errstate(over="ignore"):
+            si = to_si(x, quantity_of(canonical), units)
+        bad = ~np.isfinite(si)
+        if bad.any():  # finite in the file, beyond float64 in SI (e.g. 1e308 in)
+            i = int(np.argmax(bad))
+            raise SessionError(
+                f"{where}: column {label} has {int(bad.sum())} value(s) that overflow when "
+                f"converted from {units} to SI, the first {x[i]:.6g} at t={t[i]:.6g} s; "
+                "fix or cut the run (a logger's overflow or fill value?)"
+            )
+        channels[canonical] = _frozen_array(si)
     return _frozen_array(t), channels, float(1.0 / step)
 
 
@@ -516,6 +566,9 @@ def read_run_table(path, *, units="SI", channel_map=None, required=(), where=Non
         manifest's ``[channels]`` table). ``time`` may be mapped too.
     required : iterable of str
         Canonical channels that must be present (e.g. ``ident.channels.RIG_INPUTS``).
+        When it holds the four wheelloaders, the aero channels must be all three
+        or none (a 4-post run): ``ident.channels.WHEELLOADER_INPUTS`` reads runs
+        of either rig.
     where : str, optional
         How to name the file in error messages (default: the path), e.g.
         ``"run 'swap-LF' (runs/swap-LF.csv)"``.
@@ -693,6 +746,23 @@ def _check_unique_names(names, *, where):
         seen.add(name)
 
 
+def _check_same_rig_inputs(runs, *, where):
+    """Every run of a session has the same rig inputs (with or without aero channels)."""
+    first = runs[0]
+    want = rig_inputs_of(first.channels)
+    for r in runs[1:]:
+        got = rig_inputs_of(r.channels)
+        if got != want:
+            def kind(inputs):
+                return "aero channels" if "aero_heave" in inputs else "no aero channels (4-post)"
+            raise SessionError(
+                f"{where}: run {r.name!r} ({r.file}) has {kind(got)} but run {first.name!r} "
+                f"({first.file}) has {kind(want)}; every run of a session has the same rig "
+                "inputs (they are the identified model's): put runs of a 4-post rig and of a "
+                "rig with aero actuators in separate sessions"
+            )
+
+
 def _check_run_set(runs, *, where):
     """Check there are runs with unique names sharing one sample rate; return it."""
     if not runs:
@@ -701,6 +771,7 @@ def _check_run_set(runs, *, where):
             "file and setup"
         )
     _check_unique_names([r.name for r in runs], where=where)
+    _check_same_rig_inputs(runs, where=where)
     first = runs[0]
     for r in runs[1:]:
         if abs(r.fs_hz - first.fs_hz) > RTOL_TIME_STEP * first.fs_hz:
@@ -773,11 +844,46 @@ def _parse_run_entries(entries, *, where):
         file = _manifest_str(entry, "file", where=label)
         role = _check_role(entry.get("role", "other"), where=label)
         unknown = [k for k in entry if k not in _RUN_KEYS]
+        for key in unknown:
+            hint = did_you_mean(key, _RUN_KEYS)
+            if hint:
+                raise SessionError(
+                    f"{label}: unknown key {key!r}{hint}; a [[run]] has the keys "
+                    f"{', '.join(_RUN_KEYS)}"
+                )
         if unknown:
             logger.warning("%s: unknown key(s) %s are ignored", label, unknown)
         parsed.append({"name": name, "file": file, "setup": entry["setup"],
                        "role": role, "label": label})
     return parsed
+
+
+def _check_extra_keys(extra, *, where):
+    """Refuse near-misses of manifest keys; check a stated sample rate; warn about the rest.
+
+    Returns ``(key, rate_hz)`` for a stated sample rate, else None.
+    """
+    stated = None
+    for key, value in extra.items():
+        if key in _RATE_KEYS:
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                    not np.isfinite(value) or value <= 0:
+                raise SessionError(
+                    f"{where}: {key} = {value!r} is not a sample rate (a number > 0 Hz); the "
+                    "rate comes from the run files' 'time' column: fix or remove the key"
+                )
+            stated = (key, float(value))
+            continue
+        hint = did_you_mean(key, _MANIFEST_KEYS)
+        # a typo has the value of the key it misspells: a table [notes] is no 'units'
+        if hint and isinstance(value, _MANIFEST_TYPES[hint.split("'")[1]]):
+            raise SessionError(
+                f"{where}: unknown key {key!r}{hint}; the manifest's keys are "
+                f"{', '.join(_MANIFEST_KEYS)} (see shared/spec/rig-session.md)"
+            )
+        logger.warning("%s: key %r is not part of the rig-session format; it is kept but "
+                       "not used", where, key)
+    return stated
 
 
 def read_session(path):
@@ -806,9 +912,10 @@ def read_session(path):
         the library; a role is invalid; ``[channels]`` names an unknown canonical
         channel; the shock library is missing or malformed (the
         :class:`~ident.errors.ShockModelError` is chained); a run file is missing,
-        unreadable, has fewer than 2 rows, misses one of the 7 rig inputs, holds
-        NaN/inf or non-numeric values, or has non-uniform time; or the runs have
-        different sample rates.
+        unreadable, has fewer than 2 rows, misses a wheelloader, has some but not
+        all three aero channels, holds NaN/inf or non-numeric values, or has
+        non-uniform time; or the runs have different sample rates or different
+        rig inputs (runs with and without aero channels).
     """
     from ident.errors import ShockModelError
     from ident.shocks import read_shock_library
@@ -834,6 +941,7 @@ def read_session(path):
     channel_map = _check_channel_map(doc.get("channels"), where=where)
     entries = _parse_run_entries(doc.get("run"), where=where)
     extra = {k: v for k, v in doc.items() if k not in _MANIFEST_KEYS}
+    stated_rate = _check_extra_keys(extra, where=where)
 
     library_path = folder / library_file
     if not library_path.is_file():
@@ -861,11 +969,17 @@ def read_session(path):
                 "(paths are relative to the manifest)"
             )
         table = read_run_table(file_path, units=units, channel_map=channel_map,
-                               required=RIG_INPUTS, where=run_where)
+                               required=WHEELLOADER_INPUTS, where=run_where)
         runs.append(Run(name=e["name"], file=e["file"], setup=setup, role=e["role"],
                         time_s=table.time_s, channels=table.channels,
                         fs_hz=table.fs_hz))
     fs_hz = _check_run_set(runs, where=where)
+    if stated_rate is not None and abs(stated_rate[1] - fs_hz) > RTOL_TIME_STEP * fs_hz:
+        raise SessionError(
+            f"{where}: {stated_rate[0]} = {stated_rate[1]:g} disagrees with the run files, "
+            f"whose 'time' column gives {fs_hz:.9g} Hz; fix or remove {stated_rate[0]} (the "
+            "sample rate always comes from the time column)"
+        )
     logger.info("read session %r: %d run(s) at %.6g Hz from %s", name, len(runs),
                 fs_hz, folder)
     return Session(path=folder, name=name, units=units, runs=tuple(runs), shocks=shocks,
@@ -919,7 +1033,7 @@ def make_session(name, runs, shocks, *, units="SI"):
         role = _check_role(r.role, where=run_where)
         columns = _in_memory_columns(r.time_s, r.channels, where=run_where)
         time_s, channels, fs_hz = _check_columns(
-            columns, where=run_where, units="SI", channel_map={}, required=RIG_INPUTS
+            columns, where=run_where, units="SI", channel_map={}, required=WHEELLOADER_INPUTS
         )
         if abs(fs_hz - r.fs_hz) > RTOL_TIME_STEP * fs_hz:
             raise SessionError(

@@ -55,7 +55,7 @@ import pandas as pd
 from scipy.optimize import minimize_scalar, nnls
 from scipy.special import ndtr
 
-from ident._io import atomic_write_toml, read_toml
+from ident._io import atomic_write_toml, did_you_mean, read_toml
 from ident.errors import FitWarning, ShockModelError
 from ident.units import UNIT_LABELS, check_units, from_si, to_si
 
@@ -1007,10 +1007,16 @@ def read_shock_library(path):
     Notes
     -----
     Imperial values are converted on load: velocity in/s, force lbf, damping
-    lbf/(in/s); ``lag`` is always in seconds. Other top-level keys are ignored.
+    lbf/(in/s); ``lag`` is always in seconds. Other top-level keys are ignored, unless
+    they look like a typo of ``units`` or ``shock`` (refused, with a did-you-mean).
     """
     path = Path(path)
     doc = read_toml(path, error=ShockModelError, what="shock library")
+    for key in doc:
+        hint = did_you_mean(key, ("units", "shock")) if key not in ("units", "shock") else ""
+        if hint:  # a typo would silently read an imperial library as SI
+            raise ShockModelError(f"{path}: unknown top-level key {key!r}{hint}; a shock "
+                                  "library has 'units' and [[shock]] tables")
     units = _check_units_for(doc.get("units", "SI"), f"{path}: key 'units'")
     shocks = doc.get("shock")
     if shocks is None:

@@ -14,6 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ident._io import check_output
+from ident.channels import RIG_KINDS
+
 __all__ = ["main", "build_parser", "noise_report"]
 
 log = logging.getLogger("shockplan")
@@ -25,6 +28,22 @@ def _fmt_table(rows, headers):
     out = [line, "  ".join("-" * w for w in widths)]
     out += ["  ".join(str(c).rjust(w) for c, w in zip(r, widths)) for r in rows]
     return "\n".join(out)
+
+
+def _check_out(args, *, folder=False, overwrite=None):
+    """Check ``--out`` before any computation: exists (without --overwrite), read-only folder."""
+    check_output(args.out, overwrite=args.overwrite if overwrite is None else overwrite,
+                 folder=folder)
+
+
+def _warn_inventory(setups, library):
+    """Log a warning for every setup that needs more units of a shock than the crate's count."""
+    from planner.setups import inventory_shortfall
+
+    for s in setups:
+        short = inventory_shortfall(s, library)
+        if short:
+            log.warning("setup %r: %s", s.name, short)
 
 
 def _load_vehicle(path):
@@ -39,6 +58,7 @@ def cmd_rig_simulate(args):
     from ident.rig import default_plan, read_rig_plan, simulate_session
     from ident.session import write_session
 
+    _check_out(args, folder=True)
     plan = default_plan() if args.plan is None else read_rig_plan(args.plan)
     if args.duration is not None:
         plan = replace(plan, runs=tuple(replace(r, duration_s=args.duration) for r in plan.runs))
@@ -46,17 +66,16 @@ def cmd_rig_simulate(args):
         plan = replace(plan, noise=args.noise)
     if args.input_noise is not None:
         plan = replace(plan, input_noise=args.input_noise)
+    if args.rig is not None:
+        plan = replace(plan, rig=args.rig)
     vehicle = _load_vehicle(args.vehicle)
     out = Path(args.out)
-    from ident._io import check_can_write
-
-    if out.exists() and any(out.iterdir()) and not args.overwrite:
-        check_can_write(out, overwrite=False)
     session = simulate_session(plan, vehicle, progress=not args.quiet)
     write_session(session, out, units=args.units or plan.units, run_format=args.format,
                   overwrite=args.overwrite)
     print(f"wrote rig session '{session.name}' to {out}: {len(session.runs)} runs, "
-          f"{session.runs[0].n_samples} samples at {session.fs_hz:g} Hz, vehicle '{vehicle.name}'")
+          f"{session.runs[0].n_samples} samples at {session.fs_hz:g} Hz, vehicle '{vehicle.name}', "
+          f"{plan.rig} rig ({len(session.rig_inputs)} rig inputs)")
     return 0
 
 
@@ -104,11 +123,13 @@ def cmd_identify(args):
     from ident.model import identify_session
     from ident.session import read_session
 
-    session = read_session(args.session)
+    _check_out(args)
+    if args.mat:
+        check_output(args.mat, overwrite=args.overwrite, what="--mat")
+    if args.plots:
+        check_output(args.plots, overwrite=True, folder=True, what="--plots")
     out = Path(args.out)
-    from ident._io import check_can_write
-
-    check_can_write(out, overwrite=args.overwrite)
+    session = read_session(args.session)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         model = identify_session(session, estimator=args.estimator,
@@ -161,7 +182,7 @@ def noise_report(model, session, *, n_draws=20, seed=0):
         ``noise_limited_pairs``, ``zero_pairs`` (counts), ``expected_metric_error_pct``
         (metric -> half-width of the 95 % interval [%]), ``reference`` (run and setup).
     """
-    from ident.channels import CORNERS, RIG_INPUTS
+    from ident.channels import CORNERS
     from ident.drive import Drive
     from planner.setups import Setup
     from planner.uncertainty import prediction_uncertainty
@@ -169,7 +190,7 @@ def noise_report(model, session, *, n_draws=20, seed=0):
     table = model.summary()
     base = next((r for r in session.runs if r.role == "baseline"), session.runs[0])
     drive = Drive(name=f"run {base.name}", fs_hz=session.fs_hz,
-                  channels={c: base.dynamic(c) for c in RIG_INPUTS})
+                  channels={c: base.dynamic(c) for c in session.rig_inputs})
     setup = Setup("reference", {c: base.setup[c] for c in CORNERS})
     unc = prediction_uncertainty(model, drive, [setup], session.shocks, n_draws=n_draws,
                                  seed=seed)
@@ -215,11 +236,10 @@ def cmd_predict(args):
     from planner.report import write_predictions_csv
     from planner.setups import read_setups
 
+    _check_out(args)
     model, drive, library = _read_inputs(args)
     setups = read_setups(args.setups, library)
-    from ident._io import check_can_write
-
-    check_can_write(Path(args.out), overwrite=args.overwrite)
+    _warn_inventory(setups, library)
     pred = predict_setups(model, drive, setups, library, oversample=args.oversample,
                           static_loads_n=None, progress=not args.quiet)
     write_predictions_csv(pred.table, args.out, units=args.units, overwrite=args.overwrite)
@@ -245,6 +265,7 @@ def cmd_rank(args):
     from planner.report import write_ranking
     from planner.setups import Setup, read_setups
 
+    _check_out(args, folder=True)
     model, drive, library = _read_inputs(args)
     objective = default_objective() if args.objective is None else read_objective(args.objective)
     setups, constraints = None, None
@@ -294,6 +315,90 @@ def _ranking_summary(ranking, units, n=5):
     return "\n".join(lines)
 
 
+def cmd_sweep(args):
+    """``shockplan sweep``: screen a large enumeration on several drives/models (Dask), simulate
+    the best share, rank; writes ranking.csv, one CSV per case and sweep.toml."""
+    import re
+
+    from ident._io import atomic_write_toml
+    from ident.drive import read_drive
+    from ident.shocks import read_shock_library
+    from planner.objective import default_objective, read_objective
+    from planner.report import write_predictions_csv
+    from planner.setups import Setup, read_setups
+    from planner.sweep import sweep_setups
+
+    _check_out(args, folder=True)
+    models = {m: _load_any_model(m) for m in dict.fromkeys(args.model)}
+    drives = {d: read_drive(d, units=args.units) for d in dict.fromkeys(args.drive)}
+    library = read_shock_library(args.shocks)
+    objective = default_objective() if args.objective is None else read_objective(args.objective)
+    setups, constraints = None, None
+    if args.setups:
+        setups = read_setups(args.setups, library)
+    else:
+        constraints = {"symmetry": args.symmetry, "axles": args.axles,
+                       "fixed": _parse_fixed(args.fixed) or None,
+                       "respect_inventory": not args.ignore_inventory}
+        if args.only:
+            constraints["shocks"] = [s.strip() for s in args.only.split(",") if s.strip()]
+    baseline = None
+    if args.baseline:
+        ids = [s.strip() for s in args.baseline.split(",")]
+        ids = ids * 4 if len(ids) == 1 else ids
+        if len(ids) != 4:
+            raise ValueError("--baseline takes one shock id (all corners) or four (LF,RF,LR,RR)")
+        baseline = Setup("baseline", dict(zip(("LF", "RF", "LR", "RR"), ids)))
+        baseline.resolve(library)
+    scheduler = args.scheduler
+    result = sweep_setups(models, drives, library, setups=setups, constraints=constraints,
+                          objective=objective, baseline=baseline, top_share=args.top_share,
+                          top=args.top, combine=args.combine, chunk_size=args.chunk_size,
+                          oversample=args.oversample, scheduler=scheduler,
+                          n_workers=args.workers, progress=not args.quiet)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    written = [write_predictions_csv(result.table, out / "ranking.csv", units=args.units,
+                                     overwrite=args.overwrite)]
+    case_files = {}
+    for k, (label, table) in enumerate(result.cases.items()):
+        slug = re.sub(r"[^A-Za-z0-9._-]+", "-", label).strip("-")[:60] or "case"
+        path = out / f"case-{k + 1}-{slug}.csv"
+        case_files[label] = path.name
+        written.append(write_predictions_csv(table, path, units=args.units,
+                                             overwrite=args.overwrite))
+    st = result.settings
+    summary = {"format": "shockplan-sweep/1", "baseline": result.baseline,
+               "objective": objective.name, "best": result.best,
+               "cases": [{"label": lab, "file": case_files[lab]} for lab in st["cases"]],
+               "combine": st["combine"], "n_candidates": st["n_candidates"],
+               "n_screened": st["n_screened"], "n_simulated": int(len(result.table)),
+               "top_share": float(st["top_share"]), "scheduler": st["scheduler"],
+               "n_workers": st["n_workers"], "seconds": st["seconds"],
+               "screen_setups_per_s": st["screen_setups_per_s"],
+               "simulate_setups_per_s": st["simulate_setups_per_s"],
+               "spearman": result.agreement["spearman"]}
+    atomic_write_toml(out / "sweep.toml", summary, overwrite=True)
+    written.append(out / "sweep.toml")
+    print(_sweep_summary(result))
+    print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def _sweep_summary(result, n=5):
+    st, t = result.settings, result.table
+    sec = st["seconds"]
+    lines = [f"screened {st['n_screened']:,} setups x {len(st['cases'])} case(s) in "
+             f"{sec['screen']:.1f} s ({st['screen_setups_per_s']:,.0f} setup-cases/s, "
+             f"scheduler {st['scheduler']}, {st['n_workers']} worker(s)); simulated {len(t)} in "
+             f"{sec['simulate']:.1f} s ({st['simulate_setups_per_s']:,.0f} setup-cases/s)",
+             f"baseline '{result.baseline}'; {st['combine']} of the cases' scores; best:"]
+    rows = [(int(r["rank"]), name, f"{r['score']:.4f}", int(r["screening_rank"]),
+             "yes" if r["feasible"] else "no") for name, r in t.head(n).iterrows()]
+    lines.append(_fmt_table(rows, ["rank", "setup", "score", "screening rank", "feasible"]))
+    return "\n".join(lines)
+
+
 def cmd_optimize(args):
     """``shockplan optimize``: the best damper curve per corner group, mapped to the crate."""
     import warnings
@@ -305,10 +410,7 @@ def cmd_optimize(args):
     from planner.optimize import optimize_curves, read_curve_constraints, write_optimum
 
     out = Path(args.out)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.overwrite:
-        from ident._io import check_can_write
-
-        check_can_write(out, overwrite=False)
+    _check_out(args, folder=True)
     model = _load_any_model(args.model)
     drives = [read_drive(d, units=args.units) for d in args.drive]
     library = read_shock_library(args.shocks)
@@ -373,10 +475,7 @@ def cmd_plan(args):
     from planner.testplan import write_plan
 
     out = Path(args.out)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.overwrite:
-        from ident._io import check_can_write
-
-        check_can_write(out, overwrite=False)
+    _check_out(args, folder=True)
     if (args.vehicle is None) == (args.model is None):
         raise ValueError("give either --vehicle (before rig day: the known car, a vehicle TOML "
                          "or 'paper') or --model with --session (between runs)")
@@ -415,6 +514,7 @@ def cmd_import(args):
     """``shockplan import``: real rig files (RPC III, MDF4, TDMS) appended to a session."""
     from ident.formats import import_runs
 
+    _check_out(args, folder=True, overwrite=True)  # appending to a session is the point
     names = None if args.names is None else [n.strip() for n in args.names.split(",")]
     session = import_runs(args.out, args.files, format=args.format, channel_map=args.map,
                           setup=args.setup, role=args.role, names=names, shocks=args.shocks,
@@ -430,6 +530,7 @@ def cmd_export_drive(args):
     from ident.drive import read_drive
     from ident.formats import export_drive_rpc3
 
+    _check_out(args)
     drive = read_drive(args.drive, units=args.units)
     path = export_drive_rpc3(drive, args.out, channel_map=args.map, overwrite=args.overwrite)
     print(f"wrote drive '{drive.name}' ({drive.duration_s:g} s at {drive.fs_hz:g} Hz) as RPC III "
@@ -447,10 +548,7 @@ def cmd_whatif(args):
                                 read_perturbations, write_whatif)
 
     out = Path(args.out)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not args.overwrite:
-        from ident._io import check_can_write
-
-        check_can_write(out, overwrite=False)
+    _check_out(args, folder=True)
     model = _load_any_model(args.model)
     library = read_shock_library(args.shocks)
     drives = [read_drive(d, units=args.units) for d in args.drive]
@@ -512,6 +610,7 @@ def cmd_demo(args):
     """``shockplan demo``: the main job end to end on the built-in example."""
     from planner.demo import run_demo
 
+    _check_out(args, folder=True)
     summary = run_demo(Path(args.out), overwrite=args.overwrite, progress=not args.quiet)
     print(summary)
     return 0
@@ -521,7 +620,8 @@ def build_parser():
     """Build the argument parser (exposed for documentation and tests)."""
     p = argparse.ArgumentParser(
         prog="shockplan",
-        description="Shock-absorber selection planner for 7-post and 8-post shaker rigs.")
+        description="Shock-absorber selection planner for 7-post, 8-post and 4-post shaker "
+        "rigs.")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     sub = p.add_subparsers(dest="command", required=True)
@@ -545,6 +645,9 @@ def build_parser():
                      "fraction of each channel's RMS (overrides the plan's 'noise')")
     sim.add_argument("--input-noise", type=float, help="measurement noise of the recorded rig "
                      "inputs, fraction of each input's RMS (overrides the plan's 'input_noise')")
+    sim.add_argument("--rig", choices=list(RIG_KINDS), help="the rig (overrides the plan's "
+                     "'rig'): '4-post' has no aero actuators and writes runs without aero "
+                     "channels; '7-post' and '8-post' (default) have them")
     sim.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
     sim.set_defaults(func=cmd_rig_simulate)
 
@@ -687,6 +790,44 @@ def build_parser():
     wi.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     wi.set_defaults(func=cmd_whatif)
 
+    sw = sub.add_parser("sweep", help="screen a large enumeration of setups on several drives "
+                        "and models (on a Dask cluster), simulate and rank the best share")
+    sw.add_argument("--model", required=True, action="append",
+                    help="identified model (.npz), a vehicle TOML or 'paper' (repeatable)")
+    sw.add_argument("--drive", required=True, action="append",
+                    help="drive file (CSV or Parquet; repeatable)")
+    sw.add_argument("--shocks", required=True, help="the crate: shock library TOML")
+    sw.add_argument("--units", choices=["SI", "imperial"], default="SI",
+                    help="unit system of the drive files and of the outputs (default SI)")
+    sw.add_argument("--setups", help="setups CSV (default: enumerate from the library)")
+    sw.add_argument("--symmetry", choices=["left-right", "none"], default="none",
+                    help="enumeration (default %(default)s: every 4-corner combination)")
+    sw.add_argument("--axles", choices=["independent", "same"], default="independent")
+    sw.add_argument("--fixed", action="append", metavar="CORNER=ID",
+                    help="fix a corner's shock (repeatable)")
+    sw.add_argument("--only", help="comma-separated shock ids to consider")
+    sw.add_argument("--ignore-inventory", action="store_true",
+                    help="enumerate setups beyond the crate's counts (ranked infeasible)")
+    sw.add_argument("--baseline", help="baseline shock id(s): one for all corners or "
+                    "LF,RF,LR,RR (default: the first setup)")
+    sw.add_argument("--objective", help="objective TOML (default: grip and platform)")
+    sw.add_argument("--top-share", type=float, default=0.01,
+                    help="share of the screened setups simulated (default %(default)s)")
+    sw.add_argument("--top", type=int, help="simulate this many instead of --top-share")
+    sw.add_argument("--combine", choices=["mean", "worst"], default="mean",
+                    help="a setup's score over the cases (default %(default)s)")
+    sw.add_argument("--chunk-size", type=int, default=20000,
+                    help="setups per screening task (default %(default)s)")
+    sw.add_argument("--scheduler", default="local", metavar="ADDRESS|local|none",
+                    help="a Dask scheduler address (tcp://host:8786), 'local' for a cluster on "
+                    "this machine (default) or 'none' for one process")
+    sw.add_argument("--workers", type=int, help="workers of a local cluster (default: cores)")
+    sw.add_argument("--oversample", type=int, default=2,
+                    help="internal steps per sample of the shock loop (default %(default)s)")
+    sw.add_argument("--out", required=True, help="output folder")
+    sw.add_argument("--overwrite", action="store_true", help="replace an existing folder")
+    sw.set_defaults(func=cmd_sweep)
+
     imp = sub.add_parser("import", help="append real rig files (RPC III, MDF4, TDMS) to a "
                          "session")
     imp.add_argument("files", nargs="+", help="the rig's files, one run each")
@@ -726,6 +867,15 @@ def build_parser():
     return p
 
 
+def _one_line(exc):
+    """The message of `exc` on one line (a bare errno error gets its file named)."""
+    if isinstance(exc, OSError) and exc.filename and exc.strerror:
+        text = f"{exc.filename}: {exc.strerror}"
+    else:
+        text = str(exc)
+    return " ".join(text.split())
+
+
 def main(argv=None):
     """Entry point of the ``shockplan`` program; returns the exit status."""
     parser = build_parser()
@@ -735,7 +885,15 @@ def main(argv=None):
     try:
         return args.func(args)
     except (ValueError, TypeError, FileExistsError, FileNotFoundError) as exc:
-        print(f"shockplan: error: {exc}", file=sys.stderr)
+        print(f"shockplan: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # e.g. a disk that filled up or a folder made read-only meanwhile
+        if exc.errno is None:  # raised here with a full message (e.g. a read-only --out)
+            print(f"shockplan: error: {_one_line(exc)}", file=sys.stderr)
+        else:
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"shockplan: error: {where}{exc.strerror or exc}; check the path and its "
+                  "permissions", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # pragma: no cover
         print("shockplan: interrupted", file=sys.stderr)

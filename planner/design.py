@@ -898,6 +898,13 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     if ident_model is not None and session is None:
         raise PlannerError("an identified model needs the session it came from (its runs are "
                            "the prior information); pass session=")
+    if session is not None and tuple(session.rig_inputs) != tuple(RIG_INPUTS):
+        where = getattr(session, "path", None) or getattr(session, "name", "session")
+        raise PlannerError(
+            f"{where}: a session without aero channels (a 4-post rig: rig inputs "
+            f"{list(session.rig_inputs)}) cannot be planned from yet: the design's information "
+            f"is for the 7-post rig's 11 inputs; plan before rig day from the vehicle TOML "
+            f"(--vehicle) instead")
     t0 = time.perf_counter()
     make = _drive_maker(vehicle, session)
     edges = np.geomspace(band_hz[0], band_hz[1], n_bands + 1)

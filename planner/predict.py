@@ -40,6 +40,9 @@ METRIC_OUTPUTS = tuple(f"{k}_{c}" for k in ("tire_force", "ride_height", "shock_
                                             "shock_velocity") for c in CORNERS)
 #: Two drive rates closer than this (relative) are the same rate.
 RTOL_RATE = 1e-6
+#: Predicted tire-force RMS above which a prediction is implausible [N]: 10 x a race
+#: car's typical tire force (static corner loads of 1-3 kN, dynamic RMS well below).
+PLAUSIBLE_TIRE_FORCE_RMS_N = 20e3
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,6 +71,20 @@ class Predictions:
     def metric_names(self):
         """The metric columns of the table."""
         return [c for c in self.table.columns if c not in CORNERS]
+
+
+def _warn_implausible(table, drive):
+    """Log a warning when predicted tire forces are beyond any race car (wrong drive units?)."""
+    cols = [c for c in table.columns if c.startswith("tire_force_rms_")
+            and c[-2:] in CORNERS]
+    if not cols:
+        return
+    worst = float(np.nanmax(table[cols].to_numpy(dtype=float)))
+    if worst > PLAUSIBLE_TIRE_FORCE_RMS_N:
+        log.warning("drive %r: a predicted tire force RMS of %.3g kN is more than %.0f kN "
+                    "(10 x a race car's typical tire force); check the drive's units "
+                    "(--units) and scale", drive.name, worst / 1e3,
+                    PLAUSIBLE_TIRE_FORCE_RMS_N / 1e3)
 
 
 def as_loop_plant(model, *, reduce_rtol=LOOP_REDUCE_RTOL):
@@ -210,6 +227,7 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
     ids = pd.DataFrame([s.ids() for s in setups], columns=list(CORNERS))
     table = pd.concat([ids, table], axis=1)
     table.index = pd.Index([s.name for s in setups], name="setup")
+    _warn_implausible(table, drive)
     settings = {"kind": "time", "model": getattr(plant, "name", None), "drive": drive.name,
                 "oversample": oversample, "band_hz": tuple(band_hz), "fs_hz": drive.fs_hz,
                 "reduce_rtol": reduce_rtol, "n_shock_modes": int(plant.shock.n_states)}

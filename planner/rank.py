@@ -70,6 +70,11 @@ def _choose_baseline(setups, objective, baseline):
 
     names = [s.name for s in setups]
     if isinstance(baseline, Setup):
+        same = [s for s in setups if s.ids() == baseline.ids()]
+        if same and baseline.name not in names:
+            log.info("baseline %s is the listed setup %r; using it", "/".join(baseline.ids()),
+                     same[0].name)
+            return same[0]  # reuse the listed setup: no second row with the same shocks
         if baseline.name in names:
             listed = setups[names.index(baseline.name)]
             if listed.ids() != baseline.ids():
@@ -85,6 +90,39 @@ def _choose_baseline(setups, objective, baseline):
         raise PlannerError(f"baseline setup {wanted!r} is not among the setups; name one of the "
                            f"setups (e.g. {names[0]!r}) or pass the baseline setup")
     return setups[0]
+
+
+def _mark_inventory(scores, setups, library):
+    """Mark setups that the crate's ``count`` cannot build as infeasible, and re-rank.
+
+    The reason is appended to ``violations``; ranks follow :func:`planner.objective.
+    score_setups` (feasible first, then by score, NaN scores last, ties in order).
+    """
+    from planner.setups import inventory_shortfall
+
+    by_name = {s.name: s for s in setups}
+    short = [inventory_shortfall(by_name[n], library) if n in by_name else ""
+             for n in scores.index]
+    if not any(short):
+        return scores
+    scores = scores.copy()
+    viol = scores["violations"].to_numpy(dtype=object).copy()
+    for k, text in enumerate(short):
+        if text:
+            viol[k] = f"{viol[k]}; inventory: {text}" if viol[k] else f"inventory: {text}"
+    feasible = viol == ""
+    score = scores["score"].to_numpy(dtype=float)
+    nan_score = np.isnan(score)
+    n = len(score)
+    order = np.lexsort((np.arange(n), np.where(nan_score, 0.0, score), nan_score, ~feasible))
+    rank = np.empty(n, dtype=np.int64)
+    rank[order] = np.arange(1, n + 1)
+    scores["feasible"] = feasible.astype(bool)
+    scores["violations"] = viol
+    scores["rank"] = rank
+    log.info("%d setup(s) need more shocks than the library's count: infeasible",
+             sum(bool(t) for t in short))
+    return scores
 
 
 def rank_setups(model, drive, library, *, setups=None, constraints=None, objective=None,
@@ -107,8 +145,10 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         Default :func:`planner.objective.default_objective`.
     baseline : str or Setup, optional
         The setup metrics are normalized against; default the objective's
-        ``baseline`` if it names a setup, else the first setup. It is added to
-        the candidates if missing.
+        ``baseline`` if it names a setup, else the first setup. A Setup whose
+        shocks equal a listed setup's is that setup (no second row); otherwise
+        it is added to the candidates. Setups that need more units of a shock
+        than the library's ``count`` are infeasible (``violations`` says why).
     top : int
         Setups (best by screening) simulated in the time domain.
     n_check : int
@@ -153,7 +193,8 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         raise PlannerError(f"top must be at least 1, got {top}")
     # 1. screening of everything
     screened = screen_setups(model, drive, setups, library, band_hz=band_hz, progress=progress)
-    sc = score_setups(screened.table, objective, baseline=base.name).table
+    sc = _mark_inventory(score_setups(screened.table, objective, baseline=base.name).table,
+                         setups, library)
     screening = pd.concat([screened.table, sc], axis=1)
     # 2. time domain on the best `top` by screening (plus the baseline)
     order = sc.sort_values("rank").index.tolist()
@@ -169,7 +210,7 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     td = predict_setups(model, drive, cand, library, oversample=oversample, band_hz=band_hz,
                         progress=progress)
     scores = score_setups(td.table, objective, baseline=base.name)
-    table = pd.concat([td.table, scores.table], axis=1)
+    table = pd.concat([td.table, _mark_inventory(scores.table, setups, library)], axis=1)
     table["screening_rank"] = sc.loc[table.index, "rank"].to_numpy()
     # 3. agreement between screening and time domain over the simulated setups
     rho = float(spearmanr(sc.loc[table.index, "score"], table["score"]).statistic) \

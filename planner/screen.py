@@ -36,12 +36,13 @@ import pandas as pd
 from scipy import signal
 from tqdm.auto import tqdm
 
-from ident.channels import CORNERS, SHOCK_VELOCITIES
+from ident.channels import CORNERS, RIG_INPUTS, SHOCK_VELOCITIES
 from ident.closedloop import _invert_small
+from ident.drive import check_drive_inputs
 from ident.model import LOOP_REDUCE_RTOL
 
 __all__ = ["screen_setups", "screen_response", "DriveBands", "drive_bands", "drive_spectrum",
-           "metric_rows"]
+           "metric_rows", "ScreenOperands", "screen_operands", "screen_packed"]
 
 log = logging.getLogger(__name__)
 
@@ -313,6 +314,126 @@ def drive_bands(drive, *, band_hz=(1.0, 20.0), n_bands=96):
                       band_hz=tuple(band_hz), drive_name=drive.name)
 
 
+@dataclass(frozen=True, eq=False)
+class ScreenOperands:
+    """Everything the screening of one model on one drive needs that no setup changes.
+
+    Built by :func:`screen_operands` from the model's response at the band centres;
+    small (a few hundred kB), picklable, so it is built once per (model, drive) and
+    shipped to the workers of a sweep (:mod:`planner.sweep`) instead of the model.
+
+    Attributes
+    ----------
+    w : ndarray, shape (n_bands,)
+        Band centres [rad/s].
+    Hvs : ndarray of complex, shape (n_bands, 4, 4)
+        Shock velocities per unit shock force change dF.
+    Hys : ndarray of complex, shape (n_bands, n_metrics, 4)
+        Metric outputs per unit dF.
+    P, PB : ndarray of complex, shape (n_bands, 4, 4)
+        Shock-velocity power from the rig inputs, unweighted and metric-filter weighted.
+    QB : ndarray of complex, shape (n_bands, 4, n_metrics)
+        Weighted cross power of shock velocities and metric outputs.
+    d0 : ndarray, shape (n_bands, n_metrics)
+        Weighted metric power of the open shock loop (``dF = 0``).
+    cbar : ndarray, shape (4,)
+        The plant's built-in damping [N s/m].
+    sig0 : ndarray, shape (4,)
+        Starting shock-velocity RMS of the fixed point [m/s].
+    metric_names : tuple of str
+    """
+
+    w: np.ndarray
+    Hvs: np.ndarray
+    Hys: np.ndarray
+    P: np.ndarray
+    PB: np.ndarray
+    QB: np.ndarray
+    d0: np.ndarray
+    cbar: np.ndarray
+    sig0: np.ndarray
+    metric_names: tuple
+
+
+def screen_operands(H, output_names, cbar_n_s_m, bands):
+    """The setup-independent operands of the screening (see :class:`ScreenOperands`).
+
+    Parameters
+    ----------
+    H : ndarray of complex, shape (n_out, 11, n_bands)
+        The model's response at ``bands.f_hz``, inputs rig (7) then dF (4).
+    output_names : sequence of str
+        Must hold the 4 shock velocities.
+    cbar_n_s_m : ndarray, shape (4,)
+    bands : DriveBands
+
+    Returns
+    -------
+    ScreenOperands
+    """
+    outs = list(output_names)
+    vi = np.array([outs.index(v) for v in SHOCK_VELOCITIES])
+    names, L = metric_rows(SimpleNamespace(output_names=outs))
+    w = 2 * np.pi * bands.f_hz
+    Hvr = np.transpose(H[vi, :7], (2, 0, 1))  # (nf, 4, 7)
+    Hvs = np.ascontiguousarray(np.transpose(H[vi, 7:], (2, 0, 1)))  # (nf, 4, 4)
+    Hyr = np.einsum("mo,oif->fmi", L, H[:, :7])  # (nf, p, 7)
+    Hys = np.ascontiguousarray(np.einsum("mo,oif->fmi", L, H[:, 7:]))  # (nf, p, 4)
+    # S[k, i, j] = sum conj(U_i) U_j: the power of y = H u is H S^T H^H
+    St = np.transpose(bands.S, (0, 2, 1))
+    SBt = np.transpose(bands.SB, (0, 2, 1))
+    HvrH = np.conj(np.transpose(Hvr, (0, 2, 1)))
+    P = np.ascontiguousarray(Hvr @ St @ HvrH)  # velocity power per band (linearization)
+    PB = np.ascontiguousarray(Hvr @ SBt @ HvrH)  # the same, metric-filter weighted
+    QB = np.ascontiguousarray(Hvr @ SBt @ np.conj(np.transpose(Hyr, (0, 2, 1))))  # (nf, 4, p)
+    d0 = np.ascontiguousarray(np.real(np.einsum("fmi,fij,fmj->fm", Hyr, SBt, np.conj(Hyr))))
+    sig0 = np.sqrt(np.maximum(np.real(np.einsum("faa->a", P)), 1e-18))
+    return ScreenOperands(w=w, Hvs=Hvs, Hys=Hys, P=P, PB=PB, QB=QB, d0=d0,
+                          cbar=np.asarray(cbar_n_s_m, dtype=float), sig0=sig0,
+                          metric_names=tuple(names))
+
+
+def screen_packed(ops, kv, kf, nk, slo, shi, lag, *, max_iter=30, tol=1e-5):
+    """Screen setups given as packed shock curves (the compiled kernel, no chunking).
+
+    Parameters
+    ----------
+    ops : ScreenOperands
+    kv, kf : ndarray, shape (n_setups, 4, n_knots)
+        Knot velocities [m/s] and forces [N] per setup and corner, padded past
+        ``nk`` (padding is never read).
+    nk : ndarray of int, shape (n_setups, 4)
+        Knots in use.
+    slo, shi : ndarray, shape (n_setups, 4)
+        Slopes below the first and above the last knot [N s/m].
+    lag : ndarray, shape (n_setups, 4)
+        Shock lags [s].
+    max_iter, tol
+        As :func:`screen_setups`.
+
+    Returns
+    -------
+    metrics : ndarray, shape (n_setups, n_metrics)
+    sigma : ndarray, shape (n_setups, 4)
+    iterations : ndarray of int, shape (n_setups,)
+
+    Notes
+    -----
+    Every setup is computed on its own, from the same operands, so a setup's
+    results do not depend on which other setups share the call (bit for bit):
+    chunking and the order of chunks change nothing.
+    """
+    n = kv.shape[0]
+    out = np.zeros((n, len(ops.metric_names)))
+    sig = np.zeros((n, 4))
+    iters = np.zeros(n, dtype=np.int64)
+    if n:
+        _screen_batch(ops.w, ops.Hvs, ops.Hys, ops.P, ops.PB, ops.QB, ops.d0, ops.cbar,
+                      ops.sig0, kv, kf, nk, slo, shi, lag, int(max_iter), float(tol), out, sig,
+                      iters)
+    return out, sig, iters
+
+
 def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, tol=1e-5,
                     chunk_size=20000, progress=False):
     """Screen setups on a frequency response given at the band centres (the engine).
@@ -341,26 +462,9 @@ def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, 
     """
     from ident.closedloop import _pack_setups
 
-    outs = list(output_names)
-    vi = np.array([outs.index(v) for v in SHOCK_VELOCITIES])
-    names, L = metric_rows(SimpleNamespace(output_names=outs))
-    w = 2 * np.pi * bands.f_hz
-    Hvr = np.transpose(H[vi, :7], (2, 0, 1))  # (nf, 4, 7)
-    Hvs = np.ascontiguousarray(np.transpose(H[vi, 7:], (2, 0, 1)))  # (nf, 4, 4)
-    Hyr = np.einsum("mo,oif->fmi", L, H[:, :7])  # (nf, p, 7)
-    Hys = np.ascontiguousarray(np.einsum("mo,oif->fmi", L, H[:, 7:]))  # (nf, p, 4)
-    # S[k, i, j] = sum conj(U_i) U_j: the power of y = H u is H S^T H^H
-    St = np.transpose(bands.S, (0, 2, 1))
-    SBt = np.transpose(bands.SB, (0, 2, 1))
-    HvrH = np.conj(np.transpose(Hvr, (0, 2, 1)))
-    P = np.ascontiguousarray(Hvr @ St @ HvrH)  # velocity power per band (linearization)
-    PB = np.ascontiguousarray(Hvr @ SBt @ HvrH)  # the same, metric-filter weighted
-    QB = np.ascontiguousarray(Hvr @ SBt @ np.conj(np.transpose(Hyr, (0, 2, 1))))  # (nf, 4, p)
-    d0 = np.ascontiguousarray(np.real(np.einsum("fmi,fij,fmj->fm", Hyr, SBt, np.conj(Hyr))))
-    sig0 = np.sqrt(np.maximum(np.real(np.einsum("faa->a", P)), 1e-18))
+    ops = screen_operands(H, output_names, cbar_n_s_m, bands)
     h = 1.0 / bands.fs_hz
-    cbar = np.asarray(cbar_n_s_m, dtype=float)
-    out = np.zeros((len(models), len(names)))
+    out = np.zeros((len(models), len(ops.metric_names)))
     sig = np.zeros((len(models), 4))
     iters = np.zeros(len(models), dtype=np.int64)
     starts = range(0, len(models), chunk_size)
@@ -370,10 +474,10 @@ def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, 
         chunk = models[a:a + chunk_size]
         kv, kf, nk, slo, shi, *_ = _pack_setups(chunk, h)
         lag = np.array([[m.lag_s for m in row] for row in chunk])
-        _screen_batch(w, Hvs, Hys, P, PB, QB, d0, cbar, sig0, kv, kf, nk, slo,
-                      shi, lag, int(max_iter), float(tol), out[a:a + len(chunk)],
-                      sig[a:a + len(chunk)], iters[a:a + len(chunk)])
-    return names, out, sig, iters
+        b = a + len(chunk)
+        out[a:b], sig[a:b], iters[a:b] = screen_packed(ops, kv, kf, nk, slo, shi, lag,
+                                                       max_iter=max_iter, tol=tol)
+    return list(ops.metric_names), out, sig, iters
 
 
 def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands=96,
@@ -408,6 +512,7 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
 
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
     drive = prepare_drive(drive, getattr(model, "fs_hz", None))
+    check_drive_inputs(drive, getattr(plant, "rig_inputs", RIG_INPUTS), model=plant.name)
     models = resolve_setups(setups, library)
     bands = drive_bands(drive, band_hz=band_hz, n_bands=n_bands)
     H = plant.frequency_response(bands.f_hz)  # (p_all, 11, nf)

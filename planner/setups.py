@@ -67,6 +67,7 @@ __all__ = [
     "setups_to_frame",
     "enumerate_setups",
     "setups_from_baseline",
+    "inventory_shortfall",
 ]
 
 logger = logging.getLogger(__name__)
@@ -297,7 +298,15 @@ def read_setups(path, library=None):
         _library_ids(library, f"read_setups {path}")
     if not path.is_file():
         raise PlannerError(f"{path}: setups file not found; check the path")
-    text = path.read_text(encoding="utf-8-sig")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise PlannerError(f"{path}: not a text CSV file (byte {exc.start}: {exc.reason}); "
+                           f"a setups file is UTF-8 text with the header "
+                           f"'{_SETUP_COLUMN},{','.join(CORNERS)}'") from None
+    if "\x00" in text:
+        raise PlannerError(f"{path}: holds NUL bytes, not a text CSV file; a setups file is "
+                           f"UTF-8 text with the header '{_SETUP_COLUMN},{','.join(CORNERS)}'")
     rows = csv.reader(io.StringIO(text, newline=""), skipinitialspace=True)
     header = None
     for header in rows:
@@ -525,6 +534,36 @@ def _inventory(library):
     """Return id -> count for the shocks with a finite count."""
     return {sid: int(m.count) for sid, m in library.items()
             if getattr(m, "count", None) is not None}
+
+
+def inventory_shortfall(setup, library):
+    """Say why a setup cannot be built from the crate's inventory, or return ``""``.
+
+    Parameters
+    ----------
+    setup : Setup
+    library : ShockLibrary
+        Shocks with ``count = None`` are unlimited.
+
+    Returns
+    -------
+    str
+        ``""`` if every shock id of the setup has enough units, else e.g.
+        ``"needs 4 x 'L28' but the library's count is 0"`` (ids joined by ``"; "``).
+
+    Examples
+    --------
+    >>> from ident.shocks import LinearShock, ShockLibrary
+    >>> lib = ShockLibrary([LinearShock("B20", 3500.0, count=2), LinearShock("L8", 1400.0)])
+    >>> inventory_shortfall(Setup("x", dict(LF="B20", RF="B20", LR="B20", RR="L8")), lib)
+    "needs 3 x 'B20' but the library's count is 2"
+    """
+    counts = _inventory(library)
+    used = {}
+    for sid in setup.ids():
+        used[sid] = used.get(sid, 0) + 1
+    return "; ".join(f"needs {n} x {sid!r} but the library's count is {counts[sid]}"
+                     for sid, n in used.items() if sid in counts and n > counts[sid])
 
 
 def _name_maker(name_format):

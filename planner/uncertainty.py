@@ -54,6 +54,8 @@ import numpy as np
 import pandas as pd
 
 from ident.channels import SHOCK_VELOCITIES
+from ident.drive import check_drive_inputs
+from ident.frf import embed_inputs
 from ident.condition import conditioned_error_kernel, conditioned_standard_error
 
 __all__ = ["Uncertainty", "FrfPlant", "frf_relative_error", "error_correlation",
@@ -247,6 +249,8 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
         raise ValueError(f"n_draws must be at least 2, got {n_draws}")
     models = resolve_setups(setups, library)
     drive = prepare_drive(drive, getattr(model, "fs_hz", None))
+    rig_inputs = tuple(n for n in frf.input_names if not n.startswith("dF_"))
+    check_drive_inputs(drive, rig_inputs, model=getattr(model, "name", None))
     bands = drive_bands(drive, band_hz=band_hz, n_bands=n_bands)
     fb = bands.f_hz
     outs, cbar = frf.output_names, frf.cbar_n_s_m
@@ -254,7 +258,8 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
     def screen(H):
         return screen_response(H, outs, cbar, bands, models)[1]
 
-    Hc = _interpolate(frf.f_hz, frf.H, fb)  # (p, 11, nb)
+    # (p, 11, nb): a 4-post model's FRF (8 inputs) gets zero aero columns
+    Hc = embed_inputs(_interpolate(frf.f_hz, frf.H, fb), frf.input_names)
     fitted = hasattr(model, "loop_plant")
     if fitted:
         # the draws perturb the model's own response (the nominal is the model's screening);
@@ -270,8 +275,9 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
     else:
         H_nom = Hc
     names, base, _, _ = screen_response(H_nom, outs, cbar, bands, models)
-    rel = np.minimum(RANDOM_ERROR_SCALE * _interpolate(frf.f_hz, frf_relative_error(frf), fb),
-                     MAX_RELATIVE_ERROR)
+    rel = np.minimum(RANDOM_ERROR_SCALE * embed_inputs(
+        _interpolate(frf.f_hz, frf_relative_error(frf), fb), frf.input_names),
+        MAX_RELATIVE_ERROR)
     norm = 1.0 / np.sqrt(1.0 + rel**2)  # zero-mean in power
     Lf = _correlated_factor(error_correlation(frf, fb))
     rng = np.random.default_rng(seed)

@@ -953,12 +953,12 @@ def _condition_drive(drive, e, where):
                                "longer section")
         a, b = int(round(t0 * drive.fs_hz)), int(round(t1 * drive.fs_hz))
         drive = Drive(f"{drive.name} [{t0:g}-{t1:g} s]", drive.fs_hz,
-                      {c: x[a:b] for c, x in drive.channels.items()},
+                      {c: drive.channels[c][a:b] for c in drive.rig_inputs},
                       settings={**drive.settings, "window_s": (t0, t1)})
     if np.any(e.channel_scale != 1):
         s = dict(zip(RIG_INPUTS, e.channel_scale))
         drive = Drive(f"{drive.name} [scaled]", drive.fs_hz,
-                      {c: x * s[c] for c, x in drive.channels.items()},
+                      {c: drive.channels[c] * s[c] for c in drive.rig_inputs},
                       settings={**drive.settings, "scale": s})
     return drive
 

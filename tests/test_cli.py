@@ -27,6 +27,19 @@ def test_rig_simulate_writes_a_session(tmp_path, capsys):
                                rtol=1e-12)
 
 
+def test_rig_simulate_four_post(tmp_path, capsys):
+    """--rig 4-post: the runs have the wheelloaders and no aero channels (issue 12)."""
+    from ident.channels import AERO_INPUTS, WHEELLOADER_INPUTS
+
+    out = tmp_path / "four-post"
+    assert main(["-q", "rig", "simulate", "--duration", "10", "--rig", "4-post",
+                 "--out", str(out)]) == 0
+    assert "4-post rig (4 rig inputs)" in capsys.readouterr().out
+    s = read_session(out)
+    assert s.rig_inputs == WHEELLOADER_INPUTS
+    assert not any(c in r.channels for r in s.runs for c in AERO_INPUTS)
+
+
 def test_rig_simulate_bad_plan(tmp_path, capsys):
     plan = tmp_path / "plan.toml"
     plan.write_text('format = "nope"\n')

@@ -249,3 +249,11 @@ def test_a_designed_plan_run_on_the_virtual_rig_identifies_the_car(paper_vehicle
     sb = score_setups(b, default_objective(), baseline="baseline").table
     assert spearmanr(sa["score"], sb["score"]).statistic >= SPEARMAN_DESIGNED
     assert sa["rank"].idxmin() == sb["rank"].idxmin()
+
+
+def test_a_4_post_session_is_refused_with_the_way_out(four_post_session, four_post_model,
+                                                        demo_library):
+    """Planning between runs needs the 7-post rig's inputs; a 4-post session says so."""
+    with pytest.raises(PlannerError, match=r"without aero channels.*--vehicle"):
+        design_experiment(four_post_model, demo_library, budget_min=30.0,
+                          session=four_post_session, baseline="B20")

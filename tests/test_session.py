@@ -13,7 +13,7 @@ import tomli_w
 from numpy.testing import assert_allclose, assert_array_equal
 
 import ident.session as session_mod
-from ident.channels import ALL_CHANNELS, CORNERS, RIG_INPUTS
+from ident.channels import AERO_INPUTS, ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
 from ident.errors import SessionError
 from ident.session import (
     Run,
@@ -356,6 +356,13 @@ BAD_SESSIONS = [
     ("missing-rig-input", _edit_run(lambda f: f.drop(columns=["aero_roll", "wheelloader_RR"])),
      r"run 'swap-LF' .*: missing required channel\(s\) 'aero_roll', 'wheelloader_RR'; "
      r".*\[channels\]"),
+    ("partial-aero", _edit_run(lambda f: f.drop(columns=["aero_pitch"])),
+     r"run 'swap-LF' .*: missing required channel\(s\) 'aero_pitch'; .*\(a 4-post run, "
+     r"without aero actuators, has no aero channels at all\)"),
+    ("4-post-run-in-an-aero-session", _edit_run(lambda f: f.drop(columns=list(AERO_INPUTS))),
+     r"run 'swap-LF' \(runs/swap-LF\.csv\) has no aero channels \(4-post\) but run "
+     r"'baseline-1' \(runs/baseline-1\.csv\) has aero channels; every run of a session has "
+     r"the same rig inputs .*separate sessions"),
     ("nan-samples", _edit_run(lambda f: _set(f, "tire_force_LF", [50, 51, 120], np.nan)),
      r"run 'swap-LF' .*: column 'tire_force_LF' has 3 NaN/inf value\(s\) from t=3\.5 s"),
     ("inf-sample", _edit_run(lambda f: _set(f, "aero_heave", [7], np.inf)),
@@ -470,6 +477,9 @@ BAD_RUNS = [
     ("bad-role", {"role": "sweep"}, r"run 'swap-LF' .*role 'sweep' is not one of"),
     ("missing-rig-input", {"drop": "aero_pitch"},
      r"run 'swap-LF' .*missing required channel\(s\) 'aero_pitch'"),
+    ("4-post-run-in-an-aero-session", {"drop": AERO_INPUTS},
+     r"session 'bad': run 'swap-LF' \(runs/swap-LF\.csv\) has no aero channels \(4-post\) "
+     r"but run 'baseline-1' \(runs/baseline-1\.csv\) has aero channels"),
     ("non-canonical-channel", {"add": "ShockVel_LF"},
      r"run 'swap-LF' .*unknown channel name\(s\) \['ShockVel_LF'\]"),
     ("nan", {"nan": "shock_velocity_RF"},
@@ -492,8 +502,8 @@ def test_make_session_uses_the_same_checks(rng, shocks, change, match):
     fields = {"name": change.get("name", r.name), "file": r.file,
               "setup": change.get("setup", r.setup), "role": change.get("role", r.role),
               "time_s": r.time_s, "fs_hz": change.get("fs_hz_only", r.fs_hz)}
-    if "drop" in change:
-        del channels[change["drop"]]
+    for c in np.atleast_1d(change.get("drop", ())):
+        del channels[c]
     if "add" in change:
         channels[change["add"]] = channels["aero_heave"]
     if "nan" in change:
@@ -505,6 +515,21 @@ def test_make_session_uses_the_same_checks(rng, shocks, change, match):
     runs[1] = Run(channels=channels, **fields)
     with pytest.raises(SessionError, match=match):
         make_session("bad", runs, shocks)
+
+
+def test_four_post_session_round_trip(rng, shocks, tmp_path):
+    """A 4-post session (no aero channels in any run) is checked, written and read back; its
+    rig inputs are the wheelloaders."""
+    runs = [_random_run(rng, *spec) for spec in RUN_SPECS]
+    runs = [Run(name=r.name, file=r.file, setup=r.setup, role=r.role, time_s=r.time_s,
+                fs_hz=r.fs_hz, channels={c: x for c, x in r.channels.items()
+                                         if c not in AERO_INPUTS}) for r in runs]
+    session = make_session("synthetic 4-post", runs, shocks)
+    assert session.rig_inputs == WHEELLOADER_INPUTS
+    back = read_session(write_session(session, tmp_path / "four-post"))
+    _assert_same_data(session, back)
+    assert back.rig_inputs == WHEELLOADER_INPUTS
+    assert not any(c in r.channels for r in back.runs for c in AERO_INPUTS)
 
 
 def test_make_session_needs_runs(shocks):

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.channels import CORNERS, RIG_INPUTS
+from ident.channels import AERO_INPUTS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
 from ident.errors import SessionError
 from ident.formats._record import FORMAT_NAMES, FORMATS
 from ident.formats.channel_map import ChannelMap, read_channel_map
@@ -164,7 +164,8 @@ def read_run(path, *, format, channel_map, required=(), where=None):
     if missing:
         raise SessionError(
             f"{cmap.where}: maps no source for the required channel(s) {missing} (a "
-            "session run needs all 7 rig inputs); add a [channels.<name>] table for each"
+            "session run needs the 4 wheelloaders, and all 3 aero channels on a rig with aero "
+            "actuators); add a [channels.<name>] table for each"
         )
     needed = list(cmap.sources.values()) + ([cmap.time] if cmap.time else [])
     raw = READERS[fmt](path, channels=needed, where=where)
@@ -368,7 +369,7 @@ def import_runs(session_dir, files, *, format, channel_map, setup, role="other",
         The files' format (``--format``).
     channel_map : ChannelMap or str or os.PathLike
         The channel map or its TOML file (``--map``); it must map the 7 rig
-        inputs.
+        inputs, or only the 4 wheelloaders for a 4-post rig (no aero actuators).
     setup : mapping of str to str, or str
         Corner -> shock id, or ``"LF,RF,LR,RR"`` ids (``--setup``); the ids
         must be in the session's shock library.
@@ -473,9 +474,12 @@ def import_runs(session_dir, files, *, format, channel_map, setup, role="other",
         units = "SI" if units is None else check_units(units, where="units",
                                                         error=SessionError)
 
+    # a map without aero channels reads a 4-post rig's files; one with any reads all three
+    rig_inputs = (RIG_INPUTS if any(c in cmap.channels for c in AERO_INPUTS)
+                  else WHEELLOADER_INPUTS)
     runs = []
     for name, file in zip(names, files):
-        table = read_run(file, format=fmt, channel_map=cmap, required=RIG_INPUTS)
+        table = read_run(file, format=fmt, channel_map=cmap, required=rig_inputs)
         runs.append(Run(name=name, file=f"runs/{name}.{run_format}", setup=setup, role=role,
                         time_s=table.time_s, channels=table.channels, fs_hz=table.fs_hz))
 

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.channels import RIG_INPUTS, WHEELLOADER_INPUTS, quantity_of
+from ident.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, quantity_of
 from ident.drive import Drive
 from ident.errors import DriveError, SessionError
 from ident.formats._engine import as_channel_map, read_run
@@ -128,7 +128,7 @@ def export_drive_rpc3(drive, path, *, units=None, channel_map=None,
     if channel_map is None:
         unit_set = DRIVE_UNITS[check_units("SI" if units is None else units,
                                            where=f"{where}: units", error=DriveError)]
-        for c in RIG_INPUTS:
+        for c in drive.rig_inputs:  # a 4-post drive: the wheelloaders only
             u = unit_set[quantity_of(c)]
             values[c] = drive.channels[c] / unit_factor(u, quantity_of(c))
             file_units[c] = u
@@ -224,7 +224,9 @@ def read_drive_rpc3(path, *, channel_map=None, name=None):
     zero = [c for c in RIG_INPUTS if c not in found]
     if zero:
         logger.info("%s: no %s in the file; set to zero", where, zero)
-    channels = {c: found.get(c, np.zeros(n)) for c in RIG_INPUTS}
+    # a file without aero channels is a 4-post drive (its Drive has the wheelloaders only)
+    keep = RIG_INPUTS if any(c in found for c in AERO_INPUTS) else WHEELLOADER_INPUTS
+    channels = {c: found.get(c, np.zeros(n)) for c in keep}
     settings = {"kind": "file", "path": str(path), "format": "rpc3",
                 "channel_map": None if cmap is None else cmap.where, "zero_inputs": zero}
     return Drive(name=name or path.stem, fs_hz=fs_hz, channels=channels, settings=settings)

@@ -1,0 +1,1124 @@
+"""Sweeps: screen very large sets of setups on several models and drives, in chunks, on one
+process or a Dask cluster, then simulate the best in the time domain and rank them.
+
+``sweep_setups(models, drives, library, ...)`` is :func:`planner.rank.rank_setups` made for
+enumerations of hundreds of thousands of setups (every 4-corner combination of a 30-shock
+crate: 30^4 = 810,000) times several drives and models:
+
+1. The setups are a :class:`SetupSpace`: the enumeration of
+   :func:`planner.setups.enumerate_setups` (same order, same inventory filter, same names)
+   decoded lazily, chunk by chunk, from integer codes; no :class:`~planner.setups.Setup`
+   object exists but for the setups finally simulated. A given list of setups works too.
+2. Every (model, drive) pair, a *case*, is prepared once: the model's loop plant, the drive
+   at the model's rate and the screening operands (:func:`planner.screen.screen_operands`).
+   The baseline setup is screened per case; its metrics normalize the objective in that
+   case (like :mod:`planner.whatif`).
+3. Chunks of the space are screened (:func:`planner.screen.screen_packed`, the compiled
+   kernel of :func:`~planner.screen.screen_setups`) in every case and scored; a setup's
+   sweep score is the mean (or the worst) of its case scores, and it is feasible when it
+   is feasible in every case and the crate's ``count`` can build it. A chunk sends back
+   every setup's score and feasibility (17 bytes a setup) and the metrics of its best
+   ``n_top`` setups only; the driver keeps the best ``n_top`` of all chunks so far.
+4. The best ``top_share`` (1 %) of the screened setups and the baseline are simulated in
+   every case with :func:`planner.predict.predict_setups`, scored with the objective
+   (:func:`planner.objective.score_setups`, as ``rank_setups`` does) and ranked.
+
+Where it runs (``scheduler``): ``"local"`` (default) starts a
+:class:`dask.distributed.LocalCluster` of worker processes, one per core, each with one
+compiled-kernel thread; an address (``"tcp://host:8786"``) joins a running scheduler;
+``"none"`` runs everything in this process. The cases, the library and the space are
+scattered to the workers once; a task names only a range of the space.
+
+Determinism
+-----------
+The results do not depend on the scheduler, the number of workers, the chunk size or the
+order in which chunks finish, bit for bit:
+
+- the screening kernel computes every setup on its own from the same operands (built once,
+  in this process, and shipped), and the scores are elementwise sums in a fixed order (no
+  BLAS reduction whose blocking could depend on the chunk length);
+- setups are ordered by the total order (infeasible after feasible, NaN scores last, score,
+  then enumeration index), so the best ``n_top`` of a union does not depend on how the
+  union was formed, and chunk results are stored by chunk number, not arrival;
+- the time-domain stage simulates the same fixed groups of setups in every mode, and every
+  setup's simulation is independent of the others in its group.
+
+The sweep's screening scores agree with ``rank_setups``' (``score_setups``) to round-off
+(:data:`RTOL_SCORE_ROUNDOFF`), not bit for bit: ``score_setups`` sums with a matrix product.
+
+Examples
+--------
+>>> from ident.shocks import LinearShock, ShockLibrary
+>>> lib = ShockLibrary.from_models([LinearShock(f"S{k}", 1000.0 * k) for k in range(1, 31)])
+>>> space = setup_space(lib, symmetry="none")
+>>> len(space), space.names([0, 1, 809_999])
+(810000, ['S1/S1/S1/S1', 'S1/S1/S1/S2', 'S30/S30/S30/S30'])
+>>> index, codes = space.chunk(30, 32)   # candidates 30 and 31, decoded on demand
+>>> index.tolist(), codes.tolist()
+([30, 31], [[0, 0, 1, 0], [0, 0, 1, 1]])
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from ident.channels import CORNERS, RIG_INPUTS
+from ident.errors import PlannerError
+from ident.model import LOOP_REDUCE_RTOL
+
+__all__ = [
+    "SCHEDULER_NONE",
+    "SCHEDULER_LOCAL",
+    "COMBINE_MODES",
+    "RTOL_SCORE_ROUNDOFF",
+    "SetupSpace",
+    "setup_space",
+    "SweepResult",
+    "sweep_setups",
+]
+
+log = logging.getLogger(__name__)
+
+#: Values of `scheduler` that run everything in this process.
+SCHEDULER_NONE = ("none", "single", "serial")
+#: Values of `scheduler` that start a LocalCluster on this machine.
+SCHEDULER_LOCAL = ("local",)
+#: How case scores combine into a setup's sweep score.
+COMBINE_MODES = ("mean", "worst")
+#: Relative difference of a sweep's screening score from ``score_setups``' for the same
+#: metrics: the same weighted sum, summed in another order (round-off only).
+RTOL_SCORE_ROUNDOFF = 1e-13
+#: Default setups per screening chunk: about 10 MB of packed curves and 1-3 s of work.
+DEFAULT_CHUNK_SIZE = 20_000
+#: Default setups per time-domain task (the rig response, about 0.1 s, is redone per task).
+DEFAULT_SIMULATE_CHUNK = 128
+#: Screening tasks per worker thread at least (smaller chunks than `chunk_size` if need be).
+TASKS_PER_THREAD = 4
+#: Smallest screening chunk made to spread the work (the kernel's per-call overhead).
+MIN_CHUNK_SIZE = 1000
+#: Seconds to wait for a scheduler given by address.
+CONNECT_TIMEOUT_S = 10.0
+
+# compiled parallel kernels must not be launched by two threads at once (numba's workqueue
+# layer is not thread-safe): held around every kernel call of a task, uncontended in
+# process workers with one thread each
+_KERNEL_LOCK = threading.Lock()
+
+
+# ----------------------------------------------------------------------------------------------
+# the space of setups
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class SetupSpace:
+    """A set of setups held as integer codes, decoded chunk by chunk.
+
+    Built by :func:`setup_space`. Candidate ``i`` of an enumeration is the mixed-radix
+    number whose digits pick each corner group's candidate (the last group fastest), the
+    order of :func:`planner.setups.enumerate_setups`; candidates the inventory cannot
+    build are skipped when decoded (``respect_inventory``), so the setups decoded in order
+    are exactly the enumerated ones. A space from a list holds its codes and names.
+
+    Attributes
+    ----------
+    shock_ids : tuple of str
+        Code ``j`` is ``shock_ids[j]`` (the library's order).
+    group_codes : tuple of ndarray of int
+        Per corner group, the codes of its candidates (empty for a list).
+    corner_group : tuple of int, shape (4,)
+        The group of each corner ``LF RF LR RR``.
+    inventory : tuple of (int, int)
+        ``(code, count)`` of the shocks whose candidates are skipped beyond their count
+        (empty for a list or ``respect_inventory=False``).
+    listed_codes : ndarray of int, shape (n_setups, 4), or None
+        The codes of a given list of setups.
+    listed_names : tuple of str, or None
+    name_format : str or callable
+        The names of generated setups (:func:`planner.setups.enumerate_setups`).
+    """
+
+    shock_ids: tuple
+    group_codes: tuple
+    corner_group: tuple
+    inventory: tuple
+    listed_codes: np.ndarray | None
+    listed_names: tuple | None
+    name_format: object
+
+    def __len__(self):
+        """Number of candidates (before the inventory filter of an enumeration)."""
+        if self.listed_codes is not None:
+            return int(self.listed_codes.shape[0])
+        return int(math.prod(len(g) for g in self.group_codes))
+
+    @property
+    def sizes(self):
+        """Candidates per corner group (mixed-radix digits, the last fastest)."""
+        return tuple(len(g) for g in self.group_codes)
+
+    def chunk(self, start, stop):
+        """Decode candidates ``start <= i < stop``.
+
+        Parameters
+        ----------
+        start, stop : int
+            A range of candidate indices.
+
+        Returns
+        -------
+        index : ndarray of int64, shape (n,)
+            The candidates kept (the inventory filter drops some), increasing.
+        codes : ndarray of intp, shape (n, 4)
+            Their shock codes per corner ``LF RF LR RR``.
+        """
+        start, stop = max(int(start), 0), min(int(stop), len(self))
+        idx = np.arange(start, max(start, stop), dtype=np.int64)
+        if self.listed_codes is not None:
+            return idx, self.listed_codes[idx]
+        digits = [None] * len(self.group_codes)
+        rest = idx.copy()
+        for g in range(len(self.group_codes) - 1, -1, -1):
+            size = len(self.group_codes[g])
+            digits[g] = rest % size
+            rest //= size
+        group_vals = [np.asarray(self.group_codes[g], dtype=np.intp)[digits[g]]
+                      for g in range(len(self.group_codes))]
+        codes = np.stack([group_vals[g] for g in self.corner_group], axis=1)
+        if self.inventory:
+            keep = np.ones(idx.size, dtype=bool)
+            for code, count in self.inventory:
+                keep &= (codes == code).sum(axis=1) <= count
+            idx, codes = idx[keep], codes[keep]
+        return idx, codes
+
+    def first(self, *, chunk_size=DEFAULT_CHUNK_SIZE):
+        """The first candidate the inventory keeps (None if none), decoded chunk by chunk."""
+        for start in range(0, len(self), chunk_size):
+            index, _ = self.chunk(start, start + chunk_size)
+            if index.size:
+                return int(index[0])
+        return None
+
+    def ids(self, index):
+        """Shock ids of candidates.
+
+        Parameters
+        ----------
+        index : sequence of int
+            Candidate indices.
+
+        Returns
+        -------
+        list of tuple of str
+            Per candidate, the ids at ``LF RF LR RR``.
+        """
+        index = np.asarray(index, dtype=np.int64)
+        codes = self._codes_at(index)
+        ids = np.asarray(self.shock_ids, dtype=object)
+        return [tuple(row) for row in ids[codes].tolist()]
+
+    def _codes_at(self, index):
+        if self.listed_codes is not None:
+            return self.listed_codes[index]
+        rest = index.copy()
+        vals = [None] * len(self.group_codes)
+        for g in range(len(self.group_codes) - 1, -1, -1):
+            size = len(self.group_codes[g])
+            vals[g] = np.asarray(self.group_codes[g], dtype=np.intp)[rest % size]
+            rest //= size
+        return np.stack([vals[g] for g in self.corner_group], axis=1).reshape(-1, 4)
+
+    def names(self, index):
+        """Names of candidates (the list's names, or generated by `name_format`).
+
+        Parameters
+        ----------
+        index : sequence of int
+
+        Returns
+        -------
+        list of str
+        """
+        if self.listed_names is not None:
+            return [self.listed_names[int(i)] for i in index]
+        from planner.setups import _name_maker
+
+        make = _name_maker(self.name_format)
+        return [make(ids) for ids in self.ids(index)]
+
+    def setups(self, index):
+        """The :class:`~planner.setups.Setup` objects of candidates.
+
+        Parameters
+        ----------
+        index : sequence of int
+
+        Returns
+        -------
+        tuple of Setup
+        """
+        from planner.setups import Setup
+
+        return tuple(Setup._unchecked(n, ids)
+                     for n, ids in zip(self.names(index), self.ids(index)))
+
+    def find(self, ids):
+        """The candidate index of a setup's shock ids, or None when not in the space.
+
+        Parameters
+        ----------
+        ids : sequence of str, shape (4,)
+            Ids at ``LF RF LR RR``.
+
+        Returns
+        -------
+        int or None
+            None also for a candidate the inventory filter skips.
+        """
+        code_of = {sid: j for j, sid in enumerate(self.shock_ids)}
+        if any(sid not in code_of for sid in ids):
+            return None
+        codes = np.array([code_of[sid] for sid in ids], dtype=np.intp)
+        if self.listed_codes is not None:
+            hit = np.flatnonzero((self.listed_codes == codes).all(axis=1))
+            return int(hit[0]) if hit.size else None
+        index = 0
+        for g, cand in enumerate(self.group_codes):
+            corners = [c for c in range(4) if self.corner_group[c] == g]
+            if len({int(codes[c]) for c in corners}) != 1:
+                return None
+            where = np.flatnonzero(np.asarray(cand) == codes[corners[0]])
+            if not where.size:
+                return None
+            index = index * len(cand) + int(where[0])
+        got_index, _ = self.chunk(index, index + 1)
+        return index if got_index.size else None
+
+
+def setup_space(library, *, setups=None, symmetry="left-right", axles="independent",
+                fixed=None, shocks=None, respect_inventory=True,
+                name_format="{LF}/{RF}/{LR}/{RR}"):
+    """The setups of a sweep: an enumeration (lazy) or a given list.
+
+    Parameters
+    ----------
+    library : ident.shocks.ShockLibrary
+        The crate; its ``count`` is the inventory.
+    setups : sequence of planner.setups.Setup, optional
+        A given list (unique names); then the enumeration options must stay at their
+        defaults.
+    symmetry, axles, fixed, shocks, respect_inventory, name_format
+        As :func:`planner.setups.enumerate_setups` (which this enumerates lazily, in its
+        order and with its names); there is no ``max_setups``: a sweep is for large sets.
+
+    Returns
+    -------
+    SetupSpace
+
+    Raises
+    ------
+    PlannerError
+        As :func:`planner.setups.enumerate_setups`; on an unknown shock id in a listed
+        setup; or on a list given with enumeration options.
+    """
+    from planner.setups import (
+        DEFAULT_NAME_FORMAT,
+        _check_fixed,
+        _check_setups,
+        _corner_candidates,
+        _corner_groups,
+        _inventory,
+        _library_ids,
+        _name_maker,
+    )
+
+    where = "sweep"
+    all_ids = _library_ids(library, where)
+    if not all_ids:
+        raise PlannerError(f"{where}: the shock library is empty; add shocks to it")
+    code_of = {sid: j for j, sid in enumerate(all_ids)}
+    if setups is not None:
+        if (symmetry, axles, fixed, shocks) != ("left-right", "independent", None, None):
+            raise PlannerError(f"{where}: give either setups or enumeration options "
+                               "(symmetry, axles, fixed, shocks), not both")
+        setups = _check_setups(setups, where)
+        if not setups:
+            raise PlannerError(f"{where}: no setups given; give at least one setup")
+        for s in setups:
+            s.resolve(library)
+        codes = np.array([[code_of[sid] for sid in s.ids()] for s in setups], dtype=np.intp)
+        return SetupSpace(shock_ids=tuple(all_ids), group_codes=(), corner_group=(),
+                          inventory=(), listed_codes=codes,
+                          listed_names=tuple(s.name for s in setups), name_format=None)
+    _name_maker(name_format)  # a bad template fails here, not on a worker
+    groups = _corner_groups(symmetry, axles)
+    fixed_by_group = _check_fixed(fixed, library, groups, symmetry, axles)
+    per_corner = _corner_candidates(shocks, library)
+    group_codes = []
+    for g, grp in enumerate(groups):
+        if g in fixed_by_group:
+            cand = [fixed_by_group[g]]
+        else:
+            cand = [sid for sid in per_corner[grp[0]]
+                    if all(sid in per_corner[c] for c in grp[1:])]
+            if not cand:
+                raise PlannerError(f"{where}: corners {list(grp)} share one shock but their "
+                                   "candidate lists have no id in common; give the same ids "
+                                   "for both axles or use axles='independent'")
+        group_codes.append(np.array([code_of[sid] for sid in cand], dtype=np.intp))
+    corner_group = tuple(next(g for g, grp in enumerate(groups) if c in grp) for c in CORNERS)
+    inventory = tuple((code_of[sid], n) for sid, n in _inventory(library).items()) \
+        if respect_inventory else ()
+    if name_format == DEFAULT_NAME_FORMAT:
+        name_format = DEFAULT_NAME_FORMAT
+    return SetupSpace(shock_ids=tuple(all_ids), group_codes=tuple(group_codes),
+                      corner_group=corner_group, inventory=inventory, listed_codes=None,
+                      listed_names=None, name_format=name_format)
+
+
+# ----------------------------------------------------------------------------------------------
+# what is shipped to the workers
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _ShockTable:
+    """Every shock of the library packed once (the kernel's curve arrays, by code)."""
+
+    kv: np.ndarray  # (n_shocks, n_knots)
+    kf: np.ndarray
+    nk: np.ndarray  # (n_shocks,)
+    slo: np.ndarray
+    shi: np.ndarray
+    lag: np.ndarray
+    count: np.ndarray  # (n_shocks,), -1 = unlimited
+
+    @classmethod
+    def of(cls, library):
+        models = [library[sid] for sid in library]
+        pwls = [m.to_pwl() for m in models]
+        K = max(p.v_knots_m_s.size for p in pwls)
+        n = len(models)
+        kv, kf = np.zeros((n, K)), np.zeros((n, K))
+        nk = np.zeros(n, dtype=np.int64)
+        for j, p in enumerate(pwls):  # padded like ident.closedloop._pack_setups
+            k = p.v_knots_m_s.size
+            kv[j, :k], kf[j, :k] = p.v_knots_m_s, p.f_knots_n
+            kv[j, k:], kf[j, k:] = p.v_knots_m_s[-1], p.f_knots_n[-1]
+            nk[j] = k
+        count = np.array([-1 if getattr(m, "count", None) is None else int(m.count)
+                          for m in models], dtype=np.int64)
+        return cls(kv=kv, kf=kf, nk=nk, slo=np.array([p.slope_below for p in pwls]),
+                   shi=np.array([p.slope_above for p in pwls]),
+                   lag=np.array([m.lag_s for m in models]), count=count)
+
+    def pack(self, codes):
+        """Kernel arrays of setups given as codes, shape (n, 4)."""
+        return (self.kv[codes], self.kf[codes], self.nk[codes], self.slo[codes],
+                self.shi[codes], self.lag[codes])
+
+    def buildable(self, codes):
+        """True where the crate's counts can build the setup."""
+        ok = np.ones(codes.shape[0], dtype=bool)
+        for code in np.flatnonzero(self.count >= 0):
+            ok &= (codes == code).sum(axis=1) <= self.count[code]
+        return ok
+
+
+@dataclass(frozen=True, eq=False)
+class _Scoring:
+    """The objective as elementwise arithmetic on screening metrics, per case."""
+
+    metric_idx: np.ndarray  # (n_weighted,) columns of the weighted metrics
+    weights: np.ndarray  # (n_weighted,)
+    limits: tuple  # (column, max_ratio or nan, max or nan)
+    base: np.ndarray  # (n_cases, n_metrics) baseline's screening metrics
+    combine: str
+
+    def case_scores(self, k, M):
+        """Score and feasibility of metrics M (n, n_metrics) in case k."""
+        base = self.base[k]
+        score = np.zeros(M.shape[0])
+        for j, w in zip(self.metric_idx, self.weights):
+            score += w * (M[:, j] / base[j])
+        ok = np.ones(M.shape[0], dtype=bool)
+        for j, max_ratio, max_abs in self.limits:
+            v = M[:, j]
+            ok &= ~np.isnan(v)
+            if not np.isnan(max_ratio):
+                ok &= v / base[j] <= max_ratio
+            if not np.isnan(max_abs):
+                ok &= v <= max_abs
+        return score, ok
+
+    def combined(self, case_scores):
+        """The sweep score from the cases' scores (list of (n,) arrays, case order)."""
+        out = case_scores[0].copy()
+        for s in case_scores[1:]:  # elementwise, in case order: the same bits in any chunk
+            out = out + s if self.combine == "mean" else np.maximum(out, s)  # NaN stays NaN
+        if self.combine == "mean" and len(case_scores) > 1:
+            out /= len(case_scores)
+        return out
+
+
+def _order(feasible, score, index):
+    """Indices sorting setups best first: feasible, non-NaN, by score, then by index."""
+    nan = np.isnan(score)
+    return np.lexsort((index, np.where(nan, 0.0, score), nan, ~feasible))
+
+
+def _rank_of(at, feasible, score, index):
+    """1-based position of setup `at` in the order of :func:`_order`, without sorting."""
+    nan = np.isnan(score)
+    filled = np.where(nan, 0.0, score)
+    f, n, s, i = feasible[at], nan[at], filled[at], index[at]
+    ahead = (feasible & ~f) | ((feasible == f) & (
+        (~nan & n) | ((nan == n) & ((filled < s) | ((filled == s) & (index < i))))))
+    return int(ahead.sum()) + 1
+
+
+def _screen_codes(ops, shocks, codes, max_iter, tol):
+    from planner.screen import screen_packed
+
+    with _KERNEL_LOCK:
+        return screen_packed(ops, *shocks.pack(codes), max_iter=max_iter, tol=tol)
+
+
+def _screen_chunk(ops_list, shocks, space, scoring, start, stop, n_top, max_iter, tol):
+    """Screen and score candidates ``start <= i < stop`` in every case (a task)."""
+    index, codes = space.chunk(start, stop)
+    metrics, case_scores = [], []
+    feasible = shocks.buildable(codes)
+    not_converged = 0
+    for k, ops in enumerate(ops_list):
+        M, _, iters = _screen_codes(ops, shocks, codes, max_iter, tol)
+        not_converged += int(np.sum(iters >= max_iter))
+        s, ok = scoring.case_scores(k, M)
+        metrics.append(M)
+        case_scores.append(s)
+        feasible &= ok
+    score = scoring.combined(case_scores) if index.size else np.zeros(0)
+    best = _order(feasible, score, index)[:n_top]
+    top_metrics = np.stack([M[best] for M in metrics], axis=1) if index.size \
+        else np.zeros((0, len(ops_list), len(ops_list[0].metric_names)))
+    return {"start": start, "index": index, "score": score, "feasible": feasible,
+            "top_index": index[best], "top_metrics": top_metrics,
+            "not_converged": not_converged}
+
+
+def _warm(ops, shocks, codes, plant, drive, setups, library, oversample, band_hz):
+    """Import the engine and load both compiled kernels (from numba's cache) on a worker."""
+    _screen_codes(ops, shocks, codes, 30, 1e-5)
+    _simulate_chunk(plant, drive, setups, library, oversample, band_hz)
+
+
+def _simulate_chunk(plant, drive, setups, library, oversample, band_hz):
+    """Time-domain metrics of a group of setups on one case (a task).
+
+    BLAS runs on one thread, as in a Dask worker (which sets ``OPENBLAS_NUM_THREADS=1``):
+    the drive's rig response differs in the last bits with the BLAS thread count.
+    """
+    from threadpoolctl import threadpool_limits
+
+    from planner.predict import predict_setups
+
+    with _KERNEL_LOCK, threadpool_limits(1):
+        table = predict_setups(plant, drive, setups, library, oversample=oversample,
+                               band_hz=band_hz).table
+    return table
+
+
+# ----------------------------------------------------------------------------------------------
+# where the tasks run
+# ----------------------------------------------------------------------------------------------
+
+
+class _Serial:
+    """Runs tasks in this process, in order."""
+
+    kind = "none"
+    address = None
+    n_workers = 1
+    n_threads = 1
+
+    def scatter(self, obj):
+        return obj
+
+    def everywhere(self, func, *args):
+        func(*args)
+
+    def map_unordered(self, func, argslist, progress, desc):
+        from tqdm.auto import tqdm
+
+        for j, args in enumerate(tqdm(argslist, desc=desc, unit="task", disable=not progress)):
+            yield j, func(*args)
+
+    def close(self):
+        pass
+
+
+class _Dask:
+    """Runs tasks on a dask.distributed client, a bounded number in flight."""
+
+    def __init__(self, client, kind, cluster=None, *, own_client=False):
+        self.client = client
+        self.kind = kind
+        self.cluster = cluster
+        self.own_client = own_client or cluster is not None
+        self.address = client.scheduler.address
+        info = client.scheduler_info()
+        self.n_workers = max(1, len(info.get("workers", {})))
+        self.n_threads = max(1, sum(w.get("nthreads", 1)
+                                    for w in info.get("workers", {}).values()))
+
+    def scatter(self, obj):
+        return self.client.scatter(obj, broadcast=True, hash=False)
+
+    def everywhere(self, func, *args):
+        self.client.run(func, *args)
+
+    def map_unordered(self, func, argslist, progress, desc):
+        from distributed import as_completed
+        from tqdm.auto import tqdm
+
+        window = 2 * self.n_threads + 1  # bounded memory: results wait at most this many
+        pending = iter(enumerate(argslist))
+        futures = as_completed(loop=self.client.loop)
+        tag = {}
+        for j, args in pending:
+            fut = self.client.submit(func, *args, pure=False)
+            tag[fut.key] = j
+            futures.add(fut)
+            if futures.count() >= window:
+                break
+        with tqdm(total=len(argslist), desc=desc, unit="task", disable=not progress) as bar:
+            for fut in futures:
+                j = tag.pop(fut.key)
+                result = fut.result()
+                fut.release()
+                bar.update(1)
+                nxt = next(pending, None)
+                if nxt is not None:
+                    new = self.client.submit(func, *nxt[1], pure=False)
+                    tag[new.key] = nxt[0]
+                    futures.add(new)
+                yield j, result
+
+    def close(self):
+        if self.own_client:
+            self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def _start(scheduler, client, n_workers, processes):
+    """The task runner for `scheduler`/`client`: serial, a new LocalCluster, or a client."""
+    if client is not None:
+        if scheduler is not None:
+            raise PlannerError("sweep: give a scheduler or a client, not both")
+        return _Dask(client, "client")
+    if scheduler is not None and not isinstance(scheduler, str):
+        raise TypeError(f"sweep: scheduler must be 'local', 'none' or a scheduler address "
+                        f"(str), got {type(scheduler).__name__}")
+    name = "local" if scheduler is None else scheduler.strip()
+    if name.lower() in SCHEDULER_NONE:
+        return _Serial()
+    from distributed import Client, LocalCluster
+
+    if name.lower() in SCHEDULER_LOCAL:
+        n = (os.cpu_count() or 1) if n_workers is None else int(n_workers)
+        if n < 1:
+            raise PlannerError(f"sweep: n_workers={n_workers!r} must be at least 1")
+        # one compiled-kernel thread per worker: the workers are the parallelism
+        kwargs = {"env": {"NUMBA_NUM_THREADS": "1"}} if processes else {}
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
+                               dashboard_address=None, silence_logs=logging.ERROR, **kwargs)
+        return _Dask(Client(cluster, set_as_default=False), "local", cluster)
+    if "://" not in name and ":" not in name:
+        raise PlannerError(f"sweep: scheduler {scheduler!r} is neither 'local', 'none' nor a "
+                           "scheduler address; give an address such as tcp://10.0.0.5:8786 "
+                           "(from `dask scheduler`), 'local' for a cluster on this machine, "
+                           "or 'none' for one process")
+    try:
+        client = Client(name, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        raise PlannerError(f"sweep: cannot reach the Dask scheduler at {name!r} within "
+                           f"{CONNECT_TIMEOUT_S:g} s ({text}); check the address and that "
+                           "`dask scheduler` runs there, or use scheduler='local' (this "
+                           "machine) or 'none' (one process)") from None
+    try:
+        client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
+    except (OSError, TimeoutError) as exc:
+        client.close()
+        raise PlannerError(f"sweep: the Dask scheduler at {name!r} has no workers after "
+                           f"{CONNECT_TIMEOUT_S:g} s; start some with `dask worker {name}` "
+                           "(in this project's environment)") from exc
+    return _Dask(client, "address", own_client=True)
+
+
+# ----------------------------------------------------------------------------------------------
+# result
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class SweepResult:
+    """The result of :func:`sweep_setups`.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        The setups simulated in the time domain (the best ``n_top`` by screening, and the
+        baseline), best first, indexed by setup name: ``LF RF LR RR``, ``score`` (the
+        sweep score: mean or worst of the case scores, lower is better), ``feasible``
+        (in every case, and buildable from the crate), ``violations`` (``"[case] ..."``
+        joined by ``"; "``), ``rank``, ``screening_score``, ``screening_rank`` (among all
+        screened setups), then ``score@<case>`` per case.
+    cases : dict of str -> pandas.DataFrame
+        Per case label, the time-domain table of the simulated setups as
+        :func:`planner.rank.rank_setups` gives it (metrics SI, ``score``,
+        ``score_<group>``, ``feasible``, ``violations``, ``rank`` within the case).
+    screening_top : dict of str -> pandas.DataFrame
+        Per case, the screening metrics and scores of the same setups.
+    screening_index : ndarray of int64, shape (n_screened,)
+        Candidate index (in :attr:`space`) of every screened setup, increasing.
+    screening_score : ndarray, shape (n_screened,)
+        Every screened setup's sweep screening score.
+    screening_feasible : ndarray of bool, shape (n_screened,)
+    space : SetupSpace
+        Names and shock ids of any candidate index.
+    baseline : str
+    objective : planner.objective.Objective
+    agreement : dict
+        ``spearman`` between screening and time-domain sweep scores over the simulated
+        setups (near the top the scores are close: a low value says little), ``n``,
+        ``same_best``.
+    settings : dict
+        ``cases``, ``combine``, ``n_candidates``, ``n_screened``, ``n_top``,
+        ``top_share``, ``chunk_size``, ``scheduler`` (kind), ``address``, ``n_workers``,
+        ``seconds`` (prepare, screen, simulate), ``screen_setups_per_s`` (setups x cases)
+        and ``simulate_setups_per_s`` (setups x cases).
+    """
+
+    table: pd.DataFrame
+    cases: dict
+    screening_top: dict
+    screening_index: np.ndarray
+    screening_score: np.ndarray
+    screening_feasible: np.ndarray
+    space: SetupSpace
+    baseline: str
+    objective: object
+    agreement: dict
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def best(self):
+        """Name of the best setup (the top row)."""
+        return self.table.index[0]
+
+    def screening_order(self, n=None):
+        """Candidate indices of the screened setups, best first.
+
+        Parameters
+        ----------
+        n : int, optional
+            Only the best `n`.
+
+        Returns
+        -------
+        ndarray of int64
+        """
+        order = _order(self.screening_feasible, self.screening_score, self.screening_index)
+        return self.screening_index[order[:n] if n is not None else order]
+
+
+# ----------------------------------------------------------------------------------------------
+# the sweep
+# ----------------------------------------------------------------------------------------------
+
+
+def _as_list(x, what, kind=None):
+    if isinstance(x, Mapping):
+        return list(x.items())
+    if kind is not None and isinstance(x, kind):
+        return [(None, x)]
+    if isinstance(x, Sequence) and not isinstance(x, (str, bytes)):
+        if not x:
+            raise PlannerError(f"sweep: no {what} given; give at least one")
+        return [(None, v) for v in x]
+    return [(None, x)]
+
+
+def _prepare_case(label, model, drive, band_hz, n_bands, reduce_rtol):
+    """The plant, the drive at the model's rate and the screening operands of one case."""
+    from ident.drive import check_drive_inputs
+    from planner.predict import as_loop_plant, prepare_drive
+    from planner.screen import drive_bands, screen_operands
+
+    plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
+    drive = prepare_drive(drive, getattr(model, "fs_hz", None), where=f"case {label!r}: drive")
+    check_drive_inputs(drive, getattr(plant, "rig_inputs", RIG_INPUTS), model=plant.name)
+    bands = drive_bands(drive, band_hz=band_hz, n_bands=n_bands)
+    H = plant.frequency_response(bands.f_hz)
+    ops = screen_operands(H, plant.output_names, plant.cbar_n_s_m, bands)
+    return plant, drive, ops
+
+
+def _baseline_setup(space, library, objective, baseline):
+    """The baseline Setup and its candidate index (None when not in the space)."""
+    from planner.setups import Setup
+
+    if isinstance(baseline, Setup):
+        baseline.resolve(library)
+        idx = space.find(baseline.ids())
+        if idx is not None:
+            listed = space.setups([idx])[0]
+            if listed.name != baseline.name:
+                log.info("baseline %s is the setup %r of the sweep; using it",
+                         "/".join(baseline.ids()), listed.name)
+            return listed, idx
+        return baseline, None
+    if baseline is None:
+        baseline = objective.baseline
+    if baseline is None:
+        first = space.first()
+        if first is None:
+            raise PlannerError("sweep: no setup of the enumeration fits the inventory; raise "
+                               "the counts, choose other shocks or pass "
+                               "respect_inventory=False")
+        return space.setups([first])[0], first
+    if not isinstance(baseline, str):
+        raise TypeError(f"sweep: baseline must be a Setup, a shock id or a setup name, got "
+                        f"{type(baseline).__name__}")
+    if space.listed_names is not None and baseline in space.listed_names:
+        idx = space.listed_names.index(baseline)
+        return space.setups([idx])[0], idx
+    if baseline in library:
+        return _baseline_setup(space, library, objective,
+                               Setup(f"all-{baseline}", dict.fromkeys(CORNERS, baseline)))
+    parts = baseline.split("/")
+    if len(parts) == 4 and all(p in library for p in parts):
+        return _baseline_setup(space, library, objective,
+                               Setup(baseline, dict(zip(CORNERS, parts))))
+    raise PlannerError(f"sweep: baseline {baseline!r} is neither a listed setup, a shock id "
+                       "nor four ids LF/RF/LR/RR; name one of them or pass a Setup")
+
+
+def _scoring(objective, ops_list, base_metrics, combine):
+    """The objective's weights and limits as column indices; checks the baseline's values."""
+    from planner.objective import score_setups
+
+    names = list(ops_list[0].metric_names)
+    for k, ops in enumerate(ops_list):
+        if list(ops.metric_names) != names:
+            raise PlannerError(f"sweep: case {k} has the screening metrics {ops.metric_names}, "
+                               f"case 0 {tuple(names)}; sweep models with the same outputs")
+    for k in range(len(ops_list)):  # score_setups checks the metrics and the baseline
+        score_setups(pd.DataFrame(base_metrics[k][None, :], columns=names, index=["baseline"]),
+                     objective, baseline="baseline")
+    col = {m: j for j, m in enumerate(names)}
+    limits = tuple((col[m], float(spec.get("max_ratio", np.nan)), float(spec.get("max", np.nan)))
+                   for m, spec in objective.limits.items())
+    return _Scoring(metric_idx=np.array([col[m] for m in objective.weights], dtype=np.intp),
+                    weights=np.array(list(objective.weights.values()), dtype=float),
+                    limits=limits, base=np.asarray(base_metrics, dtype=float), combine=combine)
+
+
+def _check_options(top_share, top, chunk_size, simulate_chunk, combine):
+    if combine not in COMBINE_MODES:
+        raise PlannerError(f"sweep: combine={combine!r} is unknown; use one of "
+                           f"{list(COMBINE_MODES)}")
+    if top is None and not (isinstance(top_share, (int, float)) and 0 < top_share <= 1):
+        raise PlannerError(f"sweep: top_share={top_share!r} must be in (0, 1], e.g. 0.01 for "
+                           "the best 1 %")
+    if top is not None and (isinstance(top, bool) or not isinstance(top, (int, np.integer))
+                            or top < 1):
+        raise PlannerError(f"sweep: top={top!r} must be a positive integer")
+    for name, v in (("chunk_size", chunk_size), ("simulate_chunk", simulate_chunk)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise PlannerError(f"sweep: {name}={v!r} must be a positive integer")
+
+
+def _case_labels(models, drives):
+    labels = []
+    for mi, (mname, model) in enumerate(models):
+        for di, (dname, drive) in enumerate(drives):
+            m = mname if mname is not None else (getattr(model, "name", None) or f"model{mi}")
+            d = dname if dname is not None else (getattr(drive, "name", None) or f"drive{di}")
+            if len(models) == 1:
+                labels.append(str(d))
+            elif len(drives) == 1:
+                labels.append(str(m))
+            else:
+                labels.append(f"{m} | {d}")
+    if len(set(labels)) != len(labels):
+        labels = [f"{j}: {lab}" for j, lab in enumerate(labels)]
+    return labels
+
+
+def sweep_setups(models, drives, library, *, setups=None, constraints=None, objective=None,
+                 baseline=None, top_share=0.01, top=None, combine="mean",
+                 chunk_size=DEFAULT_CHUNK_SIZE, simulate_chunk=DEFAULT_SIMULATE_CHUNK,
+                 oversample=2, band_hz=(1.0, 20.0), n_bands=96, max_iter=30, tol=1e-5,
+                 reduce_rtol=LOOP_REDUCE_RTOL, scheduler=None, client=None, n_workers=None,
+                 processes=True, progress=True):
+    """Screen a large set of setups on several models and drives, simulate and rank the best.
+
+    Parameters
+    ----------
+    models : model, sequence of models, or mapping name -> model
+        Each a VehicleModel, FullCarModel, VehicleParams or LoopPlant.
+    drives : ident.drive.Drive, sequence of drives, or mapping name -> drive
+        Every model is swept on every drive: ``len(models) * len(drives)`` cases.
+    library : ident.shocks.ShockLibrary
+    setups : sequence of planner.setups.Setup, optional
+        The candidates; default the enumeration of `constraints`.
+    constraints : dict, optional
+        Keyword arguments of :func:`setup_space` (those of
+        :func:`planner.setups.enumerate_setups` but ``max_setups``); default every
+        left-right symmetric setup. ``{"symmetry": "none"}`` gives every 4-corner
+        combination.
+    objective : planner.objective.Objective, optional
+        Default :func:`planner.objective.default_objective`; normalized per case by the
+        baseline in that case.
+    baseline : Setup, str, optional
+        A Setup, a shock id (at every corner), a listed setup's name or ``"A/B/C/D"``;
+        default the objective's baseline, else the first setup. It is simulated always.
+    top_share : float
+        Share of the screened setups simulated in the time domain (at least one).
+    top : int, optional
+        Simulate this many instead of `top_share`.
+    combine : {"mean", "worst"}
+        A setup's sweep score: the mean or the largest of its case scores.
+    chunk_size : int
+        Candidates per screening task at most (bounds a task's memory: under 1 kB a
+        setup); smaller when needed to give every worker thread at least
+        :data:`TASKS_PER_THREAD` tasks (but not below :data:`MIN_CHUNK_SIZE`).
+    simulate_chunk : int
+        Setups per time-domain task.
+    oversample, band_hz, n_bands, max_iter, tol, reduce_rtol
+        As :func:`planner.predict.predict_setups` and
+        :func:`planner.screen.screen_setups`.
+    scheduler : str, optional
+        ``"local"`` (default): a new :class:`dask.distributed.LocalCluster` (`n_workers`,
+        default one per core, closed at the end); a scheduler address
+        (``"tcp://host:8786"``); or ``"none"`` for this process only.
+    client : distributed.Client, optional
+        An existing client to use instead (not closed).
+    n_workers : int, optional
+        Workers of a new LocalCluster.
+    processes : bool
+        LocalCluster workers as processes (default) or threads of this process.
+    progress : bool
+        Progress bars (tqdm) over the tasks.
+
+    Returns
+    -------
+    SweepResult
+
+    Raises
+    ------
+    PlannerError
+        On bad options, an unreachable scheduler, a baseline not found, metrics the
+        objective needs missing, or as :func:`setup_space`.
+    TypeError
+        On a model, drive or objective of the wrong type.
+
+    Notes
+    -----
+    The results do not depend on `scheduler`, `n_workers`, `chunk_size` or the order the
+    tasks finish in (see the module docstring). Memory: the driver keeps 17 bytes per
+    screened setup and the metrics of ``2 * n_top`` setups; a task holds one chunk.
+    """
+    from planner.objective import Objective, default_objective, score_setups
+    from planner.rank import _mark_inventory
+
+    t0 = time.perf_counter()
+    objective = default_objective() if objective is None else objective
+    if not isinstance(objective, Objective):
+        raise TypeError(f"sweep: objective must be a planner.objective.Objective (read one "
+                        f"with read_objective), got {type(objective).__name__}")
+    _check_options(top_share, top, chunk_size, simulate_chunk, combine)
+    if setups is not None and constraints:
+        raise PlannerError("sweep: give either setups or constraints, not both")
+    space = setup_space(library, setups=setups, **(constraints or {}))
+    model_list = _as_list(models, "models")
+    from ident.drive import Drive
+
+    drive_list = _as_list(drives, "drives", Drive)
+    labels = _case_labels(model_list, drive_list)
+    base, base_idx = _baseline_setup(space, library, objective, baseline)
+    # the scheduler first: a wrong address fails before any work
+    runner = _start(scheduler, client, n_workers, processes)
+    try:
+        # 1. the cases, once, here
+        cases = []
+        k = 0
+        for _, model in model_list:
+            for _, drive in drive_list:
+                cases.append(_prepare_case(labels[k], model, drive, band_hz, n_bands, reduce_rtol))
+                k += 1
+        shocks = _ShockTable.of(library)
+        code_of = {sid: j for j, sid in enumerate(space.shock_ids)}
+        base_codes = np.array([[code_of[sid] for sid in base.ids()]], dtype=np.intp)
+        base_metrics = [_screen_codes(ops, shocks, base_codes, max_iter, tol)[0][0]
+                        for _, _, ops in cases]
+        scoring = _scoring(objective, [ops for _, _, ops in cases], base_metrics, combine)
+        n_cand = len(space)
+        n_top_max = int(top) if top is not None else max(1, math.ceil(top_share * n_cand))
+        # every worker imports the engine and loads its kernels before the clock starts
+        plant0, drive0, ops0 = cases[0]
+        runner.everywhere(_warm, ops0, shocks, base_codes, plant0, drive0, [base], library,
+                          oversample, tuple(band_hz))
+        t_prep = time.perf_counter() - t0
+        # 2. screening, chunk by chunk
+        t1 = time.perf_counter()
+        ops_ref = runner.scatter([ops for _, _, ops in cases])
+        shocks_ref, space_ref, scoring_ref = (runner.scatter(x) for x in (shocks, space, scoring))
+        # at least TASKS_PER_THREAD tasks a worker thread, so that none idles at the end
+        chunk = int(min(chunk_size, max(MIN_CHUNK_SIZE, math.ceil(
+            n_cand / (TASKS_PER_THREAD * runner.n_threads)))))
+        starts = list(range(0, n_cand, chunk))
+        args = [(ops_ref, shocks_ref, space_ref, scoring_ref, a, min(a + chunk, n_cand),
+                 n_top_max, max_iter, tol) for a in starts]
+        log.info("sweep: screening %d candidate setups x %d case(s) in %d chunks (%s)",
+                 n_cand, len(cases), len(starts), runner.kind)
+        parts = [None] * len(starts)
+        top_idx = np.zeros(0, dtype=np.int64)
+        top_met = np.zeros((0, len(cases), len(cases[0][2].metric_names)))
+        top_score = np.zeros(0)
+        top_feas = np.zeros(0, dtype=bool)
+        not_converged = 0
+        for j, res in runner.map_unordered(_screen_chunk, args, progress, "sweep: screen"):
+            parts[j] = (res["index"], res["score"], res["feasible"])
+            not_converged += res["not_converged"]
+            pos = np.searchsorted(res["index"], res["top_index"])
+            top_idx = np.concatenate([top_idx, res["top_index"]])
+            top_met = np.concatenate([top_met, res["top_metrics"]])
+            top_score = np.concatenate([top_score, res["score"][pos]])
+            top_feas = np.concatenate([top_feas, res["feasible"][pos]])
+            keep = _order(top_feas, top_score, top_idx)[:n_top_max]
+            top_idx, top_met = top_idx[keep], top_met[keep]
+            top_score, top_feas = top_score[keep], top_feas[keep]
+        index = np.concatenate([p[0] for p in parts])
+        score = np.concatenate([p[1] for p in parts])
+        feasible = np.concatenate([p[2] for p in parts])
+        t_screen = time.perf_counter() - t1
+        n_scr = int(index.size)
+        if not n_scr:
+            raise PlannerError("sweep: no setup of the enumeration fits the inventory; raise "
+                               "the counts, choose other shocks or pass "
+                               "respect_inventory=False")
+        if not_converged:
+            log.warning("sweep: screening: %d setup-cases did not reach the tolerance in %d "
+                        "iterations", not_converged, max_iter)
+        n_top = int(top) if top is not None else max(1, math.ceil(top_share * n_scr))
+        n_top = min(n_top, n_scr)
+        top_idx, top_met, top_score = top_idx[:n_top], top_met[:n_top], top_score[:n_top]
+        log.info("sweep: screened %d setups x %d case(s) in %.1f s (%.0f setup-cases/s)",
+                 n_scr, len(cases), t_screen, n_scr * len(cases) / max(t_screen, 1e-9))
+        # 3. the time domain on the best and the baseline
+        t2 = time.perf_counter()
+        sim = list(space.setups(top_idx))
+        if base_idx is None or base_idx not in set(top_idx.tolist()):
+            if base.name in {s.name for s in sim}:
+                raise PlannerError(f"sweep: baseline {base.name!r} has the name of a swept "
+                                   "setup with other shocks; rename the baseline")
+            sim.append(base)
+        plant_refs = [runner.scatter(p) for p, _, _ in cases]
+        drive_refs = [runner.scatter(d) for _, d, _ in cases]
+        lib_ref = runner.scatter(library)
+        groups = [sim[a:a + simulate_chunk] for a in range(0, len(sim), simulate_chunk)]
+        targs = [(plant_refs[k], drive_refs[k], g, lib_ref, oversample, tuple(band_hz))
+                 for k in range(len(cases)) for g in groups]
+        tparts = [None] * len(targs)
+        for j, res in runner.map_unordered(_simulate_chunk, targs, progress,
+                                           "sweep: simulate"):
+            tparts[j] = res
+        t_sim = time.perf_counter() - t2
+    finally:
+        runner.close()
+    # 4. scores per case, combined, ranked
+    names = [s.name for s in sim]
+    case_tables, screen_tables = {}, {}
+    metric_names = list(cases[0][2].metric_names)
+    for k, label in enumerate(labels):
+        td = pd.concat(tparts[k * len(groups):(k + 1) * len(groups)])
+        sc = score_setups(td, objective, baseline=base.name).table
+        case_tables[label] = pd.concat([td, _mark_inventory(sc, sim, library)], axis=1)
+        rows = np.vstack([top_met[:, k], base_metrics[k][None, :]])[:len(sim)]
+        st = pd.DataFrame(rows, columns=metric_names, index=pd.Index(names, name="setup"))
+        st.insert(0, "LF", [s.ids()[0] for s in sim])
+        for c, col in enumerate(CORNERS[1:], start=1):
+            st.insert(c, col, [s.ids()[c] for s in sim])
+        screen_tables[label] = pd.concat(
+            [st, score_setups(st, objective, baseline=base.name).table], axis=1)
+    case_scores = [case_tables[lab]["score"].to_numpy(dtype=float) for lab in labels]
+    comb = scoring.combined(case_scores)
+    feas = np.logical_and.reduce([case_tables[lab]["feasible"].to_numpy(dtype=bool)
+                                  for lab in labels])
+    viol = []
+    for r in range(len(sim)):
+        texts = [f"[{lab}] {case_tables[lab]['violations'].iloc[r]}" for lab in labels
+                 if case_tables[lab]["violations"].iloc[r]]
+        viol.append("; ".join(texts) if len(labels) > 1 else
+                    (case_tables[labels[0]]["violations"].iloc[r]))
+    order = _order(feas, comb, np.arange(len(sim)))
+    rank = np.empty(len(sim), dtype=np.int64)
+    rank[order] = np.arange(1, len(sim) + 1)
+    # screening score and rank of every simulated setup among all screened
+    scr_score = np.append(top_score, [np.nan] * (len(sim) - n_top))
+    scr_rank = np.arange(1, n_top + 1).tolist()
+    if len(sim) > n_top:  # the baseline, below the top
+        if base_idx is not None:
+            at = int(np.searchsorted(index, base_idx))
+            scr_score[-1] = score[at]
+            scr_rank.append(_rank_of(at, feasible, score, index))
+        else:
+            scr_rank.append(-1)  # not among the swept setups
+    table = pd.DataFrame({c: [s.ids()[j] for s in sim] for j, c in enumerate(CORNERS)},
+                         index=pd.Index(names, name="setup"))
+    table["score"] = comb
+    table["feasible"] = feas
+    table["violations"] = viol
+    table["rank"] = rank
+    table["screening_score"] = scr_score
+    table["screening_rank"] = np.array(scr_rank, dtype=np.int64)
+    for lab, s in zip(labels, case_scores):
+        table[f"score@{lab}"] = s
+    table = table.sort_values("rank", kind="stable")
+    from scipy.stats import spearmanr
+
+    both = np.isfinite(table["screening_score"]) & np.isfinite(table["score"])
+    rho = float(spearmanr(table.loc[both, "screening_score"], table.loc[both, "score"]).statistic) \
+        if both.sum() > 2 else float("nan")
+    best_scr = table["screening_rank"].where(table["screening_rank"] > 0).idxmin()
+    agreement = {"spearman": rho, "n": int(len(table)),
+                 "same_best": bool(table.index[0] == best_scr)}
+    seconds = {"prepare": t_prep, "screen": t_screen, "simulate": t_sim}
+    settings = {"cases": tuple(labels), "combine": combine, "n_candidates": n_cand,
+                "n_screened": n_scr, "n_top": n_top, "top_share": top_share,
+                "chunk_size": chunk, "simulate_chunk": int(simulate_chunk),
+                "scheduler": runner.kind, "address": runner.address,
+                "n_workers": runner.n_workers, "oversample": oversample,
+                "band_hz": tuple(band_hz), "seconds": seconds,
+                "screen_setups_per_s": n_scr * len(cases) / max(t_screen, 1e-9),
+                "simulate_setups_per_s": len(sim) * len(cases) / max(t_sim, 1e-9)}
+    log.info("sweep: simulated %d setups x %d case(s) in %.1f s; best %r", len(sim),
+             len(cases), t_sim, table.index[0])
+    return SweepResult(table=table, cases=case_tables, screening_top=screen_tables,
+                       screening_index=index, screening_score=score,
+                       screening_feasible=feasible, space=space, baseline=base.name,
+                       objective=objective, agreement=agreement, settings=settings)

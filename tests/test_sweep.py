@@ -1,0 +1,293 @@
+"""Tests of planner.sweep: the lazy setup space against enumerate_setups, bounded memory,
+the Dask sweep against the single-process path (bit for bit), chunking invariance,
+agreement with screen_setups / predict_setups / rank_setups, several cases, bad options
+and schedulers, and the command line."""
+
+import math
+import tracemalloc
+
+import numpy as np
+import pandas as pd
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from ident.channels import CORNERS
+from ident.errors import PlannerError
+from planner import sweep as sweep_mod
+from planner.objective import score_setups
+from planner.predict import predict_setups
+from planner.rank import rank_setups
+from planner.screen import screen_setups
+from planner.setups import Setup, enumerate_setups
+from planner.sweep import RTOL_SCORE_ROUNDOFF, setup_space, sweep_setups
+
+# the drive's rig response is computed with one BLAS thread in a sweep, with all in
+# predict_setups: the last bits of the metrics differ (measured 3e-13 relative)
+RTOL_BLAS_THREADS = 1e-11
+# 30^4 candidates decoded 10,000 at a time: a chunk's arrays are about 1 MB, all of them
+# at once 810,000 x 4 codes = 26 MB (plus the index)
+CHUNK = 10_000
+MAX_CHUNKED_PEAK_BYTES = 8 * 2**20
+CRATE_10 = ["B20", "L12", "L28", "DS", "DM", "DF", "RB", "BB", "BO", "TD"]  # 10^4 setups
+TEN_THOUSAND = {"symmetry": "none", "shocks": CRATE_10, "respect_inventory": False}
+
+
+def _crate(n):
+    from ident.shocks import LinearShock, ShockLibrary
+
+    return ShockLibrary.from_models([LinearShock(f"S{k}", 500.0 * k, count=3)
+                                     for k in range(1, n + 1)])
+
+
+def _frames_identical(a, b):
+    pd.testing.assert_frame_equal(a, b, check_exact=True)
+
+
+# ---------------------------------------------------------------- the space of setups
+
+
+@pytest.mark.parametrize("constraints", [
+    {},
+    {"symmetry": "none"},
+    {"symmetry": "none", "respect_inventory": False},
+    {"axles": "same"},
+    {"symmetry": "none", "axles": "same"},
+    {"fixed": {"LR": "B20"}, "shocks": {"front": ["DS", "L12", "B20"]}},
+    {"symmetry": "none", "shocks": {"LF": ["RB", "BB"], "rear": ["RB", "BB", "TD"]}},
+    {"name_format": "LF={LF} RF={RF} LR={LR} RR={RR}"},
+])
+def test_space_decodes_the_enumeration(demo_library, constraints):
+    """Decoded in chunks, a space gives enumerate_setups' setups: same order, names, ids."""
+    expected = enumerate_setups(demo_library, max_setups=None, **constraints)
+    space = setup_space(demo_library, **constraints)
+    parts = [space.chunk(a, a + 1000) for a in range(0, len(space), 1000)]
+    index = np.concatenate([p[0] for p in parts])
+    assert space.names(index) == [s.name for s in expected]
+    assert space.ids(index) == [s.ids() for s in expected]
+    assert space.setups(index) == tuple(expected)
+
+
+def test_space_find_and_listed_setups(demo_library, baseline_setup):
+    space = setup_space(demo_library, symmetry="none")
+    idx = space.find(("DS", "DS", "B20", "TD"))
+    assert space.names([idx]) == ["DS/DS/B20/TD"]
+    assert space.find(("RB", "RB", "RB", "B20")) is None  # count 2: skipped
+    assert space.find(("XX", "B20", "B20", "B20")) is None
+    listed = setup_space(demo_library, setups=[baseline_setup, Setup("x", dict(
+        LF="DS", RF="DS", LR="B20", RR="B20"))])
+    assert len(listed) == 2 and listed.find(("DS", "DS", "B20", "B20")) == 1
+    assert listed.names([1, 0]) == ["x", "baseline"]
+
+
+def test_space_generation_is_memory_bounded():
+    """A 30-shock crate's 810,000 four-corner setups decoded chunk by chunk: the peak is one
+    chunk's, not the enumeration's (no Setup objects, no full code array)."""
+    space = setup_space(_crate(30), symmetry="none", respect_inventory=False)
+    assert len(space) == 30**4
+    tracemalloc.start()
+    try:
+        n = 0
+        last = -1
+        for a in range(0, len(space), CHUNK):
+            index, codes = space.chunk(a, a + CHUNK)
+            assert codes.shape == (index.size, 4) and index[0] == last + 1
+            n += index.size
+            last = int(index[-1])
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert n == 30**4 and last == 30**4 - 1
+    assert peak < MAX_CHUNKED_PEAK_BYTES, f"peak {peak / 2**20:.1f} MiB"
+    assert space.names([809_999]) == ["S30/S30/S30/S30"]
+
+
+# ---------------------------------------------------------------- Dask = one process
+
+
+@pytest.fixture(scope="module")
+def single(paper_model, track_drive, demo_library):
+    """10,000 setups (every 4-corner combination of 10 shocks), one process."""
+    return sweep_setups(paper_model, track_drive, demo_library, constraints=TEN_THOUSAND,
+                        scheduler="none", progress=False)
+
+
+def test_dask_sweep_equals_single_process(single, paper_model, track_drive, demo_library):
+    """A LocalCluster of 2 worker processes gives the same ranking and the same numbers, bit
+    for bit, as one process (other chunk size too)."""
+    dask = sweep_setups(paper_model, track_drive, demo_library, constraints=TEN_THOUSAND,
+                        scheduler="local", n_workers=2, chunk_size=1500, progress=False)
+    assert single.settings["n_screened"] == dask.settings["n_screened"] == 10_000
+    assert dask.settings["scheduler"] == "local" and dask.settings["n_workers"] == 2
+    assert single.table.index.tolist() == dask.table.index.tolist()
+    _frames_identical(single.table, dask.table)
+    for label in single.cases:
+        _frames_identical(single.cases[label], dask.cases[label])
+        _frames_identical(single.screening_top[label], dask.screening_top[label])
+    assert_array_equal(single.screening_index, dask.screening_index)
+    assert_array_equal(single.screening_score, dask.screening_score)
+    assert_array_equal(single.screening_feasible, dask.screening_feasible)
+
+
+@pytest.mark.parametrize("chunk_size", [997, 4096])
+def test_chunking_does_not_change_results(single, paper_model, track_drive, demo_library,
+                                          chunk_size):
+    other = sweep_setups(paper_model, track_drive, demo_library, constraints=TEN_THOUSAND,
+                         scheduler="none", chunk_size=chunk_size, simulate_chunk=7,
+                         progress=False)
+    _frames_identical(single.table, other.table)
+    assert_array_equal(single.screening_score, other.screening_score)
+
+
+def test_existing_cluster_by_client_and_address(paper_model, track_drive, demo_library):
+    """An existing cluster (thread workers in this process), given as a client or by its
+    scheduler's address, gives the one-process results."""
+    from distributed import Client, LocalCluster
+
+    constraints = {"shocks": CRATE_10}
+    ref = sweep_setups(paper_model, track_drive, demo_library, constraints=constraints,
+                       top=8, scheduler="none", progress=False)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        got = sweep_setups(paper_model, track_drive, demo_library, constraints=constraints,
+                           top=8, client=client, chunk_size=9, progress=False)
+        by_address = sweep_setups(paper_model, track_drive, demo_library,
+                                  constraints=constraints, top=8,
+                                  scheduler=cluster.scheduler_address, progress=False)
+    assert got.settings["scheduler"] == "client"
+    assert by_address.settings["scheduler"] == "address"
+    assert by_address.settings["address"] == cluster.scheduler_address
+    _frames_identical(ref.table, got.table)
+    _frames_identical(ref.table, by_address.table)
+
+
+def test_best_share_is_simulated(single):
+    st = single.settings
+    assert st["n_top"] == math.ceil(0.01 * 10_000) == 100
+    t = single.table
+    assert len(t) == 101  # the best 1 % and the baseline B20/B20/B20/B20 (first setup)
+    assert single.baseline == "B20/B20/B20/B20" and single.baseline in t.index
+    assert t["rank"].tolist() == list(range(1, 102))
+    assert sorted(t["screening_rank"].tolist())[:100] == list(range(1, 101))
+    best = single.screening_order(100)
+    assert set(single.space.names(best)) <= set(t.index)
+    assert st["screen_setups_per_s"] > 0 and st["simulate_setups_per_s"] > 0
+
+
+# ---------------------------------------------------------------- agreement with the engines
+
+
+def test_agrees_with_screen_predict_and_rank(paper_model, track_drive, demo_library,
+                                             baseline_setup):
+    """On a list of setups: screening metrics equal screen_setups' bit for bit, scores
+    score_setups' to round-off, time-domain metrics predict_setups' to the BLAS round-off,
+    and the ranking equals rank_setups' (same simulated setups)."""
+    setups = [baseline_setup] + list(enumerate_setups(demo_library)[::4])
+    n_top = 6
+    res = sweep_setups(paper_model, track_drive, demo_library, setups=setups, top=n_top,
+                       baseline="baseline", scheduler="none", progress=False)
+    label = next(iter(res.cases))
+    scr = screen_setups(paper_model, track_drive, setups, demo_library)
+    st = res.screening_top[label]
+    metrics = scr.metric_names
+    assert_array_equal(st[metrics].to_numpy(), scr.table.loc[st.index, metrics].to_numpy())
+    ref_scores = score_setups(scr.table, baseline="baseline").table
+    assert_allclose(res.screening_score, ref_scores["score"].to_numpy(),
+                    rtol=RTOL_SCORE_ROUNDOFF)
+    sim = [s for s in setups if s.name in res.table.index]
+    td = predict_setups(paper_model, track_drive, sim, demo_library).table
+    got = res.cases[label].loc[td.index, metrics]
+    assert_allclose(got.to_numpy(), td[metrics].to_numpy(), rtol=RTOL_BLAS_THREADS)
+    ranking = rank_setups(paper_model, track_drive, demo_library, setups=setups, top=n_top,
+                          n_check=0, baseline="baseline", uncertainty=False)
+    assert ranking.table.index.tolist() == res.table.index.tolist()
+    assert_allclose(res.table["score"], ranking.table["score"], rtol=RTOL_BLAS_THREADS)
+
+
+def test_several_drives_and_models_combine(paper_vehicle, track_drive, demo_library):
+    """Two models x two drives = four cases; the sweep score is the mean (or the largest) of
+    the case scores, feasible only where every case is."""
+    from dataclasses import replace
+
+    from ident.drive import make_track_drive
+    from ident.vehicle import build_full_car
+
+    other = make_track_drive(duration_s=40.0, fs_hz=100.0, seed=11, name="track other",
+                             wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,
+                             track_width_m=paper_vehicle.track_front_m)
+    models = {"car": build_full_car(paper_vehicle),
+              "heavy": build_full_car(replace(paper_vehicle,
+                                              sprung_mass_kg=1.2 * paper_vehicle.sprung_mass_kg))}
+    kw = dict(constraints={"shocks": ["B20", "L12", "L28", "DS", "DF"]}, top=5,
+              scheduler="none", progress=False)
+    mean = sweep_setups(models, [track_drive, other], demo_library, **kw)
+    worst = sweep_setups(models, [track_drive, other], demo_library, combine="worst", **kw)
+    labels = mean.settings["cases"]
+    assert len(labels) == 4 and labels[0] == "car | track test"
+    for res, combine in ((mean, np.mean), (worst, np.max)):
+        cols = [f"score@{lab}" for lab in labels]
+        assert_allclose(res.table["score"], combine(res.table[cols].to_numpy(), axis=1),
+                        rtol=RTOL_SCORE_ROUNDOFF)
+        feas = np.logical_and.reduce([res.cases[lab]["feasible"].loc[res.table.index]
+                                      for lab in labels])
+        assert_array_equal(res.table["feasible"].to_numpy(), feas)
+
+
+# ---------------------------------------------------------------- bad input
+
+
+@pytest.mark.parametrize("kwargs, error, match", [
+    ({"scheduler": "nonsense"}, PlannerError, "neither 'local', 'none' nor a scheduler"),
+    ({"scheduler": 3}, TypeError, "scheduler must be"),
+    ({"top_share": 0.0}, PlannerError, "top_share"),
+    ({"top": 0}, PlannerError, "top=0"),
+    ({"combine": "best"}, PlannerError, "combine='best'"),
+    ({"chunk_size": 0}, PlannerError, "chunk_size=0"),
+    ({"baseline": "nope"}, PlannerError, "baseline 'nope'"),
+    ({"constraints": {"symmetry": "diagonal"}}, PlannerError, "symmetry='diagonal'"),
+    ({"objective": "grip"}, TypeError, "Objective"),
+])
+def test_bad_options(paper_model, track_drive, demo_library, kwargs, error, match):
+    with pytest.raises(error, match=match):
+        sweep_setups(paper_model, track_drive, demo_library, progress=False,
+                     **{"scheduler": "none", **kwargs})
+
+
+def test_unreachable_scheduler_is_a_clear_error(paper_model, track_drive, demo_library,
+                                                monkeypatch):
+    monkeypatch.setattr(sweep_mod, "CONNECT_TIMEOUT_S", 2.0)
+    with pytest.raises(PlannerError, match=r"cannot reach the Dask scheduler at "
+                       r"'tcp://127.0.0.1:9'.*dask scheduler"):
+        sweep_setups(paper_model, track_drive, demo_library, scheduler="tcp://127.0.0.1:9",
+                     progress=False)
+
+
+# ---------------------------------------------------------------- command line
+
+
+def test_cli_sweep(tmp_path, track_drive, capsys):
+    import tomllib
+
+    from ident.drive import write_drive
+    from planner.cli import main
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    write_drive(track_drive, tmp_path / "drive.csv")
+    out = tmp_path / "sweep"
+    args = ["-q", "sweep", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
+            "--shocks", str(DEMO_LIBRARY_PATH), "--only", "B20,L12,L28,DS",
+            "--top", "4", "--scheduler", "none", "--out", str(out)]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "screened 256 setups x 1 case(s)" in text and "scheduler none" in text
+    table = pd.read_csv(out / "ranking.csv")
+    assert list(table.columns[:5]) == ["setup", *CORNERS] and len(table) == 5
+    summary = tomllib.loads((out / "sweep.toml").read_text())
+    assert summary["n_screened"] == 256 and summary["best"] == table["setup"][0]
+    assert (out / summary["cases"][0]["file"]).is_file()
+    assert main(args) == 2  # existing folder without --overwrite
+    assert "already exists" in capsys.readouterr().err
+    bad = args[:-4] + ["--scheduler", "nonsense", "--out", str(tmp_path / "o2")]
+    assert main(bad) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("shockplan: error: sweep: scheduler 'nonsense'")
+    assert "Traceback" not in err
