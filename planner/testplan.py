@@ -638,7 +638,8 @@ def _information_sheet(ws, plan, units, footer):
                "greedy_min": "the greedy plan's rig time [min]"}
     sections = [(f"criterion: {_CRITERIA.get(plan.criterion, plan.criterion)}, larger is "
                  "better", [(k, v, meaning.get(k, "")) for k, v in plan.values.items()]),
-                ("solver", [(k, v, "") for k, v in plan.solver.items()]),
+                ("solver", [(k, v, "") for k, v in plan.solver.items()
+                            if not k.endswith("_s")]),  # timings: logged, not in the file
                 ("settings", [(k, v, "") for k, v in plan.settings.items()])]
     for title, items in sections:
         ws.cell(row=r, column=2, value=title).font = fonts["bold"]

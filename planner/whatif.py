@@ -1440,6 +1440,10 @@ def _safe_name(name):
     return keep.strip("_") or "setup"
 
 
+#: Settings that time a run: logged and kept on the result, not written to the files.
+_TIMING_KEYS = ("elapsed_s", "evaluations_per_s")
+
+
 def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
     """Write a what-if's files into a folder (built aside, moved into place at the end).
 
@@ -1519,6 +1523,8 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
         sheet(wb.create_sheet("table"), table[cols])
         info = wb.create_sheet("settings")
         for k, v in result.settings.items():
+            if k in _TIMING_KEYS:  # a rerun writes the same cells (timings go to the log)
+                continue
             info.append([k, _xl(v if not isinstance(v, (list, tuple)) else ", ".join(map(str, v)))])
         info.append(["units", units])
         info.append(["baseline", result.baseline])
