@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from ident._io import atomic_path, atomic_write_text, did_you_mean, read_toml
+from ident._io import atomic_path, atomic_write_text, did_you_mean, read_toml, write_csv_frame
 from ident.channels import (ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS,
                              missing_aero, quantity_of, rig_inputs_of)
 from ident.errors import SessionError
@@ -686,7 +686,7 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
     )
     with atomic_path(path, overwrite=overwrite) as tmp:
         if kind == "csv":
-            frame.to_csv(tmp, index=False)
+            write_csv_frame(frame, tmp)
         else:
             frame.to_parquet(tmp, index=False)
 
@@ -1220,7 +1220,7 @@ def _write_mapped_run_table(path, time_s, channels, *, units, channel_map):
     frame = pd.DataFrame(data)
     with atomic_path(path, overwrite=False) as tmp:
         if kind == "csv":
-            frame.to_csv(tmp, index=False)
+            write_csv_frame(frame, tmp)
         else:
             frame.to_parquet(tmp, index=False)
 
