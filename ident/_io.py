@@ -15,7 +15,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 import tomli_w
 
 __all__ = ["read_toml", "write_csv_frame", "atomic_write_text", "atomic_write_bytes", "atomic_write_toml",
-           "atomic_path", "check_can_write", "check_output", "did_you_mean"]
+           "atomic_path", "atomic_dir", "check_can_write", "check_output", "did_you_mean"]
 
 
 def read_toml(path, *, error=ValueError, what="TOML file"):
@@ -63,6 +63,39 @@ class atomic_path:
             os.replace(self.tmp, self.path)
         else:
             self.tmp.unlink(missing_ok=True)
+        return False
+
+
+class atomic_dir:
+    """Context manager giving a temporary folder that replaces folder `path` on success.
+
+    An existing, non-empty `path` (or a file there) is refused unless `overwrite`
+    (checked on entry, before any work). The temporary folder lives beside `path`; on
+    success it replaces `path` (an old one removed first), on an exception it is removed
+    and `path` is left as it was.
+    """
+
+    def __init__(self, path, *, overwrite=False):
+        self.path = Path(path)
+        self.overwrite = overwrite
+
+    def __enter__(self):
+        out = self.path
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            check_can_write(out, overwrite=self.overwrite)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        self.work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+        return self.work
+
+    def __exit__(self, exc_type, exc, tb):
+        import shutil
+
+        if exc_type is None:
+            if self.path.exists():
+                shutil.rmtree(self.path) if self.path.is_dir() else self.path.unlink()
+            self.work.rename(self.path)
+        else:
+            shutil.rmtree(self.work, ignore_errors=True)
         return False
 
 

@@ -23,8 +23,6 @@ into place at the end.
 from __future__ import annotations
 
 import logging
-import shutil
-import tempfile
 import warnings
 from pathlib import Path
 
@@ -61,7 +59,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     FileExistsError
         If `out` exists, is not empty and `overwrite` is false.
     """
-    from ident._io import check_can_write
+    from ident._io import atomic_dir
     from ident.drive import make_track_drive, write_drive
     from ident.model import identify_session
     from ident.plots import write_frf_plots
@@ -75,11 +73,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     from planner.setups import Setup
 
     out = Path(out)
-    if out.exists() and any(out.iterdir()):
-        check_can_write(out, overwrite=overwrite)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    with atomic_dir(out, overwrite=overwrite) as work:
         vehicle = example_vehicle()
         plan = default_plan()
         units = plan.units
@@ -117,12 +111,6 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
                                       progress=progress)
         write_optimum(optimum, library, work / "optimize", units=units)
         modes = modal_summary(vehicle).table()
-        if out.exists():
-            shutil.rmtree(out)
-        work.rename(out)
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
-        raise
     best = ranking.table.iloc[0]
     lines = [
         f"shockplan demo -> {out}",

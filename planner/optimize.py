@@ -1810,19 +1810,15 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
     from openpyxl import Workbook
     from openpyxl.styles import Font
 
-    from ident._io import check_can_write
+    from ident._io import atomic_dir
     from ident.shocks import write_shock_library
     from planner.setups import write_setups
 
     units = check_units(units, where="units", error=PlannerError)
     out = Path(out_dir)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        check_can_write(out, overwrite=overwrite)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     names = {"shocks": "optimal_shocks.toml", "setups": "optimal_setup.csv",
              "xlsx": "optimize.xlsx", "curves": "curves.png", "convergence": "convergence.csv"}
-    try:
+    with atomic_dir(out, overwrite=overwrite) as work:
         lib = ShockLibrary(list(optimum.shocks.values())
                            + [m for m in library.values() if m.id not in optimum.shocks])
         write_shock_library(lib, work / names["shocks"], units=units)
@@ -1876,12 +1872,6 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
         # wall times are logged, not written: a rerun writes the same bytes
         optimum.history.drop(columns=["time_s"], errors="ignore").to_csv(
             work / names["convergence"], index=False, float_format="%.9g")
-        if out.exists():
-            shutil.rmtree(out)
-        work.rename(out)
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
-        raise
     return {k: out / v for k, v in names.items()}
 
 

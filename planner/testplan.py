@@ -43,8 +43,6 @@ import functools
 import logging
 import math
 import re
-import shutil
-import tempfile
 import zipfile
 from pathlib import Path
 
@@ -56,7 +54,7 @@ from openpyxl.styles import Alignment, Border, Font, PatternFill, Side
 from openpyxl.utils import get_column_letter
 from openpyxl.worksheet.pagebreak import Break
 
-from ident._io import atomic_path, check_can_write
+from ident._io import atomic_dir, atomic_path, check_can_write
 from ident.channels import CORNERS
 from ident.drive import write_drive
 from ident.errors import PlannerError
@@ -957,13 +955,9 @@ def write_plan(plan, out_dir, *, units="SI", overwrite=False):
     """
     units = check_units(units, where="units", error=PlannerError)
     out = Path(out_dir)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        check_can_write(out, overwrite=overwrite)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     names = {"plan": "plan.toml", "shocks": "shocks.toml", "xlsx": "test_plan.xlsx",
              "csv": "test_plan.csv", "figure": "design.png", "drives": _DRIVE_DIR}
-    try:
+    with atomic_dir(out, overwrite=overwrite) as work:
         (work / _DRIVE_DIR).mkdir()
         for name, drive in plan.drives.items():
             write_drive(drive, work / _DRIVE_DIR / f"{name}.csv", units=units)
@@ -973,10 +967,4 @@ def write_plan(plan, out_dir, *, units="SI", overwrite=False):
         rows.to_csv(work / names["csv"], index=False, float_format="%.6g")
         write_run_sheet(plan, work / names["xlsx"], units=units)
         design_figure(plan).savefig(work / names["figure"], dpi=110)
-        if out.exists():
-            shutil.rmtree(out)
-        work.rename(out)
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
-        raise
     return {k: out / v for k, v in names.items()}

@@ -81,8 +81,6 @@ from __future__ import annotations
 import itertools
 import logging
 import math
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -1464,17 +1462,13 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
     from openpyxl import Workbook
     from openpyxl.styles import Font, PatternFill
 
-    from ident._io import check_can_write
+    from ident._io import atomic_dir
     from planner.report import ranking_to_units
 
     units = check_units(units, where="units", error=PlannerError)
     out = Path(out_dir)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        check_can_write(out, overwrite=overwrite)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     files = {}
-    try:
+    with atomic_dir(out, overwrite=overwrite) as work:
         table = ranking_to_units(result.table, units)
         table.to_csv(work / "whatif.csv", index=False, float_format="%.6g")
         result.robust.to_csv(work / "robust.csv", float_format="%.6g")
@@ -1530,12 +1524,6 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
         info.append(["baseline", result.baseline])
         info.append(["objective", result.objective.name])
         wb.save(work / "whatif.xlsx")
-        if out.exists():
-            shutil.rmtree(out)
-        work.rename(out)
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
-        raise
     for p in sorted(out.rglob("*")):
         if p.is_file():
             files[str(p.relative_to(out))] = p
