@@ -36,6 +36,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Mapping
@@ -44,6 +45,7 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import signal
 
 from .channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero, rig_inputs_of
@@ -85,6 +87,9 @@ _RTOL_RATE = 1e-6
 #: ``max(up, down)`` and Kaiser window parameter.
 _FIR_HALF_LENGTH = 20
 _FIR_KAISER_BETA = 8.0
+#: Output samples per FFT segment of :func:`_decimate_bandlimited` (1024: segments
+#: of 8192 input samples at r = 8, 2.5x faster than one FFT of a whole 800 s record).
+_DECIMATE_SEGMENT = 1024
 _SWEEP_METHODS = ("linear", "quadratic", "logarithmic", "hyperbolic")
 
 
@@ -891,10 +896,119 @@ def resample_bandlimited(x, up, down=1, *, axis=0):
     """
     if up == down:
         return np.array(x, dtype=float, copy=True)
-    rate = max(up, down)
-    fir = signal.firwin(2 * _FIR_HALF_LENGTH * rate + 1, 1.0 / rate,
-                        window=("kaiser", _FIR_KAISER_BETA))
-    return signal.resample_poly(x, up, down, axis=axis, window=fir)
+    return signal.resample_poly(x, up, down, axis=axis, window=_bandlimited_fir(max(up, down)))
+
+
+def _bandlimited_fir(rate):
+    """The anti-aliasing FIR of :func:`resample_bandlimited` for ``max(up, down) = rate``.
+
+    ``2 * _FIR_HALF_LENGTH * rate + 1`` taps, symmetric, gain 1 at 0 Hz.
+    """
+    return signal.firwin(2 * _FIR_HALF_LENGTH * rate + 1, 1.0 / rate,
+                         window=("kaiser", _FIR_KAISER_BETA))
+
+
+@functools.lru_cache(maxsize=8)
+def _bandlimited_response(r, n_fft):
+    """Real zero-phase frequency response of ``_bandlimited_fir(r) / r`` on an ``n_fft`` grid.
+
+    Read-only, ``n_fft // 2 + 1`` bins (an ``rfft`` grid); the ``1 / r`` is the
+    scale of the spectrum folding in :func:`_decimate_bandlimited`.
+    """
+    h = _bandlimited_fir(r)
+    half = (h.size - 1) // 2
+    hc = np.zeros(n_fft)
+    hc[:half + 1] = h[half:]  # centred on sample 0, circularly: zero phase
+    hc[n_fft - half:] = h[:half]
+    resp = sp_fft.rfft(hc).real / r  # the imaginary part is rounding (h is symmetric)
+    resp.flags.writeable = False
+    return resp
+
+
+def _decimate_bandlimited(rows, r, n_out, *, lead="edge"):
+    """Zero-phase band-limited decimation by ``r`` of 1-D records, by FFT.
+
+    The same numbers, to rounding, as extending each record by
+    ``pad = (_FIR_HALF_LENGTH + 1) * r`` samples at each end and calling
+    ``resample_bandlimited(extended, 1, r)[pad // r: pad // r + n_out]``, at
+    about a sixth of the cost for ``r = 8`` (measured in docs/DESIGN.md).
+
+    Parameters
+    ----------
+    rows : sequence of array_like
+        ``n_rows`` records of the same length ``n_in``, each 1-D.
+    r : int
+        Decimation factor, >= 1.
+    n_out : int
+        Samples to return per record, >= 1 and ``(n_out - 1) * r < n_in``.
+        Sample ``k`` is at input sample ``k * r`` in time.
+    lead : {"edge", "zero"}
+        What the record is extended by before its start: its first value or
+        zeros. After its end it is always extended by its last value.
+
+    Returns
+    -------
+    list of ndarray
+        ``n_rows`` arrays of ``n_out`` samples, each owning its data.
+
+    Raises
+    ------
+    ValueError
+        If the records are not 1-D of one length long enough for `n_out`, or
+        `lead` is unknown.
+
+    Notes
+    -----
+    Overlap-save: the extended record is cut into segments of ``L = Q r``
+    samples (``Q`` = :data:`_DECIMATE_SEGMENT` or less) that overlap by the
+    filter's length; each is filtered by a circular convolution (its ``rfft``
+    times the FIR's real, zero-phase response) that never wraps into the
+    ``Q - 2 * _FIR_HALF_LENGTH`` output samples kept from it, and its spectrum is
+    folded ``r`` times (aliased, as decimation does) so that the inverse
+    transform has ``Q`` points. Short segments keep the transforms in cache.
+    """
+    if lead not in ("edge", "zero"):
+        raise ValueError(f"_decimate_bandlimited: lead must be 'edge' or 'zero', got {lead!r}")
+    rows = [np.asarray(x, dtype=float) for x in rows]
+    n_in = rows[0].shape[-1] if rows else 0
+    if (any(x.shape != (n_in,) for x in rows) or n_out < 1 or (n_out - 1) * r >= n_in):
+        raise ValueError(
+            f"_decimate_bandlimited: records of shapes {sorted({x.shape for x in rows})} cannot "
+            f"give {n_out} samples decimated by {r}; expected 1-D records of one length "
+            f"> {(n_out - 1) * r}")
+    if r == 1:
+        return [x[:n_out].copy() for x in rows]
+    m0 = _FIR_HALF_LENGTH  # the filter's half length in output samples
+    e = m0 * r  # ... and in input samples: the lead of every segment
+    n_fold = min(_DECIMATE_SEGMENT, sp_fft.next_fast_len(n_out + 2 * m0, real=True))
+    q = n_fold - 2 * m0  # output samples kept per segment
+    seg = n_fold * r
+    n_seg = -(-n_out // q)
+    resp = _bandlimited_response(r, seg)
+    half = n_fold // 2
+    buf = np.empty((n_seg - 1) * q * r + seg)  # lead e, the record, its last value
+    tail = min(n_in, buf.size - e)
+    out = []
+    for x in rows:
+        buf[:e] = x[0] if lead == "edge" else 0.0
+        buf[e:e + tail] = x[:tail]
+        buf[e + tail:] = x[-1]
+        # segment j starts at input sample j q r - e; its output m0 + i is sample j q + i
+        segments = np.lib.stride_tricks.sliding_window_view(buf, seg)[::q * r]
+        spec = sp_fft.rfft(segments, axis=-1, workers=-1)
+        spec *= resp
+        # fold: every r-th sample of the filtered segment from an inverse FFT of n_fold
+        # points; bins above seg / 2 are the conjugates of those below
+        folded = spec[:, :half + 1].copy()
+        for m in range(1, r):
+            if 2 * m + 1 <= r:
+                folded += spec[:, m * n_fold: m * n_fold + half + 1]
+            else:
+                hi = (r - m) * n_fold
+                folded += np.conj(spec[:, hi - half: hi + 1][:, ::-1])
+        y = sp_fft.irfft(folded, n_fold, axis=-1, workers=-1)[:, m0:m0 + q]
+        out.append(y.reshape(-1)[:n_out].copy())
+    return out
 
 
 def resample_drive(drive, fs_hz):

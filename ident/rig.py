@@ -482,18 +482,19 @@ def _daq_sample(channels, r, n_samples):
     Nyquist frequency; sampled without the filter it folds into the band,
     acts like input noise on ``dF`` and biases the identified FRFs. The
     common filter cancels in every input/output relation.
+
+    Each record is extended by its end values over the filter's length; the
+    filtering is done by FFT (:func:`ident.drive._decimate_bandlimited`: the
+    same numbers as ``resample_bandlimited`` to rounding, about 4x faster on
+    an 800 s run at 8x oversampling).
     """
-    from ident.drive import _FIR_HALF_LENGTH, resample_bandlimited
+    from ident.drive import _decimate_bandlimited
 
     names = list(channels)
-    x = np.stack([np.asarray(channels[c], dtype=float) for c in names], axis=1)
     if r == 1:
-        out = x
-    else:
-        pad = (_FIR_HALF_LENGTH + 1) * r
-        x = np.pad(x, ((pad, pad), (0, 0)), mode="edge")
-        out = resample_bandlimited(x, 1, r, axis=0)[pad // r: pad // r + n_samples]
-    return {c: np.ascontiguousarray(out[:, j]) for j, c in enumerate(names)}
+        return {c: np.array(channels[c], dtype=float) for c in names}
+    out = _decimate_bandlimited([channels[c] for c in names], r, n_samples)
+    return dict(zip(names, out))
 
 
 def _loop_damping(models):

@@ -38,7 +38,8 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from ident._io import atomic_path, atomic_write_text, did_you_mean, read_toml, write_csv_frame
+from ident._io import (atomic_path, atomic_write_text, did_you_mean, read_toml, write_csv_frame,
+                       write_parquet_frame)
 from ident.channels import (ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS,
                              missing_aero, quantity_of, rig_inputs_of)
 from ident.errors import SessionError
@@ -688,7 +689,7 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
         if kind == "csv":
             write_csv_frame(frame, tmp)
         else:
-            frame.to_parquet(tmp, index=False)
+            write_parquet_frame(frame, tmp)
 
 
 # --------------------------------------------------------------------------------------
@@ -1222,7 +1223,7 @@ def _write_mapped_run_table(path, time_s, channels, *, units, channel_map):
         if kind == "csv":
             write_csv_frame(frame, tmp)
         else:
-            frame.to_parquet(tmp, index=False)
+            write_parquet_frame(frame, tmp)
 
 
 def append_runs(path, runs, *, run_format="csv"):

@@ -136,7 +136,8 @@ def cmd_identify(args):
                                  frf_method=args.frf_method, nperseg=args.nperseg,
                                  coherence_min=args.coherence_min, fit_method=args.method)
     noise = noise_report(model, session)
-    model = replace(model, settings=dict(model.settings, noise=noise))
+    # the noise report built the loop plant; the copy keeps it, and save stores it
+    model = model.with_settings(dict(model.settings, noise=noise))
     model.save(out, overwrite=args.overwrite)
     table = model.summary()
     print(f"identified '{session.name}' ({len(session.runs)} runs, {session.fs_hz:g} Hz, "

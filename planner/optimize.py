@@ -76,6 +76,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import shutil
 import tempfile
 import time
@@ -645,7 +646,7 @@ def _pwl_sx(v, p, vk):
 class _LoopModel:
     """The closed loop of one plant and drive as a casadi recursion (module notes)."""
 
-    def __init__(self, plant, drive, space, metric_rows, oversample, jit_opts):
+    def __init__(self, plant, drive, space, metric_rows, oversample, jit):
         self.space = space
         r = int(oversample)
         names, L = metric_rows
@@ -733,14 +734,18 @@ class _LoopModel:
             new_sums = ca.vertcat(sums[:nm] + sig**2, sums[nm:2 * nm] + sig * sk,
                                   sums[2 * nm:] + y)
             return ca.Function(f"step{nsub}", [ca.vertcat(X, Pc), U],
-                               [ca.vertcat(*s, *newz, new_sums, Pc)], jit_opts)
+                               [ca.vertcat(*s, *newz, new_sums, Pc)])
 
-        key = _step_key(ms, h, r, lag, vk, grp, Cm, Dm, Deff, cbar, bool(jit_opts))
+        key = _step_key(ms, h, r, lag, vk, grp, Cm, Dm, Deff, cbar, bool(jit))
         if key not in _STEP_CACHE:
             first, step = body(1), body(r)
             # casadi keeps derivative functions only while something holds them: hold the
-            # adjoints (compiled on first use) with the steps, so a second solve reuses them
-            _STEP_CACHE[key] = (first, step, first.reverse(1), step.reverse(1))
+            # adjoints with the steps, so a second solve reuses them
+            fns = (first, step)
+            n_instructions = step.n_instructions()  # of the symbolic step (not of a library)
+            if jit:
+                fns = _compiled_steps(fns)
+            _STEP_CACHE[key] = fns + tuple(f.reverse(1) for f in fns) + (n_instructions,)
         first, step = _STEP_CACHE[key][:2]
         # inputs per sample: the r fine shock velocities of the rig part ending at the sample
         # (the first sample: its own), the metric rows of the rig part, the step response
@@ -754,7 +759,7 @@ class _LoopModel:
         self.N, self.nm, self.names = N, nm, list(names)
         self._first, self._step, self._U = first, step, Uin
         self._nx, self._G, self._npar = nx, G, npar
-        self.n_instructions = step.n_instructions()
+        self.n_instructions = _STEP_CACHE[key][-1]
 
     def metrics(self, P):
         """Symbolic metrics (MX, shape (nm,)) of curve parameters `P` (MX)."""
@@ -790,7 +795,8 @@ def _step_key(ms, *parts):
 
 
 def _jit_dir():
-    """The process's folder for compiled code (removed at exit)."""
+    """The process's folder for compiled code (removed at exit): the fallback when the
+    machine's cache folder (:func:`jit_cache_dir`) cannot be written."""
     import atexit
 
     if not _JIT_DIR:
@@ -800,12 +806,114 @@ def _jit_dir():
     return _JIT_DIR[0]
 
 
-def _jit_options(directory):
-    """casadi options that compile a Function (and its derivatives) to C in `directory`."""
-    return {"jit": True, "compiler": "shell", "jit_name": "shockplan_step",
-            "jit_options": {"flags": ["-O1"], "verbose": False, "directory": directory + "/",
-                            "cleanup": False},
-            "jit_cleanup": False}  # the folder is removed as a whole at exit
+#: Compiled step libraries kept in the cache folder; the least recently used beyond this
+#: are removed when a new one is written.
+JIT_CACHE_MAX_FILES = 64
+#: C compiler flags of the step functions (-O1: most of -O2's speed on this code at a
+#: fraction of its compile time).
+JIT_FLAGS = ("-O1", "-fPIC", "-shared")
+
+
+def jit_cache_dir():
+    """The folder of compiled step functions kept between runs.
+
+    ``$SHOCKPLAN_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/shockplan`` (default
+    ``~/.cache/shockplan``), with a subfolder per casadi version. A library is
+    named by a hash of its generated C source and the compiler flags, so a
+    changed model, drive grid, curve space or shockplan version compiles anew
+    and a stale file is never used. Safe to delete at any time.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    root = os.environ.get("SHOCKPLAN_CACHE_DIR")
+    if not root:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"),
+                                                                 ".cache")
+        root = os.path.join(base, "shockplan")
+    return Path(root) / f"jit-casadi-{ca.__version__}"
+
+
+def _compiler():
+    return shutil.which("cc") or shutil.which("gcc")
+
+
+def _compiled_steps(fns):
+    """The step functions `fns` and their adjoints as one compiled shared library.
+
+    The C source (each function and its ``reverse(1)``, which casadi's
+    ``external`` finds by name) is generated and hashed; the library is
+    compiled only when the cache (:func:`jit_cache_dir`) has no library of that
+    hash, atomically (a temporary name, then a rename), so concurrent
+    processes never load a half-written file. On a cache folder that cannot
+    be written the process's temporary folder is used; if the compiler fails,
+    the functions run uncompiled in casadi's virtual machine (slower, the same
+    results) with a warning.
+
+    Returns
+    -------
+    tuple of casadi.Function
+    """
+    import hashlib
+    import subprocess
+
+    cg = ca.CodeGenerator("shockplan_steps.c", {"with_header": False})
+    for f in fns:
+        cg.add(f)
+        cg.add(f.reverse(1))
+    src = cg.dump()
+    cc = _compiler()
+    digest = hashlib.sha256("\0".join([src, cc or "", *JIT_FLAGS]).encode()).hexdigest()[:24]
+    name = f"steps-{digest}.so"
+    folder = jit_cache_dir()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".probe-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError:
+        log.info("compiled-step cache %s cannot be written; compiling into a temporary "
+                 "folder", folder)
+        folder = Path(_jit_dir())
+    lib = folder / name
+    if lib.exists():
+        try:
+            os.utime(lib)  # least recently used goes first
+        except OSError:
+            pass
+    else:
+        t0 = time.perf_counter()
+        tmp_c = folder / f".{name}.{os.getpid()}.c"
+        tmp_so = folder / f".{name}.{os.getpid()}.tmp"
+        try:
+            tmp_c.write_text(src)
+            proc = subprocess.run([cc, *JIT_FLAGS, str(tmp_c), "-o", str(tmp_so), "-lm"],
+                                  capture_output=True, text=True)
+            if proc.returncode != 0:
+                raise OSError(proc.stderr.strip()[-400:])
+            os.replace(tmp_so, lib)
+        except (OSError, TypeError) as exc:
+            warnings.warn(f"compiling the optimizer's step functions failed ({exc}); they run "
+                          "uncompiled (slower, same results)", RuntimeWarning, stacklevel=3)
+            return tuple(fns)
+        finally:
+            for t in (tmp_c, tmp_so):
+                t.unlink(missing_ok=True)
+        log.info("compiled the optimizer's step functions in %.1f s: %s",
+                 time.perf_counter() - t0, lib)
+        _prune_cache(folder)
+    return tuple(ca.external(f.name(), str(lib)) for f in fns)
+
+
+def _prune_cache(folder):
+    """Remove the least recently used libraries beyond :data:`JIT_CACHE_MAX_FILES`."""
+    try:
+        libs = sorted(folder.glob("steps-*.so"), key=lambda p: p.stat().st_mtime)
+        for old in libs[:max(0, len(libs) - JIT_CACHE_MAX_FILES)]:
+            old.unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 class _Evaluator:
@@ -1376,9 +1484,8 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     if robust:
         tight = _robust_factors(model, drives, library, space, x0, base, need)
     C, kinds = _score_rows(objective, need, m_base, tight)
-    jit_opts = _jit_options(_jit_dir()) if jit else {}
     t_build = time.perf_counter()
-    models_cl = [_LoopModel(plant, d, space, rows, oversample, jit_opts) for d in drives]
+    models_cl = [_LoopModel(plant, d, space, rows, oversample, jit) for d in drives]
     ev = _Evaluator(models_cl, T, scale, C)
     build_s = time.perf_counter() - t_build
     x_opt, solver, history = _solve(ev, space, kinds, weights, aggregate, A_lin, b_lin,

@@ -39,6 +39,7 @@ ATOL_SLOPE = 0.1  # log-log fit of a Welch PSD over 2..15 Hz
 RTOL_RMS = 0.02  # sum over 1/120 Hz bins vs the integral of the PSD
 RTOL_RESAMPLE = 1e-4  # the anti-aliasing FIR is flat to 1e-5 below 0.8 Nyquist
 RTOL_FILE = 1e-12  # CSV floats are written with round-trip precision
+RTOL_FFT_DECIMATE = 1e-12  # FFT vs polyphase filtering: rounding only (seen < 1e-14 of the RMS)
 
 
 @pytest.fixture(scope="module")
@@ -418,3 +419,48 @@ def test_resample_same_rate_and_bad_rate(noise):
         resample_drive(noise, 0.0)
     with pytest.raises(TypeError, match="must be a Drive"):
         resample_drive(noise.channels, 100.0)
+
+
+def _decimate_reference(x, r, n_out, lead):
+    """Extend by (_FIR_HALF_LENGTH + 1) r samples each end, resample_bandlimited, slice."""
+    from ident.drive import _FIR_HALF_LENGTH, resample_bandlimited
+
+    pad = (_FIR_HALF_LENGTH + 1) * r
+    xp = np.pad(x, (pad, 0), mode="edge" if lead == "edge" else "constant")
+    xp = np.pad(xp, (0, pad), mode="edge")
+    return resample_bandlimited(xp, 1, r)[pad // r: pad // r + n_out]
+
+
+@pytest.mark.parametrize("lead", ["edge", "zero"])
+@pytest.mark.parametrize("r, n_in, n_out", [
+    (8, 40_001, 5001),  # several FFT segments
+    (8, 40_007, 5001),  # a record longer than the samples asked for
+    (8, 40_001, 4000),
+    (3, 1001, 334), (2, 4096, 2048), (7, 50, 8), (5, 1, 1), (16, 17, 2), (1, 11, 11),
+])
+def test_fft_decimation_equals_polyphase_reference(rng, lead, r, n_in, n_out):
+    """The FFT engine of the acquisition filter gives resample_bandlimited's numbers."""
+    from ident.drive import _decimate_bandlimited
+
+    rows = [rng.standard_normal(n_in) + 3.0, np.linspace(-1.0, 2.0, n_in),
+            np.where(np.arange(n_in) % 7 == 0, 1.0, 0.0)]
+    out = _decimate_bandlimited(rows, r, n_out, lead=lead)
+    for x, y in zip(rows, out):
+        ref = x[:n_out] if r == 1 else _decimate_reference(x, r, n_out, lead)
+        assert y.shape == (n_out,) and y.flags.owndata
+        tol = RTOL_FFT_DECIMATE * max(np.sqrt(np.mean(ref ** 2)), 1e-300)
+        assert_allclose(y, ref, rtol=0, atol=tol)
+
+
+@pytest.mark.parametrize("rows, r, n_out, lead, match", [
+    ([np.zeros(10), np.zeros(11)], 2, 5, "edge", "one length"),
+    ([np.zeros((2, 10))], 2, 5, "edge", "1-D records"),
+    ([np.zeros(10)], 2, 6, "edge", r"> 10"),
+    ([np.zeros(10)], 2, 0, "edge", "cannot give 0 samples"),
+    ([np.zeros(10)], 2, 5, "mirror", "lead must be"),
+])
+def test_fft_decimation_bad_input(rows, r, n_out, lead, match):
+    from ident.drive import _decimate_bandlimited
+
+    with pytest.raises(ValueError, match=match):
+        _decimate_bandlimited(rows, r, n_out, lead=lead)

@@ -136,6 +136,91 @@ def test_balanced_reduce_keeps_the_physical_model_exactly(paper_model):
                                rtol=1e-6, atol=1e-9 * np.abs(shock.frequency_response(f)).max())
 
 
+# closed-form gramians vs a Lyapunov solver: both at rounding level
+RTOL_GRAMIAN = 1e-10
+# a merged common-pole realization vs the model's pole-residue response: rounding only
+RTOL_REALIZATION = 1e-10
+# a loaded model's plant vs one built afresh in the same process: the same arithmetic
+RTOL_SAME_PLANT = 1e-9
+
+
+def _random_modal(rng, n_complex=9, n_real=3, m=3, p=4):
+    from ident.closedloop import ModalSystem
+
+    lam = np.concatenate([-rng.uniform(0.5, 5, n_complex) + 1j * rng.uniform(2, 60, n_complex),
+                          -rng.uniform(0.5, 80, n_real) + 0j])
+    B = rng.standard_normal((lam.size, m)) + 1j * rng.standard_normal((lam.size, m))
+    C = rng.standard_normal((p, lam.size)) + 1j * rng.standard_normal((p, lam.size))
+    B[n_complex:], C[:, n_complex:] = B[n_complex:].real, C[:, n_complex:].real
+    return ModalSystem(lam, B, C, np.zeros((p, m)))
+
+
+def test_modal_gramians_solve_the_lyapunov_equations(rng):
+    """The closed-form gramians in real modal coordinates equal a Lyapunov solver's."""
+    from scipy.linalg import solve_continuous_lyapunov
+
+    from ident.model import _modal_gramians
+
+    sys = _random_modal(rng)
+    P, Q = _modal_gramians(sys, sys.B, sys.C)
+    A, B, C, _ = sys.to_real()
+    P_ref = solve_continuous_lyapunov(A, -B @ B.T)
+    Q_ref = solve_continuous_lyapunov(A.T, -C.T @ C)
+    np.testing.assert_allclose(P, P_ref, rtol=0, atol=RTOL_GRAMIAN * np.abs(P_ref).max())
+    np.testing.assert_allclose(Q, Q_ref, rtol=0, atol=RTOL_GRAMIAN * np.abs(Q_ref).max())
+
+
+def test_gram_factor_of_a_low_rank_gramian(rng):
+    from ident.model import _gram_factor
+
+    X = rng.standard_normal((40, 6))
+    M = X @ X.T  # rank 6
+    L = _gram_factor(M)
+    assert L.shape[0] == 40 and 6 <= L.shape[1] <= 8  # rank 6, and a rounding-level column or two
+    np.testing.assert_allclose(L @ L.T, M, rtol=0, atol=RTOL_GRAMIAN * np.abs(M).max())
+    assert _gram_factor(np.zeros((5, 5))).shape == (5, 0)
+
+
+def test_balanced_reduce_of_a_random_system_within_its_bound(rng):
+    sys = _random_modal(rng, n_complex=20, n_real=4)
+    f = np.geomspace(0.3, 30, 200)
+    H = sys.frequency_response(f)
+    red = balanced_reduce(sys, rtol=1e-2)
+    assert red.n_states < sys.n_states
+    err = np.abs(red.frequency_response(f) - H).max(axis=(1, 2))
+    assert np.all(err <= 1e-2 * np.abs(H).max(axis=(1, 2)))
+
+
+def _common_pole_model(rng, n_poles=3):
+    """Every pair of an input column has the same poles (as a vector fit stores them)."""
+    from ident.frf import MODEL_INPUTS
+    from planner.predict import METRIC_OUTPUTS
+
+    p, m = len(METRIC_OUTPUTS), len(MODEL_INPUTS)
+    col = (-rng.uniform(2, 6, (m, n_poles)) + 1j * rng.uniform(10, 90, (m, n_poles)))
+    col[:, 0] = -rng.uniform(5, 50, m)  # one real pole per column
+    poles = np.broadcast_to(col, (p, m, n_poles)).copy()
+    residues = rng.standard_normal((p, m, n_poles)) + 1j * rng.standard_normal((p, m, n_poles))
+    residues[..., 0] = residues[..., 0].real
+    return VehicleModel(name="common poles", input_names=tuple(MODEL_INPUTS),
+                        output_names=tuple(METRIC_OUTPUTS), poles=poles, residues=residues,
+                        direct=rng.standard_normal((p, m)), n_poles=np.full((p, m), n_poles),
+                        order=np.full((p, m), 2 * n_poles - 1), fit_error=np.zeros((p, m)),
+                        cbar_n_s_m=np.full(4, 3500.0), fs_hz=100.0)
+
+
+def test_pair_modal_merges_the_poles_an_input_column_shares(rng):
+    """A common-pole model realizes with one state per pole per input, exactly."""
+    m = _common_pole_model(rng)
+    n_in = len(m.input_names)
+    sys = m.pair_modal(range(n_in))
+    assert sys.n_states == n_in * 3  # not n_out x n_in x 3
+    f = np.array([0.5, 3.0, 9.0, 17.0])
+    H = m.frequency_response(f)
+    np.testing.assert_allclose(sys.frequency_response(f), H, rtol=0,
+                               atol=RTOL_REALIZATION * np.abs(H).max())
+
+
 def test_save_load_and_export(tmp_path, identified_model):
     path = identified_model.save(tmp_path / "m.npz")
     back = load_model(path)
@@ -176,6 +261,80 @@ def test_bad_model_files(tmp_path, identified_model):
     assert zipfile.is_zipfile(good)
 
 
+def _rewrite(src, dst, edit):
+    """Copy a model file with its meta and arrays edited by ``edit(meta, data)``."""
+    import json
+
+    with np.load(src) as z:
+        data = {k: z[k] for k in z.files}
+    meta = json.loads(str(data.pop("meta")))
+    edit(meta, data)
+    np.savez(dst, meta=np.array(json.dumps(meta)), **data)
+    return dst
+
+
+def test_model_file_holds_the_loop_plant(tmp_path, identified_model, track_drive,
+                                         demo_library, baseline_setup):
+    """The default loop plant is stored in the file, restored on load, and predicts exactly as
+    the plant built afresh; older files and files whose arrays changed rebuild it."""
+    import dataclasses
+
+    from ident.drive import Drive
+    from ident.model import MODEL_VERSION
+    from planner.predict import predict_setups
+    from planner.setups import Setup
+
+    path = identified_model.save(tmp_path / "m.npz")
+    saved = identified_model.loop_plant()
+    back = load_model(path)
+    assert LOOP_REDUCE_RTOL in back._plants  # no reduction after loading
+    plant = back.loop_plant()
+    for part in ("rig", "shock"):
+        for k in ("lam", "B", "C", "D"):
+            np.testing.assert_array_equal(getattr(getattr(plant, part), k),
+                                          getattr(getattr(saved, part), k))
+    assert plant.output_names == saved.output_names and plant.rig_inputs == saved.rig_inputs
+    np.testing.assert_array_equal(plant.cbar_n_s_m, saved.cbar_n_s_m)
+
+    fresh = dataclasses.replace(identified_model)  # an empty plant cache: builds anew
+    assert not fresh._plants
+    setups = [baseline_setup, Setup("soft front", {"LF": "L12", "RF": "L12", "LR": "B20",
+                                                   "RR": "B20"})]
+    short = Drive(name="short", fs_hz=track_drive.fs_hz,  # 20 s are enough to compare
+                  channels={c: x[:int(20 * track_drive.fs_hz)]
+                            for c, x in track_drive.channels.items()})
+    a = predict_setups(back, short, setups, demo_library).table
+    b = predict_setups(fresh, short, setups, demo_library).table
+    cols = [c for c in a.columns if c not in CORNERS]
+    np.testing.assert_allclose(a[cols].to_numpy(float), b[cols].to_numpy(float),
+                               rtol=RTOL_SAME_PLANT)
+
+    def old_version(meta, data):  # a version-1 file: no plant
+        meta["version"] = 1
+        del meta["loop_plant"]
+        for k in [k for k in data if k.startswith("plant_")]:
+            del data[k]
+
+    v1 = load_model(_rewrite(path, tmp_path / "v1.npz", old_version))
+    assert MODEL_VERSION > 1 and not v1._plants
+    f = np.array([1.0, 6.0, 15.0])
+    np.testing.assert_allclose(v1.loop_plant().frequency_response(f),
+                               plant.frequency_response(f), rtol=RTOL_SAME_PLANT,
+                               atol=RTOL_SAME_PLANT * np.abs(plant.frequency_response(f)).max())
+
+    def changed(meta, data):  # residues edited after the plant was stored
+        data["residues"] = data["residues"] * 2
+
+    edited = load_model(_rewrite(path, tmp_path / "edited.npz", changed))
+    assert not edited._plants
+    H = edited.frequency_response(f)
+    Hp = edited.loop_plant(reduce_rtol=None).frequency_response(f)
+    np.testing.assert_allclose(Hp, H, rtol=0, atol=RTOL_REALIZATION * np.abs(H).max())
+
+    no_plant = load_model(identified_model.save(tmp_path / "np.npz", with_plant=False))
+    assert not no_plant._plants
+
+
 def test_vector_fitting_method(identified_model):
     from ident.model import fit_model
 
@@ -184,6 +343,13 @@ def test_vector_fitting_method(identified_model):
     # common poles: every pair has the same number of poles
     assert len(set(vf.n_poles.ravel().tolist())) == 1
     assert np.median(vf.fit_error) < 0.2
+    # one state per common pole and input column
+    full = vf.pair_modal(range(len(vf.input_names)))
+    assert full.n_states <= len(vf.input_names) * int(vf.n_poles.max())
+    f = np.array([0.7, 4.5, 18.0])
+    H = vf.frequency_response(f)
+    np.testing.assert_allclose(full.frequency_response(f), H, rtol=0,
+                               atol=RTOL_REALIZATION * np.abs(H).max())
 
 
 # a 2-pole resonance measured with 3 % relative error a line: the fit needs 2 poles and stops

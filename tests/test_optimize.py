@@ -322,3 +322,80 @@ def test_identified_model_optimum_holds_on_the_known_car(identified_model, paper
 def read_setups_from_table(opt):
     """The setups of an optimum's table, by name."""
     return [Setup(n, {c: opt.table.loc[n, c] for c in CORNERS}) for n in opt.table.index]
+
+
+# ------------------------------------------------------------------ compiled steps on disk
+
+
+def _toy_steps():
+    import casadi as ca
+
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u", 2)
+    f1 = ca.Function("step1", [x, u], [ca.vertcat(ca.sin(x[0]) * u[0], x[1] * x[2] + u[1],
+                                                  x[0] ** 2)])
+    f2 = ca.Function("step2", [x, u], [ca.vertcat(x[2] - u[0], ca.cos(x[1]), x[0] * u[1])])
+    return f1, f2
+
+
+def _loop_gradient(step, x0, U):
+    import casadi as ca
+
+    X = ca.MX.sym("X", 3)
+    y = step.mapaccum("loop", U.shape[1])(X, ca.DM(U))
+    g = ca.Function("g", [X], [ca.sum1(y[:, -1]), ca.gradient(ca.sum1(y[:, -1]), X)])
+    v, gr = g(x0)
+    return float(v), np.array(gr).ravel()
+
+
+@pytest.mark.skipif(not __import__("planner.optimize").optimize._compiler(),
+                    reason="no C compiler")
+def test_compiled_steps_are_kept_between_runs(tmp_path, monkeypatch):
+    """The step functions compile once into the cache folder; a later process (here: a
+    second call) loads the library without the compiler, and the compiled functions and
+    their adjoints give the uncompiled values."""
+    import subprocess
+
+    import planner.optimize as po
+
+    monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(tmp_path))
+    fns = _toy_steps()
+    first = po._compiled_steps(fns)
+    libs = list(po.jit_cache_dir().glob("steps-*.so"))
+    assert len(libs) == 1 and po.jit_cache_dir().parent == tmp_path
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("the compiler ran although the library is cached")
+
+    monkeypatch.setattr(subprocess, "run", no_compiler)
+    second = po._compiled_steps(_toy_steps())
+    assert list(po.jit_cache_dir().glob("steps-*.so")) == libs
+    rng = np.random.default_rng(3)
+    x0, U = rng.standard_normal(3), rng.standard_normal((2, 6))
+    for plain, a, b in zip(fns, first, second):
+        assert a.class_name() == "External" and b.class_name() == "External"
+        ref = _loop_gradient(plain, x0, U)
+        for compiled in (a, b):
+            v, g = _loop_gradient(compiled, x0, U)
+            assert v == pytest.approx(ref[0], rel=1e-12)
+            assert_allclose(g, ref[1], rtol=1e-12, atol=1e-14)
+
+
+def test_compiled_steps_fall_back(tmp_path, monkeypatch):
+    """A cache folder that cannot be written compiles into the process's temporary folder;
+    a failing compiler leaves the functions uncompiled, with a warning."""
+    import planner.optimize as po
+
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(blocker))
+    if po._compiler():
+        out = po._compiled_steps(_toy_steps())
+        assert all(f.class_name() == "External" for f in out)
+        assert blocker.read_text() == "not a folder"
+    monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(po, "_compiler", lambda: "/bin/false")
+    with pytest.warns(RuntimeWarning, match="uncompiled"):
+        out = po._compiled_steps(_toy_steps())
+    assert [f.class_name() for f in out] == ["SXFunction", "SXFunction"]
+    assert not list((tmp_path / "cache").rglob("*.c"))

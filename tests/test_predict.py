@@ -208,6 +208,12 @@ def test_four_post_session_identifies_and_predicts(four_post_session, four_post_
     plant = four_post_model.loop_plant()
     assert plant.rig_inputs == WHEELLOADER_INPUTS and plant.rig.B.shape[1] == 7
     assert not plant.rig.B[:, :3].any() and not plant.rig.D[:, :3].any()
+    # the model file keeps the plant with its rig inputs
+    from ident.model import load_model
+
+    back = load_model(four_post_model.save(tmp_path / "4post.npz")).loop_plant()
+    assert back.rig_inputs == WHEELLOADER_INPUTS
+    np.testing.assert_array_equal(back.rig.B, plant.rig.B)
 
     # a 4-post drive file has no aero columns and reads
     path = tmp_path / "track-4-post.csv"

@@ -15,6 +15,7 @@ DB_TOL_FRF = 0.5  # issue: H1 vs analytic within 0.5 dB where coherence > 0.99
 COH_MIN = 0.99
 RTOL_NOISE = 0.05  # std of 80 000 noise samples is known to ~0.3 %; 5 % margin
 ATOL_DAQ = 1e-4  # the acquisition filter: flat to 1e-5 in band, below -80 dB above 60 Hz
+RTOL_DAQ_FFT = 1e-12  # FFT vs polyphase acquisition filter: rounding (seen < 1e-14 of the RMS)
 
 
 def test_default_plan_is_the_papers(paper_plan):
@@ -94,6 +95,31 @@ def test_acquisition_filter_removes_aliases():
                                atol=ATOL_DAQ)
     assert np.abs(out["alias"][inner]).max() < ATOL_DAQ
     assert out["band"].shape == (n,)
+
+
+@pytest.mark.parametrize("r, n", [(8, 8000), (8, 1), (8, 2), (8, 1021), (3, 1001), (2, 4097),
+                                  (5, 40), (16, 300), (1, 50)])
+def test_acquisition_filter_equals_polyphase_reference(rng, r, n):
+    """The FFT acquisition filter gives the numbers of the polyphase one it replaced
+    (edge-extended record, resample_bandlimited, decimated), on records of odd and
+    even length, shorter than the filter and longer than one FFT segment."""
+    from ident.drive import _FIR_HALF_LENGTH, resample_bandlimited
+    from ident.rig import _daq_sample
+
+    n_fine = (n - 1) * r + 1
+    t = np.arange(n_fine) / (100.0 * r)
+    channels = {"noise": rng.standard_normal(n_fine) + 3.0,
+                "ramp": np.linspace(-1.0, 2.0, n_fine),
+                "tones": np.sin(2 * np.pi * 10.0 * t) + 0.3 * np.sin(2 * np.pi * 90.0 * t)}
+    out = _daq_sample(channels, r, n)
+    pad = (_FIR_HALF_LENGTH + 1) * r
+    for name, x in channels.items():
+        ref = x if r == 1 else resample_bandlimited(np.pad(x, pad, mode="edge"), 1, r)[
+            pad // r: pad // r + n]
+        assert out[name].shape == (n,)
+        np.testing.assert_allclose(out[name], ref, rtol=0,
+                                   atol=RTOL_DAQ_FFT * np.sqrt(np.mean(ref ** 2)),
+                                   err_msg=f"r={r}, n={n}: {name}")
 
 
 def test_measurement_noise(paper_plan):
