@@ -23,6 +23,13 @@ Only the object-oriented matplotlib API is used (``matplotlib.figure.Figure``,
 never ``pyplot``): no global figure state, no GUI backend, so figures can be
 made in worker threads. PNGs are rendered by the Agg canvas.
 
+The layout is fixed: margins, gaps and label distances in inches, the same on
+every page, instead of a layout engine that measures every tick label on every
+save. :func:`write_frf_plots` evaluates the model and the truth once for all
+pages and draws the pages one after the other into a single figure (axes, ticks
+and grids made once; one Agg renderer with its text caches); a page is
+pixel for pixel the page :func:`plot_frf` draws into a new figure.
+
 A response in SI units ``H`` [out_SI / in_SI] is displayed in the unit system
 ``units`` as ``H * from_si(1, out_q) / from_si(1, in_q)``, where ``out_q`` and
 ``in_q`` are the quantities of the output and the input channel
@@ -57,11 +64,26 @@ log = logging.getLogger(__name__)
 #: Named input groups: the 7 rig inputs and the 4 shock-force deviations.
 INPUT_GROUPS = {"rig": RIG_INPUTS, "shock": DF_INPUTS}
 
+#: Default frequency range of the plots [Hz].
+F_RANGE_HZ = (0.5, 20.0)
 #: Points of the log-spaced grid on which models and callable truths are evaluated.
 N_MODEL_POINTS = 600
 #: The magnitude axis shows at most this range below its largest value [dB].
 MAG_RANGE_DB = 100.0
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+#: Size of the figures [in] (width, height).
+FIG_SIZE_IN = (8.0, 9.0)
+#: Heights of the coherence, magnitude and phase axes relative to each other.
+_HEIGHT_RATIOS = (1.0, 1.6, 1.0)
+# Fixed layout [in]: margins around the axes, the gap between them, and the distance from
+# an axes' left edge to its y label (past the tick labels, up to "-100") and from the bottom
+# axes to the x label. Measuring every tick label to place the axes (constrained layout) took
+# half of the time of writing the plots (docs/DESIGN.md, "FRF plots").
+_MARGIN_IN = {"left": 0.78, "right": 0.12, "bottom": 0.52, "top": 0.28}
+_GAP_IN = 0.14
+_YLABEL_IN = 0.56
+_XLABEL_IN = 0.32
 
 
 # ----------------------------------------------------------------------------------------------
@@ -288,38 +310,49 @@ def frf_plot_data(model_or_frf, output, *, inputs=None, truth=None, units="SI",
     out_names, in_names = tuple(src.output_names), tuple(src.input_names)
     if output not in out_names:
         raise ValueError(f"output {output!r} not in this model/FRF; it has {list(out_names)}")
-    o = out_names.index(output)
     inputs = _resolve_inputs(inputs, in_names)
-    idx = [in_names.index(i) for i in inputs]
-    scales, labels = zip(*(display_scale(output, i, units) for i in inputs))
-    scale = np.array(scales)[:, None]
+    return _select(_evaluate(model, frf, truth, (lo, hi)), output, inputs, units)
 
-    f_est = coh = mult = H_raw = H_cond = replaced = None
+
+@dataclass(frozen=True, eq=False)
+class _Curves:
+    """Every pair's curves in SI inside the frequency range: what the plots of one model or
+    FRF share (see :func:`_evaluate`); responses are arrays (n_out, n_in, n_f)."""
+
+    frf: Frf | None
+    out_names: tuple
+    in_names: tuple
+    keep: np.ndarray | None
+    f_model_hz: np.ndarray
+    H_model: np.ndarray | None
+    f_truth_hz: np.ndarray | None
+    H_truth: np.ndarray | None
+    f_range_hz: tuple
+
+
+def _evaluate(model, frf, truth, f_range_hz):
+    """Evaluate the model and the truth for every pair at once (the costly part of the plot
+    data), in a checked range ``(low, high)`` [Hz]; raises as :func:`frf_plot_data`."""
+    lo, hi = f_range_hz
+    src = model if model is not None else frf
+    out_names, in_names = tuple(src.output_names), tuple(src.input_names)
+    keep = f_est = None
     if frf is not None:
         if tuple(frf.output_names) != out_names or tuple(frf.input_names) != in_names:
             raise ValueError("model.frf has other channels than the model; refit or rebuild "
                              "the model from this FRF")
         keep = (frf.f_hz >= lo) & (frf.f_hz <= hi) & (frf.f_hz > 0)
         if not keep.any():
-            raise ValueError(f"the FRF has no frequency in f_range_hz={f_range_hz!r} (it spans "
+            raise ValueError(f"the FRF has no frequency in f_range_hz={(lo, hi)!r} (it spans "
                              f"{frf.f_hz.min():g}-{frf.f_hz.max():g} Hz); widen the range")
         f_est = frf.f_hz[keep]
-        coh = np.asarray(frf.partial_coherence)[o][idx][:, keep]
-        mult = np.asarray(frf.multiple_coherence)[o][keep]
-        if frf.H_raw is not None:
-            H_raw = np.asarray(frf.H_raw)[o][idx][:, keep] * scale
-            H_cond = np.asarray(frf.H)[o][idx][:, keep] * scale
-            if frf.replaced is not None:
-                replaced = np.asarray(frf.replaced, dtype=bool)[o][idx][:, keep]
-        else:
-            H_raw = np.asarray(frf.H)[o][idx][:, keep] * scale
 
     f_model = np.geomspace(lo, hi, N_MODEL_POINTS)
     H_model = None
     if model is not None:
-        H_model = np.asarray(model.frequency_response(f_model))[o][idx] * scale
+        H_model = np.asarray(model.frequency_response(f_model))
 
-    f_truth = H_truth = None
+    f_truth = T = None
     if truth is not None:
         n_out, n_in = len(out_names), len(in_names)
         if callable(truth):
@@ -335,20 +368,47 @@ def frf_plot_data(model_or_frf, output, *, inputs=None, truth=None, units="SI",
                 raise ValueError(f"truth has shape {T.shape}; expected (n_out, n_in, n_f) = "
                                  f"{(n_out, n_in, frf.f_hz.size)} on the FRF's frequency grid")
             f_truth = f_est
-            T = T[..., (frf.f_hz >= lo) & (frf.f_hz <= hi) & (frf.f_hz > 0)]
+            T = T[..., keep]
         else:
             raise TypeError(f"truth must be an array (n_out, n_in, n_f) or a callable "
                             f"f_hz -> array, got {type(truth).__name__}")
         if T.shape != (n_out, n_in, f_truth.size):
             raise ValueError(f"truth(f_hz) returned shape {T.shape}; expected "
                              f"(n_out, n_in, n_f) = {(n_out, n_in, f_truth.size)}")
-        H_truth = T[o][idx] * scale
+    return _Curves(frf=frf, out_names=out_names, in_names=in_names, keep=keep,
+                   f_model_hz=f_model, H_model=H_model, f_truth_hz=f_truth, H_truth=T,
+                   f_range_hz=(lo, hi))
+
+
+def _select(curves, output, inputs, units):
+    """The :class:`FrfPlotData` of one output and checked inputs, in display units."""
+    o = curves.out_names.index(output)
+    idx = [curves.in_names.index(i) for i in inputs]
+    scales, labels = zip(*(display_scale(output, i, units) for i in inputs))
+    scale = np.array(scales)[:, None]
+
+    f_est = coh = mult = H_raw = H_cond = replaced = None
+    frf, keep = curves.frf, curves.keep
+    if frf is not None:
+        f_est = frf.f_hz[keep]
+        coh = np.asarray(frf.partial_coherence)[o][idx][:, keep]
+        mult = np.asarray(frf.multiple_coherence)[o][keep]
+        if frf.H_raw is not None:
+            H_raw = np.asarray(frf.H_raw)[o][idx][:, keep] * scale
+            H_cond = np.asarray(frf.H)[o][idx][:, keep] * scale
+            if frf.replaced is not None:
+                replaced = np.asarray(frf.replaced, dtype=bool)[o][idx][:, keep]
+        else:
+            H_raw = np.asarray(frf.H)[o][idx][:, keep] * scale
+    H_model = None if curves.H_model is None else curves.H_model[o][idx] * scale
+    H_truth = None if curves.H_truth is None else curves.H_truth[o][idx] * scale
 
     return FrfPlotData(output=output, inputs=inputs, units=units, scale=scale[:, 0],
                        unit_labels=tuple(labels), f_est_hz=f_est, coherence=coh,
                        multiple_coherence=mult, H_raw=H_raw, H_cond=H_cond, replaced=replaced,
-                       f_model_hz=f_model, H_model=H_model, f_truth_hz=f_truth, H_truth=H_truth,
-                       f_range_hz=(lo, hi))
+                       f_model_hz=curves.f_model_hz, H_model=H_model,
+                       f_truth_hz=curves.f_truth_hz, H_truth=H_truth,
+                       f_range_hz=curves.f_range_hz)
 
 
 def _db(h):
@@ -379,11 +439,63 @@ def _phase_curve(f, h):
 # plot
 # ----------------------------------------------------------------------------------------------
 
-def _draw(data, fig):
+def _fixed_layout(width_in, height_in):
+    """GridSpec margins and spacing of the fixed layout for a figure of this size, or an
+    empty dict (matplotlib's defaults) when the figure is too small for them."""
+    m = _MARGIN_IN
+    left, right = m["left"] / width_in, 1.0 - m["right"] / width_in
+    bottom, top = m["bottom"] / height_in, 1.0 - m["top"] / height_in
+    mean_h = ((top - bottom) * height_in - 2 * _GAP_IN) / 3
+    if right - left < 0.5 or mean_h <= 0.5:
+        return {}
+    return {"left": left, "right": right, "bottom": bottom, "top": top,
+            "hspace": _GAP_IN / mean_h}
+
+
+def _frame(fig, f_range_hz):
+    """The three axes of an FRF page with what every page shares: scales, limits, ticks,
+    grids, the fixed labels and the label positions (:func:`_fill` draws a page into them).
+    """
+    from matplotlib.transforms import offset_copy
+
+    gridspec_kw = {"height_ratios": _HEIGHT_RATIOS}
+    if fig.get_layout_engine() is None:
+        gridspec_kw.update(_fixed_layout(*fig.get_size_inches()))
+    axes = fig.subplots(3, 1, sharex=True, gridspec_kw=gridspec_kw)
+    ax_c, ax_m, ax_p = axes
+    ax_c.set_ylabel("partial coherence [-]")
+    ax_c.set_ylim(0.0, 1.05)
+    ax_p.set_ylabel("phase [deg]")
+    ax_p.set_ylim(-190.0, 190.0)
+    ax_p.set_yticks([-180, -90, 0, 90, 180])
+    ax_p.set_xlabel("frequency [Hz]")
+    ax_p.set_xscale("log")
+    ax_p.set_xlim(*f_range_hz)
+    for ax in axes:
+        ax.grid(True, which="both", lw=0.3, alpha=0.5)
+        # labels at a fixed distance from the axes: aligned, and no tick label is measured
+        # to place them
+        ax.yaxis.set_label_coords(0.0, 0.5, transform=offset_copy(
+            ax.transAxes, fig=fig, x=-_YLABEL_IN, units="inches"))
+    ax_p.xaxis.set_label_coords(0.5, 0.0, transform=offset_copy(
+        ax_p.transAxes, fig=fig, y=-_XLABEL_IN, units="inches"))
+    return tuple(axes)
+
+
+def _clear(axes):
+    """Remove the curves, texts and legends of a page from the axes of :func:`_frame`."""
+    for ax in axes:
+        for artist in [*ax.lines, *ax.texts]:
+            artist.remove()
+        if ax.get_legend() is not None:
+            ax.get_legend().remove()
+
+
+def _fill(data, axes):
+    """Draw the page of `data` into empty axes of :func:`_frame`."""
     from matplotlib.lines import Line2D
 
-    ax_c, ax_m, ax_p = fig.subplots(3, 1, sharex=True,
-                                    gridspec_kw={"height_ratios": [1.0, 1.6, 1.0]})
+    ax_c, ax_m, ax_p = axes
     colors = [f"C{k % 10}" for k in range(len(data.inputs))]
     styles = {}
     mags = []
@@ -392,7 +504,8 @@ def _draw(data, fig):
         label = kw.pop("label")
         mag = _db(h)
         mags.append(mag)
-        # data lines stay inside the axes: keeping them out of the layout halves the save time
+        # data lines stay inside the axes: keeping them out of a layout engine (a figure
+        # given to plot_frf may have one) halves its time
         ax_m.plot(f, mag, label=label, in_layout=False, **kw)
         ax_p.plot(*_phase_curve(f, h), label=label, in_layout=False, **kw)
 
@@ -428,24 +541,15 @@ def _draw(data, fig):
         ax_c.text(0.5, 0.5, "no FRF estimate: no coherence", transform=ax_c.transAxes,
                   ha="center", va="center", color="0.4")
 
-    ax_c.set_title(data.output)
-    ax_c.set_ylabel("partial coherence [-]")
-    ax_c.set_ylim(0.0, 1.05)
+    ax_c.set_title(data.output, y=1.0)  # a fixed y: no search for decorations above the axes
     ax_m.set_ylabel(data.magnitude_label)
-    ax_p.set_ylabel("phase [deg]")
-    ax_p.set_ylim(-190.0, 190.0)
-    ax_p.set_yticks([-180, -90, 0, 90, 180])
-    ax_p.set_xlabel("frequency [Hz]")
-    ax_p.set_xscale("log")
-    ax_p.set_xlim(*data.f_range_hz)
-    for ax in (ax_c, ax_m, ax_p):
-        ax.grid(True, which="both", lw=0.3, alpha=0.5)
-
     finite = np.concatenate([m[np.isfinite(m)] for m in mags]) if mags else np.empty(0)
     if finite.size:
         top, bottom = finite.max(), finite.min()
         pad = 0.05 * max(top - bottom, 1.0)
         ax_m.set_ylim(max(bottom, top - MAG_RANGE_DB) - pad, top + pad)
+    else:
+        ax_m.set_ylim(0.0, 1.0)  # nothing to show (every pair is exactly zero)
 
     mixed = len(set(data.unit_labels)) > 1
     input_handles = [Line2D([], [], color=c, lw=1.8,
@@ -458,7 +562,11 @@ def _draw(data, fig):
     if styles:
         ax_m.legend(handles=[Line2D([], [], label=k, **kw) for k, kw in styles.items()],
                     loc="best", fontsize=7, framealpha=0.8)
-    fig.align_ylabels([ax_c, ax_m, ax_p])
+
+
+def _draw(data, fig):
+    """Draw the page of `data` into an empty figure; return the figure."""
+    _fill(data, _frame(fig, data.f_range_hz))
     return fig
 
 
@@ -472,7 +580,8 @@ def plot_frf(model_or_frf, output, *, inputs=None, truth=None, units="SI",
         As :func:`frf_plot_data`.
     fig : matplotlib.figure.Figure, optional
         Figure to draw into (it is cleared first). Default: a new
-        ``Figure(figsize=(8, 9))``, not registered with pyplot.
+        ``Figure(figsize=FIG_SIZE_IN)``, not registered with pyplot. The axes
+        get fixed margins unless `fig` has a layout engine.
 
     Returns
     -------
@@ -495,7 +604,7 @@ def plot_frf(model_or_frf, output, *, inputs=None, truth=None, units="SI",
     data = frf_plot_data(model_or_frf, output, inputs=inputs, truth=truth, units=units,
                          f_range_hz=f_range_hz)
     if fig is None:
-        fig = Figure(figsize=(8.0, 9.0), layout="constrained")
+        fig = Figure(figsize=FIG_SIZE_IN)
     elif not isinstance(fig, Figure):
         raise TypeError(f"fig must be a matplotlib.figure.Figure, got {type(fig).__name__}")
     else:
@@ -552,6 +661,7 @@ def write_frf_plots(model_or_frf, out_dir, *, outputs=None, truth=None, units="S
     Every file is written atomically (a temporary file in the folder, then
     ``os.replace``), so a reader never sees a half-written PNG.
     """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     model, frf = _split(model_or_frf)
@@ -576,10 +686,16 @@ def write_frf_plots(model_or_frf, out_dir, *, outputs=None, truth=None, units="S
     jobs = [(o, g, out_dir / f"frf_{o}_{g}.png") for o in outputs for g in groups]
     for _, _, path in jobs:
         _check_target(path)
+    curves = _evaluate(model, frf, truth, _check_range(F_RANGE_HZ))  # once for all pages
+    # one figure for all pages: its axes, ticks and grids are made once, and its Agg canvas
+    # keeps one renderer with its caches of text sizes and math text (docs/DESIGN.md)
+    fig = Figure(figsize=FIG_SIZE_IN)
+    FigureCanvasAgg(fig)
+    axes = _frame(fig, curves.f_range_hz)
     written = []
     for o, g, path in jobs:
-        fig = plot_frf(model_or_frf, o, inputs=g, truth=truth, units=units,
-                       fig=Figure(figsize=(8.0, 9.0), layout="constrained"))
+        _clear(axes)
+        _fill(_select(curves, o, _resolve_inputs(g, in_names), units), axes)
         with atomic_path(path, overwrite=True) as tmp:
             fig.savefig(tmp, format="png", dpi=dpi)
         written.append(path)

@@ -62,11 +62,10 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     from ident._io import atomic_dir
     from ident.drive import make_track_drive, write_drive
     from ident.model import identify_session
-    from ident.plots import write_frf_plots
     from ident.rig import default_plan, simulate_session
     from ident.session import write_session
     from ident.shocks import read_shock_library
-    from ident.vehicle import build_full_car, example_vehicle, modal_summary
+    from ident.vehicle import example_vehicle, modal_summary
     from planner.optimize import optimize_curves, write_optimum
     from planner.rank import rank_setups
     from planner.report import write_predictions_csv, write_ranking
@@ -83,34 +82,35 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             warnings.simplefilter("ignore")
             model = identify_session(session)
         model.save(work / "model.npz")
-        truth_model = build_full_car(vehicle)
-        order = [truth_model.output_names.index(o) for o in model.output_names]
-
-        def truth(f_hz):  # the known closed-loop FRF around the model's c_bar (the ideal)
-            return truth_model.frequency_response(f_hz, damping_n_s_m=model.cbar_n_s_m)[order]
-
-        write_frf_plots(model, work / "frf_plots", outputs=_PLOT_OUTPUTS, units=units,
-                        truth=truth)
-        model.summary().to_csv(work / "model_summary.csv", index=False)
-        drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
-                                 wheelbase_m=vehicle.a_m + vehicle.b_m,
-                                 track_width_m=vehicle.track_front_m, name="demo track")
-        write_drive(drive, work / "track_drive.csv", units=units)
-        library = read_shock_library(DEMO_LIBRARY_PATH)
-        baseline = Setup("baseline", {c: "B20" for c in ("LF", "RF", "LR", "RR")})
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            ranking = rank_setups(model, drive, library, baseline=baseline, top=20,
-                                  progress=progress)
-        files = write_ranking(ranking.table, work / "ranking", units=units,
-                              objective=ranking.objective, baseline=ranking.baseline)
-        write_predictions_csv(ranking.screening, work / "ranking" / "screening.csv", units=units)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            optimum = optimize_curves(model, drive, library, baseline=baseline,
+        # the FRF plots need only the saved model: drawn by a worker process while this one
+        # ranks and optimizes (the optimizer's loop runs on one core)
+        plots = _start_plots(work / "model.npz", vehicle, work / "frf_plots", units)
+        try:
+            model.summary().to_csv(work / "model_summary.csv", index=False)
+            drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
+                                     wheelbase_m=vehicle.a_m + vehicle.b_m,
+                                     track_width_m=vehicle.track_front_m, name="demo track")
+            write_drive(drive, work / "track_drive.csv", units=units)
+            library = read_shock_library(DEMO_LIBRARY_PATH)
+            baseline = Setup("baseline", {c: "B20" for c in ("LF", "RF", "LR", "RR")})
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ranking = rank_setups(model, drive, library, baseline=baseline, top=20,
                                       progress=progress)
-        write_optimum(optimum, library, work / "optimize", units=units)
-        modes = modal_summary(vehicle).table()
+            files = write_ranking(ranking.table, work / "ranking", units=units,
+                                  objective=ranking.objective, baseline=ranking.baseline)
+            write_predictions_csv(ranking.screening, work / "ranking" / "screening.csv",
+                                  units=units)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                optimum = optimize_curves(model, drive, library, baseline=baseline,
+                                          progress=progress)
+            write_optimum(optimum, library, work / "optimize", units=units)
+            modes = modal_summary(vehicle).table()
+        except BaseException:
+            _settle_plots(plots)  # nothing may write into the folder once it is rolled back
+            raise
+        _finish_plots(plots)
     best = ranking.table.iloc[0]
     lines = [
         f"shockplan demo -> {out}",
@@ -133,3 +133,54 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         f"{out / 'optimize'}",
     ]
     return "\n".join(lines)
+
+
+def _frf_plots_job(model_path, vehicle, folder, units):
+    """Write the demo's FRF plots: estimate, conditioned estimate, fit and the known car's
+    closed-loop FRF around the model's c_bar (the ideal). Runs in a worker process."""
+    from ident.model import load_model
+    from ident.plots import write_frf_plots
+    from ident.vehicle import build_full_car
+
+    model = load_model(model_path)
+    truth_model = build_full_car(vehicle)
+    order = [truth_model.output_names.index(o) for o in model.output_names]
+
+    def truth(f_hz):
+        return truth_model.frequency_response(f_hz, damping_n_s_m=model.cbar_n_s_m)[order]
+
+    write_frf_plots(model, folder, outputs=_PLOT_OUTPUTS, units=units, truth=truth)
+    return str(folder)
+
+
+def _start_plots(model_path, vehicle, folder, units):
+    """Start :func:`_frf_plots_job` on a forked worker process (POSIX), or run it here.
+
+    Returns the future, or None when it already ran in this process.
+    """
+    import concurrent.futures
+    import multiprocessing
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        _frf_plots_job(model_path, vehicle, folder, units)
+        return None
+    pool = concurrent.futures.ProcessPoolExecutor(
+        max_workers=1, mp_context=multiprocessing.get_context("fork"))
+    future = pool.submit(_frf_plots_job, model_path, vehicle, folder, units)
+    pool.shutdown(wait=False)
+    return future
+
+
+def _finish_plots(future):
+    """Wait for the plot worker; its errors are raised here."""
+    if future is not None:
+        future.result()
+
+
+def _settle_plots(future):
+    """Wait for the plot worker without raising (the caller is already failing)."""
+    if future is not None:
+        try:
+            future.result()
+        except BaseException:  # noqa: BLE001 - the caller's error is the one to report
+            log.debug("the FRF plot worker failed too", exc_info=True)

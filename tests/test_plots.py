@@ -1,6 +1,7 @@
 """Tests of ident.plots: FRF figures from a small synthetic FRF and model, unit conversion
 read back from the drawn lines, PNG files written atomically, bad inputs."""
 
+import io
 import threading
 
 import matplotlib
@@ -9,6 +10,7 @@ matplotlib.use("Agg")  # headless; the module itself never touches pyplot
 
 import numpy as np
 import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.testing import assert_allclose
 
@@ -169,6 +171,45 @@ def test_write_frf_plots_files_are_png(tmp_path):
     again = write_frf_plots(frf, out, outputs=["ride_height_LF"], dpi=40)
     assert [p.name for p in again] == ["frf_ride_height_LF_rig.png",
                                       "frf_ride_height_LF_shock.png"]
+
+
+def test_written_pages_equal_fresh_figures(tmp_path):
+    """Equivalence: the writer draws every page into one reused figure; each PNG has the
+    bytes of the page drawn into a new figure, so nothing of an earlier page is left."""
+    frf, truth = _frf()
+    model = _model(frf)
+    paths = write_frf_plots(model, tmp_path, truth=truth, units="imperial", dpi=40)
+    for path in paths:
+        output, group = path.stem[len("frf_"):].rsplit("_", 1)
+        buf = io.BytesIO()
+        plot_frf(model, output, inputs=group, truth=truth, units="imperial").savefig(
+            buf, format="png", dpi=40)
+        assert path.read_bytes() == buf.getvalue(), path.name
+    again = write_frf_plots(model, tmp_path / "again", truth=truth, units="imperial", dpi=40)
+    assert [p.read_bytes() for p in again] == [p.read_bytes() for p in paths]  # deterministic
+
+
+@pytest.mark.parametrize("units", ["SI", "imperial"])
+def test_fixed_layout_keeps_labels_inside_and_clear_of_ticks(units):
+    """The fixed margins hold the longest labels: mixed units (rig inputs) and dB ticks."""
+    frf, truth = _frf()
+    fig = plot_frf(_model(frf), "ride_height_LF", inputs="rig", truth=truth, units=units)
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    width, height = fig.bbox.width, fig.bbox.height
+    for ax in fig.axes:
+        label = ax.yaxis.label.get_window_extent(renderer)
+        ticks = [t.get_window_extent(renderer) for t in ax.get_yticklabels() if t.get_text()]
+        assert label.x0 >= 0 and label.x1 < min(b.x0 for b in ticks), ax.get_ylabel()
+    ax_p = fig.axes[2]
+    xlabel = ax_p.xaxis.label.get_window_extent(renderer)
+    xticks = [t.get_window_extent(renderer) for t in ax_p.get_xticklabels() if t.get_text()]
+    assert xlabel.y0 >= 0 and xlabel.y1 < min(b.y0 for b in xticks)
+    title = fig.axes[0].title.get_window_extent(renderer)
+    assert title.y1 <= height
+    tight = fig.get_tightbbox(renderer)  # inches
+    assert tight.x0 >= 0 and tight.y0 >= 0
+    assert tight.x1 <= width / fig.dpi and tight.y1 <= height / fig.dpi
 
 
 def test_write_frf_plots_never_replaces_a_user_file(tmp_path):
