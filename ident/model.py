@@ -531,7 +531,9 @@ class VehicleModel:
                 ms = getattr(plant, part)
                 arrays.update({f"plant_{part}_{k}": getattr(ms, k) for k in ("lam", "B", "C", "D")})
         buf = io.BytesIO()
-        np.savez_compressed(buf, meta=np.array(json.dumps(meta)), **arrays)
+        # stored, not deflated: the FRF's noisy complex lines compress by 15 % only, at 1.2 s
+        # of a 1.3 s save (paper session: 31.8 MB stored against 27.1 MB deflated)
+        np.savez(buf, meta=np.array(json.dumps(meta)), **arrays)
         path = Path(path)
         with atomic_path(path, overwrite=overwrite) as tmp:
             tmp.write_bytes(buf.getvalue())
