@@ -73,6 +73,9 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
 
     out = Path(out)
     with atomic_dir(out, overwrite=overwrite) as work:
+        # on a fresh machine numba compiles the screening and metric-filter kernels on first
+        # use: a worker compiles them into numba's cache while the virtual rig runs here
+        warm = _start_job(_warm_kernels)
         vehicle = example_vehicle()
         plan = default_plan()
         units = plan.units
@@ -84,7 +87,9 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         model.save(work / "model.npz")
         # the FRF plots need only the saved model: drawn by a worker process while this one
         # ranks and optimizes (the optimizer's loop runs on one core)
-        plots = _start_plots(work / "model.npz", vehicle, work / "frf_plots", units)
+        _settle_plots(warm)
+        plots = _start_job(_frf_plots_job, work / "model.npz", vehicle, work / "frf_plots",
+                           units)
         try:
             model.summary().to_csv(work / "model_summary.csv", index=False)
             drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
@@ -153,8 +158,31 @@ def _frf_plots_job(model_path, vehicle, folder, units):
     return str(folder)
 
 
-def _start_plots(model_path, vehicle, folder, units):
-    """Start :func:`_frf_plots_job` on a forked worker process (POSIX), or run it here.
+def _warm_kernels():
+    """Compile (into numba's cache) the kernels of screening and of the metric filter on a
+    small problem; the demo's process then loads them. Runs in a worker process."""
+    import numpy as np
+
+    from ident.drive import make_track_drive
+    from ident.metrics import bandpass
+    from ident.shocks import read_shock_library
+    from ident.vehicle import build_full_car, example_vehicle
+    from planner.screen import screen_setups
+    from planner.setups import enumerate_setups
+
+    vehicle = example_vehicle()
+    drive = make_track_drive(duration_s=20.0, fs_hz=100.0, seed=1,
+                             wheelbase_m=vehicle.a_m + vehicle.b_m,
+                             track_width_m=vehicle.track_front_m)
+    library = read_shock_library(DEMO_LIBRARY_PATH)
+    screen_setups(build_full_car(vehicle).loop_plant(), drive, enumerate_setups(library)[:2],
+                  library)
+    bandpass(np.zeros((2, 2, 20_000)), fs=100.0)
+    return True
+
+
+def _start_job(func, *args):
+    """Start ``func(*args)`` on a forked worker process (POSIX), or run it here.
 
     Returns the future, or None when it already ran in this process.
     """
@@ -162,11 +190,11 @@ def _start_plots(model_path, vehicle, folder, units):
     import multiprocessing
 
     if "fork" not in multiprocessing.get_all_start_methods():
-        _frf_plots_job(model_path, vehicle, folder, units)
+        func(*args)
         return None
     pool = concurrent.futures.ProcessPoolExecutor(
         max_workers=1, mp_context=multiprocessing.get_context("fork"))
-    future = pool.submit(_frf_plots_job, model_path, vehicle, folder, units)
+    future = pool.submit(func, *args)
     pool.shutdown(wait=False)
     return future
 

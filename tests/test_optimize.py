@@ -368,6 +368,7 @@ def test_compiled_steps_are_kept_between_runs(tmp_path, monkeypatch):
         raise AssertionError("the compiler ran although the library is cached")
 
     monkeypatch.setattr(subprocess, "run", no_compiler)
+    monkeypatch.setattr(subprocess, "Popen", no_compiler)
     second = po._compiled_steps(_toy_steps())
     assert list(po.jit_cache_dir().glob("steps-*.so")) == libs
     rng = np.random.default_rng(3)
