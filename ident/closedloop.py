@@ -920,6 +920,12 @@ def _loop_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_
 # setups
 # ----------------------------------------------------------------------------------------------
 
+def _writable(a):
+    """A writable float copy: numba compiles a kernel once per argument type, and a frozen
+    plant's read-only arrays are another type; one specialization serves every plant."""
+    return np.array(a, dtype=float)
+
+
 def _setup_models(setup, where):
     """Return the 4 shock models (LF, RF, LR, RR) of a setup."""
     if isinstance(setup, Mapping):
@@ -1101,7 +1107,7 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
 
     Cy = ms.C[oi]
     _loop_batch(*split(phi), *split(g1), *split(g0), *split(gm), *split(Bf.T), *split(Cv),
-                np.ascontiguousarray(Deff), v_rig, plant.cbar_n_s_m, *packed, r,
+                np.ascontiguousarray(Deff), v_rig, _writable(plant.cbar_n_s_m), *packed, r,
                 *split(Cy.T), np.ascontiguousarray(ms.D[oi].T, dtype=float), y_rig, y, F, iters)
     if np.any(iters < 0):
         bad = np.flatnonzero(iters < 0).tolist()

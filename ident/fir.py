@@ -633,10 +633,11 @@ def simulate_fir_batch(plant, drive, setups, *, oversample=4, outputs=None, loop
     worst = np.zeros(S, dtype=np.int64)
     rest = bool(np.any(h_rest))
     change, passes, dF_last = 0.0, 0, None
+    cbar = np.array(plant.cbar_n_s_m, dtype=float)  # writable: one numba specialization
     while True:
         dfh[:, :, :Lm] = 0.0
-        _fir_loop_batch(hrev, D0, v_free, plant.cbar_n_s_m, kv, kf, nk, slo, shi, alpha, b0, b1,
-                        r, dfh, F, iters)
+        _fir_loop_batch(hrev, D0, v_free, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, r, dfh, F,
+                        iters)
         passes += 1
         if np.any(iters < 0):
             bad = np.flatnonzero(iters < 0).tolist()

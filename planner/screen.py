@@ -428,7 +428,10 @@ def screen_packed(ops, kv, kf, nk, slo, shi, lag, *, max_iter=30, tol=1e-5):
     sig = np.zeros((n, 4))
     iters = np.zeros(n, dtype=np.int64)
     if n:
-        _screen_batch(ops.w, ops.Hvs, ops.Hys, ops.P, ops.PB, ops.QB, ops.d0, ops.cbar,
+        # writable copies: a read-only array (a frozen plant's c_bar) is another numba type,
+        # which would compile the kernel a second time
+        _screen_batch(ops.w, ops.Hvs, ops.Hys, ops.P, ops.PB, ops.QB, ops.d0,
+                      np.array(ops.cbar, dtype=float),
                       ops.sig0, kv, kf, nk, slo, shi, lag, int(max_iter), float(tol), out, sig,
                       iters)
     return out, sig, iters
