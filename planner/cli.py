@@ -290,6 +290,7 @@ def cmd_rank(args):
     ranking = rank_setups(model, drive, library, setups=setups, constraints=constraints,
                           objective=objective, baseline=baseline, top=args.top,
                           oversample=args.oversample, uncertainty=not args.no_uncertainty,
+                          scheduler=args.scheduler, n_workers=args.workers,
                           progress=not args.quiet)
     files = write_ranking(ranking.table, out, units=args.units, objective=objective,
                           baseline=ranking.baseline, overwrite=args.overwrite)
@@ -701,6 +702,12 @@ def build_parser():
                             help="setups simulated in the time domain (default %(default)s)")
             sp.add_argument("--no-uncertainty", action="store_true",
                             help="skip the Monte Carlo intervals")
+            sp.add_argument("--scheduler", metavar="ADDRESS|local",
+                            help="screen on Dask: a scheduler address (tcp://host:8786) or "
+                            "'local' for a cluster on this machine (default: this process; "
+                            "the same ranking either way)")
+            sp.add_argument("--workers", type=int,
+                            help="workers of a local cluster (default: cores)")
         sp.set_defaults(func=func)
 
     opt = sub.add_parser("optimize", help="the best damper curve per corner group, mapped to "

@@ -511,7 +511,7 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
         ``settings["kind"] == "screening"``; diagnostics hold the linearized
         shock-velocity RMS per setup and corner and the iteration counts.
     """
-    from planner.predict import Predictions, as_loop_plant, prepare_drive, resolve_setups
+    from planner.predict import as_loop_plant, prepare_drive, resolve_setups
 
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
     drive = prepare_drive(drive, getattr(model, "fs_hz", None))
@@ -522,6 +522,16 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
     names, out, sig, iters = screen_response(H, plant.output_names, plant.cbar_n_s_m, bands,
                                              models, max_iter=max_iter, tol=tol,
                                              chunk_size=chunk_size, progress=progress)
+    return screening_predictions(plant, drive, setups, names, out, sig, iters, band_hz=band_hz,
+                                 n_bands=bands.f_hz.size, max_iter=max_iter, tol=tol)
+
+
+def screening_predictions(plant, drive, setups, names, out, sig, iters, *, band_hz, n_bands,
+                          max_iter, tol):
+    """The screening's :class:`planner.predict.Predictions` from the kernel's arrays (shared
+    by :func:`screen_setups` and :func:`planner.sweep.screen_setups_on`)."""
+    from planner.predict import Predictions
+
     if np.any(iters >= max_iter):
         log.warning("screening: %d setups did not reach the tolerance in %d iterations",
                     int(np.sum(iters >= max_iter)), max_iter)
@@ -529,7 +539,7 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
     table = pd.concat([ids, pd.DataFrame(out, columns=names)], axis=1)
     table.index = pd.Index([s.name for s in setups], name="setup")
     settings = {"kind": "screening", "model": plant.name, "drive": drive.name,
-                "band_hz": tuple(band_hz), "n_bands": int(bands.f_hz.size), "fs_hz": drive.fs_hz,
+                "band_hz": tuple(band_hz), "n_bands": int(n_bands), "fs_hz": drive.fs_hz,
                 "tol": tol, "max_iter": max_iter}
     return Predictions(table=table, setups=tuple(setups), settings=settings,
                        diagnostics={"shock_velocity_rms_linearized": sig, "iterations": iters})

@@ -84,6 +84,7 @@ __all__ = [
     "setup_space",
     "SweepResult",
     "sweep_setups",
+    "screen_setups_on",
 ]
 
 log = logging.getLogger(__name__)
@@ -514,6 +515,73 @@ def _screen_chunk(ops_list, shocks, space, scoring, start, stop, n_top, max_iter
     return {"start": start, "index": index, "score": score, "feasible": feasible,
             "top_index": index[best], "top_metrics": top_metrics,
             "not_converged": not_converged}
+
+
+def _screen_packed_chunk(ops, packed, max_iter, tol):
+    """Screen a packed chunk of setups (a task of :func:`screen_setups_on`)."""
+    from planner.screen import screen_packed
+
+    with _KERNEL_LOCK:
+        return screen_packed(ops, *packed, max_iter=max_iter, tol=tol)
+
+
+def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands=96,
+                     max_iter=30, tol=1e-5, reduce_rtol=LOOP_REDUCE_RTOL, chunk_size=5000,
+                     scheduler=None, client=None, n_workers=None, progress=False):
+    """:func:`planner.screen.screen_setups` with the chunks screened on a Dask cluster.
+
+    The operands are built once here and scattered; each task screens one chunk of packed
+    setups with the same compiled kernel, so the metrics are bit for bit those of
+    ``screen_setups`` whatever the scheduler, the workers or the chunk size (every setup
+    is computed on its own). ``rank --scheduler`` uses it.
+
+    Parameters
+    ----------
+    model, drive, setups, library, band_hz, n_bands, max_iter, tol, reduce_rtol
+        As :func:`planner.screen.screen_setups`.
+    chunk_size : int
+        Setups per task.
+    scheduler, client, n_workers
+        As :func:`sweep_setups` (default ``"local"``: a LocalCluster, one worker per core).
+    progress : bool
+
+    Returns
+    -------
+    planner.predict.Predictions
+        As ``screen_setups`` returns; ``settings["scheduler"]`` names where it ran.
+    """
+    from ident.closedloop import _pack_setups
+    from planner.predict import resolve_setups
+    from planner.screen import screening_predictions
+
+    if int(chunk_size) < 1:
+        raise PlannerError(f"chunk_size must be at least 1, got {chunk_size}")
+    setups = list(setups)
+    models = resolve_setups(setups, library)
+    runner = _start(scheduler, client, n_workers, True)  # a wrong address fails before work
+    try:
+        plant, drive, ops = _prepare_case("rank", model, drive, band_hz, n_bands, reduce_rtol)
+        h = 1.0 / drive.fs_hz  # as screen_response: the bands are of the drive at this rate
+        ops_ref = runner.scatter(ops)
+        args = []
+        for a in range(0, len(models), int(chunk_size)):
+            chunk = models[a:a + int(chunk_size)]
+            kv, kf, nk, slo, shi, *_ = _pack_setups(chunk, h)
+            lag = np.array([[m.lag_s for m in row] for row in chunk])
+            args.append((ops_ref, (kv, kf, nk, slo, shi, lag), max_iter, tol))
+        parts = [None] * len(args)
+        for j, res in runner.map_unordered(_screen_packed_chunk, args, progress, "screen"):
+            parts[j] = res
+        kind = runner.kind
+    finally:
+        runner.close()
+    out = np.concatenate([p[0] for p in parts])
+    sig = np.concatenate([p[1] for p in parts])
+    iters = np.concatenate([p[2] for p in parts])
+    pred = screening_predictions(plant, drive, setups, list(ops.metric_names), out, sig, iters,
+                                 band_hz=band_hz, n_bands=n_bands, max_iter=max_iter, tol=tol)
+    pred.settings["scheduler"] = kind
+    return pred
 
 
 def _warm(ops, shocks, codes, plant, drive, setups, library, oversample, band_hz):

@@ -291,3 +291,63 @@ def test_cli_sweep(tmp_path, track_drive, capsys):
     err = capsys.readouterr().err
     assert err.startswith("shockplan: error: sweep: scheduler 'nonsense'")
     assert "Traceback" not in err
+
+
+# ---------------------------------------------------------------- rank --scheduler
+
+
+def test_screen_on_a_cluster_equals_screen_setups(paper_model, track_drive, demo_library):
+    """``screen_setups_on`` (chunks on Dask workers, any chunk size) gives screen_setups'
+    table bit for bit; ``rank_setups(scheduler=...)`` the same ranking."""
+    from distributed import LocalCluster
+
+    from planner.sweep import screen_setups_on
+
+    setups = enumerate_setups(demo_library, symmetry="none", shocks=CRATE_10[:5],
+                              respect_inventory=False)
+    ref = screen_setups(paper_model, track_drive, setups, demo_library)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        got = screen_setups_on(paper_model, track_drive, setups, demo_library, chunk_size=97,
+                               scheduler=cluster.scheduler_address)
+        ranked = rank_setups(paper_model, track_drive, demo_library, setups=setups[:60],
+                             top=6, n_check=4, uncertainty=False,
+                             scheduler=cluster.scheduler_address)
+    assert got.settings["scheduler"] == "address"
+    _frames_identical(ref.table, got.table)
+    assert_array_equal(ref.diagnostics["iterations"], got.diagnostics["iterations"])
+    plain = rank_setups(paper_model, track_drive, demo_library, setups=setups[:60], top=6,
+                        n_check=4, uncertainty=False)
+    assert ranked.settings["scheduler"] == "address"
+    _frames_identical(plain.table, ranked.table)
+    _frames_identical(plain.screening, ranked.screening)
+    with pytest.raises(PlannerError, match="chunk_size"):
+        screen_setups_on(paper_model, track_drive, setups, demo_library, chunk_size=0,
+                         scheduler="none")
+
+
+def test_cli_rank_scheduler(tmp_path, track_drive, capsys):
+    """``rank --scheduler ADDRESS`` writes the ranking of the one-process command, byte for
+    byte; a bad scheduler is one clear error line."""
+    from distributed import LocalCluster
+
+    from ident.drive import write_drive
+    from planner.cli import main
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    write_drive(track_drive, tmp_path / "drive.csv")
+    args = ["-q", "rank", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
+            "--shocks", str(DEMO_LIBRARY_PATH), "--only", "B20,L12,L28,DS", "--top", "5",
+            "--no-uncertainty"]
+    assert main(args + ["--out", str(tmp_path / "plain")]) == 0
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        assert main(args + ["--scheduler", cluster.scheduler_address,
+                            "--out", str(tmp_path / "dask")]) == 0
+    for name in ("ranking.csv", "screening.csv"):
+        assert (tmp_path / "dask" / name).read_bytes() == (tmp_path / "plain" / name).read_bytes()
+    capsys.readouterr()
+    assert main(args + ["--scheduler", "nonsense", "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("shockplan: error: sweep: scheduler 'nonsense'") and "Traceback" not in err
+    assert not (tmp_path / "bad").exists()
