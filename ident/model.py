@@ -265,7 +265,7 @@ class VehicleModel:
             ``reduce_rtol`` per output (outputs scaled by their peak gain);
             ``None`` keeps the exact pole-residue realizations. The rig part,
             simulated once per drive, is reduced to the tighter
-            :data:`RIG_REDUCE_RTOL` (the paper session's model: 778 modes to 67,
+            :data:`RIG_REDUCE_RTOL` (the paper session's model: 778 modes to 68,
             and ten times less time per drive). The bound is conservative: at
             the default :data:`LOOP_REDUCE_RTOL` (0.03) the paper session's model
             keeps 11 of 520 shock modes and its predicted metrics move by at
