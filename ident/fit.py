@@ -447,13 +447,17 @@ def _reflect(quad, lin):
 
 def _basis(s, quad, lin):
     """Section basis, shape (n_f, n): 1/Q_k, s/Q_k per quad section, then 1/(s + a)."""
-    cols = []
-    for a1, a0 in quad:
-        q = 1.0 / (s * s + a1 * s + a0)
-        cols += [q, s * q]
-    for a in lin:
-        cols.append(1.0 / (s + a))
-    return np.array(cols).T.reshape(s.size, -1)
+    nq = len(quad)
+    out = np.empty((s.size, 2 * nq + len(lin)), dtype=complex)
+    if nq:
+        quad = np.asarray(quad, dtype=float)
+        sc = s[:, None]
+        q = 1.0 / (sc * sc + quad[:, 0] * sc + quad[:, 1])
+        out[:, 0:2 * nq:2] = q
+        out[:, 1:2 * nq:2] = sc * q
+    if len(lin):
+        out[:, 2 * nq:] = 1.0 / (s[:, None] + np.asarray(lin, dtype=float))
+    return out
 
 
 def _section_polys(quad, lin):
@@ -465,8 +469,8 @@ def _section_polys(quad, lin):
         other = np.array([1.0])
         for j, fac in enumerate(factors):
             if j != k:
-                other = np.polymul(other, fac)
-        these = [other, np.polymul(other, [1.0, 0.0])] if k < len(quad) else [other]
+                other = np.convolve(other, fac)  # np.polymul without its poly1d overhead
+        these = [other, np.append(other, 0.0)] if k < len(quad) else [other]
         for p in these:
             polys.append(np.concatenate([np.zeros(n - p.size), p]))
     return np.array(polys).reshape(-1, n), factors
@@ -1036,7 +1040,7 @@ def _polynomials(quad, lin, coef, n_num, w0, scale):
 
 
 def select_order(f_hz, h, *, weight=None, orders=range(2, 11), relative_num=-1, improvement=0.1,
-                 floor=1e-3, method="gauss-newton", max_iter=30, stable=True):
+                 floor=1e-3, method="gauss-newton", max_iter=30, stable=True, stop_early=True):
     """Fit several denominator orders and pick the smallest adequate one.
 
     Parameters
@@ -1055,6 +1059,12 @@ def select_order(f_hz, h, *, weight=None, orders=range(2, 11), relative_num=-1, 
         A fit error at or below this is good enough.
     method, max_iter, stable
         As :func:`fit_tf`.
+    stop_early : bool
+        Stop fitting higher orders once the choice can no longer change: an
+        order reached `floor` and every lower order is already beaten by more
+        than `improvement` (the selected fit is the same as with
+        ``stop_early=False``, which fits every order; only the table is
+        shorter).
 
     Returns
     -------
@@ -1062,7 +1072,8 @@ def select_order(f_hz, h, *, weight=None, orders=range(2, 11), relative_num=-1, 
         The selected fit (its FitWarnings are re-emitted; those of the other
         orders are not).
     table : list of (int, float)
-        ``(order, fit_error)`` for every order tried (``nan`` if it failed).
+        ``(order, fit_error)`` for every order fitted (``nan`` if it failed),
+        ascending.
 
     Raises
     ------
@@ -1111,6 +1122,8 @@ def select_order(f_hz, h, *, weight=None, orders=range(2, 11), relative_num=-1, 
                 fits[n], last_error = None, exc
         caught[n] = rec
         table.append((n, fits[n].fit_error if fits[n] is not None else float("nan")))
+        if stop_early and _order_settled(table, floor, improvement):
+            break
     errors = {n: e for n, e in table if np.isfinite(e)}
     if not errors:
         raise last_error
@@ -1128,6 +1141,28 @@ def select_order(f_hz, h, *, weight=None, orders=range(2, 11), relative_num=-1, 
                       f"{errors[chosen]:.3g}; the data may need more poles: extend orders",
                       FitWarning, stacklevel=2)
     return fits[chosen], table
+
+
+def _order_settled(table, floor, improvement):
+    """True when no higher order can change :func:`select_order`'s choice.
+
+    The last order fitted reached `floor`, so the choice is it or a lower order; a lower
+    order ``m`` is chosen only if no higher order improves it by more than `improvement`,
+    which an order already fitted above ``m`` may have settled (then ``m`` is out whatever
+    comes later). Once every lower order is out, the last one is the choice.
+    """
+    n, e_n = table[-1]
+    if not e_n <= floor:  # also nan
+        return False
+    for k, (m, e_m) in enumerate(table[:-1]):
+        if not np.isfinite(e_m):
+            continue
+        if e_m <= floor:
+            return True  # m (or a lower order) is the choice already
+        higher = [e for _, e in table[k + 1:] if np.isfinite(e)]
+        if not min(higher) < (1 - improvement) * e_m:
+            return False  # m is still in: it depends on the orders not fitted yet
+    return True
 
 
 # ----------------------------------------------------------------------------------------------

@@ -264,13 +264,29 @@ def test_order_10_fit_keeps_its_accuracy():
 def test_select_order_finds_the_true_order(rng):
     truth = TRUTHS["order6-zero"]
     h = truth.response(F_HZ)
-    fit, table = select_order(F_HZ, h, relative_num=-1)
+    fit, table = select_order(F_HZ, h, relative_num=-1, stop_early=False)
     assert fit.n_den == 6
     assert [n for n, _ in table] == list(range(2, 11))
     assert dict(table)[6] < FIT_ERROR_EXACT < dict(table)[5]
+    # stopping early: the same choice, from the orders up to the chosen one
+    fit_e, table_e = select_order(F_HZ, h, relative_num=-1)
+    assert fit_e.n_den == 6 and table_e == table[:len(table_e)]
+    assert [n for n, _ in table_e] == list(range(2, 7))
     hn = _noisy(h, rng)
     fit_n, table_n = select_order(F_HZ, hn, weight=1 / np.abs(hn) ** 2, relative_num=-1)
     assert 6 <= fit_n.n_den <= 8
+
+
+def test_select_order_stops_early_only_when_the_choice_is_settled():
+    # an order that reaches the floor ends the search only once no lower order can still be
+    # chosen: a lower order within `improvement` of every higher order seen so far stays a
+    # candidate until all higher orders are seen
+    from ident.fit import _order_settled
+    assert _order_settled([(2, 0.5), (3, 0.0009)], 1e-3, 0.1)
+    assert not _order_settled([(2, 0.00105), (3, 0.001)], 1e-3, 0.1)  # 2 still in
+    assert _order_settled([(2, 0.00105), (3, 0.001), (4, 0.0005)], 1e-3, 0.1)
+    assert not _order_settled([(2, 0.5), (3, float("nan"))], 1e-3, 0.1)
+    assert not _order_settled([(2, 0.5), (3, 0.01)], 1e-3, 0.1)  # floor not reached
 
 
 def test_select_order_skips_orders_the_data_cannot_identify():
@@ -278,7 +294,8 @@ def test_select_order_skips_orders_the_data_cannot_identify():
     f = np.array([1.0, 2.0, 3.0, 5.0])  # 8 real equations: at most 4 poles (+ 4 numerator)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
-        fit, table = select_order(f, truth.response(f), orders=range(1, 7), relative_num=-1)
+        fit, table = select_order(f, truth.response(f), orders=range(1, 7), relative_num=-1,
+                                  stop_early=False)
     assert [n for n, e in table if np.isnan(e)] == [5, 6]
     assert fit.n_den == 2
 
