@@ -387,6 +387,15 @@ def _lstsq(A, b, rcond=_RCOND):
     return x, U
 
 
+def _lstsq_x(A, b, rcond=_RCOND):
+    """:func:`_lstsq`'s solution alone, by LAPACK's ``gelsd`` (no range basis: about 1.3x
+    faster). The same column scaling and relative singular-value cut-off."""
+    norms = np.linalg.norm(A, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    x = np.linalg.lstsq(A / norms, b, rcond=rcond)[0]
+    return x / (norms if b.ndim == 1 else norms[:, None])
+
+
 def _section_roots(a1, a0):
     """Roots of s^2 + a1 s + a0 (the one with Im > 0 first for a complex pair)."""
     disc = a1 * a1 - 4.0 * a0
@@ -519,6 +528,13 @@ class _Problem:
         r = self.b - A @ x
         return float(r @ r), model, T @ x, U, r
 
+    def cost(self, quad, lin):
+        """``J`` of the best numerator for a denominator (:meth:`project`'s first value)."""
+        M, _ = _model_space(self.s, quad, lin, self.n_num)
+        A = _stack(self.sw[:, None] * M)
+        r = self.b - A @ _lstsq_x(A, self.b)
+        return float(r @ r)
+
     def error(self, cost):
         return float(np.sqrt(max(cost, 0.0) / self.norm2))
 
@@ -528,7 +544,7 @@ def _levi(s, y, sw, n_den, n_num):
     pa = s[:, None] ** np.arange(n_den)
     pb = s[:, None] ** np.arange(n_num + 1)
     A = sw[:, None] * np.hstack([-y[:, None] * pa, pb])
-    x, _ = _lstsq(_stack(A), _stack(sw * y * s**n_den))
+    x = _lstsq_x(_stack(A), _stack(sw * y * s**n_den))
     a = x[:n_den]
     return np.roots(np.concatenate([[1.0], a[::-1]]))
 
@@ -575,7 +591,7 @@ def _sk_step(prob, quad, lin):
     M, _ = _model_space(prob.s, quad, lin, prob.n_num)
     phi = _basis(prob.s, quad, lin)
     A = prob.sw[:, None] * np.hstack([M, -prob.y[:, None] * phi])
-    x, _ = _lstsq(_stack(A), prob.b)
+    x = _lstsq_x(_stack(A), prob.b)
     c = x[M.shape[1]:]
     return _sigma_zeros(quad, lin, c)
 
@@ -948,7 +964,7 @@ def fit_tf(f_hz, h, *, weight=None, n_den, n_num, method="gauss-newton", max_ite
             flipped = []
             if stable:
                 quad, lin, flipped = _reflect(quad, lin)
-            cost = prob.project(quad, lin)[0]
+            cost = prob.cost(quad, lin)
             hist.append(prob.error(cost))
             stg.append(name if k == 0 else "sk")
             if best is None or cost < best["cost"]:
