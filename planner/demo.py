@@ -159,10 +159,12 @@ def _frf_plots_job(model_path, vehicle, folder, units):
 
 
 def _warm_kernels():
-    """Compile (into numba's cache) the kernels of screening and of the metric filter on a
-    small problem; the demo's process then loads them. Runs in a worker process."""
+    """Compile (into numba's cache) the kernels of screening, of the metric filter and the
+    setup-parallel closed loop on a small problem; the demo's process then loads them. Runs
+    in a worker process, while the demo's virtual rig compiles and runs the one-setup loop."""
     import numpy as np
 
+    from ident.closedloop import simulate_batch
     from ident.drive import make_track_drive
     from ident.metrics import bandpass
     from ident.shocks import read_shock_library
@@ -175,8 +177,10 @@ def _warm_kernels():
                              wheelbase_m=vehicle.a_m + vehicle.b_m,
                              track_width_m=vehicle.track_front_m)
     library = read_shock_library(DEMO_LIBRARY_PATH)
-    screen_setups(build_full_car(vehicle).loop_plant(), drive, enumerate_setups(library)[:2],
-                  library)
+    plant = build_full_car(vehicle).loop_plant()
+    setups = enumerate_setups(library)[:2]
+    screen_setups(plant, drive, setups, library)
+    simulate_batch(plant, drive, [[library[i] for i in s.ids()] for s in setups], oversample=1)
     bandpass(np.zeros((2, 2, 20_000)), fs=100.0)
     return True
 
