@@ -37,7 +37,6 @@ from scipy import signal
 from tqdm.auto import tqdm
 
 from ident.channels import CORNERS, RIG_INPUTS, SHOCK_VELOCITIES
-from ident.closedloop import _invert_small
 from ident.drive import check_drive_inputs
 from ident.model import LOOP_REDUCE_RTOL
 
@@ -156,25 +155,91 @@ def _ceq(sig, kv, kf, nk, slo, shi):
     return acc
 
 
+#: Index pairs (a, b), a < b, of the upper triangle of a 4x4 Hermitian matrix, in the order
+#: the packed operands (:func:`_metric_form`) and the kernel agree on.
+_PAIRS_A = np.array([0, 0, 0, 1, 1, 2])
+_PAIRS_B = np.array([1, 2, 3, 2, 3, 3])
+#: Features of one band's loop correction that a metric's band power is linear in: the
+#: real diagonal of R = E PB E^H (4), the real and imaginary parts of its upper triangle
+#: (6 + 6) and of E = diag(D) K (16 + 16).
+_NFEAT = 48
+
+
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _loop_inverse(Hv, D, M, K):
-    """K <- (I - Hv diag(D))^-1 for one band: Hv (4, 4) the velocity responses to dF, D the
-    shocks' linearized damping minus c_bar (complex, with the lag)."""
+def _loop_inverse(Hv, D, A, perm):
+    """A <- (I - Hv diag(D))^-1 for one band (4x4, in place Gauss-Jordan, partial pivoting).
+
+    Hv (4, 4) are the velocity responses to dF, D the shocks' linearized damping minus
+    c_bar (complex, with the lag); perm (4,) is scratch. A screen-local routine rather than
+    ``ident.closedloop._invert_small``: in place (64 complex multiply-adds instead of 128:
+    the identity's zeros and ones are never multiplied) and pivots chosen by ``|z|^2``
+    (no ``hypot``), but the same pivots and the same floating-point operations on the
+    entries that matter, so the inverse is bit for bit the general routine's. That matters:
+    the fixed point's secant step amplifies any round-off change (see :func:`_screen_one`).
+    """
     for a in range(4):
         for b in range(4):
-            M[a, b] = -Hv[a, b] * D[b]
-        M[a, a] += 1.0
-    _invert_small(M, K, 4)
+            A[a, b] = -Hv[a, b] * D[b]
+        A[a, a] += 1.0
+    for c in range(4):
+        p = c
+        big = A[c, c].real * A[c, c].real + A[c, c].imag * A[c, c].imag
+        for i in range(c + 1, 4):
+            m2 = A[i, c].real * A[i, c].real + A[i, c].imag * A[i, c].imag
+            if m2 > big:
+                big = m2
+                p = i
+        perm[c] = p
+        if p != c:
+            for j in range(4):
+                t = A[c, j]
+                A[c, j] = A[p, j]
+                A[p, j] = t
+        d = 1.0 / A[c, c]
+        A[c, c] = 1.0
+        for j in range(4):
+            A[c, j] *= d
+        for i in range(4):
+            if i != c:
+                f = A[i, c]
+                A[i, c] = 0.0
+                for j in range(4):
+                    A[i, j] -= f * A[c, j]
+    # the row interchanges become column interchanges of the inverse, undone in reverse
+    for c in range(3, -1, -1):
+        p = perm[c]
+        if p != c:
+            for i in range(4):
+                t = A[i, c]
+                A[i, c] = A[i, p]
+                A[i, p] = t
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _screen_one(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
+def _screen_one(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
                 max_iter, tol, out, sig_out):
+    """Screen one setup: the fixed point on the shock-velocity RMS, then the metrics.
+
+    The fixed point's arithmetic (the loop inverse and the order of the sum
+    ``svv[c] = sum_ab Re(K_ca P_ab conj(K_cb))``) is kept as written: the secant step divides
+    differences of nearly equal residuals, so a reordered sum (e.g. using P Hermitian) moves
+    sigma by up to ~1e-9 relative on some setups. The final pass is rewritten: each metric's
+    band power is ``d0`` plus a setup-independent linear form ``F`` (:func:`_metric_form`) of
+    the 48 features of ``E = diag(D) K`` and ``R = E PB E^H``.
+    """
     nf = w.size
-    p = Hys.shape[1]
-    M = np.zeros((4, 4), dtype=np.complex128)
-    K = np.zeros((4, 4), dtype=np.complex128)
-    D = np.zeros(4, dtype=np.complex128)
+    p = d0.shape[1]
+    K = np.empty((4, 4), dtype=np.complex128)
+    T = np.empty((4, 4), dtype=np.complex128)
+    perm = np.empty(4, dtype=np.int64)
+    D = np.empty(4, dtype=np.complex128)
+    # the lag's roll-off 1 / (1 + j w tau) per band and corner: the same in every iteration
+    roll = np.empty((nf, 4), dtype=np.complex128)
+    for k in range(nf):
+        for c in range(4):
+            roll[k, c] = 1.0 + 1j * w[k] * lag[c]
+    v = np.empty(_NFEAT)
+    pw = np.empty(p)
     ceq = np.zeros(4)
     sig = sig0.copy()
     svv = np.zeros(4)
@@ -187,8 +252,8 @@ def _screen_one(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv, kf, nk, slo, shi, lag
             svv[c] = 0.0
         for k in range(nf):
             for c in range(4):
-                D[c] = ceq[c] / (1.0 + 1j * w[k] * lag[c]) - cbar[c]
-            _loop_inverse(Hvs[k], D, M, K)
+                D[c] = ceq[c] / roll[k, c] - cbar[c]
+            _loop_inverse(Hvs[k], D, K, perm)
             for c in range(4):
                 acc = 0.0
                 for a in range(4):
@@ -220,40 +285,93 @@ def _screen_one(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv, kf, nk, slo, shi, lag
         sig_out[c] = sig[c]
     for o in range(p):
         out[o] = 0.0
-    W = np.zeros(4, dtype=np.complex128)
     for k in range(nf):
         for c in range(4):
-            D[c] = ceq[c] / (1.0 + 1j * w[k] * lag[c]) - cbar[c]
-        _loop_inverse(Hvs[k], D, M, K)
-        for o in range(p):
-            # W = H_ys diag(D) K (row o)
+            D[c] = ceq[c] / roll[k, c] - cbar[c]
+        _loop_inverse(Hvs[k], D, K, perm)
+        # E = diag(D) K, in place of K
+        for a in range(4):
+            for b in range(4):
+                K[a, b] = D[a] * K[a, b]
+        # T = E PB, then R = T E^H (Hermitian: the diagonal and the upper triangle)
+        for a in range(4):
             for b in range(4):
                 acc = 0j
-                for a in range(4):
-                    acc += Hys[k, o, a] * D[a] * K[a, b]
-                W[b] = acc
-            pw = d0[k, o]
-            cross = 0j
+                for c in range(4):
+                    acc += K[a, c] * PB[k, c, b]
+                T[a, b] = acc
+        for a in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += T[a, c].real * K[a, c].real + T[a, c].imag * K[a, c].imag
+            v[a] = acc
+        q = 0
+        for a in range(3):  # a < b in the order of _PAIRS_A, _PAIRS_B
+            for b in range(a + 1, 4):
+                acc = 0j
+                for c in range(4):
+                    acc += T[a, c] * np.conj(K[b, c])
+                v[4 + q] = acc.real
+                v[10 + q] = acc.imag
+                q += 1
+        for a in range(4):
             for b in range(4):
-                cross += W[b] * Q[k, b, o]
-            pw += 2.0 * cross.real
-            quad = 0.0
-            for a in range(4):
-                for b in range(4):
-                    quad += (W[a] * PB[k, a, b] * np.conj(W[b])).real
-            pw += quad
-            out[o] += pw
+                v[16 + 4 * a + b] = K[a, b].real
+                v[32 + 4 * a + b] = K[a, b].imag
+        # each metric's band power is d0 plus a fixed linear form of v (F, from the
+        # operands): the loop over metrics innermost, contiguous in F
+        for o in range(p):
+            pw[o] = d0[k, o]
+        for j in range(_NFEAT):
+            vj = v[j]
+            for o in range(p):
+                pw[o] += F[k, j, o] * vj
+        for o in range(p):
+            out[o] += pw[o]
     for o in range(p):
         out[o] = math.sqrt(max(out[o], 0.0))
     return it + 1
 
 
 @nb.njit(cache=True, error_model="numpy", parallel=True)
-def _screen_batch(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
+def _screen_batch(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
                   max_iter, tol, out, sig_out, iters):
     for s in nb.prange(kv.shape[0]):
-        iters[s] = _screen_one(w, Hvs, Hys, P, PB, Q, d0, cbar, sig0, kv[s], kf[s], nk[s],
+        iters[s] = _screen_one(w, Hvs, P, PB, F, d0, cbar, sig0, kv[s], kf[s], nk[s],
                                slo[s], shi[s], lag[s], max_iter, tol, out[s], sig_out[s])
+
+
+def _metric_form(ops):
+    """The metrics' band powers as a linear form of the kernel's per-band features.
+
+    Parameters
+    ----------
+    ops : ScreenOperands
+
+    Returns
+    -------
+    F : ndarray, shape (n_bands, 48, n_metrics)
+        A metric's band power is ``d0[k, o] + F[k, :, o] . v`` with v the features of the
+        setup's loop correction in band k (see ``_NFEAT``). With ``h = H_ys[k, o]``,
+        ``W = h E``: ``W P_B W^H = h R h^H`` takes ``|h_a|^2`` (diagonal of R),
+        ``2 Re(h_a conj(h_b))`` and ``-2 Im(h_a conj(h_b))`` (upper triangle of R, ``a < b``
+        in the order of ``_PAIRS_A``/``_PAIRS_B``), and ``2 Re(W Q) = 2 Re sum_ab E_ab h_a
+        Q_bo`` takes ``2 Re(h_a Q_bo)`` and ``-2 Im(h_a Q_bo)``. Setup-independent: built
+        once per call of :func:`screen_packed`, it takes the per-metric work out of the
+        kernel.
+    """
+    Hys, QB = ops.Hys, ops.QB
+    nf, p = Hys.shape[0], Hys.shape[1]
+    F = np.empty((nf, _NFEAT, p))
+    h = np.transpose(Hys, (0, 2, 1))  # (nf, 4, p)
+    F[:, :4] = np.abs(h) ** 2
+    g = 2.0 * h[:, _PAIRS_A] * np.conj(h[:, _PAIRS_B])  # (nf, 6, p)
+    F[:, 4:10] = g.real
+    F[:, 10:16] = -g.imag
+    y = 2.0 * h[:, :, None, :] * QB[:, None, :, :]  # (nf, a, b, p): 2 h_a Q_bo
+    F[:, 16:32] = y.real.reshape(nf, 16, p)
+    F[:, 32:48] = -y.imag.reshape(nf, 16, p)
+    return F
 
 
 @dataclass(frozen=True, eq=False)
@@ -430,7 +548,7 @@ def screen_packed(ops, kv, kf, nk, slo, shi, lag, *, max_iter=30, tol=1e-5):
     if n:
         # writable copies: a read-only array (a frozen plant's c_bar) is another numba type,
         # which would compile the kernel a second time
-        _screen_batch(ops.w, ops.Hvs, ops.Hys, ops.P, ops.PB, ops.QB, ops.d0,
+        _screen_batch(ops.w, ops.Hvs, ops.P, ops.PB, _metric_form(ops), ops.d0,
                       np.array(ops.cbar, dtype=float),
                       ops.sig0, kv, kf, nk, slo, shi, lag, int(max_iter), float(tol), out, sig,
                       iters)

@@ -2,6 +2,7 @@
 (known answers with linear shocks, the linearization's fixed point, rank agreement with the
 time domain, the drive spectrum, the metric rows, determinism and bad inputs)."""
 
+import math
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -17,7 +18,8 @@ from ident.metrics import METRIC_NAMES
 from ident.shocks import LinearShock, ShockLibrary
 from planner.objective import default_objective, score_setups
 from planner.predict import predict_setups
-from planner.screen import drive_spectrum, metric_rows, screen_setups
+from planner.screen import (drive_bands, drive_spectrum, metric_rows, screen_operands,
+                            screen_packed, screen_setups)
 from planner.setups import Setup, enumerate_setups
 
 # Linear shocks, screening vs the time domain on the 60 s track drive. Both are exact linear
@@ -45,6 +47,13 @@ RTOL_EXACT = 1e-12  # the same linear algebra written two ways: round-off only
 # Fixed point of the linearization run to tol = 1e-11: the shock-velocity RMS are consistent
 # to ~1e-11 relative, so c_eq and the metrics are too (measured 1.4e-13).
 RTOL_FIXED_POINT = 1e-9
+# The compiled kernel against a plain-Python reference of the same fixed point. The secant
+# step divides differences of nearly equal residuals, which amplifies round-off: rewriting
+# the velocity-RMS sum in another order moved sigma by up to 1.5e-9 over 10^4 setups. So the
+# kernel's fixed point keeps the reference's arithmetic (sigma and the iteration counts come
+# out bit for bit); the metrics' final pass is reordered (band powers as a linear form of
+# the loop correction), round-off only (measured 5.5e-16).
+RTOL_KERNEL_REFERENCE = 1e-12
 # A sine over 60 s in 10.24 s Hann blocks: the window's leakage stays inside 0.2-50 Hz and
 # the per-block mean removal takes ~nothing of a 5 Hz sine (measured 2.4e-11).
 RTOL_SINE_POWER = 1e-8
@@ -178,6 +187,106 @@ def test_screening_ranks_agree_with_the_time_domain(paper_model, track_drive, de
     assert rho >= SPEARMAN_MIN  # measured 0.962
     # the time domain's best setup is among screening's best few (measured: its 3rd)
     assert ss.loc[sp["rank"].idxmin(), "rank"] <= 5
+
+
+def _ref_ceq(sig, kv, kf, nk, slo, shi):
+    """Equivalent damping of a PWL curve at velocity RMS sig (the kernel's formula)."""
+    sig = sig if sig > 0.0 else 1e-9
+    acc, lo = 0.0, 0.0
+    for seg in range(nk + 1):
+        hi = 0.5 * (1.0 + math.erf(kv[seg] / (sig * math.sqrt(2.0)))) if seg < nk else 1.0
+        s = slo if seg == 0 else shi if seg == nk else \
+            (kf[seg] - kf[seg - 1]) / (kv[seg] - kv[seg - 1])
+        acc += s * (hi - lo)
+        lo = hi
+    return acc
+
+
+def _ref_inverse(M):
+    """Inverse of a small complex matrix: Gauss-Jordan with partial pivoting on [M | I]."""
+    m = len(M)
+    J = [list(row) for row in M]
+    X = [[1.0 + 0j if i == j else 0j for j in range(m)] for i in range(m)]
+    for c in range(m):
+        p = max(range(c, m), key=lambda i: (abs(J[i][c]), -i))  # first of the largest
+        J[c], J[p], X[c], X[p] = J[p], J[c], X[p], X[c]
+        d = 1.0 / J[c][c]
+        J[c] = [z * d for z in J[c]]
+        X[c] = [z * d for z in X[c]]
+        for i in range(m):
+            f = J[i][c]
+            if i != c and f != 0.0:
+                J[i] = [a - f * b for a, b in zip(J[i], J[c])]
+                X[i] = [a - f * b for a, b in zip(X[i], X[c])]
+    return X
+
+
+def _ref_screen_one(ops, kv, kf, nk, slo, shi, lag, max_iter=30, tol=1e-5):
+    """One setup's screening written out plainly: the fixed point on the shock-velocity RMS
+    (secant-accelerated, as documented in planner.screen) and the metrics at it."""
+    w, Hvs, P = ops.w, ops.Hvs.tolist(), ops.P.tolist()
+    cbar = [float(c) for c in ops.cbar]
+    sig = [float(x) for x in ops.sig0]
+    s_prev, h_prev = [0.0] * 4, [0.0] * 4
+
+    def loop(sig):
+        ceq = [_ref_ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c]) for c in range(4)]
+        for k in range(w.size):
+            D = [ceq[c] / (1.0 + 1j * float(w[k]) * float(lag[c])) - cbar[c] for c in range(4)]
+            M = [[(1.0 if a == b else 0.0) - Hvs[k][a][b] * D[b] for b in range(4)]
+                 for a in range(4)]
+            yield k, D, _ref_inverse(M)
+
+    for it in range(max_iter):
+        svv = [0.0] * 4
+        for k, _, K in loop(sig):
+            for c in range(4):
+                svv[c] += sum((K[c][a] * P[k][a][b] * K[c][b].conjugate()).real
+                              for a in range(4) for b in range(4))
+        change = 0.0
+        for c in range(4):
+            new = math.sqrt(max(svv[c], 0.0))
+            change = max(change, abs(new - sig[c]) / max(sig[c], 1e-12))
+            hc = new - sig[c]
+            nxt = new if new > 0 else 0.5 * sig[c]
+            dh, ds = hc - h_prev[c], sig[c] - s_prev[c]
+            if it > 0 and dh != 0.0 and ds != 0.0 and \
+                    0.5 * sig[c] < sig[c] - hc * ds / dh < 2.0 * sig[c]:
+                nxt = sig[c] - hc * ds / dh
+            s_prev[c], h_prev[c], sig[c] = sig[c], hc, nxt
+        if change < tol:
+            break
+    out = np.zeros(ops.d0.shape[1])
+    for k, D, K in loop(sig):
+        W = ops.Hys[k] @ np.diag(D) @ np.array(K)  # (n_metrics, 4)
+        out += ops.d0[k] + 2.0 * np.real(np.einsum("ob,bo->o", W, ops.QB[k])) + \
+            np.real(np.einsum("oa,ab,ob->o", W, ops.PB[k], np.conj(W)))
+    return np.sqrt(np.maximum(out, 0.0)), np.array(sig), it + 1
+
+
+def test_kernel_matches_plain_reference(paper_model, track_drive, demo_library):
+    """The compiled kernel (screen_packed) gives the fixed point, its iteration count and the
+    metrics of a plain-Python reference, for nonlinear, lagged and linear setups."""
+    from ident.closedloop import _pack_setups
+    from planner.predict import as_loop_plant
+
+    plant = as_loop_plant(paper_model)
+    bands = drive_bands(track_drive)
+    H = plant.frequency_response(bands.f_hz)
+    ops = screen_operands(H, plant.output_names, plant.cbar_n_s_m, bands)
+    ids = [("BO", "RB", "TD", "DS"), ("B20", "B20", "B20", "B20"), ("L12", "L28", "B20", "L12"),
+           ("TD", "TD", "BO", "BO"), ("DS", "BO", "RB", "TD")]
+    models = [tuple(demo_library[i] for i in row) for row in ids]
+    kv, kf, nk, slo, shi, *_ = _pack_setups(models, 1.0 / bands.fs_hz)
+    lag = np.array([[m.lag_s for m in row] for row in models])
+    assert np.any(lag > 0)
+    out, sig, iters = screen_packed(ops, kv, kf, nk, slo, shi, lag)
+    for s in range(len(models)):
+        r_out, r_sig, r_it = _ref_screen_one(ops, kv[s], kf[s], nk[s], slo[s], shi[s], lag[s])
+        assert iters[s] == r_it
+        assert_allclose(sig[s], r_sig, rtol=RTOL_KERNEL_REFERENCE)
+        assert_allclose(out[s], r_out, rtol=RTOL_KERNEL_REFERENCE)
+    assert iters.max() > 2  # the secant steps were exercised
 
 
 # ---------------------------------------------------------------- drive spectrum and metric rows
