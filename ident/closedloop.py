@@ -451,12 +451,29 @@ def _refine(u, r):
     return np.ascontiguousarray(up[pad * r: pad * r + (u.shape[0] - 1) * r + 1])
 
 
-def _modal_filter(phi, g1, g0, gm, w, axis=-1):
-    """Run the hold recursion of every mode: w has the mode axis first."""
-    # x[k] = phi x[k-1] + g1 w[k] + g0 w[k-1] + gm w[k-2], zero initial state
-    out = np.empty(w.shape, dtype=complex)
-    for i in range(phi.size):
-        out[i] = signal.lfilter([g1[i], g0[i], gm[i]], [1.0, -phi[i]], w[i], axis=axis)
+def _modal_filter(phi, g1, g0, gm, w):
+    """Run the hold recursion of every mode (zero initial state).
+
+    ``x[k] = phi x[k-1] + g1 w[k] + g0 w[k-1] + gm w[k-2]`` per mode, as
+    ``scipy.signal.lfilter([g1, g0, gm], [1, -phi], w)`` computes it (transposed
+    direct form II, the same operations in the same order), compiled and parallel over
+    modes: lfilter's complex path, one call per mode, cost most of a rig response.
+
+    Parameters
+    ----------
+    phi, g1, g0, gm : ndarray of complex, shape (n,)
+        :func:`hold_coefficients` of the modes.
+    w : ndarray of complex, shape (n, n_fine)
+        Each mode's input ``B u`` on the internal grid.
+
+    Returns
+    -------
+    ndarray of complex, shape (n, n_fine)
+        The modal states.
+    """
+    c = [np.ascontiguousarray(a, dtype=complex) for a in (phi, g1, g0, gm, w)]
+    out = np.empty(c[-1].shape, dtype=complex)
+    _hold_filter(*c, out)
     return out
 
 
@@ -534,6 +551,25 @@ def _check_oversample(oversample):
 # ----------------------------------------------------------------------------------------------
 
 import numba as _nb  # noqa: E402
+
+
+@_nb.njit(cache=True, parallel=True)
+def _hold_filter(phi, g1, g0, gm, w, out):
+    """Kernel of :func:`_modal_filter`: ``out[i] = lfilter([g1, g0, gm], [1, -phi], w[i])``."""
+    N = w.shape[1]
+    for i in _nb.prange(phi.size):
+        p = phi[i]
+        b0 = g1[i]
+        b1 = g0[i]
+        b2 = gm[i]
+        z0 = 0j
+        z1 = 0j
+        for k in range(N):
+            wk = w[i, k]
+            y = b0 * wk + z0
+            z0 = b1 * wk + p * y + z1
+            z1 = b2 * wk
+            out[i, k] = y
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
@@ -780,6 +816,7 @@ def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_ri
     failed = False
     col = 0
     kk0 = 0
+    phase = 0  # k % r
     for k in range(N):
         # predictor: x[k] without the unknown g1 * B dF[k] term, and v_free from it
         a0 = 0.0
@@ -793,6 +830,12 @@ def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_ri
                   + gmr[i] * bpi[i] + gmi[i] * bpr[i])
             xr[i] = tr
             xi[i] = ti
+        # the velocities in a loop of their own: the update above has no loop-carried
+        # chain and vectorizes; fused with these sums (strict FP order) it ran scalar.
+        # Same sums in the same order as before, so the same rounding.
+        for i in range(n):
+            tr = xr[i]
+            ti = xi[i]
             a0 += Cvr[0, i] * tr - Cvi[0, i] * ti
             a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
             a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
@@ -885,7 +928,8 @@ def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_ri
             bdi[i] = ui
             xr[i] += g1r[i] * ur - g1i[i] * ui
             xi[i] += g1r[i] * ui + g1i[i] * ur
-        if k % r == 0:
+        # an output sample every r-th step (a counter: no integer division per step)
+        if phase == 0:
             kk = k // r
             for c in range(m):
                 F_out[kk, c] = F_prev[c]
@@ -902,6 +946,9 @@ def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_ri
                         y_out[o, kk0 + j] = y_rig[kk0 + j, o] + Y[j, o]
                 kk0 += col
                 col = 0
+        phase += 1
+        if phase == r:
+            phase = 0
     return -1 if failed else worst
 
 

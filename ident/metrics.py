@@ -258,7 +258,10 @@ _FAST_MIN_SIZE = 20_000
 
 
 def _sosfilt_inplace(sos, zi0, x0, buf, n):
-    """scipy's ``sosfilt(sos, buf[:n], zi=zi0 * x0)`` in place (transposed direct form II)."""
+    """scipy's ``sosfilt(sos, buf[:n], zi=zi0 * x0)`` in place (transposed direct form II).
+
+    The one-row reference of :func:`_sosfilt_lanes` (kept for tests and tooling).
+    """
     ns = sos.shape[0]
     z = np.empty((ns, 2))
     for s in range(ns):
@@ -274,23 +277,103 @@ def _sosfilt_inplace(sos, zi0, x0, buf, n):
         buf[k] = xc
 
 
+#: Rows filtered together (the lanes of one block). A biquad is a serial recurrence of
+#: a few cycles' latency per sample; rows side by side in a (time, lane) buffer make the
+#: lane loop a vector loop over independent recurrences (AVX2: 4 rows per instruction).
+#: 16 lanes measured best per core on 64 rows of 12,000 samples (8: 10 % slower, 32:
+#: fewer blocks than a batch of 64 rows needs to share among the cores).
+_LANES = 16
+
+
+def _sosfilt_lanes(sos, buf, z0, z1, start, stop, step):
+    """``sosfilt`` of every column of `buf` in place, over the rows ``range(start, stop,
+    step)`` (``step = -1``: the backward pass, without a reversed copy).
+
+    Parameters
+    ----------
+    sos : ndarray of float, shape (n_sections, 6)
+    buf : ndarray of float, shape (n, n_lanes)
+        One signal per column.
+    z0, z1 : ndarray of float, shape (n_sections, n_lanes)
+        The transposed direct form II states, holding the initial state on entry
+        (``zi * x0`` as ``sosfilt(..., zi=zi * x0)``); left with the final state.
+
+    Notes
+    -----
+    Each column gets exactly :func:`_sosfilt_inplace`'s operations in the same order, so
+    the same rounding. The lane loop indexes 1-D row views: numba's loop vectorizer then
+    turns it into vector instructions (it does not for 2-D indexing of the same loop).
+    """
+    ns = sos.shape[0]
+    n_lanes = buf.shape[1]
+    for k in range(start, stop, step):
+        row = buf[k]
+        for s in range(ns):
+            b0 = sos[s, 0]
+            b1 = sos[s, 1]
+            b2 = sos[s, 2]
+            a1 = sos[s, 4]
+            a2 = sos[s, 5]
+            zs0 = z0[s]
+            zs1 = z1[s]
+            for j in range(n_lanes):  # independent recurrences: no loop-carried chain
+                xc = row[j]
+                yc = b0 * xc + zs0[j]
+                zs0[j] = b1 * xc - a1 * yc + zs1[j]
+                zs1[j] = b2 * xc - a2 * yc
+                row[j] = yc
+
+
 def _sosfiltfilt_rows_py(x, sos, zi, padlen, out):
-    """``scipy.signal.sosfiltfilt(sos, x, axis=-1)`` (odd padding of `padlen`) per row."""
+    """``scipy.signal.sosfiltfilt(sos, x, axis=-1)`` (odd padding of `padlen`) per row.
+
+    Parameters
+    ----------
+    x : ndarray of float, shape (m, n)
+        C-contiguous rows.
+    sos : ndarray of float, shape (n_sections, 6)
+    zi : ndarray of float, shape (n_sections, 2)
+        ``scipy.signal.sosfilt_zi(sos)``.
+    padlen : int
+    out : ndarray of float, shape (m, n)
+        Written with the filtered rows.
+
+    Notes
+    -----
+    Rows are filtered in blocks of :data:`_LANES`, side by side in a (time, lane)
+    buffer (a short last block is padded with zero rows, which stay zero), the blocks in
+    parallel. Every row sees the operations of the one-row recurrence
+    (:func:`_sosfilt_inplace`) in the same order: the same result to the last bit.
+    """
     m, n = x.shape
-    for i in _prange(m):
-        ne = n + 2 * padlen
-        buf = np.empty(ne)
-        # odd extension: 2 x[0] - x[padlen:0:-1], x, 2 x[-1] - x[-2:-padlen-2:-1]
-        for k in range(padlen):
-            buf[k] = 2 * x[i, 0] - x[i, padlen - k]
-            buf[padlen + n + k] = 2 * x[i, n - 1] - x[i, n - 2 - k]
-        for k in range(n):
-            buf[padlen + k] = x[i, k]
-        _sosfilt_inplace(sos, zi, buf[0], buf, ne)
-        rev = buf[::-1].copy()
-        _sosfilt_inplace(sos, zi, rev[0], rev, ne)
-        for k in range(n):
-            out[i, k] = rev[ne - 1 - padlen - k]
+    ne = n + 2 * padlen
+    ns = sos.shape[0]
+    n_blocks = (m + _LANES - 1) // _LANES
+    for blk in _prange(n_blocks):
+        buf = np.zeros((ne, _LANES))
+        z0 = np.empty((ns, _LANES))
+        z1 = np.empty((ns, _LANES))
+        i0 = blk * _LANES
+        n_rows = min(_LANES, m - i0)
+        for j in range(n_rows):
+            i = i0 + j
+            # odd extension: 2 x[0] - x[padlen:0:-1], x, 2 x[-1] - x[-2:-padlen-2:-1]
+            for k in range(padlen):
+                buf[k, j] = 2 * x[i, 0] - x[i, padlen - k]
+                buf[padlen + n + k, j] = 2 * x[i, n - 1] - x[i, n - 2 - k]
+            for k in range(n):
+                buf[padlen + k, j] = x[i, k]
+        # forward, then backward over the same buffer; each pass starts from the steady
+        # state of its first input sample (sosfiltfilt's zi * x0)
+        for first, stop, step in ((0, ne, 1), (ne - 1, -1, -1)):
+            for s in range(ns):
+                for j in range(_LANES):
+                    z0[s, j] = zi[s, 0] * buf[first, j]
+                    z1[s, j] = zi[s, 1] * buf[first, j]
+            _sosfilt_lanes(sos, buf, z0, z1, first, stop, step)
+        for j in range(n_rows):
+            for k in range(n):
+                out[i0 + j, k] = buf[padlen + k, j]
 
 
 try:  # numba is a dependency; keep the module importable without it for tooling
@@ -298,6 +381,7 @@ try:  # numba is a dependency; keep the module importable without it for tooling
 
     _prange = _nb.prange
     _sosfilt_inplace = _nb.njit(cache=True)(_sosfilt_inplace)
+    _sosfilt_lanes = _nb.njit(cache=True)(_sosfilt_lanes)
     _sosfiltfilt_rows = _nb.njit(cache=True, parallel=True)(_sosfiltfilt_rows_py)
 except ImportError:  # pragma: no cover
     _prange = range

@@ -277,3 +277,32 @@ def test_batched_filter_equals_scipy(rng):
     ref = signal.sosfiltfilt(sos, x, axis=-1)
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.nanmax(np.abs(ref)))
     assert np.isnan(got[1, 3]).all() and np.isfinite(got[0]).all()
+
+
+#: The compiled filter runs scipy's recurrence (transposed direct form II) operation for
+#: operation; 1e-12 leaves room only for a scipy build that fuses multiply-adds.
+RTOL_FILTER = 1e-12
+
+
+def test_lane_blocks_equal_the_one_row_recurrence(rng):
+    """Rows filtered side by side in lane blocks (a short last block padded) give each
+    row exactly the one-row recurrence's result, and scipy's to round-off."""
+    from scipy import signal
+
+    from ident.metrics import _LANES, _design, _sosfilt_inplace, _sosfiltfilt_rows
+
+    x = rng.standard_normal((2 * _LANES + 3, 1500)) * 50.0
+    sos, padlen = _design((1.0, 20.0), 4, 100.0)
+    zi = np.ascontiguousarray(signal.sosfilt_zi(sos))
+    got = np.empty_like(x)
+    _sosfiltfilt_rows(x, sos, zi, padlen, got)
+    for i in range(x.shape[0]):  # plain reference: one row, forward then reversed
+        ext = np.concatenate([2 * x[i, 0] - x[i, padlen:0:-1], x[i],
+                              2 * x[i, -1] - x[i, -2:-padlen - 2:-1]])
+        _sosfilt_inplace(sos, zi, ext[0], ext, ext.size)
+        rev = ext[::-1].copy()
+        _sosfilt_inplace(sos, zi, rev[0], rev, rev.size)
+        buf = rev[::-1][padlen:padlen + x.shape[1]]
+        np.testing.assert_array_equal(got[i], buf)
+    ref = signal.sosfiltfilt(sos, x, axis=-1)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=RTOL_FILTER * np.abs(ref).max())
