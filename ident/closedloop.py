@@ -963,6 +963,24 @@ def _loop_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_
     return
 
 
+@_nb.njit(cache=True, error_model="numpy")
+def _loop_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
+                 kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, CyrT, CyiT, DyT, y_rig, y_out,
+                 F_out, iters):
+    """:func:`_loop_batch` one setup after the other (the same `_loop_one`, the same numbers).
+
+    A single setup gains nothing from the parallel loop, and this kernel compiles in about
+    60 % of its time: the virtual rig (one setup per run) uses it, so a fresh machine's first
+    ``rig simulate`` or demo waits for the smaller compilation only (the demo compiles the
+    parallel kernel meanwhile in a worker).
+    """
+    for s in range(kv.shape[0]):
+        iters[s] = _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
+                             v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s], b0[s],
+                             b1[s], bm[s], r, CyrT, CyiT, DyT, y_rig, y_out[s], F_out[s])
+    return
+
+
 # ----------------------------------------------------------------------------------------------
 # setups
 # ----------------------------------------------------------------------------------------------
@@ -1153,7 +1171,8 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
         return np.ascontiguousarray(a.real, dtype=float), np.ascontiguousarray(a.imag, dtype=float)
 
     Cy = ms.C[oi]
-    _loop_batch(*split(phi), *split(g1), *split(g0), *split(gm), *split(Bf.T), *split(Cv),
+    kernel = _loop_serial if S == 1 else _loop_batch
+    kernel(*split(phi), *split(g1), *split(g0), *split(gm), *split(Bf.T), *split(Cv),
                 np.ascontiguousarray(Deff), v_rig, _writable(plant.cbar_n_s_m), *packed, r,
                 *split(Cy.T), np.ascontiguousarray(ms.D[oi].T, dtype=float), y_rig, y, F, iters)
     if np.any(iters < 0):

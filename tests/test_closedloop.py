@@ -219,9 +219,11 @@ def test_batch_equals_single(paper_model):
     rig = rig_response(plant, drive, oversample=4)
     batch = simulate_batch(plant, drive, setups, oversample=4, rig=rig)
     for i, s in enumerate(setups):
-        one = simulate(plant, drive, s, oversample=4)
+        one = simulate(plant, drive, s, oversample=4)  # one setup: the serial kernel
         for n in ("shock_velocity_RF", "tire_force_LR", "shock_force_LF"):
             np.testing.assert_allclose(batch.channels[n][i], one.channels[n], rtol=1e-12, atol=1e-12)
+            # the same _loop_one, one setup at a time or in parallel: the same numbers
+            np.testing.assert_array_equal(batch.channels[n][i], one.channels[n])
 
 
 def test_same_curve_as_table_or_digressive_is_identical(paper_model):
