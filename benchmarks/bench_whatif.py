@@ -2,7 +2,8 @@
 
 Run::
 
-    python benchmarks/bench_whatif.py [--draws 50] [--setups 10] [--drive-s 120]
+    python benchmarks/bench_whatif.py [--draws 50] [--setups 10] [--drive-s 120] \
+        [--workers N] [--no-cluster]
 
 The problem: the paper car's loop plant (built from the known model, used as an
 identified model is: springs act through the shock-travel feedback), the
@@ -20,7 +21,12 @@ load average at that moment:
    same simulator: it must be ~0);
 3. front and rear spring rates ±10 % one at a time (4 conditions): the engine,
    and the reference (``stiffened_plant`` + ``predict_setups`` per condition);
-4. ``target: time domain >= 100 evaluations/s, screening >= 1000/s``.
+4. the same tolerance what-if on a ``LocalCluster`` (``evaluate_whatif(scheduler=
+   "local")``: ``--workers`` worker processes, default one per core, started once before
+   the clock; the figure is a warm run), in the same run, next to the one-process time:
+   its rate, the speed ratio and whether the tables are identical (they must be);
+   ``--no-cluster`` skips it;
+5. ``target: time domain >= 100 evaluations/s, screening >= 1000/s``.
 
 This is a script, not part of the package: it prints and writes nothing.
 """
@@ -45,6 +51,7 @@ from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
 from planner.predict import predict_setups  # noqa: E402
 from planner.screen import screen_setups  # noqa: E402
 from planner.setups import Setup, enumerate_setups  # noqa: E402
+from planner.sweep import _start  # noqa: E402
 from planner.whatif import (  # noqa: E402
     Factor,
     evaluate_whatif,
@@ -112,12 +119,20 @@ def largest_difference(result, tables, pset, setups, baseline):
     return worst
 
 
+def warm(plant, drive, setups, library):
+    """Import the engine and load its compiled kernels (on every cluster worker)."""
+    predict_setups(plant, drive, setups, library)
+    screen_setups(plant, drive, setups, library)
+
+
 def main(argv=None):
     """Run the benchmark and print its figures."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--draws", type=int, default=50, help="Monte Carlo draws")
     p.add_argument("--setups", type=int, default=10, help="crate setups (plus the baseline)")
     p.add_argument("--drive-s", type=float, default=120.0, help="track drive [s]")
+    p.add_argument("--workers", type=int, help="LocalCluster workers (default: cores)")
+    p.add_argument("--no-cluster", action="store_true", help="skip the LocalCluster figure")
     args = p.parse_args(argv)
     vehicle = example_vehicle()
     library = read_shock_library(DEMO_LIBRARY_PATH)
@@ -140,22 +155,44 @@ def main(argv=None):
     tol = Factor("shock tolerance", "shock_scale", targets=CORNERS, independent=True,
                  distribution=("uniform", 0.95, 1.05))
     pset = perturbation_set([tol], design="monte-carlo", n_draws=args.draws, seed=1)
+    runner = None
+    if not args.no_cluster:  # the LocalCluster of scheduler="local", started and warmed once
+        t0 = time.perf_counter()
+        runner = _start("local", None, args.workers, True)
+        runner.everywhere(warm, plant, drive, everything[:2], library)
+        print(f"LocalCluster: {runner.n_workers} worker processes started and warmed in "
+              f"{time.perf_counter() - t0:.1f} s")
     rates = {}
-    for method in ("time", "screening"):
-        t0 = time.perf_counter()
-        res = evaluate_whatif(plant, drive, setups, library, pset, baseline=base,
-                              method=method)
-        eng = time.perf_counter() - t0
-        n = res.settings["n_evaluations"]
-        t0 = time.perf_counter()
-        ref_tables = reference_tolerance(plant, drive, everything, library, pset, method)
-        ref = time.perf_counter() - t0
-        diff = largest_difference(res, ref_tables, pset, setups, base)
-        rates[method] = n / eng
-        print(f"tolerance, {method}: {n} evaluations in {eng:.2f} s = {n / eng:.0f}/s "
-              f"({load()}); per-condition reference {ref:.2f} s = {n / ref:.0f}/s; "
-              f"engine / reference speed {ref / eng:.2f}x; largest metric difference "
-              f"{diff:.2e}")
+    try:
+        for method in ("time", "screening"):
+            t0 = time.perf_counter()
+            res = evaluate_whatif(plant, drive, setups, library, pset, baseline=base,
+                                  method=method)
+            eng = time.perf_counter() - t0
+            n = res.settings["n_evaluations"]
+            t0 = time.perf_counter()
+            ref_tables = reference_tolerance(plant, drive, everything, library, pset, method)
+            ref = time.perf_counter() - t0
+            diff = largest_difference(res, ref_tables, pset, setups, base)
+            rates[method] = n / eng
+            print(f"tolerance, {method}: {n} evaluations in {eng:.2f} s = {n / eng:.0f}/s "
+                  f"({load()}); per-condition reference {ref:.2f} s = {n / ref:.0f}/s; "
+                  f"engine / reference speed {ref / eng:.2f}x; largest metric difference "
+                  f"{diff:.2e}")
+            if runner is not None:
+                t0 = time.perf_counter()
+                dres = evaluate_whatif(plant, drive, setups, library, pset, baseline=base,
+                                       method=method, client=runner.client)
+                dt = time.perf_counter() - t0
+                same = all(getattr(res, k).equals(getattr(dres, k))
+                           for k in ("table", "robust", "conditions"))
+                print(f"tolerance, {method}, LocalCluster ({runner.n_workers} workers, "
+                      f"{dres.settings['n_tasks']} tasks): {n} evaluations in {dt:.2f} s = "
+                      f"{n / dt:.0f}/s ({load()}); one process {eng:.2f} s; cluster / one "
+                      f"process speed {eng / dt:.2f}x; tables identical: {same}")
+    finally:
+        if runner is not None:
+            runner.close()
 
     k = np.asarray(vehicle.spring_rate_n_m, float)
     springs = [Factor(f"{axle} springs", "spring_rate", targets=tg, change="scale",

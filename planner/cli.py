@@ -580,7 +580,7 @@ def cmd_whatif(args):
         method=args.method, oversample=args.oversample,
         rank_tolerance=RANK_TOLERANCE if args.rank_tolerance is None else args.rank_tolerance,
         fragile_share=FRAGILE_SHARE if args.fragile_share is None else args.fragile_share,
-        progress=not args.quiet)
+        scheduler=args.scheduler, n_workers=args.workers, progress=not args.quiet)
     files = write_whatif(result, out, units=args.units, overwrite=args.overwrite)
     print(_whatif_summary(result))
     print(f"wrote {len(files)} files to {out}: " + ", ".join(sorted(files)[:6])
@@ -593,7 +593,10 @@ def _whatif_summary(result, n=10):
     rob = result.robust
     lines = [f"{st['n_setups']} setups x {st['n_conditions']} conditions "
              f"({result.perturbations.design}, {st['method']}): {st['n_evaluations']} "
-             f"evaluations in {st['elapsed_s']:.1f} s; baseline '{result.baseline}'"]
+             f"evaluations in {st['elapsed_s']:.1f} s"
+             + (f" on Dask ({st['scheduler']}, {st['n_workers']} worker(s))"
+                if st.get("scheduler", "none") != "none" else "")
+             + f"; baseline '{result.baseline}'"]
     rows = []
     for name, r in rob.head(n).iterrows():
         rows.append((name, int(r["nominal_rank"]), f"{r['mean_score']:.4f}",
@@ -794,6 +797,11 @@ def build_parser():
                     help="units of the drive files and outputs (default SI)")
     wi.add_argument("--oversample", type=int, default=2,
                     help="internal steps per sample (default %(default)s)")
+    wi.add_argument("--scheduler", metavar="ADDRESS|local",
+                    help="evaluate on Dask: a scheduler address (tcp://host:8786) or 'local' "
+                    "for a cluster on this machine (default: this process; the same files "
+                    "either way)")
+    wi.add_argument("--workers", type=int, help="workers of a local cluster (default: cores)")
     wi.add_argument("--out", required=True, help="output folder")
     wi.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     wi.set_defaults(func=cmd_whatif)

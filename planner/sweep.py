@@ -27,7 +27,10 @@ Where it runs (``scheduler``): ``"local"`` (default) starts a
 :class:`dask.distributed.LocalCluster` of worker processes, one per core, each with one
 compiled-kernel thread; an address (``"tcp://host:8786"``) joins a running scheduler;
 ``"none"`` runs everything in this process. The cases, the library and the space are
-scattered to the workers once; a task names only a range of the space.
+scattered to the workers once; a task names only a range of the space. The same runner
+(:func:`_start`) serves ``rank --scheduler`` (:func:`screen_setups_on`) and ``whatif
+--scheduler`` (:func:`planner.whatif.evaluate_whatif`, a task per chunk of a condition
+group).
 
 Determinism
 -----------

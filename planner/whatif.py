@@ -69,6 +69,13 @@ File format (``format = "shockplan-whatif/1"``)::
     levels = [0.9, 1.1]
     baseline_rate = 90000.0                   # identified models: the fitted car's rate
 
+Where it runs: by default in this process, one condition group (the conditions sharing a
+plant and a drive) after the other. With ``scheduler="local"`` (a
+:class:`dask.distributed.LocalCluster`), a scheduler address or a ``client``, the groups,
+cut into chunks of setups, are evaluated on Dask workers through the runner of
+:mod:`planner.sweep`; the tables are the one-process tables bit for bit (see
+:func:`evaluate_whatif`).
+
 Scoring: in every condition the objective normalizes by the baseline setup evaluated in
 that same condition, so a score says how much better than the team's baseline a setup
 is on that car and track; ``max`` limits stay absolute. A setup's rank is *fragile*
@@ -135,6 +142,15 @@ MIN_WINDOW_S = 4.0
 CHANNEL_GROUPS = {"wheel": WHEELLOADER_INPUTS, "aero": AERO_INPUTS}
 #: Axles of arb_rate.
 AXLE_CORNERS = {"front": (0, 1), "rear": (2, 3)}
+#: On a cluster: tasks per worker thread at least (condition groups cut into chunks), so
+#: that none idles at the end.
+TASKS_PER_THREAD = 4
+#: On a cluster: fewest evaluations (setup x condition) a task is cut to, per method (a
+#: task redoes the drive's rig response, about 0.1 s, or the screening operands).
+MIN_TASK_EVALUATIONS = {"time": 32, "screening": 2000}
+#: Setups a worker simulates together (``predict_setups``' default chunk; every setup is
+#: simulated on its own, so the metrics do not depend on it).
+PREDICT_CHUNK = 64
 
 _TOP_KEYS = {"format", "units", "design", "n_draws", "seed", "factor", "name"}
 _FACTOR_KEYS = {"name", "kind", "corners", "shocks", "axles", "channels", "parameter", "change",
@@ -1035,7 +1051,10 @@ class WhatIf:
     objective : planner.objective.Objective
     settings : dict
         ``method``, ``oversample``, ``band_hz``, ``rank_tolerance``, ``fragile_share``,
-        ``n_evaluations``, ``elapsed_s``, ``model``, ``drives``.
+        ``n_evaluations``, ``elapsed_s``, ``model``, ``drives``; where it ran:
+        ``scheduler`` (``"none"``, ``"local"``, ``"address"`` or ``"client"``),
+        ``address``, ``n_workers`` and ``n_tasks`` (neither these nor the timings are
+        written to the files).
     """
 
     table: pd.DataFrame
@@ -1075,10 +1094,195 @@ def _as_drives(drives):
     return drives
 
 
+def _evaluate_group(plant, drive, setups, library, method, oversample, band_hz):
+    """Metrics of one condition group's setups (a list of condition setups), SI.
+
+    Returns
+    -------
+    pandas.DataFrame
+        :func:`planner.predict.predict_setups`' (``method="time"``) or
+        :func:`planner.screen.screen_setups`' table: one row per setup, in order.
+    """
+    from planner.predict import predict_setups
+    from planner.screen import screen_setups
+
+    if method == "time":
+        return predict_setups(plant, drive, setups, library, oversample=oversample,
+                              band_hz=band_hz).table
+    return screen_setups(plant, drive, setups, library, band_hz=band_hz).table
+
+
+def _group_setups(setups, members, effects, variants):
+    """The setups of a condition group: every setup under every member condition."""
+    cond_setups = []
+    for (dj, pj) in members:
+        cond_setups += _condition_setups(setups, effects[pj], variants, f"{dj}:{pj}")
+    return cond_setups
+
+
+def _group_table(pred_table, by_name, drives, perturbations):
+    """A group's rows of the what-if table from its metrics table (names carry the tags)."""
+    t = pred_table.copy()
+    t.insert(0, "setup", [n.split("\x1f")[0] for n in t.index])
+    tag = [n.split("\x1f")[1] for n in t.index]
+    t.insert(0, "perturbation", [perturbations.perturbations[int(x.split(":")[1])].name
+                                 for x in tag])
+    t.insert(0, "drive", [drives[int(x.split(":")[0])].name for x in tag])
+    # the table's shock ids: the setup's own (the variants are internal)
+    for i, c in enumerate(CORNERS):
+        t[c] = [by_name[n].ids()[i] for n in t["setup"]]
+    t["_order"] = [int(x.split(":")[0]) * 10**7 + int(x.split(":")[1]) for x in tag]
+    return t
+
+
+def _blas_threads():
+    """This process's BLAS thread count per library prefix (``threadpoolctl``)."""
+    from threadpoolctl import threadpool_info
+
+    return {i["prefix"]: int(i["num_threads"]) for i in threadpool_info()
+            if i.get("user_api") == "blas"}
+
+
+def _whatif_task(plant, drive, effect, where, setups, library, extra, method, oversample,
+                 band_hz, blas):
+    """Metrics of a chunk of a condition group's setups (a task on a Dask worker).
+
+    Parameters
+    ----------
+    plant : ident.closedloop.LoopPlant
+        The condition's plant (built by the client).
+    drive : ident.drive.Drive
+        The prepared nominal drive; the condition's drive is derived here
+        (:func:`_condition_drive`: a window, channel scales, elementwise).
+    effect : _Effect
+    where : str
+        The condition's name for error messages.
+    setups : list of planner.setups.Setup, shape (n,)
+        Condition setups (names ``"<setup>\\x1f<drive>:<perturbation>"``).
+    library : ident.shocks.ShockLibrary
+        The crate.
+    extra : list of ident.shocks.ShockModel
+        The scaled or lagged shocks `setups` use.
+    method, oversample, band_hz
+        As :func:`evaluate_whatif`.
+    blas : dict of str -> int
+        The client's BLAS threads per library: the drive's rig response differs in the
+        last bits with the BLAS thread count, so the worker computes it with the
+        client's (a Dask worker process starts with one), the rest with one.
+
+    Returns
+    -------
+    pandas.DataFrame, shape (n, 4 + n_metrics)
+        The metrics only (no time histories).
+    """
+    from threadpoolctl import threadpool_limits
+
+    from ident.shocks import ShockLibrary
+    from planner.sweep import _KERNEL_LOCK
+
+    lib = ShockLibrary(list(library.values()) + list(extra), source=library.source) \
+        if extra else library
+    with _KERNEL_LOCK:
+        drive = _condition_drive(drive, effect, where)
+        if method == "time":
+            return _predict_table(plant, drive, setups, lib, oversample, band_hz, blas)
+        with threadpool_limits(limits=blas):
+            return _evaluate_group(plant, drive, setups, lib, method, oversample, band_hz)
+
+
+def _predict_table(plant, drive, setups, library, oversample, band_hz, blas):
+    """``predict_setups(plant, drive, setups, library, ...).table`` on a worker.
+
+    The same steps as :func:`planner.predict.predict_setups`, with the drive's rig
+    response computed with `blas` threads (its last bits depend on the BLAS thread
+    count) and the shock loop and metrics with one (their bits do not; many BLAS
+    threads in every worker would only contend for the cores).
+
+    Parameters
+    ----------
+    plant : ident.closedloop.LoopPlant
+    drive : ident.drive.Drive
+    setups : list of planner.setups.Setup, shape (n,)
+    library : ident.shocks.ShockLibrary
+    oversample : int
+    band_hz : (float, float)
+        Metric band [Hz].
+    blas : dict of str -> int
+        The client's BLAS threads per library.
+
+    Returns
+    -------
+    pandas.DataFrame, shape (n, 4 + n_metrics)
+    """
+    from threadpoolctl import threadpool_limits
+
+    from ident.closedloop import rig_response, simulate_batch
+    from ident.metrics import compute_metrics
+    from planner.predict import (
+        METRIC_OUTPUTS,
+        _model_fs,
+        _warn_implausible,
+        prepare_drive,
+        resolve_setups,
+    )
+
+    drive = prepare_drive(drive, _model_fs(plant))
+    models = resolve_setups(setups, library)
+    outputs = [o for o in METRIC_OUTPUTS if o in plant.output_names]
+    with threadpool_limits(limits=blas):
+        rig = rig_response(plant, drive, oversample=oversample, outputs=outputs)
+    rows = []
+    with threadpool_limits(limits=1):
+        for a in range(0, len(models), PREDICT_CHUNK):
+            batch = simulate_batch(plant, drive, models[a:a + PREDICT_CHUNK],
+                                   oversample=oversample, outputs=outputs, rig=rig)
+            met = compute_metrics(batch.channels, fs=batch.fs_hz, band_hz=band_hz,
+                                  static_loads_n=None)
+            rows.append(pd.DataFrame({k: np.asarray(v) for k, v in met.values.items()}))
+    table = pd.concat(rows, ignore_index=True)
+    ids = pd.DataFrame([s.ids() for s in setups], columns=list(CORNERS))
+    table = pd.concat([ids, table], axis=1)
+    table.index = pd.Index([s.name for s in setups], name="setup")
+    _warn_implausible(table, drive)
+    return table
+
+
+class _LazyTasks:
+    """Task arguments built when the runner submits them (bounded memory on the client)."""
+
+    def __init__(self, specs, make):
+        self.specs = specs
+        self.make = make
+
+    def __len__(self):
+        return len(self.specs)
+
+    def __iter__(self):
+        return (self.make(*spec) for spec in self.specs)
+
+
+def _is_serial(scheduler, client):
+    """True when `scheduler`/`client` ask for this process only (the default)."""
+    from planner.sweep import SCHEDULER_NONE
+
+    return client is None and (scheduler is None or (
+        isinstance(scheduler, str) and scheduler.strip().lower() in SCHEDULER_NONE))
+
+
+def _task_specs(sizes, chunk):
+    """``(group, start, stop)`` of every task: each group cut into near-equal chunks."""
+    specs = []
+    for g, n in enumerate(sizes):
+        step = math.ceil(n / math.ceil(n / chunk))
+        specs += [(g, a, min(a + step, n)) for a in range(0, n, step)]
+    return specs
+
+
 def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=None,
                     baseline=None, method="time", oversample=2, band_hz=(1.0, 20.0),
                     nominal_spring_rates_n_m=None, rank_tolerance=RANK_TOLERANCE,
-                    fragile_share=FRAGILE_SHARE, progress=False):
+                    fragile_share=FRAGILE_SHARE, progress=False, scheduler=None, client=None,
+                    n_workers=None, processes=True, chunk_size=None):
     """Evaluate every setup under every perturbation of a what-if design.
 
     Parameters
@@ -1112,16 +1316,54 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     rank_tolerance, fragile_share : int, float
         See the module docstring (fragile ranks).
     progress : bool
-        Show a progress bar over the condition groups.
+        Show a progress bar over the condition groups (over the tasks on a cluster).
+    scheduler : str, optional
+        Where the condition groups are evaluated: None or ``"none"`` (default) in this
+        process, one group after the other; ``"local"`` on a new
+        :class:`dask.distributed.LocalCluster` (`n_workers`, default one per core,
+        closed at the end); or a scheduler address (``"tcp://host:8786"``). Checked
+        before any work: an unknown value or an unreachable address raises at once.
+    client : distributed.Client, optional
+        An existing client to use instead of `scheduler` (not closed).
+    n_workers : int, optional
+        Workers of a new LocalCluster.
+    processes : bool
+        LocalCluster workers as processes (default) or threads of this process.
+    chunk_size : int, optional
+        Evaluations (setup x condition) per task at most on a cluster; default the
+        groups cut so that every worker thread gets about four tasks (at least
+        :data:`MIN_TASK_EVALUATIONS` evaluations a task). Ignored in this process.
 
     Returns
     -------
     WhatIf
+        ``settings["scheduler"]`` says where it ran (``"none"``, ``"local"``,
+        ``"address"`` or ``"client"``).
+
+    Raises
+    ------
+    PlannerError
+        On a bad option, a bad perturbation for the model, an unknown scheduler or an
+        unreachable one (raised before any work).
+    TypeError
+        On arguments of the wrong type.
+
+    Notes
+    -----
+    On a cluster the tables are the one-process tables bit for bit, whatever the
+    workers, `chunk_size` or the order tasks finish in: the plants are built here as in
+    one process, every setup is simulated on its own (a chunk of a group gives the rows
+    of the whole group), the workers compute the drive's rig response with this
+    process's BLAS thread count (its last bits depend on it) and the rows are put back
+    in group order. Workers
+    on other machines must run the same library builds on the same kind of CPU. Memory:
+    a task sends back its metrics table only (no time histories); at most
+    ``2 * threads + 1`` tasks are in flight, and their arguments are built as they are
+    submitted.
     """
     from planner.objective import Objective, default_objective, score_setups
-    from planner.predict import as_loop_plant, predict_setups, prepare_drive
+    from planner.predict import as_loop_plant, prepare_drive
     from planner.rank import _choose_baseline
-    from planner.screen import screen_setups
 
     t_start = time.perf_counter()
     if not isinstance(perturbations, PerturbationSet):
@@ -1129,6 +1371,11 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                         f"perturbation_set), got {type(perturbations).__name__}")
     if method not in ("time", "screening"):
         raise PlannerError(f"method {method!r} is unknown; use 'time' or 'screening'")
+    if chunk_size is not None and (isinstance(chunk_size, bool)
+                                   or not isinstance(chunk_size, (int, np.integer))
+                                   or chunk_size < 1):
+        raise PlannerError(f"chunk_size={chunk_size!r} must be a positive integer "
+                           "(evaluations per task), e.g. 64, or None for the default")
     drives = _as_drives(drives)
     if len(drives) > 1 and any(f.kind == "drive_file" for f in perturbations.factors):
         raise PlannerError("a drive_file factor replaces the drive; give one drive with it")
@@ -1147,57 +1394,100 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     names = [s.name for s in setups]
     if len(set(names)) != len(names):
         raise PlannerError("setup names repeat; give each setup its own name")
-    src = perturbations.settings.get("source") or "what-if"
-    fs = getattr(model, "fs_hz", None)
-    drives = [prepare_drive(d, fs, where=f"drive {d.name!r}") for d in drives]
-    base_plant = as_loop_plant(model)
-    params = _known_params(model)
-    if params is not None:  # the known model around its own nominal damping, built once
-        base_plant = as_loop_plant(params)
-    # group conditions by (plant, drive): one simulation call per group
-    effects = [_effect(p, perturbations.factors) for p in perturbations.perturbations]
-    groups = {}
-    for di, d in enumerate(drives):
-        for pi, (p, e) in enumerate(zip(perturbations.perturbations, effects)):
-            groups.setdefault((_plant_key(e), di, _drive_key(e)), []).append((di, pi))
-    plants, tables = {}, []
-    variants = _ShockVariants(library)
-    items = list(groups.items())
-    if progress:
-        from tqdm.auto import tqdm
+    # the scheduler before any work: a wrong address fails here
+    runner = None
+    if not _is_serial(scheduler, client):
+        from planner.sweep import _start
 
-        items = tqdm(items, desc="what-if", unit="group")
-    n_eval = 0
-    for (pkey, di, _), members in items:
-        e0 = effects[members[0][1]]
-        where = f"{src}: condition {perturbations.perturbations[members[0][1]].name!r}"
-        if pkey not in plants:
-            plants[pkey] = _condition_plant(model, base_plant, e0, where,
-                                            nominal_spring_rates_n_m)
-        plant = plants[pkey]
-        drive = _condition_drive(drives[di], e0, where)
-        cond_setups = []
-        for (dj, pj) in members:
-            cond_setups += _condition_setups(setups, effects[pj], variants, f"{dj}:{pj}")
-        lib = variants.full_library()
-        if method == "time":
-            pred = predict_setups(plant, drive, cond_setups, lib, oversample=oversample,
-                                  band_hz=band_hz)
-        else:
-            pred = screen_setups(plant, drive, cond_setups, lib, band_hz=band_hz)
-        n_eval += len(cond_setups)
-        t = pred.table.copy()
-        t.insert(0, "setup", [n.split("\x1f")[0] for n in t.index])
-        tag = [n.split("\x1f")[1] for n in t.index]
-        t.insert(0, "perturbation", [perturbations.perturbations[int(x.split(":")[1])].name
-                                     for x in tag])
-        t.insert(0, "drive", [drives[int(x.split(":")[0])].name for x in tag])
-        # the table's shock ids: the setup's own (the variants are internal)
+        runner = _start(scheduler, client, n_workers, processes)
+    try:
+        src = perturbations.settings.get("source") or "what-if"
+        fs = getattr(model, "fs_hz", None)
+        drives = [prepare_drive(d, fs, where=f"drive {d.name!r}") for d in drives]
+        base_plant = as_loop_plant(model)
+        params = _known_params(model)
+        if params is not None:  # the known model around its own nominal damping, built once
+            base_plant = as_loop_plant(params)
+        # group conditions by (plant, drive): one simulation call per group
+        effects = [_effect(p, perturbations.factors) for p in perturbations.perturbations]
+        groups = {}
+        for di, d in enumerate(drives):
+            for pi, (p, e) in enumerate(zip(perturbations.perturbations, effects)):
+                groups.setdefault((_plant_key(e), di, _drive_key(e)), []).append((di, pi))
+        plants, tables = {}, []
+        variants = _ShockVariants(library)
         by_name = {s.name: s for s in setups}
-        for i, c in enumerate(CORNERS):
-            t[c] = [by_name[n].ids()[i] for n in t["setup"]]
-        t["_order"] = [int(x.split(":")[0]) * 10**7 + int(x.split(":")[1]) for x in tag]
-        tables.append(t)
+
+        def condition(pkey, members):
+            """The plant (built once per key, here) and the name of a group's condition."""
+            e0 = effects[members[0][1]]
+            where = f"{src}: condition {perturbations.perturbations[members[0][1]].name!r}"
+            if pkey not in plants:
+                plants[pkey] = _condition_plant(model, base_plant, e0, where,
+                                                nominal_spring_rates_n_m)
+            return plants[pkey], e0, where
+
+        n_eval = 0
+        if runner is None:  # this process, one group after the other
+            items = list(groups.items())
+            if progress:
+                from tqdm.auto import tqdm
+
+                items = tqdm(items, desc="what-if", unit="group")
+            for (pkey, di, _), members in items:
+                plant, e0, where = condition(pkey, members)
+                drive = _condition_drive(drives[di], e0, where)
+                cond_setups = _group_setups(setups, members, effects, variants)
+                lib = variants.full_library()
+                pred_table = _evaluate_group(plant, drive, cond_setups, lib, method,
+                                             oversample, band_hz)
+                n_eval += len(cond_setups)
+                tables.append(_group_table(pred_table, by_name, drives, perturbations))
+            kind, address, workers, n_tasks = "none", None, 1, len(groups)
+        else:
+            keys = list(groups)
+            sizes = [len(groups[k]) * len(setups) for k in keys]
+            chunk = int(chunk_size) if chunk_size is not None else max(
+                MIN_TASK_EVALUATIONS[method],
+                math.ceil(sum(sizes) / (TASKS_PER_THREAD * runner.n_threads)))
+            specs = _task_specs(sizes, chunk)
+            drive_refs = [runner.scatter(d) for d in drives]
+            lib_ref = runner.scatter(library)
+            blas = _blas_threads()
+            current = {}  # the group being submitted: its condition setups
+
+            def make(g, a, b):
+                pkey, di, _ = keys[g]
+                members = groups[keys[g]]
+                plant, e0, where = condition(pkey, members)
+                if current.get("g") != g:
+                    current.clear()
+                    current.update(g=g, setups=_group_setups(setups, members, effects,
+                                                             variants))
+                chunk_setups = current["setups"][a:b]
+                extra = list({sid: variants.extra[sid] for s in chunk_setups
+                              for sid in s.ids() if sid in variants.extra}.values())
+                return (plant, drive_refs[di], e0, where, chunk_setups, lib_ref, extra,
+                        method, oversample, tuple(band_hz), blas)
+
+            log.info("what-if: %d condition groups, %d evaluations in %d tasks (%s, %d "
+                     "worker(s))", len(keys), sum(sizes), len(specs), runner.kind,
+                     runner.n_workers)
+            parts = [None] * len(specs)
+            for j, res in runner.map_unordered(_whatif_task, _LazyTasks(specs, make),
+                                               progress, "what-if"):
+                parts[j] = res
+            for g in range(len(keys)):  # the groups' rows, in group order, as one process
+                got = [parts[j] for j, spec in enumerate(specs) if spec[0] == g]
+                pred_table = got[0] if len(got) == 1 else pd.concat(got)
+                n_eval += len(pred_table)
+                tables.append(_group_table(pred_table, by_name, drives, perturbations))
+            parts = None
+            kind, address, workers, n_tasks = (runner.kind, runner.address, runner.n_workers,
+                                               len(specs))
+    finally:
+        if runner is not None:
+            runner.close()
     table = pd.concat(tables).sort_values("_order", kind="stable").drop(columns="_order")
     table = table.reset_index(drop=True)
     metrics = [c for c in table.columns if c not in ("drive", "perturbation", "setup") + CORNERS]
@@ -1227,9 +1517,11 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                 "n_setups": len(setups), "elapsed_s": elapsed,
                 "evaluations_per_s": n_eval / elapsed if elapsed > 0 else float("nan"),
                 "model": getattr(base_plant, "name", None), "drives": [d.name for d in drives],
-                "design": perturbations.design, "source": perturbations.settings.get("source")}
-    log.info("what-if: %d setups x %d conditions (%d evaluations, %s) in %.1f s", len(setups),
-             len(conditions), n_eval, method, elapsed)
+                "design": perturbations.design, "source": perturbations.settings.get("source"),
+                "scheduler": kind, "address": address, "n_workers": int(workers),
+                "n_tasks": int(n_tasks)}
+    log.info("what-if: %d setups x %d conditions (%d evaluations, %s, scheduler %s) in %.1f s",
+             len(setups), len(conditions), n_eval, method, kind, elapsed)
     return WhatIf(table=table, robust=robust, perturbations=perturbations, conditions=conditions,
                   baseline=base.name, objective=objective, settings=settings)
 
@@ -1438,8 +1730,10 @@ def _safe_name(name):
     return keep.strip("_") or "setup"
 
 
-#: Settings that time a run: logged and kept on the result, not written to the files.
-_TIMING_KEYS = ("elapsed_s", "evaluations_per_s")
+#: Settings that time a run or say where it ran: logged and kept on the result, not
+#: written to the files (a rerun, on a cluster or not, writes the same cells).
+_TIMING_KEYS = ("elapsed_s", "evaluations_per_s", "scheduler", "address", "n_workers",
+                "n_tasks")
 
 
 def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):

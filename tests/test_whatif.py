@@ -443,3 +443,133 @@ def test_effects_figures_and_files(paper_vehicle, short_drive, demo_library, twe
     assert len(back) == len(w.table)
     with pytest.raises(FileExistsError):
         write_whatif(w, tmp_path / "out")
+
+
+# ----------------------------------------------------------------------------------------------
+# on a Dask cluster (scheduler=...): the one-process tables, bit for bit
+# ----------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def cluster_case(paper_model, short_drive, track_drive, demo_library, twenty_setups):
+    """A small what-if with every kind of condition group: stiffened plants (an identified-
+    like loop plant), scaled shocks sharing the nominal group, a window and a scaled drive,
+    on two drives; and its one-process result."""
+    from ident.drive import Drive
+    from planner.whatif import CHANNEL_GROUPS, Factor, evaluate_whatif, perturbation_set
+
+    n = int(20 * track_drive.fs_hz)
+    other = Drive("track 20-40 s", track_drive.fs_hz,
+                  {c: x[n:2 * n] for c, x in track_drive.channels.items()})
+    ps = perturbation_set([
+        Factor("rear springs", "spring_rate", targets=("LR", "RR"), change="add",
+               levels=(-5000.0, 5000.0)),
+        Factor("dyno", "shock_scale", targets=CORNERS, levels=(0.95,)),
+        Factor("section", "drive_window", levels=((2.0, 14.0),)),
+        Factor("bumpy", "drive_scale", targets=CHANNEL_GROUPS["wheel"], levels=(1.2,))])
+    args = (paper_model.loop_plant(), [short_drive, other], twenty_setups[:3], demo_library, ps)
+    kw = dict(baseline=twenty_setups[0])
+    return args, kw, {m: evaluate_whatif(*args, method=m, **kw) for m in ("time", "screening")}
+
+
+def _same_whatif(a, b):
+    for name in ("table", "robust", "conditions"):
+        pd.testing.assert_frame_equal(getattr(a, name), getattr(b, name), check_exact=True)
+    assert a.baseline == b.baseline
+
+
+def test_whatif_on_a_cluster_equals_one_process(cluster_case):
+    """Condition groups, cut into chunks of any size, on a cluster (by address and by
+    client): the one-process tables bit for bit, for both methods."""
+    from distributed import Client, LocalCluster
+
+    from planner.whatif import evaluate_whatif
+
+    args, kw, single = cluster_case
+    assert single["time"].settings["scheduler"] == "none"
+    assert len(single["time"].table) == 3 * 6 * 2
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        for method, chunk in (("time", 2), ("time", None), ("screening", 5)):
+            got = evaluate_whatif(*args, method=method, scheduler=cluster.scheduler_address,
+                                  chunk_size=chunk, **kw)
+            _same_whatif(single[method], got)
+            assert got.settings["scheduler"] == "address"
+            assert got.settings["address"] == cluster.scheduler_address
+            assert got.settings["n_workers"] == 2
+        assert got.settings["n_tasks"] > got.settings["n_conditions"] // 2  # groups were cut
+        with Client(cluster, set_as_default=False) as client:
+            got = evaluate_whatif(*args, method="time", client=client, chunk_size=7, **kw)
+        assert got.settings["scheduler"] == "client"
+        _same_whatif(single["time"], got)
+
+
+def test_whatif_bad_scheduler_fails_before_any_work(cluster_case, monkeypatch):
+    from planner import sweep as sweep_mod
+    from planner import whatif as whatif_mod
+
+    args, kw, _ = cluster_case
+
+    def no_work(*a, **k):
+        raise AssertionError("work started before the scheduler was checked")
+
+    monkeypatch.setattr(whatif_mod, "_effect", no_work)
+    monkeypatch.setattr(sweep_mod, "CONNECT_TIMEOUT_S", 2.0)
+    for scheduler, error, match in (
+            ("nonsense", PlannerError, "scheduler 'nonsense' is neither 'local', 'none' nor"),
+            (3, TypeError, "scheduler must be"),
+            ("tcp://127.0.0.1:9", PlannerError,
+             r"cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'.*dask scheduler")):
+        with pytest.raises(error, match=match):
+            whatif_mod.evaluate_whatif(*args, scheduler=scheduler, **kw)
+    with pytest.raises(PlannerError, match=r"chunk_size=0 must be a positive integer"):
+        whatif_mod.evaluate_whatif(*args, scheduler="local", chunk_size=0, **kw)
+
+
+def test_cli_whatif_scheduler(tmp_path, short_drive, capsys):
+    """``whatif --scheduler local --workers 1`` (a worker process: one BLAS thread until the
+    task sets this process's count) writes the one-process files: CSVs byte for byte,
+    ``whatif.xlsx`` cell for cell; a bad scheduler is one error line and no folder."""
+    from openpyxl import load_workbook
+
+    from ident.drive import write_drive
+    from planner.cli import main
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    write_drive(short_drive, tmp_path / "drive.csv")
+    (tmp_path / "setups.csv").write_text(
+        "setup,LF,RF,LR,RR\nbaseline,B20,B20,B20,B20\nsoft,L12,L12,L12,L12\n"
+        "mixed,L28,L28,DM,DM\n")
+    _toml(tmp_path, """
+        format = "shockplan-whatif/1"
+        [[factor]]
+        name = "rear springs"
+        kind = "spring_rate"
+        corners = ["LR", "RR"]
+        levels = [0.9, 1.1]
+        [[factor]]
+        name = "dyno"
+        kind = "shock_scale"
+        corners = ["LF", "RF", "LR", "RR"]
+        levels = [1.05]
+        """, name="perturb.toml")
+    args = ["-q", "whatif", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
+            "--shocks", str(DEMO_LIBRARY_PATH), "--setups", str(tmp_path / "setups.csv"),
+            "--perturb", str(tmp_path / "perturb.toml"), "--baseline", "baseline"]
+    assert main(args + ["--out", str(tmp_path / "plain")]) == 0
+    assert main(args + ["--scheduler", "local", "--workers", "1",
+                        "--out", str(tmp_path / "dask")]) == 0
+    assert "on Dask (local, 1 worker(s))" in capsys.readouterr().out
+    for name in ("whatif.csv", "robust.csv", "conditions.csv"):
+        assert (tmp_path / "dask" / name).read_bytes() == (tmp_path / "plain" / name).read_bytes()
+
+    def cells(path):
+        wb = load_workbook(path)
+        return {ws.title: [[c.value for c in row] for row in ws.iter_rows()]
+                for ws in wb.worksheets}
+
+    assert cells(tmp_path / "dask" / "whatif.xlsx") == cells(tmp_path / "plain" / "whatif.xlsx")
+    assert main(args + ["--scheduler", "nonsense", "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("shockplan: error: sweep: scheduler 'nonsense'")
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "bad").exists()
