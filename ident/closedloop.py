@@ -65,7 +65,6 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _REAL_TOL = 1e-9  # |Im(lam)| / |lam| below which a pole is taken as real
-_MODE_BLOCK = 64  # rig modes filtered at a time (memory: block x internal samples, complex)
 
 
 @dataclass(frozen=True, eq=False)
@@ -402,8 +401,8 @@ class RigResponse:
     """The part of a plant's response driven by the rig inputs alone (``dF = 0``).
 
     Computed once per drive and shared by every setup. Only what the loop and
-    the outputs need is kept (the modal states are accumulated in blocks of
-    modes and dropped), so memory does not grow with the model's order.
+    the outputs need is kept (the outputs are accumulated step by step and the
+    modal states never stored), so memory does not grow with the model's order.
 
     Attributes
     ----------
@@ -457,7 +456,8 @@ def _modal_filter(phi, g1, g0, gm, w):
     ``x[k] = phi x[k-1] + g1 w[k] + g0 w[k-1] + gm w[k-2]`` per mode, as
     ``scipy.signal.lfilter([g1, g0, gm], [1, -phi], w)`` computes it (transposed
     direct form II, the same operations in the same order), compiled and parallel over
-    modes: lfilter's complex path, one call per mode, cost most of a rig response.
+    modes. :func:`rig_response` runs the same recursion inside :func:`_rig_kernel`
+    without storing the states; this one is kept as its stored-state form.
 
     Parameters
     ----------
@@ -516,19 +516,56 @@ def rig_response(plant, drive, *, oversample=4, outputs=None):
     vi = plant.velocity_idx
     oi = np.array([plant.output_names.index(o) for o in names], dtype=int)
     mr = plant.rig.select(outputs=np.concatenate([vi, oi])).pruned()
-    Cv, Cy = mr.C[:4], mr.C[4:]
-    phi, g1, g0, gm = hold_coefficients(mr.lam, h)
-    v_fine = (mr.D[:4] @ u_fine.T).T
-    sl = slice(None, None, r)
-    y = mr.D[4:] @ u_fine[sl].T
-    for a in range(0, mr.n_states, _MODE_BLOCK):  # bounded memory: a block of modes at a time
-        b = slice(a, a + _MODE_BLOCK)
-        x = _modal_filter(phi[b], g1[b], g0[b], gm[b], mr.B[b] @ u_fine.T)  # (block, n_fine)
-        v_fine += np.real(Cv[:, b] @ x).T
-        y += np.real(Cy[:, b] @ x[:, sl])
+    v_fine, y = _rig_outputs(mr, h, u_fine, r)
     return RigResponse(v_fine=np.ascontiguousarray(v_fine), y=y, u_fine=u_fine, fs_hz=fs,
                        oversample=r, n_samples=u.shape[0], plant_name=plant.name,
                        output_names=tuple(names))
+
+
+#: Internal steps per time chunk of :func:`_rig_kernel`. Fixed (not the thread count), so the
+#: result does not depend on how many threads run it; a record of at most one chunk runs
+#: serially with no superposition pass.
+_RIG_CHUNK = 1 << 16
+
+
+def _rig_outputs(mr, h, u_fine, r):
+    """Outputs of the modal system `mr` (rows: 4 shock velocities, then the outputs asked for)
+    driven by `u_fine` on the internal grid: ``v_fine`` (n_fine, 4) on every step and ``y``
+    (n_outputs, n_samples) on every `r`-th step, zero initial state.
+
+    One compiled pass (:func:`_rig_kernel`): each mode's input ``b_i . u[k]`` and its hold
+    recursion (:func:`_modal_filter`'s, transposed direct form II) are formed step by step
+    and ``Re(C x) + D u`` is accumulated at once, so the modal states on the internal grid
+    (complex, modes x n_fine) are never stored. Parallel over time chunks of
+    ``_RIG_CHUNK`` steps: a first pass runs every chunk from rest for its end state, the
+    chunk start states follow by superposition (zero-input propagation over a chunk is
+    ``z0 <- phi^(L-1) (phi z0 + z1)``, ``z1 <- 0``), and a second pass forms the outputs.
+    """
+    N, m = u_fine.shape
+    n, p = mr.n_states, mr.C.shape[0]
+    n_out = (N - 1) // r + 1
+    v = np.empty((N, 4))
+    y = np.empty((p - 4, n_out))
+    if N == 0:
+        return v, y
+    phi, g1, g0, gm = hold_coefficients(mr.lam, h)
+    L = _RIG_CHUNK
+    n_chunks = max(1, -(-N // L))
+    # superposition factor of a full chunk: phi^(L-1) from the poles, not by repeated products
+    phiL = np.exp(np.asarray(mr.lam, dtype=complex) * (h * (L - 1)))
+
+    def split(a):
+        a = np.asarray(a)
+        return (np.ascontiguousarray(a.real, dtype=float),
+                np.ascontiguousarray(a.imag, dtype=float))
+
+    C = mr.C
+    _rig_kernel(np.ascontiguousarray(u_fine, dtype=float), *split(mr.B), *split(phi),
+                *split(g1), *split(g0), *split(gm), *split(phiL),
+                np.ascontiguousarray(C.real.T, dtype=float),
+                np.ascontiguousarray(-C.imag.T, dtype=float),
+                np.ascontiguousarray(np.asarray(mr.D, dtype=float).T), r, L, n_chunks, v, y)
+    return v, y
 
 
 def _check_outputs(plant, outputs):
@@ -570,6 +607,91 @@ def _hold_filter(phi, g1, g0, gm, w, out):
             z0 = b1 * wk + p * y + z1
             z1 = b2 * wk
             out[i, k] = y
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _rig_chunk(u, Br, Bi, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, CrT, CmiT, DT, r, z, k0, k1,
+               v, y, outputs):
+    """Steps ``k0 <= k < k1`` of :func:`_rig_kernel` from the states ``z`` (4, n): rows
+    ``Re z0, Im z0, Re z1, Im z1`` of the transposed direct form II per mode, updated in
+    place. With `outputs` False only the states are run (the chunk end states)."""
+    n = pr.size
+    m = u.shape[1]
+    p = CrT.shape[1]
+    z0r = z[0]
+    z0i = z[1]
+    z1r = z[2]
+    z1i = z[3]
+    acc = np.empty(p)
+    phase = k0 % r
+    for k in range(k0, k1):
+        q = p if phase == 0 else 4  # the outputs on every r-th step, the velocities on all
+        if outputs:
+            for o in range(q):
+                acc[o] = 0.0
+            for j in range(m):
+                uj = u[k, j]
+                for o in range(q):
+                    acc[o] += DT[j, o] * uj
+        for i in range(n):
+            a = 0.0
+            b = 0.0
+            for j in range(m):  # the mode's input b_i . u[k]
+                a += Br[i, j] * u[k, j]
+                b += Bi[i, j] * u[k, j]
+            # x = g1 w + z0; z0 <- g0 w + phi x + z1; z1 <- gm w (lfilter's recurrence)
+            xr = g1r[i] * a - g1i[i] * b + z0r[i]
+            xi = g1r[i] * b + g1i[i] * a + z0i[i]
+            z0r[i] = g0r[i] * a - g0i[i] * b + (pr[i] * xr - pi[i] * xi) + z1r[i]
+            z0i[i] = g0r[i] * b + g0i[i] * a + (pr[i] * xi + pi[i] * xr) + z1i[i]
+            z1r[i] = gmr[i] * a - gmi[i] * b
+            z1i[i] = gmr[i] * b + gmi[i] * a
+            if outputs:
+                for o in range(q):  # Re(C[o, i] x)
+                    acc[o] += CrT[i, o] * xr + CmiT[i, o] * xi
+        if outputs:
+            for o in range(4):
+                v[k, o] = acc[o]
+            if phase == 0:
+                kk = k // r
+                for o in range(4, p):
+                    y[o - 4, kk] = acc[o]
+        phase += 1
+        if phase == r:
+            phase = 0
+
+
+@_nb.njit(cache=True, error_model="numpy", parallel=True)
+def _rig_kernel(u, Br, Bi, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, pLr, pLi, CrT, CmiT, DT, r,
+                L, n_chunks, v, y):
+    """Kernel of :func:`_rig_outputs`, parallel over time chunks of `L` steps.
+
+    ``u`` (N, m) inputs; ``B`` (n, m) split in real and imaginary parts; the hold
+    coefficients per mode; ``pL = phi^(L-1)``; ``CrT = Re(C).T``, ``CmiT = -Im(C).T`` (n, p)
+    and ``DT = D.T`` (m, p), whose first 4 columns (the shock velocities) go to ``v`` (N, 4)
+    on every step and the rest to ``y`` (p - 4, n_out) on every r-th step.
+    """
+    N = u.shape[0]
+    n = pr.size
+    S = np.zeros((n_chunks, 4, n))  # chunk start states
+    if n_chunks > 1:
+        E = np.zeros((n_chunks, 4, n))  # chunk end states from rest
+        for c in _nb.prange(n_chunks - 1):
+            _rig_chunk(u, Br, Bi, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, CrT, CmiT, DT, r, E[c],
+                       c * L, (c + 1) * L, v, y, False)
+        for c in range(1, n_chunks):
+            for i in range(n):
+                # the previous start state propagated over a chunk without input, plus the
+                # previous chunk's own response from rest
+                qr = pr[i] * S[c - 1, 0, i] - pi[i] * S[c - 1, 1, i] + S[c - 1, 2, i]
+                qi = pr[i] * S[c - 1, 1, i] + pi[i] * S[c - 1, 0, i] + S[c - 1, 3, i]
+                S[c, 0, i] = E[c - 1, 0, i] + (pLr[i] * qr - pLi[i] * qi)
+                S[c, 1, i] = E[c - 1, 1, i] + (pLr[i] * qi + pLi[i] * qr)
+                S[c, 2, i] = E[c - 1, 2, i]
+                S[c, 3, i] = E[c - 1, 3, i]
+    for c in _nb.prange(n_chunks):
+        _rig_chunk(u, Br, Bi, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, CrT, CmiT, DT, r, S[c],
+                   c * L, min(N, (c + 1) * L), v, y, True)
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
