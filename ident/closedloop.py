@@ -800,6 +800,12 @@ _FAST_ITERATIONS = 6
 _MAX_RANK1_UPDATES = 64
 
 
+#: Smallest velocity scale of the damped Newton iteration's convergence test [m/s]: a step
+#: below 1e-12 of it (1e-15 m/s) ends the iteration. At rest the solution sits on a knot
+#: (every curve has one at 0), where half steps of 1e-20 m/s can cycle between segments.
+_V_SCALE_MIN_M_S = 1e-3
+
+
 @_nb.njit(cache=True, error_model="numpy")
 def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av, vnew, res,
                 J, Jinv, state):
@@ -875,7 +881,7 @@ def _shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg,
                         acc += Jinv[c, j] * res[j]
                     vnew[c] = acc
                 step = 0.0
-                scale = 1e-9
+                scale = _V_SCALE_MIN_M_S
                 for c in range(m):
                     v[c] += 0.5 * vnew[c]
                     step = max(step, abs(vnew[c]))

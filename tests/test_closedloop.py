@@ -367,3 +367,43 @@ def test_rig_kernel_equals_reference(paper_model, monkeypatch, r, outputs):
     for got, ref in ((rr.v_fine.T, v_ref.T), (rr.y, y_ref)):
         scale = np.sqrt(np.mean(ref**2, axis=1, keepdims=True))
         assert np.all(np.abs(got - ref) <= RTOL_RIG_KERNEL * scale)
+
+
+def test_shock_step_at_rest_on_a_knot_converges():
+    """A step at rest (|vfree| ~ 1e-20 m/s, rounding of a zero drive) with every shock on its
+    knot at 0 between a nearly flat and a steep segment (an optimizer's curve moved 5 %):
+    the damped Newton iteration cycled on 1e-20 m/s half steps and reported failure; its
+    convergence test counts velocities below 1 mm/s as 1 mm/s (``_V_SCALE_MIN_M_S``)."""
+    from ident.closedloop import _shock_step, _solver_state
+
+    vfree = np.array([-2.3212568161800419e-20, -2.5951432654329554e-20, -3.9278851021791510e-20,
+                      -3.8266021543416934e-20])
+    Deff = np.array([
+        [-4.3572219796753466e-05, -7.6706033889583025e-07, -2.1134142719456599e-06,
+         3.0789990342935970e-06],
+        [-7.6706033889584909e-07, -4.3572219796753446e-05, 3.0789990342935263e-06,
+         -2.1134142719455413e-06],
+        [-2.1134142719455731e-06, 3.0789990342936021e-06, -3.7482103550162014e-05,
+         -1.6996365375314298e-07],
+        [3.0789990342936055e-06, -2.1134142719455663e-06, -1.6996365375311990e-07,
+         -3.7482103550161994e-05]])
+    cbar = np.full(4, 5253.805057394291)
+    knots = np.array([-1.0, -0.5, -0.25, -0.1, -0.05, -0.025, 0.0, 0.025, 0.05, 0.1, 0.25, 0.5,
+                      1.0])
+    front = [-6502.268177508109, -3388.7275321723273, -2269.0910614472364, -771.1730593144831,
+             -12.525336713662245, -12.50457603880661, 0.0, 478.6509367841112,
+             478.66074009803026, 791.3994127670941, 1181.6215039902181, 3366.266951026533,
+             6481.788485186636]
+    rear = [-6619.926261426002, -3514.6040742271716, -3394.014453364957, -560.9102949118648,
+            -315.36260443478665, -242.54730502486626, 0.0, 78.1311828708005, 206.5654410726682,
+            542.3840909261625, 2064.719061533325, 3369.8538043833955, 6488.194952901803]
+    kv = np.tile(knots, (4, 1))
+    kf = np.array([front, front, rear, rear])
+    nk = np.full(4, knots.size, dtype=np.int64)
+    slo = np.array([6227.081290671564, 6227.081290671564, 6210.6443743976615, 6210.6443743976615])
+    shi = np.array([6231.043068320205, 6231.043068320205, 6236.682297036815, 6236.682297036815])
+    v, _, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = _solver_state(kv, nk)
+    it = _shock_step(vfree, c0, Deff, cbar, np.ones(4), kv, kf, nk, slo, shi, v, fv, sv, seg, av,
+                     vnew, res, J, Jinv, state)
+    assert it > 0
+    assert np.all(np.abs(v) < 1e-18)  # at rest, to far below any physical velocity
