@@ -561,7 +561,7 @@ def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_ba
         raise PlannerError(f"chunk_size must be at least 1, got {chunk_size}")
     setups = list(setups)
     models = resolve_setups(setups, library)
-    runner = _start(scheduler, client, n_workers, True)  # a wrong address fails before work
+    runner = _start(scheduler, client, n_workers, True, "rank")  # a wrong address fails first
     try:
         plant, drive, ops = _prepare_case("rank", model, drive, band_hz, n_bands, reduce_rtol)
         h = 1.0 / drive.fs_hz  # as screen_response: the bands are of the drive at this rate
@@ -692,14 +692,17 @@ class _Dask:
             self.cluster.close()
 
 
-def _start(scheduler, client, n_workers, processes):
-    """The task runner for `scheduler`/`client`: serial, a new LocalCluster, or a client."""
+def _start(scheduler, client, n_workers, processes, where="sweep"):
+    """The task runner for `scheduler`/`client`: serial, a new LocalCluster, or a client.
+
+    `where` names the command in the errors (``sweep``, ``rank``, ``whatif``).
+    """
     if client is not None:
         if scheduler is not None:
-            raise PlannerError("sweep: give a scheduler or a client, not both")
+            raise PlannerError(f"{where}: give a scheduler or a client, not both")
         return _Dask(client, "client")
     if scheduler is not None and not isinstance(scheduler, str):
-        raise TypeError(f"sweep: scheduler must be 'local', 'none' or a scheduler address "
+        raise TypeError(f"{where}: scheduler must be 'local', 'none' or a scheduler address "
                         f"(str), got {type(scheduler).__name__}")
     name = "local" if scheduler is None else scheduler.strip()
     if name.lower() in SCHEDULER_NONE:
@@ -709,14 +712,14 @@ def _start(scheduler, client, n_workers, processes):
     if name.lower() in SCHEDULER_LOCAL:
         n = (os.cpu_count() or 1) if n_workers is None else int(n_workers)
         if n < 1:
-            raise PlannerError(f"sweep: n_workers={n_workers!r} must be at least 1")
+            raise PlannerError(f"{where}: n_workers={n_workers!r} must be at least 1")
         # one compiled-kernel thread per worker: the workers are the parallelism
         kwargs = {"env": {"NUMBA_NUM_THREADS": "1"}} if processes else {}
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
                                dashboard_address=None, silence_logs=logging.ERROR, **kwargs)
         return _Dask(Client(cluster, set_as_default=False), "local", cluster)
     if "://" not in name and ":" not in name:
-        raise PlannerError(f"sweep: scheduler {scheduler!r} is neither 'local', 'none' nor a "
+        raise PlannerError(f"{where}: scheduler {scheduler!r} is neither 'local', 'none' nor a "
                            "scheduler address; give an address such as tcp://10.0.0.5:8786 "
                            "(from `dask scheduler`), 'local' for a cluster on this machine, "
                            "or 'none' for one process")
@@ -724,7 +727,7 @@ def _start(scheduler, client, n_workers, processes):
         client = Client(name, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as exc:
         text = " ".join(str(exc).split()) or type(exc).__name__
-        raise PlannerError(f"sweep: cannot reach the Dask scheduler at {name!r} within "
+        raise PlannerError(f"{where}: cannot reach the Dask scheduler at {name!r} within "
                            f"{CONNECT_TIMEOUT_S:g} s ({text}); check the address and that "
                            "`dask scheduler` runs there, or use scheduler='local' (this "
                            "machine) or 'none' (one process)") from None
@@ -732,7 +735,7 @@ def _start(scheduler, client, n_workers, processes):
         client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
     except (OSError, TimeoutError) as exc:
         client.close()
-        raise PlannerError(f"sweep: the Dask scheduler at {name!r} has no workers after "
+        raise PlannerError(f"{where}: the Dask scheduler at {name!r} has no workers after "
                            f"{CONNECT_TIMEOUT_S:g} s; start some with `dask worker {name}` "
                            "(in this project's environment)") from exc
     return _Dask(client, "address", own_client=True)

@@ -1399,7 +1399,7 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     if not _is_serial(scheduler, client):
         from planner.sweep import _start
 
-        runner = _start(scheduler, client, n_workers, processes)
+        runner = _start(scheduler, client, n_workers, processes, "whatif")
     try:
         src = perturbations.settings.get("source") or "what-if"
         fs = getattr(model, "fs_hz", None)

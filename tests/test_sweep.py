@@ -349,5 +349,5 @@ def test_cli_rank_scheduler(tmp_path, track_drive, capsys):
     capsys.readouterr()
     assert main(args + ["--scheduler", "nonsense", "--out", str(tmp_path / "bad")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("shockplan: error: sweep: scheduler 'nonsense'") and "Traceback" not in err
+    assert err.startswith("shockplan: error: rank: scheduler 'nonsense'") and "Traceback" not in err
     assert not (tmp_path / "bad").exists()

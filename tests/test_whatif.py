@@ -570,6 +570,6 @@ def test_cli_whatif_scheduler(tmp_path, short_drive, capsys):
     assert cells(tmp_path / "dask" / "whatif.xlsx") == cells(tmp_path / "plain" / "whatif.xlsx")
     assert main(args + ["--scheduler", "nonsense", "--out", str(tmp_path / "bad")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("shockplan: error: sweep: scheduler 'nonsense'")
+    assert err.startswith("shockplan: error: whatif: scheduler 'nonsense'")
     assert err.count("\n") == 1 and "Traceback" not in err
     assert not (tmp_path / "bad").exists()
