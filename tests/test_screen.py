@@ -264,10 +264,16 @@ def _ref_screen_one(ops, kv, kf, nk, slo, shi, lag, max_iter=30, tol=1e-5):
     return np.sqrt(np.maximum(out, 0.0)), np.array(sig), it + 1
 
 
-def test_kernel_matches_plain_reference(paper_model, track_drive, demo_library):
-    """The compiled kernel (screen_packed) gives the fixed point, its iteration count and the
-    metrics of a plain-Python reference, for nonlinear, lagged and linear setups."""
+@pytest.mark.parametrize("kernel", ["vectorized", "scalar"])
+def test_kernel_matches_plain_reference(paper_model, track_drive, demo_library, kernel,
+                                        monkeypatch):
+    """The compiled kernels (screen_packed: the vectorized one for large batches, the scalar
+    one for small) give the fixed point, its iteration count and the metrics of a
+    plain-Python reference, for nonlinear, lagged and linear setups."""
     from ident.closedloop import _pack_setups
+    from planner import screen as screen_mod
+
+    monkeypatch.setattr(screen_mod, "_VECTOR_MIN_SETUPS", 0 if kernel == "vectorized" else 10**9)
     from planner.predict import as_loop_plant
 
     plant = as_loop_plant(paper_model)
@@ -287,6 +293,33 @@ def test_kernel_matches_plain_reference(paper_model, track_drive, demo_library):
         assert_allclose(sig[s], r_sig, rtol=RTOL_KERNEL_REFERENCE)
         assert_allclose(out[s], r_out, rtol=RTOL_KERNEL_REFERENCE)
     assert iters.max() > 2  # the secant steps were exercised
+
+
+def test_scalar_and_vectorized_kernels_agree_bit_for_bit(paper_model, track_drive, demo_library,
+                                                         monkeypatch):
+    """Small batches take the scalar kernel, large ones the vectorized one: the same
+    operations in the same order, so the same numbers to the last bit (a setup's result
+    must not depend on the size of the batch it was screened in)."""
+    from ident.closedloop import _pack_setups
+    from planner import screen as screen_mod
+    from planner.predict import as_loop_plant
+
+    plant = as_loop_plant(paper_model)
+    bands = drive_bands(track_drive)
+    ops = screen_operands(plant.frequency_response(bands.f_hz), plant.output_names,
+                          plant.cbar_n_s_m, bands)
+    ids = list(demo_library)
+    rng = np.random.default_rng(3)
+    models = [tuple(demo_library[ids[i]] for i in row)
+              for row in rng.integers(0, len(ids), size=(37, 4))]
+    kv, kf, nk, slo, shi, *_ = _pack_setups(models, 1.0 / bands.fs_hz)
+    lag = np.array([[m.lag_s for m in row] for row in models])
+    monkeypatch.setattr(screen_mod, "_VECTOR_MIN_SETUPS", 10**9)
+    scalar = screen_packed(ops, kv, kf, nk, slo, shi, lag)
+    monkeypatch.setattr(screen_mod, "_VECTOR_MIN_SETUPS", 0)
+    vector = screen_packed(ops, kv, kf, nk, slo, shi, lag)
+    for a, b in zip(scalar, vector):
+        np.testing.assert_array_equal(a, b)
 
 
 # ---------------------------------------------------------------- drive spectrum and metric rows
