@@ -545,7 +545,8 @@ def _rig_outputs(mr, h, u_fine, r):
     n, p = mr.n_states, mr.C.shape[0]
     n_out = (N - 1) // r + 1
     v = np.empty((N, 4))
-    y = np.empty((p - 4, n_out))
+    yT = np.empty((n_out, p - 4))  # sample-major, the layout the shock loop reads
+    y = yT.T
     if N == 0:
         return v, y
     phi, g1, g0, gm = hold_coefficients(mr.lam, h)
@@ -564,7 +565,7 @@ def _rig_outputs(mr, h, u_fine, r):
                 *split(g1), *split(g0), *split(gm), *split(phiL),
                 np.ascontiguousarray(C.real.T, dtype=float),
                 np.ascontiguousarray(-C.imag.T, dtype=float),
-                np.ascontiguousarray(np.asarray(mr.D, dtype=float).T), r, L, n_chunks, v, y)
+                np.ascontiguousarray(np.asarray(mr.D, dtype=float).T), r, L, n_chunks, v, yT)
     return v, y
 
 
@@ -655,7 +656,7 @@ def _rig_chunk(u, Br, Bi, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, CrT, CmiT, DT, r
             if phase == 0:
                 kk = k // r
                 for o in range(4, p):
-                    y[o - 4, kk] = acc[o]
+                    y[kk, o - 4] = acc[o]
         phase += 1
         if phase == r:
             phase = 0
@@ -669,7 +670,7 @@ def _rig_kernel(u, Br, Bi, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, pLr, pLi, CrT, 
     ``u`` (N, m) inputs; ``B`` (n, m) split in real and imaginary parts; the hold
     coefficients per mode; ``pL = phi^(L-1)``; ``CrT = Re(C).T``, ``CmiT = -Im(C).T`` (n, p)
     and ``DT = D.T`` (m, p), whose first 4 columns (the shock velocities) go to ``v`` (N, 4)
-    on every step and the rest to ``y`` (p - 4, n_out) on every r-th step.
+    on every step and the rest to ``y`` (n_out, p - 4) on every r-th step.
     """
     N = u.shape[0]
     n = pr.size
@@ -1288,7 +1289,10 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
         raise ValueError(f"simulate_batch: the given rig response lacks outputs {missing}; "
                          "compute it with rig_response(..., outputs=...) including them")
     oi = np.array([plant.output_names.index(o) for o in names], dtype=int)
-    y_rig = np.ascontiguousarray(rig.y[[rig.output_names.index(o) for o in names]].T)  # (N, p)
+    if tuple(names) == tuple(rig.output_names):
+        y_rig = np.ascontiguousarray(rig.y.T)  # (N, p): no copy of rig_response's own layout
+    else:
+        y_rig = np.ascontiguousarray(rig.y[[rig.output_names.index(o) for o in names]].T)
     packed = _pack_setups(models, h)
     S, N = len(models), rig.n_samples
     y = np.empty((S, len(names), N))
