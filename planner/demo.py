@@ -79,7 +79,9 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         # into numba's cache while the virtual rig runs here. Otherwise these are cache loads.
         rig_kernel = _start_job(_warm_rig_response)
         _warm_one_setup_loop()
-        _finish_plots(rig_kernel)
+        # a warm-up that fails only costs time (e.g. a forked worker cannot use numba's
+        # OpenMP threads once this process has): the kernels then compile here on first use
+        _settle_plots(rig_kernel)
         warm = _start_job(_warm_kernels)
         vehicle = example_vehicle()
         plan = default_plan()
@@ -253,9 +255,10 @@ def _finish_plots(future):
 
 
 def _settle_plots(future):
-    """Wait for the plot worker without raising (the caller is already failing)."""
+    """Wait for a worker without raising: the caller is already failing, or the worker's
+    work was optional (a warm-up)."""
     if future is not None:
         try:
             future.result()
         except BaseException:  # noqa: BLE001 - the caller's error is the one to report
-            log.debug("the FRF plot worker failed too", exc_info=True)
+            log.debug("a demo worker failed (its error is not the one to report)", exc_info=True)
