@@ -851,8 +851,9 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
     band_hz : (float, float)
         Frequencies used by the fit [Hz].
     n_poles_vf : int, optional
-        Number of poles for ``vf`` (default: chosen like ``auto``, even, up to
-        ``2 * max_order``).
+        Number of poles for ``vf`` (default: the smallest even number whose fits
+        reach the data's noise, plus ``VF_ORDER_MARGIN``, up to ``2 * max_order``;
+        see ``_fit_vf``).
     df_fit_hz : float
         Frequency spacing of the points used by the fit [Hz]: the conditioned
         FRF is smooth over its 0.6 Hz smoothing width, so thinning the Welch
