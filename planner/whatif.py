@@ -148,10 +148,6 @@ TASKS_PER_THREAD = 4
 #: On a cluster: fewest evaluations (setup x condition) a task is cut to, per method (a
 #: task redoes the drive's rig response, about 0.1 s, or the screening operands).
 MIN_TASK_EVALUATIONS = {"time": 32, "screening": 2000}
-#: Setups a worker simulates together (``predict_setups``' default chunk; every setup is
-#: simulated on its own, so the metrics do not depend on it).
-PREDICT_CHUNK = 64
-
 _TOP_KEYS = {"format", "units", "design", "n_draws", "seed", "factor", "name"}
 _FACTOR_KEYS = {"name", "kind", "corners", "shocks", "axles", "channels", "parameter", "change",
                 "levels", "distribution", "independent", "baseline_rate"}
@@ -1166,9 +1162,9 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
     method, oversample, band_hz
         As :func:`evaluate_whatif`.
     blas : dict of str -> int
-        The client's BLAS threads per library: the drive's rig response differs in the
-        last bits with the BLAS thread count, so the worker computes it with the
-        client's (a Dask worker process starts with one), the rest with one.
+        The client's BLAS threads per library: the screening operands' products differ
+        in the last bits with the BLAS thread count, so the worker uses the client's (a
+        Dask worker process starts with one).
 
     Returns
     -------
@@ -1184,67 +1180,8 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
         if extra else library
     with _KERNEL_LOCK:
         drive = _condition_drive(drive, effect, where)
-        if method == "time":
-            return _predict_table(plant, drive, setups, lib, oversample, band_hz, blas)
         with threadpool_limits(limits=blas):
             return _evaluate_group(plant, drive, setups, lib, method, oversample, band_hz)
-
-
-def _predict_table(plant, drive, setups, library, oversample, band_hz, blas):
-    """``predict_setups(plant, drive, setups, library, ...).table`` on a worker.
-
-    The same steps as :func:`planner.predict.predict_setups`, with the drive's rig
-    response computed with `blas` threads (its last bits depend on the BLAS thread
-    count) and the shock loop and metrics with one (their bits do not; many BLAS
-    threads in every worker would only contend for the cores).
-
-    Parameters
-    ----------
-    plant : ident.closedloop.LoopPlant
-    drive : ident.drive.Drive
-    setups : list of planner.setups.Setup, shape (n,)
-    library : ident.shocks.ShockLibrary
-    oversample : int
-    band_hz : (float, float)
-        Metric band [Hz].
-    blas : dict of str -> int
-        The client's BLAS threads per library.
-
-    Returns
-    -------
-    pandas.DataFrame, shape (n, 4 + n_metrics)
-    """
-    from threadpoolctl import threadpool_limits
-
-    from ident.closedloop import rig_response, simulate_batch
-    from ident.metrics import compute_metrics
-    from planner.predict import (
-        METRIC_OUTPUTS,
-        _model_fs,
-        _warn_implausible,
-        prepare_drive,
-        resolve_setups,
-    )
-
-    drive = prepare_drive(drive, _model_fs(plant))
-    models = resolve_setups(setups, library)
-    outputs = [o for o in METRIC_OUTPUTS if o in plant.output_names]
-    with threadpool_limits(limits=blas):
-        rig = rig_response(plant, drive, oversample=oversample, outputs=outputs)
-    rows = []
-    with threadpool_limits(limits=1):
-        for a in range(0, len(models), PREDICT_CHUNK):
-            batch = simulate_batch(plant, drive, models[a:a + PREDICT_CHUNK],
-                                   oversample=oversample, outputs=outputs, rig=rig)
-            met = compute_metrics(batch.channels, fs=batch.fs_hz, band_hz=band_hz,
-                                  static_loads_n=None)
-            rows.append(pd.DataFrame({k: np.asarray(v) for k, v in met.values.items()}))
-    table = pd.concat(rows, ignore_index=True)
-    ids = pd.DataFrame([s.ids() for s in setups], columns=list(CORNERS))
-    table = pd.concat([ids, table], axis=1)
-    table.index = pd.Index([s.name for s in setups], name="setup")
-    _warn_implausible(table, drive)
-    return table
 
 
 class _LazyTasks:
