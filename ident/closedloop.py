@@ -41,7 +41,6 @@ from dataclasses import dataclass, field
 from typing import Mapping
 
 import numpy as np
-from scipy import signal
 
 from ident.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES, WHEELLOADER_INPUTS
 from ident.drive import check_drive_inputs
@@ -450,33 +449,6 @@ def _refine(u, r):
     return np.ascontiguousarray(up[pad * r: pad * r + (u.shape[0] - 1) * r + 1])
 
 
-def _modal_filter(phi, g1, g0, gm, w):
-    """Run the hold recursion of every mode (zero initial state).
-
-    ``x[k] = phi x[k-1] + g1 w[k] + g0 w[k-1] + gm w[k-2]`` per mode, as
-    ``scipy.signal.lfilter([g1, g0, gm], [1, -phi], w)`` computes it (transposed
-    direct form II, the same operations in the same order), compiled and parallel over
-    modes. :func:`rig_response` runs the same recursion inside :func:`_rig_kernel`
-    without storing the states; this one is kept as its stored-state form.
-
-    Parameters
-    ----------
-    phi, g1, g0, gm : ndarray of complex, shape (n,)
-        :func:`hold_coefficients` of the modes.
-    w : ndarray of complex, shape (n, n_fine)
-        Each mode's input ``B u`` on the internal grid.
-
-    Returns
-    -------
-    ndarray of complex, shape (n, n_fine)
-        The modal states.
-    """
-    c = [np.ascontiguousarray(a, dtype=complex) for a in (phi, g1, g0, gm, w)]
-    out = np.empty(c[-1].shape, dtype=complex)
-    _hold_filter(*c, out)
-    return out
-
-
 def _drive_array(drive):
     if hasattr(drive, "as_array"):
         return np.asarray(drive.as_array(), dtype=float), float(drive.fs_hz)
@@ -534,7 +506,8 @@ def _rig_outputs(mr, h, u_fine, r):
     (n_outputs, n_samples) on every `r`-th step, zero initial state.
 
     One compiled pass (:func:`_rig_kernel`): each mode's input ``b_i . u[k]`` and its hold
-    recursion (:func:`_modal_filter`'s, transposed direct form II) are formed step by step
+    recursion (``scipy.signal.lfilter([g1, g0, gm], [1, -phi], .)``'s transposed direct
+    form II) are formed step by step
     and ``Re(C x) + D u`` is accumulated at once, so the modal states on the internal grid
     (complex, modes x n_fine) are never stored. Parallel over time chunks of
     ``_RIG_CHUNK`` steps: a first pass runs every chunk from rest for its end state, the
@@ -542,7 +515,7 @@ def _rig_outputs(mr, h, u_fine, r):
     ``z0 <- phi^(L-1) (phi z0 + z1)``, ``z1 <- 0``), and a second pass forms the outputs.
     """
     N, m = u_fine.shape
-    n, p = mr.n_states, mr.C.shape[0]
+    p = mr.C.shape[0]
     n_out = (N - 1) // r + 1
     v = np.empty((N, 4))
     yT = np.empty((n_out, p - 4))  # sample-major, the layout the shock loop reads
@@ -589,25 +562,6 @@ def _check_oversample(oversample):
 # ----------------------------------------------------------------------------------------------
 
 import numba as _nb  # noqa: E402
-
-
-@_nb.njit(cache=True, parallel=True)
-def _hold_filter(phi, g1, g0, gm, w, out):
-    """Kernel of :func:`_modal_filter`: ``out[i] = lfilter([g1, g0, gm], [1, -phi], w[i])``."""
-    N = w.shape[1]
-    for i in _nb.prange(phi.size):
-        p = phi[i]
-        b0 = g1[i]
-        b1 = g0[i]
-        b2 = gm[i]
-        z0 = 0j
-        z1 = 0j
-        for k in range(N):
-            wk = w[i, k]
-            y = b0 * wk + z0
-            z0 = b1 * wk + p * y + z1
-            z1 = b2 * wk
-            out[i, k] = y
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")

@@ -81,7 +81,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         _warm_one_setup_loop()
         # a warm-up that fails only costs time (e.g. a forked worker cannot use numba's
         # OpenMP threads once this process has): the kernels then compile here on first use
-        _settle_plots(rig_kernel)
+        _settle_job(rig_kernel)
         warm = _start_job(_warm_kernels)
         vehicle = example_vehicle()
         plan = default_plan()
@@ -94,7 +94,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         model.save(work / "model.npz")
         # the FRF plots need only the saved model: drawn by a worker process while this one
         # ranks and optimizes (the optimizer's loop runs on one core)
-        _settle_plots(warm)
+        _settle_job(warm)
         plots = _start_job(_frf_plots_job, work / "model.npz", vehicle, work / "frf_plots",
                            units)
         try:
@@ -120,9 +120,9 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             write_optimum(optimum, library, work / "optimize", units=units)
             modes = modal_summary(vehicle).table()
         except BaseException:
-            _settle_plots(plots)  # nothing may write into the folder once it is rolled back
+            _settle_job(plots)  # nothing may write into the folder once it is rolled back
             raise
-        _finish_plots(plots)
+        _finish_job(plots)
     best = ranking.table.iloc[0]
     lines = [
         f"shockplan demo -> {out}",
@@ -248,13 +248,13 @@ def _start_job(func, *args):
     return future
 
 
-def _finish_plots(future):
-    """Wait for the plot worker; its errors are raised here."""
+def _finish_job(future):
+    """Wait for a worker; its errors are raised here."""
     if future is not None:
         future.result()
 
 
-def _settle_plots(future):
+def _settle_job(future):
     """Wait for a worker without raising: the caller is already failing, or the worker's
     work was optional (a warm-up)."""
     if future is not None:

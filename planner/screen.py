@@ -474,9 +474,7 @@ def _band_inverse(h, d0, d1, d2, d3):
     a31 = a31 - f * a21
     a32 = a32 - f * a22
     a33 = a33 - f * a23
-    # column 3
-    big = a33.real * a33.real + a33.imag * a33.imag
-    p3 = 3
+    # column 3 (its pivot is the last row: nothing to compare)
     dd = _recip(a33)
     a33 = 1.0 + 0j
     a30 = a30 * dd
@@ -1038,7 +1036,6 @@ def _screen_batch(w, ops, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter
     n = kv.shape[0]
     nf = w.size
     nblk = (nf + _BK - 1) // _BK
-    p = d0.shape[1]
     for ch in nb.prange(n_chunks):
         # scratch once per chunk of setups
         roll = np.empty(nblk * 12 * _BK)

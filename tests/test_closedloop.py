@@ -310,28 +310,6 @@ def test_refined_drive_keeps_offsets_and_samples():
     np.testing.assert_allclose(fine[::8], u, atol=2e-6)
 
 
-#: The compiled modal filter runs lfilter's recurrence (transposed direct form II) in the
-#: same order; complex products may round differently from scipy's loop by an ulp, grown
-#: by at most 1 / (1 - |phi|) over the record: far below 1e-12 of the largest state.
-RTOL_MODAL_FILTER = 1e-12
-
-
-def test_modal_filter_equals_lfilter(paper_model):
-    """The compiled hold recursion of the rig modes is scipy's lfilter per mode."""
-    from ident.closedloop import _modal_filter
-
-    plant = paper_model.loop_plant()
-    lam = plant.rig.lam
-    phi, g1, g0, gm = hold_coefficients(lam, 1.0 / 800.0)
-    rng = np.random.default_rng(7)
-    w = rng.standard_normal((lam.size, 4000)) + 1j * rng.standard_normal((lam.size, 4000))
-    got = _modal_filter(phi, g1, g0, gm, w)
-    for i in range(lam.size):
-        ref = signal.lfilter([g1[i], g0[i], gm[i]], [1.0, -phi[i]], w[i])
-        np.testing.assert_allclose(got[i], ref, rtol=0,
-                                   atol=RTOL_MODAL_FILTER * np.abs(ref).max())
-
-
 #: The compiled rig response sums ``Re(C x)`` mode by mode (a matrix product summed them in
 #: another order) and starts each time chunk from states superposed from the previous
 #: chunks: a few ulps of each term, far below 1e-12 of a channel's RMS.
