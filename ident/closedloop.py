@@ -1035,27 +1035,420 @@ def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_ri
     return -1 if failed else worst
 
 
+#: Setups simulated side by side in one block of :func:`_loop_lanes` (the lanes). The
+#: mode updates, the velocity sums and the common case of the shock solve run as loops over
+#: the lanes, which LLVM's loop vectorizer turns into vector instructions (numba leaves its
+#: straight-line vectorizer off, so a block of 4 would run scalar). 16 lanes measured best
+#: on 64 setups (8: ..., 32: too few blocks for two cores).
+_LANES = 16
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _segment_bounds(seg, kv, c, nk):
+    """Open interval ``(lo, hi)`` of the velocities in segment `seg` of row `c`: ``lo < v < hi``
+    exactly when :func:`_segment_of` with that guess returns `seg` at once (the end segments
+    are closed at their knot, so their bound is the next float beyond it)."""
+    if seg <= 0:
+        return -np.inf, np.nextafter(kv[c, 0], np.inf)
+    if seg >= nk:
+        return np.nextafter(kv[c, nk - 1], -np.inf), np.inf
+    return kv[c, seg - 1], kv[c, seg]
+
+
+@_nb.njit(cache=True, error_model="numpy")
+def _loop_lanes(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
+                kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, CyrT, CyiT, DyT, y_rig, y_out,
+                F_out, iters, s0, L):
+    """:func:`_loop_one` for the `L` setups ``s0 .. s0 + L - 1`` side by side.
+
+    Every setup gets exactly :func:`_loop_one`'s operations in the same order, so the same
+    numbers to the last bit (tested): states are held as (row, lane) arrays and every
+    setup-independent loop runs over the lanes innermost. The shock solve's common case
+    (every shock of a lane stays on its segment at the first solve with the cached inverse)
+    is one pass over the lanes, with each lane's segment held as an open interval; the
+    lanes that leave it continue alone through :func:`_loop_one`'s segment changes and
+    :func:`_shock_step`. Writes rows ``s0 ..`` of `y_out`, `F_out` and `iters`.
+    """
+    n = pr.size
+    m = 4
+    p = CyrT.shape[1]
+    N = v_rig.shape[0]
+    n_out = y_out.shape[2]
+    xr = np.zeros((n, L))
+    xi = np.zeros((n, L))
+    bdr = np.zeros((n, L))  # B dF of the last step
+    bdi = np.zeros((n, L))
+    bpr = np.zeros((n, L))  # B dF of the step before
+    bpi = np.zeros((n, L))
+    Xr = np.zeros((L, _OUT_BLOCK, n))
+    Xi = np.zeros((L, _OUT_BLOCK, n))
+    Db = np.zeros((L, _OUT_BLOCK, m))
+    Y1 = np.empty((_OUT_BLOCK, p))
+    Y2 = np.empty((_OUT_BLOCK, p))
+    Y3 = np.empty((_OUT_BLOCK, p))
+    # per corner (row) and lane (column)
+    al = np.empty((m, L))
+    b0l = np.empty((m, L))
+    b1l = np.empty((m, L))
+    bml = np.empty((m, L))
+    K1 = kv.shape[2] + 1  # segments per corner, at most
+    SLt = np.zeros((m * K1, L))  # every segment's line f = a + s v (_segment_line) ...
+    AVt = np.zeros((m * K1, L))
+    LOt = np.zeros((m * K1, L))  # ... and open interval (_segment_bounds)
+    HIt = np.zeros((m * K1, L))
+    for l in range(L):
+        s = s0 + l
+        for c in range(m):
+            for q in range(nk[s, c] + 1):
+                row = c * K1 + q
+                SLt[row, l], AVt[row, l] = _segment_line(q, kv[s], kf[s], c, nk[s, c], slo[s, c],
+                                                         shi[s, c])
+                LOt[row, l], HIt[row, l] = _segment_bounds(q, kv[s], c, nk[s, c])
+            al[c, l] = alpha[s0 + l, c]
+            b0l[c, l] = b0[s0 + l, c]
+            b1l[c, l] = b1[s0 + l, c]
+            bml[c, l] = bm[s0 + l, c]
+    dF = np.zeros((m, L))
+    F_prev = np.zeros((m, L))
+    f_prev = np.zeros((m, L))
+    f_prev2 = np.zeros((m, L))
+    vfree = np.zeros((m, L))
+    c0 = np.zeros((m, L))
+    res = np.zeros((m, L))
+    vnew = np.zeros((m, L))
+    v = np.zeros((m, L))
+    fv = np.zeros((m, L))
+    sv = np.zeros((m, L))
+    av = np.zeros((m, L))
+    lo = np.zeros((m, L))
+    hi = np.zeros((m, L))
+    seg = np.zeros((m, L), dtype=np.int64)
+    Jinv = np.zeros((m * m, L))
+    state = np.zeros(L, dtype=np.int64)
+    ok = np.zeros(L, dtype=np.int64)
+    worst = np.zeros(L, dtype=np.int64)
+    failed = np.zeros(L, dtype=np.bool_)
+    # one lane's solver state for _shock_step (gathered, solved, scattered back)
+    v1, vfree1, c01, fv1, sv1, seg1, av1, vnew1, res1, J1, Jinv1, state1 = _solver_state(
+        kv[s0], nk[s0])
+    b01 = np.empty(m)
+    for l in range(L):
+        for c in range(m):
+            s = _segment_of(0.0, kv[s0 + l], c, nk[s0 + l, c], 0)
+            seg[c, l] = s
+            lo[c, l] = LOt[c * K1 + s, l]
+            hi[c, l] = HIt[c * K1 + s, l]
+    col = 0
+    kk0 = 0
+    phase = 0
+    for k in range(N):
+        # predictor (as _loop_one, lane by lane)
+        for i in range(n):
+            p_r = pr[i]
+            p_i = pi[i]
+            a_r = g0r[i]
+            a_i = g0i[i]
+            m_r = gmr[i]
+            m_i = gmi[i]
+            xr_ = xr[i]
+            xi_ = xi[i]
+            bdr_ = bdr[i]
+            bdi_ = bdi[i]
+            bpr_ = bpr[i]
+            bpi_ = bpi[i]
+            for l in range(L):
+                tr = (p_r * xr_[l] - p_i * xi_[l] + a_r * bdr_[l] - a_i * bdi_[l]
+                      + m_r * bpr_[l] - m_i * bpi_[l])
+                ti = (p_r * xi_[l] + p_i * xr_[l] + a_r * bdi_[l] + a_i * bdr_[l]
+                      + m_r * bpi_[l] + m_i * bpr_[l])
+                xr_[l] = tr
+                xi_[l] = ti
+        for c in range(m):
+            vf = vfree[c]
+            for l in range(L):
+                vf[l] = 0.0
+        for i in range(n):
+            xr_ = xr[i]
+            xi_ = xi[i]
+            for c in range(m):
+                cr = Cvr[c, i]
+                ci = Cvi[c, i]
+                vf = vfree[c]
+                for l in range(L):
+                    vf[l] += cr * xr_[l] - ci * xi_[l]
+        for c in range(m):
+            vf = vfree[c]
+            vr = v_rig[k, c]
+            for l in range(L):
+                vf[l] = vr + vf[l]
+            # c0 = alpha F_prev + b1 f_prev + bm f_prev2
+            c0c = c0[c]
+            a_ = al[c]
+            Fp = F_prev[c]
+            b1_ = b1l[c]
+            fp = f_prev[c]
+            bm_ = bml[c]
+            fp2 = f_prev2[c]
+            for l in range(L):
+                c0c[l] = a_[l] * Fp[l] + b1_[l] * fp[l] + bm_[l] * fp2[l]
+        # the shock solve's first pass on the cached segments, every lane at once
+        for c in range(m):
+            rc = res[c]
+            vf = vfree[c]
+            for l in range(L):
+                rc[l] = vf[l]
+            for j in range(m):
+                d = Deff[c, j]
+                c0j = c0[j]
+                b0j = b0l[j]
+                avj = av[j]
+                for l in range(L):
+                    rc[l] += d * (c0j[l] + b0j[l] * avj[l])
+        for l in range(L):
+            ok[l] = 1 if state[l] >= 1 else 0
+        for c in range(m):
+            vn = vnew[c]
+            for l in range(L):
+                vn[l] = 0.0
+            for j in range(m):
+                Jr = Jinv[c * m + j]
+                rj = res[j]
+                for l in range(L):
+                    vn[l] += Jr[l] * rj[l]
+            loc = lo[c]
+            hic = hi[c]
+            for l in range(L):
+                ok[l] &= (loc[l] < vn[l]) & (vn[l] < hic[l])
+        for c in range(m):
+            vn = vnew[c]
+            vc = v[c]
+            fvc = fv[c]
+            avc = av[c]
+            svc = sv[c]
+            for l in range(L):
+                if ok[l]:
+                    vc[l] = vn[l]
+                    fvc[l] = avc[l] + svc[l] * vn[l]
+        # the lanes whose shocks change segment: _loop_one's path, lane by lane
+        for l in range(L):
+            if ok[l]:
+                if worst[l] < 1:
+                    worst[l] = 1
+                continue
+            s = s0 + l
+            it = 0
+            if state[l] >= 1:
+                for it_ in range(1, _FAST_ITERATIONS + 1):
+                    if it_ > 1:
+                        for c in range(m):
+                            acc = vfree[c, l]
+                            for j in range(m):
+                                acc += Deff[c, j] * (c0[j, l] + b0l[j, l] * av[j, l])
+                            res[c, l] = acc
+                        for c in range(m):
+                            acc = 0.0
+                            for j in range(m):
+                                acc += Jinv[c * m + j, l] * res[j, l]
+                            vnew[c, l] = acc
+                    same = True
+                    for c in range(m):
+                        x = vnew[c, l]
+                        row = c * K1 + seg[c, l]
+                        if LOt[row, l] < x < HIt[row, l]:
+                            continue
+                        # _segment_of(x) (no array view here: a view of a shared array
+                        # costs two atomic reference counts)
+                        nkc = nk[s, c]
+                        if x <= kv[s, c, 0]:
+                            s2 = 0
+                        elif x >= kv[s, c, nkc - 1]:
+                            s2 = nkc
+                        else:
+                            lo_ = 0
+                            s2 = nkc - 1
+                            while s2 - lo_ > 1:
+                                mid = (lo_ + s2) // 2
+                                if kv[s, c, mid] <= x:
+                                    lo_ = mid
+                                else:
+                                    s2 = mid
+                        if s2 == seg[c, l]:
+                            continue
+                        same = False
+                        row = c * K1 + s2
+                        sl2 = SLt[row, l]
+                        a2 = AVt[row, l]
+                        seg[c, l] = s2
+                        av[c, l] = a2
+                        if sl2 != sv[c, l]:
+                            dsc = b0l[c, l] * (sl2 - sv[c, l])
+                            for r_ in range(m):
+                                acc = 0.0
+                                for j in range(m):
+                                    acc -= Jinv[r_ * m + j, l] * Deff[j, c] * dsc
+                                res[r_, l] = acc
+                            den = 1.0 + res[c, l]
+                            if abs(den) < 1e-8:
+                                state[l] = 0
+                                break
+                            for j in range(m):
+                                J1[0, j] = Jinv[c * m + j, l] / den
+                            for r_ in range(m):
+                                for j in range(m):
+                                    Jinv[r_ * m + j, l] -= res[r_, l] * J1[0, j]
+                            sv[c, l] = sl2
+                            state[l] += 1
+                    if same:
+                        for c in range(m):
+                            v[c, l] = vnew[c, l]
+                            fv[c, l] = av[c, l] + sv[c, l] * vnew[c, l]
+                        it = it_
+                        if state[l] > _MAX_RANK1_UPDATES:
+                            state[l] = 0
+                        break
+                    if state[l] == 0 or state[l] > _MAX_RANK1_UPDATES:
+                        state[l] = 0
+                        break
+            if it == 0:
+                for c in range(m):
+                    vfree1[c] = vfree[c, l]
+                    c01[c] = c0[c, l]
+                    b01[c] = b0l[c, l]
+                    v1[c] = v[c, l]
+                    sv1[c] = sv[c, l]
+                    seg1[c] = seg[c, l]
+                    av1[c] = av[c, l]
+                    for j in range(m):
+                        Jinv1[c, j] = Jinv[c * m + j, l]
+                state1[0] = state[l]
+                it = _shock_step(vfree1, c01, Deff, cbar, b01, kv[s], kf[s], nk[s], slo[s], shi[s],
+                                 v1, fv1, sv1, seg1, av1, vnew1, res1, J1, Jinv1, state1)
+                for c in range(m):
+                    v[c, l] = v1[c]
+                    fv[c, l] = fv1[c]
+                    sv[c, l] = sv1[c]
+                    seg[c, l] = seg1[c]
+                    av[c, l] = av1[c]
+                    for j in range(m):
+                        Jinv[c * m + j, l] = Jinv1[c, j]
+                state[l] = state1[0]
+            for c in range(m):
+                row = c * K1 + seg[c, l]
+                lo[c, l] = LOt[row, l]
+                hi[c, l] = HIt[row, l]
+            if it < 0:
+                failed[l] = True
+                it = 80
+            if it > worst[l]:
+                worst[l] = it
+        for c in range(m):
+            c0c = c0[c]
+            b0c = b0l[c]
+            fvc = fv[c]
+            Fp = F_prev[c]
+            fp = f_prev[c]
+            fp2 = f_prev2[c]
+            dFc = dF[c]
+            vc = v[c]
+            cb = cbar[c]
+            for l in range(L):
+                F = c0c[l] + b0c[l] * fvc[l]
+                Fp[l] = F
+                fp2[l] = fp[l]
+                fp[l] = fvc[l]
+                dFc[l] = F - cb * vc[l]
+        # corrector: complete x[k] with g1 * B dF[k]
+        d0 = dF[0]
+        d1 = dF[1]
+        d2 = dF[2]
+        d3 = dF[3]
+        for i in range(n):
+            B0r = Br[0, i]
+            B1r = Br[1, i]
+            B2r = Br[2, i]
+            B3r = Br[3, i]
+            B0i = Bi[0, i]
+            B1i = Bi[1, i]
+            B2i = Bi[2, i]
+            B3i = Bi[3, i]
+            h_r = g1r[i]
+            h_i = g1i[i]
+            xr_ = xr[i]
+            xi_ = xi[i]
+            bdr_ = bdr[i]
+            bdi_ = bdi[i]
+            bpr_ = bpr[i]
+            bpi_ = bpi[i]
+            for l in range(L):
+                ur = B0r * d0[l] + B1r * d1[l] + B2r * d2[l] + B3r * d3[l]
+                ui = B0i * d0[l] + B1i * d1[l] + B2i * d2[l] + B3i * d3[l]
+                bpr_[l] = bdr_[l]
+                bpi_[l] = bdi_[l]
+                bdr_[l] = ur
+                bdi_[l] = ui
+                xr_[l] += h_r * ur - h_i * ui
+                xi_[l] += h_r * ui + h_i * ur
+        if phase == 0:
+            kk = k // r
+            for l in range(L):
+                for c in range(m):
+                    F_out[s0 + l, kk, c] = F_prev[c, l]
+                    Db[l, col, c] = dF[c, l]
+            for i in range(n):
+                for l in range(L):
+                    Xr[l, col, i] = xr[i, l]
+                    Xi[l, col, i] = xi[i, l]
+            col += 1
+            if col == _OUT_BLOCK or kk == n_out - 1:
+                for l in range(L):
+                    # _loop_one's product, term by term: (Xr Cr - Xi Ci) + Db Dy
+                    np.dot(Xr[l, :col], CyrT, Y1[:col])
+                    np.dot(Xi[l, :col], CyiT, Y2[:col])
+                    np.dot(Db[l, :col], DyT, Y3[:col])
+                    yl = y_out[s0 + l]
+                    for o in range(p):
+                        yo = yl[o]
+                        for j in range(col):
+                            yo[kk0 + j] = y_rig[kk0 + j, o] + ((Y1[j, o] - Y2[j, o]) + Y3[j, o])
+                kk0 += col
+                col = 0
+        phase += 1
+        if phase == r:
+            phase = 0
+    for l in range(L):
+        iters[s0 + l] = -1 if failed[l] else worst[l]
+
+
 @_nb.njit(cache=True, error_model="numpy", parallel=True)
 def _loop_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
                 kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, CyrT, CyiT, DyT, y_rig, y_out,
-                F_out, iters):
-    for s in _nb.prange(kv.shape[0]):
-        iters[s] = _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
-                             v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s], b0[s],
-                             b1[s], bm[s], r, CyrT, CyiT, DyT, y_rig, y_out[s], F_out[s])
-    return
+                F_out, iters, T):
+    """The setups in blocks of at most :data:`_LANES` (:func:`_loop_lanes`), the blocks in
+    parallel: as many blocks as a multiple of the threads needs, of equal size (55 setups on
+    `T` threads: 4 blocks of 14, not 16, 16, 16 and 7)."""
+    S = kv.shape[0]
+    n_blocks = -(-S // _LANES)
+    n_blocks = -(-n_blocks // T) * T
+    L = -(-S // n_blocks)
+    n_blocks = -(-S // L)
+    for b in _nb.prange(n_blocks):
+        s0 = b * L
+        _loop_lanes(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
+                    kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, CyrT, CyiT, DyT, y_rig, y_out,
+                    F_out, iters, s0, min(L, S - s0))
 
 
 @_nb.njit(cache=True, error_model="numpy")
 def _loop_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
                  kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, CyrT, CyiT, DyT, y_rig, y_out,
                  F_out, iters):
-    """:func:`_loop_batch` one setup after the other (the same `_loop_one`, the same numbers).
+    """The setups one after the other through :func:`_loop_one` (the numbers of
+    :func:`_loop_batch`'s lane blocks, to the last bit).
 
-    A single setup gains nothing from the parallel loop, and this kernel compiles in about
-    60 % of its time: the virtual rig (one setup per run) uses it, so a fresh machine's first
-    ``rig simulate`` or demo waits for the smaller compilation only (the demo compiles the
-    parallel kernel meanwhile in a worker).
+    A single setup gains nothing from lanes or threads, and this kernel compiles in about
+    40 % of :func:`_loop_batch`'s time: the virtual rig (one setup per run) uses it, so a
+    fresh machine's first ``rig simulate`` or demo waits for the smaller compilation only
+    (the demo compiles the parallel kernel meanwhile in a worker).
     """
     for s in range(kv.shape[0]):
         iters[s] = _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
@@ -1257,10 +1650,13 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
         return np.ascontiguousarray(a.real, dtype=float), np.ascontiguousarray(a.imag, dtype=float)
 
     Cy = ms.C[oi]
-    kernel = _loop_serial if S == 1 else _loop_batch
-    kernel(*split(phi), *split(g1), *split(g0), *split(gm), *split(Bf.T), *split(Cv),
-                np.ascontiguousarray(Deff), v_rig, _writable(plant.cbar_n_s_m), *packed, r,
-                *split(Cy.T), np.ascontiguousarray(ms.D[oi].T, dtype=float), y_rig, y, F, iters)
+    args = (*split(phi), *split(g1), *split(g0), *split(gm), *split(Bf.T), *split(Cv),
+            np.ascontiguousarray(Deff), v_rig, _writable(plant.cbar_n_s_m), *packed, r,
+            *split(Cy.T), np.ascontiguousarray(ms.D[oi].T, dtype=float), y_rig, y, F, iters)
+    if S == 1:
+        _loop_serial(*args)
+    else:
+        _loop_batch(*args, _nb.get_num_threads())
     if np.any(iters < 0):
         bad = np.flatnonzero(iters < 0).tolist()
         raise ValueError(f"closed loop of plant {plant.name!r}: Newton's method did not converge "

@@ -376,6 +376,113 @@ def _sosfiltfilt_rows_py(x, sos, zi, padlen, out):
                 out[i0 + j, k] = buf[padlen + k, j]
 
 
+
+#: numpy's pairwise summation: blocks of at most this many samples are summed with 8
+#: partial sums (numpy's ``PW_BLOCKSIZE``).
+_PW_BLOCK = 128
+
+
+def _pairwise_sum_col(buf, start, n, j):
+    """``numpy.sum`` of ``buf[start:start + n, j]``, to the last bit: numpy's pairwise
+    summation (8 partial sums on blocks of up to 128 samples, halves above), on a column.
+    """
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += buf[start + i, j]
+        return res
+    if n <= _PW_BLOCK:
+        r0 = buf[start, j]
+        r1 = buf[start + 1, j]
+        r2 = buf[start + 2, j]
+        r3 = buf[start + 3, j]
+        r4 = buf[start + 4, j]
+        r5 = buf[start + 5, j]
+        r6 = buf[start + 6, j]
+        r7 = buf[start + 7, j]
+        i = 8
+        while i < n - (n % 8):
+            r0 += buf[start + i, j]
+            r1 += buf[start + i + 1, j]
+            r2 += buf[start + i + 2, j]
+            r3 += buf[start + i + 3, j]
+            r4 += buf[start + i + 4, j]
+            r5 += buf[start + i + 5, j]
+            r6 += buf[start + i + 6, j]
+            r7 += buf[start + i + 7, j]
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < n:
+            res += buf[start + i, j]
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_sum_col(buf, start, n2, j) + _pairwise_sum_col(buf, start + n2, n - n2, j)
+
+
+def _metric_rms_rows_py(a, b, two, sos, zi, padlen, out):
+    """The metric of every row, fused: ``_rms(sosfiltfilt(x - x.mean()))`` with ``x = a[i]``,
+    or ``(a[i] + b[i]) / 2`` when `two` (a ride height of two corners).
+
+    Parameters
+    ----------
+    a, b : ndarray of float, shape (m, n)
+        One channel per row (any row stride); `b` is read only when `two`.
+    two : bool
+    sos, zi, padlen
+        As :func:`_sosfiltfilt_rows_py`.
+    out : ndarray of float, shape (m,)
+        Written with the RMS per row.
+
+    Notes
+    -----
+    The same numbers, to the last bit, as :func:`_metric_signal`, :func:`_filtfilt` and
+    :func:`_rms` one after the other (tested): the mean and the mean square are numpy's
+    pairwise sums, the filter :func:`_sosfiltfilt_rows_py`'s lanes. Nothing of size ``(m, n)``
+    is allocated or written: a batch of 64 simulated setups' metrics costs one pass of the
+    filter over the channels.
+    """
+    m, n = a.shape
+    ne = n + 2 * padlen
+    ns = sos.shape[0]
+    n_blocks = (m + _LANES - 1) // _LANES
+    for blk in _prange(n_blocks):
+        buf = np.zeros((ne, _LANES))
+        z0 = np.empty((ns, _LANES))
+        z1 = np.empty((ns, _LANES))
+        i0 = blk * _LANES
+        n_rows = min(_LANES, m - i0)
+        for j in range(n_rows):
+            i = i0 + j
+            if two:
+                for k in range(n):
+                    buf[padlen + k, j] = (a[i, k] + b[i, k]) / 2
+            else:
+                for k in range(n):
+                    buf[padlen + k, j] = a[i, k]
+            mean = _pairwise_sum_col(buf, padlen, n, j) / n
+            for k in range(n):
+                buf[padlen + k, j] = buf[padlen + k, j] - mean
+            x0 = buf[padlen, j]
+            xn = buf[padlen + n - 1, j]
+            for k in range(padlen):  # odd extension, as _sosfiltfilt_rows_py
+                buf[k, j] = 2 * x0 - buf[2 * padlen - k, j]
+                buf[padlen + n + k, j] = 2 * xn - buf[padlen + n - 2 - k, j]
+        for first, stop, step in ((0, ne, 1), (ne - 1, -1, -1)):
+            for s in range(ns):
+                for j in range(_LANES):
+                    z0[s, j] = zi[s, 0] * buf[first, j]
+                    z1[s, j] = zi[s, 1] * buf[first, j]
+            _sosfilt_lanes(sos, buf, z0, z1, first, stop, step)
+        for k in range(padlen, padlen + n):
+            row = buf[k]
+            for j in range(_LANES):
+                row[j] = row[j] * row[j]
+        for j in range(n_rows):
+            out[i0 + j] = np.sqrt(_pairwise_sum_col(buf, padlen, n, j) / n)
+
+
 try:  # numba is a dependency; keep the module importable without it for tooling
     import numba as _nb
 
@@ -383,9 +490,12 @@ try:  # numba is a dependency; keep the module importable without it for tooling
     _sosfilt_inplace = _nb.njit(cache=True)(_sosfilt_inplace)
     _sosfilt_lanes = _nb.njit(cache=True)(_sosfilt_lanes)
     _sosfiltfilt_rows = _nb.njit(cache=True, parallel=True)(_sosfiltfilt_rows_py)
+    _pairwise_sum_col = _nb.njit(cache=True)(_pairwise_sum_col)
+    _metric_rms_rows = _nb.njit(cache=True, parallel=True)(_metric_rms_rows_py)
 except ImportError:  # pragma: no cover
     _prange = range
     _sosfiltfilt_rows = _sosfiltfilt_rows_py
+    _metric_rms_rows = _metric_rms_rows_py
 
 
 def bandpass(x, *, fs, band_hz=(1.0, 20.0), order=4, axis=-1):
@@ -483,8 +593,22 @@ def _check_static_loads(static_loads_n):
     return loads
 
 
-def _metric_signal(channels, names, label):
-    """The dynamic (mean-removed) signal of one metric: the mean of its channels."""
+def _metric_rms(xs, sos, padlen, label):
+    """RMS of the band-passed dynamic signal of one metric's channels `xs` (see
+    :func:`_metric_channels`): batches of two-dimensional channels take the fused kernel
+    (:func:`_metric_rms_rows_py`, the same numbers), the rest :func:`_metric_signal`'s steps."""
+    x = xs[0]
+    n = x.shape[-1]
+    if x.ndim != 2 or x.size < _FAST_MIN_SIZE or len(xs) > 2 or n <= padlen:
+        return _rms(_filtfilt(_metric_signal(xs), sos, padlen, -1, label))
+    out = np.empty(x.shape[0])
+    _metric_rms_rows(x, xs[-1], len(xs) == 2, np.ascontiguousarray(sos, dtype=float),
+                     np.ascontiguousarray(signal.sosfilt_zi(sos)), int(padlen), out)
+    return out
+
+
+def _metric_channels(channels, names, label):
+    """The channels of one metric as float arrays of one shape (checked)."""
     xs = [np.asarray(channels[c], dtype=float) for c in names]
     for c, x in zip(names, xs):
         if x.ndim == 0:
@@ -496,6 +620,11 @@ def _metric_signal(channels, names, label):
         raise ValueError(
             f"{label}: the channels averaged must have the same shape, got {shapes}"
         )
+    return xs
+
+
+def _metric_signal(xs):
+    """The dynamic (mean-removed) signal of one metric: the mean of its channels `xs`."""
     x = xs[0] if len(xs) == 1 else sum(xs) / len(xs)
     return x - x.mean(axis=-1, keepdims=True)
 
@@ -584,14 +713,14 @@ def compute_metrics(source, *, fs=None, band_hz=(1.0, 20.0), order=4,
         if missing:
             logger.debug("metric %s omitted: no channel %s", name, ", ".join(missing))
             continue
-        signals[name] = _metric_signal(channels, names, name)
+        signals[name] = _metric_channels(channels, names, name)
 
     values = {}
     for suffix, b in bands.items():
         sos, padlen = _design(b, order, fs)
-        for name, x in signals.items():
+        for name, xs in signals.items():
             label = "channel " + " and ".join(repr(c) for c in _METRIC_CHANNELS[name])
-            values[name + suffix] = _rms(_filtfilt(x, sos, padlen, -1, label))
+            values[name + suffix] = _metric_rms(xs, sos, padlen, label)
         for corner in CORNERS:
             tire = f"tire_force_rms_{corner}{suffix}"
             if corner in loads and tire in values:

@@ -306,3 +306,46 @@ def test_lane_blocks_equal_the_one_row_recurrence(rng):
         np.testing.assert_array_equal(got[i], buf)
     ref = signal.sosfiltfilt(sos, x, axis=-1)
     np.testing.assert_allclose(got, ref, rtol=0, atol=RTOL_FILTER * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("n", [1, 5, 8, 9, 127, 128, 129, 1000, 4097, 12_000, 12_001])
+def test_pairwise_sum_is_numpys(rng, n):
+    """The fused metric's sums are numpy's pairwise summation to the last bit (so its means
+    and mean squares are numpy's), on a column of a lane buffer."""
+    from ident.metrics import _pairwise_sum_col
+
+    x = rng.standard_normal(n) * 1e3 + 7.0
+    buf = np.zeros((n + 3, 4))
+    buf[3:, 2] = x
+    assert _pairwise_sum_col(buf, 3, n, 2) == np.sum(x)
+    assert _pairwise_sum_col(buf, 3, n, 2) / n == np.mean(x)
+
+
+def test_fused_metric_equals_its_steps(rng):
+    """compute_metrics on a batch (the fused kernel: channel mean, mean removal, zero-phase
+    band-pass and RMS in one pass per row) gives the numbers of the steps one after the
+    other (_metric_signal, scipy's sosfiltfilt, numpy's RMS) to the last bit: one channel
+    and two averaged, rows with any stride (the channels of a simulated batch are views),
+    a block of lanes not filled, a row with a NaN (NaN for that row only)."""
+    from scipy import signal
+
+    from ident.metrics import _FAST_MIN_SIZE, _LANES, _design, _metric_signal
+
+    fs = 100.0
+    n_rows, n = 2 * _LANES + 5, 3000
+    y = rng.standard_normal((n_rows, 3, n)) * 40.0 + 5.0  # (setup, channel, sample) as a batch
+    y[7, 1, 200] = np.nan
+    ch = {"tire_force_LF": y[:, 0, :], "ride_height_LF": y[:, 1, :],
+          "ride_height_RF": y[:, 2, :]}
+    assert y[:, 0, :].size >= _FAST_MIN_SIZE and not y[:, 0, :].flags.c_contiguous
+    got = compute_metrics(ch, fs=fs, split_hz=8.0)
+    for suffix, band in (("", (1.0, 20.0)), ("_body", (1.0, 8.0)), ("_wheelhop", (8.0, 20.0))):
+        sos, _ = _design(band, 4, fs)
+        for name, names in (("tire_force_rms_LF", ("tire_force_LF",)),
+                            ("ride_height_rms_front", ("ride_height_LF", "ride_height_RF"))):
+            x = _metric_signal([ch[c] for c in names])
+            ref = np.sqrt(np.mean(signal.sosfiltfilt(sos, x, axis=-1) ** 2, axis=-1))
+            np.testing.assert_array_equal(got.values[name + suffix], ref)
+    assert np.isnan(got.values["ride_height_rms_front"][7])
+    assert np.isfinite(np.delete(got.values["ride_height_rms_front"], 7)).all()
+    assert np.isfinite(got.values["tire_force_rms_LF"]).all()
