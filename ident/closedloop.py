@@ -616,7 +616,7 @@ def _rig_chunk(u, Br, Bi, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, CrT, CmiT, DT, r
             phase = 0
 
 
-@_nb.njit(cache=True, error_model="numpy", parallel=True)
+@_nb.njit(cache=True, error_model="numpy", parallel=True, nogil=True)
 def _rig_kernel(u, Br, Bi, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, pLr, pLi, CrT, CmiT, DT, r,
                 L, n_chunks, v, y):
     """Kernel of :func:`_rig_outputs`, parallel over time chunks of `L` steps.
@@ -1046,7 +1046,7 @@ def _loop_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_
     return
 
 
-@_nb.njit(cache=True, error_model="numpy")
+@_nb.njit(cache=True, error_model="numpy", nogil=True)
 def _loop_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
                  kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, CyrT, CyiT, DyT, y_rig, y_out,
                  F_out, iters):
@@ -1055,7 +1055,8 @@ def _loop_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v
     A single setup gains nothing from the parallel loop, and this kernel compiles in about
     60 % of its time: the virtual rig (one setup per run) uses it, so a fresh machine's first
     ``rig simulate`` or demo waits for the smaller compilation only (the demo compiles the
-    parallel kernel meanwhile in a worker).
+    parallel kernel meanwhile in a worker). It releases the GIL (as :func:`_rig_kernel`
+    does): the virtual rig runs its runs on threads.
     """
     for s in range(kv.shape[0]):
         iters[s] = _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,

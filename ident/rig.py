@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import difflib
 import logging
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -502,6 +503,10 @@ def _loop_damping(models):
     return np.array([float(m.equivalent_damping(NOMINAL_V_RMS_M_S)) for m in models])
 
 
+#: Runs of a rig plan simulated at once (threads; each run's loop is serial).
+_RUN_THREADS = 2
+
+
 def simulate_session(plan=None, vehicle=None, *, progress=False):
     """Run a rig plan on the physical full-car model and return the session.
 
@@ -536,12 +541,8 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
     model = build_full_car(vehicle)
     runs, clean = [], []
     drives, fine_drives = {}, {}
-    iterator = plan.runs
-    if progress:
-        from tqdm.auto import tqdm
-
-        iterator = tqdm(plan.runs, desc="virtual rig", unit="run")
-    for i, pr in enumerate(iterator):
+    jobs = []
+    for pr in plan.runs:
         key = (pr.seed, pr.duration_s) if pr.drive is None else ("file", id(pr.drive))
         if key not in drives:
             drives[key] = pr.drive if pr.drive is not None else make_plan_drive(
@@ -568,15 +569,30 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
         fine = fine_drives.get(key)
         if fine is None:
             fine = fine_drives[key] = _fine_drive(drive, plan.oversample)
+        jobs.append((pr, drive, plant, fine, models))
+
+    def run_one(job):
+        pr, drive, plant, fine, models = job
         resp = simulate(plant, fine, models, oversample=1)
-        # the rig inputs are recorded as commanded (the drive file's samples: in band the
-        # acquisition filter passes them to 1e-5)
-        sampled = _daq_sample(resp.channels, plan.oversample, drive.n_samples)
-        channels = {c: drive.channels[c] for c in drive.rig_inputs}
-        channels.update(sampled)
-        log.info("run %s: %d samples, Newton iterations <= %d", pr.name, drive.n_samples,
-                 resp.newton_iterations)
-        clean.append((pr, channels, drive))
+        return resp.newton_iterations, _daq_sample(resp.channels, plan.oversample,
+                                                   drive.n_samples)
+
+    # the runs on threads (the compiled loop and rig response release the GIL, and a run
+    # is one setup: the loop itself is serial); each run's numbers do not depend on it
+    with ThreadPoolExecutor(max_workers=max(1, min(_RUN_THREADS, len(jobs)))) as pool:
+        results = pool.map(run_one, jobs)
+        if progress:
+            from tqdm.auto import tqdm
+
+            results = tqdm(results, total=len(jobs), desc="virtual rig", unit="run")
+        for (pr, drive, _, _, _), (iters, sampled) in zip(jobs, results):
+            # the rig inputs are recorded as commanded (the drive file's samples: in band
+            # the acquisition filter passes them to 1e-5)
+            channels = {c: drive.channels[c] for c in drive.rig_inputs}
+            channels.update(sampled)
+            log.info("run %s: %d samples, Newton iterations <= %d", pr.name, drive.n_samples,
+                     iters)
+            clean.append((pr, channels, drive))
     # sensor noise: a noise floor per channel, the same in every run (a sensor's property),
     # sized as a fraction of the channel's RMS over the whole session
     rms = {}
