@@ -324,6 +324,20 @@ def _sosfilt_lanes(sos, buf, z0, z1, start, stop, step):
                 row[j] = yc
 
 
+def _filtfilt_lanes(sos, zi, buf, z0, z1):
+    """``sosfiltfilt`` of every column of the padded `buf` (n_padded, n_lanes) in place:
+    forward, then backward over the same buffer, each pass from the steady state of its
+    first input sample (sosfiltfilt's ``zi * x0``). `z0`, `z1` (n_sections, n_lanes) are
+    scratch."""
+    ne = buf.shape[0]
+    for first, stop, step in ((0, ne, 1), (ne - 1, -1, -1)):
+        for s in range(sos.shape[0]):
+            for j in range(buf.shape[1]):
+                z0[s, j] = zi[s, 0] * buf[first, j]
+                z1[s, j] = zi[s, 1] * buf[first, j]
+        _sosfilt_lanes(sos, buf, z0, z1, first, stop, step)
+
+
 def _sosfiltfilt_rows_py(x, sos, zi, padlen, out):
     """``scipy.signal.sosfiltfilt(sos, x, axis=-1)`` (odd padding of `padlen`) per row.
 
@@ -363,14 +377,7 @@ def _sosfiltfilt_rows_py(x, sos, zi, padlen, out):
                 buf[padlen + n + k, j] = 2 * x[i, n - 1] - x[i, n - 2 - k]
             for k in range(n):
                 buf[padlen + k, j] = x[i, k]
-        # forward, then backward over the same buffer; each pass starts from the steady
-        # state of its first input sample (sosfiltfilt's zi * x0)
-        for first, stop, step in ((0, ne, 1), (ne - 1, -1, -1)):
-            for s in range(ns):
-                for j in range(_LANES):
-                    z0[s, j] = zi[s, 0] * buf[first, j]
-                    z1[s, j] = zi[s, 1] * buf[first, j]
-            _sosfilt_lanes(sos, buf, z0, z1, first, stop, step)
+        _filtfilt_lanes(sos, zi, buf, z0, z1)
         for j in range(n_rows):
             for k in range(n):
                 out[i0 + j, k] = buf[padlen + k, j]
@@ -469,12 +476,7 @@ def _metric_rms_rows_py(a, b, two, sos, zi, padlen, out):
             for k in range(padlen):  # odd extension, as _sosfiltfilt_rows_py
                 buf[k, j] = 2 * x0 - buf[2 * padlen - k, j]
                 buf[padlen + n + k, j] = 2 * xn - buf[padlen + n - 2 - k, j]
-        for first, stop, step in ((0, ne, 1), (ne - 1, -1, -1)):
-            for s in range(ns):
-                for j in range(_LANES):
-                    z0[s, j] = zi[s, 0] * buf[first, j]
-                    z1[s, j] = zi[s, 1] * buf[first, j]
-            _sosfilt_lanes(sos, buf, z0, z1, first, stop, step)
+        _filtfilt_lanes(sos, zi, buf, z0, z1)
         for k in range(padlen, padlen + n):
             row = buf[k]
             for j in range(_LANES):
@@ -489,6 +491,7 @@ try:  # numba is a dependency; keep the module importable without it for tooling
     _prange = _nb.prange
     _sosfilt_inplace = _nb.njit(cache=True)(_sosfilt_inplace)
     _sosfilt_lanes = _nb.njit(cache=True)(_sosfilt_lanes)
+    _filtfilt_lanes = _nb.njit(cache=True)(_filtfilt_lanes)
     _sosfiltfilt_rows = _nb.njit(cache=True, parallel=True)(_sosfiltfilt_rows_py)
     _pairwise_sum_col = _nb.njit(cache=True)(_pairwise_sum_col)
     _metric_rms_rows = _nb.njit(cache=True, parallel=True)(_metric_rms_rows_py)
