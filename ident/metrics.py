@@ -383,7 +383,6 @@ def _sosfiltfilt_rows_py(x, sos, zi, padlen, out):
                 out[i0 + j, k] = buf[padlen + k, j]
 
 
-
 #: numpy's pairwise summation: blocks of at most this many samples are summed with 8
 #: partial sums (numpy's ``PW_BLOCKSIZE``).
 _PW_BLOCK = 128
@@ -596,17 +595,17 @@ def _check_static_loads(static_loads_n):
     return loads
 
 
-def _metric_rms(xs, sos, padlen, label):
+def _metric_rms(xs, sos, zi, padlen, label):
     """RMS of the band-passed dynamic signal of one metric's channels `xs` (see
     :func:`_metric_channels`): batches of two-dimensional channels take the fused kernel
-    (:func:`_metric_rms_rows_py`, the same numbers), the rest :func:`_metric_signal`'s steps."""
+    (:func:`_metric_rms_rows_py`, the same numbers), the rest :func:`_metric_signal`'s steps.
+    `zi` is ``sosfilt_zi(sos)`` as a contiguous float array (once per band)."""
     x = xs[0]
     n = x.shape[-1]
     if x.ndim != 2 or x.size < _FAST_MIN_SIZE or len(xs) > 2 or n <= padlen:
         return _rms(_filtfilt(_metric_signal(xs), sos, padlen, -1, label))
     out = np.empty(x.shape[0])
-    _metric_rms_rows(x, xs[-1], len(xs) == 2, np.ascontiguousarray(sos, dtype=float),
-                     np.ascontiguousarray(signal.sosfilt_zi(sos)), int(padlen), out)
+    _metric_rms_rows(x, xs[-1], len(xs) == 2, sos, zi, int(padlen), out)
     return out
 
 
@@ -721,9 +720,11 @@ def compute_metrics(source, *, fs=None, band_hz=(1.0, 20.0), order=4,
     values = {}
     for suffix, b in bands.items():
         sos, padlen = _design(b, order, fs)
+        sos = np.ascontiguousarray(sos, dtype=float)
+        zi = np.ascontiguousarray(signal.sosfilt_zi(sos))
         for name, xs in signals.items():
             label = "channel " + " and ".join(repr(c) for c in _METRIC_CHANNELS[name])
-            values[name + suffix] = _metric_rms(xs, sos, padlen, label)
+            values[name + suffix] = _metric_rms(xs, sos, zi, padlen, label)
         for corner in CORNERS:
             tire = f"tire_force_rms_{corner}{suffix}"
             if corner in loads and tire in values:

@@ -167,8 +167,9 @@ def _frf_plots_job(model_path, vehicle, folder, units):
 
 def _warm_kernels():
     """Compile (into numba's cache) the kernels of screening, of the metric filter and the
-    fused batch metric, and the setup-parallel closed loop on a small problem; the demo's process then loads them. Runs
-    in a worker process, while the demo's virtual rig compiles and runs the one-setup loop."""
+    fused batch metric, and the setup-parallel closed loop on a small problem; the demo's
+    process then loads them. Runs in a worker process, while the demo's virtual rig compiles
+    and runs the one-setup loop."""
     import numpy as np
 
     from ident.closedloop import simulate_batch
