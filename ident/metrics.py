@@ -391,6 +391,8 @@ _PW_BLOCK = 128
 def _pairwise_sum_col(buf, start, n, j):
     """``numpy.sum`` of ``buf[start:start + n, j]``, to the last bit: numpy's pairwise
     summation (8 partial sums on blocks of up to 128 samples, halves above), on a column.
+
+    The one-column reference of :func:`_pairwise_sum_lanes` (kept for tests and tooling).
     """
     if n < 8:
         res = 0.0
@@ -427,6 +429,110 @@ def _pairwise_sum_col(buf, start, n, j):
     return _pairwise_sum_col(buf, start, n2, j) + _pairwise_sum_col(buf, start + n2, n - n2, j)
 
 
+def _pairwise_leaf_lanes(buf, start, n, square, r, out):
+    """A leaf of :func:`_pairwise_sum_lanes` (``n <= 128`` samples): numpy's 8 partial sums
+    per lane in the rows of `r` (8, n_lanes), then their sum and the remainder into `out`."""
+    L = buf.shape[1]
+    if n < 8:
+        for j in range(L):
+            out[j] = 0.0
+        for i in range(n):
+            row = buf[start + i]
+            for j in range(L):
+                v = row[j]
+                if square:
+                    v = v * v
+                out[j] += v
+        return
+    for q in range(8):
+        row = buf[start + q]
+        rq = r[q]
+        for j in range(L):
+            v = row[j]
+            if square:
+                v = v * v
+            rq[j] = v
+    i = 8
+    while i < n - (n % 8):
+        for q in range(8):
+            row = buf[start + i + q]
+            rq = r[q]
+            for j in range(L):
+                v = row[j]
+                if square:
+                    v = v * v
+                rq[j] += v
+        i += 8
+    r0 = r[0]
+    r1 = r[1]
+    r2 = r[2]
+    r3 = r[3]
+    r4 = r[4]
+    r5 = r[5]
+    r6 = r[6]
+    r7 = r[7]
+    for j in range(L):
+        out[j] = ((r0[j] + r1[j]) + (r2[j] + r3[j])) + ((r4[j] + r5[j]) + (r6[j] + r7[j]))
+    while i < n:
+        row = buf[start + i]
+        for j in range(L):
+            v = row[j]
+            if square:
+                v = v * v
+            out[j] += v
+        i += 1
+
+
+def _pairwise_sum_lanes(buf, start, n, square, out, stack):
+    """``numpy.sum`` of ``buf[start:start + n, j]`` (of its squares when `square`) for every
+    lane `j` at once, into ``out`` (n_lanes,): :func:`_pairwise_sum_col`'s operations per
+    lane, to the last bit, reading `buf` row by row (a column walk of a (time, lane) buffer
+    larger than the cache streams it once per lane).
+
+    The recursion (halves of ``n // 2 - (n // 2) % 8`` samples down to leaves of at most
+    128) runs on an explicit stack: numba's cache cannot reload a self-recursive function
+    (it crashes). ``stack`` (levels, 10, n_lanes) is scratch: per level, a leaf's 8
+    partial sums and the two halves' sums.
+    """
+    levels = stack.shape[0]
+    f_start = np.empty(levels, dtype=np.int64)
+    f_n = np.empty(levels, dtype=np.int64)
+    f_stage = np.empty(levels, dtype=np.int64)  # 0: left half next, 1: right, 2: sum them
+    d = 0
+    f_start[0] = start
+    f_n[0] = n
+    f_stage[0] = 0
+    while d >= 0:
+        s0 = f_start[d]
+        nn = f_n[d]
+        # where this frame's sum goes: `out` at the top, else its parent's half slot
+        target = out if d == 0 else stack[d - 1, 7 + f_stage[d - 1]]
+        if nn <= _PW_BLOCK:
+            _pairwise_leaf_lanes(buf, s0, nn, square, stack[d], target)
+            d -= 1
+            continue
+        n2 = nn // 2
+        n2 -= n2 % 8
+        stage = f_stage[d]
+        if stage == 2:
+            left = stack[d, 8]
+            right = stack[d, 9]
+            for j in range(buf.shape[1]):
+                target[j] = left[j] + right[j]
+            d -= 1
+            continue
+        f_stage[d] = stage + 1
+        f_start[d + 1] = s0 if stage == 0 else s0 + n2
+        f_n[d + 1] = n2 if stage == 0 else nn - n2
+        f_stage[d + 1] = 0
+        d += 1
+
+
+#: Levels of :func:`_pairwise_sum_lanes`' stack: halving from 2**63 samples to a block of
+#: at most 128 takes fewer than 64.
+_PW_LEVELS = 64
+
+
 def _metric_rms_rows_py(a, b, two, sos, zi, padlen, out):
     """The metric of every row, fused: ``_rms(sosfiltfilt(x - x.mean()))`` with ``x = a[i]``,
     or ``(a[i] + b[i]) / 2`` when `two` (a ride height of two corners).
@@ -445,9 +551,12 @@ def _metric_rms_rows_py(a, b, two, sos, zi, padlen, out):
     -----
     The same numbers, to the last bit, as :func:`_metric_signal`, :func:`_filtfilt` and
     :func:`_rms` one after the other (tested): the mean and the mean square are numpy's
-    pairwise sums, the filter :func:`_sosfiltfilt_rows_py`'s lanes. Nothing of size ``(m, n)``
-    is allocated or written: a batch of 64 simulated setups' metrics costs one pass of the
-    filter over the channels.
+    pairwise sums (:func:`_pairwise_sum_lanes`), the filter :func:`_sosfiltfilt_rows_py`'s
+    lanes. Nothing of size ``(m, n)`` is allocated or written: a batch of 64 simulated
+    setups' metrics costs one pass of the filter over the channels. Every pass over a
+    block's (time, lane) buffer goes in time order over all its lanes (a buffer of 12,000
+    samples is 1.5 MB, more than a core's cache: a walk down one lane at a time would
+    stream it once per lane).
     """
     m, n = a.shape
     ne = n + 2 * padlen
@@ -457,31 +566,39 @@ def _metric_rms_rows_py(a, b, two, sos, zi, padlen, out):
         buf = np.zeros((ne, _LANES))
         z0 = np.empty((ns, _LANES))
         z1 = np.empty((ns, _LANES))
+        stack = np.empty((_PW_LEVELS, 10, _LANES))
+        sums = np.empty(_LANES)
         i0 = blk * _LANES
         n_rows = min(_LANES, m - i0)
-        for j in range(n_rows):
-            i = i0 + j
+        for k in range(n):  # the rows side by side (lanes past n_rows stay zero)
+            row = buf[padlen + k]
             if two:
-                for k in range(n):
-                    buf[padlen + k, j] = (a[i, k] + b[i, k]) / 2
+                for j in range(n_rows):
+                    row[j] = (a[i0 + j, k] + b[i0 + j, k]) / 2
             else:
-                for k in range(n):
-                    buf[padlen + k, j] = a[i, k]
-            mean = _pairwise_sum_col(buf, padlen, n, j) / n
-            for k in range(n):
-                buf[padlen + k, j] = buf[padlen + k, j] - mean
-            x0 = buf[padlen, j]
-            xn = buf[padlen + n - 1, j]
-            for k in range(padlen):  # odd extension, as _sosfiltfilt_rows_py
-                buf[k, j] = 2 * x0 - buf[2 * padlen - k, j]
-                buf[padlen + n + k, j] = 2 * xn - buf[padlen + n - 2 - k, j]
-        _filtfilt_lanes(sos, zi, buf, z0, z1)
+                for j in range(n_rows):
+                    row[j] = a[i0 + j, k]
+        _pairwise_sum_lanes(buf, padlen, n, False, sums, stack)
+        for j in range(_LANES):
+            sums[j] = sums[j] / n  # the means
         for k in range(padlen, padlen + n):
             row = buf[k]
             for j in range(_LANES):
-                row[j] = row[j] * row[j]
+                row[j] = row[j] - sums[j]
+        first = buf[padlen]
+        last = buf[padlen + n - 1]
+        for k in range(padlen):  # odd extension, as _sosfiltfilt_rows_py
+            lo = buf[k]
+            lo_src = buf[2 * padlen - k]
+            hi = buf[padlen + n + k]
+            hi_src = buf[padlen + n - 2 - k]
+            for j in range(_LANES):
+                lo[j] = 2 * first[j] - lo_src[j]
+                hi[j] = 2 * last[j] - hi_src[j]
+        _filtfilt_lanes(sos, zi, buf, z0, z1)
+        _pairwise_sum_lanes(buf, padlen, n, True, sums, stack)
         for j in range(n_rows):
-            out[i0 + j] = np.sqrt(_pairwise_sum_col(buf, padlen, n, j) / n)
+            out[i0 + j] = np.sqrt(sums[j] / n)
 
 
 try:  # numba is a dependency; keep the module importable without it for tooling
@@ -493,6 +610,8 @@ try:  # numba is a dependency; keep the module importable without it for tooling
     _filtfilt_lanes = _nb.njit(cache=True)(_filtfilt_lanes)
     _sosfiltfilt_rows = _nb.njit(cache=True, parallel=True)(_sosfiltfilt_rows_py)
     _pairwise_sum_col = _nb.njit(cache=True)(_pairwise_sum_col)
+    _pairwise_leaf_lanes = _nb.njit(cache=True)(_pairwise_leaf_lanes)
+    _pairwise_sum_lanes = _nb.njit(cache=True)(_pairwise_sum_lanes)
     _metric_rms_rows = _nb.njit(cache=True, parallel=True)(_metric_rms_rows_py)
 except ImportError:  # pragma: no cover
     _prange = range
