@@ -496,8 +496,9 @@ def rig_response(plant, drive, *, oversample=4, outputs=None):
 
 #: Internal steps per time chunk of :func:`_rig_kernel`. Fixed (not the thread count), so the
 #: result does not depend on how many threads run it; a record of at most one chunk runs
-#: serially with no superposition pass.
-_RIG_CHUNK = 1 << 16
+#: serially with no superposition pass. 8,192: a 120 s drive at 100 Hz and oversample 2
+#: (24,000 steps, 68 rig modes) in 3 chunks on 2 cores takes 0.028 s against 0.032 s serial.
+_RIG_CHUNK = 1 << 13
 
 
 def _rig_outputs(mr, h, u_fine, r):
@@ -1092,6 +1093,12 @@ def _loop_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v
     return
 
 
+#: The shock loop's modes are padded with zero modes to a multiple of this (AVX2: 4 doubles
+#: per vector), so its mode loops run in whole vectors with no scalar remainder. A zero
+#: mode adds exact zeros: the same numbers. 11 modes as 12: 7-10 % less time per setup.
+_MODE_PAD = 4
+
+
 # ----------------------------------------------------------------------------------------------
 # setups
 # ----------------------------------------------------------------------------------------------
@@ -1285,14 +1292,32 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
         return np.ascontiguousarray(a.real, dtype=float), np.ascontiguousarray(a.imag, dtype=float)
 
     Cy = ms.C[oi]
+    # zero modes up to a multiple of _MODE_PAD: exact zeros in every sum, whole vectors
+    n_pad = -len(phi) % _MODE_PAD
+    if n_pad:
+        def pad(a, axis):
+            w = [(0, 0)] * a.ndim
+            w[axis] = (0, n_pad)
+            return np.pad(a, w)
+
+        phi, g1, g0, gm = (pad(a, 0) for a in (phi, g1, g0, gm))
+        Bf, Cv, Cy = pad(Bf, 0), pad(Cv, 1), pad(Cy, 1)
     # the output rows' coefficients on [Re x, Im x, dF]: Re(Cy x) + Dy dF in one product
     Cout = np.ascontiguousarray(np.concatenate([Cy.real.T, -Cy.imag.T,
                                                 np.asarray(ms.D[oi], dtype=float).T]),
                                 dtype=float)
     kernel = _loop_serial if S == 1 else _loop_batch
-    kernel(*split(phi), *split(g1), *split(g0), *split(gm), *split(Bf.T), *split(Cv),
-           np.ascontiguousarray(Deff), v_rig, _writable(plant.cbar_n_s_m), *packed, r,
-           Cout, y_rig, y, F, iters)
+    # the parallel loop hands out one setup at a time to whichever thread is free: setups
+    # differ in cost (a digressive curve's zero crossings change segments), and equal
+    # shares per thread wait for the slower one. Set from Python: inside the kernel it
+    # would keep numba from caching it.
+    old_chunk = _nb.set_parallel_chunksize(1)
+    try:
+        kernel(*split(phi), *split(g1), *split(g0), *split(gm), *split(Bf.T), *split(Cv),
+               np.ascontiguousarray(Deff), v_rig, _writable(plant.cbar_n_s_m), *packed, r,
+               Cout, y_rig, y, F, iters)
+    finally:
+        _nb.set_parallel_chunksize(old_chunk)
     if np.any(iters < 0):
         bad = np.flatnonzero(iters < 0).tolist()
         raise ValueError(f"closed loop of plant {plant.name!r}: Newton's method did not converge "

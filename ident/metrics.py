@@ -30,6 +30,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Mapping
@@ -235,6 +236,16 @@ def _design(band, order, fs):
     return sos, 3 * int(ntaps)
 
 
+@functools.lru_cache(maxsize=32)
+def _band_filter(band, order, fs):
+    """:func:`_design` with ``sosfilt_zi``, as contiguous float arrays, once per (band,
+    order, rate): a batch prediction computes metrics chunk after chunk with the same
+    filter (about 5 ms per design). Shared arrays: read them only."""
+    sos, padlen = _design(band, order, fs)
+    sos = np.ascontiguousarray(sos, dtype=float)
+    return sos, padlen, np.ascontiguousarray(signal.sosfilt_zi(sos))
+
+
 def _filtfilt(x, sos, padlen, axis, label):
     n = x.shape[axis]
     if n <= padlen:
@@ -285,7 +296,7 @@ def _sosfilt_inplace(sos, zi0, x0, buf, n):
 _LANES = 16
 
 
-def _sosfilt_lanes(sos, buf, z0, z1, start, stop, step):
+def _sosfilt_lanes(sos, buf, z0, z1, start, stop, step, offset, lo, hi):
     """``sosfilt`` of every column of `buf` in place, over the rows ``range(start, stop,
     step)`` (``step = -1``: the backward pass, without a reversed copy).
 
@@ -297,6 +308,9 @@ def _sosfilt_lanes(sos, buf, z0, z1, start, stop, step):
     z0, z1 : ndarray of float, shape (n_sections, n_lanes)
         The transposed direct form II states, holding the initial state on entry
         (``zi * x0`` as ``sosfilt(..., zi=zi * x0)``); left with the final state.
+    offset : ndarray of float, shape (n_lanes,)
+        Subtracted from the rows ``lo <= k < hi`` as they are read (``row - offset``, a
+        metric's mean removal in the pass that filters it); ``lo = hi``: none.
 
     Notes
     -----
@@ -308,6 +322,9 @@ def _sosfilt_lanes(sos, buf, z0, z1, start, stop, step):
     n_lanes = buf.shape[1]
     for k in range(start, stop, step):
         row = buf[k]
+        if lo <= k < hi:
+            for j in range(n_lanes):
+                row[j] = row[j] - offset[j]
         for s in range(ns):
             b0 = sos[s, 0]
             b1 = sos[s, 1]
@@ -324,18 +341,22 @@ def _sosfilt_lanes(sos, buf, z0, z1, start, stop, step):
                 row[j] = yc
 
 
-def _filtfilt_lanes(sos, zi, buf, z0, z1):
+def _filtfilt_lanes(sos, zi, buf, z0, z1, offset, lo, hi):
     """``sosfiltfilt`` of every column of the padded `buf` (n_padded, n_lanes) in place:
     forward, then backward over the same buffer, each pass from the steady state of its
     first input sample (sosfiltfilt's ``zi * x0``). `z0`, `z1` (n_sections, n_lanes) are
-    scratch."""
+    scratch. `offset` is subtracted from the rows ``lo <= k < hi`` before the forward pass
+    filters them (see :func:`_sosfilt_lanes`); row 0 must be outside them."""
     ne = buf.shape[0]
     for first, stop, step in ((0, ne, 1), (ne - 1, -1, -1)):
         for s in range(sos.shape[0]):
             for j in range(buf.shape[1]):
                 z0[s, j] = zi[s, 0] * buf[first, j]
                 z1[s, j] = zi[s, 1] * buf[first, j]
-        _sosfilt_lanes(sos, buf, z0, z1, first, stop, step)
+        if step == 1:
+            _sosfilt_lanes(sos, buf, z0, z1, first, stop, step, offset, lo, hi)
+        else:
+            _sosfilt_lanes(sos, buf, z0, z1, first, stop, step, offset, 0, 0)
 
 
 def _sosfiltfilt_rows_py(x, sos, zi, padlen, out):
@@ -367,6 +388,7 @@ def _sosfiltfilt_rows_py(x, sos, zi, padlen, out):
         buf = np.zeros((ne, _LANES))
         z0 = np.empty((ns, _LANES))
         z1 = np.empty((ns, _LANES))
+        no_offset = np.zeros(_LANES)
         i0 = blk * _LANES
         n_rows = min(_LANES, m - i0)
         for j in range(n_rows):
@@ -377,7 +399,7 @@ def _sosfiltfilt_rows_py(x, sos, zi, padlen, out):
                 buf[padlen + n + k, j] = 2 * x[i, n - 1] - x[i, n - 2 - k]
             for k in range(n):
                 buf[padlen + k, j] = x[i, k]
-        _filtfilt_lanes(sos, zi, buf, z0, z1)
+        _filtfilt_lanes(sos, zi, buf, z0, z1, no_offset, 0, 0)
         for j in range(n_rows):
             for k in range(n):
                 out[i0 + j, k] = buf[padlen + k, j]
@@ -581,21 +603,19 @@ def _metric_rms_rows_py(a, b, two, sos, zi, padlen, out):
         _pairwise_sum_lanes(buf, padlen, n, False, sums, stack)
         for j in range(_LANES):
             sums[j] = sums[j] / n  # the means
-        for k in range(padlen, padlen + n):
-            row = buf[k]
-            for j in range(_LANES):
-                row[j] = row[j] - sums[j]
+        # odd extension, as _sosfiltfilt_rows_py, of the mean-removed signal (the
+        # forward pass removes the mean from the signal's own rows as it reads them)
         first = buf[padlen]
         last = buf[padlen + n - 1]
-        for k in range(padlen):  # odd extension, as _sosfiltfilt_rows_py
+        for k in range(padlen):
             lo = buf[k]
             lo_src = buf[2 * padlen - k]
             hi = buf[padlen + n + k]
             hi_src = buf[padlen + n - 2 - k]
             for j in range(_LANES):
-                lo[j] = 2 * first[j] - lo_src[j]
-                hi[j] = 2 * last[j] - hi_src[j]
-        _filtfilt_lanes(sos, zi, buf, z0, z1)
+                lo[j] = 2 * (first[j] - sums[j]) - (lo_src[j] - sums[j])
+                hi[j] = 2 * (last[j] - sums[j]) - (hi_src[j] - sums[j])
+        _filtfilt_lanes(sos, zi, buf, z0, z1, sums, padlen, padlen + n)
         _pairwise_sum_lanes(buf, padlen, n, True, sums, stack)
         for j in range(n_rows):
             out[i0 + j] = np.sqrt(sums[j] / n)
@@ -838,9 +858,7 @@ def compute_metrics(source, *, fs=None, band_hz=(1.0, 20.0), order=4,
 
     values = {}
     for suffix, b in bands.items():
-        sos, padlen = _design(b, order, fs)
-        sos = np.ascontiguousarray(sos, dtype=float)
-        zi = np.ascontiguousarray(signal.sosfilt_zi(sos))
+        sos, padlen, zi = _band_filter(tuple(float(f) for f in b), order, float(fs))
         for name, xs in signals.items():
             label = "channel " + " and ".join(repr(c) for c in _METRIC_CHANNELS[name])
             values[name + suffix] = _metric_rms(xs, sos, zi, padlen, label)

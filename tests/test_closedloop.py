@@ -251,6 +251,25 @@ def test_batch_equals_one_setup_at_a_time_on_many_curves(paper_model, rng):
                 np.testing.assert_array_equal(batch.channels[name][i], x)
 
 
+def test_zero_mode_padding_changes_nothing(paper_model, rng, monkeypatch):
+    """The shock loop's modes padded with zero modes (to whole vectors) give the numbers
+    and Newton iteration counts of the unpadded loop to the last bit."""
+    import ident.closedloop as cl
+
+    drive = _drive(6.0, scale=1.5)
+    plant = paper_model.loop_plant(C20)
+    assert plant.shock.n_states % cl._MODE_PAD != 0  # the fixture does get padded
+    d = _n8()
+    kinds = [d, LinearShock("L", C20), LinearShock("S", 3 * C20, lag_s=0.008)]
+    setups = [[kinds[i] for i in rng.integers(0, len(kinds), 4)] for _ in range(5)]
+    padded = simulate_batch(plant, drive, setups, oversample=2)
+    monkeypatch.setattr(cl, "_MODE_PAD", 1)
+    plain = simulate_batch(plant, drive, setups, oversample=2)
+    np.testing.assert_array_equal(padded.newton_iterations, plain.newton_iterations)
+    for name, x in plain.channels.items():
+        np.testing.assert_array_equal(padded.channels[name], x)
+
+
 def test_same_curve_as_table_or_digressive_is_identical(paper_model):
     d = _n8()
     v = np.concatenate([[-10.0], d.to_pwl().v_knots_m_s, [10.0]])  # far knots: end slopes

@@ -321,6 +321,49 @@ def test_pairwise_sum_is_numpys(rng, n):
     assert _pairwise_sum_col(buf, 3, n, 2) / n == np.mean(x)
 
 
+@pytest.mark.parametrize("n", [1, 5, 8, 9, 127, 128, 129, 1000, 4097, 12_000, 12_001])
+def test_pairwise_sum_of_all_lanes_is_numpys(rng, n):
+    """The lane-wise pairwise sum (every lane at once, row by row, on an explicit stack)
+    gives each lane numpy's sum and sum of squares to the last bit."""
+    from ident.metrics import _LANES, _PW_LEVELS, _pairwise_sum_lanes
+
+    buf = rng.standard_normal((n + 3, _LANES)) * 1e3 + 7.0
+    out = np.empty(_LANES)
+    stack = np.empty((_PW_LEVELS, 10, _LANES))
+    _pairwise_sum_lanes(buf, 3, n, False, out, stack)
+    cols = [np.ascontiguousarray(buf[3:, j]) for j in range(_LANES)]  # numpy's 1-D sums
+    np.testing.assert_array_equal(out, [np.sum(x) for x in cols])
+    _pairwise_sum_lanes(buf, 3, n, True, out, stack)
+    np.testing.assert_array_equal(out, [np.sum(x * x) for x in cols])
+
+
+def test_metric_kernels_load_from_numba_cache(tmp_path):
+    """The compiled metric kernels work when numba loads them from its cache in a new
+    process, not only when compiled in it (numba's cache could not reload a self-recursive
+    function: the process crashed)."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np\n"
+        "from ident.metrics import compute_metrics\n"
+        "rng = np.random.default_rng(3)\n"
+        "y = rng.standard_normal((20, 2, 3000))\n"
+        "m = compute_metrics({'tire_force_LF': y[:, 0], 'ride_height_LF': y[:, 0],\n"
+        "                     'ride_height_RF': y[:, 1]}, fs=100.0)\n"
+        "print(repr(float(m.values['tire_force_rms_LF'].sum())),\n"
+        "      repr(float(m.values['ride_height_rms_front'].sum())))\n"
+    )
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    runs = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                           text=True, timeout=600) for _ in range(2)]
+    for run in runs:  # the first compiles and writes the cache, the second loads it
+        assert run.returncode == 0, run.stderr[-2000:]
+    assert runs[0].stdout == runs[1].stdout
+    assert any((tmp_path / "numba").rglob("*.nbi"))
+
+
 def test_fused_metric_equals_its_steps(rng):
     """compute_metrics on a batch (the fused kernel: channel mean, mean removal, zero-phase
     band-pass and RMS in one pass per row) gives the numbers of the steps one after the
