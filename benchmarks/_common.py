@@ -43,11 +43,13 @@ def engine_version():
     return head + (" + uncommitted changes in ident/ or planner/" if dirty else "")
 
 
-def jit_source():
-    """How the compiled shock loop was obtained: "compile", "cache load" or "unknown"."""
+def jit_source(kernel="_loop_metrics_batch"):
+    """How a compiled shock loop of :mod:`ident.closedloop` was obtained: "compile", "cache
+    load" or "unknown". Default: the predictions' (the setup-parallel loop with its
+    metrics); the virtual rig runs ``"_loop_serial"``."""
     from ident import closedloop
 
-    stats = getattr(getattr(closedloop, "_loop_batch", None), "stats", None)
+    stats = getattr(getattr(closedloop, kernel, None), "stats", None)
     if stats is None:
         return "unknown"
     if sum(stats.cache_misses.values()):

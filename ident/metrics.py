@@ -600,25 +600,89 @@ def _metric_rms_rows_py(a, b, two, sos, zi, padlen, out):
             else:
                 for j in range(n_rows):
                     row[j] = a[i0 + j, k]
-        _pairwise_sum_lanes(buf, padlen, n, False, sums, stack)
-        for j in range(_LANES):
-            sums[j] = sums[j] / n  # the means
-        # odd extension, as _sosfiltfilt_rows_py, of the mean-removed signal (the
-        # forward pass removes the mean from the signal's own rows as it reads them)
-        first = buf[padlen]
-        last = buf[padlen + n - 1]
+        _metric_block(buf, n, padlen, sos, zi, z0, z1, stack, sums)
+        for j in range(n_rows):
+            out[i0 + j] = sums[j]
+
+
+def _metric_block(buf, n, padlen, sos, zi, z0, z1, stack, sums):
+    """The metric of every lane of a block whose signals (already the metric's channel
+    or mean of two) fill ``buf[padlen:padlen + n]`` (n + 2 padlen, n_lanes): the mean
+    removal, odd extension, zero-phase band-pass and RMS, left in ``sums`` (n_lanes,).
+    `z0`, `z1` (n_sections, n_lanes) and `stack` (:data:`_PW_LEVELS`, 10, n_lanes) are
+    scratch; `buf` is overwritten.
+    """
+    _pairwise_sum_lanes(buf, padlen, n, False, sums, stack)
+    L = buf.shape[1]
+    for j in range(L):
+        sums[j] = sums[j] / n  # the means
+    # odd extension, as _sosfiltfilt_rows_py, of the mean-removed signal (the forward
+    # pass removes the mean from the signal's own rows as it reads them)
+    first = buf[padlen]
+    last = buf[padlen + n - 1]
+    for k in range(padlen):
+        lo = buf[k]
+        lo_src = buf[2 * padlen - k]
+        hi = buf[padlen + n + k]
+        hi_src = buf[padlen + n - 2 - k]
+        for j in range(L):
+            lo[j] = 2 * (first[j] - sums[j]) - (lo_src[j] - sums[j])
+            hi[j] = 2 * (last[j] - sums[j]) - (hi_src[j] - sums[j])
+    _filtfilt_lanes(sos, zi, buf, z0, z1, sums, padlen, padlen + n)
+    _pairwise_sum_lanes(buf, padlen, n, True, sums, stack)
+    for j in range(L):
+        sums[j] = np.sqrt(sums[j] / n)
+
+
+def _setup_metric_rms(y, ia, ib, sos, zi, padlen, out, buf, z0, z1, stack, sums):
+    """The metrics of one simulated setup, in blocks of :data:`_LANES` metrics: metric `i`
+    is the RMS metric of channel ``y[ia[i]]``, or of ``(y[ia[i]] + y[ib[i]]) / 2`` when
+    ``ib[i] >= 0`` (a ride height of two corners), into ``out[i]``.
+
+    Parameters
+    ----------
+    y : ndarray of float, shape (n_channels, n)
+        The setup's output channels (any row stride).
+    ia, ib : ndarray of int64, shape (n_metrics,)
+    sos, zi, padlen
+        As :func:`_sosfiltfilt_rows_py`.
+    out : ndarray of float, shape (n_metrics,)
+    buf, z0, z1, stack, sums
+        Scratch of :func:`_metric_block`: shapes (n + 2 padlen, L), (n_sections, L) twice,
+        (:data:`_PW_LEVELS`, 10, L) and (L,) with L = :data:`_LANES` (a caller running
+        many setups keeps one set per thread).
+
+    Notes
+    -----
+    Compiled into the closed loop's kernel (:mod:`ident.closedloop`), which computes each
+    setup's metrics as soon as its outputs are simulated, while they are in the cache.
+    Each lane gets :func:`_metric_rms_rows_py`'s operations: the same numbers to the last
+    bit as :func:`compute_metrics` on the channels.
+    """
+    n = y.shape[1]
+    n_metrics = ia.size
+    for i0 in range(0, n_metrics, _LANES):
+        n_rows = min(_LANES, n_metrics - i0)
         for k in range(padlen):
             lo = buf[k]
-            lo_src = buf[2 * padlen - k]
             hi = buf[padlen + n + k]
-            hi_src = buf[padlen + n - 2 - k]
             for j in range(_LANES):
-                lo[j] = 2 * (first[j] - sums[j]) - (lo_src[j] - sums[j])
-                hi[j] = 2 * (last[j] - sums[j]) - (hi_src[j] - sums[j])
-        _filtfilt_lanes(sos, zi, buf, z0, z1, sums, padlen, padlen + n)
-        _pairwise_sum_lanes(buf, padlen, n, True, sums, stack)
+                lo[j] = 0.0
+                hi[j] = 0.0
+        for k in range(n):
+            row = buf[padlen + k]
+            for j in range(n_rows):
+                a = ia[i0 + j]
+                b = ib[i0 + j]
+                if b >= 0:
+                    row[j] = (y[a, k] + y[b, k]) / 2
+                else:
+                    row[j] = y[a, k]
+            for j in range(n_rows, _LANES):
+                row[j] = 0.0
+        _metric_block(buf, n, padlen, sos, zi, z0, z1, stack, sums)
         for j in range(n_rows):
-            out[i0 + j] = np.sqrt(sums[j] / n)
+            out[i0 + j] = sums[j]
 
 
 try:  # numba is a dependency; keep the module importable without it for tooling
@@ -632,6 +696,8 @@ try:  # numba is a dependency; keep the module importable without it for tooling
     _pairwise_sum_col = _nb.njit(cache=True)(_pairwise_sum_col)
     _pairwise_leaf_lanes = _nb.njit(cache=True)(_pairwise_leaf_lanes)
     _pairwise_sum_lanes = _nb.njit(cache=True)(_pairwise_sum_lanes)
+    _metric_block = _nb.njit(cache=True)(_metric_block)
+    _setup_metric_rms = _nb.njit(cache=True)(_setup_metric_rms)
     _metric_rms_rows = _nb.njit(cache=True, parallel=True)(_metric_rms_rows_py)
 except ImportError:  # pragma: no cover
     _prange = range
@@ -833,6 +899,59 @@ def compute_metrics(source, *, fs=None, band_hz=(1.0, 20.0), order=4,
     Signs do not matter (RMS); the channels follow the spec's conventions.
     """
     channels, fs = _source_channels(source, fs)
+    plan = _metric_plan(channels, fs, band_hz=band_hz, order=order,
+                        static_loads_n=static_loads_n, split_hz=split_hz)
+    signals = {name: _metric_channels(channels, _METRIC_CHANNELS[name], name)
+               for name in plan.names}
+    rms = {}
+    for suffix, b in plan.bands.items():
+        sos, padlen, zi = plan.filter(b)
+        for name, xs in signals.items():
+            label = "channel " + " and ".join(repr(c) for c in _METRIC_CHANNELS[name])
+            rms[name + suffix] = _metric_rms(xs, sos, zi, padlen, label)
+    return plan.assemble(rms)
+
+
+@dataclass(frozen=True)
+class _MetricPlan:
+    """What :func:`compute_metrics` computes from a set of channels: the checked settings,
+    the bands (suffix -> (low, high) [Hz]) and the metrics whose channels are present, in
+    the spec's order. Shared with the closed loop's fused kernel
+    (:func:`ident.closedloop.simulate_batch_metrics`), which computes the RMS values
+    itself and assembles them here."""
+
+    band: tuple
+    order: int
+    fs: float
+    split: object
+    loads: dict
+    bands: dict
+    names: tuple
+
+    def filter(self, b):
+        """``(sos, padlen, zi)`` of band `b`."""
+        return _band_filter(tuple(float(f) for f in b), self.order, float(self.fs))
+
+    def assemble(self, rms):
+        """The :class:`Metrics` from ``rms`` (metric name with band suffix -> values):
+        the band-passed RMS metrics in order, and the normalized tire forces."""
+        values = {}
+        for suffix in self.bands:
+            for name in self.names:
+                values[name + suffix] = rms[name + suffix]
+            for corner in CORNERS:
+                tire = f"tire_force_rms_{corner}{suffix}"
+                if corner in self.loads and tire in values:
+                    values[f"tire_force_rms_norm_{corner}{suffix}"] = (values[tire]
+                                                                      / self.loads[corner])
+        return Metrics(values=values, band_hz=self.band, order=self.order, fs_hz=self.fs,
+                       split_hz=self.split, static_loads_n=dict(self.loads) or None)
+
+
+def _metric_plan(channel_names, fs, *, band_hz=(1.0, 20.0), order=4, static_loads_n=None,
+                 split_hz=None):
+    """Check :func:`compute_metrics`' settings for channels `channel_names` at rate `fs`
+    (already checked) and return its :class:`_MetricPlan`."""
     band = _check_band(band_hz, fs)
     order = _check_order(order)
     loads = _check_static_loads(static_loads_n)
@@ -847,25 +966,12 @@ def compute_metrics(source, *, fs=None, band_hz=(1.0, 20.0), order=4,
         bands["_wheelhop"] = (split, band[1])
     else:
         split = None
-
-    signals = {}
-    for name, names in _METRIC_CHANNELS.items():
-        missing = [c for c in names if c not in channels]
+    names = []
+    for name, chans in _METRIC_CHANNELS.items():
+        missing = [c for c in chans if c not in channel_names]
         if missing:
             logger.debug("metric %s omitted: no channel %s", name, ", ".join(missing))
             continue
-        signals[name] = _metric_channels(channels, names, name)
-
-    values = {}
-    for suffix, b in bands.items():
-        sos, padlen, zi = _band_filter(tuple(float(f) for f in b), order, float(fs))
-        for name, xs in signals.items():
-            label = "channel " + " and ".join(repr(c) for c in _METRIC_CHANNELS[name])
-            values[name + suffix] = _metric_rms(xs, sos, zi, padlen, label)
-        for corner in CORNERS:
-            tire = f"tire_force_rms_{corner}{suffix}"
-            if corner in loads and tire in values:
-                values[f"tire_force_rms_norm_{corner}{suffix}"] = values[tire] / loads[corner]
-
-    return Metrics(values=values, band_hz=band, order=order, fs_hz=fs, split_hz=split,
-                   static_loads_n=dict(loads) or None)
+        names.append(name)
+    return _MetricPlan(band=band, order=order, fs=fs, split=split, loads=loads, bands=bands,
+                       names=tuple(names))

@@ -167,12 +167,12 @@ def _frf_plots_job(model_path, vehicle, folder, units):
 
 def _warm_kernels():
     """Compile (into numba's cache) the kernels of screening, of the metric filter and the
-    fused batch metric, and the setup-parallel closed loop on a small problem; the demo's
-    process then loads them. Runs in a worker process, while the demo's virtual rig compiles
-    and runs the one-setup loop."""
+    fused batch metric, and the setup-parallel closed loop with its metrics (the
+    predictions' kernel) on a small problem; the demo's process then loads them. Runs in a
+    worker process, while the demo's virtual rig compiles and runs the one-setup loop."""
     import numpy as np
 
-    from ident.closedloop import simulate_batch
+    from ident.closedloop import simulate_batch_metrics
     from ident.drive import make_track_drive
     from ident.metrics import bandpass, compute_metrics
     from ident.shocks import read_shock_library
@@ -188,7 +188,8 @@ def _warm_kernels():
     plant = build_full_car(vehicle).loop_plant()
     setups = enumerate_setups(library)[:2]
     screen_setups(plant, drive, setups, library)
-    simulate_batch(plant, drive, [[library[i] for i in s.ids()] for s in setups], oversample=1)
+    simulate_batch_metrics(plant, drive, [[library[i] for i in s.ids()] for s in setups],
+                           oversample=1)
     bandpass(np.zeros((2, 2, 20_000)), fs=100.0)
     y = np.zeros((2, 2, 20_000))  # a batch's channels are views of one (setup, output, sample)
     compute_metrics({"ride_height_LF": y[:, 0], "ride_height_RF": y[:, 1]}, fs=100.0)

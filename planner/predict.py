@@ -1,8 +1,10 @@
 """Closed-loop prediction of shock setups on a vehicle model (time domain).
 
-``predict_setups(model, drive, setups, library)`` simulates every setup with
-:func:`ident.closedloop.simulate_batch` (nonlinear shocks with lag in the loop,
-the algebraic loop solved exactly) and computes the spec's RMS metrics. The
+``predict_setups(model, drive, setups, library)`` simulates every setup in closed
+loop (nonlinear shocks with lag in the loop, the algebraic loop solved exactly) and
+computes the spec's RMS metrics, both in
+:func:`ident.closedloop.simulate_batch_metrics` (the numbers of
+:func:`ident.closedloop.simulate_batch` then :func:`ident.metrics.compute_metrics`). The
 model may be an identified :class:`ident.model.VehicleModel`, the known
 :class:`ident.vehicle.FullCarModel`, or any :class:`ident.closedloop.LoopPlant`:
 the same code path serves all, so identified and true predictions compare
@@ -182,8 +184,9 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
         Internal steps per drive sample of the shock loop (quadratic hold: at 2, metrics
         within about 0.3 % of a 32x run on a track drive at 100 Hz).
     chunk_size : int
-        Setups simulated together (bounds memory: about
-        ``chunk_size * n_samples * (n_modes + 40) * 16`` bytes).
+        Setups simulated per compiled call (a progress bar's step). Memory does not grow
+        with it: each thread keeps one setup's outputs, whose metrics it computes right
+        after simulating it (:func:`ident.closedloop.simulate_batch_metrics`).
     band_hz : (float, float)
         Metric band [Hz] (spec default 1-20 Hz).
     static_loads_n : dict, optional
@@ -197,8 +200,7 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
     -------
     Predictions
     """
-    from ident.closedloop import rig_response, simulate_batch
-    from ident.metrics import compute_metrics
+    from ident.closedloop import rig_response, simulate_batch_metrics
 
     from ident.closedloop import LoopPlant
 
@@ -217,11 +219,10 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
 
         starts = tqdm(starts, desc="predict", unit="chunk")
     for a in starts:
-        batch = simulate_batch(plant, drive, models[a:a + chunk_size], oversample=oversample,
-                               outputs=outputs, rig=rig)
-        met = compute_metrics(batch.channels, fs=batch.fs_hz, band_hz=band_hz,
-                              static_loads_n=static_loads_n)
-        rows.append(pd.DataFrame({k: np.asarray(v) for k, v in met.values.items()}))
+        batch = simulate_batch_metrics(plant, drive, models[a:a + chunk_size],
+                                       oversample=oversample, outputs=outputs, rig=rig,
+                                       band_hz=band_hz, static_loads_n=static_loads_n)
+        rows.append(pd.DataFrame({k: np.asarray(v) for k, v in batch.metrics.values.items()}))
         iters.append(batch.newton_iterations)
     table = pd.concat(rows, ignore_index=True)
     ids = pd.DataFrame([s.ids() for s in setups], columns=list(CORNERS))

@@ -251,6 +251,46 @@ def test_batch_equals_one_setup_at_a_time_on_many_curves(paper_model, rng):
                 np.testing.assert_array_equal(batch.channels[name][i], x)
 
 
+def test_batch_metrics_equal_metrics_of_the_batch(paper_model, rng):
+    """simulate_batch_metrics (each setup's metrics computed by its thread right after its
+    loop) gives compute_metrics' numbers on simulate_batch's channels to the last bit: the
+    spec's band, split bands, normalized tire forces, a subset of outputs, one setup."""
+    from ident.closedloop import simulate_batch_metrics
+    from ident.metrics import compute_metrics
+
+    drive = _drive(8.0, scale=1.5)
+    plant = paper_model.loop_plant(C20)
+    d = _n8()
+    kinds = [d, LinearShock("L", C20), LinearShock("S", 3 * C20, lag_s=0.008)]
+    setups = [[kinds[i] for i in rng.integers(0, len(kinds), 4)] for _ in range(19)]
+    loads = {"LF": 3000.0, "RR": 2500.0}
+    outputs = ["tire_force_LF", "ride_height_LF", "ride_height_RF", "shock_velocity_RR",
+               "shock_velocity_LF", "shock_velocity_RF", "shock_velocity_LR"]
+    for kw, outs, sel in (({}, None, slice(None)),
+                          ({"split_hz": 8.0, "static_loads_n": loads}, None, slice(None)),
+                          ({"band_hz": (2.0, 15.0)}, outputs, slice(None)),
+                          ({"split_hz": 8.0}, None, slice(3, 4))):
+        got = simulate_batch_metrics(plant, drive, setups[sel], oversample=2, outputs=outs,
+                                     **kw)
+        batch = simulate_batch(plant, drive, setups[sel], oversample=2, outputs=outs)
+        ref = compute_metrics(batch.channels, fs=batch.fs_hz, **kw)
+        assert list(got.metrics.values) == list(ref.values)
+        for name, x in ref.values.items():
+            np.testing.assert_array_equal(got.metrics.values[name], x)
+        np.testing.assert_array_equal(got.newton_iterations, batch.newton_iterations)
+        assert got.metrics.split_hz == ref.split_hz and got.metrics.band_hz == ref.band_hz
+
+
+def test_batch_metrics_of_a_too_short_drive_name_the_channel(paper_model):
+    from ident.closedloop import simulate_batch_metrics
+
+    plant = paper_model.loop_plant(C20)
+    peak = {w: 0.02 for w in RIG_INPUTS[3:]}
+    short = make_noise_drive(duration_s=0.2, fs_hz=100.0, peak=peak, seed=1, taper_s=0.02)
+    with pytest.raises(ValueError, match="samples, but the zero-phase band-pass needs"):
+        simulate_batch_metrics(plant, short, [[LinearShock("L", C20)] * 4] * 3, oversample=2)
+
+
 def test_zero_mode_padding_changes_nothing(paper_model, rng, monkeypatch):
     """The shock loop's modes padded with zero modes (to whole vectors) give the numbers
     and Newton iteration counts of the unpadded loop to the last bit."""
