@@ -906,14 +906,16 @@ _OUT_BLOCK = 128
 
 @_nb.njit(cache=True, error_model="numpy")
 def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
-              kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, y_rig, y_out, F_out):
+              kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, y_rig, y_out, F_out, v_row):
     """Time loop of one setup on the internal grid.
 
     The modal states are held as separate real and imaginary arrays (the mode loops
     vectorize). At every r-th step (an output sample) the states and ``dF`` are buffered
     as rows ``[Re x, Im x, dF]``; every :data:`_OUT_BLOCK` samples the outputs
     ``y_rig + Re(Cy x) + Dy dF`` are written by one matrix product with ``Cy`` (2 n + 4,
-    p) ``= [Re(Cy).T; -Im(Cy).T; Dy.T]``, and the applied shock forces per sample.
+    p) ``= [Re(Cy).T; -Im(Cy).T; Dy.T]``, and the applied shock forces per sample. With
+    ``v_row >= 0`` the shock velocities the loop solved for go to the rows ``v_row ..
+    v_row + 3`` of `y_out` (they equal the velocity outputs: ``v = v_free + Deff dF``).
     Returns the largest Newton iteration count (-1: no convergence).
     """
     n = pr.size
@@ -1075,6 +1077,9 @@ def _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_ri
             for c in range(m):
                 F_out[kk, c] = F_prev[c]
                 St[col, 2 * n + c] = dF_prev[c]
+            if v_row >= 0:
+                for c in range(m):
+                    y_out[v_row + c, kk] = v[c]
             for i in range(n):
                 St[col, i] = xr[i]
                 St[col, n + i] = xi[i]
@@ -1098,7 +1103,7 @@ def _loop_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_
     for s in _nb.prange(kv.shape[0]):
         iters[s] = _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
                              v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s], b0[s],
-                             b1[s], bm[s], r, Cy, y_rig, y_out[s], F_out[s])
+                             b1[s], bm[s], r, Cy, y_rig, y_out[s], F_out[s], -1)
     return
 
 
@@ -1116,7 +1121,7 @@ def _loop_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v
     for s in range(kv.shape[0]):
         iters[s] = _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
                              v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s], b0[s],
-                             b1[s], bm[s], r, Cy, y_rig, y_out[s], F_out[s])
+                             b1[s], bm[s], r, Cy, y_rig, y_out[s], F_out[s], -1)
     return
 
 
@@ -1129,6 +1134,10 @@ def _loop_metrics_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, 
     n_sections, 6), ``zi`` (n_bands, n_sections, 2)) into ``out`` (n_setups, n_bands,
     n_metrics).
 
+    The outputs ``Cy`` (2 n + 4, p) are the metrics' signals (a ride height pair as one
+    row of averaged coefficients); the shock velocities come from the loop's own solve
+    (rows p .. p + 3 of a setup's buffer), not from the product.
+
     `n_workers` workers (the thread count) take every `n_workers`-th setup: interleaved,
     so that each gets a mix of cheap and costly setups. Each keeps one setup's outputs and
     the metric's scratch (about 3 MB for 12,000 samples): nothing of size (setups x
@@ -1139,7 +1148,9 @@ def _loop_metrics_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, 
     ns = sos.shape[1]
     S = kv.shape[0]
     for w in _nb.prange(n_workers):
-        y = np.empty((p, n_out))
+        # sample-major: an output sample's channels side by side, so that the loop writes
+        # and the metrics' lanes read one contiguous row per sample (y is its transpose)
+        y = np.empty((n_out, p + 4)).T  # the outputs, then the 4 shock velocities
         F = np.empty((n_out, 4))
         buf = np.empty((n_out + 2 * padlen, L))
         z0 = np.empty((ns, L))
@@ -1149,7 +1160,7 @@ def _loop_metrics_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, 
         for s in range(w, S, n_workers):
             iters[s] = _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
                                  v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s],
-                                 b0[s], b1[s], bm[s], r, Cy, y_rig, y, F)
+                                 b0[s], b1[s], bm[s], r, Cy, y_rig, y, F, p)
             for b in range(sos.shape[0]):
                 _setup_metric_rms(y, ia, ib, sos[b], zi[b], padlen, out[s, b], buf, z0, z1,
                                   stack, sums)
@@ -1359,11 +1370,15 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
                            band_hz=(1.0, 20.0), order=4, static_loads_n=None, split_hz=None):
     """The metrics of several shock setups in closed loop, without keeping their responses.
 
-    The numbers, to the last bit, of :func:`ident.metrics.compute_metrics` on the channels
-    of :func:`simulate_batch` (tested), in one compiled pass: each setup's metrics are
-    computed by the thread that simulated it, right after, while its outputs are in the
-    cache (a batch's responses are written to memory and read back otherwise: 1.5 MB per
-    setup of a 120 s drive).
+    The numbers of :func:`ident.metrics.compute_metrics` on the channels of
+    :func:`simulate_batch` to rounding (tested), in one compiled pass: each setup's metrics
+    are computed by the thread that simulated it, right after, while its outputs are in
+    the cache (a batch's responses are written to memory and read back otherwise: 1.5 MB
+    per setup of a 120 s drive). Only the metrics' signals are formed: a ride height pair
+    as one output of averaged coefficients, the shock velocities as the loop solved them
+    (the velocity outputs are the same quantity), so 10 of the 16 outputs of a full set
+    go through the output product; hence rounding differences (about 1e-15 relative),
+    not the last bit.
 
     Parameters
     ----------
@@ -1397,16 +1412,32 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
                               static_loads_n=static_loads_n, split_hz=split_hz)
         return BatchMetrics(metrics=met, setups=batch.setups,
                             newton_iterations=batch.newton_iterations, settings=batch.settings)
-    chans = [_METRIC_CHANNELS[name] for name in plan.names]
-    ia = np.array([loop.names.index(c[0]) for c in chans], dtype=np.int64)
-    ib = np.array([loop.names.index(c[1]) if len(c) == 2 else -1 for c in chans],
-                  dtype=np.int64)
+    # the metrics' signals as the product's rows: a channel's row of the output matrix,
+    # the mean of two rows for a ride height of two corners; the shock velocities are the
+    # loop's own (appended after the rows)
+    Cout, y_rig = loop.args[-1], loop.y_rig
+    cols, rig_cols, lanes = [], [], []
+    for name in plan.names:
+        chans = _METRIC_CHANNELS[name]
+        if len(chans) == 1 and chans[0] in SHOCK_VELOCITIES:
+            lanes.append(-1 - SHOCK_VELOCITIES.index(chans[0]))
+            continue
+        idx = [loop.names.index(c) for c in chans]
+        cols.append(Cout[:, idx].mean(axis=1))
+        rig_cols.append(y_rig[:, idx].mean(axis=1))
+        lanes.append(len(cols) - 1)
+    p_red = len(cols)
+    ia = np.array([i if i >= 0 else p_red + (-1 - i) for i in lanes], dtype=np.int64)
+    ib = np.full(ia.size, -1, dtype=np.int64)
+    c_red = np.ascontiguousarray(np.stack(cols, axis=1) if cols else np.zeros((Cout.shape[0], 0)))
+    y_rig_red = np.ascontiguousarray(np.stack(rig_cols, axis=1) if rig_cols
+                                     else np.zeros((N, 0)))
     sos = np.ascontiguousarray(np.stack([f[0] for f in filters]), dtype=float)
     zi = np.ascontiguousarray(np.stack([f[2] for f in filters]), dtype=float)
-    out = np.empty((S, len(filters), len(chans)))
+    out = np.empty((S, len(filters), len(plan.names)))
     iters = np.zeros(S, dtype=np.int64)
-    _loop_metrics_batch(*loop.args, loop.y_rig, N, ia, ib, sos, zi, int(filters[0][1]),
-                        min(S, _nb.get_num_threads()), out, iters)
+    _loop_metrics_batch(*loop.args[:-1], c_red, y_rig_red, N, ia, ib, sos, zi,
+                        int(filters[0][1]), min(S, _nb.get_num_threads()), out, iters)
     _check_converged(plant, iters)
     rms = {name + suffix: out[:, b, i] for b, suffix in enumerate(plan.bands)
            for i, name in enumerate(plan.names)}

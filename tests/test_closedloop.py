@@ -15,6 +15,7 @@ from ident.vehicle import close_shock_loop
 
 RTOL_EXACT = 1e-9  # exact discretizations: round-off only
 RTOL_LOOP_R8 = 3e-3  # quadratic hold of dF between internal samples at 8x oversampling
+RTOL_FUSED_METRICS = 1e-12  # metrics from averaged outputs and the solved velocities: round-off
 C20 = to_si(20.0, "damping", "imperial")
 C30 = to_si(30.0, "damping", "imperial")
 
@@ -253,8 +254,10 @@ def test_batch_equals_one_setup_at_a_time_on_many_curves(paper_model, rng):
 
 def test_batch_metrics_equal_metrics_of_the_batch(paper_model, rng):
     """simulate_batch_metrics (each setup's metrics computed by its thread right after its
-    loop) gives compute_metrics' numbers on simulate_batch's channels to the last bit: the
-    spec's band, split bands, normalized tire forces, a subset of outputs, one setup."""
+    loop, from the loop's own shock velocities and one averaged output per ride-height
+    pair) gives compute_metrics' numbers on simulate_batch's channels to rounding: the
+    spec's band, split bands, normalized tire forces, a subset of outputs, one setup (the
+    two steps: the same bits)."""
     from ident.closedloop import simulate_batch_metrics
     from ident.metrics import compute_metrics
 
@@ -276,7 +279,10 @@ def test_batch_metrics_equal_metrics_of_the_batch(paper_model, rng):
         ref = compute_metrics(batch.channels, fs=batch.fs_hz, **kw)
         assert list(got.metrics.values) == list(ref.values)
         for name, x in ref.values.items():
-            np.testing.assert_array_equal(got.metrics.values[name], x)
+            if len(setups[sel]) == 1:
+                np.testing.assert_array_equal(got.metrics.values[name], x)
+            else:
+                np.testing.assert_allclose(got.metrics.values[name], x, rtol=RTOL_FUSED_METRICS)
         np.testing.assert_array_equal(got.newton_iterations, batch.newton_iterations)
         assert got.metrics.split_hz == ref.split_hz and got.metrics.band_hz == ref.band_hz
 
