@@ -43,7 +43,7 @@ def engine_version():
     return head + (" + uncommitted changes in ident/ or planner/" if dirty else "")
 
 
-def jit_source(kernel="_loop_metrics_batch"):
+def jit_source(kernel="_loop_metrics_worker"):
     """How a compiled shock loop of :mod:`ident.closedloop` was obtained: "compile", "cache
     load" or "unknown". Default: the predictions' (the setup-parallel loop with its
     metrics); the virtual rig runs ``"_loop_serial"``."""

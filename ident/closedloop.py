@@ -32,6 +32,10 @@ step; rig inputs are refined onto the internal grid by band-limited
 
 The rig-input part of the response does not depend on the shocks: it is
 computed once per drive (:func:`rig_response`) and shared by all setups.
+
+:func:`simulate_batch` returns every setup's channels; :func:`simulate_batch_metrics`
+returns only the spec's metrics, each setup's computed by the thread that simulated it
+right after its loop (the planner's predictions).
 """
 
 from __future__ import annotations
@@ -51,6 +55,7 @@ __all__ = [
     "RigResponse",
     "Response",
     "BatchResponse",
+    "BatchMetrics",
     "modal_form",
     "foh_coefficients",
     "hold_coefficients",
@@ -59,6 +64,7 @@ __all__ = [
     "rig_response",
     "simulate",
     "simulate_batch",
+    "simulate_batch_metrics",
 ]
 
 log = logging.getLogger(__name__)
@@ -1125,45 +1131,43 @@ def _loop_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v
     return
 
 
-@_nb.njit(cache=True, error_model="numpy", parallel=True)
-def _loop_metrics_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig,
-                        cbar, kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, y_rig, n_out, ia,
-                        ib, sos, zi, padlen, n_workers, out, iters):
-    """:func:`_loop_batch` with each setup's metrics computed right after its loop, by the
-    same worker (:func:`ident.metrics._setup_metric_rms`, per band: ``sos`` (n_bands,
-    n_sections, 6), ``zi`` (n_bands, n_sections, 2)) into ``out`` (n_setups, n_bands,
-    n_metrics).
+@_nb.njit(cache=True, error_model="numpy", nogil=True)
+def _loop_metrics_worker(w, n_workers, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi,
+                         Deff, v_rig, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy,
+                         y_rig, n_out, ia, ib, sos, zi, padlen, out, iters):
+    """Worker `w` of `n_workers` of :func:`simulate_batch_metrics`: the setups ``w, w +
+    n_workers, ...`` (interleaved, so that each worker gets a mix of cheap and costly
+    setups), each simulated by :func:`_loop_one` and its metrics computed right after
+    (:func:`ident.metrics._setup_metric_rms`, per band: ``sos`` (n_bands, n_sections, 6),
+    ``zi`` (n_bands, n_sections, 2)) into ``out`` (n_setups, n_bands, n_metrics).
 
     The outputs ``Cy`` (2 n + 4, p) are the metrics' signals (a ride height pair as one
     row of averaged coefficients); the shock velocities come from the loop's own solve
-    (rows p .. p + 3 of a setup's buffer), not from the product.
-
-    `n_workers` workers (the thread count) take every `n_workers`-th setup: interleaved,
-    so that each gets a mix of cheap and costly setups. Each keeps one setup's outputs and
-    the metric's scratch (about 3 MB for 12,000 samples): nothing of size (setups x
-    samples) is written.
+    (rows p .. p + 3 of the setup's buffer), not from the product. The worker keeps one
+    setup's outputs and the metric's scratch (about 2 MB for 12,000 samples): nothing of
+    size (setups x samples) is written. It releases the GIL: the workers are threads.
     """
     p = Cy.shape[1]
     L = _METRIC_LANES
     ns = sos.shape[1]
     S = kv.shape[0]
-    for w in _nb.prange(n_workers):
-        # sample-major: an output sample's channels side by side, so that the loop writes
-        # and the metrics' lanes read one contiguous row per sample (y is its transpose)
-        y = np.empty((n_out, p + 4)).T  # the outputs, then the 4 shock velocities
-        F = np.empty((n_out, 4))
-        buf = np.empty((n_out + 2 * padlen, L))
-        z0 = np.empty((ns, L))
-        z1 = np.empty((ns, L))
-        stack = np.empty((_METRIC_PW_LEVELS, 10, L))
-        sums = np.empty(L)
-        for s in range(w, S, n_workers):
-            iters[s] = _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
-                                 v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s],
-                                 b0[s], b1[s], bm[s], r, Cy, y_rig, y, F, p)
-            for b in range(sos.shape[0]):
-                _setup_metric_rms(y, ia, ib, sos[b], zi[b], padlen, out[s, b], buf, z0, z1,
-                                  stack, sums)
+    # the outputs, then the 4 shock velocities. Channel-major, as simulate_batch's: the
+    # loop kernel is then the one-setup loop's compiled code (sample-major rows were about
+    # 4 % faster but compile the loop once more, 4 s on a fresh machine's first demo)
+    y = np.empty((p + 4, n_out))
+    F = np.empty((n_out, 4))
+    buf = np.empty((n_out + 2 * padlen, L))
+    z0 = np.empty((ns, L))
+    z1 = np.empty((ns, L))
+    stack = np.empty((_METRIC_PW_LEVELS, 10, L))
+    sums = np.empty(L)
+    for s in range(w, S, n_workers):
+        iters[s] = _loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
+                             v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s], b0[s],
+                             b1[s], bm[s], r, Cy, y_rig, y, F, p)
+        for b in range(sos.shape[0]):
+            _setup_metric_rms(y, ia, ib, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack,
+                              sums)
     return
 
 
@@ -1333,8 +1337,12 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     y = np.empty((S, len(loop.names), N))
     F = np.empty((S, N, 4))  # (setup, sample, corner): written per sample in the kernel
     iters = np.zeros(S, dtype=np.int64)
-    kernel = _loop_serial if S == 1 else _loop_batch
-    _run_parallel(kernel, *loop.args, loop.y_rig, y, F, iters)
+    if S == 1:
+        # not through _run_parallel: setting the chunk size starts numba's thread pool,
+        # and a process forked after that (the demo's warm-up workers) cannot use it
+        _loop_serial(*loop.args, loop.y_rig, y, F, iters)
+    else:
+        _run_parallel(_loop_batch, *loop.args, loop.y_rig, y, F, iters)
     _check_converged(plant, iters)
     channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
     for c, name in enumerate(SHOCK_FORCES):
@@ -1378,7 +1386,8 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     as one output of averaged coefficients, the shock velocities as the loop solved them
     (the velocity outputs are the same quantity), so 10 of the 16 outputs of a full set
     go through the output product; hence rounding differences (about 1e-15 relative),
-    not the last bit.
+    not the last bit. A setup's numbers do not depend on the batch it is in (the same
+    bits alone or among others, so chunked and distributed runs agree).
 
     Parameters
     ----------
@@ -1403,9 +1412,9 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
                         static_loads_n=static_loads_n, split_hz=split_hz)
     filters = [plan.filter(b) for b in plan.bands.values()]
     S, N = len(loop.models), loop.rig.n_samples
-    if S == 1 or not plan.names or N <= filters[0][1]:
-        # one setup (no parallel batch to fuse), or a record too short for the filter:
-        # the two steps (the second raises the filter's error, naming the channel)
+    if not plan.names or N <= filters[0][1]:
+        # no metric, or a record too short for the filter: the two steps (the second
+        # raises the filter's error, naming the channel)
         batch = simulate_batch(plant, drive, setups, oversample=oversample, outputs=outputs,
                                rig=loop.rig)
         met = compute_metrics(batch.channels, fs=batch.fs_hz, band_hz=band_hz, order=order,
@@ -1436,8 +1445,21 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     zi = np.ascontiguousarray(np.stack([f[2] for f in filters]), dtype=float)
     out = np.empty((S, len(filters), len(plan.names)))
     iters = np.zeros(S, dtype=np.int64)
-    _loop_metrics_batch(*loop.args[:-1], c_red, y_rig_red, N, ia, ib, sos, zi,
-                        int(filters[0][1]), min(S, _nb.get_num_threads()), out, iters)
+    n_workers = min(S, int(_nb.config.NUMBA_NUM_THREADS))
+    args = (*loop.args[:-1], c_red, y_rig_red, N, ia, ib, sos, zi, int(filters[0][1]), out,
+            iters)
+    if n_workers == 1:
+        _loop_metrics_worker(0, 1, *args)
+    else:
+        # threads, not a parallel kernel: the worker releases the GIL, compiles in a third of
+        # the time a prange kernel of it takes, and starts no OpenMP pool (a process forked
+        # after one cannot use it)
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(n_workers) as pool:
+            for job in [pool.submit(_loop_metrics_worker, w, n_workers, *args)
+                        for w in range(n_workers)]:
+                job.result()
     _check_converged(plant, iters)
     rms = {name + suffix: out[:, b, i] for b, suffix in enumerate(plan.bands)
            for i, name in enumerate(plan.names)}

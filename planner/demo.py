@@ -75,8 +75,8 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     with atomic_dir(out, overwrite=overwrite) as work:
         # on a fresh machine numba compiles every kernel on first use. The virtual rig's two
         # compile side by side (the rig response's in a worker, the one-setup loop's here);
-        # then a worker compiles the screening, setup-parallel loop and metric-filter kernels
-        # into numba's cache while the virtual rig runs here. Otherwise these are cache loads.
+        # then a worker compiles the predictions' kernel and the screening kernels into
+        # numba's cache while the virtual rig runs here. Otherwise these are cache loads.
         rig_kernel = _start_job(_warm_rig_response)
         _warm_one_setup_loop()
         # a warm-up that fails only costs time (e.g. a forked worker cannot use numba's
@@ -166,34 +166,57 @@ def _frf_plots_job(model_path, vehicle, folder, units):
 
 
 def _warm_kernels():
-    """Compile (into numba's cache) the kernels of screening, of the metric filter and the
-    fused batch metric, and the setup-parallel closed loop with its metrics (the
-    predictions' kernel) on a small problem; the demo's process then loads them. Runs in a
-    worker process, while the demo's virtual rig compiles and runs the one-setup loop."""
-    import numpy as np
+    """The predictions' kernel, then the screening kernels (:func:`_warm_predictions`,
+    :func:`_warm_screening`), one after the other in one worker: a second worker would
+    compete with the identification for the two cores."""
+    _warm_predictions()
+    _warm_screening()
+    return True
 
-    from ident.closedloop import simulate_batch_metrics
-    from ident.drive import make_track_drive
-    from ident.metrics import bandpass, compute_metrics
-    from ident.shocks import read_shock_library
-    from ident.vehicle import build_full_car, example_vehicle
+
+def _warm_screening():
+    """Compile (into numba's cache) the screening kernels on a small problem; the demo's
+    process then loads them. Runs in a worker process."""
     from planner.screen import screen_setups
     from planner.setups import enumerate_setups
 
-    vehicle = example_vehicle()
-    drive = make_track_drive(duration_s=20.0, fs_hz=100.0, seed=1,
-                             wheelbase_m=vehicle.a_m + vehicle.b_m,
-                             track_width_m=vehicle.track_front_m)
-    library = read_shock_library(DEMO_LIBRARY_PATH)
-    plant = build_full_car(vehicle).loop_plant()
-    setups = enumerate_setups(library)[:2]
-    screen_setups(plant, drive, setups, library)
-    simulate_batch_metrics(plant, drive, [[library[i] for i in s.ids()] for s in setups],
-                           oversample=1)
-    bandpass(np.zeros((2, 2, 20_000)), fs=100.0)
-    y = np.zeros((2, 2, 20_000))  # a batch's channels are views of one (setup, output, sample)
-    compute_metrics({"ride_height_LF": y[:, 0], "ride_height_RF": y[:, 1]}, fs=100.0)
+    plant, drive = _warm_plant_and_drive()
+    library = _demo_library()
+    screen_setups(plant, drive, enumerate_setups(library)[:2], library)
     return True
+
+
+def _warm_predictions():
+    """Compile (into numba's cache) the predictions' kernel (the setup-parallel loop with
+    each setup's metrics) on a small problem with a zero rig response; the demo's process
+    then loads it. Runs in a worker process forked after this one compiled the one-setup
+    loop (inherited, not compiled again)."""
+    from ident.closedloop import simulate_batch_metrics
+    from planner.setups import enumerate_setups
+
+    plant, drive = _warm_plant_and_drive()
+    library = _demo_library()
+    setups = [[library[i] for i in s.ids()] for s in enumerate_setups(library)[:2]]
+    simulate_batch_metrics(plant, drive, setups, oversample=1, rig=_zero_rig(plant, drive))
+    return True
+
+
+def _demo_library():
+    from ident.shocks import read_shock_library
+
+    return read_shock_library(DEMO_LIBRARY_PATH)
+
+
+def _zero_rig(plant, drive):
+    """A zero rig response of the right shape (the warm-ups need only the types)."""
+    import numpy as np
+
+    from ident.closedloop import RigResponse
+
+    n = drive.n_samples
+    return RigResponse(v_fine=np.zeros((n, 4)), y=np.zeros((len(plant.output_names), n)),
+                       u_fine=np.zeros((n, 7)), fs_hz=drive.fs_hz, oversample=1, n_samples=n,
+                       plant_name=plant.name, output_names=tuple(plant.output_names))
 
 
 def _warm_plant_and_drive():
@@ -220,18 +243,11 @@ def _warm_rig_response():
 def _warm_one_setup_loop():
     """Compile (or load) the one-setup loop kernel on a zero rig response of the right shape,
     so that the rig-response kernel is left to the worker compiling it meanwhile."""
-    import numpy as np
-
-    from ident.closedloop import RigResponse, simulate
-    from ident.shocks import read_shock_library
+    from ident.closedloop import simulate
 
     plant, drive = _warm_plant_and_drive()
-    n = drive.n_samples
-    rig = RigResponse(v_fine=np.zeros((n, 4)), y=np.zeros((len(plant.output_names), n)),
-                      u_fine=np.zeros((n, 7)), fs_hz=drive.fs_hz, oversample=1, n_samples=n,
-                      plant_name=plant.name, output_names=tuple(plant.output_names))
-    library = read_shock_library(DEMO_LIBRARY_PATH)
-    simulate(plant, drive, [library["B20"]] * 4, oversample=1, rig=rig)
+    library = _demo_library()
+    simulate(plant, drive, [library["B20"]] * 4, oversample=1, rig=_zero_rig(plant, drive))
 
 
 def _start_job(func, *args):
