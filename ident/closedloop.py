@@ -1134,7 +1134,7 @@ def _loop_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v
 @_nb.njit(cache=True, error_model="numpy", nogil=True)
 def _loop_metrics_worker(w, n_workers, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi,
                          Deff, v_rig, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy,
-                         y_rig, n_out, ia, ib, sos, zi, padlen, out, iters):
+                         y_rig, n_out, ia, sos, zi, padlen, out, iters):
     """Worker `w` of `n_workers` of :func:`simulate_batch_metrics`: the setups ``w, w +
     n_workers, ...`` (interleaved, so that each worker gets a mix of cheap and costly
     setups), each simulated by :func:`_loop_one` and its metrics computed right after
@@ -1166,8 +1166,7 @@ def _loop_metrics_worker(w, n_workers, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br,
                              v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s], b0[s],
                              b1[s], bm[s], r, Cy, y_rig, y, F, p)
         for b in range(sos.shape[0]):
-            _setup_metric_rms(y, ia, ib, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack,
-                              sums)
+            _setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack, sums)
     return
 
 
@@ -1437,7 +1436,6 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
         lanes.append(len(cols) - 1)
     p_red = len(cols)
     ia = np.array([i if i >= 0 else p_red + (-1 - i) for i in lanes], dtype=np.int64)
-    ib = np.full(ia.size, -1, dtype=np.int64)
     c_red = np.ascontiguousarray(np.stack(cols, axis=1) if cols else np.zeros((Cout.shape[0], 0)))
     y_rig_red = np.ascontiguousarray(np.stack(rig_cols, axis=1) if rig_cols
                                      else np.zeros((N, 0)))
@@ -1446,7 +1444,7 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     out = np.empty((S, len(filters), len(plan.names)))
     iters = np.zeros(S, dtype=np.int64)
     n_workers = min(S, int(_nb.config.NUMBA_NUM_THREADS))
-    args = (*loop.args[:-1], c_red, y_rig_red, N, ia, ib, sos, zi, int(filters[0][1]), out,
+    args = (*loop.args[:-1], c_red, y_rig_red, N, ia, sos, zi, int(filters[0][1]), out,
             iters)
     if n_workers == 1:
         _loop_metrics_worker(0, 1, *args)

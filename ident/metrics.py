@@ -451,6 +451,16 @@ def _pairwise_sum_col(buf, start, n, j):
     return _pairwise_sum_col(buf, start, n2, j) + _pairwise_sum_col(buf, start + n2, n - n2, j)
 
 
+def _add_row(acc, row, square):
+    """``acc += row`` (``row * row`` when `square`), lane by lane: one step of numpy's
+    pairwise sum for every lane (inlined into :func:`_pairwise_leaf_lanes`)."""
+    for j in range(acc.size):
+        v = row[j]
+        if square:
+            v = v * v
+        acc[j] += v
+
+
 def _pairwise_leaf_lanes(buf, start, n, square, r, out):
     """A leaf of :func:`_pairwise_sum_lanes` (``n <= 128`` samples): numpy's 8 partial sums
     per lane in the rows of `r` (8, n_lanes), then their sum and the remainder into `out`."""
@@ -459,12 +469,7 @@ def _pairwise_leaf_lanes(buf, start, n, square, r, out):
         for j in range(L):
             out[j] = 0.0
         for i in range(n):
-            row = buf[start + i]
-            for j in range(L):
-                v = row[j]
-                if square:
-                    v = v * v
-                out[j] += v
+            _add_row(out, buf[start + i], square)
         return
     for q in range(8):
         row = buf[start + q]
@@ -477,13 +482,7 @@ def _pairwise_leaf_lanes(buf, start, n, square, r, out):
     i = 8
     while i < n - (n % 8):
         for q in range(8):
-            row = buf[start + i + q]
-            rq = r[q]
-            for j in range(L):
-                v = row[j]
-                if square:
-                    v = v * v
-                rq[j] += v
+            _add_row(r[q], buf[start + i + q], square)
         i += 8
     r0 = r[0]
     r1 = r[1]
@@ -496,12 +495,7 @@ def _pairwise_leaf_lanes(buf, start, n, square, r, out):
     for j in range(L):
         out[j] = ((r0[j] + r1[j]) + (r2[j] + r3[j])) + ((r4[j] + r5[j]) + (r6[j] + r7[j]))
     while i < n:
-        row = buf[start + i]
-        for j in range(L):
-            v = row[j]
-            if square:
-                v = v * v
-            out[j] += v
+        _add_row(out, buf[start + i], square)
         i += 1
 
 
@@ -634,16 +628,16 @@ def _metric_block(buf, n, padlen, sos, zi, z0, z1, stack, sums):
         sums[j] = np.sqrt(sums[j] / n)
 
 
-def _setup_metric_rms(y, ia, ib, sos, zi, padlen, out, buf, z0, z1, stack, sums):
+def _setup_metric_rms(y, ia, sos, zi, padlen, out, buf, z0, z1, stack, sums):
     """The metrics of one simulated setup, in blocks of :data:`_LANES` metrics: metric `i`
-    is the RMS metric of channel ``y[ia[i]]``, or of ``(y[ia[i]] + y[ib[i]]) / 2`` when
-    ``ib[i] >= 0`` (a ride height of two corners), into ``out[i]``.
+    is the RMS metric of channel ``y[ia[i]]`` (a ride height of two corners comes as one
+    channel of averaged output coefficients), into ``out[i]``.
 
     Parameters
     ----------
     y : ndarray of float, shape (n_channels, n)
         The setup's output channels (any row stride).
-    ia, ib : ndarray of int64, shape (n_metrics,)
+    ia : ndarray of int64, shape (n_metrics,)
     sos, zi, padlen
         As :func:`_sosfiltfilt_rows_py`.
     out : ndarray of float, shape (n_metrics,)
@@ -672,12 +666,7 @@ def _setup_metric_rms(y, ia, ib, sos, zi, padlen, out, buf, z0, z1, stack, sums)
         for k in range(n):
             row = buf[padlen + k]
             for j in range(n_rows):
-                a = ia[i0 + j]
-                b = ib[i0 + j]
-                if b >= 0:
-                    row[j] = (y[a, k] + y[b, k]) / 2
-                else:
-                    row[j] = y[a, k]
+                row[j] = y[ia[i0 + j], k]
             for j in range(n_rows, _LANES):
                 row[j] = 0.0
         _metric_block(buf, n, padlen, sos, zi, z0, z1, stack, sums)
@@ -694,6 +683,7 @@ try:  # numba is a dependency; keep the module importable without it for tooling
     _filtfilt_lanes = _nb.njit(cache=True)(_filtfilt_lanes)
     _sosfiltfilt_rows = _nb.njit(cache=True, parallel=True)(_sosfiltfilt_rows_py)
     _pairwise_sum_col = _nb.njit(cache=True)(_pairwise_sum_col)
+    _add_row = _nb.njit(cache=True, inline="always")(_add_row)
     _pairwise_leaf_lanes = _nb.njit(cache=True)(_pairwise_leaf_lanes)
     _pairwise_sum_lanes = _nb.njit(cache=True)(_pairwise_sum_lanes)
     _metric_block = _nb.njit(cache=True)(_metric_block)
