@@ -91,28 +91,36 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             model = identify_session(session)
+        log.info("demo: identified the session")
         model.save(work / "model.npz")
-        # the FRF plots need only the saved model: drawn by a worker process while this one
-        # ranks and optimizes (the optimizer's loop runs on one core)
         _settle_job(warm)
-        plots = _start_job(_frf_plots_job, work / "model.npz", vehicle, work / "frf_plots",
-                           units)
+        log.info("demo: saved the model")
+        drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
+                                 wheelbase_m=vehicle.a_m + vehicle.b_m,
+                                 track_width_m=vehicle.track_front_m, name="demo track")
+        library = read_shock_library(DEMO_LIBRARY_PATH)
+        baseline = Setup("baseline", {c: "B20" for c in ("LF", "RF", "LR", "RR")})
+        # the optimizer's C compile (once per machine) needs only the model: a worker does it
+        # while this process ranks; the FRF plots (one core) are drawn by a worker while
+        # this process optimizes (one core)
+        steps = _start_job(_compile_optimizer_job, model, drive, library, baseline)
+        plots = None
         try:
             model.summary().to_csv(work / "model_summary.csv", index=False)
-            drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
-                                     wheelbase_m=vehicle.a_m + vehicle.b_m,
-                                     track_width_m=vehicle.track_front_m, name="demo track")
             write_drive(drive, work / "track_drive.csv", units=units)
-            library = read_shock_library(DEMO_LIBRARY_PATH)
-            baseline = Setup("baseline", {c: "B20" for c in ("LF", "RF", "LR", "RR")})
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
+                log.info("demo: ranking the crate's setups")
                 ranking = rank_setups(model, drive, library, baseline=baseline, top=20,
                                       progress=progress)
             files = write_ranking(ranking.table, work / "ranking", units=units,
                                   objective=ranking.objective, baseline=ranking.baseline)
             write_predictions_csv(ranking.screening, work / "ranking" / "screening.csv",
                                   units=units)
+            plots = _start_job(_frf_plots_job, work / "model.npz", vehicle,
+                               work / "frf_plots", units)
+            _settle_job(steps)  # a failed compile only costs time: the optimizer compiles
+            log.info("demo: optimizing the curves")
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 optimum = optimize_curves(model, drive, library, baseline=baseline,
@@ -120,6 +128,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             write_optimum(optimum, library, work / "optimize", units=units)
             modes = modal_summary(vehicle).table()
         except BaseException:
+            _settle_job(steps)
             _settle_job(plots)  # nothing may write into the folder once it is rolled back
             raise
         _finish_job(plots)
@@ -163,6 +172,16 @@ def _frf_plots_job(model_path, vehicle, folder, units):
 
     write_frf_plots(model, folder, outputs=_PLOT_OUTPUTS, units=units, truth=truth)
     return str(folder)
+
+
+def _compile_optimizer_job(model, drive, library, baseline):
+    """Compile the optimizer's step functions (:func:`planner.optimize.compile_curves`) into
+    the machine's cache, with the arguments the demo optimizes with. Runs in a worker."""
+    from planner.optimize import compile_curves
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return compile_curves(model, drive, library, baseline=baseline)
 
 
 def _warm_kernels():

@@ -18,7 +18,7 @@ outer knots. Between knots the curve is linear; the lag of each group is fixed
 is one damping rate (``F_j = c v_j``): the known-answer case.
 
 The closed loop is that of :mod:`ident.closedloop`, written in casadi as a
-discrete recursion (``mapaccum``, single shooting) over the drive's samples:
+discrete recursion (a fold, single shooting) over the drive's samples:
 
 - the rig part of the model's :class:`~ident.closedloop.LoopPlant` is
   simulated once per drive (:func:`ident.closedloop.rig_response`);
@@ -36,9 +36,12 @@ discrete recursion (``mapaccum``, single shooting) over the drive's samples:
   of ``sosfiltfilt``'s RMS on a 120 s track drive.
 
 Gradients come by automatic differentiation (casadi's reverse mode through the
-recursion); the recursion is compiled to C when a C compiler is found
-(casadi's just-in-time ``shell`` compiler: 8x faster per evaluation for ~10 s
-of compilation). IPOPT solves the problem with a limited-memory Hessian;
+recursion). A sample's step is an MX function calling two SX functions, the
+loop's sub-step (``oversample`` times) and the metrics' filters and sums
+(once); the step and its adjoint are compiled to C when a C compiler is found
+(5-7 s of compilation, once per machine and problem: :func:`jit_cache_dir`),
+and the recursion over the samples is a tower of folds
+(:func:`_fold_chain`) that casadi's virtual machine runs, calling them. IPOPT solves the problem with a limited-memory Hessian;
 metrics and their Jacobian are computed once per iterate and shared by the
 objective and the constraints. The start is the best linear damping per group
 by frequency-domain screening (:mod:`planner.screen`), projected onto the
@@ -111,6 +114,7 @@ __all__ = [
     "read_curve_constraints",
     "check_constraints",
     "optimize_curves",
+    "compile_curves",
     "curve_distance",
     "curve_table",
     "curves_figure",
@@ -646,14 +650,14 @@ def _pwl_sx(v, p, vk):
 class _LoopModel:
     """The closed loop of one plant and drive as a casadi recursion (module notes)."""
 
-    def __init__(self, plant, drive, space, metric_rows, oversample, jit):
+    def __init__(self, plant, drive, space, metric_rows, oversample, jit, *, inputs=True):
+        """`inputs` False: build (and compile) the step functions only, for the drive's
+        sample rate; the rig response and the recursion's inputs are left out."""
         self.space = space
         r = int(oversample)
         names, L = metric_rows
         outs = [plant.output_names[o] for o in np.flatnonzero(np.any(L != 0, axis=0))]
         Lm = L[:, [plant.output_names.index(o) for o in outs]]
-        rig = rig_response(plant, drive, oversample=r, outputs=outs)
-        N = rig.n_samples
         ms = plant.shock
         vi = plant.velocity_idx
         oi = [plant.output_names.index(o) for o in outs]
@@ -671,22 +675,20 @@ class _LoopModel:
         sos = signal.butter(4, (1.0, 20.0), "bandpass", fs=drive.fs_hz, output="sos")
         sos = np.vstack([sos, sos])  # |B|^4: the power response of filtfilt
         ns = sos.shape[0]
-        step_resp = signal.sosfilt(sos, np.ones(N))
         G, npar = len(space.groups), space.n_params
         vk = space.v_knots_m_s
         grp = [space.group_of(c) for c in CORNERS]
 
-        # state: modes (re, im), dF[k-1], dF[k-2], F[k-1], f[k-1], f[k-2], filter states,
-        # sums (z^2, z s, y) per metric, then the curve parameters (carried, constant)
-        nx = 2 * n + 20 + 2 * ns * nm + 3 * nm
-        X = ca.SX.sym("x", nx)
+        # state: modes (re, im), dF[k-1], dF[k-2], F[k-1], f[k-1], f[k-2] (the loop part),
+        # filter states, sums (z^2, z s, y) per metric, then the curve parameters (carried,
+        # constant). A step is an MX function calling two SX functions: the loop's sub-step
+        # (r times) and the metrics' outputs, filters and sums (once)
+        n_loop = 2 * n + 20
+        nx = n_loop + 2 * ns * nm + 3 * nm
+        S = ca.SX.sym("s", n_loop)
         Pc = ca.SX.sym("p", G * npar)
-        U = ca.SX.sym("u", 4 * r + nm + 1)
-        xr, xi = X[:n], X[n:2 * n]
-        o = 2 * n
-        dF1, dF2, F1, f1, f2 = (X[o + 4 * k:o + 4 * k + 4] for k in range(5))
-        zf = X[o + 20:o + 20 + 2 * ns * nm]
-        sums = X[o + 20 + 2 * ns * nm:]
+        xr, xi = S[:n], S[n:2 * n]
+        dF1, dF2, F1, f1, f2 = (S[2 * n + 4 * k:2 * n + 4 * k + 4] for k in range(5))
         Br, Bi = ca.DM(B.real), ca.DM(B.imag)
         Cvr, Cvi = ca.DM(Cv.real), ca.DM(Cv.imag)
         De = ca.DM(Deff)
@@ -695,58 +697,74 @@ class _LoopModel:
         def cmul(ar, ai, br, bi):
             return ar * br - ai * bi, ar * bi + ai * br
 
-        def substep(vr, xr, xi, dF1, dF2, F1, f1, f2):
-            t1r, t1i = cmul(g0.real, g0.imag, Br @ dF1, Bi @ dF1)
-            t2r, t2i = cmul(gm.real, gm.imag, Br @ dF2, Bi @ dF2)
-            ar, ai = cmul(phi.real, phi.imag, xr, xi)
-            xpr, xpi = ar + t1r + t2r, ai + t1i + t2i
-            vfree = vr + Cvr @ xpr - Cvi @ xpi
-            c0 = alpha * F1 + b1 * f1 + bm * f2
-            v = vfree
-            for _ in range(NEWTON_ITERATIONS):
-                fs = [_pwl_sx(v[c], pg[grp[c]], vk) for c in range(4)]
-                fv = ca.vertcat(*[a for a, _ in fs])
-                sl = ca.vertcat(*[s for _, s in fs])
-                res = v - vfree - De @ (c0 + b0 * fv - cbar * v)
-                J = ca.DM.eye(4) - De @ ca.diag(b0 * sl - cbar)
-                v = v - ca.solve(J, res)
-            fv = ca.vertcat(*[_pwl_sx(v[c], pg[grp[c]], vk)[0] for c in range(4)])
-            F = c0 + b0 * fv
-            dF = F - cbar * v
-            t0r, t0i = cmul(g1.real, g1.imag, Br @ dF, Bi @ dF)
-            return xpr + t0r, xpi + t0i, dF, dF1, F, fv, f1
+        # the loop's sub-step: (loop state, the rig part's shock velocities, curves) -> state
+        vr = ca.SX.sym("v", 4)
+        t1r, t1i = cmul(g0.real, g0.imag, Br @ dF1, Bi @ dF1)
+        t2r, t2i = cmul(gm.real, gm.imag, Br @ dF2, Bi @ dF2)
+        ar, ai = cmul(phi.real, phi.imag, xr, xi)
+        xpr, xpi = ar + t1r + t2r, ai + t1i + t2i
+        vfree = vr + Cvr @ xpr - Cvi @ xpi
+        c0 = alpha * F1 + b1 * f1 + bm * f2
+        v = vfree
+        for _ in range(NEWTON_ITERATIONS):
+            fs = [_pwl_sx(v[c], pg[grp[c]], vk) for c in range(4)]
+            fv = ca.vertcat(*[a for a, _ in fs])
+            sl = ca.vertcat(*[s for _, s in fs])
+            res = v - vfree - De @ (c0 + b0 * fv - cbar * v)
+            J = ca.DM.eye(4) - De @ ca.diag(b0 * sl - cbar)
+            v = v - ca.solve(J, res)
+        fv = ca.vertcat(*[_pwl_sx(v[c], pg[grp[c]], vk)[0] for c in range(4)])
+        F = c0 + b0 * fv
+        dF = F - cbar * v
+        t0r, t0i = cmul(g1.real, g1.imag, Br @ dF, Bi @ dF)
+        substep = ca.Function("substep", [S, vr, Pc],
+                              [ca.vertcat(xpr + t0r, xpi + t0i, dF, dF1, F, fv, f1)])
+
+        # the metrics' part: (loop state, filter states, sums, the rig part's metric rows and
+        # the filter's step response) -> (filter states, sums)
+        zf, sums = ca.SX.sym("z", 2 * ns * nm), ca.SX.sym("sums", 3 * nm)
+        uy = ca.SX.sym("uy", nm + 1)
+        y = uy[:nm] + ca.DM(Cm.real) @ xr - ca.DM(Cm.imag) @ xi + ca.DM(Dm) @ dF1
+        sig, newz = y, []
+        for k in range(ns):
+            b_, a_ = sos[k, :3], sos[k, 3:]
+            z1 = zf[2 * k * nm:(2 * k + 1) * nm]
+            z2 = zf[(2 * k + 1) * nm:(2 * k + 2) * nm]
+            out = b_[0] * sig + z1
+            newz += [b_[1] * sig - a_[1] * out + z2, b_[2] * sig - a_[2] * out]
+            sig = out
+        sk = uy[nm]
+        new_sums = ca.vertcat(sums[:nm] + sig**2, sums[nm:2 * nm] + sig * sk, sums[2 * nm:] + y)
+        outputs = ca.Function("outputs", [S, zf, sums, uy], [ca.vertcat(*newz, new_sums)])
+
+        XP, U = ca.MX.sym("x", nx + G * npar), ca.MX.sym("u", 4 * r + nm + 1)
+        P = XP[nx:]
 
         def body(nsub):
-            s = (xr, xi, dF1, dF2, F1, f1, f2)
+            s = XP[:n_loop]
             for k in range(nsub):
-                s = substep(U[4 * k:4 * k + 4], *s)
-            yr, yi, dF = s[0], s[1], s[2]
-            y = U[4 * r:4 * r + nm] + ca.DM(Cm.real) @ yr - ca.DM(Cm.imag) @ yi + ca.DM(Dm) @ dF
-            sig, newz = y, []
-            for k in range(ns):
-                b_, a_ = sos[k, :3], sos[k, 3:]
-                z1 = zf[2 * k * nm:(2 * k + 1) * nm]
-                z2 = zf[(2 * k + 1) * nm:(2 * k + 2) * nm]
-                out = b_[0] * sig + z1
-                newz += [b_[1] * sig - a_[1] * out + z2, b_[2] * sig - a_[2] * out]
-                sig = out
-            sk = U[4 * r + nm]
-            new_sums = ca.vertcat(sums[:nm] + sig**2, sums[nm:2 * nm] + sig * sk,
-                                  sums[2 * nm:] + y)
-            return ca.Function(f"step{nsub}", [ca.vertcat(X, Pc), U],
-                               [ca.vertcat(*s, *newz, new_sums, Pc)])
+                s = substep(s, U[4 * k:4 * k + 4], P)
+            rest = outputs(s, XP[n_loop:n_loop + 2 * ns * nm], XP[n_loop + 2 * ns * nm:nx],
+                           U[4 * r:])
+            return ca.Function(f"step{nsub}", [XP, U], [ca.vertcat(s, rest, P)])
 
         key = _step_key(ms, h, r, lag, vk, grp, Cm, Dm, Deff, cbar, bool(jit))
         if key not in _STEP_CACHE:
             first, step = body(1), body(r)
+            # instructions of the symbolic step (not of a library)
+            n_instructions = r * substep.n_instructions() + outputs.n_instructions()
+            if jit:  # the first step runs once per sweep: it is not worth its compile
+                step = _compiled_steps((step,))[0]
             # casadi keeps derivative functions only while something holds them: hold the
             # adjoints with the steps, so a second solve reuses them
-            fns = (first, step)
-            n_instructions = step.n_instructions()  # of the symbolic step (not of a library)
-            if jit:
-                fns = _compiled_steps(fns)
-            _STEP_CACHE[key] = fns + tuple(f.reverse(1) for f in fns) + (n_instructions,)
+            _STEP_CACHE[key] = (first, step, first.reverse(1), step.reverse(1), n_instructions)
         first, step = _STEP_CACHE[key][:2]
+        self.n_instructions = _STEP_CACHE[key][-1]
+        if not inputs:
+            return
+        rig = rig_response(plant, drive, oversample=r, outputs=outs)
+        N = rig.n_samples
+        step_resp = signal.sosfilt(sos, np.ones(N))
         # inputs per sample: the r fine shock velocities of the rig part ending at the sample
         # (the first sample: its own), the metric rows of the rig part, the step response
         v_fine = rig.v_fine
@@ -759,21 +777,61 @@ class _LoopModel:
         self.N, self.nm, self.names = N, nm, list(names)
         self._first, self._step, self._U = first, step, Uin
         self._nx, self._G, self._npar = nx, G, npar
-        self.n_instructions = _STEP_CACHE[key][-1]
 
     def metrics(self, P):
         """Symbolic metrics (MX, shape (nm,)) of curve parameters `P` (MX)."""
         x0 = ca.vertcat(ca.DM.zeros(self._nx), P)
         x1 = self._first(x0, ca.DM(self._U[:, 0]))
-        acc = self._step.mapaccum("loop", self.N - 1)
-        xs = acc(x1, ca.DM(self._U[:, 1:]))
-        sums = xs[self._nx - 3 * self.nm:self._nx, -1]
+        x_last = _fold_chain(self._step, self.N - 1)(x1, ca.DM(self._U[:, 1:]))
+        sums = x_last[self._nx - 3 * self.nm:self._nx]
         nm, N = self.nm, self.N
         zz, zs, ysum = sums[:nm], sums[nm:2 * nm], sums[2 * nm:]
         mean = ysum / N
         ss = float(np.sum(self._U[-1] ** 2))
         power = (zz - 2 * mean * zs + mean**2 * ss) / N
         return ca.sqrt(ca.fmax(power, 1e-300))
+
+
+#: Steps per level of the optimizer's recursion (:func:`_fold_chain`).
+FOLD_BASE = 32
+
+
+def _fold_chain(step, n_steps, base=FOLD_BASE):
+    """``step`` applied `n_steps` times, feeding its state back: ``(x0, U) -> x_n``.
+
+    ``step`` maps (x, u) -> x; ``U`` holds the inputs column by column, shape
+    (n_u, n_steps). The chain is a tower of functions, level ``i`` folding
+    ``base**i`` steps as `base` calls of level ``i - 1``, and the top calls
+    each level as often as that digit of `n_steps` in base `base`. It builds
+    in milliseconds for any length (casadi's ``mapaccum`` took 0.3-13 s to
+    build for 10^4 steps, depending on the length's remainders), keeps only
+    the final state (the metrics' sums need no trajectory), and its adjoint
+    recomputes each level's states from the level's input (checkpointing),
+    so memory grows with ``base`` times the levels, not with `n_steps`. The
+    arithmetic of every step, and of every adjoint step, is the same as a
+    loop's.
+
+    Returns
+    -------
+    casadi.Function
+    """
+    nx, nu = step.size1_in(0), step.size1_in(1)
+    levels = [step]
+    while base ** len(levels) <= n_steps:
+        inner, k = levels[-1], base ** (len(levels) - 1)
+        x, U = ca.MX.sym("x", nx), ca.MX.sym("U", nu, k * base)
+        y = x
+        for j in range(base):
+            y = inner(y, U[:, j * k:(j + 1) * k])
+        levels.append(ca.Function(f"fold{k * base}", [x, U], [y]))
+    x, U = ca.MX.sym("x", nx), ca.MX.sym("U", nu, n_steps)
+    y, pos = x, 0
+    for i in range(len(levels) - 1, -1, -1):
+        k = base ** i
+        while n_steps - pos >= k:
+            y = levels[i](y, U[:, pos:pos + k])
+            pos += k
+    return ca.Function(f"fold{n_steps}", [x, U], [y])
 
 
 #: Compiled step functions by model, step, lags, knots, groups and metric rows: a second
@@ -1439,15 +1497,13 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         If IPOPT does not converge; the best verified iterate is returned and
         ``solver["success"]`` is False.
     """
-    from planner.predict import as_loop_plant
-    from planner.screen import metric_rows
-
     t_start = time.perf_counter()
     objective = _check_objective(objective)
     if aggregate not in ("sum", "worst"):
         raise PlannerError(f"aggregate must be 'sum' or 'worst', got {aggregate!r}")
-    plant = as_loop_plant(model)
-    drives = _drive_list(drives, getattr(model, "fs_hz", None))
+    plant, drives, base, space, rows = _problem(model, drives, library, objective, baseline,
+                                                symmetry, knots_m_s, linear, lag_s)
+    need = rows[0]
     if drive_weights is None:
         weights = np.full(len(drives), 1.0 / len(drives))
     else:
@@ -1457,15 +1513,6 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
             raise PlannerError(f"drive_weights {list(np.atleast_1d(drive_weights))} must be "
                                f"{len(drives)} numbers >= 0, not all 0")
         weights = weights / weights.sum()
-    base = _resolve_baseline(baseline, library, objective)
-    base_models = base.resolve(library)
-    groups = SYMMETRIES.get(symmetry)
-    if groups is None:
-        raise PlannerError(f"symmetry {symmetry!r} is not one of {list(SYMMETRIES)}")
-    if lag_s is None:
-        lag_s = [float(np.mean([base_models[CORNERS.index(c)].lag_s for c in corners]))
-                 for _, corners in groups]
-    space = curve_space(symmetry=symmetry, knots_m_s=knots_m_s, linear=linear, lag_s=lag_s)
     constraints = default_constraints() if constraints is None else constraints
     if not isinstance(constraints, CurveConstraints):
         raise TypeError(f"constraints must be CurveConstraints (read_curve_constraints), got "
@@ -1476,14 +1523,7 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     A_lin = np.vstack([a for _, a, _ in families]) @ T
     b_lin = np.concatenate([b for _, _, b in families])
 
-    # the metrics the objective needs, and the baseline's (verified) values per drive
-    names_all, L_all = metric_rows(plant)
-    need = [m for m in objective.metrics if m in names_all]
-    missing = [m for m in objective.metrics if m not in names_all]
-    if missing:
-        raise PlannerError(f"the model has no outputs for {missing}; its outputs are "
-                           f"{list(plant.output_names)}")
-    rows = (need, L_all[[names_all.index(m) for m in need]])
+    # the baseline's (verified) values per drive of the metrics the objective needs
     from planner.predict import predict_setups
 
     m_base = [predict_setups(model, d, [base], library, oversample=oversample).table.loc[
@@ -1523,6 +1563,70 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
                                            "robust": bool(robust), "max_iter": max_iter,
                                            "x_start": x0.tolist(), "start_rates": rates.tolist(),
                                            "limit_factors": tight.tolist()})
+
+
+def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, linear, lag_s):
+    """The loop plant, drives, baseline setup, curve space and metric rows (names, rows of
+    the plant's outputs) of an optimization, checked (see :func:`optimize_curves`)."""
+    from planner.predict import as_loop_plant
+    from planner.screen import metric_rows
+
+    plant = as_loop_plant(model)
+    drives = _drive_list(drives, getattr(model, "fs_hz", None))
+    base = _resolve_baseline(baseline, library, objective)
+    base_models = base.resolve(library)
+    groups = SYMMETRIES.get(symmetry)
+    if groups is None:
+        raise PlannerError(f"symmetry {symmetry!r} is not one of {list(SYMMETRIES)}")
+    if lag_s is None:
+        lag_s = [float(np.mean([base_models[CORNERS.index(c)].lag_s for c in corners]))
+                 for _, corners in groups]
+    space = curve_space(symmetry=symmetry, knots_m_s=knots_m_s, linear=linear, lag_s=lag_s)
+    names_all, L_all = metric_rows(plant)
+    need = [m for m in objective.metrics if m in names_all]
+    missing = [m for m in objective.metrics if m not in names_all]
+    if missing:
+        raise PlannerError(f"the model has no outputs for {missing}; its outputs are "
+                           f"{list(plant.output_names)}")
+    return plant, drives, base, space, (need, L_all[[names_all.index(m) for m in need]])
+
+
+def compile_curves(model, drives, library, *, objective=None, baseline=None,
+                   symmetry="left-right", knots_m_s=DEFAULT_KNOTS_M_S, linear=False,
+                   lag_s=None, oversample=2):
+    """Compile the optimizer's step functions of a problem ahead of :func:`optimize_curves`.
+
+    The C compile of the closed loop's step and its adjoint (10-30 s on a
+    fresh machine; nothing once cached) is what a first optimization waits
+    for. Called with the same arguments as :func:`optimize_curves` (these
+    are the ones the compiled code depends on; the drive matters only by its
+    sample rate), e.g. in a worker while other work runs, it leaves the
+    library in :func:`jit_cache_dir`, where the optimization then finds it.
+
+    Parameters
+    ----------
+    model, drives, library, objective, baseline, symmetry, knots_m_s, linear, lag_s, oversample
+        As :func:`optimize_curves`.
+
+    Returns
+    -------
+    bool
+        True if the steps are compiled (or were cached), False if no C
+        compiler is found (the optimization then runs them uncompiled).
+
+    Raises
+    ------
+    PlannerError, TypeError
+        As :func:`optimize_curves`.
+    """
+    objective = _check_objective(objective)
+    plant, drives, _, space, rows = _problem(model, drives, library, objective, baseline,
+                                             symmetry, knots_m_s, linear, lag_s)
+    if not _jit_available():
+        return False
+    for d in drives:
+        _LoopModel(plant, d, space, rows, oversample, True, inputs=False)
+    return True
 
 
 def _score_rows(objective, need, m_base, tight):

@@ -38,6 +38,9 @@ RTOL_LINEAR_DAMPING = 0.01
 RTOL_IDENTIFIED_SCORE = 0.005
 # constraints hold on the written curves (table values are printed to ~1e-12 relative)
 ATOL_CONSTRAINT = 1e-6
+# the fold's adjoint against a loop's: the same operations, summed in the same order (measured
+# equal to the bit); a few ulps allowed should casadi reorder an adjoint sum
+RTOL_FOLD_ADJOINT = 1e-13
 SMALL_KNOTS = (0.05, 0.15, 0.4)  # [m/s] three knots a side keep the test problems small
 
 
@@ -400,3 +403,76 @@ def test_compiled_steps_fall_back(tmp_path, monkeypatch):
         out = po._compiled_steps(_toy_steps())
     assert [f.class_name() for f in out] == ["SXFunction", "SXFunction"]
     assert not list((tmp_path / "cache").rglob("*.c"))
+
+
+# ------------------------------------------------------------------ the recursion as a fold
+
+
+def _contracting_step():
+    import casadi as ca
+
+    x, u = ca.SX.sym("x", 3), ca.SX.sym("u", 2)
+    M = ca.DM([[0.5, -0.3, 0.1], [0.2, 0.4, -0.2], [-0.1, 0.3, 0.6]])
+    return ca.Function("step", [x, u], [0.9 * ca.tanh(M @ x) + ca.vertcat(u[0], u[1], u[0] * u[1])])
+
+
+@pytest.mark.parametrize(("n_steps", "base"), [(1, 32), (31, 32), (32, 32), (33, 32),
+                                               (1031, 32), (2999, 32), (77, 3), (64, 4)])
+def test_fold_chain_equals_a_loop(n_steps, base):
+    """The nested fold gives a loop's final state to the bit, and its adjoint the loop's,
+    for lengths below, at and above each level of the tower."""
+    import casadi as ca
+
+    from planner.optimize import _fold_chain
+
+    step = _contracting_step()
+    rng = np.random.default_rng(11)
+    x0, U = rng.standard_normal(3), 0.3 * rng.standard_normal((2, n_steps))
+    X = ca.MX.sym("X", 3)
+    seed = ca.DM([0.7, -1.1, 0.4])
+    y_fold = _fold_chain(step, n_steps, base)(X, ca.DM(U))
+    y_loop = X
+    for k in range(n_steps):
+        y_loop = step(y_loop, ca.DM(U[:, k]))
+    values = []
+    for y in (y_fold, y_loop):
+        f = ca.Function("f", [X], [y, ca.jtimes(y, X, seed, True)])
+        values.append([np.array(v).ravel() for v in f(x0)])
+    (y_f, g_f), (y_l, g_l) = values
+    assert np.array_equal(y_f, y_l)
+    assert_allclose(g_f, g_l, rtol=RTOL_FOLD_ADJOINT, atol=0)
+
+
+@pytest.mark.skipif(not __import__("planner.optimize").optimize._compiler(),
+                    reason="no C compiler")
+def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive, demo_library,
+                                                        tmp_path, monkeypatch):
+    """compile_curves (e.g. in a worker) puts the problem's library in the cache; the
+    optimization with the same arguments then loads it without running the compiler."""
+    import subprocess
+
+    import planner.optimize as po
+    from planner.optimize import compile_curves
+
+    monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(po, "_STEP_CACHE", {})
+    assert compile_curves(paper_model, short_drive, demo_library, baseline="B20",
+                          knots_m_s=SMALL_KNOTS) is True
+    libs = list(po.jit_cache_dir().glob("steps-*.so"))
+    assert len(libs) == 1
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("the compiler ran although compile_curves compiled the steps")
+
+    monkeypatch.setattr(po, "_STEP_CACHE", {})  # as in another process
+    monkeypatch.setattr(subprocess, "Popen", no_compiler)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OptimizeWarning)
+        opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
+                              knots_m_s=SMALL_KNOTS, max_iter=2, n_closest=1,
+                              stationarity=False)
+    assert opt.solver["jit"] and opt.solver["n_grad"] > 0
+    assert list(po.jit_cache_dir().glob("steps-*.so")) == libs
+    with pytest.raises(PlannerError, match="symmetry"):
+        compile_curves(paper_model, short_drive, demo_library, baseline="B20",
+                       symmetry="diagonal")
