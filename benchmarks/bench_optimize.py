@@ -61,7 +61,7 @@ def gradient_check(model, drive, optimum):
     rows = (need, L[[names.index(m) for m in need]])
     base = optimum.metrics[drive.name].loc[optimum.baseline.name, need].to_numpy(float)
     C, _ = opt_mod._score_rows(obj, need, [base], np.ones(len(need)))
-    jit = opt_mod._jit_options(opt_mod._jit_dir()) if opt_mod._jit_available() else {}
+    jit = opt_mod._jit_available()
     loop = opt_mod._LoopModel(plant, drive, space, rows, 2, jit)
     scale = np.maximum(np.abs(optimum.x), 1.0)
     ev = opt_mod._Evaluator([loop], space.expansion(), scale, C)

@@ -1423,7 +1423,7 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     # the metrics' signals as the product's rows: a channel's row of the output matrix,
     # the mean of two rows for a ride height of two corners; the shock velocities are the
     # loop's own (appended after the rows)
-    Cout, y_rig = loop.args[-1], loop.y_rig
+    Cout, y_rig = loop.cout, loop.y_rig
     cols, rig_cols, lanes = [], [], []
     for name in plan.names:
         chans = _METRIC_CHANNELS[name]
@@ -1476,6 +1476,12 @@ class _Loop:
     y_rig: np.ndarray
     oversample: int
     plant_name: str
+
+    @property
+    def cout(self):
+        """The output rows' coefficients on ``[Re x, Im x, dF]``, shape (2 n + 4, p): the
+        kernels' last argument (the fused metrics path passes reduced rows in its place)."""
+        return self.args[-1]
 
     def settings(self, drive):
         return {"oversample": self.oversample, "plant": self.plant_name,
