@@ -1332,6 +1332,11 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
         not converge (an unstable or ill-posed loop).
     """
     loop = _loop_setup(plant, drive, setups, oversample, outputs, rig, "simulate_batch")
+    return _batch_response(plant, drive, loop)
+
+
+def _batch_response(plant, drive, loop):
+    """:func:`simulate_batch` of the checked inputs `loop` (:func:`_loop_setup`)."""
     S, N = len(loop.models), loop.rig.n_samples
     y = np.empty((S, len(loop.names), N))
     F = np.empty((S, N, 4))  # (setup, sample, corner): written per sample in the kernel
@@ -1414,8 +1419,7 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     if not plan.names or N <= filters[0][1]:
         # no metric, or a record too short for the filter: the two steps (the second
         # raises the filter's error, naming the channel)
-        batch = simulate_batch(plant, drive, setups, oversample=oversample, outputs=outputs,
-                               rig=loop.rig)
+        batch = _batch_response(plant, drive, loop)
         met = compute_metrics(batch.channels, fs=batch.fs_hz, band_hz=band_hz, order=order,
                               static_loads_n=static_loads_n, split_hz=split_hz)
         return BatchMetrics(metrics=met, setups=batch.setups,

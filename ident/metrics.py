@@ -657,13 +657,7 @@ def _setup_metric_rms(y, ia, sos, zi, padlen, out, buf, z0, z1, stack, sums):
     n_metrics = ia.size
     for i0 in range(0, n_metrics, _LANES):
         n_rows = min(_LANES, n_metrics - i0)
-        for k in range(padlen):
-            lo = buf[k]
-            hi = buf[padlen + n + k]
-            for j in range(_LANES):
-                lo[j] = 0.0
-                hi[j] = 0.0
-        for k in range(n):
+        for k in range(n):  # the pad rows are written by _metric_block's odd extension
             row = buf[padlen + k]
             for j in range(n_rows):
                 row[j] = y[ia[i0 + j], k]

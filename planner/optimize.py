@@ -40,12 +40,12 @@ recursion). A sample's step is an MX function calling two SX functions, the
 loop's sub-step (``oversample`` times) and the metrics' filters and sums
 (once); the step and its adjoint are compiled to C when a C compiler is found
 (5-7 s of compilation, once per machine and problem: :func:`jit_cache_dir`),
-and the recursion over the samples is a tower of folds
-(:func:`_fold_chain`) that casadi's virtual machine runs, calling them. IPOPT solves the problem with a limited-memory Hessian;
-metrics and their Jacobian are computed once per iterate and shared by the
-objective and the constraints. The start is the best linear damping per group
-by frequency-domain screening (:mod:`planner.screen`), projected onto the
-constraints.
+and the recursion over the samples is a tower of folds (:func:`_fold_chain`)
+that casadi's virtual machine runs, calling them. IPOPT solves the problem with
+a limited-memory Hessian; metrics and their Jacobian are computed once per
+iterate and shared by the objective and the constraints. The start is the best
+linear damping per group by frequency-domain screening (:mod:`planner.screen`),
+projected onto the constraints.
 
 Every result is verified by :func:`planner.predict.predict_setups`, the
 time-domain simulator the rest of shockplan trusts, and that figure is the one
