@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.channels import RIG_INPUTS
-from ident.drive import Drive
+from ident.data.channels import RIG_INPUTS
+from ident.data.drive import Drive
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -44,10 +44,10 @@ def engine_version():
 
 
 def jit_source(kernel="_loop_metrics_worker"):
-    """How a compiled shock loop of :mod:`ident.closedloop` was obtained: "compile", "cache
+    """How a compiled shock loop of :mod:`ident.sim.closedloop` was obtained: "compile", "cache
     load" or "unknown". Default: the predictions' (the setup-parallel loop with its
     metrics); the virtual rig runs ``"_loop_serial"``."""
-    from ident import closedloop
+    from ident.sim import closedloop
 
     stats = getattr(getattr(closedloop, kernel, None), "stats", None)
     if stats is None:

@@ -1,4 +1,4 @@
-"""Benchmark of identification: the paper session through ``ident.model.identify_session``.
+"""Benchmark of identification: the paper session through ``ident.identify.model.identify_session``.
 
 Run::
 
@@ -8,17 +8,17 @@ Prints, one figure per line, each timing with the machine's 1-minute load
 average at that moment:
 
 1. the session: the seed paper's experiment (5 runs x 800 s at 100 Hz, every
-   channel of the spec) built once in memory with ``ident.rig.simulate_session()``.
+   channel of the spec) built once in memory with ``ident.sim.rig.simulate_session()``.
    Building it is *not* part of any timing below;
 2. the engine: the median, min and max wall time of ``--repeat`` calls of
-   ``ident.model.identify_session(session)`` (FRF estimate, conditioning,
+   ``ident.identify.model.identify_session(session)`` (FRF estimate, conditioning,
    per-pair rational fits, all defaults);
 3. its stages, each timed separately (median of ``--repeat``):
-   ``ident.frf.estimate_frf`` (with its default estimator, as ``identify_session``
+   ``ident.identify.frf.estimate_frf`` (with its default estimator, as ``identify_session``
    calls it; if that is not the paper's Welch H1, ``estimator="welch"`` is timed
    too, as the like-for-like engine for the reference below),
-   ``ident.condition.condition_frf``,
-   ``ident.model.fit_model`` (the default ``invfreqs`` method), and
+   ``ident.identify.condition.condition_frf``,
+   ``ident.identify.model.fit_model`` (the default ``invfreqs`` method), and
    ``model.loop_plant()`` (the realization the planner simulates: a balanced
    truncation, about 0.4 s since session 5; not part of ``identify_session``;
    ``shockplan identify`` builds it once and stores it in the model file, so the
@@ -68,11 +68,11 @@ from scipy import signal
 # benchmark the working tree this script lives in, installed or not
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ident.channels import CORNERS, RIG_INPUTS  # noqa: E402
-from ident.condition import condition_frf  # noqa: E402
-from ident.frf import estimate_frf  # noqa: E402
-from ident.model import fit_model, identify_session  # noqa: E402
-from ident.rig import simulate_session  # noqa: E402
+from ident.data.channels import CORNERS, RIG_INPUTS  # noqa: E402
+from ident.identify.condition import condition_frf  # noqa: E402
+from ident.identify.frf import estimate_frf  # noqa: E402
+from ident.identify.model import fit_model, identify_session  # noqa: E402
+from ident.sim.rig import simulate_session  # noqa: E402
 from _common import engine_version as _engine_version  # noqa: E402
 from _common import load as _load, maxrss_mib as _maxrss_mib, mib as _mib  # noqa: E402
 
@@ -150,7 +150,7 @@ def reference_frf(session, outputs, cbar, settings):
 
     Parameters
     ----------
-    session : ident.session.Session
+    session : ident.data.session.Session
         Every run must hold ``shock_force_XX`` (the virtual rig writes them).
     outputs : sequence of str
     cbar : ndarray, shape (4,)
@@ -237,7 +237,7 @@ def main(argv=None):
     n_ch = len(session.runs[0].channels)
     total_s = sum(r.n_samples for r in session.runs) / session.fs_hz
     nbytes = sum(np.asarray(v).nbytes for r in session.runs for v in r.channels.values())
-    print(f"session: {session.name!r} built once in memory with ident.rig.simulate_session() "
+    print(f"session: {session.name!r} built once in memory with ident.sim.rig.simulate_session() "
           f"in {build_s:.1f} s (NOT part of any timing below): {len(session.runs)} runs, "
           f"{total_s:g} s of data at {session.fs_hz:g} Hz, {n_ch} channels per run, "
           f"{_mib(nbytes):.0f} MiB of samples")
@@ -289,7 +289,7 @@ def main(argv=None):
         stage_times["fit_model vf"].append(t)
         stage_loads["fit_model vf"].append(ld)
     med = {}
-    med["estimate_frf"] = _spread(f"stage: ident.frf.estimate_frf (default estimator "
+    med["estimate_frf"] = _spread(f"stage: ident.identify.frf.estimate_frf (default estimator "
                                   f"{default_estimator!r})", stage_times["estimate_frf"],
                                   stage_loads["estimate_frf"])
     if welch_differs:
@@ -299,9 +299,9 @@ def main(argv=None):
             stage_loads["estimate_frf welch"])
     else:
         med["estimate_frf welch"] = med["estimate_frf"]
-    med["condition_frf"] = _spread("stage: ident.condition.condition_frf",
+    med["condition_frf"] = _spread("stage: ident.identify.condition.condition_frf",
                                    stage_times["condition_frf"], stage_loads["condition_frf"])
-    med["fit_model"] = _spread("stage: ident.model.fit_model (invfreqs, default)",
+    med["fit_model"] = _spread("stage: ident.identify.model.fit_model (invfreqs, default)",
                                stage_times["fit_model"], stage_loads["fit_model"])
     three = med["estimate_frf"] + med["condition_frf"] + med["fit_model"]
     print(f"stage: sum of the three stages of identify_session: {three:.2f} s "

@@ -38,9 +38,9 @@ import numpy as np
 # benchmark the working tree this script lives in, installed or not
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ident.drive import make_track_drive  # noqa: E402
-from ident.shocks import read_shock_library  # noqa: E402
-from ident.vehicle import build_full_car, example_vehicle  # noqa: E402
+from ident.data.drive import make_track_drive  # noqa: E402
+from ident.models.shocks import read_shock_library  # noqa: E402
+from ident.models.vehicle import build_full_car, example_vehicle  # noqa: E402
 from planner import optimize as opt_mod  # noqa: E402
 from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
 from planner.objective import default_objective  # noqa: E402

@@ -7,12 +7,12 @@ Run::
                                        [--memory-setups P] [--sweep-setups W]
 
 Two models, each reported: the known paper car
-(``ident.vehicle.build_full_car(example_vehicle())``) and a model identified from
-the paper session (``ident.rig.simulate_session()`` then
-``ident.model.identify_session``, built once and not timed). The identified one is
-the product's case. One drive: ``ident.drive.make_track_drive(duration_s=120,
+(``ident.models.vehicle.build_full_car(example_vehicle())``) and a model identified from
+the paper session (``ident.sim.rig.simulate_session()`` then
+``ident.identify.model.identify_session``, built once and not timed). The identified one is
+the product's case. One drive: ``ident.data.drive.make_track_drive(duration_s=120,
 fs_hz=100, seed=1, ...)`` with the paper car's wheelbase and track. Shocks: the
-built-in crate ``planner/data/library.toml``; setups from
+built-in crate ``planner/examples/library.toml``; setups from
 ``planner.setups.enumerate_setups`` with its defaults (left/right symmetric) and
 with ``symmetry="none", max_setups=None`` (every corner free); both respect the
 crate's inventory (two shock kinds exist twice only), so there are slightly fewer
@@ -26,7 +26,7 @@ at that moment:
    wall time of ``--repeat`` calls of ``planner.predict.predict_setups(model, drive,
    setups, library, oversample=...)`` on all symmetric setups, as setups per second:
    with the model object as given (as ``rank_setups`` calls it: each call turns it
-   into a :class:`ident.closedloop.LoopPlant`, a balanced truncation for an
+   into a :class:`ident.sim.closedloop.LoopPlant`, a balanced truncation for an
    identified model) and with a LoopPlant built beforehand. Every call also
    computes the setup-independent rig response. Both are also timed alone (the first
    also with BLAS limited to one thread by ``threadpoolctl``: on a busy 2-core
@@ -106,11 +106,11 @@ from threadpoolctl import threadpool_limits
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ident.channels import CORNERS  # noqa: E402
-from ident.closedloop import rig_response, simulate  # noqa: E402
-from ident.drive import make_track_drive  # noqa: E402
-from ident.shocks import read_shock_library  # noqa: E402
-from ident.vehicle import build_full_car, example_vehicle  # noqa: E402
+from ident.data.channels import CORNERS  # noqa: E402
+from ident.sim.closedloop import rig_response, simulate  # noqa: E402
+from ident.data.drive import make_track_drive  # noqa: E402
+from ident.models.shocks import read_shock_library  # noqa: E402
+from ident.models.vehicle import build_full_car, example_vehicle  # noqa: E402
 from planner.objective import default_objective, score_setups  # noqa: E402
 from planner.predict import as_loop_plant, predict_setups  # noqa: E402
 from planner.screen import drive_spectrum, metric_rows, screen_setups  # noqa: E402
@@ -119,7 +119,7 @@ from _common import drive_segment, rel_rms  # noqa: E402
 from _common import engine_version as _engine_version  # noqa: E402
 from _common import jit_source as _jit_source, load as _load, mib as _mib  # noqa: E402
 
-LIBRARY_PATH = ROOT / "planner" / "data" / "library.toml"
+LIBRARY_PATH = ROOT / "planner" / "examples" / "library.toml"
 DRIVE_S = 120.0
 FS_HZ = 100.0
 DRIVE_SEED = 1
@@ -374,7 +374,7 @@ def memory_child(n_setups):
     process's ``ru_maxrss`` includes the high-water mark of the process it was
     forked from, so a child forked late would report the parent's peak.
     """
-    from ident.model import load_model
+    from ident.identify.model import load_model
 
     line = sys.stdin.readline().strip()
     if not line:
@@ -618,8 +618,8 @@ def _main(args, child):
           "(the crate's inventory respected)")
 
     # the models (not timed)
-    from ident.model import identify_session
-    from ident.rig import simulate_session
+    from ident.identify.model import identify_session
+    from ident.sim.rig import simulate_session
 
     car = build_full_car(vehicle)
     # warm-up before the virtual rig below, which runs the same compiled shock loop

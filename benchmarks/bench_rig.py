@@ -6,7 +6,7 @@ Run::
 
 Prints, one figure per line:
 
-1. the engine: the first call of ``ident.rig.simulate_session(default_plan(),
+1. the engine: the first call of ``ident.sim.rig.simulate_session(default_plan(),
    example_vehicle())`` (imports numba and compiles the JIT or loads it from the
    cache), then the median, min and max wall time of ``--repeat`` further calls:
    the whole plan (5 runs x 800 s at 100 Hz, oversample 8, nonlinear digressive
@@ -19,8 +19,8 @@ Prints, one figure per line:
    ``tau = 0``), rig inputs interpolated linearly between drive samples, for the
    baseline and the swap-LF run over the first ``--ref-seconds`` of the drive;
    its time scaled to the whole plan and the ratio reference / engine;
-3. like-for-like accuracy on that segment: ``ident.closedloop.simulate`` on the
-   same plant, drive segment and setup (as ``ident.rig`` does it) against the
+3. like-for-like accuracy on that segment: ``ident.sim.closedloop.simulate`` on the
+   same plant, drive segment and setup (as ``ident.sim.rig`` does it) against the
    reference, as relative RMS differences. The script first checks how the
    engine refines the drive onto its internal grid (``rig_response().u_fine``);
    if that is not linear interpolation, the comparison is not like-for-like in
@@ -64,10 +64,10 @@ from scipy.integrate import solve_ivp
 # benchmark the working tree this script lives in, installed or not
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ident.channels import CORNERS  # noqa: E402
-from ident.rig import NOMINAL_V_RMS_M_S, default_plan, make_plan_drive, simulate_session  # noqa: E402
-from ident.session import write_session  # noqa: E402
-from ident.vehicle import build_full_car, example_vehicle  # noqa: E402
+from ident.data.channels import CORNERS  # noqa: E402
+from ident.sim.rig import NOMINAL_V_RMS_M_S, default_plan, make_plan_drive, simulate_session  # noqa: E402
+from ident.data.session import write_session  # noqa: E402
+from ident.models.vehicle import build_full_car, example_vehicle  # noqa: E402
 from _common import drive_segment, rel_rms  # noqa: E402
 from _common import engine_version as _engine_version  # noqa: E402
 from _common import jit_source as _jit_source, mib as _mib  # noqa: E402
@@ -107,7 +107,7 @@ def time_engine(repeat):
     -------
     first_s : float
     times_s : list of float, length `repeat`
-    session : ident.session.Session
+    session : ident.data.session.Session
         The last session (for the I/O timing).
     """
     t0 = time.perf_counter()
@@ -163,8 +163,8 @@ def reference_run(model, shocks, u, fs_u_hz, fs_out_hz):
 
     Parameters
     ----------
-    model : ident.vehicle.FullCarModel
-    shocks : sequence of 4 ident.shocks.ShockModel
+    model : ident.models.vehicle.FullCarModel
+    shocks : sequence of 4 ident.models.shocks.ShockModel
         LF, RF, LR, RR.
     u : ndarray, shape (n_u, 7)
         Rig inputs (``RIG_INPUTS`` order, SI) at ``k / fs_u_hz``.
@@ -240,25 +240,25 @@ def reference_run(model, shocks, u, fs_u_hz, fs_out_hz):
 
 
 def loop_damping(shocks):
-    """Baseline damping of the loop plant, as ``ident.rig`` chooses it [N/(m/s)], shape (4,)."""
+    """Baseline damping of the loop plant, as ``ident.sim.rig`` chooses it [N/(m/s)], shape (4,)."""
     return np.array([float(s.equivalent_damping(NOMINAL_V_RMS_M_S)) for s in shocks])
 
 
 def engine_inputs(model, shocks, drive, oversample):
     """The rig inputs as the engine sees them on its internal grid, shape (n_fine, 7).
 
-    ``ident.closedloop.rig_response(...).u_fine``: the engine's discretization is
+    ``ident.sim.closedloop.rig_response(...).u_fine``: the engine's discretization is
     exact for inputs piecewise linear between these rows.
     """
-    from ident.closedloop import rig_response
+    from ident.sim.closedloop import rig_response
 
     plant = model.loop_plant(loop_damping(shocks))
     return rig_response(plant, drive, oversample=oversample).u_fine
 
 
 def engine_run(model, shocks, drive, oversample):
-    """``ident.closedloop.simulate`` as ``ident.rig`` calls it (baseline damping at the nominal RMS)."""
-    from ident.closedloop import simulate
+    """``ident.sim.closedloop.simulate`` as ``ident.sim.rig`` calls it (baseline damping at the nominal RMS)."""
+    from ident.sim.closedloop import simulate
 
     return simulate(model.loop_plant(loop_damping(shocks)), drive, list(shocks),
                      oversample=oversample)

@@ -105,7 +105,7 @@ def crate():
     """32 shocks: the built-in crate's 11 and each scaled by 0.85 and 1.15 (counts unlimited)."""
     from dataclasses import replace
 
-    from ident.shocks import ShockLibrary, read_shock_library
+    from ident.models.shocks import ShockLibrary, read_shock_library
     from planner.demo import DEMO_LIBRARY_PATH
 
     base = read_shock_library(DEMO_LIBRARY_PATH)
@@ -141,8 +141,8 @@ def main():
     p.add_argument("--skip-single", action="store_true", help="only the cluster")
     args = p.parse_args()
 
-    from ident.drive import make_track_drive
-    from ident.vehicle import build_full_car, example_vehicle
+    from ident.data.drive import make_track_drive
+    from ident.models.vehicle import build_full_car, example_vehicle
     from planner.objective import score_setups
     from planner.screen import screen_setups
     from planner.setups import Setup, enumerate_setups

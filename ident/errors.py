@@ -1,4 +1,4 @@
-"""Exception and warning classes shared by :mod:`ident` and :mod:`planner`.
+"""Exception and warning classes of :mod:`ident`, the bases of :mod:`planner`'s too.
 
 Every error raised on user input subclasses :class:`ValueError` or
 :class:`TypeError` so that callers who do not know the project still catch it,
@@ -13,7 +13,6 @@ __all__ = [
     "DriveError",
     "IdentificationError",
     "ModelFileError",
-    "PlannerError",
     "ShockplanWarning",
     "LowCoherenceWarning",
     "FitWarning",
@@ -46,10 +45,6 @@ class IdentificationError(ShockplanError):
 
 class ModelFileError(ShockplanError):
     """A saved model file is corrupt or of an unsupported version."""
-
-
-class PlannerError(ShockplanError):
-    """A setup, objective or planning request is malformed."""
 
 
 class ShockplanWarning(UserWarning):

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ident._io import check_output
-from ident.channels import RIG_KINDS
+from ident.data.files import check_output
+from ident.data.channels import RIG_KINDS
 
 __all__ = ["main", "build_parser", "noise_report"]
 
@@ -47,7 +47,7 @@ def _warn_inventory(setups, library):
 
 
 def _load_vehicle(path):
-    from ident.vehicle import example_vehicle, read_vehicle
+    from ident.models.vehicle import example_vehicle, read_vehicle
 
     return example_vehicle() if path is None else read_vehicle(path)
 
@@ -55,8 +55,8 @@ def _load_vehicle(path):
 def cmd_rig_simulate(args):
     """``shockplan rig simulate``: run a rig plan on the virtual rig, write a session."""
 
-    from ident.rig import default_plan, read_rig_plan, simulate_session
-    from ident.session import write_session
+    from ident.sim.rig import default_plan, read_rig_plan, simulate_session
+    from ident.data.session import write_session
 
     _check_out(args, folder=True)
     plan = default_plan() if args.plan is None else read_rig_plan(args.plan)
@@ -81,8 +81,8 @@ def cmd_rig_simulate(args):
 
 def cmd_vehicle_modes(args):
     """``shockplan vehicle modes``: natural frequencies of a vehicle."""
-    from ident.units import to_si
-    from ident.vehicle import modal_summary
+    from ident.data.units import to_si
+    from ident.models.vehicle import modal_summary
 
     vehicle = _load_vehicle(args.vehicle)
     damping = None
@@ -98,8 +98,8 @@ def cmd_vehicle_modes(args):
 
 def _load_any_model(path):
     """An identified model (.npz), a vehicle TOML (the known physical model) or 'paper'."""
-    from ident.model import load_model
-    from ident.vehicle import build_full_car, example_vehicle, read_vehicle
+    from ident.identify.model import load_model
+    from ident.models.vehicle import build_full_car, example_vehicle, read_vehicle
 
     if path == "paper":
         return build_full_car(example_vehicle())
@@ -120,8 +120,8 @@ def cmd_identify(args):
     """``shockplan identify``: rig session -> identified vehicle model."""
     import warnings
 
-    from ident.model import identify_session
-    from ident.session import read_session
+    from ident.identify.model import identify_session
+    from ident.data.session import read_session
 
     _check_out(args)
     if args.mat:
@@ -162,7 +162,7 @@ def cmd_identify(args):
         model.export_mat(args.mat, overwrite=args.overwrite)
         print(f"wrote MATLAB export {args.mat}")
     if args.plots:
-        from ident.plots import write_frf_plots
+        from ident.identify.plots import write_frf_plots
 
         paths = write_frf_plots(model, args.plots, units=session.units)
         print(f"wrote {len(paths)} FRF plots to {args.plots}")
@@ -183,8 +183,8 @@ def noise_report(model, session, *, n_draws=20, seed=0):
         ``noise_limited_pairs``, ``zero_pairs`` (counts), ``expected_metric_error_pct``
         (metric -> half-width of the 95 % interval [%]), ``reference`` (run and setup).
     """
-    from ident.channels import CORNERS
-    from ident.drive import Drive
+    from ident.data.channels import CORNERS
+    from ident.data.drive import Drive
     from planner.setups import Setup
     from planner.uncertainty import prediction_uncertainty
 
@@ -222,8 +222,8 @@ def _noise_summary(table, noise):
 
 
 def _read_inputs(args):
-    from ident.drive import read_drive
-    from ident.shocks import read_shock_library
+    from ident.data.drive import read_drive
+    from ident.models.shocks import read_shock_library
 
     model = _load_any_model(args.model)
     drive = read_drive(args.drive, units=args.units)
@@ -322,9 +322,9 @@ def cmd_sweep(args):
     the best share, rank; writes ranking.csv, one CSV per case and sweep.toml."""
     import re
 
-    from ident._io import atomic_write_toml
-    from ident.drive import read_drive
-    from ident.shocks import read_shock_library
+    from ident.data.files import atomic_write_toml
+    from ident.data.drive import read_drive
+    from ident.models.shocks import read_shock_library
     from planner.objective import default_objective, read_objective
     from planner.report import write_predictions_csv
     from planner.setups import Setup, read_setups
@@ -405,9 +405,9 @@ def cmd_optimize(args):
     """``shockplan optimize``: the best damper curve per corner group, mapped to the crate."""
     import warnings
 
-    from ident.drive import read_drive
-    from ident.shocks import read_shock_library
-    from ident.units import from_si
+    from ident.data.drive import read_drive
+    from ident.models.shocks import read_shock_library
+    from ident.data.units import from_si
     from planner.objective import default_objective, read_objective
     from planner.optimize import optimize_curves, read_curve_constraints, write_optimum
 
@@ -468,10 +468,10 @@ def cmd_optimize(args):
 
 def cmd_plan(args):
     """``shockplan plan``: the next rig runs (optimal experiment design) and the run sheet."""
-    from ident.drive import read_drive
-    from ident.model import load_model
-    from ident.session import read_session
-    from ident.shocks import read_shock_library
+    from ident.data.drive import read_drive
+    from ident.identify.model import load_model
+    from ident.data.session import read_session
+    from ident.models.shocks import read_shock_library
     from planner.design import design_experiment, read_rig
     from planner.objective import default_objective, read_objective
     from planner.testplan import write_plan
@@ -514,7 +514,7 @@ def cmd_plan(args):
 
 def cmd_import(args):
     """``shockplan import``: real rig files (RPC III, MDF4, TDMS) appended to a session."""
-    from ident.formats import import_runs
+    from ident.data.formats import import_runs
 
     _check_out(args, folder=True, overwrite=True)  # appending to a session is the point
     names = None if args.names is None else [n.strip() for n in args.names.split(",")]
@@ -529,8 +529,8 @@ def cmd_import(args):
 
 def cmd_export_drive(args):
     """``shockplan export-drive``: a drive file written as the RPC III file a rig plays."""
-    from ident.drive import read_drive
-    from ident.formats import export_drive_rpc3
+    from ident.data.drive import read_drive
+    from ident.data.formats import export_drive_rpc3
 
     _check_out(args)
     drive = read_drive(args.drive, units=args.units)
@@ -542,8 +542,8 @@ def cmd_export_drive(args):
 
 def cmd_whatif(args):
     """``shockplan whatif``: every setup under every perturbation; robust ranking, files."""
-    from ident.drive import read_drive
-    from ident.shocks import read_shock_library
+    from ident.data.drive import read_drive
+    from ident.models.shocks import read_shock_library
     from planner.objective import default_objective, read_objective
     from planner.setups import Setup, read_setups
     from planner.whatif import (FRAGILE_SHARE, RANK_TOLERANCE, evaluate_whatif,

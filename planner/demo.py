@@ -30,7 +30,7 @@ __all__ = ["run_demo", "DEMO_LIBRARY_PATH"]
 
 log = logging.getLogger(__name__)
 
-DEMO_LIBRARY_PATH = Path(__file__).parent / "data" / "library.toml"
+DEMO_LIBRARY_PATH = Path(__file__).parent / "examples" / "library.toml"
 _PLOT_OUTPUTS = tuple(f"{k}_{c}" for k in ("shock_velocity", "tire_force", "ride_height")
                       for c in ("LF", "RF", "LR", "RR"))
 
@@ -59,13 +59,13 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     FileExistsError
         If `out` exists, is not empty and `overwrite` is false.
     """
-    from ident._io import atomic_dir
-    from ident.drive import make_track_drive, write_drive
-    from ident.model import identify_session
-    from ident.rig import default_plan, simulate_session
-    from ident.session import write_session
-    from ident.shocks import read_shock_library
-    from ident.vehicle import example_vehicle, modal_summary
+    from ident.data.files import atomic_dir
+    from ident.data.drive import make_track_drive, write_drive
+    from ident.identify.model import identify_session
+    from ident.sim.rig import default_plan, simulate_session
+    from ident.data.session import write_session
+    from ident.models.shocks import read_shock_library
+    from ident.models.vehicle import example_vehicle, modal_summary
     from planner.optimize import optimize_curves, write_optimum
     from planner.rank import rank_setups
     from planner.report import write_predictions_csv, write_ranking
@@ -159,9 +159,9 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
 def _frf_plots_job(model_path, vehicle, folder, units):
     """Write the demo's FRF plots: estimate, conditioned estimate, fit and the known car's
     closed-loop FRF around the model's c_bar (the ideal). Runs in a worker process."""
-    from ident.model import load_model
-    from ident.plots import write_frf_plots
-    from ident.vehicle import build_full_car
+    from ident.identify.model import load_model
+    from ident.identify.plots import write_frf_plots
+    from ident.models.vehicle import build_full_car
 
     model = load_model(model_path)
     truth_model = build_full_car(vehicle)
@@ -210,7 +210,7 @@ def _warm_predictions():
     each setup's metrics) on a small problem with a zero rig response; the demo's process
     then loads it. Runs in a worker process forked after this one compiled the one-setup
     loop (inherited, not compiled again)."""
-    from ident.closedloop import simulate_batch_metrics
+    from ident.sim.closedloop import simulate_batch_metrics
     from planner.setups import enumerate_setups
 
     plant, drive = _warm_plant_and_drive()
@@ -221,7 +221,7 @@ def _warm_predictions():
 
 
 def _demo_library():
-    from ident.shocks import read_shock_library
+    from ident.models.shocks import read_shock_library
 
     return read_shock_library(DEMO_LIBRARY_PATH)
 
@@ -230,7 +230,7 @@ def _zero_rig(plant, drive):
     """A zero rig response of the right shape (the warm-ups need only the types)."""
     import numpy as np
 
-    from ident.closedloop import RigResponse
+    from ident.sim.closedloop import RigResponse
 
     n = drive.n_samples
     return RigResponse(v_fine=np.zeros((n, 4)), y=np.zeros((len(plant.output_names), n)),
@@ -240,8 +240,8 @@ def _zero_rig(plant, drive):
 
 def _warm_plant_and_drive():
     """The paper car's loop plant and a short track drive, for the warm-up jobs."""
-    from ident.drive import make_track_drive
-    from ident.vehicle import build_full_car, example_vehicle
+    from ident.data.drive import make_track_drive
+    from ident.models.vehicle import build_full_car, example_vehicle
 
     vehicle = example_vehicle()
     drive = make_track_drive(duration_s=10.0, fs_hz=100.0, seed=1,
@@ -252,7 +252,7 @@ def _warm_plant_and_drive():
 
 def _warm_rig_response():
     """Compile (into numba's cache) the rig-response kernel. Runs in a worker process."""
-    from ident.closedloop import rig_response
+    from ident.sim.closedloop import rig_response
 
     plant, drive = _warm_plant_and_drive()
     rig_response(plant, drive, oversample=1)
@@ -262,7 +262,7 @@ def _warm_rig_response():
 def _warm_one_setup_loop():
     """Compile (or load) the one-setup loop kernel on a zero rig response of the right shape,
     so that the rig-response kernel is left to the worker compiling it meanwhile."""
-    from ident.closedloop import simulate
+    from ident.sim.closedloop import simulate
 
     plant, drive = _warm_plant_and_drive()
     library = _demo_library()

@@ -2,7 +2,7 @@
 
 A rig run is a setup (the baseline, or crate shocks swapped in at one to four
 corners), a drive and a duration. ``design_experiment`` chooses runs within a
-rig-time budget so that the identification (:mod:`ident.frf`, Eqs. 18-23 of the
+rig-time budget so that the identification (:mod:`ident.identify.frf`, Eqs. 18-23 of the
 seed paper) learns the most, by one of three criteria, then orders them to
 swap as few shocks as possible.
 
@@ -62,9 +62,9 @@ import numpy as np
 import pandas as pd
 from scipy import signal
 
-from ident._io import read_toml
-from ident.channels import CORNERS, RIG_INPUTS
-from ident.errors import PlannerError
+from ident.data.files import read_toml
+from ident.data.channels import CORNERS, RIG_INPUTS
+from planner.errors import PlannerError
 
 __all__ = [
     "RigSpec",
@@ -238,7 +238,7 @@ class ExperimentPlan:
     Attributes
     ----------
     runs : tuple of PlannedRun
-    drives : dict of str -> ident.drive.Drive
+    drives : dict of str -> ident.data.drive.Drive
         Every drive the runs play, by name.
     library : ShockLibrary
         The crate.
@@ -299,8 +299,8 @@ class ExperimentPlan:
 def _drive_maker(vehicle, session):
     """kind -> function(duration_s, seed, name) -> Drive, sized like the session's inputs (an
     identified model) or the paper's plan on the vehicle (a known one)."""
-    from ident import drive as drv
-    from ident.rig import default_plan, make_plan_drive
+    from ident.data import drive as drv
+    from ident.sim.rig import default_plan, make_plan_drive
 
     fs = session.fs_hz if session is not None else 100.0
     if session is not None:
@@ -463,7 +463,7 @@ def _candidate_information(plant, setups, kinds, drive_of, library, edges, f_c):
 def _session_information(session, cbar, edges):
     """The recorded runs' own information: sum over runs of ``T * S_xx`` of their measured
     ``[u_rig, dF]``, shape (n_b, 11, 11)."""
-    from ident.frf import shock_force_deviation
+    from ident.identify.frf import shock_force_deviation
 
     nb = edges.size - 1
     M = np.zeros((nb, 11, 11), dtype=complex)
@@ -770,9 +770,9 @@ def _order(setups, start):
 
 def _plant_and_vehicle(model, baseline, library):
     """The loop plant, the vehicle (known models) and the model's FRF (identified ones)."""
-    from ident.model import VehicleModel
-    from ident.rig import _loop_damping
-    from ident.vehicle import FullCarModel, VehicleParams, build_full_car
+    from ident.identify.model import VehicleModel
+    from ident.sim.rig import _loop_damping
+    from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
 
     if isinstance(model, VehicleModel):
         return model.loop_plant(), None, model
@@ -788,7 +788,7 @@ def _plant_and_vehicle(model, baseline, library):
 def _noise_variance(plant, frf, f_c, edges, M0, S_ref, noise):
     """Each output's noise power per band, (n_b, n_out): from the identified FRF's standard
     errors and the session's information, or `noise` of each output's RMS, white."""
-    from ident.condition import frf_standard_error
+    from ident.identify.condition import frf_standard_error
 
     p = len(plant.output_names)
     if frf is not None:
@@ -830,7 +830,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     budget_min : float
         Rig time [min], runs, swaps and overheads included.
     criterion : {"d", "a", "decision"}
-    session : ident.session.Session, optional
+    session : ident.data.session.Session, optional
         The runs recorded so far (their information is the prior).
     objective : planner.objective.Objective, optional
         For the decision criterion, validation runs and predictions; default
@@ -838,7 +838,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     baseline : Setup, str or 4 str, optional
         The car's setup at the start and the reference of swaps; default the
         session's baseline run's setup, else the crate's first shock.
-    drives : sequence of ident.drive.Drive, optional
+    drives : sequence of ident.data.drive.Drive, optional
         The team's drives (e.g. a track's): the contenders of the decision
         criterion are ranked on the first, validation runs play it. Default a
         120 s track-like drive.

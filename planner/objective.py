@@ -34,7 +34,7 @@ File format (``objective.toml``)::
     shock_travel_rms_LF = { max_ratio = 1.25 }   # <= 1.25 x the baseline's
     shock_velocity_rms_LF = { max = 0.5 }        # absolute, SI (here m/s)
 
-Metric names are those of :mod:`ident.metrics` (:data:`METRIC_QUANTITY`): the
+Metric names are those of :mod:`ident.sim.metrics` (:data:`METRIC_QUANTITY`): the
 spec's metrics, the normalized tire forces ``tire_force_rms_norm_XX``, and all
 of them with the suffix ``_body`` or ``_wheelhop``. Group names may use
 letters, digits, ``_`` and ``-``; a group ``grip`` gives the score column
@@ -74,10 +74,10 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from ident._io import atomic_write_toml, check_can_write, read_toml
-from ident.channels import CORNERS
-from ident.errors import PlannerError
-from ident.metrics import BAND_SUFFIXES, METRIC_NAMES, METRIC_QUANTITY
+from ident.data.files import atomic_write_toml, check_can_write, read_toml
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
+from ident.sim.metrics import BAND_SUFFIXES, METRIC_NAMES, METRIC_QUANTITY
 
 __all__ = [
     "OBJECTIVE_FORMAT",

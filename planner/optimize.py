@@ -17,14 +17,14 @@ outer knots. Between knots the curve is linear; the lag of each group is fixed
 (the baseline's shock's, or given). With ``linear=True`` a group's variable
 is one damping rate (``F_j = c v_j``): the known-answer case.
 
-The closed loop is that of :mod:`ident.closedloop`, written in casadi as a
+The closed loop is that of :mod:`ident.sim.closedloop`, written in casadi as a
 discrete recursion (a fold, single shooting) over the drive's samples:
 
-- the rig part of the model's :class:`~ident.closedloop.LoopPlant` is
-  simulated once per drive (:func:`ident.closedloop.rig_response`);
+- the rig part of the model's :class:`~ident.sim.closedloop.LoopPlant` is
+  simulated once per drive (:func:`ident.sim.closedloop.rig_response`);
 - the shock part's modes are stepped with the same quadratic-hold
-  coefficients (:func:`ident.closedloop.hold_coefficients`) and the lag with
-  :func:`ident.closedloop.lag_hold_coefficients`, ``oversample`` sub-steps per
+  coefficients (:func:`ident.sim.closedloop.hold_coefficients`) and the lag with
+  :func:`ident.sim.closedloop.lag_hold_coefficients`, ``oversample`` sub-steps per
   sample;
 - the algebraic loop ``v = v_free + D_eff dF(v)`` is solved at every sub-step
   by Newton's method on the 4 shock velocities (3 iterations from ``v_free``;
@@ -93,13 +93,14 @@ import pandas as pd
 from scipy import optimize as sopt
 from scipy import signal
 
-from ident._io import read_toml
-from ident.channels import CORNERS
-from ident.closedloop import hold_coefficients, lag_hold_coefficients, rig_response
-from ident.errors import PlannerError, ShockplanWarning
-from ident.metrics import METRIC_NAMES
-from ident.shocks import PiecewiseLinear, ShockLibrary, TableShock
-from ident.units import check_units, to_si
+from ident.data.files import read_toml
+from ident.data.channels import CORNERS
+from ident.sim.closedloop import hold_coefficients, lag_hold_coefficients, rig_response
+from ident.errors import ShockplanWarning
+from planner.errors import PlannerError
+from ident.sim.metrics import METRIC_NAMES
+from ident.models.shocks import PiecewiseLinear, ShockLibrary, TableShock
+from ident.data.units import check_units, to_si
 
 __all__ = [
     "CurveSpace",
@@ -1328,7 +1329,7 @@ def _check_objective(objective):
 
 
 def _drive_list(drives, fs_hz):
-    from ident.drive import Drive
+    from ident.data.drive import Drive
     from planner.predict import prepare_drive
 
     if isinstance(drives, Drive):
@@ -1350,7 +1351,7 @@ def _jit_available():
 
 def _scan_start(plant, drives, library, space, baseline, objective, m_base, weights):
     """Best linear damping per group by screening (frequency domain): the start point."""
-    from ident.shocks import LinearShock
+    from ident.models.shocks import LinearShock
     from planner.objective import score_setups
     from planner.screen import drive_bands, screen_response
 
@@ -1434,8 +1435,8 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     ----------
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
         Identified or known; both go through the same loop.
-    drives : ident.drive.Drive or sequence of Drive
-    library : ident.shocks.ShockLibrary
+    drives : ident.data.drive.Drive or sequence of Drive
+    library : ident.models.shocks.ShockLibrary
         The crate: the baseline and the setups the optimum is mapped to.
     objective : planner.objective.Objective, optional
         Default :func:`planner.objective.default_objective`; the spec's
@@ -1787,7 +1788,7 @@ def curve_distance(pwl_a, pwl_b, v_samples):
 def _finish(model, plant, drives, library, space, constraints, objective, base, weights,
             aggregate, oversample, x_opt, solver, history, n_closest, stationarity, A_lin,
             b_lin, t_start, settings):
-    from ident.closedloop import simulate
+    from ident.sim.closedloop import simulate
     from planner.setups import enumerate_setups
 
     # verify the optimum and the best feasible iterate; keep the better verified one
@@ -1953,7 +1954,7 @@ def curve_table(optimum, *, units="SI"):
     pandas.DataFrame
         Index: velocity; one column per optimal shock.
     """
-    from ident.units import from_si
+    from ident.data.units import from_si
 
     units = check_units(units, where="units", error=PlannerError)
     vel = np.asarray(BUILDER_VELOCITIES_M_S if units == "SI" else BUILDER_VELOCITIES_IN_S)
@@ -2046,8 +2047,8 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
     from openpyxl import Workbook
     from openpyxl.styles import Font
 
-    from ident._io import atomic_dir
-    from ident.shocks import write_shock_library
+    from ident.data.files import atomic_dir
+    from ident.models.shocks import write_shock_library
     from planner.setups import write_setups
 
     units = check_units(units, where="units", error=PlannerError)

@@ -3,10 +3,10 @@
 ``predict_setups(model, drive, setups, library)`` simulates every setup in closed
 loop (nonlinear shocks with lag in the loop, the algebraic loop solved exactly) and
 computes the spec's RMS metrics, both in
-:func:`ident.closedloop.simulate_batch_metrics` (the numbers of
-:func:`ident.closedloop.simulate_batch` then :func:`ident.metrics.compute_metrics`). The
-model may be an identified :class:`ident.model.VehicleModel`, the known
-:class:`ident.vehicle.FullCarModel`, or any :class:`ident.closedloop.LoopPlant`:
+:func:`ident.sim.closedloop.simulate_batch_metrics` (the numbers of
+:func:`ident.sim.closedloop.simulate_batch` then :func:`ident.sim.metrics.compute_metrics`). The
+model may be an identified :class:`ident.identify.model.VehicleModel`, the known
+:class:`ident.models.vehicle.FullCarModel`, or any :class:`ident.sim.closedloop.LoopPlant`:
 the same code path serves all, so identified and true predictions compare
 like for like.
 
@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from ident.channels import CORNERS
-from ident.errors import PlannerError
-from ident.model import LOOP_REDUCE_RTOL
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
+from ident.identify.model import LOOP_REDUCE_RTOL
 
 __all__ = [
     "Predictions",
@@ -90,18 +90,18 @@ def _warn_implausible(table, drive):
 
 
 def as_loop_plant(model, *, reduce_rtol=LOOP_REDUCE_RTOL):
-    """Return a :class:`ident.closedloop.LoopPlant` for a vehicle model.
+    """Return a :class:`ident.sim.closedloop.LoopPlant` for a vehicle model.
 
     Parameters
     ----------
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
     reduce_rtol : float or None
         Balanced-truncation bound for an identified model's shock part
-        (:meth:`ident.model.VehicleModel.loop_plant`).
+        (:meth:`ident.identify.model.VehicleModel.loop_plant`).
     """
-    from ident.closedloop import LoopPlant
-    from ident.model import VehicleModel
-    from ident.vehicle import FullCarModel, VehicleParams, build_full_car
+    from ident.sim.closedloop import LoopPlant
+    from ident.identify.model import VehicleModel
+    from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
 
     if isinstance(model, LoopPlant):
         return model
@@ -121,19 +121,19 @@ def prepare_drive(drive, fs_hz=None, *, where="drive"):
     """Check a drive for prediction and bring it to the model's rate.
 
     The models are continuous-time, so any rate could be simulated; the drive
-    is nevertheless *resampled* (band-limited, :func:`ident.drive.resample_drive`)
+    is nevertheless *resampled* (band-limited, :func:`ident.data.drive.resample_drive`)
     to the model's data rate `fs_hz` so that metrics are computed at the rate
     the model was identified at. It is refused if its Nyquist frequency is
     below 25 Hz (the metric band ends at 20 Hz).
 
     Returns
     -------
-    ident.drive.Drive
+    ident.data.drive.Drive
     """
-    from ident.drive import Drive, resample_drive
+    from ident.data.drive import Drive, resample_drive
 
     if not isinstance(drive, Drive):
-        raise TypeError(f"{where}: expected an ident.drive.Drive, got {type(drive).__name__}")
+        raise TypeError(f"{where}: expected an ident.data.drive.Drive, got {type(drive).__name__}")
     if drive.fs_hz < 50.0:
         raise PlannerError(f"{where}: sampled at {drive.fs_hz:g} Hz; the metrics need content up "
                            "to 20 Hz, so give a drive sampled at 50 Hz or more")
@@ -177,16 +177,16 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
     Parameters
     ----------
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
-    drive : ident.drive.Drive
+    drive : ident.data.drive.Drive
     setups : sequence of planner.setups.Setup
-    library : ident.shocks.ShockLibrary
+    library : ident.models.shocks.ShockLibrary
     oversample : int
         Internal steps per drive sample of the shock loop (quadratic hold: at 2, metrics
         within about 0.3 % of a 32x run on a track drive at 100 Hz).
     chunk_size : int
         Setups simulated per compiled call (a progress bar's step). Memory does not grow
         with it: each thread keeps one setup's outputs, whose metrics it computes right
-        after simulating it (:func:`ident.closedloop.simulate_batch_metrics`).
+        after simulating it (:func:`ident.sim.closedloop.simulate_batch_metrics`).
     band_hz : (float, float)
         Metric band [Hz] (spec default 1-20 Hz).
     static_loads_n : dict, optional
@@ -200,9 +200,9 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
     -------
     Predictions
     """
-    from ident.closedloop import rig_response, simulate_batch_metrics
+    from ident.sim.closedloop import rig_response, simulate_batch_metrics
 
-    from ident.closedloop import LoopPlant
+    from ident.sim.closedloop import LoopPlant
 
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
     if not isinstance(plant, LoopPlant):

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from ident.errors import PlannerError
+from planner.errors import PlannerError
 
 __all__ = ["Ranking", "rank_setups"]
 
@@ -133,8 +133,8 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     Parameters
     ----------
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
-    drive : ident.drive.Drive
-    library : ident.shocks.ShockLibrary
+    drive : ident.data.drive.Drive
+    library : ident.models.shocks.ShockLibrary
     setups : sequence of planner.setups.Setup, optional
         The candidates; default: enumerated from `library` with `constraints`.
     constraints : dict, optional

@@ -3,8 +3,8 @@
 The input is a *ranking table*: a :class:`pandas.DataFrame` with one row per
 setup, indexed by setup name (or with a column ``setup``), holding
 
-- the shock ids ``LF, RF, LR, RR`` (:data:`ident.channels.CORNERS`);
-- metric columns named as in :mod:`ident.metrics` (``tire_force_rms_LF``,
+- the shock ids ``LF, RF, LR, RR`` (:data:`ident.data.channels.CORNERS`);
+- metric columns named as in :mod:`ident.sim.metrics` (``tire_force_rms_LF``,
   ``ride_height_rms_front``, ...), SI;
 - optionally interval columns ``<metric>_lo`` and ``<metric>_hi`` (SI);
 - optionally the columns of :class:`planner.objective.Scores` (``score``,
@@ -20,7 +20,7 @@ setup, indexed by setup name (or with a column ``setup``), holding
 :func:`fit_column_width`) also lay out :mod:`planner.testplan`'s run sheet.
 
 Column order of every written CSV (the spec's "Predictions"): ``setup, LF,
-RF, LR, RR``, then the spec's metrics in :data:`ident.metrics.METRIC_NAMES`
+RF, LR, RR``, then the spec's metrics in :data:`ident.sim.metrics.METRIC_NAMES`
 order (those present), then the other metric columns, then every further
 column in table order. The ranking files put ``rank`` first; the workbook
 puts the key columns first and the intervals on their own sheet (see
@@ -51,11 +51,11 @@ from openpyxl.utils import get_column_letter
 from openpyxl.worksheet.page import PageMargins
 from openpyxl.worksheet.properties import PageSetupProperties
 
-from ident._io import atomic_path, atomic_write_bytes, check_can_write
-from ident.channels import CORNERS
-from ident.errors import PlannerError
-from ident.metrics import METRIC_NAMES, METRIC_QUANTITY
-from ident.units import UNIT_LABELS, check_units, from_si
+from ident.data.files import atomic_path, atomic_write_bytes, check_can_write
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
+from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
+from ident.data.units import UNIT_LABELS, check_units, from_si
 
 __all__ = [
     "INTERVAL_SUFFIXES",
@@ -337,7 +337,7 @@ def ranking_columns(table, *, rank_first=False):
     -------
     list of str
         ``[rank,] LF, RF, LR, RR`` (those present), the spec's metrics in
-        :data:`ident.metrics.METRIC_NAMES` order, the other metric columns
+        :data:`ident.sim.metrics.METRIC_NAMES` order, the other metric columns
         (table order), then every further column in table order.
 
     Examples
@@ -369,8 +369,8 @@ def ranking_to_units(table, units):
     -------
     pandas.DataFrame
         A copy; every metric column and its ``_lo``/``_hi`` columns converted
-        with :func:`ident.units.from_si` (quantity from
-        :data:`ident.metrics.METRIC_QUANTITY`), every other column unchanged.
+        with :func:`ident.data.units.from_si` (quantity from
+        :data:`ident.sim.metrics.METRIC_QUANTITY`), every other column unchanged.
 
     Raises
     ------

@@ -2,7 +2,7 @@
 
 Each shock is replaced by its equivalent linear damping at the shock velocity
 it will see, ``c_eq(sigma_v)`` (the Gaussian stochastic linearization of its
-force-velocity curve, :meth:`ident.shocks.ShockModel.equivalent_damping`), with
+force-velocity curve, :meth:`ident.models.shocks.ShockModel.equivalent_damping`), with
 its lag as a first-order roll-off: ``c(omega) = c_eq / (1 + j omega tau)``.
 The velocity RMS comes from the linear closed-loop response to the drive's
 cross-spectral matrix, so the two are iterated to consistency. The metrics are
@@ -36,9 +36,9 @@ import pandas as pd
 from scipy import signal
 from tqdm.auto import tqdm
 
-from ident.channels import CORNERS, RIG_INPUTS, SHOCK_VELOCITIES
-from ident.drive import check_drive_inputs
-from ident.model import LOOP_REDUCE_RTOL
+from ident.data.channels import CORNERS, RIG_INPUTS, SHOCK_VELOCITIES
+from ident.data.drive import check_drive_inputs
+from ident.identify.model import LOOP_REDUCE_RTOL
 
 __all__ = ["screen_setups", "screen_response", "DriveBands", "drive_bands", "drive_spectrum",
            "metric_rows", "ScreenOperands", "screen_operands", "screen_packed"]
@@ -54,10 +54,10 @@ def metric_rows(plant):
     Returns
     -------
     names : list of str
-        Metric names (ident.metrics), in spec order, those the plant supports.
+        Metric names (ident.sim.metrics), in spec order, those the plant supports.
     L : ndarray, shape (n_metrics, n_outputs)
     """
-    from ident.metrics import METRIC_NAMES
+    from ident.sim.metrics import METRIC_NAMES
 
     outs = list(plant.output_names)
     names, rows = [], []
@@ -85,7 +85,7 @@ def drive_spectrum(drive, *, n_bands=96, f_min_hz=0.2, nperseg=None, weight=None
 
     Parameters
     ----------
-    drive : ident.drive.Drive
+    drive : ident.data.drive.Drive
     n_bands : int
         Number of log-spaced bands from `f_min_hz` to the Nyquist frequency.
     f_min_hz : float
@@ -177,7 +177,7 @@ def _loop_inverse(Hv, D, A, perm):
 
     Hv (4, 4) are the velocity responses to dF, D the shocks' linearized damping minus
     c_bar (complex, with the lag); perm (4,) is scratch. A screen-local routine rather than
-    ``ident.closedloop._invert_small``: in place (64 complex multiply-adds instead of 128:
+    ``ident.sim.closedloop._invert_small``: in place (64 complex multiply-adds instead of 128:
     the identity's zeros and ones are never multiplied) and pivots chosen by ``|z|^2``
     (no ``hypot``), but the same pivots and the same floating-point operations on the
     entries that matter, so the inverse is bit for bit the general routine's. That matters:
@@ -1280,7 +1280,7 @@ def drive_bands(drive, *, band_hz=(1.0, 20.0), n_bands=96):
 
     Parameters
     ----------
-    drive : ident.drive.Drive
+    drive : ident.data.drive.Drive
         At the rate the metrics are taken at.
     band_hz : (float, float)
         Metric band [Hz]: the metric filter's power response ``|B(f)|^4``
@@ -1468,7 +1468,7 @@ def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, 
         Linearized shock-velocity RMS [m/s].
     iterations : ndarray of int, shape (n_setups,)
     """
-    from ident.closedloop import _pack_setups
+    from ident.sim.closedloop import _pack_setups
 
     ops = screen_operands(H, output_names, cbar_n_s_m, bands)
     h = 1.0 / bands.fs_hz
@@ -1496,9 +1496,9 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
     Parameters
     ----------
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
-    drive : ident.drive.Drive
+    drive : ident.data.drive.Drive
     setups : sequence of planner.setups.Setup
-    library : ident.shocks.ShockLibrary
+    library : ident.models.shocks.ShockLibrary
     band_hz : (float, float)
         Metric band [Hz]; the metric filter's power response ``|B(f)|^4``
         (Butterworth order 4, applied forward and backward) weights the bands.

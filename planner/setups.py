@@ -1,7 +1,7 @@
 """Shock setups: one shock id per corner, read, written and enumerated.
 
-A setup names one shock of the team's shock library (``ident.shocks``) for
-each corner ``LF RF LR RR`` (:data:`ident.channels.CORNERS`). The planner
+A setup names one shock of the team's shock library (``ident.models.shocks``) for
+each corner ``LF RF LR RR`` (:data:`ident.data.channels.CORNERS`). The planner
 predicts metrics for many setups and ranks them (:mod:`planner.objective`).
 
 File format (``setups.csv``, the rig-session spec's "Setups")::
@@ -23,7 +23,7 @@ Generated names (:func:`enumerate_setups`) are compact by default:
 
 Examples
 --------
->>> from ident.shocks import LinearShock, ShockLibrary
+>>> from ident.models.shocks import LinearShock, ShockLibrary
 >>> lib = ShockLibrary.from_models([LinearShock("B20", 3502.5),
 ...                                 LinearShock("D8", 1400.0, count=2)])
 >>> [s.name for s in enumerate_setups(lib)]   # D8 x4 skipped: the team has 2
@@ -51,9 +51,9 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from ident._io import atomic_write_text, check_can_write
-from ident.channels import CORNERS
-from ident.errors import PlannerError
+from ident.data.files import atomic_write_text, check_can_write
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
 
 __all__ = [
     "SYMMETRIES",
@@ -102,7 +102,7 @@ def _library_ids(library, where):
     if not isinstance(library, Mapping):
         raise TypeError(f"{where}: library must be a ShockLibrary (or a mapping id -> "
                         f"ShockModel), got {type(library).__name__}; read one with "
-                        "ident.shocks.read_shock_library")
+                        "ident.models.shocks.read_shock_library")
     return list(library)
 
 
@@ -553,7 +553,7 @@ def inventory_shortfall(setup, library):
 
     Examples
     --------
-    >>> from ident.shocks import LinearShock, ShockLibrary
+    >>> from ident.models.shocks import LinearShock, ShockLibrary
     >>> lib = ShockLibrary([LinearShock("B20", 3500.0, count=2), LinearShock("L8", 1400.0)])
     >>> inventory_shortfall(Setup("x", dict(LF="B20", RF="B20", LR="B20", RR="L8")), lib)
     "needs 3 x 'B20' but the library's count is 2"
@@ -680,7 +680,7 @@ def enumerate_setups(library, *, symmetry="left-right", axles="independent", fix
 
     Examples
     --------
-    >>> from ident.shocks import LinearShock, ShockLibrary
+    >>> from ident.models.shocks import LinearShock, ShockLibrary
     >>> lib = ShockLibrary.from_models([LinearShock(f"S{k}", 1000.0 * k) for k in range(1, 11)])
     >>> len(enumerate_setups(lib)), len(enumerate_setups(lib, symmetry="none"))
     (100, 10000)

@@ -51,7 +51,7 @@ The sweep's screening scores agree with ``rank_setups``' (``score_setups``) to r
 
 Examples
 --------
->>> from ident.shocks import LinearShock, ShockLibrary
+>>> from ident.models.shocks import LinearShock, ShockLibrary
 >>> lib = ShockLibrary.from_models([LinearShock(f"S{k}", 1000.0 * k) for k in range(1, 31)])
 >>> space = setup_space(lib, symmetry="none")
 >>> len(space), space.names([0, 1, 809_999])
@@ -74,9 +74,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from ident.channels import CORNERS, RIG_INPUTS
-from ident.errors import PlannerError
-from ident.model import LOOP_REDUCE_RTOL
+from ident.data.channels import CORNERS, RIG_INPUTS
+from planner.errors import PlannerError
+from ident.identify.model import LOOP_REDUCE_RTOL
 
 __all__ = [
     "SCHEDULER_NONE",
@@ -316,7 +316,7 @@ def setup_space(library, *, setups=None, symmetry="left-right", axles="independe
 
     Parameters
     ----------
-    library : ident.shocks.ShockLibrary
+    library : ident.models.shocks.ShockLibrary
         The crate; its ``count`` is the inventory.
     setups : sequence of planner.setups.Setup, optional
         A given list (unique names); then the enumeration options must stay at their
@@ -415,7 +415,7 @@ class _ShockTable:
         n = len(models)
         kv, kf = np.zeros((n, K)), np.zeros((n, K))
         nk = np.zeros(n, dtype=np.int64)
-        for j, p in enumerate(pwls):  # padded like ident.closedloop._pack_setups
+        for j, p in enumerate(pwls):  # padded like ident.sim.closedloop._pack_setups
             k = p.v_knots_m_s.size
             kv[j, :k], kf[j, :k] = p.v_knots_m_s, p.f_knots_n
             kv[j, k:], kf[j, k:] = p.v_knots_m_s[-1], p.f_knots_n[-1]
@@ -553,7 +553,7 @@ def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_ba
     planner.predict.Predictions
         As ``screen_setups`` returns; ``settings["scheduler"]`` names where it ran.
     """
-    from ident.closedloop import _pack_setups
+    from ident.sim.closedloop import _pack_setups
     from planner.predict import resolve_setups
     from planner.screen import screening_predictions
 
@@ -837,7 +837,7 @@ def _as_list(x, what, kind=None):
 
 def _prepare_case(label, model, drive, band_hz, n_bands, reduce_rtol):
     """The plant, the drive at the model's rate and the screening operands of one case."""
-    from ident.drive import check_drive_inputs
+    from ident.data.drive import check_drive_inputs
     from planner.predict import as_loop_plant, prepare_drive
     from planner.screen import drive_bands, screen_operands
 
@@ -954,9 +954,9 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     ----------
     models : model, sequence of models, or mapping name -> model
         Each a VehicleModel, FullCarModel, VehicleParams or LoopPlant.
-    drives : ident.drive.Drive, sequence of drives, or mapping name -> drive
+    drives : ident.data.drive.Drive, sequence of drives, or mapping name -> drive
         Every model is swept on every drive: ``len(models) * len(drives)`` cases.
-    library : ident.shocks.ShockLibrary
+    library : ident.models.shocks.ShockLibrary
     setups : sequence of planner.setups.Setup, optional
         The candidates; default the enumeration of `constraints`.
     constraints : dict, optional
@@ -1029,7 +1029,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         raise PlannerError("sweep: give either setups or constraints, not both")
     space = setup_space(library, setups=setups, **(constraints or {}))
     model_list = _as_list(models, "models")
-    from ident.drive import Drive
+    from ident.data.drive import Drive
 
     drive_list = _as_list(drives, "drives", Drive)
     labels = _case_labels(model_list, drive_list)

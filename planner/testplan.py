@@ -3,7 +3,7 @@
 ``write_plan(plan, out_dir)`` writes, into a folder built aside and moved into
 place:
 
-- ``plan.toml``: a rig plan (``format = "rig-plan/1"``, :mod:`ident.rig`) whose
+- ``plan.toml``: a rig plan (``format = "rig-plan/1"``, :mod:`ident.sim.rig`) whose
   runs play the drive files below, so ``shockplan rig simulate --plan`` runs it
   as is; a real rig's session of the same runs is what ``shockplan identify``
   expects next;
@@ -54,13 +54,13 @@ from openpyxl.styles import Alignment, Border, Font, PatternFill, Side
 from openpyxl.utils import get_column_letter
 from openpyxl.worksheet.pagebreak import Break
 
-from ident._io import atomic_dir, atomic_path, check_can_write
-from ident.channels import CORNERS
-from ident.drive import write_drive
-from ident.errors import PlannerError
-from ident.metrics import METRIC_QUANTITY
-from ident.shocks import write_shock_library
-from ident.units import UNIT_LABELS, check_units, from_si, to_si
+from ident.data.files import atomic_dir, atomic_path, check_can_write
+from ident.data.channels import CORNERS
+from ident.data.drive import write_drive
+from planner.errors import PlannerError
+from ident.sim.metrics import METRIC_QUANTITY
+from ident.models.shocks import write_shock_library
+from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from planner.design import ExperimentPlan
 from planner.report import (PRINT_MARGINS_IN, column_label, fit_column_width, print_setup,
                              text_width, wrap_lines)

@@ -6,7 +6,7 @@ estimated here and combined into one interval per setup and metric:
 
 1. **Random error of the FRF estimate** (sensor noise, finite records). Each
    line of the conditioned FRF has a complex standard error ``sigma``
-   (:func:`ident.condition.conditioned_standard_error`: the estimator's own
+   (:func:`ident.identify.condition.conditioned_standard_error`: the estimator's own
    variance, reduced by the smoothing), and the errors of neighbouring lines
    are correlated over the smoothing width. A Monte Carlo draw perturbs every
    pair at the screening's band centres by complex Gaussian relative errors
@@ -53,10 +53,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from ident.channels import SHOCK_VELOCITIES
-from ident.drive import check_drive_inputs
-from ident.frf import embed_inputs
-from ident.condition import conditioned_error_kernel, conditioned_standard_error
+from ident.data.channels import SHOCK_VELOCITIES
+from ident.data.drive import check_drive_inputs
+from ident.identify.frf import embed_inputs
+from ident.identify.condition import conditioned_error_kernel, conditioned_standard_error
 
 __all__ = ["Uncertainty", "FrfPlant", "frf_relative_error", "error_correlation",
            "prediction_uncertainty", "unresolved_pairs", "MAX_RELATIVE_ERROR",
@@ -153,7 +153,7 @@ def frf_relative_error(frf):
     """Relative standard error of every conditioned FRF line, shape (n_out, n_in, n_f).
 
     ``sigma / |H|`` with ``sigma`` the complex standard error of the
-    conditioned estimate (:func:`ident.condition.conditioned_standard_error`:
+    conditioned estimate (:func:`ident.identify.condition.conditioned_standard_error`:
     ``E|H_est - H|^2 = sigma^2``; the error of ``|H|`` and of the phase are
     each ``sigma / sqrt(2)``), capped at :data:`MAX_RELATIVE_ERROR`. Lines
     replaced in conditioning (residual fits) take the median error of the
@@ -175,7 +175,7 @@ def frf_relative_error(frf):
 def error_correlation(frf, f_hz):
     """Correlation of the conditioned FRF's errors between frequencies, shape (n, n).
 
-    ``rho(f_i - f_j)`` from :func:`ident.condition.conditioned_error_kernel`:
+    ``rho(f_i - f_j)`` from :func:`ident.identify.condition.conditioned_error_kernel`:
     the raw estimate's errors, correlated over its estimation window, then
     smoothed by the conditioning.
 
@@ -207,11 +207,11 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
 
     Parameters
     ----------
-    model : ident.model.VehicleModel
+    model : ident.identify.model.VehicleModel
         Must carry its conditioned FRF (``model.frf``).
-    drive : ident.drive.Drive
+    drive : ident.data.drive.Drive
     setups : sequence of planner.setups.Setup
-    library : ident.shocks.ShockLibrary
+    library : ident.models.shocks.ShockLibrary
     n_draws : int
         Monte Carlo draws of the random part (at least 2).
     seed : int

@@ -14,7 +14,7 @@ Perturbations
 -------------
 ``shock_scale``
     Force multiplier of the shocks at some corners or of some shock ids (dyno
-    tolerance, fade): the scaled shocks (:meth:`ident.shocks.ShockModel.scaled`) are
+    tolerance, fade): the scaled shocks (:meth:`ident.models.shocks.ShockModel.scaled`) are
     simulated by :func:`planner.predict.predict_setups`, the same code path as a
     prediction with a scaled library.
 ``shock_lag``
@@ -95,9 +95,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ident.channels import AERO_INPUTS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
-from ident.errors import PlannerError
-from ident.units import check_units, to_si
+from ident.data.channels import AERO_INPUTS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
+from planner.errors import PlannerError
+from ident.data.units import check_units, to_si
 
 __all__ = [
     "FACTOR_KINDS",
@@ -177,7 +177,7 @@ class Factor:
         default the kind's (:data:`FACTOR_KINDS`).
     levels : tuple
         Values of the one-at-a-time and factorial designs (floats; ``(start_s, end_s)``
-        windows; :class:`ident.drive.Drive` for drive files).
+        windows; :class:`ident.data.drive.Drive` for drive files).
     distribution : tuple or None
         ``("uniform", low, high)`` or ``("normal", mean, sd)`` (SI) for Monte Carlo.
     independent : bool
@@ -401,13 +401,13 @@ def _number(where, key, x):
 
 
 def _vehicle_keys():
-    from ident.vehicle import _KEYS
+    from ident.models.vehicle import _KEYS
 
     return _KEYS
 
 
 def _parse_factor(t, units, where, base_dir):
-    from ident.drive import read_drive
+    from ident.data.drive import read_drive
 
     if not isinstance(t, dict):
         raise PlannerError(f"{where}: must be a table [[factor]]")
@@ -605,7 +605,7 @@ def read_perturbations(path):
         parameter, a non-positive multiplier, a bad window or a missing drive file: the
         message names the file, the factor and the key.
     """
-    from ident._io import read_toml
+    from ident.data.files import read_toml
 
     path = Path(path)
     doc = read_toml(path, error=PlannerError, what="perturbation file")
@@ -680,7 +680,7 @@ def stiffened_plant(plant, *, spring_n_m=None, arb_n_m=None, name=None):
 
     Parameters
     ----------
-    plant : ident.closedloop.LoopPlant
+    plant : ident.sim.closedloop.LoopPlant
         Must have the outputs ``shock_travel_XX``.
     spring_n_m : array_like, shape (4,), optional
         Spring wheel-rate change per corner LF, RF, LR, RR [N/m].
@@ -690,7 +690,7 @@ def stiffened_plant(plant, *, spring_n_m=None, arb_n_m=None, name=None):
 
     Returns
     -------
-    ident.closedloop.LoopPlant
+    ident.sim.closedloop.LoopPlant
         The rig part is the series connection of the rig part and the stiffened shock
         part (a spring transmits rig-driven travel as a force); the ``spring_force_XX``
         outputs (if any, the coil's force) include the spring changes, not the bars.
@@ -701,7 +701,7 @@ def stiffened_plant(plant, *, spring_n_m=None, arb_n_m=None, name=None):
         If the plant has no shock-travel outputs, or the stiffened loop cannot be put
         in modal form (repeated poles).
     """
-    from ident.closedloop import LoopPlant, modal_form
+    from ident.sim.closedloop import LoopPlant, modal_form
 
     for what, v, n in (("spring_n_m", spring_n_m, 4), ("arb_n_m", arb_n_m, 2)):
         if v is not None and (np.shape(v) != (n,) or not np.all(np.isfinite(v))):
@@ -834,7 +834,7 @@ def _drive_key(e):
 
 
 def _known_params(model):
-    from ident.vehicle import FullCarModel, VehicleParams
+    from ident.models.vehicle import FullCarModel, VehicleParams
 
     if isinstance(model, VehicleParams):
         return model
@@ -917,7 +917,7 @@ def _changed_params(params, e, where):
 
 def _condition_plant(model, base_plant, e, where, nominal_rates):
     """The loop plant of a condition (the model's own when nothing structural changes)."""
-    from ident.vehicle import build_full_car
+    from ident.models.vehicle import build_full_car
 
     params = _known_params(model)
     structural = (np.any(e.spring_add) or np.any(e.spring_scale != 1) or np.any(e.arb_add)
@@ -947,7 +947,7 @@ def _condition_plant(model, base_plant, e, where, nominal_rates):
 
 
 def _condition_drive(drive, e, where):
-    from ident.drive import Drive
+    from ident.data.drive import Drive
 
     if e.drive is not None:
         drive = e.drive
@@ -997,7 +997,7 @@ class _ShockVariants:
         return self._key[key]
 
     def full_library(self):
-        from ident.shocks import ShockLibrary
+        from ident.models.shocks import ShockLibrary
 
         return ShockLibrary(list(self.library.values()) + list(self.extra.values()),
                             source=self.library.source)
@@ -1077,13 +1077,13 @@ class WhatIf:
 
 
 def _as_drives(drives):
-    from ident.drive import Drive
+    from ident.data.drive import Drive
 
     if isinstance(drives, Drive):
         return [drives]
     drives = list(drives)
     if not drives or not all(isinstance(d, Drive) for d in drives):
-        raise TypeError("drives must be an ident.drive.Drive or a non-empty sequence of them")
+        raise TypeError("drives must be an ident.data.drive.Drive or a non-empty sequence of them")
     names = [d.name for d in drives]
     if len(set(names)) != len(names):
         raise PlannerError(f"the drives' names {names} repeat; give each drive its own name")
@@ -1145,9 +1145,9 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
 
     Parameters
     ----------
-    plant : ident.closedloop.LoopPlant
+    plant : ident.sim.closedloop.LoopPlant
         The condition's plant (built by the client).
-    drive : ident.drive.Drive
+    drive : ident.data.drive.Drive
         The prepared nominal drive; the condition's drive is derived here
         (:func:`_condition_drive`: a window, channel scales, elementwise).
     effect : _Effect
@@ -1155,9 +1155,9 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
         The condition's name for error messages.
     setups : list of planner.setups.Setup, shape (n,)
         Condition setups (names ``"<setup>\\x1f<drive>:<perturbation>"``).
-    library : ident.shocks.ShockLibrary
+    library : ident.models.shocks.ShockLibrary
         The crate.
-    extra : list of ident.shocks.ShockModel
+    extra : list of ident.models.shocks.ShockModel
         The scaled or lagged shocks `setups` use.
     method, oversample, band_hz
         As :func:`evaluate_whatif`.
@@ -1173,7 +1173,7 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
     """
     from threadpoolctl import threadpool_limits
 
-    from ident.shocks import ShockLibrary
+    from ident.models.shocks import ShockLibrary
     from planner.sweep import _KERNEL_LOCK
 
     lib = ShockLibrary(list(library.values()) + list(extra), source=library.source) \
@@ -1228,11 +1228,11 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
         Identified or known. Spring and anti-roll bar changes act on any (exactly: a
         feedback through the shock travel on identified models, the parameters on known
         ones); vehicle-parameter changes need a known model.
-    drives : ident.drive.Drive or sequence of Drive
+    drives : ident.data.drive.Drive or sequence of Drive
         Every condition is evaluated on every drive; the first is the nominal one.
     setups : sequence of planner.setups.Setup
         The setups (e.g. the top of a ranking); the baseline is added if missing.
-    library : ident.shocks.ShockLibrary
+    library : ident.models.shocks.ShockLibrary
     perturbations : PerturbationSet
     objective : planner.objective.Objective, optional
         Default :func:`planner.objective.default_objective`.
@@ -1693,7 +1693,7 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
     from openpyxl import Workbook
     from openpyxl.styles import Font, PatternFill
 
-    from ident._io import atomic_dir
+    from ident.data.files import atomic_dir
     from planner.report import ranking_to_units
 
     units = check_units(units, where="units", error=PlannerError)

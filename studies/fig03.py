@@ -1,6 +1,6 @@
 """Frequency responses of the paper's full car at several damping levels (seed paper, Fig. 3).
 
-The known 7-DOF model (``ident.vehicle.build_full_car`` of the Table 1 car)
+The known 7-DOF model (``ident.models.vehicle.build_full_car`` of the Table 1 car)
 with linear shocks of equal damping at every corner gives the shock-velocity
 responses of Fig. 3 to three inputs: the chassis heave force, the left front
 wheelloader and the left front shock force (on top of the linear shocks). For
@@ -48,9 +48,9 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import brentq
 
-from ident.channels import CORNERS
-from ident.units import from_si, to_si
-from ident.vehicle import build_full_car, example_vehicle, modal_summary
+from ident.data.channels import CORNERS
+from ident.data.units import from_si, to_si
+from ident.models.vehicle import build_full_car, example_vehicle, modal_summary
 
 log = logging.getLogger("studies.fig03")
 

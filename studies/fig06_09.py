@@ -1,17 +1,17 @@
 """Identified FRFs against the known car: raw, conditioned, fit, ideal (paper Figs. 6-9).
 
-The virtual rig runs the seed paper's identification plan (``ident.rig.default_plan``:
+The virtual rig runs the seed paper's identification plan (``ident.sim.rig.default_plan``:
 a baseline run with the linear B20 shocks and four single-corner swaps to the
 nonlinear N8, the same 800 s band-limited white-noise drive in every run, no
 sensor noise) on the paper's car, and shockplan identifies the session with
-the defaults of ``ident.model.identify_session`` (LPM estimate, conditioning
+the defaults of ``ident.identify.model.identify_session`` (LPM estimate, conditioning
 with residual fits and 0.6 Hz smoothing, ``invfreqs`` fits with automatic
 orders). Only the plotted outputs are identified: every output is estimated,
 conditioned and fitted on its own, so their pairs are the same as those of
 ``identify_session`` on every output (checked to 1e-13), and the study runs
 several times faster.
 
-For each plotted output, two figures drawn by ``ident.plots.plot_frf`` (the
+For each plotted output, two figures drawn by ``ident.identify.plots.plot_frf`` (the
 figures of ``shockplan identify --plots``, with the ideal response added):
 
 - the shock-force inputs ``dF_XX`` (paper Figs. 6-8: left front shock velocity,
@@ -55,12 +55,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ident.condition import condition_frf
-from ident.frf import DF_INPUTS, estimate_frf
-from ident.model import fit_model
-from ident.plots import plot_frf
-from ident.rig import default_plan, simulate_session
-from ident.vehicle import build_full_car, example_vehicle
+from ident.identify.condition import condition_frf
+from ident.identify.frf import DF_INPUTS, estimate_frf
+from ident.identify.model import fit_model
+from ident.identify.plots import plot_frf
+from ident.sim.rig import default_plan, simulate_session
+from ident.models.vehicle import build_full_car, example_vehicle
 
 log = logging.getLogger("studies.fig06_09")
 

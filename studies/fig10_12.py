@@ -1,8 +1,8 @@
 """Validation: identified model against the known car on crate setups (paper Figs. 10-12).
 
-The virtual rig runs the seed paper's identification plan (``ident.rig.default_plan``,
+The virtual rig runs the seed paper's identification plan (``ident.sim.rig.default_plan``,
 runs of ``--run-s``, no sensor noise) on the paper's car and shockplan
-identifies it with the defaults of ``ident.model.identify_session``; only the
+identifies it with the defaults of ``ident.identify.model.identify_session``; only the
 outputs the metrics need are identified (``planner.predict.METRIC_OUTPUTS``:
 every output is estimated and fitted on its own, so these pairs are those of a
 full identification). Both the identified model and the known car (the same
@@ -47,15 +47,15 @@ import numpy as np
 import pandas as pd
 from scipy.signal import welch
 
-from ident.closedloop import simulate_batch
-from ident.condition import condition_frf
-from ident.frf import estimate_frf
-from ident.metrics import METRIC_QUANTITY, bandpass
-from ident.model import fit_model
-from ident.rig import default_plan, make_plan_drive, simulate_session
-from ident.shocks import read_shock_library
-from ident.units import from_si
-from ident.vehicle import build_full_car, example_vehicle
+from ident.sim.closedloop import simulate_batch
+from ident.identify.condition import condition_frf
+from ident.identify.frf import estimate_frf
+from ident.sim.metrics import METRIC_QUANTITY, bandpass
+from ident.identify.model import fit_model
+from ident.sim.rig import default_plan, make_plan_drive, simulate_session
+from ident.models.shocks import read_shock_library
+from ident.data.units import from_si
+from ident.models.vehicle import build_full_car, example_vehicle
 from planner.demo import DEMO_LIBRARY_PATH
 from planner.predict import METRIC_OUTPUTS, as_loop_plant, predict_setups, resolve_setups
 from planner.setups import Setup

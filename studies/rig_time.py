@@ -40,12 +40,12 @@ import numpy as np
 import pandas as pd
 from scipy.stats import spearmanr
 
-from ident.drive import make_track_drive
-from ident.metrics import METRIC_NAMES
-from ident.model import identify_session
-from ident.rig import PlanRun, default_plan, read_rig_plan, simulate_session
-from ident.shocks import read_shock_library
-from ident.vehicle import build_full_car, example_vehicle
+from ident.data.drive import make_track_drive
+from ident.sim.metrics import METRIC_NAMES
+from ident.identify.model import identify_session
+from ident.sim.rig import PlanRun, default_plan, read_rig_plan, simulate_session
+from ident.models.shocks import read_shock_library
+from ident.models.vehicle import build_full_car, example_vehicle
 from planner.demo import DEMO_LIBRARY_PATH
 from planner.design import default_rig, design_experiment
 from planner.objective import default_objective, score_setups

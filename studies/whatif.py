@@ -33,11 +33,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ident.drive import make_track_drive
-from ident.model import identify_session
-from ident.rig import default_plan, simulate_session
-from ident.shocks import read_shock_library
-from ident.vehicle import example_vehicle
+from ident.data.drive import make_track_drive
+from ident.identify.model import identify_session
+from ident.sim.rig import default_plan, simulate_session
+from ident.models.shocks import read_shock_library
+from ident.models.vehicle import example_vehicle
 from planner.demo import DEMO_LIBRARY_PATH
 from planner.rank import rank_setups
 from planner.setups import Setup

@@ -5,7 +5,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ident.channels import CORNERS
+from ident.data.channels import CORNERS
 
 
 @pytest.fixture
@@ -17,7 +17,7 @@ def rng():
 @pytest.fixture(scope="session")
 def paper_vehicle():
     """The seed paper's Table 1 car, SI."""
-    from ident.vehicle import example_vehicle
+    from ident.models.vehicle import example_vehicle
 
     return example_vehicle()
 
@@ -25,7 +25,7 @@ def paper_vehicle():
 @pytest.fixture(scope="session")
 def paper_model(paper_vehicle):
     """The 7-DOF full-car state-space model of the paper car."""
-    from ident.vehicle import build_full_car
+    from ident.models.vehicle import build_full_car
 
     return build_full_car(paper_vehicle)
 
@@ -33,7 +33,7 @@ def paper_model(paper_vehicle):
 @pytest.fixture(scope="session")
 def paper_plan():
     """The built-in plan: the paper's identification experiment."""
-    from ident.rig import default_plan
+    from ident.sim.rig import default_plan
 
     return default_plan()
 
@@ -41,7 +41,7 @@ def paper_plan():
 @pytest.fixture(scope="session")
 def linear_session(paper_plan):
     """One 800 s run of the paper drive with linear B20 shocks (no shock loop error)."""
-    from ident.rig import PlanRun, simulate_session
+    from ident.sim.rig import PlanRun, simulate_session
 
     plan = replace(paper_plan, runs=(PlanRun("linear", {c: "B20" for c in CORNERS}, "baseline",
                                              1, 800.0),))
@@ -51,7 +51,7 @@ def linear_session(paper_plan):
 @pytest.fixture(scope="session")
 def paper_session(paper_plan):
     """The paper's experiment (5 runs x 800 s) from the virtual rig."""
-    from ident.rig import simulate_session
+    from ident.sim.rig import simulate_session
 
     return simulate_session(paper_plan)
 
@@ -61,7 +61,7 @@ def identified_model(paper_session):
     """The paper session identified with the default settings."""
     import warnings
 
-    from ident.model import identify_session
+    from ident.identify.model import identify_session
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -76,7 +76,7 @@ FOUR_POST_RUN_S = 100.0
 @pytest.fixture(scope="session")
 def four_post_session(paper_plan):
     """The paper's plan on a 4-post rig (no aero actuators, no aero channels), short runs."""
-    from ident.rig import simulate_session
+    from ident.sim.rig import simulate_session
 
     runs = tuple(replace(r, duration_s=FOUR_POST_RUN_S) for r in paper_plan.runs)
     return simulate_session(replace(paper_plan, rig="4-post", runs=runs))
@@ -87,7 +87,7 @@ def four_post_model(four_post_session):
     """The 4-post session identified with the default settings."""
     import warnings
 
-    from ident.model import identify_session
+    from ident.identify.model import identify_session
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -97,7 +97,7 @@ def four_post_model(four_post_session):
 @pytest.fixture(scope="session")
 def validation_drive(paper_plan, paper_vehicle):
     """A 300 s paper drive of another seed than the identification runs."""
-    from ident.rig import make_plan_drive
+    from ident.sim.rig import make_plan_drive
 
     return make_plan_drive(paper_plan, paper_vehicle, seed=77, duration_s=300.0)
 
@@ -105,7 +105,7 @@ def validation_drive(paper_plan, paper_vehicle):
 @pytest.fixture(scope="session")
 def demo_library():
     """The built-in shock crate of the demo (11 shocks)."""
-    from ident.shocks import read_shock_library
+    from ident.models.shocks import read_shock_library
     from planner.demo import DEMO_LIBRARY_PATH
 
     return read_shock_library(DEMO_LIBRARY_PATH)
@@ -114,7 +114,7 @@ def demo_library():
 @pytest.fixture(scope="session")
 def track_drive(paper_vehicle):
     """A 60 s track-like drive for the paper car."""
-    from ident.drive import make_track_drive
+    from ident.data.drive import make_track_drive
 
     return make_track_drive(duration_s=60.0, fs_hz=100.0, seed=3,
                             wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,

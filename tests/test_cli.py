@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ident.session import read_session
+from ident.data.session import read_session
 from planner.cli import main
 
 
@@ -29,7 +29,7 @@ def test_rig_simulate_writes_a_session(tmp_path, capsys):
 
 def test_rig_simulate_four_post(tmp_path, capsys):
     """--rig 4-post: the runs have the wheelloaders and no aero channels (issue 12)."""
-    from ident.channels import AERO_INPUTS, WHEELLOADER_INPUTS
+    from ident.data.channels import AERO_INPUTS, WHEELLOADER_INPUTS
 
     out = tmp_path / "four-post"
     assert main(["-q", "rig", "simulate", "--duration", "10", "--rig", "4-post",
@@ -79,9 +79,9 @@ def _small_session(tmp_path):
 
 @pytest.mark.slow
 def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
-    from ident.drive import make_track_drive, write_drive
-    from ident.model import load_model
-    from ident.shocks import read_shock_library, write_shock_library
+    from ident.data.drive import make_track_drive, write_drive
+    from ident.identify.model import load_model
+    from ident.models.shocks import read_shock_library, write_shock_library
     from planner.demo import DEMO_LIBRARY_PATH
 
     sess = _small_session(tmp_path)
@@ -134,8 +134,8 @@ def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
 def test_optimize_command(tmp_path, capsys, paper_vehicle):
     """``shockplan optimize`` end to end on a short drive (imperial files), and its refusals:
     constraints no curve meets (one line naming them, nothing written), an existing folder."""
-    from ident.drive import make_track_drive, write_drive
-    from ident.shocks import read_shock_library
+    from ident.data.drive import make_track_drive, write_drive
+    from ident.models.shocks import read_shock_library
     from planner.demo import DEMO_LIBRARY_PATH
 
     drive = make_track_drive(duration_s=30.0, fs_hz=100.0, seed=2,
@@ -168,7 +168,7 @@ def test_whatif_command(tmp_path, capsys, paper_vehicle, track_drive):
 
     import pandas as pd
 
-    from ident.drive import Drive, write_drive
+    from ident.data.drive import Drive, write_drive
     from planner.demo import DEMO_LIBRARY_PATH
 
     n = int(20 * track_drive.fs_hz)

@@ -1,17 +1,17 @@
-"""Tests of ident.closedloop: modal discretization and the shock loop."""
+"""Tests of ident.sim.closedloop: modal discretization and the shock loop."""
 
 import numpy as np
 import pytest
 from scipy import integrate, signal
 
-from ident.channels import RIG_INPUTS
-from ident.closedloop import (_refine, foh_coefficients, hold_coefficients, lag_coefficients,
+from ident.data.channels import RIG_INPUTS
+from ident.sim.closedloop import (_refine, foh_coefficients, hold_coefficients, lag_coefficients,
                               lag_hold_coefficients, modal_form, rig_response, simulate,
                               simulate_batch)
-from ident.drive import make_noise_drive
-from ident.shocks import DigressiveShock, LinearShock, TableShock
-from ident.units import to_si
-from ident.vehicle import close_shock_loop
+from ident.data.drive import make_noise_drive
+from ident.models.shocks import DigressiveShock, LinearShock, TableShock
+from ident.data.units import to_si
+from ident.models.vehicle import close_shock_loop
 
 RTOL_EXACT = 1e-9  # exact discretizations: round-off only
 RTOL_LOOP_R8 = 3e-3  # quadratic hold of dF between internal samples at 8x oversampling
@@ -257,8 +257,8 @@ def test_batch_metrics_equal_metrics_of_the_batch(paper_model, rng):
     loop, from the loop's own shock velocities and one averaged output per ride-height
     pair) gives compute_metrics' numbers on simulate_batch's channels to rounding: the
     spec's band, split bands, normalized tire forces, a subset of outputs, one setup."""
-    from ident.closedloop import simulate_batch_metrics
-    from ident.metrics import compute_metrics
+    from ident.sim.closedloop import simulate_batch_metrics
+    from ident.sim.metrics import compute_metrics
 
     drive = _drive(8.0, scale=1.5)
     plant = paper_model.loop_plant(C20)
@@ -286,7 +286,7 @@ def test_batch_metrics_equal_metrics_of_the_batch(paper_model, rng):
 def test_batch_metrics_of_a_setup_do_not_depend_on_its_batch(paper_model, rng):
     """A setup's metrics are the same bits alone, in a batch of any size or at any place
     in it (chunked and distributed predictions rely on it)."""
-    from ident.closedloop import simulate_batch_metrics
+    from ident.sim.closedloop import simulate_batch_metrics
 
     drive = _drive(6.0, scale=1.5)
     plant = paper_model.loop_plant(C20)
@@ -303,7 +303,7 @@ def test_batch_metrics_of_a_setup_do_not_depend_on_its_batch(paper_model, rng):
 
 
 def test_batch_metrics_of_a_too_short_drive_name_the_channel(paper_model):
-    from ident.closedloop import simulate_batch_metrics
+    from ident.sim.closedloop import simulate_batch_metrics
 
     plant = paper_model.loop_plant(C20)
     peak = {w: 0.02 for w in RIG_INPUTS[3:]}
@@ -315,7 +315,7 @@ def test_batch_metrics_of_a_too_short_drive_name_the_channel(paper_model):
 def test_zero_mode_padding_changes_nothing(paper_model, rng, monkeypatch):
     """The shock loop's modes padded with zero modes (to whole vectors) give the numbers
     and Newton iteration counts of the unpadded loop to the last bit."""
-    import ident.closedloop as cl
+    import ident.sim.closedloop as cl
 
     drive = _drive(6.0, scale=1.5)
     plant = paper_model.loop_plant(C20)
@@ -345,7 +345,7 @@ def test_same_curve_as_table_or_digressive_is_identical(paper_model):
 
 def test_lagged_linear_shock_matches_complex_damping(paper_model):
     """A linear shock with lag is the damping c / (1 + j w tau) in the frequency domain."""
-    from ident.frf import frf_from_arrays
+    from ident.identify.frf import frf_from_arrays
 
     tau = 0.01
     drive = _drive(400.0, seed=11)
@@ -405,7 +405,7 @@ def test_bad_options(paper_model):
 def test_refined_drive_keeps_offsets_and_samples():
     """Band-limited refinement passes the drive samples through and does not ring at
     the ends of a drive with a static offset."""
-    from ident.closedloop import _refine
+    from ident.sim.closedloop import _refine
 
     u = np.full((400, 2), 0.01)
     u[:, 1] += 0.001 * np.sin(2 * np.pi * 3.0 * np.arange(400) / 100.0)
@@ -438,7 +438,7 @@ def _rig_response_reference(plant, u_fine, h, r, names):
 def test_rig_kernel_equals_reference(paper_model, monkeypatch, r, outputs):
     """The compiled rig response (time chunks, states never stored) equals the plain
     numpy/lfilter one, on a record of several chunks that does not end on one."""
-    import ident.closedloop as cl
+    import ident.sim.closedloop as cl
 
     monkeypatch.setattr(cl, "_RIG_CHUNK", 997)
     plant = paper_model.loop_plant(np.array([C20, C30, C20, C30]))
@@ -457,7 +457,7 @@ def test_shock_step_at_rest_on_a_knot_converges():
     knot at 0 between a nearly flat and a steep segment (an optimizer's curve moved 5 %):
     the damped Newton iteration cycled on 1e-20 m/s half steps and reported failure; its
     convergence test counts velocities below 1 mm/s as 1 mm/s (``_V_SCALE_MIN_M_S``)."""
-    from ident.closedloop import _shock_step, _solver_state
+    from ident.sim.closedloop import _shock_step, _solver_state
 
     vfree = np.array([-2.3212568161800419e-20, -2.5951432654329554e-20, -3.9278851021791510e-20,
                       -3.8266021543416934e-20])

@@ -1,11 +1,11 @@
-"""Tests of ident.condition: residual fits and smoothing of an FRF."""
+"""Tests of ident.identify.condition: residual fits and smoothing of an FRF."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from ident.condition import (
+from ident.identify.condition import (
     TOLERANCE,
     condition_frf,
     conditioned_error_kernel,
@@ -13,7 +13,7 @@ from ident.condition import (
     frf_standard_error,
     residual_fit,
 )
-from ident.frf import Frf
+from ident.identify.frf import Frf
 
 
 def test_residual_fit_known_answer():

@@ -95,8 +95,8 @@ def test_case_gives_one_clear_error(corpus, name, capsys):
 
 
 def test_parquet_datetime_time_is_converted_to_seconds(corpus, tmp_path):
-    from ident.drive import read_drive
-    from ident.session import read_session
+    from ident.data.drive import read_drive
+    from ident.data.session import read_session
 
     base, _ = corpus
     folder = shutil.copytree(base["session_pq"], tmp_path / "s")
@@ -115,7 +115,7 @@ def test_parquet_datetime_time_is_converted_to_seconds(corpus, tmp_path):
 
 
 def test_drive_in_inches_read_as_si_warns(corpus, tmp_path, caplog):
-    from ident.drive import read_drive
+    from ident.data.drive import read_drive
 
     base, _ = corpus
     frame = pd.read_csv(base["drive"])
@@ -123,25 +123,25 @@ def test_drive_in_inches_read_as_si_warns(corpus, tmp_path, caplog):
     frame[wl] = frame[wl] / 0.0254  # an inch file
     path = tmp_path / "drive_in.csv"
     frame.to_csv(path, index=False)
-    with caplog.at_level(logging.WARNING, logger="ident.drive"):
+    with caplog.at_level(logging.WARNING, logger="ident.data.drive"):
         read_drive(path, units="SI")
     assert "--units imperial" in caplog.text and "drive_in.csv" in caplog.text
     caplog.clear()
-    with caplog.at_level(logging.WARNING, logger="ident.drive"):
+    with caplog.at_level(logging.WARNING, logger="ident.data.drive"):
         read_drive(path, units="imperial")
     assert caplog.text == ""
 
 
 def test_unknown_manifest_key_without_near_miss_is_kept_with_a_warning(corpus, tmp_path,
                                                                        caplog):
-    from ident.session import read_session
+    from ident.data.session import read_session
 
     base, _ = corpus
     folder = shutil.copytree(base["session"], tmp_path / "s")
     manifest = folder / "session.toml"
     manifest.write_text(manifest.read_text().replace('units = "SI"', 'units = "SI"\n'
                                                      'driver = "none"\nfs_hz = 100.0', 1))
-    with caplog.at_level(logging.WARNING, logger="ident.session"):
+    with caplog.at_level(logging.WARNING, logger="ident.data.session"):
         session = read_session(folder)
     assert session.extra == {"driver": "none", "fs_hz": 100.0}
     assert "'driver'" in caplog.text

@@ -9,9 +9,9 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import signal
 
-from ident.channels import CORNERS, RIG_INPUTS
-from ident.errors import PlannerError
-from ident.shocks import LinearShock, ShockLibrary
+from ident.data.channels import CORNERS, RIG_INPUTS
+from planner.errors import PlannerError
+from ident.models.shocks import LinearShock, ShockLibrary
 from planner import design as D
 from planner.design import (
     RigSpec,
@@ -215,10 +215,10 @@ def test_a_designed_plan_run_on_the_virtual_rig_identifies_the_car(paper_vehicle
 
     from scipy.stats import spearmanr
 
-    from ident.drive import make_track_drive
-    from ident.metrics import METRIC_NAMES
-    from ident.model import identify_session
-    from ident.rig import read_rig_plan, simulate_session
+    from ident.data.drive import make_track_drive
+    from ident.sim.metrics import METRIC_NAMES
+    from ident.identify.model import identify_session
+    from ident.sim.rig import read_rig_plan, simulate_session
     from planner.objective import score_setups
     from planner.predict import predict_setups
     from planner.setups import enumerate_setups

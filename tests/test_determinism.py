@@ -53,7 +53,7 @@ def _twice(tmp_path, args):
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory, track_drive):
     """A 20 s imperial drive, a ranking CSV and a perturbation file."""
-    from ident.drive import Drive, write_drive
+    from ident.data.drive import Drive, write_drive
 
     d = tmp_path_factory.mktemp("inputs")
     n = int(20 * track_drive.fs_hz)

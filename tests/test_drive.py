@@ -1,4 +1,4 @@
-"""Tests of ident.drive: the Drive container, the three generators (known
+"""Tests of ident.data.drive: the Drive container, the three generators (known
 spectra, peaks, delays), drive files (SI and imperial round trips) and
 resampling."""
 
@@ -8,8 +8,8 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import signal
 
-from ident.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS
-from ident.drive import (
+from ident.data.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS
+from ident.data.drive import (
     ISO8608_N0_CYCLES_M,
     Drive,
     make_noise_drive,
@@ -20,7 +20,7 @@ from ident.drive import (
     write_drive,
 )
 from ident.errors import DriveError, SessionError
-from ident.units import TO_SI
+from ident.data.units import TO_SI
 
 FS = 200.0  # Hz
 IN = 0.0254  # m
@@ -423,7 +423,7 @@ def test_resample_same_rate_and_bad_rate(noise):
 
 def _decimate_reference(x, r, n_out, lead):
     """Extend by (_FIR_HALF_LENGTH + 1) r samples each end, resample_bandlimited, slice."""
-    from ident.drive import _FIR_HALF_LENGTH, resample_bandlimited
+    from ident.data.drive import _FIR_HALF_LENGTH, resample_bandlimited
 
     pad = (_FIR_HALF_LENGTH + 1) * r
     xp = np.pad(x, (pad, 0), mode="edge" if lead == "edge" else "constant")
@@ -440,7 +440,7 @@ def _decimate_reference(x, r, n_out, lead):
 ])
 def test_fft_decimation_equals_polyphase_reference(rng, lead, r, n_in, n_out):
     """The FFT engine of the acquisition filter gives resample_bandlimited's numbers."""
-    from ident.drive import _decimate_bandlimited
+    from ident.data.drive import _decimate_bandlimited
 
     rows = [rng.standard_normal(n_in) + 3.0, np.linspace(-1.0, 2.0, n_in),
             np.where(np.arange(n_in) % 7 == 0, 1.0, 0.0)]
@@ -460,7 +460,7 @@ def test_fft_decimation_equals_polyphase_reference(rng, lead, r, n_in, n_out):
     ([np.zeros(10)], 2, 5, "mirror", "lead must be"),
 ])
 def test_fft_decimation_bad_input(rows, r, n_out, lead, match):
-    from ident.drive import _decimate_bandlimited
+    from ident.data.drive import _decimate_bandlimited
 
     with pytest.raises(ValueError, match=match):
         _decimate_bandlimited(rows, r, n_out, lead=lead)

@@ -1,4 +1,4 @@
-"""Tests of ident.fir: the FRF as FIR filters in the closed loop with the shocks."""
+"""Tests of ident.identify.fir: the FRF as FIR filters in the closed loop with the shocks."""
 
 import doctest
 import warnings
@@ -6,16 +6,16 @@ import warnings
 import numpy as np
 import pytest
 
-import ident.fir as firmod
-from ident.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES
-from ident.closedloop import lag_coefficients, simulate_batch
-from ident.drive import make_noise_drive
+import ident.identify.fir as firmod
+from ident.data.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES
+from ident.sim.closedloop import lag_coefficients, simulate_batch
+from ident.data.drive import make_noise_drive
 from ident.errors import FitWarning
-from ident.fir import FirPlant, fir_from_frf, simulate_fir_batch
-from ident.frf import MODEL_INPUTS, Frf
-from ident.metrics import compute_metrics
-from ident.shocks import DigressiveShock, LinearShock
-from ident.units import to_si
+from ident.identify.fir import FirPlant, fir_from_frf, simulate_fir_batch
+from ident.identify.frf import MODEL_INPUTS, Frf
+from ident.sim.metrics import compute_metrics
+from ident.models.shocks import DigressiveShock, LinearShock
+from ident.data.units import to_si
 
 FS = 100.0
 NPERSEG = 4096  # the paper's Welch block: 40.96 s, 0.024 Hz resolution
@@ -235,7 +235,7 @@ def test_fir_from_frf_rejects_bad_lengths(frf20, kwargs, exc, match):
 
 
 def test_fir_from_frf_rejects_bad_frf(frf20):
-    with pytest.raises(TypeError, match="ident.frf.Frf"):
+    with pytest.raises(TypeError, match="ident.identify.frf.Frf"):
         fir_from_frf(frf20.H)
     cut = _frf_with(frf20, f_hz=frf20.f_hz[:-10], H=frf20.H[..., :-10])
     with pytest.raises(ValueError, match="Welch grid"):

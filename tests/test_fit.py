@@ -1,4 +1,4 @@
-"""Tests of ident.fit: truth round trips (known transfer functions -> FRF -> fit ->
+"""Tests of ident.identify.fit: truth round trips (known transfer functions -> FRF -> fit ->
 poles, residues, FRF), weighting, stability, order selection, vector fitting, the
 modal conversions, and bad inputs."""
 
@@ -11,9 +11,9 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import signal
 
-from ident import fit as fitmod
+from ident.identify import fit as fitmod
 from ident.errors import FitWarning, IdentificationError
-from ident.fit import TfFit, VfFit, fit_common_poles, fit_tf, select_order, tf_fits_to_modal
+from ident.identify.fit import TfFit, VfFit, fit_common_poles, fit_tf, select_order, tf_fits_to_modal
 
 F_HZ = np.linspace(0.5, 20.0, 800)  # the paper's band on a Welch-like grid
 
@@ -281,7 +281,7 @@ def test_select_order_stops_early_only_when_the_choice_is_settled():
     # an order that reaches the floor ends the search only once no lower order can still be
     # chosen: a lower order within `improvement` of every higher order seen so far stays a
     # candidate until all higher orders are seen
-    from ident.fit import _order_settled
+    from ident.identify.fit import _order_settled
     assert _order_settled([(2, 0.5), (3, 0.0009)], 1e-3, 0.1)
     assert not _order_settled([(2, 0.00105), (3, 0.001)], 1e-3, 0.1)  # 2 still in
     assert _order_settled([(2, 0.00105), (3, 0.001), (4, 0.0005)], 1e-3, 0.1)

@@ -1,4 +1,4 @@
-"""Tests of ident.formats: RPC III, MDF and TDMS rig files in and out of rig sessions.
+"""Tests of ident.data.formats: RPC III, MDF and TDMS rig files in and out of rig sessions.
 
 The files are written by the libraries themselves (rpc3-file, asammdf, npTDMS) from a
 short virtual-rig session, with the rig's own channel names, other units (mm, kN, in/s,
@@ -18,10 +18,10 @@ from asammdf import MDF, Signal
 from nptdms import ChannelObject, TdmsWriter
 from numpy.testing import assert_allclose, assert_array_equal
 
-from ident.channels import CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS, kind_of
-from ident.drive import make_noise_drive
+from ident.data.channels import CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS, kind_of
+from ident.data.drive import make_noise_drive
 from ident.errors import DriveError, SessionError
-from ident.formats import (
+from ident.data.formats import (
     ChannelMap,
     apply_channel_map,
     export_drive_rpc3,
@@ -37,10 +37,10 @@ from ident.formats import (
     sniff_format,
     write_rpc3,
 )
-from ident.formats.channel_map import STANDARD_GRAVITY_M_S2
-from ident.rig import PlanRun, default_plan, simulate_session
-from ident.session import Run, append_runs, make_session, read_session, write_session
-from ident.shocks import LinearShock, ShockLibrary
+from ident.data.formats.channel_map import STANDARD_GRAVITY_M_S2
+from ident.sim.rig import PlanRun, default_plan, simulate_session
+from ident.data.session import Run, append_runs, make_session, read_session, write_session
+from ident.models.shocks import LinearShock, ShockLibrary
 
 # --------------------------------------------------------------------------------------
 # Tolerances (each with its reason)
@@ -140,7 +140,7 @@ def map_path(rig_session, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def shocks_path(rig_session, tmp_path_factory):
-    from ident.shocks import write_shock_library
+    from ident.models.shocks import write_shock_library
 
     path = tmp_path_factory.mktemp("shocks") / "shocks.toml"
     write_shock_library(rig_session.shocks, path)
@@ -429,7 +429,7 @@ def paper_plan_session():
 def _identify_and_predict(session, demo_library, track_drive):
     import warnings
 
-    from ident.model import identify_session
+    from ident.identify.model import identify_session
     from planner.predict import predict_setups
     from planner.setups import enumerate_setups
 
@@ -505,7 +505,7 @@ def test_imported_session_identifies_to_the_csv_model(case, paper_plan_session, 
 def test_import_a_four_post_rig(rig_session, shocks_path, tmp_path):
     """A map without aero channels imports a 4-post rig's files (no aero channels) into a
     session whose rig inputs are the wheelloaders; a file with aero channels needs no change."""
-    from ident.channels import AERO_INPUTS
+    from ident.data.channels import AERO_INPUTS
 
     run = rig_session.runs[0]
     four = Run(name=run.name, file=run.file, setup=run.setup, role=run.role, time_s=run.time_s,

@@ -1,4 +1,4 @@
-"""Tests of ident.frf: multi-input FRF estimation from rig runs."""
+"""Tests of ident.identify.frf: multi-input FRF estimation from rig runs."""
 
 from dataclasses import replace
 
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from ident.channels import CORNERS
+from ident.data.channels import CORNERS
 from ident.errors import IdentificationError
-from ident.frf import MODEL_INPUTS, block_spectra, default_nperseg, estimate_frf, frf_from_arrays
+from ident.identify.frf import MODEL_INPUTS, block_spectra, default_nperseg, estimate_frf, frf_from_arrays
 
 DB_STRONG = 0.5  # raw H1 on strong, coherent pairs (partial coherence > 0.99): leakage only
 DB_TOL, DEG_TOL = 1.0, 5.0  # issue 3: identified vs true closed-loop FRF
@@ -90,7 +90,7 @@ def test_sequential_agrees_with_global(paper_session):
 
 
 def _linear_session(paper_plan, setups):
-    from ident.rig import PlanRun, simulate_session
+    from ident.sim.rig import PlanRun, simulate_session
 
     runs = tuple(PlanRun(f"r{k}", s, "baseline" if k == 0 else "swap", 1, 60.0)
                  for k, s in enumerate(setups))
@@ -117,7 +117,7 @@ def test_refuses_linear_dependent_shocks_and_names_corner(paper_plan):
 
 
 def test_missing_shock_velocity(paper_plan):
-    from ident.session import Run
+    from ident.data.session import Run
 
     same = {c: "B20" for c in CORNERS}
     s = _linear_session(paper_plan, [same])

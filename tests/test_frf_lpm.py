@@ -1,4 +1,4 @@
-"""Tests of the local polynomial method of ident.frf (``estimator="lpm"``)."""
+"""Tests of the local polynomial method of ident.identify.frf (``estimator="lpm"``)."""
 
 from dataclasses import replace
 
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from ident.channels import CORNERS
+from ident.data.channels import CORNERS
 from ident.errors import IdentificationError
-from ident.frf import LPM_COHERENCE_DOF, MODEL_INPUTS, estimate_frf, frf_from_arrays
+from ident.identify.frf import LPM_COHERENCE_DOF, MODEL_INPUTS, estimate_frf, frf_from_arrays
 
 FS = 100.0
 #: Lightly damped modes of the synthetic system: (frequency [Hz], damping ratio).
@@ -124,7 +124,7 @@ def test_single_run_equals_list_of_one(rng):
 
 
 def _session(paper_plan, setups, duration_s, shocks=None):
-    from ident.rig import PlanRun, simulate_session
+    from ident.sim.rig import PlanRun, simulate_session
 
     runs = tuple(PlanRun(f"r{k}", s, "baseline" if k == 0 else "swap", 1, duration_s)
                  for k, s in enumerate(setups))
@@ -136,7 +136,7 @@ def _session(paper_plan, setups, duration_s, shocks=None):
 
 def test_session_truth_round_trip_linear_swaps(paper_plan, paper_model):
     """Paper car, one drive, swaps to a linear 8 lbf/(in/s) shock: exactly linear data (Eq. 21)."""
-    from ident.shocks import LinearShock, ShockLibrary
+    from ident.models.shocks import LinearShock, ShockLibrary
 
     b20 = paper_plan.shocks["B20"]
     lib = ShockLibrary([b20, LinearShock("L8", 0.4 * b20.c_n_s_m)])
@@ -164,7 +164,7 @@ def test_session_truth_round_trip_linear_swaps(paper_plan, paper_model):
 def test_distinct_realizations_counts_copies_once(rng):
     """Exact, scaled and noisy copies of one drive are one realization; independent drives
     and runs of other lengths are their own."""
-    from ident.frf import _distinct_realizations
+    from ident.identify.frf import _distinct_realizations
 
     x = rng.standard_normal(4000)
     noisy = [x + 0.005 * rng.standard_normal(x.size) for _ in range(4)]
@@ -187,7 +187,7 @@ def test_noisy_inputs_of_one_drive_keep_the_repeated_drive_window(paper_plan):
     base = {c: "B20" for c in CORNERS}
     setups = [base] + [dict(base, **{c: "N8"}) for c in CORNERS]
     clean = _session(paper_plan, setups, 60.0)
-    from ident.rig import PlanRun, simulate_session
+    from ident.sim.rig import PlanRun, simulate_session
 
     runs = tuple(PlanRun(f"r{k}", st, "baseline" if k == 0 else "swap", 1, 60.0)
                  for k, st in enumerate(setups))

@@ -20,14 +20,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ident.drive import read_drive
+from ident.data.drive import read_drive
 from ident.errors import ShockplanError
-from ident.formats import read_channel_map
-from ident.model import load_model
-from ident.rig import read_rig_plan
-from ident.session import read_run_table, read_session
-from ident.shocks import read_shock_library
-from ident.vehicle import read_vehicle
+from ident.data.formats import read_channel_map
+from ident.identify.model import load_model
+from ident.sim.rig import read_rig_plan
+from ident.data.session import read_run_table, read_session
+from ident.models.shocks import read_shock_library
+from ident.models.vehicle import read_vehicle
 from planner.design import read_rig
 from planner.objective import read_objective
 from planner.setups import read_setups
@@ -52,7 +52,7 @@ FUZZ = settings(derandomize=True, deadline=None, database=None,
 def base(tmp_path_factory):
     root = tmp_path_factory.mktemp("fuzz")
     files = make_corpus.build_base(root / "base")
-    files["vehicle"] = Path(__file__).resolve().parents[1] / "ident" / "data" / "paper_car.toml"
+    files["vehicle"] = Path(__file__).resolve().parents[1] / "ident" / "examples" / "paper_car.toml"
     files["work"] = root / "work"
     files["work"].mkdir()
     return files

@@ -1,4 +1,4 @@
-"""Tests of ident.metrics: known answers (a sine's RMS, Parseval), equivalences
+"""Tests of ident.sim.metrics: known answers (a sine's RMS, Parseval), equivalences
 (batched vs loop, object vs mapping), unit conversion and bad inputs."""
 
 from types import SimpleNamespace
@@ -8,8 +8,8 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import signal
 
-from ident.channels import CORNERS
-from ident.metrics import (
+from ident.data.channels import CORNERS
+from ident.sim.metrics import (
     BAND_SUFFIXES,
     METRIC_NAMES,
     METRIC_QUANTITY,
@@ -17,7 +17,7 @@ from ident.metrics import (
     bandpass,
     compute_metrics,
 )
-from ident.units import TO_SI
+from ident.data.units import TO_SI
 
 FS = 200.0  # Hz
 RTOL_SINE = 1e-3  # 600 cycles: the filtfilt edge transients weigh < 0.05 %
@@ -267,7 +267,7 @@ def test_batched_filter_equals_scipy(rng):
     scipy's sosfiltfilt, NaN rows stay NaN."""
     from scipy import signal
 
-    from ident.metrics import _FAST_MIN_SIZE, _design, _filtfilt
+    from ident.sim.metrics import _FAST_MIN_SIZE, _design, _filtfilt
 
     x = rng.standard_normal((3, 4, 6000))
     assert x.size >= _FAST_MIN_SIZE
@@ -289,7 +289,7 @@ def test_lane_blocks_equal_the_one_row_recurrence(rng):
     row exactly the one-row recurrence's result, and scipy's to round-off."""
     from scipy import signal
 
-    from ident.metrics import _LANES, _design, _sosfilt_inplace, _sosfiltfilt_rows
+    from ident.sim.metrics import _LANES, _design, _sosfilt_inplace, _sosfiltfilt_rows
 
     x = rng.standard_normal((2 * _LANES + 3, 1500)) * 50.0
     sos, padlen = _design((1.0, 20.0), 4, 100.0)
@@ -312,7 +312,7 @@ def test_lane_blocks_equal_the_one_row_recurrence(rng):
 def test_pairwise_sum_is_numpys(rng, n):
     """The fused metric's sums are numpy's pairwise summation to the last bit (so its means
     and mean squares are numpy's), on a column of a lane buffer."""
-    from ident.metrics import _pairwise_sum_col
+    from ident.sim.metrics import _pairwise_sum_col
 
     x = rng.standard_normal(n) * 1e3 + 7.0
     buf = np.zeros((n + 3, 4))
@@ -325,7 +325,7 @@ def test_pairwise_sum_is_numpys(rng, n):
 def test_pairwise_sum_of_all_lanes_is_numpys(rng, n):
     """The lane-wise pairwise sum (every lane at once, row by row, on an explicit stack)
     gives each lane numpy's sum and sum of squares to the last bit."""
-    from ident.metrics import _LANES, _PW_LEVELS, _pairwise_sum_lanes
+    from ident.sim.metrics import _LANES, _PW_LEVELS, _pairwise_sum_lanes
 
     buf = rng.standard_normal((n + 3, _LANES)) * 1e3 + 7.0
     out = np.empty(_LANES)
@@ -347,7 +347,7 @@ def test_metric_kernels_load_from_numba_cache(tmp_path):
 
     code = (
         "import numpy as np\n"
-        "from ident.metrics import compute_metrics\n"
+        "from ident.sim.metrics import compute_metrics\n"
         "rng = np.random.default_rng(3)\n"
         "y = rng.standard_normal((20, 2, 3000))\n"
         "m = compute_metrics({'tire_force_LF': y[:, 0], 'ride_height_LF': y[:, 0],\n"
@@ -372,7 +372,7 @@ def test_fused_metric_equals_its_steps(rng):
     a block of lanes not filled, a row with a NaN (NaN for that row only)."""
     from scipy import signal
 
-    from ident.metrics import _FAST_MIN_SIZE, _LANES, _design, _metric_signal
+    from ident.sim.metrics import _FAST_MIN_SIZE, _LANES, _design, _metric_signal
 
     fs = 100.0
     n_rows, n = 2 * _LANES + 5, 3000

@@ -13,9 +13,9 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 import planner.objective as objective_mod
-from ident.channels import CORNERS
-from ident.errors import PlannerError
-from ident.metrics import METRIC_NAMES
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
+from ident.sim.metrics import METRIC_NAMES
 from planner.objective import (
     OBJECTIVE_FORMAT,
     Objective,

@@ -9,9 +9,9 @@ import pandas as pd
 import pytest
 from numpy.testing import assert_allclose
 
-from ident.channels import CORNERS
-from ident.errors import PlannerError
-from ident.shocks import LinearShock, PiecewiseLinear, ShockLibrary, read_shock_library
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
+from ident.models.shocks import LinearShock, PiecewiseLinear, ShockLibrary, read_shock_library
 from planner.objective import Objective, default_objective, score_setups
 from planner.optimize import (
     CurveConstraints,
@@ -46,7 +46,7 @@ SMALL_KNOTS = (0.05, 0.15, 0.4)  # [m/s] three knots a side keep the test proble
 
 @pytest.fixture(scope="module")
 def short_drive(paper_vehicle):
-    from ident.drive import make_track_drive
+    from ident.data.drive import make_track_drive
 
     return make_track_drive(duration_s=40.0, fs_hz=100.0, seed=7,
                             wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,
@@ -260,7 +260,7 @@ def test_linear_curves_match_a_brute_force_scan(paper_model, short_drive):
 def test_bad_inputs(paper_model, short_drive, demo_library):
     """Unknown metrics, baselines, symmetries and drives at a rate too low are refused with the
     project's errors, before any solve."""
-    from ident.drive import resample_drive
+    from ident.data.drive import resample_drive
 
     norm = Objective("norm", {"tire_force_rms_norm_LF": 1.0})
     with pytest.raises(PlannerError, match="spec's metrics"):
@@ -302,7 +302,7 @@ def test_identified_model_optimum_holds_on_the_known_car(identified_model, paper
     """Issue 9 on the paper car: optimized on the model identified from the virtual rig (a
     120 s track drive, the built-in crate, left-right symmetric), the optimum's score on the
     known car agrees within 0.5 % and beats the crate's best there."""
-    from ident.drive import make_track_drive
+    from ident.data.drive import make_track_drive
 
     drive = make_track_drive(duration_s=120.0, fs_hz=100.0, seed=7,
                              wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,

@@ -1,4 +1,4 @@
-"""Tests of ident.plots: FRF figures from a small synthetic FRF and model, unit conversion
+"""Tests of ident.identify.plots: FRF figures from a small synthetic FRF and model, unit conversion
 read back from the drawn lines, PNG files written atomically, bad inputs."""
 
 import io
@@ -14,10 +14,10 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.testing import assert_allclose
 
-from ident.frf import DF_INPUTS, MODEL_INPUTS, Frf
-from ident.model import VehicleModel
-from ident.plots import display_scale, frf_plot_data, plot_frf, write_frf_plots
-from ident.units import TO_SI
+from ident.identify.frf import DF_INPUTS, MODEL_INPUTS, Frf
+from ident.identify.model import VehicleModel
+from ident.identify.plots import display_scale, frf_plot_data, plot_frf, write_frf_plots
+from ident.data.units import TO_SI
 
 OUTPUTS = ("shock_velocity_LF", "ride_height_LF")
 N_F = 200
@@ -262,7 +262,7 @@ def test_plot_frf_bad_inputs(kwargs, error, match):
 
 
 def test_bad_object_and_unknown_channel_in_imperial():
-    with pytest.raises(TypeError, match="expected an ident.frf.Frf"):
+    with pytest.raises(TypeError, match="expected an ident.identify.frf.Frf"):
         plot_frf(np.zeros(3), "x")
     with pytest.raises(ValueError, match="array but there is no FRF"):
         frf_plot_data(_model(), "ride_height_LF", truth=np.zeros((2, 11, N_F)))

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
-from ident.channels import CORNERS
-from ident.errors import PlannerError
-from ident.metrics import METRIC_NAMES
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
+from ident.sim.metrics import METRIC_NAMES
 from planner.objective import default_objective, score_setups
 from planner.predict import predict_setups
 from planner.setups import Setup, enumerate_setups
-from ident.vehicle import build_full_car
+from ident.models.vehicle import build_full_car
 
 # issue: identified vs known model predictions within 0.5 % median and 2 % max, ranks agree
 RTOL_ID_MEDIAN = 0.005
@@ -72,7 +72,7 @@ def test_table_layout_and_units(paper_model, track_drive, demo_library, baseline
 
 def test_drive_at_another_rate_is_resampled(paper_model, track_drive, demo_library,
                                             baseline_setup, caplog):
-    from ident.drive import resample_drive
+    from ident.data.drive import resample_drive
 
     fast = resample_drive(track_drive, 200.0)
     a = predict_setups(paper_model, track_drive, [baseline_setup], demo_library)
@@ -102,10 +102,10 @@ def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, bas
     import warnings
     from dataclasses import replace
 
-    from ident.drive import make_track_drive
-    from ident.model import identify_session
-    from ident.rig import simulate_session
-    from ident.vehicle import build_full_car, modal_summary
+    from ident.data.drive import make_track_drive
+    from ident.identify.model import identify_session
+    from ident.sim.rig import simulate_session
+    from ident.models.vehicle import build_full_car, modal_summary
 
     car = paper_vehicle.replace(torsion_stiffness_n_m_rad=3.0e5, cg_lateral_offset_m=0.04,
                                 track_rear_m=1.70, tire_damping_n_s_m=np.full(4, 800.0))
@@ -146,9 +146,9 @@ def test_noisy_session_of_the_papers_plan(paper_vehicle, paper_plan, demo_librar
     import warnings
     from dataclasses import replace
 
-    from ident.drive import make_track_drive
-    from ident.model import identify_session
-    from ident.rig import simulate_session
+    from ident.data.drive import make_track_drive
+    from ident.identify.model import identify_session
+    from ident.sim.rig import simulate_session
 
     runs = tuple(replace(r, duration_s=200.0) for r in paper_plan.runs)
     session = simulate_session(replace(paper_plan, runs=runs, noise=0.02, input_noise=0.005))
@@ -182,8 +182,8 @@ RTOL_SAME_DRIVE = 1e-12
 
 def _four_post_drive(drive, path):
     """`drive`'s wheelloaders written as a 4-post drive file (no aero columns), read back."""
-    from ident.channels import WHEELLOADER_INPUTS
-    from ident.drive import Drive, read_drive, write_drive
+    from ident.data.channels import WHEELLOADER_INPUTS
+    from ident.data.drive import Drive, read_drive, write_drive
 
     write_drive(Drive(f"{drive.name} 4-post", drive.fs_hz,
                       {c: drive.channels[c] for c in WHEELLOADER_INPUTS}), path)
@@ -195,8 +195,8 @@ def test_four_post_session_identifies_and_predicts(four_post_session, four_post_
                                                    baseline_setup, tmp_path):
     import pandas as pd
 
-    from ident.channels import AERO_INPUTS, WHEELLOADER_INPUTS
-    from ident.frf import DF_INPUTS
+    from ident.data.channels import AERO_INPUTS, WHEELLOADER_INPUTS
+    from ident.identify.frf import DF_INPUTS
     from planner.cli import noise_report
 
     assert four_post_session.rig_inputs == WHEELLOADER_INPUTS
@@ -209,7 +209,7 @@ def test_four_post_session_identifies_and_predicts(four_post_session, four_post_
     assert plant.rig_inputs == WHEELLOADER_INPUTS and plant.rig.B.shape[1] == 7
     assert not plant.rig.B[:, :3].any() and not plant.rig.D[:, :3].any()
     # the model file keeps the plant with its rig inputs
-    from ident.model import load_model
+    from ident.identify.model import load_model
 
     back = load_model(four_post_model.save(tmp_path / "4post.npz")).loop_plant()
     assert back.rig_inputs == WHEELLOADER_INPUTS
@@ -243,10 +243,10 @@ def test_four_post_model_refuses_an_aero_drive(four_post_model, validation_drive
                                                demo_library, baseline_setup, tmp_path):
     import re
 
-    from ident.channels import RIG_INPUTS, WHEELLOADER_INPUTS
-    from ident.drive import read_drive, write_drive
+    from ident.data.channels import RIG_INPUTS, WHEELLOADER_INPUTS
+    from ident.data.drive import read_drive, write_drive
     from ident.errors import DriveError
-    from ident.model import load_model
+    from ident.identify.model import load_model
     from planner.screen import screen_setups
 
     path = tmp_path / "aero-drive.csv"

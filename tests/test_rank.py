@@ -9,9 +9,9 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy.stats import spearmanr
 
-from ident.channels import CORNERS
-from ident.errors import PlannerError
-from ident.metrics import METRIC_NAMES
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
+from ident.sim.metrics import METRIC_NAMES
 from planner.objective import Objective, default_objective, score_setups
 from planner.predict import predict_setups
 from planner.rank import Ranking, rank_setups

@@ -14,10 +14,10 @@ from openpyxl import load_workbook
 from openpyxl.utils import get_column_letter
 
 import planner.report as report_mod
-from ident.channels import CORNERS
-from ident.errors import PlannerError
-from ident.metrics import METRIC_NAMES, METRIC_QUANTITY
-from ident.units import TO_SI, UNIT_LABELS
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
+from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
+from ident.data.units import TO_SI, UNIT_LABELS
 from planner.objective import default_objective, score_setups
 from planner.report import (
     DATA_PT,

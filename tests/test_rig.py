@@ -1,15 +1,15 @@
-"""Tests of ident.rig: experiment plans and the virtual rig."""
+"""Tests of ident.sim.rig: experiment plans and the virtual rig."""
 
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from ident.channels import CORNERS, RIG_INPUTS
+from ident.data.channels import CORNERS, RIG_INPUTS
 from ident.errors import SessionError
-from ident.frf import frf_from_arrays
-from ident.rig import PlanRun, default_plan, read_rig_plan, simulate_session
-from ident.units import to_si
+from ident.identify.frf import frf_from_arrays
+from ident.sim.rig import PlanRun, default_plan, read_rig_plan, simulate_session
+from ident.data.units import to_si
 
 DB_TOL_FRF = 0.5  # issue: H1 vs analytic within 0.5 dB where coherence > 0.99
 COH_MIN = 0.99
@@ -83,7 +83,7 @@ def test_acquisition_filter_removes_aliases():
     """Every simulated channel passes the same anti-aliasing low-pass before decimation:
     a tone above the sampled Nyquist frequency (it would alias to 10 Hz) is removed, an in-band
     tone passes unchanged, and the samples stay aligned in time."""
-    from ident.rig import _daq_sample
+    from ident.sim.rig import _daq_sample
 
     r, fs, n = 8, 100.0, 2000
     t = np.arange((n - 1) * r + 1) / (fs * r)
@@ -103,8 +103,8 @@ def test_acquisition_filter_equals_polyphase_reference(rng, r, n):
     """The FFT acquisition filter gives the numbers of the polyphase one it replaced
     (edge-extended record, resample_bandlimited, decimated), on records of odd and
     even length, shorter than the filter and longer than one FFT segment."""
-    from ident.drive import _FIR_HALF_LENGTH, resample_bandlimited
-    from ident.rig import _daq_sample
+    from ident.data.drive import _FIR_HALF_LENGTH, resample_bandlimited
+    from ident.sim.rig import _daq_sample
 
     n_fine = (n - 1) * r + 1
     t = np.arange(n_fine) / (100.0 * r)
@@ -171,7 +171,7 @@ def test_other_drive_kinds(paper_plan, kind):
 
 
 def test_write_and_read_back(tmp_path, paper_plan):
-    from ident.session import read_session, write_session
+    from ident.data.session import read_session, write_session
 
     runs = (PlanRun("b", {c: "B20" for c in CORNERS}, "baseline", 5, 20.0),
             PlanRun("s", {"LF": "N8", "RF": "B20", "LR": "B20", "RR": "B20"}, "swap", 5, 20.0))
@@ -185,7 +185,7 @@ def test_write_and_read_back(tmp_path, paper_plan):
 
 
 def _plan_text():
-    from ident.rig import DEFAULT_PLAN_PATH
+    from ident.sim.rig import DEFAULT_PLAN_PATH
 
     return DEFAULT_PLAN_PATH.read_text()
 
@@ -211,7 +211,7 @@ BAD_PLANS = [
 
 @pytest.mark.parametrize("edit,match", BAD_PLANS)
 def test_bad_plans(tmp_path, edit, match):
-    from ident.rig import DEFAULT_PLAN_PATH
+    from ident.sim.rig import DEFAULT_PLAN_PATH
 
     (tmp_path / "paper_shocks.toml").write_text(
         (DEFAULT_PLAN_PATH.parent / "paper_shocks.toml").read_text())
@@ -233,7 +233,7 @@ def test_default_plan_reads():
 
 
 def test_plan_noise_keys(tmp_path):
-    from ident.rig import DEFAULT_PLAN_PATH
+    from ident.sim.rig import DEFAULT_PLAN_PATH
 
     (tmp_path / "paper_shocks.toml").write_text(
         (DEFAULT_PLAN_PATH.parent / "paper_shocks.toml").read_text())

@@ -11,11 +11,11 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy.stats import spearmanr
 
-from ident.channels import CORNERS, RIG_INPUTS
-from ident.drive import Drive, make_track_drive
-from ident.errors import PlannerError
-from ident.metrics import METRIC_NAMES
-from ident.shocks import LinearShock, ShockLibrary
+from ident.data.channels import CORNERS, RIG_INPUTS
+from ident.data.drive import Drive, make_track_drive
+from planner.errors import PlannerError
+from ident.sim.metrics import METRIC_NAMES
+from ident.models.shocks import LinearShock, ShockLibrary
 from planner.objective import default_objective, score_setups
 from planner.predict import predict_setups
 from planner.screen import (drive_bands, drive_spectrum, metric_rows, screen_operands,
@@ -270,7 +270,7 @@ def test_kernel_matches_plain_reference(paper_model, track_drive, demo_library, 
     """The compiled kernels (screen_packed: the vectorized one for large batches, the scalar
     one for small) give the fixed point, its iteration count and the metrics of a
     plain-Python reference, for nonlinear, lagged and linear setups."""
-    from ident.closedloop import _pack_setups
+    from ident.sim.closedloop import _pack_setups
     from planner import screen as screen_mod
 
     monkeypatch.setattr(screen_mod, "_VECTOR_MIN_SETUPS", 0 if kernel == "vectorized" else 10**9)
@@ -300,7 +300,7 @@ def test_scalar_and_vectorized_kernels_agree_bit_for_bit(paper_model, track_driv
     """Small batches take the scalar kernel, large ones the vectorized one: the same
     operations in the same order, so the same numbers to the last bit (a setup's result
     must not depend on the size of the batch it was screened in)."""
-    from ident.closedloop import _pack_setups
+    from ident.sim.closedloop import _pack_setups
     from planner import screen as screen_mod
     from planner.predict import as_loop_plant
 
@@ -499,7 +499,7 @@ def test_bad_inputs(paper_model, track_drive, demo_library, baseline_setup):
         screen_setups(paper_model, track_drive, [("B20",) * 4], demo_library)
     with pytest.raises(TypeError, match="model"):
         screen_setups(object(), track_drive, [baseline_setup], demo_library)
-    with pytest.raises(TypeError, match="expected an ident.drive.Drive"):
+    with pytest.raises(TypeError, match="expected an ident.data.drive.Drive"):
         screen_setups(paper_model, track_drive.as_array(), [baseline_setup], demo_library)
     slow = Drive("slow", 40.0, {c: np.zeros(400) for c in RIG_INPUTS})
     with pytest.raises(PlannerError, match="sampled at 40 Hz"):

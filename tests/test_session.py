@@ -1,4 +1,4 @@
-"""Tests of ident.session: rig-session folders and run tables."""
+"""Tests of ident.data.session: rig-session folders and run tables."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ import pytest
 import tomli_w
 from numpy.testing import assert_allclose, assert_array_equal
 
-import ident.session as session_mod
-from ident.channels import AERO_INPUTS, ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
+import ident.data.session as session_mod
+from ident.data.channels import AERO_INPUTS, ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
 from ident.errors import SessionError
-from ident.session import (
+from ident.data.session import (
     Run,
     RunTable,
     Session,
@@ -82,7 +82,7 @@ def rng():
 
 @pytest.fixture
 def shocks(tmp_path):
-    from ident.shocks import read_shock_library
+    from ident.models.shocks import read_shock_library
 
     path = tmp_path / "library.toml"
     path.write_text(SHOCKS_TOML)
@@ -622,7 +622,7 @@ def test_run_names_are_made_safe_file_names(rng, shocks, tmp_path):
 def test_csv_writer_reads_back_bit_for_bit(tmp_path):
     """Run CSVs are written by Arrow's writer: the header as pandas writes it, and every
     float (tiny, huge, negative zero, thirds) read back exactly."""
-    from ident._io import write_csv_frame
+    from ident.data.files import write_csv_frame
 
     rng = np.random.default_rng(7)
     x = rng.standard_normal(1000) * 10.0 ** rng.integers(-300, 300, 1000)

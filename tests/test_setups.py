@@ -10,9 +10,9 @@ from itertools import product
 import pytest
 
 import planner.setups as setups_mod
-from ident.channels import CORNERS
-from ident.errors import PlannerError
-from ident.shocks import LinearShock, ShockLibrary
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
+from ident.models.shocks import LinearShock, ShockLibrary
 from planner.setups import (
     DEFAULT_MAX_SETUPS,
     Setup,

@@ -1,4 +1,4 @@
-"""Tests of ident.shocks: shock models, the shock library file, dyno fits."""
+"""Tests of ident.models.shocks: shock models, the shock library file, dyno fits."""
 
 import doctest
 import math
@@ -15,9 +15,9 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy import integrate
 from scipy.stats import norm
 
-import ident.shocks as shocks
+import ident.models.shocks as shocks
 from ident.errors import FitWarning, ShockModelError
-from ident.shocks import (
+from ident.models.shocks import (
     DigressiveShock,
     LinearShock,
     PiecewiseLinear,
@@ -27,7 +27,7 @@ from ident.shocks import (
     read_shock_library,
     write_shock_library,
 )
-from ident.units import TO_SI
+from ident.data.units import TO_SI
 
 RTOL_EXACT = 1e-12  # closed forms and unit round trips: round-off only
 RTOL_MC = 3e-3  # 1e6 Gaussian samples: the ratio estimator's relative std is ~3e-4

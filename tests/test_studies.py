@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ident.units import to_si
-from ident.vehicle import example_vehicle, modal_summary
+from ident.data.units import to_si
+from ident.models.vehicle import example_vehicle, modal_summary
 
 STUDIES = Path(__file__).resolve().parent.parent / "studies"
 
@@ -148,7 +148,7 @@ def test_random_plan_swaps_every_corner_within_budget():
     """A random plan spends at most its budget and varies every corner's shock (Eq. 17)."""
     import numpy as np
 
-    from ident.shocks import read_shock_library
+    from ident.models.shocks import read_shock_library
     from planner.demo import DEMO_LIBRARY_PATH
 
     study = _load("rig_time")

@@ -11,8 +11,8 @@ import pandas as pd
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from ident.channels import CORNERS
-from ident.errors import PlannerError
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
 from planner import sweep as sweep_mod
 from planner.objective import score_setups
 from planner.predict import predict_setups
@@ -33,7 +33,7 @@ TEN_THOUSAND = {"symmetry": "none", "shocks": CRATE_10, "respect_inventory": Fal
 
 
 def _crate(n):
-    from ident.shocks import LinearShock, ShockLibrary
+    from ident.models.shocks import LinearShock, ShockLibrary
 
     return ShockLibrary.from_models([LinearShock(f"S{k}", 500.0 * k, count=3)
                                      for k in range(1, n + 1)])
@@ -208,8 +208,8 @@ def test_several_drives_and_models_combine(paper_vehicle, track_drive, demo_libr
     the case scores, feasible only where every case is."""
     from dataclasses import replace
 
-    from ident.drive import make_track_drive
-    from ident.vehicle import build_full_car
+    from ident.data.drive import make_track_drive
+    from ident.models.vehicle import build_full_car
 
     other = make_track_drive(duration_s=40.0, fs_hz=100.0, seed=11, name="track other",
                              wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,
@@ -267,7 +267,7 @@ def test_unreachable_scheduler_is_a_clear_error(paper_model, track_drive, demo_l
 def test_cli_sweep(tmp_path, track_drive, capsys):
     import tomllib
 
-    from ident.drive import write_drive
+    from ident.data.drive import write_drive
     from planner.cli import main
     from planner.demo import DEMO_LIBRARY_PATH
 
@@ -331,7 +331,7 @@ def test_cli_rank_scheduler(tmp_path, track_drive, capsys):
     byte; a bad scheduler is one clear error line."""
     from distributed import LocalCluster
 
-    from ident.drive import write_drive
+    from ident.data.drive import write_drive
     from planner.cli import main
     from planner.demo import DEMO_LIBRARY_PATH
 

@@ -1,6 +1,6 @@
 """Tests of planner.testplan: the run sheet (layout, print setup, highlighted swaps, reading
 it back as filled in), overwrite refusal, refusal of other workbooks, and the plan folder
-(``write_plan``, its ``plan.toml`` read by ``ident.rig.read_rig_plan``)."""
+(``write_plan``, its ``plan.toml`` read by ``ident.sim.rig.read_rig_plan``)."""
 
 import dataclasses
 import datetime
@@ -16,11 +16,11 @@ from numpy.testing import assert_allclose
 from openpyxl import Workbook, load_workbook
 from openpyxl.utils import get_column_letter
 
-from ident.channels import CORNERS
-from ident.errors import PlannerError
-from ident.metrics import METRIC_QUANTITY
-from ident.rig import read_rig_plan
-from ident.units import TO_SI
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
+from ident.sim.metrics import METRIC_QUANTITY
+from ident.sim.rig import read_rig_plan
+from ident.data.units import TO_SI
 from planner.design import design_experiment
 from planner.report import PAPER_SIZE, write_ranking
 from planner.testplan import (

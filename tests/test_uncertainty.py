@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from ident.frf import MODEL_INPUTS, Frf
+from ident.identify.frf import MODEL_INPUTS, Frf
 from planner.objective import Objective
 from planner.screen import screen_setups
 from planner.setups import enumerate_setups
@@ -137,7 +137,7 @@ def test_replaced_lines_take_the_median_of_measured_lines():
 def test_frf_plant_interpolates_linearly():
     """A response linear in frequency is reproduced exactly between and beyond the grid
     lines (the end segments extend); the shock velocities are found by name."""
-    from ident.channels import SHOCK_VELOCITIES
+    from ident.data.channels import SHOCK_VELOCITIES
 
     rng = np.random.default_rng(4)
     names = ("ride_height_LF",) + SHOCK_VELOCITIES
@@ -236,7 +236,7 @@ def test_draws_are_zero_mean_in_power(known_plant, track_drive, demo_library, ba
     hit its cap). Metrics of several correlated inputs lose a little of their cross-power."""
     from dataclasses import replace
 
-    from ident.shocks import LinearShock, ShockLibrary
+    from ident.models.shocks import LinearShock, ShockLibrary
 
     one = replace(track_drive, channels={c: (x if c == "wheelloader_LF" else np.zeros_like(x))
                                          for c, x in track_drive.channels.items()})

@@ -1,12 +1,12 @@
-"""Tests of ident.vehicle: the paper's full-car model."""
+"""Tests of ident.models.vehicle: the paper's full-car model."""
 
 import numpy as np
 import pytest
 
-from ident.channels import CORNERS
+from ident.data.channels import CORNERS
 from ident.errors import VehicleError
-from ident.units import to_si
-from ident.vehicle import (FULL_CAR_OUTPUT_KINDS, G_M_S2, build_full_car, example_vehicle,
+from ident.data.units import to_si
+from ident.models.vehicle import (FULL_CAR_OUTPUT_KINDS, G_M_S2, build_full_car, example_vehicle,
                            modal_summary, read_vehicle, write_vehicle)
 
 RTOL_HOP = 0.02  # wheel hop vs the decoupled sqrt((ks+kt)/mu): chassis coupling shifts < 2 %
@@ -262,7 +262,7 @@ BAD_VEHICLES = [
 
 @pytest.mark.parametrize("change,match", BAD_VEHICLES)
 def test_bad_vehicle_files(tmp_path, change, match):
-    from ident.vehicle import EXAMPLE_VEHICLE_PATH
+    from ident.models.vehicle import EXAMPLE_VEHICLE_PATH
 
     text = EXAMPLE_VEHICLE_PATH.read_text()
     lines = [ln for ln in text.splitlines() if not ln.startswith("#")]

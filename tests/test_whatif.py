@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ident.channels import CORNERS
-from ident.errors import PlannerError
+from ident.data.channels import CORNERS
+from planner.errors import PlannerError
 
 #: The stiffened plant and the rebuilt physical model are the same linear system: they
 #: agree to rounding (1e-13 measured; the modal forms differ).
@@ -30,7 +30,7 @@ def _toml(tmp_path, text, name="whatif.toml"):
 @pytest.fixture(scope="module")
 def short_drive(track_drive):
     """The first 20 s of the track drive (small what-if cases)."""
-    from ident.drive import Drive
+    from ident.data.drive import Drive
 
     n = int(20 * track_drive.fs_hz)
     return Drive("track 20 s", track_drive.fs_hz,
@@ -67,7 +67,7 @@ def test_scaled_shock_is_the_scaled_curve(demo_library):
 
 
 def test_arb_roll_stiffness_and_file_round_trip(paper_vehicle, tmp_path):
-    from ident.vehicle import read_vehicle, write_vehicle
+    from ident.models.vehicle import read_vehicle, write_vehicle
 
     v = paper_vehicle.replace(arb_rate_n_m=[20000.0, 5000.0])
     extra = 20000.0 * v.track_front_m ** 2 + 5000.0 * v.track_rear_m ** 2
@@ -84,7 +84,7 @@ def test_arb_roll_stiffness_and_file_round_trip(paper_vehicle, tmp_path):
 
 @pytest.mark.parametrize("change", ["rear springs +10%", "front bar", "LF spring -10%"])
 def test_stiffened_plant_is_the_changed_car(paper_vehicle, change):
-    from ident.vehicle import build_full_car
+    from ident.models.vehicle import build_full_car
     from planner.whatif import stiffened_plant
 
     k = paper_vehicle.spring_rate_n_m
@@ -109,8 +109,8 @@ def test_stiffened_plant_is_the_changed_car(paper_vehicle, change):
 
 
 def test_stiffened_plant_needs_travel_outputs(paper_vehicle):
-    from ident.closedloop import LoopPlant
-    from ident.vehicle import build_full_car
+    from ident.sim.closedloop import LoopPlant
+    from ident.models.vehicle import build_full_car
     from planner.whatif import stiffened_plant
 
     plant = build_full_car(paper_vehicle).loop_plant()
@@ -151,8 +151,8 @@ def test_design_sizes_and_seed(tmp_path):
 
 
 def test_read_perturbations_units_and_files(tmp_path, track_drive):
-    from ident.drive import write_drive
-    from ident.units import to_si
+    from ident.data.drive import write_drive
+    from ident.data.units import to_si
     from planner.whatif import read_perturbations
 
     write_drive(track_drive, tmp_path / "bumpy.csv", units="imperial")
@@ -260,7 +260,7 @@ def test_bad_perturbation_files_name_the_key(tmp_path, case):
 
 def test_shock_scale_is_predict_on_scaled_shocks(paper_model, short_drive, demo_library,
                                                  twenty_setups):
-    from ident.shocks import ShockLibrary
+    from ident.models.shocks import ShockLibrary
     from planner.predict import predict_setups
     from planner.whatif import Factor, evaluate_whatif, perturbation_set
 
@@ -279,7 +279,7 @@ def test_shock_scale_is_predict_on_scaled_shocks(paper_model, short_drive, demo_
 
 
 def test_shock_scale_by_id_and_lag_change(paper_model, short_drive, demo_library, twenty_setups):
-    from ident.shocks import ShockLibrary
+    from ident.models.shocks import ShockLibrary
     from planner.predict import predict_setups
     from planner.whatif import Factor, evaluate_whatif, perturbation_set
 
@@ -299,7 +299,7 @@ def test_shock_scale_by_id_and_lag_change(paper_model, short_drive, demo_library
 
 
 def test_drive_window_and_scale(paper_model, track_drive, demo_library, twenty_setups):
-    from ident.drive import Drive
+    from ident.data.drive import Drive
     from planner.predict import predict_setups
     from planner.whatif import Factor, evaluate_whatif, perturbation_set
 
@@ -379,13 +379,13 @@ def test_spring_and_bar_whatif_on_identified_model_match_the_known_car(
                                 baseline=twenty_setups[0])
     known = evaluate_whatif(paper_vehicle, track_drive, twenty_setups, demo_library, ps,
                             baseline=twenty_setups[0])
-    from ident.metrics import METRIC_QUANTITY
+    from ident.sim.metrics import METRIC_QUANTITY
 
     metrics = [c for c in ident.table.columns if c in METRIC_QUANTITY]
     names = [p.name for p in ps.perturbations[1:]]
     assert names == ["rear springs x0.9", "rear springs x1.1", "front bar +1.121e+05 N/m"]
     for name in names:
-        a = ident.condition(name)[metrics]
+        a = ident.identify.condition(name)[metrics]
         b = known.condition(name).loc[a.index, metrics]
         err = np.abs(a.to_numpy(float) / b.to_numpy(float) - 1.0)
         assert np.median(err) < WHATIF_MEDIAN and err.max() < WHATIF_MAX, name
@@ -454,7 +454,7 @@ def cluster_case(paper_model, short_drive, track_drive, demo_library, twenty_set
     """A small what-if with every kind of condition group: stiffened plants (an identified-
     like loop plant), scaled shocks sharing the nominal group, a window and a scaled drive,
     on two drives; and its one-process result."""
-    from ident.drive import Drive
+    from ident.data.drive import Drive
     from planner.whatif import CHANNEL_GROUPS, Factor, evaluate_whatif, perturbation_set
 
     n = int(20 * track_drive.fs_hz)
@@ -531,7 +531,7 @@ def test_cli_whatif_scheduler(tmp_path, short_drive, capsys):
     ``whatif.xlsx`` cell for cell; a bad scheduler is one error line and no folder."""
     from openpyxl import load_workbook
 
-    from ident.drive import write_drive
+    from ident.data.drive import write_drive
     from planner.cli import main
     from planner.demo import DEMO_LIBRARY_PATH
 

@@ -70,8 +70,8 @@ class Case:
 
 
 def _plan(shock_library, *, duration_s=RUN_S, units="SI"):
-    from ident.channels import CORNERS
-    from ident.rig import PlanRun, default_plan
+    from ident.data.channels import CORNERS
+    from ident.sim.rig import PlanRun, default_plan
 
     base = {c: "B20" for c in CORNERS}
     plan = default_plan()
@@ -83,8 +83,8 @@ def _plan(shock_library, *, duration_s=RUN_S, units="SI"):
 
 def _synthetic_model(path):
     """A small valid model file: one stable pole per pair (the corpus only reads it)."""
-    from ident.frf import MODEL_INPUTS
-    from ident.model import VehicleModel
+    from ident.identify.frf import MODEL_INPUTS
+    from ident.identify.model import VehicleModel
     from planner.predict import METRIC_OUTPUTS
 
     n_out, n_in = len(METRIC_OUTPUTS), len(MODEL_INPUTS)
@@ -114,7 +114,7 @@ _MAP_UNITS = {"displacement": "m", "force": "N", "moment": "N*m", "velocity": "m
 
 
 def _map_text(channels):
-    from ident.channels import quantity_of
+    from ident.data.channels import quantity_of
 
     lines = ['format = "channel-map/1"', 'name = "corpus rig"']
     for c in channels:
@@ -131,16 +131,16 @@ def build_base(root):
     root : str or os.PathLike
         An empty (or new) folder.
     """
-    from ident.channels import RIG_INPUTS, SHOCK_VELOCITIES
-    from ident.drive import Drive, write_drive
-    from ident.rig import simulate_session
-    from ident.session import write_run_table, write_session
+    from ident.data.channels import RIG_INPUTS, SHOCK_VELOCITIES
+    from ident.data.drive import Drive, write_drive
+    from ident.sim.rig import simulate_session
+    from ident.data.session import write_run_table, write_session
     from planner.setups import Setup, write_setups
 
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
-    paper = Path(__file__).resolve().parents[2] / "ident" / "data"
-    crate = Path(__file__).resolve().parents[2] / "planner" / "data" / "library.toml"
+    paper = Path(__file__).resolve().parents[2] / "ident" / "examples"
+    crate = Path(__file__).resolve().parents[2] / "planner" / "examples" / "library.toml"
     session = simulate_session(_plan(paper / "paper_shocks.toml"))
     p = {"root": root}
     p["session"] = write_session(session, root / "session")

@@ -33,7 +33,7 @@ pixel for pixel the page :func:`plot_frf` draws into a new figure.
 A response in SI units ``H`` [out_SI / in_SI] is displayed in the unit system
 ``units`` as ``H * from_si(1, out_q) / from_si(1, in_q)``, where ``out_q`` and
 ``in_q`` are the quantities of the output and the input channel
-(:func:`ident.channels.quantity_of`; the shock-force inputs ``dF_XX`` are
+(:func:`ident.data.channels.quantity_of`; the shock-force inputs ``dF_XX`` are
 forces). The factor is positive, so the phase does not depend on the units.
 """
 
@@ -45,10 +45,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ident._io import atomic_path
-from ident.channels import RIG_INPUTS, quantity_of
-from ident.frf import DF_INPUTS, Frf
-from ident.units import UNIT_LABELS, check_units, from_si
+from ident.data.files import atomic_path
+from ident.data.channels import RIG_INPUTS, quantity_of
+from ident.identify.frf import DF_INPUTS, Frf
+from ident.data.units import UNIT_LABELS, check_units, from_si
 
 __all__ = [
     "INPUT_GROUPS",
@@ -221,10 +221,10 @@ def _split(model_or_frf):
             model_or_frf, "output_names") and hasattr(model_or_frf, "input_names"):
         frf = getattr(model_or_frf, "frf", None)
         if frf is not None and not isinstance(frf, Frf):
-            raise TypeError(f"model.frf must be an ident.frf.Frf or None, got "
+            raise TypeError(f"model.frf must be an ident.identify.frf.Frf or None, got "
                             f"{type(frf).__name__}")
         return model_or_frf, frf
-    raise TypeError(f"expected an ident.frf.Frf or an ident.model.VehicleModel, got "
+    raise TypeError(f"expected an ident.identify.frf.Frf or an ident.identify.model.VehicleModel, got "
                     f"{type(model_or_frf).__name__}")
 
 
@@ -271,7 +271,7 @@ def frf_plot_data(model_or_frf, output, *, inputs=None, truth=None, units="SI",
 
     Parameters
     ----------
-    model_or_frf : ident.model.VehicleModel or ident.frf.Frf
+    model_or_frf : ident.identify.model.VehicleModel or ident.identify.frf.Frf
         A model (its ``frf``, if any, gives the estimates and coherences) or an
         FRF estimate.
     output : str
@@ -631,7 +631,7 @@ def write_frf_plots(model_or_frf, out_dir, *, outputs=None, truth=None, units="S
 
     Parameters
     ----------
-    model_or_frf : ident.model.VehicleModel or ident.frf.Frf
+    model_or_frf : ident.identify.model.VehicleModel or ident.identify.frf.Frf
     out_dir : str or path
         Folder for the PNGs (created if missing).
     outputs : sequence of str, optional

@@ -2,7 +2,7 @@
 
 A rig's acquisition names its channels its own way (``WL_LF_Disp``), in its
 own units (mm, kN, in/s) and sign conventions. A channel-map TOML file says,
-per canonical shockplan channel (:data:`ident.channels.ALL_CHANNELS`), where
+per canonical shockplan channel (:data:`ident.data.channels.ALL_CHANNELS`), where
 to find it in the file and how to turn it into SI with shockplan's signs:
 
 .. code-block:: toml
@@ -76,10 +76,10 @@ from types import MappingProxyType
 
 import numpy as np
 
-from ident._io import read_toml
-from ident.channels import ALL_CHANNELS, quantity_of
+from ident.data.files import read_toml
+from ident.data.channels import ALL_CHANNELS, quantity_of
 from ident.errors import SessionError
-from ident.units import TO_SI
+from ident.data.units import TO_SI
 
 __all__ = [
     "CHANNEL_MAP_FORMAT",
@@ -220,7 +220,7 @@ class ChannelSpec:
     Attributes
     ----------
     canonical : str
-        The shockplan channel (:data:`ident.channels.ALL_CHANNELS`).
+        The shockplan channel (:data:`ident.data.channels.ALL_CHANNELS`).
     source : str
         The channel's name in the file.
     units : str
@@ -329,7 +329,7 @@ class ChannelMap:
     Attributes
     ----------
     channels : mapping of str to ChannelSpec
-        Read-only, in :data:`ident.channels.ALL_CHANNELS` order.
+        Read-only, in :data:`ident.data.channels.ALL_CHANNELS` order.
     time : str or None
         The source channel holding time [s], or ``None`` to use the file's own
         time base.
@@ -395,7 +395,7 @@ def _spec_from_table(canonical, table, *, where):
         raise SessionError(
             f"{entry}: {canonical!r} is not a canonical channel"
             f"{_suggest(canonical, ALL_CHANNELS)}; keys are the rig inputs and "
-            "'<kind>_<corner>' names of ident.channels.ALL_CHANNELS"
+            "'<kind>_<corner>' names of ident.data.channels.ALL_CHANNELS"
         )
     if not isinstance(table, Mapping):
         raise SessionError(
@@ -562,7 +562,7 @@ def apply_channel_map(channel_map, raw, *, where=None):
     -------
     dict of str to ndarray, shape (n_samples,)
         Canonical channel -> SI values with shockplan's signs (float64), for
-        every channel of the map, in :data:`ident.channels.ALL_CHANNELS` order.
+        every channel of the map, in :data:`ident.data.channels.ALL_CHANNELS` order.
 
     Raises
     ------
@@ -575,7 +575,7 @@ def apply_channel_map(channel_map, raw, *, where=None):
     Notes
     -----
     ``x_si = sign * factor(units) * scale * (raw - offset)``; no check of
-    lengths, sampling or finiteness here (see :func:`ident.formats.read_run`).
+    lengths, sampling or finiteness here (see :func:`ident.data.formats.read_run`).
     """
     if not isinstance(channel_map, ChannelMap):
         raise TypeError(f"channel_map must be a ChannelMap, got {type(channel_map).__name__}")

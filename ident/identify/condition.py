@@ -15,7 +15,7 @@ Two steps, per input/output pair:
 
 Both steps are there to remove random error, so both are held to the
 estimate's own uncertainty: with the standard error ``sigma`` of each estimate
-(from its partial coherence and number of averages, as :mod:`ident.frf`
+(from its partial coherence and number of averages, as :mod:`ident.identify.frf`
 reports them) and ``d`` the distance between the replacement ``H_c`` (residual
 fit or smoothed value) and the estimate ``H``, the result is ``H + w (H_c -
 H)`` with ``w = 1 / (1 + (d / (k sigma))^2)``, ``k = tolerance``. No
@@ -42,7 +42,7 @@ import logging
 import numpy as np
 from scipy import ndimage, signal
 
-from ident.frf import Frf
+from ident.identify.frf import Frf
 
 __all__ = ["condition_frf", "residual_fit", "frf_standard_error", "conditioned_standard_error",
            "conditioned_error_kernel", "TOLERANCE"]
@@ -115,7 +115,7 @@ def frf_standard_error(frf):
 
     ``sigma = |H| sqrt((1 - gamma2) / (gamma2 nu))`` with ``nu = n_averages -
     n_in`` (the multi-input H1 random error; for the LPM exactly its
-    least-squares standard error, see :mod:`ident.frf`).
+    least-squares standard error, see :mod:`ident.identify.frf`).
 
     Parameters
     ----------
@@ -129,7 +129,7 @@ def frf_standard_error(frf):
     Examples
     --------
     >>> import numpy as np
-    >>> from ident.frf import frf_from_arrays
+    >>> from ident.identify.frf import frf_from_arrays
     >>> rng = np.random.default_rng(0)
     >>> u = rng.standard_normal((20000, 1))
     >>> frf = frf_from_arrays(u, 2 * u + 0.2 * rng.standard_normal((20000, 1)), fs=100.0,
@@ -306,7 +306,7 @@ def condition_frf(frf, *, coherence_min=0.9, band_hz=(0.5, 20.0), residual_windo
     Parameters
     ----------
     frf : Frf
-        From :func:`ident.frf.estimate_frf`.
+        From :func:`ident.identify.frf.estimate_frf`.
     coherence_min : float
         Partial coherence at or above which an estimate counts as good.
         Frequencies flagged for an input (no independent energy) are never good.

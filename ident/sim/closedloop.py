@@ -46,8 +46,8 @@ from typing import Mapping
 
 import numpy as np
 
-from ident.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES, WHEELLOADER_INPUTS
-from ident.drive import check_drive_inputs
+from ident.data.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES, WHEELLOADER_INPUTS
+from ident.data.drive import check_drive_inputs
 
 __all__ = [
     "ModalSystem",
@@ -356,7 +356,7 @@ class LoopPlant:
         The rig inputs the model has (default all 7): a model identified on a
         4-post rig has the 4 wheelloaders only, and :func:`rig_response`
         refuses a drive with nonzero content on the others
-        (:func:`ident.drive.check_drive_inputs`).
+        (:func:`ident.data.drive.check_drive_inputs`).
     """
 
     rig: ModalSystem
@@ -448,7 +448,7 @@ def _refine(u, r):
     """
     if r == 1:
         return np.ascontiguousarray(u, dtype=float)
-    from ident.drive import _FIR_HALF_LENGTH, resample_bandlimited
+    from ident.data.drive import _FIR_HALF_LENGTH, resample_bandlimited
 
     pad = _FIR_HALF_LENGTH + 1
     up = resample_bandlimited(np.pad(u, ((pad, pad), (0, 0)), mode="edge"), r, 1, axis=0)
@@ -458,7 +458,7 @@ def _refine(u, r):
 def _drive_array(drive):
     if hasattr(drive, "as_array"):
         return np.asarray(drive.as_array(), dtype=float), float(drive.fs_hz)
-    raise TypeError(f"drive must be an ident.drive.Drive, got {type(drive).__name__}")
+    raise TypeError(f"drive must be an ident.data.drive.Drive, got {type(drive).__name__}")
 
 
 def rig_response(plant, drive, *, oversample=4, outputs=None):
@@ -467,7 +467,7 @@ def rig_response(plant, drive, *, oversample=4, outputs=None):
     Parameters
     ----------
     plant : LoopPlant
-    drive : ident.drive.Drive
+    drive : ident.data.drive.Drive
     oversample : int
         Internal steps per drive sample (>= 1).
     outputs : sequence of str, optional
@@ -570,9 +570,9 @@ def _check_oversample(oversample):
 
 import numba as _nb  # noqa: E402
 
-from ident.metrics import _LANES as _METRIC_LANES  # noqa: E402
-from ident.metrics import _PW_LEVELS as _METRIC_PW_LEVELS  # noqa: E402
-from ident.metrics import _setup_metric_rms  # noqa: E402
+from ident.sim.metrics import _LANES as _METRIC_LANES  # noqa: E402
+from ident.sim.metrics import _PW_LEVELS as _METRIC_PW_LEVELS  # noqa: E402
+from ident.sim.metrics import _setup_metric_rms  # noqa: E402
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1138,7 +1138,7 @@ def _loop_metrics_worker(w, n_workers, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br,
     """Worker `w` of `n_workers` of :func:`simulate_batch_metrics`: the setups ``w, w +
     n_workers, ...`` (interleaved, so that each worker gets a mix of cheap and costly
     setups), each simulated by :func:`_loop_one` and its metrics computed right after
-    (:func:`ident.metrics._setup_metric_rms`, per band: ``sos`` (n_bands, n_sections, 6),
+    (:func:`ident.sim.metrics._setup_metric_rms`, per band: ``sos`` (n_bands, n_sections, 6),
     ``zi`` (n_bands, n_sections, 2)) into ``out`` (n_setups, n_bands, n_metrics).
 
     The outputs ``Cy`` (2 n + 4, p) are the metrics' signals (a ride height pair as one
@@ -1203,7 +1203,7 @@ def _setup_models(setup, where):
     for c, mdl in zip(CORNERS, models):
         if not hasattr(mdl, "to_pwl") or not hasattr(mdl, "lag_s"):
             raise TypeError(f"{where}: corner {c} is {type(mdl).__name__}, not a shock model "
-                            "(ident.shocks.ShockModel); resolve shock ids with the library first")
+                            "(ident.models.shocks.ShockModel); resolve shock ids with the library first")
     return models
 
 
@@ -1307,11 +1307,11 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     Parameters
     ----------
     plant : LoopPlant
-    drive : ident.drive.Drive
+    drive : ident.data.drive.Drive
         The 7 rig inputs, SI (a 4-post drive: aero inputs zero).
     setups : sequence of setups
         Each a mapping corner -> shock model or a sequence of 4 shock models
-        (LF, RF, LR, RR) with ``to_pwl()`` and ``lag_s`` (:mod:`ident.shocks`).
+        (LF, RF, LR, RR) with ``to_pwl()`` and ``lag_s`` (:mod:`ident.models.shocks`).
     oversample : int, default 4
         Internal steps per drive sample.
     outputs : sequence of str, optional
@@ -1362,7 +1362,7 @@ class BatchMetrics:
 
     Attributes
     ----------
-    metrics : ident.metrics.Metrics
+    metrics : ident.sim.metrics.Metrics
         One value per setup for every metric, shape (n_setups,), SI.
     setups : tuple
         The setups as given (tuples of 4 shock models).
@@ -1382,7 +1382,7 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
                            band_hz=(1.0, 20.0), order=4, static_loads_n=None, split_hz=None):
     """The metrics of several shock setups in closed loop, without keeping their responses.
 
-    The numbers of :func:`ident.metrics.compute_metrics` on the channels of
+    The numbers of :func:`ident.sim.metrics.compute_metrics` on the channels of
     :func:`simulate_batch` to rounding (tested), in one compiled pass: each setup's metrics
     are computed by the thread that simulated it, right after, while its outputs are in
     the cache (a batch's responses are written to memory and read back otherwise: 1.5 MB
@@ -1398,7 +1398,7 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     plant, drive, setups, oversample, outputs, rig
         As :func:`simulate_batch`; the metrics are those of `outputs` (default all).
     band_hz, order, static_loads_n, split_hz
-        As :func:`ident.metrics.compute_metrics`.
+        As :func:`ident.sim.metrics.compute_metrics`.
 
     Returns
     -------
@@ -1407,9 +1407,9 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     Raises
     ------
     ValueError
-        As :func:`simulate_batch` and :func:`ident.metrics.compute_metrics`.
+        As :func:`simulate_batch` and :func:`ident.sim.metrics.compute_metrics`.
     """
-    from ident.metrics import _METRIC_CHANNELS, _metric_plan, compute_metrics
+    from ident.sim.metrics import _METRIC_CHANNELS, _metric_plan, compute_metrics
 
     loop = _loop_setup(plant, drive, setups, oversample, outputs, rig, "simulate_batch_metrics")
     plan = _metric_plan(loop.names, loop.rig.fs_hz, band_hz=band_hz, order=order,

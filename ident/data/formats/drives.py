@@ -1,6 +1,6 @@
 """Drives as RPC III files, the files an MTS rig controller plays.
 
-:func:`export_drive_rpc3` writes an :class:`ident.drive.Drive` (SI inside) as
+:func:`export_drive_rpc3` writes an :class:`ident.data.drive.Drive` (SI inside) as
 an RPC III drive file (``TIME_TYPE DRIVE``); :func:`read_drive_rpc3` reads one
 back into a Drive.
 
@@ -11,13 +11,13 @@ name equals the channel's descriptor (``DESC.CHAN_n``), and converts the
 values from the channel's unit descriptor (``UNITS.CHAN_n``) when it is a unit
 of that channel's dimension. So:
 
-- with a ``channel_map`` (the rig's map, :mod:`ident.formats.channel_map`),
+- with a ``channel_map`` (the rig's map, :mod:`ident.data.formats.channel_map`),
   each mapped rig input is written under its ``source`` name, in the map's
   ``units`` with its ``sign``, ``scale`` and ``offset`` inverted: the file
   holds what the rig's own files hold. Rig inputs the map does not map are
   left out (a 4-post rig has no aero actuators); they must be all zero;
 - without a map, the channels are named by their canonical names
-  (``wheelloader_LF`` ...), in :data:`ident.channels.RIG_INPUTS` order, in
+  (``wheelloader_LF`` ...), in :data:`ident.data.channels.RIG_INPUTS` order, in
   the unit set `units`: ``"SI"`` writes wheel-pad displacements in **mm**
   (the length unit of MTS's metric unit sets), ``aero_heave`` in N and the
   aero moments in N*m; ``"imperial"`` writes in, lbf and lbf*in.
@@ -35,7 +35,7 @@ The file keeps the drive's rate. MTS time-history playout supports a fixed
 set of file rates (e.g. 102.4, 128, 204.8, 256, 409.6, 512, 1024, 2048 Hz,
 depending on the controller's system rate); a drive at another rate is
 written with a logged warning: resample it first with
-:func:`ident.drive.resample_drive` (e.g. 100 Hz -> 512 Hz).
+:func:`ident.data.drive.resample_drive` (e.g. 100 Hz -> 512 Hz).
 """
 
 from __future__ import annotations
@@ -45,13 +45,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, quantity_of
-from ident.drive import Drive
+from ident.data.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, quantity_of
+from ident.data.drive import Drive
 from ident.errors import DriveError, SessionError
-from ident.formats._engine import as_channel_map, read_run
-from ident.formats.channel_map import ChannelMap, unit_factor
-from ident.formats.rpc3 import RPC3_DATA_TYPES, read_rpc3, write_rpc3
-from ident.units import check_units
+from ident.data.formats.engine import as_channel_map, read_run
+from ident.data.formats.channel_map import ChannelMap, unit_factor
+from ident.data.formats.rpc3 import RPC3_DATA_TYPES, read_rpc3, write_rpc3
+from ident.data.units import check_units
 
 __all__ = ["DRIVE_UNITS", "MTS_PLAYOUT_RATES_HZ", "export_drive_rpc3", "read_drive_rpc3"]
 
@@ -72,7 +72,7 @@ def export_drive_rpc3(drive, path, *, units=None, channel_map=None,
 
     Parameters
     ----------
-    drive : ident.drive.Drive
+    drive : ident.data.drive.Drive
         The drive (SI).
     path : str or os.PathLike
         Output file, usually ``.drv`` (any suffix is kept as given).
@@ -109,7 +109,7 @@ def export_drive_rpc3(drive, path, *, units=None, channel_map=None,
     Examples
     --------
     >>> import os, tempfile
-    >>> from ident.drive import make_noise_drive
+    >>> from ident.data.drive import make_noise_drive
     >>> drive = make_noise_drive(duration_s=4.0, fs_hz=128.0, seed=1,
     ...                          peak={"wheelloader_LF": 0.0254})
     >>> p = export_drive_rpc3(drive, os.path.join(tempfile.mkdtemp(), "noise.drv"))
@@ -156,7 +156,7 @@ def export_drive_rpc3(drive, path, *, units=None, channel_map=None,
     if not any(np.isclose(drive.fs_hz, r, rtol=1e-9) for r in MTS_PLAYOUT_RATES_HZ):
         logger.warning(
             "%s: %g Hz is not an MTS playout rate (%s Hz); resample the drive first "
-            "(ident.drive.resample_drive) if the controller refuses the file", where,
+            "(ident.data.drive.resample_drive) if the controller refuses the file", where,
             drive.fs_hz, ", ".join(f"{r:g}" for r in MTS_PLAYOUT_RATES_HZ))
     return write_rpc3(path, values, fs_hz=drive.fs_hz, units=file_units,
                       data_type=data_type, time_type="DRIVE", overwrite=overwrite,
@@ -180,7 +180,7 @@ def read_drive_rpc3(path, *, channel_map=None, name=None):
 
     Returns
     -------
-    ident.drive.Drive
+    ident.data.drive.Drive
         Rig inputs the file does not hold (the map does not map) are all zero;
         ``settings`` records the file, the map and the inputs set to zero.
 
@@ -190,7 +190,7 @@ def read_drive_rpc3(path, *, channel_map=None, name=None):
         If the file is missing, not an RPC III file or damaged; holds no
         wheelloader channel (without a map: the message lists what it has);
         a channel's unit is not one of its quantity's; a mapped channel is
-        missing or fails the checks of :func:`ident.formats.read_run`.
+        missing or fails the checks of :func:`ident.data.formats.read_run`.
     """
     path = Path(path)
     where = f"drive file {path}"

@@ -5,7 +5,7 @@ conditioned FRF (seed paper: ``invfreqs`` per pair; here also a common-pole
 vector fit) and returns a :class:`VehicleModel`: the FRF it came from (with
 coherence), the fitted pole-residue form of every pair with its fit error,
 the baseline damping ``c_bar``, channel names, units and sample rate. The
-model converts to an :class:`ident.closedloop.LoopPlant` for closed-loop
+model converts to an :class:`ident.sim.closedloop.LoopPlant` for closed-loop
 simulation with any shocks, to a python-control state-space system in real
 modal form, and to discrete time; it is saved to and loaded from one ``.npz``
 file with a format version (and its reduced loop plant, so that loading it is
@@ -16,7 +16,7 @@ Notes
 Every pair ``(o, i)`` is ``H(s) = sum_k r_k / (s - p_k) + d`` over its own
 poles (pole-residue form: no polynomial is ever expanded in unscaled ``s``).
 Conjugate poles are stored once (``Im p > 0``) with the factor 2 carried by the
-realization, as in :class:`ident.closedloop.ModalSystem`.
+realization, as in :class:`ident.sim.closedloop.ModalSystem`.
 """
 
 from __future__ import annotations
@@ -36,10 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ident._io import atomic_path
-from ident.channels import RIG_INPUTS
+from ident.data.files import atomic_path
+from ident.data.channels import RIG_INPUTS
 from ident.errors import FitWarning, IdentificationError, LowCoherenceWarning, ModelFileError
-from ident.frf import Frf
+from ident.identify.frf import Frf
 
 __all__ = [
     "VehicleModel",
@@ -181,7 +181,7 @@ class VehicleModel:
 
         Models saved before 4-post sessions existed have all seven. A drive
         with nonzero content on another rig input is refused in prediction
-        (:func:`ident.drive.check_drive_inputs`).
+        (:func:`ident.data.drive.check_drive_inputs`).
         """
         return tuple(n for n in self.input_names if not n.startswith("dF_"))
 
@@ -206,7 +206,7 @@ class VehicleModel:
 
         Returns
         -------
-        ident.closedloop.ModalSystem
+        ident.sim.closedloop.ModalSystem
             One state per distinct stored pole of each input column, driven by
             its input with B = 1 and read by every output with that pole with
             C = its residue (x2 for conjugate pairs; residues of a pole repeated
@@ -222,7 +222,7 @@ class VehicleModel:
         order output, pole. Only identical poles merge, so the realization is
         exact either way.
         """
-        from ident.closedloop import ModalSystem
+        from ident.sim.closedloop import ModalSystem
 
         inputs = list(inputs)
         p = len(self.output_names)
@@ -255,7 +255,7 @@ class VehicleModel:
                            np.concatenate(Cs, axis=1), self.direct[:, inputs].astype(float))
 
     def loop_plant(self, *, reduce_rtol=LOOP_REDUCE_RTOL):
-        """The model as an :class:`ident.closedloop.LoopPlant` for closed-loop simulation.
+        """The model as an :class:`ident.sim.closedloop.LoopPlant` for closed-loop simulation.
 
         Parameters
         ----------
@@ -281,14 +281,14 @@ class VehicleModel:
         (:meth:`plant_key`), and a plant that does not match is rebuilt.
 
         The plant's rig part always has the 7 columns of
-        :data:`ident.channels.RIG_INPUTS`: those of rig inputs the model does
+        :data:`ident.data.channels.RIG_INPUTS`: those of rig inputs the model does
         not have (the aero inputs of a 4-post model) are zero, and
         ``LoopPlant.rig_inputs`` names the ones it has, so the simulator
         refuses a drive that excites the others.
         """
         from threadpoolctl import threadpool_limits
 
-        from ident.closedloop import LoopPlant, ModalSystem
+        from ident.sim.closedloop import LoopPlant, ModalSystem
 
         cache = self.__dict__.setdefault("_plants", {})  # built once per model and bound
         # (and for the default bound, stored in the model file: load_model fills the cache)
@@ -436,7 +436,7 @@ class VehicleModel:
         """Frequency bands where a pair's conditioned estimate rests on noise.
 
         A line rests on noise where the conditioned FRF's relative standard
-        error (:func:`ident.condition.conditioned_standard_error`) exceeds
+        error (:func:`ident.identify.condition.conditioned_standard_error`) exceeds
         `max_rel_error` while the response is within `floor_db` of the pair's
         peak (below that the response is too small to matter, as the paper
         argues); lines replaced by residual fits count when their raw estimate
@@ -448,7 +448,7 @@ class VehicleModel:
             ``(output, input) -> [(f_lo_hz, f_hi_hz), ...]`` for the pairs that
             have such bands, within the model's fit band.
         """
-        from ident.condition import conditioned_standard_error
+        from ident.identify.condition import conditioned_standard_error
 
         if self.frf is None:
             return {}
@@ -654,7 +654,7 @@ def _restore_plant(model, pm, data, path):
     (another shockplan's reduction, or arrays changed after it was stored) is left out
     and rebuilt on demand.
     """
-    from ident.closedloop import LoopPlant, ModalSystem
+    from ident.sim.closedloop import LoopPlant, ModalSystem
 
     rtol = pm["reduce_rtol"]
     if pm.get("key") != model.plant_key(rtol):
@@ -789,9 +789,9 @@ def balanced_reduce(modal, *, rtol=1e-4):
     (:func:`_modal_gramians`), their square-root factors from a pivoted Cholesky
     stopped at their rounding level (:func:`_gram_factor`: low rank, so the
     singular value decomposition is of an ``r_q x r_p`` matrix). Returns a
-    :class:`ident.closedloop.ModalSystem`.
+    :class:`ident.sim.closedloop.ModalSystem`.
     """
-    from ident.closedloop import ModalSystem, modal_form
+    from ident.sim.closedloop import ModalSystem, modal_form
 
     if np.any(modal.lam.real >= 0):
         raise IdentificationError("balanced_reduce needs a stable system; reflect unstable poles first")
@@ -833,7 +833,7 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
     Parameters
     ----------
     frf : Frf
-        Conditioned FRF (:func:`ident.condition.condition_frf`).
+        Conditioned FRF (:func:`ident.identify.condition.condition_frf`).
     method : {"invfreqs", "vf"}
         ``invfreqs``: a transfer function per pair (output-error Gauss-Newton
         from a Levi / Sanathanan-Koerner start, as MATLAB's ``invfreqs``).
@@ -866,7 +866,7 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
     -------
     VehicleModel
     """
-    from ident import fit as fitmod
+    from ident.identify import fit as fitmod
 
     if not isinstance(frf, Frf):
         raise TypeError(f"fit_model needs an Frf, got {type(frf).__name__}")
@@ -983,7 +983,7 @@ def pair_noise_level(frf, sel=None, weight=None):
     """Relative noise of each pair's conditioned FRF over the fitted lines.
 
     ``sqrt(sum w sigma^2 / sum w |H|^2)`` with ``sigma`` the conditioned
-    estimate's standard error (:func:`ident.condition.conditioned_standard_error`)
+    estimate's standard error (:func:`ident.identify.condition.conditioned_standard_error`)
     and ``w`` the fit weights: the fit error a fit to the noise-free response
     would have against these data.
 
@@ -1000,7 +1000,7 @@ def pair_noise_level(frf, sel=None, weight=None):
     ndarray, shape (n_out, n_in)
         0 for noise-free data; ``inf`` where the coherence is 0 throughout.
     """
-    from ident.condition import conditioned_standard_error
+    from ident.identify.condition import conditioned_standard_error
 
     sel = np.arange(frf.f_hz.size) if sel is None else np.asarray(sel)
     sig = conditioned_standard_error(frf)[:, :, sel]
@@ -1151,7 +1151,7 @@ def _fit_pairs(common, tasks):
     """
     from threadpoolctl import threadpool_limits
 
-    from ident import fit as fitmod
+    from ident.identify import fit as fitmod
 
     fb, Hb, W, max_order, f_max, f_min = common
     out = []
@@ -1222,7 +1222,7 @@ def _fit_vf(fitmod, fb, Hb, W, frf, n_poles_vf, max_order):
     the pairs, or stop improving by 10 %, plus :data:`VF_ORDER_MARGIN` poles (the residues of
     every pair are refitted with `W` afterwards, by :func:`_regularize`).
     """
-    from ident.condition import conditioned_standard_error
+    from ident.identify.condition import conditioned_standard_error
 
     sel = np.searchsorted(frf.f_hz, fb)
     peak = np.maximum(np.abs(Hb).max(axis=-1, keepdims=True), 1e-300)
@@ -1262,17 +1262,17 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
 
     Parameters
     ----------
-    session : ident.session.Session
+    session : ident.data.session.Session
     estimator : {"lpm", "welch"}
-        FRF estimator (:func:`ident.frf.estimate_frf`): the local polynomial
+        FRF estimator (:func:`ident.identify.frf.estimate_frf`): the local polynomial
         method (default; free of the transient leakage that makes Welch H1
         estimates of weak paths noisy) or the paper's Welch H1.
     frf_method : {"global", "sequential"}
-        :func:`ident.frf.estimate_frf` (``sequential`` needs ``estimator="welch"``).
+        :func:`ident.identify.frf.estimate_frf` (``sequential`` needs ``estimator="welch"``).
     cbar_n_s_m, nperseg
-        :func:`ident.frf.estimate_frf`.
+        :func:`ident.identify.frf.estimate_frf`.
     coherence_min, smooth_width_hz, smooth_domain
-        :func:`ident.condition.condition_frf` (``smooth_domain`` None: its default).
+        :func:`ident.identify.condition.condition_frf` (``smooth_domain`` None: its default).
     fit_method, orders, weighting, band_hz, max_order
         :func:`fit_model`.
 
@@ -1281,8 +1281,8 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
     VehicleModel
         ``settings["session"]`` names the session and its runs.
     """
-    from ident.condition import condition_frf
-    from ident.frf import estimate_frf
+    from ident.identify.condition import condition_frf
+    from ident.identify.frf import estimate_frf
 
     frf = estimate_frf(session, method=frf_method, cbar_n_s_m=cbar_n_s_m, nperseg=nperseg,
                        estimator=estimator)

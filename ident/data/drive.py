@@ -1,6 +1,6 @@
 """Drives: the time histories of the 7 rig inputs, made, read, written and resampled.
 
-A drive holds the rig inputs of :data:`ident.channels.RIG_INPUTS`, in SI:
+A drive holds the rig inputs of :data:`ident.data.channels.RIG_INPUTS`, in SI:
 ``aero_heave`` [N], ``aero_roll`` [N*m], ``aero_pitch`` [N*m] and
 ``wheelloader_LF/RF/LR/RR`` [m] (wheel-pad displacement, up positive), on a
 uniform time grid starting at 0 s. A 4-post drive gives only the wheelloaders:
@@ -21,7 +21,7 @@ Three generators make drives:
 
 :func:`read_drive` and :func:`write_drive` read and write drive files (the
 rig-session run-file format, CSV or Parquet, through
-:func:`ident.session.read_run_table` / :func:`ident.session.write_run_table`);
+:func:`ident.data.session.read_run_table` / :func:`ident.data.session.write_run_table`);
 :func:`resample_drive` changes a drive's sample rate.
 
 Examples
@@ -48,9 +48,9 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
 
-from .channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero, rig_inputs_of
-from .errors import DriveError
-from .units import check_units
+from ident.data.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero, rig_inputs_of
+from ident.errors import DriveError
+from ident.data.units import check_units
 
 __all__ = [
     "Drive",
@@ -109,7 +109,7 @@ class Drive:
     fs_hz : float
         Sample rate [Hz]; samples are at ``k / fs_hz``, ``k = 0 .. n_samples-1``.
     channels : dict of str to ndarray, shape (n_samples,)
-        Every rig input of :data:`ident.channels.RIG_INPUTS` -> samples in SI
+        Every rig input of :data:`ident.data.channels.RIG_INPUTS` -> samples in SI
         (``aero_heave`` [N], ``aero_roll`` and ``aero_pitch`` [N*m],
         ``wheelloader_XX`` [m]), float64 and read-only, in that order. Give
         all seven, or only the four wheelloaders (a 4-post drive: the aero
@@ -220,7 +220,7 @@ class Drive:
         Returns
         -------
         ndarray, shape (n_samples, 7)
-            Columns in :data:`ident.channels.RIG_INPUTS` order, SI (a new array;
+            Columns in :data:`ident.data.channels.RIG_INPUTS` order, SI (a new array;
             zero columns for the aero inputs of a 4-post drive).
         """
         return np.column_stack([self.channels[c] for c in RIG_INPUTS])
@@ -327,7 +327,7 @@ def make_noise_drive(*, duration_s, fs_hz, peak, seed, f_max_hz=30.0, filter_ord
 
     Each rig input is independent Gaussian white noise
     (``numpy.random.default_rng(seed)``, one stream drawn for all 7 inputs in
-    :data:`~ident.channels.RIG_INPUTS` order), low-passed 0..`f_max_hz` by a
+    :data:`~ident.data.channels.RIG_INPUTS` order), low-passed 0..`f_max_hz` by a
     causal `filter_order`-th order discrete Butterworth filter
     (``scipy.signal.sosfilt``), faded in and out with a raised cosine over
     `taper_s` seconds, and finally scaled so that its largest absolute value
@@ -800,9 +800,9 @@ def read_drive(path, *, units="SI", channel_map=None, name=None):
         If the file is missing or unreadable, lacks ``time`` or a wheelloader,
         has some but not all three aero columns, holds NaN/inf or non-numeric
         values, or its time is not uniform (the checks of
-        :func:`ident.session.read_run_table`).
+        :func:`ident.data.session.read_run_table`).
     """
-    from .session import read_run_table
+    from ident.data.session import read_run_table
 
     path = Path(path)
     table = read_run_table(path, units=units, channel_map=channel_map,
@@ -860,7 +860,7 @@ def write_drive(drive, path, *, units="SI", overwrite=False):
     FileExistsError
         If `path` exists and `overwrite` is false.
     """
-    from .session import write_run_table
+    from ident.data.session import write_run_table
 
     if not isinstance(drive, Drive):
         raise TypeError(f"write_drive: drive must be a Drive, got {type(drive).__name__}")
@@ -1116,7 +1116,7 @@ def check_drive_inputs(drive, rig_inputs, *, model=None):
 
     Examples
     --------
-    >>> from ident.channels import WHEELLOADER_INPUTS
+    >>> from ident.data.channels import WHEELLOADER_INPUTS
     >>> d = make_sweep_drive(duration_s=4.0, fs_hz=100.0, amplitude={"aero_heave": 500.0},
     ...                      f_start_hz=1.0, f_stop_hz=10.0, channels=["aero_heave"])
     >>> check_drive_inputs(d, WHEELLOADER_INPUTS, model="4-post car")

@@ -55,9 +55,9 @@ import pandas as pd
 from scipy.optimize import minimize_scalar, nnls
 from scipy.special import ndtr
 
-from ident._io import atomic_write_toml, did_you_mean, read_toml
+from ident.data.files import atomic_write_toml, did_you_mean, read_toml
 from ident.errors import FitWarning, ShockModelError
-from ident.units import UNIT_LABELS, check_units, from_si, to_si
+from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 
 __all__ = [
     "PASSIVITY_RTOL",

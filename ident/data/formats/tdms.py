@@ -18,7 +18,7 @@ import numpy as np
 from nptdms import TdmsFile
 
 from ident.errors import SessionError
-from ident.formats._record import RawRecord, as_float_samples, check_file, logged_warnings
+from ident.data.formats.record import RawRecord, as_float_samples, check_file, logged_warnings
 
 __all__ = ["read_tdms"]
 

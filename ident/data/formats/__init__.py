@@ -5,7 +5,7 @@ RPC III time histories (``.rsp``, ``.tim``, ``.drv``), vehicle data loggers
 ASAM MDF (``.mf4``), NI systems TDMS (``.tdms``). Each is read with the library
 made for it (``rpc3-file``, ``asammdf``, ``npTDMS``) by a reader that returns
 the file's channels as stored (:class:`RawRecord`); a channel map
-(:mod:`ident.formats.channel_map`) names, per canonical channel, the file's
+(:mod:`ident.data.formats.channel_map`) names, per canonical channel, the file's
 channel, its unit, scale, offset and sign; one engine (:func:`read_run`) checks
 and converts a file to SI canonical channels; :func:`import_runs` appends files
 as runs to a rig session folder; :func:`export_drive_rpc3` writes a drive as
@@ -17,7 +17,7 @@ Command-line use (thin calls)::
         -> import_runs(SESSION, FILES, format=..., channel_map=MAP, setup="B20,B20,N8,B20",
                        role=..., names=..., shocks=..., units=...)
     shockplan export-drive DRIVE.csv --format rpc3 --out FILE.drv
-        -> export_drive_rpc3(ident.drive.read_drive(DRIVE.csv, units=...), FILE.drv, ...)
+        -> export_drive_rpc3(ident.data.drive.read_drive(DRIVE.csv, units=...), FILE.drv, ...)
 
 Errors on user input are :class:`~ident.errors.SessionError` (files, maps,
 sessions) and :class:`~ident.errors.DriveError` (drives), one sentence each
@@ -31,7 +31,7 @@ Examples
 'N8'
 """
 
-from ident.formats._engine import (
+from ident.data.formats.engine import (
     READERS,
     as_channel_map,
     import_runs,
@@ -39,8 +39,8 @@ from ident.formats._engine import (
     read_raw,
     read_run,
 )
-from ident.formats._record import FORMAT_NAMES, FORMATS, RawRecord, sniff_format
-from ident.formats.channel_map import (
+from ident.data.formats.record import FORMAT_NAMES, FORMATS, RawRecord, sniff_format
+from ident.data.formats.channel_map import (
     CHANNEL_MAP_FORMAT,
     UNIT_FACTORS,
     ChannelMap,
@@ -49,10 +49,10 @@ from ident.formats.channel_map import (
     make_channel_map,
     read_channel_map,
 )
-from ident.formats.drives import DRIVE_UNITS, export_drive_rpc3, read_drive_rpc3
-from ident.formats.mdf import read_mdf
-from ident.formats.rpc3 import read_rpc3, write_rpc3
-from ident.formats.tdms import read_tdms
+from ident.data.formats.drives import DRIVE_UNITS, export_drive_rpc3, read_drive_rpc3
+from ident.data.formats.mdf import read_mdf
+from ident.data.formats.rpc3 import read_rpc3, write_rpc3
+from ident.data.formats.tdms import read_tdms
 
 __all__ = [
     "FORMATS",

@@ -10,14 +10,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.channels import AERO_INPUTS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
+from ident.data.channels import AERO_INPUTS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
 from ident.errors import SessionError
-from ident.formats._record import FORMAT_NAMES, FORMATS
-from ident.formats.channel_map import ChannelMap, read_channel_map
-from ident.formats.mdf import read_mdf
-from ident.formats.rpc3 import read_rpc3
-from ident.formats.tdms import read_tdms
-from ident.session import (
+from ident.data.formats.record import FORMAT_NAMES, FORMATS
+from ident.data.formats.channel_map import ChannelMap, read_channel_map
+from ident.data.formats.mdf import read_mdf
+from ident.data.formats.rpc3 import read_rpc3
+from ident.data.formats.tdms import read_tdms
+from ident.data.session import (
     MANIFEST_NAME,
     RTOL_TIME_STEP,
     RUN_ROLES,
@@ -28,8 +28,8 @@ from ident.session import (
     read_session,
     write_session,
 )
-from ident.shocks import ShockLibrary, read_shock_library
-from ident.units import check_units
+from ident.models.shocks import ShockLibrary, read_shock_library
+from ident.data.units import check_units
 
 __all__ = ["READERS", "read_raw", "read_run", "import_runs", "parse_setup",
            "as_channel_map"]
@@ -129,7 +129,7 @@ def read_run(path, *, format, channel_map, required=(), where=None):
     format : {"rpc3", "mdf", "tdms"}
         The file's format (``--format``); a file of another format is refused.
     channel_map : ChannelMap or str or os.PathLike
-        The map, or its TOML file (:mod:`ident.formats.channel_map`).
+        The map, or its TOML file (:mod:`ident.data.formats.channel_map`).
     required : iterable of str
         Canonical channels the map must map (e.g. the 7 rig inputs for a
         session run); checked before the file is read.
@@ -138,10 +138,10 @@ def read_run(path, *, format, channel_map, required=(), where=None):
 
     Returns
     -------
-    ident.session.RunTable
+    ident.data.session.RunTable
         ``time_s`` [s] (the file's time base), ``channels`` (every mapped
         channel, SI, shockplan's signs, read-only, in
-        :data:`ident.channels.ALL_CHANNELS` order), ``fs_hz`` and ``path``.
+        :data:`ident.data.channels.ALL_CHANNELS` order), ``fs_hz`` and ``path``.
 
     Raises
     ------
@@ -153,7 +153,7 @@ def read_run(path, *, format, channel_map, required=(), where=None):
         known unit other than the map's; a channel has no time base and the
         map names no ``time``; the mapped channels differ in length or time
         base; time is not strictly increasing and uniform (relative tolerance
-        :data:`ident.session.RTOL_TIME_STEP`); a value is NaN/inf; fewer than
+        :data:`ident.data.session.RTOL_TIME_STEP`); a value is NaN/inf; fewer than
         2 samples.
     """
     fmt = _check_format(format)
@@ -273,7 +273,7 @@ def parse_setup(setup, *, shocks=None, where="setup"):
     Returns
     -------
     dict of str to str
-        In :data:`ident.channels.CORNERS` order.
+        In :data:`ident.data.channels.CORNERS` order.
 
     Raises
     ------
@@ -391,7 +391,7 @@ def import_runs(session_dir, files, *, format, channel_map, setup, role="other",
 
     Returns
     -------
-    ident.session.Session
+    ident.data.session.Session
         The session as read back from `session_dir`.
 
     Raises
@@ -410,8 +410,8 @@ def import_runs(session_dir, files, *, format, channel_map, setup, role="other",
     Notes
     -----
     Writing is atomic: a new session is built in a temporary folder and
-    renamed into place (:func:`ident.session.write_session`); runs are appended
-    with :func:`ident.session.append_runs`, which keeps everything already in
+    renamed into place (:func:`ident.data.session.write_session`); runs are appended
+    with :func:`ident.data.session.append_runs`, which keeps everything already in
     the folder byte for byte. All files are read and checked before anything
     is written.
     """

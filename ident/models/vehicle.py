@@ -37,10 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ident._io import atomic_write_toml, read_toml
-from ident.channels import CORNERS, RIG_INPUTS
+from ident.data.files import atomic_write_toml, read_toml
+from ident.data.channels import CORNERS, RIG_INPUTS
 from ident.errors import VehicleError
-from ident.units import check_units, from_si, to_si
+from ident.data.units import check_units, from_si, to_si
 
 __all__ = [
     "VehicleParams",
@@ -59,7 +59,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 G_M_S2 = 9.80665  # standard gravity [m/s^2]
-EXAMPLE_VEHICLE_PATH = Path(__file__).parent / "data" / "paper_car.toml"
+EXAMPLE_VEHICLE_PATH = Path(__file__).parents[1] / "examples" / "paper_car.toml"
 
 #: Output kinds of the physical model, in output order (each for LF, RF, LR, RR).
 FULL_CAR_OUTPUT_KINDS = (
@@ -493,7 +493,7 @@ class FullCarModel:
                           name=self.params.name.replace(".", ""))  # control forbids '.' in names
 
     def loop_plant(self, cbar_n_s_m=None):
-        """The model as an :class:`ident.closedloop.LoopPlant` around linear damping `cbar_n_s_m`.
+        """The model as an :class:`ident.sim.closedloop.LoopPlant` around linear damping `cbar_n_s_m`.
 
         Parameters
         ----------
@@ -502,7 +502,7 @@ class FullCarModel:
             nominal damping. Any value gives the same closed loop with the same
             shocks; a realistic one keeps the plant itself well damped.
         """
-        from ident.closedloop import LoopPlant
+        from ident.sim.closedloop import LoopPlant
 
         c = self.params.damping_n_s_m if cbar_n_s_m is None else np.broadcast_to(
             np.asarray(cbar_n_s_m, float), (4,))

@@ -45,9 +45,9 @@ from pathlib import Path
 import numpy as np
 import rpc3
 
-from ident._io import atomic_path
+from ident.data.files import atomic_path
 from ident.errors import SessionError
-from ident.formats._record import RawRecord, as_float_samples, check_file, logged_warnings
+from ident.data.formats.record import RawRecord, as_float_samples, check_file, logged_warnings
 
 __all__ = ["RPC3_DATA_TYPES", "RPC3_TIME_TYPES", "INT_FULL_SCALE", "read_rpc3", "write_rpc3"]
 

@@ -14,7 +14,7 @@ actuators: every run records the 7 rig inputs) or ``"4-post"`` (no aero
 actuators: the physical model is driven with the aero inputs zero and the runs
 have no aero channels, as the spec's "Run files" says of a 4-post rig).
 
-Each run is simulated with :func:`ident.closedloop.simulate` on the physical
+Each run is simulated with :func:`ident.sim.closedloop.simulate` on the physical
 full-car model, closed around the equivalent linear damping of that run's
 shocks (so the feedback carries only their nonlinear, dynamic residual) and
 oversampled internally.
@@ -30,12 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ident._io import read_toml
-from ident.channels import (CORNERS, RESPONSE_KINDS, RIG_INPUTS, RIG_KINDS, WHEELLOADER_INPUTS,
+from ident.data.files import read_toml
+from ident.data.channels import (CORNERS, RESPONSE_KINDS, RIG_INPUTS, RIG_KINDS, WHEELLOADER_INPUTS,
                             kind_of)
-from ident.drive import Drive, check_drive_inputs
+from ident.data.drive import Drive, check_drive_inputs
 from ident.errors import DriveError, SessionError, ShockModelError
-from ident.units import check_units, to_si
+from ident.data.units import check_units, to_si
 
 __all__ = [
     "PlanRun",
@@ -51,7 +51,7 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-DEFAULT_PLAN_PATH = Path(__file__).parent / "data" / "paper_plan.toml"
+DEFAULT_PLAN_PATH = Path(__file__).parents[1] / "examples" / "paper_plan.toml"
 #: Shock-velocity RMS at which the loop's baseline damping is linearized [m/s].
 #: Any value gives the same closed loop; a typical one keeps the feedback small.
 NOMINAL_V_RMS_M_S = 0.1
@@ -74,7 +74,7 @@ class PlanRun:
     seed : int
         Drive seed (the same seed gives the same drive).
     duration_s : float
-    drive : ident.drive.Drive or None
+    drive : ident.data.drive.Drive or None
         A drive of its own (read from the plan's ``drive`` file); None plays the
         plan's generated drive (``seed``, ``duration_s``).
     """
@@ -105,7 +105,7 @@ class RigPlan:
         in every run).
     drive : dict
         Drive settings in SI (``kind`` and its options).
-    shocks : ident.shocks.ShockLibrary
+    shocks : ident.models.shocks.ShockLibrary
     runs : tuple of PlanRun
     units : str
         Unit system of the session to write.
@@ -256,7 +256,7 @@ def read_rig_plan(path):
     ``setup``, ``role``, optional ``seed`` and ``duration_s``, or ``drive``: a
     drive file (relative to the plan, in its units) the run plays instead.
     """
-    from ident.shocks import read_shock_library
+    from ident.models.shocks import read_shock_library
 
     path = Path(path)
     where = str(path)
@@ -312,7 +312,7 @@ def read_rig_plan(path):
             if not isinstance(drive_file, str) or not drive_file:
                 raise SessionError(f"{w}: 'drive' must be the path of a drive file (relative "
                                    f"to the plan), got {drive_file!r}")
-            from ident.drive import read_drive
+            from ident.data.drive import read_drive
 
             try:
                 run_drive = read_drive(path.parent / drive_file, units=units,
@@ -358,7 +358,7 @@ def _noise_num(doc, key, where):
 
 
 def _parse_channel_noise(table, where):
-    from ident.channels import ALL_CHANNELS
+    from ident.data.channels import ALL_CHANNELS
 
     if not isinstance(table, dict):
         raise SessionError(f"{where}: must be a table of channel or kind = fraction")
@@ -423,16 +423,16 @@ def make_plan_drive(plan, vehicle, *, seed, duration_s, name=None):
     Parameters
     ----------
     plan : RigPlan
-    vehicle : ident.vehicle.VehicleParams
+    vehicle : ident.models.vehicle.VehicleParams
         Needed for the roll/pitch moment amplitudes and the wheelbase.
     seed : int
     duration_s : float
 
     Returns
     -------
-    ident.drive.Drive
+    ident.data.drive.Drive
     """
-    from ident import drive as drv
+    from ident.data import drive as drv
 
     d = plan.drive
     if d["kind"] == "noise":
@@ -465,7 +465,7 @@ def make_plan_drive(plan, vehicle, *, seed, duration_s, name=None):
 
 def _fine_drive(drive, r):
     """The drive interpolated band-limited onto the simulation grid (``r`` steps per sample)."""
-    from ident.closedloop import _refine
+    from ident.sim.closedloop import _refine
 
     u = _refine(drive.as_array(), r)
     return Drive(name=drive.name, fs_hz=drive.fs_hz * r,
@@ -477,7 +477,7 @@ def _daq_sample(channels, r, n_samples):
     """Sample simulation-grid signals as a rig's data acquisition does.
 
     Every channel passes the same zero-phase anti-aliasing low-pass
-    (:func:`ident.drive.resample_bandlimited`, flat to 1e-5 up to 0.8 of the
+    (:func:`ident.data.drive.resample_bandlimited`, flat to 1e-5 up to 0.8 of the
     output Nyquist frequency, below -80 dB above 1.2 of it) before it is
     decimated by ``r``. The nonlinear shock forces have content above the
     Nyquist frequency; sampled without the filter it folds into the band,
@@ -485,11 +485,11 @@ def _daq_sample(channels, r, n_samples):
     common filter cancels in every input/output relation.
 
     Each record is extended by its end values over the filter's length; the
-    filtering is done by FFT (:func:`ident.drive._decimate_bandlimited`: the
+    filtering is done by FFT (:func:`ident.data.drive._decimate_bandlimited`: the
     same numbers as ``resample_bandlimited`` to rounding, about 4x faster on
     an 800 s run at 8x oversampling).
     """
-    from ident.drive import _decimate_bandlimited
+    from ident.data.drive import _decimate_bandlimited
 
     names = list(channels)
     if r == 1:
@@ -514,15 +514,15 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
     ----------
     plan : RigPlan, optional
         Default :func:`default_plan`.
-    vehicle : ident.vehicle.VehicleParams, optional
+    vehicle : ident.models.vehicle.VehicleParams, optional
         Default the built-in example car (the paper's Table 1).
     progress : bool
         Show a progress bar (tqdm) over the runs.
 
     Returns
     -------
-    ident.session.Session
-        In memory (``path`` None); write it with :func:`ident.session.write_session`.
+    ident.data.session.Session
+        In memory (``path`` None); write it with :func:`ident.data.session.write_session`.
         Every run holds the 7 rig inputs (the 4 wheelloaders on a 4-post
         rig), ``shock_force_XX`` and every output of the full-car model.
 
@@ -532,9 +532,9 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
         If a run's drive is sampled at another rate than the plan, or, on a
         4-post plan, a run's drive file moves an aero input.
     """
-    from ident.closedloop import simulate
-    from ident.session import Run, make_session
-    from ident.vehicle import build_full_car, example_vehicle
+    from ident.sim.closedloop import simulate
+    from ident.data.session import Run, make_session
+    from ident.models.vehicle import build_full_car, example_vehicle
 
     plan = default_plan() if plan is None else plan
     vehicle = example_vehicle() if vehicle is None else vehicle

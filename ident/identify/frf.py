@@ -1,7 +1,7 @@
 """Multi-input frequency-response estimation from rig runs (seed paper, Eqs. 11-28).
 
 The inputs of the identified model are the session's rig inputs (the 7 of
-:data:`ident.channels.RIG_INPUTS`, or the 4 wheelloaders of a 4-post rig) and
+:data:`ident.data.channels.RIG_INPUTS`, or the 4 wheelloaders of a 4-post rig) and
 the 4 shock-force deviations ``dF_i = F_i - c_bar_i v_i`` (Eq. 19), where ``c_bar`` is a baseline
 linear damping per corner. Runs with different shocks make ``dF`` linearly
 independent of the rig inputs (Eqs. 21-24), so the closed-loop responses
@@ -94,7 +94,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from ident.channels import (CORNERS, RESPONSE_CHANNELS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES,
+from ident.data.channels import (CORNERS, RESPONSE_CHANNELS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES,
                             rig_inputs_of)
 from ident.errors import IdentificationError, LowCoherenceWarning
 
@@ -128,7 +128,7 @@ def model_inputs(session):
     """The inputs of a model identified from a session: its rig inputs, then ``dF_XX``.
 
     The rig inputs are those of the session's runs (the spec: every run has
-    the same set): the 7 of :data:`ident.channels.RIG_INPUTS` on a 7/8-post
+    the same set): the 7 of :data:`ident.data.channels.RIG_INPUTS` on a 7/8-post
     rig, the 4 wheelloaders on a 4-post rig (8 inputs in all).
     """
     return rig_inputs_of(session.runs[0].channels) + DF_INPUTS
@@ -141,7 +141,7 @@ def embed_inputs(X, input_names, *, axis=1, fill=0.0):
     loop and the screening work on the canonical 11 columns, where the absent
     aero inputs get `fill` (a zero response: the model says nothing about
     them, and a drive that excites them is refused,
-    :func:`ident.drive.check_drive_inputs`).
+    :func:`ident.data.drive.check_drive_inputs`).
 
     Parameters
     ----------
@@ -200,7 +200,7 @@ LPM_DISTINCT_FRACTION = 0.1
 #: Default ``lpm_coherence_dof``: the LPM reports its standard error as the
 #: partial coherence an H1 estimate with this many degrees of freedom (the
 #: seed paper's 40 Welch blocks per run) would have for the same random error,
-#: so :func:`ident.condition.condition_frf`'s threshold 0.9 keeps the meaning it
+#: so :func:`ident.identify.condition.condition_frf`'s threshold 0.9 keeps the meaning it
 #: has in the paper: a relative standard error of ``sqrt(0.1 / 0.9 / 40)`` = 5.3 %.
 LPM_COHERENCE_DOF = 40
 #: Singular values of the column-scaled local LPM regressor below this fraction
@@ -250,13 +250,13 @@ class Frf:
         ``estimator``, ``method``, ``window``, ``nperseg``, ``noverlap``,
         ``runs``, ... (LPM: ``lpm_degree``, ``lpm_half_width``, ``lpm_dof``, ...)
     H_raw : ndarray or None
-        The estimate before conditioning (set by :func:`ident.condition.condition_frf`).
+        The estimate before conditioning (set by :func:`ident.identify.condition.condition_frf`).
     replaced : ndarray of bool or None
         Frequencies replaced by residual fits in conditioning, (n_out, n_in, n_f).
     sigma : ndarray or None
         Standard error of each line of ``H`` (complex, ``E|H - H_true|^2 =
         sigma^2``), (n_out, n_in, n_f); set by conditioning
-        (:func:`ident.condition.conditioned_standard_error`).
+        (:func:`ident.identify.condition.conditioned_standard_error`).
     """
 
     f_hz: np.ndarray
@@ -732,12 +732,12 @@ def shock_force_deviation(run, shocks, cbar_n_s_m, *, exact_linear=True):
 
     Parameters
     ----------
-    run : ident.session.Run
+    run : ident.data.session.Run
         Must hold ``shock_velocity_XX``; ``shock_force_XX`` is used when present,
         otherwise the force is computed from the run's shock model (static curve
         and lag, first-order hold at the run's sample rate) and the measured
         velocity.
-    shocks : ident.shocks.ShockLibrary
+    shocks : ident.models.shocks.ShockLibrary
     cbar_n_s_m : array_like, shape (4,)
     exact_linear : bool
         A corner whose shock is, per the library, linear with ``c == c_bar``
@@ -755,7 +755,7 @@ def shock_force_deviation(run, shocks, cbar_n_s_m, *, exact_linear=True):
     F, dF : ndarray, shape (4, n_samples)
         Dynamic parts (means removed) [N].
     """
-    from ident.closedloop import lag_coefficients
+    from ident.sim.closedloop import lag_coefficients
 
     cbar = np.asarray(cbar_n_s_m, dtype=float)
     F = np.empty((4, run.n_samples))
@@ -780,7 +780,7 @@ def shock_force_deviation(run, shocks, cbar_n_s_m, *, exact_linear=True):
 
 def _is_cbar_linear(model, cbar):
     """True if a shock model is linear with rate ``cbar`` (relative 1e-9) and has no lag."""
-    from ident.shocks import LinearShock
+    from ident.models.shocks import LinearShock
 
     return (isinstance(model, LinearShock) and model.lag_s == 0
             and abs(model.c_n_s_m - cbar) <= 1e-9 * abs(cbar))
@@ -862,7 +862,7 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
 
     Parameters
     ----------
-    session : ident.session.Session
+    session : ident.data.session.Session
     method : {"global", "sequential"}
         ``global``: one least-squares problem over all runs' blocks (Eq. 23);
         works with nonlinear baseline shocks. ``sequential``: the rig inputs

@@ -15,7 +15,7 @@ shock library, run roles, duplicate names, one common sample rate).
 Notes
 -----
 Inside the package every value is SI and every channel has its canonical name
-(:mod:`ident.channels`). Files may be in ``"imperial"`` units (the manifest's
+(:mod:`ident.data.channels`). Files may be in ``"imperial"`` units (the manifest's
 ``units`` key; run files take the unit system of the manifest) and may name
 their columns differently (the manifest's ``[channels]`` table maps canonical
 names to file columns). Values may carry static offsets; :meth:`Run.dynamic`
@@ -38,12 +38,12 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from ident._io import (atomic_path, atomic_write_text, did_you_mean, read_toml, write_csv_frame,
+from ident.data.files import (atomic_path, atomic_write_text, did_you_mean, read_toml, write_csv_frame,
                        write_parquet_frame)
-from ident.channels import (ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS,
+from ident.data.channels import (ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS,
                              missing_aero, quantity_of, rig_inputs_of)
 from ident.errors import SessionError
-from ident.units import check_units, from_si, to_si
+from ident.data.units import check_units, from_si, to_si
 
 __all__ = [
     "SESSION_FORMAT",
@@ -100,7 +100,7 @@ class RunTable:
         Sample times [s], strictly increasing and uniformly sampled (read-only).
     channels : dict of str to ndarray, shape (n_samples,)
         Canonical channel name -> samples in SI units (float64, read-only), in
-        :data:`ident.channels.ALL_CHANNELS` order.
+        :data:`ident.data.channels.ALL_CHANNELS` order.
     fs_hz : float
         Sample rate [Hz], derived from `time_s`.
     path : pathlib.Path
@@ -207,7 +207,7 @@ class Session:
     runs : tuple of Run
         The runs, in manifest order.
     shocks : ShockLibrary
-        Ordered mapping shock id -> shock model (:mod:`ident.shocks`).
+        Ordered mapping shock id -> shock model (:mod:`ident.models.shocks`).
     shock_library_file : str
         The shock library as named in the manifest (relative to the folder).
     fs_hz : float
@@ -383,7 +383,7 @@ def _check_columns(columns, *, where, units, channel_map, required):
     -------
     time_s : ndarray, shape (n_samples,)
     channels : dict of str to ndarray, shape (n_samples,)
-        SI, read-only, in :data:`ident.channels.ALL_CHANNELS` order.
+        SI, read-only, in :data:`ident.data.channels.ALL_CHANNELS` order.
     fs_hz : float
     """
     source = {c: channel_map.get(c, c) for c in (_TIME,) + ALL_CHANNELS}
@@ -493,7 +493,7 @@ def _check_required(required, *, where):
     if unknown:
         raise SessionError(
             f"{where}: required channel(s) {unknown} are not canonical channels; "
-            f"see ident.channels.ALL_CHANNELS"
+            f"see ident.data.channels.ALL_CHANNELS"
         )
     return required
 
@@ -561,14 +561,14 @@ def read_run_table(path, *, units="SI", channel_map=None, required=(), where=Non
         A CSV file with a header row (``.csv``) or a Parquet file (``.parquet``).
     units : {"SI", "imperial"}
         Unit system of the values in the file; each channel is converted to SI by
-        its quantity (:func:`ident.channels.quantity_of`); ``time`` is in seconds.
+        its quantity (:func:`ident.data.channels.quantity_of`); ``time`` is in seconds.
     channel_map : mapping of str to str, optional
         ``{canonical name: file column}`` for exports whose names differ (the
         manifest's ``[channels]`` table). ``time`` may be mapped too.
     required : iterable of str
-        Canonical channels that must be present (e.g. ``ident.channels.RIG_INPUTS``).
+        Canonical channels that must be present (e.g. ``ident.data.channels.RIG_INPUTS``).
         When it holds the four wheelloaders, the aero channels must be all three
-        or none (a 4-post run): ``ident.channels.WHEELLOADER_INPUTS`` reads runs
+        or none (a 4-post run): ``ident.data.channels.WHEELLOADER_INPUTS`` reads runs
         of either rig.
     where : str, optional
         How to name the file in error messages (default: the path), e.g.
@@ -624,7 +624,7 @@ def _in_memory_columns(time_s, channels, *, where):
     if unknown:
         raise SessionError(
             f"{where}: unknown channel name(s) {unknown}; use canonical names "
-            "(ident.channels.ALL_CHANNELS)"
+            "(ident.data.channels.ALL_CHANNELS)"
         )
     if np.ndim(time_s) != 1:
         raise SessionError(
@@ -659,7 +659,7 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
     Notes
     -----
     Columns are ``time``, the rig inputs, then the responses, in
-    :data:`ident.channels.ALL_CHANNELS` order. CSV floats are written with full
+    :data:`ident.data.channels.ALL_CHANNELS` order. CSV floats are written with full
     precision (shortest repr that round-trips). The data are checked by the same
     engine as :func:`read_run_table`, so a written file always reads back.
 
@@ -919,7 +919,7 @@ def read_session(path):
         rig inputs (runs with and without aero channels).
     """
     from ident.errors import ShockModelError
-    from ident.shocks import read_shock_library
+    from ident.models.shocks import read_shock_library
 
     folder, manifest = _manifest_paths(path)
     where = str(manifest)
@@ -1017,7 +1017,7 @@ def make_session(name, runs, shocks, *, units="SI"):
         sample rates (one engine checks both), or a run's ``fs_hz`` that
         disagrees with its ``time_s``.
     """
-    from ident.shocks import ShockLibrary
+    from ident.models.shocks import ShockLibrary
 
     where = f"session {name!r}"
     if not isinstance(name, str) or not name.strip():
@@ -1141,7 +1141,7 @@ def write_session(session, path, *, units=None, run_format="csv", overwrite=Fals
     SessionError
         If a run's data fail the run-file checks.
     """
-    from ident.shocks import write_shock_library
+    from ident.models.shocks import write_shock_library
 
     units = _check_units(session.units if units is None else units, where="units")
     if run_format not in _RUN_FORMATS:

@@ -19,7 +19,7 @@ import numpy as np
 from asammdf import MDF
 
 from ident.errors import SessionError
-from ident.formats._record import RawRecord, as_float_samples, check_file, logged_warnings
+from ident.data.formats.record import RawRecord, as_float_samples, check_file, logged_warnings
 
 __all__ = ["read_mdf"]
 

@@ -4,8 +4,8 @@ The planner predicts setups with a fitted (parametric) model. To tell fit error
 from everything else, :func:`fir_from_frf` turns the estimated FRF itself into
 impulse responses (FIR filters) at the FRF's sample rate, and
 :func:`simulate_fir_batch` runs them in the same closed loop with the same exact
-nonlinear shocks as :func:`ident.closedloop.simulate_batch`, returning the same
-:class:`ident.closedloop.BatchResponse`.
+nonlinear shocks as :func:`ident.sim.closedloop.simulate_batch`, returning the same
+:class:`ident.sim.closedloop.BatchResponse`.
 
 Notes
 -----
@@ -42,17 +42,17 @@ the band (a digressive shock with a knee at 2 in/s crosses it in a few ms).
 For the paper car with such shocks at 100 Hz this costs up to 3.8 % in RMS
 metrics at the data rate, 1 % at 2x, 0.3 % at 4x and 0.1 % at 8x (against
 the modal simulator at 16x). The loop therefore runs on a grid
-``oversample`` times finer, like :func:`ident.closedloop.simulate_batch`: the
+``oversample`` times finer, like :func:`ident.sim.closedloop.simulate_batch`: the
 shock-velocity responses to ``dF`` are interpolated band-limited onto it (the
 plant does not respond above ``fs / 2``, where the FRF says nothing), the rig
 part of the shock velocities likewise, and the shock-force deviations are
-decimated back (zero-phase low-pass, :func:`ident.drive.resample_bandlimited`)
+decimated back (zero-phase low-pass, :func:`ident.data.drive.resample_bandlimited`)
 before the outputs are formed; the shock forces returned are the fine grid's
 values at the output instants, as in ``simulate_batch``. At every fine step the
 first ``loop_s`` of the velocity responses act directly (their tap 0 through
-the algebraic loop, solved exactly as ``ident.closedloop._loop_one`` does: the
+the algebraic loop, solved exactly as ``ident.sim.closedloop._loop_one`` does: the
 curve is piecewise linear, the lag is discretized with
-:func:`ident.closedloop.lag_coefficients`); the rest, i.e. the older taps and
+:func:`ident.sim.closedloop.lag_coefficients`); the rest, i.e. the older taps and
 the anticausal ones, acts through the ``dF`` of the previous pass, and passes
 repeat until ``dF`` changes by less than ``tol`` (a fixed point of the
 two-sided discrete model; about a decade per pass).
@@ -69,11 +69,11 @@ import numba as _nb
 import numpy as np
 from scipy import signal
 
-from ident.channels import CORNERS, SHOCK_FORCES, SHOCK_VELOCITIES
-from ident.closedloop import (BatchResponse, _check_oversample, _drive_array, _pack_setups,
+from ident.data.channels import CORNERS, SHOCK_FORCES, SHOCK_VELOCITIES
+from ident.sim.closedloop import (BatchResponse, _check_oversample, _drive_array, _pack_setups,
                               _refine, _setup_models, _shock_step, _solver_state)
 from ident.errors import FitWarning
-from ident.frf import MODEL_INPUTS, Frf
+from ident.identify.frf import MODEL_INPUTS, Frf
 
 __all__ = ["FirPlant", "fir_from_frf", "simulate_fir_batch"]
 
@@ -105,7 +105,7 @@ class FirPlant:
     Attributes
     ----------
     h_rig : ndarray, shape (n_out, 7, n_taps)
-        Impulse responses from the rig inputs (:data:`ident.channels.RIG_INPUTS`)
+        Impulse responses from the rig inputs (:data:`ident.data.channels.RIG_INPUTS`)
         [output SI per input SI] at ``fs_hz``; tap ``l`` is time
         ``(l - n_acausal) / fs_hz``.
     h_shock : ndarray, shape (n_out, 4, n_taps)
@@ -204,7 +204,7 @@ class FirPlant:
         -------
         ndarray of complex, shape (n_out, 11, n_f)
             ``H[output, input, frequency]`` with inputs rig (7) then dF (4)
-            (:data:`ident.frf.MODEL_INPUTS`):
+            (:data:`ident.identify.frf.MODEL_INPUTS`):
             ``sum_l h[l] exp(-2j pi f t_l)``, ``t_l = (l - n_acausal) / fs_hz``.
         """
         f = np.atleast_1d(np.asarray(f_hz, dtype=float))
@@ -238,7 +238,7 @@ def _check_seconds(value, name, where):
 
 def _check_frf(frf):
     if not isinstance(frf, Frf):
-        raise TypeError(f"fir_from_frf: frf must be an ident.frf.Frf, got {type(frf).__name__}")
+        raise TypeError(f"fir_from_frf: frf must be an ident.identify.frf.Frf, got {type(frf).__name__}")
     if tuple(frf.input_names) != MODEL_INPUTS:
         raise ValueError(f"fir_from_frf: the FRF's inputs must be {list(MODEL_INPUTS)} (rig "
                          f"inputs then dF), got {list(frf.input_names)}")
@@ -263,7 +263,7 @@ def _check_frf(frf):
         o, i, k = np.argwhere(bad)[0]
         raise ValueError(f"fir_from_frf: H has {int(bad.sum())} non-finite value(s) (first: "
                          f"{frf.output_names[o]} / {MODEL_INPUTS[i]} at {f[k]:g} Hz); condition "
-                         "the FRF first (ident.condition.condition_frf)")
+                         "the FRF first (ident.identify.condition.condition_frf)")
     return n, fs, H
 
 
@@ -273,8 +273,8 @@ def fir_from_frf(frf, *, length_s=4.0, taper_s=1.0, acausal_s=0.5, acausal_taper
 
     Parameters
     ----------
-    frf : ident.frf.Frf
-        Inputs :data:`ident.frf.MODEL_INPUTS`, on the full Welch grid
+    frf : ident.identify.frf.Frf
+        Inputs :data:`ident.identify.frf.MODEL_INPUTS`, on the full Welch grid
         ``k fs / nperseg`` (``k = 0 .. nperseg/2``, DC and Nyquist included;
         ``settings["nperseg"]``), finite everywhere (e.g. conditioned), with
         the 4 shock velocities among the outputs.
@@ -305,7 +305,7 @@ def fir_from_frf(frf, *, length_s=4.0, taper_s=1.0, acausal_s=0.5, acausal_taper
     Raises
     ------
     TypeError
-        If `frf` is not an :class:`ident.frf.Frf`.
+        If `frf` is not an :class:`ident.identify.frf.Frf`.
     ValueError
         If the FRF's inputs, grid or values are unusable (the message says
         why), or a length is negative or does not fit in the block.
@@ -328,7 +328,7 @@ def fir_from_frf(frf, *, length_s=4.0, taper_s=1.0, acausal_s=0.5, acausal_taper
     --------
     A pure gain becomes one tap at time 0:
 
-    >>> from ident.frf import Frf, MODEL_INPUTS
+    >>> from ident.identify.frf import Frf, MODEL_INPUTS
     >>> n, fs = 64, 100.0
     >>> names = ("shock_velocity_LF", "shock_velocity_RF", "shock_velocity_LR",
     ...          "shock_velocity_RR")
@@ -515,7 +515,7 @@ def _decimate(x, r):
     """
     if r == 1:
         return x
-    from ident.drive import _FIR_HALF_LENGTH, resample_bandlimited
+    from ident.data.drive import _FIR_HALF_LENGTH, resample_bandlimited
 
     n = (x.shape[-1] - 1) // r + 1
     pad = (_FIR_HALF_LENGTH + 1) * r
@@ -530,20 +530,20 @@ def simulate_fir_batch(plant, drive, setups, *, oversample=4, outputs=None, loop
                        tol=1e-5):
     """Simulate several shock setups on a FIR plant and a drive, in closed loop.
 
-    The nonparametric counterpart of :func:`ident.closedloop.simulate_batch`:
+    The nonparametric counterpart of :func:`ident.sim.closedloop.simulate_batch`:
     same setups, same result type and channel conventions, the same exact
     shock models (piecewise-linear curve; lag discretized with
-    :func:`ident.closedloop.lag_coefficients`), the same algebraic-loop solve;
+    :func:`ident.sim.closedloop.lag_coefficients`), the same algebraic-loop solve;
     convolutions with the plant's impulse responses replace the modal states.
 
     Parameters
     ----------
     plant : FirPlant
-    drive : ident.drive.Drive
+    drive : ident.data.drive.Drive
         The 7 rig inputs, SI, at the plant's rate ``plant.fs_hz``.
     setups : sequence of setups
         Each a mapping corner -> shock model or a sequence of 4 shock models
-        (LF, RF, LR, RR) (:mod:`ident.shocks`).
+        (LF, RF, LR, RR) (:mod:`ident.models.shocks`).
     oversample : int, default 4
         Shock-loop steps per drive sample (see the module notes: 1 aliases
         the shock force's harmonics, several percent in RMS metrics with a
@@ -561,7 +561,7 @@ def simulate_fir_batch(plant, drive, setups, *, oversample=4, outputs=None, loop
 
     Returns
     -------
-    ident.closedloop.BatchResponse
+    ident.sim.closedloop.BatchResponse
         ``channels`` of shape (n_setups, n_samples); ``newton_iterations``
         the largest solve iteration count per setup over all passes;
         ``settings`` with ``kind = "fir"``, ``plant``, ``drive``,
@@ -574,7 +574,7 @@ def simulate_fir_batch(plant, drive, setups, *, oversample=4, outputs=None, loop
         If `plant` is not a :class:`FirPlant` or `drive` not a drive.
     ValueError
         If the drive's rate differs from the plant's (resample it with
-        :func:`ident.drive.resample_drive`), on a malformed setup, an unknown
+        :func:`ident.data.drive.resample_drive`), on a malformed setup, an unknown
         output, a bad option, or if the shock loop does not converge.
 
     Notes
@@ -595,7 +595,7 @@ def simulate_fir_batch(plant, drive, setups, *, oversample=4, outputs=None, loop
     if not math.isclose(fs, plant.fs_hz, rel_tol=RTOL_RATE):
         raise ValueError(f"{where}: drive {getattr(drive, 'name', '?')!r} is sampled at {fs:g} Hz "
                          f"but FIR plant {plant.name!r} at {plant.fs_hz:g} Hz; resample the drive "
-                         f"with ident.drive.resample_drive(drive, {plant.fs_hz:g})")
+                         f"with ident.data.drive.resample_drive(drive, {plant.fs_hz:g})")
     models = [_setup_models(s, f"setup {i}") for i, s in enumerate(setups)]
     if not models:
         raise ValueError(f"{where}: no setups given")

@@ -39,8 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-from .channels import CORNERS, quantity_of
-from .units import check_units, from_si
+from ident.data.channels import CORNERS, quantity_of
+from ident.data.units import check_units, from_si
 
 __all__ = [
     "METRIC_NAMES",
@@ -72,7 +72,7 @@ _NORM_NAMES = tuple(f"tire_force_rms_norm_{c}" for c in CORNERS)
 BAND_SUFFIXES = ("_body", "_wheelhop")
 
 #: Physical quantity of every metric :func:`compute_metrics` can return (key of
-#: ``ident.units.TO_SI``), including the normalized tire-force metrics and the
+#: ``ident.data.units.TO_SI``), including the normalized tire-force metrics and the
 #: ``_body`` / ``_wheelhop`` band variants.
 METRIC_QUANTITY = {}
 for _suffix in ("",) + BAND_SUFFIXES:
@@ -648,7 +648,7 @@ def _setup_metric_rms(y, ia, sos, zi, padlen, out, buf, z0, z1, stack, sums):
 
     Notes
     -----
-    Compiled into the closed loop's kernel (:mod:`ident.closedloop`), which computes each
+    Compiled into the closed loop's kernel (:mod:`ident.sim.closedloop`), which computes each
     setup's metrics as soon as its outputs are simulated, while they are in the cache.
     Each lane gets :func:`_metric_rms_rows_py`'s operations: the same numbers to the last
     bit as :func:`compute_metrics` on the channels.
@@ -901,7 +901,7 @@ class _MetricPlan:
     """What :func:`compute_metrics` computes from a set of channels: the checked settings,
     the bands (suffix -> (low, high) [Hz]) and the metrics whose channels are present, in
     the spec's order. Shared with the closed loop's fused kernel
-    (:func:`ident.closedloop.simulate_batch_metrics`), which computes the RMS values
+    (:func:`ident.sim.closedloop.simulate_batch_metrics`), which computes the RMS values
     itself and assembles them here."""
 
     band: tuple

@@ -1,0 +1,6 @@
+"""Models of the car's parts, independent of how they are simulated or identified.
+
+Modules: :mod:`~ident.models.vehicle` (the paper's 7-DOF full-car model and its
+vehicle TOML) and :mod:`~ident.models.shocks` (shock force-velocity models, the
+shock library TOML and fits to dyno data).
+"""
