@@ -62,7 +62,7 @@ from ident.sim.metrics import METRIC_QUANTITY
 from ident.models.shocks import write_shock_library
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from planner.design import ExperimentPlan
-from planner.report import (PRINT_MARGINS_IN, column_label, fit_column_width, print_setup,
+from planner.report.ranking import (PRINT_MARGINS_IN, column_label, fit_column_width, print_setup,
                              text_width, wrap_lines)
 
 __all__ = ["write_plan", "plan_toml", "run_sheet_rows", "design_figure", "write_run_sheet",

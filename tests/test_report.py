@@ -13,7 +13,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from openpyxl import load_workbook
 from openpyxl.utils import get_column_letter
 
-import planner.report as report_mod
+import planner.report.ranking as report_mod
 from ident.data.channels import CORNERS
 from planner.errors import PlannerError
 from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
