@@ -43,13 +43,13 @@ def engine_version():
     return head + (" + uncommitted changes in ident/ or planner/" if dirty else "")
 
 
-def jit_source(kernel="_loop_metrics_worker"):
-    """How a compiled shock loop of :mod:`ident.sim.closedloop` was obtained: "compile", "cache
+def jit_source(kernel="loop_metrics_worker"):
+    """How a compiled shock loop of :mod:`ident.sim.loop_kernels` was obtained: "compile", "cache
     load" or "unknown". Default: the predictions' (the setup-parallel loop with its
-    metrics); the virtual rig runs ``"_loop_serial"``."""
-    from ident.sim import closedloop
+    metrics); the virtual rig runs ``"loop_serial"``."""
+    from ident.sim import loop_kernels
 
-    stats = getattr(getattr(closedloop, kernel, None), "stats", None)
+    stats = getattr(getattr(loop_kernels, kernel, None), "stats", None)
     if stats is None:
         return "unknown"
     if sum(stats.cache_misses.values()):

@@ -71,7 +71,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ident.data.channels import CORNERS, RIG_INPUTS  # noqa: E402
 from ident.identify.condition import condition_frf  # noqa: E402
 from ident.identify.frf import estimate_frf  # noqa: E402
-from ident.identify.model import fit_model, identify_session  # noqa: E402
+from ident.identify.pipeline import fit_model, identify_session  # noqa: E402
 from ident.sim.rig import simulate_session  # noqa: E402
 from _common import engine_version as _engine_version  # noqa: E402
 from _common import load as _load, maxrss_mib as _maxrss_mib, mib as _mib  # noqa: E402

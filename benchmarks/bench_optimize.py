@@ -42,6 +42,10 @@ from ident.data.drive import make_track_drive  # noqa: E402
 from ident.models.shocks import read_shock_library  # noqa: E402
 from ident.models.vehicle import build_full_car, example_vehicle  # noqa: E402
 from planner import optimize as opt_mod  # noqa: E402
+from planner.optimize.cache import jit_available  # noqa: E402
+from planner.optimize.core import score_rows  # noqa: E402
+from planner.optimize.loop import LoopModel  # noqa: E402
+from planner.optimize.solve import Evaluator  # noqa: E402
 from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
 from planner.objective import default_objective  # noqa: E402
 from planner.screen import metric_rows  # noqa: E402
@@ -60,11 +64,11 @@ def gradient_check(model, drive, optimum):
     need = [m for m in obj.metrics if m in names]
     rows = (need, L[[names.index(m) for m in need]])
     base = optimum.metrics[drive.name].loc[optimum.baseline.name, need].to_numpy(float)
-    C, _ = opt_mod._score_rows(obj, need, [base], np.ones(len(need)))
-    jit = opt_mod._jit_available()
-    loop = opt_mod._LoopModel(plant, drive, space, rows, 2, jit)
+    C, _ = score_rows(obj, need, [base], np.ones(len(need)))
+    jit = jit_available()
+    loop = LoopModel(plant, drive, space, rows, 2, jit)
     scale = np.maximum(np.abs(optimum.x), 1.0)
-    ev = opt_mod._Evaluator([loop], space.expansion(), scale, C)
+    ev = Evaluator([loop], space.expansion(), scale, C)
     x = optimum.x / scale
     t0 = time.perf_counter()
     g_ad = ev.gradients(x, [0])[0]
@@ -96,7 +100,7 @@ def main(argv=None):
                              wheelbase_m=vehicle.a_m + vehicle.b_m,
                              track_width_m=vehicle.track_front_m, name="bench track")
     print(f"shockplan {engine_version()}; casadi compiles the loop: "
-          f"{opt_mod._jit_available()}")
+          f"{jit_available()}")
     print(f"problem: paper car (known model), {args.drive_s:g} s track drive at 100 Hz, "
           f"{len(library)} crate shocks, objective '{default_objective().name}', left-right, "
           f"{len(args.knots)} knots a side")

@@ -618,7 +618,7 @@ def _main(args, child):
           "(the crate's inventory respected)")
 
     # the models (not timed)
-    from ident.identify.model import identify_session
+    from ident.identify.pipeline import identify_session
     from ident.sim.rig import simulate_session
 
     car = build_full_car(vehicle)

@@ -325,7 +325,7 @@ def main(argv=None):
     # 1. engine --------------------------------------------------------------------------
     first_s, times_s, session = time_engine(args.repeat)
     median_s = statistics.median(times_s)
-    print(f"engine: JIT warm-up, first call (numba import + {_jit_source('_loop_serial')}): "
+    print(f"engine: JIT warm-up, first call (numba import + {_jit_source('loop_serial')}): "
           f"{first_s:.2f} s")
     print(f"engine: whole plan in memory, median of {args.repeat}: {median_s:.2f} s")
     print(f"engine: whole plan in memory, min of {args.repeat}: {min(times_s):.2f} s")

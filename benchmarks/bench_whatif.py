@@ -51,7 +51,7 @@ from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
 from planner.predict import predict_setups  # noqa: E402
 from planner.screen import screen_setups  # noqa: E402
 from planner.setups import Setup, enumerate_setups  # noqa: E402
-from planner.sweep import _start  # noqa: E402
+from planner.runner import start_runner  # noqa: E402
 from planner.whatif import (  # noqa: E402
     Factor,
     evaluate_whatif,
@@ -158,7 +158,7 @@ def main(argv=None):
     runner = None
     if not args.no_cluster:  # the LocalCluster of scheduler="local", started and warmed once
         t0 = time.perf_counter()
-        runner = _start("local", None, args.workers, True)
+        runner = start_runner("local", None, args.workers, True)
         runner.everywhere(warm, plant, drive, everything[:2], library)
         print(f"LocalCluster: {runner.n_workers} worker processes started and warmed in "
               f"{time.perf_counter() - t0:.1f} s")

@@ -46,6 +46,17 @@ def _warn_inventory(setups, library):
             log.warning("setup %r: %s", s.name, short)
 
 
+def _baseline_arg(args, library, setups=None):
+    """``--baseline`` read by :func:`planner.setups.resolve_baseline` (None when not given):
+    a listed setup's name, one shock id (every corner) or four ``LF,RF,LR,RR``; a setup
+    built from ids is named ``baseline``."""
+    from planner.setups import resolve_baseline
+
+    if not args.baseline:
+        return None
+    return resolve_baseline(args.baseline, library, setups=setups or (), where="--baseline")
+
+
 def _load_vehicle(path):
     from ident.models.vehicle import example_vehicle, read_vehicle
 
@@ -109,18 +120,11 @@ def _load_any_model(path):
     return load_model(p)
 
 
-def _static_loads(model):
-    params = getattr(model, "params", None)
-    if params is None:
-        return None
-    return dict(zip(("LF", "RF", "LR", "RR"), params.static_corner_load_n))
-
-
 def cmd_identify(args):
     """``shockplan identify``: rig session -> identified vehicle model."""
     import warnings
 
-    from ident.identify.model import identify_session
+    from ident.identify.pipeline import identify_session
     from ident.data.session import read_session
 
     _check_out(args)
@@ -264,7 +268,7 @@ def cmd_rank(args):
     from planner.objective import default_objective, read_objective
     from planner.rank import rank_setups
     from planner.report import write_ranking
-    from planner.setups import Setup, read_setups
+    from planner.setups import read_setups
 
     _check_out(args, folder=True)
     model, drive, library = _read_inputs(args)
@@ -277,15 +281,7 @@ def cmd_rank(args):
                        "fixed": _parse_fixed(args.fixed) or None}
         if args.only:
             constraints["shocks"] = [s.strip() for s in args.only.split(",") if s.strip()]
-    baseline = None
-    if args.baseline:
-        ids = [s.strip() for s in args.baseline.split(",")]
-        if len(ids) == 1:
-            ids = ids * 4
-        if len(ids) != 4:
-            raise ValueError("--baseline takes one shock id (all corners) or four (LF,RF,LR,RR)")
-        baseline = Setup("baseline", dict(zip(("LF", "RF", "LR", "RR"), ids)))
-        baseline.resolve(library)
+    baseline = _baseline_arg(args, library, setups)
     out = Path(args.out)
     ranking = rank_setups(model, drive, library, setups=setups, constraints=constraints,
                           objective=objective, baseline=baseline, top=args.top,
@@ -327,7 +323,7 @@ def cmd_sweep(args):
     from ident.models.shocks import read_shock_library
     from planner.objective import default_objective, read_objective
     from planner.report import write_predictions_csv
-    from planner.setups import Setup, read_setups
+    from planner.setups import read_setups
     from planner.sweep import sweep_setups
 
     _check_out(args, folder=True)
@@ -344,14 +340,7 @@ def cmd_sweep(args):
                        "respect_inventory": not args.ignore_inventory}
         if args.only:
             constraints["shocks"] = [s.strip() for s in args.only.split(",") if s.strip()]
-    baseline = None
-    if args.baseline:
-        ids = [s.strip() for s in args.baseline.split(",")]
-        ids = ids * 4 if len(ids) == 1 else ids
-        if len(ids) != 4:
-            raise ValueError("--baseline takes one shock id (all corners) or four (LF,RF,LR,RR)")
-        baseline = Setup("baseline", dict(zip(("LF", "RF", "LR", "RR"), ids)))
-        baseline.resolve(library)
+    baseline = _baseline_arg(args, library, setups)
     scheduler = args.scheduler
     result = sweep_setups(models, drives, library, setups=setups, constraints=constraints,
                           objective=objective, baseline=baseline, top_share=args.top_share,
@@ -545,7 +534,7 @@ def cmd_whatif(args):
     from ident.data.drive import read_drive
     from ident.models.shocks import read_shock_library
     from planner.objective import default_objective, read_objective
-    from planner.setups import Setup, read_setups
+    from planner.setups import read_setups
     from planner.whatif import (FRAGILE_SHARE, RANK_TOLERANCE, evaluate_whatif,
                                 read_perturbations, write_whatif)
 
@@ -562,19 +551,7 @@ def cmd_whatif(args):
         if args.top < 1:
             raise ValueError(f"--top must be at least 1, got {args.top}")
         setups = read_setups(args.ranking, library)[: args.top]
-    baseline = None
-    if args.baseline:
-        names = [s.name for s in setups]
-        ids = [s.strip() for s in args.baseline.split(",")]
-        if args.baseline in names or (len(ids) == 1 and ids[0] not in library):
-            baseline = args.baseline
-        else:
-            ids = ids * 4 if len(ids) == 1 else ids
-            if len(ids) != 4:
-                raise ValueError("--baseline takes a setup name, one shock id (all corners) or "
-                                 "four (LF,RF,LR,RR)")
-            baseline = Setup("baseline", dict(zip(("LF", "RF", "LR", "RR"), ids)))
-            baseline.resolve(library)
+    baseline = _baseline_arg(args, library, setups)
     result = evaluate_whatif(
         model, drives, setups, library, perturbations, objective=objective, baseline=baseline,
         method=args.method, oversample=args.oversample,
@@ -693,13 +670,19 @@ def build_parser():
             sp.add_argument("--setups", required=True, help="setups CSV")
         else:
             sp.add_argument("--setups", help="setups CSV (default: enumerate from the library)")
-            sp.add_argument("--symmetry", choices=["left-right", "none"], default="left-right")
-            sp.add_argument("--axles", choices=["independent", "same"], default="independent")
+            sp.add_argument("--symmetry", choices=["left-right", "all", "none"],
+                            default="left-right",
+                            help="enumeration: one shock per axle (left-right, default), one "
+                            "for every corner (all), or one per corner (none)")
+            sp.add_argument("--axles", choices=["independent", "same"], default="independent",
+                            help="enumeration: the rear corners' shocks chosen on their own "
+                            "(independent, default) or the front corners' (same)")
             sp.add_argument("--fixed", action="append", metavar="CORNER=ID",
                             help="fix a corner's shock (repeatable)")
             sp.add_argument("--only", help="comma-separated shock ids to consider")
-            sp.add_argument("--baseline", help="baseline shock id(s): one for all corners or "
-                            "LF,RF,LR,RR (default: the first setup)")
+            sp.add_argument("--baseline", help="baseline: a setup of --setups by name, one "
+                            "shock id (all corners) or four LF,RF,LR,RR (default: the first "
+                            "setup)")
             sp.add_argument("--objective", help="objective TOML (default: grip and platform)")
             sp.add_argument("--top", type=int, default=40,
                             help="setups simulated in the time domain (default %(default)s)")
@@ -723,8 +706,9 @@ def build_parser():
     opt.add_argument("--objective", help="objective TOML (default: grip and platform)")
     opt.add_argument("--baseline", help="baseline shock id(s): one for all corners or "
                      "LF,RF,LR,RR (default: the crate's first shock)")
-    opt.add_argument("--symmetry", choices=["left-right", "axle", "none"], default="left-right",
-                     help="a curve per axle (default), one for the car, or one per corner")
+    opt.add_argument("--symmetry", choices=["left-right", "all", "none"], default="left-right",
+                     help="a curve per axle (left-right, default), one for every corner (all), "
+                          "or one per corner (none)")
     opt.add_argument("--constraints", help="curve constraints TOML (default: buildable race "
                      "shock bounds)")
     opt.add_argument("--drive-weights", help="weights of the drives, comma-separated")
@@ -784,8 +768,8 @@ def build_parser():
     wi.add_argument("--top", type=int, default=10,
                     help="setups taken from --ranking (default %(default)s)")
     wi.add_argument("--objective", help="objective TOML (default: grip and platform)")
-    wi.add_argument("--baseline", help="baseline shock id(s): one for all corners or "
-                    "LF,RF,LR,RR, or a setup name (default: the first setup)")
+    wi.add_argument("--baseline", help="baseline: a setup name, one shock id (all corners) "
+                    "or four LF,RF,LR,RR (default: the first setup)")
     wi.add_argument("--method", choices=["time", "screening"], default="time",
                     help="time domain (default, the reference) or frequency-domain screening")
     wi.add_argument("--rank-tolerance", type=int, default=None,
@@ -816,16 +800,19 @@ def build_parser():
     sw.add_argument("--units", choices=["SI", "imperial"], default="SI",
                     help="unit system of the drive files and of the outputs (default SI)")
     sw.add_argument("--setups", help="setups CSV (default: enumerate from the library)")
-    sw.add_argument("--symmetry", choices=["left-right", "none"], default="none",
-                    help="enumeration (default %(default)s: every 4-corner combination)")
-    sw.add_argument("--axles", choices=["independent", "same"], default="independent")
+    sw.add_argument("--symmetry", choices=["left-right", "all", "none"], default="none",
+                    help="enumeration: one shock per axle (left-right), one for every corner "
+                    "(all) or one per corner (default %(default)s: every 4-corner combination)")
+    sw.add_argument("--axles", choices=["independent", "same"], default="independent",
+                    help="enumeration: the rear corners' shocks chosen on their own "
+                    "(independent, default) or the front corners' (same)")
     sw.add_argument("--fixed", action="append", metavar="CORNER=ID",
                     help="fix a corner's shock (repeatable)")
     sw.add_argument("--only", help="comma-separated shock ids to consider")
     sw.add_argument("--ignore-inventory", action="store_true",
                     help="enumerate setups beyond the crate's counts (ranked infeasible)")
-    sw.add_argument("--baseline", help="baseline shock id(s): one for all corners or "
-                    "LF,RF,LR,RR (default: the first setup)")
+    sw.add_argument("--baseline", help="baseline: a setup of --setups by name, one shock id "
+                    "(all corners) or four LF,RF,LR,RR (default: the first setup)")
     sw.add_argument("--objective", help="objective TOML (default: grip and platform)")
     sw.add_argument("--top-share", type=float, default=0.01,
                     help="share of the screened setups simulated (default %(default)s)")

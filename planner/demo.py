@@ -61,7 +61,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     """
     from ident.data.files import atomic_dir
     from ident.data.drive import make_track_drive, write_drive
-    from ident.identify.model import identify_session
+    from ident.identify.pipeline import identify_session
     from ident.sim.rig import default_plan, simulate_session
     from ident.data.session import write_session
     from ident.models.shocks import read_shock_library
@@ -69,7 +69,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     from planner.optimize import optimize_curves, write_optimum
     from planner.rank import rank_setups
     from planner.report import write_predictions_csv, write_ranking
-    from planner.setups import Setup
+    from planner.setups import resolve_baseline
 
     out = Path(out)
     with atomic_dir(out, overwrite=overwrite) as work:
@@ -99,7 +99,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
                                  wheelbase_m=vehicle.a_m + vehicle.b_m,
                                  track_width_m=vehicle.track_front_m, name="demo track")
         library = read_shock_library(DEMO_LIBRARY_PATH)
-        baseline = Setup("baseline", {c: "B20" for c in ("LF", "RF", "LR", "RR")})
+        baseline = resolve_baseline("B20", library)  # B20 at every corner, named "baseline"
         # the optimizer's C compile (once per machine) needs only the model: a worker does it
         # while this process ranks; the FRF plots (one core) are drawn by a worker while
         # this process optimizes (one core)

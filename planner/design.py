@@ -57,14 +57,26 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
 from scipy import signal
 
-from ident.data.files import read_toml
+from ident.data import drive as drv
 from ident.data.channels import CORNERS, RIG_INPUTS
+from ident.data.files import read_toml
+from ident.identify.condition import frf_standard_error
+from ident.identify.frf import shock_force_deviation
+from ident.identify.model import VehicleModel
+from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
+from ident.sim.rig import default_plan, loop_damping, make_plan_drive
 from planner.errors import PlannerError
+from planner.objective import default_objective, score_setups
+from planner.predict import predict_setups
+from planner.screen import DriveBands, metric_rows, screen_response, screen_setups
+from planner.setups import Setup, enumerate_setups, resolve_baseline, unknown_id_error
+from planner.uncertainty import interpolate, prediction_uncertainty
 
 __all__ = [
     "RigSpec",
@@ -299,9 +311,6 @@ class ExperimentPlan:
 def _drive_maker(vehicle, session):
     """kind -> function(duration_s, seed, name) -> Drive, sized like the session's inputs (an
     identified model) or the paper's plan on the vehicle (a known one)."""
-    from ident.data import drive as drv
-    from ident.sim.rig import default_plan, make_plan_drive
-
     fs = session.fs_hz if session is not None else 100.0
     if session is not None:
         ref = session.runs[0]
@@ -371,8 +380,6 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
     -------
     list of Candidate
     """
-    from planner.setups import Setup
-
     rig = default_rig() if rig is None else rig
     base_ids = baseline.ids()
     if shocks is None:
@@ -384,11 +391,9 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
         firm = sorted([s for s in others if ceq[s] >= cb], key=lambda s: -ceq[s])
         shocks = [s for pair in itertools.zip_longest(soft, firm) for s in pair if s][:n_shocks]
     else:
-        from planner.setups import _unknown_id
-
         for s in shocks:
             if s not in library:
-                raise _unknown_id("candidate shocks", s, library)
+                raise unknown_id_error("candidate shocks", s, library)
     setups = [("baseline", baseline, ())]
     for group, sets in _GROUPS.items():
         for corners in sets:
@@ -419,8 +424,6 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
 
 def _linearized(plant, bands_fb, S_b, models):
     """Equivalent damping per setup and corner at the velocity the setup sees on a drive."""
-    from planner.screen import DriveBands, screen_response
-
     bands = DriveBands(f_hz=bands_fb, S=S_b, SB=S_b, fs_hz=100.0, band_hz=(1.0, 20.0),
                        drive_name="design")
     H = plant.frequency_response(bands_fb)
@@ -463,8 +466,6 @@ def _candidate_information(plant, setups, kinds, drive_of, library, edges, f_c):
 def _session_information(session, cbar, edges):
     """The recorded runs' own information: sum over runs of ``T * S_xx`` of their measured
     ``[u_rig, dF]``, shape (n_b, 11, 11)."""
-    from ident.identify.frf import shock_force_deviation
-
     nb = edges.size - 1
     M = np.zeros((nb, 11, 11), dtype=complex)
     for run in session.runs:
@@ -524,9 +525,6 @@ def _score_gradients(H, out_names, cbar, f_c, SB, models, sig, objective, m_base
     scores : ndarray, shape (n_setups,)
         With `return_scores`: the scores themselves (the linearization frozen at `sig`).
     """
-    from planner.screen import metric_rows
-    from types import SimpleNamespace
-
     names, L = metric_rows(SimpleNamespace(output_names=list(out_names)))
     w = np.array([objective.weights.get(n, 0.0) for n in names])
     mb = np.array([m_base.get(n, np.nan) for n in names])
@@ -594,7 +592,7 @@ def _decision_weights(grads, scores, noise_var, top_pairs):
 
 def _relaxed(Mc, M0, cost, budget, criterion, W, groups):
     """cvxpy on the design bands: relaxed run counts (n_cand,), the value and status."""
-    import cvxpy as cp
+    import cvxpy as cp  # heavy (1.6 s to import); only the relaxed design needs it
 
     n = cp.Variable(Mc.shape[0], nonneg=True)
     terms = []
@@ -770,16 +768,12 @@ def _order(setups, start):
 
 def _plant_and_vehicle(model, baseline, library):
     """The loop plant, the vehicle (known models) and the model's FRF (identified ones)."""
-    from ident.identify.model import VehicleModel
-    from ident.sim.rig import _loop_damping
-    from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
-
     if isinstance(model, VehicleModel):
         return model.loop_plant(), None, model
     if isinstance(model, VehicleParams):
         model = build_full_car(model)
     if isinstance(model, FullCarModel):
-        cbar = _loop_damping(baseline.resolve(library))
+        cbar = loop_damping(baseline.resolve(library))
         return model.loop_plant(cbar), model.params, None
     raise TypeError(f"model must be an identified VehicleModel (with the session), a "
                     f"VehicleParams or a FullCarModel, got {type(model).__name__}")
@@ -788,13 +782,9 @@ def _plant_and_vehicle(model, baseline, library):
 def _noise_variance(plant, frf, f_c, edges, M0, S_ref, noise):
     """Each output's noise power per band, (n_b, n_out): from the identified FRF's standard
     errors and the session's information, or `noise` of each output's RMS, white."""
-    from ident.identify.condition import frf_standard_error
-
     p = len(plant.output_names)
     if frf is not None:
-        from planner.uncertainty import _interpolate
-
-        sig = _interpolate(frf.f_hz, frf_standard_error(frf), f_c)  # (p, 11, nb)
+        sig = interpolate(frf.f_hz, frf_standard_error(frf), f_c)  # (p, 11, nb)
         order = [list(frf.output_names).index(o) for o in plant.output_names]
         sig = sig[order]
         C = np.linalg.inv(np.conj(_herm(M0)) + _EPS * np.eye(11) * np.abs(
@@ -876,12 +866,6 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         the corners and the fix), or a budget too short for any identifying
         plan.
     """
-    from planner.objective import default_objective, score_setups
-    from planner.optimize import _resolve_baseline
-    from planner.predict import predict_setups
-    from planner.screen import screen_setups
-    from planner.setups import enumerate_setups
-
     if criterion not in CRITERIA:
         raise PlannerError(f"criterion {criterion!r} is not one of {list(CRITERIA)}")
     if not (isinstance(budget_min, (int, float)) and math.isfinite(budget_min)
@@ -893,7 +877,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     if baseline is None and session is not None:
         base_run = next((r for r in session.runs if r.role == "baseline"), session.runs[0])
         baseline = [base_run.setup[c] for c in CORNERS]
-    base = _resolve_baseline(baseline, library, objective)
+    base = resolve_baseline(library.ids[0] if baseline is None else baseline, library)
     plant, vehicle, ident_model = _plant_and_vehicle(model, base, library)
     if ident_model is not None and session is None:
         raise PlannerError("an identified model needs the session it came from (its runs are "
@@ -1093,10 +1077,6 @@ def _check_plan_identifiable(plan_M, budget, cands, rig):
 def _decision_w(plant, ident_model, library, base, objective, drive, f_c, edges, M0, S_ref,
                 noise, top):
     """The decision criterion's weights (unscaled): the top contenders' score differences."""
-    from planner.objective import score_setups
-    from planner.screen import screen_setups
-    from planner.setups import enumerate_setups
-
     pool = [base] + [s for s in enumerate_setups(library) if s.ids() != base.ids()]
     sc = screen_setups(plant, drive, pool, library)
     scores = score_setups(sc.table, objective, baseline=base.name).table
@@ -1209,9 +1189,6 @@ def _curve(runs, infos, M0_s, criterion, W_s):
 
 def _predictions(model, ident_model, runs, drives, library, objective):
     """The key metrics predicted for every run on its own drive, with intervals (identified)."""
-    from planner.predict import predict_setups
-    from planner.uncertainty import prediction_uncertainty
-
     keys = [m for m in objective.weights if objective.weights[m] > 0]
     rows = []
     for r in runs:

@@ -76,8 +76,9 @@ import pandas as pd
 
 from ident.data.files import atomic_write_toml, check_can_write, read_toml
 from ident.data.channels import CORNERS
-from planner.errors import PlannerError
 from ident.sim.metrics import BAND_SUFFIXES, METRIC_NAMES, METRIC_QUANTITY
+from planner.errors import PlannerError
+from planner.setups import inventory_shortfall
 
 __all__ = [
     "OBJECTIVE_FORMAT",
@@ -88,6 +89,10 @@ __all__ = [
     "read_objective",
     "objective_to_toml",
     "score_setups",
+    "ranking_order",
+    "ranks",
+    "ranking_position",
+    "mark_inventory",
     "pareto_front",
 ]
 
@@ -494,6 +499,122 @@ def _join_messages(acc, idx, parts):
                         ).astype(object)
 
 
+# ----------------------------------------------------------------------------
+# the ranking rule
+# ----------------------------------------------------------------------------
+
+
+def ranking_order(feasible, score, index=None):
+    """Positions of setups, best first: the one ranking rule of every command.
+
+    Feasible setups come before infeasible ones; within each, NaN scores last, then
+    by score (lower is better), ties by `index` (by position when None).
+
+    Parameters
+    ----------
+    feasible : ndarray of bool, shape (n,)
+    score : ndarray of float, shape (n,)
+    index : ndarray of int, shape (n,), optional
+        The tie-break (e.g. the setups' enumeration indices); default ``arange(n)``.
+
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        ``order[0]`` is the position of the best setup.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ranking_order(np.array([True, False, True, True]),
+    ...               np.array([2.0, 0.5, np.nan, 1.0])).tolist()
+    [3, 0, 2, 1]
+    """
+    nan = np.isnan(score)
+    if index is None:
+        index = np.arange(len(score))
+    return np.lexsort((index, np.where(nan, 0.0, score), nan, ~feasible))
+
+
+def ranks(feasible, score):
+    """1-based ranks of setups by :func:`ranking_order` (ties in table order).
+
+    Parameters
+    ----------
+    feasible : ndarray of bool, shape (n,)
+    score : ndarray of float, shape (n,)
+
+    Returns
+    -------
+    ndarray of int64, shape (n,)
+    """
+    n = len(score)
+    rank = np.empty(n, dtype=np.int64)
+    rank[ranking_order(feasible, score)] = np.arange(1, n + 1)
+    return rank
+
+
+def ranking_position(at, feasible, score, index):
+    """1-based position of setup `at` in :func:`ranking_order`, without sorting.
+
+    Parameters
+    ----------
+    at : int
+        Position of the setup in the arrays.
+    feasible, score, index : ndarray, shape (n,)
+        As :func:`ranking_order`.
+
+    Returns
+    -------
+    int
+    """
+    nan = np.isnan(score)
+    filled = np.where(nan, 0.0, score)
+    f, n, s, i = feasible[at], nan[at], filled[at], index[at]
+    ahead = (feasible & ~f) | ((feasible == f) & (
+        (~nan & n) | ((nan == n) & ((filled < s) | ((filled == s) & (index < i))))))
+    return int(ahead.sum()) + 1
+
+
+def mark_inventory(scores, setups, library):
+    """Mark setups that the crate's ``count`` cannot build as infeasible, and re-rank.
+
+    Parameters
+    ----------
+    scores : pandas.DataFrame
+        A scores table (:attr:`Scores.table`: ``score``, ``feasible``, ``violations``,
+        ``rank``), indexed by setup name.
+    setups : iterable of planner.setups.Setup
+        The setups by name (rows of other names are left as they are).
+    library : ShockLibrary
+        The crate; shocks with ``count = None`` are unlimited.
+
+    Returns
+    -------
+    pandas.DataFrame
+        `scores` itself when every setup can be built, else a copy with the reason
+        appended to ``violations`` (``"inventory: needs 3 x 'B20' ..."``), ``feasible``
+        updated and ``rank`` by :func:`ranking_order`.
+    """
+    by_name = {s.name: s for s in setups}
+    short = [inventory_shortfall(by_name[n], library) if n in by_name else ""
+             for n in scores.index]
+    if not any(short):
+        return scores
+    scores = scores.copy()
+    viol = scores["violations"].to_numpy(dtype=object).copy()
+    for k, text in enumerate(short):
+        if text:
+            viol[k] = f"{viol[k]}; inventory: {text}" if viol[k] else f"inventory: {text}"
+    feasible = viol == ""
+    rank = ranks(feasible, scores["score"].to_numpy(dtype=float))
+    scores["feasible"] = feasible.astype(bool)
+    scores["violations"] = viol
+    scores["rank"] = rank
+    logger.info("%d setup(s) need more shocks than the library's count: infeasible",
+                sum(bool(t) for t in short))
+    return scores
+
+
 def score_setups(metrics, objective=None, *, baseline=None):
     """Score and rank setups from their metrics (lower is better).
 
@@ -606,11 +727,7 @@ def score_setups(metrics, objective=None, *, baseline=None):
                 _join_messages(violations, idx, np.char.add(np.char.add(
                     f"{m} = ", text), f" > max {spec['max']:.4g}"))
     feasible = violations == ""
-    score = data["score"]
-    nan_score = np.isnan(score)
-    order = np.lexsort((np.arange(n), np.where(nan_score, 0.0, score), nan_score, ~feasible))
-    rank = np.empty(n, dtype=np.int64)
-    rank[order] = np.arange(1, n + 1)
+    rank = ranks(feasible, data["score"])
     data["feasible"] = feasible.astype(bool)
     data["violations"] = violations
     data["rank"] = rank

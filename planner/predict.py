@@ -21,10 +21,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from tqdm.auto import tqdm
 
 from ident.data.channels import CORNERS
+from ident.data.drive import Drive, resample_drive
+from ident.identify.model import LOOP_REDUCE_RTOL, VehicleModel
+from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
+from ident.sim.closedloop import LoopPlant, rig_response, simulate_batch_metrics
 from planner.errors import PlannerError
-from ident.identify.model import LOOP_REDUCE_RTOL
+from planner.setups import Setup
 
 __all__ = [
     "Predictions",
@@ -99,10 +104,6 @@ def as_loop_plant(model, *, reduce_rtol=LOOP_REDUCE_RTOL):
         Balanced-truncation bound for an identified model's shock part
         (:meth:`ident.identify.model.VehicleModel.loop_plant`).
     """
-    from ident.sim.closedloop import LoopPlant
-    from ident.identify.model import VehicleModel
-    from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
-
     if isinstance(model, LoopPlant):
         return model
     if hasattr(model, "frequency_response") and hasattr(model, "velocity_idx"):
@@ -130,8 +131,6 @@ def prepare_drive(drive, fs_hz=None, *, where="drive"):
     -------
     ident.data.drive.Drive
     """
-    from ident.data.drive import Drive, resample_drive
-
     if not isinstance(drive, Drive):
         raise TypeError(f"{where}: expected an ident.data.drive.Drive, got {type(drive).__name__}")
     if drive.fs_hz < 50.0:
@@ -153,8 +152,6 @@ def resolve_setups(setups, library):
         On a setup naming an unknown shock id (the message names the setup,
         the corner and the known ids).
     """
-    from planner.setups import Setup
-
     out = []
     for s in setups:
         if not isinstance(s, Setup):
@@ -200,10 +197,6 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
     -------
     Predictions
     """
-    from ident.sim.closedloop import rig_response, simulate_batch_metrics
-
-    from ident.sim.closedloop import LoopPlant
-
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
     if not isinstance(plant, LoopPlant):
         raise TypeError(f"time-domain prediction needs a state-space model, got "
@@ -215,8 +208,6 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
     rows, iters = [], []
     starts = range(0, len(models), chunk_size)
     if progress:
-        from tqdm.auto import tqdm
-
         starts = tqdm(starts, desc="predict", unit="chunk")
     for a in starts:
         batch = simulate_batch_metrics(plant, drive, models[a:a + chunk_size],

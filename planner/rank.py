@@ -16,17 +16,21 @@
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from scipy.stats import spearmanr
 
 from planner.errors import PlannerError
+from planner.objective import Objective, default_objective, mark_inventory, score_setups
+from planner.predict import predict_setups
+from planner.screen import screen_setups
+from planner.setups import enumerate_setups, resolve_baseline
+from planner.sweep import screen_setups_on
+from planner.uncertainty import prediction_uncertainty, unresolved_pairs
 
 __all__ = ["Ranking", "rank_setups"]
-
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,66 +69,6 @@ class Ranking:
         return self.table.index[0]
 
 
-def _choose_baseline(setups, objective, baseline):
-    from planner.setups import Setup
-
-    names = [s.name for s in setups]
-    if isinstance(baseline, Setup):
-        same = [s for s in setups if s.ids() == baseline.ids()]
-        if same and baseline.name not in names:
-            log.info("baseline %s is the listed setup %r; using it", "/".join(baseline.ids()),
-                     same[0].name)
-            return same[0]  # reuse the listed setup: no second row with the same shocks
-        if baseline.name in names:
-            listed = setups[names.index(baseline.name)]
-            if listed.ids() != baseline.ids():
-                raise PlannerError(
-                    f"baseline setup {baseline.name!r} ({'/'.join(baseline.ids())}) has the name "
-                    f"of a listed setup with other shocks ({'/'.join(listed.ids())}); rename the "
-                    "baseline or pass its name to use the listed one")
-        return baseline
-    wanted = baseline if baseline is not None else objective.baseline
-    if wanted is not None:
-        if wanted in names:
-            return setups[names.index(wanted)]
-        raise PlannerError(f"baseline setup {wanted!r} is not among the setups; name one of the "
-                           f"setups (e.g. {names[0]!r}) or pass the baseline setup")
-    return setups[0]
-
-
-def _mark_inventory(scores, setups, library):
-    """Mark setups that the crate's ``count`` cannot build as infeasible, and re-rank.
-
-    The reason is appended to ``violations``; ranks follow :func:`planner.objective.
-    score_setups` (feasible first, then by score, NaN scores last, ties in order).
-    """
-    from planner.setups import inventory_shortfall
-
-    by_name = {s.name: s for s in setups}
-    short = [inventory_shortfall(by_name[n], library) if n in by_name else ""
-             for n in scores.index]
-    if not any(short):
-        return scores
-    scores = scores.copy()
-    viol = scores["violations"].to_numpy(dtype=object).copy()
-    for k, text in enumerate(short):
-        if text:
-            viol[k] = f"{viol[k]}; inventory: {text}" if viol[k] else f"inventory: {text}"
-    feasible = viol == ""
-    score = scores["score"].to_numpy(dtype=float)
-    nan_score = np.isnan(score)
-    n = len(score)
-    order = np.lexsort((np.arange(n), np.where(nan_score, 0.0, score), nan_score, ~feasible))
-    rank = np.empty(n, dtype=np.int64)
-    rank[order] = np.arange(1, n + 1)
-    scores["feasible"] = feasible.astype(bool)
-    scores["violations"] = viol
-    scores["rank"] = rank
-    log.info("%d setup(s) need more shocks than the library's count: infeasible",
-             sum(bool(t) for t in short))
-    return scores
-
-
 def rank_setups(model, drive, library, *, setups=None, constraints=None, objective=None,
                 baseline=None, top=40, n_check=20, oversample=2, uncertainty=True, n_draws=40,
                 seed=0, band_hz=(1.0, 20.0), scheduler=None, n_workers=None, progress=False):
@@ -143,11 +87,14 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         ``max_setups``).
     objective : planner.objective.Objective, optional
         Default :func:`planner.objective.default_objective`.
-    baseline : str or Setup, optional
-        The setup metrics are normalized against; default the objective's
-        ``baseline`` if it names a setup, else the first setup. A Setup whose
-        shocks equal a listed setup's is that setup (no second row); otherwise
-        it is added to the candidates. Setups that need more units of a shock
+    baseline : Setup or str, optional
+        The setup metrics are normalized against
+        (:func:`planner.setups.resolve_baseline`): a Setup, a setup's name, one
+        shock id (every corner) or four ``"LF,RF,LR,RR"``; default the
+        objective's ``baseline``, else the first setup. A baseline whose shocks
+        equal a listed setup's is that setup (no second row); otherwise it is
+        added to the candidates (a setup built from ids is named
+        ``"baseline"``). Setups that need more units of a shock
         than the library's ``count`` are infeasible (``violations`` says why).
     top : int
         Setups (best by screening) simulated in the time domain.
@@ -174,14 +121,6 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     -------
     Ranking
     """
-    from scipy.stats import spearmanr
-
-    from planner.objective import Objective, default_objective, score_setups
-    from planner.predict import predict_setups
-    from planner.screen import screen_setups
-    from planner.setups import enumerate_setups
-    from planner.uncertainty import prediction_uncertainty, unresolved_pairs
-
     objective = default_objective() if objective is None else objective
     if not isinstance(objective, Objective):
         raise TypeError(f"objective must be a planner.objective.Objective (read one with "
@@ -193,7 +132,7 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     setups = list(setups)
     if not setups:
         raise PlannerError("no setups to rank")
-    base = _choose_baseline(setups, objective, baseline)
+    base = resolve_baseline(baseline, library, setups=setups, default=objective.baseline)
     if base.name not in {s.name for s in setups}:
         setups = [base] + setups
     if top < 1:
@@ -203,11 +142,9 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         screened = screen_setups(model, drive, setups, library, band_hz=band_hz,
                                  progress=progress)
     else:
-        from planner.sweep import screen_setups_on
-
         screened = screen_setups_on(model, drive, setups, library, band_hz=band_hz,
                                     scheduler=scheduler, n_workers=n_workers, progress=progress)
-    sc = _mark_inventory(score_setups(screened.table, objective, baseline=base.name).table,
+    sc = mark_inventory(score_setups(screened.table, objective, baseline=base.name).table,
                          setups, library)
     screening = pd.concat([screened.table, sc], axis=1)
     # 2. time domain on the best `top` by screening (plus the baseline)
@@ -224,7 +161,7 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     td = predict_setups(model, drive, cand, library, oversample=oversample, band_hz=band_hz,
                         progress=progress)
     scores = score_setups(td.table, objective, baseline=base.name)
-    table = pd.concat([td.table, _mark_inventory(scores.table, setups, library)], axis=1)
+    table = pd.concat([td.table, mark_inventory(scores.table, setups, library)], axis=1)
     table["screening_rank"] = sc.loc[table.index, "rank"].to_numpy()
     # 3. agreement between screening and time domain over the simulated setups
     rho = float(spearmanr(sc.loc[table.index, "score"], table["score"]).statistic) \

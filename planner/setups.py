@@ -1,4 +1,4 @@
-"""Shock setups: one shock id per corner, read, written and enumerated.
+"""Shock setups: one shock id per corner, read, written, enumerated; the baseline.
 
 A setup names one shock of the team's shock library (``ident.models.shocks``) for
 each corner ``LF RF LR RR`` (:data:`ident.data.channels.CORNERS`). The planner
@@ -21,6 +21,15 @@ Generated names (:func:`enumerate_setups`) are compact by default:
 ``"B20/B20/D8/D8"``, the ids in corner order LF/RF/LR/RR; pass
 ``name_format="LF={LF} RF={RF} LR={LR} RR={RR}"`` for the spelled-out form.
 
+The enumeration is one implementation: :func:`setup_space` holds the setups of
+an enumeration as integer codes (a :class:`SetupSpace`, decoded chunk by chunk);
+:func:`enumerate_setups` decodes all of it, :mod:`planner.sweep` a chunk at a
+time, in the same order and with the same names.
+
+Every command reads its baseline with :func:`resolve_baseline`: a
+:class:`Setup`, a listed setup's name, one shock id (every corner) or four ids
+``"LF,RF,LR,RR"`` separated by commas.
+
 Examples
 --------
 >>> from ident.models.shocks import LinearShock, ShockLibrary
@@ -42,6 +51,7 @@ import csv
 import gc
 import io
 import logging
+import math
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -62,19 +72,26 @@ __all__ = [
     "DEFAULT_MAX_SETUPS",
     "DEFAULT_NAME_FORMAT",
     "Setup",
+    "SetupSpace",
+    "setup_space",
     "read_setups",
     "write_setups",
     "setups_to_frame",
     "enumerate_setups",
     "setups_from_baseline",
     "inventory_shortfall",
+    "unknown_id_error",
+    "resolve_baseline",
 ]
 
 logger = logging.getLogger(__name__)
 
-#: Allowed values of `symmetry` in :func:`enumerate_setups`.
-SYMMETRIES = ("left-right", "none")
-#: Allowed values of `axles` in :func:`enumerate_setups`.
+#: Allowed values of `symmetry` in :func:`enumerate_setups`: ``"left-right"`` (LF = RF and
+#: LR = RR), ``"all"`` (every corner the same shock: left-right with ``axles="same"``;
+#: :func:`planner.optimize.optimize_curves` uses the same names) and ``"none"``.
+SYMMETRIES = ("left-right", "all", "none")
+#: Allowed values of `axles` in :func:`enumerate_setups`: ``"independent"`` or ``"same"``
+#: (the rear corners get the front corners' shocks).
 AXLE_MODES = ("independent", "same")
 #: Axle name -> its two corners.
 AXLES = {"front": ("LF", "RF"), "rear": ("LR", "RR")}
@@ -85,10 +102,6 @@ DEFAULT_NAME_FORMAT = "{LF}/{RF}/{LR}/{RR}"
 
 _SETUP_COLUMN = "setup"
 _CORNER_LIKE = re.compile(r"^[A-Za-z]{2}$")
-
-
-def _plural(n, word):
-    return f"{n} {word}" + ("" if n == 1 else "s")
 
 
 def _check_text(value, what, fix):
@@ -111,7 +124,32 @@ def _lib_label(library):
     return f"shock library {source}" if source else "the shock library"
 
 
-def _unknown_id(where, shock_id, library):
+def unknown_id_error(where, shock_id, library):
+    """The error for a shock id that `library` does not hold, listing the ids it has.
+
+    Parameters
+    ----------
+    where : str
+        Where the id was given (a setup and corner, a column, an argument), the message's
+        first words.
+    shock_id : str
+        The unknown id.
+    library : ShockLibrary or mapping of str to ShockModel
+        The library looked in (its ``source`` is named when it has one).
+
+    Returns
+    -------
+    PlannerError
+        To raise: ``raise unknown_id_error(...)``.
+
+    Examples
+    --------
+    >>> from ident.models.shocks import LinearShock, ShockLibrary
+    >>> lib = ShockLibrary.from_models([LinearShock("B20", 3502.5), LinearShock("D8", 1400.0)])
+    >>> print(unknown_id_error("candidate shocks", "X9", lib))  # doctest: +NORMALIZE_WHITESPACE
+    candidate shocks: unknown shock id 'X9'; the shock library has ['B20', 'D8']; fix the id or
+    add the shock to the library
+    """
     return PlannerError(f"{where}: unknown shock id {shock_id!r}; {_lib_label(library)} has "
                         f"{list(library)}; fix the id or add the shock to the library")
 
@@ -234,7 +272,7 @@ class Setup:
         out = []
         for c, sid in zip(CORNERS, self._ids):
             if sid not in library:
-                raise _unknown_id(f"setup {self.name!r}: corner {c}", sid, library)
+                raise unknown_id_error(f"setup {self.name!r}: corner {c}", sid, library)
             out.append(library[sid])
         return tuple(out)
 
@@ -359,7 +397,7 @@ def read_setups(path, library=None):
                 raise PlannerError(f"{where}: column {c!r} is empty; give a shock id for "
                                    "every corner")
             if library is not None and sid not in library:
-                raise _unknown_id(f"{where}: column {c!r}", sid, library)
+                raise unknown_id_error(f"{where}: column {c!r}", sid, library)
         out.append(Setup._unchecked(name, ids))
     if not out:
         raise PlannerError(f"{path}: no setups below the header; add one row per setup")
@@ -450,9 +488,9 @@ def _corner_groups(symmetry, axles):
         return c
 
     links = []
-    if symmetry == "left-right":
+    if symmetry in ("left-right", "all"):
         links += [("LF", "RF"), ("LR", "RR")]
-    if axles == "same":
+    if axles == "same" or symmetry == "all":
         links += [("LF", "LR"), ("RF", "RR")]
     for a, b in links:
         ra, rb = root(a), root(b)
@@ -472,7 +510,7 @@ def _id_list(values, what, library, where="enumerate_setups"):
     out = []
     for sid in values:
         if sid not in library:
-            raise _unknown_id(f"{where}: {what}", sid, library)
+            raise unknown_id_error(f"{where}: {what}", sid, library)
         if sid not in out:
             out.append(sid)
     if not out:
@@ -518,7 +556,7 @@ def _check_fixed(fixed, library, groups, symmetry, axles):
             raise PlannerError(f"enumerate_setups: fixed has the corner {c!r}; corners are "
                                f"{list(CORNERS)}")
         if sid not in library:
-            raise _unknown_id(f"enumerate_setups: fixed[{c!r}]", sid, library)
+            raise unknown_id_error(f"enumerate_setups: fixed[{c!r}]", sid, library)
         g = next(j for j, grp in enumerate(groups) if c in grp)
         if g in out and out[g][1] != sid:
             c0, sid0 = out[g]
@@ -616,6 +654,270 @@ def _make_named(id_rows, name_format, where):
         return tuple(Setup._unchecked(n, ids) for n, ids in zip(names, id_rows))
 
 
+@dataclass(frozen=True, eq=False)
+class SetupSpace:
+    """A set of setups held as integer codes, decoded chunk by chunk.
+
+    Built by :func:`setup_space`. Candidate ``i`` of an enumeration is the mixed-radix
+    number whose digits pick each corner group's candidate (the last group fastest), the
+    order of :func:`enumerate_setups`; candidates the inventory cannot
+    build are skipped when decoded (``respect_inventory``), so the setups decoded in order
+    are exactly the enumerated ones. A space from a list holds its codes and names.
+
+    Attributes
+    ----------
+    shock_ids : tuple of str
+        Code ``j`` is ``shock_ids[j]`` (the library's order).
+    group_codes : tuple of ndarray of int
+        Per corner group, the codes of its candidates (empty for a list).
+    corner_group : tuple of int, shape (4,)
+        The group of each corner ``LF RF LR RR``.
+    inventory : tuple of (int, int)
+        ``(code, count)`` of the shocks whose candidates are skipped beyond their count
+        (empty for a list or ``respect_inventory=False``).
+    listed_codes : ndarray of int, shape (n_setups, 4), or None
+        The codes of a given list of setups.
+    listed_names : tuple of str, or None
+    name_format : str or callable
+        The names of generated setups (:func:`enumerate_setups`).
+    """
+
+    shock_ids: tuple
+    group_codes: tuple
+    corner_group: tuple
+    inventory: tuple
+    listed_codes: np.ndarray | None
+    listed_names: tuple | None
+    name_format: object
+
+    def __len__(self):
+        """Number of candidates (before the inventory filter of an enumeration)."""
+        if self.listed_codes is not None:
+            return int(self.listed_codes.shape[0])
+        return int(math.prod(len(g) for g in self.group_codes))
+
+    @property
+    def sizes(self):
+        """Candidates per corner group (mixed-radix digits, the last fastest)."""
+        return tuple(len(g) for g in self.group_codes)
+
+    @property
+    def groups(self):
+        """The corners of each group (that share one shock), in group order."""
+        return tuple(tuple(c for c, g in zip(CORNERS, self.corner_group) if g == k)
+                     for k in range(len(self.group_codes)))
+
+    def chunk(self, start, stop):
+        """Decode candidates ``start <= i < stop``.
+
+        Parameters
+        ----------
+        start, stop : int
+            A range of candidate indices.
+
+        Returns
+        -------
+        index : ndarray of int64, shape (n,)
+            The candidates kept (the inventory filter drops some), increasing.
+        codes : ndarray of intp, shape (n, 4)
+            Their shock codes per corner ``LF RF LR RR``.
+        """
+        start, stop = max(int(start), 0), min(int(stop), len(self))
+        idx = np.arange(start, max(start, stop), dtype=np.int64)
+        if self.listed_codes is not None:
+            return idx, self.listed_codes[idx]
+        digits = [None] * len(self.group_codes)
+        rest = idx.copy()
+        for g in range(len(self.group_codes) - 1, -1, -1):
+            size = len(self.group_codes[g])
+            digits[g] = rest % size
+            rest //= size
+        group_vals = [np.asarray(self.group_codes[g], dtype=np.intp)[digits[g]]
+                      for g in range(len(self.group_codes))]
+        codes = np.stack([group_vals[g] for g in self.corner_group], axis=1)
+        if self.inventory:
+            keep = np.ones(idx.size, dtype=bool)
+            for code, count in self.inventory:
+                keep &= (codes == code).sum(axis=1) <= count
+            idx, codes = idx[keep], codes[keep]
+        return idx, codes
+
+    def first(self, *, chunk_size=20_000):
+        """The first candidate the inventory keeps (None if none), decoded chunk by chunk."""
+        for start in range(0, len(self), chunk_size):
+            index, _ = self.chunk(start, start + chunk_size)
+            if index.size:
+                return int(index[0])
+        return None
+
+    def ids(self, index):
+        """Shock ids of candidates.
+
+        Parameters
+        ----------
+        index : sequence of int
+            Candidate indices.
+
+        Returns
+        -------
+        list of tuple of str
+            Per candidate, the ids at ``LF RF LR RR``.
+        """
+        index = np.asarray(index, dtype=np.int64)
+        codes = self._codes_at(index)
+        ids = np.asarray(self.shock_ids, dtype=object)
+        return [tuple(row) for row in ids[codes].tolist()]
+
+    def _codes_at(self, index):
+        if self.listed_codes is not None:
+            return self.listed_codes[index]
+        rest = index.copy()
+        vals = [None] * len(self.group_codes)
+        for g in range(len(self.group_codes) - 1, -1, -1):
+            size = len(self.group_codes[g])
+            vals[g] = np.asarray(self.group_codes[g], dtype=np.intp)[rest % size]
+            rest //= size
+        return np.stack([vals[g] for g in self.corner_group], axis=1).reshape(-1, 4)
+
+    def names(self, index):
+        """Names of candidates (the list's names, or generated by `name_format`).
+
+        Parameters
+        ----------
+        index : sequence of int
+
+        Returns
+        -------
+        list of str
+        """
+        if self.listed_names is not None:
+            return [self.listed_names[int(i)] for i in index]
+        make = _name_maker(self.name_format)
+        return [make(ids) for ids in self.ids(index)]
+
+    def setups(self, index):
+        """The :class:`Setup` objects of candidates.
+
+        Parameters
+        ----------
+        index : sequence of int
+
+        Returns
+        -------
+        tuple of Setup
+        """
+        return tuple(Setup._unchecked(n, ids)
+                     for n, ids in zip(self.names(index), self.ids(index)))
+
+    def find(self, ids):
+        """The candidate index of a setup's shock ids, or None when not in the space.
+
+        Parameters
+        ----------
+        ids : sequence of str, shape (4,)
+            Ids at ``LF RF LR RR``.
+
+        Returns
+        -------
+        int or None
+            None also for a candidate the inventory filter skips.
+        """
+        code_of = {sid: j for j, sid in enumerate(self.shock_ids)}
+        if any(sid not in code_of for sid in ids):
+            return None
+        codes = np.array([code_of[sid] for sid in ids], dtype=np.intp)
+        if self.listed_codes is not None:
+            hit = np.flatnonzero((self.listed_codes == codes).all(axis=1))
+            return int(hit[0]) if hit.size else None
+        index = 0
+        for g, cand in enumerate(self.group_codes):
+            corners = [c for c in range(4) if self.corner_group[c] == g]
+            if len({int(codes[c]) for c in corners}) != 1:
+                return None
+            where = np.flatnonzero(np.asarray(cand) == codes[corners[0]])
+            if not where.size:
+                return None
+            index = index * len(cand) + int(where[0])
+        got_index, _ = self.chunk(index, index + 1)
+        return index if got_index.size else None
+
+
+def setup_space(library, *, setups=None, symmetry="left-right", axles="independent",
+                fixed=None, shocks=None, respect_inventory=True,
+                name_format=DEFAULT_NAME_FORMAT, where="setup_space"):
+    """The setups of an enumeration (decoded lazily) or of a given list, as integer codes.
+
+    The one enumeration: :func:`enumerate_setups` decodes the whole space at once,
+    :func:`planner.sweep.sweep_setups` chunk by chunk.
+
+    Parameters
+    ----------
+    library : ident.models.shocks.ShockLibrary
+        The crate; its ``count`` is the inventory.
+    setups : sequence of planner.setups.Setup, optional
+        A given list (unique names); then the enumeration options must stay at their
+        defaults.
+    symmetry, axles, fixed, shocks, respect_inventory, name_format
+        As :func:`enumerate_setups` (which decodes this space, in its order and with
+        its names); there is no ``max_setups``: a space may be large.
+    where : str
+        The caller named at the start of the errors.
+
+    Returns
+    -------
+    SetupSpace
+
+    Raises
+    ------
+    PlannerError
+        As :func:`enumerate_setups`; on an unknown shock id in a listed
+        setup; or on a list given with enumeration options.
+    """
+    all_ids = _library_ids(library, where)
+    if not all_ids:
+        raise PlannerError(f"{where}: the shock library is empty; add shocks to it")
+    code_of = {sid: j for j, sid in enumerate(all_ids)}
+    if setups is not None:
+        if (symmetry, axles, fixed, shocks) != ("left-right", "independent", None, None):
+            raise PlannerError(f"{where}: give either setups or enumeration options "
+                               "(symmetry, axles, fixed, shocks), not both")
+        setups = _check_setups(setups, where)
+        if not setups:
+            raise PlannerError(f"{where}: no setups given; give at least one setup")
+        for s in setups:
+            s.resolve(library)
+        codes = np.array([[code_of[sid] for sid in s.ids()] for s in setups], dtype=np.intp)
+        return SetupSpace(shock_ids=tuple(all_ids), group_codes=(), corner_group=(),
+                          inventory=(), listed_codes=codes,
+                          listed_names=tuple(s.name for s in setups), name_format=None)
+    _name_maker(name_format)  # a bad template fails here, not on a worker
+    groups = _corner_groups(symmetry, axles)
+    fixed_by_group = _check_fixed(fixed, library, groups, symmetry, axles)
+    per_corner = _corner_candidates(shocks, library)
+    group_codes = []
+    for g, grp in enumerate(groups):
+        if g in fixed_by_group:
+            cand = [fixed_by_group[g]]
+        else:
+            cand = [sid for sid in per_corner[grp[0]]
+                    if all(sid in per_corner[c] for c in grp[1:])]
+            if not cand:
+                raise PlannerError(f"{where}: corners {list(grp)} share one shock but their "
+                                   "candidate lists have no id in common; give the same ids "
+                                   "for both axles or use axles='independent'")
+        group_codes.append(np.array([code_of[sid] for sid in cand], dtype=np.intp))
+    corner_group = tuple(next(g for g, grp in enumerate(groups) if c in grp) for c in CORNERS)
+    inventory = tuple((code_of[sid], n) for sid, n in _inventory(library).items()) \
+        if respect_inventory else ()
+    if name_format == DEFAULT_NAME_FORMAT:
+        name_format = DEFAULT_NAME_FORMAT
+    return SetupSpace(shock_ids=tuple(all_ids), group_codes=tuple(group_codes),
+                      corner_group=corner_group, inventory=inventory, listed_codes=None,
+                      listed_names=None, name_format=name_format)
+
+
+
+
 def enumerate_setups(library, *, symmetry="left-right", axles="independent", fixed=None,
                      shocks=None, respect_inventory=True, max_setups=DEFAULT_MAX_SETUPS,
                      name_format=DEFAULT_NAME_FORMAT):
@@ -625,12 +927,16 @@ def enumerate_setups(library, *, symmetry="left-right", axles="independent", fix
     ----------
     library : ShockLibrary or mapping of str to ShockModel
         The team's shocks; their ``count`` is the inventory.
-    symmetry : {"left-right", "none"}
+    symmetry : {"left-right", "all", "none"}
         ``"left-right"``: the left and right corners of an axle get the same
-        shock (LF = RF, LR = RR). ``"none"``: every corner independent.
+        shock (LF = RF, LR = RR). ``"all"``: every corner gets the same shock
+        (left-right with ``axles="same"``; the name
+        :func:`planner.optimize.optimize_curves` uses for one curve at every
+        corner). ``"none"``: every corner independent.
     axles : {"independent", "same"}
         ``"same"``: the rear corners get the same shocks as the front ones
-        (LR = LF, RR = RF); with left-right symmetry all four are equal.
+        (LR = LF, RR = RF); with left-right symmetry all four are equal (as
+        ``symmetry="all"``, whatever `axles`).
     fixed : mapping of str to str, optional
         Corner -> shock id for corners that do not vary. A fixed corner fixes
         every corner that shares its shock (RF with LF under left-right
@@ -688,58 +994,35 @@ def enumerate_setups(library, *, symmetry="left-right", axles="independent", fix
     'S3/S3/S1/S1'
     """
     where = "enumerate_setups"
-    all_ids = _library_ids(library, where)
-    if not all_ids:
-        raise PlannerError(f"{where}: the shock library is empty; add shocks to it")
-    groups = _corner_groups(symmetry, axles)
-    fixed_by_group = _check_fixed(fixed, library, groups, symmetry, axles)
-    per_corner = _corner_candidates(shocks, library)
-    cands = []
-    for g, grp in enumerate(groups):
-        if g in fixed_by_group:
-            cands.append([fixed_by_group[g]])
-            continue
-        common = [sid for sid in per_corner[grp[0]]
-                  if all(sid in per_corner[c] for c in grp[1:])]
-        if not common:
-            raise PlannerError(f"{where}: corners {list(grp)} share one shock but their "
-                               "candidate lists have no id in common; give the same ids for "
-                               "both axles or use axles='independent'")
-        cands.append(common)
-    sizes = [len(c) for c in cands]
-    n_total = int(np.prod(sizes, dtype=object))
+    space = setup_space(library, symmetry=symmetry, axles=axles, fixed=fixed, shocks=shocks,
+                        respect_inventory=respect_inventory, name_format=name_format,
+                        where=where)
+    n_total = len(space)
     if max_setups is not None:
         if isinstance(max_setups, bool) or not isinstance(max_setups, (int, np.integer)) \
                 or max_setups < 1:
             raise PlannerError(f"{where}: max_setups={max_setups!r} must be a positive "
                                "integer or None")
         if n_total > max_setups:
-            detail = " x ".join(f"{len(c)} ({'='.join(grp)})" for c, grp in zip(cands, groups))
+            detail = " x ".join(f"{n} ({'='.join(grp)})"
+                                for n, grp in zip(space.sizes, space.groups))
             raise PlannerError(
                 f"{where}: {n_total:,} candidate setups ({detail}) exceed "
                 f"max_setups={max_setups:,}; use symmetry='left-right', fix corners, restrict "
                 "the candidates with shocks=..., or raise max_setups")
-    # integer codes into `all_ids`, one column per group, last group fastest
-    code_of = {sid: j for j, sid in enumerate(all_ids)}
-    grids = np.indices(sizes, dtype=np.intp).reshape(len(sizes), -1)
-    group_codes = [np.asarray([code_of[s] for s in c], dtype=np.intp)[grids[g]]
-                   for g, c in enumerate(cands)]
-    corner_group = [next(g for g, grp in enumerate(groups) if c in grp) for c in CORNERS]
-    codes = np.stack([group_codes[g] for g in corner_group], axis=1)  # (setup, corner)
+    # integer codes into the library's ids, (setup, corner), the last group fastest; the
+    # space skips what the inventory cannot build
+    index, codes = space.chunk(0, n_total)
     if respect_inventory:
-        keep = np.ones(codes.shape[0], dtype=bool)
-        for sid, count in _inventory(library).items():
-            keep &= (codes == code_of[sid]).sum(axis=1) <= count
-        if not keep.any():
+        if not index.size:
             raise PlannerError(f"{where}: none of the {n_total:,} candidate setups fits the "
                                "inventory (shock counts in the library); raise the counts, "
                                "choose other shocks or pass respect_inventory=False")
-        n_skipped = int(codes.shape[0] - keep.sum())
+        n_skipped = int(n_total - index.size)
         if n_skipped:
             logger.info("%s: skipped %d of %d setups that need more shocks than the "
-                        "inventory has", where, n_skipped, codes.shape[0])
-        codes = codes[keep]
-    ids_arr = np.asarray(all_ids, dtype=object)
+                        "inventory has", where, n_skipped, n_total)
+    ids_arr = np.asarray(space.shock_ids, dtype=object)
     with _gc_paused():
         id_rows = list(map(tuple, ids_arr[codes].tolist()))
     return _make_named(id_rows, name_format, where)
@@ -819,3 +1102,132 @@ def setups_from_baseline(baseline, library, *, corners=CORNERS, shocks=None,
             seen.add(ids)
             out.append(Setup._unchecked(f"{baseline.name} {label}={sid}", ids))
     return tuple(out)
+
+
+# ----------------------------------------------------------------------------
+# the baseline
+# ----------------------------------------------------------------------------
+
+
+def resolve_baseline(baseline, library, *, setups=(), default=None, find=None,
+                     name="baseline", where=None):
+    """The baseline setup of a command, from its one syntax.
+
+    Every command takes its baseline the same way: a :class:`Setup`, the name of a
+    listed setup, one shock id (at every corner) or four ids ``"LF,RF,LR,RR"``
+    separated by commas (spaces around them ignored). ``"A/B/C/D"`` is refused with
+    a message to use commas (unless it is a listed setup's name).
+
+    Parameters
+    ----------
+    baseline : Setup, str, sequence of str, or None
+        The baseline as given; a sequence holds one shock id or four (LF, RF, LR, RR).
+        None takes `default`.
+    library : ShockLibrary or mapping of str to ShockModel
+        The crate; the baseline's ids must be in it.
+    setups : sequence of Setup
+        The listed setups (the candidates). A name picks one; a baseline with the
+        shocks of one (and not the name of another) is that one, so that no second
+        row holds the same shocks.
+    default : str or Setup, optional
+        Taken when `baseline` is None (e.g. the objective's ``baseline``), read the
+        same way.
+    find : callable, optional
+        ``find(ids) -> Setup or None``: the candidate with the shock ids ``ids``
+        (tuple, corner order), for candidates that are not listed (a sweep's lazy
+        enumeration). Default: the first listed setup with these ids.
+    name : str or callable
+        The name of a setup built from shock ids (default ``"baseline"``); a callable
+        gets the ids as given (a list of one or four) and returns the name (a sweep
+        names them ``"all-B20"`` or ``"B20/B20/D8/D8"``).
+    where : str, optional
+        The command or argument named at the start of the errors.
+
+    Returns
+    -------
+    Setup or None
+        The baseline: a listed (or found) setup, or a setup to add to the candidates.
+        With neither `baseline` nor `default`: the first listed setup, or None when
+        none is listed.
+
+    Raises
+    ------
+    PlannerError
+        On a name that is neither a listed setup nor a shock id, ids separated by
+        ``/``, a count of ids other than one or four, an unknown shock id, or a
+        baseline setup with the name of a listed setup but other shocks.
+    TypeError
+        If `baseline` is of another type.
+
+    Examples
+    --------
+    >>> from ident.models.shocks import LinearShock, ShockLibrary
+    >>> lib = ShockLibrary.from_models([LinearShock("B20", 3502.5), LinearShock("D8", 1400.0)])
+    >>> resolve_baseline("B20", lib).ids()
+    ('B20', 'B20', 'B20', 'B20')
+    >>> resolve_baseline("D8, D8, B20, B20", lib).name
+    'baseline'
+    >>> listed = enumerate_setups(lib)
+    >>> resolve_baseline("D8,D8,B20,B20", lib, setups=listed).name   # the listed setup
+    'D8/D8/B20/B20'
+    """
+    pre = f"{where}: " if where else ""
+    names = [s.name for s in setups]
+    if baseline is None:
+        baseline = default
+    if baseline is None:
+        return setups[0] if len(setups) else None
+    if isinstance(baseline, Setup):
+        setup = baseline
+    elif isinstance(baseline, str):
+        if baseline in names:
+            return setups[names.index(baseline)]
+        if baseline in library:
+            given = [baseline]
+        elif "," in baseline:
+            given = [s.strip() for s in baseline.split(",")]
+        elif "/" in baseline:
+            raise PlannerError(f"{pre}baseline {baseline!r}: separate the shock ids with "
+                               f"commas, {baseline.replace('/', ',')!r} (LF,RF,LR,RR)")
+        elif names:
+            raise PlannerError(f"{pre}baseline setup {baseline!r} is not among the setups, nor "
+                               f"a shock id; name one of the setups (e.g. {names[0]!r}), give "
+                               "one shock id (every corner) or four (LF,RF,LR,RR), or pass the "
+                               "baseline setup")
+        else:
+            raise PlannerError(f"{pre}baseline {baseline!r} is neither a shock id nor four ids "
+                               f"LF,RF,LR,RR; {_lib_label(library)} has {list(library)}; give "
+                               "one shock id (every corner) or four separated by commas")
+        setup = _baseline_from_ids(given, name, pre)
+    elif isinstance(baseline, (list, tuple)) and all(isinstance(s, str) for s in baseline):
+        setup = _baseline_from_ids(list(baseline), name, pre)
+    else:
+        raise TypeError(f"{pre}baseline must be a Setup, a setup name or shock ids (str), got "
+                        f"{type(baseline).__name__}")
+    setup.resolve(library)
+    if setup.name in names:
+        listed = setups[names.index(setup.name)]
+        if listed.ids() != setup.ids():
+            raise PlannerError(
+                f"{pre}baseline setup {setup.name!r} ({'/'.join(setup.ids())}) has the name of "
+                f"a listed setup with other shocks ({'/'.join(listed.ids())}); rename the "
+                "baseline or pass its name to use the listed one")
+        return listed
+    ids = setup.ids()
+    found = find(ids) if find is not None else next((s for s in setups if s.ids() == ids), None)
+    if found is not None:
+        if found.name != setup.name:
+            logger.info("baseline %s is the listed setup %r; using it", "/".join(ids),
+                        found.name)
+        return found  # the listed setup: no second row with the same shocks
+    return setup
+
+
+def _baseline_from_ids(given, name, pre):
+    """A baseline Setup from one shock id (every corner) or four, named by `name`."""
+    if len(given) not in (1, 4):
+        raise PlannerError(f"{pre}baseline {','.join(given)!r}: give one shock id (every "
+                           "corner) or four (LF,RF,LR,RR)")
+    ids = given * 4 if len(given) == 1 else given
+    label = name(list(given)) if callable(name) else name
+    return Setup(label, dict(zip(CORNERS, ids)))

@@ -5,9 +5,10 @@ process or a Dask cluster, then simulate the best in the time domain and rank th
 enumerations of hundreds of thousands of setups (every 4-corner combination of a 30-shock
 crate: 30^4 = 810,000) times several drives and models:
 
-1. The setups are a :class:`SetupSpace`: the enumeration of
-   :func:`planner.setups.enumerate_setups` (same order, same inventory filter, same names)
-   decoded lazily, chunk by chunk, from integer codes; no :class:`~planner.setups.Setup`
+1. The setups are a :class:`planner.setups.SetupSpace` (:func:`planner.setups.setup_space`,
+   re-exported here): the one enumeration that :func:`planner.setups.enumerate_setups`
+   decodes (same order, same inventory filter, same names), decoded here lazily, chunk by
+   chunk, from integer codes; no :class:`~planner.setups.Setup`
    object exists but for the setups finally simulated. A given list of setups works too.
 2. Every (model, drive) pair, a *case*, is prepared once: the model's loop plant, the drive
    at the model's rate and the screening operands (:func:`planner.screen.screen_operands`).
@@ -28,7 +29,7 @@ Where it runs (``scheduler``): ``"local"`` (default) starts a
 compiled-kernel thread; an address (``"tcp://host:8786"``) joins a running scheduler;
 ``"none"`` runs everything in this process. The cases, the library and the space are
 scattered to the workers once; a task names only a range of the space. The same runner
-(:func:`_start`) serves ``rank --scheduler`` (:func:`screen_setups_on`) and ``whatif
+(:func:`planner.runner.start_runner`) serves ``rank --scheduler`` (:func:`screen_setups_on`) and ``whatif
 --scheduler`` (:func:`planner.whatif.evaluate_whatif`, a task per chunk of a condition
 group).
 
@@ -65,18 +66,27 @@ from __future__ import annotations
 
 import logging
 import math
-import os
-import threading
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from scipy.stats import spearmanr
+from threadpoolctl import threadpool_limits
 
 from ident.data.channels import CORNERS, RIG_INPUTS
-from planner.errors import PlannerError
+from ident.data.drive import Drive, check_drive_inputs
 from ident.identify.model import LOOP_REDUCE_RTOL
+from ident.sim.closedloop import pack_setups
+from planner.errors import PlannerError
+from planner.objective import (Objective, default_objective, mark_inventory, ranking_order,
+                               ranking_position, score_setups)
+from planner.predict import as_loop_plant, predict_setups, prepare_drive, resolve_setups
+from planner.runner import KERNEL_LOCK, SCHEDULER_LOCAL, SCHEDULER_NONE, start_runner
+from planner.screen import (drive_bands, screen_operands, screen_packed,
+                            screening_predictions)
+from planner.setups import SetupSpace, resolve_baseline, setup_space
 
 __all__ = [
     "SCHEDULER_NONE",
@@ -92,10 +102,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Values of `scheduler` that run everything in this process.
-SCHEDULER_NONE = ("none", "single", "serial")
-#: Values of `scheduler` that start a LocalCluster on this machine.
-SCHEDULER_LOCAL = ("local",)
 #: How case scores combine into a setup's sweep score.
 COMBINE_MODES = ("mean", "worst")
 #: Relative difference of a sweep's screening score from ``score_setups``' for the same
@@ -109,285 +115,6 @@ DEFAULT_SIMULATE_CHUNK = 128
 TASKS_PER_THREAD = 4
 #: Smallest screening chunk made to spread the work (the kernel's per-call overhead).
 MIN_CHUNK_SIZE = 1000
-#: Seconds to wait for a scheduler given by address.
-CONNECT_TIMEOUT_S = 10.0
-
-# compiled parallel kernels must not be launched by two threads at once (numba's workqueue
-# layer is not thread-safe): held around every kernel call of a task, uncontended in
-# process workers with one thread each
-_KERNEL_LOCK = threading.Lock()
-
-
-# ----------------------------------------------------------------------------------------------
-# the space of setups
-# ----------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class SetupSpace:
-    """A set of setups held as integer codes, decoded chunk by chunk.
-
-    Built by :func:`setup_space`. Candidate ``i`` of an enumeration is the mixed-radix
-    number whose digits pick each corner group's candidate (the last group fastest), the
-    order of :func:`planner.setups.enumerate_setups`; candidates the inventory cannot
-    build are skipped when decoded (``respect_inventory``), so the setups decoded in order
-    are exactly the enumerated ones. A space from a list holds its codes and names.
-
-    Attributes
-    ----------
-    shock_ids : tuple of str
-        Code ``j`` is ``shock_ids[j]`` (the library's order).
-    group_codes : tuple of ndarray of int
-        Per corner group, the codes of its candidates (empty for a list).
-    corner_group : tuple of int, shape (4,)
-        The group of each corner ``LF RF LR RR``.
-    inventory : tuple of (int, int)
-        ``(code, count)`` of the shocks whose candidates are skipped beyond their count
-        (empty for a list or ``respect_inventory=False``).
-    listed_codes : ndarray of int, shape (n_setups, 4), or None
-        The codes of a given list of setups.
-    listed_names : tuple of str, or None
-    name_format : str or callable
-        The names of generated setups (:func:`planner.setups.enumerate_setups`).
-    """
-
-    shock_ids: tuple
-    group_codes: tuple
-    corner_group: tuple
-    inventory: tuple
-    listed_codes: np.ndarray | None
-    listed_names: tuple | None
-    name_format: object
-
-    def __len__(self):
-        """Number of candidates (before the inventory filter of an enumeration)."""
-        if self.listed_codes is not None:
-            return int(self.listed_codes.shape[0])
-        return int(math.prod(len(g) for g in self.group_codes))
-
-    @property
-    def sizes(self):
-        """Candidates per corner group (mixed-radix digits, the last fastest)."""
-        return tuple(len(g) for g in self.group_codes)
-
-    def chunk(self, start, stop):
-        """Decode candidates ``start <= i < stop``.
-
-        Parameters
-        ----------
-        start, stop : int
-            A range of candidate indices.
-
-        Returns
-        -------
-        index : ndarray of int64, shape (n,)
-            The candidates kept (the inventory filter drops some), increasing.
-        codes : ndarray of intp, shape (n, 4)
-            Their shock codes per corner ``LF RF LR RR``.
-        """
-        start, stop = max(int(start), 0), min(int(stop), len(self))
-        idx = np.arange(start, max(start, stop), dtype=np.int64)
-        if self.listed_codes is not None:
-            return idx, self.listed_codes[idx]
-        digits = [None] * len(self.group_codes)
-        rest = idx.copy()
-        for g in range(len(self.group_codes) - 1, -1, -1):
-            size = len(self.group_codes[g])
-            digits[g] = rest % size
-            rest //= size
-        group_vals = [np.asarray(self.group_codes[g], dtype=np.intp)[digits[g]]
-                      for g in range(len(self.group_codes))]
-        codes = np.stack([group_vals[g] for g in self.corner_group], axis=1)
-        if self.inventory:
-            keep = np.ones(idx.size, dtype=bool)
-            for code, count in self.inventory:
-                keep &= (codes == code).sum(axis=1) <= count
-            idx, codes = idx[keep], codes[keep]
-        return idx, codes
-
-    def first(self, *, chunk_size=DEFAULT_CHUNK_SIZE):
-        """The first candidate the inventory keeps (None if none), decoded chunk by chunk."""
-        for start in range(0, len(self), chunk_size):
-            index, _ = self.chunk(start, start + chunk_size)
-            if index.size:
-                return int(index[0])
-        return None
-
-    def ids(self, index):
-        """Shock ids of candidates.
-
-        Parameters
-        ----------
-        index : sequence of int
-            Candidate indices.
-
-        Returns
-        -------
-        list of tuple of str
-            Per candidate, the ids at ``LF RF LR RR``.
-        """
-        index = np.asarray(index, dtype=np.int64)
-        codes = self._codes_at(index)
-        ids = np.asarray(self.shock_ids, dtype=object)
-        return [tuple(row) for row in ids[codes].tolist()]
-
-    def _codes_at(self, index):
-        if self.listed_codes is not None:
-            return self.listed_codes[index]
-        rest = index.copy()
-        vals = [None] * len(self.group_codes)
-        for g in range(len(self.group_codes) - 1, -1, -1):
-            size = len(self.group_codes[g])
-            vals[g] = np.asarray(self.group_codes[g], dtype=np.intp)[rest % size]
-            rest //= size
-        return np.stack([vals[g] for g in self.corner_group], axis=1).reshape(-1, 4)
-
-    def names(self, index):
-        """Names of candidates (the list's names, or generated by `name_format`).
-
-        Parameters
-        ----------
-        index : sequence of int
-
-        Returns
-        -------
-        list of str
-        """
-        if self.listed_names is not None:
-            return [self.listed_names[int(i)] for i in index]
-        from planner.setups import _name_maker
-
-        make = _name_maker(self.name_format)
-        return [make(ids) for ids in self.ids(index)]
-
-    def setups(self, index):
-        """The :class:`~planner.setups.Setup` objects of candidates.
-
-        Parameters
-        ----------
-        index : sequence of int
-
-        Returns
-        -------
-        tuple of Setup
-        """
-        from planner.setups import Setup
-
-        return tuple(Setup._unchecked(n, ids)
-                     for n, ids in zip(self.names(index), self.ids(index)))
-
-    def find(self, ids):
-        """The candidate index of a setup's shock ids, or None when not in the space.
-
-        Parameters
-        ----------
-        ids : sequence of str, shape (4,)
-            Ids at ``LF RF LR RR``.
-
-        Returns
-        -------
-        int or None
-            None also for a candidate the inventory filter skips.
-        """
-        code_of = {sid: j for j, sid in enumerate(self.shock_ids)}
-        if any(sid not in code_of for sid in ids):
-            return None
-        codes = np.array([code_of[sid] for sid in ids], dtype=np.intp)
-        if self.listed_codes is not None:
-            hit = np.flatnonzero((self.listed_codes == codes).all(axis=1))
-            return int(hit[0]) if hit.size else None
-        index = 0
-        for g, cand in enumerate(self.group_codes):
-            corners = [c for c in range(4) if self.corner_group[c] == g]
-            if len({int(codes[c]) for c in corners}) != 1:
-                return None
-            where = np.flatnonzero(np.asarray(cand) == codes[corners[0]])
-            if not where.size:
-                return None
-            index = index * len(cand) + int(where[0])
-        got_index, _ = self.chunk(index, index + 1)
-        return index if got_index.size else None
-
-
-def setup_space(library, *, setups=None, symmetry="left-right", axles="independent",
-                fixed=None, shocks=None, respect_inventory=True,
-                name_format="{LF}/{RF}/{LR}/{RR}"):
-    """The setups of a sweep: an enumeration (lazy) or a given list.
-
-    Parameters
-    ----------
-    library : ident.models.shocks.ShockLibrary
-        The crate; its ``count`` is the inventory.
-    setups : sequence of planner.setups.Setup, optional
-        A given list (unique names); then the enumeration options must stay at their
-        defaults.
-    symmetry, axles, fixed, shocks, respect_inventory, name_format
-        As :func:`planner.setups.enumerate_setups` (which this enumerates lazily, in its
-        order and with its names); there is no ``max_setups``: a sweep is for large sets.
-
-    Returns
-    -------
-    SetupSpace
-
-    Raises
-    ------
-    PlannerError
-        As :func:`planner.setups.enumerate_setups`; on an unknown shock id in a listed
-        setup; or on a list given with enumeration options.
-    """
-    from planner.setups import (
-        DEFAULT_NAME_FORMAT,
-        _check_fixed,
-        _check_setups,
-        _corner_candidates,
-        _corner_groups,
-        _inventory,
-        _library_ids,
-        _name_maker,
-    )
-
-    where = "sweep"
-    all_ids = _library_ids(library, where)
-    if not all_ids:
-        raise PlannerError(f"{where}: the shock library is empty; add shocks to it")
-    code_of = {sid: j for j, sid in enumerate(all_ids)}
-    if setups is not None:
-        if (symmetry, axles, fixed, shocks) != ("left-right", "independent", None, None):
-            raise PlannerError(f"{where}: give either setups or enumeration options "
-                               "(symmetry, axles, fixed, shocks), not both")
-        setups = _check_setups(setups, where)
-        if not setups:
-            raise PlannerError(f"{where}: no setups given; give at least one setup")
-        for s in setups:
-            s.resolve(library)
-        codes = np.array([[code_of[sid] for sid in s.ids()] for s in setups], dtype=np.intp)
-        return SetupSpace(shock_ids=tuple(all_ids), group_codes=(), corner_group=(),
-                          inventory=(), listed_codes=codes,
-                          listed_names=tuple(s.name for s in setups), name_format=None)
-    _name_maker(name_format)  # a bad template fails here, not on a worker
-    groups = _corner_groups(symmetry, axles)
-    fixed_by_group = _check_fixed(fixed, library, groups, symmetry, axles)
-    per_corner = _corner_candidates(shocks, library)
-    group_codes = []
-    for g, grp in enumerate(groups):
-        if g in fixed_by_group:
-            cand = [fixed_by_group[g]]
-        else:
-            cand = [sid for sid in per_corner[grp[0]]
-                    if all(sid in per_corner[c] for c in grp[1:])]
-            if not cand:
-                raise PlannerError(f"{where}: corners {list(grp)} share one shock but their "
-                                   "candidate lists have no id in common; give the same ids "
-                                   "for both axles or use axles='independent'")
-        group_codes.append(np.array([code_of[sid] for sid in cand], dtype=np.intp))
-    corner_group = tuple(next(g for g, grp in enumerate(groups) if c in grp) for c in CORNERS)
-    inventory = tuple((code_of[sid], n) for sid, n in _inventory(library).items()) \
-        if respect_inventory else ()
-    if name_format == DEFAULT_NAME_FORMAT:
-        name_format = DEFAULT_NAME_FORMAT
-    return SetupSpace(shock_ids=tuple(all_ids), group_codes=tuple(group_codes),
-                      corner_group=corner_group, inventory=inventory, listed_codes=None,
-                      listed_names=None, name_format=name_format)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -415,7 +142,7 @@ class _ShockTable:
         n = len(models)
         kv, kf = np.zeros((n, K)), np.zeros((n, K))
         nk = np.zeros(n, dtype=np.int64)
-        for j, p in enumerate(pwls):  # padded like ident.sim.closedloop._pack_setups
+        for j, p in enumerate(pwls):  # padded like ident.sim.closedloop.pack_setups
             k = p.v_knots_m_s.size
             kv[j, :k], kf[j, :k] = p.v_knots_m_s, p.f_knots_n
             kv[j, k:], kf[j, k:] = p.v_knots_m_s[-1], p.f_knots_n[-1]
@@ -475,26 +202,8 @@ class _Scoring:
         return out
 
 
-def _order(feasible, score, index):
-    """Indices sorting setups best first: feasible, non-NaN, by score, then by index."""
-    nan = np.isnan(score)
-    return np.lexsort((index, np.where(nan, 0.0, score), nan, ~feasible))
-
-
-def _rank_of(at, feasible, score, index):
-    """1-based position of setup `at` in the order of :func:`_order`, without sorting."""
-    nan = np.isnan(score)
-    filled = np.where(nan, 0.0, score)
-    f, n, s, i = feasible[at], nan[at], filled[at], index[at]
-    ahead = (feasible & ~f) | ((feasible == f) & (
-        (~nan & n) | ((nan == n) & ((filled < s) | ((filled == s) & (index < i))))))
-    return int(ahead.sum()) + 1
-
-
 def _screen_codes(ops, shocks, codes, max_iter, tol):
-    from planner.screen import screen_packed
-
-    with _KERNEL_LOCK:
+    with KERNEL_LOCK:
         return screen_packed(ops, *shocks.pack(codes), max_iter=max_iter, tol=tol)
 
 
@@ -512,7 +221,7 @@ def _screen_chunk(ops_list, shocks, space, scoring, start, stop, n_top, max_iter
         case_scores.append(s)
         feasible &= ok
     score = scoring.combined(case_scores) if index.size else np.zeros(0)
-    best = _order(feasible, score, index)[:n_top]
+    best = ranking_order(feasible, score, index)[:n_top]
     top_metrics = np.stack([M[best] for M in metrics], axis=1) if index.size \
         else np.zeros((0, len(ops_list), len(ops_list[0].metric_names)))
     return {"start": start, "index": index, "score": score, "feasible": feasible,
@@ -522,9 +231,7 @@ def _screen_chunk(ops_list, shocks, space, scoring, start, stop, n_top, max_iter
 
 def _screen_packed_chunk(ops, packed, max_iter, tol):
     """Screen a packed chunk of setups (a task of :func:`screen_setups_on`)."""
-    from planner.screen import screen_packed
-
-    with _KERNEL_LOCK:
+    with KERNEL_LOCK:
         return screen_packed(ops, *packed, max_iter=max_iter, tol=tol)
 
 
@@ -553,15 +260,11 @@ def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_ba
     planner.predict.Predictions
         As ``screen_setups`` returns; ``settings["scheduler"]`` names where it ran.
     """
-    from ident.sim.closedloop import _pack_setups
-    from planner.predict import resolve_setups
-    from planner.screen import screening_predictions
-
     if int(chunk_size) < 1:
         raise PlannerError(f"chunk_size must be at least 1, got {chunk_size}")
     setups = list(setups)
     models = resolve_setups(setups, library)
-    runner = _start(scheduler, client, n_workers, True, "rank")  # a wrong address fails first
+    runner = start_runner(scheduler, client, n_workers, True, "rank")  # a wrong address fails first
     try:
         plant, drive, ops = _prepare_case("rank", model, drive, band_hz, n_bands, reduce_rtol)
         h = 1.0 / drive.fs_hz  # as screen_response: the bands are of the drive at this rate
@@ -569,7 +272,7 @@ def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_ba
         args = []
         for a in range(0, len(models), int(chunk_size)):
             chunk = models[a:a + int(chunk_size)]
-            kv, kf, nk, slo, shi, *_ = _pack_setups(chunk, h)
+            kv, kf, nk, slo, shi, *_ = pack_setups(chunk, h)
             lag = np.array([[m.lag_s for m in row] for row in chunk])
             args.append((ops_ref, (kv, kf, nk, slo, shi, lag), max_iter, tol))
         parts = [None] * len(args)
@@ -599,146 +302,10 @@ def _simulate_chunk(plant, drive, setups, library, oversample, band_hz):
     BLAS runs on one thread, as in a Dask worker (which sets ``OPENBLAS_NUM_THREADS=1``):
     the drive's rig response differs in the last bits with the BLAS thread count.
     """
-    from threadpoolctl import threadpool_limits
-
-    from planner.predict import predict_setups
-
-    with _KERNEL_LOCK, threadpool_limits(1):
+    with KERNEL_LOCK, threadpool_limits(1):
         table = predict_setups(plant, drive, setups, library, oversample=oversample,
                                band_hz=band_hz).table
     return table
-
-
-# ----------------------------------------------------------------------------------------------
-# where the tasks run
-# ----------------------------------------------------------------------------------------------
-
-
-class _Serial:
-    """Runs tasks in this process, in order."""
-
-    kind = "none"
-    address = None
-    n_workers = 1
-    n_threads = 1
-
-    def scatter(self, obj):
-        return obj
-
-    def everywhere(self, func, *args):
-        func(*args)
-
-    def map_unordered(self, func, argslist, progress, desc):
-        from tqdm.auto import tqdm
-
-        for j, args in enumerate(tqdm(argslist, desc=desc, unit="task", disable=not progress)):
-            yield j, func(*args)
-
-    def close(self):
-        pass
-
-
-class _Dask:
-    """Runs tasks on a dask.distributed client, a bounded number in flight."""
-
-    def __init__(self, client, kind, cluster=None, *, own_client=False):
-        self.client = client
-        self.kind = kind
-        self.cluster = cluster
-        self.own_client = own_client or cluster is not None
-        self.address = client.scheduler.address
-        info = client.scheduler_info()
-        self.n_workers = max(1, len(info.get("workers", {})))
-        self.n_threads = max(1, sum(w.get("nthreads", 1)
-                                    for w in info.get("workers", {}).values()))
-
-    def scatter(self, obj):
-        return self.client.scatter(obj, broadcast=True, hash=False)
-
-    def everywhere(self, func, *args):
-        self.client.run(func, *args)
-
-    def map_unordered(self, func, argslist, progress, desc):
-        from distributed import as_completed
-        from tqdm.auto import tqdm
-
-        window = 2 * self.n_threads + 1  # bounded memory: results wait at most this many
-        pending = iter(enumerate(argslist))
-        futures = as_completed(loop=self.client.loop)
-        tag = {}
-        for j, args in pending:
-            fut = self.client.submit(func, *args, pure=False)
-            tag[fut.key] = j
-            futures.add(fut)
-            if futures.count() >= window:
-                break
-        with tqdm(total=len(argslist), desc=desc, unit="task", disable=not progress) as bar:
-            for fut in futures:
-                j = tag.pop(fut.key)
-                result = fut.result()
-                fut.release()
-                bar.update(1)
-                nxt = next(pending, None)
-                if nxt is not None:
-                    new = self.client.submit(func, *nxt[1], pure=False)
-                    tag[new.key] = nxt[0]
-                    futures.add(new)
-                yield j, result
-
-    def close(self):
-        if self.own_client:
-            self.client.close()
-        if self.cluster is not None:
-            self.cluster.close()
-
-
-def _start(scheduler, client, n_workers, processes, where="sweep"):
-    """The task runner for `scheduler`/`client`: serial, a new LocalCluster, or a client.
-
-    `where` names the command in the errors (``sweep``, ``rank``, ``whatif``).
-    """
-    if client is not None:
-        if scheduler is not None:
-            raise PlannerError(f"{where}: give a scheduler or a client, not both")
-        return _Dask(client, "client")
-    if scheduler is not None and not isinstance(scheduler, str):
-        raise TypeError(f"{where}: scheduler must be 'local', 'none' or a scheduler address "
-                        f"(str), got {type(scheduler).__name__}")
-    name = "local" if scheduler is None else scheduler.strip()
-    if name.lower() in SCHEDULER_NONE:
-        return _Serial()
-    from distributed import Client, LocalCluster
-
-    if name.lower() in SCHEDULER_LOCAL:
-        n = (os.cpu_count() or 1) if n_workers is None else int(n_workers)
-        if n < 1:
-            raise PlannerError(f"{where}: n_workers={n_workers!r} must be at least 1")
-        # one compiled-kernel thread per worker: the workers are the parallelism
-        kwargs = {"env": {"NUMBA_NUM_THREADS": "1"}} if processes else {}
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
-                               dashboard_address=None, silence_logs=logging.ERROR, **kwargs)
-        return _Dask(Client(cluster, set_as_default=False), "local", cluster)
-    if "://" not in name and ":" not in name:
-        raise PlannerError(f"{where}: scheduler {scheduler!r} is neither 'local', 'none' nor a "
-                           "scheduler address; give an address such as tcp://10.0.0.5:8786 "
-                           "(from `dask scheduler`), 'local' for a cluster on this machine, "
-                           "or 'none' for one process")
-    try:
-        client = Client(name, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
-    except (OSError, TimeoutError, ValueError) as exc:
-        text = " ".join(str(exc).split()) or type(exc).__name__
-        raise PlannerError(f"{where}: cannot reach the Dask scheduler at {name!r} within "
-                           f"{CONNECT_TIMEOUT_S:g} s ({text}); check the address and that "
-                           "`dask scheduler` runs there, or use scheduler='local' (this "
-                           "machine) or 'none' (one process)") from None
-    try:
-        client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
-    except (OSError, TimeoutError) as exc:
-        client.close()
-        raise PlannerError(f"{where}: the Dask scheduler at {name!r} has no workers after "
-                           f"{CONNECT_TIMEOUT_S:g} s; start some with `dask worker {name}` "
-                           "(in this project's environment)") from exc
-    return _Dask(client, "address", own_client=True)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -814,7 +381,7 @@ class SweepResult:
         -------
         ndarray of int64
         """
-        order = _order(self.screening_feasible, self.screening_score, self.screening_index)
+        order = ranking_order(self.screening_feasible, self.screening_score, self.screening_index)
         return self.screening_index[order[:n] if n is not None else order]
 
 
@@ -837,10 +404,6 @@ def _as_list(x, what, kind=None):
 
 def _prepare_case(label, model, drive, band_hz, n_bands, reduce_rtol):
     """The plant, the drive at the model's rate and the screening operands of one case."""
-    from ident.data.drive import check_drive_inputs
-    from planner.predict import as_loop_plant, prepare_drive
-    from planner.screen import drive_bands, screen_operands
-
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
     drive = prepare_drive(drive, getattr(model, "fs_hz", None), where=f"case {label!r}: drive")
     check_drive_inputs(drive, getattr(plant, "rig_inputs", RIG_INPUTS), model=plant.name)
@@ -850,50 +413,36 @@ def _prepare_case(label, model, drive, band_hz, n_bands, reduce_rtol):
     return plant, drive, ops
 
 
+def _baseline_name(given):
+    """The name of a baseline built from shock ids: ``all-<id>`` (one id) or the four ids
+    joined by ``/`` (the enumeration's default name of that setup)."""
+    return f"all-{given[0]}" if len(given) == 1 else "/".join(given)
+
+
 def _baseline_setup(space, library, objective, baseline):
     """The baseline Setup and its candidate index (None when not in the space)."""
-    from planner.setups import Setup
 
-    if isinstance(baseline, Setup):
-        baseline.resolve(library)
-        idx = space.find(baseline.ids())
-        if idx is not None:
-            listed = space.setups([idx])[0]
-            if listed.name != baseline.name:
-                log.info("baseline %s is the setup %r of the sweep; using it",
-                         "/".join(baseline.ids()), listed.name)
-            return listed, idx
-        return baseline, None
-    if baseline is None:
-        baseline = objective.baseline
-    if baseline is None:
+    def find(ids):
+        idx = space.find(ids)
+        return None if idx is None else space.setups([idx])[0]
+
+    listed = space.setups(range(len(space))) if space.listed_names is not None else ()
+    base = resolve_baseline(baseline, library, setups=listed, default=objective.baseline,
+                            find=find, name=_baseline_name, where="sweep")
+    if base is None:  # an enumeration and no baseline named: its first buildable setup
         first = space.first()
         if first is None:
             raise PlannerError("sweep: no setup of the enumeration fits the inventory; raise "
                                "the counts, choose other shocks or pass "
                                "respect_inventory=False")
         return space.setups([first])[0], first
-    if not isinstance(baseline, str):
-        raise TypeError(f"sweep: baseline must be a Setup, a shock id or a setup name, got "
-                        f"{type(baseline).__name__}")
-    if space.listed_names is not None and baseline in space.listed_names:
-        idx = space.listed_names.index(baseline)
-        return space.setups([idx])[0], idx
-    if baseline in library:
-        return _baseline_setup(space, library, objective,
-                               Setup(f"all-{baseline}", dict.fromkeys(CORNERS, baseline)))
-    parts = baseline.split("/")
-    if len(parts) == 4 and all(p in library for p in parts):
-        return _baseline_setup(space, library, objective,
-                               Setup(baseline, dict(zip(CORNERS, parts))))
-    raise PlannerError(f"sweep: baseline {baseline!r} is neither a listed setup, a shock id "
-                       "nor four ids LF/RF/LR/RR; name one of them or pass a Setup")
+    if space.listed_names is not None and base.name in space.listed_names:
+        return base, space.listed_names.index(base.name)
+    return base, space.find(base.ids())
 
 
 def _scoring(objective, ops_list, base_metrics, combine):
     """The objective's weights and limits as column indices; checks the baseline's values."""
-    from planner.objective import score_setups
-
     names = list(ops_list[0].metric_names)
     for k, ops in enumerate(ops_list):
         if list(ops.metric_names) != names:
@@ -968,8 +517,11 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         Default :func:`planner.objective.default_objective`; normalized per case by the
         baseline in that case.
     baseline : Setup, str, optional
-        A Setup, a shock id (at every corner), a listed setup's name or ``"A/B/C/D"``;
-        default the objective's baseline, else the first setup. It is simulated always.
+        As :func:`planner.setups.resolve_baseline`: a Setup, a listed setup's name, a
+        shock id (at every corner, named ``"all-<id>"``) or four ids ``"LF,RF,LR,RR"``
+        (named ``"LF/RF/LR/RR"``); default the objective's baseline, else the first
+        setup. A baseline with the shocks of a swept setup is that setup. It is
+        simulated always.
     top_share : float
         Share of the screened setups simulated in the time domain (at least one).
     top : int, optional
@@ -1016,9 +568,6 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     tasks finish in (see the module docstring). Memory: the driver keeps 17 bytes per
     screened setup and the metrics of ``2 * n_top`` setups; a task holds one chunk.
     """
-    from planner.objective import Objective, default_objective, score_setups
-    from planner.rank import _mark_inventory
-
     t0 = time.perf_counter()
     objective = default_objective() if objective is None else objective
     if not isinstance(objective, Objective):
@@ -1027,15 +576,13 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     _check_options(top_share, top, chunk_size, simulate_chunk, combine)
     if setups is not None and constraints:
         raise PlannerError("sweep: give either setups or constraints, not both")
-    space = setup_space(library, setups=setups, **(constraints or {}))
+    space = setup_space(library, setups=setups, **(constraints or {}), where="sweep")
     model_list = _as_list(models, "models")
-    from ident.data.drive import Drive
-
     drive_list = _as_list(drives, "drives", Drive)
     labels = _case_labels(model_list, drive_list)
     base, base_idx = _baseline_setup(space, library, objective, baseline)
     # the scheduler first: a wrong address fails before any work
-    runner = _start(scheduler, client, n_workers, processes)
+    runner = start_runner(scheduler, client, n_workers, processes)
     try:
         # 1. the cases, once, here
         cases = []
@@ -1083,7 +630,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
             top_met = np.concatenate([top_met, res["top_metrics"]])
             top_score = np.concatenate([top_score, res["score"][pos]])
             top_feas = np.concatenate([top_feas, res["feasible"][pos]])
-            keep = _order(top_feas, top_score, top_idx)[:n_top_max]
+            keep = ranking_order(top_feas, top_score, top_idx)[:n_top_max]
             top_idx, top_met = top_idx[keep], top_met[keep]
             top_score, top_feas = top_score[keep], top_feas[keep]
         index = np.concatenate([p[0] for p in parts])
@@ -1131,7 +678,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     for k, label in enumerate(labels):
         td = pd.concat(tparts[k * len(groups):(k + 1) * len(groups)])
         sc = score_setups(td, objective, baseline=base.name).table
-        case_tables[label] = pd.concat([td, _mark_inventory(sc, sim, library)], axis=1)
+        case_tables[label] = pd.concat([td, mark_inventory(sc, sim, library)], axis=1)
         rows = np.vstack([top_met[:, k], base_metrics[k][None, :]])[:len(sim)]
         st = pd.DataFrame(rows, columns=metric_names, index=pd.Index(names, name="setup"))
         st.insert(0, "LF", [s.ids()[0] for s in sim])
@@ -1149,7 +696,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
                  if case_tables[lab]["violations"].iloc[r]]
         viol.append("; ".join(texts) if len(labels) > 1 else
                     (case_tables[labels[0]]["violations"].iloc[r]))
-    order = _order(feas, comb, np.arange(len(sim)))
+    order = ranking_order(feas, comb, np.arange(len(sim)))
     rank = np.empty(len(sim), dtype=np.int64)
     rank[order] = np.arange(1, len(sim) + 1)
     # screening score and rank of every simulated setup among all screened
@@ -1159,7 +706,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         if base_idx is not None:
             at = int(np.searchsorted(index, base_idx))
             scr_score[-1] = score[at]
-            scr_rank.append(_rank_of(at, feasible, score, index))
+            scr_rank.append(ranking_position(at, feasible, score, index))
         else:
             scr_rank.append(-1)  # not among the swept setups
     table = pd.DataFrame({c: [s.ids()[j] for s in sim] for j, c in enumerate(CORNERS)},
@@ -1173,8 +720,6 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     for lab, s in zip(labels, case_scores):
         table[f"score@{lab}"] = s
     table = table.sort_values("rank", kind="stable")
-    from scipy.stats import spearmanr
-
     both = np.isfinite(table["screening_score"]) & np.isfinite(table["score"])
     rho = float(spearmanr(table.loc[both, "screening_score"], table.loc[both, "score"]).statistic) \
         if both.sum() > 2 else float("nan")

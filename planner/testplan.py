@@ -54,16 +54,16 @@ from openpyxl.styles import Alignment, Border, Font, PatternFill, Side
 from openpyxl.utils import get_column_letter
 from openpyxl.worksheet.pagebreak import Break
 
-from ident.data.files import atomic_dir, atomic_path, check_can_write
 from ident.data.channels import CORNERS
 from ident.data.drive import write_drive
-from planner.errors import PlannerError
-from ident.sim.metrics import METRIC_QUANTITY
-from ident.models.shocks import write_shock_library
+from ident.data.files import atomic_dir, atomic_path, check_can_write
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
+from ident.models.shocks import write_shock_library
+from ident.sim.metrics import METRIC_QUANTITY
 from planner.design import ExperimentPlan
-from planner.report.ranking import (PRINT_MARGINS_IN, column_label, fit_column_width, print_setup,
-                             text_width, wrap_lines)
+from planner.errors import PlannerError
+from planner.report.sheets import (PRINT_MARGINS_IN, column_label, fit_column_width, print_setup,
+                                   text_width, wrap_lines)
 
 __all__ = ["write_plan", "plan_toml", "run_sheet_rows", "design_figure", "write_run_sheet",
            "read_run_sheet", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES"]

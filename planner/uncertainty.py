@@ -57,9 +57,12 @@ from ident.data.channels import SHOCK_VELOCITIES
 from ident.data.drive import check_drive_inputs
 from ident.identify.frf import embed_inputs
 from ident.identify.condition import conditioned_error_kernel, conditioned_standard_error
+from planner.objective import score_setups
+from planner.predict import predict_setups, prepare_drive, resolve_setups
+from planner.screen import drive_bands, screen_response
 
 __all__ = ["Uncertainty", "FrfPlant", "frf_relative_error", "error_correlation",
-           "prediction_uncertainty", "unresolved_pairs", "MAX_RELATIVE_ERROR",
+           "prediction_uncertainty", "unresolved_pairs", "interpolate", "MAX_RELATIVE_ERROR",
            "SYSTEMATIC_TERMS"]
 
 log = logging.getLogger(__name__)
@@ -101,11 +104,35 @@ class FrfPlant:
 
     def frequency_response(self, f_hz):
         """Linear interpolation of the real and imaginary parts, shape (n_out, 11, n_f)."""
-        return _interpolate(self.f_hz, self.H, f_hz)
+        return interpolate(self.f_hz, self.H, f_hz)
 
 
-def _interpolate(f_grid, X, f_hz):
-    """Linear interpolation of ``X[..., grid]`` at `f_hz` along the last axis."""
+def interpolate(f_grid, X, f_hz):
+    """Linear interpolation of ``X[..., grid]`` at `f_hz` along the last axis.
+
+    Real and imaginary parts (of a complex `X`) alike, each between its two
+    neighbouring grid lines; outside the grid, the first or last segment is
+    extended linearly.
+
+    Parameters
+    ----------
+    f_grid : ndarray, shape (n_grid,)
+        Increasing frequencies [Hz], at least two.
+    X : ndarray, shape (..., n_grid)
+        Values on the grid (real or complex).
+    f_hz : array_like, shape (n,)
+        Frequencies to interpolate at [Hz].
+
+    Returns
+    -------
+    ndarray, shape (..., n)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> interpolate(np.array([1.0, 2.0, 4.0]), np.array([0.0, 1.0, 3.0]), [1.5, 3.0, 5.0])
+    array([0.5, 2. , 4. ])
+    """
     f = np.asarray(f_hz, dtype=float)
     idx = np.clip(np.searchsorted(f_grid, f) - 1, 0, f_grid.size - 2)
     t = (f - f_grid[idx]) / (f_grid[idx + 1] - f_grid[idx])
@@ -238,9 +265,6 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
         If the model has no FRF (a known physical model has no estimation
         error) or `n_draws` is below 2.
     """
-    from planner.predict import predict_setups, prepare_drive, resolve_setups
-    from planner.screen import drive_bands, screen_response
-
     frf = getattr(model, "frf", None)
     if frf is None:
         raise ValueError("prediction_uncertainty needs an identified model with its FRF "
@@ -259,7 +283,7 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
         return screen_response(H, outs, cbar, bands, models)[1]
 
     # (p, 11, nb): a 4-post model's FRF (8 inputs) gets zero aero columns
-    Hc = embed_inputs(_interpolate(frf.f_hz, frf.H, fb), frf.input_names)
+    Hc = embed_inputs(interpolate(frf.f_hz, frf.H, fb), frf.input_names)
     fitted = hasattr(model, "loop_plant")
     if fitted:
         # the draws perturb the model's own response (the nominal is the model's screening);
@@ -276,7 +300,7 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
         H_nom = Hc
     names, base, _, _ = screen_response(H_nom, outs, cbar, bands, models)
     rel = np.minimum(RANDOM_ERROR_SCALE * embed_inputs(
-        _interpolate(frf.f_hz, frf_relative_error(frf), fb), frf.input_names),
+        interpolate(frf.f_hz, frf_relative_error(frf), fb), frf.input_names),
         MAX_RELATIVE_ERROR)
     norm = 1.0 / np.sqrt(1.0 + rel**2)  # zero-mean in power
     Lf = _correlated_factor(error_correlation(frf, fb))
@@ -346,8 +370,6 @@ def unresolved_pairs(scores, uncertainty, objective, *, baseline=None, max_flip=
     dict
         Setup name -> list of setup names it is not resolved from.
     """
-    from planner.objective import score_setups
-
     nominal = score_setups(scores, objective, baseline=baseline).table
     order = nominal.sort_values("rank").index.tolist()
     if top is not None:

@@ -57,7 +57,7 @@ import pandas as pd
 
 from ident.identify.condition import condition_frf
 from ident.identify.frf import DF_INPUTS, estimate_frf
-from ident.identify.model import fit_model
+from ident.identify.pipeline import fit_model
 from ident.identify.plots import plot_frf
 from ident.sim.rig import default_plan, simulate_session
 from ident.models.vehicle import build_full_car, example_vehicle

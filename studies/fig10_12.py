@@ -51,7 +51,7 @@ from ident.sim.closedloop import simulate_batch
 from ident.identify.condition import condition_frf
 from ident.identify.frf import estimate_frf
 from ident.sim.metrics import METRIC_QUANTITY, bandpass
-from ident.identify.model import fit_model
+from ident.identify.pipeline import fit_model
 from ident.sim.rig import default_plan, make_plan_drive, simulate_session
 from ident.models.shocks import read_shock_library
 from ident.data.units import from_si

@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 from ident.data.drive import make_track_drive
-from ident.identify.model import identify_session
+from ident.identify.pipeline import identify_session
 from ident.sim.rig import default_plan, simulate_session
 from ident.models.shocks import read_shock_library
 from ident.models.vehicle import example_vehicle

@@ -61,7 +61,7 @@ def identified_model(paper_session):
     """The paper session identified with the default settings."""
     import warnings
 
-    from ident.identify.model import identify_session
+    from ident.identify.pipeline import identify_session
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -87,7 +87,7 @@ def four_post_model(four_post_session):
     """The 4-post session identified with the default settings."""
     import warnings
 
-    from ident.identify.model import identify_session
+    from ident.identify.pipeline import identify_session
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -47,14 +47,57 @@ def test_rig_simulate_bad_plan(tmp_path, capsys):
     assert "format" in capsys.readouterr().err
 
 
+#: The modes table prints frequencies and damping ratios with 3 decimals.
+ATOL_PRINTED_3_DECIMALS = 0.0005
+#: The CLI's predictions CSV against predict_setups on the same inputs: the same call in the
+#: same process, its floats written at full precision (they read back bit for bit).
+RTOL_CLI_VS_LIBRARY = 1e-12
+
+
 def test_vehicle_modes(capsys):
+    """The printed modes are the vehicle model's (modal_summary of the paper's car with the
+    damping converted from lbf/(in/s)), row by row, to the printed decimals."""
+    from ident.data.units import to_si
+    from ident.models.vehicle import example_vehicle, modal_summary
+
     assert main(["vehicle", "modes", "--damping", "20", "--units", "imperial"]) == 0
     out = capsys.readouterr().out
     assert "hop_LF" in out and "heave" in out
+    s = modal_summary(example_vehicle(), damping_n_s_m=to_si(20.0, "damping", "imperial"))
+    lines = out.splitlines()
+    assert f"shocks {s.damping_n_s_m[0]:.1f} N/(m/s)" in lines[0]
+    assert lines[1].split() == ["mode", "undamped", "Hz", "damped", "Hz", "zeta"]
+    rows = [line.split() for line in lines[3:]]
+    assert [r[0] for r in rows] == list(s.labels)
+    printed = np.array([[float(x) for x in r[1:]] for r in rows])
+    expected = np.column_stack([s.undamped_hz, s.damped_hz, s.damping_ratio])
+    np.testing.assert_allclose(printed, expected, rtol=0, atol=ATOL_PRINTED_3_DECIMALS)
+
+
+#: The demo's best setup. Its defaults fix it: the paper's car and identification
+#: experiment (seeded noise), the seed-7 track drive of 120 s, the built-in crate, the B20
+#: baseline and the default objective.
+DEMO_BEST = "L28/L28/L28/L28"
 
 
 @pytest.mark.slow
 def test_demo(tmp_path, capsys):
+    """The demo's files and what they say: the ranking screened every left/right-symmetric
+    setup the crate can build, its columns, its best setup (by the ranking rule, and the
+    known one), the baseline's score; the optimizer's figures printed are those of its
+    workbook, and its setup file names the optimal shocks."""
+    import re
+
+    import pandas as pd
+    from openpyxl import load_workbook
+
+    from ident.data.channels import CORNERS
+    from ident.models.shocks import read_shock_library
+    from ident.sim.metrics import METRIC_NAMES
+    from planner.demo import DEMO_LIBRARY_PATH
+    from planner.objective import default_objective, ranking_order
+    from planner.setups import enumerate_setups, read_setups
+
     out = tmp_path / "demo"
     assert main(["-q", "demo", "--out", str(out)]) == 0
     assert (out / "session" / "session.toml").is_file()
@@ -68,6 +111,36 @@ def test_demo(tmp_path, capsys):
     assert "shockplan demo" in text and "best:" in text
     assert "optimized curves" in text and "better" in text
     assert str(out) in text and ".demo." not in text  # final paths, not the temporary folder
+    # the ranking: every setup of the crate's left/right-symmetric enumeration screened
+    library = read_shock_library(DEMO_LIBRARY_PATH)
+    screening = pd.read_csv(out / "ranking" / "screening.csv")
+    assert sorted(screening["setup"]) == sorted(s.name for s in enumerate_setups(library))
+    ranking = pd.read_csv(out / "ranking" / "ranking.csv", keep_default_na=False)
+    assert list(ranking.columns) == [
+        "rank", "setup", *CORNERS, *METRIC_NAMES, "score", "score_grip", "score_platform",
+        "feasible", "violations", "screening_rank", "unresolved",
+        *(f"{m}{s}" for m in METRIC_NAMES for s in ("_lo", "_hi"))]
+    # its best setup: first by the ranking rule, the known one, the one printed
+    feasible = ranking["feasible"].to_numpy(dtype=bool)
+    score = ranking["score"].to_numpy(dtype=float)
+    assert ranking_order(feasible, score)[0] == 0 and ranking["rank"].iloc[0] == 1
+    assert feasible[0] and ranking["setup"].iloc[0] == DEMO_BEST
+    assert f"best: {DEMO_BEST} (score {score[0]:.4f} vs baseline" in text
+    base = ranking.set_index("setup").loc["B20/B20/B20/B20"]  # the baseline, B20 all round
+    assert base["score"] == pytest.approx(default_objective().total_weight, rel=1e-12)
+    # the optimizer: the printed figures are its workbook's, its setup the optimal shocks
+    said = re.search(r"optimized curves \(front, rear\): the optimum \(([\d.]+)\) is "
+                     r"([\d.]+) % better than the crate's best (\S+) \(([\d.]+)\)", text)
+    assert said is not None, text
+    solver = dict(load_workbook(out / "optimize" / "optimize.xlsx")["solver"].iter_rows(
+        values_only=True))
+    assert said.group(1) == f"{solver['optimum score (time domain)']:.4f}"
+    assert f"{said.group(2)} %" == solver["gain over the crate best"]
+    assert said.group(3) == solver["crate best"]
+    assert said.group(4) == f"{solver['crate best score']:.4f}"
+    assert float(said.group(1)) < float(said.group(4))
+    optimal = read_setups(out / "optimize" / "optimal_setup.csv")
+    assert optimal[0].ids() == ("OPT-front", "OPT-front", "OPT-rear", "OPT-rear")
 
 
 def _small_session(tmp_path):
@@ -116,6 +189,20 @@ def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
     assert list(table.columns[:6]) == ["setup", "LF", "RF", "LR", "RR", "tire_force_rms_LF"]
     assert table["setup"].tolist() == ["baseline", "firm"]
     assert 5 < table["tire_force_rms_LF"].iloc[0] < 1000  # lbf on a smooth track
+    # the CLI's tire forces are the library's prediction on the same files, in lbf
+    from ident.data.drive import read_drive
+    from planner.predict import predict_setups
+    from planner.report import ranking_to_units
+    from planner.setups import read_setups
+
+    lib = read_shock_library(tmp_path / "shocks.toml")
+    ref = predict_setups(load_model(model), read_drive(tmp_path / "drive.csv", units="imperial"),
+                         read_setups(tmp_path / "setups.csv", lib), lib, oversample=2).table
+    ref = ranking_to_units(ref, "imperial")
+    for c in ("LF", "RF", "LR", "RR"):
+        np.testing.assert_allclose(table[f"tire_force_rms_{c}"].to_numpy(),
+                                   ref[f"tire_force_rms_{c}"].to_numpy(),
+                                   rtol=RTOL_CLI_VS_LIBRARY, atol=0)
     rank_dir = tmp_path / "rank"
     assert main(["-q", "rank", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
                  "--shocks", str(tmp_path / "shocks.toml"), "--units", "imperial",

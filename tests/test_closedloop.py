@@ -5,13 +5,13 @@ import pytest
 from scipy import integrate, signal
 
 from ident.data.channels import RIG_INPUTS
-from ident.sim.closedloop import (_refine, foh_coefficients, hold_coefficients, lag_coefficients,
-                              lag_hold_coefficients, modal_form, rig_response, simulate,
-                              simulate_batch)
 from ident.data.drive import make_noise_drive
-from ident.models.shocks import DigressiveShock, LinearShock, TableShock
 from ident.data.units import to_si
+from ident.models.lti import (foh_coefficients, hold_coefficients, lag_coefficients,
+                              lag_hold_coefficients, modal_form)
+from ident.models.shocks import DigressiveShock, LinearShock, TableShock
 from ident.models.vehicle import close_shock_loop
+from ident.sim.closedloop import refine_input, rig_response, simulate, simulate_batch
 
 RTOL_EXACT = 1e-9  # exact discretizations: round-off only
 RTOL_LOOP_R8 = 3e-3  # quadratic hold of dF between internal samples at 8x oversampling
@@ -175,7 +175,7 @@ def test_quadratic_hold_is_third_order_against_lsim(paper_model):
     err_q, err_l = [], []
     for r in (1, 2, 4):
         q = simulate(plant, drive, [LinearShock("B", C20)] * 4, oversample=r).channels["tire_force_LF"]
-        u = _refine(drive.as_array(), r)
+        u = refine_input(drive.as_array(), r)
         _, y, _ = signal.lsim((A, B[:, :7], C, D[:, :7]), u, np.arange(u.shape[0]) / (100.0 * r),
                               interp=True)
         err_q.append(_rel_rms(q, ref))
@@ -223,7 +223,7 @@ def test_batch_equals_single(paper_model):
         one = simulate(plant, drive, s, oversample=4)  # one setup: the serial kernel
         for n in ("shock_velocity_RF", "tire_force_LR", "shock_force_LF"):
             np.testing.assert_allclose(batch.channels[n][i], one.channels[n], rtol=1e-12, atol=1e-12)
-            # the same _loop_one, one setup at a time or in parallel: the same numbers
+            # the same loop_one, one setup at a time or in parallel: the same numbers
             np.testing.assert_array_equal(batch.channels[n][i], one.channels[n])
 
 
@@ -405,11 +405,11 @@ def test_bad_options(paper_model):
 def test_refined_drive_keeps_offsets_and_samples():
     """Band-limited refinement passes the drive samples through and does not ring at
     the ends of a drive with a static offset."""
-    from ident.sim.closedloop import _refine
+    from ident.sim.closedloop import refine_input
 
     u = np.full((400, 2), 0.01)
     u[:, 1] += 0.001 * np.sin(2 * np.pi * 3.0 * np.arange(400) / 100.0)
-    fine = _refine(u, 8)
+    fine = refine_input(u, 8)
     assert fine.shape == (399 * 8 + 1, 2)
     np.testing.assert_allclose(fine[:, 0], 0.01, rtol=1e-4)
     np.testing.assert_allclose(fine[::8], u, atol=2e-6)
@@ -457,7 +457,7 @@ def test_shock_step_at_rest_on_a_knot_converges():
     knot at 0 between a nearly flat and a steep segment (an optimizer's curve moved 5 %):
     the damped Newton iteration cycled on 1e-20 m/s half steps and reported failure; its
     convergence test counts velocities below 1 mm/s as 1 mm/s (``_V_SCALE_MIN_M_S``)."""
-    from ident.sim.closedloop import _shock_step, _solver_state
+    from ident.sim.loop_kernels import shock_step, solver_state
 
     vfree = np.array([-2.3212568161800419e-20, -2.5951432654329554e-20, -3.9278851021791510e-20,
                       -3.8266021543416934e-20])
@@ -485,8 +485,8 @@ def test_shock_step_at_rest_on_a_knot_converges():
     nk = np.full(4, knots.size, dtype=np.int64)
     slo = np.array([6227.081290671564, 6227.081290671564, 6210.6443743976615, 6210.6443743976615])
     shi = np.array([6231.043068320205, 6231.043068320205, 6236.682297036815, 6236.682297036815])
-    v, _, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = _solver_state(kv, nk)
-    it = _shock_step(vfree, c0, Deff, cbar, np.ones(4), kv, kf, nk, slo, shi, v, fv, sv, seg, av,
+    v, _, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = solver_state(kv, nk)
+    it = shock_step(vfree, c0, Deff, cbar, np.ones(4), kv, kf, nk, slo, shi, v, fv, sv, seg, av,
                      vnew, res, J, Jinv, state)
     assert it > 0
     assert np.all(np.abs(v) < 1e-18)  # at rest, to far below any physical velocity

@@ -217,7 +217,7 @@ def test_a_designed_plan_run_on_the_virtual_rig_identifies_the_car(paper_vehicle
 
     from ident.data.drive import make_track_drive
     from ident.sim.metrics import METRIC_NAMES
-    from ident.identify.model import identify_session
+    from ident.identify.pipeline import identify_session
     from ident.sim.rig import read_rig_plan, simulate_session
     from planner.objective import score_setups
     from planner.predict import predict_setups

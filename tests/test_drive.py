@@ -422,10 +422,10 @@ def test_resample_same_rate_and_bad_rate(noise):
 
 
 def _decimate_reference(x, r, n_out, lead):
-    """Extend by (_FIR_HALF_LENGTH + 1) r samples each end, resample_bandlimited, slice."""
-    from ident.data.drive import _FIR_HALF_LENGTH, resample_bandlimited
+    """Extend by (FIR_HALF_LENGTH + 1) r samples each end, resample_bandlimited, slice."""
+    from ident.data.drive import FIR_HALF_LENGTH, resample_bandlimited
 
-    pad = (_FIR_HALF_LENGTH + 1) * r
+    pad = (FIR_HALF_LENGTH + 1) * r
     xp = np.pad(x, (pad, 0), mode="edge" if lead == "edge" else "constant")
     xp = np.pad(xp, (0, pad), mode="edge")
     return resample_bandlimited(xp, 1, r)[pad // r: pad // r + n_out]
@@ -440,11 +440,11 @@ def _decimate_reference(x, r, n_out, lead):
 ])
 def test_fft_decimation_equals_polyphase_reference(rng, lead, r, n_in, n_out):
     """The FFT engine of the acquisition filter gives resample_bandlimited's numbers."""
-    from ident.data.drive import _decimate_bandlimited
+    from ident.data.drive import decimate_bandlimited
 
     rows = [rng.standard_normal(n_in) + 3.0, np.linspace(-1.0, 2.0, n_in),
             np.where(np.arange(n_in) % 7 == 0, 1.0, 0.0)]
-    out = _decimate_bandlimited(rows, r, n_out, lead=lead)
+    out = decimate_bandlimited(rows, r, n_out, lead=lead)
     for x, y in zip(rows, out):
         ref = x[:n_out] if r == 1 else _decimate_reference(x, r, n_out, lead)
         assert y.shape == (n_out,) and y.flags.owndata
@@ -460,7 +460,7 @@ def test_fft_decimation_equals_polyphase_reference(rng, lead, r, n_in, n_out):
     ([np.zeros(10)], 2, 5, "mirror", "lead must be"),
 ])
 def test_fft_decimation_bad_input(rows, r, n_out, lead, match):
-    from ident.data.drive import _decimate_bandlimited
+    from ident.data.drive import decimate_bandlimited
 
     with pytest.raises(ValueError, match=match):
-        _decimate_bandlimited(rows, r, n_out, lead=lead)
+        decimate_bandlimited(rows, r, n_out, lead=lead)

@@ -8,7 +8,8 @@ import pytest
 
 import ident.identify.fir as firmod
 from ident.data.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES
-from ident.sim.closedloop import lag_coefficients, simulate_batch
+from ident.models.lti import lag_coefficients
+from ident.sim.closedloop import simulate_batch
 from ident.data.drive import make_noise_drive
 from ident.errors import FitWarning
 from ident.identify.fir import FirPlant, fir_from_frf, simulate_fir_batch

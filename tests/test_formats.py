@@ -429,7 +429,7 @@ def paper_plan_session():
 def _identify_and_predict(session, demo_library, track_drive):
     import warnings
 
-    from ident.identify.model import identify_session
+    from ident.identify.pipeline import identify_session
     from planner.predict import predict_setups
     from planner.setups import enumerate_setups
 

@@ -289,7 +289,10 @@ def test_lane_blocks_equal_the_one_row_recurrence(rng):
     row exactly the one-row recurrence's result, and scipy's to round-off."""
     from scipy import signal
 
-    from ident.sim.metrics import _LANES, _design, _sosfilt_inplace, _sosfiltfilt_rows
+    from ident.sim.metric_kernels import LANES as _LANES
+    from ident.sim.metric_kernels import _sosfilt_inplace
+    from ident.sim.metric_kernels import sosfiltfilt_rows as _sosfiltfilt_rows
+    from ident.sim.metrics import _design
 
     x = rng.standard_normal((2 * _LANES + 3, 1500)) * 50.0
     sos, padlen = _design((1.0, 20.0), 4, 100.0)
@@ -312,7 +315,7 @@ def test_lane_blocks_equal_the_one_row_recurrence(rng):
 def test_pairwise_sum_is_numpys(rng, n):
     """The fused metric's sums are numpy's pairwise summation to the last bit (so its means
     and mean squares are numpy's), on a column of a lane buffer."""
-    from ident.sim.metrics import _pairwise_sum_col
+    from ident.sim.metric_kernels import _pairwise_sum_col
 
     x = rng.standard_normal(n) * 1e3 + 7.0
     buf = np.zeros((n + 3, 4))
@@ -325,7 +328,9 @@ def test_pairwise_sum_is_numpys(rng, n):
 def test_pairwise_sum_of_all_lanes_is_numpys(rng, n):
     """The lane-wise pairwise sum (every lane at once, row by row, on an explicit stack)
     gives each lane numpy's sum and sum of squares to the last bit."""
-    from ident.sim.metrics import _LANES, _PW_LEVELS, _pairwise_sum_lanes
+    from ident.sim.metric_kernels import LANES as _LANES
+    from ident.sim.metric_kernels import PW_LEVELS as _PW_LEVELS
+    from ident.sim.metric_kernels import _pairwise_sum_lanes
 
     buf = rng.standard_normal((n + 3, _LANES)) * 1e3 + 7.0
     out = np.empty(_LANES)
@@ -372,7 +377,8 @@ def test_fused_metric_equals_its_steps(rng):
     a block of lanes not filled, a row with a NaN (NaN for that row only)."""
     from scipy import signal
 
-    from ident.sim.metrics import _FAST_MIN_SIZE, _LANES, _design, _metric_signal
+    from ident.sim.metric_kernels import LANES as _LANES
+    from ident.sim.metrics import _FAST_MIN_SIZE, _design, _metric_signal
 
     fs = 100.0
     n_rows, n = 2 * _LANES + 5, 3000

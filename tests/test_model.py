@@ -7,8 +7,8 @@ from ident.data.channels import CORNERS
 from ident.sim.closedloop import simulate_batch
 from ident.errors import ModelFileError
 from ident.sim.metrics import compute_metrics
-from ident.identify.model import (LOOP_REDUCE_RTOL, RIG_REDUCE_RTOL, VehicleModel, balanced_reduce,
-                         has_feedthrough, load_model)
+from ident.identify.model import LOOP_REDUCE_RTOL, RIG_REDUCE_RTOL, VehicleModel, has_feedthrough, load_model
+from ident.models.lti import balanced_reduce
 
 # issue criteria: the identified model in closed loop with the paper's shocks reproduces the
 # known model's RMS metrics within 0.5 % median and 1.5 % max (no measurement noise)
@@ -68,7 +68,7 @@ def test_truth_round_trip_metrics_with_noise(paper_plan, paper_model, validation
     import warnings
     from dataclasses import replace
 
-    from ident.identify.model import identify_session
+    from ident.identify.pipeline import identify_session
     from ident.sim.rig import simulate_session
 
     session = simulate_session(replace(paper_plan, noise=0.02))
@@ -145,7 +145,7 @@ RTOL_SAME_PLANT = 1e-9
 
 
 def _random_modal(rng, n_complex=9, n_real=3, m=3, p=4):
-    from ident.sim.closedloop import ModalSystem
+    from ident.models.lti import ModalSystem
 
     lam = np.concatenate([-rng.uniform(0.5, 5, n_complex) + 1j * rng.uniform(2, 60, n_complex),
                           -rng.uniform(0.5, 80, n_real) + 0j])
@@ -159,7 +159,7 @@ def test_modal_gramians_solve_the_lyapunov_equations(rng):
     """The closed-form gramians in real modal coordinates equal a Lyapunov solver's."""
     from scipy.linalg import solve_continuous_lyapunov
 
-    from ident.identify.model import _modal_gramians
+    from ident.models.lti import _modal_gramians
 
     sys = _random_modal(rng)
     P, Q = _modal_gramians(sys, sys.B, sys.C)
@@ -171,7 +171,7 @@ def test_modal_gramians_solve_the_lyapunov_equations(rng):
 
 
 def test_gram_factor_of_a_low_rank_gramian(rng):
-    from ident.identify.model import _gram_factor
+    from ident.models.lti import _gram_factor
 
     X = rng.standard_normal((40, 6))
     M = X @ X.T  # rank 6
@@ -336,7 +336,7 @@ def test_model_file_holds_the_loop_plant(tmp_path, identified_model, track_drive
 
 
 def test_vector_fitting_method(identified_model):
-    from ident.identify.model import fit_model
+    from ident.identify.pipeline import fit_model
 
     vf = fit_model(identified_model.frf, method="vf")
     assert vf.settings["method"] == "vf"
@@ -393,7 +393,7 @@ def test_fits_stop_at_the_noise_and_refuse_to_make_up_dynamics(rng):
 
     from ident.identify.condition import condition_frf
     from ident.errors import LowCoherenceWarning
-    from ident.identify.model import ZERO_FIT_NOISE, fit_model
+    from ident.identify.pipeline import ZERO_FIT_NOISE, fit_model
 
     frf, overconfident = _noisy_pair_frf(rng)
     with pytest.warns(LowCoherenceWarning, match="1 pair.*no response above the noise"):
@@ -430,7 +430,7 @@ def test_vector_fitting_weighs_lines_by_their_noise(rng):
     did not: 2.4e-3 on this case), and the 4 Hz, 15 % mode is found."""
     import warnings
 
-    from ident.identify.model import ORDER_FLOOR, fit_model
+    from ident.identify.pipeline import ORDER_FLOOR, fit_model
 
     frf, _ = _noisy_pair_frf(rng)
     with warnings.catch_warnings():

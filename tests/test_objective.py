@@ -21,8 +21,12 @@ from planner.objective import (
     Objective,
     Scores,
     default_objective,
+    mark_inventory,
     objective_to_toml,
     pareto_front,
+    ranking_order,
+    ranking_position,
+    ranks,
     read_objective,
     score_setups,
 )
@@ -459,3 +463,40 @@ def test_module_docstring_documents_every_file_key():
                 "max_ratio", "max ="):
         assert key in doc, key
     assert re.search(r"lower\s+is\s+better", doc, re.IGNORECASE)
+
+
+# ---------------------------------------------------------------- the ranking rule
+
+
+def test_ranking_rule_feasible_then_score_nan_last_ties_by_index():
+    """The one ranking rule: feasible first, NaN scores last within each, then by score,
+    ties by index; ranks and the sort-free position agree with the order."""
+    feasible = np.array([True, False, True, True, True, False, True])
+    score = np.array([1.0, 0.1, np.nan, 0.5, 1.0, np.nan, 0.9])
+    order = ranking_order(feasible, score)
+    assert order.tolist() == [3, 6, 0, 4, 2, 1, 5]
+    assert ranking_order(feasible, score, np.array([6, 5, 4, 3, 2, 1, 0])).tolist() == \
+        [3, 6, 4, 0, 2, 1, 5]
+    r = ranks(feasible, score)
+    assert r.dtype == np.int64 and r.tolist() == [3, 6, 5, 1, 4, 7, 2]
+    index = np.arange(len(score))
+    assert [ranking_position(k, feasible, score, index) for k in range(7)] == r.tolist()
+
+
+def test_mark_inventory_makes_unbuildable_setups_infeasible_and_reranks():
+    from ident.models.shocks import LinearShock, ShockLibrary
+    from planner.setups import Setup
+
+    lib = ShockLibrary([LinearShock("A", 1000.0, count=2), LinearShock("B", 2000.0)])
+    setups = [Setup("four-A", dict.fromkeys(CORNERS, "A")),
+              Setup("two-A", dict(zip(CORNERS, "AABB")))]
+    scores = pd.DataFrame({"score": [0.5, 1.0], "feasible": [True, True],
+                           "violations": ["", ""], "rank": [1, 2]},
+                          index=pd.Index(["four-A", "two-A"], name="setup"))
+    out = mark_inventory(scores, setups, lib)
+    assert out["feasible"].tolist() == [False, True] and out["rank"].tolist() == [2, 1]
+    assert out.loc["four-A", "violations"] == \
+        "inventory: needs 4 x 'A' but the library's count is 2"
+    assert scores["rank"].tolist() == [1, 2]  # the input is left as it was
+    buildable = scores.iloc[1:]
+    assert mark_inventory(buildable, setups, lib) is buildable  # nothing to mark: unchanged

@@ -11,12 +11,11 @@ from numpy.testing import assert_allclose
 
 from ident.data.channels import CORNERS
 from planner.errors import PlannerError
-from ident.models.shocks import LinearShock, PiecewiseLinear, ShockLibrary, read_shock_library
+from ident.models.shocks import LinearShock, ShockLibrary, read_shock_library
 from planner.objective import Objective, default_objective, score_setups
 from planner.optimize import (
     CurveConstraints,
     OptimizeWarning,
-    _constraint_rows,
     check_constraints,
     curve_space,
     curve_table,
@@ -25,6 +24,7 @@ from planner.optimize import (
     read_curve_constraints,
     write_optimum,
 )
+from planner.optimize.constraints import constraint_rows
 from planner.predict import predict_setups
 from planner.setups import Setup, read_setups
 
@@ -78,7 +78,7 @@ def test_curve_space_expansion_known_answer():
     assert pwl.force(0.2) == pytest.approx(500.0) and pwl.force(0.5) == pytest.approx(1000.0)
     assert pwl.force(-0.5) == pytest.approx(-900.0 - 0.2 * 4000.0)
     assert_allclose(sp.from_curves(sp.curves(x)), x)
-    lin = curve_space(symmetry="axle", linear=True)
+    lin = curve_space(symmetry="all", linear=True)
     assert lin.n_vars == 1 and lin.groups == (("all", CORNERS),)
     c = lin.curves([2500.0])[0]
     assert c.force(0.3) == pytest.approx(750.0) and c.force(-1.0) == pytest.approx(-2500.0)
@@ -96,14 +96,14 @@ def _holds(space, cons, x, library=None):
     """Every family of linear constraints at the decision vector `x`."""
     p = space.expansion() @ x
     return {name: bool(np.all(A @ p <= b + ATOL_CONSTRAINT * (1 + np.abs(b))))
-            for name, A, b in _constraint_rows(space, cons, library)}
+            for name, A, b in constraint_rows(space, cons, library)}
 
 
 def test_constraint_families_known_answers(demo_library):
     """A digressive, passive, increasing curve meets the constraints; a progressive one breaks
     'digressive', a non-passive one 'passive', a steep one the slope bound, a rebound-weak one
     the ratio."""
-    sp = curve_space(symmetry="axle", knots_m_s=(0.05, 0.2, 0.5))
+    sp = curve_space(symmetry="all", knots_m_s=(0.05, 0.2, 0.5))
     cons = CurveConstraints(bump_low_slope=(1000.0, 30000.0), digressive=True,
                             ratio=(0.2, 1.0, 3.0), max_force_n=6000.0)
     # forces at -0.5, -0.2, -0.05 | 0.05, 0.2, 0.5 m/s, then the end slopes
@@ -251,10 +251,20 @@ def test_linear_curves_match_a_brute_force_scan(paper_model, short_drive):
     a, b, _ = np.polyfit(lx, s[k - 1:k + 2], 2)
     best = float(np.exp(-b / (2 * a)))
     opt = optimize_curves(paper_model, short_drive, lib, objective=obj, baseline="B",
-                          symmetry="axle", linear=True, stationarity=False)
+                          symmetry="all", linear=True, stationarity=False)
     assert opt.solver["success"]
     assert opt.x[0] == pytest.approx(best, rel=RTOL_LINEAR_DAMPING)
     assert opt.curves[0].force(0.1) == pytest.approx(0.1 * opt.x[0])
+
+
+def test_symmetry_axle_is_refused_naming_all(paper_model, short_drive, demo_library):
+    """optimize's old word 'axle' (one curve for every corner) is refused with its new name,
+    'all', the word planner.setups uses for every corner the same."""
+    with pytest.raises(PlannerError, match=r"use 'all' \(one curve for every corner\)"):
+        curve_space(symmetry="axle")
+    with pytest.raises(PlannerError, match=r"use 'all' \(one curve for every corner\)"):
+        optimize_curves(paper_model, short_drive, demo_library, baseline="B20", symmetry="axle")
+    assert curve_space(symmetry="all").groups == (("all", CORNERS),)
 
 
 def test_bad_inputs(paper_model, short_drive, demo_library):
@@ -351,7 +361,7 @@ def _loop_gradient(step, x0, U):
     return float(v), np.array(gr).ravel()
 
 
-@pytest.mark.skipif(not __import__("planner.optimize").optimize._compiler(),
+@pytest.mark.skipif(not __import__("planner.optimize.cache").optimize.cache._compiler(),
                     reason="no C compiler")
 def test_compiled_steps_are_kept_between_runs(tmp_path, monkeypatch):
     """The step functions compile once into the cache folder; a later process (here: a
@@ -359,11 +369,11 @@ def test_compiled_steps_are_kept_between_runs(tmp_path, monkeypatch):
     their adjoints give the uncompiled values."""
     import subprocess
 
-    import planner.optimize as po
+    import planner.optimize.cache as po
 
     monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(tmp_path))
     fns = _toy_steps()
-    first = po._compiled_steps(fns)
+    first = po.compiled_steps(fns)
     libs = list(po.jit_cache_dir().glob("steps-*.so"))
     assert len(libs) == 1 and po.jit_cache_dir().parent == tmp_path
 
@@ -372,7 +382,7 @@ def test_compiled_steps_are_kept_between_runs(tmp_path, monkeypatch):
 
     monkeypatch.setattr(subprocess, "run", no_compiler)
     monkeypatch.setattr(subprocess, "Popen", no_compiler)
-    second = po._compiled_steps(_toy_steps())
+    second = po.compiled_steps(_toy_steps())
     assert list(po.jit_cache_dir().glob("steps-*.so")) == libs
     rng = np.random.default_rng(3)
     x0, U = rng.standard_normal(3), rng.standard_normal((2, 6))
@@ -388,19 +398,19 @@ def test_compiled_steps_are_kept_between_runs(tmp_path, monkeypatch):
 def test_compiled_steps_fall_back(tmp_path, monkeypatch):
     """A cache folder that cannot be written compiles into the process's temporary folder;
     a failing compiler leaves the functions uncompiled, with a warning."""
-    import planner.optimize as po
+    import planner.optimize.cache as po
 
     blocker = tmp_path / "a-file"
     blocker.write_text("not a folder")
     monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(blocker))
     if po._compiler():
-        out = po._compiled_steps(_toy_steps())
+        out = po.compiled_steps(_toy_steps())
         assert all(f.class_name() == "External" for f in out)
         assert blocker.read_text() == "not a folder"
     monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(po, "_compiler", lambda: "/bin/false")
     with pytest.warns(RuntimeWarning, match="uncompiled"):
-        out = po._compiled_steps(_toy_steps())
+        out = po.compiled_steps(_toy_steps())
     assert [f.class_name() for f in out] == ["SXFunction", "SXFunction"]
     assert not list((tmp_path / "cache").rglob("*.c"))
 
@@ -423,7 +433,7 @@ def test_fold_chain_equals_a_loop(n_steps, base):
     for lengths below, at and above each level of the tower."""
     import casadi as ca
 
-    from planner.optimize import _fold_chain
+    from planner.optimize.loop import _fold_chain
 
     step = _contracting_step()
     rng = np.random.default_rng(11)
@@ -443,7 +453,7 @@ def test_fold_chain_equals_a_loop(n_steps, base):
     assert_allclose(g_f, g_l, rtol=RTOL_FOLD_ADJOINT, atol=0)
 
 
-@pytest.mark.skipif(not __import__("planner.optimize").optimize._compiler(),
+@pytest.mark.skipif(not __import__("planner.optimize.cache").optimize.cache._compiler(),
                     reason="no C compiler")
 def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive, demo_library,
                                                         tmp_path, monkeypatch):
@@ -451,11 +461,12 @@ def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive
     optimization with the same arguments then loads it without running the compiler."""
     import subprocess
 
-    import planner.optimize as po
+    import planner.optimize.cache as po
+    import planner.optimize.loop as pl
     from planner.optimize import compile_curves
 
     monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(po, "_STEP_CACHE", {})
+    monkeypatch.setattr(pl, "_STEP_CACHE", {})
     assert compile_curves(paper_model, short_drive, demo_library, baseline="B20",
                           knots_m_s=SMALL_KNOTS) is True
     libs = list(po.jit_cache_dir().glob("steps-*.so"))
@@ -464,7 +475,7 @@ def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive
     def no_compiler(*args, **kwargs):
         raise AssertionError("the compiler ran although compile_curves compiled the steps")
 
-    monkeypatch.setattr(po, "_STEP_CACHE", {})  # as in another process
+    monkeypatch.setattr(pl, "_STEP_CACHE", {})  # as in another process
     monkeypatch.setattr(subprocess, "Popen", no_compiler)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)

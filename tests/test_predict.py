@@ -103,7 +103,7 @@ def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, bas
     from dataclasses import replace
 
     from ident.data.drive import make_track_drive
-    from ident.identify.model import identify_session
+    from ident.identify.pipeline import identify_session
     from ident.sim.rig import simulate_session
     from ident.models.vehicle import build_full_car, modal_summary
 
@@ -147,7 +147,7 @@ def test_noisy_session_of_the_papers_plan(paper_vehicle, paper_plan, demo_librar
     from dataclasses import replace
 
     from ident.data.drive import make_track_drive
-    from ident.identify.model import identify_session
+    from ident.identify.pipeline import identify_session
     from ident.sim.rig import simulate_session
 
     runs = tuple(replace(r, duration_s=200.0) for r in paper_plan.runs)

@@ -14,14 +14,13 @@ from openpyxl import load_workbook
 from openpyxl.utils import get_column_letter
 
 import planner.report.ranking as report_mod
+from planner.report.ranking import DATA_PT, HEADER_PT
 from ident.data.channels import CORNERS
 from planner.errors import PlannerError
 from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
 from ident.data.units import TO_SI, UNIT_LABELS
 from planner.objective import default_objective, score_setups
 from planner.report import (
-    DATA_PT,
-    HEADER_PT,
     PAPER_SIZE,
     column_label,
     metric_of_column,
@@ -259,11 +258,11 @@ def test_write_ranking_refuses_overwrite_before_writing_anything(table, tmp_path
 
 def test_baseline_normalization_of_top_setups(table):
     obj = default_objective()
-    assert report_mod._resolve_baseline(table, obj, None) == "baseline"
-    assert report_mod._resolve_baseline(table.iloc[::-1], obj, None) == "baseline"
-    assert report_mod._resolve_baseline(table, None, None) is None
+    assert report_mod._normalizing_setup(table, obj, None) == "baseline"
+    assert report_mod._normalizing_setup(table.iloc[::-1], obj, None) == "baseline"
+    assert report_mod._normalizing_setup(table, None, None) is None
     with pytest.raises(PlannerError, match="baseline setup 'nope'"):
-        report_mod._resolve_baseline(table, None, "nope")
+        report_mod._normalizing_setup(table, None, "nope")
     assert report_mod._key_metrics(table, obj) == list(obj.weights)
     fig = report_mod._top_figure(table, list(obj.weights), "baseline", 5)
     from matplotlib.container import BarContainer

@@ -103,7 +103,7 @@ def test_acquisition_filter_equals_polyphase_reference(rng, r, n):
     """The FFT acquisition filter gives the numbers of the polyphase one it replaced
     (edge-extended record, resample_bandlimited, decimated), on records of odd and
     even length, shorter than the filter and longer than one FFT segment."""
-    from ident.data.drive import _FIR_HALF_LENGTH, resample_bandlimited
+    from ident.data.drive import FIR_HALF_LENGTH, resample_bandlimited
     from ident.sim.rig import _daq_sample
 
     n_fine = (n - 1) * r + 1
@@ -112,7 +112,7 @@ def test_acquisition_filter_equals_polyphase_reference(rng, r, n):
                 "ramp": np.linspace(-1.0, 2.0, n_fine),
                 "tones": np.sin(2 * np.pi * 10.0 * t) + 0.3 * np.sin(2 * np.pi * 90.0 * t)}
     out = _daq_sample(channels, r, n)
-    pad = (_FIR_HALF_LENGTH + 1) * r
+    pad = (FIR_HALF_LENGTH + 1) * r
     for name, x in channels.items():
         ref = x if r == 1 else resample_bandlimited(np.pad(x, pad, mode="edge"), 1, r)[
             pad // r: pad // r + n]

@@ -16,10 +16,14 @@ from ident.data.drive import Drive, make_track_drive
 from planner.errors import PlannerError
 from ident.sim.metrics import METRIC_NAMES
 from ident.models.shocks import LinearShock, ShockLibrary
+from ident.sim.closedloop import pack_setups
+from planner import screen as screen_mod
+from planner import screen_codegen
 from planner.objective import default_objective, score_setups
-from planner.predict import predict_setups
+from planner.predict import as_loop_plant, predict_setups
 from planner.screen import (drive_bands, drive_spectrum, metric_rows, screen_operands,
                             screen_packed, screen_setups)
+from planner.screen_kernels import _band_inverse, _loop_inverse
 from planner.setups import Setup, enumerate_setups
 
 # Linear shocks, screening vs the time domain on the 60 s track drive. Both are exact linear
@@ -54,6 +58,12 @@ RTOL_FIXED_POINT = 1e-9
 # out bit for bit); the metrics' final pass is reordered (band powers as a linear form of
 # the loop correction), round-off only (measured 5.5e-16).
 RTOL_KERNEL_REFERENCE = 1e-12
+# The generated band inverse against numpy.linalg.inv on 4x4 complex matrices of condition
+# number <= COND_MAX_INVERSE: Gauss-Jordan with partial pivoting, round-off of a few eps times
+# the condition number (measured 5.6e-15 relative to the inverse's largest entry, 5,000
+# draws).
+COND_MAX_INVERSE = 100.0
+RTOL_INVERSE = 1e-13
 # A sine over 60 s in 10.24 s Hann blocks: the window's leakage stays inside 0.2-50 Hz and
 # the per-block mean removal takes ~nothing of a 5 Hz sine (measured 2.4e-11).
 RTOL_SINE_POWER = 1e-8
@@ -270,12 +280,7 @@ def test_kernel_matches_plain_reference(paper_model, track_drive, demo_library, 
     """The compiled kernels (screen_packed: the vectorized one for large batches, the scalar
     one for small) give the fixed point, its iteration count and the metrics of a
     plain-Python reference, for nonlinear, lagged and linear setups."""
-    from ident.sim.closedloop import _pack_setups
-    from planner import screen as screen_mod
-
     monkeypatch.setattr(screen_mod, "_VECTOR_MIN_SETUPS", 0 if kernel == "vectorized" else 10**9)
-    from planner.predict import as_loop_plant
-
     plant = as_loop_plant(paper_model)
     bands = drive_bands(track_drive)
     H = plant.frequency_response(bands.f_hz)
@@ -283,7 +288,7 @@ def test_kernel_matches_plain_reference(paper_model, track_drive, demo_library, 
     ids = [("BO", "RB", "TD", "DS"), ("B20", "B20", "B20", "B20"), ("L12", "L28", "B20", "L12"),
            ("TD", "TD", "BO", "BO"), ("DS", "BO", "RB", "TD")]
     models = [tuple(demo_library[i] for i in row) for row in ids]
-    kv, kf, nk, slo, shi, *_ = _pack_setups(models, 1.0 / bands.fs_hz)
+    kv, kf, nk, slo, shi, *_ = pack_setups(models, 1.0 / bands.fs_hz)
     lag = np.array([[m.lag_s for m in row] for row in models])
     assert np.any(lag > 0)
     out, sig, iters = screen_packed(ops, kv, kf, nk, slo, shi, lag)
@@ -300,10 +305,6 @@ def test_scalar_and_vectorized_kernels_agree_bit_for_bit(paper_model, track_driv
     """Small batches take the scalar kernel, large ones the vectorized one: the same
     operations in the same order, so the same numbers to the last bit (a setup's result
     must not depend on the size of the batch it was screened in)."""
-    from ident.sim.closedloop import _pack_setups
-    from planner import screen as screen_mod
-    from planner.predict import as_loop_plant
-
     plant = as_loop_plant(paper_model)
     bands = drive_bands(track_drive)
     ops = screen_operands(plant.frequency_response(bands.f_hz), plant.output_names,
@@ -312,7 +313,7 @@ def test_scalar_and_vectorized_kernels_agree_bit_for_bit(paper_model, track_driv
     rng = np.random.default_rng(3)
     models = [tuple(demo_library[ids[i]] for i in row)
               for row in rng.integers(0, len(ids), size=(37, 4))]
-    kv, kf, nk, slo, shi, *_ = _pack_setups(models, 1.0 / bands.fs_hz)
+    kv, kf, nk, slo, shi, *_ = pack_setups(models, 1.0 / bands.fs_hz)
     lag = np.array([[m.lag_s for m in row] for row in models])
     monkeypatch.setattr(screen_mod, "_VECTOR_MIN_SETUPS", 10**9)
     scalar = screen_packed(ops, kv, kf, nk, slo, shi, lag)
@@ -320,6 +321,49 @@ def test_scalar_and_vectorized_kernels_agree_bit_for_bit(paper_model, track_driv
     vector = screen_packed(ops, kv, kf, nk, slo, shi, lag)
     for a, b in zip(scalar, vector):
         np.testing.assert_array_equal(a, b)
+
+
+# ---------------------------------------------------------------- the generated band inverse
+
+
+def test_band_inverse_is_its_generator_output():
+    """The straight-line band inverse in planner/screen_kernels.py is exactly the text its
+    generator (planner.screen_codegen) writes: regenerate it after a change to either."""
+    committed = screen_codegen.committed_source()
+    assert committed == screen_codegen.band_inverse_source()
+    assert committed.count("dd = _recip(") == 4
+    with pytest.raises(ValueError, match="markers"):
+        screen_codegen.committed_source("def _band_inverse(h, d0, d1, d2, d3):\n")
+
+
+def _random_loop(rng, n):
+    """n random (Hv, D) of a 4x4 loop, ``I - Hv diag(D)`` of condition <= COND_MAX_INVERSE,
+    with entries large enough that the pivoting interchanges rows."""
+    out = []
+    while len(out) < n:
+        Hv = rng.standard_normal((4, 4)) + 1j * rng.standard_normal((4, 4))
+        D = rng.uniform(0.5, 2.0, 4) * np.exp(1j * rng.uniform(-np.pi, np.pi, 4))
+        if np.linalg.cond(np.eye(4) - Hv * D) <= COND_MAX_INVERSE:
+            out.append((Hv, D))
+    return out
+
+
+def test_band_inverse_known_answer(rng):
+    """The generated inverse gives numpy.linalg.inv of ``I - Hv diag(D)`` (random, well
+    conditioned, row interchanges exercised), and bit for bit what the looped Gauss-Jordan
+    (_loop_inverse, the scalar kernel's) gives."""
+    n_swapped = 0
+    for Hv, D in _random_loop(rng, 200):
+        M = np.eye(4) - Hv * D
+        K = np.array(_band_inverse(tuple(-Hv.ravel()), *D)).reshape(4, 4)
+        ref = np.linalg.inv(M)
+        assert_allclose(K, ref, rtol=RTOL_INVERSE, atol=RTOL_INVERSE * np.abs(ref).max())
+        A = np.empty((4, 4), dtype=complex)
+        perm = np.empty(4, dtype=np.int64)
+        _loop_inverse(Hv, D, A, perm)
+        assert_array_equal(K, A)
+        n_swapped += np.any(perm != np.arange(4))
+    assert n_swapped > 100  # most draws pivot: the selects are exercised
 
 
 # ---------------------------------------------------------------- drive spectrum and metric rows

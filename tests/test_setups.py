@@ -15,9 +15,12 @@ from planner.errors import PlannerError
 from ident.models.shocks import LinearShock, ShockLibrary
 from planner.setups import (
     DEFAULT_MAX_SETUPS,
+    SYMMETRIES,
     Setup,
     enumerate_setups,
     read_setups,
+    resolve_baseline,
+    setup_space,
     setups_from_baseline,
     setups_to_frame,
     write_setups,
@@ -123,6 +126,18 @@ def test_enumeration_counts_for_ten_shocks(symmetry, axles, expected):
     assert len({s.name for s in out}) == expected
 
 
+@pytest.mark.parametrize("axles", ["independent", "same"])
+def test_symmetry_all_is_left_right_with_the_same_axles(axles):
+    """``symmetry="all"`` (every corner one shock, optimize's name) enumerates exactly what
+    left-right symmetry with ``axles="same"`` does: same setups, order and names."""
+    assert "all" in SYMMETRIES
+    lib = _lib(6, counts={"S2": 2})
+    ref = enumerate_setups(lib, symmetry="left-right", axles="same")
+    got = enumerate_setups(lib, symmetry="all", axles=axles)
+    assert got == ref and [s.name for s in got] == [s.name for s in ref]
+    assert all(len(set(s.ids())) == 1 for s in got) and len(got) == 5  # S2 x4: only 2
+
+
 def test_enumeration_respects_symmetry_and_axles():
     for s in enumerate_setups(_lib(4)):
         lf, rf, lr, rr = s.ids()
@@ -222,7 +237,7 @@ def test_max_setups_guards_and_large_enumerations_work():
 
 BAD_ENUMERATIONS = [
     ("symmetry", dict(symmetry="diagonal"), r"symmetry='diagonal' is unknown; use one of "
-     r"\['left-right', 'none'\]"),
+     r"\['left-right', 'all', 'none'\]"),
     ("axles", dict(axles="swapped"), r"axles='swapped' is unknown"),
     ("fixed corner", dict(fixed={"LM": "S1"}), r"fixed has the corner 'LM'; corners are"),
     ("fixed id", dict(fixed={"LF": "X"}), r"fixed\['LF'\]: unknown shock id 'X'; shock library "
@@ -267,6 +282,77 @@ def test_enumeration_type_errors():
         enumerate_setups(_lib(2), fixed=["S1"])
     with pytest.raises(PlannerError, match="the shock library is empty"):
         enumerate_setups(ShockLibrary.from_models([]))
+
+
+@pytest.mark.parametrize("options", [
+    {}, {"symmetry": "none"}, {"symmetry": "none", "axles": "same"}, {"symmetry": "all"},
+    {"symmetry": "none", "fixed": {"LR": "S3"}, "shocks": {"front": ["S5", "S1", "S2"]}},
+    {"symmetry": "none", "respect_inventory": False},
+])
+def test_setup_space_decodes_to_the_enumeration(options):
+    """The one enumeration: the space decoded chunk by chunk (any chunk boundaries) gives
+    enumerate_setups' setups, in its order, with its names and inventory filter."""
+    lib = _lib(5, counts={"S1": 1, "S4": 2})
+    ref = enumerate_setups(lib, **options)
+    space = setup_space(lib, **options)
+    got = []
+    for start in range(0, len(space), 7):
+        index, _ = space.chunk(start, start + 7)
+        got += space.setups(index)
+    assert got == list(ref)
+    assert space.first() == space.find(ref[0].ids())
+
+
+# ---------------------------------------------------------------- the baseline
+
+
+def test_resolve_baseline_syntax(spec_lib):
+    """One syntax: a Setup, a listed name, one shock id (every corner) or four ids separated
+    by commas; a setup built from ids is named by `name` (a str or a callable)."""
+    base = resolve_baseline("B20", spec_lib)
+    assert base == _setup("baseline", "B20", "B20", "B20", "B20")
+    assert resolve_baseline(" D8 , D8,B20,B20 ", spec_lib) == \
+        _setup("baseline", "D8", "D8", "B20", "B20")
+    assert resolve_baseline(["D8", "D8", "B20", "B20"], spec_lib).ids() == \
+        ("D8", "D8", "B20", "B20")
+    sweep_name = lambda given: f"all-{given[0]}" if len(given) == 1 else "/".join(given)  # noqa: E731
+    assert resolve_baseline("B20", spec_lib, name=sweep_name).name == "all-B20"
+    assert resolve_baseline("D8,D8,B20,B20", spec_lib, name=sweep_name).name == "D8/D8/B20/B20"
+    own = _setup("mine", "D8", "B20", "B20", "B20")
+    assert resolve_baseline(own, spec_lib) is own
+    assert resolve_baseline(None, spec_lib) is None
+    assert resolve_baseline(None, spec_lib, default="D8").ids() == ("D8",) * 4
+
+
+def test_resolve_baseline_against_listed_setups(spec_lib):
+    """A name picks a listed setup; shocks equal to a listed setup's give that setup (no
+    second row); nothing given is the first listed setup; `find` looks beyond the list."""
+    listed = enumerate_setups(spec_lib)
+    assert resolve_baseline("D8/D8/B20/B20", spec_lib, setups=listed) is listed[2]
+    assert resolve_baseline("D8,D8,B20,B20", spec_lib, setups=listed) is listed[2]
+    assert resolve_baseline(_setup("x", "B20", "B20", "B20", "B20"), spec_lib,
+                            setups=listed) is listed[0]
+    assert resolve_baseline(None, spec_lib, setups=listed) is listed[0]
+    assert resolve_baseline(None, spec_lib, setups=listed, default=listed[1].name) is listed[1]
+    other = _setup("found", "D8", "B20", "D8", "B20")
+    assert resolve_baseline("D8,B20,D8,B20", spec_lib, find=lambda ids: other) is other
+
+
+@pytest.mark.parametrize("baseline, kwargs, error, match", [
+    ("B20/B20/D8/D8", {}, PlannerError, r"separate the shock ids with commas, 'B20,B20,D8,D8'"),
+    ("B20,D8", {}, PlannerError, r"give one shock id \(every corner\) or four"),
+    ("Z9", {}, PlannerError, r"baseline 'Z9' is neither a shock id nor four ids"),
+    ("Z9", {"setups": (_setup("a", "B20", "B20", "B20", "B20"),)}, PlannerError,
+     r"baseline setup 'Z9' is not among the setups"),
+    ("B20,B20,B20,Z9", {"where": "rank"}, PlannerError,
+     r"setup 'baseline': corner RR: unknown shock id 'Z9'"),
+    (_setup("a", "D8", "D8", "D8", "D8"), {"setups": (_setup("a", "B20", "B20", "B20", "B20"),)},
+     PlannerError, r"has the name of a listed setup with other shocks"),
+    (3, {"where": "sweep"}, TypeError, r"sweep: baseline must be a Setup"),
+])
+def test_bad_baselines_raise(spec_lib, baseline, kwargs, error, match):
+    with pytest.raises(error, match=match):
+        resolve_baseline(baseline, spec_lib, **kwargs)
 
 
 # ---------------------------------------------------------------- swaps from a baseline

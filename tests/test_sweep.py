@@ -13,7 +13,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from ident.data.channels import CORNERS
 from planner.errors import PlannerError
-from planner import sweep as sweep_mod
+from planner import runner as runner_mod
 from planner.objective import score_setups
 from planner.predict import predict_setups
 from planner.rank import rank_setups
@@ -254,7 +254,7 @@ def test_bad_options(paper_model, track_drive, demo_library, kwargs, error, matc
 
 def test_unreachable_scheduler_is_a_clear_error(paper_model, track_drive, demo_library,
                                                 monkeypatch):
-    monkeypatch.setattr(sweep_mod, "CONNECT_TIMEOUT_S", 2.0)
+    monkeypatch.setattr(runner_mod, "CONNECT_TIMEOUT_S", 2.0)
     with pytest.raises(PlannerError, match=r"cannot reach the Dask scheduler at "
                        r"'tcp://127.0.0.1:9'.*dask scheduler"):
         sweep_setups(paper_model, track_drive, demo_library, scheduler="tcp://127.0.0.1:9",

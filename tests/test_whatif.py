@@ -385,7 +385,7 @@ def test_spring_and_bar_whatif_on_identified_model_match_the_known_car(
     names = [p.name for p in ps.perturbations[1:]]
     assert names == ["rear springs x0.9", "rear springs x1.1", "front bar +1.121e+05 N/m"]
     for name in names:
-        a = ident.identify.condition(name)[metrics]
+        a = ident.condition(name)[metrics]
         b = known.condition(name).loc[a.index, metrics]
         err = np.abs(a.to_numpy(float) / b.to_numpy(float) - 1.0)
         assert np.median(err) < WHATIF_MEDIAN and err.max() < WHATIF_MAX, name
@@ -396,7 +396,7 @@ def test_spring_and_bar_whatif_on_identified_model_match_the_known_car(
 
 
 def test_robust_ranking_flags_a_setup_that_moves():
-    from planner.whatif import _robust_table
+    from planner.whatif.robust import robust_table
 
     rows = []
     # A stays first; B and C swap in 3 of 4 conditions (one place); D falls 2 places once
@@ -409,11 +409,11 @@ def test_robust_ranking_flags_a_setup_that_moves():
             rows.append({"drive": "d", "perturbation": p, "setup": s, "rank": r,
                          "score": 0.9 + 0.01 * r, "feasible": True,
                          "rank_change": r - nominal[s]})
-    rob = _robust_table(pd.DataFrame(rows), list("ABCDE"), rank_tolerance=0, fragile_share=0.5)
+    rob = robust_table(pd.DataFrame(rows), list("ABCDE"), rank_tolerance=0, fragile_share=0.5)
     assert not rob.loc["A", "fragile"] and rob.loc["A", "best_share"] == 1.0
     assert rob.loc["B", "moved_share"] == pytest.approx(0.4)
     assert rob.loc["C", "fragile"]  # moved in 3 of 5
-    rob1 = _robust_table(pd.DataFrame(rows), list("ABCDE"), rank_tolerance=1, fragile_share=0.1)
+    rob1 = robust_table(pd.DataFrame(rows), list("ABCDE"), rank_tolerance=1, fragile_share=0.1)
     assert not rob1["fragile"].any()  # nobody moves more than one place
     assert rob1.index[0] == "A" and rob1.loc["C", "worst_rank"] == 4
 
@@ -504,16 +504,17 @@ def test_whatif_on_a_cluster_equals_one_process(cluster_case):
 
 
 def test_whatif_bad_scheduler_fails_before_any_work(cluster_case, monkeypatch):
-    from planner import sweep as sweep_mod
+    from planner import runner as runner_mod
     from planner import whatif as whatif_mod
+    from planner.whatif import evaluate as evaluate_mod
 
     args, kw, _ = cluster_case
 
     def no_work(*a, **k):
         raise AssertionError("work started before the scheduler was checked")
 
-    monkeypatch.setattr(whatif_mod, "_effect", no_work)
-    monkeypatch.setattr(sweep_mod, "CONNECT_TIMEOUT_S", 2.0)
+    monkeypatch.setattr(evaluate_mod, "condition_effect", no_work)
+    monkeypatch.setattr(runner_mod, "CONNECT_TIMEOUT_S", 2.0)
     for scheduler, error, match in (
             ("nonsense", PlannerError, "scheduler 'nonsense' is neither 'local', 'none' nor"),
             (3, TypeError, "scheduler must be"),

@@ -49,8 +49,9 @@ from scipy import fft as sp_fft
 from scipy import signal
 
 from ident.data.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero, rig_inputs_of
-from ident.errors import DriveError
+from ident.data.session import read_run_table, write_run_table
 from ident.data.units import check_units
+from ident.errors import DriveError
 
 __all__ = [
     "Drive",
@@ -85,9 +86,9 @@ _MAX_DENOMINATOR = 1000
 _RTOL_RATE = 1e-6
 #: Anti-aliasing FIR of :func:`resample_drive`: half length in units of
 #: ``max(up, down)`` and Kaiser window parameter.
-_FIR_HALF_LENGTH = 20
+FIR_HALF_LENGTH = 20
 _FIR_KAISER_BETA = 8.0
-#: Output samples per FFT segment of :func:`_decimate_bandlimited` (1024: segments
+#: Output samples per FFT segment of :func:`decimate_bandlimited` (1024: segments
 #: of 8192 input samples at r = 8, 2.5x faster than one FFT of a whole 800 s record).
 _DECIMATE_SEGMENT = 1024
 _SWEEP_METHODS = ("linear", "quadratic", "logarithmic", "hyperbolic")
@@ -802,8 +803,6 @@ def read_drive(path, *, units="SI", channel_map=None, name=None):
         values, or its time is not uniform (the checks of
         :func:`ident.data.session.read_run_table`).
     """
-    from ident.data.session import read_run_table
-
     path = Path(path)
     table = read_run_table(path, units=units, channel_map=channel_map,
                            required=WHEELLOADER_INPUTS, where=f"drive file {path}")
@@ -860,8 +859,6 @@ def write_drive(drive, path, *, units="SI", overwrite=False):
     FileExistsError
         If `path` exists and `overwrite` is false.
     """
-    from ident.data.session import write_run_table
-
     if not isinstance(drive, Drive):
         raise TypeError(f"write_drive: drive must be a Drive, got {type(drive).__name__}")
     write_run_table(path, drive.time_s, {c: drive.channels[c] for c in drive.rig_inputs},
@@ -902,9 +899,9 @@ def resample_bandlimited(x, up, down=1, *, axis=0):
 def _bandlimited_fir(rate):
     """The anti-aliasing FIR of :func:`resample_bandlimited` for ``max(up, down) = rate``.
 
-    ``2 * _FIR_HALF_LENGTH * rate + 1`` taps, symmetric, gain 1 at 0 Hz.
+    ``2 * FIR_HALF_LENGTH * rate + 1`` taps, symmetric, gain 1 at 0 Hz.
     """
-    return signal.firwin(2 * _FIR_HALF_LENGTH * rate + 1, 1.0 / rate,
+    return signal.firwin(2 * FIR_HALF_LENGTH * rate + 1, 1.0 / rate,
                          window=("kaiser", _FIR_KAISER_BETA))
 
 
@@ -913,7 +910,7 @@ def _bandlimited_response(r, n_fft):
     """Real zero-phase frequency response of ``_bandlimited_fir(r) / r`` on an ``n_fft`` grid.
 
     Read-only, ``n_fft // 2 + 1`` bins (an ``rfft`` grid); the ``1 / r`` is the
-    scale of the spectrum folding in :func:`_decimate_bandlimited`.
+    scale of the spectrum folding in :func:`decimate_bandlimited`.
     """
     h = _bandlimited_fir(r)
     half = (h.size - 1) // 2
@@ -925,11 +922,11 @@ def _bandlimited_response(r, n_fft):
     return resp
 
 
-def _decimate_bandlimited(rows, r, n_out, *, lead="edge"):
+def decimate_bandlimited(rows, r, n_out, *, lead="edge"):
     """Zero-phase band-limited decimation by ``r`` of 1-D records, by FFT.
 
     The same numbers, to rounding, as extending each record by
-    ``pad = (_FIR_HALF_LENGTH + 1) * r`` samples at each end and calling
+    ``pad = (FIR_HALF_LENGTH + 1) * r`` samples at each end and calling
     ``resample_bandlimited(extended, 1, r)[pad // r: pad // r + n_out]``, at
     about a sixth of the cost for ``r = 8`` (measured in docs/DESIGN.md).
 
@@ -963,22 +960,22 @@ def _decimate_bandlimited(rows, r, n_out, *, lead="edge"):
     samples (``Q`` = :data:`_DECIMATE_SEGMENT` or less) that overlap by the
     filter's length; each is filtered by a circular convolution (its ``rfft``
     times the FIR's real, zero-phase response) that never wraps into the
-    ``Q - 2 * _FIR_HALF_LENGTH`` output samples kept from it, and its spectrum is
+    ``Q - 2 * FIR_HALF_LENGTH`` output samples kept from it, and its spectrum is
     folded ``r`` times (aliased, as decimation does) so that the inverse
     transform has ``Q`` points. Short segments keep the transforms in cache.
     """
     if lead not in ("edge", "zero"):
-        raise ValueError(f"_decimate_bandlimited: lead must be 'edge' or 'zero', got {lead!r}")
+        raise ValueError(f"decimate_bandlimited: lead must be 'edge' or 'zero', got {lead!r}")
     rows = [np.asarray(x, dtype=float) for x in rows]
     n_in = rows[0].shape[-1] if rows else 0
     if (any(x.shape != (n_in,) for x in rows) or n_out < 1 or (n_out - 1) * r >= n_in):
         raise ValueError(
-            f"_decimate_bandlimited: records of shapes {sorted({x.shape for x in rows})} cannot "
+            f"decimate_bandlimited: records of shapes {sorted({x.shape for x in rows})} cannot "
             f"give {n_out} samples decimated by {r}; expected 1-D records of one length "
             f"> {(n_out - 1) * r}")
     if r == 1:
         return [x[:n_out].copy() for x in rows]
-    m0 = _FIR_HALF_LENGTH  # the filter's half length in output samples
+    m0 = FIR_HALF_LENGTH  # the filter's half length in output samples
     e = m0 * r  # ... and in input samples: the lead of every segment
     n_fold = min(_DECIMATE_SEGMENT, sp_fft.next_fast_len(n_out + 2 * m0, real=True))
     q = n_fold - 2 * m0  # output samples kept per segment

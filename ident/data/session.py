@@ -38,12 +38,13 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from ident.data.files import (atomic_path, atomic_write_text, did_you_mean, read_toml, write_csv_frame,
-                       write_parquet_frame)
 from ident.data.channels import (ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS,
-                             missing_aero, quantity_of, rig_inputs_of)
-from ident.errors import SessionError
+                                 missing_aero, quantity_of, rig_inputs_of)
+from ident.data.files import (atomic_path, atomic_write_text, did_you_mean, read_toml,
+                              write_csv_frame, write_parquet_frame)
 from ident.data.units import check_units, from_si, to_si
+from ident.errors import SessionError, ShockModelError
+from ident.models.shocks import ShockLibrary, read_shock_library, write_shock_library
 
 __all__ = [
     "SESSION_FORMAT",
@@ -918,9 +919,6 @@ def read_session(path):
         non-uniform time; or the runs have different sample rates or different
         rig inputs (runs with and without aero channels).
     """
-    from ident.errors import ShockModelError
-    from ident.models.shocks import read_shock_library
-
     folder, manifest = _manifest_paths(path)
     where = str(manifest)
     doc = read_toml(manifest, error=SessionError, what="session manifest")
@@ -1017,8 +1015,6 @@ def make_session(name, runs, shocks, *, units="SI"):
         sample rates (one engine checks both), or a run's ``fs_hz`` that
         disagrees with its ``time_s``.
     """
-    from ident.models.shocks import ShockLibrary
-
     where = f"session {name!r}"
     if not isinstance(name, str) or not name.strip():
         raise SessionError(f"session name must be a non-empty string, got {name!r}")
@@ -1141,8 +1137,6 @@ def write_session(session, path, *, units=None, run_format="csv", overwrite=Fals
     SessionError
         If a run's data fail the run-file checks.
     """
-    from ident.models.shocks import write_shock_library
-
     units = _check_units(session.units if units is None else units, where="units")
     if run_format not in _RUN_FORMATS:
         raise ValueError(

@@ -50,9 +50,9 @@ decimated back (zero-phase low-pass, :func:`ident.data.drive.resample_bandlimite
 before the outputs are formed; the shock forces returned are the fine grid's
 values at the output instants, as in ``simulate_batch``. At every fine step the
 first ``loop_s`` of the velocity responses act directly (their tap 0 through
-the algebraic loop, solved exactly as ``ident.sim.closedloop._loop_one`` does: the
+the algebraic loop, solved exactly as :func:`ident.sim.loop_kernels.loop_one` does: the
 curve is piecewise linear, the lag is discretized with
-:func:`ident.sim.closedloop.lag_coefficients`); the rest, i.e. the older taps and
+:func:`ident.models.lti.lag_coefficients`); the rest, i.e. the older taps and
 the anticausal ones, acts through the ``dF`` of the previous pass, and passes
 repeat until ``dF`` changes by less than ``tol`` (a fixed point of the
 two-sided discrete model; about a decade per pass).
@@ -70,9 +70,11 @@ import numpy as np
 from scipy import signal
 
 from ident.data.channels import CORNERS, SHOCK_FORCES, SHOCK_VELOCITIES
-from ident.sim.closedloop import (BatchResponse, _check_oversample, _drive_array, _pack_setups,
-                              _refine, _setup_models, _shock_step, _solver_state)
+from ident.data.drive import FIR_HALF_LENGTH, resample_bandlimited
 from ident.errors import FitWarning
+from ident.sim.closedloop import (BatchResponse, check_oversample, drive_array, pack_setups,
+                                  refine_input, setup_models)
+from ident.sim.loop_kernels import shock_step, solver_state
 from ident.identify.frf import MODEL_INPUTS, Frf
 
 __all__ = ["FirPlant", "fir_from_frf", "simulate_fir_batch"]
@@ -438,7 +440,7 @@ def _fir_loop_one(hrev, D0, v_free, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, r
     F_prev = np.zeros(m)
     f_prev = np.zeros(m)
     hist = np.zeros(m)
-    v, vfree, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = _solver_state(kv, nk)
+    v, vfree, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = solver_state(kv, nk)
     worst = 0
     failed = False
     for k in range(N):
@@ -448,8 +450,8 @@ def _fir_loop_one(hrev, D0, v_free, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, r
             vfree[c] = v_free[c, k] + hist[c]
             c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c]
         # v = vfree + D0 (c0 + b0 f(v) - cbar v): the modal simulator's step with Deff = D0
-        it = _shock_step(vfree, c0, D0, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av, vnew,
-                         res, J, Jinv, state)
+        it = shock_step(vfree, c0, D0, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av, vnew,
+                        res, J, Jinv, state)
         if it < 0:
             failed = True
             it = 80
@@ -515,10 +517,8 @@ def _decimate(x, r):
     """
     if r == 1:
         return x
-    from ident.data.drive import _FIR_HALF_LENGTH, resample_bandlimited
-
     n = (x.shape[-1] - 1) // r + 1
-    pad = (_FIR_HALF_LENGTH + 1) * r
+    pad = (FIR_HALF_LENGTH + 1) * r
     widths = [(0, 0)] * (x.ndim - 1)
     xp = np.pad(x, widths + [(pad, 0)])
     xp = np.pad(xp, widths + [(0, pad)], mode="edge")
@@ -533,7 +533,7 @@ def simulate_fir_batch(plant, drive, setups, *, oversample=4, outputs=None, loop
     The nonparametric counterpart of :func:`ident.sim.closedloop.simulate_batch`:
     same setups, same result type and channel conventions, the same exact
     shock models (piecewise-linear curve; lag discretized with
-    :func:`ident.sim.closedloop.lag_coefficients`), the same algebraic-loop solve;
+    :func:`ident.models.lti.lag_coefficients`), the same algebraic-loop solve;
     convolutions with the plant's impulse responses replace the modal states.
 
     Parameters
@@ -587,16 +587,16 @@ def simulate_fir_batch(plant, drive, setups, *, oversample=4, outputs=None, loop
     where = "simulate_fir_batch"
     if not isinstance(plant, FirPlant):
         raise TypeError(f"{where}: plant must be a FirPlant, got {type(plant).__name__}")
-    r = _check_oversample(oversample)
+    r = check_oversample(oversample)
     loop_s = _check_seconds(loop_s, "loop_s", where)
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < 1:
         raise ValueError(f"{where}: tol must be a number in (0, 1), got {tol!r}")
-    u, fs = _drive_array(drive)
+    u, fs = drive_array(drive)
     if not math.isclose(fs, plant.fs_hz, rel_tol=RTOL_RATE):
         raise ValueError(f"{where}: drive {getattr(drive, 'name', '?')!r} is sampled at {fs:g} Hz "
                          f"but FIR plant {plant.name!r} at {plant.fs_hz:g} Hz; resample the drive "
                          f"with ident.data.drive.resample_drive(drive, {plant.fs_hz:g})")
-    models = [_setup_models(s, f"setup {i}") for i, s in enumerate(setups)]
+    models = [setup_models(s, f"setup {i}") for i, s in enumerate(setups)]
     if not models:
         raise ValueError(f"{where}: no setups given")
     names = list(plant.output_names) if outputs is None else list(outputs)
@@ -622,9 +622,9 @@ def simulate_fir_batch(plant, drive, setups, *, oversample=4, outputs=None, loop
     h_rest = h_vs.copy()
     h_rest[:, :, naf:naf + n_near] = 0.0
     Lm = hrev.shape[2]
-    v_rig = np.ascontiguousarray(_refine(np.ascontiguousarray(y_rig[vi].T), r).T)  # (4, Nf)
+    v_rig = np.ascontiguousarray(refine_input(np.ascontiguousarray(y_rig[vi].T), r).T)  # (4, Nf)
     Nf = v_rig.shape[1]
-    kv, kf, nk, slo, shi, alpha, b0, b1 = _pack_setups(models, 1.0 / (fs * r), hold="linear")
+    kv, kf, nk, slo, shi, alpha, b0, b1 = pack_setups(models, 1.0 / (fs * r), hold="linear")
     v_free = np.empty((S, 4, Nf))
     v_free[:] = v_rig
     dfh = np.zeros((S, 4, Lm + Nf))

@@ -14,7 +14,7 @@ Two fitters share one numerical core:
 Results are pole-residue forms ``H(s) = sum_k r_k / (s - p_k) + d`` (the
 polynomial coefficients of :class:`TfFit` are a convenience only), and
 :func:`tf_fits_to_modal` / :meth:`VfFit.to_modal` turn them into the
-:class:`ident.sim.closedloop.ModalSystem` the simulator runs.
+:class:`ident.models.lti.ModalSystem` the simulator runs.
 
 Notes
 -----
@@ -75,6 +75,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ident.errors import FitWarning, IdentificationError
+from ident.models.lti import ModalSystem
 
 __all__ = [
     "TfFit",
@@ -203,7 +204,7 @@ class TfFit:
         return _pole_residue_response(f_hz, self.poles, self.residues, self.direct)
 
     def to_modal(self):
-        """The fit as a one-input, one-output :class:`ident.sim.closedloop.ModalSystem`."""
+        """The fit as a one-input, one-output :class:`ident.models.lti.ModalSystem`."""
         return tf_fits_to_modal({(0, 0): self}, 1, 1)
 
 
@@ -259,7 +260,7 @@ class VfFit:
         return _pole_residue_response(f_hz, self.poles, self.residues, self.direct)
 
     def to_modal(self):
-        """The fit as an :class:`ident.sim.closedloop.ModalSystem`.
+        """The fit as an :class:`ident.models.lti.ModalSystem`.
 
         Returns
         -------
@@ -270,8 +271,6 @@ class VfFit:
             ``C = 2 * residue`` (pairs) or ``residue`` (real poles). Not
             minimal when residue matrices have low rank; exact.
         """
-        from ident.sim.closedloop import ModalSystem
-
         lam, res = _modal_states(self.poles, self.residues)  # (n_s,), (n_s, p, m)
         n_s = lam.size
         p, m = self.direct.shape
@@ -309,7 +308,7 @@ def tf_fits_to_modal(fits, n_out, n_in):
 
     Returns
     -------
-    ident.sim.closedloop.ModalSystem
+    ident.models.lti.ModalSystem
         The union of every pair's poles: one state per conjugate pair
         (``Im > 0``) or real pole of each pair, driven by the pair's input
         (``B = 1``) and read by the pair's output (``C = 2 * residue`` for a
@@ -323,8 +322,6 @@ def tf_fits_to_modal(fits, n_out, n_in):
     ValueError
         If a key is not a valid ``(output, input)`` index pair.
     """
-    from ident.sim.closedloop import ModalSystem
-
     n_out, n_in = _check_count(n_out, "n_out"), _check_count(n_in, "n_in")
     lam, Bs, Cs = [], [], []
     D = np.zeros((n_out, n_in))

@@ -97,6 +97,8 @@ from scipy import signal
 from ident.data.channels import (CORNERS, RESPONSE_CHANNELS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES,
                             rig_inputs_of)
 from ident.errors import IdentificationError, LowCoherenceWarning
+from ident.models.lti import lag_coefficients
+from ident.models.shocks import LinearShock
 
 __all__ = [
     "Frf",
@@ -755,8 +757,6 @@ def shock_force_deviation(run, shocks, cbar_n_s_m, *, exact_linear=True):
     F, dF : ndarray, shape (4, n_samples)
         Dynamic parts (means removed) [N].
     """
-    from ident.sim.closedloop import lag_coefficients
-
     cbar = np.asarray(cbar_n_s_m, dtype=float)
     F = np.empty((4, run.n_samples))
     dF = np.empty_like(F)
@@ -780,8 +780,6 @@ def shock_force_deviation(run, shocks, cbar_n_s_m, *, exact_linear=True):
 
 def _is_cbar_linear(model, cbar):
     """True if a shock model is linear with rate ``cbar`` (relative 1e-9) and has no lag."""
-    from ident.models.shocks import LinearShock
-
     return (isinstance(model, LinearShock) and model.lag_s == 0
             and abs(model.c_n_s_m - cbar) <= 1e-9 * abs(cbar))
 

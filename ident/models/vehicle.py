@@ -37,10 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.data.files import atomic_write_toml, read_toml
 from ident.data.channels import CORNERS, RIG_INPUTS
-from ident.errors import VehicleError
+from ident.data.files import atomic_write_toml, read_toml
 from ident.data.units import check_units, from_si, to_si
+from ident.errors import VehicleError
+from ident.models.lti import LoopPlant
 
 __all__ = [
     "VehicleParams",
@@ -54,6 +55,7 @@ __all__ = [
     "EXAMPLE_VEHICLE_PATH",
     "G_M_S2",
     "FULL_CAR_OUTPUT_KINDS",
+    "VEHICLE_KEYS",
 ]
 
 log = logging.getLogger(__name__)
@@ -72,8 +74,9 @@ FULL_CAR_OUTPUT_KINDS = (
     "spring_force",
 )
 
-# vehicle TOML key -> (quantity, required)
-_KEYS = {
+#: The vehicle TOML's parameter keys: key -> (quantity, required); the quantity names the
+#: unit conversion (:data:`ident.data.units.TO_SI`).
+VEHICLE_KEYS = {
     "track": ("displacement", False),
     "track_front": ("displacement", False),
     "track_rear": ("displacement", False),
@@ -321,13 +324,13 @@ def vehicle_from_dict(doc, *, where="vehicle"):
     if fmt != "vehicle/1":
         raise VehicleError(f"{where}: format {fmt!r} is not supported; expected \"vehicle/1\"")
     units = check_units(doc.get("units", "SI"), where=f"{where}: 'units'", error=VehicleError)
-    unknown = set(doc) - set(_KEYS) - {"format", "units", "name", "description"}
+    unknown = set(doc) - set(VEHICLE_KEYS) - {"format", "units", "name", "description"}
     if unknown:
         raise VehicleError(
-            f"{where}: unknown key(s) {sorted(unknown)}; known keys are {sorted(_KEYS)}"
+            f"{where}: unknown key(s) {sorted(unknown)}; known keys are {sorted(VEHICLE_KEYS)}"
         )
     v = {}
-    for key, (quantity, required) in _KEYS.items():
+    for key, (quantity, required) in VEHICLE_KEYS.items():
         if key in doc:
             v[key] = to_si(_num(doc, key, where), quantity, units)
         elif required:
@@ -493,7 +496,7 @@ class FullCarModel:
                           name=self.params.name.replace(".", ""))  # control forbids '.' in names
 
     def loop_plant(self, cbar_n_s_m=None):
-        """The model as an :class:`ident.sim.closedloop.LoopPlant` around linear damping `cbar_n_s_m`.
+        """The model as an :class:`ident.models.lti.LoopPlant` around linear damping `cbar_n_s_m`.
 
         Parameters
         ----------
@@ -502,8 +505,6 @@ class FullCarModel:
             nominal damping. Any value gives the same closed loop with the same
             shocks; a realistic one keeps the plant itself well damped.
         """
-        from ident.sim.closedloop import LoopPlant
-
         c = self.params.damping_n_s_m if cbar_n_s_m is None else np.broadcast_to(
             np.asarray(cbar_n_s_m, float), (4,))
         A, B, C, D = close_shock_loop(self.A, self.B, self.C, self.D, c)

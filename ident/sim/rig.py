@@ -30,12 +30,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ident.data.channels import (ALL_CHANNELS, CORNERS, RESPONSE_KINDS, RIG_INPUTS, RIG_KINDS,
+                                 WHEELLOADER_INPUTS, kind_of)
+from ident.data.drive import (Drive, check_drive_inputs, decimate_bandlimited, make_multisine_drive,
+                              make_noise_drive, make_sweep_drive, make_track_drive, read_drive)
 from ident.data.files import read_toml
-from ident.data.channels import (CORNERS, RESPONSE_KINDS, RIG_INPUTS, RIG_KINDS, WHEELLOADER_INPUTS,
-                            kind_of)
-from ident.data.drive import Drive, check_drive_inputs
-from ident.errors import DriveError, SessionError, ShockModelError
+from ident.data.session import Run, make_session
 from ident.data.units import check_units, to_si
+from ident.errors import DriveError, SessionError, ShockModelError
+from ident.models.shocks import read_shock_library
+from ident.models.vehicle import build_full_car, example_vehicle
+from ident.sim.closedloop import refine_input, simulate
 
 __all__ = [
     "PlanRun",
@@ -47,6 +52,7 @@ __all__ = [
     "DEFAULT_PLAN_PATH",
     "NOMINAL_V_RMS_M_S",
     "RIG_KINDS",
+    "loop_damping",
 ]
 
 log = logging.getLogger(__name__)
@@ -256,8 +262,6 @@ def read_rig_plan(path):
     ``setup``, ``role``, optional ``seed`` and ``duration_s``, or ``drive``: a
     drive file (relative to the plan, in its units) the run plays instead.
     """
-    from ident.models.shocks import read_shock_library
-
     path = Path(path)
     where = str(path)
     doc = read_toml(path, error=SessionError, what="rig plan")
@@ -312,8 +316,6 @@ def read_rig_plan(path):
             if not isinstance(drive_file, str) or not drive_file:
                 raise SessionError(f"{w}: 'drive' must be the path of a drive file (relative "
                                    f"to the plan), got {drive_file!r}")
-            from ident.data.drive import read_drive
-
             try:
                 run_drive = read_drive(path.parent / drive_file, units=units,
                                        name=Path(drive_file).stem)
@@ -358,8 +360,6 @@ def _noise_num(doc, key, where):
 
 
 def _parse_channel_noise(table, where):
-    from ident.data.channels import ALL_CHANNELS
-
     if not isinstance(table, dict):
         raise SessionError(f"{where}: must be a table of channel or kind = fraction")
     out = {}
@@ -432,8 +432,6 @@ def make_plan_drive(plan, vehicle, *, seed, duration_s, name=None):
     -------
     ident.data.drive.Drive
     """
-    from ident.data import drive as drv
-
     d = plan.drive
     if d["kind"] == "noise":
         deg = np.pi / 180
@@ -441,33 +439,31 @@ def make_plan_drive(plan, vehicle, *, seed, duration_s, name=None):
         peak["aero_heave"] = d["peak_aero_heave_n"]
         peak["aero_roll"] = d["roll_moment_multiple"] * vehicle.roll_stiffness_n_m_rad * deg
         peak["aero_pitch"] = d["pitch_moment_multiple"] * vehicle.pitch_stiffness_n_m_rad * deg
-        return drv.make_noise_drive(duration_s=duration_s, fs_hz=plan.fs_hz, peak=peak, seed=seed,
-                                    f_max_hz=d["f_max_hz"], filter_order=d["filter_order"],
-                                    taper_s=d["taper_s"], name=name)
+        return make_noise_drive(duration_s=duration_s, fs_hz=plan.fs_hz, peak=peak, seed=seed,
+                                f_max_hz=d["f_max_hz"], filter_order=d["filter_order"],
+                                taper_s=d["taper_s"], name=name)
     if d["kind"] == "multisine":
         deg = np.pi / 180
         rms = {w: d["rms_wheelloader_m"] for w in RIG_INPUTS[3:]}
         rms["aero_heave"] = d["rms_aero_heave_n"]
         rms["aero_roll"] = d["roll_moment_multiple"] * vehicle.roll_stiffness_n_m_rad * deg
         rms["aero_pitch"] = d["pitch_moment_multiple"] * vehicle.pitch_stiffness_n_m_rad * deg
-        return drv.make_multisine_drive(duration_s=duration_s, fs_hz=plan.fs_hz, rms=rms,
-                                        seed=seed, f_min_hz=d["f_min_hz"],
-                                        f_max_hz=d["f_max_hz"], taper_s=d["taper_s"], name=name)
+        return make_multisine_drive(duration_s=duration_s, fs_hz=plan.fs_hz, rms=rms,
+                                    seed=seed, f_min_hz=d["f_min_hz"],
+                                    f_max_hz=d["f_max_hz"], taper_s=d["taper_s"], name=name)
     if d["kind"] == "sweep":
         amp = {w: d["amplitude_wheelloader_m"] for w in RIG_INPUTS[3:]}
-        return drv.make_sweep_drive(duration_s=duration_s, fs_hz=plan.fs_hz, amplitude=amp,
-                                    f_start_hz=d["f_start_hz"], f_stop_hz=d["f_stop_hz"],
-                                    channels=RIG_INPUTS[3:], taper_s=d["taper_s"], name=name)
-    return drv.make_track_drive(duration_s=duration_s, fs_hz=plan.fs_hz, seed=seed,
-                                speed_m_s=d["speed_m_s"], wheelbase_m=vehicle.a_m + vehicle.b_m,
-                                track_width_m=vehicle.track_front_m, name=name)
+        return make_sweep_drive(duration_s=duration_s, fs_hz=plan.fs_hz, amplitude=amp,
+                                f_start_hz=d["f_start_hz"], f_stop_hz=d["f_stop_hz"],
+                                channels=RIG_INPUTS[3:], taper_s=d["taper_s"], name=name)
+    return make_track_drive(duration_s=duration_s, fs_hz=plan.fs_hz, seed=seed,
+                            speed_m_s=d["speed_m_s"], wheelbase_m=vehicle.a_m + vehicle.b_m,
+                            track_width_m=vehicle.track_front_m, name=name)
 
 
 def _fine_drive(drive, r):
     """The drive interpolated band-limited onto the simulation grid (``r`` steps per sample)."""
-    from ident.sim.closedloop import _refine
-
-    u = _refine(drive.as_array(), r)
+    u = refine_input(drive.as_array(), r)
     return Drive(name=drive.name, fs_hz=drive.fs_hz * r,
                  channels={c: u[:, j] for j, c in enumerate(RIG_INPUTS) if c in drive.rig_inputs},
                  settings=dict(drive.settings, refined_by=r))
@@ -485,21 +481,31 @@ def _daq_sample(channels, r, n_samples):
     common filter cancels in every input/output relation.
 
     Each record is extended by its end values over the filter's length; the
-    filtering is done by FFT (:func:`ident.data.drive._decimate_bandlimited`: the
+    filtering is done by FFT (:func:`ident.data.drive.decimate_bandlimited`: the
     same numbers as ``resample_bandlimited`` to rounding, about 4x faster on
     an 800 s run at 8x oversampling).
     """
-    from ident.data.drive import _decimate_bandlimited
-
     names = list(channels)
     if r == 1:
         return {c: np.array(channels[c], dtype=float) for c in names}
-    out = _decimate_bandlimited([channels[c] for c in names], r, n_samples)
+    out = decimate_bandlimited([channels[c] for c in names], r, n_samples)
     return dict(zip(names, out))
 
 
-def _loop_damping(models):
-    """Baseline damping per corner: each shock's equivalent damping at a nominal velocity."""
+def loop_damping(models):
+    """Baseline damping per corner: each shock's equivalent damping at a nominal velocity.
+
+    Parameters
+    ----------
+    models : sequence of 4 shock models
+        LF, RF, LR, RR (:mod:`ident.models.shocks`).
+
+    Returns
+    -------
+    ndarray, shape (4,)
+        ``equivalent_damping(NOMINAL_V_RMS_M_S)`` per corner [N/(m/s)]: the ``c_bar`` the
+        virtual rig closes its loop around.
+    """
     return np.array([float(m.equivalent_damping(NOMINAL_V_RMS_M_S)) for m in models])
 
 
@@ -532,10 +538,6 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
         If a run's drive is sampled at another rate than the plan, or, on a
         4-post plan, a run's drive file moves an aero input.
     """
-    from ident.sim.closedloop import simulate
-    from ident.data.session import Run, make_session
-    from ident.models.vehicle import build_full_car, example_vehicle
-
     plan = default_plan() if plan is None else plan
     vehicle = example_vehicle() if vehicle is None else vehicle
     model = build_full_car(vehicle)
@@ -565,7 +567,7 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
                                f"{drive.fs_hz:g} Hz, the plan at {plan.fs_hz:g} Hz; resample "
                                "the drive or set the plan's fs_hz")
         models = [plan.shocks[pr.setup[c]] for c in CORNERS]
-        plant = model.loop_plant(_loop_damping(models))
+        plant = model.loop_plant(loop_damping(models))
         fine = fine_drives.get(key)
         if fine is None:
             fine = fine_drives[key] = _fine_drive(drive, plan.oversample)

@@ -1,25 +1,46 @@
 """Report writers: what a person reads and prints (CSV, xlsx run sheets, figures).
 
 :mod:`~planner.report.ranking` writes the predictions CSV and a ranking's
-files (``ranking.csv``, ``ranking.xlsx``, ``pareto.png``, ``top_setups.png``)
-and holds the print layout shared by every workbook. Compute lives in the
-decision modules; these only format and write their results.
+files (``ranking.csv``, ``ranking.xlsx``, ``pareto.png``, ``top_setups.png``).
+:mod:`~planner.report.sheets` holds the print layout shared by every workbook
+(column widths, labels, one page wide).
+:mod:`~planner.report.whatif` writes a what-if's files (``whatif.xlsx``, CSVs,
+``rank_stability.png``, ``tornado/*.png``) and reads the per-factor effects the
+tornado charts show off the what-if's table (:func:`factor_effects`).
+:mod:`~planner.report.optimize` writes a curve optimum's files (``optimize.xlsx``,
+``curves.png``, ``convergence.csv``, the optimal shocks and setups). Compute lives in
+the decision modules; these only format and write their results.
 """
 
+from planner.report.optimize import (
+    BUILDER_VELOCITIES_IN_S,
+    BUILDER_VELOCITIES_M_S,
+    curve_table,
+    curves_figure,
+    write_optimum,
+)
 from planner.report.ranking import (
     INTERVAL_SUFFIXES,
-    PAPER_SIZE,
     RANKING_FILES,
-    column_label,
-    fit_column_width,
     metric_of_column,
-    print_setup,
     ranking_columns,
     ranking_to_units,
-    text_width,
-    wrap_lines,
     write_predictions_csv,
     write_ranking,
+)
+from planner.report.sheets import (
+    PAPER_SIZE,
+    column_label,
+    fit_column_width,
+    print_setup,
+    text_width,
+    wrap_lines,
+)
+from planner.report.whatif import (
+    factor_effects,
+    rank_stability_figure,
+    tornado_figure,
+    write_whatif,
 )
 
 __all__ = [
@@ -36,4 +57,13 @@ __all__ = [
     "ranking_to_units",
     "write_predictions_csv",
     "write_ranking",
+    "BUILDER_VELOCITIES_M_S",
+    "BUILDER_VELOCITIES_IN_S",
+    "curve_table",
+    "curves_figure",
+    "write_optimum",
+    "factor_effects",
+    "tornado_figure",
+    "rank_stability_figure",
+    "write_whatif",
 ]

@@ -14,10 +14,9 @@ setup, indexed by setup name (or with a column ``setup``), holding
 
 :func:`write_predictions_csv` writes the rig-session spec's predictions CSV;
 :func:`write_ranking` writes a folder with ``ranking.csv``, ``ranking.xlsx``,
-``pareto.png`` and ``top_setups.png``. The workbook is laid out to print
-(:func:`print_setup`: landscape, one page wide, header repeated); its helpers
-(:func:`column_label`, :func:`text_width`, :func:`wrap_lines`,
-:func:`fit_column_width`) also lay out :mod:`planner.testplan`'s run sheet.
+``pareto.png`` and ``top_setups.png``. The workbook is laid out to print with
+the shared print layout of :mod:`planner.report.sheets` (landscape, one page wide,
+header repeated; the same layout as :mod:`planner.testplan`'s run sheet).
 
 Column order of every written CSV (the spec's "Predictions"): ``setup, LF,
 RF, LR, RR``, then the spec's metrics in :data:`ident.sim.metrics.METRIC_NAMES`
@@ -48,25 +47,26 @@ import pandas as pd
 from openpyxl import Workbook
 from openpyxl.styles import Alignment, Border, Font, PatternFill, Side
 from openpyxl.utils import get_column_letter
-from openpyxl.worksheet.page import PageMargins
-from openpyxl.worksheet.properties import PageSetupProperties
 
 from ident.data.files import atomic_path, atomic_write_bytes, check_can_write
 from ident.data.channels import CORNERS
-from planner.errors import PlannerError
-from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
 from ident.data.units import UNIT_LABELS, check_units, from_si
+from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
+from planner.errors import PlannerError
+from planner.objective import Objective, pareto_front
+from planner.report.sheets import (
+    MAX_COLUMN_WIDTH,
+    column_label,
+    fit_column_width,
+    print_setup,
+    text_width,
+    wrap_lines,
+)
 
 __all__ = [
     "INTERVAL_SUFFIXES",
-    "PAPER_SIZE",
     "RANKING_FILES",
-    "column_label",
-    "fit_column_width",
-    "text_width",
-    "wrap_lines",
     "metric_of_column",
-    "print_setup",
     "ranking_columns",
     "ranking_to_units",
     "write_predictions_csv",
@@ -91,17 +91,8 @@ N_PARETO_LABELS = 5
 SCORE_FORMAT = "0.0000"
 INTEGER_FORMAT = "0"
 _INT_COLUMNS = ("rank", "screening_rank")
-_MAX_WIDTH = 50
 _GREY_FILL = "E7E6E6"
 _GREY_FONT = "7F7F7F"
-#: Excel paper codes of the printed workbooks per unit system: ISO A4 for SI files, US
-#: letter for imperial ones (the unit system a team writes says where it prints).
-PAPER_SIZE = {"SI": 9, "imperial": 1}
-#: Page margins of the printed workbooks [in]: narrow, so one page wide stays readable.
-PRINT_MARGINS_IN = {"left": 0.4, "right": 0.4, "top": 0.45, "bottom": 0.55, "header": 0.2,
-                    "footer": 0.25}
-#: A header cell wraps to at most this many lines before its column widens.
-HEADER_MAX_LINES = 4
 #: Font sizes of the printed tables [pt]: values, headers (bold), long notes.
 DATA_PT, HEADER_PT, NOTE_PT = 10, 9, 9
 #: Text wider than this wraps (violations, unresolved pairs) [Excel width units].
@@ -131,170 +122,6 @@ def metric_of_column(column):
         if column.endswith(suffix) and column[: -len(suffix)] in METRIC_QUANTITY:
             return column[: -len(suffix)]
     return None
-
-
-def column_label(column):
-    """A column's name for people: words instead of underscores, ``rms`` as ``RMS``.
-
-    Examples
-    --------
-    >>> column_label("tire_force_rms_LF"), column_label("score_platform")
-    ('tire force RMS LF', 'score platform')
-    """
-    return " ".join("RMS" if w == "rms" else w for w in str(column).split("_") if w)
-
-
-def text_width(text, *, size=11, bold=False):
-    """Width of a text in Excel width units (a digit of 11 pt Calibri), estimated.
-
-    Per-character widths of Calibri (digits 1.1: the unit is rounded down to
-    whole pixels, and LibreOffice draws the columns a little narrower than
-    Excel; most lower-case letters 0.85, narrow ones 0.5, capitals 1.15,
-    ``M``/``W`` 1.5, space and punctuation about 0.5), scaled by the font size
-    and 5 % for bold. Good to about a character over a header; enough to size
-    columns and count wrapped lines.
-
-    Examples
-    --------
-    >>> round(text_width("0.0809"), 2), round(text_width("0.0809", size=9), 2)
-    (6.0, 4.91)
-    """
-    w = 0.0
-    for ch in str(text):
-        if ch.isdigit():
-            w += 1.1
-        elif ch in "MWmw":
-            w += 1.5
-        elif ch.isupper():
-            w += 1.15
-        elif ch in "ijlrtf":
-            w += 0.5
-        elif ch.islower():
-            w += 0.85
-        elif ch in " .,:;'!|":
-            w += 0.5
-        else:
-            w += 0.65
-    return w * size / 11 * (1.05 if bold else 1.0)
-
-
-def wrap_lines(text, width, *, size=11, bold=False):
-    """Lines of `text` wrapped at spaces into `width` (a longer word stays whole).
-
-    Parameters
-    ----------
-    text : str
-    width : float
-        [Excel width units] (see :func:`text_width`).
-    size : float
-        Font size [pt].
-    bold : bool
-
-    Returns
-    -------
-    list of str
-        The lines (none for an empty text).
-
-    Examples
-    --------
-    >>> wrap_lines("tire force RMS LF [lbf]", 8)
-    ['tire force', 'RMS LF', '[lbf]']
-    """
-    lines, line = [], ""
-    for word in str(text).split():
-        trial = f"{line} {word}" if line else word
-        if line and text_width(trial, size=size, bold=bold) > width:
-            lines.append(line)
-            line = word
-        else:
-            line = trial
-    return lines + ([line] if line else [])
-
-
-def fit_column_width(header, data_width, *, size=11, bold=True, max_lines=HEADER_MAX_LINES,
-                     max_width=_MAX_WIDTH):
-    """Width of a column whose header wraps at spaces, and the header's lines.
-
-    Parameters
-    ----------
-    header : str
-    data_width : float
-        Width of the widest value shown in the column [Excel width units, a
-        digit of 11 pt Calibri; see :func:`text_width`].
-    size : float
-        The header's font size [pt].
-    bold : bool
-        The header's font is bold.
-    max_lines : int
-        The header wraps to at most this many lines (the column widens instead).
-    max_width : float
-        The widest column [Excel width units].
-
-    Returns
-    -------
-    width : float
-        At least the data's and the header's longest word (up to `max_width`),
-        without the cell's padding.
-    lines : int
-        Lines of the header at that width.
-
-    Examples
-    --------
-    >>> w, lines = fit_column_width("tire force RMS LF [lbf]", 6, size=9)
-    >>> w, lines
-    (6, 3)
-    """
-    words = str(header).split() or [""]
-    widest = max(text_width(w, size=size, bold=bold) for w in words)
-    width = min(max(data_width, widest, 1), max_width)
-
-    def lines(w):
-        return max(len(wrap_lines(header, w, size=size, bold=bold)), 1)
-
-    while lines(width) > max_lines and width < max_width:
-        width += 0.5
-    return width, lines(width)
-
-
-def print_setup(ws, *, units, area, title_rows=None, landscape=True, footer=None):
-    """Set a worksheet to print one page wide (any number tall).
-
-    Parameters
-    ----------
-    ws : openpyxl.worksheet.worksheet.Worksheet
-    units : {"SI", "imperial"}
-        Chooses the paper (:data:`PAPER_SIZE`: A4 for SI, letter for imperial).
-    area : str
-        The print area, e.g. ``"A1:K62"``.
-    title_rows : str, optional
-        Rows repeated at the top of every page, e.g. ``"1:1"`` (print titles).
-    landscape : bool
-    footer : str, optional
-        Left footer text (the page number is on the right).
-
-    Notes
-    -----
-    Fit to one page wide and as many tall as it takes, margins
-    :data:`PRINT_MARGINS_IN`, centred horizontally, no printed gridlines (the
-    writers draw borders).
-    """
-    units = check_units(units, where="print_setup")
-    ws.page_setup.orientation = "landscape" if landscape else "portrait"
-    ws.page_setup.paperSize = PAPER_SIZE[units]
-    ws.page_setup.fitToWidth = 1
-    ws.page_setup.fitToHeight = 0
-    ws.sheet_properties.pageSetUpPr = PageSetupProperties(fitToPage=True)
-    ws.page_margins = PageMargins(**PRINT_MARGINS_IN)
-    ws.print_options.horizontalCentered = True
-    ws.print_options.gridLines = False
-    ws.print_area = area
-    if title_rows:
-        ws.print_title_rows = title_rows
-    if footer:
-        ws.oddFooter.left.text = str(footer).replace("&", "&&")
-        ws.oddFooter.left.size = 8
-    ws.oddFooter.right.text = "page &P of &N"
-    ws.oddFooter.right.size = 8
 
 
 def _check_table(table, where, *, corners=True):
@@ -675,7 +502,7 @@ def _write_table_sheet(ws, frame, cols, formats, headers, infeasible, *, group_h
                 height = max(height, _LINE_PT["note"] * n + 2)
         ws.row_dimensions[excel_row].height = height
     for j, w in enumerate(widths, start=1):
-        ws.column_dimensions[get_column_letter(j)].width = round(min(w, _MAX_WIDTH), 2)
+        ws.column_dimensions[get_column_letter(j)].width = round(min(w, MAX_COLUMN_WIDTH), 2)
     return n_head + len(frame)
 
 
@@ -788,8 +615,6 @@ def _save_png(fig, path, *, overwrite, dpi=110):
 
 def _pareto_figure(table, baseline):
     """score_grip vs score_platform: all setups, the Pareto front, the best labelled."""
-    from planner.objective import pareto_front
-
     x, y = "score_grip", "score_platform"
     xv = table[x].to_numpy(dtype=float)
     yv = table[y].to_numpy(dtype=float)
@@ -848,8 +673,14 @@ def _key_metrics(table, objective):
     return chosen or [c for c in ranking_columns(table) if c in METRIC_QUANTITY][:MAX_KEY_METRICS]
 
 
-def _resolve_baseline(table, objective, baseline):
-    """The setup metrics are normalized by in ``top_setups.png``, or None (the best)."""
+def _normalizing_setup(table, objective, baseline):
+    """The setup of `table` that ``top_setups.png`` divides the metrics by, or None (the best).
+
+    Not a baseline resolver (:func:`planner.setups.resolve_baseline` reads a command's
+    baseline): this finds, in a finished ranking table, the row its scores were normalized
+    by: `baseline` if given, else the objective's, else the row scoring exactly the
+    objective's total weight.
+    """
     if baseline is not None:
         if baseline not in table.index:
             raise PlannerError(f"write_ranking: baseline setup {baseline!r} is not in the table; "
@@ -980,8 +811,6 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
     repeated on every page, on A4 (SI) or US letter (imperial)
     (:func:`print_setup`).
     """
-    from planner.objective import Objective
-
     table = _check_table(table, "write_ranking")
     units = check_units(units, where="write_ranking")
     if objective is not None and not isinstance(objective, Objective):
@@ -990,7 +819,7 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
     if isinstance(top, bool) or not isinstance(top, (int, np.integer)) or top < 1:
         raise ValueError(f"write_ranking: top must be an integer >= 1, got {top!r}")
     out_dir = Path(out_dir)
-    ref = _resolve_baseline(table, objective, baseline)
+    ref = _normalizing_setup(table, objective, baseline)
     key_metrics = _key_metrics(table, objective)
     keys = ["csv", "xlsx"]
     if {"score_grip", "score_platform"} <= set(table.columns):

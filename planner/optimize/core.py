@@ -1,0 +1,674 @@
+"""The curve optimization: the problem, the start, the solve, the crate mapping, the verification.
+
+:func:`optimize_curves` checks the problem (model, drives, baseline,
+objective, curve space), starts from the best linear damping per group by
+screening, solves (:mod:`planner.optimize.solve`) through the casadi loop
+(:mod:`planner.optimize.loop`), verifies the optimum and the best feasible
+iterate in the time domain (:func:`planner.predict.predict_setups`), and maps
+the optimum to the crate (the nearest setups and the crate's best).
+:func:`compile_curves` compiles a problem's step functions ahead.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pandas as pd
+from scipy import optimize as sopt
+
+from ident.data.channels import CORNERS
+from ident.data.drive import Drive
+from ident.models.shocks import LinearShock, PiecewiseLinear, ShockLibrary, TableShock
+from ident.sim.closedloop import simulate
+from ident.sim.metrics import METRIC_NAMES
+from planner.errors import PlannerError
+from planner.objective import Objective, default_objective, score_setups
+from planner.optimize.cache import jit_available
+from planner.optimize.constraints import (
+    CurveConstraints,
+    check_constraints,
+    constraint_rows,
+    default_constraints,
+)
+from planner.optimize.loop import LoopModel
+from planner.optimize.solve import Evaluator, OptimizeWarning, solve_problem
+from planner.optimize.space import DEFAULT_KNOTS_M_S, CurveSpace, curve_space, symmetry_groups
+from planner.predict import as_loop_plant, predict_setups, prepare_drive
+from planner.screen import drive_bands, metric_rows, screen_response, screen_setups
+from planner.setups import Setup, enumerate_setups, resolve_baseline
+from planner.uncertainty import prediction_uncertainty
+
+__all__ = [
+    "CurveOptimum",
+    "optimize_curves",
+    "compile_curves",
+    "curve_distance",
+    "score_rows",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class CurveOptimum:
+    """The result of :func:`optimize_curves`.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n_vars,)
+        The optimal decision vector (knot forces [N] and end slopes [N/(m/s)],
+        or damping rates).
+    curves : list of PiecewiseLinear
+        The optimal curve of every group (``space.groups``).
+    shocks : ShockLibrary
+        The optimal shocks (table kind, with the group's lag), ids ``OPT-<group>``.
+    setup : planner.setups.Setup
+        The optimum as a setup (named ``optimum``).
+    table : pandas.DataFrame
+        Verified in the time domain (:func:`planner.predict.predict_setups`),
+        one row per setup: the optimum, the baseline, the crate's best and
+        the crate setups closest to the optimum, with ``kind``, the shock ids,
+        ``score`` (aggregated over the drives), ``score_<drive>``,
+        ``feasible``, ``distance`` (to the optimal curves, weighted by the
+        optimum's shock velocities).
+    metrics : dict of str -> pandas.DataFrame
+        Per drive, the metrics (SI) of the setups of `table`.
+    crate_best : str
+        The crate's best feasible setup (time domain).
+    gap : float
+        ``1 - score(optimum) / score(crate best)``: what building the optimal
+        shocks gains over the best the crate can do (> 0 when the optimum is
+        better).
+    velocity_m_s : dict of str -> ndarray
+        The optimum's shock velocity samples per corner on the first drive.
+    stationarity : pandas.DataFrame or None
+        Each knot force moved by +-5 % within the constraints: the score's
+        relative change (a gain is negative).
+    history : pandas.DataFrame
+        IPOPT's iterations: objective, primal and dual infeasibility, time.
+    solver : dict
+        ``status``, ``success``, ``iterations``, ``n_eval`` (forward sweeps),
+        ``build_s`` (the loop built and compiled), ``solve_s``, ``eval_s``, ``grad_s``,
+        ``n_grad`` (adjoint sweeps), ``jit``,
+        ``objective`` (the optimizer's own), ``verified_score``.
+    space : CurveSpace
+    constraints : CurveConstraints
+    objective : planner.objective.Objective
+    baseline : planner.setups.Setup
+    settings : dict
+    """
+
+    x: np.ndarray
+    curves: list
+    shocks: ShockLibrary
+    setup: object
+    table: pd.DataFrame
+    metrics: dict
+    crate_best: str
+    gap: float
+    velocity_m_s: dict
+    stationarity: pd.DataFrame | None
+    history: pd.DataFrame
+    solver: dict
+    space: CurveSpace
+    constraints: CurveConstraints
+    objective: object
+    baseline: object
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def score(self):
+        """float: the optimum's verified (time-domain) score."""
+        return float(self.table.loc["optimum", "score"])
+
+    def verdict(self):
+        """One sentence: how the optimum compares with the crate's best (time domain)."""
+        best = float(self.table.loc[self.crate_best, "score"])
+        if self.gap >= 0:
+            return (f"the optimum ({self.score:.4f}) is {100 * self.gap:.2f} % better than the "
+                    f"crate's best {self.crate_best} ({best:.4f})")
+        return (f"the crate's best {self.crate_best} ({best:.4f}) beats the optimum "
+                f"({self.score:.4f}) by {-100 * self.gap:.2f} %: the constraints keep the "
+                "curves from what the crate already does; relax them")
+
+
+def _valid(space, x):
+    """`x` with the curves' validity exact: an interior-point solution meets its constraints
+    to the solver's tolerance (a slope of -5e-5 N/(m/s) is not passive for a shock model).
+    Knot forces are made non-decreasing through F(0) = 0 with the sign of their velocity,
+    end slopes >= 0; changes are of the order of the tolerance."""
+    if space.linear:
+        return np.maximum(np.asarray(x, dtype=float), 0.0)
+    K, z = space.v_knots_m_s.size, space.zero_index
+    out = []
+    for p in space.params(x):
+        f = p[:K].copy()
+        f[z] = 0.0
+        f[z + 1:] = np.maximum.accumulate(np.maximum(f[z + 1:], 0.0))
+        f[:z] = -np.maximum.accumulate(np.maximum(-f[:z][::-1], 0.0))[::-1]
+        out.append(PiecewiseLinear(space.v_knots_m_s, f, max(p[K], 0.0), max(p[K + 1], 0.0)))
+    return space.from_curves(out)
+
+
+def _optimal_shocks(space, x, *, prefix="OPT"):
+    """Table shocks of the curves of `x` (the end slopes kept by one extra point a side)."""
+    models = []
+    for (name, _), pwl, lag in zip(space.groups, space.curves(_valid(space, x)), space.lag_s):
+        v, f = pwl.v_knots_m_s, pwl.f_knots_n
+        ext = 0.5
+        vv = np.concatenate([[v[0] - ext], v, [v[-1] + ext]])
+        ff = np.concatenate([[f[0] - pwl.slope_below * ext], f, [f[-1] + pwl.slope_above * ext]])
+        models.append(TableShock(f"{prefix}-{name}", vv, ff, lag_s=lag,
+                                 description=f"optimal {name} curve (shockplan optimize)"))
+    return ShockLibrary(models)
+
+
+def _setup_of(space, shocks, name="optimum"):
+    ids = {c: shocks.ids[space.group_of(c)] for c in CORNERS}
+    return Setup(name, ids)
+
+
+def _check_objective(objective):
+    objective = default_objective() if objective is None else objective
+    if not isinstance(objective, Objective):
+        raise TypeError(f"objective must be a planner.objective.Objective, got "
+                        f"{type(objective).__name__}")
+    other = [m for m in objective.metrics if m not in METRIC_NAMES]
+    if other:
+        raise PlannerError(f"objective {objective.name!r}: optimize works on the spec's metrics "
+                           f"{list(METRIC_NAMES)}; {other} are not among them (normalized and "
+                           "band-split metrics are for ranking)")
+    return objective
+
+
+def _drive_list(drives, fs_hz):
+    if isinstance(drives, Drive):
+        drives = [drives]
+    drives = list(drives)
+    if not drives:
+        raise PlannerError("optimize needs at least one drive")
+    out = [prepare_drive(d, fs_hz, where=f"drive {getattr(d, 'name', k)!r}")
+           for k, d in enumerate(drives)]
+    names = [d.name for d in out]
+    if len(set(names)) < len(names):
+        out = [replace(d, name=f"{d.name} #{k + 1}") for k, d in enumerate(out)]
+    return out
+
+
+def _scan_start(plant, drives, library, space, baseline, objective, m_base, weights):
+    """Best linear damping per group by screening (frequency domain): the start point."""
+    cbar = float(np.mean(plant.cbar_n_s_m))
+    rates = cbar * np.geomspace(0.15, 4.0, 25)
+    base_models = baseline.resolve(library)
+    G = len(space.groups)
+    bands = [drive_bands(d) for d in drives]
+    Hs = [plant.frequency_response(b.f_hz) for b in bands]
+
+    def scores(choices):  # choices: list of per-group rates arrays -> aggregated scores
+        models = []
+        for combo in choices:
+            models.append(tuple(LinearShock("c", combo[space.group_of(c)],
+                                            lag_s=space.lag_s[space.group_of(c)])
+                                for c in CORNERS))
+        total = 0.0
+        for w, b, H, mb in zip(weights, bands, Hs, m_base):
+            names, met, _, _ = screen_response(H, plant.output_names, plant.cbar_n_s_m, b,
+                                               models + [tuple(base_models)])
+            t = pd.DataFrame(met, columns=names)
+            t.index = [f"s{k}" for k in range(len(models))] + ["baseline"]
+            total = total + w * score_setups(t, objective, baseline="baseline").table[
+                "score"].to_numpy()[:-1]
+        return total
+
+    best = np.full(G, cbar)
+    s = scores([np.full(G, c) for c in rates])
+    best[:] = rates[int(np.argmin(s))]
+    for _ in range(2):  # coordinate refinement, group by group
+        for g in range(G):
+            trial = [np.where(np.arange(G) == g, c, best) for c in rates]
+            best[g] = rates[int(np.argmin(scores(trial)))]
+    return best
+
+
+def _project(x0, A, b):
+    """The point nearest `x0` (scaled least squares) with ``A x <= b``."""
+    if np.all(A @ x0 <= b + 1e-9 * np.maximum(np.abs(b), 1)):
+        return x0
+    scale = np.maximum(np.abs(x0), 1.0)
+    res = sopt.minimize(lambda y: 0.5 * np.sum((y - x0 / scale) ** 2), x0 / scale,
+                        jac=lambda y: y - x0 / scale, method="SLSQP",
+                        constraints=[{"type": "ineq", "fun": lambda y: b - A @ (y * scale),
+                                      "jac": lambda y: -A * scale[None, :]}],
+                        options={"maxiter": 500, "ftol": 1e-12})
+    return res.x * scale
+
+
+def _time_domain_scores(model, drives, setups, library, objective, baseline, weights,
+                        oversample, aggregate):
+    """Verified scores: predict_setups per drive, scored against the baseline, aggregated."""
+    cand = [baseline] + [s for s in setups if s.name != baseline.name]
+    per, metrics, feasible = [], {}, None
+    for d in drives:
+        pred = predict_setups(model, d, cand, library, oversample=oversample)
+        metrics[d.name] = pred.table
+        sc = score_setups(pred.table, objective, baseline=baseline.name).table
+        per.append(sc["score"])
+        feasible = sc["feasible"] if feasible is None else (feasible & sc["feasible"])
+    S = pd.concat(per, axis=1)
+    S.columns = [f"score_{d.name}" for d in drives]
+    agg = S.to_numpy() @ np.asarray(weights) if aggregate == "sum" else S.to_numpy().max(axis=1)
+    out = S.copy()
+    out.insert(0, "score", agg)
+    out["feasible"] = feasible.to_numpy()
+    return out, metrics
+
+
+def optimize_curves(model, drives, library, *, objective=None, baseline=None,
+                    symmetry="left-right", knots_m_s=DEFAULT_KNOTS_M_S, linear=False,
+                    constraints=None, lag_s=None, drive_weights=None, aggregate="sum",
+                    robust=False, oversample=2, max_iter=80, n_closest=5, jit=None,
+                    stationarity=True, progress=False):
+    """The best force-velocity curve per corner group (see the module docstring).
+
+    Parameters
+    ----------
+    model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
+        Identified or known; both go through the same loop.
+    drives : ident.data.drive.Drive or sequence of Drive
+    library : ident.models.shocks.ShockLibrary
+        The crate: the baseline and the setups the optimum is mapped to.
+    objective : planner.objective.Objective, optional
+        Default :func:`planner.objective.default_objective`; the spec's
+        metrics only.
+    baseline : Setup, str or sequence of 4 str, optional
+        The setup the objective normalizes against, read by
+        :func:`planner.setups.resolve_baseline`: a Setup, a shock id (every
+        corner) or four ids ``"LF,RF,LR,RR"``; default the crate's first shock
+        at every corner.
+    symmetry : {"left-right", "all", "none"}
+        Corner groups (:func:`~planner.optimize.space.curve_space`).
+    knots_m_s : sequence of float
+        Bump knot velocities [m/s] (rebound mirrors them).
+    linear : bool
+        One damping rate per group (the known-answer case).
+    constraints : CurveConstraints, optional
+        Default :func:`default_constraints`.
+    lag_s : float, optional
+        The optimal shocks' lag [s]; default per group the mean lag of the
+        baseline's shocks at its corners.
+    drive_weights : sequence of float, optional
+        Per drive (default equal), for ``aggregate="sum"``.
+    aggregate : {"sum", "worst"}
+        Weighted sum of the drives' scores, or the worst drive's (epigraph).
+    robust : bool
+        Hold the objective's limits with the model's uncertainty: each
+        limited metric times the upper bound of its 95 % interval
+        (:func:`planner.uncertainty.prediction_uncertainty` at the start
+        point; identified models only). The score of a weighted sum of
+        metrics is unbiased under the zero-mean model errors, so its expected
+        value is its nominal value to first order: only the limits need it.
+    oversample : int
+        Sub-steps per sample in the optimizer's loop and in the verification.
+    max_iter : int
+        IPOPT iterations.
+    n_closest : int
+        Crate setups nearest the optimum to simulate and report.
+    jit : bool, optional
+        Compile the loop to C (default: when a C compiler is found).
+    stationarity : bool
+        Report the effect of moving each knot force by +-5 % (time domain).
+    progress : bool
+
+    Returns
+    -------
+    CurveOptimum
+
+    Raises
+    ------
+    PlannerError
+        On constraints no curve meets (naming them), an objective with
+        metrics other than the spec's, an unknown baseline shock, a bad
+        symmetry, aggregate or weights; drive errors as :mod:`planner.predict`.
+    TypeError
+        If the objective is not an Objective.
+
+    Warns
+    -----
+    OptimizeWarning
+        If IPOPT does not converge; the best verified iterate is returned and
+        ``solver["success"]`` is False.
+    """
+    t_start = time.perf_counter()
+    objective = _check_objective(objective)
+    if aggregate not in ("sum", "worst"):
+        raise PlannerError(f"aggregate must be 'sum' or 'worst', got {aggregate!r}")
+    plant, drives, base, space, rows = _problem(model, drives, library, objective, baseline,
+                                                symmetry, knots_m_s, linear, lag_s)
+    need = rows[0]
+    if drive_weights is None:
+        weights = np.full(len(drives), 1.0 / len(drives))
+    else:
+        weights = np.asarray(drive_weights, dtype=float).ravel()
+        if weights.size != len(drives) or np.any(~np.isfinite(weights)) or np.any(weights < 0) \
+                or not weights.sum() > 0:
+            raise PlannerError(f"drive_weights {list(np.atleast_1d(drive_weights))} must be "
+                               f"{len(drives)} numbers >= 0, not all 0")
+        weights = weights / weights.sum()
+    constraints = default_constraints() if constraints is None else constraints
+    if not isinstance(constraints, CurveConstraints):
+        raise TypeError(f"constraints must be CurveConstraints (read_curve_constraints), got "
+                        f"{type(constraints).__name__}")
+    check_constraints(space, constraints, library)
+    families = constraint_rows(space, constraints, library)
+    T = space.expansion()
+    A_lin = np.vstack([a for _, a, _ in families]) @ T
+    b_lin = np.concatenate([b for _, _, b in families])
+
+    # the baseline's (verified) values per drive of the metrics the objective needs
+    m_base = [predict_setups(model, d, [base], library, oversample=oversample).table.loc[
+        base.name, need].to_numpy(float) for d in drives]
+
+    # start: the best linear damping per group (screening), projected onto the constraints
+    rates = _scan_start(plant, drives, library, space, base, objective, m_base, weights)
+    start_curves = [PiecewiseLinear([0.0], [0.0], c, c) for c in rates]
+    x0 = _project(space.from_curves(start_curves), A_lin, b_lin)
+
+    # scaling of the decision variables: forces by c_bar |v|, slopes by c_bar
+    cbar = float(np.mean(plant.cbar_n_s_m))
+    if space.linear:
+        scale = np.full(space.n_vars, cbar)
+    else:
+        vk = np.delete(space.v_knots_m_s, space.zero_index)
+        per = np.concatenate([cbar * np.maximum(np.abs(vk), 0.05), [cbar, cbar]])
+        scale = np.tile(per, len(space.groups))
+
+    jit = jit_available() if jit is None else bool(jit)
+    # the rows the problem needs of the metrics: a score per drive, each limit per drive
+    tight = np.ones(len(need))
+    if robust:
+        tight = _robust_factors(model, drives, library, space, x0, base, need)
+    C, kinds = score_rows(objective, need, m_base, tight)
+    t_build = time.perf_counter()
+    models_cl = [LoopModel(plant, d, space, rows, oversample, jit) for d in drives]
+    ev = Evaluator(models_cl, T, scale, C)
+    build_s = time.perf_counter() - t_build
+    x_opt, solver, history = solve_problem(ev, space, kinds, weights, aggregate, A_lin,
+                                           b_lin, x0 / scale, scale, max_iter, progress)
+    solver.update(build_s=build_s, eval_s=ev.eval_s, grad_s=ev.grad_s, n_eval=ev.n_eval,
+                  n_grad=ev.n_grad, jit=jit, step_instructions=models_cl[0].n_instructions)
+    return _finish(model, plant, drives, library, space, constraints, objective, base, weights,
+                   aggregate, oversample, x_opt, solver, history, n_closest, stationarity,
+                   A_lin, b_lin, t_start, {"knots_m_s": list(map(float, knots_m_s)),
+                                           "robust": bool(robust), "max_iter": max_iter,
+                                           "x_start": x0.tolist(), "start_rates": rates.tolist(),
+                                           "limit_factors": tight.tolist()})
+
+
+def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, linear, lag_s):
+    """The loop plant, drives, baseline setup, curve space and metric rows (names, rows of
+    the plant's outputs) of an optimization, checked (see :func:`optimize_curves`)."""
+    plant = as_loop_plant(model)
+    drives = _drive_list(drives, getattr(model, "fs_hz", None))
+    # the commands' one baseline syntax; none given: the crate's first shock at every corner
+    base = resolve_baseline(library.ids[0] if baseline is None else baseline, library)
+    base_models = base.resolve(library)
+    groups = symmetry_groups(symmetry)
+    if lag_s is None:
+        lag_s = [float(np.mean([base_models[CORNERS.index(c)].lag_s for c in corners]))
+                 for _, corners in groups]
+    space = curve_space(symmetry=symmetry, knots_m_s=knots_m_s, linear=linear, lag_s=lag_s)
+    names_all, L_all = metric_rows(plant)
+    need = [m for m in objective.metrics if m in names_all]
+    missing = [m for m in objective.metrics if m not in names_all]
+    if missing:
+        raise PlannerError(f"the model has no outputs for {missing}; its outputs are "
+                           f"{list(plant.output_names)}")
+    return plant, drives, base, space, (need, L_all[[names_all.index(m) for m in need]])
+
+
+def compile_curves(model, drives, library, *, objective=None, baseline=None,
+                   symmetry="left-right", knots_m_s=DEFAULT_KNOTS_M_S, linear=False,
+                   lag_s=None, oversample=2):
+    """Compile the optimizer's step functions of a problem ahead of :func:`optimize_curves`.
+
+    The C compile of the closed loop's step and its adjoint (10-30 s on a
+    fresh machine; nothing once cached) is what a first optimization waits
+    for. Called with the same arguments as :func:`optimize_curves` (these
+    are the ones the compiled code depends on; the drive matters only by its
+    sample rate), e.g. in a worker while other work runs, it leaves the
+    library in :func:`jit_cache_dir`, where the optimization then finds it.
+
+    Parameters
+    ----------
+    model, drives, library, objective, baseline, symmetry, knots_m_s, linear, lag_s, oversample
+        As :func:`optimize_curves`.
+
+    Returns
+    -------
+    bool
+        True if the steps are compiled (or were cached), False if no C
+        compiler is found (the optimization then runs them uncompiled).
+
+    Raises
+    ------
+    PlannerError, TypeError
+        As :func:`optimize_curves`.
+    """
+    objective = _check_objective(objective)
+    plant, drives, _, space, rows = _problem(model, drives, library, objective, baseline,
+                                             symmetry, knots_m_s, linear, lag_s)
+    if not jit_available():
+        return False
+    for d in drives:
+        LoopModel(plant, d, space, rows, oversample, True, inputs=False)
+    return True
+
+
+def score_rows(objective, need, m_base, tight):
+    """The linear combinations of all drives' metrics the problem uses.
+
+    Rows: the score of every drive (``sum w m / m_base``), then every limit of every
+    drive as ``tight * m / bound`` (<= 1).
+
+    Parameters
+    ----------
+    objective : planner.objective.Objective
+    need : list of str
+        The metrics the objective needs, in the order of the loop's metric rows.
+    m_base : list of ndarray, shape (n_metrics,)
+        The baseline's values of `need` per drive.
+    tight : ndarray, shape (n_metrics,)
+        Factors on the limited metrics (1, or the robust upper bounds).
+
+    Returns
+    -------
+    C : ndarray, shape (n_rows, n_drives * n_metrics)
+    kinds : list of (str, int)
+        ``("score", drive)`` or ``("limit", drive)`` per row.
+    """
+    nd, nm = len(m_base), len(need)
+    w = np.array([objective.weights.get(m, 0.0) for m in need])
+    rows, kinds = [], []
+    for d in range(nd):
+        r = np.zeros(nd * nm)
+        r[d * nm:(d + 1) * nm] = w / m_base[d]
+        rows.append(r)
+        kinds.append(("score", d))
+    for d in range(nd):
+        for k, metric in enumerate(need):
+            lim = objective.limits.get(metric)
+            if not lim:
+                continue
+            bound = min(lim.get("max_ratio", np.inf) * m_base[d][k], lim.get("max", np.inf))
+            r = np.zeros(nd * nm)
+            r[d * nm + k] = tight[k] / bound
+            rows.append(r)
+            kinds.append(("limit", d))
+    return np.array(rows), kinds
+
+
+def _robust_factors(model, drives, library, space, x, base, need):
+    """Upper 95 % bound over the nominal of each limited metric at `x` (identified models)."""
+    if getattr(model, "frf", None) is None:
+        raise PlannerError("robust=True needs an identified model (with its FRF): a known "
+                           "model has no estimation error")
+    shocks = _optimal_shocks(space, x)
+    lib = ShockLibrary(list(shocks.values()) + list(library.values()))
+    unc = prediction_uncertainty(model, drives[0], [_setup_of(space, shocks)], lib)
+    hi = unc.ratio_hi.iloc[0]
+    return np.array([max(float(hi.get(m, 1.0)), 1.0) for m in need])
+
+
+def curve_distance(pwl_a, pwl_b, v_samples):
+    """RMS difference of two curves over velocity samples, relative to the second's RMS force.
+
+    Parameters
+    ----------
+    pwl_a, pwl_b : PiecewiseLinear
+    v_samples : ndarray
+        Shock velocities [m/s] (the distribution the curves are compared over).
+
+    Returns
+    -------
+    float
+    """
+    fa, fb = pwl_a.force(v_samples), pwl_b.force(v_samples)
+    return float(np.sqrt(np.mean((fa - fb) ** 2) / max(np.mean(fb**2), 1e-300)))
+
+
+def _finish(model, plant, drives, library, space, constraints, objective, base, weights,
+            aggregate, oversample, x_opt, solver, history, n_closest, stationarity, A_lin,
+            b_lin, t_start, settings):
+    # verify the optimum and the best feasible iterate; keep the better verified one
+    cands = [x_opt]
+    feas = [(f, x) for x, f in solver.pop("iterates")
+            if np.all(A_lin @ x <= b_lin + 1e-6 * (1 + np.abs(b_lin)))]
+    if feas:
+        cands.append(min(feas, key=lambda fx: fx[0])[1])
+    verified = []
+    for k, x in enumerate(cands):
+        shocks = _optimal_shocks(space, x)
+        lib = ShockLibrary(list(shocks.values()) + list(library.values()))
+        setup = _setup_of(space, shocks)
+        sc, _ = _time_domain_scores(model, drives, [setup], lib, objective, base, weights,
+                                    oversample, aggregate)
+        verified.append((float(sc.loc["optimum", "score"]), bool(sc.loc["optimum", "feasible"]),
+                         k))
+    ok = [v for v in verified if v[1]] or verified
+    best_k = min(ok)[2]
+    x_opt = _valid(space, cands[best_k])
+    shocks = _optimal_shocks(space, x_opt)
+    lib = ShockLibrary(list(shocks.values()) + list(library.values()))
+    setup = _setup_of(space, shocks)
+    if not solver["success"]:
+        warnings.warn(f"optimize: IPOPT stopped with status {solver['status']!r} after "
+                      f"{solver['iterations']} iterations; the best verified iterate is "
+                      "returned (score "
+                      f"{min(ok)[0]:.4f}): raise max_iter, or check the constraints",
+                      OptimizeWarning, stacklevel=3)
+
+    # the optimum's shock velocities (first drive): the distribution the crate is compared over
+    resp = simulate(plant, drives[0], setup.resolve(lib), oversample=oversample)
+    vel = {c: np.asarray(resp.channels[f"shock_velocity_{c}"]) for c in CORNERS}
+    # the crate: every setup of the same symmetry, by distance to the optimal curves
+    sym, axles = {"left-right": ("left-right", "independent"), "all": ("left-right", "same"),
+                  "none": ("none", "independent")}[space.symmetry]
+    crate = list(enumerate_setups(library, symmetry=sym, axles=axles))
+    if base.name not in {s.name for s in crate}:
+        crate.append(base)
+    opt_pwl = {c: space.curves(x_opt)[space.group_of(c)] for c in CORNERS}
+    dist_id = {(c, sid): curve_distance(library[sid].to_pwl(), opt_pwl[c], vel[c])
+               for c in CORNERS for sid in library.ids}
+    dist = np.array([math.sqrt(np.mean([dist_id[(c, s.shocks[c])] ** 2 for c in CORNERS]))
+                     for s in crate])
+    order = np.argsort(dist, kind="stable")
+    closest = [crate[i] for i in order[:n_closest]]
+    best_name, crate_scores = _crate_best(model, drives, library, crate, objective, base,
+                                          weights, oversample, aggregate)
+    by_name = {s.name: s for s in crate}
+    listed = [setup, base] + [by_name[best_name]] + closest
+    uniq, seen = [], set()
+    for s in listed:
+        if s.name not in seen:
+            uniq.append(s)
+            seen.add(s.name)
+    table, metrics = _time_domain_scores(model, drives, uniq, lib, objective, base, weights,
+                                         oversample, aggregate)
+    table = table.loc[[s.name for s in uniq]]
+    kinds = {setup.name: "optimum", base.name: "baseline"}
+    kinds.setdefault(best_name, "crate best")
+    for s in closest:
+        kinds.setdefault(s.name, "closest")
+    table.insert(0, "kind", [kinds[n] for n in table.index])
+    ids = pd.DataFrame([s.ids() for s in uniq], columns=list(CORNERS), index=table.index)
+    table = pd.concat([table.iloc[:, :1], ids, table.iloc[:, 1:]], axis=1)
+    dmap = dict(zip([s.name for s in crate], dist))
+    table["distance"] = [0.0 if n == setup.name else dmap.get(n, np.nan) for n in table.index]
+    table.index.name = "setup"
+    gap = 1.0 - table.loc[setup.name, "score"] / table.loc[best_name, "score"]
+    solver["verified_score"] = float(table.loc[setup.name, "score"])
+    stat = None
+    if stationarity and not space.linear:
+        stat = _stationarity(model, drives, lib, space, x_opt, A_lin, b_lin, objective, base,
+                             weights, oversample, aggregate, solver["verified_score"])
+    settings.update(oversample=oversample, aggregate=aggregate, weights=weights.tolist(),
+                    drives=[d.name for d in drives], symmetry=space.symmetry,
+                    linear=space.linear, lag_s=list(space.lag_s), total_s=None,
+                    crate_scores=crate_scores)
+    settings["total_s"] = time.perf_counter() - t_start
+    return CurveOptimum(x=np.asarray(x_opt), curves=space.curves(x_opt), shocks=shocks,
+                        setup=setup, table=table, metrics=metrics, crate_best=best_name,
+                        gap=float(gap), velocity_m_s=vel, stationarity=stat, history=history,
+                        solver=solver, space=space, constraints=constraints,
+                        objective=objective, baseline=base, settings=settings)
+
+
+def _crate_best(model, drives, library, crate, objective, base, weights, oversample, aggregate,
+                top=20):
+    """The crate's best feasible setup: screened on every drive, the best `top` verified."""
+    total = None
+    for w, d in zip(weights, drives):
+        sc = screen_setups(model, d, crate, library).table
+        s = score_setups(sc, objective, baseline=base.name).table
+        v = s["score"].where(s["feasible"], np.inf)
+        total = w * v if total is None else (total + w * v if aggregate == "sum"
+                                             else np.maximum(total, v))
+    order = total.sort_values(kind="stable").index.tolist()
+    cand = [s for s in crate if s.name in set(order[:top])]
+    table, _ = _time_domain_scores(model, drives, cand, library, objective, base, weights,
+                                   oversample, aggregate)
+    feas = table[table["feasible"]]
+    pick = feas if len(feas) else table
+    return str(pick["score"].idxmin()), {n: float(v) for n, v in pick["score"].items()}
+
+
+def _stationarity(model, drives, lib, space, x, A, b, objective, base, weights, oversample,
+                  aggregate, score):
+    """Each decision variable moved by +-5 % (within the linear constraints), verified."""
+    rows, setups, extra = [], [], []
+    # a move is within the constraints if it violates none more than the optimum does (an
+    # interior-point solution meets its constraints to the solver's tolerance)
+    slack = np.maximum(A @ x - b, 0.0) + 1e-9 * (1 + np.abs(b))
+    for j in range(space.n_vars):
+        for sgn in (-1.0, 1.0):
+            xt = x.copy()
+            xt[j] *= 1.0 + 0.05 * sgn
+            if not np.all(A @ xt - b <= slack) or xt[j] == x[j]:
+                continue
+            shocks = _optimal_shocks(space, xt, prefix=f"S{j}{'m' if sgn < 0 else 'p'}")
+            extra += list(shocks.values())
+            setups.append(Setup(f"var{j}{'-' if sgn < 0 else '+'}",
+                                {c: shocks.ids[space.group_of(c)] for c in CORNERS}))
+            rows.append((j, sgn))
+    if not setups:
+        return pd.DataFrame(columns=["variable", "change", "score", "relative_change"])
+    lib2 = ShockLibrary(list(lib.values()) + extra)
+    table, _ = _time_domain_scores(model, drives, setups, lib2, objective, base, weights,
+                                   oversample, aggregate)
+    out = pd.DataFrame({"variable": [j for j, _ in rows], "change": [0.05 * s for _, s in rows],
+                        "score": table.loc[[s.name for s in setups], "score"].to_numpy(),
+                        "feasible": table.loc[[s.name for s in setups], "feasible"].to_numpy()})
+    out["relative_change"] = out["score"] / score - 1.0
+    return out

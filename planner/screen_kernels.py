@@ -1,0 +1,1146 @@
+"""Compiled kernels of the frequency-domain screening: numba, one caller (:mod:`planner.screen`).
+
+The per-setup work of :func:`planner.screen.screen_packed`: the fixed point on the
+shock-velocity RMS (the stochastic linearization, see :mod:`planner.screen`), the
+band features of the loop correction at it, and the metrics as a linear form of
+those features. Two kernels give the same numbers bit for bit:
+
+- :func:`screen_batch`, vectorized over bands (straight-line 4x4 complex algebra
+  per band, laid out by :func:`band_operands`), for large batches;
+- :func:`screen_batch_scalar`, one band after the other, which compiles in a
+  fraction of the time, for small ones.
+
+:func:`metric_form` builds the setup-independent linear form both apply. These
+public names serve :mod:`planner.screen`, their one caller; everything else here
+is private to the kernels. The straight-line band inverse, :func:`_band_inverse`,
+is generated code: its block is written by :mod:`planner.screen_codegen`
+(``python -m planner.screen_codegen --write``) and checked by ``tests/test_screen.py``.
+
+numba caches the compiled kernels per source file (``cache=True``): editing this
+file recompiles them on first use (the vectorized kernel takes 30-40 s).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+__all__ = ["screen_batch", "screen_batch_scalar", "band_operands", "metric_form"]
+
+_SQRT2 = math.sqrt(2.0)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _ceq(sig, kv, kf, nk, slo, shi):
+    """Equivalent damping of a PWL curve for a zero-mean Gaussian velocity of RMS sig."""
+    if sig <= 0.0:
+        sig = 1e-9
+    acc = 0.0
+    lo_cdf = 0.0
+    for seg in range(nk + 1):
+        if seg < nk:
+            hi_cdf = 0.5 * (1.0 + math.erf(kv[seg] / (sig * _SQRT2)))
+        else:
+            hi_cdf = 1.0
+        if seg == 0:
+            s = slo
+        elif seg == nk:
+            s = shi
+        else:
+            s = (kf[seg] - kf[seg - 1]) / (kv[seg] - kv[seg - 1])
+        acc += s * (hi_cdf - lo_cdf)
+        lo_cdf = hi_cdf
+    return acc
+
+
+#: Index pairs (a, b), a < b, of the upper triangle of a 4x4 Hermitian matrix, in the order
+#: the packed operands (:func:`metric_form`) and the kernel agree on.
+_PAIRS_A = np.array([0, 0, 0, 1, 1, 2])
+_PAIRS_B = np.array([1, 2, 3, 2, 3, 3])
+#: Features of one band's loop correction that a metric's band power is linear in: the
+#: real diagonal of R = E PB E^H (4), the real and imaginary parts of its upper triangle
+#: (6 + 6) and of E = diag(D) K (16 + 16).
+_NFEAT = 48
+#: Bands per block of the fixed point's band loop (:func:`_screen_one`): a compile-time
+#: stride, so that LLVM sees the operands of a block at constant offsets and vectorizes the
+#: loop (16: its minimum trip count for a loop with run-time alias checks).
+_BK = 16
+#: Setups whose metrics are taken together (:func:`_metrics_of`: one pass over F per group).
+_GROUP = 8
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _loop_inverse(Hv, D, A, perm):
+    """A <- (I - Hv diag(D))^-1 for one band (4x4, in place Gauss-Jordan, partial pivoting).
+
+    Hv (4, 4) are the velocity responses to dF, D the shocks' linearized damping minus
+    c_bar (complex, with the lag); perm (4,) is scratch. A screen-local routine rather than
+    ``ident.sim.closedloop._invert_small``: in place (64 complex multiply-adds instead of 128:
+    the identity's zeros and ones are never multiplied) and pivots chosen by ``|z|^2``
+    (no ``hypot``), but the same pivots and the same floating-point operations on the
+    entries that matter, so the inverse is bit for bit the general routine's. That matters:
+    the fixed point's secant step amplifies any round-off change (see :func:`_screen_one`).
+    """
+    for a in range(4):
+        for b in range(4):
+            A[a, b] = -Hv[a, b] * D[b]
+        A[a, a] += 1.0
+    for c in range(4):
+        p = c
+        big = A[c, c].real * A[c, c].real + A[c, c].imag * A[c, c].imag
+        for i in range(c + 1, 4):
+            m2 = A[i, c].real * A[i, c].real + A[i, c].imag * A[i, c].imag
+            if m2 > big:
+                big = m2
+                p = i
+        perm[c] = p
+        if p != c:
+            for j in range(4):
+                t = A[c, j]
+                A[c, j] = A[p, j]
+                A[p, j] = t
+        d = 1.0 / A[c, c]
+        A[c, c] = 1.0
+        for j in range(4):
+            A[c, j] *= d
+        for i in range(4):
+            if i != c:
+                f = A[i, c]
+                A[i, c] = 0.0
+                for j in range(4):
+                    A[i, j] -= f * A[c, j]
+    # the row interchanges become column interchanges of the inverse, undone in reverse
+    for c in range(3, -1, -1):
+        p = perm[c]
+        if p != c:
+            for i in range(4):
+                t = A[i, c]
+                A[i, c] = A[i, p]
+                A[i, p] = t
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _recip(z):
+    """``1.0 / z`` as numba's complex division computes it (CPython's algorithm): both
+    branches' operations computed, one selected, so that the band loop around it has no
+    branches (and vectorizes). A zero z gives NaN instead of raising ZeroDivisionError."""
+    br = z.real
+    bi = z.imag
+    cond = abs(br) >= abs(bi)
+    num = bi if cond else br
+    den = br if cond else bi
+    ratio = num / den
+    dn1 = br + bi * ratio
+    dn2 = br * ratio + bi
+    re1 = 1.0 + 0.0 * ratio
+    re2 = 1.0 * ratio + 0.0
+    im1 = 0.0 - 1.0 * ratio
+    im2 = 0.0 * ratio - 1.0
+    denom = dn1 if cond else dn2
+    re = re1 if cond else re2
+    im = im1 if cond else im2
+    return complex(re / denom, im / denom)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _over_roll(x, cond, ratio, denom):
+    """``x / roll`` (x real) as numba's complex division computes it, with the divisor's
+    branch, ``ratio`` and ``denom`` precomputed (:func:`_screen_one`); no branches."""
+    re1 = x + 0.0 * ratio
+    re2 = x * ratio + 0.0
+    im1 = 0.0 - x * ratio
+    im2 = 0.0 * ratio - x
+    re = re1 if cond else re2
+    im = im1 if cond else im2
+    return complex(re / denom, im / denom)
+
+
+# BEGIN GENERATED CODE by planner.screen_codegen (python -m planner.screen_codegen --write)
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _band_inverse(h, d0, d1, d2, d3):
+    """K = (I - Hv diag(D))^-1 of band k, straight-line (Gauss-Jordan, partial pivoting).
+
+    Generated code (:mod:`planner.screen_codegen`): the same operations, in the same order, as
+    :func:`_loop_inverse` (pivots by ``|z|^2``, row interchanges, in-place elimination,
+    column interchanges undone in reverse), with the 16 entries held in scalars and the
+    row and column interchanges written as selects, so that a loop over bands around it
+    has no branches and no scratch memory and LLVM vectorizes it over bands. h: the 16
+    entries of ``-Hv`` (row-major), loaded by :func:`_screen_one` (scalars only: an array
+    passed to an inlined function costs reference counting, which stops vectorization).
+    """
+    a00 = h[0] * d0
+    a01 = h[1] * d1
+    a02 = h[2] * d2
+    a03 = h[3] * d3
+    a00 = complex(a00.real + 1.0, a00.imag + 0.0)
+    a10 = h[4] * d0
+    a11 = h[5] * d1
+    a12 = h[6] * d2
+    a13 = h[7] * d3
+    a11 = complex(a11.real + 1.0, a11.imag + 0.0)
+    a20 = h[8] * d0
+    a21 = h[9] * d1
+    a22 = h[10] * d2
+    a23 = h[11] * d3
+    a22 = complex(a22.real + 1.0, a22.imag + 0.0)
+    a30 = h[12] * d0
+    a31 = h[13] * d1
+    a32 = h[14] * d2
+    a33 = h[15] * d3
+    a33 = complex(a33.real + 1.0, a33.imag + 0.0)
+    # column 0
+    big = a00.real * a00.real + a00.imag * a00.imag
+    p0 = 0
+    m2 = a10.real * a10.real + a10.imag * a10.imag
+    up = m2 > big
+    big = m2 if up else big
+    p0 = 1 if up else p0
+    m2 = a20.real * a20.real + a20.imag * a20.imag
+    up = m2 > big
+    big = m2 if up else big
+    p0 = 2 if up else p0
+    m2 = a30.real * a30.real + a30.imag * a30.imag
+    up = m2 > big
+    big = m2 if up else big
+    p0 = 3 if up else p0
+    s = p0 == 1
+    t = a00
+    a00 = a10 if s else a00
+    a10 = t if s else a10
+    t = a01
+    a01 = a11 if s else a01
+    a11 = t if s else a11
+    t = a02
+    a02 = a12 if s else a02
+    a12 = t if s else a12
+    t = a03
+    a03 = a13 if s else a03
+    a13 = t if s else a13
+    s = p0 == 2
+    t = a00
+    a00 = a20 if s else a00
+    a20 = t if s else a20
+    t = a01
+    a01 = a21 if s else a01
+    a21 = t if s else a21
+    t = a02
+    a02 = a22 if s else a02
+    a22 = t if s else a22
+    t = a03
+    a03 = a23 if s else a03
+    a23 = t if s else a23
+    s = p0 == 3
+    t = a00
+    a00 = a30 if s else a00
+    a30 = t if s else a30
+    t = a01
+    a01 = a31 if s else a01
+    a31 = t if s else a31
+    t = a02
+    a02 = a32 if s else a02
+    a32 = t if s else a32
+    t = a03
+    a03 = a33 if s else a03
+    a33 = t if s else a33
+    dd = _recip(a00)
+    a00 = 1.0 + 0j
+    a00 = a00 * dd
+    a01 = a01 * dd
+    a02 = a02 * dd
+    a03 = a03 * dd
+    f = a10
+    a10 = 0j
+    a10 = a10 - f * a00
+    a11 = a11 - f * a01
+    a12 = a12 - f * a02
+    a13 = a13 - f * a03
+    f = a20
+    a20 = 0j
+    a20 = a20 - f * a00
+    a21 = a21 - f * a01
+    a22 = a22 - f * a02
+    a23 = a23 - f * a03
+    f = a30
+    a30 = 0j
+    a30 = a30 - f * a00
+    a31 = a31 - f * a01
+    a32 = a32 - f * a02
+    a33 = a33 - f * a03
+    # column 1
+    big = a11.real * a11.real + a11.imag * a11.imag
+    p1 = 1
+    m2 = a21.real * a21.real + a21.imag * a21.imag
+    up = m2 > big
+    big = m2 if up else big
+    p1 = 2 if up else p1
+    m2 = a31.real * a31.real + a31.imag * a31.imag
+    up = m2 > big
+    big = m2 if up else big
+    p1 = 3 if up else p1
+    s = p1 == 2
+    t = a10
+    a10 = a20 if s else a10
+    a20 = t if s else a20
+    t = a11
+    a11 = a21 if s else a11
+    a21 = t if s else a21
+    t = a12
+    a12 = a22 if s else a12
+    a22 = t if s else a22
+    t = a13
+    a13 = a23 if s else a13
+    a23 = t if s else a23
+    s = p1 == 3
+    t = a10
+    a10 = a30 if s else a10
+    a30 = t if s else a30
+    t = a11
+    a11 = a31 if s else a11
+    a31 = t if s else a31
+    t = a12
+    a12 = a32 if s else a12
+    a32 = t if s else a32
+    t = a13
+    a13 = a33 if s else a13
+    a33 = t if s else a33
+    dd = _recip(a11)
+    a11 = 1.0 + 0j
+    a10 = a10 * dd
+    a11 = a11 * dd
+    a12 = a12 * dd
+    a13 = a13 * dd
+    f = a01
+    a01 = 0j
+    a00 = a00 - f * a10
+    a01 = a01 - f * a11
+    a02 = a02 - f * a12
+    a03 = a03 - f * a13
+    f = a21
+    a21 = 0j
+    a20 = a20 - f * a10
+    a21 = a21 - f * a11
+    a22 = a22 - f * a12
+    a23 = a23 - f * a13
+    f = a31
+    a31 = 0j
+    a30 = a30 - f * a10
+    a31 = a31 - f * a11
+    a32 = a32 - f * a12
+    a33 = a33 - f * a13
+    # column 2
+    big = a22.real * a22.real + a22.imag * a22.imag
+    p2 = 2
+    m2 = a32.real * a32.real + a32.imag * a32.imag
+    up = m2 > big
+    big = m2 if up else big
+    p2 = 3 if up else p2
+    s = p2 == 3
+    t = a20
+    a20 = a30 if s else a20
+    a30 = t if s else a30
+    t = a21
+    a21 = a31 if s else a21
+    a31 = t if s else a31
+    t = a22
+    a22 = a32 if s else a22
+    a32 = t if s else a32
+    t = a23
+    a23 = a33 if s else a23
+    a33 = t if s else a33
+    dd = _recip(a22)
+    a22 = 1.0 + 0j
+    a20 = a20 * dd
+    a21 = a21 * dd
+    a22 = a22 * dd
+    a23 = a23 * dd
+    f = a02
+    a02 = 0j
+    a00 = a00 - f * a20
+    a01 = a01 - f * a21
+    a02 = a02 - f * a22
+    a03 = a03 - f * a23
+    f = a12
+    a12 = 0j
+    a10 = a10 - f * a20
+    a11 = a11 - f * a21
+    a12 = a12 - f * a22
+    a13 = a13 - f * a23
+    f = a32
+    a32 = 0j
+    a30 = a30 - f * a20
+    a31 = a31 - f * a21
+    a32 = a32 - f * a22
+    a33 = a33 - f * a23
+    # column 3 (its pivot is the last row: nothing to compare)
+    dd = _recip(a33)
+    a33 = 1.0 + 0j
+    a30 = a30 * dd
+    a31 = a31 * dd
+    a32 = a32 * dd
+    a33 = a33 * dd
+    f = a03
+    a03 = 0j
+    a00 = a00 - f * a30
+    a01 = a01 - f * a31
+    a02 = a02 - f * a32
+    a03 = a03 - f * a33
+    f = a13
+    a13 = 0j
+    a10 = a10 - f * a30
+    a11 = a11 - f * a31
+    a12 = a12 - f * a32
+    a13 = a13 - f * a33
+    f = a23
+    a23 = 0j
+    a20 = a20 - f * a30
+    a21 = a21 - f * a31
+    a22 = a22 - f * a32
+    a23 = a23 - f * a33
+    # the row interchanges become column interchanges of the inverse, undone in reverse
+    s = p2 == 3
+    t = a02
+    a02 = a03 if s else a02
+    a03 = t if s else a03
+    t = a12
+    a12 = a13 if s else a12
+    a13 = t if s else a13
+    t = a22
+    a22 = a23 if s else a22
+    a23 = t if s else a23
+    t = a32
+    a32 = a33 if s else a32
+    a33 = t if s else a33
+    s = p1 == 2
+    t = a01
+    a01 = a02 if s else a01
+    a02 = t if s else a02
+    t = a11
+    a11 = a12 if s else a11
+    a12 = t if s else a12
+    t = a21
+    a21 = a22 if s else a21
+    a22 = t if s else a22
+    t = a31
+    a31 = a32 if s else a31
+    a32 = t if s else a32
+    s = p1 == 3
+    t = a01
+    a01 = a03 if s else a01
+    a03 = t if s else a03
+    t = a11
+    a11 = a13 if s else a11
+    a13 = t if s else a13
+    t = a21
+    a21 = a23 if s else a21
+    a23 = t if s else a23
+    t = a31
+    a31 = a33 if s else a31
+    a33 = t if s else a33
+    s = p0 == 1
+    t = a00
+    a00 = a01 if s else a00
+    a01 = t if s else a01
+    t = a10
+    a10 = a11 if s else a10
+    a11 = t if s else a11
+    t = a20
+    a20 = a21 if s else a20
+    a21 = t if s else a21
+    t = a30
+    a30 = a31 if s else a30
+    a31 = t if s else a31
+    s = p0 == 2
+    t = a00
+    a00 = a02 if s else a00
+    a02 = t if s else a02
+    t = a10
+    a10 = a12 if s else a10
+    a12 = t if s else a12
+    t = a20
+    a20 = a22 if s else a20
+    a22 = t if s else a22
+    t = a30
+    a30 = a32 if s else a30
+    a32 = t if s else a32
+    s = p0 == 3
+    t = a00
+    a00 = a03 if s else a00
+    a03 = t if s else a03
+    t = a10
+    a10 = a13 if s else a10
+    a13 = t if s else a13
+    t = a20
+    a20 = a23 if s else a20
+    a23 = t if s else a23
+    t = a30
+    a30 = a33 if s else a30
+    a33 = t if s else a33
+    return (a00, a01, a02, a03, a10, a11, a12, a13, a20, a21, a22, a23, a30, a31, a32, a33)
+# END GENERATED CODE by planner.screen_codegen
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _band_svv(a0, a1, a2, a3, P):
+    """``sum_ab Re(K_ca P_ab conj(K_cb))`` for one row (a0..a3) of K in band k, in the
+    order of the reference (a outer, b inner), written out; P: its 16 entries (row-major)."""
+    acc = 0.0
+    acc += (a0 * P[0] * np.conj(a0)).real
+    acc += (a0 * P[1] * np.conj(a1)).real
+    acc += (a0 * P[2] * np.conj(a2)).real
+    acc += (a0 * P[3] * np.conj(a3)).real
+    acc += (a1 * P[4] * np.conj(a0)).real
+    acc += (a1 * P[5] * np.conj(a1)).real
+    acc += (a1 * P[6] * np.conj(a2)).real
+    acc += (a1 * P[7] * np.conj(a3)).real
+    acc += (a2 * P[8] * np.conj(a0)).real
+    acc += (a2 * P[9] * np.conj(a1)).real
+    acc += (a2 * P[10] * np.conj(a2)).real
+    acc += (a2 * P[11] * np.conj(a3)).real
+    acc += (a3 * P[12] * np.conj(a0)).real
+    acc += (a3 * P[13] * np.conj(a1)).real
+    acc += (a3 * P[14] * np.conj(a2)).real
+    acc += (a3 * P[15] * np.conj(a3)).real
+    return acc
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _band_features(e, pb):
+    """The first 16 features of one band (see ``_NFEAT``): the real diagonal of
+    ``R = E PB E^H`` and the real and imaginary parts of its upper triangle, with
+    ``T = E PB``; e, pb: the 16 entries (row-major) of E and PB. The operations of the
+    reference pass, written out (straight-line, vectorized over bands by the caller)."""
+    t00 = 0j
+    t00 += e[0] * pb[0]
+    t00 += e[1] * pb[4]
+    t00 += e[2] * pb[8]
+    t00 += e[3] * pb[12]
+    t01 = 0j
+    t01 += e[0] * pb[1]
+    t01 += e[1] * pb[5]
+    t01 += e[2] * pb[9]
+    t01 += e[3] * pb[13]
+    t02 = 0j
+    t02 += e[0] * pb[2]
+    t02 += e[1] * pb[6]
+    t02 += e[2] * pb[10]
+    t02 += e[3] * pb[14]
+    t03 = 0j
+    t03 += e[0] * pb[3]
+    t03 += e[1] * pb[7]
+    t03 += e[2] * pb[11]
+    t03 += e[3] * pb[15]
+    t10 = 0j
+    t10 += e[4] * pb[0]
+    t10 += e[5] * pb[4]
+    t10 += e[6] * pb[8]
+    t10 += e[7] * pb[12]
+    t11 = 0j
+    t11 += e[4] * pb[1]
+    t11 += e[5] * pb[5]
+    t11 += e[6] * pb[9]
+    t11 += e[7] * pb[13]
+    t12 = 0j
+    t12 += e[4] * pb[2]
+    t12 += e[5] * pb[6]
+    t12 += e[6] * pb[10]
+    t12 += e[7] * pb[14]
+    t13 = 0j
+    t13 += e[4] * pb[3]
+    t13 += e[5] * pb[7]
+    t13 += e[6] * pb[11]
+    t13 += e[7] * pb[15]
+    t20 = 0j
+    t20 += e[8] * pb[0]
+    t20 += e[9] * pb[4]
+    t20 += e[10] * pb[8]
+    t20 += e[11] * pb[12]
+    t21 = 0j
+    t21 += e[8] * pb[1]
+    t21 += e[9] * pb[5]
+    t21 += e[10] * pb[9]
+    t21 += e[11] * pb[13]
+    t22 = 0j
+    t22 += e[8] * pb[2]
+    t22 += e[9] * pb[6]
+    t22 += e[10] * pb[10]
+    t22 += e[11] * pb[14]
+    t23 = 0j
+    t23 += e[8] * pb[3]
+    t23 += e[9] * pb[7]
+    t23 += e[10] * pb[11]
+    t23 += e[11] * pb[15]
+    t30 = 0j
+    t30 += e[12] * pb[0]
+    t30 += e[13] * pb[4]
+    t30 += e[14] * pb[8]
+    t30 += e[15] * pb[12]
+    t31 = 0j
+    t31 += e[12] * pb[1]
+    t31 += e[13] * pb[5]
+    t31 += e[14] * pb[9]
+    t31 += e[15] * pb[13]
+    t32 = 0j
+    t32 += e[12] * pb[2]
+    t32 += e[13] * pb[6]
+    t32 += e[14] * pb[10]
+    t32 += e[15] * pb[14]
+    t33 = 0j
+    t33 += e[12] * pb[3]
+    t33 += e[13] * pb[7]
+    t33 += e[14] * pb[11]
+    t33 += e[15] * pb[15]
+    r0 = 0.0
+    r0 += t00.real * e[0].real + t00.imag * e[0].imag
+    r0 += t01.real * e[1].real + t01.imag * e[1].imag
+    r0 += t02.real * e[2].real + t02.imag * e[2].imag
+    r0 += t03.real * e[3].real + t03.imag * e[3].imag
+    r1 = 0.0
+    r1 += t10.real * e[4].real + t10.imag * e[4].imag
+    r1 += t11.real * e[5].real + t11.imag * e[5].imag
+    r1 += t12.real * e[6].real + t12.imag * e[6].imag
+    r1 += t13.real * e[7].real + t13.imag * e[7].imag
+    r2 = 0.0
+    r2 += t20.real * e[8].real + t20.imag * e[8].imag
+    r2 += t21.real * e[9].real + t21.imag * e[9].imag
+    r2 += t22.real * e[10].real + t22.imag * e[10].imag
+    r2 += t23.real * e[11].real + t23.imag * e[11].imag
+    r3 = 0.0
+    r3 += t30.real * e[12].real + t30.imag * e[12].imag
+    r3 += t31.real * e[13].real + t31.imag * e[13].imag
+    r3 += t32.real * e[14].real + t32.imag * e[14].imag
+    r3 += t33.real * e[15].real + t33.imag * e[15].imag
+    z0 = 0j
+    z0 += t00 * np.conj(e[4])
+    z0 += t01 * np.conj(e[5])
+    z0 += t02 * np.conj(e[6])
+    z0 += t03 * np.conj(e[7])
+    z1 = 0j
+    z1 += t00 * np.conj(e[8])
+    z1 += t01 * np.conj(e[9])
+    z1 += t02 * np.conj(e[10])
+    z1 += t03 * np.conj(e[11])
+    z2 = 0j
+    z2 += t00 * np.conj(e[12])
+    z2 += t01 * np.conj(e[13])
+    z2 += t02 * np.conj(e[14])
+    z2 += t03 * np.conj(e[15])
+    z3 = 0j
+    z3 += t10 * np.conj(e[8])
+    z3 += t11 * np.conj(e[9])
+    z3 += t12 * np.conj(e[10])
+    z3 += t13 * np.conj(e[11])
+    z4 = 0j
+    z4 += t10 * np.conj(e[12])
+    z4 += t11 * np.conj(e[13])
+    z4 += t12 * np.conj(e[14])
+    z4 += t13 * np.conj(e[15])
+    z5 = 0j
+    z5 += t20 * np.conj(e[12])
+    z5 += t21 * np.conj(e[13])
+    z5 += t22 * np.conj(e[14])
+    z5 += t23 * np.conj(e[15])
+    return (r0, r1, r2, r3, z0.real, z1.real, z2.real, z3.real, z4.real, z5.real,
+            z0.imag, z1.imag, z2.imag, z3.imag, z4.imag, z5.imag)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _screen_one(w, ops, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol, sig_out, roll,
+                acc, V, st):
+    """Screen one setup: the fixed point on the shock-velocity RMS, then its band features.
+
+    The fixed point's arithmetic (the loop inverse and the order of the sum
+    ``svv[c] = sum_ab Re(K_ca P_ab conj(K_cb))``) is kept as written: the secant step divides
+    differences of nearly equal residuals, so a reordered sum (e.g. using P Hermitian) moves
+    sigma by up to ~1e-9 relative on some setups. Only where the values live changed: the
+    per-band work (:func:`_band_inverse`, :func:`_band_svv`) is straight-line code on scalars
+    in a loop over the bands of a block (``_BK`` bands, operands laid out by
+    :func:`band_operands`) that LLVM vectorizes over bands (each lane the same operations,
+    no fastmath); the bands' sums are then added to ``svv`` in band order. The final pass
+    writes the 48 features (``_NFEAT``) of ``E = diag(D) K`` and ``R = E PB E^H`` per band
+    into V (vectorized the same way); the metrics are a setup-independent linear form of
+    them (:func:`_metrics_of`).
+
+    roll (n_blocks * 12 * _BK), acc (n_blocks * 4 * _BK), V (n_blocks * _NFEAT * _BK; out:
+    feature i of band b _BK + j at (b _NFEAT + i) _BK + j), st (5, 4) are scratch,
+    allocated once per chunk of setups (:func:`screen_batch`).
+    """
+    nf = w.size
+    nblk = (nf + _BK - 1) // _BK
+    # the lag's roll-off 1 + j w tau per band and corner, the same in every iteration: its
+    # complex division's branch and divisor parts (numba's, CPython's algorithm) once per
+    # setup, by block: rows c (branch), 4 + c (ratio), 8 + c (denominator); padding bands
+    # get a harmless 1
+    for blk in range(nblk):
+        for c in range(4):
+            r = blk * 12 * _BK + c * _BK
+            for j in range(_BK):
+                k = blk * _BK + j
+                if k < nf:
+                    rl = 1.0 + 1j * w[k] * lag[c]
+                    br = rl.real
+                    bi = rl.imag
+                else:
+                    br = 1.0
+                    bi = 0.0
+                if abs(br) >= abs(bi):
+                    ratio = bi / br
+                    roll[r + j] = 1.0
+                    roll[r + 4 * _BK + j] = ratio
+                    roll[r + 8 * _BK + j] = br + bi * ratio
+                else:
+                    ratio = br / bi
+                    roll[r + j] = 0.0
+                    roll[r + 4 * _BK + j] = ratio
+                    roll[r + 8 * _BK + j] = br * ratio + bi
+    cb0, cb1, cb2, cb3 = cbar[0], cbar[1], cbar[2], cbar[3]
+    sig = st[0]
+    ceq = st[1]
+    svv = st[2]
+    s_prev = st[3]
+    h_prev = st[4]
+    for c in range(4):
+        sig[c] = sig0[c]
+        s_prev[c] = 0.0
+        h_prev[c] = 0.0
+    it = 0
+    for it in range(max_iter):
+        for c in range(4):
+            ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+            svv[c] = 0.0
+        e0, e1, e2, e3 = ceq[0], ceq[1], ceq[2], ceq[3]
+        for blk in range(nblk):
+            ob = blk * 96 * _BK
+            rb = blk * 12 * _BK
+            ab = blk * 4 * _BK
+            for j in range(_BK):  # vectorized over bands: no branches, no stores but acc
+                r = rb + j
+                D0 = _over_roll(e0, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb0
+                r += _BK
+                D1 = _over_roll(e1, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb1
+                r += _BK
+                D2 = _over_roll(e2, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb2
+                r += _BK
+                D3 = _over_roll(e3, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb3
+                o = ob + j
+                h = (complex(ops[o + 0 * _BK], ops[o + 16 * _BK]),
+                     complex(ops[o + 1 * _BK], ops[o + 17 * _BK]),
+                     complex(ops[o + 2 * _BK], ops[o + 18 * _BK]),
+                     complex(ops[o + 3 * _BK], ops[o + 19 * _BK]),
+                     complex(ops[o + 4 * _BK], ops[o + 20 * _BK]),
+                     complex(ops[o + 5 * _BK], ops[o + 21 * _BK]),
+                     complex(ops[o + 6 * _BK], ops[o + 22 * _BK]),
+                     complex(ops[o + 7 * _BK], ops[o + 23 * _BK]),
+                     complex(ops[o + 8 * _BK], ops[o + 24 * _BK]),
+                     complex(ops[o + 9 * _BK], ops[o + 25 * _BK]),
+                     complex(ops[o + 10 * _BK], ops[o + 26 * _BK]),
+                     complex(ops[o + 11 * _BK], ops[o + 27 * _BK]),
+                     complex(ops[o + 12 * _BK], ops[o + 28 * _BK]),
+                     complex(ops[o + 13 * _BK], ops[o + 29 * _BK]),
+                     complex(ops[o + 14 * _BK], ops[o + 30 * _BK]),
+                     complex(ops[o + 15 * _BK], ops[o + 31 * _BK]))
+                (a00, a01, a02, a03, a10, a11, a12, a13, a20, a21, a22, a23, a30, a31, a32,
+                 a33) = _band_inverse(h, D0, D1, D2, D3)
+                P = (complex(ops[o + 32 * _BK], ops[o + 48 * _BK]),
+                     complex(ops[o + 33 * _BK], ops[o + 49 * _BK]),
+                     complex(ops[o + 34 * _BK], ops[o + 50 * _BK]),
+                     complex(ops[o + 35 * _BK], ops[o + 51 * _BK]),
+                     complex(ops[o + 36 * _BK], ops[o + 52 * _BK]),
+                     complex(ops[o + 37 * _BK], ops[o + 53 * _BK]),
+                     complex(ops[o + 38 * _BK], ops[o + 54 * _BK]),
+                     complex(ops[o + 39 * _BK], ops[o + 55 * _BK]),
+                     complex(ops[o + 40 * _BK], ops[o + 56 * _BK]),
+                     complex(ops[o + 41 * _BK], ops[o + 57 * _BK]),
+                     complex(ops[o + 42 * _BK], ops[o + 58 * _BK]),
+                     complex(ops[o + 43 * _BK], ops[o + 59 * _BK]),
+                     complex(ops[o + 44 * _BK], ops[o + 60 * _BK]),
+                     complex(ops[o + 45 * _BK], ops[o + 61 * _BK]),
+                     complex(ops[o + 46 * _BK], ops[o + 62 * _BK]),
+                     complex(ops[o + 47 * _BK], ops[o + 63 * _BK]))
+                acc[ab + j] = _band_svv(a00, a01, a02, a03, P)
+                acc[ab + _BK + j] = _band_svv(a10, a11, a12, a13, P)
+                acc[ab + 2 * _BK + j] = _band_svv(a20, a21, a22, a23, P)
+                acc[ab + 3 * _BK + j] = _band_svv(a30, a31, a32, a33, P)
+        for k in range(nf):  # in band order, as the reference adds them
+            ab = (k // _BK) * 4 * _BK + k % _BK
+            for c in range(4):
+                svv[c] += acc[ab + c * _BK]
+        # fixed point sigma = g(sigma) per corner, accelerated by a secant step on
+        # h = g(sigma) - sigma once two iterates exist (safeguarded to a factor 2)
+        change = 0.0
+        for c in range(4):
+            new = math.sqrt(max(svv[c], 0.0))
+            change = max(change, abs(new - sig[c]) / max(sig[c], 1e-12))
+            hc = new - sig[c]
+            nxt = new if new > 0 else 0.5 * sig[c]
+            if it > 0:
+                dh = hc - h_prev[c]
+                ds = sig[c] - s_prev[c]
+                if dh != 0.0 and ds != 0.0:
+                    cand = sig[c] - hc * ds / dh
+                    if 0.5 * sig[c] < cand < 2.0 * sig[c]:
+                        nxt = cand
+            s_prev[c] = sig[c]
+            h_prev[c] = hc
+            sig[c] = nxt
+        if change < tol:
+            break
+    for c in range(4):
+        ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+        sig_out[c] = sig[c]
+    e0, e1, e2, e3 = ceq[0], ceq[1], ceq[2], ceq[3]
+    # the features v of every band (see _NFEAT), vectorized over bands like the fixed point,
+    # into V by block: band blk * _BK + j, feature i at (blk * _NFEAT + i) * _BK + j
+    for blk in range(nblk):
+        ob = blk * 96 * _BK
+        rb = blk * 12 * _BK
+        vb = blk * _NFEAT * _BK
+        for j in range(_BK):
+            r = rb + j
+            D0 = _over_roll(e0, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb0
+            r += _BK
+            D1 = _over_roll(e1, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb1
+            r += _BK
+            D2 = _over_roll(e2, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb2
+            r += _BK
+            D3 = _over_roll(e3, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb3
+            o = ob + j
+            h = (complex(ops[o + 0 * _BK], ops[o + 16 * _BK]),
+                 complex(ops[o + 1 * _BK], ops[o + 17 * _BK]),
+                 complex(ops[o + 2 * _BK], ops[o + 18 * _BK]),
+                 complex(ops[o + 3 * _BK], ops[o + 19 * _BK]),
+                 complex(ops[o + 4 * _BK], ops[o + 20 * _BK]),
+                 complex(ops[o + 5 * _BK], ops[o + 21 * _BK]),
+                 complex(ops[o + 6 * _BK], ops[o + 22 * _BK]),
+                 complex(ops[o + 7 * _BK], ops[o + 23 * _BK]),
+                 complex(ops[o + 8 * _BK], ops[o + 24 * _BK]),
+                 complex(ops[o + 9 * _BK], ops[o + 25 * _BK]),
+                 complex(ops[o + 10 * _BK], ops[o + 26 * _BK]),
+                 complex(ops[o + 11 * _BK], ops[o + 27 * _BK]),
+                 complex(ops[o + 12 * _BK], ops[o + 28 * _BK]),
+                 complex(ops[o + 13 * _BK], ops[o + 29 * _BK]),
+                 complex(ops[o + 14 * _BK], ops[o + 30 * _BK]),
+                 complex(ops[o + 15 * _BK], ops[o + 31 * _BK]))
+            K = _band_inverse(h, D0, D1, D2, D3)
+            # E = diag(D) K
+            e = (D0 * K[0], D0 * K[1], D0 * K[2], D0 * K[3], D1 * K[4], D1 * K[5], D1 * K[6],
+                 D1 * K[7], D2 * K[8], D2 * K[9], D2 * K[10], D2 * K[11], D3 * K[12],
+                 D3 * K[13], D3 * K[14], D3 * K[15])
+            pb = (complex(ops[o + 64 * _BK], ops[o + 80 * _BK]),
+                  complex(ops[o + 65 * _BK], ops[o + 81 * _BK]),
+                  complex(ops[o + 66 * _BK], ops[o + 82 * _BK]),
+                  complex(ops[o + 67 * _BK], ops[o + 83 * _BK]),
+                  complex(ops[o + 68 * _BK], ops[o + 84 * _BK]),
+                  complex(ops[o + 69 * _BK], ops[o + 85 * _BK]),
+                  complex(ops[o + 70 * _BK], ops[o + 86 * _BK]),
+                  complex(ops[o + 71 * _BK], ops[o + 87 * _BK]),
+                  complex(ops[o + 72 * _BK], ops[o + 88 * _BK]),
+                  complex(ops[o + 73 * _BK], ops[o + 89 * _BK]),
+                  complex(ops[o + 74 * _BK], ops[o + 90 * _BK]),
+                  complex(ops[o + 75 * _BK], ops[o + 91 * _BK]),
+                  complex(ops[o + 76 * _BK], ops[o + 92 * _BK]),
+                  complex(ops[o + 77 * _BK], ops[o + 93 * _BK]),
+                  complex(ops[o + 78 * _BK], ops[o + 94 * _BK]),
+                  complex(ops[o + 79 * _BK], ops[o + 95 * _BK]))
+            f = _band_features(e, pb)
+            o = vb + j  # feature i at o + i * _BK
+            V[o + 0 * _BK] = f[0]
+            V[o + 1 * _BK] = f[1]
+            V[o + 2 * _BK] = f[2]
+            V[o + 3 * _BK] = f[3]
+            V[o + 4 * _BK] = f[4]
+            V[o + 5 * _BK] = f[5]
+            V[o + 6 * _BK] = f[6]
+            V[o + 7 * _BK] = f[7]
+            V[o + 8 * _BK] = f[8]
+            V[o + 9 * _BK] = f[9]
+            V[o + 10 * _BK] = f[10]
+            V[o + 11 * _BK] = f[11]
+            V[o + 12 * _BK] = f[12]
+            V[o + 13 * _BK] = f[13]
+            V[o + 14 * _BK] = f[14]
+            V[o + 15 * _BK] = f[15]
+            V[o + 16 * _BK] = e[0].real
+            V[o + 32 * _BK] = e[0].imag
+            V[o + 17 * _BK] = e[1].real
+            V[o + 33 * _BK] = e[1].imag
+            V[o + 18 * _BK] = e[2].real
+            V[o + 34 * _BK] = e[2].imag
+            V[o + 19 * _BK] = e[3].real
+            V[o + 35 * _BK] = e[3].imag
+            V[o + 20 * _BK] = e[4].real
+            V[o + 36 * _BK] = e[4].imag
+            V[o + 21 * _BK] = e[5].real
+            V[o + 37 * _BK] = e[5].imag
+            V[o + 22 * _BK] = e[6].real
+            V[o + 38 * _BK] = e[6].imag
+            V[o + 23 * _BK] = e[7].real
+            V[o + 39 * _BK] = e[7].imag
+            V[o + 24 * _BK] = e[8].real
+            V[o + 40 * _BK] = e[8].imag
+            V[o + 25 * _BK] = e[9].real
+            V[o + 41 * _BK] = e[9].imag
+            V[o + 26 * _BK] = e[10].real
+            V[o + 42 * _BK] = e[10].imag
+            V[o + 27 * _BK] = e[11].real
+            V[o + 43 * _BK] = e[11].imag
+            V[o + 28 * _BK] = e[12].real
+            V[o + 44 * _BK] = e[12].imag
+            V[o + 29 * _BK] = e[13].real
+            V[o + 45 * _BK] = e[13].imag
+            V[o + 30 * _BK] = e[14].real
+            V[o + 46 * _BK] = e[14].imag
+            V[o + 31 * _BK] = e[15].real
+            V[o + 47 * _BK] = e[15].imag
+    return it + 1
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _metrics_of(F, d0, V, G, out, pw):
+    """The metrics of G setups from their band features V[g] (:func:`_screen_one`).
+
+    Each metric's band power is d0 plus a fixed linear form of the band's features (F, from
+    the operands), summed over bands, in the reference's order per setup: ``pw = d0[k]``,
+    ``pw += F[k, i] v_i`` for i in order, ``out += pw`` band by band. The G setups share
+    each row of F (read once per group, not once per setup: F is a few hundred kB); the loop
+    over metrics innermost, contiguous in F (padded to a multiple of 4)."""
+    nf = d0.shape[0]
+    p = d0.shape[1]
+    pp = F.shape[2]
+    for g in range(G):
+        for o in range(p):
+            out[g, o] = 0.0
+    for k in range(nf):
+        vb = (k // _BK) * _NFEAT * _BK + k % _BK
+        for g in range(G):
+            for o in range(p):
+                pw[g, o] = d0[k, o]
+        for i in range(_NFEAT):
+            for g in range(G):
+                vi = V[g, vb + i * _BK]
+                for o in range(pp):
+                    pw[g, o] += F[k, i, o] * vi
+        for g in range(G):
+            for o in range(p):
+                out[g, o] += pw[g, o]
+    for g in range(G):
+        for o in range(p):
+            out[g, o] = math.sqrt(max(out[g, o], 0.0))
+
+
+@nb.njit(cache=True, error_model="numpy", parallel=True)
+def screen_batch(w, ops, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol,
+                 out, sig_out, iters, n_chunks):
+    """Screen setups in n_chunks chunks, in parallel (scratch allocated once per chunk)."""
+    n = kv.shape[0]
+    nf = w.size
+    nblk = (nf + _BK - 1) // _BK
+    for ch in nb.prange(n_chunks):
+        # scratch once per chunk of setups
+        roll = np.empty(nblk * 12 * _BK)
+        acc = np.empty(nblk * 4 * _BK)
+        V = np.empty((_GROUP, nblk * _NFEAT * _BK))
+        pw = np.zeros((_GROUP, F.shape[2]))
+        st = np.empty((5, 4))
+        stop = (ch + 1) * n // n_chunks
+        for s0 in range(ch * n // n_chunks, stop, _GROUP):
+            G = min(_GROUP, stop - s0)
+            for g in range(G):
+                s = s0 + g
+                iters[s] = _screen_one(w, ops, cbar, sig0, kv[s], kf[s], nk[s], slo[s], shi[s],
+                                       lag[s], max_iter, tol, sig_out[s], roll, acc, V[g], st)
+            _metrics_of(F, d0, V, G, out[s0:s0 + G], pw)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
+                       max_iter, tol, out, sig_out):
+    """Screen one setup, one band after the other (the scalar kernel).
+
+    The same operations in the same order as :func:`_screen_one`, which runs them on four
+    bands at once: the same numbers bit for bit (tested). It compiles in about 6 s against
+    the vectorized kernel's 30-40 s (numba's front end on that kernel's straight-line band
+    code), so small batches (:data:`planner.screen._VECTOR_MIN_SETUPS`) use it: a fresh
+    machine's first ``rank`` or demo waits for the small compilation only.
+
+    The fixed point's arithmetic (the loop inverse and the order of the sum
+    ``svv[c] = sum_ab Re(K_ca P_ab conj(K_cb))``) is kept as written: the secant step divides
+    differences of nearly equal residuals, so a reordered sum (e.g. using P Hermitian) moves
+    sigma by up to ~1e-9 relative on some setups. The final pass is rewritten: each metric's
+    band power is ``d0`` plus a setup-independent linear form ``F`` (:func:`metric_form`) of
+    the 48 features of ``E = diag(D) K`` and ``R = E PB E^H``.
+    """
+    nf = w.size
+    p = d0.shape[1]
+    K = np.empty((4, 4), dtype=np.complex128)
+    T = np.empty((4, 4), dtype=np.complex128)
+    perm = np.empty(4, dtype=np.int64)
+    D = np.empty(4, dtype=np.complex128)
+    # the lag's roll-off 1 / (1 + j w tau) per band and corner: the same in every iteration
+    roll = np.empty((nf, 4), dtype=np.complex128)
+    for k in range(nf):
+        for c in range(4):
+            roll[k, c] = 1.0 + 1j * w[k] * lag[c]
+    v = np.empty(_NFEAT)
+    pw = np.empty(p)
+    ceq = np.zeros(4)
+    sig = sig0.copy()
+    svv = np.zeros(4)
+    s_prev = np.zeros(4)
+    h_prev = np.zeros(4)
+    it = 0
+    for it in range(max_iter):
+        for c in range(4):
+            ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+            svv[c] = 0.0
+        for k in range(nf):
+            for c in range(4):
+                D[c] = ceq[c] / roll[k, c] - cbar[c]
+            _loop_inverse(Hvs[k], D, K, perm)
+            for c in range(4):
+                acc = 0.0
+                for a in range(4):
+                    for b in range(4):
+                        acc += (K[c, a] * P[k, a, b] * np.conj(K[c, b])).real
+                svv[c] += acc
+        # fixed point sigma = g(sigma) per corner, accelerated by a secant step on
+        # h = g(sigma) - sigma once two iterates exist (safeguarded to a factor 2)
+        change = 0.0
+        for c in range(4):
+            new = math.sqrt(max(svv[c], 0.0))
+            change = max(change, abs(new - sig[c]) / max(sig[c], 1e-12))
+            hc = new - sig[c]
+            nxt = new if new > 0 else 0.5 * sig[c]
+            if it > 0:
+                dh = hc - h_prev[c]
+                ds = sig[c] - s_prev[c]
+                if dh != 0.0 and ds != 0.0:
+                    cand = sig[c] - hc * ds / dh
+                    if 0.5 * sig[c] < cand < 2.0 * sig[c]:
+                        nxt = cand
+            s_prev[c] = sig[c]
+            h_prev[c] = hc
+            sig[c] = nxt
+        if change < tol:
+            break
+    for c in range(4):
+        ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
+        sig_out[c] = sig[c]
+    for o in range(p):
+        out[o] = 0.0
+    for k in range(nf):
+        for c in range(4):
+            D[c] = ceq[c] / roll[k, c] - cbar[c]
+        _loop_inverse(Hvs[k], D, K, perm)
+        # E = diag(D) K, in place of K
+        for a in range(4):
+            for b in range(4):
+                K[a, b] = D[a] * K[a, b]
+        # T = E PB, then R = T E^H (Hermitian: the diagonal and the upper triangle)
+        for a in range(4):
+            for b in range(4):
+                acc = 0j
+                for c in range(4):
+                    acc += K[a, c] * PB[k, c, b]
+                T[a, b] = acc
+        for a in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += T[a, c].real * K[a, c].real + T[a, c].imag * K[a, c].imag
+            v[a] = acc
+        q = 0
+        for a in range(3):  # a < b in the order of _PAIRS_A, _PAIRS_B
+            for b in range(a + 1, 4):
+                acc = 0j
+                for c in range(4):
+                    acc += T[a, c] * np.conj(K[b, c])
+                v[4 + q] = acc.real
+                v[10 + q] = acc.imag
+                q += 1
+        for a in range(4):
+            for b in range(4):
+                v[16 + 4 * a + b] = K[a, b].real
+                v[32 + 4 * a + b] = K[a, b].imag
+        # each metric's band power is d0 plus a fixed linear form of v (F, from the
+        # operands): the loop over metrics innermost, contiguous in F
+        for o in range(p):
+            pw[o] = d0[k, o]
+        for j in range(_NFEAT):
+            vj = v[j]
+            for o in range(p):
+                pw[o] += F[k, j, o] * vj
+        for o in range(p):
+            out[o] += pw[o]
+    for o in range(p):
+        out[o] = math.sqrt(max(out[o], 0.0))
+    return it + 1
+
+
+@nb.njit(cache=True, error_model="numpy", parallel=True)
+def screen_batch_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
+                        max_iter, tol, out, sig_out, iters):
+    """:func:`_screen_one_scalar` over setups, in parallel."""
+    for s in nb.prange(kv.shape[0]):
+        iters[s] = _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv[s], kf[s], nk[s],
+                                      slo[s], shi[s], lag[s], max_iter, tol, out[s],
+                                      sig_out[s])
+
+
+def band_operands(ops):
+    """The fixed point's per-band operands in the layout of :func:`_screen_one`'s band loop.
+
+    Returns
+    -------
+    ndarray, shape (n_blocks * 96 * _BK,)
+        Block ``b`` of ``_BK`` bands holds at ``(96 b + m) _BK + j`` (band ``b _BK + j``):
+        for m < 16 the real part of entry m (row-major) of ``-Hvs``, for 16 <= m < 32 its
+        imaginary part, then the same of ``P`` (32 <= m < 64) and ``PB`` (64 <= m < 96).
+        Bands past the last are zero (their loop inverse is the identity; never summed).
+    """
+    nf = ops.w.size
+    nblk = -(-nf // _BK)
+    x = np.zeros((96, nblk * _BK))
+    nhv = -ops.Hvs.reshape(nf, 16).T
+    P = ops.P.reshape(nf, 16).T
+    x[:16, :nf] = nhv.real
+    x[16:32, :nf] = nhv.imag
+    x[32:48, :nf] = P.real
+    x[48:64, :nf] = P.imag
+    PB = ops.PB.reshape(nf, 16).T
+    x[64:80, :nf] = PB.real
+    x[80:, :nf] = PB.imag
+    return np.ascontiguousarray(x.reshape(96, nblk, _BK).transpose(1, 0, 2)).reshape(-1)
+
+
+def metric_form(ops):
+    """The metrics' band powers as a linear form of the kernel's per-band features.
+
+    Parameters
+    ----------
+    ops : ScreenOperands
+
+    Returns
+    -------
+    F : ndarray, shape (n_bands, 48, n_metrics)
+        A metric's band power is ``d0[k, o] + F[k, :, o] . v`` with v the features of the
+        setup's loop correction in band k (see ``_NFEAT``). With ``h = H_ys[k, o]``,
+        ``W = h E``: ``W P_B W^H = h R h^H`` takes ``|h_a|^2`` (diagonal of R),
+        ``2 Re(h_a conj(h_b))`` and ``-2 Im(h_a conj(h_b))`` (upper triangle of R, ``a < b``
+        in the order of ``_PAIRS_A``/``_PAIRS_B``), and ``2 Re(W Q) = 2 Re sum_ab E_ab h_a
+        Q_bo`` takes ``2 Re(h_a Q_bo)`` and ``-2 Im(h_a Q_bo)``. Setup-independent: built
+        once per call of :func:`planner.screen.screen_packed`, it takes the per-metric work out
+        of the kernels.
+    """
+    Hys, QB = ops.Hys, ops.QB
+    nf, p = Hys.shape[0], Hys.shape[1]
+    F = np.empty((nf, _NFEAT, p))
+    h = np.transpose(Hys, (0, 2, 1))  # (nf, 4, p)
+    F[:, :4] = np.abs(h) ** 2
+    g = 2.0 * h[:, _PAIRS_A] * np.conj(h[:, _PAIRS_B])  # (nf, 6, p)
+    F[:, 4:10] = g.real
+    F[:, 10:16] = -g.imag
+    y = 2.0 * h[:, :, None, :] * QB[:, None, :, :]  # (nf, a, b, p): 2 h_a Q_bo
+    F[:, 16:32] = y.real.reshape(nf, 16, p)
+    F[:, 32:48] = -y.imag.reshape(nf, 16, p)
+    return F

@@ -1,0 +1,415 @@
+"""What-if conditions: what a perturbation changes, and the plant, drive and setups it gives.
+
+:func:`condition_effect` sums a condition's factor values into a
+:class:`ConditionEffect` (shock scales and lags per corner or id, spring and bar
+changes, vehicle-parameter changes, drive scales, a window or another drive file).
+From it, :func:`condition_plant` builds the condition's loop plant (the changed known
+vehicle, or the identified plant stiffened by :func:`stiffened_plant`),
+:func:`condition_drive` the condition's drive, and :func:`condition_setups` the setups
+with their scaled or lagged shocks (:class:`ShockVariants`, shared between identical
+conditions). :func:`plant_key` and :func:`drive_key` say which conditions share a plant
+and a drive (one simulation call per group in :mod:`planner.whatif.evaluate`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ident.data.channels import CORNERS, RIG_INPUTS
+from ident.data.drive import Drive
+from ident.errors import VehicleError
+from ident.models.shocks import ShockLibrary
+from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
+from ident.sim import stiffness as ident_stiffness
+from ident.sim.stiffness import suspension_stiffness
+from planner.errors import PlannerError
+from planner.setups import Setup
+from planner.whatif.spec import AXLE_CORNERS
+
+__all__ = [
+    "MIN_WINDOW_S",
+    "suspension_stiffness",
+    "stiffened_plant",
+    "ConditionEffect",
+    "condition_effect",
+    "plant_key",
+    "drive_key",
+    "known_params",
+    "condition_plant",
+    "condition_drive",
+    "ShockVariants",
+    "condition_setups",
+]
+
+#: A drive window shorter than this cannot resolve the 1 Hz end of the metric band with
+#: the metric filter's transients [s].
+MIN_WINDOW_S = 4.0
+
+
+# ----------------------------------------------------------------------------------------------
+# applying a condition
+# ----------------------------------------------------------------------------------------------
+
+def stiffened_plant(plant, *, spring_n_m=None, arb_n_m=None, name=None):
+    """:func:`ident.sim.stiffness.stiffened_plant`, raising the what-if's error.
+
+    The same plant and messages; a :class:`~ident.errors.VehicleError` of the
+    transform (no shock-travel outputs, a singular or unstable stiffened loop) is
+    raised as a :class:`~planner.errors.PlannerError`.
+    """
+    try:
+        return ident_stiffness.stiffened_plant(plant, spring_n_m=spring_n_m, arb_n_m=arb_n_m,
+                                               name=name)
+    except VehicleError as exc:
+        raise PlannerError(str(exc)) from None
+
+
+@dataclass(frozen=True)
+class ConditionEffect:
+    """The accumulated change of one condition (SI)."""
+
+    corner_scale: np.ndarray       # (4,)
+    id_scale: dict
+    corner_lag: np.ndarray         # (4,) added [s]
+    id_lag: dict
+    spring_add: np.ndarray         # (4,) [N/m]
+    spring_scale: np.ndarray       # (4,) multiplier of the known rate
+    arb_add: np.ndarray            # (2,) [N/m]
+    arb_scale: np.ndarray          # (2,)
+    vehicle: tuple                 # ((key, change, value), ...)
+    channel_scale: np.ndarray      # (7,)
+    window: tuple | None
+    drive: object | None
+
+
+def condition_effect(perturbation, factors):
+    """What a condition changes: its factors' values summed per corner, id, axle, channel.
+
+    Parameters
+    ----------
+    perturbation : planner.whatif.spec.Perturbation
+    factors : sequence of planner.whatif.spec.Factor
+
+    Returns
+    -------
+    ConditionEffect
+        Scales multiply and additions add when several factors act on one target.
+    """
+    e = dict(corner_scale=np.ones(4), id_scale={}, corner_lag=np.zeros(4), id_lag={},
+             spring_add=np.zeros(4), spring_scale=np.ones(4), arb_add=np.zeros(2),
+             arb_scale=np.ones(2), vehicle=[], channel_scale=np.ones(7), window=None, drive=None)
+    for f in factors:
+        vals = perturbation.values.get(f.name)
+        if vals is None:
+            continue
+        for j, t in enumerate(f.targets or (None,)):
+            v = vals[j] if j < len(vals) else vals[0]
+            if f.kind in ("shock_scale", "shock_lag"):
+                key = "scale" if f.kind == "shock_scale" else "lag"
+                if isinstance(t, str) and t.startswith("id:"):
+                    d = e[f"id_{key}"]
+                    d[t[3:]] = d.get(t[3:], 1.0 if key == "scale" else 0.0)
+                    d[t[3:]] = d[t[3:]] * v if key == "scale" else d[t[3:]] + v
+                else:
+                    i = CORNERS.index(t)
+                    if key == "scale":
+                        e["corner_scale"][i] *= v
+                    else:
+                        e["corner_lag"][i] += v
+            elif f.kind == "spring_rate":
+                i = CORNERS.index(t)
+                if f.change == "add":
+                    e["spring_add"][i] += v
+                elif f.baseline_rate is not None:
+                    e["spring_add"][i] += (v - 1.0) * f.baseline_rate[j]
+                else:
+                    e["spring_scale"][i] *= v
+            elif f.kind == "arb_rate":
+                a = list(AXLE_CORNERS).index(t)
+                if f.change == "add":
+                    e["arb_add"][a] += v
+                elif f.baseline_rate is not None:
+                    e["arb_add"][a] += (v - 1.0) * f.baseline_rate[j]
+                else:
+                    e["arb_scale"][a] *= v
+            elif f.kind == "drive_scale":
+                e["channel_scale"][RIG_INPUTS.index(t)] *= v
+            elif f.kind == "drive_window":
+                e["window"] = v
+            elif f.kind == "drive_file":
+                e["drive"] = v
+            elif f.kind == "vehicle":
+                e["vehicle"].append((t, f.change, v, f.name))
+    e["vehicle"] = tuple(e["vehicle"])
+    return ConditionEffect(**e)
+
+
+def plant_key(e):
+    """A hashable key of the plant a :class:`ConditionEffect` makes (equal key, one plant)."""
+    return (tuple(np.round(e.spring_add, 9)), tuple(np.round(e.spring_scale, 12)),
+            tuple(np.round(e.arb_add, 9)), tuple(np.round(e.arb_scale, 12)),
+            tuple((k, c, round(float(v), 12)) for k, c, v, _ in e.vehicle))
+
+
+def drive_key(e):
+    """A hashable key of the drive change of a :class:`ConditionEffect`."""
+    return (tuple(np.round(e.channel_scale, 12)), e.window,
+            None if e.drive is None else id(e.drive))
+
+
+def known_params(model):
+    """The known vehicle's parameters of `model`, or None for an identified model.
+
+    Parameters
+    ----------
+    model : VehicleParams, FullCarModel, VehicleModel or LoopPlant
+
+    Returns
+    -------
+    ident.models.vehicle.VehicleParams or None
+    """
+    if isinstance(model, VehicleParams):
+        return model
+    if isinstance(model, FullCarModel):
+        return model.params
+    return None
+
+
+_VEHICLE_ATTR = {  # vehicle-TOML key -> (attribute, indices or None)
+    "track": (("track_front_m", None), ("track_rear_m", None)),
+    "track_front": (("track_front_m", None),),
+    "track_rear": (("track_rear_m", None),),
+    "cg_lateral_offset": (("cg_lateral_offset_m", None),),
+    "cg_to_front_axle": (("a_m", None),),
+    "cg_to_rear_axle": (("b_m", None),),
+    "sprung_mass": (("sprung_mass_kg", None),),
+    "roll_inertia": (("roll_inertia_kg_m2", None),),
+    "pitch_inertia": (("pitch_inertia_kg_m2", None),),
+    "front_unsprung_mass": (("unsprung_mass_kg", (0, 1)),),
+    "rear_unsprung_mass": (("unsprung_mass_kg", (2, 3)),),
+    "front_spring_rate": (("spring_rate_n_m", (0, 1)),),
+    "rear_spring_rate": (("spring_rate_n_m", (2, 3)),),
+    "tire_stiffness": (("tire_rate_n_m", (0, 1, 2, 3)),),
+    "front_tire_stiffness": (("tire_rate_n_m", (0, 1)),),
+    "rear_tire_stiffness": (("tire_rate_n_m", (2, 3)),),
+    "torsion_stiffness": (("torsion_stiffness_n_m_rad", None),),
+    "torsion_inertia": (("torsion_inertia_kg_m2", None),),
+    "tire_damping": (("tire_damping_n_s_m", (0, 1, 2, 3)),),
+    "front_tire_damping": (("tire_damping_n_s_m", (0, 1)),),
+    "rear_tire_damping": (("tire_damping_n_s_m", (2, 3)),),
+    "tire_damping_corner": (("tire_damping_corner_hz", None),),
+    "front_arb_rate": (("arb_rate_n_m", (0,)),),
+    "rear_arb_rate": (("arb_rate_n_m", (1,)),),
+}
+
+
+def _changed_params(params, e, where):
+    """The known vehicle with a condition's spring, bar and parameter changes."""
+    changes = {}
+
+    def current(attr):
+        if attr in changes:
+            return changes[attr]
+        v = getattr(params, attr)
+        if v is None and attr in ("arb_rate_n_m", "tire_damping_n_s_m"):
+            v = np.zeros(2 if attr == "arb_rate_n_m" else 4)
+        return None if v is None else np.array(v, dtype=float)
+
+    k = current("spring_rate_n_m") * e.spring_scale + e.spring_add
+    changes["spring_rate_n_m"] = k
+    arb = current("arb_rate_n_m") * e.arb_scale + e.arb_add
+    if np.any(arb != 0) or params.arb_rate_n_m is not None:
+        changes["arb_rate_n_m"] = arb
+    for key, change, v, fname in e.vehicle:
+        for attr, idx in _VEHICLE_ATTR[key]:
+            cur = current(attr)
+            if cur is None:
+                raise PlannerError(f"{where}: factor {fname!r} key 'parameter' = {key!r}: the "
+                                   "vehicle has no such element to change; give it in the "
+                                   "vehicle file first")
+            if idx is None:
+                cur = float(cur) * v if change == "scale" else float(cur) + v
+            else:
+                cur = cur.copy()
+                cur[list(idx)] = cur[list(idx)] * v if change == "scale" else cur[list(idx)] + v
+            changes[attr] = cur
+    for attr, val in changes.items():
+        if np.any(np.asarray(val, dtype=float) < 0):
+            key = {"spring_rate_n_m": "spring_rate", "arb_rate_n_m": "arb_rate"}.get(attr, attr)
+            raise PlannerError(f"{where}: the change makes {key} negative "
+                               f"({np.round(np.asarray(val, float), 1).tolist()}); reduce the "
+                               "change (a rate cannot be below zero)")
+    try:
+        return params.replace(**changes)
+    except VehicleError as exc:
+        raise PlannerError(f"{where}: the changed vehicle is not valid: {exc}") from None
+
+
+def condition_plant(model, base_plant, e, where, nominal_rates):
+    """The loop plant of a condition (the model's own when nothing structural changes).
+
+    Parameters
+    ----------
+    model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
+        As :func:`planner.whatif.evaluate_whatif` takes it.
+    base_plant : ident.sim.closedloop.LoopPlant
+        The model's nominal loop plant.
+    e : ConditionEffect
+    where : str
+        The condition's name for error messages.
+    nominal_rates : array_like, shape (4,), or None
+        The identified car's spring wheel rates [N/m], if known.
+
+    Returns
+    -------
+    ident.sim.closedloop.LoopPlant
+        `base_plant` itself; the changed known vehicle's plant; or `base_plant`
+        stiffened (:func:`stiffened_plant`) on an identified model.
+
+    Raises
+    ------
+    PlannerError
+        If the change needs a known vehicle, the current rates, or makes a rate negative.
+    """
+    params = known_params(model)
+    structural = (np.any(e.spring_add) or np.any(e.spring_scale != 1) or np.any(e.arb_add)
+                  or np.any(e.arb_scale != 1) or e.vehicle)
+    if not structural:
+        return base_plant
+    if params is not None:
+        p2 = _changed_params(params, e, where)
+        return build_full_car(p2).loop_plant(cbar_n_s_m=base_plant.cbar_n_s_m)
+    if e.vehicle:
+        key = e.vehicle[0][0]
+        raise PlannerError(f"{where}: factor {e.vehicle[0][3]!r} key 'parameter' = {key!r} "
+                           "needs a known vehicle model (a vehicle TOML); an identified model "
+                           "cannot change it without re-identification (springs and anti-roll "
+                           "bars can: use a spring_rate or arb_rate factor)")
+    if np.any(e.spring_scale != 1) or np.any(e.arb_scale != 1):
+        raise PlannerError(f"{where}: a spring_rate or arb_rate factor with change = 'scale' on an "
+                           "identified model needs the current rates: add baseline_rate = ... "
+                           "(N/m or lbf/in per the file's units) or use change = 'add'")
+    if nominal_rates is not None:
+        net = np.asarray(nominal_rates, float) + e.spring_add
+        if np.any(net < 0):
+            raise PlannerError(f"{where}: the change makes a spring rate negative "
+                               f"({np.round(net, 1).tolist()} N/m); reduce the change")
+    return stiffened_plant(base_plant, spring_n_m=e.spring_add, arb_n_m=e.arb_add,
+                           name=f"{base_plant.name} [{where}]")
+
+
+def condition_drive(drive, e, where):
+    """The drive of a condition: another file, a window, scaled channels (in that order).
+
+    Parameters
+    ----------
+    drive : ident.data.drive.Drive
+        The prepared nominal drive.
+    e : ConditionEffect
+    where : str
+        The condition's name for error messages.
+
+    Returns
+    -------
+    ident.data.drive.Drive
+        `drive` itself when the condition leaves it alone.
+
+    Raises
+    ------
+    PlannerError
+        If a window lies outside the drive or is shorter than :data:`MIN_WINDOW_S`.
+    """
+    if e.drive is not None:
+        drive = e.drive
+    if e.window is not None:
+        t0, t1 = e.window
+        if t0 < 0 or t1 > drive.duration_s + 0.5 / drive.fs_hz:
+            raise PlannerError(f"{where}: key 'levels': window {t0:g}-{t1:g} s is outside drive "
+                               f"{drive.name!r} (0-{drive.duration_s:g} s); give a window within "
+                               "the drive")
+        if t1 - t0 < MIN_WINDOW_S:
+            raise PlannerError(f"{where}: key 'levels': window {t0:g}-{t1:g} s is shorter than "
+                               f"{MIN_WINDOW_S:g} s; the 1 Hz end of the metric band needs a "
+                               "longer section")
+        a, b = int(round(t0 * drive.fs_hz)), int(round(t1 * drive.fs_hz))
+        drive = Drive(f"{drive.name} [{t0:g}-{t1:g} s]", drive.fs_hz,
+                      {c: drive.channels[c][a:b] for c in drive.rig_inputs},
+                      settings={**drive.settings, "window_s": (t0, t1)})
+    if np.any(e.channel_scale != 1):
+        s = dict(zip(RIG_INPUTS, e.channel_scale))
+        drive = Drive(f"{drive.name} [scaled]", drive.fs_hz,
+                      {c: drive.channels[c] * s[c] for c in drive.rig_inputs},
+                      settings={**drive.settings, "scale": s})
+    return drive
+
+
+class ShockVariants:
+    """Derived shocks of the conditions (scaled, lagged), shared between identical ones.
+
+    Parameters
+    ----------
+    library : ident.models.shocks.ShockLibrary
+        The crate.
+
+    Attributes
+    ----------
+    extra : dict of str -> ident.models.shocks.ShockModel
+        The derived shocks by id (``"<id>~<n>"``).
+    """
+
+    def __init__(self, library):
+        self.library = library
+        self.extra = {}
+        self._key = {}
+
+    def model_id(self, shock_id, scale, lag_add):
+        """The id of shock `shock_id` scaled by `scale` with `lag_add` [s] more lag (made once)."""
+        if scale == 1.0 and lag_add == 0.0:
+            return shock_id
+        key = (shock_id, round(float(scale), 14), round(float(lag_add), 14))
+        if key not in self._key:
+            base = self.library.get(shock_id)
+            lag = base.lag_s + lag_add
+            if lag < 0:
+                raise PlannerError(f"shock {shock_id!r}: the lag change {lag_add:g} s makes its "
+                                   f"lag {lag:g} s negative; reduce the change")
+            new_id = f"{shock_id}~{len(self._key) + 1}"
+            self.extra[new_id] = base.scaled(scale, lag_s=lag, id=new_id)
+            self._key[key] = new_id
+        return self._key[key]
+
+    def full_library(self):
+        """The crate and the derived shocks in one library."""
+        return ShockLibrary(list(self.library.values()) + list(self.extra.values()),
+                            source=self.library.source)
+
+
+def condition_setups(setups, e, variants, tag):
+    """The setups under a condition: their shocks scaled or lagged, names tagged.
+
+    Parameters
+    ----------
+    setups : sequence of planner.setups.Setup
+    e : ConditionEffect
+    variants : ShockVariants
+        Makes (once) and names the derived shocks.
+    tag : str
+        The condition's tag, ``"<drive>:<perturbation>"`` (indices).
+
+    Returns
+    -------
+    list of planner.setups.Setup
+        Named ``"<setup>\x1f<tag>"``.
+    """
+    out = []
+    for s in setups:
+        ids = {}
+        for i, c in enumerate(CORNERS):
+            sid = s.ids()[i]
+            scale = e.corner_scale[i] * e.id_scale.get(sid, 1.0)
+            lag = e.corner_lag[i] + e.id_lag.get(sid, 0.0)
+            ids[c] = variants.model_id(sid, scale, lag)
+        out.append(Setup(f"{s.name}\x1f{tag}", ids))
+    return out
