@@ -85,7 +85,7 @@ def main(argv=None):
         timed("identify", ["-q", "identify", "session", "--out", "model.npz"], w)
         # a drive and setups for predict, from the package's own writers
         code = ("from ident.data.drive import make_track_drive, write_drive; "
-                "from ident.models.shocks import read_shock_library; "
+                "from ident.models.library import read_shock_library; "
                 "from planner.demo import DEMO_LIBRARY_PATH; "
                 "from planner.setups import enumerate_setups, write_setups; "
                 "write_drive(make_track_drive(duration_s=120.0, fs_hz=100.0, seed=1), "

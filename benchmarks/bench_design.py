@@ -33,7 +33,7 @@ from pathlib import Path
 # benchmark the working tree this script lives in, installed or not
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ident.models.shocks import read_shock_library  # noqa: E402
+from ident.models.library import read_shock_library  # noqa: E402
 from ident.models.vehicle import example_vehicle  # noqa: E402
 from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
 from planner.design import design_experiment  # noqa: E402

@@ -1,4 +1,5 @@
-"""Benchmark of identification: the paper session through ``ident.identify.model.identify_session``.
+"""Benchmark of identification: the paper session through
+``ident.identify.pipeline.identify_session``.
 
 Run::
 
@@ -11,14 +12,14 @@ average at that moment:
    channel of the spec) built once in memory with ``ident.sim.rig.simulate_session()``.
    Building it is *not* part of any timing below;
 2. the engine: the median, min and max wall time of ``--repeat`` calls of
-   ``ident.identify.model.identify_session(session)`` (FRF estimate, conditioning,
+   ``ident.identify.pipeline.identify_session(session)`` (FRF estimate, conditioning,
    per-pair rational fits, all defaults);
 3. its stages, each timed separately (median of ``--repeat``):
    ``ident.identify.frf.estimate_frf`` (with its default estimator, as ``identify_session``
    calls it; if that is not the paper's Welch H1, ``estimator="welch"`` is timed
    too, as the like-for-like engine for the reference below),
    ``ident.identify.condition.condition_frf``,
-   ``ident.identify.model.fit_model`` (the default ``invfreqs`` method), and
+   ``ident.identify.pipeline.fit_model`` (the default ``invfreqs`` method), and
    ``model.loop_plant()`` (the realization the planner simulates: a balanced
    truncation, about 0.4 s since session 5; not part of ``identify_session``;
    ``shockplan identify`` builds it once and stores it in the model file, so the
@@ -301,7 +302,7 @@ def main(argv=None):
         med["estimate_frf welch"] = med["estimate_frf"]
     med["condition_frf"] = _spread("stage: ident.identify.condition.condition_frf",
                                    stage_times["condition_frf"], stage_loads["condition_frf"])
-    med["fit_model"] = _spread("stage: ident.identify.model.fit_model (invfreqs, default)",
+    med["fit_model"] = _spread("stage: ident.identify.pipeline.fit_model (invfreqs, default)",
                                stage_times["fit_model"], stage_loads["fit_model"])
     three = med["estimate_frf"] + med["condition_frf"] + med["fit_model"]
     print(f"stage: sum of the three stages of identify_session: {three:.2f} s "

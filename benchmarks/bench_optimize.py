@@ -39,7 +39,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ident.data.drive import make_track_drive  # noqa: E402
-from ident.models.shocks import read_shock_library  # noqa: E402
+from ident.models.library import read_shock_library  # noqa: E402
 from ident.models.vehicle import build_full_car, example_vehicle  # noqa: E402
 from planner import optimize as opt_mod  # noqa: E402
 from planner.optimize.cache import jit_available  # noqa: E402

@@ -9,8 +9,8 @@ Run::
 Two models, each reported: the known paper car
 (``ident.models.vehicle.build_full_car(example_vehicle())``) and a model identified from
 the paper session (``ident.sim.rig.simulate_session()`` then
-``ident.identify.model.identify_session``, built once and not timed). The identified one is
-the product's case. One drive: ``ident.data.drive.make_track_drive(duration_s=120,
+``ident.identify.pipeline.identify_session``, built once and not timed). The identified one
+is the product's case. One drive: ``ident.data.drive.make_track_drive(duration_s=120,
 fs_hz=100, seed=1, ...)`` with the paper car's wheelbase and track. Shocks: the
 built-in crate ``planner/examples/library.toml``; setups from
 ``planner.setups.enumerate_setups`` with its defaults (left/right symmetric) and
@@ -26,7 +26,7 @@ at that moment:
    wall time of ``--repeat`` calls of ``planner.predict.predict_setups(model, drive,
    setups, library, oversample=...)`` on all symmetric setups, as setups per second:
    with the model object as given (as ``rank_setups`` calls it: each call turns it
-   into a :class:`ident.sim.closedloop.LoopPlant`, a balanced truncation for an
+   into a :class:`ident.models.lti.LoopPlant`, a balanced truncation for an
    identified model) and with a LoopPlant built beforehand. Every call also
    computes the setup-independent rig response. Both are also timed alone (the first
    also with BLAS limited to one thread by ``threadpoolctl``: on a busy 2-core
@@ -109,7 +109,7 @@ sys.path.insert(0, str(ROOT))
 from ident.data.channels import CORNERS  # noqa: E402
 from ident.sim.closedloop import rig_response, simulate  # noqa: E402
 from ident.data.drive import make_track_drive  # noqa: E402
-from ident.models.shocks import read_shock_library  # noqa: E402
+from ident.models.library import read_shock_library  # noqa: E402
 from ident.models.vehicle import build_full_car, example_vehicle  # noqa: E402
 from planner.objective import default_objective, score_setups  # noqa: E402
 from planner.predict import as_loop_plant, predict_setups  # noqa: E402

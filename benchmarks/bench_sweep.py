@@ -105,7 +105,7 @@ def crate():
     """32 shocks: the built-in crate's 11 and each scaled by 0.85 and 1.15 (counts unlimited)."""
     from dataclasses import replace
 
-    from ident.models.shocks import ShockLibrary, read_shock_library
+    from ident.models.library import ShockLibrary, read_shock_library
     from planner.demo import DEMO_LIBRARY_PATH
 
     base = read_shock_library(DEMO_LIBRARY_PATH)

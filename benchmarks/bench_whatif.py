@@ -45,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ident.data.drive import make_track_drive  # noqa: E402
 from ident.sim.metrics import METRIC_NAMES  # noqa: E402
-from ident.models.shocks import ShockLibrary, read_shock_library  # noqa: E402
+from ident.models.library import ShockLibrary, read_shock_library  # noqa: E402
 from ident.models.vehicle import build_full_car, example_vehicle  # noqa: E402
 from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
 from planner.predict import predict_setups  # noqa: E402

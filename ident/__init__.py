@@ -21,7 +21,8 @@ layers before it in this list:
 
 One exception to the order: a rig session holds its shock library, so
 :mod:`ident.data.session` and :mod:`ident.data.formats` read and write it through
-:mod:`ident.models.shocks` (which uses only data's units and files).
+:mod:`ident.models.library` (which, with the shock models it holds, uses only data's
+units and files).
 :mod:`ident.errors` holds the exception and warning classes every layer raises.
 ``ident`` never imports :mod:`planner`.
 """

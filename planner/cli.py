@@ -227,7 +227,7 @@ def _noise_summary(table, noise):
 
 def _read_inputs(args):
     from ident.data.drive import read_drive
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
 
     model = _load_any_model(args.model)
     drive = read_drive(args.drive, units=args.units)
@@ -320,7 +320,7 @@ def cmd_sweep(args):
 
     from ident.data.files import atomic_write_toml
     from ident.data.drive import read_drive
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
     from planner.objective import default_objective, read_objective
     from planner.report import write_predictions_csv
     from planner.setups import read_setups
@@ -395,7 +395,7 @@ def cmd_optimize(args):
     import warnings
 
     from ident.data.drive import read_drive
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
     from ident.data.units import from_si
     from planner.objective import default_objective, read_objective
     from planner.optimize import optimize_curves, read_curve_constraints, write_optimum
@@ -460,7 +460,7 @@ def cmd_plan(args):
     from ident.data.drive import read_drive
     from ident.identify.model import load_model
     from ident.data.session import read_session
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
     from planner.design import design_experiment, read_rig
     from planner.objective import default_objective, read_objective
     from planner.testplan import write_plan
@@ -532,7 +532,7 @@ def cmd_export_drive(args):
 def cmd_whatif(args):
     """``shockplan whatif``: every setup under every perturbation; robust ranking, files."""
     from ident.data.drive import read_drive
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
     from planner.objective import default_objective, read_objective
     from planner.setups import read_setups
     from planner.whatif import (FRAGILE_SHARE, RANK_TOLERANCE, evaluate_whatif,

@@ -64,7 +64,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     from ident.identify.pipeline import identify_session
     from ident.sim.rig import default_plan, simulate_session
     from ident.data.session import write_session
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
     from ident.models.vehicle import example_vehicle, modal_summary
     from planner.optimize import optimize_curves, write_optimum
     from planner.rank import rank_setups
@@ -221,7 +221,7 @@ def _warm_predictions():
 
 
 def _demo_library():
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
 
     return read_shock_library(DEMO_LIBRARY_PATH)
 

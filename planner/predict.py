@@ -6,7 +6,7 @@ computes the spec's RMS metrics, both in
 :func:`ident.sim.closedloop.simulate_batch_metrics` (the numbers of
 :func:`ident.sim.closedloop.simulate_batch` then :func:`ident.sim.metrics.compute_metrics`). The
 model may be an identified :class:`ident.identify.model.VehicleModel`, the known
-:class:`ident.models.vehicle.FullCarModel`, or any :class:`ident.sim.closedloop.LoopPlant`:
+:class:`ident.models.vehicle.FullCarModel`, or any :class:`ident.models.lti.LoopPlant`:
 the same code path serves all, so identified and true predictions compare
 like for like.
 
@@ -26,8 +26,9 @@ from tqdm.auto import tqdm
 from ident.data.channels import CORNERS
 from ident.data.drive import Drive, resample_drive
 from ident.identify.model import LOOP_REDUCE_RTOL, VehicleModel
+from ident.models.lti import LoopPlant
 from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
-from ident.sim.closedloop import LoopPlant, rig_response, simulate_batch_metrics
+from ident.sim.closedloop import rig_response, simulate_batch_metrics
 from planner.errors import PlannerError
 from planner.setups import Setup
 
@@ -95,7 +96,7 @@ def _warn_implausible(table, drive):
 
 
 def as_loop_plant(model, *, reduce_rtol=LOOP_REDUCE_RTOL):
-    """Return a :class:`ident.sim.closedloop.LoopPlant` for a vehicle model.
+    """Return a :class:`ident.models.lti.LoopPlant` for a vehicle model.
 
     Parameters
     ----------
@@ -176,7 +177,7 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
     drive : ident.data.drive.Drive
     setups : sequence of planner.setups.Setup
-    library : ident.models.shocks.ShockLibrary
+    library : ident.models.library.ShockLibrary
     oversample : int
         Internal steps per drive sample of the shock loop (quadratic hold: at 2, metrics
         within about 0.3 % of a 32x run on a track drive at 100 Hz).

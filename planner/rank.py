@@ -78,7 +78,7 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     ----------
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
     drive : ident.data.drive.Drive
-    library : ident.models.shocks.ShockLibrary
+    library : ident.models.library.ShockLibrary
     setups : sequence of planner.setups.Setup, optional
         The candidates; default: enumerated from `library` with `constraints`.
     constraints : dict, optional

@@ -66,18 +66,22 @@ class SerialRunner:
     n_threads = 1
 
     def scatter(self, obj):
+        """Return `obj` as is (tasks run in this process)."""
         return obj
 
     def everywhere(self, func, *args):
+        """Call ``func(*args)`` once, in this process."""
         func(*args)
 
     def map_unordered(self, func, argslist, progress, desc):
+        """Yield ``(j, func(*argslist[j]))`` in order, with a progress bar when asked."""
         from tqdm.auto import tqdm
 
         for j, args in enumerate(tqdm(argslist, desc=desc, unit="task", disable=not progress)):
             yield j, func(*args)
 
     def close(self):
+        """Nothing to release."""
         pass
 
 
@@ -96,12 +100,15 @@ class DaskRunner:
                                     for w in info.get("workers", {}).values()))
 
     def scatter(self, obj):
+        """Send `obj` to every worker once; tasks take the returned future."""
         return self.client.scatter(obj, broadcast=True, hash=False)
 
     def everywhere(self, func, *args):
+        """Call ``func(*args)`` on every worker."""
         self.client.run(func, *args)
 
     def map_unordered(self, func, argslist, progress, desc):
+        """Yield ``(j, result)`` as tasks finish, a bounded number in flight."""
         # distributed is heavy and optional: imported only when a cluster runs
         from distributed import as_completed
         from tqdm.auto import tqdm
@@ -130,6 +137,7 @@ class DaskRunner:
                 yield j, result
 
     def close(self):
+        """Close the client and the cluster this runner started."""
         if self.own_client:
             self.client.close()
         if self.cluster is not None:

@@ -381,7 +381,7 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
     drive : ident.data.drive.Drive
     setups : sequence of planner.setups.Setup
-    library : ident.models.shocks.ShockLibrary
+    library : ident.models.library.ShockLibrary
     band_hz : (float, float)
         Metric band [Hz]; the metric filter's power response ``|B(f)|^4``
         (Butterworth order 4, applied forward and backward) weights the bands.

@@ -77,7 +77,7 @@ def _loop_inverse(Hv, D, A, perm):
 
     Hv (4, 4) are the velocity responses to dF, D the shocks' linearized damping minus
     c_bar (complex, with the lag); perm (4,) is scratch. A screen-local routine rather than
-    ``ident.sim.closedloop._invert_small``: in place (64 complex multiply-adds instead of 128:
+    ``ident.sim.loop_kernels.invert_small``: in place (64 complex multiply-adds instead of 128:
     the identity's zeros and ones are never multiplied) and pivots chosen by ``|z|^2``
     (no ``hypot``), but the same pivots and the same floating-point operations on the
     entries that matter, so the inverse is bit for bit the general routine's. That matters:

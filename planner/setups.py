@@ -1,6 +1,6 @@
 """Shock setups: one shock id per corner, read, written, enumerated; the baseline.
 
-A setup names one shock of the team's shock library (``ident.models.shocks``) for
+A setup names one shock of the team's shock library (``ident.models.library``) for
 each corner ``LF RF LR RR`` (:data:`ident.data.channels.CORNERS`). The planner
 predicts metrics for many setups and ranks them (:mod:`planner.objective`).
 
@@ -32,7 +32,8 @@ Every command reads its baseline with :func:`resolve_baseline`: a
 
 Examples
 --------
->>> from ident.models.shocks import LinearShock, ShockLibrary
+>>> from ident.models.library import ShockLibrary
+>>> from ident.models.shocks import LinearShock
 >>> lib = ShockLibrary.from_models([LinearShock("B20", 3502.5),
 ...                                 LinearShock("D8", 1400.0, count=2)])
 >>> [s.name for s in enumerate_setups(lib)]   # D8 x4 skipped: the team has 2
@@ -115,7 +116,7 @@ def _library_ids(library, where):
     if not isinstance(library, Mapping):
         raise TypeError(f"{where}: library must be a ShockLibrary (or a mapping id -> "
                         f"ShockModel), got {type(library).__name__}; read one with "
-                        "ident.models.shocks.read_shock_library")
+                        "ident.models.library.read_shock_library")
     return list(library)
 
 
@@ -144,7 +145,8 @@ def unknown_id_error(where, shock_id, library):
 
     Examples
     --------
-    >>> from ident.models.shocks import LinearShock, ShockLibrary
+    >>> from ident.models.library import ShockLibrary
+    >>> from ident.models.shocks import LinearShock
     >>> lib = ShockLibrary.from_models([LinearShock("B20", 3502.5), LinearShock("D8", 1400.0)])
     >>> print(unknown_id_error("candidate shocks", "X9", lib))  # doctest: +NORMALIZE_WHITESPACE
     candidate shocks: unknown shock id 'X9'; the shock library has ['B20', 'D8']; fix the id or
@@ -591,7 +593,8 @@ def inventory_shortfall(setup, library):
 
     Examples
     --------
-    >>> from ident.models.shocks import LinearShock, ShockLibrary
+    >>> from ident.models.library import ShockLibrary
+    >>> from ident.models.shocks import LinearShock
     >>> lib = ShockLibrary([LinearShock("B20", 3500.0, count=2), LinearShock("L8", 1400.0)])
     >>> inventory_shortfall(Setup("x", dict(LF="B20", RF="B20", LR="B20", RR="L8")), lib)
     "needs 3 x 'B20' but the library's count is 2"
@@ -852,7 +855,7 @@ def setup_space(library, *, setups=None, symmetry="left-right", axles="independe
 
     Parameters
     ----------
-    library : ident.models.shocks.ShockLibrary
+    library : ident.models.library.ShockLibrary
         The crate; its ``count`` is the inventory.
     setups : sequence of planner.setups.Setup, optional
         A given list (unique names); then the enumeration options must stay at their
@@ -986,7 +989,8 @@ def enumerate_setups(library, *, symmetry="left-right", axles="independent", fix
 
     Examples
     --------
-    >>> from ident.models.shocks import LinearShock, ShockLibrary
+    >>> from ident.models.library import ShockLibrary
+    >>> from ident.models.shocks import LinearShock
     >>> lib = ShockLibrary.from_models([LinearShock(f"S{k}", 1000.0 * k) for k in range(1, 11)])
     >>> len(enumerate_setups(lib)), len(enumerate_setups(lib, symmetry="none"))
     (100, 10000)
@@ -1161,7 +1165,8 @@ def resolve_baseline(baseline, library, *, setups=(), default=None, find=None,
 
     Examples
     --------
-    >>> from ident.models.shocks import LinearShock, ShockLibrary
+    >>> from ident.models.library import ShockLibrary
+    >>> from ident.models.shocks import LinearShock
     >>> lib = ShockLibrary.from_models([LinearShock("B20", 3502.5), LinearShock("D8", 1400.0)])
     >>> resolve_baseline("B20", lib).ids()
     ('B20', 'B20', 'B20', 'B20')

@@ -52,7 +52,8 @@ The sweep's screening scores agree with ``rank_setups``' (``score_setups``) to r
 
 Examples
 --------
->>> from ident.models.shocks import LinearShock, ShockLibrary
+>>> from ident.models.library import ShockLibrary
+>>> from ident.models.shocks import LinearShock
 >>> lib = ShockLibrary.from_models([LinearShock(f"S{k}", 1000.0 * k) for k in range(1, 31)])
 >>> space = setup_space(lib, symmetry="none")
 >>> len(space), space.names([0, 1, 809_999])
@@ -83,18 +84,14 @@ from planner.errors import PlannerError
 from planner.objective import (Objective, default_objective, mark_inventory, ranking_order,
                                ranking_position, score_setups)
 from planner.predict import as_loop_plant, predict_setups, prepare_drive, resolve_setups
-from planner.runner import KERNEL_LOCK, SCHEDULER_LOCAL, SCHEDULER_NONE, start_runner
+from planner.runner import KERNEL_LOCK, start_runner
 from planner.screen import (drive_bands, screen_operands, screen_packed,
                             screening_predictions)
 from planner.setups import SetupSpace, resolve_baseline, setup_space
 
 __all__ = [
-    "SCHEDULER_NONE",
-    "SCHEDULER_LOCAL",
     "COMBINE_MODES",
     "RTOL_SCORE_ROUNDOFF",
-    "SetupSpace",
-    "setup_space",
     "SweepResult",
     "sweep_setups",
     "screen_setups_on",
@@ -505,7 +502,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         Each a VehicleModel, FullCarModel, VehicleParams or LoopPlant.
     drives : ident.data.drive.Drive, sequence of drives, or mapping name -> drive
         Every model is swept on every drive: ``len(models) * len(drives)`` cases.
-    library : ident.models.shocks.ShockLibrary
+    library : ident.models.library.ShockLibrary
     setups : sequence of planner.setups.Setup, optional
         The candidates; default the enumeration of `constraints`.
     constraints : dict, optional

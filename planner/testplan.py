@@ -58,7 +58,7 @@ from ident.data.channels import CORNERS
 from ident.data.drive import write_drive
 from ident.data.files import atomic_dir, atomic_path, check_can_write
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
-from ident.models.shocks import write_shock_library
+from ident.models.library import write_shock_library
 from ident.sim.metrics import METRIC_QUANTITY
 from planner.design import ExperimentPlan
 from planner.errors import PlannerError

@@ -238,7 +238,7 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
         Must carry its conditioned FRF (``model.frf``).
     drive : ident.data.drive.Drive
     setups : sequence of planner.setups.Setup
-    library : ident.models.shocks.ShockLibrary
+    library : ident.models.library.ShockLibrary
     n_draws : int
         Monte Carlo draws of the random part (at least 2).
     seed : int

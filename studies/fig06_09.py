@@ -4,7 +4,7 @@ The virtual rig runs the seed paper's identification plan (``ident.sim.rig.defau
 a baseline run with the linear B20 shocks and four single-corner swaps to the
 nonlinear N8, the same 800 s band-limited white-noise drive in every run, no
 sensor noise) on the paper's car, and shockplan identifies the session with
-the defaults of ``ident.identify.model.identify_session`` (LPM estimate, conditioning
+the defaults of ``ident.identify.pipeline.identify_session`` (LPM estimate, conditioning
 with residual fits and 0.6 Hz smoothing, ``invfreqs`` fits with automatic
 orders). Only the plotted outputs are identified: every output is estimated,
 conditioned and fitted on its own, so their pairs are the same as those of

@@ -2,7 +2,7 @@
 
 The virtual rig runs the seed paper's identification plan (``ident.sim.rig.default_plan``,
 runs of ``--run-s``, no sensor noise) on the paper's car and shockplan
-identifies it with the defaults of ``ident.identify.model.identify_session``; only the
+identifies it with the defaults of ``ident.identify.pipeline.identify_session``; only the
 outputs the metrics need are identified (``planner.predict.METRIC_OUTPUTS``:
 every output is estimated and fitted on its own, so these pairs are those of a
 full identification). Both the identified model and the known car (the same
@@ -53,7 +53,7 @@ from ident.identify.frf import estimate_frf
 from ident.sim.metrics import METRIC_QUANTITY, bandpass
 from ident.identify.pipeline import fit_model
 from ident.sim.rig import default_plan, make_plan_drive, simulate_session
-from ident.models.shocks import read_shock_library
+from ident.models.library import read_shock_library
 from ident.data.units import from_si
 from ident.models.vehicle import build_full_car, example_vehicle
 from planner.demo import DEMO_LIBRARY_PATH

@@ -44,7 +44,7 @@ from ident.data.drive import make_track_drive
 from ident.sim.metrics import METRIC_NAMES
 from ident.identify.pipeline import identify_session
 from ident.sim.rig import PlanRun, default_plan, read_rig_plan, simulate_session
-from ident.models.shocks import read_shock_library
+from ident.models.library import read_shock_library
 from ident.models.vehicle import build_full_car, example_vehicle
 from planner.demo import DEMO_LIBRARY_PATH
 from planner.design import default_rig, design_experiment

@@ -105,7 +105,7 @@ def validation_drive(paper_plan, paper_vehicle):
 @pytest.fixture(scope="session")
 def demo_library():
     """The built-in shock crate of the demo (11 shocks)."""
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
     from planner.demo import DEMO_LIBRARY_PATH
 
     return read_shock_library(DEMO_LIBRARY_PATH)

@@ -92,7 +92,7 @@ def test_demo(tmp_path, capsys):
     from openpyxl import load_workbook
 
     from ident.data.channels import CORNERS
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
     from ident.sim.metrics import METRIC_NAMES
     from planner.demo import DEMO_LIBRARY_PATH
     from planner.objective import default_objective, ranking_order
@@ -154,7 +154,7 @@ def _small_session(tmp_path):
 def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
     from ident.data.drive import make_track_drive, write_drive
     from ident.identify.model import load_model
-    from ident.models.shocks import read_shock_library, write_shock_library
+    from ident.models.library import read_shock_library, write_shock_library
     from planner.demo import DEMO_LIBRARY_PATH
 
     sess = _small_session(tmp_path)
@@ -222,7 +222,7 @@ def test_optimize_command(tmp_path, capsys, paper_vehicle):
     """``shockplan optimize`` end to end on a short drive (imperial files), and its refusals:
     constraints no curve meets (one line naming them, nothing written), an existing folder."""
     from ident.data.drive import make_track_drive, write_drive
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
     from planner.demo import DEMO_LIBRARY_PATH
 
     drive = make_track_drive(duration_s=30.0, fs_hz=100.0, seed=2,

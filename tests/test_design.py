@@ -11,7 +11,8 @@ from scipy import signal
 
 from ident.data.channels import CORNERS, RIG_INPUTS
 from planner.errors import PlannerError
-from ident.models.shocks import LinearShock, ShockLibrary
+from ident.models.library import ShockLibrary
+from ident.models.shocks import LinearShock
 from planner import design as D
 from planner.design import (
     RigSpec,

@@ -40,7 +40,8 @@ from ident.data.formats import (
 from ident.data.formats.channel_map import STANDARD_GRAVITY_M_S2
 from ident.sim.rig import PlanRun, default_plan, simulate_session
 from ident.data.session import Run, append_runs, make_session, read_session, write_session
-from ident.models.shocks import LinearShock, ShockLibrary
+from ident.models.library import ShockLibrary
+from ident.models.shocks import LinearShock
 
 # --------------------------------------------------------------------------------------
 # Tolerances (each with its reason)
@@ -140,7 +141,7 @@ def map_path(rig_session, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def shocks_path(rig_session, tmp_path_factory):
-    from ident.models.shocks import write_shock_library
+    from ident.models.library import write_shock_library
 
     path = tmp_path_factory.mktemp("shocks") / "shocks.toml"
     write_shock_library(rig_session.shocks, path)

@@ -136,7 +136,8 @@ def _session(paper_plan, setups, duration_s, shocks=None):
 
 def test_session_truth_round_trip_linear_swaps(paper_plan, paper_model):
     """Paper car, one drive, swaps to a linear 8 lbf/(in/s) shock: exactly linear data (Eq. 21)."""
-    from ident.models.shocks import LinearShock, ShockLibrary
+    from ident.models.library import ShockLibrary
+    from ident.models.shocks import LinearShock
 
     b20 = paper_plan.shocks["B20"]
     lib = ShockLibrary([b20, LinearShock("L8", 0.4 * b20.c_n_s_m)])

@@ -25,8 +25,9 @@ from ident.errors import ShockplanError
 from ident.data.formats import read_channel_map
 from ident.identify.model import load_model
 from ident.sim.rig import read_rig_plan
-from ident.data.session import read_run_table, read_session
-from ident.models.shocks import read_shock_library
+from ident.data.runs import read_run_table
+from ident.data.session import read_session
+from ident.models.library import read_shock_library
 from ident.models.vehicle import read_vehicle
 from planner.design import read_rig
 from planner.objective import read_objective

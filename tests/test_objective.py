@@ -484,7 +484,8 @@ def test_ranking_rule_feasible_then_score_nan_last_ties_by_index():
 
 
 def test_mark_inventory_makes_unbuildable_setups_infeasible_and_reranks():
-    from ident.models.shocks import LinearShock, ShockLibrary
+    from ident.models.library import ShockLibrary
+    from ident.models.shocks import LinearShock
     from planner.setups import Setup
 
     lib = ShockLibrary([LinearShock("A", 1000.0, count=2), LinearShock("B", 2000.0)])

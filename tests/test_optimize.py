@@ -11,7 +11,8 @@ from numpy.testing import assert_allclose
 
 from ident.data.channels import CORNERS
 from planner.errors import PlannerError
-from ident.models.shocks import LinearShock, ShockLibrary, read_shock_library
+from ident.models.library import ShockLibrary, read_shock_library
+from ident.models.shocks import LinearShock
 from planner.objective import Objective, default_objective, score_setups
 from planner.optimize import (
     CurveConstraints,

@@ -15,7 +15,8 @@ from ident.data.channels import CORNERS, RIG_INPUTS
 from ident.data.drive import Drive, make_track_drive
 from planner.errors import PlannerError
 from ident.sim.metrics import METRIC_NAMES
-from ident.models.shocks import LinearShock, ShockLibrary
+from ident.models.library import ShockLibrary
+from ident.models.shocks import LinearShock
 from ident.sim.closedloop import pack_setups
 from planner import screen as screen_mod
 from planner import screen_codegen

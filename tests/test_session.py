@@ -1,4 +1,4 @@
-"""Tests of ident.data.session: rig-session folders and run tables."""
+"""Tests of ident.data.session and ident.data.runs: rig-session folders and run tables."""
 
 from __future__ import annotations
 
@@ -15,14 +15,12 @@ from numpy.testing import assert_allclose, assert_array_equal
 import ident.data.session as session_mod
 from ident.data.channels import AERO_INPUTS, ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
 from ident.errors import SessionError
+from ident.data.runs import RunTable, read_run_table, write_run_table
 from ident.data.session import (
     Run,
-    RunTable,
     Session,
     make_session,
-    read_run_table,
     read_session,
-    write_run_table,
     write_session,
 )
 
@@ -82,7 +80,7 @@ def rng():
 
 @pytest.fixture
 def shocks(tmp_path):
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
 
     path = tmp_path / "library.toml"
     path.write_text(SHOCKS_TOML)

@@ -12,7 +12,8 @@ import pytest
 import planner.setups as setups_mod
 from ident.data.channels import CORNERS
 from planner.errors import PlannerError
-from ident.models.shocks import LinearShock, ShockLibrary
+from ident.models.library import ShockLibrary
+from ident.models.shocks import LinearShock
 from planner.setups import (
     DEFAULT_MAX_SETUPS,
     SYMMETRIES,

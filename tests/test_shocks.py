@@ -1,4 +1,5 @@
-"""Tests of ident.models.shocks: shock models, the shock library file, dyno fits."""
+"""Tests of ident.models.shocks, library and dyno: shock models, the shock library file, dyno
+fits."""
 
 import doctest
 import math
@@ -17,15 +18,13 @@ from scipy.stats import norm
 
 import ident.models.shocks as shocks
 from ident.errors import FitWarning, ShockModelError
+from ident.models.dyno import fit_shock_to_dyno
+from ident.models.library import ShockLibrary, read_shock_library, write_shock_library
 from ident.models.shocks import (
     DigressiveShock,
     LinearShock,
     PiecewiseLinear,
-    ShockLibrary,
     TableShock,
-    fit_shock_to_dyno,
-    read_shock_library,
-    write_shock_library,
 )
 from ident.data.units import TO_SI
 
@@ -235,7 +234,7 @@ def test_count_inventory_round_trip_and_default(tmp_path):
 
 
 def _values(model):
-    return [(key, getattr(model, attr)) for key, (attr, _, _) in model._TOML_FIELDS.items()]
+    return [(key, getattr(model, attr)) for key, (attr, _, _) in model.TOML_FIELDS.items()]
 
 
 def test_imperial_file_holds_imperial_values(tmp_path):

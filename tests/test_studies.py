@@ -148,7 +148,7 @@ def test_random_plan_swaps_every_corner_within_budget():
     """A random plan spends at most its budget and varies every corner's shock (Eq. 17)."""
     import numpy as np
 
-    from ident.models.shocks import read_shock_library
+    from ident.models.library import read_shock_library
     from planner.demo import DEMO_LIBRARY_PATH
 
     study = _load("rig_time")

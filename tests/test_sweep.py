@@ -18,8 +18,8 @@ from planner.objective import score_setups
 from planner.predict import predict_setups
 from planner.rank import rank_setups
 from planner.screen import screen_setups
-from planner.setups import Setup, enumerate_setups
-from planner.sweep import RTOL_SCORE_ROUNDOFF, setup_space, sweep_setups
+from planner.setups import Setup, enumerate_setups, setup_space
+from planner.sweep import RTOL_SCORE_ROUNDOFF, sweep_setups
 
 # the drive's rig response is computed with one BLAS thread in a sweep, with all in
 # predict_setups: the last bits of the metrics differ (measured 3e-13 relative)
@@ -33,7 +33,8 @@ TEN_THOUSAND = {"symmetry": "none", "shocks": CRATE_10, "respect_inventory": Fal
 
 
 def _crate(n):
-    from ident.models.shocks import LinearShock, ShockLibrary
+    from ident.models.library import ShockLibrary
+    from ident.models.shocks import LinearShock
 
     return ShockLibrary.from_models([LinearShock(f"S{k}", 500.0 * k, count=3)
                                      for k in range(1, n + 1)])

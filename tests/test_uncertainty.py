@@ -236,7 +236,8 @@ def test_draws_are_zero_mean_in_power(known_plant, track_drive, demo_library, ba
     hit its cap). Metrics of several correlated inputs lose a little of their cross-power."""
     from dataclasses import replace
 
-    from ident.models.shocks import LinearShock, ShockLibrary
+    from ident.models.library import ShockLibrary
+    from ident.models.shocks import LinearShock
 
     one = replace(track_drive, channels={c: (x if c == "wheelloader_LF" else np.zeros_like(x))
                                          for c, x in track_drive.channels.items()})

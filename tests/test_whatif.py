@@ -109,7 +109,7 @@ def test_stiffened_plant_is_the_changed_car(paper_vehicle, change):
 
 
 def test_stiffened_plant_needs_travel_outputs(paper_vehicle):
-    from ident.sim.closedloop import LoopPlant
+    from ident.models.lti import LoopPlant
     from ident.models.vehicle import build_full_car
     from planner.whatif import stiffened_plant
 
@@ -260,7 +260,7 @@ def test_bad_perturbation_files_name_the_key(tmp_path, case):
 
 def test_shock_scale_is_predict_on_scaled_shocks(paper_model, short_drive, demo_library,
                                                  twenty_setups):
-    from ident.models.shocks import ShockLibrary
+    from ident.models.library import ShockLibrary
     from planner.predict import predict_setups
     from planner.whatif import Factor, evaluate_whatif, perturbation_set
 
@@ -279,7 +279,7 @@ def test_shock_scale_is_predict_on_scaled_shocks(paper_model, short_drive, demo_
 
 
 def test_shock_scale_by_id_and_lag_change(paper_model, short_drive, demo_library, twenty_setups):
-    from ident.models.shocks import ShockLibrary
+    from ident.models.library import ShockLibrary
     from planner.predict import predict_setups
     from planner.whatif import Factor, evaluate_whatif, perturbation_set
 

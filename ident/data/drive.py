@@ -21,7 +21,7 @@ Three generators make drives:
 
 :func:`read_drive` and :func:`write_drive` read and write drive files (the
 rig-session run-file format, CSV or Parquet, through
-:func:`ident.data.session.read_run_table` / :func:`ident.data.session.write_run_table`);
+:func:`ident.data.runs.read_run_table` / :func:`ident.data.runs.write_run_table`);
 :func:`resample_drive` changes a drive's sample rate.
 
 Examples
@@ -49,7 +49,7 @@ from scipy import fft as sp_fft
 from scipy import signal
 
 from ident.data.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero, rig_inputs_of
-from ident.data.session import read_run_table, write_run_table
+from ident.data.runs import read_run_table, write_run_table
 from ident.data.units import check_units
 from ident.errors import DriveError
 
@@ -801,7 +801,7 @@ def read_drive(path, *, units="SI", channel_map=None, name=None):
         If the file is missing or unreadable, lacks ``time`` or a wheelloader,
         has some but not all three aero columns, holds NaN/inf or non-numeric
         values, or its time is not uniform (the checks of
-        :func:`ident.data.session.read_run_table`).
+        :func:`ident.data.runs.read_run_table`).
     """
     path = Path(path)
     table = read_run_table(path, units=units, channel_map=channel_map,

@@ -739,7 +739,7 @@ def shock_force_deviation(run, shocks, cbar_n_s_m, *, exact_linear=True):
         otherwise the force is computed from the run's shock model (static curve
         and lag, first-order hold at the run's sample rate) and the measured
         velocity.
-    shocks : ident.models.shocks.ShockLibrary
+    shocks : ident.models.library.ShockLibrary
     cbar_n_s_m : array_like, shape (4,)
     exact_linear : bool
         A corner whose shock is, per the library, linear with ``c == c_bar``

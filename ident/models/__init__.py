@@ -2,7 +2,8 @@
 
 Modules: :mod:`~ident.models.lti` (linear time-invariant systems in modal form, the
 loop plant the simulator steps, their exact discretization and balanced reduction),
-:mod:`~ident.models.vehicle` (the paper's 7-DOF full-car model and its vehicle TOML)
-and :mod:`~ident.models.shocks` (shock force-velocity models, the shock library TOML
-and fits to dyno data).
+:mod:`~ident.models.vehicle` (the paper's 7-DOF full-car model and its vehicle TOML),
+:mod:`~ident.models.shocks` (shock force-velocity models: piecewise-linear curves with a
+lag), :mod:`~ident.models.library` (the shock library and its TOML file, ``shocks.toml``)
+and :mod:`~ident.models.dyno` (shock models fitted to dyno data).
 """

@@ -1,16 +1,17 @@
-"""Shock-absorber models: force-velocity curves, shock libraries, dyno fits.
+"""Shock-absorber models: force-velocity curves with a lag.
 
 Every shock kind is exactly a continuous piecewise-linear force-velocity curve
 (:class:`PiecewiseLinear`) plus a first-order lag ``lag_s`` between the curve's
 force and the applied force, ``lag * dF/dt + F = f(v)``. The closed-loop
 simulator only sees :meth:`ShockModel.to_pwl`, so a new kind needs no simulator
-change.
+change. The shock library and its file ``shocks.toml`` are in
+:mod:`ident.models.library`, fits to dyno data in :mod:`ident.models.dyno`.
 
 SI inside: velocity [m/s], force [N], damping [N/(m/s)], lag [s]. Shock
 velocity and force are positive in **compression** (bump), negative in
 rebound, as in ``shared/spec/rig-session.md``.
 
-Kinds (``kind`` in ``shocks.toml``):
+Kinds (``kind`` in ``shocks.toml``, :data:`SHOCK_KINDS`):
 
 ``"linear"``
     :class:`LinearShock`, ``f = c v``.
@@ -25,6 +26,9 @@ Every ``[[shock]]`` table may also give ``count``, an integer >= 0: how many
 of that shock the team has (its inventory, used by the planner to skip setups
 that need more units than exist). Omitted means unlimited (``count=None``).
 
+:func:`is_real_number`, :func:`format_number` and :func:`check_shock_units` are the
+input checks and message formatting shared with the library and the dyno fits.
+
 Examples
 --------
 >>> b20 = LinearShock("B20", 3502.5)
@@ -34,30 +38,20 @@ Examples
 ...                 [-1100.0, -500.0, 0.0, 350.0, 700.0], lag_s=0.004)
 >>> d8.force([0.05, 1.0]).tolist()
 [175.0, 1137.5]
->>> lib = ShockLibrary.from_models([b20, d8])
->>> list(lib)
-['B20', 'D8']
 """
 
 from __future__ import annotations
 
-import logging
 import math
 import numbers
-import warnings
-from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
-import pandas as pd
-from scipy.optimize import minimize_scalar, nnls
 from scipy.special import ndtr
 
-from ident.data.files import atomic_write_toml, did_you_mean, read_toml
-from ident.errors import FitWarning, ShockModelError
-from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
+from ident.data.units import check_units, from_si
+from ident.errors import ShockModelError
 
 __all__ = [
     "PASSIVITY_RTOL",
@@ -67,13 +61,10 @@ __all__ = [
     "LinearShock",
     "TableShock",
     "DigressiveShock",
-    "ShockLibrary",
-    "read_shock_library",
-    "write_shock_library",
-    "fit_shock_to_dyno",
+    "is_real_number",
+    "format_number",
+    "check_shock_units",
 ]
-
-logger = logging.getLogger(__name__)
 
 #: Relative tolerance (to the largest |force| of a table) within which a curve
 #: counts as passing through (0, 0). Covers round-off of unit conversions.
@@ -91,8 +82,14 @@ def _out(x):
     return float(x) if x.ndim == 0 else x
 
 
-def _fmt(x):
-    """Format a number for an error message (short, unambiguous)."""
+def format_number(x):
+    """Format a number for an error message (short, unambiguous).
+
+    Examples
+    --------
+    >>> format_number(3502.5), format_number(1 / 3)
+    ('3502.5', '0.333333')
+    """
     return f"{float(x):.6g}"
 
 
@@ -100,8 +97,8 @@ def _model_error(who, field_name, problem, fix):
     """Build a :class:`ShockModelError` about one field of one shock.
 
     `who` is the label of the object (``"shock 'B20'"``). The parts are kept as
-    attributes so that :func:`read_shock_library` can re-word the message with
-    the file, the shock's index and the TOML key.
+    attributes so that :func:`ident.models.library.read_shock_library` can re-word the
+    message with the file, the shock's index and the TOML key.
     """
     exc = ShockModelError(f"{who}: {field_name} {problem}; {fix}")
     exc.field = field_name
@@ -110,13 +107,20 @@ def _model_error(who, field_name, problem, fix):
     return exc
 
 
-def _is_real_number(x):
+def is_real_number(x):
+    """Return whether `x` is a real number (Python or numpy), booleans excluded.
+
+    Examples
+    --------
+    >>> is_real_number(2), is_real_number(np.float32(0.5)), is_real_number(True)
+    (True, True, False)
+    """
     return isinstance(x, (numbers.Real, np.number)) and not isinstance(x, (bool, np.bool_))
 
 
 def _check_scalar(who, name, value, *, minimum=None, strict=False, unit=""):
     """Return `value` as a finite float, or raise naming the object and field."""
-    if not _is_real_number(value):
+    if not is_real_number(value):
         raise _model_error(who, name, f"must be a number, got {type(value).__name__} "
                            f"{value!r}", "give a finite real number (no quotes)")
     value = float(value)
@@ -124,8 +128,9 @@ def _check_scalar(who, name, value, *, minimum=None, strict=False, unit=""):
         raise _model_error(who, name, f"is {value}, not finite", "give a finite number")
     if minimum is not None and (value < minimum or (strict and value == minimum)):
         rel = ">" if strict else ">="
-        raise _model_error(who, name, f"= {_fmt(value)} {unit} is not {rel} {_fmt(minimum)}",
-                           f"give a value {rel} {_fmt(minimum)}")
+        raise _model_error(who, name,
+                           f"= {format_number(value)} {unit} is not {rel} {format_number(minimum)}",
+                           f"give a value {rel} {format_number(minimum)}")
     return value
 
 
@@ -137,7 +142,7 @@ def _check_vector(who, name, values):
     if not isinstance(values, np.ndarray):
         values = list(values)
         for j, x in enumerate(values):
-            if not _is_real_number(x):
+            if not is_real_number(x):
                 raise _model_error(who, f"{name}[{j}]", f"must be a number, got "
                                    f"{type(x).__name__} {x!r}",
                                    "give finite real numbers (no quotes)")
@@ -158,7 +163,25 @@ def _check_vector(who, name, values):
     return arr
 
 
-def _check_units_for(units, where):
+def check_shock_units(units, where):
+    """Return the unit system `units` checked, raising :class:`ShockModelError` if unknown.
+
+    Parameters
+    ----------
+    units : {"SI", "imperial"}
+        The unit system name.
+    where : str
+        Prefix of the error message.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ShockModelError
+        If `units` is not a unit system (:func:`ident.data.units.check_units`).
+    """
     try:
         return check_units(units, where=where)
     except ValueError as exc:
@@ -224,7 +247,8 @@ class PiecewiseLinear:
         if np.any(dv <= 0):
             j = int(np.flatnonzero(dv <= 0)[0])
             raise _model_error(who, "v_knots_m_s", f"is not strictly increasing at index "
-                               f"{j + 1} ({_fmt(v[j])} then {_fmt(v[j + 1])} m/s)",
+                               f"{j + 1} ({format_number(v[j])} then "
+                               f"{format_number(v[j + 1])} m/s)",
                                "sort the knots and remove duplicate velocities")
         object.__setattr__(self, "v_knots_m_s", v)
         object.__setattr__(self, "f_knots_n", f)
@@ -335,24 +359,25 @@ def _passivity_problem(pwl):
     wrong = np.flatnonzero(((v > 0) & (f < 0)) | ((v < 0) & (f > 0)))
     if wrong.size:
         j = int(wrong[0])
-        return (f"force_n[{j}]", f"= {_fmt(f[j])} N at velocity {_fmt(v[j])} m/s has the "
-                "wrong sign (f*v < 0, the shock would give energy)",
+        return (f"force_n[{j}]", f"= {format_number(f[j])} N at velocity "
+                f"{format_number(v[j])} m/s has the wrong sign (f*v < 0, the shock would "
+                "give energy)",
                 "forces must have the sign of the velocity (compression positive, "
                 "rebound negative)")
     f0 = pwl.force(0.0)
     if abs(f0) > tol:
         if v[0] <= 0 <= v[-1]:
-            return ("force_n", f"gives f(0) = {_fmt(f0)} N, not 0 (not passive)",
+            return ("force_n", f"gives f(0) = {format_number(f0)} N, not 0 (not passive)",
                     "the curve must pass through (0, 0); subtract any gas or static force")
         return ("force_n", f"does not span v = 0 and its linear extension gives f(0) = "
-                f"{_fmt(f0)} N, not 0 (not passive)", "add the point (0, 0) to the table")
+                f"{format_number(f0)} N, not 0 (not passive)", "add the point (0, 0) to the table")
     if pwl.slope_below < 0:
-        return ("force_n", f"has a first-segment slope of {_fmt(pwl.slope_below)} N/(m/s) < 0, "
-                "so its extension below the table is not passive",
+        return ("force_n", f"has a first-segment slope of {format_number(pwl.slope_below)} "
+                "N/(m/s) < 0, so its extension below the table is not passive",
                 "make the force non-decreasing over the first two points")
     if pwl.slope_above < 0:
-        return ("force_n", f"has a last-segment slope of {_fmt(pwl.slope_above)} N/(m/s) < 0, "
-                "so its extension above the table is not passive",
+        return ("force_n", f"has a last-segment slope of {format_number(pwl.slope_above)} "
+                "N/(m/s) < 0, so its extension above the table is not passive",
                 "make the force non-decreasing over the last two points")
     return None
 
@@ -389,7 +414,7 @@ class ShockModel:
     #: The TOML ``kind`` of the class.
     kind: ClassVar[str] = ""
     #: TOML key -> (attribute, quantity, "scalar" | "vector"), in file order.
-    _TOML_FIELDS: ClassVar[dict] = {}
+    TOML_FIELDS: ClassVar[dict] = {}
 
     id: str
     lag_s: float = field(default=0.0, kw_only=True)
@@ -536,7 +561,7 @@ class ShockModel:
         s = _check_scalar(self._who, "force_scale", force_scale, minimum=0.0, strict=True)
         changes = {attr: np.asarray(getattr(self, attr), dtype=float) * s
                    if shape == "vector" else float(getattr(self, attr)) * s
-                   for attr, quantity, shape in self._TOML_FIELDS.values()
+                   for attr, quantity, shape in self.TOML_FIELDS.values()
                    if quantity in ("force", "damping")}
         changes["lag_s"] = self.lag_s if lag_s is None else lag_s
         changes["id"] = self.id if id is None else id
@@ -562,11 +587,11 @@ class ShockModel:
         ShockModelError
             If `units` is not a unit system.
         """
-        units = _check_units_for(units, f"shock {self.id!r}: units")
+        units = check_shock_units(units, f"shock {self.id!r}: units")
         out = {"id": self.id, "kind": self.kind}
         if self.description:
             out["description"] = self.description
-        for key, (attr, quantity, shape) in self._TOML_FIELDS.items():
+        for key, (attr, quantity, shape) in self.TOML_FIELDS.items():
             value = from_si(getattr(self, attr), quantity, units)
             out[key] = (np.asarray(value, dtype=float).tolist() if shape == "vector"
                         else float(value))
@@ -604,7 +629,7 @@ class LinearShock(ShockModel):
     """
 
     kind: ClassVar[str] = "linear"
-    _TOML_FIELDS: ClassVar[dict] = {"damping": ("c_n_s_m", "damping", "scalar")}
+    TOML_FIELDS: ClassVar[dict] = {"damping": ("c_n_s_m", "damping", "scalar")}
 
     c_n_s_m: float
 
@@ -650,7 +675,7 @@ class TableShock(ShockModel):
     """
 
     kind: ClassVar[str] = "table"
-    _TOML_FIELDS: ClassVar[dict] = {"velocity": ("velocity_m_s", "velocity", "vector"),
+    TOML_FIELDS: ClassVar[dict] = {"velocity": ("velocity_m_s", "velocity", "vector"),
                                     "force": ("force_n", "force", "vector")}
 
     velocity_m_s: np.ndarray
@@ -669,7 +694,8 @@ class TableShock(ShockModel):
         if np.any(dv <= 0):
             j = int(np.flatnonzero(dv <= 0)[0])
             raise _model_error(self._who, "velocity_m_s", f"is not strictly increasing at index "
-                               f"{j + 1} ({_fmt(v[j])} then {_fmt(v[j + 1])} m/s)",
+                               f"{j + 1} ({format_number(v[j])} then "
+                               f"{format_number(v[j + 1])} m/s)",
                                "sort the points and remove duplicate velocities")
         object.__setattr__(self, "velocity_m_s", v)
         object.__setattr__(self, "force_n", f)
@@ -729,7 +755,7 @@ class DigressiveShock(ShockModel):
     """
 
     kind: ClassVar[str] = "digressive"
-    _TOML_FIELDS: ClassVar[dict] = {
+    TOML_FIELDS: ClassVar[dict] = {
         "bump_low": ("bump_low_n_s_m", "damping", "scalar"),
         "bump_knee": ("bump_knee_m_s", "velocity", "scalar"),
         "bump_high": ("bump_high_n_s_m", "damping", "scalar"),
@@ -746,7 +772,7 @@ class DigressiveShock(ShockModel):
     rebound_high_n_s_m: float
 
     def _validate(self):
-        for attr, quantity, _ in self._TOML_FIELDS.values():
+        for attr, quantity, _ in self.TOML_FIELDS.values():
             knee = quantity == "velocity"
             value = _check_scalar(self._who, attr, getattr(self, attr), minimum=0.0,
                                   strict=knee, unit="m/s" if knee else "N/(m/s)")
@@ -761,551 +787,3 @@ class DigressiveShock(ShockModel):
 
 #: TOML ``kind`` -> model class.
 SHOCK_KINDS = {cls.kind: cls for cls in (LinearShock, TableShock, DigressiveShock)}
-
-
-# ----------------------------------------------------------------------------
-# shock library
-# ----------------------------------------------------------------------------
-
-
-class ShockLibrary(Mapping):
-    """An ordered, read-only mapping ``id -> ShockModel``.
-
-    Parameters
-    ----------
-    models : iterable of ShockModel, or mapping id -> ShockModel
-        The shocks, in order. Ids must be unique (and equal the keys of a
-        mapping).
-    source : str or path, optional
-        Where the library came from (used in error messages).
-
-    Raises
-    ------
-    ShockModelError
-        On a duplicate id or a mapping key different from the model's id.
-    TypeError
-        If an item is not a :class:`ShockModel`.
-
-    Notes
-    -----
-    :meth:`get` raises :class:`ShockModelError` for an unknown id unless a
-    default is passed (``dict.get`` returns ``None``): a missing shock is always
-    a user error in this project. ``lib[id]`` raises ``KeyError`` as any
-    mapping does.
-
-    Examples
-    --------
-    >>> lib = ShockLibrary.from_models([LinearShock("B20", 3502.5)])
-    >>> lib.get("B20").c_n_s_m
-    3502.5
-    >>> "D8" in lib
-    False
-    """
-
-    __slots__ = ("_models", "_source")
-
-    def __init__(self, models=(), *, source=None):
-        items = []
-        if isinstance(models, Mapping):
-            for key, model in models.items():
-                if isinstance(model, ShockModel) and key != model.id:
-                    raise ShockModelError(f"shock library: key {key!r} holds shock "
-                                          f"{model.id!r}; use the shock's id as the key")
-                items.append(model)
-        elif isinstance(models, Iterable) and not isinstance(models, (str, bytes)):
-            items = list(models)
-        else:
-            raise TypeError(f"shock library: models must be an iterable of ShockModel, got "
-                            f"{type(models).__name__}")
-        out = {}
-        for j, model in enumerate(items):
-            if not isinstance(model, ShockModel):
-                raise TypeError(f"shock library: item {j} is a {type(model).__name__}, not a "
-                                "ShockModel; build it with LinearShock, TableShock or "
-                                "DigressiveShock")
-            if model.id in out:
-                raise ShockModelError(f"shock library{self._at(source)}: duplicate shock id "
-                                      f"{model.id!r} (items {list(out).index(model.id)} and "
-                                      f"{j}); give each shock a unique id")
-            out[model.id] = model
-        self._models = out
-        self._source = None if source is None else str(source)
-
-    @staticmethod
-    def _at(source):
-        return f" {source}" if source else ""
-
-    @classmethod
-    def from_models(cls, models, *, source=None):
-        """Build a library from shock models (see the class parameters)."""
-        return cls(models, source=source)
-
-    @property
-    def source(self):
-        """str or None: the file the library was read from."""
-        return self._source
-
-    @property
-    def ids(self):
-        """tuple of str: the shock ids, in order."""
-        return tuple(self._models)
-
-    def __getitem__(self, shock_id):
-        return self._models[shock_id]
-
-    def __iter__(self):
-        return iter(self._models)
-
-    def __len__(self):
-        return len(self._models)
-
-    def __repr__(self):
-        src = f", source={self._source!r}" if self._source else ""
-        return f"ShockLibrary({list(self._models.values())!r}{src})"
-
-    _MISSING = object()
-
-    def get(self, shock_id, default=_MISSING, *, where=""):
-        """Return the shock `shock_id`, or raise a clear error naming the known ids.
-
-        Parameters
-        ----------
-        shock_id : str
-            The id to look up.
-        default : optional
-            Returned for an unknown id if given (as ``dict.get``); without it an
-            unknown id raises.
-        where : str
-            Who asks (e.g. ``"run 'swap-LF' setup LF"``), put first in the message.
-
-        Returns
-        -------
-        ShockModel
-
-        Raises
-        ------
-        ShockModelError
-            If `shock_id` is not in the library and no `default` is given.
-        """
-        try:
-            return self._models[shock_id]
-        except (KeyError, TypeError):
-            if default is not ShockLibrary._MISSING:
-                return default
-        prefix = f"{where}: " if where else ""
-        lib = f"shock library {self._source}" if self._source else "the shock library"
-        raise ShockModelError(f"{prefix}unknown shock id {shock_id!r}; {lib} has "
-                              f"{list(self._models)}; fix the id or add the shock")
-
-
-def _fail(where, key, problem, fix):
-    return ShockModelError(f"{where}: key {key!r} {problem}; {fix}")
-
-
-def _toml_number(where, key, value):
-    if not _is_real_number(value):
-        raise _fail(where, key, f"must be a number, got {type(value).__name__} {value!r}",
-                    "write a number without quotes")
-    return float(value)
-
-
-def _toml_numbers(where, key, value):
-    if not isinstance(value, list):
-        raise _fail(where, key, f"must be an array of numbers, got {type(value).__name__} "
-                    f"{value!r}", "write it as [v1, v2, ...]")
-    for j, x in enumerate(value):
-        if not _is_real_number(x):
-            raise _fail(where, key, f"has a {type(x).__name__} {x!r} at position {j}",
-                        "write numbers without quotes")
-    return np.array(value, dtype=float)
-
-
-def _model_from_toml(table, units, where, index):
-    """Build one shock from a ``[[shock]]`` table (values in `units`)."""
-    raw_id = table.get("id") if isinstance(table, dict) else None
-    label = f"{where}: [[shock]] #{index}" + (f" ({raw_id!r})" if isinstance(raw_id, str) else "")
-    if not isinstance(table, dict):
-        raise ShockModelError(f"{label}: is a {type(table).__name__}, not a table; write "
-                              "each shock as a [[shock]] table")
-    if "id" not in table:
-        raise _fail(label, "id", "is missing", "give each shock an id = \"...\"")
-    if not isinstance(raw_id, str):
-        raise _fail(label, "id", f"must be a string, got {type(raw_id).__name__} {raw_id!r}",
-                    "write the id in quotes")
-    if "kind" not in table:
-        raise _fail(label, "kind", "is missing", f"give kind = one of {list(SHOCK_KINDS)}")
-    kind = table["kind"]
-    if not isinstance(kind, str) or kind not in SHOCK_KINDS:
-        raise _fail(label, "kind", f"is {kind!r}, an unknown kind",
-                    f"use one of {list(SHOCK_KINDS)}")
-    cls = SHOCK_KINDS[kind]
-    allowed = {"id", "kind", "lag", "description", "count", *cls._TOML_FIELDS}
-    extra = [k for k in table if k not in allowed]
-    if extra:
-        raise _fail(label, extra[0], f"is not a key of a {kind!r} shock",
-                    f"remove it or fix its spelling (keys: {sorted(allowed)})")
-    kwargs = {}
-    for key, (attr, quantity, shape) in cls._TOML_FIELDS.items():
-        if key not in table:
-            raise _fail(label, key, f"is missing (required for kind {kind!r})",
-                        f"add {key} in {UNIT_LABELS[units][quantity]}")
-        value = (_toml_numbers if shape == "vector" else _toml_number)(label, key, table[key])
-        kwargs[attr] = to_si(value, quantity, units)
-    if "lag" in table:
-        kwargs["lag_s"] = _toml_number(label, "lag", table["lag"])
-    if "description" in table:
-        if not isinstance(table["description"], str):
-            raise _fail(label, "description", f"must be a string, got "
-                        f"{type(table['description']).__name__}", "write it in quotes")
-        kwargs["description"] = table["description"]
-    if "count" in table:
-        if not isinstance(table["count"], int) or isinstance(table["count"], bool):
-            raise _fail(label, "count", f"must be an integer, got "
-                        f"{type(table['count']).__name__} {table['count']!r}",
-                        "write a whole number without quotes or decimal point, or omit it "
-                        "for unlimited")
-        kwargs["count"] = table["count"]
-    keys = {attr: key for key, (attr, _, _) in cls._TOML_FIELDS.items()}
-    keys.update(lag_s="lag", id="id", description="description", count="count")
-    try:
-        return cls(raw_id, **kwargs)
-    except ShockModelError as exc:
-        attr = getattr(exc, "field", None)
-        if attr is None:  # pragma: no cover - every model error carries its field
-            raise ShockModelError(f"{label}: {exc}") from None
-        base, _, sub = attr.partition("[")
-        key = keys.get(base, base) + (f"[{sub}" if sub else "")
-        raise ShockModelError(f"{label}: key {key!r} {exc.problem}; {exc.fix}") from None
-
-
-def read_shock_library(path):
-    """Read a shock library (``shocks.toml``) into SI models.
-
-    Parameters
-    ----------
-    path : str or path
-        The TOML file: a top-level ``units`` ("SI", the default, or
-        "imperial") and ``[[shock]]`` tables with ``id``, ``kind`` ("linear":
-        ``damping``; "table": ``velocity``, ``force``; "digressive":
-        ``bump_low``, ``bump_knee``, ``bump_high``, ``rebound_low``,
-        ``rebound_knee``, ``rebound_high``), optional ``lag`` [s],
-        ``description`` and ``count`` (inventory, integer >= 0; omitted =
-        unlimited).
-
-    Returns
-    -------
-    ShockLibrary
-        The shocks in file order, in SI.
-
-    Raises
-    ------
-    ShockModelError
-        If the file is missing or not TOML, has no shocks, an unknown kind, a
-        missing, unknown or mistyped key, a duplicate id, or an invalid model;
-        the message names the file, the shock (index from 1 and id) and the key.
-
-    Notes
-    -----
-    Imperial values are converted on load: velocity in/s, force lbf, damping
-    lbf/(in/s); ``lag`` is always in seconds. Other top-level keys are ignored, unless
-    they look like a typo of ``units`` or ``shock`` (refused, with a did-you-mean).
-    """
-    path = Path(path)
-    doc = read_toml(path, error=ShockModelError, what="shock library")
-    for key in doc:
-        hint = did_you_mean(key, ("units", "shock")) if key not in ("units", "shock") else ""
-        if hint:  # a typo would silently read an imperial library as SI
-            raise ShockModelError(f"{path}: unknown top-level key {key!r}{hint}; a shock "
-                                  "library has 'units' and [[shock]] tables")
-    units = _check_units_for(doc.get("units", "SI"), f"{path}: key 'units'")
-    shocks = doc.get("shock")
-    if shocks is None:
-        raise ShockModelError(f"{path}: no [[shock]] tables; add at least one shock")
-    if not isinstance(shocks, list):
-        raise ShockModelError(f"{path}: key 'shock' must be an array of tables, got "
-                              f"{type(shocks).__name__}; write each shock as a [[shock]] table")
-    ignored = [k for k in doc if k not in ("units", "shock")]
-    if ignored:
-        logger.debug("%s: ignoring top-level keys %s", path, ignored)
-    models = [_model_from_toml(t, units, str(path), j + 1) for j, t in enumerate(shocks)]
-    ids = [m.id for m in models]
-    for j, shock_id in enumerate(ids):
-        if shock_id in ids[:j]:
-            raise ShockModelError(f"{path}: [[shock]] #{j + 1} ({shock_id!r}): key 'id' repeats "
-                                  f"the id of [[shock]] #{ids.index(shock_id) + 1}; give each "
-                                  "shock a unique id")
-    logger.debug("read %d shock(s) from %s (%s)", len(models), path, units)
-    return ShockLibrary(models, source=path)
-
-
-def write_shock_library(library, path, *, units="SI", overwrite=False):
-    """Write a shock library as ``shocks.toml``, atomically.
-
-    Parameters
-    ----------
-    library : ShockLibrary or iterable of ShockModel
-        The shocks, in order.
-    path : str or path
-        Output file.
-    units : {"SI", "imperial"}
-        Unit system of the file. Imperial converts back from SI (a round trip
-        SI -> imperial -> SI is exact to round-off).
-    overwrite : bool
-        Replace an existing file.
-
-    Returns
-    -------
-    pathlib.Path
-        The written path.
-
-    Raises
-    ------
-    ShockModelError
-        If `units` is unknown or the models have duplicate ids.
-    FileExistsError
-        If `path` exists and `overwrite` is false.
-    """
-    if not isinstance(library, ShockLibrary):
-        library = ShockLibrary.from_models(library)
-    units = _check_units_for(units, "write_shock_library: units")
-    path = Path(path)
-    doc = {"units": units, "shock": [m.to_toml_dict(units) for m in library.values()]}
-    atomic_write_toml(path, doc, overwrite=overwrite,
-                      header="Shock library (rig-session/1), written by shockplan.")
-    logger.info("wrote %d shock(s) to %s (%s)", len(library), path, units)
-    return path
-
-
-# ----------------------------------------------------------------------------
-# dyno fitting
-# ----------------------------------------------------------------------------
-
-
-def _dyno_points(data, units, where):
-    """Return signed (velocity [m/s], force [N], row labels) from dyno data."""
-    if isinstance(data, pd.DataFrame):
-        df = data
-    elif isinstance(data, (str, Path)):
-        p = Path(data)
-        if not p.is_file():
-            raise ShockModelError(f"{where}: dyno file not found; check the path")
-        try:
-            df = pd.read_csv(p)
-        except (ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
-            raise ShockModelError(f"{where}: cannot read the dyno CSV ({exc}); give a CSV "
-                                  "with a header row") from None
-    else:
-        raise TypeError(f"dyno data must be a CSV path or a pandas DataFrame, got "
-                        f"{type(data).__name__}")
-    cols = {str(c).strip().lower(): c for c in df.columns}
-
-    def column(name, quantity):
-        raw = df[cols[name]]
-        num = pd.to_numeric(raw, errors="coerce")
-        bad = np.flatnonzero(num.isna().to_numpy())
-        if bad.size:
-            r = int(bad[0])
-            raise ShockModelError(f"{where}: column {cols[name]!r} has {bad.size} missing or "
-                                  f"non-numeric value(s), the first at data row {r + 1} "
-                                  f"({raw.iloc[r]!r}); fill or remove those rows")
-        return np.asarray(to_si(num.to_numpy(dtype=float), quantity, units), dtype=float)
-
-    if "velocity" not in cols:
-        raise ShockModelError(f"{where}: no column 'velocity' (columns: "
-                              f"{[str(c) for c in df.columns]}); give columns velocity, force "
-                              "or velocity, bump_force, rebound_force")
-    if len(df) == 0:
-        raise ShockModelError(f"{where}: no data rows; give at least one measured point")
-    has_signed = "force" in cols
-    has_split = "bump_force" in cols or "rebound_force" in cols
-    if has_signed and has_split:
-        raise ShockModelError(f"{where}: has both a 'force' column and 'bump_force'/"
-                              "'rebound_force' columns; keep one layout")
-    v = column("velocity", "velocity")
-    rows = np.arange(1, len(df) + 1)
-    if has_signed:
-        f = column("force", "force")
-        return v, f, rows, ("velocity", "force")
-    for name in ("bump_force", "rebound_force"):
-        if name not in cols:
-            raise ShockModelError(f"{where}: no column {name!r} (columns: "
-                                  f"{[str(c) for c in df.columns]}); give columns velocity, "
-                                  "bump_force, rebound_force, or velocity, force (signed)")
-    fb = column("bump_force", "force")
-    fr = column("rebound_force", "force")
-    neg = np.flatnonzero(v < 0)
-    if neg.size:
-        raise ShockModelError(f"{where}: column {cols['velocity']!r} has a negative value at "
-                              f"data row {neg[0] + 1} while bump_force/rebound_force are "
-                              "given; give velocity magnitudes, or use signed columns "
-                              "velocity, force")
-    for name, arr in (("bump_force", fb), ("rebound_force", fr)):
-        neg = np.flatnonzero(arr < 0)
-        if neg.size:
-            raise ShockModelError(f"{where}: column {cols[name]!r} has a negative value at "
-                                  f"data row {neg[0] + 1}; give force magnitudes (positive) "
-                                  "as the dyno reports them")
-    return (np.concatenate([v, -v]), np.concatenate([fb, -fr]), np.concatenate([rows, rows]),
-            ("velocity", "bump_force/rebound_force"))
-
-
-def _check_dyno_passive(v, f, rows, colnames, where, units):
-    wrong = np.flatnonzero(v * f < 0)
-    if wrong.size:
-        j = int(wrong[0])
-        raise ShockModelError(
-            f"{where}: column {colnames[1]!r} data row {rows[j]}: force "
-            f"{_fmt(from_si(f[j], 'force', units))} {UNIT_LABELS[units]['force']} at velocity "
-            f"{_fmt(from_si(v[j], 'velocity', units))} {UNIT_LABELS[units]['velocity']} has the "
-            "wrong sign (not passive); check the sign convention (compression positive)")
-    tol = PASSIVITY_RTOL * float(np.max(np.abs(f)))
-    zero = np.flatnonzero((v == 0) & (np.abs(f) > tol))
-    if zero.size:
-        j = int(zero[0])
-        raise ShockModelError(
-            f"{where}: column {colnames[1]!r} data row {rows[j]}: force "
-            f"{_fmt(from_si(f[j], 'force', units))} {UNIT_LABELS[units]['force']} at zero "
-            "velocity (not passive); subtract the gas or static force first")
-
-
-def _fit_table(v, f, where, units, colnames):
-    keep = v != 0
-    v, f = v[keep], f[keep]
-    if v.size == 0:
-        raise ShockModelError(f"{where}: column {colnames[0]!r} has no non-zero velocity; "
-                              "give measured points away from 0")
-    uv, inv = np.unique(v, return_inverse=True)
-    uf = np.bincount(inv, weights=f) / np.bincount(inv)
-    vk = np.concatenate([uv[uv < 0], [0.0], uv[uv > 0]])
-    fk = np.concatenate([uf[uv < 0], [0.0], uf[uv > 0]])
-    for side, present in (("rebound", np.any(uv < 0)), ("bump", np.any(uv > 0))):
-        if not present:
-            warnings.warn(f"{where}: no {side} points; the {side} side of the table is the "
-                          "linear extension of the other side's first segment through (0, 0); "
-                          f"measure {side} points to model it", FitWarning, stacklevel=3)
-    pwl = PiecewiseLinear(vk, fk, 0.0, 0.0)
-    slopes = pwl.segment_slopes[1:-1]
-    for end, s, pts in (("lowest", slopes[0], (0, 1)), ("highest", slopes[-1], (-2, -1))):
-        if s < 0:
-            va, vb = (from_si(vk[i], "velocity", units) for i in pts)
-            raise ShockModelError(
-                f"{where}: column {colnames[1]!r}: the force decreases in magnitude between "
-                f"velocities {_fmt(va)} and {_fmt(vb)} {UNIT_LABELS[units]['velocity']} (the "
-                f"{end} two points), so the table's linear extension would not be passive; "
-                "remove the outlier or fit kind='digressive'")
-    return vk, fk, uv.size
-
-
-def _fit_side(u, g, where, side):
-    """Fit ``g = a min(u, k) + b max(u - k, 0)`` with a, b >= 0 and a knee k.
-
-    Returns ``(a, k, b, sse)``.
-    """
-    uniq = np.unique(u)
-    if uniq.size < 3:
-        raise ShockModelError(f"{where}: the {side} side has {uniq.size} distinct non-zero "
-                              "velocities; a digressive fit needs at least 3 per side; measure "
-                              "more points or use kind='table'")
-    lo, hi = float(uniq[0]), float(uniq[-2])
-
-    def solve(k):
-        a_mat = np.column_stack([np.minimum(u, k), np.maximum(u - k, 0.0)])
-        x, rnorm = nnls(a_mat, g)
-        return x, rnorm * rnorm
-
-    grid = np.unique(np.concatenate([np.linspace(lo, hi, 65), uniq[:-1]]))
-    sse = np.array([solve(k)[1] for k in grid])
-    j = int(np.argmin(sse))
-    k_best, sse_best = float(grid[j]), float(sse[j])
-    a_lo, a_hi = float(grid[max(j - 1, 0)]), float(grid[min(j + 1, grid.size - 1)])
-    if a_hi > a_lo:
-        res = minimize_scalar(lambda k: solve(k)[1], bounds=(a_lo, a_hi), method="bounded",
-                              options={"xatol": 1e-10 * hi})
-        if res.fun <= sse_best:
-            k_best, sse_best = float(res.x), float(res.fun)
-    (a, b), sse_best = solve(k_best)
-    if k_best <= lo * (1 + 1e-6) or k_best >= hi * (1 - 1e-6):
-        warnings.warn(f"{where}: the {side} knee is at the edge of the measured velocities "
-                      f"({_fmt(k_best)} m/s); the knee is poorly determined, measure more "
-                      "points around it", FitWarning, stacklevel=3)
-    return float(a), k_best, float(b), float(sse_best)
-
-
-def fit_shock_to_dyno(data, *, id, kind="table", units="SI", lag_s=0.0, where=None):
-    """Fit a shock model to dyno data (peak force vs peak velocity).
-
-    Parameters
-    ----------
-    data : str, path or pandas.DataFrame
-        A CSV file (with a header row) or a DataFrame, in one of two layouts:
-        (a) columns ``velocity``, ``force``: signed, compression positive,
-        rebound rows negative; (b) columns ``velocity``, ``bump_force``,
-        ``rebound_force``: velocity magnitudes and force magnitudes (all >= 0)
-        as dynos report them. Column names are matched case-insensitively.
-    id : str
-        The id of the fitted shock.
-    kind : {"table", "digressive"}
-        ``"table"``: the measured points (duplicate velocities averaged) plus
-        the (0, 0) knot. ``"digressive"``: least-squares low slope, knee and
-        high slope per side (knee by a bounded 1-D search, slopes >= 0 by
-        non-negative linear least squares given the knee).
-    units : {"SI", "imperial"}
-        Unit system of the data (velocity m/s or in/s, force N or lbf).
-    lag_s : float
-        Lag [s] of the returned model.
-    where : str, optional
-        Name of the data in messages; default the file path or
-        ``"dyno DataFrame"``.
-
-    Returns
-    -------
-    TableShock or DigressiveShock
-        The fitted model in SI; its ``description`` says what it was fitted to.
-
-    Raises
-    ------
-    ShockModelError
-        If a column is missing or non-numeric, the data are not passive (a
-        force of the wrong sign, a non-zero force at zero velocity, a table
-        whose end slope is negative), a side has too few points for the
-        digressive fit, or `kind` or `units` is unknown.
-    TypeError
-        If `data` is neither a path nor a DataFrame.
-
-    Warns
-    -----
-    FitWarning
-        A table with no points on one side; a digressive knee at the edge of
-        the measured velocities.
-    """
-    if where is None:
-        where = "dyno DataFrame" if isinstance(data, pd.DataFrame) else str(data)
-    if kind not in ("table", "digressive"):
-        raise ShockModelError(f"{where}: unknown fit kind {kind!r}; use 'table' or "
-                              "'digressive'")
-    units = _check_units_for(units, f"{where}: units")
-    v, f, rows, colnames = _dyno_points(data, units, where)
-    _check_dyno_passive(v, f, rows, colnames, where, units)
-    n = v.size
-    if kind == "table":
-        vk, fk, n_unique = _fit_table(v, f, where, units, colnames)
-        model = TableShock(id, vk, fk, lag_s=lag_s,
-                           description=f"table fitted to dyno data {where} ({n} points, "
-                                       f"{n_unique} distinct velocities)")
-        logger.info("fitted table shock %r to %s: %d knots", id, where, vk.size)
-        return model
-    params = {}
-    sse_total = 0.0
-    for side, mask, sign in (("bump", v > 0, 1.0), ("rebound", v < 0, -1.0)):
-        a, k, b, sse = _fit_side(sign * v[mask], sign * f[mask], where, side)
-        params.update({f"{side}_low_n_s_m": a, f"{side}_knee_m_s": k,
-                       f"{side}_high_n_s_m": b})
-        sse_total += sse
-    # points at v = 0 have f = 0 (checked) and the model gives 0 there: no residual
-    rms = math.sqrt(sse_total / n)
-    model = DigressiveShock(id, **params, lag_s=lag_s,
-                            description=f"digressive fitted to dyno data {where} ({n} points, "
-                                        f"RMS residual {rms:.4g} N)")
-    logger.info("fitted digressive shock %r to %s: RMS residual %.4g N over %d points",
-                id, where, rms, n)
-    return model

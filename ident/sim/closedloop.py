@@ -3,7 +3,7 @@
 This is the one simulator of the project: the virtual rig runs the physical
 full-car model through it, the planner runs identified models through it.
 
-The linear part is a :class:`LoopPlant`: an LTI system with inputs
+The linear part is a :class:`~ident.models.lti.LoopPlant`: an LTI system with inputs
 ``[u_rig (7), dF (4)]`` and outputs ``y`` (the shock velocities among them),
 written around a baseline linear damping ``c_bar`` (Eq. 20 of the seed paper):
 the applied shock force of corner ``i`` is ``F_i = c_bar_i v_i + dF_i``. Each
@@ -15,7 +15,7 @@ Notes
 Discretization. The plant is held in modal form (one complex state per
 conjugate pole pair or real pole) and every mode is discretized *exactly* for
 inputs that follow the parabola through the last three samples (a quadratic
-hold, :func:`hold_coefficients`)::
+hold, :func:`ident.models.lti.hold_coefficients`)::
 
     x[k+1] = exp(lam h) x[k] + g1 (B u[k+1]) + g0 (B u[k]) + gm (B u[k-1])
 
@@ -33,10 +33,10 @@ step; rig inputs are refined onto the internal grid by band-limited
 The rig-input part of the response does not depend on the shocks: it is
 computed once per drive (:func:`rig_response`) and shared by all setups.
 
-The plant types and the discretization live in :mod:`ident.models.lti` (re-exported
-here: :class:`LoopPlant`, :class:`ModalSystem`, :func:`modal_form` and the hold
-coefficients are the simulator's inputs), the compiled kernels in
-:mod:`ident.sim.loop_kernels`; this module checks the inputs, builds the kernels'
+The plant types and the discretization live in :mod:`ident.models.lti`
+(:class:`~ident.models.lti.LoopPlant`, :class:`~ident.models.lti.ModalSystem`,
+:func:`~ident.models.lti.modal_form` and the hold coefficients are the simulator's
+inputs), the compiled kernels in :mod:`ident.sim.loop_kernels`; this module checks the inputs, builds the kernels'
 arguments and returns the results. :func:`refine_input`, :func:`drive_array`,
 :func:`check_oversample`, :func:`setup_models` and :func:`pack_setups` are the input
 steps shared with the virtual rig (:mod:`ident.sim.rig`), the FIR simulator
@@ -59,23 +59,15 @@ import numpy as np
 
 from ident.data.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES
 from ident.data.drive import FIR_HALF_LENGTH, check_drive_inputs, resample_bandlimited
-from ident.models.lti import (LoopPlant, ModalSystem, foh_coefficients, hold_coefficients,
-                              lag_coefficients, lag_hold_coefficients, modal_form)
+from ident.models.lti import hold_coefficients, lag_coefficients, lag_hold_coefficients
 from ident.sim.loop_kernels import loop_batch, loop_metrics_worker, loop_serial, rig_kernel
 from ident.sim.metrics import METRIC_CHANNELS, compute_metrics, metric_plan
 
 __all__ = [
-    "ModalSystem",
-    "LoopPlant",
     "RigResponse",
     "Response",
     "BatchResponse",
     "BatchMetrics",
-    "modal_form",
-    "foh_coefficients",
-    "hold_coefficients",
-    "lag_hold_coefficients",
-    "lag_coefficients",
     "rig_response",
     "simulate",
     "simulate_batch",
@@ -163,7 +155,7 @@ def rig_response(plant, drive, *, oversample=4, outputs=None):
 
     Parameters
     ----------
-    plant : LoopPlant
+    plant : ident.models.lti.LoopPlant
     drive : ident.data.drive.Drive
     oversample : int
         Internal steps per drive sample (>= 1).
@@ -338,8 +330,8 @@ def pack_setups(setups, h, *, hold="quadratic"):
         ``kv, kf`` (n_setups, 4, n_knots) knot velocities [m/s] and forces [N] of each
         curve, padded with its last knot; ``nk`` (n_setups, 4) knots per curve; ``slo,
         shi`` (n_setups, 4) end slopes [N/(m/s)]; then the lag coefficients of
-        :func:`lag_hold_coefficients` (``alpha, b0, b1, bm``), or with
-        ``hold="linear"`` of :func:`lag_coefficients` (``alpha, b0, b1``), each
+        :func:`ident.models.lti.lag_hold_coefficients` (``alpha, b0, b1, bm``), or with
+        ``hold="linear"`` of :func:`ident.models.lti.lag_coefficients` (``alpha, b0, b1``), each
         (n_setups, 4).
     """
     S = len(setups)
@@ -435,7 +427,7 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
 
     Parameters
     ----------
-    plant : LoopPlant
+    plant : ident.models.lti.LoopPlant
     drive : ident.data.drive.Drive
         The 7 rig inputs, SI (a 4-post drive: aero inputs zero).
     setups : sequence of setups

@@ -38,7 +38,7 @@ from ident.data.files import read_toml
 from ident.data.session import Run, make_session
 from ident.data.units import check_units, to_si
 from ident.errors import DriveError, SessionError, ShockModelError
-from ident.models.shocks import read_shock_library
+from ident.models.library import read_shock_library
 from ident.models.vehicle import build_full_car, example_vehicle
 from ident.sim.closedloop import refine_input, simulate
 
@@ -51,7 +51,6 @@ __all__ = [
     "simulate_session",
     "DEFAULT_PLAN_PATH",
     "NOMINAL_V_RMS_M_S",
-    "RIG_KINDS",
     "loop_damping",
 ]
 
@@ -111,7 +110,7 @@ class RigPlan:
         in every run).
     drive : dict
         Drive settings in SI (``kind`` and its options).
-    shocks : ident.models.shocks.ShockLibrary
+    shocks : ident.models.library.ShockLibrary
     runs : tuple of PlanRun
     units : str
         Unit system of the session to write.

@@ -22,7 +22,8 @@ from scipy import optimize as sopt
 
 from ident.data.channels import CORNERS
 from ident.data.drive import Drive
-from ident.models.shocks import LinearShock, PiecewiseLinear, ShockLibrary, TableShock
+from ident.models.library import ShockLibrary
+from ident.models.shocks import LinearShock, PiecewiseLinear, TableShock
 from ident.sim.closedloop import simulate
 from ident.sim.metrics import METRIC_NAMES
 from planner.errors import PlannerError
@@ -277,7 +278,7 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
         Identified or known; both go through the same loop.
     drives : ident.data.drive.Drive or sequence of Drive
-    library : ident.models.shocks.ShockLibrary
+    library : ident.models.library.ShockLibrary
         The crate: the baseline and the setups the optimum is mapped to.
     objective : planner.objective.Objective, optional
         Default :func:`planner.objective.default_objective`; the spec's

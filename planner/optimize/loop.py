@@ -3,11 +3,11 @@
 The closed loop is that of :mod:`ident.sim.closedloop`, written in casadi as a
 discrete recursion (a fold, single shooting) over the drive's samples:
 
-- the rig part of the model's :class:`~ident.sim.closedloop.LoopPlant` is
+- the rig part of the model's :class:`~ident.models.lti.LoopPlant` is
   simulated once per drive (:func:`ident.sim.closedloop.rig_response`);
 - the shock part's modes are stepped with the same quadratic-hold
-  coefficients (:func:`ident.sim.closedloop.hold_coefficients`) and the lag with
-  :func:`ident.sim.closedloop.lag_hold_coefficients`, ``oversample`` sub-steps per
+  coefficients (:func:`ident.models.lti.hold_coefficients`) and the lag with
+  :func:`ident.models.lti.lag_hold_coefficients`, ``oversample`` sub-steps per
   sample;
 - the algebraic loop ``v = v_free + D_eff dF(v)`` is solved at every sub-step
   by Newton's method on the 4 shock velocities (3 iterations from ``v_free``;
@@ -36,7 +36,8 @@ import numpy as np
 from scipy import signal
 
 from ident.data.channels import CORNERS
-from ident.sim.closedloop import hold_coefficients, lag_hold_coefficients, rig_response
+from ident.models.lti import hold_coefficients, lag_hold_coefficients
+from ident.sim.closedloop import rig_response
 from planner.optimize.cache import compiled_steps
 
 __all__ = [

@@ -18,7 +18,7 @@ from openpyxl.styles import Font
 from ident.data.channels import CORNERS
 from ident.data.files import atomic_dir
 from ident.data.units import check_units, from_si, to_si
-from ident.models.shocks import ShockLibrary, write_shock_library
+from ident.models.library import ShockLibrary, write_shock_library
 from ident.sim.metrics import METRIC_NAMES
 from planner.errors import PlannerError
 from planner.report.ranking import ranking_to_units

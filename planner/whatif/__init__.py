@@ -98,13 +98,14 @@ The effects, figures and files (:func:`factor_effects`, :func:`tornado_figure`,
 :mod:`planner.report.whatif`; this package re-exports them.
 """
 
+from ident.sim.stiffness import suspension_stiffness
 from planner.report.whatif import (
     factor_effects,
     rank_stability_figure,
     tornado_figure,
     write_whatif,
 )
-from planner.whatif.conditions import MIN_WINDOW_S, stiffened_plant, suspension_stiffness
+from planner.whatif.conditions import MIN_WINDOW_S, stiffened_plant
 from planner.whatif.evaluate import (
     MIN_TASK_EVALUATIONS,
     TASKS_PER_THREAD,

@@ -20,17 +20,15 @@ import numpy as np
 from ident.data.channels import CORNERS, RIG_INPUTS
 from ident.data.drive import Drive
 from ident.errors import VehicleError
-from ident.models.shocks import ShockLibrary
+from ident.models.library import ShockLibrary
 from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
 from ident.sim import stiffness as ident_stiffness
-from ident.sim.stiffness import suspension_stiffness
 from planner.errors import PlannerError
 from planner.setups import Setup
 from planner.whatif.spec import AXLE_CORNERS
 
 __all__ = [
     "MIN_WINDOW_S",
-    "suspension_stiffness",
     "stiffened_plant",
     "ConditionEffect",
     "condition_effect",
@@ -254,7 +252,7 @@ def condition_plant(model, base_plant, e, where, nominal_rates):
     ----------
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
         As :func:`planner.whatif.evaluate_whatif` takes it.
-    base_plant : ident.sim.closedloop.LoopPlant
+    base_plant : ident.models.lti.LoopPlant
         The model's nominal loop plant.
     e : ConditionEffect
     where : str
@@ -264,7 +262,7 @@ def condition_plant(model, base_plant, e, where, nominal_rates):
 
     Returns
     -------
-    ident.sim.closedloop.LoopPlant
+    ident.models.lti.LoopPlant
         `base_plant` itself; the changed known vehicle's plant; or `base_plant`
         stiffened (:func:`stiffened_plant`) on an identified model.
 
@@ -350,7 +348,7 @@ class ShockVariants:
 
     Parameters
     ----------
-    library : ident.models.shocks.ShockLibrary
+    library : ident.models.library.ShockLibrary
         The crate.
 
     Attributes

@@ -23,7 +23,7 @@ from tqdm.auto import tqdm
 
 from ident.data.channels import CORNERS
 from ident.data.drive import Drive
-from ident.models.shocks import ShockLibrary
+from ident.models.library import ShockLibrary
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
 from planner.predict import as_loop_plant, predict_setups, prepare_drive
@@ -181,7 +181,7 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
 
     Parameters
     ----------
-    plant : ident.sim.closedloop.LoopPlant
+    plant : ident.models.lti.LoopPlant
         The condition's plant (built by the client).
     drive : ident.data.drive.Drive
         The prepared nominal drive; the condition's drive is derived here
@@ -192,7 +192,7 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
         The condition's name for error messages.
     setups : list of planner.setups.Setup, shape (n,)
         Condition setups (names ``"<setup>\\x1f<drive>:<perturbation>"``).
-    library : ident.models.shocks.ShockLibrary
+    library : ident.models.library.ShockLibrary
         The crate.
     extra : list of ident.models.shocks.ShockModel
         The scaled or lagged shocks `setups` use.
@@ -262,7 +262,7 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
         Every condition is evaluated on every drive; the first is the nominal one.
     setups : sequence of planner.setups.Setup
         The setups (e.g. the top of a ranking); the baseline is added if missing.
-    library : ident.models.shocks.ShockLibrary
+    library : ident.models.library.ShockLibrary
     perturbations : PerturbationSet
     objective : planner.objective.Objective, optional
         Default :func:`planner.objective.default_objective`.

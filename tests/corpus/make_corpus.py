@@ -134,7 +134,8 @@ def build_base(root):
     from ident.data.channels import RIG_INPUTS, SHOCK_VELOCITIES
     from ident.data.drive import Drive, write_drive
     from ident.sim.rig import simulate_session
-    from ident.data.session import write_run_table, write_session
+    from ident.data.runs import write_run_table
+    from ident.data.session import write_session
     from planner.setups import Setup, write_setups
 
     root = Path(root)

@@ -17,18 +17,17 @@ from ident.data.formats.channel_map import ChannelMap, read_channel_map
 from ident.data.formats.mdf import read_mdf
 from ident.data.formats.rpc3 import read_rpc3
 from ident.data.formats.tdms import read_tdms
+from ident.data.runs import RTOL_TIME_STEP, RunTable
 from ident.data.session import (
     MANIFEST_NAME,
-    RTOL_TIME_STEP,
     RUN_ROLES,
     Run,
-    RunTable,
     append_runs,
     make_session,
     read_session,
     write_session,
 )
-from ident.models.shocks import ShockLibrary, read_shock_library
+from ident.models.library import ShockLibrary, read_shock_library
 from ident.data.units import check_units
 
 __all__ = ["READERS", "read_raw", "read_run", "import_runs", "parse_setup",
@@ -138,7 +137,7 @@ def read_run(path, *, format, channel_map, required=(), where=None):
 
     Returns
     -------
-    ident.data.session.RunTable
+    ident.data.runs.RunTable
         ``time_s`` [s] (the file's time base), ``channels`` (every mapped
         channel, SI, shockplan's signs, read-only, in
         :data:`ident.data.channels.ALL_CHANNELS` order), ``fs_hz`` and ``path``.
@@ -153,7 +152,7 @@ def read_run(path, *, format, channel_map, required=(), where=None):
         known unit other than the map's; a channel has no time base and the
         map names no ``time``; the mapped channels differ in length or time
         base; time is not strictly increasing and uniform (relative tolerance
-        :data:`ident.data.session.RTOL_TIME_STEP`); a value is NaN/inf; fewer than
+        :data:`ident.data.runs.RTOL_TIME_STEP`); a value is NaN/inf; fewer than
         2 samples.
     """
     fmt = _check_format(format)
