@@ -1,3 +1,25 @@
-"""shockplan planner: from vehicle models to shock-setup decisions."""
+"""shockplan's model-to-decision half: which shocks to bolt on, and which rig runs to do next.
+
+Modules, from the shared vocabulary up to the decisions (a module imports only those
+before it):
+
+- vocabulary: :mod:`~planner.errors`, :mod:`~planner.setups` (setups and their files,
+  the one enumeration, the one baseline resolver, the symmetry names) and
+  :mod:`~planner.objective` (scores, limits and the one ranking rule);
+- engines: :mod:`~planner.runner` (tasks in this process or on Dask),
+  :mod:`~planner.predict` (the closed loop in the time domain), :mod:`~planner.screen`
+  with :mod:`~planner.screen_kernels` and :mod:`~planner.screen_codegen` (the frequency
+  domain, stochastic linearization) and :mod:`~planner.uncertainty` (intervals from the
+  identification's random error);
+- writers: :mod:`planner.report` (ranking, optimum and what-if files and figures, the
+  print layout of every workbook);
+- decisions: :mod:`~planner.sweep` and :mod:`~planner.rank` (which crate setup),
+  :mod:`planner.optimize` (which damper curve), :mod:`~planner.design` and
+  :mod:`~planner.testplan` (which rig runs, the run sheet) and :mod:`planner.whatif`
+  (does the best stay best);
+- :mod:`~planner.cli` (the command line, a thin layer) and :mod:`~planner.demo`.
+
+``planner`` imports :mod:`ident`, never the reverse.
+"""
 
 __version__ = "0.1.0"
