@@ -2,12 +2,20 @@
 
 Every command is a call into the library; this module parses arguments,
 prints summaries and turns the project's errors into one-line messages.
+
+One vocabulary across commands (issue 23): ``--units`` takes ``SI`` or ``imperial`` in
+any case and passes the canonical name on; ``-q`` and ``-v`` go before or after the
+command; options are spelled out in full, and a misspelled option or command ends with
+exit status 2 and one line naming the nearest valid one; every option's help states its
+default and, for a physical quantity, its unit.
 """
 
 from __future__ import annotations
 
 import argparse
+import difflib
 import logging
+import re
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -16,6 +24,7 @@ import numpy as np
 
 from ident.data.files import check_output
 from ident.data.channels import RIG_KINDS
+from ident.data.units import UNIT_SYSTEMS
 
 __all__ = ["main", "build_parser", "noise_report"]
 
@@ -84,8 +93,11 @@ def cmd_rig_simulate(args):
     session = simulate_session(plan, vehicle, progress=not args.quiet)
     write_session(session, out, units=args.units or plan.units, run_format=args.format,
                   overwrite=args.overwrite)
+    counts = [r.n_samples for r in session.runs]
+    samples = (f"{counts[0]} samples each" if len(set(counts)) == 1 else
+               f"{min(counts)}-{max(counts)} samples per run ({sum(counts)} in all)")
     print(f"wrote rig session '{session.name}' to {out}: {len(session.runs)} runs, "
-          f"{session.runs[0].n_samples} samples at {session.fs_hz:g} Hz, vehicle '{vehicle.name}', "
+          f"{samples} at {session.fs_hz:g} Hz, vehicle '{vehicle.name}', "
           f"{plan.rig} rig ({len(session.rig_inputs)} rig inputs)")
     return 0
 
@@ -100,10 +112,15 @@ def cmd_vehicle_modes(args):
     if args.damping is not None:
         damping = to_si(args.damping, "damping", args.units)
     s = modal_summary(vehicle, damping_n_s_m=damping)
-    rows = [(lab, f"{u:.3f}", f"{d:.3f}", f"{z:.3f}")
-            for lab, u, d, z in zip(s.labels, s.undamped_hz, s.damped_hz, s.damping_ratio)]
+    rows = [(lab, f"{f0:.3f}", f"{u:.3f}", f"{d:.3f}", f"{z:.3f}")
+            for lab, f0, u, d, z in zip(s.labels, s.no_damping_hz, s.natural_hz, s.damped_hz,
+                                        s.damping_ratio)]
     print(f"vehicle '{vehicle.name}', shocks {s.damping_n_s_m[0]:.1f} N/(m/s)")
-    print(_fmt_table(rows, ["mode", "undamped Hz", "damped Hz", "zeta"]))
+    print(_fmt_table(rows, ["mode", "no-damping Hz", "natural Hz", "damped Hz", "zeta"]))
+    print("no-damping: springs and tires alone (the ride-rate hand calculation); natural and "
+          "damped: the modes with these shocks, |s|/2pi and Im(s)/2pi (damped = natural * "
+          "sqrt(1 - zeta^2)); shock damping couples chassis and wheels, so natural differs from "
+          "no-damping")
     return 0
 
 
@@ -316,13 +333,10 @@ def _ranking_summary(ranking, units, n=5):
 def cmd_sweep(args):
     """``shockplan sweep``: screen a large enumeration on several drives/models (Dask), simulate
     the best share, rank; writes ranking.csv, one CSV per case and sweep.toml."""
-    import re
-
-    from ident.data.files import atomic_write_toml
     from ident.data.drive import read_drive
     from ident.models.library import read_shock_library
     from planner.objective import default_objective, read_objective
-    from planner.report import write_predictions_csv
+    from planner.report.sweep import write_sweep
     from planner.setups import read_setups
     from planner.sweep import sweep_setups
 
@@ -347,30 +361,7 @@ def cmd_sweep(args):
                           top=args.top, combine=args.combine, chunk_size=args.chunk_size,
                           oversample=args.oversample, scheduler=scheduler,
                           n_workers=args.workers, progress=not args.quiet)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    written = [write_predictions_csv(result.table, out / "ranking.csv", units=args.units,
-                                     overwrite=args.overwrite)]
-    case_files = {}
-    for k, (label, table) in enumerate(result.cases.items()):
-        slug = re.sub(r"[^A-Za-z0-9._-]+", "-", label).strip("-")[:60] or "case"
-        path = out / f"case-{k + 1}-{slug}.csv"
-        case_files[label] = path.name
-        written.append(write_predictions_csv(table, path, units=args.units,
-                                             overwrite=args.overwrite))
-    st = result.settings
-    summary = {"format": "shockplan-sweep/1", "baseline": result.baseline,
-               "objective": objective.name, "best": result.best,
-               "cases": [{"label": lab, "file": case_files[lab]} for lab in st["cases"]],
-               "combine": st["combine"], "n_candidates": st["n_candidates"],
-               "n_screened": st["n_screened"], "n_simulated": int(len(result.table)),
-               "top_share": float(st["top_share"]), "scheduler": st["scheduler"],
-               "n_workers": st["n_workers"], "seconds": st["seconds"],
-               "screen_setups_per_s": st["screen_setups_per_s"],
-               "simulate_setups_per_s": st["simulate_setups_per_s"],
-               "spearman": result.agreement["spearman"]}
-    atomic_write_toml(out / "sweep.toml", summary, overwrite=True)
-    written.append(out / "sweep.toml")
+    written = write_sweep(result, args.out, units=args.units, overwrite=args.overwrite)
     print(_sweep_summary(result))
     print("wrote " + ", ".join(str(p) for p in written))
     return 0
@@ -598,15 +589,161 @@ def cmd_demo(args):
     return 0
 
 
+#: difflib similarity a misspelled option or command must reach for the nearest valid one to
+#: be named: stricter than difflib's 0.6, as :func:`ident.data.files.did_you_mean`, so that
+#: an option of a command written before it ('--units') is not taken for '--quiet'.
+TYPO_CUTOFF = 0.75
+
+#: What argparse takes for a negative number (a value, not an option).
+_NEGATIVE_NUMBER = re.compile(r"^-\d+$|^-\d*\.\d+$")
+
+#: The flags taken before or after any command (issue 23): short, long, help.
+_FLAGS_ANYWHERE = (("-v", "--verbose",
+                    "log progress details (default: warnings only); before or after the command"),
+                   ("-q", "--quiet",
+                    "no progress bars (default: shown); before or after the command"))
+
+
+def _unit_system(text):
+    """``--units`` in any case (``si``, ``Imperial``) as its canonical name in
+    :data:`ident.data.units.UNIT_SYSTEMS` ("SI" or "imperial"); any other text unchanged,
+    for argparse's ``choices`` to refuse with the valid names."""
+    for name in UNIT_SYSTEMS:
+        if text.strip().lower() == name.lower():
+            return name
+    return text
+
+
+def _add_units(parser, what, *, default="SI", default_text="SI"):
+    """Add ``--units`` (``SI`` or ``imperial``, any case) to `parser`."""
+    parser.add_argument("--units", type=_unit_system, choices=list(UNIT_SYSTEMS),
+                        default=default, help=f"{what}: SI or imperial, in any case (default: "
+                        f"{default_text})")
+
+
+def _subcommands(parser):
+    """The subparsers action of `parser` (its commands), or None."""
+    return next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)),
+                None)
+
+
+def _option_owners(option, commands):
+    """The commands under `commands` (``rank``, ``rig simulate``) that take `option`."""
+    owners = []
+    for name, parser in commands.choices.items():
+        inner = _subcommands(parser)
+        if inner is not None:
+            owners += [f"{name} {o}" for o in _option_owners(option, inner)]
+        elif option in parser._option_string_actions:
+            owners.append(name)
+    return owners
+
+
+def _looks_like_option(arg):
+    """Whether argparse takes `arg` for an option (not a value such as ``-0.5``)."""
+    return len(arg) > 1 and arg[0] == "-" and " " not in arg and not _NEGATIVE_NUMBER.match(arg)
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser that takes options only spelled out in full, and answers a
+    misspelled option or command with the nearest valid one of that command (issue 23).
+
+    Abbreviations (``--shock`` for ``--shocks``) are refused: one that works today
+    breaks or changes meaning when an option with the same beginning is added. An
+    unknown option or command ends the program with exit status 2 and one line, before
+    argparse's own checks (so a misspelled ``--shocks`` is named, not reported missing).
+    """
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+    def parse_known_args(self, args=None, namespace=None):
+        """:meth:`argparse.ArgumentParser.parse_known_args`, after refusing a misspelled
+        option or command of this parser."""
+        args = sys.argv[1:] if args is None else list(args)
+        self._check_spelling(args)
+        return super().parse_known_args(args, namespace)
+
+    def _check_spelling(self, args):
+        """Refuse the first unknown option or command of `args` (up to this parser's
+        command: the rest is the command's parser's to check)."""
+        commands = _subcommands(self)
+        is_value = False
+        for arg in args:
+            if is_value:
+                is_value = False
+                continue
+            if arg == "--":
+                return
+            if not _looks_like_option(arg):
+                if commands is None:
+                    continue
+                if arg not in commands.choices:
+                    close = difflib.get_close_matches(arg, list(commands.choices), n=3,
+                                                      cutoff=TYPO_CUTOFF)
+                    hint = (f"did you mean {' or '.join(close)}?" if close else
+                            f"the commands are {', '.join(commands.choices)}")
+                    self._fail(f"unknown command {arg!r}; {hint}")
+                return
+            name = arg.split("=", 1)[0] if arg.startswith("--") else arg
+            action = self._option_string_actions.get(name)
+            if action is None and not arg.startswith("--"):
+                action = self._option_string_actions.get(arg[:2])  # grouped flags: -qv
+            if action is None:
+                self._unknown_option(name, commands)
+            # an option's value before the command is not the command
+            is_value = (commands is not None and action.nargs != 0
+                        and arg in self._option_string_actions)
+
+    def _unknown_option(self, name, commands):
+        said = f"unrecognized option {name!r}"
+        owners = [] if commands is None else _option_owners(name, commands)
+        if owners:
+            self._fail(f"{said}: it is an option of {', '.join(owners)}; write it after the "
+                       "command")
+        longs = {o.lstrip("-"): o for o in self._option_string_actions if o.startswith("--")}
+        stem = name.lstrip("-")
+        # an abbreviation's full spellings first, then the misspellings' nearest
+        close = [o for o in longs if stem and o.startswith(stem)]
+        close += [o for o in difflib.get_close_matches(stem, list(longs), n=3,
+                                                        cutoff=TYPO_CUTOFF) if o not in close]
+        close = close[:3]
+        if close:
+            self._fail(f"{said}; did you mean {' or '.join(longs[c] for c in close)}?")
+        self._fail(f"{said}; see '{self.prog} --help' for the options")
+
+    def _fail(self, message):
+        """Exit with status 2 and one line (no usage: the line says what to write)."""
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _add_flags_anywhere(parser):
+    """Give every command (and its commands) the top level's ``-v`` and ``-q``, so that
+    ``shockplan rank ... -q`` works as ``shockplan -q rank ...``. A command's copy sets the
+    flag only when given (default SUPPRESS): it never resets the top level's."""
+    commands = _subcommands(parser)
+    for sub in () if commands is None else commands.choices.values():
+        for short, long, text in _FLAGS_ANYWHERE:
+            sub.add_argument(short, long, action="store_true", default=argparse.SUPPRESS,
+                             help=text)
+        _add_flags_anywhere(sub)
+
+
+_MODEL_HELP = "identified model (.npz), a vehicle TOML (the known physical model) or 'paper'"
+_OBJECTIVE_HELP = "objective TOML (default: the built-in 'grip and platform')"
+
+
 def build_parser():
     """Build the argument parser (exposed for documentation and tests)."""
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="shockplan",
         description="Shock-absorber selection planner for 7-post, 8-post and 4-post shaker "
         "rigs.")
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    sub = p.add_subparsers(dest="command", required=True)
+    for short, long, text in _FLAGS_ANYWHERE:
+        p.add_argument(short, long, action="store_true", help=text)
+    sub = p.add_subparsers(dest="command", required=True,
+                           help="the command ('shockplan COMMAND --help' for its options)")
 
     demo = sub.add_parser("demo", help="run the whole job on the built-in example car")
     demo.add_argument("--out", default="shockplan-demo", help="output folder (default %(default)s)")
@@ -614,22 +751,28 @@ def build_parser():
     demo.set_defaults(func=cmd_demo)
 
     rig = sub.add_parser("rig", help="the virtual rig")
-    rig_sub = rig.add_subparsers(dest="rig_command", required=True)
+    rig_sub = rig.add_subparsers(dest="rig_command", required=True, help="the rig command")
     sim = rig_sub.add_parser("simulate", help="simulate a rig plan and write a rig session")
-    sim.add_argument("--plan", help="rig plan TOML (default: the paper's experiment)")
+    sim.add_argument("--plan", help="rig plan TOML (default: the built-in plan, the paper's "
+                     "identification experiment: 5 runs of 800 s at 100 Hz, imperial, 7-post)")
     sim.add_argument("--vehicle", help="vehicle TOML (default: the paper's Table 1 car)")
     sim.add_argument("--out", required=True, help="session folder to write")
-    sim.add_argument("--units", choices=["SI", "imperial"], help="units of the written session "
-                     "(default: the plan's)")
-    sim.add_argument("--format", choices=["csv", "parquet"], default="csv", help="run file format")
-    sim.add_argument("--duration", type=float, help="override every run's duration [s]")
+    _add_units(sim, "units of the written session", default=None,
+               default_text="the plan's 'units'; imperial for the built-in plan")
+    sim.add_argument("--format", choices=["csv", "parquet"], default="csv",
+                     help="run file format (default %(default)s)")
+    sim.add_argument("--duration", type=float, help="every run's duration [s] (default: the "
+                     "plan's; 800 s in the built-in plan)")
     sim.add_argument("--noise", type=float, help="measurement noise of the response channels, "
-                     "fraction of each channel's RMS (overrides the plan's 'noise')")
+                     "a fraction of each channel's RMS (default: the plan's 'noise'; 0 in the "
+                     "built-in plan)")
     sim.add_argument("--input-noise", type=float, help="measurement noise of the recorded rig "
-                     "inputs, fraction of each input's RMS (overrides the plan's 'input_noise')")
-    sim.add_argument("--rig", choices=list(RIG_KINDS), help="the rig (overrides the plan's "
-                     "'rig'): '4-post' has no aero actuators and writes runs without aero "
-                     "channels; '7-post' and '8-post' (default) have them")
+                     "inputs, a fraction of each input's RMS (default: the plan's "
+                     "'input_noise'; 0 in the built-in plan)")
+    sim.add_argument("--rig", choices=list(RIG_KINDS), help="the rig kind (default: the plan's "
+                     "'rig'; 7-post for the built-in plan and for a plan that names none): "
+                     "'7-post' and '8-post' have aero actuators; '4-post' has none and writes "
+                     "runs without aero channels")
     sim.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
     sim.set_defaults(func=cmd_rig_simulate)
 
@@ -637,30 +780,36 @@ def build_parser():
     ident_p.add_argument("session", help="rig session folder (or its session.toml)")
     ident_p.add_argument("--out", required=True, help="model file to write (.npz)")
     ident_p.add_argument("--method", choices=["invfreqs", "vf"], default="invfreqs",
-                         help="per-pair rational fits (invfreqs) or common-pole vector fitting")
+                         help="per-pair rational fits (invfreqs, default) or common-pole "
+                         "vector fitting (vf)")
     ident_p.add_argument("--estimator", choices=["lpm", "welch"], default="lpm",
-                         help="FRF estimator: local polynomial method (default, leakage-free) "
-                         "or the paper's Welch H1")
+                         help="FRF estimator: local polynomial method (lpm, default, "
+                         "leakage-free) or the paper's Welch H1 (welch)")
     ident_p.add_argument("--frf-method", choices=["global", "sequential"], default="global",
-                         help="least squares over all runs (Eq. 23) or sequential (Eqs. 25-28)")
-    ident_p.add_argument("--nperseg", type=int, help="Welch block length [samples]")
+                         help="least squares over all runs (global, Eq. 23, default) or "
+                         "sequential (Eqs. 25-28; needs --estimator welch)")
+    ident_p.add_argument("--nperseg", type=int, help="FRF block length [samples]: Welch's "
+                         "block, and the frequency grid fs/nperseg of both estimators "
+                         "(default: the power of two nearest the shortest run's samples / 20, "
+                         "4096 for 800 s at 100 Hz)")
     ident_p.add_argument("--coherence-min", type=float, default=0.9,
-                         help="coherence below which band ends are replaced (default %(default)s)")
-    ident_p.add_argument("--plots", help="folder for FRF-vs-fit plots (PNG)")
-    ident_p.add_argument("--mat", help="also export the model to this MATLAB .mat file")
-    ident_p.add_argument("--all-pairs", action="store_true", help="print every pair's summary")
+                         help="coherence (0 to 1) below which band ends are replaced "
+                         "(default %(default)s)")
+    ident_p.add_argument("--plots", help="folder for FRF-vs-fit plots (PNG) (default: no plots)")
+    ident_p.add_argument("--mat", help="also export the model to this MATLAB .mat file "
+                         "(default: no export)")
+    ident_p.add_argument("--all-pairs", action="store_true", help="print every pair's summary "
+                         "(default: the 12 pairs with the largest fit error)")
     ident_p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     ident_p.set_defaults(func=cmd_identify)
 
     for name, helptext, func in (("predict", "predict every setup of a setups CSV", cmd_predict),
                                  ("rank", "rank shock setups and write a report", cmd_rank)):
         sp = sub.add_parser(name, help=helptext)
-        sp.add_argument("--model", required=True, help="identified model (.npz), a vehicle TOML "
-                        "(the known physical model) or 'paper'")
+        sp.add_argument("--model", required=True, help=_MODEL_HELP)
         sp.add_argument("--drive", required=True, help="drive file (CSV or Parquet)")
         sp.add_argument("--shocks", required=True, help="shock library TOML")
-        sp.add_argument("--units", choices=["SI", "imperial"], default="SI",
-                        help="unit system of the drive file and of the outputs (default SI)")
+        _add_units(sp, "unit system of the drive file and of the outputs")
         sp.add_argument("--oversample", type=int, default=2,
                         help="internal steps per sample of the shock loop (default %(default)s)")
         sp.add_argument("--out", required=True, help="predictions CSV" if name == "predict"
@@ -678,16 +827,17 @@ def build_parser():
                             help="enumeration: the rear corners' shocks chosen on their own "
                             "(independent, default) or the front corners' (same)")
             sp.add_argument("--fixed", action="append", metavar="CORNER=ID",
-                            help="fix a corner's shock (repeatable)")
-            sp.add_argument("--only", help="comma-separated shock ids to consider")
+                            help="fix a corner's shock (repeatable; default: none fixed)")
+            sp.add_argument("--only", help="comma-separated shock ids to consider (default: "
+                            "every shock of the library)")
             sp.add_argument("--baseline", help="baseline: a setup of --setups by name, one "
                             "shock id (all corners) or four LF,RF,LR,RR (default: the first "
                             "setup)")
-            sp.add_argument("--objective", help="objective TOML (default: grip and platform)")
+            sp.add_argument("--objective", help=_OBJECTIVE_HELP)
             sp.add_argument("--top", type=int, default=40,
                             help="setups simulated in the time domain (default %(default)s)")
             sp.add_argument("--no-uncertainty", action="store_true",
-                            help="skip the Monte Carlo intervals")
+                            help="skip the Monte Carlo intervals (default: computed)")
             sp.add_argument("--scheduler", metavar="ADDRESS|local",
                             help="screen on Dask: a scheduler address (tcp://host:8786) or "
                             "'local' for a cluster on this machine (default: this process; "
@@ -698,12 +848,11 @@ def build_parser():
 
     opt = sub.add_parser("optimize", help="the best damper curve per corner group, mapped to "
                          "the crate")
-    opt.add_argument("--model", required=True, help="identified model (.npz), a vehicle TOML "
-                     "(the known physical model) or 'paper'")
+    opt.add_argument("--model", required=True, help=_MODEL_HELP)
     opt.add_argument("--drive", required=True, action="append",
                      help="drive file (CSV or Parquet); repeat for several drives")
     opt.add_argument("--shocks", required=True, help="the crate: shock library TOML")
-    opt.add_argument("--objective", help="objective TOML (default: grip and platform)")
+    opt.add_argument("--objective", help=_OBJECTIVE_HELP)
     opt.add_argument("--baseline", help="baseline shock id(s): one for all corners or "
                      "LF,RF,LR,RR (default: the crate's first shock)")
     opt.add_argument("--symmetry", choices=["left-right", "all", "none"], default="left-right",
@@ -711,13 +860,14 @@ def build_parser():
                           "or one per corner (none)")
     opt.add_argument("--constraints", help="curve constraints TOML (default: buildable race "
                      "shock bounds)")
-    opt.add_argument("--drive-weights", help="weights of the drives, comma-separated")
+    opt.add_argument("--drive-weights", help="weights of the drives, comma-separated, one per "
+                     "--drive (default: equal)")
     opt.add_argument("--worst-case", action="store_true",
-                     help="minimize the worst drive's score instead of the weighted sum")
+                     help="minimize the worst drive's score instead of the weighted sum "
+                     "(default: the weighted sum)")
     opt.add_argument("--robust", action="store_true", help="hold the objective's limits "
-                     "with the identified model's 95 %% intervals")
-    opt.add_argument("--units", choices=["SI", "imperial"], default="SI",
-                     help="unit system of the drive files and outputs (default SI)")
+                     "with the identified model's 95 %% intervals (default: nominal limits)")
+    _add_units(opt, "unit system of the drive files and outputs")
     opt.add_argument("--oversample", type=int, default=2,
                      help="internal steps per sample (default %(default)s)")
     opt.add_argument("--max-iter", type=int, default=80, help="IPOPT iterations "
@@ -728,57 +878,63 @@ def build_parser():
 
     pl = sub.add_parser("plan", help="the next rig runs (optimal experiment design) and the "
                         "rig-day run sheet")
-    pl.add_argument("--vehicle", help="before rig day: the known car, a vehicle TOML or 'paper'")
-    pl.add_argument("--model", help="between runs: the model identified so far (.npz)")
+    pl.add_argument("--vehicle", help="before rig day: the known car, a vehicle TOML or "
+                    "'paper' (give this or --model)")
+    pl.add_argument("--model", help="between runs: the model identified so far (.npz; give "
+                    "this and --session, or --vehicle)")
     pl.add_argument("--session", help="the session the model came from (with --model)")
     pl.add_argument("--shocks", required=True, help="the crate: shock library TOML")
     pl.add_argument("--budget-min", type=float, required=True,
                     help="rig time for the plan [min], swaps included")
     pl.add_argument("--criterion", choices=["d", "a", "decision"], default="d",
-                    help="D-optimal (default), A-optimal, or the ranking's decisions")
-    pl.add_argument("--objective", help="objective TOML (decision criterion, predictions)")
-    pl.add_argument("--drive", action="append", help="the team's drive (decision criterion, "
-                    "validation runs); repeatable")
-    pl.add_argument("--rig", help="rig TOML: swap_min, run_overhead_min")
+                    help="D-optimal (d, default), A-optimal (a), or the ranking's decisions "
+                    "(decision)")
+    pl.add_argument("--objective", help="objective TOML for the decision criterion and the "
+                    "predictions (default: the built-in 'grip and platform')")
+    pl.add_argument("--drive", action="append", help="the team's drive for the decision "
+                    "criterion and the validation runs; repeatable (default: a 120 s "
+                    "synthetic track drive of the car)")
+    pl.add_argument("--rig", help="rig TOML: swap_min and run_overhead_min [min] (default: "
+                    "6 min a changed corner, no overhead)")
     pl.add_argument("--baseline", help="the car's setup at the start: one shock id or "
                     "LF,RF,LR,RR (default: the session's baseline, or the crate's first shock)")
     pl.add_argument("--validate", type=int, default=0,
-                    help="validation runs of the current best setups on --drive")
+                    help="validation runs of the current best setups on --drive (default "
+                    "%(default)s)")
     pl.add_argument("--baseline-every", type=int, default=0,
-                    help="repeat the baseline after every this many runs (drift)")
-    pl.add_argument("--units", choices=["SI", "imperial"], default="SI",
-                    help="units of the drive files read and written (default SI)")
+                    help="repeat the baseline after every this many runs, for drift (default "
+                    "%(default)s: never)")
+    _add_units(pl, "units of the drive files read and written")
     pl.add_argument("--out", required=True, help="output folder")
     pl.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     pl.set_defaults(func=cmd_plan)
 
     wi = sub.add_parser("whatif", help="what-if study: setups under spring, shock, drive and "
                         "vehicle changes; robust ranking")
-    wi.add_argument("--model", required=True, help="identified model (.npz), a vehicle TOML "
-                    "(the known physical model) or 'paper'")
+    wi.add_argument("--model", required=True, help=_MODEL_HELP)
     wi.add_argument("--drive", required=True, action="append",
                     help="drive file (CSV or Parquet); repeat for several drives")
     wi.add_argument("--shocks", required=True, help="the crate: shock library TOML")
     wi.add_argument("--perturb", required=True, help="perturbation TOML "
                     "(format = \"shockplan-whatif/1\")")
     src = wi.add_mutually_exclusive_group(required=True)
-    src.add_argument("--setups", help="setups CSV")
+    src.add_argument("--setups", help="setups CSV (give this or --ranking)")
     src.add_argument("--ranking", help="a ranking CSV (shockplan rank's ranking.csv): its top "
-                     "--top setups")
+                     "--top setups (give this or --setups)")
     wi.add_argument("--top", type=int, default=10,
                     help="setups taken from --ranking (default %(default)s)")
-    wi.add_argument("--objective", help="objective TOML (default: grip and platform)")
+    wi.add_argument("--objective", help=_OBJECTIVE_HELP)
     wi.add_argument("--baseline", help="baseline: a setup name, one shock id (all corners) "
                     "or four LF,RF,LR,RR (default: the first setup)")
     wi.add_argument("--method", choices=["time", "screening"], default="time",
-                    help="time domain (default, the reference) or frequency-domain screening")
+                    help="time domain (time, default, the reference) or frequency-domain "
+                    "screening (screening)")
     wi.add_argument("--rank-tolerance", type=int, default=None,
                     help="places a rank may move before it counts as moved (default 1)")
     wi.add_argument("--fragile-share", type=float, default=None,
                     help="share of conditions with a moved rank that makes it fragile "
                     "(default 0.1)")
-    wi.add_argument("--units", choices=["SI", "imperial"], default="SI",
-                    help="units of the drive files and outputs (default SI)")
+    _add_units(wi, "units of the drive files and outputs")
     wi.add_argument("--oversample", type=int, default=2,
                     help="internal steps per sample (default %(default)s)")
     wi.add_argument("--scheduler", metavar="ADDRESS|local",
@@ -797,8 +953,7 @@ def build_parser():
     sw.add_argument("--drive", required=True, action="append",
                     help="drive file (CSV or Parquet; repeatable)")
     sw.add_argument("--shocks", required=True, help="the crate: shock library TOML")
-    sw.add_argument("--units", choices=["SI", "imperial"], default="SI",
-                    help="unit system of the drive files and of the outputs (default SI)")
+    _add_units(sw, "unit system of the drive files and of the outputs")
     sw.add_argument("--setups", help="setups CSV (default: enumerate from the library)")
     sw.add_argument("--symmetry", choices=["left-right", "all", "none"], default="none",
                     help="enumeration: one shock per axle (left-right), one for every corner "
@@ -807,16 +962,19 @@ def build_parser():
                     help="enumeration: the rear corners' shocks chosen on their own "
                     "(independent, default) or the front corners' (same)")
     sw.add_argument("--fixed", action="append", metavar="CORNER=ID",
-                    help="fix a corner's shock (repeatable)")
-    sw.add_argument("--only", help="comma-separated shock ids to consider")
+                    help="fix a corner's shock (repeatable; default: none fixed)")
+    sw.add_argument("--only", help="comma-separated shock ids to consider (default: every "
+                    "shock of the library)")
     sw.add_argument("--ignore-inventory", action="store_true",
-                    help="enumerate setups beyond the crate's counts (ranked infeasible)")
+                    help="enumerate setups beyond the crate's counts, ranked infeasible "
+                    "(default: only setups the crate can build)")
     sw.add_argument("--baseline", help="baseline: a setup of --setups by name, one shock id "
                     "(all corners) or four LF,RF,LR,RR (default: the first setup)")
-    sw.add_argument("--objective", help="objective TOML (default: grip and platform)")
+    sw.add_argument("--objective", help=_OBJECTIVE_HELP)
     sw.add_argument("--top-share", type=float, default=0.01,
                     help="share of the screened setups simulated (default %(default)s)")
-    sw.add_argument("--top", type=int, help="simulate this many instead of --top-share")
+    sw.add_argument("--top", type=int, help="simulate this many instead of --top-share "
+                    "(default: --top-share)")
     sw.add_argument("--combine", choices=["mean", "worst"], default="mean",
                     help="a setup's score over the cases (default %(default)s)")
     sw.add_argument("--chunk-size", type=int, default=20000,
@@ -834,39 +992,46 @@ def build_parser():
     imp = sub.add_parser("import", help="append real rig files (RPC III, MDF4, TDMS) to a "
                          "session")
     imp.add_argument("files", nargs="+", help="the rig's files, one run each")
-    imp.add_argument("--format", required=True, choices=["rpc3", "mdf", "tdms"])
+    imp.add_argument("--format", required=True, choices=["rpc3", "mdf", "tdms"],
+                     help="the files' format: RPC III (rpc3), MDF4 (mdf) or TDMS (tdms)")
     imp.add_argument("--map", required=True, help="channel-map TOML: canonical channel -> the "
                      "file's channel, units, sign, scale, offset")
     imp.add_argument("--setup", required=True, help="the runs' shocks: LF,RF,LR,RR ids")
     imp.add_argument("--out", required=True, help="session folder (created, or appended to)")
-    imp.add_argument("--shocks", help="shock library TOML (needed for a new session)")
+    imp.add_argument("--shocks", help="shock library TOML (needed for a new session; default: "
+                     "the session's)")
     imp.add_argument("--role", default="other",
-                     choices=["baseline", "swap", "validation", "other"])
+                     choices=["baseline", "swap", "validation", "other"],
+                     help="the runs' role in the session (default %(default)s)")
     imp.add_argument("--names", help="run names, comma-separated (default: the file names)")
-    imp.add_argument("--units", choices=["SI", "imperial"],
-                     help="units of a new session's run files (default SI)")
+    _add_units(imp, "units of a new session's run files", default=None,
+               default_text="SI for a new session, the session's when appending")
     imp.set_defaults(func=cmd_import)
 
     exp = sub.add_parser("export-drive", help="write a drive file as the RPC III file a rig "
                          "controller plays")
     exp.add_argument("drive", help="drive file (CSV or Parquet)")
-    exp.add_argument("--format", required=True, choices=["rpc3"])
+    exp.add_argument("--format", required=True, choices=["rpc3"],
+                     help="the file format written: RPC III (rpc3)")
     exp.add_argument("--map", help="the rig's channel map (channel names, units, signs); "
                      "default canonical names in mm, N, N*m")
-    exp.add_argument("--units", choices=["SI", "imperial"], default="SI",
-                     help="units of the drive file (default SI)")
+    _add_units(exp, "units of the drive file")
     exp.add_argument("--out", required=True, help="RPC III file to write (.drv, .rsp, .tim)")
     exp.add_argument("--overwrite", action="store_true", help="replace an existing file")
     exp.set_defaults(func=cmd_export_drive)
 
     veh = sub.add_parser("vehicle", help="vehicle model tools")
-    veh_sub = veh.add_subparsers(dest="vehicle_command", required=True)
+    veh_sub = veh.add_subparsers(dest="vehicle_command", required=True,
+                                 help="the vehicle command")
     modes = veh_sub.add_parser("modes", help="natural frequencies of a vehicle")
     modes.add_argument("--vehicle", help="vehicle TOML (default: the paper's Table 1 car)")
-    modes.add_argument("--damping", type=float, help="linear shock damping for the damped modes")
-    modes.add_argument("--units", choices=["SI", "imperial"], default="SI",
-                       help="units of --damping (default %(default)s)")
+    modes.add_argument("--damping", type=float, help="linear shock damping of every corner for "
+                       "the damped modes [N/(m/s), or lbf/(in/s) with --units imperial] "
+                       "(default: the vehicle's own)")
+    _add_units(modes, "units of --damping")
     modes.set_defaults(func=cmd_vehicle_modes)
+
+    _add_flags_anywhere(p)
     return p
 
 

@@ -17,7 +17,10 @@
    best a new shock could be.
 
 Everything goes to one output folder, built in a temporary sibling and moved
-into place at the end.
+into place at the end. Beside the results, :func:`write_demo_inputs` writes the inputs
+the README's examples name (``crate.toml``, ``car.toml``, ``objective.toml``,
+``constraints.toml``, ``whatif.toml``, ``rig_map.toml``), each readable as is by its
+reader; ``docs/formats.md`` describes their formats.
 """
 
 from __future__ import annotations
@@ -26,13 +29,65 @@ import logging
 import warnings
 from pathlib import Path
 
-__all__ = ["run_demo", "DEMO_LIBRARY_PATH"]
+from ident.data.channels import ALL_CHANNELS, quantity_of
+from ident.data.files import (atomic_write_bytes, atomic_write_text, atomic_write_toml,
+                              check_can_write)
+from ident.data.formats.channel_map import CHANNEL_MAP_FORMAT, UNIT_FACTORS
+from ident.data.units import check_units
+from ident.models.library import write_shock_library
+from ident.models.vehicle import EXAMPLE_VEHICLE_PATH
+from planner.objective import default_objective, objective_to_toml
+
+__all__ = ["run_demo", "write_demo_inputs", "DEMO_LIBRARY_PATH", "DEMO_INPUT_FILES"]
 
 log = logging.getLogger(__name__)
 
 DEMO_LIBRARY_PATH = Path(__file__).parent / "examples" / "library.toml"
 _PLOT_OUTPUTS = tuple(f"{k}_{c}" for k in ("shock_velocity", "tire_force", "ride_height")
                       for c in ("LF", "RF", "LR", "RR"))
+#: The inputs :func:`write_demo_inputs` writes (file name -> what it is), in README order.
+DEMO_INPUT_FILES = {
+    "crate.toml": "the demo's crate of shocks (shock library TOML)",
+    "car.toml": "the paper's car (vehicle TOML)",
+    "objective.toml": "the default objective (objective TOML)",
+    "constraints.toml": "curve constraints for optimize (curve-constraints TOML)",
+    "whatif.toml": "the README's what-if study (what-if TOML)",
+    "rig_map.toml": "a channel map of the canonical channels to themselves, SI, sign 1",
+}
+
+# Buildable-curve constraints a race shock meets, in round numbers of each unit system:
+# the slopes and maximum force of planner.optimize.default_constraints (the imperial ones
+# within 6 %), plus rebound at least as firm as bump and at most 3 times (a rebound/bump
+# force ratio of 1 to 3 at low speed, as most race valving): (low-speed slope, high-speed
+# slope [damping]; the ratio's velocity; max force).
+_CONSTRAINTS = {
+    "imperial": {"low": (3.0, 225.0), "high": (0.0, 85.0), "ratio_v": 2.0,
+                 "max_force": 2250.0, "damping": "lbf/(in/s)", "velocity": "in/s",
+                 "force": "lbf", "reach": "1 m/s (39.4 in/s)"},
+    "SI": {"low": (500.0, 40000.0), "high": (0.0, 15000.0), "ratio_v": 0.05,
+           "max_force": 10000.0, "damping": "N/(m/s)", "velocity": "m/s", "force": "N",
+           "reach": "1 m/s"},
+}
+
+# the README's "What if" example, as written there (after a header naming the units)
+_WHATIF_TOML = """\
+# What-if study (shockplan-whatif/1), written by shockplan demo: the README's "What if"
+# example. Each shock's force scaled by its own draw from 0.95 to 1.05 (a dyno tolerance
+# of +-5 %), 50 Monte Carlo draws. Run it with
+#   shockplan whatif --model model.npz --drive track_drive.csv --shocks crate.toml \\
+#       --ranking ranking/ranking.csv --top 10 --perturb whatif.toml --units @UNITS@ \\
+#       --out whatif/
+format = "shockplan-whatif/1"
+design = "monte-carlo"
+n_draws = 50
+
+[[factor]]
+name = "shock tolerance"
+kind = "shock_scale"
+corners = ["LF", "RF", "LR", "RR"]
+independent = true
+distribution = { kind = "uniform", low = 0.95, high = 1.05 }
+"""
 
 
 def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
@@ -108,6 +163,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         try:
             model.summary().to_csv(work / "model_summary.csv", index=False)
             write_drive(drive, work / "track_drive.csv", units=units)
+            write_demo_inputs(work, units=units, channels=session.runs[0].channels)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 log.info("demo: ranking the crate's setups")
@@ -136,7 +192,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     lines = [
         f"shockplan demo -> {out}",
         f"  vehicle: {vehicle.name}; modes [Hz]: " + ", ".join(
-            f"{lab} {f:.1f}" for lab, f in zip(modes["mode"], modes["undamped_hz"])),
+            f"{lab} {f:.1f}" for lab, f in zip(modes["mode"], modes["no_damping_hz"])),
         f"  rig session: {out / 'session'} ({len(session.runs)} runs x "
         f"{session.runs[0].n_samples / session.fs_hz:g} s at {session.fs_hz:g} Hz)",
         f"  identified model: {out / 'model.npz'} (median fit error "
@@ -154,6 +210,124 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         f"{out / 'optimize'}",
     ]
     return "\n".join(lines)
+
+
+def write_demo_inputs(folder, *, units="imperial", channels=ALL_CHANNELS, overwrite=False):
+    """Write the inputs the README's examples need into `folder`, each atomically.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The demo's output folder (created if missing).
+    units : {"SI", "imperial"}
+        Unit system of the crate and the curve constraints (the demo's: that of its
+        rig session and drive). The car keeps its file's imperial units; the objective
+        and the channel map have no unit system of their own.
+    channels : sequence of str
+        Canonical channels of the demo's rig session: those the channel map maps.
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        File name -> written path, in :data:`DEMO_INPUT_FILES` order:
+
+        - ``crate.toml``: the built-in crate (``planner/examples/library.toml``) through
+          :func:`ident.models.library.write_shock_library`, in `units`;
+        - ``car.toml``: the paper's car, a copy of ``ident/examples/paper_car.toml``;
+        - ``objective.toml``: :func:`planner.objective.default_objective`;
+        - ``constraints.toml``: buildable-curve constraints (slopes, a rebound/bump
+          ratio, a maximum force), read by
+          :func:`planner.optimize.constraints.read_curve_constraints`;
+        - ``whatif.toml``: the README's what-if example
+          (:func:`planner.whatif.read_perturbations`);
+        - ``rig_map.toml``: a channel map (:func:`ident.data.formats.read_channel_map`)
+          of every channel in `channels` to a file channel of the same name, in SI
+          units, sign 1.
+
+    Raises
+    ------
+    FileExistsError
+        If one of the files exists and `overwrite` is false (checked before any is
+        written, so none is).
+    ValueError
+        If `units` is not a unit system, or `channels` names no channel or one that is
+        not canonical.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from ident.models.library import read_shock_library
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     paths = write_demo_inputs(folder)
+    ...     crate = read_shock_library(paths["crate.toml"])
+    >>> list(paths)
+    ['crate.toml', 'car.toml', 'objective.toml', 'constraints.toml', 'whatif.toml', 'rig_map.toml']
+    >>> list(crate) == list(_demo_library())
+    True
+    """
+    units = check_units(units, where="write_demo_inputs: units")
+    channels = tuple(channels)
+    bad = [c for c in channels if c not in ALL_CHANNELS]
+    if not channels or bad:
+        raise ValueError(f"write_demo_inputs: channels {bad or '(none)'} are not canonical "
+                         "channels; give names of ident.data.channels.ALL_CHANNELS")
+    folder = Path(folder)
+    paths = {name: folder / name for name in DEMO_INPUT_FILES}
+    for path in paths.values():
+        check_can_write(path, overwrite=overwrite)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_shock_library(_demo_library(), paths["crate.toml"], units=units, overwrite=True)
+    atomic_write_bytes(paths["car.toml"], EXAMPLE_VEHICLE_PATH.read_bytes())
+    objective_to_toml(default_objective(), paths["objective.toml"], overwrite=True)
+    atomic_write_text(paths["constraints.toml"], _constraints_toml(units))
+    atomic_write_text(paths["whatif.toml"], _WHATIF_TOML.replace("@UNITS@", units))
+    si_unit = {q: next(u for u, f in table.items() if f == 1.0)
+               for q, table in UNIT_FACTORS.items()}
+    rig_map = {"format": CHANNEL_MAP_FORMAT,
+               "name": "canonical channels in SI (shockplan demo)",
+               "channels": {c: {"source": c, "units": si_unit[quantity_of(c)], "sign": 1}
+                            for c in channels}}
+    atomic_write_toml(paths["rig_map.toml"], rig_map, header=(
+        f"Channel map ({CHANNEL_MAP_FORMAT}), written by shockplan demo: every channel of the\n"
+        "demo's rig session, named as in shockplan (source = the canonical name), in SI\n"
+        "units with shockplan's signs (up and compression positive, sign = 1). For a real\n"
+        "rig, set each channel's source, units and sign (and scale, offset) to the rig's."))
+    log.info("demo: wrote the examples' inputs to %s", folder)
+    return paths
+
+
+def _constraints_toml(units):
+    """The text of the demo's ``constraints.toml`` in `units` (see :data:`_CONSTRAINTS`)."""
+    c = _CONSTRAINTS[units]
+    low, high = (f"[{a!r}, {b!r}]" for a, b in (c["low"], c["high"]))
+    ratio = f"{{ velocity = {c['ratio_v']!r}, min = 1.0, max = 3.0 }}"
+
+    def line(text, comment):  # comments in one column
+        return f"{text:<40}# {comment}\n"
+
+    return "".join([
+        "# Curve constraints (curve-constraints/1), written by shockplan demo: a buildable\n",
+        f"# race shock, in {units} units. Passive and increasing curves always hold. Use with\n",
+        "#   shockplan optimize --model model.npz --drive track_drive.csv --shocks crate.toml \\\n",
+        f"#       --baseline B20 --constraints constraints.toml --units {units} --out optimum/\n",
+        'format = "curve-constraints/1"\n',
+        f'units = "{units}"\n',
+        "\n",
+        line("[bump]", "compression, v > 0"),
+        line(f"low_speed_slope = {low}", f"{c['damping']}: from 0 to the first knot"),
+        line(f"high_speed_slope = {high}", f"{c['damping']}: beyond the last knot"),
+        "\n",
+        line("[rebound]", "extension, v < 0"),
+        line(f"low_speed_slope = {low}", f"{c['damping']}"),
+        line(f"high_speed_slope = {high}", f"{c['damping']}"),
+        "\n",
+        "[shape]\n",
+        f"# |F(-v)| / F(v) between min and max at v = velocity [{c['velocity']}]\n",
+        f"rebound_bump_ratio = {ratio}\n",
+        line(f"max_force = {c['max_force']!r}", f"{c['force']}: |F| at every knot and at {c['reach']}"),
+    ])
 
 
 def _frf_plots_job(model_path, vehicle, folder, units):

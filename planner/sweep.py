@@ -343,8 +343,11 @@ class SweepResult:
         setups (near the top the scores are close: a low value says little), ``n``,
         ``same_best``.
     settings : dict
-        ``cases``, ``combine``, ``n_candidates``, ``n_screened``, ``n_top``,
-        ``top_share``, ``chunk_size``, ``scheduler`` (kind), ``address``, ``n_workers``,
+        ``cases`` (the labels, models outer, drives inner), ``models`` and ``drives``
+        (their names: the mapping's keys, else the objects' ``name``; the case files'
+        names come from them, :func:`planner.report.sweep.case_file_names`),
+        ``combine``, ``n_candidates``, ``n_screened``, ``n_top``, ``top_share``,
+        ``chunk_size``, ``scheduler`` (kind), ``address``, ``n_workers``,
         ``seconds`` (prepare, screen, simulate), ``screen_setups_per_s`` (setups x cases)
         and ``simulate_setups_per_s`` (setups x cases).
     """
@@ -471,16 +474,23 @@ def _check_options(top_share, top, chunk_size, simulate_chunk, combine):
             raise PlannerError(f"sweep: {name}={v!r} must be a positive integer")
 
 
-def _case_labels(models, drives):
+def _names(items, kind):
+    """The name of every model or drive: its mapping key, else its ``name``, else
+    ``model<i>`` / ``drive<i>``."""
+    return tuple(str(key if key is not None else (getattr(x, "name", None) or f"{kind}{i}"))
+                 for i, (key, x) in enumerate(items))
+
+
+def _case_labels(model_names, drive_names):
+    """A label per case, models outer: the drive's name (one model), the model's (one
+    drive) or ``"model | drive"``; numbered when two would be the same."""
     labels = []
-    for mi, (mname, model) in enumerate(models):
-        for di, (dname, drive) in enumerate(drives):
-            m = mname if mname is not None else (getattr(model, "name", None) or f"model{mi}")
-            d = dname if dname is not None else (getattr(drive, "name", None) or f"drive{di}")
-            if len(models) == 1:
-                labels.append(str(d))
-            elif len(drives) == 1:
-                labels.append(str(m))
+    for m in model_names:
+        for d in drive_names:
+            if len(model_names) == 1:
+                labels.append(d)
+            elif len(drive_names) == 1:
+                labels.append(m)
             else:
                 labels.append(f"{m} | {d}")
     if len(set(labels)) != len(labels):
@@ -576,7 +586,8 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     space = setup_space(library, setups=setups, **(constraints or {}), where="sweep")
     model_list = _as_list(models, "models")
     drive_list = _as_list(drives, "drives", Drive)
-    labels = _case_labels(model_list, drive_list)
+    model_names, drive_names = _names(model_list, "model"), _names(drive_list, "drive")
+    labels = _case_labels(model_names, drive_names)
     base, base_idx = _baseline_setup(space, library, objective, baseline)
     # the scheduler first: a wrong address fails before any work
     runner = start_runner(scheduler, client, n_workers, processes)
@@ -724,7 +735,8 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     agreement = {"spearman": rho, "n": int(len(table)),
                  "same_best": bool(table.index[0] == best_scr)}
     seconds = {"prepare": t_prep, "screen": t_screen, "simulate": t_sim}
-    settings = {"cases": tuple(labels), "combine": combine, "n_candidates": n_cand,
+    settings = {"cases": tuple(labels), "models": model_names, "drives": drive_names,
+                "combine": combine, "n_candidates": n_cand,
                 "n_screened": n_scr, "n_top": n_top, "top_share": top_share,
                 "chunk_size": chunk, "simulate_chunk": int(simulate_chunk),
                 "scheduler": runner.kind, "address": runner.address,

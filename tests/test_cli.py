@@ -1,10 +1,15 @@
 """Tests of planner.cli: the shockplan command line."""
 
+import argparse
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+import ident
 from ident.data.session import read_session
-from planner.cli import main
+from planner.cli import build_parser, main
 
 
 def test_rig_simulate_writes_a_session(tmp_path, capsys):
@@ -13,7 +18,9 @@ def test_rig_simulate_writes_a_session(tmp_path, capsys):
     s = read_session(out)
     assert [r.name for r in s.runs][:2] == ["baseline", "swap-LF"]
     assert s.runs[0].n_samples == 1000 and s.units == "imperial"
-    assert "wrote rig session" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    # without --rig the built-in plan runs on a 7-post rig, as --help says (issue 23)
+    assert "wrote rig session" in said and "7-post rig (7 rig inputs)" in said
     # a second run refuses to overwrite, with one clear line
     assert main(["-q", "rig", "simulate", "--duration", "10", "--out", str(out)]) == 2
     err = capsys.readouterr().err
@@ -66,11 +73,13 @@ def test_vehicle_modes(capsys):
     s = modal_summary(example_vehicle(), damping_n_s_m=to_si(20.0, "damping", "imperial"))
     lines = out.splitlines()
     assert f"shocks {s.damping_n_s_m[0]:.1f} N/(m/s)" in lines[0]
-    assert lines[1].split() == ["mode", "undamped", "Hz", "damped", "Hz", "zeta"]
-    rows = [line.split() for line in lines[3:]]
+    assert lines[1].split() == ["mode", "no-damping", "Hz", "natural", "Hz", "damped", "Hz",
+                                "zeta"]
+    rows = [line.split() for line in lines[3:3 + len(s.labels)]]
     assert [r[0] for r in rows] == list(s.labels)
     printed = np.array([[float(x) for x in r[1:]] for r in rows])
-    expected = np.column_stack([s.undamped_hz, s.damped_hz, s.damping_ratio])
+    expected = np.column_stack([s.no_damping_hz, s.natural_hz, s.damped_hz, s.damping_ratio])
+    assert np.all(printed[:, 2] <= printed[:, 1] + ATOL_PRINTED_3_DECIMALS)  # damped <= natural
     np.testing.assert_allclose(printed, expected, rtol=0, atol=ATOL_PRINTED_3_DECIMALS)
 
 
@@ -299,3 +308,249 @@ def test_whatif_command(tmp_path, capsys, paper_vehicle, track_drive):
     err = capsys.readouterr().err
     assert "'parameter'" in err and "bad.toml" in err and err.count("\n") == 1
     assert not (tmp_path / "w2").exists()
+
+
+# --- One vocabulary across commands (issue 23, item 3) ---------------------------------
+
+def _parsers(parser, path=()):
+    """Every parser under `parser` (itself included) with its command path, e.g.
+    ``(("rig", "simulate"), <parser>)``."""
+    yield path, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _parsers(sub, path + (name,))
+
+
+def _commands(parser):
+    """The leaf commands: (path, parser) of every parser without commands of its own."""
+    return [(path, p) for path, p in _parsers(parser)
+            if path and not any(isinstance(a, argparse._SubParsersAction) for a in p._actions)]
+
+
+def _required_argv(parser):
+    """Placeholder arguments that satisfy `parser`'s positionals and required options."""
+    argv = []
+    for a in parser._actions:
+        if not a.option_strings:
+            argv.append("1")
+        elif a.required:
+            argv += [a.option_strings[-1], next(iter(a.choices)) if a.choices else "1"]
+    for group in parser._mutually_exclusive_groups:
+        if group.required:
+            argv += [group._group_actions[0].option_strings[-1], "1"]
+    return argv
+
+
+def test_the_walk_finds_every_command():
+    assert {" ".join(path) for path, _ in _commands(build_parser())} == {
+        "demo", "rig simulate", "identify", "predict", "rank", "optimize", "plan", "whatif",
+        "sweep", "import", "export-drive", "vehicle modes"}
+
+
+@pytest.mark.parametrize("given, canonical", [
+    ("SI", "SI"), ("si", "SI"), ("Si", "SI"),
+    ("imperial", "imperial"), ("Imperial", "imperial"), ("IMPERIAL", "imperial")])
+def test_units_in_any_case_become_the_canonical_name(given, canonical):
+    """Every command's --units takes any case and hands the library "SI" or "imperial"."""
+    parser = build_parser()
+    with_units = [(path, sub) for path, sub in _commands(parser)
+                  if "--units" in sub._option_string_actions]
+    assert len(with_units) == 10
+    for path, sub in with_units:
+        args = parser.parse_args([*path, *_required_argv(sub), "--units", given])
+        assert args.units == canonical, path
+
+
+def test_units_unknown_is_refused_with_the_names(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["vehicle", "modes", "--units", "metric"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'metric'" in err and "'SI', 'imperial'" in err
+
+
+def test_units_case_changes_no_output(capsys):
+    """The modes printed with --units IMPERIAL are those of --units imperial, and not those
+    of SI: the canonical name reached the unit conversion."""
+    argv = ["vehicle", "modes", "--damping", "20", "--units"]
+    assert main(argv + ["imperial"]) == 0
+    canonical = capsys.readouterr().out
+    assert main(argv + ["IMPERIAL"]) == 0
+    assert capsys.readouterr().out == canonical
+    assert main(argv + ["si"]) == 0
+    assert capsys.readouterr().out != canonical
+
+
+@pytest.mark.parametrize("flag, dest", [("-q", "quiet"), ("--quiet", "quiet"),
+                                        ("-v", "verbose"), ("--verbose", "verbose")])
+def test_quiet_and_verbose_before_or_after_the_command(flag, dest):
+    """-q/-v before the command, right after it or at the end: the same flag; and a command
+    never resets the top level's (``-q rank ...`` stays quiet)."""
+    parser = build_parser()
+    for path, sub in _commands(parser):
+        req = _required_argv(sub)
+        assert getattr(parser.parse_args([*path, *req]), dest) is False, path
+        for argv in ([flag, *path, *req], [*path, flag, *req], [*path, *req, flag]):
+            assert getattr(parser.parse_args(argv), dest) is True, argv
+    assert getattr(parser.parse_args(["rig", flag, "simulate", "--out", "o"]), dest) is True
+
+
+def test_grouped_flags_equals_form_and_negative_values_still_parse():
+    parser = build_parser()
+    args = parser.parse_args(["vehicle", "modes", "-qv", "--damping=-5", "--units", "si"])
+    assert args.quiet and args.verbose and args.damping == -5.0 and args.units == "SI"
+    assert parser.parse_args(["vehicle", "modes", "--damping", "-0.5"]).damping == -0.5
+
+
+@pytest.mark.parametrize("argv, prog, typo, meant", [
+    (["rank", "--shock", "crate.toml"], "shockplan rank", "--shock", "--shocks"),
+    (["rank", "--unit", "si"], "shockplan rank", "--unit", "--units"),
+    (["predict", "--modle", "paper"], "shockplan predict", "--modle", "--model"),
+    (["sweep", "--top-shar", "0.1"], "shockplan sweep", "--top-shar", "--top-share"),
+    (["rig", "simulate", "--durtion", "10"], "shockplan rig simulate", "--durtion",
+     "--duration"),
+    (["vehicle", "modes", "--damp", "20"], "shockplan vehicle modes", "--damp", "--damping"),
+    (["vehicle", "modes", "--dampnig=20"], "shockplan vehicle modes", "--dampnig",
+     "--damping"),
+    (["--quite", "vehicle", "modes"], "shockplan", "--quite", "--quiet"),
+    (["rnk", "--model", "paper"], "shockplan", "rnk", "rank"),
+    (["rig", "simulat"], "shockplan rig", "simulat", "simulate"),
+    (["vehicle", "mode"], "shockplan vehicle", "mode", "modes"),
+])
+def test_a_typo_names_the_nearest_valid_spelling(argv, prog, typo, meant, capsys):
+    """A misspelled or abbreviated option (or command) of that command: exit status 2 and one
+    line naming it and the nearest valid one, before argparse reports missing options."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"{prog}: error: "), err
+    assert repr(typo) in err, err
+    assert re.search(rf"did you mean {re.escape(meant)}[ ?]", err), err
+
+
+def test_an_option_before_its_command_says_where_it_goes(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--units", "SI", "vehicle", "modes"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "did you mean" not in err
+    assert "it is an option of" in err and "vehicle modes" in err and "rank" in err
+    assert "write it after the command" in err
+
+
+def test_an_option_with_nothing_close_points_to_help(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["vehicle", "modes", "--shocks", "crate.toml"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err == ("shockplan vehicle modes: error: unrecognized option '--shocks'; see "
+                   "'shockplan vehicle modes --help' for the options\n")
+
+
+#: Options without a default: the command needs one of each pair (plan: --vehicle, or
+#: --model with --session; whatif: --setups or --ranking).
+NO_DEFAULT = {("plan", "--vehicle"), ("plan", "--model"), ("plan", "--session"),
+              ("whatif", "--setups"), ("whatif", "--ranking")}
+
+
+def test_every_option_has_help():
+    """Every action of every parser but --help has a help text, every command a help line,
+    and every help formats (no stray %)."""
+    for path, parser in _parsers(build_parser()):
+        parser.format_help()
+        for a in parser._actions:
+            if isinstance(a, argparse._HelpAction):
+                continue
+            assert a.help and a.help is not argparse.SUPPRESS and a.help.strip(), \
+                (path, a.option_strings or a.dest)
+            if isinstance(a, argparse._SubParsersAction):
+                for choice in a._choices_actions:
+                    assert choice.help and choice.help.strip(), (path, choice.dest)
+
+
+def test_every_optional_value_states_its_default():
+    """An option that takes a value and may be left out says what happens then; one with a
+    default value names that value."""
+    checked = 0
+    for path, parser in _parsers(build_parser()):
+        for a in parser._actions:
+            if not a.option_strings or a.required or a.nargs == 0:
+                continue  # positionals, required options, flags (off unless given)
+            key = (" ".join(path), a.option_strings[-1])
+            if key in NO_DEFAULT:
+                assert a.default is None, key
+                continue
+            assert "default" in a.help, key
+            if a.default is not None:
+                assert "%(default)s" in a.help or str(a.default) in a.help, key
+            checked += 1
+    assert checked >= 80  # every command's (80 when written)
+
+
+def _action(path, option):
+    parser = dict(_parsers(build_parser()))[tuple(path)]
+    return parser._option_string_actions[option]
+
+
+def test_rank_symmetry_and_axles_state_their_default():
+    for option, default in (("--symmetry", "left-right"), ("--axles", "independent")):
+        a = _action(["rank"], option)
+        assert a.default == default and f"({default}, default)" in a.help
+
+
+@pytest.mark.parametrize("path, option, unit", [
+    (["rig", "simulate"], "--duration", "[s]"),
+    (["plan"], "--budget-min", "[min]"),
+    (["plan"], "--rig", "[min]"),
+    (["identify"], "--nperseg", "[samples]"),
+    (["vehicle", "modes"], "--damping", "[N/(m/s), or lbf/(in/s) with --units imperial]"),
+])
+def test_physical_options_state_their_unit(path, option, unit):
+    assert unit in _action(path, option).help
+
+
+def test_help_defaults_are_what_runs():
+    """The defaults stated in words are the library's: the rig simulated without --rig (a
+    plan that names none, as the built-in one: 7-post), the built-in plan's units and
+    duration, the rig swap time, the what-if tolerances."""
+    import dataclasses
+
+    from ident.sim.rig import RigPlan, default_plan
+    from planner.design import default_rig
+    from planner.whatif import FRAGILE_SHARE, RANK_TOLERANCE
+
+    plan = default_plan()
+    field_default = {f.name: f.default for f in dataclasses.fields(RigPlan)}["rig"]
+    rig_help = _action(["rig", "simulate"], "--rig").help
+    assert plan.rig == field_default == "7-post"
+    assert f"{plan.rig} for the built-in plan and for a plan that names none" in rig_help
+    assert "(default)" not in rig_help
+    assert f"{plan.units} for the built-in plan" in _action(["rig", "simulate"], "--units").help
+    assert f"{plan.runs[0].duration_s:g} s in the built-in plan" in \
+        _action(["rig", "simulate"], "--duration").help
+    assert f"{default_rig().swap_min:g} min a changed corner" in _action(["plan"], "--rig").help
+    assert f"(default {RANK_TOLERANCE})" in _action(["whatif"], "--rank-tolerance").help
+    assert f"(default {FRAGILE_SHARE})" in _action(["whatif"], "--fragile-share").help
+
+
+PAPER_SHOCKS = Path(ident.__file__).parent / "examples" / "paper_shocks.toml"
+
+
+def test_rig_simulate_prints_the_sample_count_of_every_run(tmp_path, capsys):
+    """Runs of different lengths: the printed count is per run and in all, not the first
+    run's (issue 23: "12000 samples" for a plan whose second run has 36000)."""
+    base = '{ LF = "B20", RF = "B20", LR = "B20", RR = "B20" }'
+    swap = '{ LF = "N8", RF = "B20", LR = "B20", RR = "B20" }'
+    plan = tmp_path / "plan.toml"
+    plan.write_text(
+        f'format = "rig-plan/1"\nname = "two lengths"\nshock_library = "{PAPER_SHOCKS.as_posix()}"\n'
+        f'fs_hz = 100.0\noversample = 2\n'
+        f'[[run]]\nname = "short"\nsetup = {base}\nrole = "baseline"\nduration_s = 10.0\n'
+        f'[[run]]\nname = "long"\nsetup = {swap}\nrole = "swap"\nduration_s = 30.0\n')
+    assert main(["-q", "rig", "simulate", "--plan", str(plan), "--out", str(tmp_path / "s")]) == 0
+    out = capsys.readouterr().out
+    assert "2 runs, 1000-3000 samples per run (4000 in all) at 100 Hz" in out
+    assert main(["-q", "rig", "simulate", "--duration", "10", "--out", str(tmp_path / "d")]) == 0
+    assert "runs, 1000 samples each at 100 Hz" in capsys.readouterr().out

@@ -4,6 +4,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from threadpoolctl import threadpool_limits
 
 from ident.data.channels import CORNERS, RIG_INPUTS
 from ident.errors import SessionError
@@ -136,13 +137,19 @@ def test_measurement_noise(paper_plan):
 def test_noise_floor_per_channel_and_inputs(paper_plan):
     """Per-kind and per-channel overrides, input noise on the recorded rig inputs only, and one
     noise floor per channel for the whole session (a sensor's, not a run's): a swap run whose
-    shock velocity is larger gets the same noise as the baseline's."""
+    shock velocity is larger gets the same noise as the baseline's.
+
+    A channel without noise is the clean session's bit for bit: the runs are simulated on
+    threads, each run's loop on one thread from start to end, and BLAS (the one call in the
+    loop: its output product) on one thread, so the bits do not depend on the scheduling.
+    """
     runs = (PlanRun("b", {c: "B20" for c in CORNERS}, "baseline", 5, 100.0),
             PlanRun("s", {"LF": "N8", "RF": "B20", "LR": "B20", "RR": "B20"}, "swap", 5, 100.0))
-    clean = simulate_session(replace(paper_plan, runs=runs))
     plan = replace(paper_plan, runs=runs, noise=0.02, input_noise=0.005,
                    channel_noise={"tire_force": 0.0, "ride_height_RR": 0.05, "aero": 0.0})
-    noisy = simulate_session(plan)
+    with threadpool_limits(limits=1, user_api="blas"):
+        clean = simulate_session(replace(paper_plan, runs=runs))
+        noisy = simulate_session(plan)
 
     def session_rms(name):
         return np.sqrt(np.mean([np.mean((r.channels[name] - r.channels[name].mean()) ** 2)

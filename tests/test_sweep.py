@@ -1,10 +1,13 @@
 """Tests of planner.sweep: the lazy setup space against enumerate_setups, bounded memory,
 the Dask sweep against the single-process path (bit for bit), chunking invariance,
 agreement with screen_setups / predict_setups / rank_setups, several cases, bad options
-and schedulers, and the command line."""
+and schedulers, the files (planner.report.sweep) and the command line."""
 
 import math
+import re
+import tomllib
 import tracemalloc
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -18,6 +21,8 @@ from planner.objective import score_setups
 from planner.predict import predict_setups
 from planner.rank import rank_setups
 from planner.screen import screen_setups
+from planner.report.sweep import (MAX_STEM_CHARS, case_file_name, case_file_names, name_stem,
+                                  write_sweep)
 from planner.setups import Setup, enumerate_setups, setup_space
 from planner.sweep import RTOL_SCORE_ROUNDOFF, sweep_setups
 
@@ -224,6 +229,11 @@ def test_several_drives_and_models_combine(paper_vehicle, track_drive, demo_libr
     worst = sweep_setups(models, [track_drive, other], demo_library, combine="worst", **kw)
     labels = mean.settings["cases"]
     assert len(labels) == 4 and labels[0] == "car | track test"
+    assert mean.settings["models"] == ("car", "heavy")
+    assert mean.settings["drives"] == ("track test", "track other")  # the drives' names
+    assert list(case_file_names(mean).values()) == [
+        "case-1-car-track-test.csv", "case-2-car-track-other.csv",
+        "case-3-heavy-track-test.csv", "case-4-heavy-track-other.csv"]
     for res, combine in ((mean, np.mean), (worst, np.max)):
         cols = [f"score@{lab}" for lab in labels]
         assert_allclose(res.table["score"], combine(res.table[cols].to_numpy(), axis=1),
@@ -262,12 +272,88 @@ def test_unreachable_scheduler_is_a_clear_error(paper_model, track_drive, demo_l
                      progress=False)
 
 
+# ---------------------------------------------------------------- the files
+
+#: A case file's name: the case number, then a stem of portable characters that neither
+#: starts nor ends with "-" or "." (no hidden file, no path).
+SAFE_CASE_FILE = re.compile(r"case-[0-9]+(-[A-Za-z0-9_]([A-Za-z0-9._-]*[A-Za-z0-9_])?)?\.csv")
+
+
+@pytest.mark.parametrize("models, drives, k, expected", [
+    (["paper"], ["track.csv"], 1, "case-1-track.csv"),  # issue 23: was case-1-track.csv.csv
+    (["paper"], ["runs/2026/track.csv"], 1, "case-1-track.csv"),
+    (["paper"], ["C:\\data\\Bumps #3.PQ"], 1, "case-1-Bumps-3.csv"),
+    (["paper"], ["track test"], 1, "case-1-track-test.csv"),  # a Drive's own name
+    (["paper"], ["v1.2 run"], 1, "case-1-v1.2-run.csv"),  # only a reader's suffix goes
+    (["paper"], ["../../etc/passwd"], 1, "case-1-passwd.csv"),
+    (["paper"], ["???.csv"], 1, "case-1.csv"),
+    (["paper"], [".hidden.csv"], 1, "case-1-hidden.csv"),
+    (["paper"], ["x" * 100 + ".csv"], 1, "case-1-" + "x" * MAX_STEM_CHARS + ".csv"),
+    (["models/car.npz", "heavy.TOML"], ["track.csv"], 2, "case-2-heavy.csv"),
+    (["car.npz", "heavy.toml"], ["a.csv", "b.parquet"], 3, "case-3-heavy-a.csv"),
+])
+def test_case_file_name_from_stems(models, drives, k, expected):
+    assert case_file_name(k, models, drives) == expected
+    assert SAFE_CASE_FILE.fullmatch(expected)
+
+
+def test_case_file_names_are_unique_and_safe():
+    """Names that give the same stem, or differ only in case, still give distinct files
+    (on a case-insensitive file system too); a bad case number is refused."""
+    models = ["paper", "cars/paper.npz", "Paper.toml"]
+    drives = ["a/track.csv", "b/track.csv", "Track.CSV", "track", "/", "ü ñ.csv"]
+    labels = [f"{m} | {d}" for m in models for d in drives]
+    files = case_file_names(SimpleNamespace(settings={"cases": tuple(labels),
+                                                      "models": models, "drives": drives}))
+    assert list(files) == labels
+    assert len({f.lower() for f in files.values()}) == len(labels)
+    assert all(SAFE_CASE_FILE.fullmatch(f) for f in files.values()), files
+    assert name_stem("/") == "" and files[labels[4]] == "case-5-paper.csv"
+    for k in (0, len(labels) + 1, True, 1.0):
+        with pytest.raises(ValueError, match="case number"):
+            case_file_name(k, models, drives)
+
+
+def test_write_sweep(tmp_path, paper_model, track_drive, demo_library):
+    """The drive given as ``runs/track.csv`` (the mapping key, as the command line passes
+    it) names its case file ``case-1-track.csv``; sweep.toml points to it."""
+    res = sweep_setups({"paper": paper_model}, {"runs/track.csv": track_drive}, demo_library,
+                       constraints={"shocks": ["B20", "L12", "L28", "DS"]}, top=3,
+                       scheduler="none", progress=False)
+    assert res.settings["models"] == ("paper",)
+    assert res.settings["drives"] == ("runs/track.csv",)
+    out = tmp_path / "out"
+    written = write_sweep(res, out, units="imperial")
+    assert [p.name for p in written] == ["ranking.csv", "case-1-track.csv", "sweep.toml"]
+    assert sorted(p.name for p in out.iterdir()) == ["case-1-track.csv", "ranking.csv",
+                                                     "sweep.toml"]
+    summary = tomllib.loads((out / "sweep.toml").read_text())
+    assert summary["cases"] == [{"label": "runs/track.csv", "file": "case-1-track.csv"}]
+    assert summary["best"] == res.best and summary["n_simulated"] == len(res.table)
+    assert len(pd.read_csv(out / "case-1-track.csv")) == len(res.table)
+    with pytest.raises(FileExistsError):
+        write_sweep(res, out)
+    assert write_sweep(res, out, overwrite=True) == written
+
+
 # ---------------------------------------------------------------- command line
 
 
-def test_cli_sweep(tmp_path, track_drive, capsys):
-    import tomllib
+def test_cli_sweep_names_case_files_from_stems(tmp_path, track_drive, monkeypatch):
+    from ident.data.drive import write_drive
+    from planner.cli import main
+    from planner.demo import DEMO_LIBRARY_PATH
 
+    write_drive(track_drive, tmp_path / "track.csv")
+    monkeypatch.chdir(tmp_path)  # the drive as a user names it: track.csv
+    assert main(["-q", "sweep", "--model", "paper", "--drive", "track.csv", "--shocks",
+                 str(DEMO_LIBRARY_PATH), "--only", "B20,L12", "--top", "2", "--scheduler",
+                 "none", "--out", "sweep"]) == 0
+    assert sorted(p.name for p in (tmp_path / "sweep").iterdir()) == [
+        "case-1-track.csv", "ranking.csv", "sweep.toml"]
+
+
+def test_cli_sweep(tmp_path, track_drive, capsys):
     from ident.data.drive import write_drive
     from planner.cli import main
     from planner.demo import DEMO_LIBRARY_PATH

@@ -6,12 +6,15 @@ import pytest
 from ident.data.channels import CORNERS
 from ident.errors import VehicleError
 from ident.data.units import to_si
-from ident.models.vehicle import (FULL_CAR_OUTPUT_KINDS, G_M_S2, build_full_car, example_vehicle,
-                           modal_summary, read_vehicle, write_vehicle)
+from ident.models.vehicle import (FULL_CAR_OUTPUT_KINDS, G_M_S2, build_full_car,
+                                  close_shock_loop, example_vehicle, modal_summary,
+                                  mode_frequencies, read_vehicle, write_vehicle)
 
 RTOL_HOP = 0.02  # wheel hop vs the decoupled sqrt((ks+kt)/mu): chassis coupling shifts < 2 %
 RTOL_BODY = 0.03  # body modes vs ride-rate hand calculations: wheel-mass coupling < 3 %
 RTOL_EXACT = 1e-12  # algebraic identities
+RTOL_EIG = 1e-8  # eigenvalues of the 14-state loop against the symmetric 7-DOF problem
+RTOL_LOCKED = 1e-3  # shocks of 2000 lbf/(in/s) against a rigid suspension: moved by 1e-4
 
 
 def _inputs(model, name):
@@ -45,7 +48,7 @@ def test_shapes_and_names(paper_model):
 def test_natural_frequencies_match_hand_calculation(paper_vehicle):
     p = paper_vehicle
     s = modal_summary(p)
-    freqs = dict(zip(s.labels, s.undamped_hz))
+    freqs = dict(zip(s.labels, s.no_damping_hz))  # hand calculations have no damping
     # wheel hop: unsprung mass between spring and tire, chassis held still
     hop_f = np.sqrt((p.spring_rate_n_m[0] + p.tire_rate_n_m[0]) / p.unsprung_mass_kg[0]) / (2 * np.pi)
     hop_r = np.sqrt((p.spring_rate_n_m[2] + p.tire_rate_n_m[2]) / p.unsprung_mass_kg[2]) / (2 * np.pi)
@@ -65,11 +68,75 @@ def test_natural_frequencies_match_hand_calculation(paper_vehicle):
 
 
 def test_damped_equals_undamped_without_shocks(paper_vehicle):
+    """Without shocks the closed loop's modes are those of K phi = w^2 M phi."""
     s = modal_summary(paper_vehicle, damping_n_s_m=0.0)
-    np.testing.assert_allclose(s.damped_hz, s.undamped_hz, rtol=1e-8)
-    np.testing.assert_allclose(s.damping_ratio, 0.0, atol=1e-8)
+    np.testing.assert_allclose(s.natural_hz, s.no_damping_hz, rtol=RTOL_EIG)
+    np.testing.assert_allclose(s.damped_hz, s.natural_hz, rtol=RTOL_EIG)
+    np.testing.assert_allclose(s.damping_ratio, 0.0, atol=RTOL_EIG)
     d = modal_summary(paper_vehicle)
     assert np.all((d.damping_ratio > 0.1) & (d.damping_ratio < 1.0))
+
+
+# m x'' + c x' + k x = 0 with m = 2 kg, k = 800 N/m: w_n = 20 rad/s, zeta = c / 80
+@pytest.mark.parametrize("c_n_s_m, zeta", [(0.0, 0.0), (8.0, 0.1), (40.0, 0.5), (200.0, 2.5)])
+def test_mode_frequencies_of_one_dof_known_answer(c_n_s_m, zeta):
+    """One degree of freedom, where f_d = f_n sqrt(1 - zeta^2) is exact: from its poles
+    (a conjugate pair, the upper pole alone, or two real poles when overdamped)."""
+    m, k = 2.0, 800.0
+    f_n = np.sqrt(k / m) / (2 * np.pi)
+    f_d = f_n * np.sqrt(max(0.0, 1.0 - zeta ** 2))
+    poles = np.roots([m, c_n_s_m, k])
+    for given in (poles, poles[poles.imag >= 0] if zeta < 1 else poles):
+        got = mode_frequencies(given)
+        np.testing.assert_allclose(got, (f_n, f_d, zeta), rtol=RTOL_EXACT, atol=RTOL_EXACT)
+
+
+def test_mode_frequencies_rejects_what_is_no_mode():
+    with pytest.raises(ValueError, match="one complex pole or two real poles"):
+        mode_frequencies([-1.0 + 2.0j, -3.0 + 1.0j])
+    with pytest.raises(ValueError, match="one complex pole or two real poles"):
+        mode_frequencies([-1.0, -2.0, -3.0])
+
+
+def test_locked_suspension_bounces_on_the_tires(paper_vehicle):
+    """Shocks stiff enough to lock the suspension: heave, pitch and roll are the modes of
+    the rigid car on its tires (known answer: ``K = T' Kt T``, ``M = J_C + T' m_u T``),
+    lightly damped; the wheels' modes are overdamped."""
+    p = paper_vehicle
+    T = p.corner_matrix[:, :3]
+    K = T.T @ np.diag(p.tire_rate_n_m) @ T
+    M = np.diag(p.chassis_inertia[:3]) + T.T @ np.diag(p.unsprung_mass_kg) @ T
+    rigid = np.sort(np.sqrt(np.linalg.eigvals(np.linalg.solve(M, K)).real)) / (2 * np.pi)
+    s = modal_summary(p, damping_n_s_m=to_si(2000.0, "damping", "imperial"))
+    body = [s.labels.index(m) for m in ("heave", "pitch", "roll")]
+    np.testing.assert_allclose(s.natural_hz[body], rigid, rtol=RTOL_LOCKED)
+    assert np.all(s.damping_ratio[body] < 0.02)
+    hop = [i for i, lab in enumerate(s.labels) if lab.startswith("hop")]
+    assert np.all(s.damping_ratio[hop] > 1) and np.all(s.damped_hz[hop] == 0)
+
+
+@pytest.mark.parametrize("c_lbf_in_s", [None, 20.0, 60.0, 2000.0])
+def test_damped_frequencies_below_undamped_on_the_paper_car(paper_vehicle, c_lbf_in_s):
+    """Every mode of the paper's car (nominal shocks, the CLI's 20 lbf/(in/s), stiff ones
+    and shocks that overdamp the wheels): f_d <= f_n and f_d = f_n sqrt(1 - zeta^2), all
+    from the closed loop's poles (each pole pair used once)."""
+    c = None if c_lbf_in_s is None else to_si(c_lbf_in_s, "damping", "imperial")
+    s = modal_summary(paper_vehicle, damping_n_s_m=c)
+    assert np.all(s.damped_hz <= s.natural_hz), s.table()
+    np.testing.assert_allclose(
+        s.damped_hz, s.natural_hz * np.sqrt(np.maximum(0.0, 1 - s.damping_ratio ** 2)),
+        rtol=RTOL_EXACT, atol=RTOL_EXACT * s.natural_hz.max())
+    # the natural frequencies are the closed loop's |s| / (2 pi), every pole once
+    m = build_full_car(paper_vehicle)
+    A = close_shock_loop(m.A, m.B, m.C, m.D, s.damping_n_s_m)[0]
+    lam = np.linalg.eigvals(A)
+    under = s.damping_ratio < 1
+    np.testing.assert_allclose(np.sort(s.natural_hz[under]),
+                               np.sort(np.abs(lam[lam.imag > 0])) / (2 * np.pi), rtol=RTOL_EIG)
+    real = np.sort(lam[lam.imag == 0].real)
+    assert real.size == 2 * np.sum(~under)
+    assert np.prod(np.abs(real)) == pytest.approx(
+        np.prod((2 * np.pi * s.natural_hz[~under]) ** 2), rel=RTOL_EIG)
 
 
 def test_static_equilibrium_known_answers(paper_model, paper_vehicle):
@@ -176,7 +243,7 @@ def test_generalized_car_torsion_and_unequal_half_tracks(paper_vehicle):
     # a very stiff chassis recovers the rigid car's frequencies
     stiff = modal_summary(paper_vehicle.replace(torsion_stiffness_n_m_rad=1e12))
     rigid = modal_summary(paper_vehicle)
-    np.testing.assert_allclose(np.sort(stiff.undamped_hz)[:7], np.sort(rigid.undamped_hz), rtol=1e-4)
+    np.testing.assert_allclose(np.sort(stiff.natural_hz)[:7], np.sort(rigid.natural_hz), rtol=1e-4)
     # lateral offset: more static load on the left, total unchanged
     loads = car.static_corner_load_n
     assert loads[0] > loads[1] and loads[2] > loads[3]

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from ident.data.channels import CORNERS, RIG_INPUTS
 from ident.data.files import atomic_write_toml, read_toml
@@ -52,6 +53,7 @@ __all__ = [
     "example_vehicle",
     "build_full_car",
     "modal_summary",
+    "mode_frequencies",
     "EXAMPLE_VEHICLE_PATH",
     "G_M_S2",
     "FULL_CAR_OUTPUT_KINDS",
@@ -676,42 +678,116 @@ def build_full_car(params):
                         output_names=outputs, mass_matrix=M, stiffness_matrix=K)
 
 
+def mode_frequencies(poles):
+    """Natural frequency, damped frequency and damping ratio of one vibration mode.
+
+    A mode is a pair of poles of ``m x'' + c x' + k x = 0``:
+    ``s = -zeta w_n +- j w_n sqrt(1 - zeta^2)`` when underdamped, two real poles
+    ``s1 s2 = w_n^2``, ``s1 + s2 = -2 zeta w_n`` when overdamped.
+
+    Parameters
+    ----------
+    poles : complex or array_like of complex, shape (1,) or (2,)
+        The mode's pole with a positive imaginary part (its conjugate is implied), its
+        conjugate pair, or its two real poles [rad/s].
+
+    Returns
+    -------
+    f_n_hz : float
+        Natural frequency ``w_n / (2 pi)`` [Hz], the mode's frequency without its damping.
+    f_d_hz : float
+        Damped natural frequency ``f_n sqrt(1 - zeta^2)`` [Hz] (0 when overdamped).
+    zeta : float
+        Damping ratio (``>= 1`` when overdamped, negative for an unstable mode).
+
+    Raises
+    ------
+    ValueError
+        If `poles` is neither one pole, a conjugate pair nor two real poles.
+
+    Notes
+    -----
+    The three numbers come from the same poles, so ``f_d = f_n sqrt(1 - zeta^2)`` holds
+    to round-off (python-control's ``damp`` gives the same ``w_n`` and ``zeta`` for a
+    complex pole).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> m, c, k = 2.0, 40.0, 800.0      # w_n = 20 rad/s, zeta = c / (2 sqrt(k m)) = 0.5
+    >>> f_n, f_d, zeta = mode_frequencies(np.roots([m, c, k]))
+    >>> round(f_n * 2 * np.pi, 12), round(zeta, 12), round(f_d / f_n, 12)
+    (20.0, 0.5, 0.866025403784)
+    """
+    p = np.atleast_1d(np.asarray(poles, dtype=complex))
+    if p.size == 2 and np.all(p.imag == 0):  # overdamped (or critically damped)
+        s1, s2 = p.real
+        wn = np.sqrt(s1 * s2) if s1 * s2 > 0 else 0.0
+        zeta = -(s1 + s2) / (2 * wn) if wn > 0 else 1.0
+        return float(wn / (2 * np.pi)), 0.0, float(zeta)
+    if p.size == 2 and np.isclose(p[0], np.conj(p[1]), rtol=1e-9, atol=0.0):
+        p = p[p.imag > 0]  # a conjugate pair
+    if p.size != 1:
+        raise ValueError(f"a mode has one complex pole or two real poles, got {p.tolist()}")
+    s = p[0]
+    wn = abs(s)
+    zeta = -s.real / wn if wn > 0 else 1.0
+    return float(wn / (2 * np.pi)), float(abs(s.imag) / (2 * np.pi)), float(zeta)
+
+
 @dataclass(frozen=True, eq=False)
 class ModalSummary:
     """Natural frequencies of the full-car model.
 
     Attributes
     ----------
-    undamped_hz : ndarray, shape (n_dof,)
-        Undamped natural frequencies [Hz], ascending.
+    natural_hz : ndarray, shape (n_dof,)
+        Natural frequency ``|s| / (2 pi)`` of each mode of the car with its shocks [Hz]
+        (``f_n`` of :func:`mode_frequencies`): the frequency at which the mode would ring
+        without its damping. Not :attr:`no_damping_hz`: stiff shocks couple chassis and
+        wheels (their damping is not proportional), which moves ``|s|``.
     labels : tuple of str
-        The dominant coordinate of each undamped mode (by modal kinetic
-        energy): ``heave``, ``roll``, ``pitch``, ``twist``, ``hop_LF``, ...
+        The dominant coordinate of each mode without damping (by modal kinetic energy):
+        ``heave``, ``roll``, ``pitch``, ``twist``, ``hop_LF``, ...
     damped_hz : ndarray, shape (n_dof,)
-        Damped natural frequencies [Hz] with the given linear shocks (0 for
-        overdamped modes), in the order of the undamped modes.
+        Damped natural frequencies ``Im(s) / (2 pi)`` [Hz] (0 for overdamped modes): in
+        every mode ``damped_hz = natural_hz sqrt(1 - damping_ratio^2)``.
     damping_ratio : ndarray, shape (n_dof,)
-        Damping ratio of each mode with the given shocks.
+        Damping ratio ``-Re(s) / |s|`` of each mode with the given shocks (of the two real
+        poles of an overdamped mode, ``>= 1``).
     damping_n_s_m : ndarray, shape (4,)
         The linear shock damping used [N/(m/s)].
+    no_damping_hz : ndarray, shape (n_dof,)
+        Natural frequencies of the car without shocks and tire dampers [Hz], ascending
+        (``K phi = w^2 M phi``, what a ride-rate hand calculation gives); the modes are in
+        this order.
+
+    Notes
+    -----
+    ``natural_hz``, ``damped_hz`` and ``damping_ratio`` come from one eigenproblem, the
+    closed loop with the shocks; each of its modes is matched to the mode without
+    damping of the most similar shape. A damped frequency compared with
+    ``no_damping_hz`` instead can lie above it (the paper's car: heave, pitch and roll).
     """
 
-    undamped_hz: np.ndarray
+    natural_hz: np.ndarray
     labels: tuple
     damped_hz: np.ndarray
     damping_ratio: np.ndarray
     damping_n_s_m: np.ndarray
+    no_damping_hz: np.ndarray
 
     def table(self):
         """The summary as a ``pandas.DataFrame`` (one row per mode)."""
         import pandas as pd
 
-        return pd.DataFrame({"mode": self.labels, "undamped_hz": self.undamped_hz,
-                             "damped_hz": self.damped_hz, "damping_ratio": self.damping_ratio})
+        return pd.DataFrame({"mode": self.labels, "natural_hz": self.natural_hz,
+                             "damped_hz": self.damped_hz, "damping_ratio": self.damping_ratio,
+                             "no_damping_hz": self.no_damping_hz})
 
 
 def modal_summary(model, *, damping_n_s_m=None):
-    """Undamped and damped natural frequencies of a full-car model.
+    """Natural frequencies, damped frequencies and damping ratios of a full-car model.
 
     Parameters
     ----------
@@ -722,6 +798,12 @@ def modal_summary(model, *, damping_n_s_m=None):
     Returns
     -------
     ModalSummary
+
+    Examples
+    --------
+    >>> s = modal_summary(example_vehicle())
+    >>> bool(np.all(s.damped_hz <= s.natural_hz))
+    True
     """
     if isinstance(model, VehicleParams):
         model = build_full_car(model)
@@ -729,7 +811,7 @@ def modal_summary(model, *, damping_n_s_m=None):
     c = p.damping_n_s_m if damping_n_s_m is None else np.broadcast_to(
         np.asarray(damping_n_s_m, float), (4,)).copy()
     M, K = model.mass_matrix, model.stiffness_matrix
-    # undamped: K phi = w^2 M phi (M diagonal): symmetric form
+    # without damping: K phi = w^2 M phi (M diagonal): symmetric form
     ms = 1 / np.sqrt(np.diag(M))
     w2, vec = np.linalg.eigh(ms[:, None] * K * ms[None, :])
     order = np.argsort(w2)
@@ -737,32 +819,35 @@ def modal_summary(model, *, damping_n_s_m=None):
     nc = p.corner_matrix.shape[1]
     names = ["heave", "roll", "pitch", "twist"][:nc] + [f"hop_{c}" for c in CORNERS]
     labels = tuple(names[int(np.argmax(vec[:, i] ** 2))] for i in range(len(w2)))
-    undamped = np.sqrt(np.maximum(w2, 0)) / (2 * np.pi)
-    # damped: eigenvalues of the closed loop, matched to undamped modes by shape
+    no_damping = np.sqrt(np.maximum(w2, 0)) / (2 * np.pi)
+    # with the shocks: the closed loop's poles, assigned to those modes by shape
     A, _, _, _ = close_shock_loop(model.A, model.B, model.C, model.D, c)
     lam, V = np.linalg.eig(A)
     nq = M.shape[0]
-    damped = np.zeros(nq)
-    zeta = np.ones(nq)
-    modal_disp = (ms[:, None] * vec).T  # physical mode shapes, one per row
-    used = set()
+    keep = np.ones(lam.size, dtype=bool)
     if p.has_tire_damping:  # the tire dampers' relaxation roots (near -2 pi f_c) are no modes
         wc = 2 * np.pi * p.tire_damping_corner_hz
-        used.update(np.argsort(np.abs(lam + wc))[:4].tolist())
-    for i in range(nq):
-        best, score = None, -1.0
-        for j in range(lam.size):
-            if j in used or lam[j].imag < 0:
-                continue
-            shape = V[:nq, j]
-            num = abs(np.vdot(modal_disp[i], shape))
-            s = num / (np.linalg.norm(modal_disp[i]) * np.linalg.norm(shape) + 1e-300)
-            if s > score:
-                best, score = j, s
-        used.add(best)
-        lj = lam[best]
-        wn = abs(lj)
-        damped[i] = abs(lj.imag) / (2 * np.pi)
-        zeta[i] = -lj.real / wn if wn > 0 else 1.0
-    return ModalSummary(undamped_hz=undamped, labels=labels, damped_hz=damped,
-                        damping_ratio=zeta, damping_n_s_m=np.asarray(c, float))
+        keep[np.argsort(np.abs(lam + wc))[:4]] = False
+    # shapes compared mass-weighted (M^1/2 q: kinetic energy, whatever the coordinates'
+    # units), where the modes without damping are orthonormal (`vec`)
+    shapes = V[:nq] / ms[:, None]
+    shapes /= np.maximum(np.linalg.norm(shapes, axis=0), 1e-300)
+    mac = np.abs(vec.T @ shapes)  # (mode, pole): 1 for the same shape
+    upper = np.flatnonzero(keep & (lam.imag > 0))  # one pole of each oscillating mode
+    real = np.flatnonzero(keep & (lam.imag == 0))  # overdamped modes: two real poles each
+    # the oscillating poles to the modes they resemble most (one each, best total), then
+    # the real poles in pairs to the modes left
+    rows, cols = linear_sum_assignment(mac[:, upper], maximize=True)
+    poles = {int(i): [lam[upper[j]]] for i, j in zip(rows, cols)}
+    rest = np.array([i for i in range(nq) if i not in poles], dtype=np.intp)
+    if rest.size and real.size:
+        slots = np.repeat(rest, 2)
+        rows, cols = linear_sum_assignment(mac[np.ix_(slots, real)], maximize=True)
+        for r, j in zip(rows, cols):
+            poles.setdefault(int(slots[r]), []).append(lam[real[j]])
+    natural, damped, zeta = np.full(nq, np.nan), np.full(nq, np.nan), np.full(nq, np.nan)
+    for i, pl in poles.items():
+        natural[i], damped[i], zeta[i] = mode_frequencies(pl)
+    return ModalSummary(natural_hz=natural, labels=labels, damped_hz=damped,
+                        damping_ratio=zeta, damping_n_s_m=np.asarray(c, float),
+                        no_damping_hz=no_damping)

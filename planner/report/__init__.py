@@ -8,7 +8,9 @@ files (``ranking.csv``, ``ranking.xlsx``, ``pareto.png``, ``top_setups.png``).
 ``rank_stability.png``, ``tornado/*.png``) and reads the per-factor effects the
 tornado charts show off the what-if's table (:func:`factor_effects`).
 :mod:`~planner.report.optimize` writes a curve optimum's files (``optimize.xlsx``,
-``curves.png``, ``convergence.csv``, the optimal shocks and setups). Compute lives in
+``curves.png``, ``convergence.csv``, the optimal shocks and setups).
+:mod:`~planner.report.sweep` writes a sweep's files (``ranking.csv``, a CSV per case
+named from its model and drive, ``sweep.toml``). Compute lives in
 the decision modules; these only format and write their results.
 """
 
@@ -36,6 +38,7 @@ from planner.report.sheets import (
     text_width,
     wrap_lines,
 )
+from planner.report.sweep import case_file_names, write_sweep
 from planner.report.whatif import (
     factor_effects,
     rank_stability_figure,
@@ -66,4 +69,6 @@ __all__ = [
     "tornado_figure",
     "rank_stability_figure",
     "write_whatif",
+    "case_file_names",
+    "write_sweep",
 ]
