@@ -342,6 +342,7 @@ def test_pairwise_sum_of_all_lanes_is_numpys(rng, n):
     np.testing.assert_array_equal(out, [np.sum(x * x) for x in cols])
 
 
+@pytest.mark.slow
 def test_metric_kernels_load_from_numba_cache(tmp_path):
     """The compiled metric kernels work when numba loads them from its cache in a new
     process, not only when compiled in it (numba's cache could not reload a self-recursive

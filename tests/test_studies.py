@@ -131,6 +131,7 @@ def test_fig10_12_small(tmp_path):
 RTOL_SHORT_RUNS_MAX_PCT = 5.0
 
 
+@pytest.mark.slow
 def test_rig_time_study_small(tmp_path):
     """The paper plan with 60 s runs: its rig time counts the swaps; identified, predicted.
     (The designed plans' path, design -> plan.toml -> virtual rig -> identify, is
@@ -161,6 +162,7 @@ def test_random_plan_swaps_every_corner_within_budget():
             assert any(r.setup[c] != study.BASELINE for r in plan.runs)
 
 
+@pytest.mark.slow
 def test_noise_study_small_with_missing_shock_forces(tmp_path):
     """The paper plan at 2 % noise without shock-force channels (the exact library standing
     in for the load cells) identifies and predicts."""
