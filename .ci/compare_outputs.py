@@ -212,10 +212,12 @@ def _copy_ref_inputs(src_root, dest):
 
 
 def _cut_drive(src, dest, first, count):
-    """Rows [first, first + count) of a drive CSV, header kept, bytes as they are."""
+    """Rows [first, first + count) of a drive CSV, header (and leading '#' lines: the unit
+    marker '# units: ...', issue 23) kept, bytes as they are."""
     with open(src, "rb") as fh:
         lines = fh.readlines()
-    Path(dest).write_bytes(b"".join([lines[0], *lines[1 + first: 1 + first + count]]))
+    head = next(i for i, line in enumerate(lines) if not line.startswith(b"#")) + 1
+    Path(dest).write_bytes(b"".join([*lines[:head], *lines[head + first: head + first + count]]))
 
 
 SETUPS_CSV = """setup,LF,RF,LR,RR
@@ -391,7 +393,7 @@ def write_rpc3(path, channels, fs_hz, group=1024, full_scale=32752):
 def _rpc_from_run(run_csv, dest, samples=RPC_SAMPLES):
     import pandas as pd
 
-    df = pd.read_csv(run_csv, nrows=samples)
+    df = pd.read_csv(run_csv, nrows=samples, comment="#")  # '# units: ...' first (issue 23)
     fs_hz = 1.0 / float(df["time"].iloc[1] - df["time"].iloc[0])
     fs_hz = round(fs_hz, 6)
     chans = {}
@@ -447,7 +449,7 @@ def run_all(exe, out, inputs_from):
           "--shocks", "inputs/crate.toml", "--units", "imperial", "--out", "rank", section=sec)
     r.cmd("rank-constrained", "rank", "--model", "demo/model.npz", "--drive",
           "inputs/track30.csv", "--shocks", "inputs/crate.toml", "--symmetry", "none",
-          "--only", "L12,L28,DM,TD", "--fixed", "LF=L28", "--baseline", "B20", "--top", "8",
+          "--only", "L12,L28,DM,TD", "--fixed", "LF=L28", "--baseline", "B20", "--simulate", "8",
           "--no-uncertainty", "--units", "imperial", "--out", "rank_constrained", section=sec)
     r.cmd("rank-setups-car", "rank", "--model", "inputs/car.toml", "--drive",
           "inputs/track30.csv", "--shocks", "inputs/crate.toml", "--setups",
@@ -455,7 +457,7 @@ def run_all(exe, out, inputs_from):
     r.cmd("sweep", "sweep", "--model", "demo/model.npz", "--model", "inputs/car.toml",
           "--drive", "inputs/track30.csv", "--drive", "inputs/track30b.csv", "--shocks",
           "inputs/crate.toml", "--only", "B20,L12,L28,DS,DM", "--baseline", "B20",
-          "--symmetry", "none", "--top-share", "0.02", "--scheduler", "none", "--units",
+          "--symmetry", "none", "--simulate-share", "0.02", "--scheduler", "none", "--units",
           "imperial", "--out", "sweep", section=sec)
 
     # -- From a real rig -------------------------------------------------------------------

@@ -4,7 +4,9 @@ Every command is a call into the library; this module parses arguments,
 prints summaries and turns the project's errors into one-line messages.
 
 One vocabulary across commands (issue 23): ``--units`` takes ``SI`` or ``imperial`` in
-any case and passes the canonical name on; ``-q`` and ``-v`` go before or after the
+any case and passes the canonical name on; a command that reads drive files defaults it
+to the drive file's own unit system (its ``# units:`` line), else SI, and writes its
+outputs in it; ``-q`` and ``-v`` go before or after the
 command; options are spelled out in full, and a misspelled option or command ends with
 exit status 2 and one line naming the nearest valid one; every option's help states its
 default and, for a physical quantity, its unit.
@@ -81,6 +83,13 @@ def cmd_rig_simulate(args):
     _check_out(args, folder=True)
     plan = default_plan() if args.plan is None else read_rig_plan(args.plan)
     if args.duration is not None:
+        played = [r.name for r in plan.runs if r.drive is not None]
+        if played:
+            raise ValueError(
+                f"--duration {args.duration:g}: the plan's run(s) {', '.join(played[:3])}"
+                f"{' ...' if len(played) > 3 else ''} play drive files, whose length is the "
+                "file's; --duration sets only generated drives: leave it out, or give a plan "
+                "without drive files")
         plan = replace(plan, runs=tuple(replace(r, duration_s=args.duration) for r in plan.runs))
     if args.noise is not None:
         plan = replace(plan, noise=args.noise)
@@ -141,10 +150,12 @@ def cmd_identify(args):
     """``shockplan identify``: rig session -> identified vehicle model."""
     import warnings
 
-    from ident.identify.pipeline import identify_session
     from ident.data.session import read_session
+    from ident.identify.model import summary_path, write_model_summary
+    from ident.identify.pipeline import identify_session
 
     _check_out(args)
+    check_output(summary_path(args.out), overwrite=args.overwrite, what="the model's summary")
     if args.mat:
         check_output(args.mat, overwrite=args.overwrite, what="--mat")
     if args.plots:
@@ -155,11 +166,14 @@ def cmd_identify(args):
         warnings.simplefilter("always")
         model = identify_session(session, estimator=args.estimator,
                                  frf_method=args.frf_method, nperseg=args.nperseg,
-                                 coherence_min=args.coherence_min, fit_method=args.method)
+                                 coherence_min=args.coherence_min, fit_method=args.method,
+                                 max_order=args.max_order)
     noise = noise_report(model, session)
     # the noise report built the loop plant; the copy keeps it, and save stores it
     model = model.with_settings(dict(model.settings, noise=noise))
     model.save(out, overwrite=args.overwrite)
+    summary_file = write_model_summary(model, summary_path(out), units=session.units,
+                                       overwrite=args.overwrite)
     table = model.summary()
     print(f"identified '{session.name}' ({len(session.runs)} runs, {session.fs_hz:g} Hz, "
           f"estimator {model.frf.settings.get('estimator')}) with {args.method}: "
@@ -178,7 +192,7 @@ def cmd_identify(args):
     print(_noise_summary(table, noise))
     for w in caught:
         print(f"warning: {w.message}")
-    print(f"wrote model {out}")
+    print(f"wrote model {out} and its per-pair summary {summary_file}")
     if args.mat:
         model.export_mat(args.mat, overwrite=args.overwrite)
         print(f"wrote MATLAB export {args.mat}")
@@ -248,8 +262,18 @@ def _read_inputs(args):
 
     model = _load_any_model(args.model)
     drive = read_drive(args.drive, units=args.units)
+    _output_units(args, [drive])
     library = read_shock_library(args.shocks)
     return model, drive, library
+
+
+def _output_units(args, drives):
+    """The unit system of the outputs, set as ``args.units``: ``--units`` if given, else the
+    first drive file's (its ``# units:`` line; the spec: predictions in the drive file's
+    units), else SI."""
+    if args.units is None:
+        args.units = drives[0].settings.get("units", "SI") if drives else "SI"
+    return args.units
 
 
 def cmd_predict(args):
@@ -301,7 +325,7 @@ def cmd_rank(args):
     baseline = _baseline_arg(args, library, setups)
     out = Path(args.out)
     ranking = rank_setups(model, drive, library, setups=setups, constraints=constraints,
-                          objective=objective, baseline=baseline, top=args.top,
+                          objective=objective, baseline=baseline, top=args.simulate,
                           oversample=args.oversample, uncertainty=not args.no_uncertainty,
                           scheduler=args.scheduler, n_workers=args.workers,
                           progress=not args.quiet)
@@ -318,9 +342,12 @@ def cmd_rank(args):
 
 
 def _ranking_summary(ranking, units, n=5):
+    from planner.screen import describe_agreement
+
     t = ranking.table
     lines = [f"screened {len(ranking.screening)} setups, simulated {len(t)} in the time domain; "
              f"screening vs time-domain Spearman {ranking.agreement['spearman']:.3f}",
+             describe_agreement(ranking.agreement, what="ranking"),
              f"baseline '{ranking.baseline}' scores {ranking.objective.total_weight:.3f}; best:"]
     rows = []
     for name, r in t.head(n).iterrows():
@@ -343,6 +370,7 @@ def cmd_sweep(args):
     _check_out(args, folder=True)
     models = {m: _load_any_model(m) for m in dict.fromkeys(args.model)}
     drives = {d: read_drive(d, units=args.units) for d in dict.fromkeys(args.drive)}
+    _output_units(args, list(drives.values()))
     library = read_shock_library(args.shocks)
     objective = default_objective() if args.objective is None else read_objective(args.objective)
     setups, constraints = None, None
@@ -357,8 +385,8 @@ def cmd_sweep(args):
     baseline = _baseline_arg(args, library, setups)
     scheduler = args.scheduler
     result = sweep_setups(models, drives, library, setups=setups, constraints=constraints,
-                          objective=objective, baseline=baseline, top_share=args.top_share,
-                          top=args.top, combine=args.combine, chunk_size=args.chunk_size,
+                          objective=objective, baseline=baseline, top_share=args.simulate_share,
+                          top=args.simulate, combine=args.combine, chunk_size=args.chunk_size,
                           oversample=args.oversample, scheduler=scheduler,
                           n_workers=args.workers, progress=not args.quiet)
     written = write_sweep(result, args.out, units=args.units, overwrite=args.overwrite)
@@ -368,12 +396,15 @@ def cmd_sweep(args):
 
 
 def _sweep_summary(result, n=5):
+    from planner.screen import describe_agreement
+
     st, t = result.settings, result.table
     sec = st["seconds"]
     lines = [f"screened {st['n_screened']:,} setups x {len(st['cases'])} case(s) in "
              f"{sec['screen']:.1f} s ({st['screen_setups_per_s']:,.0f} setup-cases/s, "
              f"scheduler {st['scheduler']}, {st['n_workers']} worker(s)); simulated {len(t)} in "
              f"{sec['simulate']:.1f} s ({st['simulate_setups_per_s']:,.0f} setup-cases/s)",
+             describe_agreement(result.agreement, what="ranking"),
              f"baseline '{result.baseline}'; {st['combine']} of the cases' scores; best:"]
     rows = [(int(r["rank"]), name, f"{r['score']:.4f}", int(r["screening_rank"]),
              "yes" if r["feasible"] else "no") for name, r in t.head(n).iterrows()]
@@ -395,6 +426,7 @@ def cmd_optimize(args):
     _check_out(args, folder=True)
     model = _load_any_model(args.model)
     drives = [read_drive(d, units=args.units) for d in args.drive]
+    _output_units(args, drives)
     library = read_shock_library(args.shocks)
     objective = default_objective() if args.objective is None else read_objective(args.objective)
     constraints = None if args.constraints is None else read_curve_constraints(args.constraints)
@@ -473,7 +505,8 @@ def cmd_plan(args):
     library = read_shock_library(args.shocks)
     objective = default_objective() if args.objective is None else read_objective(args.objective)
     drives = [read_drive(d, units=args.units) for d in args.drive] if args.drive else None
-    rig = read_rig(args.rig) if args.rig else None
+    _output_units(args, drives)
+    rig = read_rig(args.rig_costs) if args.rig_costs else None
     plan = design_experiment(model, library, budget_min=args.budget_min,
                              criterion=args.criterion, session=session, objective=objective,
                              baseline=args.baseline, drives=drives, rig=rig,
@@ -525,7 +558,7 @@ def cmd_whatif(args):
     from ident.data.drive import read_drive
     from ident.models.library import read_shock_library
     from planner.objective import default_objective, read_objective
-    from planner.setups import read_setups
+    from planner.setups import read_ranking_baseline, read_setups
     from planner.whatif import (FRAGILE_SHARE, RANK_TOLERANCE, evaluate_whatif,
                                 read_perturbations, write_whatif)
 
@@ -534,6 +567,7 @@ def cmd_whatif(args):
     model = _load_any_model(args.model)
     library = read_shock_library(args.shocks)
     drives = [read_drive(d, units=args.units) for d in args.drive]
+    _output_units(args, drives)
     perturbations = read_perturbations(args.perturb)
     objective = default_objective() if args.objective is None else read_objective(args.objective)
     if args.setups:
@@ -541,8 +575,18 @@ def cmd_whatif(args):
     else:
         if args.top < 1:
             raise ValueError(f"--top must be at least 1, got {args.top}")
-        setups = read_setups(args.ranking, library)[: args.top]
+        ranked = read_setups(args.ranking, library)
+        setups = ranked[: args.top]
     baseline = _baseline_arg(args, library, setups)
+    if baseline is None and args.ranking:
+        # the ranking's own baseline (not its best setup), added if beyond --top
+        name = read_ranking_baseline(args.ranking)
+        if name is not None:
+            baseline = next((s for s in ranked if s.name == name), None)
+    if baseline is None and objective.baseline is None:
+        first = setups[0].name
+        print(f"baseline: '{first}', the first setup of {args.setups or args.ranking} "
+              "(give --baseline to score against another)")
     result = evaluate_whatif(
         model, drives, setups, library, perturbations, objective=objective, baseline=baseline,
         method=args.method, oversample=args.oversample,
@@ -565,6 +609,14 @@ def _whatif_summary(result, n=10):
              + (f" on Dask ({st['scheduler']}, {st['n_workers']} worker(s))"
                 if st.get("scheduler", "none") != "none" else "")
              + f"; baseline '{result.baseline}'"]
+    if "agreement" in st:
+        from planner.screen import describe_agreement
+
+        agree = st["agreement"]
+        lines.append("nominal condition checked in the time domain: "
+                     + describe_agreement(agree, what=None)
+                     + ("" if agree["same_best"] else
+                        "; decide with --method time, the reference"))
     rows = []
     for name, r in rob.head(n).iterrows():
         rows.append((name, int(r["nominal_rank"]), f"{r['mean_score']:.4f}",
@@ -594,6 +646,19 @@ def cmd_demo(args):
 #: an option of a command written before it ('--units') is not taken for '--quiet'.
 TYPO_CUTOFF = 0.75
 
+#: Options renamed so that one name means one thing in every command (issue 23):
+#: ``{command: {old: (new, what the new one means)}}``. The old spelling is refused with
+#: the new one named, never taken silently.
+RENAMED_OPTIONS = {
+    "rank": {"--top": ("--simulate", "the number of setups simulated in the time domain; "
+                       "--top is whatif's: the number of setups taken from a ranking")},
+    "sweep": {"--top": ("--simulate", "the number of setups simulated in the time domain"),
+              "--top-share": ("--simulate-share", "the share of setups simulated in the "
+                              "time domain")},
+    "plan": {"--rig": ("--rig-costs", "the rig TOML of swap and run times; --rig is the rig "
+                       "kind of 'rig simulate'")},
+}
+
 #: What argparse takes for a negative number (a value, not an option).
 _NEGATIVE_NUMBER = re.compile(r"^-\d+$|^-\d*\.\d+$")
 
@@ -612,6 +677,13 @@ def _unit_system(text):
         if text.strip().lower() == name.lower():
             return name
     return text
+
+
+#: ``--units`` default of the commands that read one drive file / several (issue 23): the
+#: file's unit marker, else SI; a given ``--units`` that contradicts the marker is an error.
+_UNITS_OF_DRIVE = "the drive file's own, from its '# units:' line, else SI"
+_UNITS_OF_DRIVES = ("each drive file's own, from its '# units:' line, else SI; the outputs "
+                    "in the first drive's")
 
 
 def _add_units(parser, what, *, default="SI", default_text="SI"):
@@ -698,6 +770,9 @@ class _Parser(argparse.ArgumentParser):
 
     def _unknown_option(self, name, commands):
         said = f"unrecognized option {name!r}"
+        renamed = RENAMED_OPTIONS.get(self.prog.split(" ", 1)[-1], {}).get(name)
+        if renamed is not None:
+            self._fail(f"{said}: it was renamed {renamed[0]} ({renamed[1]})")
         owners = [] if commands is None else _option_owners(name, commands)
         if owners:
             self._fail(f"{said}: it is an option of {', '.join(owners)}; write it after the "
@@ -778,7 +853,8 @@ def build_parser():
 
     ident_p = sub.add_parser("identify", help="identify a vehicle model from a rig session")
     ident_p.add_argument("session", help="rig session folder (or its session.toml)")
-    ident_p.add_argument("--out", required=True, help="model file to write (.npz)")
+    ident_p.add_argument("--out", required=True, help="model file to write (.npz); its "
+                         "per-pair summary goes beside it as <name>_summary.csv")
     ident_p.add_argument("--method", choices=["invfreqs", "vf"], default="invfreqs",
                          help="per-pair rational fits (invfreqs, default) or common-pole "
                          "vector fitting (vf)")
@@ -795,6 +871,10 @@ def build_parser():
     ident_p.add_argument("--coherence-min", type=float, default=0.9,
                          help="coherence (0 to 1) below which band ends are replaced "
                          "(default %(default)s)")
+    ident_p.add_argument("--max-order", type=int, default=10, metavar="N",
+                         help="highest denominator order (poles) a pair's fit may take "
+                         "(default %(default)s; raise it when identify warns that a pair "
+                         "took the highest order)")
     ident_p.add_argument("--plots", help="folder for FRF-vs-fit plots (PNG) (default: no plots)")
     ident_p.add_argument("--mat", help="also export the model to this MATLAB .mat file "
                          "(default: no export)")
@@ -809,7 +889,8 @@ def build_parser():
         sp.add_argument("--model", required=True, help=_MODEL_HELP)
         sp.add_argument("--drive", required=True, help="drive file (CSV or Parquet)")
         sp.add_argument("--shocks", required=True, help="shock library TOML")
-        _add_units(sp, "unit system of the drive file and of the outputs")
+        _add_units(sp, "unit system of the drive file and of the outputs", default=None,
+                   default_text=_UNITS_OF_DRIVE)
         sp.add_argument("--oversample", type=int, default=2,
                         help="internal steps per sample of the shock loop (default %(default)s)")
         sp.add_argument("--out", required=True, help="predictions CSV" if name == "predict"
@@ -834,8 +915,10 @@ def build_parser():
                             "shock id (all corners) or four LF,RF,LR,RR (default: the first "
                             "setup)")
             sp.add_argument("--objective", help=_OBJECTIVE_HELP)
-            sp.add_argument("--top", type=int, default=40,
-                            help="setups simulated in the time domain (default %(default)s)")
+            sp.add_argument("--simulate", type=int, default=40, metavar="N",
+                            help="the best N setups by screening simulated in the time "
+                            "domain (default %(default)s; the baseline and a spread of the "
+                            "others are checked besides)")
             sp.add_argument("--no-uncertainty", action="store_true",
                             help="skip the Monte Carlo intervals (default: computed)")
             sp.add_argument("--scheduler", metavar="ADDRESS|local",
@@ -867,7 +950,8 @@ def build_parser():
                      "(default: the weighted sum)")
     opt.add_argument("--robust", action="store_true", help="hold the objective's limits "
                      "with the identified model's 95 %% intervals (default: nominal limits)")
-    _add_units(opt, "unit system of the drive files and outputs")
+    _add_units(opt, "unit system of the drive files and outputs", default=None,
+               default_text=_UNITS_OF_DRIVES)
     opt.add_argument("--oversample", type=int, default=2,
                      help="internal steps per sample (default %(default)s)")
     opt.add_argument("--max-iter", type=int, default=80, help="IPOPT iterations "
@@ -894,7 +978,8 @@ def build_parser():
     pl.add_argument("--drive", action="append", help="the team's drive for the decision "
                     "criterion and the validation runs; repeatable (default: a 120 s "
                     "synthetic track drive of the car)")
-    pl.add_argument("--rig", help="rig TOML: swap_min and run_overhead_min [min] (default: "
+    pl.add_argument("--rig-costs", metavar="RIG.toml", help="the rig's time costs (rig "
+                    "TOML, docs/formats.md): swap_min and run_overhead_min [min] (default: "
                     "6 min a changed corner, no overhead)")
     pl.add_argument("--baseline", help="the car's setup at the start: one shock id or "
                     "LF,RF,LR,RR (default: the session's baseline, or the crate's first shock)")
@@ -904,7 +989,8 @@ def build_parser():
     pl.add_argument("--baseline-every", type=int, default=0,
                     help="repeat the baseline after every this many runs, for drift (default "
                     "%(default)s: never)")
-    _add_units(pl, "units of the drive files read and written")
+    _add_units(pl, "units of the drive files read and written", default=None,
+               default_text=_UNITS_OF_DRIVES + ", SI without --drive")
     pl.add_argument("--out", required=True, help="output folder")
     pl.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     pl.set_defaults(func=cmd_plan)
@@ -925,7 +1011,8 @@ def build_parser():
                     help="setups taken from --ranking (default %(default)s)")
     wi.add_argument("--objective", help=_OBJECTIVE_HELP)
     wi.add_argument("--baseline", help="baseline: a setup name, one shock id (all corners) "
-                    "or four LF,RF,LR,RR (default: the first setup)")
+                    "or four LF,RF,LR,RR (default: with --ranking the ranking's baseline, "
+                    "with --setups the first setup)")
     wi.add_argument("--method", choices=["time", "screening"], default="time",
                     help="time domain (time, default, the reference) or frequency-domain "
                     "screening (screening)")
@@ -934,7 +1021,8 @@ def build_parser():
     wi.add_argument("--fragile-share", type=float, default=None,
                     help="share of conditions with a moved rank that makes it fragile "
                     "(default 0.1)")
-    _add_units(wi, "units of the drive files and outputs")
+    _add_units(wi, "units of the drive files and outputs", default=None,
+               default_text=_UNITS_OF_DRIVES)
     wi.add_argument("--oversample", type=int, default=2,
                     help="internal steps per sample (default %(default)s)")
     wi.add_argument("--scheduler", metavar="ADDRESS|local",
@@ -953,7 +1041,8 @@ def build_parser():
     sw.add_argument("--drive", required=True, action="append",
                     help="drive file (CSV or Parquet; repeatable)")
     sw.add_argument("--shocks", required=True, help="the crate: shock library TOML")
-    _add_units(sw, "unit system of the drive files and of the outputs")
+    _add_units(sw, "unit system of the drive files and of the outputs", default=None,
+               default_text=_UNITS_OF_DRIVES)
     sw.add_argument("--setups", help="setups CSV (default: enumerate from the library)")
     sw.add_argument("--symmetry", choices=["left-right", "all", "none"], default="none",
                     help="enumeration: one shock per axle (left-right), one for every corner "
@@ -971,10 +1060,11 @@ def build_parser():
     sw.add_argument("--baseline", help="baseline: a setup of --setups by name, one shock id "
                     "(all corners) or four LF,RF,LR,RR (default: the first setup)")
     sw.add_argument("--objective", help=_OBJECTIVE_HELP)
-    sw.add_argument("--top-share", type=float, default=0.01,
-                    help="share of the screened setups simulated (default %(default)s)")
-    sw.add_argument("--top", type=int, help="simulate this many instead of --top-share "
-                    "(default: --top-share)")
+    sw.add_argument("--simulate-share", type=float, default=0.01, metavar="SHARE",
+                    help="share of the screened setups simulated in the time domain, the best "
+                    "by screening (default %(default)s)")
+    sw.add_argument("--simulate", type=int, metavar="N", help="simulate the best N in the time domain "
+                    "instead of --simulate-share (default: --simulate-share)")
     sw.add_argument("--combine", choices=["mean", "worst"], default="mean",
                     help="a setup's score over the cases (default %(default)s)")
     sw.add_argument("--chunk-size", type=int, default=20000,
@@ -1015,7 +1105,7 @@ def build_parser():
                      help="the file format written: RPC III (rpc3)")
     exp.add_argument("--map", help="the rig's channel map (channel names, units, signs); "
                      "default canonical names in mm, N, N*m")
-    _add_units(exp, "units of the drive file")
+    _add_units(exp, "units of the drive file", default=None, default_text=_UNITS_OF_DRIVE)
     exp.add_argument("--out", required=True, help="RPC III file to write (.drv, .rsp, .tim)")
     exp.add_argument("--overwrite", action="store_true", help="replace an existing file")
     exp.set_defaults(func=cmd_export_drive)

@@ -31,14 +31,16 @@ from pathlib import Path
 
 from ident.data.channels import ALL_CHANNELS, quantity_of
 from ident.data.files import (atomic_write_bytes, atomic_write_text, atomic_write_toml,
-                              check_can_write)
+                              check_can_write, write_csv)
 from ident.data.formats.channel_map import CHANNEL_MAP_FORMAT, UNIT_FACTORS
+from ident.data.formats.rpc3 import write_rpc3
 from ident.data.units import check_units
 from ident.models.library import write_shock_library
 from ident.models.vehicle import EXAMPLE_VEHICLE_PATH
 from planner.objective import default_objective, objective_to_toml
 
-__all__ = ["run_demo", "write_demo_inputs", "DEMO_LIBRARY_PATH", "DEMO_INPUT_FILES"]
+__all__ = ["run_demo", "write_demo_inputs", "write_demo_rig_files", "DEMO_LIBRARY_PATH",
+           "DEMO_INPUT_FILES", "DEMO_RIG_FILES"]
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +56,8 @@ DEMO_INPUT_FILES = {
     "whatif.toml": "the README's what-if study (what-if TOML)",
     "rig_map.toml": "a channel map of the canonical channels to themselves, SI, sign 1",
 }
+#: Folder of the session's runs as a real rig writes them (:func:`write_demo_rig_files`).
+DEMO_RIG_FILES = "rig_files"
 
 # Buildable-curve constraints a race shock meets, in round numbers of each unit system:
 # the slopes and maximum force of planner.optimize.default_constraints (the imperial ones
@@ -161,9 +165,10 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         steps = _start_job(_compile_optimizer_job, model, drive, library, baseline)
         plots = None
         try:
-            model.summary().to_csv(work / "model_summary.csv", index=False)
+            write_csv(work / "model_summary.csv", model.summary(), units=units)
             write_drive(drive, work / "track_drive.csv", units=units)
             write_demo_inputs(work, units=units, channels=session.runs[0].channels)
+            write_demo_rig_files(work / DEMO_RIG_FILES, session)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 log.info("demo: ranking the crate's setups")
@@ -295,6 +300,43 @@ def write_demo_inputs(folder, *, units="imperial", channels=ALL_CHANNELS, overwr
         "units with shockplan's signs (up and compression positive, sign = 1). For a real\n"
         "rig, set each channel's source, units and sign (and scale, offset) to the rig's."))
     log.info("demo: wrote the examples' inputs to %s", folder)
+    return paths
+
+
+def write_demo_rig_files(folder, session, *, overwrite=False):
+    """Write a session's runs as a real rig's files: RPC III, one ``<run>.rsp`` a run.
+
+    The README's import example reads them back through ``rig_map.toml``
+    (:func:`write_demo_inputs`): every canonical channel under its own name, in SI
+    units with shockplan's signs, 16-bit integers as an RPC III V5 controller writes
+    them (each channel quantized to its full scale).
+
+    Parameters
+    ----------
+    folder : str or Path
+        Output folder (created).
+    session : ident.data.session.RigSession
+        The session whose runs to write (SI inside).
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        Run name -> written file, in run order.
+    """
+    si_unit = {q: next(u for u, f in table.items() if f == 1.0)
+               for q, table in UNIT_FACTORS.items()}
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = {}
+    for run in session.runs:
+        names = [c for c in ALL_CHANNELS if c in run.channels]
+        paths[run.name] = write_rpc3(
+            folder / f"{run.name}.rsp", {c: run.channels[c] for c in names},
+            fs_hz=session.fs_hz, units={c: si_unit[quantity_of(c)] for c in names},
+            overwrite=overwrite)
+    log.info("demo: wrote %d runs as RPC III files to %s", len(paths), folder)
     return paths
 
 

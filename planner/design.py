@@ -1067,11 +1067,19 @@ def _check_plan_identifiable(plan_M, budget, cands, rig):
         return
     short = min(c.duration_s for c in cands) / 60 + rig.run_overhead_min
     need = 2 * short + 4 * rig.swap_min
+    if budget < need:
+        raise PlannerError(
+            f"a budget of {budget:g} min cannot buy runs that identify all 11 inputs (Eq. 17: "
+            f"the shock forces must vary apart from the rig inputs at every corner); the "
+            f"baseline and one run with all four corners swapped take about {need:.0f} min "
+            f"with this rig (swap {rig.swap_min:g} min a corner); give more time")
+    # the time is there: the runs themselves do not separate the shock forces
     raise PlannerError(
-        f"a budget of {budget:g} min cannot buy runs that identify all 11 inputs (Eq. 17: the "
-        f"shock forces must vary apart from the rig inputs at every corner); the baseline and "
-        f"one run with all four corners swapped take about {need:.0f} min with this rig "
-        f"(swap {rig.swap_min:g} min a corner); give more time")
+        f"the runs a budget of {budget:g} min buys (the baseline and a four-corner swap take "
+        f"about {need:.0f} min) still do not identify all 11 inputs at every band (Eq. 17): "
+        "the crate's shocks give shock forces that do not vary apart from the rig inputs "
+        "(shocks too alike, or a drive that saturates them: check the drive's units and "
+        "level); add a shock unlike the baseline to the crate, or check the drive")
 
 
 def _decision_w(plant, ident_model, library, base, objective, drive, f_c, edges, M0, S_ref,

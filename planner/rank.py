@@ -163,11 +163,13 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     scores = score_setups(td.table, objective, baseline=base.name)
     table = pd.concat([td.table, mark_inventory(scores.table, setups, library)], axis=1)
     table["screening_rank"] = sc.loc[table.index, "rank"].to_numpy()
+    table["baseline"] = table.index == base.name  # the setup the scores are ratios to
     # 3. agreement between screening and time domain over the simulated setups
     rho = float(spearmanr(sc.loc[table.index, "score"], table["score"]).statistic) \
         if len(table) > 2 else float("nan")
-    agreement = {"spearman": rho, "n": int(len(table)),
-                 "same_best": bool(table["rank"].idxmin() == sc.loc[table.index, "rank"].idxmin())}
+    time_best, screening_best = table["rank"].idxmin(), sc.loc[table.index, "rank"].idxmin()
+    agreement = {"spearman": rho, "n": int(len(table)), "same_best": bool(time_best == screening_best),
+                 "time_best": time_best, "screening_best": screening_best}
     # 4. uncertainty (identified models)
     settings = {"top": top, "n_check": n_check, "oversample": oversample, "band_hz": tuple(band_hz),
                 "n_setups": len(setups), "model": td.settings.get("model"),

@@ -43,10 +43,58 @@ from ident.sim.metrics import METRIC_NAMES
 from planner.predict import Predictions, as_loop_plant, prepare_drive, resolve_setups
 from planner.screen_kernels import band_operands, metric_form, screen_batch, screen_batch_scalar
 
-__all__ = ["screen_setups", "screen_response", "DriveBands", "drive_bands", "drive_spectrum",
+__all__ = ["screen_setups", "screen_response", "describe_agreement", "WEAK_AGREEMENT_SPEARMAN", "DriveBands", "drive_bands", "drive_spectrum",
            "metric_rows", "ScreenOperands", "screen_operands", "screen_packed"]
 
 log = logging.getLogger(__name__)
+
+#: Spearman rank correlation (screening against time-domain scores) below which the two
+#: are said to agree only weakly on the order: at 0.8 about one pair in ten is swapped.
+WEAK_AGREEMENT_SPEARMAN = 0.8
+
+
+def describe_agreement(agreement, *, what="ranking"):
+    """One sentence on how far screening and the time domain agree, for where results are read.
+
+    Parameters
+    ----------
+    agreement : Mapping
+        ``spearman`` (float, NaN with fewer than 3 setups), ``n`` (int, setups in both)
+        and ``same_best`` (bool); optionally ``screening_best`` and ``time_best`` (setup
+        names), as :class:`planner.rank.Ranking`, :class:`planner.sweep.Sweep` and a
+        screening what-if (``settings["agreement"]``) hold them.
+    what : str or None
+        What the time domain decides (``"ranking"``), said at the end; None: nothing.
+
+    Returns
+    -------
+    str
+        E.g. ``"screening and the time domain agree: the same best setup, Spearman 0.91
+        over 41 setups; the ranking is the time domain's"``; a disagreement on the best
+        setup names both and says which to trust.
+
+    Examples
+    --------
+    >>> describe_agreement({"spearman": 0.52, "n": 50, "same_best": False,
+    ...                     "screening_best": "A", "time_best": "B"}, what=None)
+    "screening and the time domain DISAGREE on the best setup: screening's best 'A' is not the time domain's 'B' (Spearman 0.52 over 50 setups)"
+    """
+    rho, n = float(agreement.get("spearman", float("nan"))), int(agreement.get("n", 0))
+    corr = (f"Spearman {rho:.2f} over {n} setups" if np.isfinite(rho) else
+            f"{n} setup(s), too few for a rank correlation")
+    tail = "" if what is None else f"; the {what} is the time domain's"
+    if not agreement.get("same_best", True):
+        names = ""
+        if agreement.get("screening_best") and agreement.get("time_best"):
+            names = (f": screening's best '{agreement['screening_best']}' is not the time "
+                     f"domain's '{agreement['time_best']}'")
+        return (f"screening and the time domain DISAGREE on the best setup{names} ({corr})"
+                + ("" if what is None else
+                   f": the {what} is the time domain's; screening only chose what to simulate"))
+    if np.isfinite(rho) and rho < WEAK_AGREEMENT_SPEARMAN:
+        return (f"screening and the time domain agree on the best setup but only weakly on the "
+                f"order ({corr}){tail}")
+    return f"screening and the time domain agree: the same best setup, {corr}{tail}"
 
 
 def metric_rows(plant):

@@ -15,7 +15,9 @@ One row per setup, order kept. :func:`read_setups` needs the columns
 allowed and ignored**, so a predictions CSV (``setup, LF, RF, LR, RR``, then
 metrics) reads as a setups file. The exception is a column that looks like a
 misspelt corner (two letters, such as ``LM`` or ``lf``): that is an error.
-Cells are stripped of surrounding spaces; blank lines are skipped.
+Cells are stripped of surrounding spaces; blank lines, and ``#`` comment lines before
+the header (the unit marker ``# units: SI`` that every CSV shockplan writes starts
+with), are skipped.
 
 Generated names (:func:`enumerate_setups`) are compact by default:
 ``"B20/B20/D8/D8"``, the ids in corner order LF/RF/LR/RR; pass
@@ -62,7 +64,7 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from ident.data.files import atomic_write_text, check_can_write
+from ident.data.files import check_can_write, csv_preamble, write_csv
 from ident.data.channels import CORNERS
 from planner.errors import PlannerError
 
@@ -76,6 +78,7 @@ __all__ = [
     "SetupSpace",
     "setup_space",
     "read_setups",
+    "read_ranking_baseline",
     "write_setups",
     "setups_to_frame",
     "enumerate_setups",
@@ -331,7 +334,9 @@ def read_setups(path, library=None):
     Notes
     -----
     Columns other than ``setup`` and the corners are ignored (so a predictions
-    CSV reads as a setups file). Line numbers count the header as line 1.
+    CSV reads as a setups file). Leading ``#`` comment lines (the unit marker
+    ``# units: ...`` that shockplan writes) are skipped. Line numbers are the file's
+    (the header is line 1 unless comment lines precede it).
     """
     path = Path(path)
     if library is not None:
@@ -347,7 +352,11 @@ def read_setups(path, library=None):
     if "\x00" in text:
         raise PlannerError(f"{path}: holds NUL bytes, not a text CSV file; a setups file is "
                            f"UTF-8 text with the header '{_SETUP_COLUMN},{','.join(CORNERS)}'")
-    rows = csv.reader(io.StringIO(text, newline=""), skipinitialspace=True)
+    # leading '#' comment lines (the unit marker '# units: ...') are skipped, their
+    # marker checked; line numbers stay the file's
+    _, n_skip = csv_preamble(text.splitlines(), where=str(path), error=PlannerError)
+    body = "".join(text.splitlines(keepends=True)[n_skip:])
+    rows = csv.reader(io.StringIO(body, newline=""), skipinitialspace=True)
     header = None
     for header in rows:
         if any(cell.strip() for cell in header):
@@ -377,7 +386,7 @@ def read_setups(path, library=None):
     out = []
     lines = {}
     for cells in rows:
-        line = rows.line_num
+        line = n_skip + rows.line_num
         if not any(cell.strip() for cell in cells):
             continue
         if len(cells) != len(header):
@@ -407,8 +416,54 @@ def read_setups(path, library=None):
     return tuple(out)
 
 
-def write_setups(setups, path, *, overwrite=False):
+def read_ranking_baseline(path):
+    """The baseline a ranking CSV was scored against (its ``baseline`` column).
+
+    ``shockplan rank`` marks the setup its scores are ratios to with ``True`` in the
+    column ``baseline`` of ``ranking.csv``; ``whatif --ranking`` takes it as its own
+    baseline, so that the what-if scores mean what the ranking's mean.
+
+    Parameters
+    ----------
+    path : str or path
+        A ranking CSV (leading ``#`` comment lines, e.g. the unit marker, are skipped).
+
+    Returns
+    -------
+    str or None
+        The baseline setup's name; None if the file has no ``baseline`` column (a
+        ranking written before the column existed, or a plain setups file).
+
+    Raises
+    ------
+    PlannerError
+        If the file cannot be read, or marks more than one setup, or the column marks
+        none: the message names the file and the fix (``--baseline``).
+    """
+    path = Path(path)
+    try:
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise PlannerError(f"{path}: cannot read the ranking ({exc}); check the path") from None
+    while lines and lines[0].lstrip().startswith("#"):
+        lines.pop(0)
+    rows = list(csv.DictReader(lines, skipinitialspace=True))
+    if not rows or "baseline" not in rows[0] or _SETUP_COLUMN not in rows[0]:
+        return None
+    marked = [r[_SETUP_COLUMN].strip() for r in rows
+              if str(r["baseline"]).strip().lower() in ("true", "1", "yes")]
+    if len(marked) != 1:
+        raise PlannerError(
+            f"{path}: column 'baseline' marks {len(marked)} setups ({', '.join(marked) or 'none'}); "
+            "a ranking has one baseline: fix the column, or give --baseline")
+    return marked[0]
+
+
+def write_setups(setups, path, *, units="SI", overwrite=False):
     """Write setups as a setups CSV (``setup,LF,RF,LR,RR``), atomically.
+
+    The first line is the unit marker ``# units: <units>``: shock ids have no unit, but
+    every CSV shockplan writes says the unit system of the run that wrote it.
 
     Parameters
     ----------
@@ -416,6 +471,8 @@ def write_setups(setups, path, *, overwrite=False):
         The setups, in order; names must be unique.
     path : str or path
         Output file.
+    units : {"SI", "imperial"}
+        The unit system of the run that writes the file (the marker).
     overwrite : bool
         Replace an existing file.
 
@@ -440,7 +497,7 @@ def write_setups(setups, path, *, overwrite=False):
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow((_SETUP_COLUMN, *CORNERS))
     writer.writerows((s.name, *s.ids()) for s in setups)
-    atomic_write_text(path, buf.getvalue(), overwrite=overwrite)
+    write_csv(path, buf.getvalue(), units=units, overwrite=overwrite)
     logger.info("wrote %d setup(s) to %s", len(setups), path)
     return path
 

@@ -733,7 +733,8 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         if both.sum() > 2 else float("nan")
     best_scr = table["screening_rank"].where(table["screening_rank"] > 0).idxmin()
     agreement = {"spearman": rho, "n": int(len(table)),
-                 "same_best": bool(table.index[0] == best_scr)}
+                 "same_best": bool(table.index[0] == best_scr),
+                 "time_best": table.index[0], "screening_best": best_scr}
     seconds = {"prepare": t_prep, "screen": t_screen, "simulate": t_sim}
     settings = {"cases": tuple(labels), "models": model_names, "drives": drive_names,
                 "combine": combine, "n_candidates": n_cand,

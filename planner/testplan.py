@@ -8,10 +8,11 @@ place:
   as is; a real rig's session of the same runs is what ``shockplan identify``
   expects next;
 - ``shocks.toml``: the crate (the plan's shock library);
-- ``drives/<run drive>.csv``: every drive the runs play;
+- ``drives/<run drive>.csv``: every drive the runs play (first line ``# units: ...``);
 - ``test_plan.xlsx``: the run sheet (:func:`write_run_sheet`), to print and
   fill in on rig day, and to read back (:func:`read_run_sheet`);
-- ``test_plan.csv``: the same rows (:func:`run_sheet_rows`);
+- ``test_plan.csv``: the same rows (:func:`run_sheet_rows`), after the unit marker
+  ``# units: ...``;
 - ``design.png``: the criterion against rig time, run by run.
 
 The run sheet
@@ -19,21 +20,23 @@ The run sheet
 Sheet "run sheet": a header block (car, rig, date, crate, budget, criterion,
 planned rig time, baseline, units), then one block of rows per run, in rig
 order. The run's columns (number, planned start ``h:mm`` from the first run,
-duration, purpose, drive file, the shock at each corner, swap time) are merged
-over its block; a shock changed before the run (:attr:`PlannedRun.changed
-<planner.design.PlannedRun>`) is filled amber and bold. Under each key metric
-(the objective's weighted ones, units in the header), the block's rows hold
-the prediction, its interval (``lo-hi``, when the model was identified) and an
-empty cell for the measured value, so the three read down one column. The
-shock temperatures (one per corner) and the notes are empty cells over the
-block. Sheet "crate" lists the crate's shocks with their forces at reference
-velocities (:data:`REFERENCE_VELOCITIES`) and the runs that use them; sheet
-"information" holds each run's share of the criterion, the criterion's values,
-the solver's report and the design settings.
+duration, purpose, drive file, swap time, notes) are merged over its block; the
+shock at each corner over the plan's rows, with an empty cell below it in the
+measured row for its temperature; a shock changed before the run
+(:attr:`PlannedRun.changed <planner.design.PlannedRun>`) is filled amber and
+bold. Under each key metric (the objective's weighted ones, units in the
+header; the first ones that fit the page, all in ``test_plan.csv``), the
+block's rows hold the prediction, its interval (``lo-hi``, when the model was
+identified) and an empty cell for the measured value, so the three read down
+one column. Sheet "crate" lists the crate's shocks with their forces at
+reference velocities (:data:`REFERENCE_VELOCITIES`) and the runs that use
+them; sheet "information" holds each run's share of the criterion, the
+criterion's values, the solver's report and the design settings.
 
-Every sheet prints landscape (the information sheet portrait), one page wide,
-the table's header repeated on every page, on A4 for SI and US letter for
-imperial (:data:`planner.report.PAPER_SIZE`).
+Every sheet prints landscape, one page wide with its smallest text at >= 7 pt
+(:func:`planner.report.sheets.print_setup`), the table's header repeated on
+every page, on A4 for SI and US letter for imperial
+(:data:`planner.report.PAPER_SIZE`).
 """
 
 from __future__ import annotations
@@ -56,14 +59,14 @@ from openpyxl.worksheet.pagebreak import Break
 
 from ident.data.channels import CORNERS
 from ident.data.drive import write_drive
-from ident.data.files import atomic_dir, atomic_path, check_can_write
+from ident.data.files import atomic_dir, atomic_path, check_can_write, write_csv
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from ident.models.library import write_shock_library
 from ident.sim.metrics import METRIC_QUANTITY
 from planner.design import ExperimentPlan
 from planner.errors import PlannerError
-from planner.report.sheets import (PRINT_MARGINS_IN, column_label, fit_column_width, print_setup,
-                                   text_width, wrap_lines)
+from planner.report.sheets import (column_label, fit_column_width, fit_width_units,
+                                   print_setup, printable_size_pt, text_width, wrap_lines)
 
 __all__ = ["write_plan", "plan_toml", "run_sheet_rows", "design_figure", "write_run_sheet",
            "read_run_sheet", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES"]
@@ -85,13 +88,15 @@ REFERENCE_VELOCITIES = {"SI": (0.025, 0.05, 0.1, 0.25), "imperial": (1.0, 2.0, 5
 #: Significant digits of the printed predictions and intervals.
 SIGNIFICANT_DIGITS = 3
 _TEMPERATURE_UNIT = {"SI": "°C", "imperial": "°F"}
-# landscape paper [in] of planner.report.PAPER_SIZE: A4 for SI, US letter for imperial
-_PAPER_IN = {"SI": (11.69, 8.27), "imperial": (11.0, 8.5)}
 _CRITERIA = {"d": "D-optimal (sum of log det M)", "a": "A-optimal (- sum of tr M^-1)",
              "decision": "decision (- variance of the top setups' score differences)"}
 _FONT = "Calibri"
-_DATA_PT, _HEAD_PT, _SMALL_PT, _SHOCK_PT = 10, 9, 8.5, 11
-_PAD = 2.0  # cell padding [Excel width units]
+# the smallest (intervals, row labels) is the font that must print at >= MIN_PRINT_PT
+_DATA_PT, _HEAD_PT, _SMALL_PT, _SHOCK_PT = 10, 9, 9, 11
+_PAD = 1.5  # cell padding [Excel width units] (text_width already spares ~10 % on digits)
+# the notes column [Excel width units]: at least (the run's block is 52 pt tall to write
+# in), and at most where the page leaves room; the fit's spare for rounding
+_NOTES_MIN_W, _NOTES_MAX_W, _FIT_SPARE_W = 12.0, 30.0, 1.0
 # rows of a run's block: height [pt]; the measured row leaves room to write by hand
 _ROW_PT = {"predicted": 14.0, "interval": 12.5, "measured": 26.0}
 _LINE_PT = 12.0  # a header line of 9 pt text
@@ -255,10 +260,10 @@ def _run_sheet_columns(units, metrics):
     cols += [(c, _SHOCKS_GROUP, c) for c in CORNERS]
     cols += [("swap_min", None, _HEAD["swap_min"]), ("row", _METRICS_GROUP, _HEAD["row"])]
     cols += [(m, _METRICS_GROUP, _metric_header(m, units)) for m in metrics]
-    temps = f"{_TEMPS_GROUP} [{_TEMPERATURE_UNIT[units]}]"
-    cols += [(f"temp_{c}", temps, c) for c in CORNERS]
+    # the shock temperatures are written under the shocks, in the measured row (a column
+    # each would take the width of three key metrics off a page)
     cols += [("notes", None, _HEAD["notes"])]
-    starts = {"run", CORNERS[0], "swap_min", "row", f"temp_{CORNERS[0]}", "notes"}
+    starts = {"run", CORNERS[0], "swap_min", "row", "notes"}
     return [(k, g, h, k in starts) for k, g, h in cols]
 
 
@@ -290,28 +295,19 @@ def _header_block(ws, plan, units, date, label_col, intervals):
             ws.cell(row=r, column=col + 2, value=value).font = fonts["data"]
         ws.row_dimensions[r].height = 14
     legend = (f"Filled shock: changed before the run. Grey cells are the plan's (predictions"
-              f"{', intervals' if intervals else ''}); write the measured values, the shock "
-              "temperatures and notes in the white cells. Start times count from the first "
-              "run's start.")
+              f"{', intervals' if intervals else ''}); write the measured values, each shock's "
+              f"temperature [{_TEMPERATURE_UNIT[units]}] (in the measured row, under the shock) "
+              "and notes in the white cells. Start times count from the first run's start.")
     ws.cell(row=7, column=1, value=legend).font = fonts["note"]
     ws.row_dimensions[7].height = 14
     return 9
 
 
-def _write_run_table(ws, units, rows, metrics, cols, top, intervals):
-    """The table header at rows `top`, `top` + 1 and the runs' blocks; returns the last row."""
-    fonts = _fonts()
-    plan_fill = PatternFill("solid", fgColor=PLAN_FILL)
-    changed_fill = PatternFill("solid", fgColor=CHANGED_FILL)
-    center = Alignment(horizontal="center", vertical="center", wrap_text=True)
-    left_mid = Alignment(horizontal="left", vertical="center", wrap_text=True)
-    right_mid = Alignment(horizontal="right", vertical="center")
-    right = Alignment(horizontal="right")
-    top_left = Alignment(vertical="top", wrap_text=True)
+def _run_table_widths(rows, metrics, cols, intervals, *, notes=_NOTES_MIN_W):
+    """Widths of the run table's columns (keyed as `cols`) and their headers' lines."""
     kinds = [k for k in ("predicted", "interval", "measured") if k != "interval" or intervals]
-
-    # shown texts -> widths
     shown = {k: [] for k, *_ in cols}
+    small = {k: [] for k, *_ in cols}  # texts in the small font (intervals, row labels)
     for _, row in rows.iterrows():
         shown["run"].append(str(row["run"]))
         shown["start"].append(row["start"])
@@ -328,19 +324,51 @@ def _write_run_table(ws, units, rows, metrics, cols, top, intervals):
                 shown[m].append(f"{v:.{d}f}")
                 lo, hi = _number(row.get(f"{m}_lo")), _number(row.get(f"{m}_hi"))
                 if intervals and lo is not None and hi is not None:
-                    shown[m].append(f"{lo:.{d}f}\u2013{hi:.{d}f}")
-    shown["row"] = list(kinds)
-    minimum = {"notes": 22.0, "drive_file": 9.0}
+                    small[m].append(f"{lo:.{d}f}\u2013{hi:.{d}f}")
+    small["row"] = list(kinds)
+    minimum = {"notes": notes, "drive_file": 9.0}
     widths = {}
     head_lines = {}
     for key, group, head, _ in cols:
         size = _SHOCK_PT if key in CORNERS else _DATA_PT
-        data = max([text_width(t, size=size, bold=key in CORNERS) for t in shown[key]] or [0])
-        if key.startswith("temp_"):
-            data = max(data, 4.5)  # room for three hand-written digits
+        data = max([text_width(t, size=size, bold=key in CORNERS) for t in shown[key]]
+                   + [text_width(t, size=_SMALL_PT) for t in small[key]] or [0])
         data = max(data, minimum.get(key, 0))
         w, lines = fit_column_width(head, data, size=_HEAD_PT)
         widths[key], head_lines[key] = w + _PAD, lines
+    return widths, head_lines
+
+
+def _fit_run_table(rows, metrics, units, intervals):
+    """The key metrics that fit the run table one page wide with its smallest text at
+    >= MIN_PRINT_PT (the first ones, at least one), the columns, their widths and header
+    lines; the notes column takes the room left (up to :data:`_NOTES_MAX_W`)."""
+    budget = fit_width_units(min(_SMALL_PT, _HEAD_PT), units=units) - _FIT_SPARE_W
+    while True:
+        cols = _run_sheet_columns(units, metrics)
+        widths, head_lines = _run_table_widths(rows, metrics, cols, intervals)
+        if sum(widths.values()) <= budget or len(metrics) <= 1:
+            break
+        log.info("run sheet: %d key metrics are too wide for one page; it shows the first "
+                 "%d (all are in test_plan.csv)", len(metrics), len(metrics) - 1)
+        metrics = metrics[:-1]
+    spare = budget - sum(widths.values())
+    if spare > 0:
+        widths["notes"] = min(widths["notes"] + spare, _NOTES_MAX_W)
+    return metrics, cols, widths, head_lines
+
+
+def _write_run_table(ws, units, rows, metrics, cols, top, intervals, widths, head_lines):
+    """The table header at rows `top`, `top` + 1 and the runs' blocks; returns the last row."""
+    fonts = _fonts()
+    plan_fill = PatternFill("solid", fgColor=PLAN_FILL)
+    changed_fill = PatternFill("solid", fgColor=CHANGED_FILL)
+    center = Alignment(horizontal="center", vertical="center", wrap_text=True)
+    left_mid = Alignment(horizontal="left", vertical="center", wrap_text=True)
+    right_mid = Alignment(horizontal="right", vertical="center")
+    right = Alignment(horizontal="right")
+    top_left = Alignment(vertical="top", wrap_text=True)
+    kinds = [k for k in ("predicted", "interval", "measured") if k != "interval" or intervals]
     for j, (key, *_) in enumerate(cols, start=1):
         ws.column_dimensions[get_column_letter(j)].width = round(widths[key], 2)
 
@@ -396,11 +424,19 @@ def _write_run_table(ws, units, rows, metrics, cols, top, intervals):
                   "drive_file": Path(row["drive_file"]).name,
                   "swap_min": float(row["swap_min"]), "notes": None}
         values.update({c: row[c] for c in CORNERS})
-        values.update({f"temp_{c}": None for c in CORNERS})
+        r_meas = r0 + kinds.index("measured")
         for key in merged_keys:
             j = col_of[key]
             cell = ws.cell(row=r0, column=j, value=values[key])
             cell.border = _border(left=start_of[key], top=True, bottom=end)
+            if key in CORNERS:  # the shock over the plan's rows, its temperature below
+                cell.border = _border(left=start_of[key], top=True)
+                temp = ws.cell(row=r_meas, column=j)
+                temp.border = _border(left=start_of[key], bottom=end)
+                temp.font, temp.alignment, temp.number_format = fonts["data"], center, "0"
+                if r_meas - 1 > r0:
+                    ws.merge_cells(start_row=r0, start_column=j, end_row=r_meas - 1,
+                                   end_column=j)
             cell.font = fonts["data"]
             cell.alignment = center
             if key in CORNERS:
@@ -419,7 +455,7 @@ def _write_run_table(ws, units, rows, metrics, cols, top, intervals):
                 cell.alignment = top_left
             if key in ("run", "start", "duration_min", "purpose", "drive_file", "swap_min"):
                 cell.fill = plan_fill
-            if len(kinds) > 1:
+            if len(kinds) > 1 and key not in CORNERS:
                 ws.merge_cells(start_row=r0, start_column=j, end_row=r_end, end_column=j)
         for i, kind in enumerate(kinds):
             r = r0 + i
@@ -462,13 +498,13 @@ def _keep_blocks_whole(ws, blocks, units, width_units, n_cols, top):
     table's (Excel's 7 px a width unit plus 5 px a column, at 96 px/in); a page
     then holds the printable height over that scale, less the repeated header
     (and the header block on the first page), with 6 % to spare for the
-    application's own rounding.
+    application's own rounding. (Excel's is the largest scale an application
+    prints the sheet at, so the most rows a page can lose to it.)
     """
-    paper_w, paper_h = _PAPER_IN[units]
-    m = PRINT_MARGINS_IN
-    table_in = (7.0 * width_units + 5.0 * n_cols) / 96.0
-    scale = min(1.0, (paper_w - m["left"] - m["right"]) / table_in)
-    page_pt = 0.94 * (paper_h - m["top"] - m["bottom"]) * 72.0 / scale
+    room_w, room_h = printable_size_pt(units)
+    table_pt = 0.75 * (7.0 * width_units + 5.0 * n_cols)  # 0.75 pt a px
+    scale = min(1.0, room_w / table_pt)
+    page_pt = 0.94 * room_h / scale
 
     def height(r):
         return ws.row_dimensions[r].height or 15.0
@@ -658,8 +694,9 @@ def _information_sheet(ws, plan, units, footer):
         r += 2
     for j, w in enumerate(widths, start=1):
         ws.column_dimensions[get_column_letter(j)].width = w
+    # a short table, then label-value sections: no header row to repeat
     print_setup(ws, units=units, area=f"A1:{get_column_letter(len(widths))}{r - 2}",
-                title_rows=None, landscape=False, footer=footer)
+                footer=footer)
 
 
 def write_run_sheet(plan, path, *, units="SI", overwrite=False):
@@ -705,17 +742,22 @@ def write_run_sheet(plan, path, *, units="SI", overwrite=False):
     date = plan.settings.get("date") or datetime.date.today().isoformat()
     metrics = _sheet_metrics(plan)
     rows = run_sheet_rows(plan, units=units)
-    cols = _run_sheet_columns(units, metrics)
     footer = f"{RUN_SHEET_TITLE}: {plan.settings.get('car') or 'car'}, {date}"
+    intervals = bool(metrics) and all(f"{m}_lo" in rows and f"{m}_hi" in rows for m in metrics)
+    metrics, cols, widths, head_lines = _fit_run_table(rows, metrics, units, intervals)
 
     wb = Workbook()
     ws = wb.active
     ws.title = "run sheet"
     label_col = [k for k, *_ in cols].index("row") + 1
-    intervals = bool(metrics) and all(f"{m}_lo" in rows and f"{m}_hi" in rows for m in metrics)
     top = _header_block(ws, plan, units, str(date), label_col, intervals)
-    last = _write_run_table(ws, units, rows, metrics, cols, top, intervals)
+    last = _write_run_table(ws, units, rows, metrics, cols, top, intervals, widths, head_lines)
     last_col = get_column_letter(len(cols))
+    # the legend wraps over the table's width (the print area ends there)
+    ws.merge_cells(f"A7:{last_col}7")
+    ws["A7"].alignment = Alignment(wrap_text=True, vertical="top")
+    ws.row_dimensions[7].height = _LINE_PT * len(_wrap(
+        ws["A7"].value, 0.9 * (sum(widths.values()) - _PAD), bold=False)) + 2
     ws.freeze_panes = ws.cell(row=top + 2, column=2).coordinate
     print_setup(ws, units=units, area=f"A1:{last_col}{last}", title_rows=f"{top}:{top + 1}",
                 footer=footer)
@@ -910,8 +952,11 @@ def read_run_sheet(path):
                                 f"measured {m}") if cell is not None else np.nan
             rec[f"{m}_measured"] = float(to_si(meas, q, units))
         for c in CORNERS:
-            if f"temp_{c}" in col:
-                cell = ws.cell(row=r, column=col[f"temp_{c}"])
+            # under the shock in the measured row; a column of its own on an older sheet
+            cell = (ws.cell(row=r, column=col[f"temp_{c}"]) if f"temp_{c}" in col
+                    else ws.cell(row=rows["measured"], column=col[c])
+                    if rows.get("measured", r) != r else None)
+            if cell is not None:
                 t = _read_number(cell.value, f"{where}, cell {cell.coordinate}",
                                  f"shock temperature {c}")
                 rec[f"shock_temp_{c}_c"] = (t - 32.0) * 5.0 / 9.0 if units == "imperial" else t
@@ -964,7 +1009,7 @@ def write_plan(plan, out_dir, *, units="SI", overwrite=False):
         write_shock_library(plan.library, work / names["shocks"], units=units)
         (work / names["plan"]).write_text(plan_toml(plan, units=units), encoding="utf-8")
         rows = run_sheet_rows(plan, units=units)
-        rows.to_csv(work / names["csv"], index=False, float_format="%.6g")
+        write_csv(work / names["csv"], rows, units=units, float_format="%.6g")
         write_run_sheet(plan, work / names["xlsx"], units=units)
         design_figure(plan).savefig(work / names["figure"], dpi=110)
     return {k: out / v for k, v in names.items()}

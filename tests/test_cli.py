@@ -54,6 +54,26 @@ def test_rig_simulate_bad_plan(tmp_path, capsys):
     assert "format" in capsys.readouterr().err
 
 
+def test_rig_simulate_duration_with_drive_files_is_refused(tmp_path, capsys):
+    """--duration sets generated drives only: on a plan whose runs play drive files it would
+    be ignored, so it is refused, naming the run (issue 23)."""
+    from ident.data.drive import make_track_drive, write_drive
+
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    write_drive(make_track_drive(duration_s=5.0, fs_hz=100.0, seed=1), tmp_path / "d.csv")
+    (tmp_path / "shocks.toml").write_bytes(DEMO_LIBRARY_PATH.read_bytes())
+    plan = tmp_path / "plan.toml"
+    plan.write_text('format = "rig-plan/1"\nshock_library = "shocks.toml"\n\n[[run]]\n'
+                    'name = "track"\ndrive = "d.csv"\n'
+                    'setup = { LF = "B20", RF = "B20", LR = "B20", RR = "B20" }\n')
+    code = main(["-q", "rig", "simulate", "--plan", str(plan), "--duration", "10", "--out",
+                 str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and "--duration" in err and "track" in err and "drive file" in err, err
+    assert not (tmp_path / "o").exists()
+
+
 #: The modes table prints frequencies and damping ratios with 3 decimals.
 ATOL_PRINTED_3_DECIMALS = 0.0005
 #: The CLI's predictions CSV against predict_setups on the same inputs: the same call in the
@@ -120,14 +140,19 @@ def test_demo(tmp_path, capsys):
     assert "shockplan demo" in text and "best:" in text
     assert "optimized curves" in text and "better" in text
     assert str(out) in text and ".demo." not in text  # final paths, not the temporary folder
+    # every CSV says the demo's unit system (issue 23): the drive first, read without --units
+    for csv_file in ("track_drive.csv", "model_summary.csv", "ranking/ranking.csv",
+                     "ranking/screening.csv", "optimize/optimal_setup.csv",
+                     "optimize/convergence.csv", "session/runs/baseline.csv"):
+        assert (out / csv_file).read_text().startswith("# units: imperial\n"), csv_file
     # the ranking: every setup of the crate's left/right-symmetric enumeration screened
     library = read_shock_library(DEMO_LIBRARY_PATH)
-    screening = pd.read_csv(out / "ranking" / "screening.csv")
+    screening = pd.read_csv(out / "ranking" / "screening.csv", comment="#")
     assert sorted(screening["setup"]) == sorted(s.name for s in enumerate_setups(library))
-    ranking = pd.read_csv(out / "ranking" / "ranking.csv", keep_default_na=False)
+    ranking = pd.read_csv(out / "ranking" / "ranking.csv", keep_default_na=False, comment="#")
     assert list(ranking.columns) == [
         "rank", "setup", *CORNERS, *METRIC_NAMES, "score", "score_grip", "score_platform",
-        "feasible", "violations", "screening_rank", "unresolved",
+        "feasible", "violations", "screening_rank", "baseline", "unresolved",
         *(f"{m}{s}" for m in METRIC_NAMES for s in ("_lo", "_hi"))]
     # its best setup: first by the ranking rule, the known one, the one printed
     feasible = ranking["feasible"].to_numpy(dtype=bool)
@@ -194,7 +219,8 @@ def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
                  str(tmp_path / "setups.csv"), "--out", str(pred), "--units", "imperial"]) == 0
     import pandas as pd
 
-    table = pd.read_csv(pred)
+    assert pred.read_text().startswith("# units: imperial\n")
+    table = pd.read_csv(pred, comment="#")
     assert list(table.columns[:6]) == ["setup", "LF", "RF", "LR", "RR", "tire_force_rms_LF"]
     assert table["setup"].tolist() == ["baseline", "firm"]
     assert 5 < table["tire_force_rms_LF"].iloc[0] < 1000  # lbf on a smooth track
@@ -215,7 +241,7 @@ def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
     rank_dir = tmp_path / "rank"
     assert main(["-q", "rank", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
                  "--shocks", str(tmp_path / "shocks.toml"), "--units", "imperial",
-                 "--only", "B20,L12,L28,DM", "--baseline", "B20", "--top", "6",
+                 "--only", "B20,L12,L28,DM", "--baseline", "B20", "--simulate", "6",
                  "--out", str(rank_dir)]) == 0
     assert (rank_dir / "ranking.xlsx").is_file() and "best" in capsys.readouterr().out
     # bad input: a setup with an unknown shock id, one line naming it
@@ -298,7 +324,7 @@ def test_whatif_command(tmp_path, capsys, paper_vehicle, track_drive):
     assert main(args + ["--perturb", str(tmp_path / "perturb.toml"), "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "3 setups x 7 conditions" in text and "baseline 'baseline'" in text
-    rob = pd.read_csv(out / "robust.csv", index_col="setup")
+    rob = pd.read_csv(out / "robust.csv", index_col="setup", comment="#")
     assert set(rob.index) == {"baseline", "soft", "firm"}
     assert (out / "whatif.xlsx").is_file() and (out / "rank_stability.png").is_file()
     (tmp_path / "bad.toml").write_text('format = "shockplan-whatif/1"\n[[factor]]\nname = "m"\n'
@@ -308,6 +334,92 @@ def test_whatif_command(tmp_path, capsys, paper_vehicle, track_drive):
     err = capsys.readouterr().err
     assert "'parameter'" in err and "bad.toml" in err and err.count("\n") == 1
     assert not (tmp_path / "w2").exists()
+
+
+# --- Units that cannot be mistaken (issue 23, item 1) ----------------------------------
+
+#: The commands that read drive files: their --units defaults to the drive file's marker.
+DRIVE_COMMANDS = ("predict", "rank", "sweep", "optimize", "plan", "whatif", "export-drive")
+
+
+def _short_imperial_drive(track_drive, path, seconds=20.0):
+    """The first `seconds` of the track drive, written in imperial units (with the marker)."""
+    from ident.data.drive import Drive, write_drive
+
+    n = int(seconds * track_drive.fs_hz)
+    write_drive(Drive("short", track_drive.fs_hz,
+                      {c: x[:n] for c, x in track_drive.channels.items()}), path,
+                units="imperial")
+    return path
+
+
+def _rank_argv(drive, out, *extra):
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    return ["-q", "rank", "--model", "paper", "--drive", str(drive), "--shocks",
+            str(DEMO_LIBRARY_PATH), "--only", "B20,L12,L28,DM,TD", "--simulate", "4",
+            "--no-uncertainty", *extra, "--out", str(out)]
+
+
+def _ranking_lines(text):
+    """What rank printed, without the line of written paths (which name --out)."""
+    return [line for line in text.splitlines() if not line.startswith("wrote ")]
+
+
+def test_rank_gives_one_ranking_with_or_without_units(tmp_path, capsys, track_drive):
+    """Issue 23's Done-when on a short imperial drive: ``rank`` with and without
+    ``--units imperial`` gives the same ranking (the file's '# units:' line stands in for
+    the option, and the outputs are in its units); with the line cut off and no --units,
+    it stops with exit 2 naming --units imperial and writes nothing; --units SI against
+    the line is an error naming the file and both unit systems."""
+    drive = _short_imperial_drive(track_drive, tmp_path / "track.csv")
+    assert main(_rank_argv(drive, tmp_path / "with", "--units", "imperial")) == 0
+    said_with = capsys.readouterr().out
+    assert main(_rank_argv(drive, tmp_path / "without")) == 0
+    said_without = capsys.readouterr().out
+    ranking = (tmp_path / "with" / "ranking.csv").read_bytes()
+    assert ranking.startswith(b"# units: imperial\n")
+    assert (tmp_path / "without" / "ranking.csv").read_bytes() == ranking
+    assert _ranking_lines(said_without) == _ranking_lines(said_with)
+    assert "best:" in said_with
+    # the marker cut off: values nobody says the units of, implausible as SI
+    bare = tmp_path / "bare.csv"
+    bare.write_text(drive.read_text().split("\n", 1)[1])
+    assert main(_rank_argv(bare, tmp_path / "bare_out")) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("shockplan: error: drive file ") and "bare.csv" in err
+    assert "--units imperial" in err and err.count("\n") == 1
+    assert not (tmp_path / "bare_out").exists()
+    assert main(_rank_argv(bare, tmp_path / "bare_imperial", "--units", "imperial")) == 0
+    assert (tmp_path / "bare_imperial" / "ranking.csv").read_bytes() == ranking
+    capsys.readouterr()
+    # a contradiction: one line naming the file, both systems and the fix
+    assert main(_rank_argv(drive, tmp_path / "si", "--units", "si")) == 2
+    err = capsys.readouterr().err
+    assert "track.csv" in err and "imperial" in err and "--units says SI" in err
+    assert "drop --units" in err and err.count("\n") == 1
+    assert not (tmp_path / "si").exists()
+
+
+def test_export_drive_takes_the_drive_files_units(tmp_path, track_drive):
+    drive = _short_imperial_drive(track_drive, tmp_path / "track.csv", seconds=5.0)
+    argv = ["-q", "export-drive", str(drive), "--format", "rpc3"]
+    assert main(argv + ["--out", str(tmp_path / "a.drv")]) == 0
+    assert main(argv + ["--units", "imperial", "--out", str(tmp_path / "b.drv")]) == 0
+    from ident.data.formats.rpc3 import read_rpc3
+
+    a, b = read_rpc3(tmp_path / "a.drv"), read_rpc3(tmp_path / "b.drv")
+    for name in a.channels:
+        np.testing.assert_array_equal(a.channels[name], b.channels[name])
+
+
+def test_units_help_states_the_drive_files_default():
+    for path, sub in _commands(build_parser()):
+        if path[0] in DRIVE_COMMANDS:
+            action = sub._option_string_actions["--units"]
+            assert action.default is None, path
+            assert "the drive file's own, from its '# units:' line, else SI" in action.help \
+                or "each drive file's own, from its '# units:' line, else SI" in action.help, path
 
 
 # --- One vocabulary across commands (issue 23, item 3) ---------------------------------
@@ -407,7 +519,7 @@ def test_grouped_flags_equals_form_and_negative_values_still_parse():
     (["rank", "--shock", "crate.toml"], "shockplan rank", "--shock", "--shocks"),
     (["rank", "--unit", "si"], "shockplan rank", "--unit", "--units"),
     (["predict", "--modle", "paper"], "shockplan predict", "--modle", "--model"),
-    (["sweep", "--top-shar", "0.1"], "shockplan sweep", "--top-shar", "--top-share"),
+    (["sweep", "--simulate-shar", "0.1"], "shockplan sweep", "--simulate-shar", "--simulate-share"),
     (["rig", "simulate", "--durtion", "10"], "shockplan rig simulate", "--durtion",
      "--duration"),
     (["vehicle", "modes", "--damp", "20"], "shockplan vehicle modes", "--damp", "--damping"),
@@ -428,6 +540,33 @@ def test_a_typo_names_the_nearest_valid_spelling(argv, prog, typo, meant, capsys
     assert err.count("\n") == 1 and err.startswith(f"{prog}: error: "), err
     assert repr(typo) in err, err
     assert re.search(rf"did you mean {re.escape(meant)}[ ?]", err), err
+
+
+@pytest.mark.parametrize("argv, old, new", [
+    (["rank", "--top", "5"], "--top", "--simulate"),
+    (["sweep", "--top", "5"], "--top", "--simulate"),
+    (["sweep", "--top-share", "0.1"], "--top-share", "--simulate-share"),
+    (["plan", "--rig", "rig.toml"], "--rig", "--rig-costs"),
+])
+def test_a_renamed_option_is_refused_with_its_new_name(argv, old, new, capsys):
+    """One name, one meaning (issue 23): rank's and sweep's --top (simulate this many) and
+    plan's --rig (a TOML of times) were renamed; the old spelling is refused, never taken."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and repr(old) in err and f"renamed {new} " in err, err
+
+
+def test_one_option_name_means_one_thing_across_commands():
+    """--top is whatif's only (setups taken from a ranking); --rig is 'rig simulate''s only
+    (the rig kind); rank and sweep simulate --simulate setups."""
+    assert _action(["whatif"], "--top") is not None
+    assert _action(["rig", "simulate"], "--rig") is not None
+    for cmd in (["rank"], ["sweep"], ["plan"], ["predict"], ["optimize"]):
+        assert _action(cmd, "--top") is None and _action(cmd, "--rig") is None, cmd
+    assert "time domain" in _action(["rank"], "--simulate").help
+    assert "time domain" in _action(["sweep"], "--simulate").help
 
 
 def test_an_option_before_its_command_says_where_it_goes(capsys):
@@ -491,7 +630,7 @@ def test_every_optional_value_states_its_default():
 
 def _action(path, option):
     parser = dict(_parsers(build_parser()))[tuple(path)]
-    return parser._option_string_actions[option]
+    return parser._option_string_actions.get(option)
 
 
 def test_rank_symmetry_and_axles_state_their_default():
@@ -503,7 +642,7 @@ def test_rank_symmetry_and_axles_state_their_default():
 @pytest.mark.parametrize("path, option, unit", [
     (["rig", "simulate"], "--duration", "[s]"),
     (["plan"], "--budget-min", "[min]"),
-    (["plan"], "--rig", "[min]"),
+    (["plan"], "--rig-costs", "[min]"),
     (["identify"], "--nperseg", "[samples]"),
     (["vehicle", "modes"], "--damping", "[N/(m/s), or lbf/(in/s) with --units imperial]"),
 ])
@@ -530,7 +669,7 @@ def test_help_defaults_are_what_runs():
     assert f"{plan.units} for the built-in plan" in _action(["rig", "simulate"], "--units").help
     assert f"{plan.runs[0].duration_s:g} s in the built-in plan" in \
         _action(["rig", "simulate"], "--duration").help
-    assert f"{default_rig().swap_min:g} min a changed corner" in _action(["plan"], "--rig").help
+    assert f"{default_rig().swap_min:g} min a changed corner" in _action(["plan"], "--rig-costs").help
     assert f"(default {RANK_TOLERANCE})" in _action(["whatif"], "--rank-tolerance").help
     assert f"(default {FRAGILE_SHARE})" in _action(["whatif"], "--fragile-share").help
 

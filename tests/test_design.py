@@ -258,3 +258,20 @@ def test_a_4_post_session_is_refused_with_the_way_out(four_post_session, four_po
     with pytest.raises(PlannerError, match=r"without aero channels.*--vehicle"):
         design_experiment(four_post_model, demo_library, budget_min=30.0,
                           session=four_post_session, baseline="B20")
+
+
+def test_an_unidentifiable_plan_within_budget_does_not_blame_the_budget():
+    """Issue 23: with the time there (budget above the baseline + four-corner swap) and the
+    runs still not identifying, the message names the runs and the drive, not the budget."""
+    from types import SimpleNamespace
+
+    from planner.design import _check_plan_identifiable
+
+    rig = default_rig()
+    cands = [SimpleNamespace(duration_s=60.0)]
+    singular = np.zeros((3, 11, 11), dtype=complex)  # no information at any band
+    with pytest.raises(PlannerError, match="still do not identify") as exc:
+        _check_plan_identifiable(singular, 120.0, cands, rig)
+    assert "give more time" not in str(exc.value) and "drive" in str(exc.value)
+    with pytest.raises(PlannerError, match="cannot buy runs"):
+        _check_plan_identifiable(singular, 10.0, cands, rig)

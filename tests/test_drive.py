@@ -331,26 +331,84 @@ def test_generators_reject_bad_input(make, kwargs, match):
 @pytest.mark.parametrize("units, suffix", [("SI", ".csv"), ("imperial", ".csv"),
                                            ("imperial", ".parquet")])
 def test_write_read_round_trip(noise, tmp_path, units, suffix):
+    """Read back with the units given, or with none: the file's marker says them."""
     path = tmp_path / f"drive{suffix}"
     write_drive(noise, path, units=units)
-    back = read_drive(path, units=units)
-    assert back.name == "drive" and back.settings["kind"] == "file"
-    assert_allclose(back.fs_hz, FS, rtol=1e-9)
-    for c in RIG_INPUTS:
-        assert_allclose(back.channels[c], noise.channels[c], rtol=RTOL_FILE,
-                        atol=RTOL_FILE * PAPER_PEAK[c])
+    for given in (units, None):
+        back = read_drive(path, units=given)
+        assert back.name == "drive" and back.settings["kind"] == "file"
+        assert back.settings["units"] == units
+        assert back.settings["units_from"] == "file"  # the marker says them either way
+        assert_allclose(back.fs_hz, FS, rtol=1e-9)
+        for c in RIG_INPUTS:
+            assert_allclose(back.channels[c], noise.channels[c], rtol=RTOL_FILE,
+                            atol=RTOL_FILE * PAPER_PEAK[c])
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_units_contradicting_the_marker_are_an_error(noise, tmp_path, suffix):
+    path = tmp_path / f"lap{suffix}"
+    write_drive(noise, path, units="imperial")
+    with pytest.raises(SessionError) as exc:
+        read_drive(path, units="SI")
+    text = str(exc.value)
+    assert isinstance(exc.value, ValueError)
+    assert text.startswith(f"drive file {path}: ")
+    assert "in imperial units" in text and "--units says SI" in text
+    assert "drop --units" in text  # the fix
+
+
+def test_implausible_drive_of_unknown_units_is_refused(tmp_path, caplog):
+    """An inch file without a marker read as SI: metres of wheel-pad motion. Nobody said
+    the units, so reading stops and names the fix; said (--units SI, or a marker), it
+    warns as before."""
+    drive = make_track_drive(duration_s=20.0, fs_hz=100.0, seed=5, name="lap")
+    marked = tmp_path / "marked.csv"
+    write_drive(drive, marked, units="imperial")
+    bare = tmp_path / "bare.csv"
+    bare.write_text(marked.read_text().split("\n", 1)[1])  # the marker line cut off
+    with pytest.raises(DriveError) as exc:
+        read_drive(bare)
+    text = str(exc.value)
+    assert isinstance(exc.value, ValueError)
+    assert text.startswith(f"drive file {bare}: wheelloader_")
+    assert "--units imperial" in text and "'# units: imperial'" in text
+    with caplog.at_level("WARNING", logger="ident.data.drive"):
+        as_si = read_drive(bare, units="SI")  # the user said SI: warned, not refused
+    assert "--units imperial" in caplog.text and "bare.csv" in caplog.text
+    assert as_si.settings["units_from"] == "argument"
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="ident.data.drive"):
+        for path, units in ((bare, "imperial"), (marked, None), (marked, "imperial")):
+            back = read_drive(path, units=units)
+            assert_allclose(back.channels["wheelloader_LF"], drive.channels["wheelloader_LF"],
+                            rtol=RTOL_FILE, atol=RTOL_FILE * IN)
+    assert caplog.text == ""
+    # a file that says it is SI and is implausible: its own statement stands, with a warning
+    bare_si = tmp_path / "said_si.csv"
+    bare_si.write_text("# units: SI\n" + bare.read_text())
+    with caplog.at_level("WARNING", logger="ident.data.drive"):
+        assert read_drive(bare_si).settings["units_from"] == "file"
+    assert "said_si.csv" in caplog.text
 
 
 def test_imperial_file_holds_inches_and_pounds(noise, tmp_path):
     path = tmp_path / "drive.csv"
     write_drive(noise, path, units="imperial")
-    raw = pd.read_csv(path)
+    assert path.read_text().splitlines()[0] == "# units: imperial"
+    raw = pd.read_csv(path, comment="#")
     assert list(raw.columns) == ["time", *RIG_INPUTS]
     assert_allclose(raw["wheelloader_LF"].abs().max(), 1.0, rtol=1e-12)  # 1 in
     assert_allclose(raw["aero_heave"].abs().max(), 500.0, rtol=1e-12)  # 500 lbf
     assert_allclose(raw["aero_pitch"].abs().max(), 5.0e4, rtol=1e-12)  # lbf*in
-    # the same file read as SI would be 39x too large: units matter
-    assert_allclose(read_drive(path).channels["wheelloader_LF"],
+    # the file says its units: read without any, it is read as imperial
+    back = read_drive(path)
+    assert back.settings["units"] == "imperial" and back.settings["units_from"] == "file"
+    assert_allclose(back.channels["wheelloader_LF"], noise.channels["wheelloader_LF"],
+                    rtol=RTOL_FILE, atol=RTOL_FILE * PAPER_PEAK["wheelloader_LF"])
+    # the same values read as SI would be 39x too large: units matter
+    raw.to_csv(tmp_path / "bare.csv", index=False)
+    assert_allclose(read_drive(tmp_path / "bare.csv", units="SI").channels["wheelloader_LF"],
                     noise.channels["wheelloader_LF"] / TO_SI["displacement"], rtol=1e-12)
 
 
@@ -375,7 +433,7 @@ def test_drive_file_errors(noise, tmp_path):
     with pytest.raises(FileExistsError, match="overwrite=True"):
         write_drive(noise, path)
     write_drive(noise, path, overwrite=True)
-    pd.read_csv(path).drop(columns="aero_roll").to_csv(path, index=False)
+    pd.read_csv(path, comment="#").drop(columns="aero_roll").to_csv(path, index=False)
     with pytest.raises(SessionError, match="missing required channel.*aero_roll"):
         read_drive(path)
     with pytest.raises(SessionError, match="file not found"):

@@ -441,3 +441,19 @@ def test_vector_fitting_weighs_lines_by_their_noise(rng):
     p = vf.poles[0, 2, :vf.n_poles[0, 2]]
     k = np.argmin(np.abs(np.abs(p) - 2 * np.pi * 4.0))
     assert abs(np.abs(p[k]) / (2 * np.pi) - 4.0) < 0.02 and abs(-p[k].real / abs(p[k]) - 0.15) < 0.01
+
+
+def test_model_summary_file_says_its_units(identified_model, tmp_path):
+    """``identify``'s summary beside the model: the unit marker first (issue 23), then
+    the summary's table, which pandas and the marker reader both read."""
+    from ident.data.files import read_csv_table
+    from ident.identify.model import summary_path, write_model_summary
+
+    path = write_model_summary(identified_model, summary_path(tmp_path / "model.npz"),
+                               units="imperial")
+    assert path.name == "model_summary.csv"
+    assert path.read_text().startswith("# units: imperial\n")
+    frame, units = read_csv_table(path)
+    summary = identified_model.summary()
+    assert units == "imperial" and list(frame.columns) == list(summary.columns)
+    assert frame["fit_error"].tolist() == summary["fit_error"].tolist()

@@ -228,11 +228,35 @@ def test_constraints_hold_on_the_written_curves(known_optimum, demo_library, tmp
     tab = curve_table(opt, units="imperial").round(1)
     assert [r[0] for r in rows[1:]] == tab.index.tolist()
     assert_allclose([r[1] for r in rows[1:]], tab.iloc[:, 0].to_numpy())
-    conv = pd.read_csv(files["convergence"])
+    conv = pd.read_csv(files["convergence"], comment="#")
     assert list(conv.columns[:2]) == ["iteration", "objective"] and len(conv) > 3
     assert files["curves"].stat().st_size > 10_000
     with pytest.raises(FileExistsError):
         write_optimum(opt, demo_library, tmp_path / "opt")
+
+
+@pytest.mark.parametrize("units, v_unit, f_unit", [("SI", "m/s", "N"),
+                                                   ("imperial", "in/s", "lbf")])
+def test_curves_figure_is_in_the_run_units(known_optimum, demo_library, units, v_unit, f_unit):
+    """Issue 23: curves.png stayed in SI in an imperial run. The axes are labelled in the
+    run's units and the knots drawn are the optimum's knots converted (in = 0.0254 m,
+    lbf = 4.448 N)."""
+    from ident.data.units import TO_SI
+    from planner.report.optimize import CURVE_V_MAX, curves_figure
+
+    opt = known_optimum
+    fig = curves_figure(opt, demo_library, units=units)
+    axes = [ax for ax in fig.axes if ax.get_xlabel()]  # the curves' axes, not the histograms'
+    assert len(axes) == len(opt.space.groups)
+    v_si = TO_SI["velocity"] if units == "imperial" else 1.0
+    f_si = TO_SI["force"] if units == "imperial" else 1.0
+    for ax, pwl in zip(axes, opt.curves):
+        assert ax.get_xlabel().startswith(f"shock velocity [{v_unit}]")
+        assert ax.get_ylabel() == f"force [{f_unit}]"
+        assert ax.get_xlim() == (-CURVE_V_MAX[units], CURVE_V_MAX[units])
+        knots = next(line for line in ax.lines if line.get_marker() == "o")
+        assert_allclose(knots.get_xdata() * v_si, pwl.v_knots_m_s, rtol=1e-12)
+        assert_allclose(knots.get_ydata() * f_si, pwl.f_knots_n, rtol=1e-12, atol=1e-9)
 
 
 def test_linear_curves_match_a_brute_force_scan(paper_model, short_drive):

@@ -57,7 +57,10 @@ def test_result_has_the_documented_fields(ranking):
     assert s["rank"].tolist() == list(range(1, 31 + 1))
     assert set(METRIC_NAMES) <= set(s.columns) and "score" in s.columns
     assert ranking.baseline == "baseline" and ranking.objective == default_objective()
-    assert set(ranking.agreement) == {"spearman", "n", "same_best"}
+    assert set(ranking.agreement) == {"spearman", "n", "same_best", "time_best",
+                                      "screening_best"}
+    assert ranking.agreement["time_best"] == t.index[0]
+    assert t.index[t["baseline"]].tolist() == ["baseline"]  # the one row scores are ratios to
 
 
 def test_simulated_setups_are_the_top_and_a_spread(ranking):

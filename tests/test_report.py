@@ -7,6 +7,7 @@ import matplotlib
 
 matplotlib.use("Agg")  # headless; the module itself never touches pyplot
 
+import numpy as np
 import pandas as pd
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
@@ -81,8 +82,10 @@ def test_ranking_to_units_converts_metrics_and_intervals_only(table):
 def test_predictions_csv_spec_columns_units_and_precision(table, tmp_path):
     si_path = write_predictions_csv(table, tmp_path / "pred_si.csv")
     imp_path = write_predictions_csv(table, tmp_path / "pred_imp.csv", units="imperial")
-    si = pd.read_csv(si_path, keep_default_na=False, na_values=[""])
-    imp = pd.read_csv(imp_path, keep_default_na=False, na_values=[""])
+    assert si_path.read_text().startswith("# units: SI\nsetup,")  # the unit marker first
+    assert imp_path.read_text().startswith("# units: imperial\nsetup,")
+    si = pd.read_csv(si_path, keep_default_na=False, na_values=[""], comment="#")
+    imp = pd.read_csv(imp_path, keep_default_na=False, na_values=[""], comment="#")
     n_m = len(METRIC_NAMES)
     assert list(si.columns[:5]) == ["setup", *CORNERS]
     assert list(si.columns[5:5 + n_m]) == list(METRIC_NAMES)  # the spec's order
@@ -109,7 +112,7 @@ def test_predictions_csv_accepts_a_setup_column_and_refuses_overwrite(table, tmp
         write_predictions_csv(table, path)
     assert path.read_bytes() == before
     write_predictions_csv(table.iloc[:3], path, overwrite=True)
-    assert len(pd.read_csv(path)) == 3
+    assert len(pd.read_csv(path, comment="#")) == 3
 
 
 def test_write_ranking_files(table, tmp_path):
@@ -121,7 +124,8 @@ def test_write_ranking_files(table, tmp_path):
     for key in ("pareto", "top_setups"):
         data = paths[key].read_bytes()
         assert len(data) > 1000 and data[:8] == PNG_MAGIC
-    csv = pd.read_csv(paths["csv"], keep_default_na=False, na_values=[""])
+    assert paths["csv"].read_text().startswith("# units: imperial\nrank,setup,")
+    csv = pd.read_csv(paths["csv"], keep_default_na=False, na_values=[""], comment="#")
     assert list(csv.columns[:6]) == ["rank", "setup", *CORNERS]
     assert list(csv.columns[6:6 + len(METRIC_NAMES)]) == list(METRIC_NAMES)
     assert csv["rank"].tolist() == list(range(1, N_SETUPS + 1))
@@ -200,22 +204,29 @@ def test_ranking_workbook_layout(table, tmp_path):
     assert ["tire force RMS LF", "lbf", "tire_force_rms_LF"] in [row[:3] for row in cells]
 
 
-def test_ranking_workbook_prints_one_page_wide(table, tmp_path):
-    """Every sheet: fit to one page wide (any number tall), the header rows repeated on every
-    page, a print area over the whole table, landscape (the about sheet portrait), paper by
-    units (A4 for SI, letter for imperial), narrow margins, a page number."""
+def test_ranking_workbook_prints_across_pages(table, tmp_path):
+    """The ranking and intervals sheets are too wide for one page at a readable size: they
+    print across pages at a fixed scale, rank and setup repeated on every page, breaking
+    between metric families; the about sheet fits one page wide. Every sheet: landscape,
+    the header rows repeated, a print area over the whole table, paper by units (A4 for SI,
+    letter for imperial), narrow margins, the sheet and page number. (The printed size is
+    checked in tests/test_sheets.py.)"""
     for units, paper in (("imperial", PAPER_SIZE["imperial"]), ("SI", PAPER_SIZE["SI"])):
         paths = write_ranking(table, tmp_path / units, units=units, objective=default_objective())
         wb = load_workbook(paths["xlsx"])
-        expect = {"ranking": ("landscape", "$1:$1", N_SETUPS + 1),
-                  "intervals": ("landscape", "$1:$2", N_SETUPS + 2),
-                  "about": ("portrait", None, None)}
-        for name, (orientation, titles, last_row) in expect.items():
+        expect = {"ranking": (False, "$1:$1", N_SETUPS + 1),
+                  "intervals": (False, "$1:$2", N_SETUPS + 2),
+                  "about": (True, None, None)}
+        for name, (fit, titles, last_row) in expect.items():
             ws = wb[name]
             ps = ws.page_setup
-            assert ws.sheet_properties.pageSetUpPr.fitToPage, name
-            assert (int(ps.fitToWidth), int(ps.fitToHeight)) == (1, 0), name
-            assert ps.orientation == orientation, name
+            assert bool(ws.sheet_properties.pageSetUpPr.fitToPage) == fit, name
+            if fit:
+                assert (int(ps.fitToWidth), int(ps.fitToHeight)) == (1, 0), name
+            else:
+                assert ws.print_title_cols == "$A:$B", name  # rank, setup
+                assert ws.col_breaks.brk and 0 < int(ps.scale) <= 100, name
+            assert ps.orientation == "landscape", name
             assert int(ps.paperSize) == paper, name
             assert ws.print_title_rows == titles, name
             area = ws.print_area if isinstance(ws.print_area, str) else ws.print_area[0]
@@ -223,8 +234,15 @@ def test_ranking_workbook_prints_one_page_wide(table, tmp_path):
             if last_row is not None:
                 assert area.endswith(f"$A$1:${last_col}${last_row}"), (name, area)
             assert ws.page_margins.left <= 0.5 and ws.page_margins.right <= 0.5
-            assert "&P" in ws.oddFooter.right.text
+            assert "&P" in ws.oddFooter.right.text and "&A" in ws.oddFooter.right.text
             assert not ws.print_options.gridLines  # the cells have borders instead
+        # the pages break between metric families: a page's last column and the next
+        # page's first are of different families
+        ws = wb["ranking"]
+        heads = [ws.cell(1, j).value for j in range(1, ws.max_column + 1)]
+        for brk in ws.col_breaks.brk:
+            left, right = heads[brk.id - 1], heads[brk.id]
+            assert left.split(" RMS")[0] != right.split(" RMS")[0], (left, right)
         assert wb["ranking"].cell(2, 1).border.bottom.style == "thin"
 
 
@@ -274,6 +292,72 @@ def test_baseline_normalization_of_top_setups(table):
     m = list(obj.weights)[0]
     assert_allclose([b.get_height() for b in bars.patches],
                     best[m] / table.loc["baseline", m], rtol=1e-12)
+
+
+def _crowded_scores(rng, n, *, grid=False):
+    """A ranking of `n` setups crowded around the best ones (scores only); on a grid: every
+    place in the axes is taken by a marker, so no label fits beside its point."""
+    if grid:
+        side = int(np.ceil(np.sqrt(n)))
+        g, p = (a.ravel()[:n] for a in np.meshgrid(np.linspace(0.45, 0.55, side),
+                                                  np.linspace(0.40, 0.50, side)))
+    else:
+        g = 0.5 + 0.02 * rng.standard_normal(n)
+        p = 0.45 + 0.02 * rng.standard_normal(n)
+    t = pd.DataFrame({"score_grip": g, "score_platform": p, "score": g + p,
+                      "feasible": rng.uniform(size=n) > 0.1},
+                     index=pd.Index([f"setup-{k:04d}" for k in range(n)], name="setup"))
+    t["rank"] = t["score"].rank(method="first").astype(int)
+    return t
+
+
+def _label_and_marker_boxes(fig):
+    """The label texts' boxes (text only, no leader line) and the markers' boxes [px]."""
+    from matplotlib.text import Text
+    from matplotlib.transforms import Bbox
+
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    ax = fig.axes[0]
+    labels = [Text.get_window_extent(t, renderer) for t in ax.texts]
+    markers = []
+    for coll in ax.collections:
+        offs = np.asarray(coll.get_offsets(), dtype=float)
+        half = np.sqrt(np.broadcast_to(coll.get_sizes(), (len(offs),))) / 2 * fig.dpi / 72
+        for (x, y), h in zip(ax.transData.transform(offs), half):
+            markers.append(Bbox([[x - h, y - h], [x + h, y + h]]))
+    return labels, markers
+
+
+@pytest.mark.parametrize("n, grid", [(60, False), (400, False), (2500, True)])
+def test_pareto_labels_overlap_no_marker_and_no_other_label(rng, n, grid):
+    """The best setups are labelled; no label box touches another or a marker, at the
+    figure's dpi and at the dpi the PNG is written with; on a full grid the labels with no
+    free place go to the margin beside the axes."""
+    table = _crowded_scores(rng, n, grid=grid)
+    fig = report_mod._pareto_figure(table, "setup-0010")
+    ax = fig.axes[0]
+    best = table.sort_values("rank").index[:report_mod.N_PARETO_LABELS]
+    assert sorted(t.get_text() for t in ax.texts) == sorted(best)
+    for dpi in (fig.dpi, 110):
+        fig.set_dpi(dpi)
+        labels, markers = _label_and_marker_boxes(fig)
+        for i, a in enumerate(labels):
+            assert all(not a.overlaps(b) for b in labels[i + 1:]), (dpi, ax.texts[i].get_text())
+            assert all(not a.overlaps(m) for m in markers), (dpi, ax.texts[i].get_text())
+            assert fig.bbox.contains(a.x0, a.y0) and fig.bbox.contains(a.x1, a.y1)
+    axes_box = ax.get_window_extent()
+    inside = [axes_box.contains(b.x0, b.y0) and axes_box.contains(b.x1, b.y1) for b in labels]
+    # the grid leaves no free place beside most points: those labels go to the margin
+    assert sum(inside) < len(inside) if grid else all(inside)
+
+
+def test_pareto_figure_is_deterministic(rng, tmp_path):
+    table = _crowded_scores(rng, 400)
+    for name in ("a.png", "b.png"):
+        report_mod._save_png(report_mod._pareto_figure(table, "setup-0010"), tmp_path / name,
+                             overwrite=False)
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
 
 
 @pytest.mark.parametrize("change, kwargs, error, match", [

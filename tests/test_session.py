@@ -137,7 +137,7 @@ def test_manifest_is_the_spec_layout(session_dir):
     assert doc["shock_library"] == "shocks.toml" and "channels" not in doc
     assert doc["run"][1] == {"name": "swap-LF", "file": "runs/swap-LF.csv", "role": "swap",
                              "setup": {"LF": "D8", "RF": "B20", "LR": "B20", "RR": "B20"}}
-    header = pd.read_csv(session_dir / "runs" / "baseline-1.csv", nrows=0).columns
+    header = pd.read_csv(session_dir / "runs" / "baseline-1.csv", nrows=0, comment="#").columns
     assert list(header) == ["time", *RIG_INPUTS,
                             *[c for c in ALL_CHANNELS if c in RESPONSES]]
 
@@ -161,8 +161,8 @@ def test_imperial_twin(session, tmp_path):
     imp_dir = write_session(session, tmp_path / "imperial", units="imperial")
     assert tomllib.loads((imp_dir / "session.toml").read_text())["units"] == "imperial"
 
-    si_file = pd.read_csv(si_dir / "runs" / "swap-LF.csv")
-    imp_file = pd.read_csv(imp_dir / "runs" / "swap-LF.csv")
+    si_file = pd.read_csv(si_dir / "runs" / "swap-LF.csv", comment="#")
+    imp_file = pd.read_csv(imp_dir / "runs" / "swap-LF.csv", comment="#")
     expected_factor = {"time": 1.0, "wheelloader_LF": IN_M, "ride_height_RR": IN_M,
                        "shock_velocity_LR": IN_M, "aero_heave": LBF_N,
                        "tire_force_LF": LBF_N, "aero_roll": LBF_N * IN_M}
@@ -267,7 +267,7 @@ def _edit_manifest(edit):
 def _edit_run(edit, name="swap-LF"):
     def mutate(folder):
         path = folder / "runs" / f"{name}.csv"
-        frame = edit(pd.read_csv(path))
+        frame = edit(pd.read_csv(path, comment="#"))
         frame.to_csv(path, index=False)
     return mutate
 
@@ -612,24 +612,41 @@ def test_run_names_are_made_safe_file_names(rng, shocks, tmp_path):
 
 
 # --------------------------------------------------------------------------------------
-# documentation
+# the unit marker (issue 23)
 # --------------------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("run_format", ["csv", "parquet"])
+@pytest.mark.parametrize("units", ["SI", "imperial"])
+def test_run_files_say_their_units(session, tmp_path, run_format, units):
+    from ident.data.files import read_units_marker
 
-def test_csv_writer_reads_back_bit_for_bit(tmp_path):
-    """Run CSVs are written by Arrow's writer: the header as pandas writes it, and every
-    float (tiny, huge, negative zero, thirds) read back exactly."""
-    from ident.data.files import write_csv_frame
+    folder = write_session(session, tmp_path / "s", units=units, run_format=run_format)
+    for name, _, _ in RUN_SPECS:
+        path = folder / "runs" / f"{name}.{run_format}"
+        assert read_units_marker(path) == units
+        if run_format == "csv":
+            assert path.read_text().splitlines()[0] == f"# units: {units}"
+    table = read_run_table(folder / "runs" / f"swap-LF.{run_format}")  # no units given
+    assert table.units == table.file_units == units
+    _assert_same_data(session, read_session(folder))
 
-    rng = np.random.default_rng(7)
-    x = rng.standard_normal(1000) * 10.0 ** rng.integers(-300, 300, 1000)
-    x[:4] = (-0.0, 1.0 / 3.0, 5e-324, 1.7976931348623157e308)
-    frame = pd.DataFrame({"time": np.arange(1000) / 100.0, "a,b": x, "c": -x})
-    write_csv_frame(frame, tmp_path / "f.csv")
-    text = (tmp_path / "f.csv").read_text()
-    assert text.splitlines()[0] == 'time,"a,b",c'
-    back = pd.read_csv(tmp_path / "f.csv")
-    for col in frame:
-        assert_array_equal(back[col].to_numpy(), frame[col].to_numpy())
-        assert np.array_equal(np.signbit(back[col].to_numpy()), np.signbit(frame[col].to_numpy()))
+
+@pytest.mark.parametrize("run_format", ["csv", "parquet"])
+def test_a_run_file_contradicting_the_manifest_is_an_error(session, tmp_path, run_format):
+    folder = write_session(session, tmp_path / "s", units="imperial", run_format=run_format)
+    manifest = folder / "session.toml"
+    manifest.write_text(manifest.read_text().replace('units = "imperial"', 'units = "SI"'))
+    with pytest.raises(SessionError) as exc:
+        read_session(folder)
+    text = str(exc.value)
+    assert text.startswith(f"run 'baseline-1' ({folder / 'runs' / 'baseline-1'}.{run_format}): ")
+    assert "in imperial units" in text and 'units = "SI"' in text
+    assert "session.toml" in text and "make them agree" in text
+
+
+def test_a_run_file_without_marker_takes_the_manifest_units(session, tmp_path):
+    folder = write_session(session, tmp_path / "s", units="imperial")
+    for path in (folder / "runs").iterdir():  # an export that says nothing
+        path.write_text(path.read_text().split("\n", 1)[1])
+    _assert_same_data(session, read_session(folder))

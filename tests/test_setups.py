@@ -7,6 +7,7 @@ import pickle
 import re
 from itertools import product
 
+import pandas as pd
 import pytest
 
 import planner.setups as setups_mod
@@ -415,8 +416,34 @@ def test_csv_round_trip(tmp_path):
     setups = enumerate_setups(lib, symmetry="none") + (_setup("with, comma", "S1", "S2",
                                                               "S3", "S1"),)
     path = write_setups(setups, tmp_path / "out" / "setups.csv")
-    assert path.read_text().splitlines()[:2] == ["setup,LF,RF,LR,RR", "S1/S1/S1/S1,S1,S1,S1,S1"]
+    assert path.read_text().splitlines()[:3] == ["# units: SI", "setup,LF,RF,LR,RR",
+                                                 "S1/S1/S1/S1,S1,S1,S1,S1"]
     assert read_setups(path, lib) == setups
+    write_setups(setups, path, units="imperial", overwrite=True)
+    assert path.read_text().splitlines()[0] == "# units: imperial"
+    assert pd.read_csv(path, comment="#")["setup"].tolist() == [s.name for s in setups]
+    assert read_setups(path, lib) == setups
+
+
+@pytest.mark.parametrize("preamble", [
+    "# units: imperial\n",  # as shockplan writes it
+    "# units: SI,,,,\n",  # saved back by a spreadsheet: the row padded with commas
+    "\ufeff# exported by the rig PC\n\n# Units = si\n",  # a BOM, a comment, a blank line
+])
+def test_leading_comment_lines_are_skipped_and_lines_keep_their_numbers(tmp_path, preamble):
+    path = tmp_path / "setups.csv"
+    path.write_text(preamble + "setup,LF,RF,LR,RR\na,B20,B20,B20,B20\nb,B20,,B20,B20\n",
+                    encoding="utf-8")
+    line = preamble.count("\n") + 3  # the file's own line number of setup 'b'
+    with pytest.raises(PlannerError, match=rf"line {line} \(setup 'b'\): column 'RF' is empty"):
+        read_setups(path)
+
+
+def test_a_bad_unit_marker_is_refused(tmp_path):
+    path = tmp_path / "setups.csv"
+    path.write_text("# units: metric\nsetup,LF,RF,LR,RR\na,B20,B20,B20,B20\n")
+    with pytest.raises(PlannerError, match=r"setups.csv: line 1 .*unknown unit system 'metric'"):
+        read_setups(path)
 
 
 def test_write_refuses_to_overwrite(tmp_path):

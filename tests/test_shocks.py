@@ -546,6 +546,17 @@ def test_bad_dyno_data_raise(tmp_path, columns, options, match):
     assert str(path) in str(info.value)
 
 
+def test_dyno_csv_with_leading_comment_lines_reads(tmp_path):
+    """A dyno sheet with a unit marker (and a comment) first reads like one without."""
+    path = tmp_path / "dyno.csv"
+    body = "velocity,force\n-0.2,-600\n-0.05,-200\n0.05,150\n0.2,450\n"
+    path.write_text(body)
+    plain = fit_shock_to_dyno(path, id="X")
+    path.write_text("# units: SI\n# dyno of 3 May\n" + body)
+    marked = fit_shock_to_dyno(path, id="X")
+    np.testing.assert_array_equal(marked.to_pwl().f_knots_n, plain.to_pwl().f_knots_n)
+
+
 def test_dyno_missing_file_and_bad_type(tmp_path):
     with pytest.raises(ShockModelError, match="dyno file not found"):
         fit_shock_to_dyno(tmp_path / "nope.csv", id="X")

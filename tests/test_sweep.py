@@ -330,7 +330,7 @@ def test_write_sweep(tmp_path, paper_model, track_drive, demo_library):
     summary = tomllib.loads((out / "sweep.toml").read_text())
     assert summary["cases"] == [{"label": "runs/track.csv", "file": "case-1-track.csv"}]
     assert summary["best"] == res.best and summary["n_simulated"] == len(res.table)
-    assert len(pd.read_csv(out / "case-1-track.csv")) == len(res.table)
+    assert len(pd.read_csv(out / "case-1-track.csv", comment="#")) == len(res.table)
     with pytest.raises(FileExistsError):
         write_sweep(res, out)
     assert write_sweep(res, out, overwrite=True) == written
@@ -347,7 +347,7 @@ def test_cli_sweep_names_case_files_from_stems(tmp_path, track_drive, monkeypatc
     write_drive(track_drive, tmp_path / "track.csv")
     monkeypatch.chdir(tmp_path)  # the drive as a user names it: track.csv
     assert main(["-q", "sweep", "--model", "paper", "--drive", "track.csv", "--shocks",
-                 str(DEMO_LIBRARY_PATH), "--only", "B20,L12", "--top", "2", "--scheduler",
+                 str(DEMO_LIBRARY_PATH), "--only", "B20,L12", "--simulate", "2", "--scheduler",
                  "none", "--out", "sweep"]) == 0
     assert sorted(p.name for p in (tmp_path / "sweep").iterdir()) == [
         "case-1-track.csv", "ranking.csv", "sweep.toml"]
@@ -362,11 +362,12 @@ def test_cli_sweep(tmp_path, track_drive, capsys):
     out = tmp_path / "sweep"
     args = ["-q", "sweep", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
             "--shocks", str(DEMO_LIBRARY_PATH), "--only", "B20,L12,L28,DS",
-            "--top", "4", "--scheduler", "none", "--out", str(out)]
+            "--simulate", "4", "--scheduler", "none", "--out", str(out)]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "screened 256 setups x 1 case(s)" in text and "scheduler none" in text
-    table = pd.read_csv(out / "ranking.csv")
+    assert (out / "ranking.csv").read_text().startswith("# units: SI\n")  # the drive's
+    table = pd.read_csv(out / "ranking.csv", comment="#")
     assert list(table.columns[:5]) == ["setup", *CORNERS] and len(table) == 5
     summary = tomllib.loads((out / "sweep.toml").read_text())
     assert summary["n_screened"] == 256 and summary["best"] == table["setup"][0]
@@ -424,7 +425,7 @@ def test_cli_rank_scheduler(tmp_path, track_drive, capsys):
 
     write_drive(track_drive, tmp_path / "drive.csv")
     args = ["-q", "rank", "--model", "paper", "--drive", str(tmp_path / "drive.csv"),
-            "--shocks", str(DEMO_LIBRARY_PATH), "--only", "B20,L12,L28,DS", "--top", "5",
+            "--shocks", str(DEMO_LIBRARY_PATH), "--only", "B20,L12,L28,DS", "--simulate", "5",
             "--no-uncertainty"]
     assert main(args + ["--out", str(tmp_path / "plain")]) == 0
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,

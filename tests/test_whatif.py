@@ -439,10 +439,107 @@ def test_effects_figures_and_files(paper_vehicle, short_drive, demo_library, twe
     files = write_whatif(w, tmp_path / "out", units="imperial", top=2)
     assert {"whatif.xlsx", "whatif.csv", "robust.csv", "rank_stability.png"} <= set(files)
     assert sum(k.startswith("tornado") for k in files) == 2
-    back = pd.read_csv(files["whatif.csv"])
+    for name in ("whatif.csv", "robust.csv", "conditions.csv"):  # each says its units
+        assert files[name].read_text().startswith("# units: imperial\n"), name
+    back = pd.read_csv(files["whatif.csv"], comment="#")
     assert len(back) == len(w.table)
     with pytest.raises(FileExistsError):
         write_whatif(w, tmp_path / "out")
+
+
+@pytest.fixture(scope="module")
+def bar_whatif(paper_vehicle, short_drive, demo_library, twenty_setups):
+    """One-at-a-time: a front bar added (a rate, so a value with a unit) and the dyno scale."""
+    from planner.whatif import Factor, evaluate_whatif, perturbation_set
+
+    setups = twenty_setups[:4]
+    ps = perturbation_set([
+        Factor("front bar", "arb_rate", targets=("front",), change="add", levels=(20000.0,)),
+        Factor("dyno", "shock_scale", targets=CORNERS, levels=(0.95, 1.05))])
+    return evaluate_whatif(paper_vehicle, short_drive, setups, demo_library, ps,
+                           baseline=setups[0])
+
+
+def _tornado_texts(fig):
+    """The texts of a tornado's axes and their boxes [px], drawn by Agg."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig).draw()
+    renderer = fig.canvas.get_renderer()
+    texts = fig.axes[0].texts
+    return [t.get_text() for t in texts], [t.get_window_extent(renderer) for t in texts]
+
+
+def test_tornado_of_the_baseline_shows_its_own_metrics(bar_whatif):
+    """Issue 23: the baseline's tornado was empty. Its score is the total weight in every
+    condition (the scores are relative to it), so it shows the weighted change of its own
+    metrics instead, read back from the table (a known answer), and says why."""
+    from planner.report.whatif import WEIGHTED_CHANGE, factor_effects, tornado_figure
+
+    w = bar_whatif
+    rows = w.table[(w.table["setup"] == w.baseline)]
+    np.testing.assert_array_equal(rows["score_change"], 0.0)  # the cause: x / x is 1 exactly
+    eff = factor_effects(w, w.baseline, quantity=WEIGHTED_CHANGE)
+    weights = {m: v for m, v in w.objective.weights.items() if v > 0}
+    high = rows[rows["perturbation"] == "dyno x1.05"].iloc[0]
+    expected = sum(v * high[f"{m}_change_pct"] for m, v in weights.items()) / sum(
+        weights.values())
+    assert eff.loc["dyno", "change_high"] == pytest.approx(expected, rel=1e-12)
+    assert (eff["swing"] > 0).all()
+    fig = tornado_figure(w, w.baseline)
+    ax = fig.axes[0]
+    widths = np.array([p.get_width() for p in ax.patches])
+    # every row has a bar off zero (the bar's single level is drawn from the nominal, 0)
+    assert len(widths) == 2 * len(eff) and np.all(np.abs(widths).reshape(-1, 2).max(axis=1) > 0)
+    assert "is the baseline" in ax.get_title() and "weighted change" in ax.get_xlabel()
+    # another setup keeps the score change
+    other = next(s for s in w.robust.index if s != w.baseline)
+    assert tornado_figure(w, other).axes[0].get_xlabel().startswith("score change [-]")
+
+
+@pytest.mark.parametrize("units", ["SI", "imperial"])
+def test_tornado_labels_do_not_overlap_and_carry_units(bar_whatif, units):
+    """Each bar's value label sits in its own half row (no two overlap, even when every
+    change is 0, the case that printed two numbers over each other), the bar's added rate in
+    the run's units; with every change 0 the panel says so instead of empty bars."""
+    import dataclasses
+
+    from ident.data.units import TO_SI
+    from planner.report.whatif import tornado_figure
+
+    w = bar_whatif
+    other = next(s for s in w.robust.index if s != w.baseline)
+    zero = dataclasses.replace(w, table=w.table.assign(score_change=0.0))
+    for result in (w, zero):
+        texts, boxes = _tornado_texts(tornado_figure(result, other, units=units))
+        for i, a in enumerate(boxes):
+            assert all(not a.overlaps(b) for b in boxes[i + 1:]), (texts[i], texts)
+    texts, _ = _tornado_texts(tornado_figure(w, other, units=units))
+    bar = 20000.0 if units == "SI" else 20000.0 / TO_SI["stiffness"]
+    unit = "N/m" if units == "SI" else "lbf/in"
+    assert f"{bar:+.4g} {unit}" in texts and {"x0.95", "x1.05"} <= set(texts)
+    texts, _ = _tornado_texts(tornado_figure(zero, other, units=units))
+    assert texts == [f"no factor changes the score change of {other}: every change is 0"]
+    # changes of +-7.5e-5 (as the demo's 5th setup): the axis runs to +-1.1e-4 in steps of
+    # 2.5e-5, whose plain tick labels ("-0.000075") ran into each other
+    p = w.table["perturbation"]
+    small = np.select([p == "dyno x0.95", p == "dyno x1.05"], [-7.5e-5, 7.5e-5], 2.5e-5)
+    fig = tornado_figure(dataclasses.replace(w, table=w.table.assign(score_change=small)),
+                         other, units=units)
+    _tornado_texts(fig)
+    ax = fig.axes[0]
+    lo, hi = ax.get_xlim()
+    ticks = [t.get_window_extent() for t, x in zip(ax.get_xticklabels(), ax.get_xticks())
+             if lo <= x <= hi]
+    assert len(ticks) > 3
+    assert all(not a.overlaps(b) for i, a in enumerate(ticks) for b in ticks[i + 1:])
+
+
+def test_rank_stability_ticks_are_whole_ranks(bar_whatif):
+    from planner.report.whatif import rank_stability_figure
+
+    ticks = rank_stability_figure(bar_whatif).axes[0].get_yticks()
+    np.testing.assert_array_equal(ticks, np.round(ticks))
 
 
 # ----------------------------------------------------------------------------------------------

@@ -22,7 +22,10 @@ Three generators make drives:
 :func:`read_drive` and :func:`write_drive` read and write drive files (the
 rig-session run-file format, CSV or Parquet, through
 :func:`ident.data.runs.read_run_table` / :func:`ident.data.runs.write_run_table`);
-:func:`resample_drive` changes a drive's sample rate.
+:func:`resample_drive` changes a drive's sample rate. A written drive file says its
+unit system (a CSV's first line ``# units: imperial``, a Parquet file's metadata); a
+read one takes it from there, from ``units`` (``--units``), or is SI, and a file that
+says nothing and is implausible as SI is refused (see :func:`read_drive`).
 
 Examples
 --------
@@ -50,7 +53,6 @@ from scipy import signal
 
 from ident.data.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero, rig_inputs_of
 from ident.data.runs import read_run_table, write_run_table
-from ident.data.units import check_units
 from ident.errors import DriveError
 
 __all__ = [
@@ -773,17 +775,20 @@ def make_track_drive(*, duration_s, fs_hz, seed, speed_m_s=50.0, wheelbase_m=2.7
 # --------------------------------------------------------------------------------------
 
 
-def read_drive(path, *, units="SI", channel_map=None, name=None):
+def read_drive(path, *, units=None, channel_map=None, name=None):
     """Read a drive file (the rig-session run-file format, CSV or Parquet).
 
     Parameters
     ----------
     path : str or os.PathLike
-        A ``.csv`` (header row) or ``.parquet`` file with a ``time`` column [s]
-        and the 7 rig inputs, or only the 4 wheelloaders (a 4-post drive: no
-        aero columns, the aero inputs are zero); other columns are ignored.
-    units : {"SI", "imperial"}
-        Unit system of the values in the file (``--units`` of the CLI).
+        A ``.csv`` (header row, after any ``#`` comment lines) or ``.parquet`` file
+        with a ``time`` column [s] and the 7 rig inputs, or only the 4 wheelloaders
+        (a 4-post drive: no aero columns, the aero inputs are zero); other columns
+        are ignored.
+    units : {"SI", "imperial"}, optional
+        Unit system of the values in the file (``--units`` of the CLI). Default: the
+        file's unit marker (a CSV's ``# units: ...`` line, a Parquet file's metadata
+        ``units``), else SI. Given, it must agree with the marker.
     channel_map : Mapping of str to str, optional
         ``{canonical name: file column}`` for files whose names differ.
     name : str, optional
@@ -792,8 +797,9 @@ def read_drive(path, *, units="SI", channel_map=None, name=None):
     Returns
     -------
     Drive
-        SI values; time restarts at 0 s. ``settings`` records the file, its
-        units and the channel map (``kind = "file"``).
+        SI values; time restarts at 0 s. ``settings`` records the file, the
+        units it was read in, where they came from (``units_from``: ``"file"``,
+        ``"argument"`` or ``"default"``) and the channel map (``kind = "file"``).
 
     Raises
     ------
@@ -801,43 +807,63 @@ def read_drive(path, *, units="SI", channel_map=None, name=None):
         If the file is missing or unreadable, lacks ``time`` or a wheelloader,
         has some but not all three aero columns, holds NaN/inf or non-numeric
         values, or its time is not uniform (the checks of
-        :func:`ident.data.runs.read_run_table`).
+        :func:`ident.data.runs.read_run_table`); if its unit marker contradicts
+        `units`.
+    DriveError
+        If the file has too few samples; or if it does not say its units, none are
+        given, and its wheel-pad motion read as SI is beyond what a shaker rig plays
+        (RMS over :data:`PLAUSIBLE_WHEELLOADER_RMS_M`): an inch file read as metres.
+        Given `units` (or a marker) the same check only logs a warning.
     """
     path = Path(path)
     table = read_run_table(path, units=units, channel_map=channel_map,
-                           required=WHEELLOADER_INPUTS, where=f"drive file {path}")
+                           required=WHEELLOADER_INPUTS, where=f"drive file {path}",
+                           units_from="--units")
     n = table.time_s.size
     if n < MIN_DRIVE_SAMPLES:
         raise DriveError(f"drive file {path}: {n} samples; a drive needs at least "
                          f"{MIN_DRIVE_SAMPLES} (the metrics' zero-phase band-pass), and seconds "
                          "of data for RMS values that mean something; give a longer drive")
-    _check_plausible(table.channels, where=f"drive file {path}", units=check_units(units))
-    settings = {"kind": "file", "path": str(path), "units": check_units(units),
-                "channel_map": dict(channel_map or {}),
+    units_from = ("file" if table.file_units is not None else
+                  "argument" if units is not None else "default")
+    _check_plausible(table.channels, where=f"drive file {path}", units=table.units,
+                     units_from=units_from)
+    settings = {"kind": "file", "path": str(path), "units": table.units,
+                "units_from": units_from, "channel_map": dict(channel_map or {}),
                 "t0_s": float(table.time_s[0])}
     return Drive(name=name or path.stem, fs_hz=table.fs_hz,
                  channels={c: table.channels[c] for c in rig_inputs_of(table.channels)},
                  settings=settings)
 
 
-def _check_plausible(channels, *, where, units):
-    """Warn (logging) when the wheel-pad motion is beyond what a rig plays: wrong units?"""
+def _check_plausible(channels, *, where, units, units_from):
+    """Refuse (units nobody stated) or warn (logging) when the wheel-pad motion is beyond
+    what a rig plays: wrong units?"""
     rms = {c: float(np.sqrt(np.mean((channels[c] - channels[c].mean()) ** 2)))
            for c in WHEELLOADER_INPUTS if c in channels}
     worst = max(rms, key=rms.get)
-    if rms[worst] > PLAUSIBLE_WHEELLOADER_RMS_M:
-        hint = ("is the file in imperial units (--units imperial)?" if units == "SI" else
-                "check the file's units")
-        logger.warning("%s: %s has an RMS of %.0f mm, more than %.0f mm that a shaker rig "
-                       "plays; the predictions will be absurd (tire forces of tens of kN): %s",
-                       where, worst, 1e3 * rms[worst], 1e3 * PLAUSIBLE_WHEELLOADER_RMS_M, hint)
+    if rms[worst] <= PLAUSIBLE_WHEELLOADER_RMS_M:
+        return
+    said = (f"{where}: {worst} has an RMS of {1e3 * rms[worst]:.0f} mm read as {units}, more "
+            f"than the {1e3 * PLAUSIBLE_WHEELLOADER_RMS_M:.0f} mm a shaker rig plays")
+    if units_from == "default":
+        raise DriveError(
+            f"{said}: the file does not say its units (no '# units:' line) and was read as "
+            "SI; if it is in inches and pounds give --units imperial (units='imperial'), "
+            "or add the line '# units: imperial' at its top; --units SI reads it as SI anyway")
+    hint = ("is the file in imperial units (--units imperial)?" if units == "SI" else
+            "check the file's units")
+    logger.warning("%s; the predictions will be absurd (tire forces of tens of kN): %s",
+                   said, hint)
 
 
 def write_drive(drive, path, *, units="SI", overwrite=False):
     """Write a drive file (``time`` and the drive's rig inputs), atomically.
 
     The columns are ``drive.rig_inputs``: the 7 rig inputs, or the 4
-    wheelloaders of a 4-post drive.
+    wheelloaders of a 4-post drive. The file says its unit system: a CSV's first
+    line is ``# units: SI`` (or ``imperial``), a Parquet file's schema metadata
+    has ``units``; :func:`read_drive` reads it back in those units.
 
     Parameters
     ----------

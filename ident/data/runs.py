@@ -17,7 +17,10 @@ Notes
 Inside the package every value is SI and every channel has its canonical name
 (:mod:`ident.data.channels`). Files may be in ``"imperial"`` units and may name
 their columns differently (a ``{canonical: column}`` channel map, the session
-manifest's ``[channels]`` table).
+manifest's ``[channels]`` table). A written file says its unit system: a CSV's first
+line ``# units: SI`` (or ``imperial``), a Parquet file's schema metadata ``units``
+(:mod:`ident.data.files`); a read file's marker decides its units when the caller gives
+none, and contradicts them with an error (:func:`ident.data.files.resolve_units`).
 """
 
 from __future__ import annotations
@@ -32,7 +35,8 @@ import numpy as np
 
 from ident.data.channels import (ALL_CHANNELS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero,
                                  quantity_of)
-from ident.data.files import atomic_path, write_csv_frame, write_parquet_frame
+from ident.data.files import (atomic_path, csv_preamble, read_csv_after, read_units_marker,
+                              resolve_units, write_csv_frame, write_parquet_frame)
 from ident.data.units import check_units, from_si, to_si
 from ident.errors import SessionError
 
@@ -79,12 +83,18 @@ class RunTable:
         Sample rate [Hz], derived from `time_s`.
     path : pathlib.Path
         The file the table was read from.
+    units : {"SI", "imperial"}
+        The unit system the file was read in.
+    file_units : {"SI", "imperial"} or None
+        The unit system the file says it is in (its unit marker), or None.
     """
 
     time_s: np.ndarray
     channels: dict
     fs_hz: float
     path: Path
+    units: str = "SI"
+    file_units: str | None = None
 
 
 # --------------------------------------------------------------------------------------
@@ -396,7 +406,10 @@ def _file_kind(path, *, where):
 
 
 def _read_columns(path, *, where):
-    """Read a CSV or Parquet file into ``{column: 1-D ndarray}``."""
+    """Read a CSV or Parquet file into ``{column: 1-D ndarray}`` and its unit marker.
+
+    A CSV's leading ``#`` comment and blank lines (the unit marker among them) are skipped.
+    """
     import pandas as pd
     import pyarrow
 
@@ -404,17 +417,22 @@ def _read_columns(path, *, where):
     try:
         if kind == "csv":
             with open(path, newline="", encoding="utf-8-sig") as fh:
+                marker, n_skip = csv_preamble(fh, where=where, error=SessionError)
+            with open(path, newline="", encoding="utf-8-sig") as fh:
+                for _ in range(n_skip):  # as lines: a quote in a comment opens no field
+                    fh.readline()
                 header = next(csv.reader(fh), None)
             if not header:
                 raise SessionError(
                     f"{where}: the file is empty; a run file has a header row and one "
                     "row per sample"
                 )
-            frame = pd.read_csv(path, encoding="utf-8-sig")
+            frame = read_csv_after(path, n_skip)
             names = [h.strip() for h in header]
         else:
             frame = pd.read_parquet(path)
             names = [str(c).strip() for c in frame.columns]
+            marker = read_units_marker(path, where=where, error=SessionError)
     except SessionError:
         raise
     except (OSError, ValueError, UnicodeDecodeError, pyarrow.ArrowException) as exc:
@@ -429,19 +447,23 @@ def _read_columns(path, *, where):
         )
     if len(names) != frame.shape[1]:  # pragma: no cover - pandas always agrees
         raise SessionError(f"{where}: could not parse the header row; check the file")
-    return {name: frame.iloc[:, j].to_numpy() for j, name in enumerate(names)}
+    return {name: frame.iloc[:, j].to_numpy() for j, name in enumerate(names)}, marker
 
 
-def read_run_table(path, *, units="SI", channel_map=None, required=(), where=None):
+def read_run_table(path, *, units=None, channel_map=None, required=(), where=None,
+                   units_from="units", units_fix=None):
     """Read, check and convert one run (or drive) file to SI and canonical names.
 
     Parameters
     ----------
     path : str or os.PathLike
-        A CSV file with a header row (``.csv``) or a Parquet file (``.parquet``).
-    units : {"SI", "imperial"}
+        A CSV file with a header row (``.csv``), after any leading ``#`` comment lines,
+        or a Parquet file (``.parquet``).
+    units : {"SI", "imperial"}, optional
         Unit system of the values in the file; each channel is converted to SI by
         its quantity (:func:`ident.data.channels.quantity_of`); ``time`` is in seconds.
+        Default: the file's unit marker (``# units: ...``, Parquet metadata ``units``),
+        else SI. Given, it must agree with the marker.
     channel_map : mapping of str to str, optional
         ``{canonical name: file column}`` for exports whose names differ (the
         manifest's ``[channels]`` table). ``time`` may be mapped too.
@@ -453,13 +475,18 @@ def read_run_table(path, *, units="SI", channel_map=None, required=(), where=Non
     where : str, optional
         How to name the file in error messages (default: the path), e.g.
         ``"run 'swap-LF' (runs/swap-LF.csv)"``.
+    units_from : str
+        How to name the source of `units` when it contradicts the file's marker (e.g.
+        ``"the manifest's units"``).
+    units_fix : str, optional
+        The fix that message ends with (default: :func:`ident.data.files.resolve_units`'s).
 
     Returns
     -------
     RunTable
         Times [s], shape (n_samples,); SI channels, each shape (n_samples,); the
-        sample rate [Hz]. Columns that are not canonical channels are ignored
-        (logged at debug level).
+        sample rate [Hz]; the unit system read in and the file's marker. Columns that
+        are not canonical channels are ignored (logged at debug level).
 
     Raises
     ------
@@ -468,8 +495,8 @@ def read_run_table(path, *, units="SI", channel_map=None, required=(), where=Non
         fewer than 2 rows, duplicated column names, no ``time``, misses a
         required channel, holds a non-numeric or NaN/inf value in a used column,
         or its time is not strictly increasing and uniformly sampled (relative
-        step tolerance :data:`RTOL_TIME_STEP`); or if `units`, `channel_map` or
-        `required` is invalid.
+        step tolerance :data:`RTOL_TIME_STEP`); if its unit marker is invalid or
+        contradicts `units`; or if `units`, `channel_map` or `required` is invalid.
 
     Examples
     --------
@@ -482,7 +509,8 @@ def read_run_table(path, *, units="SI", channel_map=None, required=(), where=Non
     """
     path = Path(path)
     where = str(path) if where is None else where
-    units = check_session_units(units, where=f"{where}: units")
+    if units is not None:
+        units = check_session_units(units, where=f"{where}: units")
     channel_map = check_channel_map(channel_map, where=where)
     required = _check_required(required, where=where)
     if not path.exists():
@@ -490,11 +518,14 @@ def read_run_table(path, *, units="SI", channel_map=None, required=(), where=Non
         raise SessionError(f"{where}: file not found{at}; check the path")
     if not path.is_file():
         raise SessionError(f"{where}: {path} is not a file; give the path of a run file")
-    columns = _read_columns(path, where=where)
+    columns, marker = _read_columns(path, where=where)
+    units = resolve_units(marker, units, where=where, given_as=units_from, fix=units_fix,
+                          error=SessionError)
     time_s, channels, fs_hz = check_columns(
         columns, where=where, units=units, channel_map=channel_map, required=required
     )
-    return RunTable(time_s=time_s, channels=channels, fs_hz=fs_hz, path=path)
+    return RunTable(time_s=time_s, channels=channels, fs_hz=fs_hz, path=path, units=units,
+                    file_units=marker)
 
 
 def in_memory_columns(time_s, channels, *, where):
@@ -561,7 +592,9 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
     -----
     Columns are ``time``, the rig inputs, then the responses, in
     :data:`ident.data.channels.ALL_CHANNELS` order. CSV floats are written with full
-    precision (shortest repr that round-trips). The data are checked by the same
+    precision (shortest repr that round-trips). The file says its unit system: a CSV's
+    first line is ``# units: SI`` (or ``imperial``), a Parquet file has the schema
+    metadata ``units``. The data are checked by the same
     engine as :func:`read_run_table`, so a written file always reads back.
 
     Raises
@@ -588,9 +621,9 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
     )
     with atomic_path(path, overwrite=overwrite) as tmp:
         if kind == "csv":
-            write_csv_frame(frame, tmp)
+            write_csv_frame(frame, tmp, units=units)
         else:
-            write_parquet_frame(frame, tmp)
+            write_parquet_frame(frame, tmp, units=units)
 
 
 # --------------------------------------------------------------------------------------
@@ -625,6 +658,6 @@ def write_mapped_run_table(path, time_s, channels, *, units, channel_map):
     frame = pd.DataFrame(data)
     with atomic_path(path, overwrite=False) as tmp:
         if kind == "csv":
-            write_csv_frame(frame, tmp)
+            write_csv_frame(frame, tmp, units=units)
         else:
-            write_parquet_frame(frame, tmp)
+            write_parquet_frame(frame, tmp, units=units)

@@ -17,7 +17,9 @@ Notes
 -----
 Inside the package every value is SI and every channel has its canonical name
 (:mod:`ident.data.channels`). Files may be in ``"imperial"`` units (the manifest's
-``units`` key; run files take the unit system of the manifest) and may name
+``units`` key; run files take the unit system of the manifest, and a run file that
+says its own, a CSV's ``# units: ...`` line or a Parquet file's metadata, must agree
+with it) and may name
 their columns differently (the manifest's ``[channels]`` table maps canonical
 names to file columns). Values may carry static offsets; :meth:`Run.dynamic`
 gives the dynamic part (the run's mean removed) on which everything downstream
@@ -453,8 +455,9 @@ def read_session(path):
         channel; the shock library is missing or malformed (the
         :class:`~ident.errors.ShockModelError` is chained); a run file is missing,
         unreadable, has fewer than 2 rows, misses a wheelloader, has some but not
-        all three aero channels, holds NaN/inf or non-numeric values, or has
-        non-uniform time; or the runs have different sample rates or different
+        all three aero channels, holds NaN/inf or non-numeric values, has
+        non-uniform time or a unit marker that disagrees with the manifest's
+        ``units``; or the runs have different sample rates or different
         rig inputs (runs with and without aero channels).
     """
     folder, manifest = _manifest_paths(path)
@@ -505,8 +508,11 @@ def read_session(path):
                 f"{run_where}: run file not found; fix the run's 'file' in {where} "
                 "(paths are relative to the manifest)"
             )
-        table = read_run_table(file_path, units=units, channel_map=channel_map,
-                               required=WHEELLOADER_INPUTS, where=run_where)
+        table = read_run_table(
+            file_path, units=units, channel_map=channel_map, required=WHEELLOADER_INPUTS,
+            where=run_where, units_from=f"the manifest ({where}: units = \"{units}\")",
+            units_fix="make them agree: set the manifest's units to the run files' unit "
+            "system, or correct the run file's '# units:' line")
         runs.append(Run(name=e["name"], file=e["file"], setup=setup, role=e["role"],
                         time_s=table.time_s, channels=table.channels,
                         fs_hz=table.fs_hz))

@@ -1151,7 +1151,8 @@ def select_order(f_hz, h, *, weight=None, orders=range(2, 11), relative_num=-1, 
         warnings.warn_explicit(rec.message, rec.category, rec.filename, rec.lineno)
     if chosen == ok[-1] and len(ok) > 1 and errors[chosen] > floor:
         warnings.warn(f"{where}: the highest order tried ({chosen}) was selected with fit error "
-                      f"{errors[chosen]:.3g}; the data may need more poles: extend orders",
+                      f"{errors[chosen]:.3g}; the data may need more poles: raise the highest order "
+                      "(max_order; shockplan identify --max-order)",
                       FitWarning, stacklevel=2)
     return fits[chosen], table
 

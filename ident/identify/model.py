@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ident.data.channels import RIG_INPUTS
-from ident.data.files import atomic_path
+from ident.data.files import atomic_path, write_csv
 from ident.errors import ModelFileError
 from ident.identify.condition import conditioned_standard_error
 from ident.identify.frf import Frf
@@ -42,6 +42,8 @@ from ident.models.lti import GRAM_FACTOR_RTOL, LoopPlant, ModalSystem, balanced_
 __all__ = [
     "VehicleModel",
     "load_model",
+    "summary_path",
+    "write_model_summary",
     "has_feedthrough",
     "MODEL_FORMAT",
     "MODEL_VERSION",
@@ -633,3 +635,49 @@ def _restore_plant(model, pm, data, path):
     model._plants[rtol] = LoopPlant(parts["rig"], parts["shock"], tuple(pm["output_names"]),
                                     data["plant_cbar_n_s_m"], name=model.name,
                                     rig_inputs=tuple(pm["rig_inputs"]))
+
+
+def summary_path(model_path):
+    """Where ``shockplan identify`` writes a model's per-pair summary: beside the model,
+    ``<stem>_summary.csv`` (``model.npz`` -> ``model_summary.csv``, as the demo's).
+
+    Parameters
+    ----------
+    model_path : str or Path
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    model_path = Path(model_path)
+    return model_path.with_name(f"{model_path.stem}_summary.csv")
+
+
+def write_model_summary(model, path, *, units="SI", overwrite=False):
+    """Write :meth:`VehicleModel.summary` (order, fit error, coherence, noise level and
+    status of every input/output pair) as CSV, atomically.
+
+    The first line is the unit marker ``# units: <units>`` (the summary's values have no
+    unit; the marker says the unit system of the session it came from).
+
+    Parameters
+    ----------
+    model : VehicleModel
+    path : str or Path
+        Output file, e.g. :func:`summary_path` of the model's file.
+    units : {"SI", "imperial"}
+        The unit system of the run that writes it (the session's).
+    overwrite : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+    """
+    if not isinstance(model, VehicleModel):
+        raise TypeError(f"write_model_summary: model must be a VehicleModel, got "
+                        f"{type(model).__name__}")
+    path = Path(path)
+    write_csv(path, model.summary(), units=units, overwrite=overwrite)
+    return path

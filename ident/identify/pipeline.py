@@ -177,8 +177,10 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
                 messages += msgs
         if messages:
             warnings.warn(f"{n_short} pair fits stay above their data's noise level and needed "
-                          f"attention (e.g. {messages[0]}); see the model summary's fit errors "
-                          "against 'noise_level'", FitWarning, stacklevel=2)
+                          f"attention (e.g. {messages[0]}); compare their fit errors with "
+                          "'noise_level' in the model's summary (VehicleModel.summary(); "
+                          "shockplan identify writes it beside the model as "
+                          "<name>_summary.csv)", FitWarning, stacklevel=2)
     else:
         with threadpool_limits(1):
             vf = _fit_vf(fitmod, fb, Hb, W, frf, n_poles_vf, max_order)
@@ -207,7 +209,9 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
         warnings.warn(f"{len(zeroed)} pair(s) have no response above the noise (e.g. "
                       f"{zeroed[0][0]} from {zeroed[0][1]}: relative noise of the conditioned "
                       f"FRF >= {ZERO_FIT_NOISE}); fitted as zero (order 0) instead of making up "
-                      "dynamics; see the model summary's 'status'", LowCoherenceWarning,
+                      "dynamics; see 'status' in the model's summary (VehicleModel.summary(); "
+                      "shockplan identify writes it beside the model as <name>_summary.csv)",
+                      LowCoherenceWarning,
                       stacklevel=2)
     keep = max(1, int(n_poles.max()))
     return VehicleModel(name=name or "identified model", input_names=tuple(frf.input_names),

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import minimize_scalar, nnls
 
+from ident.data.files import read_csv_table
 from ident.data.units import UNIT_LABELS, from_si, to_si
 from ident.errors import FitWarning, ShockModelError
 from ident.models.shocks import (PASSIVITY_RTOL, DigressiveShock, PiecewiseLinear, TableShock,
@@ -36,11 +37,8 @@ def _dyno_points(data, units, where):
         p = Path(data)
         if not p.is_file():
             raise ShockModelError(f"{where}: dyno file not found; check the path")
-        try:
-            df = pd.read_csv(p)
-        except (ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
-            raise ShockModelError(f"{where}: cannot read the dyno CSV ({exc}); give a CSV "
-                                  "with a header row") from None
+        # leading '#' comment lines (a unit marker '# units: ...') are skipped
+        df, _ = read_csv_table(p, where=where, error=ShockModelError)
     else:
         raise TypeError(f"dyno data must be a CSV path or a pandas DataFrame, got "
                         f"{type(data).__name__}")

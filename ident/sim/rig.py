@@ -259,7 +259,8 @@ def read_rig_plan(path):
     pitch moments' RMS as ``roll_moment_multiple``/``pitch_moment_multiple``
     of the stiffness per degree); ``[[run]]`` tables with ``name``,
     ``setup``, ``role``, optional ``seed`` and ``duration_s``, or ``drive``: a
-    drive file (relative to the plan, in its units) the run plays instead.
+    drive file (relative to the plan, in the plan's units when it states them,
+    else in the drive file's own, else SI) the run plays instead.
     """
     path = Path(path)
     where = str(path)
@@ -316,7 +317,10 @@ def read_rig_plan(path):
                 raise SessionError(f"{w}: 'drive' must be the path of a drive file (relative "
                                    f"to the plan), got {drive_file!r}")
             try:
-                run_drive = read_drive(path.parent / drive_file, units=units,
+                # the plan's units when it states them (the drive's marker must agree),
+                # else the drive file's marker, else SI
+                run_drive = read_drive(path.parent / drive_file,
+                                       units=units if "units" in doc else None,
                                        name=Path(drive_file).stem)
             except SessionError as exc:
                 raise SessionError(f"{w}: drive: {exc}") from exc

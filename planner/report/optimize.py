@@ -13,20 +13,27 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from openpyxl import Workbook
-from openpyxl.styles import Font
+from openpyxl.utils import get_column_letter
 
 from ident.data.channels import CORNERS
-from ident.data.files import atomic_dir
-from ident.data.units import check_units, from_si, to_si
+from ident.data.files import atomic_dir, write_csv
+from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from ident.models.library import ShockLibrary, write_shock_library
-from ident.sim.metrics import METRIC_NAMES
+from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
 from planner.errors import PlannerError
 from planner.report.ranking import ranking_to_units
+from planner.report.sheets import (
+    column_label,
+    print_setup,
+    write_key_values,
+    write_table,
+)
 from planner.setups import Setup, write_setups
 
 __all__ = [
     "BUILDER_VELOCITIES_M_S",
     "BUILDER_VELOCITIES_IN_S",
+    "CURVE_V_MAX",
     "curve_table",
     "curves_figure",
     "write_optimum",
@@ -35,6 +42,8 @@ __all__ = [
 #: Velocities of the shock builder's force table [m/s] and [in/s].
 BUILDER_VELOCITIES_M_S = (0.0125, 0.025, 0.05, 0.075, 0.1, 0.15, 0.2, 0.25, 0.35, 0.5, 0.75, 1.0)
 BUILDER_VELOCITIES_IN_S = (0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 15.0, 20.0, 30.0, 40.0)
+#: Half-span of the velocity axis of ``curves.png`` per unit system [m/s] and [in/s].
+CURVE_V_MAX = {"SI": 0.6, "imperial": 24.0}
 
 
 def curve_table(optimum, *, units="SI"):
@@ -63,8 +72,17 @@ def curve_table(optimum, *, units="SI"):
     return out.rename(columns=lambda c: f"{c} [{'N' if units == 'SI' else 'lbf'}]")
 
 
-def curves_figure(optimum, library):
+def curves_figure(optimum, library, *, units="SI"):
     """The optimal curves against the crate's, with the optimum's shock-velocity histograms.
+
+    Parameters
+    ----------
+    optimum : CurveOptimum
+    library : ShockLibrary
+        The crate.
+    units : {"SI", "imperial"}
+        Display units: velocity [m/s] and force [N], or [in/s] and [lbf]; the
+        velocity axis spans :data:`CURVE_V_MAX` of the unit system.
 
     Returns
     -------
@@ -72,28 +90,38 @@ def curves_figure(optimum, library):
     """
     from matplotlib.figure import Figure  # heavy: loaded only when a figure is drawn
 
+    units = check_units(units, where="units", error=PlannerError)
+    v_unit, f_unit = UNIT_LABELS[units]["velocity"], UNIT_LABELS[units]["force"]
+    v_max = CURVE_V_MAX[units]
     G = len(optimum.space.groups)
     fig = Figure(figsize=(5.5 * G, 4.6), layout="constrained")
     axes = fig.subplots(1, G, squeeze=False)[0]
-    v = np.linspace(-0.6, 0.6, 241)
+    v = np.linspace(-v_max, v_max, 241)  # display units
+    v_si = to_si(v, "velocity", units)
+
+    def force(model, vel_si):  # a curve in display units
+        return from_si(model.force(vel_si), "force", units)
+
     for ax, (name, corners), pwl in zip(axes, optimum.space.groups, optimum.curves):
-        samples = np.concatenate([optimum.velocity_m_s[c] for c in corners])
+        samples = from_si(np.concatenate([optimum.velocity_m_s[c] for c in corners]),
+                          "velocity", units)
         hist = ax.twinx()
-        hist.hist(samples, bins=np.linspace(-0.6, 0.6, 61), color="#d9e6f2", density=True)
+        hist.hist(samples, bins=np.linspace(-v_max, v_max, 61), color="#d9e6f2", density=True)
         hist.set_yticks([])
         ax.set_zorder(hist.get_zorder() + 1)
         ax.patch.set_visible(False)
         for k, m in enumerate(library.values()):
-            ax.plot(v, m.force(v), color="0.7", lw=0.8, label="crate" if k == 0 else None)
-        for sid in set(optimum.table.loc[optimum.crate_best, list(corners)]):
-            ax.plot(v, library[sid].force(v), color="tab:orange", lw=1.6,
+            ax.plot(v, force(m, v_si), color="0.7", lw=0.8, label="crate" if k == 0 else None)
+        for sid in sorted(set(optimum.table.loc[optimum.crate_best, list(corners)])):
+            ax.plot(v, force(library[sid], v_si), color="tab:orange", lw=1.6,
                     label=f"crate best ({sid})")
-        ax.plot(v, pwl.force(v), color="tab:blue", lw=2.2, label=f"optimum ({name})")
-        ax.plot(pwl.v_knots_m_s, pwl.f_knots_n, "o", color="tab:blue", ms=4)
+        ax.plot(v, force(pwl, v_si), color="tab:blue", lw=2.2, label=f"optimum ({name})")
+        ax.plot(from_si(pwl.v_knots_m_s, "velocity", units),
+                from_si(pwl.f_knots_n, "force", units), "o", color="tab:blue", ms=4)
         ax.axhline(0, color="0.5", lw=0.6)
         ax.axvline(0, color="0.5", lw=0.6)
-        ax.set(xlabel="shock velocity [m/s] (compression +)", ylabel="force [N]",
-               title=f"{name}: {', '.join(corners)}", xlim=(-0.6, 0.6))
+        ax.set(xlabel=f"shock velocity [{v_unit}] (compression +)", ylabel=f"force [{f_unit}]",
+               title=f"{name}: {', '.join(corners)}", xlim=(-v_max, v_max))
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8, loc="upper left")
     fig.suptitle(f"optimal curves (score {optimum.score:.4f}) and the crate; shaded: the "
@@ -110,6 +138,55 @@ def _setups_sheet(optimum, units):
     return t.reset_index()
 
 
+def _write_workbook(optimum, units, path):
+    """``optimize.xlsx``: the force tables (SI, imperial), the setups, the solver's report;
+    every sheet laid out and set to print with :mod:`planner.report.sheets`."""
+    wb = Workbook()
+    what = f"shockplan optimize ({units})"
+    for k, u in enumerate(("SI", "imperial")):
+        sheet = wb.active if k == 0 else wb.create_sheet()
+        sheet.title = f"curves {u}"
+        tab = curve_table(optimum, units=u).round(1).reset_index()
+        last = write_table(sheet, tab, headers=list(tab.columns),
+                           formats={c: "0.0###" if j == 0 else "0.0"
+                                    for j, c in enumerate(tab.columns)})
+        print_setup(sheet, units=units, area=f"A1:{get_column_letter(tab.shape[1])}{last}",
+                    title_rows="1:1", footer=f"{what}: force table for the shock builder "
+                                             f"({u}), bump positive, rebound negative")
+    ss = wb.create_sheet("setups")
+    tab = _setups_sheet(optimum, units)
+    heads = [f"{column_label(c)} [{UNIT_LABELS[units][METRIC_QUANTITY[c]]}]"
+             if c in METRIC_QUANTITY else column_label(c) for c in tab.columns]
+    formats = {c: "0.0000" for c in tab.columns if str(c).startswith("score")}
+    last = write_table(ss, tab, headers=heads, formats=formats, freeze_cols=2)
+    # pages across break between metric families (tire force, ride height, ...)
+    group = [c.rsplit("_", 1)[0] if c in METRIC_QUANTITY else "setup" for c in tab.columns]
+    print_setup(ss, units=units, area=f"A1:{get_column_letter(tab.shape[1])}{last}",
+                title_rows="1:1", title_cols="A:B",
+                group_starts=[j + 1 for j in range(1, len(group)) if group[j] != group[j - 1]],
+                footer=f"{what}: the optimum, the baseline and the crate setups closest to it")
+    rep = wb.create_sheet("solver")
+    s = optimum.solver
+    rows = [("optimum score (time domain)", optimum.score),
+            ("crate best", optimum.crate_best),
+            ("crate best score", float(optimum.table.loc[optimum.crate_best, "score"])),
+            ("gain over the crate best", f"{100 * optimum.gap:.2f} %"),
+            ("IPOPT status", s["status"]), ("iterations", s["iterations"]),
+            ("closed-loop evaluations", s["n_eval"]),
+            ("adjoint sweeps", s["n_grad"]), ("compiled (jit)", s["jit"]),
+            ("symmetry", optimum.space.symmetry),
+            ("objective", optimum.objective.name),
+            ("baseline", "/".join(optimum.baseline.ids())),
+            ("drives", ", ".join(optimum.settings["drives"])),
+            ("units", units)]
+    if optimum.stationarity is not None and len(optimum.stationarity):
+        rows.append(("largest gain of a +-5 % knot move",
+                     f"{-100 * min(0.0, optimum.stationarity.relative_change.min()):.3f} %"))
+    last = write_key_values(rep, rows)
+    print_setup(rep, units=units, area=f"A1:B{last}", footer=f"{what}: the solver's report")
+    wb.save(path)
+
+
 def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
     """Write an optimum's files into a folder (built aside, then moved into place).
 
@@ -117,7 +194,8 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
     crate's, so the setups file reads against it), ``optimal_setup.csv`` (the optimum,
     then the crate setups closest to it), ``optimize.xlsx`` (force tables for the shock
     builder in SI and imperial, the setups side by side, the solver's report),
-    ``curves.png`` and ``convergence.csv``.
+    ``curves.png`` and ``convergence.csv``. Each CSV's first line is the unit marker
+    ``# units: <units>``.
 
     Parameters
     ----------
@@ -126,7 +204,7 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
         The crate.
     out_dir : str or path
     units : {"SI", "imperial"}
-        Units of the shock library and the metrics.
+        Units of the shock library, the metrics and ``curves.png``'s axes.
     overwrite : bool
         Replace an existing folder.
 
@@ -150,54 +228,14 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
         write_shock_library(lib, work / names["shocks"], units=units)
         closest = [s for s in _table_setups(optimum) if s.name != optimum.setup.name
                    and optimum.table.loc[s.name, "kind"] == "closest"]
-        write_setups([optimum.setup] + closest, work / names["setups"])
-        wb = Workbook()
-        ws = wb.active
-        ws.title = "curves SI"
-        for title, u in (("curves SI", "SI"), ("curves imperial", "imperial")):
-            sheet = ws if title == "curves SI" else wb.create_sheet(title)
-            tab = curve_table(optimum, units=u).round(1).reset_index()
-            sheet.append(list(tab.columns))
-            for row in tab.itertuples(index=False):
-                sheet.append([float(x) for x in row])
-            for cell in sheet[1]:
-                cell.font = Font(bold=True)
-            sheet.freeze_panes = "B2"
-        ss = wb.create_sheet("setups")
-        tab = _setups_sheet(optimum, units)
-        ss.append(list(tab.columns))
-        for row in tab.itertuples(index=False):
-            ss.append([x.item() if hasattr(x, "item") else x for x in row])
-        for cell in ss[1]:
-            cell.font = Font(bold=True)
-        ss.freeze_panes = "B2"
-        rep = wb.create_sheet("solver")
-        s = optimum.solver
-        for key, value in (("optimum score (time domain)", optimum.score),
-                           ("crate best", optimum.crate_best),
-                           ("crate best score", float(optimum.table.loc[optimum.crate_best,
-                                                                         "score"])),
-                           ("gain over the crate best", f"{100 * optimum.gap:.2f} %"),
-                           ("IPOPT status", s["status"]), ("iterations", s["iterations"]),
-                           ("closed-loop evaluations", s["n_eval"]),
-                           ("adjoint sweeps", s["n_grad"]), ("compiled (jit)", s["jit"]),
-                           ("symmetry", optimum.space.symmetry),
-                           ("objective", optimum.objective.name),
-                           ("baseline", "/".join(optimum.baseline.ids())),
-                           ("drives", ", ".join(optimum.settings["drives"])),
-                           ("units", units)):
-            rep.append([key, value])
-        if optimum.stationarity is not None and len(optimum.stationarity):
-            rep.append(["largest gain of a +-5 % knot move",
-                        f"{-100 * min(0.0, optimum.stationarity.relative_change.min()):.3f} %"])
-        rep.column_dimensions["A"].width = 34
-        rep.column_dimensions["B"].width = 40
-        wb.save(work / names["xlsx"])
-        fig = curves_figure(optimum, library)
+        write_setups([optimum.setup] + closest, work / names["setups"], units=units)
+        _write_workbook(optimum, units, work / names["xlsx"])
+        fig = curves_figure(optimum, library, units=units)
         fig.savefig(work / names["curves"], dpi=110)
         # wall times are logged, not written: a rerun writes the same bytes
-        optimum.history.drop(columns=["time_s"], errors="ignore").to_csv(
-            work / names["convergence"], index=False, float_format="%.9g")
+        write_csv(work / names["convergence"],
+                  optimum.history.drop(columns=["time_s"], errors="ignore"), units=units,
+                  float_format="%.9g")
     return {k: out / v for k, v in names.items()}
 
 

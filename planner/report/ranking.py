@@ -15,15 +15,17 @@ setup, indexed by setup name (or with a column ``setup``), holding
 :func:`write_predictions_csv` writes the rig-session spec's predictions CSV;
 :func:`write_ranking` writes a folder with ``ranking.csv``, ``ranking.xlsx``,
 ``pareto.png`` and ``top_setups.png``. The workbook is laid out to print with
-the shared print layout of :mod:`planner.report.sheets` (landscape, one page wide,
-header repeated; the same layout as :mod:`planner.testplan`'s run sheet).
+the shared print layout of :mod:`planner.report.sheets` (landscape, header repeated,
+one page wide or, too wide for that, across pages with the setup repeated; the same
+layout as every workbook the planner writes).
 
 Column order of every written CSV (the spec's "Predictions"): ``setup, LF,
 RF, LR, RR``, then the spec's metrics in :data:`ident.sim.metrics.METRIC_NAMES`
 order (those present), then the other metric columns, then every further
 column in table order. The ranking files put ``rank`` first; the workbook
 puts the key columns first and the intervals on their own sheet (see
-:func:`write_ranking`).
+:func:`write_ranking`). Every CSV's first line is its unit marker, ``# units: SI``
+or ``# units: imperial`` (:func:`ident.data.files.write_csv`).
 
 Notes
 -----
@@ -48,7 +50,7 @@ from openpyxl import Workbook
 from openpyxl.styles import Alignment, Border, Font, PatternFill, Side
 from openpyxl.utils import get_column_letter
 
-from ident.data.files import atomic_path, atomic_write_bytes, check_can_write
+from ident.data.files import atomic_write_bytes, check_can_write, write_csv
 from ident.data.channels import CORNERS
 from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
@@ -87,6 +89,20 @@ DEFAULT_KEY_METRICS = tuple(f"tire_force_rms_{c}" for c in CORNERS) + (
 MAX_KEY_METRICS = 6
 #: Setups labelled by name in ``pareto.png``.
 N_PARETO_LABELS = 5
+# Label layout of pareto.png (see _place_labels) [pt]: the farthest a label may sit from
+# its point, the grid its corner is moved on, the gap kept between a label and a marker, a
+# line, a leader line or another label, and a leader line beyond this distance.
+_LABEL_REACH_PT = 90.0
+_LABEL_STEP_PT = 2.0
+_LABEL_PAD_PT = 1.5
+_LEADER_PT = 8.0
+# At most this many free places are tried per label for a clear leader line (bounds the
+# time on a crowded plot; a label with none goes to the margin).
+_MAX_LEADER_TRIES = 3000
+# pareto.png's fixed layout [in]: figure size, margins around the axes; the right margin
+# holds the legend and the labels that find no free place beside their point.
+_PARETO_SIZE_IN = (8.8, 5.6)
+_PARETO_MARGIN_IN = {"left": 0.85, "right": 2.45, "bottom": 0.6, "top": 0.45}
 #: Number formats of the Excel sheet.
 SCORE_FORMAT = "0.0000"
 INTEGER_FORMAT = "0"
@@ -249,10 +265,9 @@ def _file_frame(table, units, *, rank_first):
     return frame
 
 
-def _write_csv(frame, path, *, overwrite):
-    text = frame.to_csv(index=False, lineterminator="\n")  # floats: shortest round-trip repr
-    with atomic_path(path, overwrite=overwrite) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+def _write_csv(frame, path, *, units, overwrite):
+    # floats: shortest round-trip repr; the first line is the unit marker '# units: ...'
+    write_csv(path, frame, units=units, overwrite=overwrite)
 
 
 def write_predictions_csv(table, path, *, units="SI", overwrite=False):
@@ -292,13 +307,16 @@ def write_predictions_csv(table, path, *, units="SI", overwrite=False):
     Columns ``setup, LF, RF, LR, RR``, the metrics (spec order first), then
     further columns (intervals, scores, ranks) in table order; rows in the
     table's order; floats at full precision (they read back bit-identical);
-    NaN as an empty field. Written atomically.
+    NaN as an empty field. The first line is the unit marker ``# units: <units>``
+    (read with ``pandas.read_csv(path, comment="#")`` or
+    :func:`ident.data.files.read_csv_table`). Written atomically.
     """
     path = Path(path)
     table = _check_table(table, "write_predictions_csv")
     units = check_units(units, where="write_predictions_csv")
     check_can_write(path, overwrite=overwrite)
-    _write_csv(_file_frame(table, units, rank_first=False), path, overwrite=overwrite)
+    _write_csv(_file_frame(table, units, rank_first=False), path, units=units,
+               overwrite=overwrite)
     log.info("wrote predictions of %d setups (%s) to %s", len(table), units, path)
     return path
 
@@ -506,6 +524,14 @@ def _write_table_sheet(ws, frame, cols, formats, headers, infeasible, *, group_h
     return n_head + len(frame)
 
 
+def _group_starts(cols):
+    """Columns (1-based) that start a metric family (tire force, ride height, ...) or end
+    one: where a printed page across may break."""
+    family = [m.rsplit("_", 1)[0] if (m := metric_of_column(c)) is not None else None
+              for c in cols]
+    return [j + 1 for j in range(1, len(cols)) if family[j] != family[j - 1]]
+
+
 def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
     wb = Workbook()
     ws = wb.active
@@ -521,7 +547,10 @@ def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
     what = f"shockplan ranking ({units})"
     if objective is not None:
         what += f", objective '{objective.name}'"
+    # too wide for one page at a readable size: across pages, rank and setup on each, the
+    # key columns (scores, weighted metrics) on the first, a metric family per page break
     print_setup(ws, units=units, area=f"A1:{last_col}{last_row}", title_rows="1:1",
+                title_cols=f"A:{get_column_letter(setup_col)}", group_starts=_group_starts(main),
                 footer=what + "; rows sorted by rank, infeasible ones greyed")
 
     if interval_cols:
@@ -536,6 +565,8 @@ def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
         iv.freeze_panes = iv.cell(row=3, column=cols.index("setup") + 2).coordinate
         letter = get_column_letter(len(cols))
         print_setup(iv, units=units, area=f"A1:{letter}{last}", title_rows="1:2",
+                    title_cols=f"A:{get_column_letter(cols.index('setup') + 1)}",
+                    group_starts=_group_starts(cols),
                     footer=f"{what}: interval of each prediction (lo, hi)")
 
     bold = Font(name=_FONT, bold=True)
@@ -590,7 +621,7 @@ def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
     about.column_dimensions["B"].width = 30
     for letter in "CDE":
         about.column_dimensions[letter].width = 24
-    print_setup(about, units=units, area=f"A1:E{about.max_row}", landscape=False,
+    print_setup(about, units=units, area=f"A1:E{about.max_row}",
                 footer="shockplan ranking: about")
     buf = io.BytesIO()
     wb.save(buf)
@@ -613,40 +644,257 @@ def _save_png(fig, path, *, overwrite, dpi=110):
     atomic_write_bytes(path, buf.getvalue(), overwrite=overwrite)
 
 
+def _boxes_hit(box, boxes):
+    """Whether `box` (x0, y0, x1, y1) overlaps any row of `boxes`, shape (n, 4)."""
+    if len(boxes) == 0:
+        return False
+    return bool(np.any((boxes[:, 0] < box[2]) & (box[0] < boxes[:, 2])
+                       & (boxes[:, 1] < box[3]) & (box[1] < boxes[:, 3])))
+
+
+def _points_hit(points, boxes):
+    """Whether any of `points`, shape (n, 2), lies inside a row of `boxes`, shape (m, 4)."""
+    if len(points) == 0 or len(boxes) == 0:
+        return False
+    x, y = points[:, :1], points[:, 1:]
+    return bool(np.any((boxes[:, 0] < x) & (x < boxes[:, 2])
+                       & (boxes[:, 1] < y) & (y < boxes[:, 3])))
+
+
+def _label_candidates(anchor, size, blocked, bounds, *, reach, step, pad):
+    """Boxes one label may take, nearest its point first (geometry only).
+
+    Returns
+    -------
+    ndarray, shape (n, 4)
+        x0, y0, x1, y1 [pt] of the boxes of size `size` whose corner lies on a grid of
+        `step` around `anchor`, at most `reach` from it, inside `bounds` and clear of
+        `blocked` by `pad`; ordered by the distance from the point to the box (to
+        0.5 pt), then by the direction (up-right first).
+    """
+    px, py = anchor
+    w, h = size
+    gx = np.arange(-w - reach, reach + step / 2, step)
+    gy = np.arange(-h - reach, reach + step / 2, step)
+    x0 = px + np.tile(gx, gy.size)
+    y0 = py + np.repeat(gy, gx.size)
+    boxes = np.column_stack([x0, y0, x0 + w, y0 + h])
+    grown = boxes + np.array([-pad, -pad, pad, pad])
+    x_lo, y_lo, x_hi, y_hi = bounds
+    near = np.column_stack([np.clip(px, boxes[:, 0], boxes[:, 2]),
+                            np.clip(py, boxes[:, 1], boxes[:, 3])])
+    dist = np.hypot(near[:, 0] - px, near[:, 1] - py)
+    keep = ((grown[:, 0] >= x_lo) & (grown[:, 1] >= y_lo) & (grown[:, 2] <= x_hi)
+            & (grown[:, 3] <= y_hi) & (dist <= reach))
+    boxes, grown, dist = boxes[keep], grown[keep], dist[keep]
+    far = w + reach + pad, h + reach + pad
+    local = blocked[(blocked[:, 2] > px - far[0]) & (blocked[:, 0] < px + far[0])
+                    & (blocked[:, 3] > py - far[1]) & (blocked[:, 1] < py + far[1])]
+    hit = np.zeros(len(boxes), dtype=bool)
+    for b in local:  # one obstacle at a time: memory stays (n,)
+        hit |= ((grown[:, 0] < b[2]) & (b[0] < grown[:, 2]) & (grown[:, 1] < b[3])
+                & (b[1] < grown[:, 3]))
+    boxes, dist = boxes[~hit], dist[~hit]
+    angle = np.arctan2((boxes[:, 1] + boxes[:, 3]) / 2 - py, (boxes[:, 0] + boxes[:, 2]) / 2 - px)
+    turn = np.abs(np.angle(np.exp(1j * (angle - np.pi / 4))))
+    return boxes[np.lexsort((turn, np.round(2.0 * dist)))]
+
+
+def _place_labels(anchors, sizes, markers, lines, bounds, *, reach=_LABEL_REACH_PT,
+                  step=_LABEL_STEP_PT, pad=_LABEL_PAD_PT, leader_pt=_LEADER_PT):
+    """Label layout: the nearest free place beside each point (geometry only).
+
+    Each label takes the nearest box (:func:`_label_candidates`) that touches no
+    marker, no line, no label and no leader line placed before; a label farther
+    than `leader_pt` from its point gets a leader line, straight from the point to
+    the nearest point of the label, which may cross no marker (but its own) and no
+    label. Labels choose in order; when some find no place, the layout is tried
+    again with those first, and the layout with the fewest labels left out (then the
+    shortest total distance) is kept.
+
+    Parameters
+    ----------
+    anchors : array_like, shape (n_labels, 2)
+        The labelled points, display coordinates [pt].
+    sizes : array_like, shape (n_labels, 2)
+        Width and height of each label's text box [pt].
+    markers : array_like, shape (n_markers, 4)
+        Boxes of the markers: x0, y0, x1, y1 [pt].
+    lines : array_like, shape (n_lines, 4)
+        Boxes of line segments no label may touch (leader lines may cross them) [pt].
+    bounds : sequence of 4 float
+        The box every label stays inside (the axes): x0, y0, x1, y1 [pt].
+    reach, step, pad, leader_pt : float
+        The farthest a label may sit from its point, the grid of its corner, the gap
+        kept to everything else, and the distance beyond which a leader line is drawn
+        [pt].
+
+    Returns
+    -------
+    list
+        Per label: ``(dx, dy, relpos)``, the offset of the label's lower-left corner
+        from its point [pt] and the point of the label its leader line ends at (a
+        fraction of its width and height; None: no leader line), or None where no
+        place is free. Deterministic: the same inputs give the same layout.
+    """
+    anchors = np.asarray(anchors, dtype=float).reshape(-1, 2)
+    sizes = np.asarray(sizes, dtype=float).reshape(-1, 2)
+    markers = np.asarray(markers, dtype=float).reshape(-1, 4)
+    blocked = np.vstack([markers, np.asarray(lines, dtype=float).reshape(-1, 4)])
+    bounds = tuple(float(b) for b in bounds)
+    grow = np.array([-pad, -pad, pad, pad])
+    cands = [_label_candidates(a, s, blocked, bounds, reach=reach, step=step, pad=pad)
+             for a, s in zip(anchors, sizes)]
+    own = [(markers[:, 0] <= px) & (px <= markers[:, 2]) & (markers[:, 1] <= py)
+           & (py <= markers[:, 3]) for px, py in anchors]
+
+    def layout(order):
+        placed = np.empty((0, 4))  # label boxes placed so far
+        leaders = np.empty((0, 2))  # points along the leader lines drawn so far
+        out = [None] * len(anchors)
+        for i in order:
+            px, py = anchors[i]
+            boxes = cands[i]
+            grown = boxes + grow
+            free = np.ones(len(boxes), dtype=bool)
+            for b in placed:
+                free &= ~((grown[:, 0] < b[2]) & (b[0] < grown[:, 2]) & (grown[:, 1] < b[3])
+                          & (b[1] < grown[:, 3]))
+            for x, y in leaders:
+                free &= ~((grown[:, 0] < x) & (x < grown[:, 2]) & (grown[:, 1] < y)
+                          & (y < grown[:, 3]))
+            for box in boxes[free][:_MAX_LEADER_TRIES]:
+                nx, ny = np.clip(px, box[0], box[2]), np.clip(py, box[1], box[3])
+                d = math.hypot(nx - px, ny - py)
+                line = np.empty((0, 2))
+                if d > leader_pt:  # the leader line: a point every 1 pt
+                    s = np.linspace(0.0, 1.0, math.ceil(d) + 1)[:, None]
+                    line = np.array([px, py]) + s * np.array([nx - px, ny - py])
+                    if (_points_hit(line, markers[~own[i]])
+                            or _points_hit(line, placed + grow)):
+                        continue
+                relpos = None if d <= leader_pt else (
+                    (nx - box[0]) / (box[2] - box[0]), (ny - box[1]) / (box[3] - box[1]))
+                out[i] = (box[0] - px, box[1] - py, relpos, d)
+                placed = np.vstack([placed, box])
+                leaders = np.vstack([leaders, line])
+                break
+        return out
+
+    order = list(range(len(anchors)))
+    best = None
+    for _ in range(max(len(order), 1)):
+        out = layout(order)
+        missed = [i for i in order if out[i] is None]
+        key = (len(missed), sum(o[3] for o in out if o is not None))
+        if best is None or key < best[0]:
+            best = (key, out)
+        retry = missed + [i for i in order if i not in missed]
+        if not missed or retry == order:
+            break
+        order = retry
+    return [None if o is None else o[:3] for o in best[1]]
+
+
 def _pareto_figure(table, baseline):
-    """score_grip vs score_platform: all setups, the Pareto front, the best labelled."""
+    """score_grip vs score_platform: all setups, the Pareto front, the best labelled.
+
+    The :data:`N_PARETO_LABELS` best setups are labelled by name at the nearest
+    place beside their point that touches no marker, no line of the front and no
+    other label (:func:`_place_labels`, text measured with the Agg renderer), with a
+    leader line when the label sits away from its point; a label with no such place
+    goes to a column in the right margin, under the legend, with a leader line. The
+    layout is fixed (no layout engine), so the same table draws the same bytes.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.text import Text
+
     x, y = "score_grip", "score_platform"
     xv = table[x].to_numpy(dtype=float)
     yv = table[y].to_numpy(dtype=float)
     feasible = (table["feasible"].to_numpy(dtype=bool) if "feasible" in table.columns
                 else np.ones(len(table), dtype=bool))
     front = pareto_front(table, x, y)
-    fig = _new_figure((7.0, 5.5))
-    ax = fig.add_subplot()
+    width_in, height_in = _PARETO_SIZE_IN
+    m = _PARETO_MARGIN_IN
+    fig = Figure(figsize=_PARETO_SIZE_IN)
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((m["left"] / width_in, m["bottom"] / height_in,
+                       1.0 - (m["left"] + m["right"]) / width_in,
+                       1.0 - (m["bottom"] + m["top"]) / height_in))
     ax.scatter(xv[feasible & ~front], yv[feasible & ~front], s=18, color="C0", alpha=0.6,
                label="feasible")
     if (~feasible).any():
         ax.scatter(xv[~feasible], yv[~feasible], s=18, marker="x", color="0.6",
                    label="infeasible")
+    steps = np.empty((0, 2))
     if front.any():
         order = np.argsort(xv[front], kind="stable")
         fx, fy = xv[front][order], yv[front][order]
         ax.step(fx, fy, where="post", color="C3", lw=1.2, alpha=0.8)
         ax.scatter(fx, fy, s=40, color="C3", zorder=3, label="Pareto front")
+        # the step line's corners: (x_i, y_i) -> (x_i+1, y_i) -> (x_i+1, y_i+1)
+        steps = np.column_stack([np.repeat(fx, 2)[1:], np.repeat(fy, 2)[:-1]])
     if baseline is not None and baseline in table.index:
         b = table.index.get_loc(baseline)
         ax.scatter([xv[b]], [yv[b]], s=120, marker="*", color="k", zorder=4,
                    label=f"baseline ({baseline})")
-    best = _best_order(table)[:N_PARETO_LABELS]
-    for k in best:
-        if np.isfinite(xv[k]) and np.isfinite(yv[k]):
-            ax.annotate(str(table.index[k]), (xv[k], yv[k]), xytext=(4, 4),
-                        textcoords="offset points", fontsize=7)
     ax.set_xlabel(f"{x} (lower is better)")
     ax.set_ylabel(f"{y} (lower is better)")
     ax.set_title(f"Grip vs platform: {int(front.sum())} setups on the Pareto front")
     ax.grid(True, lw=0.3, alpha=0.5)
-    ax.legend(fontsize=8, loc="best")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
+    ax.set_xlim(ax.get_xlim())  # freeze the limits: the labels are placed in display space
+    ax.set_ylim(ax.get_ylim())
+
+    pt = 72.0 / fig.dpi  # display pixels -> points
+
+    def to_pt(xy):
+        return ax.transData.transform(np.asarray(xy, dtype=float).reshape(-1, 2)) * pt
+
+    markers = [np.empty((0, 4))]
+    for coll in ax.collections:  # markers: squares of the marker's size
+        offs = np.asarray(coll.get_offsets(), dtype=float).reshape(-1, 2)
+        ok = np.isfinite(offs).all(axis=1)
+        half = np.sqrt(np.broadcast_to(coll.get_sizes(), (len(offs),)))[ok] / 2.0
+        c = to_pt(offs[ok])
+        markers.append(np.column_stack([c - half[:, None], c + half[:, None]]))
+    lines = np.empty((0, 4))
+    if len(steps) > 1:  # the front's segments (horizontal or vertical): boxes of the line
+        c = to_pt(steps)
+        half_lw = 0.6
+        lines = np.column_stack([np.minimum(c[:-1], c[1:]) - half_lw,
+                                 np.maximum(c[:-1], c[1:]) + half_lw])
+    bounds = np.asarray(ax.bbox.extents) * pt
+
+    best = [k for k in _best_order(table)[:N_PARETO_LABELS]
+            if np.isfinite(xv[k]) and np.isfinite(yv[k])]
+    names = [str(table.index[k]) for k in best]
+    renderer = fig.canvas.get_renderer()
+    sizes = []
+    for name in names:
+        ext = Text(0.0, 0.0, name, fontsize=7, figure=fig).get_window_extent(renderer)
+        sizes.append((ext.width * pt, ext.height * pt))
+    anchors = to_pt(np.column_stack([xv[best], yv[best]])) if best else np.empty((0, 2))
+    places = _place_labels(anchors, sizes, np.vstack(markers), lines, bounds)
+    leader = {"arrowstyle": "-", "color": "0.35", "lw": 0.6, "shrinkA": 0.0, "shrinkB": 3.5}
+    for k, name, place in zip(best, names, places):
+        if place is None:
+            continue
+        dx, dy, relpos = place
+        arrow = None if relpos is None else dict(leader, relpos=relpos)
+        ax.annotate(name, (xv[k], yv[k]), xytext=(dx, dy), textcoords="offset points",
+                    ha="left", va="bottom", fontsize=7, arrowprops=arrow)
+    # labels with no free place: a column in the right margin, bottom up, ordered by height
+    rest = sorted((float(a[1]), j, name) for j, (name, a, place)
+                  in enumerate(zip(names, anchors, places)) if place is None)
+    line_in = 0.18
+    for row, (_, j, name) in enumerate(rest):
+        y_frac = (row + 0.5) * line_in / (height_in - m["bottom"] - m["top"])
+        ax.annotate(name, (xv[best[j]], yv[best[j]]), xytext=(1.04, y_frac),
+                    textcoords="axes fraction", ha="left", va="center", fontsize=7,
+                    annotation_clip=False, arrowprops=dict(leader, relpos=(0.0, 0.5)))
     return fig
 
 
@@ -807,9 +1055,12 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
     - sheet "about": the units, the objective, the metrics' labels, units and
       CSV columns.
 
-    Every sheet prints landscape ("about" portrait), one page wide, the header
-    repeated on every page, on A4 (SI) or US letter (imperial)
-    (:func:`print_setup`).
+    Every sheet prints landscape, the header repeated on every page, on A4 (SI)
+    or US letter (imperial) (:func:`print_setup`): "about" one page wide; the
+    wide "ranking" and "intervals" across pages at a scale that keeps their
+    text >= 8 pt, ``rank, setup`` repeated on every page and the pages broken
+    between metric families, so the first page holds the key columns (the
+    summary: shocks, scores, the objective's metrics).
     """
     table = _check_table(table, "write_ranking")
     units = check_units(units, where="write_ranking")
@@ -833,7 +1084,7 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
 
     ranked = _sorted_by_rank(table)
     frame = _file_frame(ranked, units, rank_first=True)
-    _write_csv(frame, paths["csv"], overwrite=overwrite)
+    _write_csv(frame, paths["csv"], units=units, overwrite=overwrite)
     infeasible = (~ranked["feasible"].to_numpy(dtype=bool) if "feasible" in ranked.columns
                   else np.zeros(len(ranked), dtype=bool))
     about_base = ref if ref is not None else (objective.baseline if objective else None)

@@ -13,22 +13,39 @@ what-if computation does not need them.
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from ident.data.files import atomic_dir
-from ident.data.units import check_units
+from ident.data.files import atomic_dir, write_csv
+from ident.data.units import UNIT_LABELS, check_units, from_si
+from ident.models.vehicle import VEHICLE_KEYS
+from ident.sim.metrics import METRIC_QUANTITY
 from planner.errors import PlannerError
 from planner.report.ranking import ranking_to_units
+from planner.report.sheets import (
+    column_label,
+    print_setup,
+    write_key_values,
+    write_table,
+)
+from planner.screen import describe_agreement
 
 __all__ = [
+    "WEIGHTED_CHANGE",
     "factor_effects",
     "tornado_figure",
     "rank_stability_figure",
     "write_whatif",
 ]
+
+#: Quantity of :func:`factor_effects` and :func:`tornado_figure`: the objective-weighted
+#: mean change of a setup's metrics against its own nominal condition [%].
+WEIGHTED_CHANGE = "weighted_change_pct"
+# Colours of the tornado bars: the change at the factor's low and at its high value.
+_TORNADO_COLORS = ("#4C72B0", "#DD8452")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -50,7 +67,11 @@ def factor_effects(result, setup, *, quantity="score_change"):
     setup : str
     quantity : str
         A column of ``result.table`` (default ``score_change``; e.g. ``rank_change`` or
-        ``tire_force_rms_LF_change_pct``).
+        ``tire_force_rms_LF_change_pct``), or :data:`WEIGHTED_CHANGE`: the mean of the
+        objective's metrics' changes [%] weighted by the objective's weights, each
+        against the setup's own nominal condition (the change of the score the setup
+        would have against its own nominal metrics; it moves for the baseline, whose
+        ``score_change`` is 0 in every condition).
 
     Returns
     -------
@@ -63,12 +84,13 @@ def factor_effects(result, setup, *, quantity="score_change"):
     if setup not in set(t["setup"]):
         raise PlannerError(f"setup {setup!r} is not in the what-if; it has "
                            f"{sorted(set(t['setup']))[:8]}")
-    if quantity not in t.columns:
+    if quantity not in t.columns and quantity != WEIGHTED_CHANGE:
         raise PlannerError(f"{quantity!r} is not a column of the what-if table")
     d0 = result.settings["drives"][0]
     rows = t[(t["setup"] == setup) & (t["drive"] == d0)].set_index("perturbation")
     conds = result.perturbations.table().loc[rows.index]
-    y = rows[quantity].to_numpy(dtype=float)
+    y = (_weighted_change(result, rows) if quantity == WEIGHTED_CHANGE
+         else rows[quantity].to_numpy(dtype=float))
     out = []
     design = result.perturbations.design
     if design == "one-at-a-time":
@@ -125,36 +147,132 @@ def _value_text_out(v):
     return v if isinstance(v, str) else float(v)
 
 
+def _weighted_change(result, rows):
+    """:data:`WEIGHTED_CHANGE` of the rows of one setup: sum w_k change_k / sum w_k [%]."""
+    weights = {m: w for m, w in result.objective.weights.items()
+               if w > 0 and f"{m}_change_pct" in rows.columns}
+    if not weights:
+        raise PlannerError(f"{WEIGHTED_CHANGE!r}: the what-if table has no '<metric>_change_pct' "
+                           f"column of the objective's weighted metrics "
+                           f"{sorted(result.objective.weights)}")
+    total = sum(weights.values())
+    return sum(w * rows[f"{m}_change_pct"].to_numpy(dtype=float)
+               for m, w in weights.items()) / total
+
+
+def _tornado_quantity(result, setup, quantity):
+    """The quantity a setup's tornado shows, and a note saying why when it is not `quantity`.
+
+    The scores of a what-if are relative to the baseline in the same condition, so the
+    baseline scores the total weight in every condition and its ``score_change`` is 0
+    for every factor: its tornado shows :data:`WEIGHTED_CHANGE` instead.
+    """
+    if quantity == "score_change" and setup == result.baseline:
+        return WEIGHTED_CHANGE, (f"{setup} is the baseline: its score is the same in every "
+                                 "condition (scores are relative to it), so its own metrics' "
+                                 "weighted change is shown")
+    return quantity, None
+
+
+def _quantity_label(quantity):
+    """Axis label of a tornado quantity, with its unit."""
+    if quantity == WEIGHTED_CHANGE:
+        return "weighted change of the objective's metrics [%]"
+    if quantity == "score_change":
+        return "score change [-]"
+    if quantity == "rank_change":
+        return "rank change [places]"
+    if quantity.endswith("_change_pct") and quantity[:-len("_change_pct")] in METRIC_QUANTITY:
+        return f"{column_label(quantity[:-len('_change_pct')])} change [%]"
+    return quantity.replace("_", " ")
+
+
+def _level_text(result, column, value, units):
+    """A factor value as the tornado labels it: ``x0.95`` (scale), ``+5 lbf/in`` (add)."""
+    if isinstance(value, str):
+        return value
+    for f in result.perturbations.factors:
+        for label, _ in f.atoms():
+            if label != column:
+                continue
+            if f.change == "scale":
+                return f"x{value:.4g}"
+            qty = {"shock_lag": "time", "spring_rate": "stiffness",
+                   "arb_rate": "stiffness"}.get(f.kind)
+            if f.kind == "vehicle" and f.targets:
+                qty = VEHICLE_KEYS.get(f.targets[0], (None,))[0]
+            if qty is None:
+                return f"{value:+.4g}"
+            return f"{float(from_si(value, qty, units)):+.4g} {UNIT_LABELS[units][qty]}"
+    return f"{value:.4g}"
+
+
 # ----------------------------------------------------------------------------------------------
 # figures
 # ----------------------------------------------------------------------------------------------
 
-def tornado_figure(result, setup, *, quantity="score_change", max_factors=12):
+def tornado_figure(result, setup, *, quantity="score_change", max_factors=12, units="SI"):
     """Tornado chart of the factors' effects on one setup (:func:`factor_effects`).
+
+    Each factor has two bars in its row: the change at the factor's low value (upper,
+    blue) and at its high value (lower, orange), each labelled with the value
+    (``x0.95`` for a scale, ``+5 lbf/in`` for an added rate, in `units`).
+
+    Parameters
+    ----------
+    result : WhatIf
+    setup : str
+    quantity : str
+        As :func:`factor_effects`. The baseline's ``score_change`` is 0 in every
+        condition (the scores are relative to it), so its chart shows
+        :data:`WEIGHTED_CHANGE` instead and says so under the title.
+    max_factors : int
+        The factors with the largest swing shown.
+    units : {"SI", "imperial"}
+        Units of the factor values added to a rate (``spring_rate``, ``arb_rate``,
+        ``vehicle`` with ``change = "add"``).
 
     Returns
     -------
     matplotlib.figure.Figure
+        When no factor changes `quantity` (every change 0), the axes say so in a
+        line of text instead of drawing bars of zero length.
     """
     from matplotlib.figure import Figure  # heavy, needed only for the figures
 
-    eff = factor_effects(result, setup, quantity=quantity).head(max_factors).iloc[::-1]
-    fig = Figure(figsize=(7.5, 0.45 * max(len(eff), 3) + 1.4))
+    units = check_units(units, where="units", error=PlannerError)
+    shown, note = _tornado_quantity(result, setup, quantity)
+    eff = factor_effects(result, setup, quantity=shown).head(max_factors).iloc[::-1]
+    fig = Figure(figsize=(7.5, 0.5 * max(len(eff), 3) + (2.0 if note else 1.7)))
     ax = fig.add_subplot()
     ypos = np.arange(len(eff))
-    for y_, (name, r) in zip(ypos, eff.iterrows()):
-        for val, label, color in ((r["change_low"], r["low"], "#4C72B0"),
-                                  (r["change_high"], r["high"], "#DD8452")):
-            ax.barh(y_, val, color=color, height=0.6)
-            txt = label if isinstance(label, str) else f"{label:.4g}"
-            ax.annotate(txt, (val, y_), xytext=(3 if val >= 0 else -3, 0),
-                        textcoords="offset points", va="center",
-                        ha="left" if val >= 0 else "right", fontsize=7)
+    moved = bool(len(eff)) and bool((eff["swing"].to_numpy(dtype=float) > 0).any())
+    half = 0.38  # each bar takes under half of its row: the two labels never meet
+    for y_, (name, r) in zip(ypos if moved else [], eff.iterrows()):
+        for val, label, color, dy in ((r["change_low"], r["low"], _TORNADO_COLORS[0], 0.2),
+                                      (r["change_high"], r["high"], _TORNADO_COLORS[1], -0.2)):
+            ax.barh(y_ + dy, val, color=color, height=half)
+            ax.annotate(_level_text(result, name, label, units), (val, y_ + dy),
+                        xytext=(3 if val >= 0 else -3, 0), textcoords="offset points",
+                        va="center", ha="left" if val >= 0 else "right", fontsize=7)
+    if not moved:  # no bars to draw: say so (the values of each factor are in the effects)
+        what = shown.replace("_", " ")
+        ax.text(0.5, 0.5, "no factor moved in this design" if len(eff) == 0 else
+                f"no factor changes the {what} of {setup}: every change is 0",
+                transform=ax.transAxes, ha="center", va="center", fontsize=9,
+                bbox={"facecolor": "white", "edgecolor": "0.6"})
     ax.set_yticks(ypos, [str(i) for i in eff.index], fontsize=8)
+    ax.set_ylim(-0.6, max(len(eff), 1) - 0.4)
     ax.axvline(0.0, color="k", lw=0.8)
-    ax.set_xlabel(quantity.replace("_", " ") + " (low value blue, high value orange)")
-    ax.set_title(f"what-if effects on {setup}", fontsize=10)
+    ax.set_xlabel(f"{_quantity_label(shown)}\nupper bar (blue): the factor at its low value; "
+                  "lower bar (orange): at its high value", fontsize=9)
+    title = f"what-if effects on {setup}"
+    if note:
+        title += "\n" + textwrap.fill(note, 95)
+    ax.set_title(title, fontsize=9)
     ax.margins(x=0.25)
+    # short tick labels: "-0.000075" side by side ran into each other; 1e-4 goes to an offset
+    ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4), useMathText=True)
     fig.tight_layout()
     return fig
 
@@ -195,9 +313,11 @@ def rank_stability_figure(result, *, top=10):
         ax.set_xticks(np.arange(1, len(names) + 1),
                       [f"{n}{' *' if rob.loc[n, 'fragile'] else ''}" for n in names],
                       rotation=45, ha="right", fontsize=7)
-        ax.legend(fontsize=8, loc="lower left")
+        # beside the axes, as the lines' legend: inside, it may cover a box or a whisker
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
         ax.set_xlabel("setup (* fragile rank); boxes 25-75 %, whiskers 5-95 % of conditions")
     ax.invert_yaxis()
+    ax.yaxis.get_major_locator().set_params(integer=True)  # ranks are whole places
     ax.set_ylabel("rank (1 = best)")
     ax.set_title(f"rank stability over {len(piv)} conditions "
                  f"({result.perturbations.design}, {result.settings['method']})", fontsize=10)
@@ -226,7 +346,8 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
     Files: ``whatif.xlsx`` (sheets ``robust``, ``conditions``, ``effects`` and
     ``table``), ``whatif.csv`` (the long table, metrics in `units`), ``robust.csv``,
     ``conditions.csv``, ``rank_stability.png`` and ``tornado/<nn>_<setup>.png`` for the
-    `top` setups of the robust ranking.
+    `top` setups of the robust ranking. Each CSV's first line is the unit marker
+    ``# units: <units>``.
 
     Returns
     -------
@@ -237,72 +358,106 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
     FileExistsError
         If `out_dir` exists and is not empty and `overwrite` is false (checked first).
     """
-    from openpyxl import Workbook  # heavy, needed only here
-    from openpyxl.styles import Font, PatternFill
-
     units = check_units(units, where="units", error=PlannerError)
     out = Path(out_dir)
     files = {}
     with atomic_dir(out, overwrite=overwrite) as work:
         table = ranking_to_units(result.table, units)
-        table.to_csv(work / "whatif.csv", index=False, float_format="%.6g")
-        result.robust.to_csv(work / "robust.csv", float_format="%.6g")
-        result.conditions.to_csv(work / "conditions.csv")
+        # each CSV's first line is the unit marker '# units: ...'
+        write_csv(work / "whatif.csv", table, units=units, float_format="%.6g")
+        write_csv(work / "robust.csv", result.robust, units=units, index=True,
+                  float_format="%.6g")
+        write_csv(work / "conditions.csv", result.conditions, units=units, index=True)
         top_names = list(result.robust.index[:top])
         effects = []
         (work / "tornado").mkdir()
         for k, n in enumerate(top_names):
             eff = factor_effects(result, n)
             effects.append(eff.reset_index().assign(setup=n))
-            fig = tornado_figure(result, n)
+            fig = tornado_figure(result, n, units=units)
             fig.savefig(work / "tornado" / f"{k + 1:02d}_{_safe_name(n)}.png", dpi=110)
         fig = rank_stability_figure(result)
         fig.savefig(work / "rank_stability.png", dpi=110)
-        wb = Workbook()
-        bold = Font(bold=True)
-        fragile_fill = PatternFill("solid", fgColor="F8CBAD")
-
-        def sheet(ws, frame, *, highlight=None):
-            ws.append(list(frame.columns))
-            for cell in ws[1]:
-                cell.font = bold
-            for row in frame.itertuples(index=False):
-                ws.append([_xl(x) for x in row])
-            if highlight is not None:
-                for r, flag in enumerate(highlight, start=2):
-                    if flag:
-                        for cell in ws[r]:
-                            cell.fill = fragile_fill
-            ws.freeze_panes = "B2"
-            for col in ws.columns:
-                width = max(len(str(c.value)) if c.value is not None else 0 for c in col)
-                ws.column_dimensions[col[0].column_letter].width = min(max(width + 2, 8), 40)
-
-        ws = wb.active
-        ws.title = "robust"
-        rob = result.robust.reset_index()
-        sheet(ws, rob.round(4), highlight=rob["fragile"].tolist())
-        sheet(wb.create_sheet("conditions"), result.conditions.reset_index())
-        if effects:
-            sheet(wb.create_sheet("effects"), pd.concat(effects, ignore_index=True)[
-                ["setup", "factor", "low", "high", "change_low", "change_high", "swing"]])
-        cols = ["drive", "perturbation", "setup", "score", "rank", "score_change",
-                "rank_change", "feasible"] + [c for c in table.columns
-                                              if c.endswith("_change_pct")]
-        sheet(wb.create_sheet("table"), table[cols])
-        info = wb.create_sheet("settings")
-        for k, v in result.settings.items():
-            if k in _TIMING_KEYS:  # a rerun writes the same cells (timings go to the log)
-                continue
-            info.append([k, _xl(v if not isinstance(v, (list, tuple)) else ", ".join(map(str, v)))])
-        info.append(["units", units])
-        info.append(["baseline", result.baseline])
-        info.append(["objective", result.objective.name])
-        wb.save(work / "whatif.xlsx")
+        _write_workbook(result, table, effects, units, work / "whatif.xlsx")
     for p in sorted(out.rglob("*")):
         if p.is_file():
             files[str(p.relative_to(out))] = p
     return files
+
+
+_CHANGE_PCT = "_change_pct"
+
+
+def _write_workbook(result, table, effects, units, path):
+    """``whatif.xlsx``: sheets robust, conditions, effects, table and settings, each laid out
+    and set to print with :mod:`planner.report.sheets` (the wide table across pages, the
+    drive, condition and setup repeated on each)."""
+    from openpyxl import Workbook  # heavy, needed only here
+    from openpyxl.styles import PatternFill
+    from openpyxl.utils import get_column_letter
+
+    wb = Workbook()
+    what = f"shockplan what-if ({units}), baseline {result.baseline}"
+    fragile_fill = PatternFill("solid", fgColor="F8CBAD")
+
+    def area(frame, last):
+        return f"A1:{get_column_letter(frame.shape[1])}{last}"
+
+    ws = wb.active
+    ws.title = "robust"
+    rob = result.robust.reset_index().round(4)
+    shares = {c: "0.0%" for c in rob.columns if str(c).endswith("_share")}
+    last = write_table(ws, rob, formats=shares)
+    for r, flag in enumerate(rob["fragile"].tolist(), start=2):
+        if flag:
+            for cell in ws[r]:
+                cell.fill = fragile_fill
+    print_setup(ws, units=units, area=area(rob, last), title_rows="1:1",
+                footer=f"{what}: robust ranking over the conditions; fragile rows filled")
+    cond = result.conditions.reset_index()
+    ws = wb.create_sheet("conditions")
+    last = write_table(ws, cond, headers=[str(c) if c in result.conditions.columns
+                                          else column_label(c) for c in cond.columns],
+                       freeze_cols=2)
+    print_setup(ws, units=units, area=area(cond, last), title_rows="1:1", title_cols="A:B",
+                footer=f"{what}: the conditions (a factor's value in each)")
+    if effects:
+        eff = pd.concat(effects, ignore_index=True)[
+            ["setup", "factor", "low", "high", "change_low", "change_high", "swing"]]
+        ws = wb.create_sheet("effects")
+        last = write_table(ws, eff, freeze_cols=2)
+        print_setup(ws, units=units, area=area(eff, last), title_rows="1:1",
+                    title_cols="A:B", footer=f"{what}: each factor's effect on the score")
+    changes = [c for c in table.columns if c.endswith(_CHANGE_PCT)]
+    cols = ["drive", "perturbation", "setup", "score", "rank", "score_change",
+            "rank_change", "feasible"] + changes
+    heads = [f"{column_label(c[:-len(_CHANGE_PCT)])} change [%]" if c in changes
+             else column_label(c) for c in cols]
+    # pages across break between metric families (tire force, ride height, ...)
+    groups = ["run"] * (len(cols) - len(changes)) + [
+        c[:-len(_CHANGE_PCT)].rsplit("_", 1)[0] for c in changes]
+    ws = wb.create_sheet("table")
+    frame = table[cols]
+    last = write_table(ws, frame, headers=heads, freeze_cols=3,
+                       formats={c: "0.00" for c in changes})
+    print_setup(ws, units=units, area=area(frame, last), title_rows="1:1", title_cols="A:C",
+                group_starts=[j + 1 for j in range(1, len(groups)) if groups[j] != groups[j - 1]],
+                footer=f"{what}: every setup in every condition; metric changes from the "
+                       "setup's nominal")
+    rows = []
+    for k, v in result.settings.items():
+        if k in _TIMING_KEYS:  # a rerun writes the same cells (timings go to the log)
+            continue
+        if k == "agreement":  # screening's nominal scores checked in the time domain
+            rows.append(("screening vs time domain (nominal)", describe_agreement(v, what=None)))
+            continue
+        rows.append((k, _xl(v if not isinstance(v, (list, tuple)) else ", ".join(map(str, v)))))
+    rows += [("units", units), ("baseline", result.baseline),
+             ("objective", result.objective.name)]
+    ws = wb.create_sheet("settings")
+    last = write_key_values(ws, rows)
+    print_setup(ws, units=units, area=f"A1:B{last}", footer=f"{what}: settings")
+    wb.save(path)
 
 
 def _xl(x):

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from scipy.stats import spearmanr
 from threadpoolctl import threadpool_info, threadpool_limits
 from tqdm.auto import tqdm
 
@@ -144,6 +145,28 @@ def _evaluate_group(plant, drive, setups, library, method, oversample, band_hz):
         return predict_setups(plant, drive, setups, library, oversample=oversample,
                               band_hz=band_hz).table
     return screen_setups(plant, drive, setups, library, band_hz=band_hz).table
+
+
+def _nominal_agreement(plant, drive, setups, library, objective, baseline, nominal, metrics,
+                       oversample, band_hz):
+    """Screening's nominal scores against the time domain's on the same setups.
+
+    Returns
+    -------
+    dict
+        ``spearman`` (NaN for fewer than 3 setups), ``n``, ``same_best``,
+        ``screening_best``, ``time_best``: what :func:`planner.screen.describe_agreement`
+        reads.
+    """
+    td = predict_setups(plant, drive, setups, library, oversample=oversample,
+                        band_hz=band_hz).table
+    td_score = score_setups(td[metrics], objective, baseline=baseline).table["score"]
+    scr_score = nominal.loc[td_score.index, "score"]
+    rho = (float(spearmanr(scr_score, td_score).statistic) if len(td_score) > 2
+           else float("nan"))
+    time_best, screening_best = td_score.idxmin(), scr_score.idxmin()
+    return {"spearman": rho, "n": int(len(td_score)), "same_best": bool(time_best == screening_best),
+            "time_best": time_best, "screening_best": screening_best}
 
 
 def _group_setups(setups, members, effects, variants):
@@ -468,6 +491,10 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
         ref = nominal.loc[table["setup"], m].to_numpy(dtype=float)
         with np.errstate(divide="ignore", invalid="ignore"):
             table[f"{m}_change_pct"] = 100.0 * (table[m].to_numpy(dtype=float) / ref - 1.0)
+    agreement = None
+    if method == "screening":  # the decision checked where it is made: the time domain
+        agreement = _nominal_agreement(base_plant, drives[0], setups, library, objective,
+                                       base.name, nominal, metrics, oversample, band_hz)
     robust = robust_table(table, names, rank_tolerance, fragile_share)
     ptab = perturbations.table()
     conditions = pd.concat([ptab.assign(drive=d.name) for d in drives]).reset_index()
@@ -482,6 +509,11 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                 "design": perturbations.design, "source": perturbations.settings.get("source"),
                 "scheduler": kind, "address": address, "n_workers": int(workers),
                 "n_tasks": int(n_tasks)}
+    if agreement is not None:
+        settings["agreement"] = agreement
+        log.info("what-if by screening, nominal condition checked in the time domain: "
+                 "Spearman %.3f over %d setups, same best: %s", agreement["spearman"],
+                 agreement["n"], agreement["same_best"])
     log.info("what-if: %d setups x %d conditions (%d evaluations, %s, scheduler %s) in %.1f s",
              len(setups), len(conditions), n_eval, method, kind, elapsed)
     return WhatIf(table=table, robust=robust, perturbations=perturbations, conditions=conditions,

@@ -304,7 +304,7 @@ def _number(where, key, x):
     return float(x)
 
 
-def _parse_factor(t, units, where, base_dir):
+def _parse_factor(t, units, where, base_dir, *, stated_units=True):
     if not isinstance(t, dict):
         raise PlannerError(f"{where}: must be a table [[factor]]")
     unknown = sorted(set(t) - _FACTOR_KEYS)
@@ -416,7 +416,9 @@ def _parse_factor(t, units, where, base_dir):
                 if not path.is_file():
                     raise _fail(where, "levels", f"names drive file {str(path)!r}, which does not "
                                 "exist", "fix the path (relative to the perturbation file)")
-                lv.append(read_drive(path, units=units))
+                # the file's units when it states them (the drive's marker must agree),
+                # else the drive file's marker, else SI
+                lv.append(read_drive(path, units=units if stated_units else None))
             levels = tuple(lv)
         else:
             levels = tuple(value(x, "levels") for x in raw)
@@ -523,7 +525,8 @@ def read_perturbations(path):
     tables = doc.get("factor")
     if not isinstance(tables, list) or not tables:
         raise _fail(where, "factor", "is missing", "add at least one [[factor]] table")
-    factors = [_parse_factor(t, units, f"{where}: factor {j + 1}", path.parent)
+    factors = [_parse_factor(t, units, f"{where}: factor {j + 1}", path.parent,
+                             stated_units="units" in doc)
                for j, t in enumerate(tables)]
     if design != "monte-carlo":
         for f in factors:

@@ -207,7 +207,9 @@ def _edit_text(path, old, new, *, count=1):
 
 
 def _edit_frame(path, func):
-    frame = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
+    # a CSV's leading '# units: ...' line is skipped, and not written back
+    frame = (pd.read_parquet(path) if path.suffix == ".parquet" else
+             pd.read_csv(path, comment="#"))
     frame = func(frame)
     if path.suffix == ".parquet":
         frame.to_parquet(path, index=False)
@@ -296,7 +298,7 @@ def make_cases(base, root=None):
         o = o or out(name, "")
         argv = ("-q", "rank", "--model", "paper", "--drive", str(base["drive"]), "--shocks",
                 str(shocks or base["shocks"]), "--setups", str(setups or base["setups"]),
-                "--out", o, "--top", "2", "--no-uncertainty")
+                "--out", o, "--simulate", "2", "--no-uncertainty")
         if objective:
             argv += ("--objective", str(objective))
         ins = tuple(str(x) for x in (objective, setups, shocks) if x)
@@ -481,7 +483,8 @@ def make_cases(base, root=None):
                 "\n".join(",".join(r.split(",")[:4]) for r in setups_text.splitlines()) + "\n")
     setups_case("setups/empty-cell", ["setups.csv", "RF", "empty"],
                 setups_text.replace("L12,L12", "L12,", 1))
-    setups_case("setups/no-rows", ["setups.csv", "no setups"], setups_text.splitlines()[0] + "\n")
+    setups_case("setups/no-rows", ["setups.csv", "no setups"],  # the unit marker and header
+                "".join(setups_text.splitlines(keepends=True)[:2]))
     setups_case("setups/binary", ["setups.csv"], bytes(range(256)) * 8)
     setups_case("setups/header-typo", ["setups.csv", "setup"],
                 setups_text.replace("setup,", "setpu,", 1))
@@ -601,7 +604,7 @@ def make_cases(base, root=None):
         path.write_text(text)
         o = out(name, "")
         argv = ("-q", "plan", "--vehicle", "paper", "--shocks", str(base["shocks"]),
-                "--budget-min", "60", "--rig", str(path), "--out", o)
+                "--budget-min", "60", "--rig-costs", str(path), "--out", o)
         cases.append(Case(name, argv, tuple(expect), out=o, inputs=(str(path),)))
 
     rig_text = base["rig"].read_text()
