@@ -679,6 +679,31 @@ def _unit_system(text):
     return text
 
 
+def _int_at_least(low):
+    """An argparse type: an integer >= `low`, refused before any work with the bound named."""
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
+        return value
+    return parse
+
+
+def _share(text):
+    """An argparse type: a share in (0, 1] (e.g. 0.01 for the best 1 %)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number in (0, 1], got {text!r}") from None
+    if not 0.0 < value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1], e.g. 0.01 for the best 1 %, got "
+                                         f"{value:g}")
+    return value
+
+
 #: ``--units`` default of the commands that read one drive file / several (issue 23): the
 #: file's unit marker, else SI; a given ``--units`` that contradicts the marker is an error.
 _UNITS_OF_DRIVE = "the drive file's own, from its '# units:' line, else SI"
@@ -871,7 +896,7 @@ def build_parser():
     ident_p.add_argument("--coherence-min", type=float, default=0.9,
                          help="coherence (0 to 1) below which band ends are replaced "
                          "(default %(default)s)")
-    ident_p.add_argument("--max-order", type=int, default=10, metavar="N",
+    ident_p.add_argument("--max-order", type=_int_at_least(2), default=10, metavar="N",
                          help="highest denominator order (poles) a pair's fit may take "
                          "(default %(default)s; raise it when identify warns that a pair "
                          "took the highest order)")
@@ -915,7 +940,7 @@ def build_parser():
                             "shock id (all corners) or four LF,RF,LR,RR (default: the first "
                             "setup)")
             sp.add_argument("--objective", help=_OBJECTIVE_HELP)
-            sp.add_argument("--simulate", type=int, default=40, metavar="N",
+            sp.add_argument("--simulate", type=_int_at_least(1), default=40, metavar="N",
                             help="the best N setups by screening simulated in the time "
                             "domain (default %(default)s; the baseline and a spread of the "
                             "others are checked besides)")
@@ -1060,11 +1085,12 @@ def build_parser():
     sw.add_argument("--baseline", help="baseline: a setup of --setups by name, one shock id "
                     "(all corners) or four LF,RF,LR,RR (default: the first setup)")
     sw.add_argument("--objective", help=_OBJECTIVE_HELP)
-    sw.add_argument("--simulate-share", type=float, default=0.01, metavar="SHARE",
+    sw.add_argument("--simulate-share", type=_share, default=0.01, metavar="SHARE",
                     help="share of the screened setups simulated in the time domain, the best "
                     "by screening (default %(default)s)")
-    sw.add_argument("--simulate", type=int, metavar="N", help="simulate the best N in the time domain "
-                    "instead of --simulate-share (default: --simulate-share)")
+    sw.add_argument("--simulate", type=_int_at_least(1), metavar="N",
+                    help="simulate the best N in the time domain instead of --simulate-share "
+                    "(default: --simulate-share)")
     sw.add_argument("--combine", choices=["mean", "worst"], default="mean",
                     help="a setup's score over the cases (default %(default)s)")
     sw.add_argument("--chunk-size", type=int, default=20000,

@@ -56,6 +56,9 @@ DEMO_INPUT_FILES = {
     "whatif.toml": "the README's what-if study (what-if TOML)",
     "rig_map.toml": "a channel map of the canonical channels to themselves, SI, sign 1",
 }
+#: The SI unit name of each quantity (the channel map's unit of factor 1), as the demo's
+#: channel map and rig files name them.
+_SI_UNIT = {q: next(u for u, f in table.items() if f == 1.0) for q, table in UNIT_FACTORS.items()}
 #: Folder of the session's runs as a real rig writes them (:func:`write_demo_rig_files`).
 DEMO_RIG_FILES = "rig_files"
 
@@ -288,11 +291,9 @@ def write_demo_inputs(folder, *, units="imperial", channels=ALL_CHANNELS, overwr
     objective_to_toml(default_objective(), paths["objective.toml"], overwrite=True)
     atomic_write_text(paths["constraints.toml"], _constraints_toml(units))
     atomic_write_text(paths["whatif.toml"], _WHATIF_TOML.replace("@UNITS@", units))
-    si_unit = {q: next(u for u, f in table.items() if f == 1.0)
-               for q, table in UNIT_FACTORS.items()}
     rig_map = {"format": CHANNEL_MAP_FORMAT,
                "name": "canonical channels in SI (shockplan demo)",
-               "channels": {c: {"source": c, "units": si_unit[quantity_of(c)], "sign": 1}
+               "channels": {c: {"source": c, "units": _SI_UNIT[quantity_of(c)], "sign": 1}
                             for c in channels}}
     atomic_write_toml(paths["rig_map.toml"], rig_map, header=(
         f"Channel map ({CHANNEL_MAP_FORMAT}), written by shockplan demo: every channel of the\n"
@@ -325,8 +326,6 @@ def write_demo_rig_files(folder, session, *, overwrite=False):
     dict of str to pathlib.Path
         Run name -> written file, in run order.
     """
-    si_unit = {q: next(u for u, f in table.items() if f == 1.0)
-               for q, table in UNIT_FACTORS.items()}
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     paths = {}
@@ -334,7 +333,7 @@ def write_demo_rig_files(folder, session, *, overwrite=False):
         names = [c for c in ALL_CHANNELS if c in run.channels]
         paths[run.name] = write_rpc3(
             folder / f"{run.name}.rsp", {c: run.channels[c] for c in names},
-            fs_hz=session.fs_hz, units={c: si_unit[quantity_of(c)] for c in names},
+            fs_hz=session.fs_hz, units={c: _SI_UNIT[quantity_of(c)] for c in names},
             overwrite=overwrite)
     log.info("demo: wrote %d runs as RPC III files to %s", len(paths), folder)
     return paths

@@ -445,9 +445,8 @@ def read_ranking_baseline(path):
         lines = path.read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise PlannerError(f"{path}: cannot read the ranking ({exc}); check the path") from None
-    while lines and lines[0].lstrip().startswith("#"):
-        lines.pop(0)
-    rows = list(csv.DictReader(lines, skipinitialspace=True))
+    _, n_skip = csv_preamble(lines, where=str(path), error=PlannerError)
+    rows = list(csv.DictReader(lines[n_skip:], skipinitialspace=True))
     if not rows or "baseline" not in rows[0] or _SETUP_COLUMN not in rows[0]:
         return None
     marked = [r[_SETUP_COLUMN].strip() for r in rows

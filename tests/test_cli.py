@@ -558,6 +558,20 @@ def test_a_renamed_option_is_refused_with_its_new_name(argv, old, new, capsys):
     assert err.count("\n") == 1 and repr(old) in err and f"renamed {new} " in err, err
 
 
+@pytest.mark.parametrize("argv, option, bound", [
+    (["rank", "--simulate", "0"], "--simulate", ">= 1"),
+    (["sweep", "--simulate", "-3"], "--simulate", ">= 1"),
+    (["sweep", "--simulate-share", "2"], "--simulate-share", "(0, 1]"),
+    (["identify", "s", "--out", "m.npz", "--max-order", "1"], "--max-order", ">= 2"),
+    (["identify", "s", "--out", "m.npz", "--max-order", "ten"], "--max-order", ">= 2"),
+])
+def test_new_counts_are_refused_out_of_range_before_any_work(argv, option, bound, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and f"argument {option}" in err and bound in err, err
+
+
 def test_one_option_name_means_one_thing_across_commands():
     """--top is whatif's only (setups taken from a ranking); --rig is 'rig simulate''s only
     (the rig kind); rank and sweep simulate --simulate setups."""

@@ -528,3 +528,20 @@ def test_missing_setups_file_raises(tmp_path):
 def test_docstring_examples_run():
     result = doctest.testmod(setups_mod, optionflags=doctest.ELLIPSIS)
     assert result.failed == 0 and result.attempted > 0
+
+
+def test_read_ranking_baseline(tmp_path):
+    """The setup a ranking's scores are ratios to: its `baseline` column, after the unit
+    marker; None without the column; more than one marked is refused, naming the fix."""
+    from planner.setups import read_ranking_baseline
+
+    path = tmp_path / "ranking.csv"
+    path.write_text("# units: imperial\nrank,setup,LF,RF,LR,RR,baseline\n"
+                    "1,best,L28,L28,L28,L28,False\n2,base,B20,B20,B20,B20,True\n")
+    assert read_ranking_baseline(path) == "base"
+    path.write_text("setup,LF,RF,LR,RR\nbest,L28,L28,L28,L28\n")
+    assert read_ranking_baseline(path) is None
+    path.write_text("setup,LF,RF,LR,RR,baseline\na,B20,B20,B20,B20,True\n"
+                    "b,L28,L28,L28,L28,True\n")
+    with pytest.raises(PlannerError, match="marks 2 setups.*--baseline"):
+        read_ranking_baseline(path)
