@@ -2,7 +2,7 @@
 
 Run::
 
-    python benchmarks/bench_optimize.py [--drive-s 120] [--knots 0.025 0.05 0.1 0.25 0.5]
+    python benchmarks/bench_optimize.py [--drive-s 120] [--knots quantiles | 0.025 0.05 0.1 0.25 0.5]
 
 Prints, one figure per line, each timing with the machine's 1-minute load
 average at that moment:
@@ -10,7 +10,8 @@ average at that moment:
 1. the problem: the known paper car (its 7-DOF model, the same loop an identified
    model goes through), a track drive of ``--drive-s`` seconds at 100 Hz, the
    built-in crate, the default objective and constraints, left-right symmetry (2
-   curve groups), ``--knots`` a side (default 5: 12 variables a group);
+   curve groups), knots on the shock speeds' quantiles (default) or ``--knots`` (5 a
+   side: 12 variables a group); the scan's share of the call;
 2. one optimization, first call in this process (it compiles the loop's step and
    its adjoint when a C compiler is found): wall time, its build (compilation)
    and solve parts, IPOPT's status and iterations, the closed-loop evaluations
@@ -90,9 +91,11 @@ def main(argv=None):
     """Run the benchmark and print its figures."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--drive-s", type=float, default=120.0, help="track drive length [s]")
-    p.add_argument("--knots", type=float, nargs="+", default=list(opt_mod.DEFAULT_KNOTS_M_S),
-                   help="bump knot velocities [m/s] (rebound mirrors them)")
+    p.add_argument("--knots", nargs="+", default=["quantiles"],
+                   help="'quantiles' (the default: on the shock speeds) or bump knot velocities "
+                   "[m/s] (rebound mirrors them), e.g. 0.025 0.05 0.1 0.25 0.5 (the fixed knots)")
     args = p.parse_args(argv)
+    knots = "quantiles" if args.knots == ["quantiles"] else [float(k) for k in args.knots]
     vehicle = example_vehicle()
     model = build_full_car(vehicle)
     library = read_shock_library(DEMO_LIBRARY_PATH)
@@ -103,14 +106,14 @@ def main(argv=None):
           f"{jit_available()}")
     print(f"problem: paper car (known model), {args.drive_s:g} s track drive at 100 Hz, "
           f"{len(library)} crate shocks, objective '{default_objective().name}', left-right, "
-          f"{len(args.knots)} knots a side")
+          f"knots {'on the quantiles' if knots == 'quantiles' else knots}")
     times = []
     for call in ("first call", "second call"):
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             opt = opt_mod.optimize_curves(model, drive, library, baseline="B20",
-                                          knots_m_s=args.knots)
+                                          knots_m_s=knots)
         wall = time.perf_counter() - t0
         times.append(wall)
         s = opt.solver
@@ -120,6 +123,16 @@ def main(argv=None):
               f" ms each), {s['n_grad']} adjoint sweeps "
               f"({1e3 * s['grad_s'] / max(s['n_grad'], 1):.0f} ms each); "
               f"{opt.space.n_vars} variables")
+        scan = opt.settings.get("scan") or {}
+        if scan:
+            scan_s = scan["screen_s"] + scan["verify_s"]
+            print(f"  scan: {scan['n_screened']} screened in {scan['screen_s']:.2f} s, "
+                  f"{scan['n_verified']} verified in {scan['verify_s']:.2f} s: "
+                  f"{100 * scan_s / wall:.0f} % of the call; best {scan['best']} "
+                  f"{scan['score']:.4f} (linear {scan['linear_score']:.4f}); the optimum is "
+                  f"the {s.get('source')}'s; knots {opt.settings['knots_m_s']} m/s (moved "
+                  f"{100 * opt.settings['knot_update']['moved']:.0f} %, updated "
+                  f"{opt.settings['knot_update']['updated']})")
     print(f"result: optimum {opt.score:.4f}, crate best {opt.crate_best} "
           f"{opt.table.loc[opt.crate_best, 'score']:.4f} (gain {100 * opt.gap:.2f} %)")
     t_ad, t_fd, err, n = gradient_check(model, drive, opt)

@@ -68,10 +68,11 @@ DEMO_RIG_FILES = "rig_files"
 # force ratio of 1 to 3 at low speed, as most race valving): (low-speed slope, high-speed
 # slope [damping]; the ratio's velocity; max force).
 _CONSTRAINTS = {
-    "imperial": {"low": (3.0, 225.0), "high": (0.0, 85.0), "ratio_v": 2.0,
+    "imperial": {"low": (3.0, 225.0), "high": (0.0, 85.0), "segment": (5.7, 228.0), "ratio_v": 2.0,
                  "max_force": 2250.0, "damping": "lbf/(in/s)", "velocity": "in/s",
                  "force": "lbf", "reach": "1 m/s (39.4 in/s)"},
-    "SI": {"low": (500.0, 40000.0), "high": (0.0, 15000.0), "ratio_v": 0.05,
+    "SI": {"low": (500.0, 40000.0), "high": (0.0, 15000.0), "segment": (1000.0, 40000.0),
+           "ratio_v": 0.05,
            "max_force": 10000.0, "damping": "N/(m/s)", "velocity": "m/s", "force": "N",
            "reach": "1 m/s"},
 }
@@ -165,7 +166,9 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         # the optimizer's C compile (once per machine) needs only the model: a worker does it
         # while this process ranks; the FRF plots (one core) are drawn by a worker while
         # this process optimizes (one core)
-        steps = _start_job(_compile_optimizer_job, model, drive, library, baseline)
+        # spawned: the compile simulates the baseline (the knots sit on its shock speeds)
+        steps = _start_job(_compile_optimizer_job, model, drive, library, baseline,
+                           method="spawn")
         plots = None
         try:
             write_csv(work / "model_summary.csv", model.summary(), units=units)
@@ -342,7 +345,7 @@ def write_demo_rig_files(folder, session, *, overwrite=False):
 def _constraints_toml(units):
     """The text of the demo's ``constraints.toml`` in `units` (see :data:`_CONSTRAINTS`)."""
     c = _CONSTRAINTS[units]
-    low, high = (f"[{a!r}, {b!r}]" for a, b in (c["low"], c["high"]))
+    low, high, seg = (f"[{a!r}, {b!r}]" for a, b in (c["low"], c["high"], c["segment"]))
     ratio = f"{{ velocity = {c['ratio_v']!r}, min = 1.0, max = 3.0 }}"
 
     def line(text, comment):  # comments in one column
@@ -359,12 +362,19 @@ def _constraints_toml(units):
         line("[bump]", "compression, v > 0"),
         line(f"low_speed_slope = {low}", f"{c['damping']}: from 0 to the first knot"),
         line(f"high_speed_slope = {high}", f"{c['damping']}: beyond the last knot"),
+        line(f"segment_slope = {seg}", f"{c['damping']}: every segment where the car spends "
+             "99 % of its time"),
         "\n",
         line("[rebound]", "extension, v < 0"),
         line(f"low_speed_slope = {low}", f"{c['damping']}"),
         line(f"high_speed_slope = {high}", f"{c['damping']}"),
+        line(f"segment_slope = {seg}", f"{c['damping']}"),
         "\n",
         "[shape]\n",
+        line("digressive = true", "slopes do not grow away from 0"),
+        line("min_slope_ratio = 0.15", "no segment flatter than 0.15 x its side's first"),
+        line("crate_envelope = [0.333, 3.0]", "forces within 1/3 of the crate's weakest, 3 x "
+             "its strongest"),
         f"# |F(-v)| / F(v) between min and max at v = velocity [{c['velocity']}]\n",
         f"rebound_bump_ratio = {ratio}\n",
         line(f"max_force = {c['max_force']!r}", f"{c['force']}: |F| at every knot and at {c['reach']}"),
@@ -484,19 +494,21 @@ def _warm_one_setup_loop():
     simulate(plant, drive, [library["B20"]] * 4, oversample=1, rig=_zero_rig(plant, drive))
 
 
-def _start_job(func, *args):
-    """Start ``func(*args)`` on a forked worker process (POSIX), or run it here.
+def _start_job(func, *args, method="fork"):
+    """Start ``func(*args)`` on a worker process started by `method` (POSIX ``fork``; or
+    ``spawn``, a fresh interpreter, for a job that runs a numba parallel kernel: a process
+    forked after one used its OpenMP pool cannot use it), or run it here.
 
     Returns the future, or None when it already ran in this process.
     """
     import concurrent.futures
     import multiprocessing
 
-    if "fork" not in multiprocessing.get_all_start_methods():
+    if method not in multiprocessing.get_all_start_methods():
         func(*args)
         return None
     pool = concurrent.futures.ProcessPoolExecutor(
-        max_workers=1, mp_context=multiprocessing.get_context("fork"))
+        max_workers=1, mp_context=multiprocessing.get_context(method))
     future = pool.submit(func, *args)
     pool.shutdown(wait=False)
     return future

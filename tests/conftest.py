@@ -127,3 +127,39 @@ def baseline_setup():
     from planner.setups import Setup
 
     return Setup("baseline", {c: "B20" for c in CORNERS})
+
+
+@pytest.fixture(scope="session")
+def gt_vehicle():
+    """A GT-like car unlike the paper's (issue 24): heavier, stiffer, a flexible chassis
+    (:func:`ident.models.vehicle.example_gt_vehicle`)."""
+    from ident.models.vehicle import example_gt_vehicle
+
+    return example_gt_vehicle()
+
+
+@pytest.fixture(scope="session")
+def gt_identified(gt_vehicle, paper_plan):
+    """The GT-like car identified from the paper's plan (5 runs of 100 s) at 2 % sensor
+    noise, with the defaults."""
+    import warnings
+
+    from ident.identify.pipeline import identify_session
+    from ident.sim.rig import simulate_session
+
+    plan = replace(paper_plan, runs=tuple(replace(r, duration_s=100.0) for r in paper_plan.runs),
+                   noise=0.02)
+    session = simulate_session(plan, gt_vehicle)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return identify_session(session)
+
+
+@pytest.fixture(scope="session")
+def gt_track_drive(gt_vehicle):
+    """A 30 s track drive for the GT-like car."""
+    from ident.data.drive import make_track_drive
+
+    return make_track_drive(duration_s=30.0, fs_hz=100.0, seed=24,
+                            wheelbase_m=gt_vehicle.a_m + gt_vehicle.b_m,
+                            track_width_m=gt_vehicle.track_front_m, name="GT track")

@@ -202,3 +202,54 @@ def test_whatif_study_small(tmp_path):
     assert (springs["conditions"] == 5).all()   # nominal, front and rear at 0.9 and 1.1
     moved = springs[springs["setup"] != "baseline"]
     assert (moved["worst_score"] > moved["nominal_score"]).all()
+
+
+def _fake_case(path, rng, *, run_s, error, light=0):
+    """A cached identification of the interval study: 20 setups x 14 metrics, relative errors
+    of size `error` (one per metric, shared by the setups), a random part of +-0.2 % at scale 1,
+    a fit term of 0.05 %."""
+    P = rng.uniform(1.0, 2.0, (20, 14))
+    e = error * rng.standard_normal(14)
+    np.savez(path, P=P, K=P / (1 + e), random_lo=np.full_like(P, 0.998),
+             random_hi=np.full_like(P, 1.002), fit=np.full_like(P, 5e-4),
+             reduction=np.zeros_like(P), discretization=np.full_like(P, 3e-4),
+             package_scale=1.0, grid_df_hz=0.05, light_modes=light, identify_s=1.0,
+             intervals_s=1.0, run_s=run_s)
+
+
+def test_interval_calibration_study_small(tmp_path, rng):
+    """The study's calibration from cached identifications (the study reuses them; a real
+    identification takes 20-60 s): the fitted scale is the smallest giving 95 % pooled coverage
+    on the calibration car, an identification with a lightly damped mode is left out of the
+    fit, and every table is written."""
+    study = _load("interval_calibration")
+    cache = tmp_path / "cases"
+    cache.mkdir()
+    for k in range(2):
+        _fake_case(cache / f"paper_30s_seed{study.SEED0 + k}.npz", rng, run_s=30.0, error=0.002)
+        _fake_case(cache / f"GT-like_30s_seed{study.SEED0 + k}.npz", rng, run_s=30.0,
+                   error=0.001)
+        _fake_case(cache / f"heavy_stiff_30s_seed{study.SEED0 + k}.npz", rng, run_s=30.0,
+                   error=0.05, light=1)
+    args = ["--out", str(tmp_path), "--cars", "paper", "heavy stiff", "GT-like", "--seeds", "2",
+            "--run-s", "30"]
+    assert study.main(args) == 0
+    cases = pd.read_csv(tmp_path / "interval_cases.csv")
+    cars = pd.read_csv(tmp_path / "interval_cars.csv")
+    calib = pd.read_csv(tmp_path / "interval_calibration.csv").set_index("fit")
+    assert list(cars["car"]) == ["paper", "heavy stiff", "GT-like"]
+    assert list(cars["role"]) == ["calibration", "calibration", "held-out"]
+    assert list(cars["light_modes"]) == [0, 2, 0]
+    k = calib.loc["constant", "scale"]
+    assert calib.loc["constant", "calibration_cases"] == 2  # the light-mode cases left out
+    paper = [study.load_case(cache / f"paper_30s_seed{study.SEED0 + i}.npz") for i in range(2)]
+    step = study.SCALES[1] - study.SCALES[0]
+    assert np.mean([study.coverage(c, k) for c in paper]) >= study.TARGET
+    assert np.mean([study.coverage(c, k - step) for c in paper]) < study.TARGET
+    # T below the reference run length: the run-length fit is the constant one
+    assert calib.iloc[1]["scale"] == k
+    assert np.allclose(cases["coverage_fitted"],
+                       [study.coverage(study.load_case(cache / f"{c.replace(' ', '_')}_30s_seed"
+                                                      f"{s}.npz"), k)
+                        for c, s in zip(cases["car"], cases["seed"])])
+    assert (cars.loc[cars["car"] == "GT-like", "coverage_fitted"] > 0.9).all()

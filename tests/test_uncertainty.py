@@ -9,15 +9,21 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from ident.identify.frf import MODEL_INPUTS, Frf
+from ident.identify.model import VehicleModel
 from planner.objective import Objective
 from planner.screen import screen_setups
 from planner.setups import enumerate_setups
 from planner.uncertainty import (
+    LIGHT_DAMPING_ZETA,
     MAX_RELATIVE_ERROR,
+    RANDOM_ERROR_SCALE,
     FrfPlant,
     Uncertainty,
+    combine_terms,
     frf_relative_error,
+    light_modes,
     prediction_uncertainty,
+    random_error_scale,
     unresolved_pairs,
 )
 
@@ -219,7 +225,8 @@ def test_intervals_seed_quantiles_and_settings(known_plant, track_drive, demo_li
     assert list(u.ratio_lo.index) == [s.name for s in few_setups]
     assert u.settings == {"n_draws": 6, "seed": 1, "quantiles": (0.0, 1.0),
                           "n_averages": N_AVERAGES, "smooth_width_hz": 0.6,
-                          "terms": ["random"], "oversample": None}
+                          "terms": ["random"], "oversample": None,
+                          "random_scale": RANDOM_ERROR_SCALE, "light_modes": []}
     assert set(u.components) == {"random_lo", "random_hi"}
     pred = screen_setups(known_plant, track_drive, few_setups, demo_library).table.iloc[::-1]
     t = u.intervals(pred)
@@ -296,6 +303,100 @@ def test_prediction_uncertainty_bad_inputs(paper_model, known_plant, track_drive
                                few_setups, demo_library, n_draws=1)
 
 
+# ---------------------------------------------------------------- calibration and light modes
+def test_combine_terms_stretches_the_random_part_and_adds_systematic_in_quadrature():
+    lo_r, hi_r = np.array([0.99, 0.995, 1.001]), np.array([1.02, 1.004, 1.01])
+    fit, disc = np.array([0.003, np.nan, -0.004]), np.array([0.0004, 0.0, 0.0003])
+    lo, hi = combine_terms(lo_r, hi_r, {"fit": fit, "discretization": disc})
+    sys2 = np.nan_to_num(fit) ** 2 + disc**2
+    up, down = np.maximum(hi_r - 1, 0), np.maximum(1 - lo_r, 0)
+    assert_allclose(hi, hi_r + np.sqrt(up**2 + sys2) - up, rtol=RTOL_EXACT)
+    assert_allclose(lo, lo_r - np.sqrt(down**2 + sys2) + down, rtol=RTOL_EXACT)
+    # without systematic terms the factor stretches the bounds about 1
+    lo2, hi2 = combine_terms(lo_r, hi_r, {}, random_factor=2.0)
+    assert_allclose(lo2, 1 - 2 * (1 - lo_r), rtol=RTOL_EXACT)
+    assert_allclose(hi2, 1 + 2 * (hi_r - 1), rtol=RTOL_EXACT)
+    # a factor of 0 leaves the systematic half-widths alone
+    lo0, hi0 = combine_terms(lo_r, hi_r, {"fit": fit}, random_factor=0.0)
+    assert_allclose(hi0 - 1, np.abs(np.nan_to_num(fit)), atol=1e-15)
+    assert_allclose(1 - lo0, np.abs(np.nan_to_num(fit)), atol=1e-15)
+
+
+def test_random_scale_option_and_its_default(known_plant, track_drive, demo_library,
+                                             few_setups):
+    """The random part's scale defaults to random_error_scale of the FRF and is recorded;
+    twice the scale gives (for small errors) twice the random half-widths; a negative or
+    non-finite scale is refused."""
+    frf = _frf(known_plant, 0.99)
+    model = SimpleNamespace(frf=frf)
+    u = _unc(known_plant, 0.99, track_drive, few_setups, demo_library)
+    assert u.settings["random_scale"] == random_error_scale(frf)
+    assert u.settings["light_modes"] == []
+    u1 = prediction_uncertainty(model, track_drive, few_setups, demo_library, n_draws=20,
+                                random_scale=1.0)
+    u2 = prediction_uncertainty(model, track_drive, few_setups, demo_library, n_draws=20,
+                                random_scale=2.0)
+    assert u1.settings["random_scale"] == 1.0
+    w1 = (u1.ratio_hi - u1.ratio_lo).to_numpy()
+    w2 = (u2.ratio_hi - u2.ratio_lo).to_numpy()
+    assert_allclose(w2 / w1, 2.0, rtol=RTOL_WIDTH_SCALING_SMALL)
+    for bad in (-1.0, np.nan):
+        with pytest.raises(ValueError, match="random_scale must be a finite number >= 0"):
+            prediction_uncertainty(model, track_drive, few_setups, demo_library, n_draws=2,
+                                   random_scale=bad)
+
+
+def _modal_model(zeta, f_hz=13.0, n_out=4, light_pairs=None):
+    """A VehicleModel whose pairs are one mode of damping ratio `zeta` at `f_hz` (``light_pairs``
+    of them; the others a mode at zeta 0.3 and 3 Hz), residues that make each pair's peak 1."""
+    n_in = 11
+    shape = (n_out, n_in, 1)
+    light = np.zeros((n_out, n_in), dtype=bool)
+    light.flat[:light.size if light_pairs is None else light_pairs] = True
+    z = np.where(light, zeta, 0.3)[..., None]
+    wn = 2 * np.pi * np.where(light, f_hz, 3.0)[..., None]
+    p = -z * wn + 1j * wn * np.sqrt(1 - z**2)
+    r = (z * wn) * np.ones(shape) / 2  # |r| / (zeta wn) = 1/2 against a peak of about 1
+    return VehicleModel(name="modal", input_names=MODEL_INPUTS,
+                        output_names=tuple(f"out{i}" for i in range(n_out)), poles=p,
+                        residues=r.astype(complex), direct=np.zeros((n_out, n_in)),
+                        n_poles=np.ones((n_out, n_in), dtype=int),
+                        order=np.full((n_out, n_in), 2), fit_error=np.zeros((n_out, n_in)),
+                        cbar_n_s_m=np.full(4, 5000.0), fs_hz=100.0)
+
+
+def test_light_modes_finds_a_lightly_damped_mode_shared_by_the_pairs():
+    found = light_modes(_modal_model(0.02))
+    assert len(found) == 1
+    row = found.iloc[0]
+    assert row["f_hz"] == pytest.approx(13.0, rel=1e-9)
+    assert row["zeta"] == pytest.approx(0.02, rel=1e-9)
+    assert row["pairs"] == 44
+    assert LIGHT_DAMPING_ZETA > 0.02  # the fit's floor ZETA_MIN counts as light
+
+
+def test_light_modes_ignores_damped_modes_stray_poles_and_other_bands(identified_model):
+    assert light_modes(_modal_model(0.05)).empty            # damped enough
+    assert light_modes(_modal_model(0.02, light_pairs=2)).empty   # 2 of 44 pairs: stray poles
+    assert light_modes(_modal_model(0.02, f_hz=25.0)).empty       # outside the metric band
+    assert len(light_modes(_modal_model(0.02, f_hz=25.0), band_hz=(1.0, 30.0))) == 1
+    assert light_modes(SimpleNamespace(frf=None)).empty           # no poles: nothing to say
+    assert light_modes(identified_model).empty                    # the paper car's model
+
+
+def test_light_modes_are_warned_and_recorded(known_plant, track_drive, demo_library, few_setups,
+                                             monkeypatch, caplog):
+    """prediction_uncertainty warns about a lightly damped mode and records it in settings."""
+    import planner.uncertainty as unc
+
+    mode = pd.DataFrame({"f_hz": [13.06], "zeta": [0.02], "pairs": [232]})
+    monkeypatch.setattr(unc, "light_modes", lambda model, band_hz: mode)
+    with caplog.at_level("WARNING", logger="planner.uncertainty"):
+        u = _unc(known_plant, 0.99, track_drive, few_setups, demo_library)
+    assert u.settings["light_modes"] == [{"f_hz": 13.06, "zeta": 0.02, "pairs": 232}]
+    assert "lightly damped modes in the metric band (13.1 Hz, zeta 0.020)" in caplog.text
+
+
 # ---------------------------------------------------------------- unresolved pairs
 
 
@@ -353,3 +454,108 @@ def test_unresolved_pairs_match_rows_by_name(rng):
     shuffled = scores.iloc[[3, 0, 4, 2, 1]]
     assert unresolved_pairs(shuffled, unc, OBJ_ONE, baseline="baseline") == unresolved_pairs(
         scores, unc, OBJ_ONE, baseline="baseline")
+
+
+# ---------------------------------------------------------------- coverage on held-out cars
+def _held_out_cars():
+    """The held-out cars of studies/interval_calibration.py (none of them in the calibration):
+    name -> (vehicle, noise, run length [s], validation drive)."""
+    from ident.data.drive import make_noise_drive, make_track_drive
+    from ident.models.vehicle import example_gt_vehicle, example_vehicle
+
+    paper = example_vehicle()
+
+    def car(name, mass_kg, springs_n_m, torsion=None, tire_damping=None):
+        r = mass_kg / paper.sprung_mass_kg
+        return paper.replace(name=name, sprung_mass_kg=mass_kg,
+                             roll_inertia_kg_m2=paper.roll_inertia_kg_m2 * r,
+                             pitch_inertia_kg_m2=paper.pitch_inertia_kg_m2 * r,
+                             spring_rate_n_m=np.repeat(np.asarray(springs_n_m, dtype=float), 2),
+                             torsion_stiffness_n_m_rad=torsion,
+                             tire_damping_n_s_m=None if tire_damping is None
+                             else np.full(4, tire_damping))
+
+    gt = example_gt_vehicle()
+
+    def track(v, speed):
+        return make_track_drive(duration_s=HELD_OUT_DRIVE_S, fs_hz=100.0, seed=24, speed_m_s=speed,
+                                wheelbase_m=v.a_m + v.b_m, track_width_m=v.track_front_m)
+
+    noise = make_noise_drive(duration_s=HELD_OUT_DRIVE_S, fs_hz=100.0, seed=24, f_max_hz=25.0,
+                             peak={**{f"wheelloader_{c}": 0.0254 for c in ("LF", "RF", "LR", "RR")},
+                                   "aero_heave": 2224.0})
+    compact = car("compact", 950.0, (250e3, 220e3), 3.5e5, 900.0)
+    soft = car("soft heavy", 1500.0, (100e3, 120e3))
+    stiff = car("stiff light", 900.0, (300e3, 340e3), 1.5e5, 1000.0)
+    return {"GT-like": (gt, 0.02, 300.0, track(gt, 50.0)),
+            "compact": (compact, 0.04, 250.0, track(compact, 60.0)),
+            "soft heavy": (soft, 0.01, 600.0, noise),
+            "stiff light": (stiff, 0.015, 800.0, track(stiff, 35.0))}
+
+
+#: The held-out check's size: one identification per car (every run's seed 101) of the
+#: paper's plan at the car's run length in the study, only the outputs the metrics need, 20
+#: setups on a 60 s drive: about 75 s of CI (two seeds took 150 s). Measured: GT-like 98.2 %,
+#: compact 96.4 %, soft heavy 96.1 %, stiff light 88.2 % (pooled 94.7 %); seed 102 gave 98.9,
+#: 98.6, 95.7 and 91.8 %.
+HELD_OUT_SEEDS = (101,)
+HELD_OUT_DRIVE_S = 60.0
+#: Pooled over the 4 held-out cars, the coverage must be in the issue's 90-98 %. One
+#: identification's coverage is a sample of about 14 independent metric errors (its error is
+#: shared by all setups), so a single car's has a standard deviation of about 5 %: the
+#: per-car 90-98 % of issue 24 is checked by the study as the mean over 3 identifications
+#: (docs/DESIGN.md); pooling 4 cars brings the standard deviation to about 2.5 %.
+HELD_OUT_POOLED = (0.90, 0.98)
+#: No single identification below this (2 standard deviations of one realization under 95 %).
+HELD_OUT_SINGLE_MIN = 0.85
+
+
+@pytest.fixture(scope="module")
+def held_out_coverage(demo_library):
+    """Per held-out car and seed: the share of the known model's metrics inside rank's 95 %
+    intervals (the package's calibrated scale)."""
+    import warnings
+    from dataclasses import replace
+
+    from ident.identify.condition import condition_frf
+    from ident.identify.frf import estimate_frf
+    from ident.identify.pipeline import fit_model
+    from ident.models.vehicle import build_full_car
+    from ident.sim.metrics import METRIC_NAMES
+    from ident.sim.rig import default_plan, simulate_session
+    from planner.predict import METRIC_OUTPUTS, predict_setups
+    from planner.setups import Setup
+
+    pool = enumerate_setups(demo_library)
+    idx = np.unique(np.linspace(0, len(pool) - 1, 19).round().astype(int))
+    setups = [Setup("baseline", {c: "DM" for c in ("LF", "RF", "LR", "RR")})] + [pool[i] for i in idx]
+    out = {}
+    for name, (car, noise, run_s, drive) in _held_out_cars().items():
+        for seed in HELD_OUT_SEEDS:
+            plan = default_plan()
+            plan = replace(plan, noise=noise, input_noise=noise / 4,
+                           runs=tuple(replace(r, duration_s=run_s, seed=seed)
+                                      for r in plan.runs))
+            session = simulate_session(plan, car)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                model = fit_model(condition_frf(estimate_frf(session,
+                                                             outputs=list(METRIC_OUTPUTS))))
+            pred = predict_setups(model, drive, setups, demo_library)
+            unc = prediction_uncertainty(model, drive, setups, demo_library, predictions=pred)
+            t = unc.intervals(pred.table)
+            known = predict_setups(build_full_car(car).loop_plant(model.cbar_n_s_m), drive,
+                                   setups, demo_library).table.loc[t.index]
+            names = [m for m in METRIC_NAMES if m in t]
+            out[name, seed] = float(np.mean([(known[m] >= t[f"{m}_lo"]) & (known[m] <= t[f"{m}_hi"])
+                                             for m in names]))
+    return out
+
+
+@pytest.mark.slow
+def test_intervals_cover_95_percent_on_held_out_cars(held_out_coverage):
+    """Issue 24: rank's 95 % intervals, calibrated on other cars, cover 90-98 % of the known
+    model's metrics on the held-out cars (pooled), and no car falls far out of it."""
+    pooled = np.mean(list(held_out_coverage.values()))
+    assert HELD_OUT_POOLED[0] <= pooled <= HELD_OUT_POOLED[1], held_out_coverage
+    assert min(held_out_coverage.values()) >= HELD_OUT_SINGLE_MIN, held_out_coverage

@@ -45,19 +45,20 @@ from ident.errors import VehicleError
 from ident.models.lti import LoopPlant
 
 __all__ = [
-    "VehicleParams",
+    "EXAMPLE_VEHICLE_PATH",
+    "FULL_CAR_OUTPUT_KINDS",
+    "G_M_S2",
+    "VEHICLE_KEYS",
     "FullCarModel",
     "ModalSummary",
-    "read_vehicle",
-    "write_vehicle",
-    "example_vehicle",
+    "VehicleParams",
     "build_full_car",
+    "example_gt_vehicle",
+    "example_vehicle",
     "modal_summary",
     "mode_frequencies",
-    "EXAMPLE_VEHICLE_PATH",
-    "G_M_S2",
-    "FULL_CAR_OUTPUT_KINDS",
-    "VEHICLE_KEYS",
+    "read_vehicle",
+    "write_vehicle",
 ]
 
 log = logging.getLogger(__name__)
@@ -464,6 +465,28 @@ def write_vehicle(params, path, *, units="SI", overwrite=False):
 def example_vehicle():
     """The built-in example car: the seed paper's Table 1 (read from its imperial file)."""
     return read_vehicle(EXAMPLE_VEHICLE_PATH)
+
+
+def example_gt_vehicle():
+    """A GT-like car unlike the paper's, for checks on a car not tuned on (issue 24).
+
+    Heavier (1,350 kg sprung) and stiffer (springs 280 / 320 kN/m against 224 /
+    103, tires 420 / 450 kN/m), with a flexible chassis (torsion 2e5 N m/rad: a
+    twist mode at 7.9 Hz, damping ratio 0.077 with its 800 N s/m tire damping)
+    and the c.g. 2 cm off centre; the paper car's other parameters.
+
+    Returns
+    -------
+    VehicleParams
+    """
+    return example_vehicle().replace(
+        name="GT-like", track_front_m=1.66, track_rear_m=1.62, a_m=1.30, b_m=1.45,
+        sprung_mass_kg=1350.0, roll_inertia_kg_m2=520.0, pitch_inertia_kg_m2=2100.0,
+        unsprung_mass_kg=np.array([55.0, 55.0, 62.0, 62.0]),
+        spring_rate_n_m=np.array([280e3, 280e3, 320e3, 320e3]),
+        tire_rate_n_m=np.array([420e3, 420e3, 450e3, 450e3]),
+        damping_n_s_m=np.full(4, 7000.0), torsion_stiffness_n_m_rad=2.0e5,
+        tire_damping_n_s_m=np.full(4, 800.0), cg_lateral_offset_m=0.02)
 
 
 @dataclass(frozen=True, eq=False)

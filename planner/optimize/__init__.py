@@ -26,9 +26,13 @@ recursion). The loop's step and its adjoint are compiled to C when a C
 compiler is found (5-7 s of compilation, once per machine and problem:
 :func:`jit_cache_dir`). IPOPT solves the problem with a limited-memory
 Hessian; metrics and their Jacobian are computed once per iterate and shared
-by the objective and the constraints. The start is the best linear damping per
-group by frequency-domain screening (:mod:`planner.screen`), projected onto
-the constraints.
+by the objective and the constraints. The start is the best curve of a scan
+of linear and two-slope curves per group (:mod:`planner.optimize.scan`:
+screened by :mod:`planner.screen`, the best few of each kind verified in the
+time domain), among the curves that meet the constraints; the result is the
+best verified of IPOPT's solution, its best feasible iterate and that curve,
+so it is never worse than the scan's best. A stop at IPOPT's acceptable level
+is reported as not converged.
 
 Every result is verified by :func:`planner.predict.predict_setups`, the
 time-domain simulator the rest of shockplan trusts, and that figure is the one
@@ -39,12 +43,17 @@ Modules
 -------
 - :mod:`~planner.optimize.space`: the curve space (groups, knots, the
   parametrization);
+- :mod:`~planner.optimize.knots`: velocity knots on the quantiles of the
+  baseline's shock speeds (``knots_m_s="quantiles"``);
 - :mod:`~planner.optimize.constraints`: the buildability constraints, their
   file (``format = "curve-constraints/1"``) and the check that refuses a set
   no curve can meet, naming the constraints that conflict;
 - :mod:`~planner.optimize.loop`: the closed loop in casadi (the sub-step, the
   Newton iterations, the metric filters, the fold over the samples);
 - :mod:`~planner.optimize.cache`: the compiled step functions on disk;
+- :mod:`~planner.optimize.scan`: the global stage, linear curves per group screened
+  on a grid and the best verified in the time domain (IPOPT's start and a floor
+  under the result);
 - :mod:`~planner.optimize.solve`: the metrics' evaluator and IPOPT;
 - :mod:`~planner.optimize.core`: :func:`optimize_curves` and
   :func:`compile_curves`, the crate mapping and the verification.
@@ -64,7 +73,9 @@ from planner.optimize.constraints import (
     read_curve_constraints,
 )
 from planner.optimize.core import CurveOptimum, compile_curves, curve_distance, optimize_curves
+from planner.optimize.knots import KNOT_QUANTILES, QUANTILE_KNOTS, velocity_knots
 from planner.optimize.loop import FOLD_BASE, NEWTON_ITERATIONS
+from planner.optimize.scan import ScanResult, scan_curves
 from planner.optimize.solve import ACCEPTABLE_CHANGE, OptimizeWarning
 from planner.optimize.space import DEFAULT_KNOTS_M_S, SYMMETRIES, CurveSpace, curve_space
 from planner.report.optimize import (
@@ -88,6 +99,11 @@ __all__ = [
     "read_curve_constraints",
     "check_constraints",
     "optimize_curves",
+    "ScanResult",
+    "scan_curves",
+    "velocity_knots",
+    "KNOT_QUANTILES",
+    "QUANTILE_KNOTS",
     "compile_curves",
     "curve_distance",
     "curve_table",

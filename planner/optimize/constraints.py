@@ -8,10 +8,21 @@ extension's slope >= 0). From a constraints TOML (``format =
     [bump]                                  # v > 0; [rebound] likewise (v < 0)
     low_speed_slope = [500.0, 40000.0]      # N/(m/s): 0 .. first knot
     high_speed_slope = [0.0, 15000.0]       # N/(m/s): beyond the last knot
+    segment_slope = [1000.0, 40000.0]       # N/(m/s): every segment in the velocity range
     [shape]
     digressive = true                       # slopes do not grow away from 0
+    min_slope_ratio = 0.15                  # no segment in the range flatter than this
+                                            # times its side's first segment
+    crate_envelope = [0.333, 3.0]           # knot forces (segments in the range) within these
+                                            # factors of the crate's weakest / strongest
     rebound_bump_ratio = { velocity = 0.1, min = 1.0, max = 3.0 }
     max_force = 8000.0                      # N, |F| at every knot and at 1 m/s
+
+The *velocity range* is where the car spends most of its time: the optimizer
+sets it from the baseline's shock speeds on the drives (their 99 % quantile
+per side, :attr:`planner.optimize.space.CurveSpace.v_range_m_s`); a segment is
+in it when it starts below that speed. Beyond it, the curve is what a blow-off
+valve makes of it: bounded only by ``high_speed_slope`` and ``max_force``.
     [adjustment]                            # an adjustable shock's reach
     reference = "DM"                        # a crate shock
     range = 0.3                             # force within +-30 % of the reference's
@@ -44,6 +55,8 @@ __all__ = [
     "read_curve_constraints",
     "check_constraints",
     "constraint_rows",
+    "crate_envelope",
+    "constraint_envelope",
 ]
 
 #: The ``format`` of curve-constraints files.
@@ -61,6 +74,17 @@ class CurveConstraints:
     bump_low_slope, bump_high_slope, rebound_low_slope, rebound_high_slope : (float, float) or None
         Bounds on the slope [N/(m/s)] from 0 to the first knot (low) and beyond
         the last (high), per side.
+    bump_segment_slope, rebound_segment_slope : (float, float) or None
+        Bounds on the slope [N/(m/s)] of every segment that starts inside the
+        velocity range (the space's ``v_range_m_s``; every segment if it has
+        none), per side.
+    min_slope_ratio : float or None
+        Every segment inside the velocity range at least this times the slope
+        of its side's first segment: no flat segment where the car lives.
+    envelope_factor : (float, float) or None
+        ``(lo, hi)``: the force at the ends of the segments in the velocity
+        range (the knots up to the first beyond it) between ``lo`` times the crate's weakest shock there and ``hi`` times
+        its strongest (:func:`crate_envelope`).
     digressive : bool
     ratio : (float, float, float) or None
         ``(velocity [m/s], min, max)`` of ``|F(-v)| / F(v)``.
@@ -76,6 +100,10 @@ class CurveConstraints:
     bump_high_slope: tuple | None = None
     rebound_low_slope: tuple | None = None
     rebound_high_slope: tuple | None = None
+    bump_segment_slope: tuple | None = None
+    rebound_segment_slope: tuple | None = None
+    min_slope_ratio: float | None = None
+    envelope_factor: tuple | None = None
     digressive: bool = False
     ratio: tuple | None = None
     max_force_n: float | None = None
@@ -84,21 +112,41 @@ class CurveConstraints:
     source: str | None = None
 
 
-def default_constraints():
-    """Constraints a race shock can be built to, when none are given.
+#: Default slope bounds of every segment in the velocity range [N/(m/s)] (5.7 to 228
+#: lbf/(in/s)): docs/DESIGN.md, "Buildable by default".
+SEGMENT_SLOPE_N_S_M = (1000.0, 40000.0)
+#: Default least slope of a segment in the range relative to its side's first segment.
+MIN_SLOPE_RATIO = 0.15
+#: Default factors on the crate's envelope (weakest, strongest) at the knots in the range.
+ENVELOPE_FACTOR = (1.0 / 3.0, 3.0)
 
-    Low-speed slopes 500 to 40,000 N/(m/s) (about 3 to 230 lbf/(in/s)),
-    high-speed slopes 0 to 15,000 N/(m/s), at most 10 kN (2,250 lbf); not
-    digressive by force, no ratio. Passive and increasing always hold.
+
+def default_constraints():
+    """Constraints a shock builder would valve to, when none are given.
+
+    Inside the velocity range the car spends 99 % of its time in (see the
+    module docstring): every segment's slope 1,000 to 40,000 N/(m/s) (about
+    5.7 to 230 lbf/(in/s)) and at least 0.15 times its side's first segment's
+    (no flat segment), knot forces within 1/3 of the crate's weakest and 3
+    times its strongest shock; everywhere digressive or linear (slopes do not
+    grow away from 0), the low-speed slope 500 to 40,000 N/(m/s), beyond the
+    last knot 0 to 15,000 N/(m/s), at most 10 kN (2,250 lbf) at every knot and
+    at 1 m/s. Passive and increasing always hold. The reasons are in
+    docs/DESIGN.md ("Buildable by default").
     """
     return CurveConstraints(bump_low_slope=(500.0, 40000.0), bump_high_slope=(0.0, 15000.0),
                             rebound_low_slope=(500.0, 40000.0),
-                            rebound_high_slope=(0.0, 15000.0), max_force_n=10000.0)
+                            rebound_high_slope=(0.0, 15000.0),
+                            bump_segment_slope=SEGMENT_SLOPE_N_S_M,
+                            rebound_segment_slope=SEGMENT_SLOPE_N_S_M,
+                            min_slope_ratio=MIN_SLOPE_RATIO, envelope_factor=ENVELOPE_FACTOR,
+                            digressive=True, max_force_n=10000.0)
 
 
 _CONSTRAINT_KEYS = {"format", "units", "bump", "rebound", "shape", "adjustment"}
-_SIDE_KEYS = {"low_speed_slope", "high_speed_slope"}
-_SHAPE_KEYS = {"digressive", "rebound_bump_ratio", "max_force"}
+_SIDE_KEYS = {"low_speed_slope", "high_speed_slope", "segment_slope"}
+_SHAPE_KEYS = {"digressive", "rebound_bump_ratio", "max_force", "min_slope_ratio",
+               "crate_envelope"}
 
 
 def read_curve_constraints(path):
@@ -133,7 +181,8 @@ def read_curve_constraints(path):
         if not isinstance(tab, dict):
             raise PlannerError(f"{where}: [{side}] must be a table")
         _unknown_keys(tab, _SIDE_KEYS, f"{where}: [{side}]")
-        for key, attr in (("low_speed_slope", "low"), ("high_speed_slope", "high")):
+        for key, attr in (("low_speed_slope", "low"), ("high_speed_slope", "high"),
+                          ("segment_slope", "segment")):
             if key in tab:
                 out[f"{side}_{attr}_slope"] = _bounds(tab[key], f"{where}: [{side}] {key}",
                                                       "damping", units)
@@ -153,6 +202,20 @@ def read_curve_constraints(path):
         v = _positive(r["velocity"], f"{w}.velocity")
         lo, hi = _bounds([r["min"], r["max"]], w, None, units)
         out["ratio"] = (to_si(v, "velocity", units), lo, hi)
+    if "min_slope_ratio" in shape:
+        r = _positive(shape["min_slope_ratio"], f"{where}: [shape] min_slope_ratio")
+        if r > 1:
+            raise PlannerError(f"{where}: [shape] min_slope_ratio = {r:g} must be at most 1 "
+                               "(a segment's least slope relative to its side's first)")
+        out["min_slope_ratio"] = r
+    if "crate_envelope" in shape:
+        lo, hi = _bounds(shape["crate_envelope"], f"{where}: [shape] crate_envelope", None,
+                         units)
+        if not 0 < lo <= 1 <= hi:
+            raise PlannerError(f"{where}: [shape] crate_envelope = {[lo, hi]} must be "
+                               "[lo, hi] with 0 < lo <= 1 <= hi (factors on the crate's "
+                               "weakest and strongest force)")
+        out["envelope_factor"] = (lo, hi)
     if "max_force" in shape:
         out["max_force_n"] = to_si(_positive(shape["max_force"], f"{where}: [shape] max_force"),
                                    "force", units)
@@ -254,6 +317,36 @@ def constraint_rows(space, cons, library):
                 add(f"{side} high-speed slope >= {high[0]:g} N/(m/s)", g, {ext: -1.0}, -high[0])
                 if math.isfinite(high[1]):
                     add(f"{side} high-speed slope <= {high[1]:g} N/(m/s)", g, {ext: 1.0}, high[1])
+        rng = space.v_range_m_s
+        for side, sgn, rs in (("bump", 1, 1), ("rebound", -1, 0)):
+            # the segments of the side that start inside the velocity range, from 0 out
+            segs = list(range(z, K - 1)) if sgn > 0 else list(range(z - 1, -1, -1))
+            inside = [j for j in segs if rng is None
+                      or abs(v[j if sgn > 0 else j + 1]) < rng[rs] * (1 - 1e-9)]
+            bnd = getattr(cons, f"{side}_segment_slope")
+            if bnd is not None:
+                for j in inside:
+                    name = (f"{side} slope in the velocity range within "
+                            f"[{bnd[0]:g}, {bnd[1]:g}] N/(m/s)")
+                    add(name, g, {k: -c for k, c in seg(j).items()}, -bnd[0])
+                    if math.isfinite(bnd[1]):
+                        add(name, g, seg(j), bnd[1])
+            if cons.min_slope_ratio is not None and len(inside) > 1:
+                r = cons.min_slope_ratio
+                for j in inside[1:]:
+                    # r * slope(first) - slope(j) <= 0
+                    add(f"{side} slopes in the velocity range >= {r:g} x the first", g,
+                        _combine({k: r * c for k, c in seg(inside[0]).items()}, seg(j), -1.0),
+                        0.0)
+            if cons.envelope_factor is not None and library is not None and len(library):
+                lo_f, hi_f = cons.envelope_factor
+                knots = [j + 1 if sgn > 0 else j for j in inside]
+                weak, strong = crate_envelope(library, v[knots])
+                name = (f"{side} forces in the velocity range within [{lo_f:.3g}, {hi_f:.3g}] "
+                        "x the crate's envelope")
+                for j, fw, fs in zip(knots, weak, strong):
+                    add(name, g, {j: -float(sgn)}, -lo_f * fw)
+                    add(name, g, {j: float(sgn)}, hi_f * fs)
         if cons.digressive:
             # slopes do not grow away from 0: bump segment j+1 <= j, rebound j-1 <= j
             for a, b in [(j + 1, j) for j in range(z, K - 2)] + [(j - 1, j) for j in range(1, z)]:
@@ -299,6 +392,26 @@ def constraint_rows(space, cons, library):
                 add(name, g, {idx: -1.0}, -sr * (1 - a))
     return [(name, np.array([r for r, _ in rows]), np.array([b for _, b in rows]))
             for name, rows in fam.items()]
+
+
+def crate_envelope(library, v_m_s):
+    """The weakest and strongest force of a crate's shocks at velocities.
+
+    Parameters
+    ----------
+    library : ShockLibrary
+    v_m_s : array_like, shape (n,)
+        Velocities [m/s] (rebound negative).
+
+    Returns
+    -------
+    weak, strong : ndarray, shape (n,)
+        The least and greatest ``|F(v)|`` [N] over the crate's shocks (their
+        steady curves).
+    """
+    v = np.asarray(v_m_s, dtype=float).ravel()
+    F = np.abs(np.array([np.asarray(m.to_pwl().force(v), dtype=float) for m in library.values()]))
+    return F.min(axis=0), F.max(axis=0)
 
 
 def _combine(a, b, wb):
@@ -364,3 +477,46 @@ def check_constraints(space, constraints, library=None):
     raise PlannerError(
         f"curve constraints{src} cannot all hold: {'; '.join(names)} conflict on the knots "
         f"{np.round(space.v_knots_m_s, 4).tolist()} m/s; relax one of them")
+
+
+def constraint_envelope(space, constraints, library=None):
+    """The least and greatest force the constraints allow at every knot, per group.
+
+    Each bound is a linear program over all the constraints (HiGHS), so it
+    shows what the constraints together leave open, not one family's bound.
+
+    Parameters
+    ----------
+    space : CurveSpace
+    constraints : CurveConstraints
+    library : ShockLibrary, optional
+        Needed for the crate envelope and an adjustment range.
+
+    Returns
+    -------
+    lo, hi : ndarray, shape (n_groups, n_knots)
+        Force [N] at ``space.v_knots_m_s``; ``-inf`` / ``inf`` where
+        unbounded, NaN if the constraints cannot hold.
+    """
+    families = constraint_rows(space, constraints, library)
+    T = space.expansion()
+    A = np.vstack([a for _, a, _ in families]) @ T
+    b = np.concatenate([b for _, _, b in families])
+    scale = np.maximum(np.abs(A).max(axis=1), 1e-300)
+    A, b = A / scale[:, None], b / scale
+    G, K, npar = len(space.groups), space.v_knots_m_s.size, space.n_params
+    lo, hi = np.full((G, K), np.nan), np.full((G, K), np.nan)
+    for g in range(G):
+        for j in range(K):
+            c = T[g * npar + j]
+            for sgn, out in ((1.0, lo), (-1.0, hi)):
+                if not np.any(c):
+                    out[g, j] = 0.0
+                    continue
+                res = sopt.linprog(sgn * c, A_ub=A, b_ub=b, bounds=[(None, None)] * space.n_vars,
+                                   method="highs")
+                if res.status == 0:
+                    out[g, j] = float(c @ res.x)
+                elif res.status == 3:
+                    out[g, j] = -sgn * np.inf
+    return lo, hi

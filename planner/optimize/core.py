@@ -1,11 +1,13 @@
 """The curve optimization: the problem, the start, the solve, the crate mapping, the verification.
 
 :func:`optimize_curves` checks the problem (model, drives, baseline,
-objective, curve space), starts from the best linear damping per group by
-screening, solves (:mod:`planner.optimize.solve`) through the casadi loop
-(:mod:`planner.optimize.loop`), verifies the optimum and the best feasible
-iterate in the time domain (:func:`planner.predict.predict_setups`), and maps
-the optimum to the crate (the nearest setups and the crate's best).
+objective, curve space), starts from the best linear damping per group of a
+scan (:mod:`planner.optimize.scan`: screened, the best few verified), solves
+(:mod:`planner.optimize.solve`) through the casadi loop
+(:mod:`planner.optimize.loop`), verifies the optimum, the best feasible
+iterate and the scan's best in the time domain
+(:func:`planner.predict.predict_setups`) and keeps the best, and maps the
+optimum to the crate (the nearest setups and the crate's best).
 :func:`compile_curves` compiles a problem's step functions ahead.
 """
 
@@ -23,7 +25,6 @@ from scipy import optimize as sopt
 from ident.data.channels import CORNERS
 from ident.data.drive import Drive
 from ident.models.library import ShockLibrary
-from ident.models.shocks import LinearShock, PiecewiseLinear, TableShock
 from ident.sim.closedloop import simulate
 from ident.sim.metrics import METRIC_NAMES
 from planner.errors import PlannerError
@@ -32,24 +33,44 @@ from planner.optimize.cache import jit_available
 from planner.optimize.constraints import (
     CurveConstraints,
     check_constraints,
+    constraint_envelope,
     constraint_rows,
     default_constraints,
 )
+from planner.optimize.knots import (
+    QUANTILE_KNOTS,
+    shock_speeds,
+    velocity_knots,
+    velocity_range,
+)
 from planner.optimize.loop import LoopModel
+from planner.optimize.scan import scan_curves, time_domain_scores
 from planner.optimize.solve import Evaluator, OptimizeWarning, solve_problem
-from planner.optimize.space import DEFAULT_KNOTS_M_S, CurveSpace, curve_space, symmetry_groups
+from planner.optimize.space import CurveSpace, curve_space, symmetry_groups
 from planner.predict import as_loop_plant, predict_setups, prepare_drive
-from planner.screen import drive_bands, metric_rows, screen_response, screen_setups
+from planner.screen import metric_rows, screen_setups
 from planner.setups import Setup, enumerate_setups, resolve_baseline
 from planner.uncertainty import prediction_uncertainty
 
 __all__ = [
+    "KNOT_UPDATE_RTOL",
+    "MULTI_START_ITER",
     "CurveOptimum",
     "optimize_curves",
     "compile_curves",
     "curve_distance",
     "score_rows",
 ]
+
+
+#: The knots on the quantiles move onto the scan's best curve's shock speeds when one of them,
+#: or the velocity range, moves by more than this relative amount (a knot a tenth off its
+#: quantile still splits the samples about as intended).
+KNOT_UPDATE_RTOL = 0.1
+#: IPOPT iterations of each further start (``n_starts > 1``): the first start has
+#: ``max_iter``; a further one refines a different shape (about 0.5 s an iteration on a 120 s
+#: drive), so the call stays within 1.5 times a single start's time (bench_optimize).
+MULTI_START_ITER = 10
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,7 +111,11 @@ class CurveOptimum:
     history : pandas.DataFrame
         IPOPT's iterations: objective, primal and dual infeasibility, time.
     solver : dict
-        ``status``, ``success``, ``iterations``, ``n_eval`` (forward sweeps),
+        ``status``, ``success`` (converged or acceptable), ``converged`` (IPOPT's
+        tolerance met), ``acceptable`` (stopped at IPOPT's acceptable level: an
+        :class:`OptimizeWarning` gives ``reason``), ``source`` (``"ipopt"``,
+        ``"iterate"`` or ``"scan"``: which verified candidate is the optimum),
+        ``candidates`` (their verified scores), ``iterations``, ``n_eval`` (forward sweeps),
         ``build_s`` (the loop built and compiled), ``solve_s``, ``eval_s``, ``grad_s``,
         ``n_grad`` (adjoint sweeps), ``jit``,
         ``objective`` (the optimizer's own), ``verified_score``.
@@ -99,6 +124,12 @@ class CurveOptimum:
     objective : planner.objective.Objective
     baseline : planner.setups.Setup
     settings : dict
+        The call's settings and what the run decided: ``knots_m_s`` and
+        ``rebound_knots_m_s`` (the knots used [m/s]), ``v_range_m_s`` (the
+        baseline's 99 % shock speeds, rebound and bump), ``scan``
+        (:meth:`ScanResult.summary`), ``envelope_n`` (``lo`` and ``hi``, the
+        least and greatest force [N] the constraints allow at each group's
+        knots, :func:`~planner.optimize.constraints.constraint_envelope`), ...
     """
 
     x: np.ndarray
@@ -125,50 +156,18 @@ class CurveOptimum:
         return float(self.table.loc["optimum", "score"])
 
     def verdict(self):
-        """One sentence: how the optimum compares with the crate's best (time domain)."""
+        """One sentence: how the optimum compares with the crate's best (time domain), and
+        whether IPOPT converged."""
         best = float(self.table.loc[self.crate_best, "score"])
+        note = ""
+        if self.solver.get("acceptable"):
+            note = " (IPOPT stopped at an acceptable level, not converged)"
         if self.gap >= 0:
             return (f"the optimum ({self.score:.4f}) is {100 * self.gap:.2f} % better than the "
-                    f"crate's best {self.crate_best} ({best:.4f})")
+                    f"crate's best {self.crate_best} ({best:.4f}){note}")
         return (f"the crate's best {self.crate_best} ({best:.4f}) beats the optimum "
                 f"({self.score:.4f}) by {-100 * self.gap:.2f} %: the constraints keep the "
-                "curves from what the crate already does; relax them")
-
-
-def _valid(space, x):
-    """`x` with the curves' validity exact: an interior-point solution meets its constraints
-    to the solver's tolerance (a slope of -5e-5 N/(m/s) is not passive for a shock model).
-    Knot forces are made non-decreasing through F(0) = 0 with the sign of their velocity,
-    end slopes >= 0; changes are of the order of the tolerance."""
-    if space.linear:
-        return np.maximum(np.asarray(x, dtype=float), 0.0)
-    K, z = space.v_knots_m_s.size, space.zero_index
-    out = []
-    for p in space.params(x):
-        f = p[:K].copy()
-        f[z] = 0.0
-        f[z + 1:] = np.maximum.accumulate(np.maximum(f[z + 1:], 0.0))
-        f[:z] = -np.maximum.accumulate(np.maximum(-f[:z][::-1], 0.0))[::-1]
-        out.append(PiecewiseLinear(space.v_knots_m_s, f, max(p[K], 0.0), max(p[K + 1], 0.0)))
-    return space.from_curves(out)
-
-
-def _optimal_shocks(space, x, *, prefix="OPT"):
-    """Table shocks of the curves of `x` (the end slopes kept by one extra point a side)."""
-    models = []
-    for (name, _), pwl, lag in zip(space.groups, space.curves(_valid(space, x)), space.lag_s):
-        v, f = pwl.v_knots_m_s, pwl.f_knots_n
-        ext = 0.5
-        vv = np.concatenate([[v[0] - ext], v, [v[-1] + ext]])
-        ff = np.concatenate([[f[0] - pwl.slope_below * ext], f, [f[-1] + pwl.slope_above * ext]])
-        models.append(TableShock(f"{prefix}-{name}", vv, ff, lag_s=lag,
-                                 description=f"optimal {name} curve (shockplan optimize)"))
-    return ShockLibrary(models)
-
-
-def _setup_of(space, shocks, name="optimum"):
-    ids = {c: shocks.ids[space.group_of(c)] for c in CORNERS}
-    return Setup(name, ids)
+                f"curves from what the crate already does; relax them{note}")
 
 
 def _check_objective(objective):
@@ -198,41 +197,6 @@ def _drive_list(drives, fs_hz):
     return out
 
 
-def _scan_start(plant, drives, library, space, baseline, objective, m_base, weights):
-    """Best linear damping per group by screening (frequency domain): the start point."""
-    cbar = float(np.mean(plant.cbar_n_s_m))
-    rates = cbar * np.geomspace(0.15, 4.0, 25)
-    base_models = baseline.resolve(library)
-    G = len(space.groups)
-    bands = [drive_bands(d) for d in drives]
-    Hs = [plant.frequency_response(b.f_hz) for b in bands]
-
-    def scores(choices):  # choices: list of per-group rates arrays -> aggregated scores
-        models = []
-        for combo in choices:
-            models.append(tuple(LinearShock("c", combo[space.group_of(c)],
-                                            lag_s=space.lag_s[space.group_of(c)])
-                                for c in CORNERS))
-        total = 0.0
-        for w, b, H, mb in zip(weights, bands, Hs, m_base):
-            names, met, _, _ = screen_response(H, plant.output_names, plant.cbar_n_s_m, b,
-                                               models + [tuple(base_models)])
-            t = pd.DataFrame(met, columns=names)
-            t.index = [f"s{k}" for k in range(len(models))] + ["baseline"]
-            total = total + w * score_setups(t, objective, baseline="baseline").table[
-                "score"].to_numpy()[:-1]
-        return total
-
-    best = np.full(G, cbar)
-    s = scores([np.full(G, c) for c in rates])
-    best[:] = rates[int(np.argmin(s))]
-    for _ in range(2):  # coordinate refinement, group by group
-        for g in range(G):
-            trial = [np.where(np.arange(G) == g, c, best) for c in rates]
-            best[g] = rates[int(np.argmin(scores(trial)))]
-    return best
-
-
 def _project(x0, A, b):
     """The point nearest `x0` (scaled least squares) with ``A x <= b``."""
     if np.all(A @ x0 <= b + 1e-9 * np.maximum(np.abs(b), 1)):
@@ -246,31 +210,11 @@ def _project(x0, A, b):
     return res.x * scale
 
 
-def _time_domain_scores(model, drives, setups, library, objective, baseline, weights,
-                        oversample, aggregate):
-    """Verified scores: predict_setups per drive, scored against the baseline, aggregated."""
-    cand = [baseline] + [s for s in setups if s.name != baseline.name]
-    per, metrics, feasible = [], {}, None
-    for d in drives:
-        pred = predict_setups(model, d, cand, library, oversample=oversample)
-        metrics[d.name] = pred.table
-        sc = score_setups(pred.table, objective, baseline=baseline.name).table
-        per.append(sc["score"])
-        feasible = sc["feasible"] if feasible is None else (feasible & sc["feasible"])
-    S = pd.concat(per, axis=1)
-    S.columns = [f"score_{d.name}" for d in drives]
-    agg = S.to_numpy() @ np.asarray(weights) if aggregate == "sum" else S.to_numpy().max(axis=1)
-    out = S.copy()
-    out.insert(0, "score", agg)
-    out["feasible"] = feasible.to_numpy()
-    return out, metrics
-
-
 def optimize_curves(model, drives, library, *, objective=None, baseline=None,
-                    symmetry="left-right", knots_m_s=DEFAULT_KNOTS_M_S, linear=False,
+                    symmetry="left-right", knots_m_s=QUANTILE_KNOTS, linear=False,
                     constraints=None, lag_s=None, drive_weights=None, aggregate="sum",
-                    robust=False, oversample=2, max_iter=80, n_closest=5, jit=None,
-                    stationarity=True, progress=False):
+                    robust=False, oversample=2, max_iter=80, n_starts=2, n_closest=5,
+                    jit=None, stationarity=True, progress=False):
     """The best force-velocity curve per corner group (see the module docstring).
 
     Parameters
@@ -290,8 +234,15 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         at every corner.
     symmetry : {"left-right", "all", "none"}
         Corner groups (:func:`~planner.optimize.space.curve_space`).
-    knots_m_s : sequence of float
-        Bump knot velocities [m/s] (rebound mirrors them).
+    knots_m_s : "quantiles" or sequence of float
+        ``"quantiles"`` (default): per side on the quantiles
+        ``KNOT_QUANTILES`` of the baseline's shock speeds on the drives, every
+        corner pooled (:func:`planner.optimize.knots.velocity_knots`), the
+        last at their 99 %; or bump knot velocities [m/s] (rebound mirrors
+        them), e.g. ``DEFAULT_KNOTS_M_S``. The knots used are in
+        ``settings["knots_m_s"]`` and ``settings["rebound_knots_m_s"]``, the
+        velocity range of the constraints (the baseline's 99 % speeds) in
+        ``settings["v_range_m_s"]``.
     linear : bool
         One damping rate per group (the known-answer case).
     constraints : CurveConstraints, optional
@@ -313,7 +264,11 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     oversample : int
         Sub-steps per sample in the optimizer's loop and in the verification.
     max_iter : int
-        IPOPT iterations.
+        IPOPT iterations (of the first start).
+    n_starts : int
+        IPOPT starts: the scan's best verified curve, then the best verified
+        curve of the other kind (linear or two-slope) with
+        :data:`MULTI_START_ITER` iterations; every start's result is verified.
     n_closest : int
         Crate setups nearest the optimum to simulate and report.
     jit : bool, optional
@@ -338,43 +293,27 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     Warns
     -----
     OptimizeWarning
-        If IPOPT does not converge; the best verified iterate is returned and
-        ``solver["success"]`` is False.
+        If IPOPT does not converge; the best verified candidate is returned and
+        ``solver["success"]`` is False. If it stops at its acceptable level
+        (``solver["acceptable"]``), with the reason (``solver["reason"]``).
     """
     t_start = time.perf_counter()
     objective = _check_objective(objective)
     if aggregate not in ("sum", "worst"):
         raise PlannerError(f"aggregate must be 'sum' or 'worst', got {aggregate!r}")
     plant, drives, base, space, rows = _problem(model, drives, library, objective, baseline,
-                                                symmetry, knots_m_s, linear, lag_s)
+                                                symmetry, knots_m_s, linear, lag_s, oversample)
     need = rows[0]
-    if drive_weights is None:
-        weights = np.full(len(drives), 1.0 / len(drives))
-    else:
-        weights = np.asarray(drive_weights, dtype=float).ravel()
-        if weights.size != len(drives) or np.any(~np.isfinite(weights)) or np.any(weights < 0) \
-                or not weights.sum() > 0:
-            raise PlannerError(f"drive_weights {list(np.atleast_1d(drive_weights))} must be "
-                               f"{len(drives)} numbers >= 0, not all 0")
-        weights = weights / weights.sum()
-    constraints = default_constraints() if constraints is None else constraints
-    if not isinstance(constraints, CurveConstraints):
-        raise TypeError(f"constraints must be CurveConstraints (read_curve_constraints), got "
-                        f"{type(constraints).__name__}")
-    check_constraints(space, constraints, library)
-    families = constraint_rows(space, constraints, library)
-    T = space.expansion()
-    A_lin = np.vstack([a for _, a, _ in families]) @ T
-    b_lin = np.concatenate([b for _, _, b in families])
-
+    weights = _weights(drive_weights, drives)
+    constraints = _check_constraints_arg(constraints)
     # the baseline's (verified) values per drive of the metrics the objective needs
     m_base = [predict_setups(model, d, [base], library, oversample=oversample).table.loc[
         base.name, need].to_numpy(float) for d in drives]
 
-    # start: the best linear damping per group (screening), projected onto the constraints
-    rates = _scan_start(plant, drives, library, space, base, objective, m_base, weights)
-    start_curves = [PiecewiseLinear([0.0], [0.0], c, c) for c in rates]
-    x0 = _project(space.from_curves(start_curves), A_lin, b_lin)
+    # the global stage (the knots moved once onto the scan's best curve's speeds)
+    space, A_lin, b_lin, scan, x0, knot_log = _start(
+        model, plant, drives, library, space, constraints, base, objective, weights, aggregate,
+        oversample, _quantile_knots(knots_m_s))
 
     # scaling of the decision variables: forces by c_bar |v|, slopes by c_bar
     cbar = float(np.mean(plant.cbar_n_s_m))
@@ -393,21 +332,155 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     C, kinds = score_rows(objective, need, m_base, tight)
     t_build = time.perf_counter()
     models_cl = [LoopModel(plant, d, space, rows, oversample, jit) for d in drives]
-    ev = Evaluator(models_cl, T, scale, C)
+    ev = Evaluator(models_cl, space.expansion(), scale, C)
     build_s = time.perf_counter() - t_build
     x_opt, solver, history = solve_problem(ev, space, kinds, weights, aggregate, A_lin,
                                            b_lin, x0 / scale, scale, max_iter, progress)
+    # multi-start: from the best verified scan curve of the other kind (linear or two-slope),
+    # a short solve; its result and best iterate join the verification
+    extra, starts = [], [{"start": "scan best", "iterations": solver["iterations"],
+                          "status": solver["status"], "objective": solver["objective"]}]
+    others = _other_starts(scan, n_starts - 1)
+    if others:
+        history = history.assign(start=1)
+    for label, xs in others:
+        x_k, solver_k, hist_k = solve_problem(ev, space, kinds, weights, aggregate, A_lin,
+                                              b_lin, xs / scale, scale,
+                                              min(max_iter, MULTI_START_ITER), progress)
+        extra.append((f"start {len(starts) + 1}", x_k))
+        solver["iterates"] += solver_k.pop("iterates")
+        starts.append({"start": label, "iterations": solver_k["iterations"],
+                       "status": solver_k["status"], "objective": solver_k["objective"]})
+        hist_k = hist_k.assign(start=len(starts))
+        history.attrs, hist_k.attrs = {}, {}  # (the iterates, already taken)
+        history = pd.concat([history, hist_k], ignore_index=True)
+    solver["starts"] = starts
     solver.update(build_s=build_s, eval_s=ev.eval_s, grad_s=ev.grad_s, n_eval=ev.n_eval,
                   n_grad=ev.n_grad, jit=jit, step_instructions=models_cl[0].n_instructions)
     return _finish(model, plant, drives, library, space, constraints, objective, base, weights,
                    aggregate, oversample, x_opt, solver, history, n_closest, stationarity,
-                   A_lin, b_lin, t_start, {"knots_m_s": list(map(float, knots_m_s)),
+                   A_lin, b_lin, t_start, {"n_starts": len(starts), "knots_m_s": _bump_knots(space), "knot_update": knot_log,
+                                           "rebound_knots_m_s": _bump_knots(space, -1),
+                                           "v_range_m_s": list(space.v_range_m_s),
+                                           "knots": ("quantiles" if _quantile_knots(knots_m_s)
+                                                     else "fixed"),
                                            "robust": bool(robust), "max_iter": max_iter,
-                                           "x_start": x0.tolist(), "start_rates": rates.tolist(),
-                                           "limit_factors": tight.tolist()})
+                                           "x_start": x0.tolist(),
+                                           "limit_factors": tight.tolist(),
+                                           "scan": None if scan is None else scan.summary()},
+                   scan=scan, extra=extra)
 
 
-def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, linear, lag_s):
+def _other_starts(scan, n):
+    """Up to `n` further IPOPT starts: the scan's best verified curves of a kind other than
+    its best's (linear or two-slope), best first; (label, decision vector)."""
+    if scan is None or n <= 0:
+        return []
+    kinds, feasible = list(scan.table["kind"]), list(scan.table["feasible"])
+    out, seen = [], {kinds[0]}
+    for k, ok, x in zip(kinds, feasible, scan.points):
+        if k not in seen and ok and len(out) < n:
+            out.append((f"scan's best {k}", x))
+            seen.add(k)
+    return out
+
+
+def _weights(drive_weights, drives):
+    """The drives' weights, summing to 1, checked."""
+    if drive_weights is None:
+        return np.full(len(drives), 1.0 / len(drives))
+    weights = np.asarray(drive_weights, dtype=float).ravel()
+    if weights.size != len(drives) or np.any(~np.isfinite(weights)) or np.any(weights < 0) \
+            or not weights.sum() > 0:
+        raise PlannerError(f"drive_weights {list(np.atleast_1d(drive_weights))} must be "
+                           f"{len(drives)} numbers >= 0, not all 0")
+    return weights / weights.sum()
+
+
+def _check_constraints_arg(constraints):
+    constraints = default_constraints() if constraints is None else constraints
+    if not isinstance(constraints, CurveConstraints):
+        raise TypeError(f"constraints must be CurveConstraints (read_curve_constraints), got "
+                        f"{type(constraints).__name__}")
+    return constraints
+
+
+def _linear_rows(space, constraints, library):
+    """The curve constraints on the decision variables, ``A x <= b``, checked."""
+    check_constraints(space, constraints, library)
+    families = constraint_rows(space, constraints, library)
+    T = space.expansion()
+    return (np.vstack([a for _, a, _ in families]) @ T,
+            np.concatenate([b for _, _, b in families]))
+
+
+def _start(model, plant, drives, library, space, constraints, base, objective, weights,
+           aggregate, oversample, quantile_knots):
+    """The global stage: IPOPT's curve space, constraints, scan and start.
+
+    The scan (:func:`planner.optimize.scan.scan_curves`) screens linear and
+    two-slope curves per group and verifies the best; the best is IPOPT's
+    start and a floor under its result. With knots on the quantiles, they were
+    placed on the baseline's shock speeds; they are moved once onto the speeds
+    of the scan's best curve (the curve the optimum starts from) when a knot or
+    the velocity range moves by more than :data:`KNOT_UPDATE_RTOL`, and the
+    scan is run again on the new knots; the better verified scan is kept with
+    its space. No candidate meeting the constraints: the best screened
+    uniform rate, projected onto them.
+
+    Returns
+    -------
+    space, A_lin, b_lin, scan, x0, knot_log
+    """
+    A_lin, b_lin = _linear_rows(space, constraints, library)
+    scan = scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin, base,
+                       objective, weights, aggregate, oversample=oversample)
+    log = {"baseline_knots_m_s": _bump_knots(space),
+           "baseline_rebound_knots_m_s": _bump_knots(space, -1),
+           "baseline_v_range_m_s": list(space.v_range_m_s), "moved": 0.0, "updated": False}
+    if scan is not None and quantile_knots and not space.linear:
+        shocks = space.shocks(scan.x, prefix="SCANBEST")
+        lib = ShockLibrary(list(shocks.values()) + list(library.values()))
+        speeds = shock_speeds(plant, drives, space.setup(shocks), lib, oversample=oversample)
+        bump, reb = velocity_knots(speeds)
+        rng = velocity_range(speeds)
+        old = np.concatenate([_bump_knots(space), _bump_knots(space, -1), space.v_range_m_s])
+        new = np.concatenate([bump, reb, rng])
+        log["moved"] = float(np.max(np.abs(new / old - 1.0))) if new.size == old.size else 1.0
+        if log["moved"] > KNOT_UPDATE_RTOL:
+            space1 = curve_space(symmetry=space.symmetry, knots_m_s=bump, rebound_knots_m_s=reb,
+                                 linear=False, lag_s=space.lag_s, v_range_m_s=rng)
+            try:
+                A1, b1 = _linear_rows(space1, constraints, library)
+            except PlannerError:
+                A1 = None  # the new knots conflict with the constraints: keep the first
+            scan1 = None if A1 is None else scan_curves(
+                model, plant, drives, library, space1, constraints, A1, b1, base, objective,
+                weights, aggregate, oversample=oversample)
+            if scan1 is not None and (scan1.feasible, -scan1.score) >= (scan.feasible,
+                                                                        -scan.score):
+                space, A_lin, b_lin, scan = space1, A1, b1, scan1
+                log["updated"] = True
+    if scan is not None:
+        return space, A_lin, b_lin, scan, scan.x, log
+    free = np.zeros((0, space.n_vars)), np.zeros(0)
+    scan_any = scan_curves(model, plant, drives, library, space, constraints, *free, base,
+                           objective, weights, aggregate, n_verify=1, two_slope=False,
+                           oversample=oversample)
+    return space, A_lin, b_lin, None, _project(scan_any.x, A_lin, b_lin), log
+
+
+def _quantile_knots(knots_m_s):
+    return isinstance(knots_m_s, str) and knots_m_s == QUANTILE_KNOTS
+
+
+def _bump_knots(space, side=1):
+    v = side * space.v_knots_m_s
+    return sorted(float(x) for x in v[v > 0])
+
+
+def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, linear, lag_s,
+             oversample=2):
     """The loop plant, drives, baseline setup, curve space and metric rows (names, rows of
     the plant's outputs) of an optimization, checked (see :func:`optimize_curves`)."""
     plant = as_loop_plant(model)
@@ -419,7 +492,17 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
     if lag_s is None:
         lag_s = [float(np.mean([base_models[CORNERS.index(c)].lag_s for c in corners]))
                  for _, corners in groups]
-    space = curve_space(symmetry=symmetry, knots_m_s=knots_m_s, linear=linear, lag_s=lag_s)
+    if isinstance(knots_m_s, str) and not _quantile_knots(knots_m_s):
+        raise PlannerError(f"knots_m_s must be velocities [m/s] or {QUANTILE_KNOTS!r} (on "
+                           f"the baseline's shock speeds), got {knots_m_s!r}")
+    # the baseline's shock speeds: the velocity range the buildable constraints hold in, and
+    # the knots on their quantiles
+    speeds = shock_speeds(plant, drives, base, library, oversample=oversample)
+    rebound_knots = None
+    if _quantile_knots(knots_m_s):
+        knots_m_s, rebound_knots = velocity_knots(speeds)
+    space = curve_space(symmetry=symmetry, knots_m_s=knots_m_s, rebound_knots_m_s=rebound_knots,
+                        linear=linear, lag_s=lag_s, v_range_m_s=velocity_range(speeds))
     names_all, L_all = metric_rows(plant)
     need = [m for m in objective.metrics if m in names_all]
     missing = [m for m in objective.metrics if m not in names_all]
@@ -430,16 +513,21 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
 
 
 def compile_curves(model, drives, library, *, objective=None, baseline=None,
-                   symmetry="left-right", knots_m_s=DEFAULT_KNOTS_M_S, linear=False,
+                   symmetry="left-right", knots_m_s=QUANTILE_KNOTS, linear=False,
                    lag_s=None, oversample=2):
     """Compile the optimizer's step functions of a problem ahead of :func:`optimize_curves`.
 
     The C compile of the closed loop's step and its adjoint (10-30 s on a
     fresh machine; nothing once cached) is what a first optimization waits
     for. Called with the same arguments as :func:`optimize_curves` (these
-    are the ones the compiled code depends on; the drive matters only by its
-    sample rate), e.g. in a worker while other work runs, it leaves the
+    are the ones the compiled code depends on; the drive matters by its
+    sample rate and, with ``knots_m_s="quantiles"``, by the baseline's shock
+    speeds on it), e.g. in a worker while other work runs, it leaves the
     library in :func:`jit_cache_dir`, where the optimization then finds it.
+    It compiles the problem on the baseline's knots: when the optimization
+    moves them onto its scan's best curve (``settings["knot_update"]``), it
+    compiles that problem itself. It runs no screening (no OpenMP pool: it
+    may run in a process forked from one that used one).
 
     Parameters
     ----------
@@ -459,7 +547,7 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     """
     objective = _check_objective(objective)
     plant, drives, _, space, rows = _problem(model, drives, library, objective, baseline,
-                                             symmetry, knots_m_s, linear, lag_s)
+                                             symmetry, knots_m_s, linear, lag_s, oversample)
     if not jit_available():
         return False
     for d in drives:
@@ -515,9 +603,9 @@ def _robust_factors(model, drives, library, space, x, base, need):
     if getattr(model, "frf", None) is None:
         raise PlannerError("robust=True needs an identified model (with its FRF): a known "
                            "model has no estimation error")
-    shocks = _optimal_shocks(space, x)
+    shocks = space.shocks(x)
     lib = ShockLibrary(list(shocks.values()) + list(library.values()))
-    unc = prediction_uncertainty(model, drives[0], [_setup_of(space, shocks)], lib)
+    unc = prediction_uncertainty(model, drives[0], [space.setup(shocks)], lib)
     hi = unc.ratio_hi.iloc[0]
     return np.array([max(float(hi.get(m, 1.0)), 1.0) for m in need])
 
@@ -541,33 +629,52 @@ def curve_distance(pwl_a, pwl_b, v_samples):
 
 def _finish(model, plant, drives, library, space, constraints, objective, base, weights,
             aggregate, oversample, x_opt, solver, history, n_closest, stationarity, A_lin,
-            b_lin, t_start, settings):
-    # verify the optimum and the best feasible iterate; keep the better verified one
-    cands = [x_opt]
+            b_lin, t_start, settings, scan=None, extra=()):
+    # verify the optimum, the other starts' results, the best feasible iterate and the scan's
+    # best curve (the floor: the result is never worse than it in the time domain); keep the
+    # best verified
+    cands, sources = [x_opt], ["ipopt"]
+    for src, x in extra:
+        cands.append(x)
+        sources.append(src)
     feas = [(f, x) for x, f in solver.pop("iterates")
             if np.all(A_lin @ x <= b_lin + 1e-6 * (1 + np.abs(b_lin)))]
     if feas:
         cands.append(min(feas, key=lambda fx: fx[0])[1])
+        sources.append("iterate")
+    if scan is not None and not settings.get("robust"):
+        # (robust limits are tightened by the model's intervals, which the scan does not
+        # hold: there the scan's curve is only the start)
+        cands.append(scan.x)
+        sources.append("scan")
     verified = []
     for k, x in enumerate(cands):
-        shocks = _optimal_shocks(space, x)
+        shocks = space.shocks(x)
         lib = ShockLibrary(list(shocks.values()) + list(library.values()))
-        setup = _setup_of(space, shocks)
-        sc, _ = _time_domain_scores(model, drives, [setup], lib, objective, base, weights,
+        setup = space.setup(shocks)
+        sc, _ = time_domain_scores(model, drives, [setup], lib, objective, base, weights,
                                     oversample, aggregate)
         verified.append((float(sc.loc["optimum", "score"]), bool(sc.loc["optimum", "feasible"]),
                          k))
     ok = [v for v in verified if v[1]] or verified
     best_k = min(ok)[2]
-    x_opt = _valid(space, cands[best_k])
-    shocks = _optimal_shocks(space, x_opt)
+    solver["source"] = sources[best_k]
+    solver["candidates"] = {src: v[0] for src, v in zip(sources, verified)}
+    x_opt = space.valid(cands[best_k])
+    shocks = space.shocks(x_opt)
     lib = ShockLibrary(list(shocks.values()) + list(library.values()))
-    setup = _setup_of(space, shocks)
+    setup = space.setup(shocks)
     if not solver["success"]:
         warnings.warn(f"optimize: IPOPT stopped with status {solver['status']!r} after "
                       f"{solver['iterations']} iterations; the best verified iterate is "
                       "returned (score "
                       f"{min(ok)[0]:.4f}): raise max_iter, or check the constraints",
+                      OptimizeWarning, stacklevel=3)
+    elif solver.get("acceptable"):
+        warnings.warn(f"optimize: IPOPT stopped at an acceptable level, not converged "
+                      f"({solver['reason']}); the best verified of its results, its best "
+                      f"iterate and the scan's best curve is returned ({sources[best_k]}, "
+                      f"score {min(ok)[0]:.4f}): check the curves, or raise max_iter",
                       OptimizeWarning, stacklevel=3)
 
     # the optimum's shock velocities (first drive): the distribution the crate is compared over
@@ -595,7 +702,7 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
         if s.name not in seen:
             uniq.append(s)
             seen.add(s.name)
-    table, metrics = _time_domain_scores(model, drives, uniq, lib, objective, base, weights,
+    table, metrics = time_domain_scores(model, drives, uniq, lib, objective, base, weights,
                                          oversample, aggregate)
     table = table.loc[[s.name for s in uniq]]
     kinds = {setup.name: "optimum", base.name: "baseline"}
@@ -618,6 +725,9 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
                     drives=[d.name for d in drives], symmetry=space.symmetry,
                     linear=space.linear, lag_s=list(space.lag_s), total_s=None,
                     crate_scores=crate_scores)
+    if not space.linear:
+        lo, hi = constraint_envelope(space, constraints, library)
+        settings["envelope_n"] = {"lo": lo.tolist(), "hi": hi.tolist()}
     settings["total_s"] = time.perf_counter() - t_start
     return CurveOptimum(x=np.asarray(x_opt), curves=space.curves(x_opt), shocks=shocks,
                         setup=setup, table=table, metrics=metrics, crate_best=best_name,
@@ -638,7 +748,7 @@ def _crate_best(model, drives, library, crate, objective, base, weights, oversam
                                              else np.maximum(total, v))
     order = total.sort_values(kind="stable").index.tolist()
     cand = [s for s in crate if s.name in set(order[:top])]
-    table, _ = _time_domain_scores(model, drives, cand, library, objective, base, weights,
+    table, _ = time_domain_scores(model, drives, cand, library, objective, base, weights,
                                    oversample, aggregate)
     feas = table[table["feasible"]]
     pick = feas if len(feas) else table
@@ -658,7 +768,7 @@ def _stationarity(model, drives, lib, space, x, A, b, objective, base, weights, 
             xt[j] *= 1.0 + 0.05 * sgn
             if not np.all(A @ xt - b <= slack) or xt[j] == x[j]:
                 continue
-            shocks = _optimal_shocks(space, xt, prefix=f"S{j}{'m' if sgn < 0 else 'p'}")
+            shocks = space.shocks(xt, prefix=f"S{j}{'m' if sgn < 0 else 'p'}")
             extra += list(shocks.values())
             setups.append(Setup(f"var{j}{'-' if sgn < 0 else '+'}",
                                 {c: shocks.ids[space.group_of(c)] for c in CORNERS}))
@@ -666,7 +776,7 @@ def _stationarity(model, drives, lib, space, x, A, b, objective, base, weights, 
     if not setups:
         return pd.DataFrame(columns=["variable", "change", "score", "relative_change"])
     lib2 = ShockLibrary(list(lib.values()) + extra)
-    table, _ = _time_domain_scores(model, drives, setups, lib2, objective, base, weights,
+    table, _ = time_domain_scores(model, drives, setups, lib2, objective, base, weights,
                                    oversample, aggregate)
     out = pd.DataFrame({"variable": [j for j, _ in rows], "change": [0.05 * s for _, s in rows],
                         "score": table.loc[[s.name for s in setups], "score"].to_numpy(),

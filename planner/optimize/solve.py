@@ -21,6 +21,10 @@ from ident.errors import ShockplanWarning
 
 __all__ = [
     "ACCEPTABLE_CHANGE",
+    "ACCEPTABLE_ITER",
+    "ACCEPTABLE_TOL",
+    "IPOPT_TOL",
+    "acceptable_reason",
     "OptimizeWarning",
     "Evaluator",
     "solve_problem",
@@ -30,12 +34,57 @@ __all__ = [
 #: this for 5 iterations: 1e-5 of a score is far below the model's accuracy (~1e-3), and
 #: the piecewise-linear curves' kinks make the last digits of a tighter tolerance costly.
 ACCEPTABLE_CHANGE = 1e-5
-#: IPOPT statuses that count as solved.
+#: IPOPT's convergence tolerance (scaled NLP error) and the looser "acceptable" one, with the
+#: iterations the acceptable test must hold. A stop at the acceptable level is reported as
+#: such (``solver["acceptable"]``, an :class:`OptimizeWarning` with the reason): it is not a
+#: converged optimum (issue 24: the GT car's optimum stopped there on a flat landscape).
+IPOPT_TOL = 1e-6
+ACCEPTABLE_TOL = 1e-3
+ACCEPTABLE_ITER = 5
+#: IPOPT statuses that count as solved ("acceptable" with a warning).
 _SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+_ACCEPTABLE = "Solved_To_Acceptable_Level"
 
 
 class OptimizeWarning(ShockplanWarning):
-    """The optimizer stopped without converging; the best verified iterate is returned."""
+    """The optimizer stopped without converging (or only at IPOPT's acceptable level); the
+    best verified candidate is returned."""
+
+
+def acceptable_reason(history, iterations):
+    """Why IPOPT stopped at its acceptable level, in one phrase.
+
+    Parameters
+    ----------
+    history : pandas.DataFrame
+        The iterations (``objective``, and ``inf_pr``, ``inf_du`` when IPOPT gave them).
+    iterations : int
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> h = pd.DataFrame({"objective": [1.0, 0.9, 0.9, 0.9, 0.9, 0.9, 0.9],
+    ...                   "inf_pr": [0.0] * 7, "inf_du": [1.0, 0.1, 0.05, 0.03, 0.03, 0.03, 0.02]})
+    >>> acceptable_reason(h, 6)
+    'the objective changed by 0 (relative) over the last 5 iterations, below 1e-05, with the dual infeasibility 2.0e-02 above the tolerance 1e-06 after 6 iterations'
+    """
+    obj = history["objective"].to_numpy(float) if len(history) else np.array([np.nan])
+    tail = obj[-(ACCEPTABLE_ITER + 1):]
+    change = float(np.max(np.abs(np.diff(tail))) / max(abs(tail[-1]), 1e-300)) \
+        if tail.size > 1 else float("nan")
+    parts = [f"the objective changed by {change:.2g} (relative) over the last "
+             f"{ACCEPTABLE_ITER} iterations, below {ACCEPTABLE_CHANGE:g}"
+             if change <= ACCEPTABLE_CHANGE else
+             f"the scaled NLP error stayed below the acceptable tolerance {ACCEPTABLE_TOL:g} "
+             f"for {ACCEPTABLE_ITER} iterations"]
+    for key, what in (("inf_du", "dual infeasibility"), ("inf_pr", "primal infeasibility")):
+        if key in history and len(history) and float(history[key].iloc[-1]) > IPOPT_TOL:
+            parts.append(f"the {what} {float(history[key].iloc[-1]):.1e} above the tolerance "
+                         f"{IPOPT_TOL:g}")
+    return ", with ".join(parts) + f" after {iterations} iterations"
 
 
 class Evaluator:
@@ -230,6 +279,10 @@ def solve_problem(ev, space, kinds, weights, aggregate, A_lin, b_lin, xs0, scale
         x_start = xs_opt
     hist = pd.concat(histories, ignore_index=True)
     hist.insert(0, "iteration", np.arange(len(hist)))
+    info["acceptable"] = info["status"] == _ACCEPTABLE
+    info["converged"] = info["status"] == "Solve_Succeeded"
+    info["reason"] = (acceptable_reason(histories[-1], total_its) if info["acceptable"]
+                      else "")
     info.update(iterations=total_its, solve_s=time.perf_counter() - t0,
                 active_limits=len(active), limits=len(limit_rows),
                 iterates=[x for h in histories for x in h.attrs["iterates"]])
@@ -269,7 +322,8 @@ def _ipopt(ev, space, score_rows, limit_rows, weights, aggregate, A_lin, b_lin, 
     G = ca.vertcat(*g)
     it_cb = _Iterations(x_all.shape[0], G.shape[0], progress)
     opts = {"ipopt.hessian_approximation": "limited-memory", "ipopt.max_iter": int(max_iter),
-            "ipopt.tol": 1e-6, "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5,
+            "ipopt.tol": IPOPT_TOL, "ipopt.acceptable_tol": ACCEPTABLE_TOL,
+            "ipopt.acceptable_iter": ACCEPTABLE_ITER,
             "ipopt.acceptable_obj_change_tol": ACCEPTABLE_CHANGE, "ipopt.print_level": 0,
             "print_time": False, "ipopt.sb": "yes", "iteration_callback": it_cb,
             "ipopt.mu_strategy": "adaptive"}

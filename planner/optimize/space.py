@@ -20,8 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ident.data.channels import CORNERS
-from ident.models.shocks import PiecewiseLinear
+from ident.models.library import ShockLibrary
+from ident.models.shocks import PiecewiseLinear, TableShock
 from planner.errors import PlannerError
+from planner.setups import Setup
 
 __all__ = [
     "CurveSpace",
@@ -56,6 +58,12 @@ class CurveSpace:
     lag_s : tuple of float
         The lag of each group [s].
     symmetry : str
+    v_range_m_s : (float, float) or None
+        The shock speeds [m/s] below which the car spends most of its time
+        (by default 99 %: :data:`planner.optimize.knots.RANGE_QUANTILE`),
+        rebound then bump: the velocity range the buildable constraints
+        hold in (:func:`planner.optimize.constraints.constraint_rows`).
+        None: every segment.
     """
 
     groups: tuple
@@ -63,6 +71,7 @@ class CurveSpace:
     linear: bool
     lag_s: tuple
     symmetry: str
+    v_range_m_s: tuple | None = None
 
     @property
     def zero_index(self):
@@ -119,6 +128,53 @@ class CurveSpace:
         K = self.v_knots_m_s.size
         return [PiecewiseLinear(self.v_knots_m_s, p[:K], p[K], p[K + 1]) for p in self.params(x)]
 
+    def valid(self, x):
+        """`x` with the curves' validity exact.
+
+        An interior-point solution meets its constraints to the solver's
+        tolerance (a slope of -5e-5 N/(m/s) is not passive for a shock
+        model). Knot forces are made non-decreasing through F(0) = 0 with the
+        sign of their velocity, end slopes >= 0; changes are of the order of
+        the tolerance.
+        """
+        if self.linear:
+            return np.maximum(np.asarray(x, dtype=float), 0.0)
+        K, z = self.v_knots_m_s.size, self.zero_index
+        out = []
+        for p in self.params(x):
+            f = p[:K].copy()
+            f[z] = 0.0
+            f[z + 1:] = np.maximum.accumulate(np.maximum(f[z + 1:], 0.0))
+            f[:z] = -np.maximum.accumulate(np.maximum(-f[:z][::-1], 0.0))[::-1]
+            out.append(PiecewiseLinear(self.v_knots_m_s, f, max(p[K], 0.0), max(p[K + 1], 0.0)))
+        return self.from_curves(out)
+
+    def shocks(self, x, *, prefix="OPT"):
+        """Table shocks of the curves of `x`, ids ``<prefix>-<group>``.
+
+        The end slopes are kept by one extra point a side (0.5 m/s beyond the
+        outer knots); each group's lag.
+
+        Returns
+        -------
+        ShockLibrary
+        """
+        models = []
+        for (name, _), pwl, lag in zip(self.groups, self.curves(self.valid(x)), self.lag_s):
+            v, f = pwl.v_knots_m_s, pwl.f_knots_n
+            ext = 0.5
+            vv = np.concatenate([[v[0] - ext], v, [v[-1] + ext]])
+            ff = np.concatenate([[f[0] - pwl.slope_below * ext], f,
+                                 [f[-1] + pwl.slope_above * ext]])
+            models.append(TableShock(f"{prefix}-{name}", vv, ff, lag_s=lag,
+                                     description=f"optimal {name} curve (shockplan optimize)"))
+        return ShockLibrary(models)
+
+    def setup(self, shocks, name="optimum"):
+        """The setup that puts each group's shock of `shocks` (one per group, in
+        group order, as :meth:`shocks` returns) on the group's corners."""
+        return Setup(name, {c: shocks.ids[self.group_of(c)] for c in CORNERS})
+
     def group_of(self, corner):
         """Index of the group that holds `corner`."""
         for g, (_, corners) in enumerate(self.groups):
@@ -147,7 +203,7 @@ class CurveSpace:
 
 
 def curve_space(*, symmetry="left-right", knots_m_s=DEFAULT_KNOTS_M_S, rebound_knots_m_s=None,
-                linear=False, lag_s=0.0):
+                linear=False, lag_s=0.0, v_range_m_s=None):
     """Build the curves the optimizer chooses from.
 
     Parameters
@@ -164,6 +220,10 @@ def curve_space(*, symmetry="left-right", knots_m_s=DEFAULT_KNOTS_M_S, rebound_k
         One damping rate per group.
     lag_s : float or sequence of float
         Lag per group [s].
+    v_range_m_s : (float, float), optional
+        Rebound and bump speeds [m/s] (positive) below which the buildable
+        constraints hold (:attr:`CurveSpace.v_range_m_s`); default every
+        segment.
 
     Returns
     -------
@@ -182,8 +242,15 @@ def curve_space(*, symmetry="left-right", knots_m_s=DEFAULT_KNOTS_M_S, rebound_k
     lags = np.broadcast_to(np.asarray(lag_s, dtype=float), (len(groups),))
     if np.any(~np.isfinite(lags)) or np.any(lags < 0):
         raise PlannerError(f"lag_s must be >= 0 [s], got {lag_s!r}")
+    if v_range_m_s is not None:
+        rng = np.asarray(v_range_m_s, dtype=float).ravel()
+        if rng.size != 2 or np.any(~np.isfinite(rng)) or np.any(rng <= 0):
+            raise PlannerError(f"v_range_m_s must be two positive speeds [m/s] (rebound, bump), "
+                               f"got {v_range_m_s!r}")
+        v_range_m_s = (float(rng[0]), float(rng[1]))
     return CurveSpace(groups=groups, v_knots_m_s=v, linear=bool(linear),
-                      lag_s=tuple(float(x) for x in lags), symmetry=symmetry)
+                      lag_s=tuple(float(x) for x in lags), symmetry=symmetry,
+                      v_range_m_s=v_range_m_s)
 
 
 def symmetry_groups(symmetry):

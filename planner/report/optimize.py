@@ -102,7 +102,13 @@ def curves_figure(optimum, library, *, units="SI"):
     def force(model, vel_si):  # a curve in display units
         return from_si(model.force(vel_si), "force", units)
 
-    for ax, (name, corners), pwl in zip(axes, optimum.space.groups, optimum.curves):
+    env = optimum.settings.get("envelope_n") or {}
+    env_lo = np.asarray(env.get("lo", np.full((G, optimum.space.v_knots_m_s.size), np.nan)),
+                        dtype=float)
+    env_hi = np.asarray(env.get("hi", np.full_like(env_lo, np.nan)), dtype=float)
+    rng = optimum.space.v_range_m_s
+    for g, (ax, (name, corners), pwl) in enumerate(zip(axes, optimum.space.groups,
+                                                         optimum.curves)):
         samples = from_si(np.concatenate([optimum.velocity_m_s[c] for c in corners]),
                           "velocity", units)
         hist = ax.twinx()
@@ -115,6 +121,18 @@ def curves_figure(optimum, library, *, units="SI"):
         for sid in sorted(set(optimum.table.loc[optimum.crate_best, list(corners)])):
             ax.plot(v, force(library[sid], v_si), color="tab:orange", lw=1.6,
                     label=f"crate best ({sid})")
+        vk = from_si(pwl.v_knots_m_s, "velocity", units)
+        f_lim = 1.5 * max(np.max(np.abs(force(pwl, v_si))), 1e-9)
+        lo = np.clip(from_si(env_lo[g], "force", units), -f_lim, f_lim)
+        hi = np.clip(from_si(env_hi[g], "force", units), -f_lim, f_lim)
+        ok = np.isfinite(lo) & np.isfinite(hi)
+        ax.fill_between(vk[ok], lo[ok], hi[ok], color="tab:green", alpha=0.13, lw=0,
+                        label="constraint envelope")
+        if rng is not None:
+            for k, vr in enumerate((-rng[0], rng[1])):
+                ax.axvline(from_si(vr, "velocity", units), color="tab:green", lw=0.9, ls="--",
+                           label="99 % of the shock speeds (constraints' range)" if k == 0
+                           else None)
         ax.plot(v, force(pwl, v_si), color="tab:blue", lw=2.2, label=f"optimum ({name})")
         ax.plot(from_si(pwl.v_knots_m_s, "velocity", units),
                 from_si(pwl.f_knots_n, "force", units), "o", color="tab:blue", ms=4)
@@ -124,8 +142,9 @@ def curves_figure(optimum, library, *, units="SI"):
                title=f"{name}: {', '.join(corners)}", xlim=(-v_max, v_max))
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8, loc="upper left")
-    fig.suptitle(f"optimal curves (score {optimum.score:.4f}) and the crate; shaded: the "
-                 "optimum's shock velocities", fontsize=10)
+    fig.suptitle(f"optimal curves (score {optimum.score:.4f}) and the crate; blue histogram: "
+                 "the optimum's shock velocities; green: the forces the constraints allow at "
+                 "the knots", fontsize=10)
     return fig
 
 
@@ -171,7 +190,16 @@ def _write_workbook(optimum, units, path):
             ("crate best", optimum.crate_best),
             ("crate best score", float(optimum.table.loc[optimum.crate_best, "score"])),
             ("gain over the crate best", f"{100 * optimum.gap:.2f} %"),
-            ("IPOPT status", s["status"]), ("iterations", s["iterations"]),
+            ("IPOPT status", s["status"] + (" (not converged: a warning)"
+                                             if s.get("acceptable") else "")),
+            ("IPOPT stop reason", s.get("reason") or "converged"),
+            ("iterations", s["iterations"]),
+            ("result taken from", {"ipopt": "IPOPT's solution", "iterate": "IPOPT's best "
+                                   "feasible iterate", "scan": "the scan's best curve"}
+             .get(s.get("source"), "IPOPT's solution")),
+            ("IPOPT starts", "; ".join(
+                f"{st['start']}: {st['iterations']} iterations, {st['status']}"
+                for st in s.get("starts", []))),
             ("closed-loop evaluations", s["n_eval"]),
             ("adjoint sweeps", s["n_grad"]), ("compiled (jit)", s["jit"]),
             ("symmetry", optimum.space.symmetry),
@@ -179,6 +207,19 @@ def _write_workbook(optimum, units, path):
             ("baseline", "/".join(optimum.baseline.ids())),
             ("drives", ", ".join(optimum.settings["drives"])),
             ("units", units)]
+    scan = optimum.settings.get("scan")
+    if scan:
+        rates = ", ".join(f"{name} {c:.0f} N s/m" for (name, _), c in
+                          zip(optimum.space.groups, scan["rates_n_s_m"]))
+        lo, hi, n = scan["grid_n_s_m"]
+        rows += [("scan: linear rates per group", f"{n} from {lo:.0f} to {hi:.0f} N s/m"),
+                 ("scan: candidates / within the constraints (screened) / verified",
+                  f"{scan['n_candidates']} / {scan['n_screened']} / {scan['n_verified']}"),
+                 ("scan: best linear curves", rates),
+                 ("scan: best linear score (time domain)", scan["linear_score"]),
+                 ("scan: best curves", "; ".join(scan["curves"])),
+                 ("scan: best score (time domain)", scan["score"])]
+        # the scan's wall time is in settings["scan"], not here: a rerun writes the same bytes
     if optimum.stationarity is not None and len(optimum.stationarity):
         rows.append(("largest gain of a +-5 % knot move",
                      f"{-100 * min(0.0, optimum.stationarity.relative_change.min()):.3f} %"))
