@@ -19,10 +19,10 @@ layers before it in this list:
     conditioning, rational fits, the identified model and its file, the pipeline
     that puts them together, the FIR reference, and the FRF plots.
 
-One exception to the order: a rig session holds its shock library, so
-:mod:`ident.data.session` and :mod:`ident.data.formats` read and write it through
-:mod:`ident.models.library` (which, with the shock models it holds, uses only data's
-units and files).
+One exception to the order: a rig session holds its shock library (and its bump-stop
+library), so :mod:`ident.data.session` and :mod:`ident.data.formats` read and write it
+through :mod:`ident.models.library` and :mod:`ident.models.bumpstops` (which, with the
+models they hold, use only data's channels, units and files).
 :mod:`ident.errors` holds the exception and warning classes every layer raises.
 ``ident`` never imports :mod:`planner`.
 """

@@ -9,6 +9,7 @@ __all__ = [
     "ShockplanError",
     "SessionError",
     "ShockModelError",
+    "BumpStopError",
     "VehicleError",
     "DriveError",
     "IdentificationError",
@@ -29,6 +30,10 @@ class SessionError(ShockplanError):
 
 class ShockModelError(ShockplanError):
     """A shock model or shock library is malformed."""
+
+
+class BumpStopError(ShockplanError):
+    """A bump stop, a bump-stop library or a packer is malformed."""
 
 
 class VehicleError(ShockplanError):

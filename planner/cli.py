@@ -105,9 +105,16 @@ def cmd_rig_simulate(args):
     counts = [r.n_samples for r in session.runs]
     samples = (f"{counts[0]} samples each" if len(set(counts)) == 1 else
                f"{min(counts)}-{max(counts)} samples per run ({sum(counts)} in all)")
+    real = []  # the real car of the plan (issue 25), said only when the plan has it
+    if session.bump_stops is not None:
+        fitted = sum(any(r.bump_stops.values()) for r in session.runs)
+        real.append(f"bump stops on {fitted} of {len(session.runs)} runs")
+    if session.static_corner_load_n is not None:
+        real.append("static corner loads (the tires may lift off)")
     print(f"wrote rig session '{session.name}' to {out}: {len(session.runs)} runs, "
           f"{samples} at {session.fs_hz:g} Hz, vehicle '{vehicle.name}', "
-          f"{plan.rig} rig ({len(session.rig_inputs)} rig inputs)")
+          f"{plan.rig} rig ({len(session.rig_inputs)} rig inputs)"
+          + "".join(f"; {x}" for x in real))
     return 0
 
 
@@ -162,12 +169,18 @@ def cmd_identify(args):
         check_output(args.plots, overwrite=True, folder=True, what="--plots")
     out = Path(args.out)
     session = read_session(args.session)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        model = identify_session(session, estimator=args.estimator,
-                                 frf_method=args.frf_method, nperseg=args.nperseg,
-                                 coherence_min=args.coherence_min, fit_method=args.method,
-                                 max_order=args.max_order)
+    diagnose_log = logging.getLogger("ident.identify.diagnose")
+    level = diagnose_log.level
+    diagnose_log.setLevel(logging.ERROR)  # its findings are printed below, once
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            model = identify_session(session, estimator=args.estimator,
+                                     frf_method=args.frf_method, nperseg=args.nperseg,
+                                     coherence_min=args.coherence_min, fit_method=args.method,
+                                     max_order=args.max_order, diagnose=not args.no_diagnosis)
+    finally:
+        diagnose_log.setLevel(level)
     noise = noise_report(model, session)
     # the noise report built the loop plant; the copy keeps it, and save stores it
     model = model.with_settings(dict(model.settings, noise=noise))
@@ -190,6 +203,7 @@ def cmd_identify(args):
           f"{int(table.order.min())}..{int(table.order.max())}; c_bar "
           f"{', '.join(f'{c:.0f}' for c in model.cbar_n_s_m)} N/(m/s)")
     print(_noise_summary(table, noise))
+    print(_diagnosis_summary(model))
     for w in caught:
         print(f"warning: {w.message}")
     print(f"wrote model {out} and its per-pair summary {summary_file}")
@@ -253,6 +267,28 @@ def _noise_summary(table, noise):
                      "peak), e.g.:")
         lines += [f"  {r.output} <- {r.input}: {r.noise_bands_hz} Hz"
                   for r in banded.head(3).itertuples()]
+    return "\n".join(lines)
+
+
+def _diagnosis_summary(model):
+    """Lines for the terminal: what the session shows that the linear model cannot see."""
+    from ident.identify.diagnose import Diagnosis
+
+    doc = model.settings.get("diagnosis")
+    if doc is None:
+        return "diagnosis: skipped (--no-diagnosis)"
+    diag = Diagnosis.from_dict(doc)
+    amplitude = diag.settings.get("amplitude", "")
+    if not len(diag):
+        return ("diagnosis: nothing the linear model cannot see (bump stops, lift-off, the "
+                "runs re-simulated on the model against their noise; amplitude dependence "
+                f"{amplitude})")
+    groups = diag.groups()
+    lines = [(f"diagnosis: {len(groups)} finding(s) the linear model cannot see (per corner "
+              f"over the runs; {len(diag)} per run and corner in the model's settings; "
+              f"amplitude dependence {amplitude}):")]
+    lines += [f"  warning: {line}" if not line.startswith("    ") else f"  {line}"
+              for line in diag.lines()]
     return "\n".join(lines)
 
 
@@ -936,6 +972,9 @@ def build_parser():
                          "(default: no export)")
     ident_p.add_argument("--all-pairs", action="store_true", help="print every pair's summary "
                          "(default: the 12 pairs with the largest fit error)")
+    ident_p.add_argument("--no-diagnosis", action="store_true", help="skip the check of the "
+                         "session against the model (bump stops, lift-off, the runs "
+                         "re-simulated on the model; about 5-8 %% of the time)")
     ident_p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     ident_p.set_defaults(func=cmd_identify)
 

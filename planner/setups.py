@@ -19,6 +19,16 @@ Cells are stripped of surrounding spaces; blank lines, and ``#`` comment lines b
 the header (the unit marker ``# units: SI`` that every CSV shockplan writes starts
 with), are skipped.
 
+Bump stops and packers (the spec's "The real car"; optional): columns ``bump_stop_XX``
+(a bump-stop id, or ``none``) and ``packer_XX`` (a thickness in the file's unit system:
+m, or in with ``# units: imperial``) give a setup's bump stops and packers at corner
+``XX``. A setup without them, a corner without its column, or an empty cell keeps the
+model's baseline run's (:func:`ident.models.bumpstops.resolve_corner_stops`)::
+
+    setup,LF,RF,LR,RR,bump_stop_LF,bump_stop_RF,packer_LF,packer_RF
+    soft-front-packed,D8,D8,B20,B20,BS-F,BS-F,0.003,0.003
+    baseline,B20,B20,B20,B20,,,,
+
 Generated names (:func:`enumerate_setups`) are compact by default:
 ``"B20/B20/D8/D8"``, the ids in corner order LF/RF/LR/RR; pass
 ``name_format="LF={LF} RF={RF} LR={LR} RR={RR}"`` for the spelled-out form.
@@ -64,8 +74,11 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from ident.data.files import check_can_write, csv_preamble, write_csv
+from ident.data.files import check_can_write, csv_preamble, resolve_units, write_csv
 from ident.data.channels import CORNERS
+from ident.data.units import UNIT_LABELS, from_si, to_si
+from ident.models.bumpstops import (NO_BUMP_STOP, BumpStopLibrary, check_packer,
+                                    parse_bump_stop_id)
 from planner.errors import PlannerError
 
 __all__ = [
@@ -106,6 +119,13 @@ DEFAULT_NAME_FORMAT = "{LF}/{RF}/{LR}/{RR}"
 
 _SETUP_COLUMN = "setup"
 _CORNER_LIKE = re.compile(r"^[A-Za-z]{2}$")
+#: The optional columns of a setups CSV: bump stop and packer per corner.
+_BUMP_COLUMNS = tuple(f"bump_stop_{c}" for c in CORNERS)
+_PACKER_COLUMNS = tuple(f"packer_{c}" for c in CORNERS)
+#: A misspelt one (case, separators, plural, FL for LF), refused; a longer name that
+#: merely starts alike (a metric such as bump_stop_share_LF) is another column.
+_ELEMENT_LIKE = re.compile(r"^(bumpstops?|bumps?|packers?)(lf|rf|lr|rr|fl|fr|rl)$")
+_CORNER_ALIASES = {"fl": "LF", "fr": "RF", "rl": "LR"}
 
 
 def _check_text(value, what, fix):
@@ -164,9 +184,40 @@ def unknown_id_error(where, shock_id, library):
 # ----------------------------------------------------------------------------
 
 
+def _corner_elements(who, bump_stops, packers_m):
+    """A setup's bump stops and packers, checked: read-only mappings in corner order (only
+    the corners given; an empty one becomes None)."""
+    out = []
+    for key, values in (("bump_stops", bump_stops), ("packers_m", packers_m)):
+        if values is None:
+            out.append(None)
+            continue
+        if not isinstance(values, Mapping):
+            raise TypeError(f"{who}: {key} must be a mapping corner -> value, got "
+                            f"{type(values).__name__}")
+        unknown = [c for c in values if c not in CORNERS]
+        if unknown:
+            raise PlannerError(f"{who}: {key}: unknown corner {unknown[0]!r}; corners are "
+                               f"{list(CORNERS)}")
+        given = {}
+        for c in (c for c in CORNERS if c in values):
+            v = values[c]
+            if key == "bump_stops":
+                given[c] = None if v is None else parse_bump_stop_id(
+                    v, f"{who}: bump_stops {c}", error=PlannerError)
+            elif isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or \
+                    not math.isfinite(v) or v < 0:
+                raise PlannerError(f"{who}: packers_m {c} = {v!r} is not a thickness; give a "
+                                   "number >= 0 [m] (0 = none)")
+            else:
+                given[c] = float(v)
+        out.append(MappingProxyType(given) if given else None)
+    return out
+
+
 @dataclass(frozen=True)
 class Setup:
-    """One shock id per corner.
+    """One shock id per corner, and optionally bump stops and packers.
 
     Parameters
     ----------
@@ -175,18 +226,28 @@ class Setup:
     shocks : mapping of str to str
         Corner -> shock id, exactly the corners ``LF RF LR RR`` (any order;
         stored read-only in corner order).
+    bump_stops : mapping of str to (str or None), optional
+        Corner -> bump-stop id, or None (or ``"none"``) for no bump stop, for the
+        corners the setup sets; the others keep the model's baseline run's. Stored
+        read-only in corner order; None (the default) when no corner is given.
+    packers_m : mapping of str to float, optional
+        Corner -> packer thickness [m] (>= 0) for the corners the setup sets; the others
+        keep the baseline run's. As `bump_stops`.
 
     Raises
     ------
     PlannerError
         On an empty or padded name, a missing or unknown corner, or an empty
-        or padded shock id.
+        or padded shock id; an unknown corner, an empty bump-stop id or a negative or
+        non-finite packer.
 
     Notes
     -----
-    Setups compare and hash by name and ids. Whether the ids exist is checked
-    against a library by :meth:`resolve` (and :func:`read_setups` when given
-    one).
+    Setups compare by name, ids, bump stops and packers, and hash by name and ids.
+    Whether the ids exist is checked against a library by :meth:`resolve` (and
+    :func:`read_setups` when given libraries); the bump stops and packers at each
+    corner, the setup's or the baseline run's, by
+    :func:`ident.models.bumpstops.resolve_corner_stops`.
 
     Examples
     --------
@@ -199,6 +260,9 @@ class Setup:
 
     name: str
     shocks: Mapping
+    # defaults stay class attributes, so _unchecked's setups read None without a store
+    bump_stops: Mapping | None = None
+    packers_m: Mapping | None = None
 
     def __post_init__(self):
         _check_text(self.name, "setup name", "give a non-empty name without surrounding "
@@ -220,6 +284,10 @@ class Setup:
             _check_text(sid, f"{who}: corner {c}: shock id", "give a shock id from the "
                         "library (non-empty, no surrounding spaces)")
         self._set(ids)
+        if self.bump_stops is not None or self.packers_m is not None:
+            stops, packers = _corner_elements(who, self.bump_stops, self.packers_m)
+            object.__setattr__(self, "bump_stops", stops)
+            object.__setattr__(self, "packers_m", packers)
 
     def _set(self, ids):
         object.__setattr__(self, "shocks", MappingProxyType(dict(zip(CORNERS, ids))))
@@ -236,11 +304,19 @@ class Setup:
     def __hash__(self):
         return hash((self.name, self._ids))
 
+    def _elements(self):
+        """The bump stops and packers as plain dicts (None where not given)."""
+        return tuple(None if m is None else dict(m) for m in (self.bump_stops, self.packers_m))
+
     def __reduce__(self):  # mappingproxy does not pickle; rebuild from plain values
-        return (Setup, (self.name, dict(self.shocks)))
+        if self.bump_stops is None and self.packers_m is None:
+            return (Setup, (self.name, dict(self.shocks)))
+        return (Setup, (self.name, dict(self.shocks), *self._elements()))
 
     def __repr__(self):
-        return f"Setup(name={self.name!r}, shocks={dict(self.shocks)!r})"
+        more = "".join(f", {k}={v!r}" for k, v in zip(("bump_stops", "packers_m"),
+                                                        self._elements()) if v is not None)
+        return f"Setup(name={self.name!r}, shocks={dict(self.shocks)!r}{more})"
 
     def ids(self):
         """Return the shock ids in corner order.
@@ -306,7 +382,7 @@ def _check_setups(setups, where):
 # ----------------------------------------------------------------------------
 
 
-def read_setups(path, library=None):
+def read_setups(path, library=None, bump_stops=None, *, units=None):
     """Read a setups CSV (``setup,LF,RF,LR,RR``, one row per setup).
 
     Parameters
@@ -315,6 +391,12 @@ def read_setups(path, library=None):
         The CSV file (UTF-8, a header row).
     library : ShockLibrary, optional
         If given, every shock id must be in it.
+    bump_stops : BumpStopLibrary, optional
+        If given, every id in a ``bump_stop_XX`` column must be in it, and a packer
+        beside a bump stop the row names must fit its gap.
+    units : {"SI", "imperial"}, optional
+        The unit system of ``packer_XX`` when the file has no unit marker (default SI);
+        a marker that says otherwise is an error.
 
     Returns
     -------
@@ -328,19 +410,27 @@ def read_setups(path, library=None):
         a corner column, repeats a column, has a column that looks like an
         unknown corner (two letters, e.g. ``LM``), a row with the wrong number
         of fields, an empty cell, a duplicate setup name, or (with `library`) an
-        unknown shock id. The message names the file, the line and setup, the
-        column, and the fix.
+        unknown shock id; a column that looks like a misspelt ``bump_stop_XX`` or
+        ``packer_XX``, a packer that is not a number >= 0, or (with `bump_stops`) an
+        unknown bump-stop id or a packer thicker than the gap of the row's bump stop.
+        The message names the file, the line and setup, the column, and the fix.
 
     Notes
     -----
-    Columns other than ``setup`` and the corners are ignored (so a predictions
-    CSV reads as a setups file). Leading ``#`` comment lines (the unit marker
+    Columns other than ``setup``, the corners and ``bump_stop_XX`` / ``packer_XX``
+    are ignored (so a predictions CSV reads as a setups file). In ``bump_stop_XX``,
+    ``none`` (any case) is no bump stop; an empty ``bump_stop_XX`` or ``packer_XX``
+    cell keeps the baseline run's (:attr:`Setup.bump_stops` and
+    :attr:`Setup.packers_m` hold only the corners a row gives). Leading ``#``
+    comment lines (the unit marker
     ``# units: ...`` that shockplan writes) are skipped. Line numbers are the file's
     (the header is line 1 unless comment lines precede it).
     """
     path = Path(path)
     if library is not None:
         _library_ids(library, f"read_setups {path}")
+    if bump_stops is not None and not isinstance(bump_stops, BumpStopLibrary):
+        bump_stops = BumpStopLibrary(bump_stops)
     if not path.is_file():
         raise PlannerError(f"{path}: setups file not found; check the path")
     try:
@@ -354,7 +444,7 @@ def read_setups(path, library=None):
                            f"UTF-8 text with the header '{_SETUP_COLUMN},{','.join(CORNERS)}'")
     # leading '#' comment lines (the unit marker '# units: ...') are skipped, their
     # marker checked; line numbers stay the file's
-    _, n_skip = csv_preamble(text.splitlines(), where=str(path), error=PlannerError)
+    marked, n_skip = csv_preamble(text.splitlines(), where=str(path), error=PlannerError)
     body = "".join(text.splitlines(keepends=True)[n_skip:])
     rows = csv.reader(io.StringIO(body, newline=""), skipinitialspace=True)
     header = None
@@ -374,6 +464,14 @@ def read_setups(path, library=None):
         if h != _SETUP_COLUMN and h not in CORNERS and _CORNER_LIKE.match(h):
             raise PlannerError(f"{path}: column {h!r} is not a corner; corners are "
                                f"{list(CORNERS)} (upper case); rename the column")
+        typo = _ELEMENT_LIKE.match(re.sub(r"[^a-z]", "", h.lower()))
+        if typo and h not in _BUMP_COLUMNS + _PACKER_COLUMNS:
+            word, corner = typo.groups()
+            meant = ("packer_" if word.startswith("p") else "bump_stop_") + \
+                _CORNER_ALIASES.get(corner, corner.upper())
+            raise PlannerError(f"{path}: column {h!r} is not a bump-stop or packer column "
+                               f"(did you mean {meant!r}?); they are bump_stop_XX and "
+                               f"packer_XX with XX one of {list(CORNERS)}: rename the column")
     if _SETUP_COLUMN not in header:
         raise PlannerError(f"{path}: no column '{_SETUP_COLUMN}'; the header must be "
                            f"'{_SETUP_COLUMN},{','.join(CORNERS)}' (lower-case 'setup')")
@@ -383,6 +481,10 @@ def read_setups(path, library=None):
                            f"'{_SETUP_COLUMN},{','.join(CORNERS)}'")
     i_name = header.index(_SETUP_COLUMN)
     i_corner = [header.index(c) for c in CORNERS]
+    i_stop = {c: header.index(k) for c, k in zip(CORNERS, _BUMP_COLUMNS) if k in header}
+    i_packer = {c: header.index(k) for c, k in zip(CORNERS, _PACKER_COLUMNS) if k in header}
+    packer_units = resolve_units(marked, units, where=str(path), error=PlannerError) \
+        if i_packer else None
     out = []
     lines = {}
     for cells in rows:
@@ -409,11 +511,45 @@ def read_setups(path, library=None):
                                    "every corner")
             if library is not None and sid not in library:
                 raise unknown_id_error(f"{where}: column {c!r}", sid, library)
-        out.append(Setup._unchecked(name, ids))
+        if not i_stop and not i_packer:
+            out.append(Setup._unchecked(name, ids))
+            continue
+        stops, packers = _row_elements(cells, i_stop, i_packer, bump_stops, packer_units,
+                                       where)
+        out.append(Setup(name, dict(zip(CORNERS, ids)), bump_stops=stops or None,
+                         packers_m=packers or None))
     if not out:
         raise PlannerError(f"{path}: no setups below the header; add one row per setup")
     logger.debug("read %d setup(s) from %s", len(out), path)
     return tuple(out)
+
+
+def _row_elements(cells, i_stop, i_packer, bump_stops, units, where):
+    """The bump stops and packers [m] a setups CSV row gives (empty cells left out)."""
+    stops, packers = {}, {}
+    for c, i in i_stop.items():
+        if cells[i]:
+            col = f"{where}: column 'bump_stop_{c}'"
+            stops[c] = sid = parse_bump_stop_id(cells[i], col, error=PlannerError)
+            if sid is not None and bump_stops is not None and sid not in bump_stops:
+                raise bump_stops.unknown_id_error(sid, where=col, error=PlannerError)
+    for c, i in i_packer.items():
+        if not cells[i]:
+            continue
+        col = f"{where}: column 'packer_{c}'"
+        unit = UNIT_LABELS[units]["displacement"]
+        try:
+            value = float(cells[i])
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value) or value < 0:
+            raise PlannerError(f"{col}: {cells[i]!r} is not a thickness; give the packer in "
+                               f"{unit} (a number >= 0, 0 = none), or leave the cell empty "
+                               "for the baseline's packer")
+        packers[c] = to_si(value, "displacement", units)
+        if bump_stops is not None and stops.get(c) is not None:
+            check_packer(bump_stops[stops[c]], packers[c], col, error=PlannerError)
+    return stops, packers
 
 
 def read_ranking_baseline(path):
@@ -462,7 +598,10 @@ def write_setups(setups, path, *, units="SI", overwrite=False):
     """Write setups as a setups CSV (``setup,LF,RF,LR,RR``), atomically.
 
     The first line is the unit marker ``# units: <units>``: shock ids have no unit, but
-    every CSV shockplan writes says the unit system of the run that wrote it.
+    every CSV shockplan writes says the unit system of the run that wrote it. Setups with
+    bump stops or packers add the columns ``bump_stop_XX`` (``none`` for no stop) or
+    ``packer_XX`` (in `units`), empty where a setup keeps the baseline's; without them
+    the file is as before.
 
     Parameters
     ----------
@@ -494,8 +633,23 @@ def write_setups(setups, path, *, units="SI", overwrite=False):
     check_can_write(path, overwrite=overwrite)
     buf = io.StringIO(newline="")
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow((_SETUP_COLUMN, *CORNERS))
-    writer.writerows((s.name, *s.ids()) for s in setups)
+    stops = any(s.bump_stops for s in setups)
+    packers = any(s.packers_m for s in setups)
+    writer.writerow((_SETUP_COLUMN, *CORNERS, *(_BUMP_COLUMNS if stops else ()),
+                     *(_PACKER_COLUMNS if packers else ())))
+
+    def cells(values, text):
+        return [] if values is None else [text(values[c]) if c in values else ""
+                                          for c in CORNERS]
+
+    for s in setups:
+        row = [s.name, *s.ids()]
+        if stops:
+            row += cells(s.bump_stops or {}, lambda v: NO_BUMP_STOP if v is None else v)
+        if packers:
+            row += cells(s.packers_m or {},
+                         lambda v: repr(float(from_si(v, "displacement", units))))
+        writer.writerow(row)
     write_csv(path, buf.getvalue(), units=units, overwrite=overwrite)
     logger.info("wrote %d setup(s) to %s", len(setups), path)
     return path

@@ -163,3 +163,16 @@ def gt_track_drive(gt_vehicle):
     return make_track_drive(duration_s=30.0, fs_hz=100.0, seed=24,
                             wheelbase_m=gt_vehicle.a_m + gt_vehicle.b_m,
                             track_width_m=gt_vehicle.track_front_m, name="GT track")
+
+
+@pytest.fixture(scope="session")
+def bumpstop_vehicle():
+    """A GT-like car (1350 kg, springs 280/320 kN/m at the wheel, tires 380/400 kN/m) for the
+    bump-stop and lift-off tests (issue 25)."""
+    from ident.models.vehicle import VehicleParams
+
+    return VehicleParams(name="gt", track_front_m=1.65, track_rear_m=1.60, a_m=1.30, b_m=1.35,
+                         sprung_mass_kg=1180.0, roll_inertia_kg_m2=420.0,
+                         pitch_inertia_kg_m2=1650.0, unsprung_mass_kg=[42.0, 42.0, 43.0, 43.0],
+                         spring_rate_n_m=[280e3, 280e3, 320e3, 320e3],
+                         tire_rate_n_m=[380e3, 380e3, 400e3, 400e3], damping_n_s_m=[9000.0] * 4)

@@ -523,3 +523,210 @@ def test_shock_step_at_rest_on_a_knot_converges():
                      vnew, res, J, Jinv, state)
     assert it > 0
     assert np.all(np.abs(v) < 1e-18)  # at rest, to far below any physical velocity
+
+
+# ----------------------------------------------------------------------------------------------
+# bump stops and tire lift-off (issue 25)
+# ----------------------------------------------------------------------------------------------
+
+#: A progressive bump stop: 100, 267, 500 and 600 kN/m over 15 mm beyond contact.
+STOP_TRAVEL_M = [0.0, 0.002, 0.005, 0.010, 0.015]
+STOP_FORCE_N = [0.0, 200.0, 1000.0, 3500.0, 6500.0]
+#: Quasi-static push: what is left of the transient after 4 s of hold (heave at about 3 Hz,
+#: 30 % damped) and of the ramp's slow motion, relative to the static deflection.
+RTOL_QUASI_STATIC = 1e-6
+#: Bump stops at 2x oversampling against 16x, the spec's metrics: the loop's own
+#: discretization error (measured 2.7e-4 max with the stops, 2.8e-4 without, on this drive).
+RTOL_STOP_OVERSAMPLE_2 = 1e-3
+
+
+def _gt_shocks(scale=1.0):
+    return [DigressiveShock("G", bump_low_n_s_m=9000 * scale, bump_knee_m_s=0.08,
+                            bump_high_n_s_m=3500 * scale, rebound_low_n_s_m=14000 * scale,
+                            rebound_knee_m_s=0.08, rebound_high_n_s_m=5000 * scale,
+                            lag_s=0.002)] * 4
+
+
+def _gt_drive(vehicle, duration_s=20.0, roughness_m3=16e-6, seed=3):
+    from ident.data.drive import make_track_drive
+
+    return make_track_drive(duration_s=duration_s, fs_hz=100.0, seed=seed,
+                            roughness_m3=roughness_m3, wheelbase_m=vehicle.a_m + vehicle.b_m,
+                            track_width_m=vehicle.track_front_m,
+                            aero={"aero_heave": 1500.0, "aero_pitch": 800.0, "aero_roll": 300.0})
+
+
+def _stops(gap_front_m, gap_rear_m):
+    return {c: ((gap_front_m if c[1] == "F" else gap_rear_m), STOP_TRAVEL_M, STOP_FORCE_N)
+            for c in ("LF", "RF", "LR", "RR")}
+
+
+@pytest.fixture(scope="module")
+def gt_plant(bumpstop_vehicle):
+    from ident.models.vehicle import build_full_car
+    from ident.sim.rig import loop_damping
+
+    return build_full_car(bumpstop_vehicle).loop_plant(loop_damping(_gt_shocks()))
+
+
+def test_elements_never_active_change_nothing(gt_plant, bumpstop_vehicle, one_blas_thread):
+    """Bump stops beyond every travel and static loads no tire reaches: today's numbers (the
+    loop's forces to the bit; the outputs of the lift-off path, whose output product has 4
+    more rows, to RTOL_OUTPUT_PRODUCT)."""
+    drive = _gt_drive(bumpstop_vehicle, 10.0)
+    plain = simulate(gt_plant, drive, _gt_shocks(), oversample=2)
+    far = simulate(gt_plant, drive, _gt_shocks(), oversample=2, bump_stops=_stops(1.0, 1.0))
+    none = simulate(gt_plant, drive, _gt_shocks(), oversample=2,
+                    bump_stops={"LF": None, "RR": None})
+    heavy = simulate(gt_plant, drive, _gt_shocks(), oversample=2,
+                     static_corner_load_n=[1e8] * 4)
+    for res in (far, none):
+        assert res.newton_iterations == plain.newton_iterations
+        for name, x in plain.channels.items():
+            np.testing.assert_array_equal(res.channels[name], x, err_msg=name)
+    assert far.elements["bump_stop_contact_share_LF"] == 0.0
+    for name, x in plain.channels.items():
+        if name in SHOCK_FORCES:
+            np.testing.assert_array_equal(heavy.channels[name], x, err_msg=name)
+        else:
+            np.testing.assert_allclose(heavy.channels[name], x, rtol=0,
+                                       atol=RTOL_OUTPUT_PRODUCT * np.abs(x).max(), err_msg=name)
+    assert heavy.elements["tire_liftoff_share_RR"] == 0.0
+    assert heavy.elements["tire_contact_min_LF"] > 0.99e8
+
+
+def _heave_push(vehicle_sym, force_n, duration_s=8.0):
+    """A downforce ramped in over 2 s (raised cosine) and held."""
+    from ident.data.drive import Drive
+
+    fs = 100.0
+    t = np.arange(int(duration_s * fs)) / fs
+    ramp = np.where(t < 2.0, 0.5 - 0.5 * np.cos(np.pi * t / 2.0), 1.0)
+    ch = {c: np.zeros_like(t) for c in RIG_INPUTS}
+    ch["aero_heave"] = -force_n * ramp  # aero_heave acts up: a downforce is negative
+    return Drive(name="heave push", fs_hz=fs, channels=ch)
+
+
+def test_bump_stop_and_spring_share_a_quasi_static_push():
+    """Known answer: a symmetric car pushed down by a slow downforce F settles where each
+    corner's spring and bump stop carry F/4 together: k s + g(s - s0) = F/4. The tire carries
+    it all (it feels the sum), the spring its k s, the shock nothing; without the stop,
+    s = F / (4 k)."""
+    from scipy.optimize import brentq
+
+    from ident.models.vehicle import VehicleParams, build_full_car
+
+    k = 250e3
+    car = VehicleParams(name="symmetric", track_front_m=1.6, track_rear_m=1.6, a_m=1.3, b_m=1.3,
+                        sprung_mass_kg=1200.0, roll_inertia_kg_m2=400.0,
+                        pitch_inertia_kg_m2=1600.0, unsprung_mass_kg=[40.0] * 4,
+                        spring_rate_n_m=[k] * 4, tire_rate_n_m=[380e3] * 4,
+                        damping_n_s_m=[9000.0] * 4)
+    plant = build_full_car(car).loop_plant()
+    force = 12000.0
+    drive = _heave_push(car, force)
+    shocks = [LinearShock("L", 9000.0)] * 4
+    s0 = 0.004
+    stop = (s0, STOP_TRAVEL_M, STOP_FORCE_N)
+    res = simulate(plant, drive, shocks, oversample=2, bump_stops=[stop] * 4)
+    plain = simulate(plant, drive, shocks, oversample=2)
+    # the table, linear between its points (the answer lies inside it)
+    expected = brentq(lambda s: k * s + np.interp(s - s0, STOP_TRAVEL_M, STOP_FORCE_N, left=0.0)
+                      - force / 4, 0.0, 0.05)
+    assert s0 < expected < s0 + STOP_TRAVEL_M[-1]  # on the stop, inside its table
+    for c in ("LF", "RF", "LR", "RR"):
+        travel = res.channels[f"shock_travel_{c}"][-1]
+        assert travel == pytest.approx(expected, rel=RTOL_QUASI_STATIC)
+        assert plain.channels[f"shock_travel_{c}"][-1] == pytest.approx(force / 4 / k,
+                                                                         rel=RTOL_QUASI_STATIC)
+        assert res.channels[f"spring_force_{c}"][-1] == pytest.approx(k * expected,
+                                                                       rel=RTOL_QUASI_STATIC)
+        assert res.channels[f"tire_force_{c}"][-1] == pytest.approx(force / 4,
+                                                                     rel=RTOL_QUASI_STATIC)
+        assert abs(res.channels[f"shock_force_{c}"][-1]) < RTOL_QUASI_STATIC * force
+        stop_force = np.interp(expected - s0, STOP_TRAVEL_M, STOP_FORCE_N)
+        assert stop_force > 0.1 * force / 4  # the stop does carry a real share
+    assert res.elements["bump_stop_contact_share_LF"] > 0.5
+
+
+def test_bump_stops_at_realistic_stiffness_converge_with_the_step(gt_plant, bumpstop_vehicle):
+    """Stops of 100-600 kN/m touched 4-8 % of the time: the metrics at 2x oversampling are as
+    close to 16x as without stops (the travel, the stop's force and the shocks are solved
+    together in each step, so the stop adds no error of its own)."""
+    from ident.sim.metrics import compute_metrics
+
+    drive = _gt_drive(bumpstop_vehicle, 20.0)
+    stops = _stops(0.0035, 0.0045)
+    ref = simulate(gt_plant, drive, _gt_shocks(), oversample=16, bump_stops=stops)
+    got = simulate(gt_plant, drive, _gt_shocks(), oversample=2, bump_stops=stops)
+    share = ref.elements["bump_stop_contact_share_LF"]
+    assert 0.03 < share < 0.10
+    m_ref = compute_metrics(ref.channels, fs=100.0).values
+    m_got = compute_metrics(got.channels, fs=100.0).values
+    for name, x in m_ref.items():
+        assert m_got[name] == pytest.approx(x, rel=RTOL_STOP_OVERSAMPLE_2), name
+    # the stops matter: the same car without them is further off than the discretization
+    m_plain = compute_metrics(simulate(gt_plant, drive, _gt_shocks(), oversample=16).channels,
+                              fs=100.0).values
+    assert max(abs(m_plain[n] / x - 1) for n, x in m_ref.items()) > 5 * RTOL_STOP_OVERSAMPLE_2
+
+
+def test_tire_lift_off_keeps_contact_at_or_above_zero(gt_plant, bumpstop_vehicle):
+    """Static loads low enough for the tires to leave the pads: the contact force static +
+    tire_force is never negative, the lift-off share is the count of samples at zero contact,
+    the smallest contact force is that of the channel, and the loop without static loads
+    pulls the tire below zero on the same drive."""
+    drive = _gt_drive(bumpstop_vehicle, 20.0, roughness_m3=32e-6)
+    static = 0.7 * bumpstop_vehicle.static_corner_load_n
+    res = simulate(gt_plant, drive, _gt_shocks(), oversample=2, static_corner_load_n=static)
+    plain = simulate(gt_plant, drive, _gt_shocks(), oversample=2)
+    tol = 1e-9 * static.max()  # round-off of the contact force solved to zero
+    shares = []
+    for c, s in zip(("LF", "RF", "LR", "RR"), static):
+        contact = s + res.channels[f"tire_force_{c}"]
+        assert contact.min() >= -tol
+        share = np.mean(contact <= tol)
+        assert res.elements[f"tire_liftoff_share_{c}"] == share
+        assert res.elements[f"tire_contact_min_{c}"] == pytest.approx(max(contact.min(), 0.0),
+                                                                      abs=tol)
+        shares.append(share)
+        assert np.mean(s + plain.channels[f"tire_force_{c}"] < 0) >= 0.5 * share
+    assert max(shares) > 0.005  # the test does lift a tire
+
+
+def test_elements_batch_equals_single(gt_plant, bumpstop_vehicle, one_blas_thread):
+    """Per-setup bump stops in a batch (the setup-parallel kernel) give each setup the
+    one-setup numbers."""
+    drive = _gt_drive(bumpstop_vehicle, 6.0, roughness_m3=32e-6)
+    setups = [_gt_shocks(), _gt_shocks(0.7), _gt_shocks(1.4)]
+    stops = [_stops(0.0035, 0.0045), None, _stops(0.002, 1.0)]
+    static = bumpstop_vehicle.static_corner_load_n * 0.8
+    batch = simulate_batch(gt_plant, drive, setups, oversample=2, bump_stops=stops,
+                           static_corner_load_n=static)
+    for i, (s, st) in enumerate(zip(setups, stops)):
+        one = simulate(gt_plant, drive, s, oversample=2, bump_stops=st,
+                       static_corner_load_n=static)
+        assert batch.newton_iterations[i] == one.newton_iterations
+        for name, x in one.channels.items():
+            np.testing.assert_array_equal(batch.channels[name][i], x, err_msg=name)
+        # a batch reports a corner's contact share when any of its setups has a stop there
+        got = batch.response(i).elements
+        assert {k: got[k] for k in one.elements} == one.elements
+
+
+BAD_ELEMENTS = [
+    ({"bump_stops": {"LF": (0.003, [0.0, 0.01], [0.0, -5.0])}}, ValueError, "falls"),
+    ({"bump_stops": {"LF": (-0.001, [0.0, 0.01], [0.0, 50.0])}}, ValueError, ">= 0"),
+    ({"bump_stops": {"LF": (0.003, [0.0, 0.01, 0.005], [0.0, 50.0, 60.0])}}, ValueError,
+     "strictly"),
+    ({"bump_stops": {"XX": (0.003, [0.0, 0.01], [0.0, 50.0])}}, ValueError, "unknown corners"),
+    ({"bump_stops": {"LF": "BS-F"}}, TypeError, "contact_travel_m"),
+    ({"static_corner_load_n": [3000.0, -1.0, 3000.0, 3000.0]}, ValueError, "positive static"),
+]
+
+
+@pytest.mark.parametrize("kw,exc,match", BAD_ELEMENTS)
+def test_bad_elements(gt_plant, bumpstop_vehicle, kw, exc, match):
+    drive = _gt_drive(bumpstop_vehicle, 4.0)
+    with pytest.raises(exc, match=match):
+        simulate(gt_plant, drive, _gt_shocks(), oversample=2, **kw)

@@ -12,7 +12,8 @@ import pytest
 from ident.data.channels import ALL_CHANNELS, RIG_INPUTS
 from ident.data.formats.channel_map import apply_channel_map, read_channel_map
 from ident.data.units import to_si
-from ident.errors import SessionError
+from ident.errors import BumpStopError, SessionError
+from ident.models.bumpstops import read_bump_stops
 from ident.models.library import read_shock_library
 from ident.models.vehicle import EXAMPLE_VEHICLE_PATH, example_vehicle, read_vehicle
 from ident.sim.rig import default_plan, simulate_session
@@ -37,6 +38,7 @@ READERS = {
     "whatif": (read_perturbations, PlannerError),
     "rig": (read_rig, PlannerError),
     "channel-map": (read_channel_map, SessionError),
+    "bump-stops": (read_bump_stops, BumpStopError),
 }
 #: A shock's force read back from an imperial file: SI -> imperial text -> SI, shortest
 #: round-trip float text each way, so a few ulps.
@@ -117,8 +119,17 @@ def _check_channel_map(cmap):
     np.testing.assert_allclose(x["tire_force_LF"], [500.0])  # 0.5 kN/unit x (4 - 3)
 
 
+def _check_bump_stops(stops):
+    # imperial in the file: 0.3 in, 180 lbf at 0.2 in beyond contact
+    assert stops.ids == ("BS-F", "BS-R")
+    np.testing.assert_allclose(stops["BS-F"].gap_m, to_si(0.3, "displacement", "imperial"))
+    np.testing.assert_allclose(stops["BS-F"].force(to_si(0.5, "displacement", "imperial")),
+                               to_si(180.0, "force", "imperial"))
+
+
 CHECKS = {"objective": _check_objective, "constraints": _check_constraints,
-          "whatif": _check_whatif, "rig": _check_rig, "channel-map": _check_channel_map}
+          "whatif": _check_whatif, "rig": _check_rig, "channel-map": _check_channel_map,
+          "bump-stops": _check_bump_stops}
 
 
 @pytest.mark.parametrize("tag, body", FORMAT_BLOCKS,

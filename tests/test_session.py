@@ -650,3 +650,302 @@ def test_a_run_file_without_marker_takes_the_manifest_units(session, tmp_path):
     for path in (folder / "runs").iterdir():  # an export that says nothing
         path.write_text(path.read_text().split("\n", 1)[1])
     _assert_same_data(session, read_session(folder))
+
+
+# --------------------------------------------------------------------------------------
+# the real car: bump stops, packers and static corner loads (all optional)
+# --------------------------------------------------------------------------------------
+
+BUMPSTOPS_TOML = """\
+units = "SI"
+
+[[bump_stop]]
+id = "BS-F"
+gap = 0.0075
+travel = [0.0, 0.005, 0.010]
+force = [0.0, 800.0, 3000.0]
+
+[[bump_stop]]
+id = "BS-R"
+gap = 0.010
+travel = [0.0, 0.01]
+force = [0.0, 2500.0]
+"""
+STATIC_N = (3100.0, 3000.0, 3300.0, 3200.0)  # LF RF LR RR [N]
+REAL_CAR = {  # run name -> (bump_stops, packers_m)
+    "baseline-1": ({"LF": "BS-F", "RF": "BS-F", "LR": "BS-R", "RR": "BS-R"}, {}),
+    "swap-LF": ({"LF": "BS-F", "RF": "BS-F", "LR": "BS-R", "RR": "none"},
+                {"LF": 0.003, "RF": 0.0025}),
+    "validation": ({}, {}),
+}
+# the manifest of the fixture session, as written before the real car's keys existed
+PLAIN_MANIFEST = """\
+format = "rig-session/1"
+name = "synthetic 8-post"
+units = "SI"
+shock_library = "shocks.toml"
+""" + "".join(f"""
+[[run]]
+name = "{name}"
+file = "runs/{name}.csv"
+setup = {{ LF = "{s[0]}", RF = "{s[1]}", LR = "{s[2]}", RR = "{s[3]}" }}
+role = "{role}"
+""" for name, role, s in RUN_SPECS)
+
+
+@pytest.fixture
+def bump_stops(tmp_path):
+    from ident.models.bumpstops import read_bump_stops
+
+    path = tmp_path / "stops.toml"
+    path.write_text(BUMPSTOPS_TOML)
+    return read_bump_stops(path)
+
+
+def _real_car_runs(rng, *, tire_mean=STATIC_N[0]):
+    """The fixture's runs with bump stops and packers; tire_force_LF about `tire_mean`."""
+    runs = []
+    for name, role, setup in RUN_SPECS:
+        r = _random_run(rng, name, role, setup)
+        channels = {**r.channels,
+                    "tire_force_LF": tire_mean + 300.0 * rng.standard_normal(N_SAMPLES)}
+        stops, packers = REAL_CAR[name]
+        runs.append(Run(name=r.name, file=r.file, setup=r.setup, role=r.role, time_s=r.time_s,
+                        channels=channels, fs_hz=r.fs_hz, bump_stops=stops, packers_m=packers))
+    return runs
+
+
+@pytest.fixture
+def real_car(rng, shocks, bump_stops):
+    return make_session("real car", _real_car_runs(rng), shocks, bump_stops=bump_stops,
+                        static_corner_load_n=dict(zip(CORNERS, STATIC_N)))
+
+
+@pytest.fixture
+def real_car_dir(real_car, tmp_path):
+    return write_session(real_car, tmp_path / "real-car")
+
+
+def test_session_without_the_real_car_keys_is_as_before(session, session_dir):
+    """No bump stops, packers or static loads: the manifest is byte for byte the old one, no
+    bumpstops.toml, and what reads back has none of them."""
+    assert (session_dir / "session.toml").read_text() == PLAIN_MANIFEST
+    assert sorted(p.name for p in session_dir.iterdir()) == ["runs", "session.toml",
+                                                             "shocks.toml"]
+    for s in (session, read_session(session_dir)):
+        assert s.bump_stops is None and s.bump_stop_library_file is None
+        assert s.static_corner_load_n is None
+        for r in s.runs:
+            assert r.bump_stops == dict.fromkeys(CORNERS)
+            assert r.packers_m == dict.fromkeys(CORNERS, 0.0)
+
+
+def test_make_session_keeps_the_real_car(real_car, bump_stops):
+    assert real_car.bump_stops == bump_stops and real_car.bump_stop_library_file == \
+        "bumpstops.toml"
+    assert_array_equal(real_car.static_corner_load_n, STATIC_N)
+    assert not real_car.static_corner_load_n.flags.writeable
+    swap = real_car.run("swap-LF")
+    assert swap.bump_stops == {"LF": "BS-F", "RF": "BS-F", "LR": "BS-R", "RR": None}
+    assert swap.packers_m == {"LF": 0.003, "RF": 0.0025, "LR": 0.0, "RR": 0.0}
+    assert real_car.run("validation").bump_stops == dict.fromkeys(CORNERS)
+
+
+@pytest.mark.parametrize("units", ["SI", "imperial"])
+def test_real_car_round_trip(real_car, bump_stops, tmp_path, units):
+    folder = write_session(real_car, tmp_path / units, units=units)
+    back = read_session(folder)
+    _assert_same_data(real_car, back)
+    assert back.bump_stop_library_file == "bumpstops.toml"
+    assert back.bump_stops.ids == bump_stops.ids
+    for a, b in zip(bump_stops.values(), back.bump_stops.values(), strict=True):
+        assert b.gap_m == pytest.approx(a.gap_m, rel=RTOL_ROUND_TRIP)
+        assert_allclose(b.force_n, a.force_n, rtol=RTOL_ROUND_TRIP)
+    assert_allclose(back.static_corner_load_n, STATIC_N, rtol=RTOL_ROUND_TRIP)
+    for ra, rb in zip(real_car.runs, back.runs, strict=True):
+        assert rb.bump_stops == ra.bump_stops
+        assert_allclose([rb.packers_m[c] for c in CORNERS], [ra.packers_m[c] for c in CORNERS],
+                        rtol=RTOL_ROUND_TRIP)
+    # what was read writes the same manifest again
+    again = write_session(back, tmp_path / f"{units}-again")
+    assert (again / "session.toml").read_bytes() == (folder / "session.toml").read_bytes()
+    assert (again / "bumpstops.toml").read_bytes() == (folder / "bumpstops.toml").read_bytes()
+
+
+def test_real_car_manifest_is_the_spec_layout(real_car_dir):
+    text = (real_car_dir / "session.toml").read_text()
+    assert 'bump_stop_library = "bumpstops.toml"\n' in text
+    assert "static_corner_load = { LF = 3100.0, RF = 3000.0, LR = 3300.0, RR = 3200.0 }\n" in text
+    doc = tomllib.loads(text)
+    assert doc["run"][0]["bump_stops"] == REAL_CAR["baseline-1"][0]
+    assert "packers" not in doc["run"][0]  # none fitted: not written
+    assert doc["run"][1]["bump_stops"] == {"LF": "BS-F", "RF": "BS-F", "LR": "BS-R"}  # RR none
+    assert doc["run"][1]["packers"] == {"LF": 0.003, "RF": 0.0025}
+    assert "bump_stops" not in doc["run"][2] and "packers" not in doc["run"][2]
+    imperial = tomllib.loads((real_car_dir / "bumpstops.toml").read_text())
+    assert imperial["bump_stop"][0]["gap"] == 0.0075
+
+
+def test_imperial_manifest_converts_packers_and_loads(real_car, tmp_path):
+    folder = write_session(real_car, tmp_path / "imp", units="imperial")
+    doc = tomllib.loads((folder / "session.toml").read_text())
+    assert doc["static_corner_load"]["LF"] == pytest.approx(3100.0 / LBF_N, rel=1e-12)
+    assert doc["run"][1]["packers"]["LF"] == pytest.approx(0.003 / IN_M, rel=1e-12)
+    stops = tomllib.loads((folder / "bumpstops.toml").read_text())
+    assert stops["units"] == "imperial"
+    assert stops["bump_stop"][1]["gap"] == pytest.approx(0.010 / IN_M, rel=1e-12)
+
+
+def test_a_dynamic_tire_channel_is_not_compared_with_the_static_load(rng, shocks, bump_stops):
+    """A tire_force channel whose mean is ~0 carries no static offset: any load is accepted;
+    one carrying the offset is accepted within STATIC_LOAD_RTOL."""
+    from ident.data.session import STATIC_LOAD_RTOL, STATIC_OFFSET_SHARE
+
+    assert 0 < STATIC_LOAD_RTOL < STATIC_OFFSET_SHARE < 1
+    for mean in (0.0, 0.15 * STATIC_N[0], (1 + 0.8 * STATIC_LOAD_RTOL) * STATIC_N[0],
+                 (1 - 0.8 * STATIC_LOAD_RTOL) * STATIC_N[0]):
+        make_session("ok", _real_car_runs(rng, tire_mean=mean), shocks, bump_stops=bump_stops,
+                     static_corner_load_n=STATIC_N)
+
+
+def _runs_with(rng, **change):
+    runs = _real_car_runs(rng)
+    r = runs[1]
+    runs[1] = Run(**{**{k: getattr(r, k) for k in ("name", "file", "setup", "role", "time_s",
+                                                    "channels", "fs_hz", "bump_stops",
+                                                    "packers_m")}, **change})
+    return runs
+
+
+@pytest.mark.parametrize("change, kwargs, match", [
+    ({"bump_stops": {"LF": "BS-X"}}, {},
+     r"run 'swap-LF' \(runs/swap-LF.csv\): bump_stops LF: unknown bump-stop id 'BS-X'.*"
+     r"stops.toml has \['BS-F', 'BS-R'\]"),
+    ({}, {"bump_stops": None}, r"run 'baseline-1' .*bump_stops LF = 'BS-F' but the session has "
+                               r"no bump-stop library"),
+    ({"packers_m": {"LR": 0.0101}}, {},
+     r"run 'swap-LF' .*: packers LR: packer 10\.1 mm .* is thicker than the gap of bump stop "
+     r"'BS-R', 10 mm .*use a packer of at most 10 mm"),
+    ({"packers_m": {"RR": -0.001}}, {}, r"packers RR = -0\.001 is not a thickness"),
+    ({"bump_stops": {"lf": "BS-F"}}, {}, r"bump_stops names unknown corner\(s\) \['lf'\]"),
+    ({"bump_stops": {"LF": ""}}, {}, r"bump_stops LF: bump stop '' is not an id"),
+    ({}, {"static_corner_load_n": (3100.0, 3000.0, 3300.0)},
+     r"static_corner_load_n must be 4 positive numbers"),
+    ({}, {"static_corner_load_n": (3100.0, 3000.0, -3300.0, 3200.0)},
+     r"static_corner_load_n LR = -3300\.0 is not a load"),
+    ({}, {"static_corner_load_n": (3100.0, np.nan, 3300.0, 3200.0)},
+     r"static_corner_load_n RF = nan is not a load"),
+    ({}, {"static_corner_load_n": {"LF": 3100.0, "RF": 3000.0}},
+     r"static_corner_load_n has no load for corner\(s\) LR, RR"),
+    ({}, {"static_corner_load_n": (3500.0, 3000.0, 3300.0, 3200.0)},
+     r"run 'baseline-1' \(runs/baseline-1.csv\): tire_force_LF has a mean of 31\d\d\.?\d* N, so "
+     r"it carries the static load, but static_corner_load_n LF = 3500 N \(-1\d%, more than 10% "
+     r"off\); fix static_corner_load_n LF"),
+])
+def test_make_session_refuses_a_bad_real_car(rng, shocks, bump_stops, change, kwargs, match):
+    kwargs = {"bump_stops": bump_stops, "static_corner_load_n": STATIC_N, **kwargs}
+    with pytest.raises(SessionError, match=match):
+        make_session("bad", _runs_with(rng, **change), shocks, **kwargs)
+
+
+def _edit_run_entry(name, edit):
+    def mutate(doc):
+        edit(next(r for r in doc["run"] if r["name"] == name))
+    return _edit_manifest(mutate)
+
+
+BAD_REAL_CARS = [
+    ("unknown id", _edit_run_entry("swap-LF", lambda r: r["bump_stops"].update(RR="BS-RR")),
+     r"session.toml: run 'swap-LF': bump_stops RR: unknown bump-stop id 'BS-RR' \(did you mean "
+     r"'BS-R'\?\); the bump-stop library .*bumpstops.toml has \['BS-F', 'BS-R'\]"),
+    ("no library", _edit_manifest(lambda d: d.pop("bump_stop_library")),
+     r"run 'baseline-1': bump_stops LF = 'BS-F' but the session has no bump-stop library; "
+     r"name it at the top of the manifest with bump_stop_library = \"bumpstops.toml\""),
+    ("library missing", _remove("bumpstops.toml"),
+     r"bump_stop_library 'bumpstops.toml' not found"),
+    ("library malformed", _write("bumpstops.toml", BUMPSTOPS_TOML.replace("gap = 0.010",
+                                                                          "gap = -0.010")),
+     r"bump_stop_library 'bumpstops.toml': .*#2 \('BS-R'\): key 'gap' = -0\.01 m is negative"),
+    ("packer thicker", _edit_run_entry("swap-LF", lambda r: r["packers"].update(LF=0.008)),
+     r"run 'swap-LF': packers LF: packer 8 mm \(0\.315 in\) is thicker than the gap of bump "
+     r"stop 'BS-F', 7\.5 mm \(0\.2953 in\)"),
+    ("packer not a number", _edit_run_entry("swap-LF", lambda r: r["packers"].update(LF="3")),
+     r"packers LF: packer '3' is not a finite number"),
+    ("packers not a table", _edit_run_entry("swap-LF", lambda r: r.update(packers=0.003)),
+     r"packers must be a table"),
+    ("static 3 corners", _edit_manifest(lambda d: d["static_corner_load"].pop("RR")),
+     r"static_corner_load has no load for corner\(s\) RR; give the static tire load of all four "
+     r"corners \(N\)"),
+    ("static zero", _edit_manifest(lambda d: d["static_corner_load"].update(LR=0.0)),
+     r"static_corner_load LR = 0\.0 is not a load"),
+    ("static string", _edit_manifest(lambda d: d["static_corner_load"].update(LR="3300")),
+     r"static_corner_load LR = '3300' is not a load"),
+    ("static not a table", _edit_manifest(lambda d: d.update(static_corner_load=3100.0)),
+     r"static_corner_load must be 4 positive numbers"),
+    ("static mismatch", _edit_manifest(lambda d: d["static_corner_load"].update(LF=2500.0)),
+     r"run 'baseline-1' \(.*baseline-1.csv\): tire_force_LF has a mean of 3\d{3}(\.\d+)? N, so "
+     r"it carries the static load, but static_corner_load LF = 2500 N \(\+2\d%, more than 10% "
+     r"off\); fix static_corner_load LF \(the tire's load on its pad"),
+    ("static in the wrong units", _edit_manifest(lambda d: d.update(units="imperial")),
+     r"the manifest .*units = \"imperial\""),  # the run files' marker stops it first
+    ("bump_stops at the top", _edit_manifest(lambda d: d.update(bump_stops={"LF": "BS-F"})),
+     r"'bump_stops' is a key of a run .*; move it into each \[\[run\]\]"),
+    ("static under a run", _edit_run_entry("validation", lambda r: r.update(
+        static_corner_load={"LF": 1.0})),
+     r"run 'validation': 'static_corner_load' is a key of the session, not of a run; move it "
+     r"to the top of the manifest"),
+]
+
+
+@pytest.mark.parametrize("mutate, match", [c[1:] for c in BAD_REAL_CARS],
+                         ids=[c[0] for c in BAD_REAL_CARS])
+def test_bad_real_car_raises_one_clear_error(real_car_dir, mutate, match):
+    mutate(real_car_dir)
+    with pytest.raises(SessionError, match=match):
+        read_session(real_car_dir)
+
+
+def test_static_loads_are_read_in_the_manifest_units(real_car, tmp_path):
+    """Imperial static loads (lbf) that match the channel read back; the same numbers
+    taken as N would not."""
+    folder = write_session(real_car, tmp_path / "imp", units="imperial")
+    assert_allclose(read_session(folder).static_corner_load_n, STATIC_N, rtol=1e-12)
+
+
+def test_a_packer_without_a_bump_stop_is_kept_with_a_warning(rng, shocks, bump_stops, caplog):
+    runs = _runs_with(rng, packers_m={"RR": 0.002})  # swap-LF has no bump stop at RR
+    s = make_session("ok", runs, shocks, bump_stops=bump_stops)
+    assert s.run("swap-LF").packers_m["RR"] == 0.002
+    assert "packers RR = 0.002 m at a corner without a bump stop has no effect" in caplog.text
+
+
+def test_append_runs_keeps_the_real_car(real_car, real_car_dir, rng):
+    from ident.data.session import append_runs
+
+    old = (real_car_dir / "session.toml").read_bytes()
+    new = _runs_with(rng, name="swap-RR", packers_m={"LF": 0.001})[1]
+    back = append_runs(real_car_dir, [new])
+    assert (real_car_dir / "session.toml").read_bytes().startswith(old)
+    assert back.run("swap-RR").packers_m["LF"] == pytest.approx(0.001, rel=1e-15)
+    assert back.run("swap-RR").bump_stops["RR"] is None
+    assert_allclose(back.static_corner_load_n, STATIC_N)
+    bad = _runs_with(rng, name="swap-X", bump_stops={"LF": "BS-Z"})[1]
+    with pytest.raises(SessionError, match="unknown bump-stop id 'BS-Z'"):
+        append_runs(real_car_dir, [bad])
+
+
+def test_check_static_corner_loads():
+    """The public checker the virtual rig uses: per corner or in corner order, read-only,
+    None for None; the session's messages."""
+    from ident.data.session import check_static_corner_loads
+
+    got = check_static_corner_loads({"RR": 4.0, "LF": 1.0, "RF": 2.0, "LR": 3.0}, "plan")
+    assert_array_equal(got, [1.0, 2.0, 3.0, 4.0])
+    assert not got.flags.writeable
+    assert_array_equal(check_static_corner_loads([1, 2, 3, 4], "plan"), [1.0, 2.0, 3.0, 4.0])
+    assert check_static_corner_loads(None, "plan") is None
+    with pytest.raises(SessionError, match=r"plan: static_corner_load LR = 0 is not a load; "
+                       r".*\(lbf, compression positive\)"):
+        check_static_corner_loads([1, 2, 0, 4], "plan", key="static_corner_load", unit="lbf")
+    with pytest.raises(SessionError, match="no load for corner"):
+        check_static_corner_loads({"LF": 1.0}, "plan")

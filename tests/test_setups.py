@@ -13,6 +13,7 @@ import pytest
 import planner.setups as setups_mod
 from ident.data.channels import CORNERS
 from planner.errors import PlannerError
+from ident.models.bumpstops import BumpStop, BumpStopLibrary
 from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock
 from planner.setups import (
@@ -545,3 +546,148 @@ def test_read_ranking_baseline(tmp_path):
                     "b,L28,L28,L28,L28,True\n")
     with pytest.raises(PlannerError, match="marks 2 setups.*--baseline"):
         read_ranking_baseline(path)
+
+
+# ---------------------------------------------------------------- bump stops and packers
+
+IN_M = 0.0254  # in -> m, by definition
+RTOL_PACKER = 1e-12  # a packer written with repr, plus one SI <-> imperial factor
+ELEMENTS_CSV = (
+    "# units: SI\n"
+    "setup,LF,RF,LR,RR,bump_stop_LF,bump_stop_RF,bump_stop_LR,packer_LF,packer_RF\n"
+    "packed,D8,D8,B20,B20,BS-F,BS-F,none,0.003,0.0025\n"
+    "soft-stops,B20,B20,B20,B20,BS-S,BS-S,,,\n"
+    "baseline,B20,B20,B20,B20,,,,,\n"
+)
+
+
+@pytest.fixture
+def stops():
+    return BumpStopLibrary([BumpStop("BS-F", 0.0075, [0.0, 0.01], [0.0, 3000.0]),
+                            BumpStop("BS-S", 0.0050, [0.0, 0.01], [0.0, 1000.0])],
+                           source="bumpstops.toml")
+
+
+def test_setups_with_bump_stops_and_packers_are_read(tmp_path, spec_lib, stops):
+    path = tmp_path / "setups.csv"
+    path.write_text(ELEMENTS_CSV)
+    packed, soft, base = read_setups(path, spec_lib, stops)
+    assert packed.ids() == ("D8", "D8", "B20", "B20")
+    assert dict(packed.bump_stops) == {"LF": "BS-F", "RF": "BS-F", "LR": None}  # RR: baseline's
+    assert dict(packed.packers_m) == {"LF": 0.003, "RF": 0.0025}
+    assert dict(soft.bump_stops) == {"LF": "BS-S", "RF": "BS-S"} and soft.packers_m is None
+    assert base.bump_stops is None and base.packers_m is None  # empty cells: the baseline's
+    assert base == _setup("baseline", "B20", "B20", "B20", "B20")
+    assert read_setups(path) == (packed, soft, base)  # the libraries are optional
+
+
+def test_packers_are_read_in_the_files_units(tmp_path):
+    path = tmp_path / "setups.csv"
+    body = "setup,LF,RF,LR,RR,packer_LR\na,B20,B20,B20,B20,0.1\n"
+    path.write_text("# units: imperial\n" + body)
+    assert read_setups(path)[0].packers_m["LR"] == pytest.approx(0.1 * IN_M, rel=1e-15)
+    path.write_text(body)  # no marker: units= decides, SI by default
+    assert read_setups(path)[0].packers_m["LR"] == 0.1
+    assert read_setups(path, units="imperial")[0].packers_m["LR"] == pytest.approx(0.00254)
+    path.write_text("# units: SI\n" + body)
+    with pytest.raises(PlannerError, match=r"the file says it is in SI units .* but units says "
+                       "imperial"):
+        read_setups(path, units="imperial")
+
+
+@pytest.mark.parametrize("units", ["SI", "imperial"])
+def test_setups_with_elements_round_trip(tmp_path, spec_lib, stops, units):
+    src = tmp_path / "setups.csv"
+    src.write_text(ELEMENTS_CSV)
+    setups = read_setups(src, spec_lib, stops)
+    path = write_setups(setups, tmp_path / "out.csv", units=units)
+    lines = path.read_text().splitlines()
+    assert lines[1] == ("setup,LF,RF,LR,RR,bump_stop_LF,bump_stop_RF,bump_stop_LR,bump_stop_RR,"
+                        "packer_LF,packer_RF,packer_LR,packer_RR")
+    if units == "SI":
+        assert lines[2:] == ["packed,D8,D8,B20,B20,BS-F,BS-F,none,,0.003,0.0025,,",
+                             "soft-stops,B20,B20,B20,B20,BS-S,BS-S,,,,,,",
+                             "baseline,B20,B20,B20,B20,,,,,,,,"]
+    back = read_setups(path, spec_lib, stops)
+    assert [(s.name, s.ids(), s.bump_stops) for s in back] == \
+        [(s.name, s.ids(), s.bump_stops) for s in setups]
+    assert back[0].packers_m["RF"] == pytest.approx(0.0025, rel=RTOL_PACKER)
+
+
+def test_setups_without_elements_are_written_as_before(tmp_path):
+    """No bump-stop or packer columns unless a setup has some: byte for byte the old file."""
+    path = write_setups([_setup("a", "A", "B", "C", "D")], tmp_path / "s.csv")
+    assert path.read_text() == "# units: SI\nsetup,LF,RF,LR,RR\na,A,B,C,D\n"
+    only_stops = Setup("b", dict(zip(CORNERS, "ABCD")), bump_stops={"RR": None})
+    path = write_setups([only_stops], tmp_path / "t.csv")
+    assert path.read_text() == ("# units: SI\nsetup,LF,RF,LR,RR,bump_stop_LF,bump_stop_RF,"
+                                "bump_stop_LR,bump_stop_RR\nb,A,B,C,D,,,,none\n")
+
+
+@pytest.mark.parametrize("header, row, match", [
+    ("bump_stop_LF", "BS-X", r"setups.csv: line 3 \(setup 'a'\): column 'bump_stop_LF': "
+                             r"unknown bump-stop id 'BS-X'.*; the bump-stop library "
+                             r"bumpstops.toml has \['BS-F', 'BS-S'\]"),
+    ("bump_stop_RR", "BS-SS", r"column 'bump_stop_RR': unknown bump-stop id 'BS-SS' \(did you "
+                              r"mean 'BS-S'\?\)"),
+    ("bump_stop_LF,packer_LF", "BS-S,0.006",
+     r"line 3 \(setup 'a'\): column 'packer_LF': packer 6 mm \(0\.2362 in\) is thicker than "
+     r"the gap of bump stop 'BS-S', 5 mm \(0\.1969 in\)"),
+    ("packer_LF", "-0.001", r"column 'packer_LF': '-0.001' is not a thickness; give the "
+                            r"packer in m \(a number >= 0, 0 = none\)"),
+    ("packer_LF", "3mm", r"column 'packer_LF': '3mm' is not a thickness"),
+    ("packer_LF", "nan", r"column 'packer_LF': 'nan' is not a thickness"),
+    ("bump_stop_lf", "BS-F", r"column 'bump_stop_lf' is not a bump-stop or packer column "
+                             r"\(did you mean 'bump_stop_LF'\?\)"),
+    ("packers_LF", "0.001", r"column 'packers_LF' is not a bump-stop or packer column "
+                            r"\(did you mean 'packer_LF'\?\)"),
+    ("bumpstop_FL", "BS-F", r"column 'bumpstop_FL' is not a bump-stop or packer column "
+                            r"\(did you mean 'bump_stop_LF'\?\)"),
+    ("Packer RL", "0.001", r"column 'Packer RL' .*\(did you mean 'packer_LR'\?\)"),
+])
+def test_bad_bump_stop_columns_are_refused(tmp_path, stops, header, row, match):
+    path = tmp_path / "setups.csv"
+    path.write_text(f"# units: SI\nsetup,LF,RF,LR,RR,{header}\na,B20,B20,B20,B20,{row}\n")
+    with pytest.raises(PlannerError, match=match):
+        read_setups(path, bump_stops=stops)
+
+
+def test_a_longer_column_that_starts_alike_is_another_column(tmp_path):
+    path = tmp_path / "pred.csv"
+    path.write_text("setup,LF,RF,LR,RR,bump_stop_share_LF,packer_cost\na,A,A,A,A,0.05,3\n")
+    assert read_setups(path)[0].bump_stops is None
+
+
+def test_a_packer_beside_a_baseline_stop_is_checked_later(tmp_path, stops):
+    """Without a bump stop in the row the packer's stop is the baseline's: read_setups cannot
+    check it, so it reads; and any packer reads without a library."""
+    path = tmp_path / "setups.csv"
+    path.write_text("setup,LF,RF,LR,RR,packer_LF\na,B20,B20,B20,B20,0.009\n")
+    assert read_setups(path, bump_stops=stops)[0].packers_m["LF"] == 0.009
+
+
+def test_setup_with_elements_compares_pickles_and_reprs():
+    a = Setup("x", dict(zip(CORNERS, "ABCD")), bump_stops={"LF": "BS-F", "RR": "none"},
+              packers_m={"LF": 0.003})
+    assert dict(a.bump_stops) == {"LF": "BS-F", "RR": None}
+    with pytest.raises(TypeError):
+        a.bump_stops["LF"] = "Z"
+    for b in (pickle.loads(pickle.dumps(a)), copy.deepcopy(a), dataclasses.replace(a),
+              eval(repr(a))):
+        assert b == a and b.bump_stops == a.bump_stops and b.packers_m == a.packers_m
+    plain = Setup("x", dict(zip(CORNERS, "ABCD")))
+    assert a != plain and hash(a) == hash(plain)
+    assert repr(plain) == "Setup(name='x', shocks={'LF': 'A', 'RF': 'B', 'LR': 'C', 'RR': 'D'})"
+    assert Setup("x", dict(zip(CORNERS, "ABCD")), bump_stops={}, packers_m={}) == plain
+
+
+@pytest.mark.parametrize("kwargs, err, match", [
+    ({"bump_stops": {"FL": "BS-F"}}, PlannerError, r"bump_stops: unknown corner 'FL'"),
+    ({"bump_stops": {"LF": ""}}, PlannerError, r"bump_stops LF: bump stop '' is not an id"),
+    ({"packers_m": {"LF": -0.001}}, PlannerError, r"packers_m LF = -0\.001 is not a thickness"),
+    ({"packers_m": {"LF": "0.003"}}, PlannerError, r"packers_m LF = '0\.003' is not a thickness"),
+    ({"packers_m": [0.003]}, TypeError, r"packers_m must be a mapping"),
+])
+def test_setup_refuses_bad_elements(kwargs, err, match):
+    with pytest.raises(err, match=match):
+        Setup("x", dict(zip(CORNERS, "ABCD")), **kwargs)

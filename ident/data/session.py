@@ -11,7 +11,8 @@ them with :func:`ident.data.runs.read_run_table`, and :func:`make_session` check
 in-memory runs with the same checking engine (:func:`ident.data.runs.check_columns`).
 :func:`read_session` and :func:`make_session` share the same session-level checks
 (setups against the shock library, run roles, duplicate names, one common sample
-rate).
+rate; the bump stops and packers of each run and the static corner loads, the spec's
+"The real car", both optional).
 
 Notes
 -----
@@ -45,19 +46,27 @@ from ident.data.files import atomic_write_text, did_you_mean, read_toml
 from ident.data.runs import (RTOL_TIME_STEP, check_channel_map, check_columns,
                              check_session_units, frozen_array, in_memory_columns,
                              read_run_table, write_mapped_run_table, write_run_table)
-from ident.errors import SessionError, ShockModelError
+from ident.data.units import UNIT_LABELS, from_si, to_si
+from ident.errors import BumpStopError, SessionError, ShockModelError
+from ident.models.bumpstops import (BumpStopLibrary, check_packer, parse_bump_stop_id,
+                                    read_bump_stops, write_bump_stops)
 from ident.models.library import ShockLibrary, read_shock_library, write_shock_library
+from ident.models.shocks import is_real_number
 
 __all__ = [
     "SESSION_FORMAT",
     "MANIFEST_NAME",
     "RUN_ROLES",
+    "BUMP_STOP_LIBRARY_NAME",
+    "STATIC_OFFSET_SHARE",
+    "STATIC_LOAD_RTOL",
     "Run",
     "Session",
     "read_session",
     "write_session",
     "make_session",
     "append_runs",
+    "check_static_corner_loads",
 ]
 
 logger = logging.getLogger(__name__)
@@ -68,12 +77,30 @@ SESSION_FORMAT = "rig-session/1"
 MANIFEST_NAME = "session.toml"
 #: Allowed values of a run's ``role``.
 RUN_ROLES = ("baseline", "swap", "validation", "other")
+#: File name of the bump-stop library :func:`write_session` writes.
+BUMP_STOP_LIBRARY_NAME = "bumpstops.toml"
+#: A run's ``tire_force_XX`` carries the static load when the magnitude of its mean is
+#: above this share of the corner's static load: a dynamic channel's mean is near 0 (the
+#: drive moves the car about its rest, and tapered drives start and end at rest), while a
+#: channel with the static offset has a mean near the load itself. A fifth leaves room for
+#: a drive's mean aero load and a load cell's drift on either side.
+STATIC_OFFSET_SHARE = 0.2
+#: Where ``tire_force_XX`` carries the static load, its run mean may differ from the static
+#: load given by at most this share: a drive's mean aero load above the actuators' static
+#: preload and the load cell's zero drift move it by a few per cent, while the usual
+#: mistakes (another corner's load, lbf written as N, the weight without the aero preload,
+#: the sign) are far beyond.
+STATIC_LOAD_RTOL = 0.10
 
 _RUN_FORMATS = {"csv": ".csv", "parquet": ".parquet"}
-_MANIFEST_KEYS = ("format", "name", "units", "shock_library", "run", "channels")
-_RUN_KEYS = ("name", "file", "setup", "role")
+_MANIFEST_KEYS = ("format", "name", "units", "shock_library", "run", "channels",
+                  "bump_stop_library", "static_corner_load")
+_RUN_KEYS = ("name", "file", "setup", "role", "bump_stops", "packers")
 _MANIFEST_TYPES = {"format": str, "name": str, "units": str, "shock_library": str, "run": list,
-                   "channels": dict}
+                   "channels": dict, "bump_stop_library": str, "static_corner_load": dict}
+#: Keys of one run that a manifest may hold only under a [[run]], and the reverse.
+_RUN_ONLY_KEYS = ("bump_stops", "packers")
+_SESSION_ONLY_KEYS = ("bump_stop_library", "static_corner_load")
 #: Optional manifest keys that state the sample rate [Hz]: checked against the run files
 #: (the rate itself always comes from their ``time`` column).
 _RATE_KEYS = ("fs_hz", "fs", "sample_rate", "sample_rate_hz", "sampling_rate_hz")
@@ -105,6 +132,13 @@ class Run:
         wheelloaders only (a 4-post rig: no aero channels).
     fs_hz : float
         Sample rate [Hz].
+    bump_stops : dict of str to (str or None)
+        Corner -> id of the bump stop fitted on the run, in the session's bump-stop
+        library, or None for none (the default, also for ``bump_stops=None``, at every
+        corner). A checked run has all four corners.
+    packers_m : dict of str to float
+        Corner -> packer thickness [m] (default 0 at every corner). A checked run has
+        all four corners.
 
     Notes
     -----
@@ -119,9 +153,15 @@ class Run:
     time_s: np.ndarray
     channels: dict
     fs_hz: float
+    bump_stops: dict = field(default_factory=lambda: dict.fromkeys(CORNERS))
+    packers_m: dict = field(default_factory=lambda: dict.fromkeys(CORNERS, 0.0))
 
     def __post_init__(self):
         object.__setattr__(self, "setup", dict(self.setup))
+        object.__setattr__(self, "bump_stops", dict.fromkeys(CORNERS) if self.bump_stops is None
+                           else dict(self.bump_stops))
+        object.__setattr__(self, "packers_m", dict.fromkeys(CORNERS, 0.0)
+                           if self.packers_m is None else dict(self.packers_m))
         object.__setattr__(self, "time_s", frozen_array(self.time_s))
         object.__setattr__(
             self, "channels", {k: frozen_array(v) for k, v in dict(self.channels).items()}
@@ -187,6 +227,15 @@ class Session:
     extra : dict
         Manifest keys this version does not know, kept so that writing the
         session again preserves them.
+    bump_stops : BumpStopLibrary or None
+        The bump stops the runs name (:mod:`ident.models.bumpstops`), None when the
+        manifest names no ``bump_stop_library``.
+    bump_stop_library_file : str or None
+        The bump-stop library as named in the manifest (relative to the folder).
+    static_corner_load_n : ndarray, shape (4,), or None
+        The tires' static loads [N] in corner order ``LF, RF, LR, RR`` (the car at rest
+        on the rig, with the aero actuators' static preload; read-only), None when the
+        manifest gives none.
     """
 
     path: Path | None
@@ -198,9 +247,15 @@ class Session:
     fs_hz: float
     channel_map: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)
+    bump_stops: Mapping | None = None
+    bump_stop_library_file: str | None = None
+    static_corner_load_n: np.ndarray | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "runs", tuple(self.runs))
+        if self.static_corner_load_n is not None:
+            object.__setattr__(self, "static_corner_load_n",
+                               frozen_array(self.static_corner_load_n))
 
     @property
     def rig_inputs(self):
@@ -329,6 +384,140 @@ def _run_where(name, file_path):
     return f"run {name!r} ({file_path})"
 
 
+def _corner_table(value, key, *, where, what):
+    """Return `value` (a table corner -> value, or None) as a dict, or raise."""
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise SessionError(f"{where}: {key} must be a table {{ LF = ..., RF = ... }} of "
+                           f"{what}, got {value!r}")
+    unknown = [c for c in value if c not in CORNERS]
+    if unknown:
+        raise SessionError(f"{where}: {key} names unknown corner(s) {unknown}; corners are "
+                           f"{', '.join(CORNERS)}")
+    return dict(value)
+
+
+def _check_bump_stops(bump_stops, packers_m, library, *, where):
+    """A run's bump stops and packers [m], checked; ``({corner: id or None},
+    {corner: m})`` in corner order.
+
+    `library` is the session's bump-stop library, or None when it has none (then a run
+    naming a bump stop is refused).
+    """
+    stops = _corner_table(bump_stops, "bump_stops", where=where,
+                          what='bump-stop ids or "none"')
+    ids = {}
+    for c in CORNERS:
+        sid = stops.get(c)
+        if sid is not None:
+            sid = parse_bump_stop_id(sid, f"{where}: bump_stops {c}", error=SessionError)
+        if sid is not None and library is None:
+            raise SessionError(
+                f"{where}: bump_stops {c} = {sid!r} but the session has no bump-stop "
+                "library; name it at the top of the manifest with bump_stop_library = "
+                f"\"{BUMP_STOP_LIBRARY_NAME}\" (make_session: bump_stops=), or remove the "
+                "run's bump_stops")
+        if sid is not None and sid not in library:
+            raise library.unknown_id_error(sid, where=f"{where}: bump_stops {c}",
+                                           error=SessionError)
+        ids[c] = sid
+    given = _corner_table(packers_m, "packers", where=where,
+                          what="thicknesses (numbers >= 0)")
+    packers = {}
+    for c in CORNERS:
+        p = given.get(c, 0.0)
+        if sid := ids[c]:
+            packers[c] = check_packer(library[sid], p, f"{where}: packers {c}",
+                                      error=SessionError)
+            continue
+        if not is_real_number(p) or not np.isfinite(p) or p < 0:
+            raise SessionError(f"{where}: packers {c} = {p!r} is not a thickness; give a "
+                               "number >= 0 (0 = none)")
+        if p:
+            logger.warning("%s: packers %s = %g m at a corner without a bump stop has no "
+                           "effect", where, c, p)
+        packers[c] = float(p)
+    return ids, packers
+
+
+def _check_static_loads(value, *, where, key, unit):
+    """The static corner loads as an array (4,) in the units given, or raise."""
+    if value is None:
+        return None
+    if not isinstance(value, Mapping):
+        if isinstance(value, (str, bytes)) or not np.iterable(value) or len(value) != 4:
+            raise SessionError(
+                f"{where}: {key} must be 4 positive numbers, one per corner "
+                f"{{ LF = ..., RF = ..., LR = ..., RR = ... }} ({unit}), got {value!r}")
+        value = dict(zip(CORNERS, value))
+    loads = _corner_table(value, key, where=where, what=f"positive numbers ({unit})")
+    missing = [c for c in CORNERS if c not in loads]
+    if missing:
+        raise SessionError(f"{where}: {key} has no load for corner(s) {', '.join(missing)}; "
+                           f"give the static tire load of all four corners ({unit})")
+    for c in CORNERS:
+        x = loads[c]
+        if not is_real_number(x) or not np.isfinite(x) or x <= 0:
+            raise SessionError(
+                f"{where}: {key} {c} = {x!r} is not a load; give the tire's static load on "
+                f"its pad, a positive number ({unit}, compression positive)")
+    return np.array([float(loads[c]) for c in CORNERS])
+
+
+def check_static_corner_loads(value, where, *, key="static_corner_load_n", unit="N"):
+    """The tires' static loads as a session holds them, or raise.
+
+    Parameters
+    ----------
+    value : mapping of str to float, array_like, shape (4,), or None
+        Per corner ``{LF = ..., ...}`` (all four) or in corner order ``LF, RF, LR, RR``.
+    where : str
+        The file or object, put first in messages.
+    key : str
+        The key or argument named in messages.
+    unit : str
+        The unit of `value` named in messages (the values are returned as given: convert
+        them with :func:`ident.data.units.to_si` where they are not SI).
+
+    Returns
+    -------
+    ndarray, shape (4,), or None
+        The loads in corner order, read-only; None for None.
+
+    Raises
+    ------
+    SessionError
+        If a corner is missing or unknown, or a load is not a positive finite number.
+    """
+    loads = _check_static_loads(value, where=where, key=key, unit=unit)
+    return None if loads is None else frozen_array(loads)
+
+
+def _check_static_vs_tire(runs, loads_n, *, where_run, units, key="static_corner_load"):
+    """Refuse static loads that the tire-force channels carrying the static load deny."""
+    if loads_n is None:
+        return
+    unit = UNIT_LABELS[units]["force"]
+    for r in runs:
+        for c, load in zip(CORNERS, loads_n):
+            x = r.channels.get(f"tire_force_{c}")
+            if x is None:
+                continue
+            mean = float(np.mean(x))
+            if abs(mean) <= STATIC_OFFSET_SHARE * load:
+                continue  # the dynamic part only: nothing to compare
+            if abs(mean - load) > STATIC_LOAD_RTOL * load:
+                m, g = from_si(mean, "force", units), from_si(float(load), "force", units)
+                raise SessionError(
+                    f"{where_run(r)}: tire_force_{c} has a mean of {m:.6g} {unit}, so it "
+                    f"carries the static load, but {key} {c} = {g:.6g} {unit} "
+                    f"({(mean - load) / load:+.0%}, more than {STATIC_LOAD_RTOL:.0%} off); "
+                    f"fix {key} {c} (the tire's load on its pad with the car at "
+                    "rest and the aero preload on, compression positive), or the channel's "
+                    "offset or sign")
+
+
 # --------------------------------------------------------------------------------------
 # Sessions
 # --------------------------------------------------------------------------------------
@@ -387,6 +576,10 @@ def _parse_run_entries(entries, *, where):
         role = _check_role(entry.get("role", "other"), where=label)
         unknown = [k for k in entry if k not in _RUN_KEYS]
         for key in unknown:
+            if key in _SESSION_ONLY_KEYS:  # written below a [[run]], TOML gives it to the run
+                raise SessionError(
+                    f"{label}: {key!r} is a key of the session, not of a run; move it to the "
+                    "top of the manifest, before the first [[run]]")
             hint = did_you_mean(key, _RUN_KEYS)
             if hint:
                 raise SessionError(
@@ -396,7 +589,8 @@ def _parse_run_entries(entries, *, where):
         if unknown:
             logger.warning("%s: unknown key(s) %s are ignored", label, unknown)
         parsed.append({"name": name, "file": file, "setup": entry["setup"],
-                       "role": role, "label": label})
+                       "role": role, "label": label, "bump_stops": entry.get("bump_stops"),
+                       "packers": entry.get("packers")})
     return parsed
 
 
@@ -416,6 +610,10 @@ def _check_extra_keys(extra, *, where):
                 )
             stated = (key, float(value))
             continue
+        if key in _RUN_ONLY_KEYS:
+            raise SessionError(
+                f"{where}: {key!r} is a key of a run (what was fitted on that run); move it "
+                "into each [[run]] that had it")
         hint = did_you_mean(key, _MANIFEST_KEYS)
         # a typo has the value of the key it misspells: a table [notes] is no 'units'
         if hint and isinstance(value, _MANIFEST_TYPES[hint.split("'")[1]]):
@@ -426,6 +624,23 @@ def _check_extra_keys(extra, *, where):
         logger.warning("%s: key %r is not part of the rig-session format; it is kept but "
                        "not used", where, key)
     return stated
+
+
+def _read_bump_stop_library(doc, folder, *, where):
+    """``(file as named, BumpStopLibrary)`` of the manifest's bump_stop_library, or
+    ``(None, None)``."""
+    if "bump_stop_library" not in doc:
+        return None, None
+    bump_file = _manifest_str(doc, "bump_stop_library", where=where)
+    bump_path = folder / bump_file
+    if not bump_path.is_file():
+        raise SessionError(
+            f"{where}: bump_stop_library {bump_file!r} not found ({bump_path}); put the "
+            "bump-stop library beside the manifest or fix the path")
+    try:
+        return bump_file, read_bump_stops(bump_path)
+    except BumpStopError as exc:
+        raise SessionError(f"{where}: bump_stop_library {bump_file!r}: {exc}") from exc
 
 
 def read_session(path):
@@ -458,7 +673,26 @@ def read_session(path):
         all three aero channels, holds NaN/inf or non-numeric values, has
         non-uniform time or a unit marker that disagrees with the manifest's
         ``units``; or the runs have different sample rates or different
-        rig inputs (runs with and without aero channels).
+        rig inputs (runs with and without aero channels). For the real car (all
+        optional): the bump-stop library is missing or malformed (the
+        :class:`~ident.errors.BumpStopError` is chained); a run names a bump stop
+        without a ``bump_stop_library``, or an id not in it (naming the run, the
+        corner, the library file and its ids); a packer is negative or thicker
+        than its bump stop's gap; ``static_corner_load`` is not 4 positive numbers;
+        a run's ``tire_force_XX`` carries the static load (its mean is above
+        :data:`STATIC_OFFSET_SHARE` of the load) and differs from it by more than
+        :data:`STATIC_LOAD_RTOL`; ``bump_stops`` or ``packers`` stand outside a
+        ``[[run]]``, or a session key (``static_corner_load``,
+        ``bump_stop_library``) inside one.
+
+    Notes
+    -----
+    The real car's keys (the spec's "The real car"): ``bump_stop_library`` (read
+    into :attr:`Session.bump_stops`), per run ``bump_stops = { LF = "BS-F", ... }``
+    (a corner left out, or ``"none"``, has none) and ``packers = { LF = 0.003 }``
+    (file units, default 0), kept as :attr:`Run.bump_stops` and
+    :attr:`Run.packers_m`, and ``static_corner_load`` (file units) as
+    :attr:`Session.static_corner_load_n`. A manifest without them reads as before.
     """
     folder, manifest = _manifest_paths(path)
     where = str(manifest)
@@ -496,11 +730,24 @@ def read_session(path):
 
     setups = [_check_setup(e["setup"], shocks, where=e["label"], library=library_file)
               for e in entries]
+    bump_file, bump_stops = _read_bump_stop_library(doc, folder, where=where)
+    static = _check_static_loads(doc.get("static_corner_load"), where=where,
+                                 key="static_corner_load",
+                                 unit=UNIT_LABELS[units]["force"])
+    static = None if static is None else to_si(static, "force", units)
+    elements = []
+    for e in entries:
+        packers = _corner_table(e["packers"], "packers", where=e["label"],
+                                what="thicknesses (numbers >= 0)")
+        packers = {c: to_si(p, "displacement", units) if is_real_number(p) else p
+                   for c, p in packers.items()}
+        elements.append(_check_bump_stops(e["bump_stops"], packers, bump_stops,
+                                          where=e["label"]))
     # before reading any run file: a cheap, manifest-only mistake
     _check_unique_names([e["name"] for e in entries], where=where)
 
     runs = []
-    for e, setup in zip(entries, setups):
+    for e, setup, (stops, packers) in zip(entries, setups, elements):
         file_path = folder / e["file"]
         run_where = _run_where(e["name"], file_path)
         if not file_path.is_file():
@@ -515,8 +762,10 @@ def read_session(path):
             "system, or correct the run file's '# units:' line")
         runs.append(Run(name=e["name"], file=e["file"], setup=setup, role=e["role"],
                         time_s=table.time_s, channels=table.channels,
-                        fs_hz=table.fs_hz))
+                        fs_hz=table.fs_hz, bump_stops=stops, packers_m=packers))
     fs_hz = _check_run_set(runs, where=where)
+    _check_static_vs_tire(runs, static, units=units,
+                          where_run=lambda r: f"{where}: {_run_where(r.name, folder / r.file)}")
     if stated_rate is not None and abs(stated_rate[1] - fs_hz) > RTOL_TIME_STEP * fs_hz:
         raise SessionError(
             f"{where}: {stated_rate[0]} = {stated_rate[1]:g} disagrees with the run files, "
@@ -527,10 +776,12 @@ def read_session(path):
                 fs_hz, folder)
     return Session(path=folder, name=name, units=units, runs=tuple(runs), shocks=shocks,
                    shock_library_file=library_file, fs_hz=fs_hz,
-                   channel_map=channel_map, extra=extra)
+                   channel_map=channel_map, extra=extra, bump_stops=bump_stops,
+                   bump_stop_library_file=bump_file, static_corner_load_n=static)
 
 
-def make_session(name, runs, shocks, *, units="SI"):
+def make_session(name, runs, shocks, *, units="SI", bump_stops=None,
+                 static_corner_load_n=None):
     """Build a checked :class:`Session` from in-memory runs.
 
     Parameters
@@ -544,19 +795,26 @@ def make_session(name, runs, shocks, *, units="SI"):
         The shock models named by the runs' setups.
     units : {"SI", "imperial"}
         Unit system used when the session is written (the arrays stay SI).
+    bump_stops : BumpStopLibrary or iterable of BumpStop, optional
+        The bump stops named by the runs' ``bump_stops`` (default: none, and no run may
+        name one).
+    static_corner_load_n : mapping of str to float, or array_like, shape (4,), optional
+        The tires' static loads [N], per corner or in corner order ``LF, RF, LR, RR``.
 
     Returns
     -------
     Session
-        With ``path=None``, ``shock_library_file="shocks.toml"`` and no
-        ``[channels]`` mapping.
+        With ``path=None``, ``shock_library_file="shocks.toml"``,
+        ``bump_stop_library_file="bumpstops.toml"`` when `bump_stops` is given (else
+        None) and no ``[channels]`` mapping.
 
     Raises
     ------
     SessionError
         On the same problems :func:`read_session` reports for a run's setup,
         role, rig inputs, samples and time, duplicated run names and different
-        sample rates (one engine checks both), or a run's ``fs_hz`` that
+        sample rates (one engine checks both), a run's bump stops and packers,
+        static loads (as :func:`read_session`), or a run's ``fs_hz`` that
         disagrees with its ``time_s``.
     """
     where = f"session {name!r}"
@@ -565,6 +823,10 @@ def make_session(name, runs, shocks, *, units="SI"):
     units = check_session_units(units, where=f"{where}: units")
     if not isinstance(shocks, ShockLibrary):
         shocks = ShockLibrary(shocks)
+    if bump_stops is not None and not isinstance(bump_stops, BumpStopLibrary):
+        bump_stops = BumpStopLibrary(bump_stops)
+    static = _check_static_loads(static_corner_load_n, where=where,
+                                 key="static_corner_load_n", unit="N")
     checked = []
     for r in runs:
         if not isinstance(r, Run):
@@ -572,6 +834,8 @@ def make_session(name, runs, shocks, *, units="SI"):
         run_where = _run_where(r.name, r.file)
         setup = _check_setup(r.setup, shocks, where=run_where, library="of the session")
         role = _check_role(r.role, where=run_where)
+        stops, packers = _check_bump_stops(r.bump_stops, r.packers_m, bump_stops,
+                                           where=run_where)
         columns = in_memory_columns(r.time_s, r.channels, where=run_where)
         time_s, channels, fs_hz = check_columns(
             columns, where=run_where, units="SI", channel_map={}, required=WHEELLOADER_INPUTS
@@ -582,10 +846,15 @@ def make_session(name, runs, shocks, *, units="SI"):
                 f"({fs_hz:.9g} Hz); pass fs_hz = 1 / time step"
             )
         checked.append(Run(name=r.name, file=r.file, setup=setup, role=role,
-                           time_s=time_s, channels=channels, fs_hz=fs_hz))
+                           time_s=time_s, channels=channels, fs_hz=fs_hz,
+                           bump_stops=stops, packers_m=packers))
     fs_hz = _check_run_set(checked, where=where)
+    _check_static_vs_tire(checked, static, units="SI", key="static_corner_load_n",
+                          where_run=lambda r: _run_where(r.name, r.file))
     return Session(path=None, name=name, units=units, runs=tuple(checked), shocks=shocks,
-                   shock_library_file="shocks.toml", fs_hz=fs_hz)
+                   shock_library_file="shocks.toml", fs_hz=fs_hz, bump_stops=bump_stops,
+                   bump_stop_library_file=None if bump_stops is None
+                   else BUMP_STOP_LIBRARY_NAME, static_corner_load_n=static)
 
 
 def _safe_stem(name):
@@ -598,25 +867,50 @@ def _toml_value(value):
     return tomli_w.dumps({"x": value}).partition("=")[2].strip()
 
 
+def _inline_table(values):
+    """``{ LF = ..., RF = ... }``: a TOML inline table of corner values."""
+    return "{ " + ", ".join(f"{c} = {_toml_value(v)}" for c, v in values.items()) + " }"
+
+
+def _run_block(run, file, *, units):
+    """The ``[[run]]`` table of a run in the manifest; ``bump_stops`` and ``packers`` only
+    where the run has some (so a run without them is written as before)."""
+    setup = ", ".join(f"{c} = {_toml_value(run.setup[c])}" for c in CORNERS)
+    text = ("\n[[run]]\n"
+            f"name = {_toml_value(run.name)}\n"
+            f"file = {_toml_value(file)}\n"
+            f"setup = {{ {setup} }}\n"
+            f"role = {_toml_value(run.role)}\n")
+    stops = {c: run.bump_stops[c] for c in CORNERS if run.bump_stops.get(c) is not None}
+    if stops:
+        text += f"bump_stops = {_inline_table(stops)}\n"
+    packers = {c: from_si(float(run.packers_m[c]), "displacement", units) for c in CORNERS
+               if run.packers_m.get(c, 0.0)}
+    if packers:
+        text += f"packers = {_inline_table(packers)}\n"
+    return text
+
+
 def _manifest_text(session, *, units, files):
     head = {"format": SESSION_FORMAT, "name": session.name, "units": units,
             "shock_library": "shocks.toml"}
+    if session.bump_stops is not None:
+        head["bump_stop_library"] = BUMP_STOP_LIBRARY_NAME
+    extra = {}
     for key, value in session.extra.items():
         if key in _MANIFEST_KEYS:
             logger.warning("session extra key %r clashes with a manifest key; not written",
                            key)
             continue
-        head[key] = value
-    parts = [tomli_w.dumps(head)]
-    for run, file in zip(session.runs, files):
-        setup = ", ".join(f"{c} = {_toml_value(run.setup[c])}" for c in CORNERS)
-        parts.append(
-            "\n[[run]]\n"
-            f"name = {_toml_value(run.name)}\n"
-            f"file = {_toml_value(file)}\n"
-            f"setup = {{ {setup} }}\n"
-            f"role = {_toml_value(run.role)}\n"
-        )
+        extra[key] = value
+    if session.static_corner_load_n is None:
+        parts = [tomli_w.dumps({**head, **extra})]
+    else:  # an inline table, as in the spec, before any [table] of the extra keys
+        loads = dict(zip(CORNERS, (from_si(float(x), "force", units)
+                                   for x in session.static_corner_load_n)))
+        parts = [tomli_w.dumps(head), f"static_corner_load = {_inline_table(loads)}\n",
+                 tomli_w.dumps(extra)]
+    parts.extend(_run_block(run, file, units=units) for run, file in zip(session.runs, files))
     return "".join(parts)
 
 
@@ -643,7 +937,7 @@ def _sibling(target, tag):
 
 
 def write_session(session, path, *, units=None, run_format="csv", overwrite=False):
-    """Write a session folder: ``session.toml``, ``shocks.toml`` and ``runs/``.
+    """Write a session folder: ``session.toml``, the libraries and ``runs/``.
 
     Parameters
     ----------
@@ -670,7 +964,10 @@ def write_session(session, path, *, units=None, run_format="csv", overwrite=Fals
     at the end, so a failure leaves nothing half-written; an existing folder is
     replaced only after the new one is complete. The manifest has no
     ``[channels]`` table (written files use canonical names); unknown manifest
-    keys kept in ``session.extra`` are written back.
+    keys kept in ``session.extra`` are written back. A session with bump stops
+    gets ``bumpstops.toml`` and ``bump_stop_library``, its runs' ``bump_stops``
+    and ``packers`` (only where a run has some) and ``static_corner_load``, all in
+    `units`; a session without them is written exactly as before.
 
     Raises
     ------
@@ -703,6 +1000,8 @@ def write_session(session, path, *, units=None, run_format="csv", overwrite=Fals
     try:
         (tmp / "runs").mkdir()
         write_shock_library(session.shocks, tmp / "shocks.toml", units=units)
+        if session.bump_stops is not None:
+            write_bump_stops(session.bump_stops, tmp / BUMP_STOP_LIBRARY_NAME, units=units)
         for run, file in zip(session.runs, files):
             write_run_table(tmp / file, run.time_s, run.channels, units=units)
         atomic_write_text(tmp / MANIFEST_NAME,
@@ -799,7 +1098,8 @@ def append_runs(path, runs, *, run_format="csv"):
             )
     # the checks of a whole session (setups, roles, rig inputs, one sample rate)
     combined = make_session(existing.name, list(existing.runs) + runs, existing.shocks,
-                            units=existing.units)
+                            units=existing.units, bump_stops=existing.bump_stops,
+                            static_corner_load_n=existing.static_corner_load_n)
     new_runs = combined.runs[len(existing.runs):]
 
     runs_dir = folder / "runs"
@@ -817,16 +1117,8 @@ def append_runs(path, runs, *, run_format="csv"):
         files.append(file)
 
     old = manifest.read_bytes()
-    blocks = []
-    for run, file in zip(new_runs, files):
-        setup = ", ".join(f"{c} = {_toml_value(run.setup[c])}" for c in CORNERS)
-        blocks.append(
-            "\n[[run]]\n"
-            f"name = {_toml_value(run.name)}\n"
-            f"file = {_toml_value(file)}\n"
-            f"setup = {{ {setup} }}\n"
-            f"role = {_toml_value(run.role)}\n"
-        )
+    blocks = [_run_block(run, file, units=existing.units)
+              for run, file in zip(new_runs, files)]
     text = ("" if not old or old.endswith(b"\n") else "\n") + "".join(blocks)
 
     written, tmp = [], None

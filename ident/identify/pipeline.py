@@ -29,6 +29,7 @@ import numpy as np
 from ident.errors import FitWarning, LowCoherenceWarning
 from ident.identify import fit as fitmod
 from ident.identify.condition import condition_frf, conditioned_standard_error
+from ident.identify.diagnose import diagnose_session
 from ident.identify.frf import Frf, estimate_frf
 from ident.identify.model import VehicleModel, has_feedthrough
 
@@ -494,8 +495,9 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
                      nperseg=None,
                      coherence_min=0.9, smooth_width_hz=None, smooth_domain=None,
                      fit_method="invfreqs",
-                     orders="auto", weighting="paper", band_hz=(0.5, 20.0), max_order=10):
-    """Identify a vehicle model from a rig session: estimate, condition, fit.
+                     orders="auto", weighting="paper", band_hz=(0.5, 20.0), max_order=10,
+                     diagnose=True):
+    """Identify a vehicle model from a rig session: estimate, condition, fit, check.
 
     Parameters
     ----------
@@ -512,6 +514,14 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         :func:`ident.identify.condition.condition_frf` (``smooth_domain`` None: its default).
     fit_method, orders, weighting, band_hz, max_order
         :func:`fit_model`.
+    diagnose : bool
+        Check the session against the model (:func:`ident.identify.diagnose.
+        diagnose_session`: bump stops, lift-off, the runs re-simulated on the model,
+        amplitude dependence), log a warning per finding and keep the result in
+        ``settings["diagnosis"]`` (:meth:`ident.identify.diagnose.Diagnosis.to_dict`;
+        :meth:`~ident.identify.diagnose.Diagnosis.from_dict` reads it back). It builds
+        the model's loop plant (kept with the model) and adds about 5-8 % to the time.
+        False: skip it.
 
     Returns
     -------
@@ -528,4 +538,6 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
     settings = dict(model.settings, session=session.name,
                     runs=[r.name for r in session.runs], frf_method=frf_method,
                     estimator=estimator)
+    if diagnose:
+        settings["diagnosis"] = diagnose_session(session, model).to_dict()
     return model.with_settings(settings)

@@ -4,6 +4,8 @@ Modules: :mod:`~ident.models.lti` (linear time-invariant systems in modal form, 
 loop plant the simulator steps, their exact discretization and balanced reduction),
 :mod:`~ident.models.vehicle` (the paper's 7-DOF full-car model and its vehicle TOML),
 :mod:`~ident.models.shocks` (shock force-velocity models: piecewise-linear curves with a
-lag), :mod:`~ident.models.library` (the shock library and its TOML file, ``shocks.toml``)
-and :mod:`~ident.models.dyno` (shock models fitted to dyno data).
+lag), :mod:`~ident.models.library` (the shock library and its TOML file, ``shocks.toml``),
+:mod:`~ident.models.dyno` (shock models fitted to dyno data) and
+:mod:`~ident.models.bumpstops` (bump stops, packers and their library file,
+``bumpstops.toml``).
 """

@@ -43,6 +43,7 @@ __all__ = [
     "lag_hold_coefficients",
     "lag_coefficients",
     "balanced_reduce",
+    "join_inputs",
     "GRAM_FACTOR_RTOL",
 ]
 
@@ -529,3 +530,50 @@ def balanced_reduce(modal, *, rtol=1e-4):
     log.info("balanced truncation: %d -> %d states (bound %.2g)", A.shape[0], r, tail[r] / sv[0])
     return red
 
+
+
+def join_inputs(a, b, *, rtol=1e-9):
+    """One modal system with the inputs of `a` then those of `b` (the same outputs).
+
+    A mode of `b` with a pole and an output column equal to a mode of `a` (to `rtol`) is
+    that mode (its input rows are joined): the two parts of a physical model's
+    :class:`LoopPlant` come from one modal form and share their modes. Other modes of `b`
+    are appended (an identified model's parts fitted separately: the joined system then
+    has the modes of both).
+
+    Parameters
+    ----------
+    a, b : ModalSystem
+        With the same number of outputs.
+    rtol : float
+        Relative tolerance of the pole and output-column match.
+
+    Returns
+    -------
+    ModalSystem
+        Modes of `a` first, in their order (then the appended modes of `b`); inputs
+        ``[a's, b's]``; ``D = [a.D, b.D]``.
+    """
+    if a.C.shape[0] != b.C.shape[0]:
+        raise ValueError(f"join_inputs: the systems have {a.C.shape[0]} and {b.C.shape[0]} "
+                         "outputs; give systems of the same outputs")
+    na, ma, mb = a.lam.size, a.B.shape[1], b.B.shape[1]
+    used = np.zeros(na, dtype=bool)
+    where = np.full(b.lam.size, -1)
+    for j, lam in enumerate(b.lam):
+        cj = b.C[:, j]
+        scale = max(np.abs(cj).max(initial=0.0), 1e-300)
+        for i in np.flatnonzero(~used & (np.abs(a.lam - lam) <= rtol * max(abs(lam), 1e-300))):
+            if np.abs(a.C[:, i] - cj).max(initial=0.0) <= rtol * scale:
+                where[j] = i
+                used[i] = True
+                break
+    extra = np.flatnonzero(where < 0)
+    where[extra] = na + np.arange(extra.size)
+    n = na + extra.size
+    lam = np.concatenate([a.lam, b.lam[extra]])
+    B = np.zeros((n, ma + mb), dtype=complex)
+    B[:na, :ma] = a.B
+    B[where, ma:] = b.B
+    C = np.concatenate([a.C, b.C[:, extra]], axis=1)
+    return ModalSystem(lam, B, C, np.concatenate([a.D, b.D], axis=1))

@@ -51,16 +51,20 @@ from __future__ import annotations
 
 import logging
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping
 
 import numba as _nb
 import numpy as np
 
-from ident.data.channels import CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES
+from ident.data.channels import (CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES,
+                                 WHEELLOADER_INPUTS, kind_of)
 from ident.data.drive import FIR_HALF_LENGTH, check_drive_inputs, resample_bandlimited
-from ident.models.lti import hold_coefficients, lag_coefficients, lag_hold_coefficients
-from ident.sim.loop_kernels import loop_batch, loop_metrics_worker, loop_serial, rig_kernel
+from ident.models.lti import (hold_coefficients, join_inputs, lag_coefficients,
+                              lag_hold_coefficients)
+from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, loop_batch, loop_elements_batch,
+                                    loop_elements_serial, loop_metrics_worker, loop_serial,
+                                    rig_kernel)
 from ident.sim.metrics import METRIC_CHANNELS, compute_metrics, metric_plan
 
 __all__ = [
@@ -77,6 +81,9 @@ __all__ = [
     "check_oversample",
     "setup_models",
     "pack_setups",
+    "pack_bump_stops",
+    "corner_values",
+    "ELEMENT_STATS",
 ]
 
 log = logging.getLogger(__name__)
@@ -106,6 +113,10 @@ class RigResponse:
     plant_name : str
     output_names : tuple of str
         The plant outputs in ``y``.
+    element_rows : dict
+        Filled by the simulator with bump stops or lift-off: the rig-input part of the
+        shock travels and tire forces on the internal grid, (n_fine, 8), by their rows
+        (computed once per response, shared by every call given it).
     """
 
     v_fine: np.ndarray
@@ -116,6 +127,7 @@ class RigResponse:
     n_samples: int
     plant_name: str
     output_names: tuple = ()
+    element_rows: dict = field(default_factory=dict, repr=False)
 
 
 def refine_input(u, r):
@@ -378,7 +390,14 @@ class BatchResponse:
     newton_iterations : ndarray of int, shape (n_setups,)
         Largest Newton iteration count per setup.
     settings : dict
-        ``oversample``, ``plant``, ``drive``.
+        ``oversample``, ``plant``, ``drive`` (and ``bump_stops``, ``static_corner_load_n``
+        when given).
+    elements : dict of str -> ndarray, shape (n_setups,)
+        With bump stops or static loads only (:data:`ELEMENT_STATS`):
+        ``bump_stop_contact_share_XX`` (share of samples with the travel beyond contact,
+        corners with a bump stop), ``tire_contact_min_XX`` [N] (smallest contact force
+        ``static + tire_force``) and ``tire_liftoff_share_XX`` (share of samples at zero
+        contact), corners with a static load.
     """
 
     channels: dict
@@ -386,6 +405,7 @@ class BatchResponse:
     setups: tuple
     newton_iterations: np.ndarray
     settings: dict
+    elements: dict = field(default_factory=dict)
 
     @property
     def n_setups(self):
@@ -402,7 +422,8 @@ class BatchResponse:
         """The :class:`Response` of setup `i`."""
         return Response(channels={k: v[i] for k, v in self.channels.items()}, fs_hz=self.fs_hz,
                         setup=self.setups[i], newton_iterations=int(self.newton_iterations[i]),
-                        settings=self.settings)
+                        settings=self.settings,
+                        elements={k: float(v[i]) for k, v in self.elements.items()})
 
 
 @dataclass(frozen=True, eq=False)
@@ -414,6 +435,7 @@ class Response:
     setup: tuple
     newton_iterations: int
     settings: dict
+    elements: dict = field(default_factory=dict)
 
     @property
     def time_s(self):
@@ -422,7 +444,8 @@ class Response:
         return np.arange(n) / self.fs_hz
 
 
-def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None):
+def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None,
+                   bump_stops=None, static_corner_load_n=None):
     """Simulate several shock setups on one plant and drive, in closed loop.
 
     Parameters
@@ -441,6 +464,18 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     rig : RigResponse, optional
         A precomputed :func:`rig_response` of this plant, drive and
         oversampling (reuse it across calls).
+    bump_stops : sequence, optional
+        One entry per setup: the setup's bump stops, a mapping corner -> stop or 4 stops
+        (LF, RF, LR, RR), a stop ``None`` (none at that corner) or ``(contact_travel_m,
+        travel_table_m, force_table_n)`` (:func:`pack_bump_stops`). The corner's force
+        into the car is then the shock's plus the stop's at the shock travel;
+        ``shock_force_XX`` stays the shock's. Needs the plant's ``shock_travel_XX``.
+        ``None`` (default): today's loop, the same numbers.
+    static_corner_load_n : array_like, shape (4,) or mapping, optional
+        Static tire load per corner [N] (:func:`corner_values`; a corner left out or
+        ``None`` has no lift-off): the contact force ``static + tire_force`` is kept at
+        or above zero, the pad following the tire while it is off (lift-off). Needs the
+        plant's ``tire_force_XX``. ``None`` (default): today's loop.
 
     Returns
     -------
@@ -450,10 +485,24 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     ------
     ValueError
         On a malformed setup, an unknown output, or if Newton's method does
-        not converge (an unstable or ill-posed loop).
+        not converge (an unstable or ill-posed loop); on malformed bump stops or static
+        loads, or a plant without the channels they need.
+
+    Notes
+    -----
+    Bump stops and lift-off are solved within each internal step with the shocks
+    (:func:`ident.sim.loop_kernels.loop_one_elements`): the travel, the stop's force, the
+    contact force and the shock forces agree at the step (implicit). The pad correction
+    of lift-off enters the model through its wheelloader inputs (the rig part's wheelloader
+    columns joined to the shock part, :func:`ident.models.lti.join_inputs`), so the tire
+    force, accelerations and every state see it; the ride heights, measured from the real
+    pad, do not take its direct feedthrough.
     """
     loop = _loop_setup(plant, drive, setups, oversample, outputs, rig, "simulate_batch")
-    return _batch_response(plant, drive, loop)
+    if bump_stops is None and static_corner_load_n is None:
+        return _batch_response(plant, drive, loop)
+    return _element_response(plant, drive, loop, bump_stops, static_corner_load_n,
+                             "simulate_batch")
 
 
 def _batch_response(plant, drive, loop):
@@ -623,12 +672,7 @@ def _loop_setup(plant, drive, setups, oversample, outputs, rig, where):
                          "or oversampling; recompute it with rig_response()")
     fs = rig.fs_hz
     h = 1.0 / (fs * r)
-    ms = plant.shock
     vi = plant.velocity_idx
-    phi, g1, g0, gm = hold_coefficients(ms.lam, h)
-    Bf = np.ascontiguousarray(ms.B)
-    Cv = np.ascontiguousarray(ms.C[vi])
-    Deff = np.real(Cv @ (g1[:, None] * Bf)) + ms.D[vi]
     names = _check_outputs(plant, outputs)
     missing = [o for o in names if o not in rig.output_names]
     if missing:
@@ -640,11 +684,61 @@ def _loop_setup(plant, drive, setups, oversample, outputs, rig, where):
     else:
         y_rig = np.ascontiguousarray(rig.y[[rig.output_names.index(o) for o in names]].T)
     packed = pack_setups(models, h)
+    modal, Cout, _ = _modal_args(plant.shock, vi, oi, h)
+    args = (*modal, rig.v_fine, _writable(plant.cbar_n_s_m), *packed, r, Cout)
+    return _Loop(models=models, rig=rig, names=names, args=args, y_rig=y_rig, oversample=r,
+                 plant_name=plant.name)
 
-    def split(a):
-        a = np.asarray(a)
-        return np.ascontiguousarray(a.real, dtype=float), np.ascontiguousarray(a.imag, dtype=float)
 
+def _split(a):
+    """Real and imaginary parts of `a` as contiguous float arrays."""
+    a = np.asarray(a)
+    return np.ascontiguousarray(a.real, dtype=float), np.ascontiguousarray(a.imag, dtype=float)
+
+
+def _modal_args(ms, vi, oi, h, *, erows=(), w_out=None):
+    """The modal loop's arguments of the kernels from the shock part `ms` of a plant.
+
+    Parameters
+    ----------
+    ms : ident.models.lti.ModalSystem
+        Inputs ``dF`` (4), then with lift-off the 4 pad corrections ``w``.
+    vi, oi : ndarray of int
+        Rows of the shock velocities and of the outputs.
+    h : float
+        Internal step [s].
+    erows : sequence of int
+        Rows of the elements' channels (travel, tire force), returned padded.
+    w_out : ndarray, shape (p, 4), optional
+        Feedthrough of ``w`` to the outputs (with lift-off).
+
+    Returns
+    -------
+    modal : tuple
+        ``phi, g1, g0, gm, B.T, Cv`` split in real and imaginary parts, then ``Deff``.
+    Cout : ndarray, shape (2 n + 4 (+ 4), p)
+        The output rows' coefficients on ``[Re x, Im x, dF (, w)]``.
+    extra : tuple
+        ``(Bw.T, Ce)`` split (padded as the modes), and the elements' effective
+        feedthroughs ``g1``-weighted (:func:`_element_feedthrough`); empty without
+        `erows`.
+    """
+    phi, g1, g0, gm = hold_coefficients(ms.lam, h)
+    Bf = np.ascontiguousarray(ms.B[:, :4])
+    Cv = np.ascontiguousarray(ms.C[vi])
+    Deff = np.real(Cv @ (g1[:, None] * Bf)) + ms.D[vi][:, :4]
+    nw = ms.B.shape[1] - 4
+    Bw = np.ascontiguousarray(ms.B[:, 4:])
+    Ce = np.ascontiguousarray(ms.C[list(erows)])
+    feed = ()
+    if len(erows):
+        def eff(C, D, B):
+            return np.ascontiguousarray(np.real(C @ (g1[:, None] * B)) + D)
+
+        Dv_w = eff(Cv, ms.D[vi][:, 4:], Bw) if nw else np.zeros((4, 4))
+        De_f = eff(Ce, ms.D[list(erows)][:, :4], Bf)
+        De_w = eff(Ce, ms.D[list(erows)][:, 4:], Bw) if nw else np.zeros((8, 4))
+        feed = (De_f[:4], De_w[:4], Dv_w, De_f[4:], De_w[4:])
     Cy = ms.C[oi]
     # zero modes up to a multiple of _MODE_PAD: exact zeros in every sum, whole vectors
     n_pad = -len(phi) % _MODE_PAD
@@ -655,16 +749,17 @@ def _loop_setup(plant, drive, setups, oversample, outputs, rig, where):
             return np.pad(a, w)
 
         phi, g1, g0, gm = (pad(a, 0) for a in (phi, g1, g0, gm))
-        Bf, Cv, Cy = pad(Bf, 0), pad(Cv, 1), pad(Cy, 1)
+        Bf, Cv, Cy, Bw, Ce = pad(Bf, 0), pad(Cv, 1), pad(Cy, 1), pad(Bw, 0), pad(Ce, 1)
     # the output rows' coefficients on [Re x, Im x, dF]: Re(Cy x) + Dy dF in one product
-    Cout = np.ascontiguousarray(np.concatenate([Cy.real.T, -Cy.imag.T,
-                                                np.asarray(ms.D[oi], dtype=float).T]),
-                                dtype=float)
-    args = (*split(phi), *split(g1), *split(g0), *split(gm), *split(Bf.T), *split(Cv),
-            np.ascontiguousarray(Deff), rig.v_fine, _writable(plant.cbar_n_s_m), *packed, r,
-            Cout)
-    return _Loop(models=models, rig=rig, names=names, args=args, y_rig=y_rig, oversample=r,
-                 plant_name=plant.name)
+    rows = [Cy.real.T, -Cy.imag.T, np.asarray(ms.D[oi][:, :4], dtype=float).T]
+    if nw:
+        rows.append(np.asarray(w_out, dtype=float).T)
+    Cout = np.ascontiguousarray(np.concatenate(rows), dtype=float)
+    modal = (*_split(phi), *_split(g1), *_split(g0), *_split(gm), *_split(Bf.T), *_split(Cv),
+             np.ascontiguousarray(Deff))
+    extra = (*_split(Bw.T if nw else np.zeros((0, len(phi)))), *_split(Ce)) + feed if len(erows) \
+        else ()
+    return modal, Cout, extra
 
 
 def _run_parallel(kernel, *args):
@@ -687,10 +782,238 @@ def _check_converged(plant, iters):
                          "and the model's stability, or raise oversample)")
 
 
-def simulate(plant, drive, setup, *, oversample=4, outputs=None, rig=None):
+def simulate(plant, drive, setup, *, oversample=4, outputs=None, rig=None, bump_stops=None,
+             static_corner_load_n=None):
     """Simulate one shock setup on a plant and a drive in closed loop.
 
     Same as :func:`simulate_batch` with one setup; returns a :class:`Response`.
+    `bump_stops` is the setup's (a mapping corner -> stop or 4 stops), not a list of them.
     """
     return simulate_batch(plant, drive, [setup], oversample=oversample, outputs=outputs,
-                          rig=rig).response(0)
+                          rig=rig, bump_stops=None if bump_stops is None else [bump_stops],
+                          static_corner_load_n=static_corner_load_n).response(0)
+
+
+# ----------------------------------------------------------------------------------------------
+# bump stops and tire lift-off (issue 25)
+# ----------------------------------------------------------------------------------------------
+
+#: The per-corner summaries of :attr:`BatchResponse.elements`, by prefix.
+ELEMENT_STATS = ("bump_stop_contact_share", "tire_liftoff_share", "tire_contact_min")
+
+
+def corner_values(values, where, what):
+    """Per-corner values LF, RF, LR, RR from a mapping (a corner left out or ``None``: none)
+    or a sequence of 4; returns a list of 4 (entries ``None`` where none).
+
+    Raises
+    ------
+    ValueError
+        On an unknown corner or a sequence not of 4.
+    """
+    if isinstance(values, Mapping):
+        unknown = [c for c in values if c not in CORNERS]
+        if unknown:
+            raise ValueError(f"{where}: {what} names unknown corners {unknown}; the corners are "
+                             f"{list(CORNERS)}")
+        return [values.get(c) for c in CORNERS]
+    vals = list(values)
+    if len(vals) != 4:
+        raise ValueError(f"{where}: {what} needs 4 values (LF, RF, LR, RR), got {len(vals)}")
+    return vals
+
+
+def _check_stop(stop, where):
+    """A bump stop ``(contact_travel_m, travel_m, force_n)`` as checked float arrays."""
+    try:
+        s0, x, f = stop
+    except (TypeError, ValueError):
+        raise TypeError(f"{where}: a bump stop is (contact_travel_m, travel_table_m, "
+                        f"force_table_n), got {type(stop).__name__}") from None
+    s0 = float(s0)
+    x = np.asarray(x, dtype=float).ravel()
+    f = np.asarray(f, dtype=float).ravel()
+    if not np.isfinite(s0) or s0 < 0:
+        raise ValueError(f"{where}: contact travel {s0!r} m must be >= 0 (the gap less the "
+                         "packer, from the car at rest)")
+    if x.size < 2 or x.size != f.size or not (np.all(np.isfinite(x)) and np.all(np.isfinite(f))):
+        raise ValueError(f"{where}: travel and force tables need the same number (>= 2) of "
+                         f"finite values, got {x.size} and {f.size}")
+    if x[0] != 0 or f[0] != 0:
+        raise ValueError(f"{where}: the tables start at travel 0 with force 0 (contact), got "
+                         f"({x[0]!r}, {f[0]!r})")
+    if np.any(np.diff(x) <= 0):
+        raise ValueError(f"{where}: the travel table must increase strictly")
+    if np.any(np.diff(f) < 0):
+        raise ValueError(f"{where}: the force table falls with travel; a bump stop's force "
+                         "must not decrease")
+    return s0, x, f
+
+
+def pack_bump_stops(per_setup, where="bump_stops"):
+    """Pack the setups' bump stops into the arrays of the compiled loop.
+
+    Parameters
+    ----------
+    per_setup : sequence
+        One entry per setup: a mapping corner -> stop or 4 stops (LF, RF, LR, RR), or
+        ``None`` (no bump stops). A stop is ``None`` or ``(contact_travel_m,
+        travel_table_m, force_table_n)``: the shock travel from the car at rest at
+        which the stop touches (its gap less the packer) [m], and its force [N] at
+        travels beyond contact [m] (strictly increasing from 0; force from 0,
+        non-decreasing), extended beyond the table with its last slope.
+    where : str
+        Names the argument in error messages.
+
+    Returns
+    -------
+    on : ndarray of int, shape (n_setups, 4)
+    s0 : ndarray, shape (n_setups, 4)
+        Contact travel [m].
+    bx, bf : ndarray, shape (n_setups, 4, n_points)
+        Tables [m], [N], padded with their last point.
+    bn : ndarray of int, shape (n_setups, 4)
+        Points per table.
+    bslope : ndarray, shape (n_setups, 4)
+        Slope beyond the table [N/m].
+
+    Raises
+    ------
+    ValueError, TypeError
+        On a malformed stop (named by setup and corner).
+    """
+    S = len(per_setup)
+    rows = []
+    for i, stops in enumerate(per_setup):
+        if stops is None:
+            rows.append([None] * 4)
+            continue
+        vals = corner_values(stops, f"{where}: setup {i}", "bump stops")
+        rows.append([None if st is None else _check_stop(st, f"{where}: setup {i} {c}")
+                     for c, st in zip(CORNERS, vals)])
+    K = max([2] + [st[1].size for row in rows for st in row if st is not None])
+    on = np.zeros((S, 4), dtype=np.int64)
+    s0 = np.zeros((S, 4))
+    bx = np.zeros((S, 4, K))
+    bf = np.zeros((S, 4, K))
+    bn = np.full((S, 4), 2, dtype=np.int64)
+    bx[:, :, 1:] = 1.0
+    bslope = np.zeros((S, 4))
+    for i, row in enumerate(rows):
+        for c, st in enumerate(row):
+            if st is None:
+                continue
+            a, x, f = st
+            on[i, c] = 1
+            s0[i, c] = a
+            bx[i, c, :x.size], bx[i, c, x.size:] = x, x[-1]
+            bf[i, c, :x.size], bf[i, c, x.size:] = f, f[-1]
+            bn[i, c] = x.size
+            bslope[i, c] = (f[-1] - f[-2]) / (x[-1] - x[-2])
+    return on, s0, bx, bf, bn, bslope
+
+
+def _static_loads(static_corner_load_n, where):
+    """``(on, static)`` (4,) from the static loads (None: none)."""
+    on = np.zeros(4, dtype=np.int64)
+    static = np.zeros(4)
+    if static_corner_load_n is None:
+        return on, static
+    for c, (name, val) in enumerate(zip(CORNERS, corner_values(
+            static_corner_load_n, where, "static_corner_load_n"))):
+        if val is None:
+            continue
+        val = float(val)
+        if not np.isfinite(val) or val <= 0:
+            raise ValueError(f"{where}: static_corner_load_n at {name} is {val!r} N; give the "
+                             "tire's positive static load (the car at rest on the rig)")
+        on[c] = 1
+        static[c] = val
+    return on, static
+
+
+def _corner_rows(plant, kind, where, why):
+    """Rows of ``<kind>_XX`` in the plant's outputs."""
+    names = [f"{kind}_{c}" for c in CORNERS]
+    missing = [n for n in names if n not in plant.output_names]
+    if missing:
+        raise ValueError(f"{where}: {why} needs the plant's outputs {missing}; plant "
+                         f"{plant.name!r} has none of them (identify it with those channels)")
+    return [plant.output_names.index(n) for n in names]
+
+
+def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, where):
+    """:func:`simulate_batch` with bump stops and/or static loads (the elements' kernels)."""
+    S, N = len(loop.models), loop.rig.n_samples
+    if bump_stops is None:
+        bump_stops = [None] * S
+    bump_stops = list(bump_stops)
+    if len(bump_stops) != S:
+        raise ValueError(f"{where}: bump_stops has {len(bump_stops)} entries for {S} setups; "
+                         "give one per setup (None: none)")
+    on, s0, bx, bf, bn, bslope = pack_bump_stops(bump_stops, f"{where}: bump_stops")
+    lo_on, static = _static_loads(static_corner_load_n, where)
+    any_bs, any_lo = bool(on.any()), bool(lo_on.any())
+    h = 1.0 / (loop.rig.fs_hz * loop.oversample)
+    vi = plant.velocity_idx
+    oi = np.array([plant.output_names.index(o) for o in loop.names], dtype=int)
+    # the element rows: travel (needed with bump stops), tire force (with lift-off); a
+    # plant without one of them is refused only when it is needed
+    ti = _corner_rows(plant, "shock_travel", where, "bump_stops") if any_bs else list(vi)
+    fi = _corner_rows(plant, "tire_force", where, "static_corner_load_n") if any_lo else list(vi)
+    erows = np.array(list(ti) + list(fi), dtype=int)
+    ms = plant.shock
+    w_out = None
+    if any_lo:
+        wl = [RIG_INPUTS.index(c) for c in WHEELLOADER_INPUTS]
+        ms = join_inputs(ms, plant.rig.select(inputs=wl).pruned())
+        # the pad correction's direct path: into the tire force and accelerations, not into
+        # the ride heights (measured from the real pad)
+        w_out = np.array(ms.D[oi][:, 4:], dtype=float)
+        w_out[[kind_of(n) == "ride_height" for n in loop.names]] = 0.0
+    modal, Cout, extra = _modal_args(ms, vi, oi, h, erows=erows, w_out=w_out)
+    # the element rows' rig-input part on the internal grid
+    key = tuple(int(i) for i in erows)
+    e_rig = loop.rig.element_rows.get(key)
+    if e_rig is None:
+        mr = plant.rig.select(outputs=np.concatenate([vi, erows])).pruned()
+        _, e_y = _rig_outputs(mr, h, loop.rig.u_fine, 1)
+        e_rig = loop.rig.element_rows[key] = np.ascontiguousarray(e_y.T)
+    tf_rows = np.array([loop.names.index(f"tire_force_{c}") if f"tire_force_{c}" in loop.names
+                        else -1 for c in CORNERS], dtype=np.int64)
+    packed = loop.args[len(modal) + 2:-2]  # the setups' curves (see _loop_setup)
+    r = loop.oversample
+    y = np.empty((S, len(loop.names), N))
+    F = np.empty((S, N, 4))
+    iters = np.zeros(S, dtype=np.int64)
+    stats = np.zeros((S, 3, 4))
+    args = (*modal, loop.rig.v_fine, _writable(plant.cbar_n_s_m), *packed, r, Cout, *extra[:4],
+            e_rig, *extra[4:], on, s0, bx, bf, bn, bslope,
+            np.repeat(lo_on[None], S, axis=0), np.repeat(static[None], S, axis=0), tf_rows,
+            ELEMENT_MAX_ITERATIONS if _ELEMENT_IMPLICIT else 1, loop.y_rig, y, F, iters, stats)
+    if S == 1:
+        loop_elements_serial(*args)
+    else:
+        _run_parallel(loop_elements_batch, *args)
+    _check_converged(plant, iters)
+    channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
+    for c, name in enumerate(SHOCK_FORCES):
+        channels[name] = F[:, :, c]
+    elements = {}
+    for c, corner in enumerate(CORNERS):
+        if on[:, c].any():
+            elements[f"bump_stop_contact_share_{corner}"] = stats[:, 0, c] / max(N, 1)
+        if lo_on[c]:
+            elements[f"tire_liftoff_share_{corner}"] = stats[:, 1, c] / max(N, 1)
+            elements[f"tire_contact_min_{corner}"] = np.maximum(stats[:, 2, c], 0.0)
+    settings = dict(loop.settings(drive), bump_stops=any_bs,
+                    static_corner_load_n=None if not any_lo else static.tolist())
+    return BatchResponse(channels=channels, fs_hz=loop.rig.fs_hz,
+                         setups=tuple(tuple(m) for m in loop.models), newton_iterations=iters,
+                         settings=settings, elements=elements)
+
+
+#: Solve bump stops and lift-off within the step (True); False evaluates the bump stop at
+#: the travel extrapolated from the state (one solve per step): kept to measure the
+#: difference (tests and the issue-25 notes), not an option.
+_ELEMENT_IMPLICIT = True

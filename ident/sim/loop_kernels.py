@@ -376,6 +376,84 @@ def shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, 
 _OUT_BLOCK = 128
 
 
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _fast_solve(vfree, c0, Deff, b0, kv, nk, lines_s, lines_a, v, fv, sv, seg, av, vnew, res, J,
+                Jinv, state):
+    """The shock loop's common cases (see :func:`loop_one`); returns the iteration count, 0
+    when :func:`shock_step` must solve the step. Inlined: the same operations in the same
+    order wherever it is used."""
+    m = 4
+    # the common cases inline: every shock on its segment, or segment changes (a zero
+    # crossing of a digressive shock, a knee) by Sherman-Morrison updates of the cached
+    # inverse of J = I - Deff diag(b0 s - cbar); the rest in shock_step. One solve per
+    # step: a segment change of shock c is a rank-1 change of J and of the right-hand
+    # side along d = Deff[:, c], so the new solution is the last one plus
+    # J'^-1 d (= Jinv d / den) times the force change the new line makes at v_c.
+    it = 0
+    if state[0] >= 1:
+        for c in range(m):
+            acc = vfree[c]
+            for j in range(m):
+                acc += Deff[c, j] * (c0[j] + b0[j] * av[j])
+            res[c] = acc
+        for c in range(m):
+            acc = 0.0
+            for j in range(m):
+                acc += Jinv[c, j] * res[j]
+            vnew[c] = acc
+        for it_ in range(1, _FAST_ITERATIONS + 1):
+            same = True
+            for c in range(m):
+                s2 = _segment_of(vnew[c], kv, c, nk[c], seg[c])
+                if s2 == seg[c]:
+                    continue
+                same = False
+                sl2 = lines_s[c, s2]
+                a2 = lines_a[c, s2]
+                dsl = sl2 - sv[c]
+                # the force change at vnew[c] that the new line makes, through shock c
+                dfc = b0[c] * ((a2 - av[c]) + dsl * vnew[c])
+                for r_ in range(m):  # u = Jinv Deff[:, c]
+                    acc = 0.0
+                    for j in range(m):
+                        acc += Jinv[r_, j] * Deff[j, c]
+                    res[r_] = acc
+                dsc = b0[c] * dsl
+                den = 1.0 - dsc * res[c]
+                if abs(den) < 1e-8:
+                    seg[c] = s2
+                    av[c] = a2
+                    state[0] = 0
+                    break
+                # the solution on the new segments (Sherman-Morrison: J'^-1 d = u / den)
+                g = dfc / den
+                for r_ in range(m):
+                    vnew[r_] += res[r_] * g
+                seg[c] = s2
+                av[c] = a2
+                if dsl != 0.0:
+                    q = dsc / den
+                    for j in range(m):
+                        J[0, j] = Jinv[c, j] * q
+                    for r_ in range(m):
+                        for j in range(m):
+                            Jinv[r_, j] += res[r_] * J[0, j]
+                    sv[c] = sl2
+                    state[0] += 1
+            if same:
+                for c in range(m):
+                    v[c] = vnew[c]
+                    fv[c] = av[c] + sv[c] * vnew[c]
+                it = it_
+                if state[0] > _MAX_RANK1_UPDATES:
+                    state[0] = 0
+                break
+            if state[0] == 0 or state[0] > _MAX_RANK1_UPDATES:
+                state[0] = 0
+                break
+    return it
+
+
 @_nb.njit(cache=True, error_model="numpy")
 def loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
              kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, y_rig, y_out, F_out, v_row):
@@ -447,74 +525,8 @@ def loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig
         vfree[3] = v_rig[k, 3] + a3
         for c in range(m):
             c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
-        # the common cases inline: every shock on its segment, or segment changes (a zero
-        # crossing of a digressive shock, a knee) by Sherman-Morrison updates of the cached
-        # inverse of J = I - Deff diag(b0 s - cbar); the rest in shock_step. One solve per
-        # step: a segment change of shock c is a rank-1 change of J and of the right-hand
-        # side along d = Deff[:, c], so the new solution is the last one plus
-        # J'^-1 d (= Jinv d / den) times the force change the new line makes at v_c.
-        it = 0
-        if state[0] >= 1:
-            for c in range(m):
-                acc = vfree[c]
-                for j in range(m):
-                    acc += Deff[c, j] * (c0[j] + b0[j] * av[j])
-                res[c] = acc
-            for c in range(m):
-                acc = 0.0
-                for j in range(m):
-                    acc += Jinv[c, j] * res[j]
-                vnew[c] = acc
-            for it_ in range(1, _FAST_ITERATIONS + 1):
-                same = True
-                for c in range(m):
-                    s2 = _segment_of(vnew[c], kv, c, nk[c], seg[c])
-                    if s2 == seg[c]:
-                        continue
-                    same = False
-                    sl2 = lines_s[c, s2]
-                    a2 = lines_a[c, s2]
-                    dsl = sl2 - sv[c]
-                    # the force change at vnew[c] that the new line makes, through shock c
-                    dfc = b0[c] * ((a2 - av[c]) + dsl * vnew[c])
-                    for r_ in range(m):  # u = Jinv Deff[:, c]
-                        acc = 0.0
-                        for j in range(m):
-                            acc += Jinv[r_, j] * Deff[j, c]
-                        res[r_] = acc
-                    dsc = b0[c] * dsl
-                    den = 1.0 - dsc * res[c]
-                    if abs(den) < 1e-8:
-                        seg[c] = s2
-                        av[c] = a2
-                        state[0] = 0
-                        break
-                    # the solution on the new segments (Sherman-Morrison: J'^-1 d = u / den)
-                    g = dfc / den
-                    for r_ in range(m):
-                        vnew[r_] += res[r_] * g
-                    seg[c] = s2
-                    av[c] = a2
-                    if dsl != 0.0:
-                        q = dsc / den
-                        for j in range(m):
-                            J[0, j] = Jinv[c, j] * q
-                        for r_ in range(m):
-                            for j in range(m):
-                                Jinv[r_, j] += res[r_] * J[0, j]
-                        sv[c] = sl2
-                        state[0] += 1
-                if same:
-                    for c in range(m):
-                        v[c] = vnew[c]
-                        fv[c] = av[c] + sv[c] * vnew[c]
-                    it = it_
-                    if state[0] > _MAX_RANK1_UPDATES:
-                        state[0] = 0
-                    break
-                if state[0] == 0 or state[0] > _MAX_RANK1_UPDATES:
-                    state[0] = 0
-                    break
+        it = _fast_solve(vfree, c0, Deff, b0, kv, nk, lines_s, lines_a, v, fv, sv, seg, av,
+                         vnew, res, J, Jinv, state)
         if it == 0:
             it = shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av,
                             vnew, res, J, Jinv, state)
@@ -640,3 +652,368 @@ def loop_metrics_worker(w, n_workers, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, 
         for b in range(sos.shape[0]):
             setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack, sums)
     return
+
+
+# ----------------------------------------------------------------------------------------------
+# the loop with the car's other nonlinear elements: bump stops and tire lift-off (issue 25)
+# ----------------------------------------------------------------------------------------------
+
+#: Largest element iterations per step (each one a shock solve) before the step is reported
+#: as failed. The iteration contracts by the bump stop's stiffness times the travel's
+#: same-step response to a force (0.04 at 600 kN/m on a GT car at 200 Hz internal steps),
+#: and the Newton update takes out its diagonal: 2-4 iterations in contact.
+ELEMENT_MAX_ITERATIONS = 60
+#: Force change below which the element iteration has converged [N]: 1e-9 of a kN force
+#: (the results move by 2e-9 relative against 1e-9 N, at 8 % fewer solves).
+ELEMENT_TOL_N = 1e-6
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _stop_force(s, c, s0, bx, bf, bn, bslope):
+    """Bump-stop force and slope of corner `c` at shock travel `s` (compression positive):
+    zero up to the contact travel ``s0[c]``, then the table ``bx[c], bf[c]`` (``bn[c]``
+    points, travel beyond contact from 0) linearly interpolated, extended with ``bslope[c]``."""
+    x = s - s0[c]
+    if x <= 0.0:
+        return 0.0, 0.0
+    n = bn[c]
+    if x >= bx[c, n - 1]:
+        return bf[c, n - 1] + bslope[c] * (x - bx[c, n - 1]), bslope[c]
+    lo = 0
+    hi = n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if bx[c, mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    k = (bf[c, hi] - bf[c, lo]) / (bx[c, hi] - bx[c, lo])
+    return bf[c, lo] + k * (x - bx[c, lo]), k
+
+
+@_nb.njit(cache=True, error_model="numpy")
+def loop_one_elements(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
+                      kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, y_rig, y_out, F_out, v_row,
+                      Bwr, Bwi, Cer, Cei, e_rig, Dt, Dtw, Dvw, Dcf, Dcw, bs_on, s0, bx, bf, bn,
+                      bslope, lo_on, static, tf_rows, max_iter, stats):
+    """:func:`loop_one` with bump stops and tire lift-off in the loop.
+
+    The plant's force input of corner ``c`` is ``dF = F_shock + G(s) - cbar v`` with ``G``
+    the bump stop's force at the shock travel ``s``; with lift-off the pad input of corner
+    ``c`` gets ``w_c >= 0`` (``Bw``: the modes' wheelloader columns), the pad following the
+    tire so that the contact force ``static + tire_force`` is zero while ``w_c > 0``.
+
+    Per step: the predictor gives ``v_free`` and the element rows' free parts ``s_free``,
+    ``c_free`` (``Ce`` (8, n): travel then tire force rows; ``e_rig`` (N, 8): their
+    rig-input part on the internal grid). Then, until ``G`` and ``w`` stop changing (by
+    :data:`ELEMENT_TOL_N`): the shock solve with ``v_free + Deff G + Dvw w``; the travel
+    ``s = s_free + Dt dF + Dtw w`` and contact ``c = static + c_free + Dcf dF + Dcw w``;
+    Newton updates of ``G`` on ``G - g(s)`` and of ``w`` on ``c = 0`` with their diagonal
+    derivatives (``Dt[c, c] g'(s)`` and ``Dcw[c, c]``). So the travel, the bump-stop force,
+    the contact and the shock forces agree within the step (implicit); ``max_iter = 1``
+    evaluates ``G`` at the travel extrapolated from the state and the last step's force
+    (explicit: kept to measure what the iteration buys).
+
+    ``F_out`` holds the shock forces only (the load cell measures the shock). ``Cy`` has
+    rows ``[Re x, Im x, dF, w]`` (the ``w`` rows only with lift-off, ``Bwr.shape[0] == 4``
+    then; 0 rows without). At an output sample with ``w_c > 0`` the output row
+    ``tf_rows[c]`` (the tire force, if an output) is set to ``-static[c]`` exactly.
+    ``stats`` (3, 4): output samples in bump-stop contact, output samples lifted off,
+    smallest contact force. Returns the largest Newton iteration count over the element
+    iterations of a step (-1: no convergence).
+    """
+    n = pr.size
+    m = 4
+    p = Cy.shape[1]
+    N = v_rig.shape[0]
+    n_out = y_out.shape[1]
+    nw = Bwr.shape[0]  # 4 with lift-off, 0 without
+    CeTr = np.ascontiguousarray(Cer.T)
+    CeTi = np.ascontiguousarray(Cei.T)
+    any_bs = False
+    any_lo = False
+    for c in range(m):
+        if bs_on[c]:
+            any_bs = True
+        if lo_on[c]:
+            any_lo = True
+    xr = np.zeros(n)
+    xi = np.zeros(n)
+    bdr = np.zeros(n)
+    bdi = np.zeros(n)
+    bpr = np.zeros(n)
+    bpi = np.zeros(n)
+    St = np.zeros((_OUT_BLOCK, 2 * n + m + nw))
+    dF_prev = np.zeros(m)
+    F_prev = np.zeros(m)
+    f_prev = np.zeros(m)
+    f_prev2 = np.zeros(m)
+    vf2 = np.zeros(m)
+    sfree = np.zeros(m)
+    cfree = np.zeros(m)
+    G = np.zeros(m)
+    Gn = np.zeros(m)
+    w = np.zeros(m)
+    wn = np.zeros(m)
+    s = np.zeros(m)
+    cc = np.zeros(m)
+    Fsh = np.zeros(m)
+    v, vfree, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = solver_state(kv, nk)
+    lines_s = np.empty((m, kv.shape[1] + 1))
+    lines_a = np.empty((m, kv.shape[1] + 1))
+    for c in range(m):
+        for sg in range(nk[c] + 1):
+            lines_s[c, sg], lines_a[c, sg] = _segment_line(sg, kv, kf, c, nk[c], slo[c], shi[c])
+    # the counts in arrays of the kernel's own, written to `stats` at the end: stores into an
+    # argument inside the time loop (which may alias the others, for all the compiler
+    # knows) made the whole loop twice as slow
+    n_bs = np.zeros(m)
+    n_lo = np.zeros(m)
+    c_min = np.full(m, np.inf)
+    worst = 0
+    failed = False
+    col = 0
+    kk0 = 0
+    phase = 0
+    for k in range(N):
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        for i in range(n):
+            tr = (pr[i] * xr[i] - pi[i] * xi[i] + g0r[i] * bdr[i] - g0i[i] * bdi[i]
+                  + gmr[i] * bpr[i] - gmi[i] * bpi[i])
+            ti = (pr[i] * xi[i] + pi[i] * xr[i] + g0r[i] * bdi[i] + g0i[i] * bdr[i]
+                  + gmr[i] * bpi[i] + gmi[i] * bpr[i])
+            xr[i] = tr
+            xi[i] = ti
+        for i in range(n):
+            tr = xr[i]
+            ti = xi[i]
+            a0 += Cvr[0, i] * tr - Cvi[0, i] * ti
+            a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
+            a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
+            a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
+        if any_bs:
+            # the travel rows (Ce rows 0-3, held mode-major: CeTr[i, c]), the 4 corners as
+            # the inner loop, which the compiler can run as one vector
+            for c in range(m):
+                sfree[c] = e_rig[k, c]
+            for i in range(n):
+                tr = xr[i]
+                ti = xi[i]
+                for c in range(m):
+                    sfree[c] += CeTr[i, c] * tr - CeTi[i, c] * ti
+        vfree[0] = v_rig[k, 0] + a0
+        vfree[1] = v_rig[k, 1] + a1
+        vfree[2] = v_rig[k, 2] + a2
+        vfree[3] = v_rig[k, 3] + a3
+        if any_lo:
+            for c in range(m):
+                cfree[c] = static[c] + e_rig[k, 4 + c]
+            for i in range(n):
+                tr = xr[i]
+                ti = xi[i]
+                for c in range(m):
+                    cfree[c] += CeTr[i, 4 + c] * tr - CeTi[i, 4 + c] * ti
+        for c in range(m):
+            c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
+        # first guesses: the bump-stop forces and pad corrections of the last step (zero
+        # out of contact, the common case: one solve, then the check). The explicit
+        # variant (max_iter 1) takes the stop at the travel extrapolated with the last
+        # step's inputs.
+        if any_bs:
+            for c in range(m):
+                if bs_on[c] and (G[c] != 0.0 or sfree[c] > s0[c] or max_iter == 1):
+                    acc = sfree[c]
+                    for j in range(m):
+                        acc += Dt[c, j] * dF_prev[j] + Dtw[c, j] * w[j]
+                    G[c], kb = _stop_force(acc, c, s0, bx, bf, bn, bslope)
+        step_worst = 0
+        for itx in range(max_iter):
+            for c in range(m):
+                vf2[c] = vfree[c]
+            g_any = False
+            for c in range(m):
+                if G[c] != 0.0:
+                    g_any = True
+            if g_any:
+                for c in range(m):
+                    acc = vf2[c]
+                    for j in range(m):
+                        acc += Deff[c, j] * G[j]
+                    vf2[c] = acc
+            w_nz = False
+            if any_lo:
+                for c in range(m):
+                    if w[c] != 0.0:
+                        w_nz = True
+            if w_nz:
+                for c in range(m):
+                    acc = vf2[c]
+                    for j in range(m):
+                        acc += Dvw[c, j] * w[j]
+                    vf2[c] = acc
+            it = _fast_solve(vf2, c0, Deff, b0, kv, nk, lines_s, lines_a, v, fv, sv, seg, av,
+                             vnew, res, J, Jinv, state)
+            if it == 0:
+                it = shock_step(vf2, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg,
+                                av, vnew, res, J, Jinv, state)
+            if it < 0:
+                failed = True
+                it = 80
+            step_worst = max(step_worst, it)
+            for c in range(m):
+                Fsh[c] = c0[c] + b0[c] * fv[c]
+                dF_prev[c] = Fsh[c] - cbar[c] * v[c] + G[c]
+            change = 0.0
+            if any_bs:
+                for c in range(m):
+                    acc = sfree[c]
+                    for j in range(m):
+                        acc += Dt[c, j] * dF_prev[j]
+                    if any_lo:
+                        for j in range(m):
+                            acc += Dtw[c, j] * w[j]
+                    s[c] = acc
+                    Gn[c] = G[c]
+                    if bs_on[c] and (acc > s0[c] or G[c] != 0.0):
+                        g, kb = _stop_force(acc, c, s0, bx, bf, bn, bslope)
+                        # Newton on G - g(s(G)) with ds_c/dG_c: through the plant (Dt[c, c],
+                        # < 0: the stop pushes the wheel away) and the shocks' answer (with
+                        # the solve's cached inverse: dv/dG = Jinv Deff)
+                        dsdg = Dt[c, c]
+                        if state[0] >= 1:
+                            for j in range(m):
+                                u = 0.0
+                                for q in range(m):
+                                    u += Jinv[j, q] * Deff[q, c]
+                                dsdg += Dt[c, j] * (b0[j] * sv[j] - cbar[j]) * u
+                        den = 1.0 - kb * dsdg
+                        den = max(den, 0.5)
+                        Gn[c] = G[c] + (g - G[c]) / den
+                        change = max(change, abs(Gn[c] - G[c]))
+            if any_lo:
+                for c in range(m):
+                    acc = cfree[c]
+                    for j in range(m):
+                        acc += Dcf[c, j] * dF_prev[j] + Dcw[c, j] * w[j]
+                    cc[c] = acc
+                    wn[c] = w[c]
+                    if lo_on[c]:
+                        wn[c] = max(0.0, w[c] - acc / Dcw[c, c])
+                        change = max(change, abs(Dcw[c, c] * (wn[c] - w[c])))
+            if change <= ELEMENT_TOL_N:
+                break
+            if itx == max_iter - 1:
+                if max_iter > 1:
+                    failed = True
+                break
+            for c in range(m):
+                G[c] = Gn[c]
+                w[c] = wn[c]
+        worst = max(worst, step_worst)
+        for c in range(m):
+            F_prev[c] = Fsh[c]
+            f_prev2[c] = f_prev[c]
+            f_prev[c] = fv[c]
+        w_now = False
+        for c in range(m):
+            if w[c] != 0.0:
+                w_now = True
+        d0 = dF_prev[0]
+        d1 = dF_prev[1]
+        d2 = dF_prev[2]
+        d3 = dF_prev[3]
+        for i in range(n):
+            ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
+            ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
+            bpr[i] = bdr[i]
+            bpi[i] = bdi[i]
+            bdr[i] = ur
+            bdi[i] = ui
+        if w_now:
+            for i in range(n):
+                bdr[i] += Bwr[0, i] * w[0] + Bwr[1, i] * w[1] + Bwr[2, i] * w[2] + Bwr[3, i] * w[3]
+                bdi[i] += Bwi[0, i] * w[0] + Bwi[1, i] * w[1] + Bwi[2, i] * w[2] + Bwi[3, i] * w[3]
+        for i in range(n):
+            ur = bdr[i]
+            ui = bdi[i]
+            xr[i] += g1r[i] * ur - g1i[i] * ui
+            xi[i] += g1r[i] * ui + g1i[i] * ur
+        if phase == 0:
+            kk = k // r
+            for c in range(m):
+                F_out[kk, c] = F_prev[c]
+                St[col, 2 * n + c] = dF_prev[c]
+            for c in range(nw):
+                St[col, 2 * n + m + c] = w[c]
+            if v_row >= 0:
+                for c in range(m):
+                    y_out[v_row + c, kk] = v[c]
+            for i in range(n):
+                St[col, i] = xr[i]
+                St[col, n + i] = xi[i]
+            for c in range(m):
+                if bs_on[c] and s[c] > s0[c]:
+                    n_bs[c] += 1.0
+                if lo_on[c]:
+                    cont = 0.0
+                    if w[c] > 0.0:
+                        n_lo[c] += 1.0
+                    else:
+                        cont = cc[c]
+                    c_min[c] = min(c_min[c], cont)
+            col += 1
+            if col == _OUT_BLOCK or kk == n_out - 1:
+                Y = np.dot(St[:col], Cy)
+                for j in range(col):
+                    for o in range(p):
+                        y_out[o, kk0 + j] = y_rig[kk0 + j, o] + Y[j, o]
+                if nw > 0:
+                    for j in range(col):
+                        for c in range(m):
+                            if tf_rows[c] >= 0 and St[j, 2 * n + m + c] > 0.0:
+                                y_out[tf_rows[c], kk0 + j] = -static[c]
+                kk0 += col
+                col = 0
+        phase += 1
+        if phase == r:
+            phase = 0
+    for c in range(m):
+        stats[0, c] = n_bs[c]
+        stats[1, c] = n_lo[c]
+        stats[2, c] = c_min[c]
+    return -1 if failed else worst
+
+
+@_nb.njit(cache=True, error_model="numpy", nogil=True)
+def loop_elements_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig,
+                         cbar, kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, Bwr, Bwi, Cer, Cei,
+                         e_rig, Dt, Dtw, Dvw, Dcf, Dcw, bs_on, s0, bx, bf, bn, bslope, lo_on,
+                         static, tf_rows, max_iter, y_rig, y_out, F_out, iters, stats):
+    """:func:`loop_one_elements` of every setup, one after the other: the element arrays
+    ``bs_on, s0, bx, bf, bn, bslope, lo_on, static`` have one row per setup (bump stops and
+    packers are setup choices), ``stats`` (n_setups, 3, 4)."""
+    for s_ in range(kv.shape[0]):
+        iters[s_] = loop_one_elements(
+            pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar, kv[s_],
+            kf[s_], nk[s_], slo[s_], shi[s_], alpha[s_], b0[s_], b1[s_], bm[s_], r, Cy, y_rig,
+            y_out[s_], F_out[s_], -1, Bwr, Bwi, Cer, Cei, e_rig, Dt, Dtw, Dvw, Dcf, Dcw,
+            bs_on[s_], s0[s_], bx[s_], bf[s_], bn[s_], bslope[s_], lo_on[s_], static[s_],
+            tf_rows, max_iter, stats[s_])
+
+
+@_nb.njit(cache=True, error_model="numpy", parallel=True)
+def loop_elements_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig,
+                        cbar, kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, Bwr, Bwi, Cer, Cei,
+                        e_rig, Dt, Dtw, Dvw, Dcf, Dcw, bs_on, s0, bx, bf, bn, bslope, lo_on,
+                        static, tf_rows, max_iter, y_rig, y_out, F_out, iters, stats):
+    """:func:`loop_elements_serial` in parallel over the setups (the same numbers)."""
+    for s_ in _nb.prange(kv.shape[0]):
+        iters[s_] = loop_one_elements(
+            pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar, kv[s_],
+            kf[s_], nk[s_], slo[s_], shi[s_], alpha[s_], b0[s_], b1[s_], bm[s_], r, Cy, y_rig,
+            y_out[s_], F_out[s_], -1, Bwr, Bwi, Cer, Cei, e_rig, Dt, Dtw, Dvw, Dcf, Dcw,
+            bs_on[s_], s0[s_], bx[s_], bf[s_], bn[s_], bslope[s_], lo_on[s_], static[s_],
+            tf_rows, max_iter, stats[s_])

@@ -18,6 +18,12 @@ Each run is simulated with :func:`ident.sim.closedloop.simulate` on the physical
 full-car model, closed around the equivalent linear damping of that run's
 shocks (so the feedback carries only their nonlinear, dynamic residual) and
 oversampled internally.
+
+The real car (the spec's "The real car", all optional): a plan may name a bump-stop
+library (``bump_stop_library``), fit bump stops and packers per run (``bump_stops``,
+``packers``) and give the tires' static loads (``static_corner_load``: the tires may then
+leave the pads). The loop then carries the stops' forces and the lift-off, and the
+session written records what was fitted, as a real rig's session would.
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ from __future__ import annotations
 import difflib
 import logging
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,10 +41,14 @@ from ident.data.channels import (ALL_CHANNELS, CORNERS, RESPONSE_KINDS, RIG_INPU
 from ident.data.drive import (Drive, check_drive_inputs, decimate_bandlimited, make_multisine_drive,
                               make_noise_drive, make_sweep_drive, make_track_drive, read_drive)
 from ident.data.files import read_toml
-from ident.data.session import Run, make_session
-from ident.data.units import check_units, to_si
-from ident.errors import DriveError, SessionError, ShockModelError
+from ident.data.session import (STATIC_OFFSET_SHARE, Run, check_static_corner_loads,
+                                 make_session)
+from ident.data.units import UNIT_LABELS, check_units, to_si
+from ident.errors import BumpStopError, DriveError, SessionError, ShockModelError
+from ident.models.bumpstops import (BumpStopLibrary, check_packer, contact_tables,
+                                    parse_bump_stop_id, read_bump_stops)
 from ident.models.library import read_shock_library
+from ident.models.shocks import is_real_number
 from ident.models.vehicle import build_full_car, example_vehicle
 from ident.sim.closedloop import refine_input, simulate
 
@@ -82,6 +92,12 @@ class PlanRun:
     drive : ident.data.drive.Drive or None
         A drive of its own (read from the plan's ``drive`` file); None plays the
         plan's generated drive (``seed``, ``duration_s``).
+    bump_stops : dict or None
+        Corner -> id of the bump stop fitted there, in the plan's bump-stop library
+        (:attr:`RigPlan.bump_stops`); a corner left out, ``None`` or ``"none"`` has
+        none. None: no bump stops (the car of the paper).
+    packers_m : dict or None
+        Corner -> packer thickness [m] (shortens that corner's gap; default 0).
     """
 
     name: str
@@ -90,6 +106,93 @@ class PlanRun:
     seed: int
     duration_s: float
     drive: object = None
+    bump_stops: dict | None = None
+    packers_m: dict | None = None
+
+    def fitted(self, library=None, *, where=None):
+        """The run's bump stops and packers, checked against the library.
+
+        Parameters
+        ----------
+        library : ident.models.bumpstops.BumpStopLibrary or None
+            The plan's bump stops (:attr:`RigPlan.bump_stops`).
+        where : str, optional
+            Who asks, put first in messages (default ``"run '<name>'"``).
+
+        Returns
+        -------
+        stops : dict of str to (str or None)
+            Corner -> bump-stop id, or None (all four corners).
+        packers_m : dict of str to float
+            Corner -> packer [m] (all four corners, 0 where none was given).
+
+        Raises
+        ------
+        SessionError
+            On an unknown corner, a bump stop without a library or not in it, a packer
+            that is not a number, negative, or thicker than its stop's gap.
+        """
+        where = f"run '{self.name}'" if where is None else where
+        given = {}
+        for key, table in (("bump_stops", self.bump_stops), ("packers", self.packers_m)):
+            if table is None:
+                table = {}
+            if not isinstance(table, dict):
+                raise SessionError(f"{where}: {key} must be a table {{ LF = ..., RF = ... }}, "
+                                   f"got {table!r}")
+            unknown = [c for c in table if c not in CORNERS]
+            if unknown:
+                raise SessionError(f"{where}: {key} names unknown corner(s) {unknown}; the "
+                                   f"corners are {', '.join(CORNERS)}")
+            given[key] = table
+        stops, packers = {}, {}
+        for c in CORNERS:
+            sid = given["bump_stops"].get(c)
+            if sid is not None:
+                sid = parse_bump_stop_id(sid, f"{where}: bump_stops {c}", error=SessionError)
+            if sid is not None and library is None:
+                raise SessionError(f"{where}: bump_stops {c} = {sid!r} but the plan has no "
+                                   "bump-stop library; name it at the top of the plan with "
+                                   "bump_stop_library = \"bumpstops.toml\" (RigPlan: "
+                                   "bump_stops=), or remove the run's bump_stops")
+            if sid is not None and sid not in library:
+                raise library.unknown_id_error(sid, where=f"{where}: bump_stops {c}",
+                                               error=SessionError)
+            p = given["packers"].get(c, 0.0)
+            if sid is not None:
+                p = check_packer(library[sid], p, f"{where}: packers {c}", error=SessionError)
+            elif not is_real_number(p) or not np.isfinite(p) or p < 0:
+                raise SessionError(f"{where}: packers {c} = {p!r} is not a thickness; give a "
+                                   "number >= 0 (0 = none)")
+            stops[c], packers[c] = sid, float(p)
+        return stops, packers
+
+    def contact_stops(self, library=None, *, where=None):
+        """The run's bump stops as the simulator takes them.
+
+        Parameters
+        ----------
+        library : ident.models.bumpstops.BumpStopLibrary or None
+            The plan's bump stops.
+        where : str, optional
+            Who asks, put first in messages.
+
+        Returns
+        -------
+        tuple of ((float, ndarray, ndarray) or None), shape (4,), or None
+            :func:`ident.models.bumpstops.contact_tables`: per corner ``(gap - packer,
+            travel_table_m, force_table_n)`` or None; None without bump stops.
+
+        Raises
+        ------
+        SessionError
+            As :meth:`fitted`.
+        """
+        stops, packers = self.fitted(library, where=where)
+        return contact_tables([None if stops[c] is None else library[stops[c]]
+                               for c in CORNERS], [packers[c] for c in CORNERS],
+                              where=f"run '{self.name}'" if where is None else where,
+                              error=SessionError)
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,6 +232,14 @@ class RigPlan:
     rig : {"7-post", "8-post", "4-post"}
         The rig: a ``"4-post"`` rig has no aero actuators (its runs have no
         aero channels and the model is driven with zero aero loads).
+    static_corner_load_n : array_like, shape (4,), mapping or None
+        The tires' static loads [N] (LF, RF, LR, RR, all four; stored as a read-only
+        array): the tires leave the pads when the contact force ``static +
+        tire_force`` would be negative (the recorded ``tire_force_XX`` is then
+        ``-static``). None: the tires stay on the pads (the loop lets them pull).
+    bump_stops : ident.models.bumpstops.BumpStopLibrary or None
+        The bump stops the runs name (an iterable of ``BumpStop`` is made a library).
+        None: no run may name one.
     """
 
     name: str
@@ -143,11 +254,17 @@ class RigPlan:
     input_noise: float = 0.0
     channel_noise: dict = field(default_factory=dict)
     rig: str = "7-post"
+    static_corner_load_n: object = None
+    bump_stops: object = None
 
     def __post_init__(self):
         if self.rig not in RIG_KINDS:
             raise SessionError(f"rig plan {self.name!r}: rig {self.rig!r} is not one of "
                                f"{list(RIG_KINDS)}")
+        object.__setattr__(self, "static_corner_load_n", check_static_corner_loads(
+            self.static_corner_load_n, f"rig plan {self.name!r}"))
+        if self.bump_stops is not None and not isinstance(self.bump_stops, BumpStopLibrary):
+            object.__setattr__(self, "bump_stops", BumpStopLibrary(self.bump_stops))
 
     @property
     def aero(self):
@@ -188,8 +305,57 @@ def _noise_group(channel):
 #: Keys of a rig plan and of its [[run]] tables (a near miss is refused: a typo would
 #: silently fall back to a default).
 _PLAN_KEYS = ("format", "name", "units", "shock_library", "fs_hz", "duration_s", "oversample",
-              "seed", "noise", "input_noise", "channel_noise", "rig", "drive", "run")
-_PLAN_RUN_KEYS = ("name", "setup", "role", "seed", "duration_s", "drive")
+              "seed", "noise", "input_noise", "channel_noise", "rig", "drive", "run",
+              "bump_stop_library", "static_corner_load")
+_PLAN_RUN_KEYS = ("name", "setup", "role", "seed", "duration_s", "drive", "bump_stops",
+                  "packers")
+#: Plan keys that a TOML file gives to the table above them when written below one, and
+#: the run keys that belong in a [[run]]: refused with where they go.
+_PLAN_ONLY_KEYS = ("bump_stop_library", "static_corner_load")
+_RUN_ONLY_KEYS = ("bump_stops", "packers")
+
+
+def _check_misplaced(table, where, *, plan_keys, run_keys):
+    """Refuse the real car's keys where TOML put them by mistake (a plan key below a table
+    or a run, a run key outside a run)."""
+    for key in table:
+        if plan_keys and key in _PLAN_ONLY_KEYS:
+            raise SessionError(f"{where}: {key!r} is a key of the plan; move it to the top "
+                               "of the plan, before the first [table] or [[run]]")
+        if run_keys and key in _RUN_ONLY_KEYS:
+            raise SessionError(f"{where}: {key!r} is a key of a run (what was fitted on "
+                               "that run); move it into each [[run]] that has it")
+
+
+def _read_plan_bump_stops(doc, folder, where):
+    """The plan's bump-stop library (``bump_stop_library``), or None."""
+    if "bump_stop_library" not in doc:
+        return None
+    file = doc["bump_stop_library"]
+    if not isinstance(file, str) or not file:
+        raise SessionError(f"{where}: 'bump_stop_library' must be the path of a bump-stop "
+                           f"library (relative to the plan), got {file!r}")
+    try:
+        return read_bump_stops(folder / file)
+    except BumpStopError as exc:
+        raise SessionError(f"{where}: bump_stop_library {file!r}: {exc}") from exc
+
+
+def _plan_packers(entry, units, where):
+    """A run's ``packers`` table in SI [m] (values in the plan's `units`), or None."""
+    table = entry.get("packers")
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise SessionError(f"{where}: packers must be a table {{ LF = ..., RF = ... }} of "
+                           f"thicknesses ({UNIT_LABELS[units]['displacement']}), got {table!r}")
+    out = {}
+    for c, p in table.items():
+        if not is_real_number(p) or not np.isfinite(p) or p < 0:
+            raise SessionError(f"{where}: packers {c} = {p!r} is not a thickness; give a "
+                               f"number >= 0 ({UNIT_LABELS[units]['displacement']}, 0 = none)")
+        out[c] = float(to_si(float(p), "displacement", units))
+    return out
 
 
 def _check_keys(table, known, where):
@@ -261,10 +427,25 @@ def read_rig_plan(path):
     ``setup``, ``role``, optional ``seed`` and ``duration_s``, or ``drive``: a
     drive file (relative to the plan, in the plan's units when it states them,
     else in the drive file's own, else SI) the run plays instead.
+
+    The real car (optional; the spec's "The real car"): ``bump_stop_library``
+    (path of a ``bumpstops.toml`` relative to the plan) and ``static_corner_load =
+    { LF = ..., RF = ..., LR = ..., RR = ... }`` (the tires' static loads, N or lbf, all
+    four) at the top of the plan, before any table; per ``[[run]]``, ``bump_stops = {
+    LF = "BS-F", ... }`` (ids in the library; a corner left out, or ``"none"``, has
+    none) and ``packers = { LF = 0.003, ... }`` (m or in, default 0). Refused: an
+    unknown id or corner, a bump stop without a library, a packer that is negative or
+    thicker than its stop's gap, static loads that are not 4 positive numbers, and
+    these keys where TOML put them by mistake (a plan key below ``[drive]`` or a
+    ``[[run]]``, a run key at the top).
     """
     path = Path(path)
     where = str(path)
     doc = read_toml(path, error=SessionError, what="rig plan")
+    _check_misplaced(doc, where, plan_keys=False, run_keys=True)
+    for table in ("drive", "channel_noise"):
+        if isinstance(doc.get(table), dict):
+            _check_misplaced(doc[table], f"{where}: [{table}]", plan_keys=True, run_keys=True)
     _check_keys(doc, _PLAN_KEYS, where)
     if doc.get("format") != "rig-plan/1":
         raise SessionError(f"{where}: 'format' is {doc.get('format')!r}; expected \"rig-plan/1\"")
@@ -280,6 +461,12 @@ def read_rig_plan(path):
     duration = _num(doc, "duration_s", where, 800.0)
     seed = _num(doc, "seed", where, 0, positive=False, integer=True)
     drive = _parse_drive(doc.get("drive", {}), units, f"{where}: [drive]")
+    bump_stops = _read_plan_bump_stops(doc, path.parent, where)
+    static = doc.get("static_corner_load")
+    if static is not None:
+        static = to_si(check_static_corner_loads(static, where, key="static_corner_load",
+                                                 unit=UNIT_LABELS[units]["force"]),
+                       "force", units)
     rig = doc.get("rig", "7-post")
     if rig not in RIG_KINDS:
         close = difflib.get_close_matches(str(rig), RIG_KINDS, n=1)
@@ -298,6 +485,7 @@ def read_rig_plan(path):
         if not isinstance(name, str) or not name:
             raise SessionError(f"{w}: 'name' is missing")
         w = f"{where}: run '{name}'"
+        _check_misplaced(entry, w, plan_keys=True, run_keys=False)
         _check_keys(entry, _PLAN_RUN_KEYS, w)
         setup = entry.get("setup")
         if not isinstance(setup, dict) or sorted(setup) != sorted(CORNERS):
@@ -328,7 +516,12 @@ def read_rig_plan(path):
                             seed=_num(entry, "seed", w, seed, positive=False, integer=True),
                             duration_s=(run_drive.duration_s if run_drive is not None else
                                         _num(entry, "duration_s", w, duration)),
-                            drive=run_drive))
+                            drive=run_drive, bump_stops=entry.get("bump_stops"),
+                            packers_m=_plan_packers(entry, units, w)))
+        # the ids and packers, against the library; ids as read ("none" -> None)
+        stops, _ = runs[-1].fitted(bump_stops, where=w)
+        if runs[-1].bump_stops is not None:
+            runs[-1] = replace(runs[-1], bump_stops=stops)
     names = [r.name for r in runs]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -347,7 +540,7 @@ def read_rig_plan(path):
                    input_noise=_noise_num(doc, "input_noise", where),
                    channel_noise=_parse_channel_noise(doc.get("channel_noise", {}),
                                                       f"{where}: [channel_noise]"),
-                   rig=rig)
+                   rig=rig, static_corner_load_n=static, bump_stops=bump_stops)
 
 
 #: Keys of ``[channel_noise]`` besides the canonical channels.
@@ -512,6 +705,27 @@ def loop_damping(models):
     return np.array([float(m.equivalent_damping(NOMINAL_V_RMS_M_S)) for m in models])
 
 
+def _check_dynamic_tire_mean(run, channels, static_n):
+    """Refuse a run whose dynamic tire force a session would take for one with the static
+    load in it (:data:`ident.data.session.STATIC_OFFSET_SHARE`): a drive too violent or a
+    run too short for its mean to settle near 0. Said here, for what it is, rather than as
+    a wrong static load by :func:`ident.data.session.make_session`."""
+    if static_n is None:
+        return
+    for c, load in zip(CORNERS, static_n):
+        x = channels.get(f"tire_force_{c}")
+        if x is None:
+            continue
+        mean = float(np.mean(x))
+        if abs(mean) > STATIC_OFFSET_SHARE * load:
+            raise SessionError(
+                f"run '{run.name}': its dynamic tire_force_{c} has a mean of {mean:.6g} N, "
+                f"more than {STATIC_OFFSET_SHARE:.0%} of the static load {load:.6g} N, so a "
+                "session would take it for a channel with the static load in it; the drive "
+                "is too violent for the car on its static loads (or the run too short for "
+                "its mean to settle): make the run longer or the drive gentler")
+
+
 #: Runs of a rig plan simulated at once (threads; each run's loop is serial).
 _RUN_THREADS = 2
 
@@ -533,13 +747,32 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
     ident.data.session.Session
         In memory (``path`` None); write it with :func:`ident.data.session.write_session`.
         Every run holds the 7 rig inputs (the 4 wheelloaders on a 4-post
-        rig), ``shock_force_XX`` and every output of the full-car model.
+        rig), ``shock_force_XX`` and every output of the full-car model. It records
+        the real car of the plan: ``Session.bump_stops`` (the plan's library, written as
+        ``bumpstops.toml``), each run's ``bump_stops`` and ``packers_m`` (all four
+        corners: None and 0 where nothing was fitted) and ``static_corner_load_n``; a
+        plan without them gives the session (and files) of before.
 
     Raises
     ------
     SessionError
         If a run's drive is sampled at another rate than the plan, or, on a
-        4-post plan, a run's drive file moves an aero input.
+        4-post plan, a run's drive file moves an aero input; if a run names a bump
+        stop the plan's library does not hold (or the plan has none), or a packer is
+        negative or thicker than its stop's gap (all before any run is simulated); if,
+        with static loads, a run's dynamic ``tire_force_XX`` has a mean over
+        :data:`ident.data.session.STATIC_OFFSET_SHARE` of the corner's load (a drive
+        too violent for the car on its loads, or a run too short: its session would
+        read as one whose channel carries the static load).
+
+    Notes
+    -----
+    With static loads the tires may leave the pads, but ``tire_force_XX`` stays the
+    dynamic part, as without them: the deviation from the car at rest (the static
+    load is not added, so its mean stays near zero as before), with the contact force
+    ``static + tire_force_XX`` (exactly ``-static`` while a tire is off its pad, up to
+    the acquisition filter's ringing at the edges). ``shock_force_XX`` is the shock's
+    alone (the bump stop's force is not in it, as on a real shock's load cell).
     """
     plan = default_plan() if plan is None else plan
     vehicle = example_vehicle() if vehicle is None else vehicle
@@ -570,15 +803,21 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
                                f"{drive.fs_hz:g} Hz, the plan at {plan.fs_hz:g} Hz; resample "
                                "the drive or set the plan's fs_hz")
         models = [plan.shocks[pr.setup[c]] for c in CORNERS]
+        # checked here, before any run is simulated
+        stops = pr.contact_stops(plan.bump_stops)
         plant = model.loop_plant(loop_damping(models))
         fine = fine_drives.get(key)
         if fine is None:
             fine = fine_drives[key] = _fine_drive(drive, plan.oversample)
-        jobs.append((pr, drive, plant, fine, models))
+        jobs.append((pr, drive, plant, fine, models, stops))
 
     def run_one(job):
-        pr, drive, plant, fine, models = job
-        resp = simulate(plant, fine, models, oversample=1)
+        pr, drive, plant, fine, models, stops = job
+        resp = simulate(plant, fine, models, oversample=1, bump_stops=stops,
+                        static_corner_load_n=plan.static_corner_load_n)
+        if resp.elements:
+            log.info("run %s: %s", pr.name, ", ".join(f"{k} {v:.4g}"
+                                                      for k, v in resp.elements.items()))
         return resp.newton_iterations, _daq_sample(resp.channels, plan.oversample,
                                                    drive.n_samples)
 
@@ -590,7 +829,7 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
             from tqdm.auto import tqdm
 
             results = tqdm(results, total=len(jobs), desc="virtual rig", unit="run")
-        for (pr, drive, _, _, _), (iters, sampled) in zip(jobs, results):
+        for (pr, drive, *_), (iters, sampled) in zip(jobs, results):
             # the rig inputs are recorded as commanded (the drive file's samples: in band
             # the acquisition filter passes them to 1e-5)
             channels = {c: drive.channels[c] for c in drive.rig_inputs}
@@ -615,6 +854,10 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
                 gen = rng_in if name in RIG_INPUTS else rng
                 channels[name] = x + gen.standard_normal(x.shape) * level * np.sqrt(
                     np.mean(rms[name]))
+        _check_dynamic_tire_mean(pr, channels, plan.static_corner_load_n)
+        fitted, packers = pr.fitted(plan.bump_stops)
         runs.append(Run(name=pr.name, file=f"runs/{pr.name}.csv", setup=dict(pr.setup),
-                        role=pr.role, time_s=drive.time_s, channels=channels, fs_hz=drive.fs_hz))
-    return make_session(plan.name, runs, plan.shocks, units=plan.units)
+                        role=pr.role, time_s=drive.time_s, channels=channels, fs_hz=drive.fs_hz,
+                        bump_stops=fitted, packers_m=packers))
+    return make_session(plan.name, runs, plan.shocks, units=plan.units,
+                        bump_stops=plan.bump_stops, static_corner_load_n=plan.static_corner_load_n)
