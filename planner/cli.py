@@ -463,6 +463,7 @@ def cmd_optimize(args):
         read_curve_constraints,
         write_optimum,
     )
+    from planner.report.optimize import STATIONARY_FLAT
 
     out = Path(args.out)
     _check_out(args, folder=True)
@@ -709,10 +710,6 @@ def cmd_demo(args):
 #: an option of a command written before it ('--units') is not taken for '--quiet'.
 TYPO_CUTOFF = 0.75
 
-#: A +-5 % knot move of optimize's stationarity check that changes the verified score by less
-#: than this (relative) either way is reported as flat: below the identified model's accuracy
-#: (about 1e-3 on metrics) it says nothing about optimality (issue 24).
-STATIONARY_FLAT = 1e-4
 #: Options renamed so that one name means one thing in every command (issue 23):
 #: ``{command: {old: (new, what the new one means)}}``. The old spelling is refused with
 #: the new one named, never taken silently.

@@ -39,6 +39,7 @@ import pandas as pd
 
 from ident.data.channels import CORNERS
 from ident.models.library import ShockLibrary
+from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.models.shocks import LinearShock
 from planner.objective import score_setups
 from planner.optimize.constraints import MAX_FORCE_VELOCITY_M_S
@@ -52,6 +53,7 @@ __all__ = [
     "TWO_SLOPE_RATIOS",
     "REBOUND_FACTORS",
     "ScanResult",
+    "curve_words",
     "scan_curves",
     "time_domain_scores",
 ]
@@ -99,6 +101,8 @@ class ScanResult:
         ``score_<drive>`` and ``feasible`` (time domain).
     points : list of ndarray
         The decision vectors of `table`'s rows.
+    keys : list of tuple
+        The best candidate's curve per group, as :func:`curve_words` reads it.
     n_candidates : int
         Candidates tried.
     n_screened : int
@@ -116,6 +120,7 @@ class ScanResult:
     grid_n_s_m: np.ndarray
     table: pd.DataFrame
     points: list
+    keys: list
     n_candidates: int
     n_screened: int
     screen_s: float
@@ -127,8 +132,9 @@ class ScanResult:
         return {"grid_n_s_m": [float(self.grid_n_s_m[0]), float(self.grid_n_s_m[-1]),
                                self.grid_n_s_m.size],
                 "best": str(best["kind"]),
-                "curves": [str(best[c]) for c in self.table.columns
-                           if c.startswith("curve_")],
+                # the best curves in words, per unit system (the report's units)
+                "curves": {u: [curve_words(k, units=u) for k in self.keys]
+                           for u in ("SI", "imperial")},
                 "rates_n_s_m": self.rates_n_s_m.tolist(), "score": self.score,
                 "linear_score": self.linear_score,
                 "feasible": self.feasible, "n_candidates": self.n_candidates,
@@ -248,7 +254,7 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
                 xs = np.zeros(space.n_vars)
                 xs[g * nv:(g + 1) * nv] = xg
                 shock = list(space.shocks(xs, prefix="SCAN").values())[g]
-            group_cand[(g, key)] = (xg, shock, _words(key))
+            group_cand[(g, key)] = (xg, shock, curve_words(key))
         return group_cand[(g, key)]
 
     def point(cand):
@@ -338,7 +344,7 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
                                   oversample, aggregate)
     table = table.loc[[s.name for s in setups]]
     for g, (name, _) in reversed(list(enumerate(space.groups))):
-        table.insert(0, f"curve_{name}", [_words(c[g]) for c in order])
+        table.insert(0, f"curve_{name}", [curve_words(c[g]) for c in order])
     table.insert(0, "kind", ["linear" if all(k[0] == "linear" for k in c) else "two-slope"
                              for c in order])
     table.insert(1 + G, "screening", [screened[c] for c in order])
@@ -347,6 +353,7 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
     table = table.assign(_rank=~table["feasible"]).sort_values(
         ["_rank", "score"], kind="stable").drop(columns="_rank")
     points = [point(order[i]) for i in table["_order"]]
+    best_keys = order[int(table["_order"].iloc[0])]
     lin_rows = table[table["kind"] == "linear"]
     best_lin_row = order[int(lin_rows["_order"].iloc[0])]
     table = table.drop(columns="_order")
@@ -357,7 +364,8 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
                       rates_n_s_m=np.array([k[1] for k in best_lin_row]),
                       score=float(best["score"]), feasible=bool(best["feasible"]),
                       linear_score=float(lin_rows["score"].iloc[0]), grid_n_s_m=grid,
-                      table=table, points=points, n_candidates=len(admit),
+                      table=table, points=points, keys=list(best_keys),
+                      n_candidates=len(admit),
                       n_screened=len(screened), screen_s=screen_s, verify_s=verify_s)
 
 
@@ -407,11 +415,36 @@ def _extension_slope(space, constraints, f_last, slope, side):
     return max(s, 0.0 if high is None else high[0])
 
 
-def _words(key):
-    """A group candidate in words: ``linear 9294`` or ``9294 > 0.35x at knot 2, rebound 1.25x``."""
+def curve_words(key, units="SI"):
+    """A scan candidate's curve in words, its slopes in `units`.
+
+    Parameters
+    ----------
+    key : sequence
+        ``("linear", rate)`` or ``("two-slope", slope, knee, ratio, rebound
+        factor)``, slopes [N s/m], knee a bump knot's index (None: no knee).
+    units : {"SI", "imperial"}
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> curve_words(("two-slope", 9294.0, 2, 0.35, 1.25))
+    '9294 N s/m, 0.35x beyond knot 2, rebound 1.25x'
+    >>> curve_words(("linear", 8756.3), units="imperial")
+    'linear 50 lbf/(in/s)'
+    """
+    units = check_units(units, where="units")
+    unit = "N s/m" if units == "SI" else UNIT_LABELS[units]["damping"]
+
+    def rate(c):
+        return f"{from_si(float(c), 'damping', units):.0f} {unit}"
+
     if key[0] == "linear":
-        return f"linear {key[1]:.0f} N s/m"
+        return f"linear {rate(key[1])}"
     _, slope, knee, ratio, q = key
     if knee is None:
-        return f"linear {slope:.0f} N s/m, rebound {q:g}x"
-    return f"{slope:.0f} N s/m, {ratio:g}x beyond knot {knee}, rebound {q:g}x"
+        return f"linear {rate(slope)}, rebound {q:g}x"
+    return f"{rate(slope)}, {ratio:g}x beyond knot {knee}, rebound {q:g}x"

@@ -72,6 +72,12 @@ def curve_table(optimum, *, units="SI"):
     return out.rename(columns=lambda c: f"{c} [{'N' if units == 'SI' else 'lbf'}]")
 
 
+#: A +-5 % knot move that changes the verified score by less than this (relative) either way
+#: is flat: below the identified model's accuracy (about 1e-3 on metrics) it says nothing
+#: about optimality (issue 24; ``shockplan optimize`` says the same).
+STATIONARY_FLAT = 1e-4
+
+
 def curves_figure(optimum, library, *, units="SI"):
     """The optimal curves against the crate's, with the optimum's shock-velocity histograms.
 
@@ -209,20 +215,31 @@ def _write_workbook(optimum, units, path):
             ("units", units)]
     scan = optimum.settings.get("scan")
     if scan:
-        rates = ", ".join(f"{name} {c:.0f} N s/m" for (name, _), c in
+        d_unit = "N s/m" if units == "SI" else UNIT_LABELS[units]["damping"]
+
+        def rate(c):
+            return f"{from_si(c, 'damping', units):.0f}"
+
+        rates = ", ".join(f"{name} {rate(c)} {d_unit}" for (name, _), c in
                           zip(optimum.space.groups, scan["rates_n_s_m"]))
         lo, hi, n = scan["grid_n_s_m"]
-        rows += [("scan: linear rates per group", f"{n} from {lo:.0f} to {hi:.0f} N s/m"),
+        rows += [("scan: linear rates per group",
+                  f"{n} from {rate(lo)} to {rate(hi)} {d_unit}"),
                  ("scan: candidates / within the constraints (screened) / verified",
                   f"{scan['n_candidates']} / {scan['n_screened']} / {scan['n_verified']}"),
                  ("scan: best linear curves", rates),
                  ("scan: best linear score (time domain)", scan["linear_score"]),
-                 ("scan: best curves", "; ".join(scan["curves"])),
+                 ("scan: best curves", "; ".join(scan["curves"][units])),
                  ("scan: best score (time domain)", scan["score"])]
         # the scan's wall time is in settings["scan"], not here: a rerun writes the same bytes
     if optimum.stationarity is not None and len(optimum.stationarity):
+        st = optimum.stationarity
+        flat = st.groupby("variable")["relative_change"].apply(
+            lambda r: bool(np.all(np.abs(r) < STATIONARY_FLAT)))
         rows.append(("largest gain of a +-5 % knot move",
-                     f"{-100 * min(0.0, optimum.stationarity.relative_change.min()):.3f} %"))
+                     f"{-100 * min(0.0, st.relative_change.min()):.4f} %"))
+        rows.append(("variables whose +-5 % moves change the score by less than "
+                     f"{100 * STATIONARY_FLAT:g} % (flat)", f"{int(flat.sum())} of {len(flat)}"))
     last = write_key_values(rep, rows)
     print_setup(rep, units=units, area=f"A1:B{last}", footer=f"{what}: the solver's report")
     wb.save(path)
