@@ -5,6 +5,7 @@ Run::
     python benchmarks/bench_planner.py [--repeat N] [--ref-seconds S] [--ref-setups K]
                                        [--ref-screen-setups M] [--accuracy-setups A]
                                        [--memory-setups P] [--sweep-setups W]
+                                       [--elements-repeat E] [--elements-only]
 
 Two models, each reported: the known paper car
 (``ident.models.vehicle.build_full_car(example_vehicle())``) and a model identified from
@@ -71,10 +72,23 @@ at that moment:
    Then a crate sweep: one ``predict_setups`` call on the first ``--sweep-setups``
    (default 2,000) every-corner-free setups, where the drive's rig part is shared by
    many setups as in a real sweep (one call, so the load is printed with it);
-6. ``target: ...: PASS/FAIL`` lines: time-domain >= 200 setups/s (oversample 2,
+6. the real car's elements (issue 25): the GT-like car
+   (``build_full_car(example_gt_vehicle())``) on its own track drives (120 s at 100 Hz, the
+   car's wheelbase and track, 1.5 kN of aero heave), the symmetric setups through
+   ``ident.sim.closedloop.simulate_batch_metrics`` (oversample 2, the metric outputs, the
+   rig response in every call as ``predict_setups`` does) without and with bump stops
+   (progressive, 100-600 kN/m, contact at ``STOP_GAPS_M`` from rest: touched 4-8 % of the
+   time at the front), and on a rougher drive without and with the car's static loads
+   (lift-off); calls alternate between the two, ``--elements-repeat`` times; printed: the
+   median wall and CPU times (all threads) of each, the ratio of the CPU times (the
+   issue's target: at most 1.3x with bump stops; the wall time of a loaded shared machine
+   carries the other processes' load) and the contact and lift-off shares over the setups. ``--elements-only`` runs this part
+   alone;
+7. ``target: ...: PASS/FAIL`` lines: time-domain >= 200 setups/s (oversample 2,
    the default; on the symmetric setups, one call per 119 setups, and on the sweep) and screening >= 10,000 setups/s (every-corner-free setups), each
    for each model given as is (the product's path); peak memory < 2 GB (the
-   child's ``ru_maxrss``, the larger and all-inclusive figure).
+   child's ``ru_maxrss``, the larger and all-inclusive figure); time-domain prediction with
+   bump stops at most 1.3x the time without them.
 
 This is a script, not part of the package: it prints. It writes only a temporary
 model file for the child process (removed at the end); numba may update its own
@@ -107,12 +121,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from ident.data.channels import CORNERS  # noqa: E402
-from ident.sim.closedloop import rig_response, simulate  # noqa: E402
+from ident.sim.closedloop import rig_response, simulate, simulate_batch_metrics  # noqa: E402
 from ident.data.drive import make_track_drive  # noqa: E402
 from ident.models.library import read_shock_library  # noqa: E402
-from ident.models.vehicle import build_full_car, example_vehicle  # noqa: E402
+from ident.models.vehicle import build_full_car, example_gt_vehicle, example_vehicle  # noqa: E402
 from planner.objective import default_objective, score_setups  # noqa: E402
-from planner.predict import as_loop_plant, predict_setups  # noqa: E402
+from planner.predict import METRIC_OUTPUTS, as_loop_plant, predict_setups  # noqa: E402
 from planner.screen import drive_spectrum, metric_rows, screen_setups  # noqa: E402
 from planner.setups import Setup, enumerate_setups  # noqa: E402
 from _common import drive_segment, rel_rms  # noqa: E402
@@ -131,6 +145,19 @@ OVERSAMPLE_FINE = 16
 TARGET_TIME_SETUPS_S = 200.0
 TARGET_SCREEN_SETUPS_S = 10_000.0
 TARGET_MEMORY_BYTES = 2 * 2**30
+TARGET_ELEMENT_RATIO = 1.3
+#: Screening with bump stops (their stochastic linearization) against without, same setups.
+TARGET_ELEMENT_SCREEN_RATIO = 1.5
+#: The elements' case (issue 25): a progressive bump stop (100, 267, 500, 600 kN/m over 15 mm
+#: beyond contact), touching at these shock travels from rest (front, rear) [m]: on the
+#: roughness-16e-6 drive with the B20 baseline the front is beyond 5 mm about 6 % of the time
+#: without stops (quantiles measured); the lift-off drive is twice as rough (the rear tires
+#: leave the pads 1-3 % of the time at the car's static loads).
+STOP_TRAVEL_M = (0.0, 0.002, 0.005, 0.010, 0.015)
+STOP_FORCE_N = (0.0, 200.0, 1000.0, 3500.0, 6500.0)
+STOP_GAPS_M = (0.005, 0.006)
+ELEMENT_ROUGHNESS_M3 = {"bump stops": 16e-6, "static loads": 32e-6}
+ELEMENT_AERO = {"aero_heave": 1500.0, "aero_pitch": 800.0, "aero_roll": 300.0}
 #: Reference integration tolerance (as bench_rig.py) and the loose first pass that
 #: measures each state's size for the absolute tolerance.
 REF_RTOL = 1e-6
@@ -563,6 +590,101 @@ def bench_screening(label, model, plant, drive, sym, free, library, args):
 
 
 # ---------------------------------------------------------------------------------------
+# the real car's elements: bump stops and lift-off against the plain loop
+# ---------------------------------------------------------------------------------------
+
+def bench_elements(library, sym, args):
+    """Time-domain prediction with bump stops (and with static loads) against without them
+    on the GT-like car; returns the ratios ``{"bump stops": r, "static loads": r}``."""
+    vehicle = example_gt_vehicle()
+    plant = as_loop_plant(build_full_car(vehicle))
+    models = [s.resolve(library) for s in sym]
+    outputs = [o for o in METRIC_OUTPUTS if o in plant.output_names]
+    stops = {c: (STOP_GAPS_M[0] if c[1] == "F" else STOP_GAPS_M[1], STOP_TRAVEL_M, STOP_FORCE_N)
+             for c in CORNERS}
+    cases = {"bump stops": {"bump_stops": [stops] * len(models)},
+             "static loads": {"static_corner_load_n": vehicle.static_corner_load_n}}
+    ratios = {}
+    for case, kw in cases.items():
+        drive = make_track_drive(duration_s=DRIVE_S, fs_hz=FS_HZ, seed=DRIVE_SEED,
+                                 roughness_m3=ELEMENT_ROUGHNESS_M3[case],
+                                 wheelbase_m=vehicle.a_m + vehicle.b_m,
+                                 track_width_m=vehicle.track_front_m, aero=ELEMENT_AERO,
+                                 name="GT track")
+
+        def run(kw, drive=drive):
+            rig = rig_response(plant, drive, oversample=OVERSAMPLE_DEFAULT, outputs=outputs)
+            return simulate_batch_metrics(plant, drive, models, oversample=OVERSAMPLE_DEFAULT,
+                                          outputs=outputs, rig=rig, **kw)
+
+        run({})  # warm-up: numba's compile or cache load of both workers
+        t0 = time.perf_counter()
+        run(kw)
+        t_warm = time.perf_counter() - t0
+        times = {"without": [], "with": []}
+        cpu = {"without": [], "with": []}
+        loads = []
+        out = None
+        for _ in range(args.elements_repeat):
+            for what, k in (("without", {}), ("with", kw)):
+                gc.collect()
+                c0 = time.process_time()
+                t0 = time.perf_counter()
+                res = run(k)
+                times[what].append(time.perf_counter() - t0)
+                cpu[what].append(time.process_time() - c0)
+                if what == "with":
+                    out = res
+            loads.append(os.getloadavg()[0])
+        med = {w: statistics.median(t) for w, t in times.items()}
+        med_cpu = {w: statistics.median(t) for w, t in cpu.items()}
+        ratios[case] = med_cpu["with"] / med_cpu["without"]
+        vals = out.metrics.values
+        key = "bump_stop_contact_share" if case == "bump stops" else "tire_liftoff_share"
+        shares = ", ".join(f"{c} {100 * np.median(vals[f'{key}_{c}']):.1f} % "
+                           f"({100 * np.min(vals[f'{key}_{c}']):.1f}-"
+                           f"{100 * np.max(vals[f'{key}_{c}']):.1f})" for c in CORNERS)
+        print(f"elements [GT-like car, {case}]: simulate_batch_metrics of {len(models)} "
+              f"symmetric setups, oversample {OVERSAMPLE_DEFAULT}, {DRIVE_S:g} s drive "
+              f"(roughness {ELEMENT_ROUGHNESS_M3[case]:g} m^3; rig response in each call), "
+              f"medians of {args.elements_repeat} alternating calls: wall without "
+              f"{med['without']:.3f} s, with {med['with']:.3f} s ({med['with'] / med['without']:.3f}x); "
+              f"CPU time (all threads) without {med_cpu['without']:.3f} s, with "
+              f"{med_cpu['with']:.3f} s; wall without: "
+              + ", ".join(f"{t:.3f}" for t in times["without"]) + "; with: "
+              + ", ".join(f"{t:.3f}" for t in times["with"])
+              + "; 1-min load after each pair: " + ", ".join(f"{x:.2f}" for x in loads)
+              + f"; warm-up {t_warm:.1f} s")
+        print(f"elements [GT-like car, {case}]: ratio with / without {ratios[case]:.3f}x "
+              f"(CPU time: on a shared machine the wall time carries the other processes' "
+              f"load); {key} median (min-max) over the setups: {shares}")
+    # the screening with the stops linearized (equivalent stiffness) against without
+    drive = make_track_drive(duration_s=DRIVE_S, fs_hz=FS_HZ, seed=DRIVE_SEED,
+                             roughness_m3=ELEMENT_ROUGHNESS_M3["bump stops"],
+                             wheelbase_m=vehicle.a_m + vehicle.b_m,
+                             track_width_m=vehicle.track_front_m, aero=ELEMENT_AERO,
+                             name="GT track")
+    many = (sym * max(1, 2000 // max(len(sym), 1)))[:2000]
+    many = [Setup(f"s{k}", dict(s.shocks)) for k, s in enumerate(many)]
+    kw = {"bump_stops": [stops] * len(many)}
+    screen_setups(plant, drive, many[:8], library)  # warm-up: compile or cache load
+    screen_setups(plant, drive, many[:8], library, bump_stops=kw["bump_stops"][:8])
+    cpu = {"without": [], "with": []}
+    for _ in range(args.elements_repeat):
+        for what, k in (("without", {}), ("with", kw)):
+            gc.collect()
+            c0 = time.process_time()
+            screen_setups(plant, drive, many, library, **k)
+            cpu[what].append(time.process_time() - c0)
+    med = {w: statistics.median(t) for w, t in cpu.items()}
+    ratios["screening"] = med["with"] / med["without"]
+    print(f"elements [GT-like car, screening]: screen_setups of {len(many)} setups, medians of "
+          f"{args.elements_repeat} alternating calls, CPU time without {med['without']:.3f} s, "
+          f"with bump stops {med['with']:.3f} s: ratio {ratios['screening']:.3f}x")
+    return ratios
+
+
+# ---------------------------------------------------------------------------------------
 # main
 # ---------------------------------------------------------------------------------------
 
@@ -582,17 +704,29 @@ def main(argv=None):
                         help="every-corner-free setups of the crate-sweep timing (default 2000)")
     parser.add_argument("--memory-setups", type=int, default=100_000,
                         help="setups screened and scored for the memory figure (default 100000)")
+    parser.add_argument("--elements-repeat", type=int, default=3,
+                        help="timed calls with and without the elements (default 3)")
+    parser.add_argument("--elements-only", action="store_true",
+                        help="run only the elements' part (bump stops, lift-off)")
     parser.add_argument("--memory-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.memory_child:
         memory_child(args.memory_setups)
         return
     for name in ("repeat", "ref_setups", "ref_screen_setups", "accuracy_setups",
-                 "memory_setups"):
+                 "memory_setups", "elements_repeat"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be >= 1")
     if not 0 < args.ref_seconds <= DRIVE_S:
         parser.error(f"--ref-seconds must be in (0, {DRIVE_S:g}]")
+    if args.elements_only:
+        library = read_shock_library(LIBRARY_PATH)
+        print(f"engine version: {_engine_version()}; {_load()}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ratios = bench_elements(library, list(enumerate_setups(library)), args)
+        _element_targets(ratios)
+        return
 
     child = start_memory_child(args.memory_setups)  # before this process grows
     try:
@@ -650,6 +784,10 @@ def _main(args, child):
             del plant
             gc.collect()
 
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        element_ratios = bench_elements(library, sym, args)
+
     mem = run_memory_child(child, identified)
 
     for label, _ in models:
@@ -668,6 +806,19 @@ def _main(args, child):
           f"{_mib(TARGET_MEMORY_BYTES) / 1024:g} GB (child ru_maxrss {_mib(mem['rss']):.0f} MiB, "
           f"tracemalloc peak {_mib(mem['peak']):.0f} MiB; {_load()} at the end): "
           f"{'PASS' if worst < TARGET_MEMORY_BYTES else 'FAIL'}")
+    _element_targets(element_ratios)
+
+
+def _element_targets(ratios):
+    r = ratios["bump stops"]
+    print(f"target: time-domain prediction with bump stops <= {TARGET_ELEMENT_RATIO:g}x the "
+          f"time without [GT-like car, simulate_batch_metrics, CPU time]: {r:.3f}x: "
+          f"{'PASS' if r <= TARGET_ELEMENT_RATIO else 'FAIL'} (static loads, lift-off: "
+          f"{ratios['static loads']:.3f}x, no target)")
+    r = ratios["screening"]
+    print(f"target: screening with bump stops <= {TARGET_ELEMENT_SCREEN_RATIO:g}x the time "
+          f"without [GT-like car, screen_setups, CPU time]: {r:.3f}x: "
+          f"{'PASS' if r <= TARGET_ELEMENT_SCREEN_RATIO else 'FAIL'}")
 
 
 if __name__ == "__main__":

@@ -203,6 +203,13 @@ def cmd_identify(args):
           f"{int(table.order.min())}..{int(table.order.max())}; c_bar "
           f"{', '.join(f'{c:.0f}' for c in model.cbar_n_s_m)} N/(m/s)")
     print(_noise_summary(table, noise))
+    if model.elements is not None:  # what the session declared: in the loop of predictions
+        lift = model.settings.get("liftoff")
+        print(f"real car: {model.elements.describe()}; the bump stops' force is in the "
+              "corners' force inputs (the linear model is free of it), and predictions put "
+              "the stops and static loads in the loop"
+              + ("" if not lift else "; samples where a tire left its pad were corrected "
+                 "(pad corrections, settings['liftoff'])"))
     print(_diagnosis_summary(model))
     for w in caught:
         print(f"warning: {w.message}")
@@ -320,14 +327,46 @@ def cmd_predict(args):
 
     _check_out(args)
     model, drive, library = _read_inputs(args)
-    setups = read_setups(args.setups, library)
+    stops = _bump_stop_library(args, model)
+    setups = read_setups(args.setups, library, stops, units=args.units)
     _warn_inventory(setups, library)
     pred = predict_setups(model, drive, setups, library, oversample=args.oversample,
-                          static_loads_n=None, progress=not args.quiet)
+                          static_loads_n=None, progress=not args.quiet, bump_stops=stops,
+                          elements=not args.no_elements)
     write_predictions_csv(pred.table, args.out, units=args.units, overwrite=args.overwrite)
     print(f"predicted {len(setups)} setups on drive '{drive.name}' ({drive.duration_s:g} s): "
           f"wrote {args.out} ({args.units})")
+    for line in _element_lines(pred.settings.get("elements"), pred.table):
+        print(line)
     return 0
+
+
+def _bump_stop_library(args, model):
+    """``--bump-stops FILE`` read (it replaces the model's library), else None."""
+    from ident.models.bumpstops import read_bump_stops
+
+    path = getattr(args, "bump_stops", None)
+    return None if path is None else read_bump_stops(path)
+
+
+def _element_lines(settings, table):
+    """What the loop held besides the shocks, and the largest shares of time in it."""
+    if not settings:
+        return []
+    lines = []
+    shares = [c for c in table.columns if c.startswith("bump_stop_contact_share_")]
+    if shares:
+        worst = table[shares].max()
+        lines.append("bump stops in the loop (library: " + str(settings.get("library"))
+                     + "); largest share of time in contact: "
+                     + ", ".join(f"{c[-2:]} {100 * v:.1f} %" for c, v in worst.items()))
+    lifts = [c for c in table.columns if c.startswith("tire_liftoff_share_")]
+    if lifts:
+        worst = table[lifts].max()
+        lines.append("static corner loads in the loop (tire lift-off); largest share of time "
+                     "off the pad: " + ", ".join(f"{c[-2:]} {100 * v:.2f} %"
+                                                for c, v in worst.items()))
+    return lines
 
 
 def _parse_fixed(items):
@@ -351,20 +390,23 @@ def cmd_rank(args):
     model, drive, library = _read_inputs(args)
     objective = default_objective() if args.objective is None else read_objective(args.objective)
     setups, constraints = None, None
+    stops = _bump_stop_library(args, model)
     if args.setups:
-        setups = read_setups(args.setups, library)
+        setups = read_setups(args.setups, library, stops, units=args.units)
     else:
         constraints = {"symmetry": args.symmetry, "axles": args.axles,
                        "fixed": _parse_fixed(args.fixed) or None}
         if args.only:
             constraints["shocks"] = [s.strip() for s in args.only.split(",") if s.strip()]
     baseline = _baseline_arg(args, library, setups)
+    variations = _element_choices(args)
     out = Path(args.out)
     ranking = rank_setups(model, drive, library, setups=setups, constraints=constraints,
                           objective=objective, baseline=baseline, top=args.simulate,
                           oversample=args.oversample, uncertainty=not args.no_uncertainty,
                           scheduler=args.scheduler, n_workers=args.workers,
-                          progress=not args.quiet)
+                          progress=not args.quiet, bump_stops=stops,
+                          elements=not args.no_elements, **variations)
     files = write_ranking(ranking.table, out, units=args.units, objective=objective,
                           baseline=ranking.baseline, overwrite=args.overwrite)
     write_ranking_screening = out / "screening.csv"
@@ -375,6 +417,73 @@ def cmd_rank(args):
     print(_ranking_summary(ranking, args.units))
     print("wrote " + ", ".join(str(p) for p in list(files.values()) + [write_ranking_screening]))
     return 0
+
+
+def _add_element_options(parser):
+    """``--bump-stops FILE`` and ``--no-elements`` (the real car's elements)."""
+    parser.add_argument("--bump-stops", metavar="FILE",
+                        help="bump-stop library TOML (bumpstops.toml) naming the stops of the "
+                        "setups' bump_stop_XX columns and of bump_stop factors (default: the "
+                        "model's, from its session)")
+    parser.add_argument("--no-elements", action="store_true",
+                        help="leave the model's bump stops and static loads (tire lift-off) "
+                        "out of the loop (default: in the loop when the session declared "
+                        "them)")
+
+
+def _packer_bounds(args):
+    """``--packers GROUP=LO:HI`` as :func:`planner.optimize.optimize_curves`' ``packers``."""
+    from planner.elements import parse_length
+
+    out = {}
+    for item in getattr(args, "packers", None) or ():
+        group, sep, span = item.partition("=")
+        lo, sep2, hi = span.partition(":")
+        if not sep or not sep2 or not group.strip():
+            raise ValueError(f"--packers {item!r}: write GROUP=LO:HI with GROUP a corner group "
+                             "of the symmetry (front, rear; a corner with --symmetry none), "
+                             "e.g. --packers front=0:4mm")
+        unit = re.search(r"[a-z]+$", hi.strip().lower())
+        if unit and not re.search(r"[a-z]+$", lo.strip().lower()):
+            lo = lo.strip() + unit.group(0)  # 2:4mm is 2 mm to 4 mm
+        out[group.strip()] = tuple(parse_length(x, units=args.units, where="--packers")
+                                   for x in (lo, hi))
+    return out or None
+
+
+def _add_try_options(parser):
+    """``--try-bump-stops`` and ``--try-packers`` (bump stops and packers as setup columns)."""
+    parser.add_argument("--try-bump-stops", action="append", metavar="GROUP=ID,ID",
+                        help="rank every setup with each of these bump stops at GROUP "
+                        "(front, rear, all or a corner; 'none' for none); repeatable "
+                        "(default: the setups' own)")
+    parser.add_argument("--try-packers", action="append", metavar="GROUP=L,L",
+                        help="rank every setup with each of these packers at GROUP, in "
+                        "the drive's units or with a unit (0,2mm,4mm); repeatable "
+                        "(default: the setups' own)")
+
+
+def _element_choices(args):
+    """``--try-bump-stops GROUP=ID,ID`` and ``--try-packers GROUP=L,L`` as
+    :func:`planner.elements.vary_elements`' arguments."""
+    from planner.elements import parse_length
+
+    out = {}
+    for opt, key in (("try_bump_stops", "vary_bump_stops"), ("try_packers", "vary_packers_m")):
+        items = getattr(args, opt, None) or ()
+        flag = "--" + opt.replace("_", "-")
+        for item in items:
+            group, sep, values = item.partition("=")
+            vals = [v.strip() for v in values.split(",") if v.strip()]
+            if not sep or not group.strip() or not vals:
+                raise ValueError(f"{flag} {item!r}: write GROUP=A,B with GROUP front, rear, "
+                                 "all or a corner, e.g. " + ("--try-bump-stops front=BS-F,BS-F2"
+                                                              if key == "vary_bump_stops" else
+                                                              "--try-packers front=0,2mm,4mm"))
+            if key == "vary_packers_m":
+                vals = [parse_length(v, units=args.units or "SI", where=flag) for v in vals]
+            out.setdefault(key, {})[group.strip()] = vals
+    return out
 
 
 def _ranking_summary(ranking, units, n=5):
@@ -424,7 +533,9 @@ def cmd_sweep(args):
                           objective=objective, baseline=baseline, top_share=args.simulate_share,
                           top=args.simulate, combine=args.combine, chunk_size=args.chunk_size,
                           oversample=args.oversample, scheduler=scheduler,
-                          n_workers=args.workers, progress=not args.quiet)
+                          n_workers=args.workers, progress=not args.quiet,
+                          bump_stops=_bump_stop_library(args, None),
+                          elements=not args.no_elements, **_element_choices(args))
     written = write_sweep(result, args.out, units=args.units, overwrite=args.overwrite)
     print(_sweep_summary(result))
     print("wrote " + ", ".join(str(p) for p in written))
@@ -490,7 +601,10 @@ def cmd_optimize(args):
                               max_iter=args.max_iter, n_starts=args.starts,
                               progress=not args.quiet,
                               knots_m_s=(QUANTILE_KNOTS if args.knots == "quantiles"
-                                         else DEFAULT_KNOTS_M_S))
+                                         else DEFAULT_KNOTS_M_S),
+                              elements=not args.no_elements,
+                              bump_stop_library=_bump_stop_library(args, model),
+                              packers=_packer_bounds(args))
     files = write_optimum(opt, library, out, units=args.units, overwrite=args.overwrite)
     t = opt.table
     s = opt.solver
@@ -499,6 +613,12 @@ def cmd_optimize(args):
              f"{s['n_eval']} closed-loop evaluations, {s['build_s'] + s['solve_s']:.1f} s",
              f"verified in the time domain (baseline {t.loc[opt.baseline.name, 'score']:.4f}): "
              f"{opt.verdict()}"]
+    if opt.bump_stops is not None:
+        lines.append("bump stops in the loop and the verification"
+                     + (", packers chosen: " + ", ".join(
+                         f"{g} {from_si(p, 'displacement', args.units):.4g} "
+                         f"{'in' if args.units == 'imperial' else 'm'}"
+                         for g, p in opt.packers_m.items()) if opt.packers_m else ""))
     scan = opt.settings.get("scan")
     if scan:
         source = {"scan": "the scan's best curve",
@@ -634,12 +754,13 @@ def cmd_whatif(args):
     _output_units(args, drives)
     perturbations = read_perturbations(args.perturb)
     objective = default_objective() if args.objective is None else read_objective(args.objective)
+    stops = _bump_stop_library(args, model)
     if args.setups:
-        setups = read_setups(args.setups, library)
+        setups = read_setups(args.setups, library, stops, units=args.units)
     else:
         if args.top < 1:
             raise ValueError(f"--top must be at least 1, got {args.top}")
-        ranked = read_setups(args.ranking, library)
+        ranked = read_setups(args.ranking, library, stops, units=args.units)
         setups = ranked[: args.top]
     baseline = _baseline_arg(args, library, setups)
     if baseline is None and args.ranking:
@@ -656,7 +777,8 @@ def cmd_whatif(args):
         method=args.method, oversample=args.oversample,
         rank_tolerance=RANK_TOLERANCE if args.rank_tolerance is None else args.rank_tolerance,
         fragile_share=FRAGILE_SHARE if args.fragile_share is None else args.fragile_share,
-        scheduler=args.scheduler, n_workers=args.workers, progress=not args.quiet)
+        scheduler=args.scheduler, n_workers=args.workers, progress=not args.quiet,
+        bump_stops=stops, elements=not args.no_elements)
     files = write_whatif(result, out, units=args.units, overwrite=args.overwrite)
     print(_whatif_summary(result))
     print(f"wrote {len(files)} files to {out}: " + ", ".join(sorted(files)[:6])
@@ -988,6 +1110,7 @@ def build_parser():
         sp.add_argument("--out", required=True, help="predictions CSV" if name == "predict"
                         else "output folder")
         sp.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+        _add_element_options(sp)
         if name == "predict":
             sp.add_argument("--setups", required=True, help="setups CSV")
         else:
@@ -1011,6 +1134,7 @@ def build_parser():
                             help="the best N setups by screening simulated in the time "
                             "domain (default %(default)s; the baseline and a spread of the "
                             "others are checked besides)")
+            _add_try_options(sp)
             sp.add_argument("--no-uncertainty", action="store_true",
                             help="skip the Monte Carlo intervals (default: computed)")
             sp.add_argument("--scheduler", metavar="ADDRESS|local",
@@ -1055,6 +1179,12 @@ def build_parser():
                      help="velocity knots of the curves: on the quantiles 25, 50, 75, 90, 99 %% "
                      "of the baseline's shock speeds on the drives, per side (quantiles, "
                      "default), or fixed at 0.025, 0.05, 0.1, 0.25, 0.5 m/s (fixed)")
+    _add_element_options(opt)
+    opt.add_argument("--packers", action="append", metavar="GROUP=LO:HI",
+                     help="optimize the packers of a corner group too, between LO and HI (the "
+                     "drive's units or with a unit: front=0:4mm); needs bump stops (the "
+                     "model's, or --bump-stops); repeatable (default: packers as the "
+                     "baseline's)")
     opt.add_argument("--out", required=True, help="output folder")
     opt.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     opt.set_defaults(func=cmd_optimize)
@@ -1129,6 +1259,7 @@ def build_parser():
                     "for a cluster on this machine (default: this process; the same files "
                     "either way)")
     wi.add_argument("--workers", type=int, help="workers of a local cluster (default: cores)")
+    _add_element_options(wi)
     wi.add_argument("--out", required=True, help="output folder")
     wi.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     wi.set_defaults(func=cmd_whatif)
@@ -1175,6 +1306,8 @@ def build_parser():
     sw.add_argument("--workers", type=int, help="workers of a local cluster (default: cores)")
     sw.add_argument("--oversample", type=int, default=2,
                     help="internal steps per sample of the shock loop (default %(default)s)")
+    _add_element_options(sw)
+    _add_try_options(sw)
     sw.add_argument("--out", required=True, help="output folder")
     sw.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     sw.set_defaults(func=cmd_sweep)

@@ -20,7 +20,9 @@ Everything goes to one output folder, built in a temporary sibling and moved
 into place at the end. Beside the results, :func:`write_demo_inputs` writes the inputs
 the README's examples name (``crate.toml``, ``car.toml``, ``objective.toml``,
 ``constraints.toml``, ``whatif.toml``, ``rig_map.toml``), each readable as is by its
-reader; ``docs/formats.md`` describes their formats.
+reader, and :func:`write_real_car_example` the README's real-car example (``real_car/``:
+a GT-like car with bump stops and static loads); ``docs/formats.md`` describes their
+formats.
 """
 
 from __future__ import annotations
@@ -39,8 +41,9 @@ from ident.models.library import write_shock_library
 from ident.models.vehicle import EXAMPLE_VEHICLE_PATH
 from planner.objective import default_objective, objective_to_toml
 
-__all__ = ["run_demo", "write_demo_inputs", "write_demo_rig_files", "DEMO_LIBRARY_PATH",
-           "DEMO_INPUT_FILES", "DEMO_RIG_FILES"]
+__all__ = ["run_demo", "write_demo_inputs", "write_demo_rig_files", "write_real_car_example",
+           "DEMO_LIBRARY_PATH", "DEMO_INPUT_FILES", "DEMO_RIG_FILES", "REAL_CAR_FOLDER",
+           "REAL_CAR_FILES"]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +64,81 @@ DEMO_INPUT_FILES = {
 _SI_UNIT = {q: next(u for u, f in table.items() if f == 1.0) for q, table in UNIT_FACTORS.items()}
 #: Folder of the session's runs as a real rig writes them (:func:`write_demo_rig_files`).
 DEMO_RIG_FILES = "rig_files"
+#: Folder of the README's real-car example (:func:`write_real_car_example`).
+REAL_CAR_FOLDER = "real_car"
+#: The real-car example's files (name -> what it is), in README order.
+REAL_CAR_FILES = {
+    "car.toml": "a GT-like car (ident.models.vehicle.example_gt_vehicle), vehicle TOML",
+    "shocks.toml": "its crate: one digressive valving at five force levels (shock library)",
+    "bumpstops.toml": "its bump stops: progressive, front at 4.5 mm, a softer 6 mm choice, "
+                      "rear at 6 mm (bump-stop library)",
+    "plan.toml": "a rig plan: the paper's experiment on this car, its bump stops fitted and "
+                 "its static corner loads declared (rig plan)",
+    "track_drive.csv": "a 60 s track drive for this car, with aero loads (drive)",
+    "whatif.toml": "packers +-1 mm and a bump-stop swap at the front (what-if TOML)",
+}
+#: The real-car example's crate: force levels of one digressive valving (N s/m at low speed
+#: in bump and rebound, knee 0.08 m/s, 2 ms lag), named by the level.
+_REAL_CAR_LEVELS = (0.6, 0.8, 1.0, 1.25, 1.5)
+#: Its bump stops: one progressive table (100-600 kN/m over 15 mm) at three gaps [m].
+_REAL_CAR_STOP_TABLE = ([0.0, 0.002, 0.005, 0.010, 0.015], [0.0, 200.0, 1000.0, 3500.0, 6500.0])
+_REAL_CAR_GAPS = {"BS-F": 0.0045, "BS-F2": 0.006, "BS-R": 0.006}
+
+_REAL_CAR_PLAN = """\
+# Rig plan (rig-plan/1), written by shockplan demo: the README's "A real car" example.
+# The seed paper's identification experiment (a baseline run, then a softer shock at each
+# corner) on a GT-like car whose bump stops are fitted and whose static corner loads are
+# known, 2 % sensor noise. Run it with
+#   shockplan rig simulate --plan real_car/plan.toml --vehicle real_car/car.toml \\
+#       --out real_car/session
+format = "rig-plan/1"
+name = "GT-like car with bump stops"
+units = "SI"
+shock_library = "shocks.toml"
+bump_stop_library = "bumpstops.toml"
+static_corner_load = @STATIC@   # N, the car at rest
+fs_hz = 100.0
+duration_s = 200.0
+oversample = 4
+seed = 25
+noise = 0.02
+
+[drive]
+kind = "noise"
+peak_wheelloader = 0.010          # m
+peak_aero_heave = 2000.0          # N
+roll_moment_multiple = 0.2
+pitch_moment_multiple = 0.2
+
+[[run]]
+name = "baseline"
+setup = { LF = "G1.00", RF = "G1.00", LR = "G1.00", RR = "G1.00" }
+role = "baseline"
+bump_stops = { LF = "BS-F", RF = "BS-F", LR = "BS-R", RR = "BS-R" }
+@SWAPS@"""
+
+_REAL_CAR_WHATIF = """\
+# What-if study (shockplan-whatif/1), written by shockplan demo: the README's "A real car"
+# example. The front packers 1 mm thinner and thicker than each setup's, and the softer
+# front bump stop. Run it with
+#   shockplan whatif --model real_car/model.npz --drive real_car/track_drive.csv \\
+#       --shocks real_car/shocks.toml --ranking real_car/ranking/ranking.csv --top 5 \\
+#       --perturb real_car/whatif.toml --out real_car/whatif
+format = "shockplan-whatif/1"
+units = "SI"
+
+[[factor]]
+name = "front packers"
+kind = "packer"
+corners = ["LF", "RF"]
+levels = [-0.001, 0.001]          # m
+
+[[factor]]
+name = "front bump stops"
+kind = "bump_stop"
+corners = ["LF", "RF"]
+levels = ["BS-F2"]
+"""
 
 # Buildable-curve constraints a race shock meets, in round numbers of each unit system:
 # the slopes and maximum force of planner.optimize.default_constraints (the imperial ones
@@ -174,6 +252,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             write_csv(work / "model_summary.csv", model.summary(), units=units)
             write_drive(drive, work / "track_drive.csv", units=units)
             write_demo_inputs(work, units=units, channels=session.runs[0].channels)
+            write_real_car_example(work / REAL_CAR_FOLDER)
             write_demo_rig_files(work / DEMO_RIG_FILES, session)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -528,3 +607,71 @@ def _settle_job(future):
             future.result()
         except BaseException:  # noqa: BLE001 - the caller's error is the one to report
             log.debug("a demo worker failed (its error is not the one to report)", exc_info=True)
+
+
+def write_real_car_example(folder, *, overwrite=False):
+    """Write the README's real-car example (:data:`REAL_CAR_FILES`) into `folder`.
+
+    A GT-like car (:func:`ident.models.vehicle.example_gt_vehicle`) with bump stops and
+    static corner loads, its crate, a rig plan that fits the stops and declares the loads,
+    a track drive and a what-if study of packers and bump stops; all SI.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Created if missing.
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        File name -> written path, in :data:`REAL_CAR_FILES` order.
+
+    Raises
+    ------
+    FileExistsError
+        If one of the files exists and `overwrite` is false (none is written then).
+    """
+    from ident.data.drive import make_track_drive, write_drive
+    from ident.models.bumpstops import BumpStop, BumpStopLibrary, write_bump_stops
+    from ident.models.library import ShockLibrary
+    from ident.models.shocks import DigressiveShock
+    from ident.models.vehicle import example_gt_vehicle, write_vehicle
+
+    folder = Path(folder)
+    paths = {name: folder / name for name in REAL_CAR_FILES}
+    for path in paths.values():
+        check_can_write(path, overwrite=overwrite)
+    folder.mkdir(parents=True, exist_ok=True)
+    car = example_gt_vehicle()
+    write_vehicle(car, paths["car.toml"], overwrite=True)
+    crate = ShockLibrary.from_models([
+        DigressiveShock(f"G{k:.2f}", bump_low_n_s_m=9000 * k, bump_knee_m_s=0.08,
+                        bump_high_n_s_m=3500 * k, rebound_low_n_s_m=14000 * k,
+                        rebound_knee_m_s=0.08, rebound_high_n_s_m=5000 * k, lag_s=0.002,
+                        description=f"digressive valving at {k:g} x the baseline's force")
+        for k in _REAL_CAR_LEVELS])
+    write_shock_library(crate, paths["shocks.toml"], overwrite=True)
+    stops = BumpStopLibrary([BumpStop(sid, gap, *_REAL_CAR_STOP_TABLE)
+                             for sid, gap in _REAL_CAR_GAPS.items()])
+    write_bump_stops(stops, paths["bumpstops.toml"], overwrite=True)
+    static = ", ".join(f"{c} = {round(float(x), -1):.1f}"
+                       for c, x in zip(("LF", "RF", "LR", "RR"), car.static_corner_load_n))
+    swaps = []
+    for c in ("LF", "RF", "LR", "RR"):
+        setup = ", ".join(f'{k} = "{"G0.60" if k == c else "G1.00"}"'
+                          for k in ("LF", "RF", "LR", "RR"))
+        swaps.append(f'\n[[run]]\nname = "swap-{c}"\nsetup = {{ {setup} }}\nrole = "swap"\n'
+                     'bump_stops = { LF = "BS-F", RF = "BS-F", LR = "BS-R", RR = "BS-R" }\n')
+    swaps = "".join(swaps)
+    atomic_write_text(paths["plan.toml"], _REAL_CAR_PLAN.replace("@STATIC@", f"{{ {static} }}")
+                      .replace("@SWAPS@", swaps))
+    drive = make_track_drive(duration_s=60.0, fs_hz=100.0, seed=3, roughness_m3=16e-6,
+                             wheelbase_m=car.a_m + car.b_m, track_width_m=car.track_front_m,
+                             aero={"aero_heave": 1500.0, "aero_pitch": 800.0,
+                                   "aero_roll": 300.0}, name="GT track")
+    write_drive(drive, paths["track_drive.csv"], overwrite=True)
+    atomic_write_text(paths["whatif.toml"], _REAL_CAR_WHATIF)
+    log.info("demo: wrote the real-car example to %s", folder)
+    return paths

@@ -36,7 +36,10 @@ File format (``objective.toml``)::
 
 Metric names are those of :mod:`ident.sim.metrics` (:data:`METRIC_QUANTITY`): the
 spec's metrics, the normalized tire forces ``tire_force_rms_norm_XX``, and all
-of them with the suffix ``_body`` or ``_wheelhop``. Group names may use
+of them with the suffix ``_body`` or ``_wheelhop``; and, where the loop holds the real
+car's elements (:mod:`planner.elements`), ``bump_stop_contact_share_XX``,
+``tire_liftoff_share_XX`` (shares of time, 0-1) and ``tire_contact_min_XX`` [N]: limit
+lift-off as travel is limited, ``tire_liftoff_share_LR = { max = 0.01 }``. Group names may use
 letters, digits, ``_`` and ``-``; a group ``grip`` gives the score column
 ``score_grip``. A group sub-score is not re-normalized: when the groups
 partition the weights, the group scores add up to the score.

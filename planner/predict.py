@@ -25,10 +25,12 @@ from tqdm.auto import tqdm
 
 from ident.data.channels import CORNERS
 from ident.data.drive import Drive, resample_drive
+from ident.identify.coverage import Coverage, outside_coverage
 from ident.identify.model import LOOP_REDUCE_RTOL, VehicleModel
 from ident.models.lti import LoopPlant
 from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
 from ident.sim.closedloop import rig_response, simulate_batch_metrics
+from planner.elements import ELEMENT_COLUMNS, model_setup_elements
 from planner.errors import PlannerError
 from planner.setups import Setup
 
@@ -39,6 +41,7 @@ __all__ = [
     "prepare_drive",
     "predict_setups",
     "resolve_setups",
+    "warn_outside_session",
 ]
 
 log = logging.getLogger(__name__)
@@ -78,7 +81,7 @@ class Predictions:
     @property
     def metric_names(self):
         """The metric columns of the table."""
-        return [c for c in self.table.columns if c not in CORNERS]
+        return [c for c in self.table.columns if c not in CORNERS and c not in ELEMENT_COLUMNS]
 
 
 def _warn_implausible(table, drive):
@@ -169,7 +172,8 @@ def _model_fs(model):
 
 def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64,
                    band_hz=(1.0, 20.0), static_loads_n=None, reduce_rtol=LOOP_REDUCE_RTOL,
-                   progress=False):
+                   progress=False, bump_stops=None, static_corner_load_n=None,
+                   elements=True, check_coverage=True):
     """Predict the metrics of shock setups on a model and drive (time domain).
 
     Parameters
@@ -193,10 +197,29 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
         See :func:`as_loop_plant`.
     progress : bool
         Show a progress bar.
+    bump_stops : ident.models.bumpstops.BumpStopLibrary, optional
+        The bump stops the setups name (``bump_stop_XX``); default the model's
+        (``model.elements``, an identified model of a session that declared them).
+    static_corner_load_n : array_like, shape (4,), optional
+        Static tire loads [N]: the loop keeps the contact force at or above zero (tire
+        lift-off); default the model's.
+    elements : bool or ident.models.bumpstops.CarElements
+        True (default): the model's (``model.elements``, see
+        :func:`planner.elements.setup_elements`); a ``CarElements``: those (a model
+        given as a plant); False: the setups without the model's bump stops and static
+        loads (the linear car of the paper; only stops the setups name, with
+        `bump_stops`).
+    check_coverage : bool
+        Warn when setups take the car beyond what the model's session covered
+        (:func:`warn_outside_session`; ``diagnostics["outside_session"]``).
 
     Returns
     -------
     Predictions
+        With bump stops the table adds ``bump_stop_contact_share_XX`` (share of time in
+        contact); with static loads ``tire_contact_min_XX`` [N] and
+        ``tire_liftoff_share_XX``; then the setup columns ``bump_stop_XX`` and
+        ``packer_XX`` [m] (after the metrics, as the spec allows).
     """
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
     if not isinstance(plant, LoopPlant):
@@ -204,25 +227,83 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
                         f"{type(plant).__name__}; use planner.screen for frequency-response plants")
     drive = prepare_drive(drive, _model_fs(model))
     models = resolve_setups(setups, library)
+    elem = model_setup_elements(setups, model, bump_stops=bump_stops,
+                                static_corner_load_n=static_corner_load_n, elements=elements)
     outputs = [o for o in METRIC_OUTPUTS if o in plant.output_names]
     rig = rig_response(plant, drive, oversample=oversample, outputs=outputs)
+    extra = {} if elem is None else {
+        "bump_stops": elem.loop_stops(), "static_corner_load_n": elem.static_corner_load_n}
     rows, iters = [], []
     starts = range(0, len(models), chunk_size)
     if progress:
         starts = tqdm(starts, desc="predict", unit="chunk")
     for a in starts:
+        if extra.get("bump_stops") is not None:
+            extra["bump_stops"] = elem.loop_stops(slice(a, a + chunk_size))
         batch = simulate_batch_metrics(plant, drive, models[a:a + chunk_size],
                                        oversample=oversample, outputs=outputs, rig=rig,
-                                       band_hz=band_hz, static_loads_n=static_loads_n)
+                                       band_hz=band_hz, static_loads_n=static_loads_n, **extra)
         rows.append(pd.DataFrame({k: np.asarray(v) for k, v in batch.metrics.values.items()}))
         iters.append(batch.newton_iterations)
     table = pd.concat(rows, ignore_index=True)
     ids = pd.DataFrame([s.ids() for s in setups], columns=list(CORNERS))
     table = pd.concat([ids, table], axis=1)
     table.index = pd.Index([s.name for s in setups], name="setup")
+    if elem is not None:
+        table = pd.concat([table, elem.columns(table.index)], axis=1)
     _warn_implausible(table, drive)
     settings = {"kind": "time", "model": getattr(plant, "name", None), "drive": drive.name,
                 "oversample": oversample, "band_hz": tuple(band_hz), "fs_hz": drive.fs_hz,
                 "reduce_rtol": reduce_rtol, "n_shock_modes": int(plant.shock.n_states)}
+    if elem is not None:
+        settings["elements"] = elem.settings
+    diagnostics = {"newton_iterations": np.concatenate(iters)}
+    outside = None if not check_coverage else warn_outside_session(
+        model, table, None if elem is None else elem.static_corner_load_n)
+    if outside is not None:
+        diagnostics["outside_session"] = outside
     return Predictions(table=table, setups=tuple(setups), settings=settings,
-                       diagnostics={"newton_iterations": np.concatenate(iters)})
+                       diagnostics=diagnostics)
+
+
+def warn_outside_session(model, table, static_corner_load_n=None):
+    """Warn when predictions take the car beyond what the model's session covered.
+
+    Parameters
+    ----------
+    model : VehicleModel or other
+        An identified model keeps its session's coverage (``settings["coverage"]``,
+        :func:`ident.identify.coverage.session_coverage`); other models have none.
+    table : pandas.DataFrame
+        Predicted metrics (SI), one row per setup.
+    static_corner_load_n : array_like, shape (4,), optional
+
+    Returns
+    -------
+    pandas.DataFrame or None
+        One row per setup and corner outside (``setup, corner, what, predicted,
+        covered``, SI), or None for a model without coverage. A warning is logged
+        when it is not empty: the model extrapolates there (a travel, velocity or
+        contact the session never reached), so the predictions of those setups are
+        less certain than the intervals say.
+    """
+    cov = getattr(model, "settings", {}).get("coverage") if isinstance(
+        getattr(model, "settings", None), dict) else None
+    if cov is None:
+        return None
+    rows = outside_coverage(table, Coverage.from_dict(cov), static_corner_load_n)
+    frame = pd.DataFrame(rows, columns=["setup", "corner", "what", "predicted", "covered"])
+    if len(frame):
+        worst = frame.assign(ratio=frame.predicted / frame.covered).sort_values(
+            "ratio", ascending=False).iloc[0]
+        unit = {"travel": ("mm", 1e3), "velocity": ("mm/s", 1e3), "contact": ("N", 1.0)}
+        u, f = unit[worst["what"]]
+        log.warning("%d of %d setups take the car beyond what the session covered (%s); "
+                    "e.g. setup %r at %s: %s %.3g %s predicted, %.3g %s covered. The model "
+                    "extrapolates there: check those setups on the rig, or record a run "
+                    "that reaches them", frame.setup.nunique(), len(table),
+                    ", ".join(sorted(set(frame.what))), worst["setup"], worst["corner"],
+                    "RMS " + worst["what"] if worst["what"] != "contact"
+                    else "smallest contact force", worst["predicted"] * f, u,
+                    worst["covered"] * f, u)
+    return frame

@@ -16,12 +16,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import logging
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
 from scipy.stats import spearmanr
 
+from planner.elements import (distinct_setups, loop_arguments, model_elements,
+                              model_setup_elements, vary_elements)
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, mark_inventory, score_setups
 from planner.predict import predict_setups
@@ -31,6 +34,8 @@ from planner.sweep import screen_setups_on
 from planner.uncertainty import prediction_uncertainty, unresolved_pairs
 
 __all__ = ["Ranking", "rank_setups"]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,7 +76,9 @@ class Ranking:
 
 def rank_setups(model, drive, library, *, setups=None, constraints=None, objective=None,
                 baseline=None, top=40, n_check=20, oversample=2, uncertainty=True, n_draws=40,
-                seed=0, band_hz=(1.0, 20.0), scheduler=None, n_workers=None, progress=False):
+                seed=0, band_hz=(1.0, 20.0), scheduler=None, n_workers=None, progress=False,
+                bump_stops=None, static_corner_load_n=None, elements=True, vary_bump_stops=None,
+                vary_packers_m=None):
     """Rank shock setups on a model and a drive.
 
     Parameters
@@ -116,6 +123,14 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         the ranking, are the same bit for bit; it pays from about 10^5 setups.
     n_workers : int, optional
         Workers of a new LocalCluster.
+    bump_stops, static_corner_load_n, elements
+        The real car's elements, as :func:`planner.predict.predict_setups`: by default the
+        model's bump stops (each setup's, else the baseline run's) and static loads are in
+        the loop.
+    vary_bump_stops, vary_packers_m : mapping, optional
+        Bump-stop and packer choices per group enumerated as setup columns
+        (:func:`planner.elements.vary_elements`): every setup is ranked with each
+        combination too (e.g. ``vary_packers_m={"front": [0, 0.002, 0.004]}``).
 
     Returns
     -------
@@ -135,10 +150,31 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     base = resolve_baseline(baseline, library, setups=setups, default=objective.baseline)
     if base.name not in {s.name for s in setups}:
         setups = [base] + setups
+    car = model_elements(model) if elements is True else (None if elements is False
+                                                          else elements)
+    lib_stops = bump_stops if bump_stops is not None else getattr(car, "bump_stops", None)
+    if vary_bump_stops or vary_packers_m:
+        setups = vary_elements(setups, bump_stops=vary_bump_stops, packers_m=vary_packers_m,
+                               library=lib_stops)
+    ekw = {"bump_stops": bump_stops, "static_corner_load_n": static_corner_load_n,
+           "elements": elements}
+    elem = model_setup_elements(setups, model, **ekw)
+    if elem is not None:
+        setups, keep = distinct_setups(setups, elem)
+        if len(keep) < len(elem.tables):
+            elem = model_setup_elements(setups, model, **ekw)
     if top < 1:
         raise PlannerError(f"top must be at least 1, got {top}")
     # 1. screening of everything
-    if scheduler is None or str(scheduler).strip().lower() == "none":
+    if elem is not None:  # the stops linearized with the shocks, in this process
+        if scheduler is not None and str(scheduler).strip().lower() != "none":
+            log.info("rank: screening with bump stops or static loads runs in this process "
+                     "(not on %s)", scheduler)
+        screened = screen_setups(model, drive, setups, library, band_hz=band_hz,
+                                 progress=progress, **loop_arguments(elem))
+        screened = replace(screened, table=pd.concat(
+            [screened.table, elem.columns(screened.table.index)], axis=1))
+    elif scheduler is None or str(scheduler).strip().lower() == "none":
         screened = screen_setups(model, drive, setups, library, band_hz=band_hz,
                                  progress=progress)
     else:
@@ -159,7 +195,7 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     by_name = {s.name: s for s in setups}
     cand = [by_name[n] for n in chosen]
     td = predict_setups(model, drive, cand, library, oversample=oversample, band_hz=band_hz,
-                        progress=progress)
+                        progress=progress, **ekw)
     scores = score_setups(td.table, objective, baseline=base.name)
     table = pd.concat([td.table, mark_inventory(scores.table, setups, library)], axis=1)
     table["screening_rank"] = sc.loc[table.index, "rank"].to_numpy()
@@ -175,9 +211,14 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
                 "n_setups": len(setups), "model": td.settings.get("model"),
                 "drive": td.settings.get("drive"),
                 "scheduler": screened.settings.get("scheduler", "none")}
+    if elem is not None:
+        settings["elements"] = dict(elem.settings, n_variants=len(setups),
+                                    vary_bump_stops=vary_bump_stops,
+                                    vary_packers_m=vary_packers_m)
     table["unresolved"] = ""
     if uncertainty and getattr(model, "frf", None) is not None:
         unc = prediction_uncertainty(model, drive, cand, library, n_draws=n_draws, seed=seed,
+                                     element_options=ekw,
                                      band_hz=band_hz, predictions=td, oversample=oversample)
         table = unc.intervals(table)
         pairs = unresolved_pairs(td.table, unc, objective, baseline=base.name)

@@ -33,18 +33,45 @@ import numba as nb
 import numpy as np
 import pandas as pd
 from scipy import signal
+from scipy.special import erfc
 from tqdm.auto import tqdm
 
 from ident.data.channels import CORNERS, RIG_INPUTS, SHOCK_VELOCITIES
 from ident.data.drive import check_drive_inputs
 from ident.identify.model import LOOP_REDUCE_RTOL
-from ident.sim.closedloop import pack_setups
+from ident.sim.closedloop import corner_values, pack_bump_stops, pack_setups
 from ident.sim.metrics import METRIC_NAMES
+from planner.errors import PlannerError
 from planner.predict import Predictions, as_loop_plant, prepare_drive, resolve_setups
-from planner.screen_kernels import band_operands, metric_form, screen_batch, screen_batch_scalar
+from planner.screen_kernels import (
+    STOP_ROWS,
+    band_operands,
+    gaussian_pwl,
+    metric_form,
+    padded_bands,
+    screen_batch,
+    screen_batch_scalar,
+)
 
-__all__ = ["screen_setups", "screen_response", "describe_agreement", "WEAK_AGREEMENT_SPEARMAN", "DriveBands", "drive_bands", "drive_spectrum",
-           "metric_rows", "ScreenOperands", "screen_operands", "screen_packed"]
+__all__ = [
+    "LIFTOFF_LINEAR_LIMIT",
+    "TIRE_CONTACT_MIN_SIGMAS",
+    "WEAK_AGREEMENT_SPEARMAN",
+    "DriveBands",
+    "ElementOperands",
+    "ScreenOperands",
+    "describe_agreement",
+    "drive_bands",
+    "drive_spectrum",
+    "element_operands",
+    "metric_rows",
+    "screen_operands",
+    "screen_packed",
+    "screen_packed_elements",
+    "screen_response",
+    "screen_setups",
+    "tire_force_statistics",
+]
 
 log = logging.getLogger(__name__)
 
@@ -316,6 +343,154 @@ def screen_operands(H, output_names, cbar_n_s_m, bands):
                           metric_names=tuple(names))
 
 
+#: The screening's estimate of the smallest contact force (``tire_contact_min_XX``): the
+#: Gaussian contact force's mean less this many standard deviations, floored at zero. 3.5:
+#: the expected minimum of a Gaussian record of a few thousand independent samples (a
+#: 60-120 s drive whose tire force has a 10-20 Hz bandwidth: sqrt(2 ln N) = 3.3-3.6).
+TIRE_CONTACT_MIN_SIGMAS = 3.5
+#: Lift-off share (0-1) above which the screening's Gaussian lift-off estimate is said to
+#: need the time domain (logged): lift-off clips the contact force on one side, which no
+#: linearization represents; below ~1 % its effect on the metrics is small and the
+#: screening leaves the metrics linear.
+LIFTOFF_LINEAR_LIMIT = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class ElementOperands:
+    """What screening with bump stops or static loads needs of the model beyond
+    :class:`ScreenOperands` (:func:`element_operands`; setup-independent).
+
+    Attributes
+    ----------
+    jinv : ndarray, shape (n_blocks * 16,)
+        ``-1 / w`` per band [s/rad] (padded with zeros, :func:`planner.screen_kernels.padded_bands`):
+        the travel ``s = v / (j w)`` the stops' equivalent stiffness acts on.
+    w2inv : ndarray, shape (n_bands,)
+        ``1 / w^2`` per band: the travel power from the velocity power.
+    travel_gain_m_n : ndarray, shape (4, 4)
+        Static shock travel per unit dF [m/N] (the model's ``shock_travel_XX`` rows at 0 Hz).
+    travel_static_m : ndarray, shape (4,)
+        Static shock travel of the drive's mean rig inputs [m].
+    travel_rms0_m : ndarray, shape (4,)
+        Starting travel RMS of the fixed point (no shock force) [m].
+    tire : tuple or None
+        With static loads: ``(gain, static, Hts, Qt, d0t)``, the tire forces' static gain
+        from dF (4, 4) [N/N], static tire force of the drive's mean (4,) [N], their
+        response to dF per band (n_bands, 4, 4), the unweighted cross power of the shock
+        velocities and tire forces from the rig (n_bands, 4, 4) and the tire forces' power
+        with dF = 0 (n_bands, 4).
+    """
+
+    jinv: np.ndarray
+    w2inv: np.ndarray
+    travel_gain_m_n: np.ndarray
+    travel_static_m: np.ndarray
+    travel_rms0_m: np.ndarray
+    tire: tuple | None
+
+
+def _corner_rows(output_names, kind, why):
+    """Rows of ``<kind>_XX`` (4) in the outputs, or a PlannerError naming what needs them."""
+    outs = list(output_names)
+    names = [f"{kind}_{c}" for c in CORNERS]
+    missing = [n for n in names if n not in outs]
+    if missing:
+        raise PlannerError(f"screen_setups: {why} needs the model's outputs {missing}; identify "
+                           f"the model with those channels (or screen without {why})")
+    return [outs.index(n) for n in names]
+
+
+def element_operands(plant, drive, bands, ops, *, travel=True, tire=False):
+    """The setup-independent operands of the elements (see :class:`ElementOperands`).
+
+    Parameters
+    ----------
+    plant : LoopPlant
+        With ``shock_travel_XX`` outputs (and ``tire_force_XX`` with `tire`).
+    drive : ident.data.drive.Drive
+        At the model's rate (its mean rig inputs set the static travel).
+    bands : DriveBands
+    ops : ScreenOperands
+        Of the same plant and bands.
+    travel : bool
+        The travel's operands (bump stops); False: zeros (static loads alone).
+    tire : bool
+        Also the tire forces' operands (static loads: lift-off estimates).
+
+    Returns
+    -------
+    ElementOperands
+
+    Raises
+    ------
+    PlannerError
+        If the plant lacks the travel (or tire-force) outputs.
+    """
+    ti = _corner_rows(plant.output_names, "shock_travel", "bump_stops") if travel else None
+    H0 = np.real(plant.frequency_response(np.array([0.0]))[:, :, 0])  # (p, 11)
+    u_mean = drive.as_array().mean(axis=0)
+    w = ops.w
+    w2inv = 1.0 / w ** 2
+    sigs0 = np.sqrt(np.maximum(np.real(np.einsum("faa,f->a", ops.P, w2inv)), 1e-18))
+    tire_ops = None
+    if tire:
+        fi = _corner_rows(plant.output_names, "tire_force", "static_corner_load_n")
+        H = plant.frequency_response(bands.f_hz)
+        outs = list(plant.output_names)
+        vi = [outs.index(v) for v in SHOCK_VELOCITIES]
+        St = np.transpose(bands.S, (0, 2, 1))
+        Hvr = np.transpose(H[vi, :7], (2, 0, 1))
+        Htr = np.transpose(H[fi, :7], (2, 0, 1))
+        Hts = np.ascontiguousarray(np.transpose(H[fi, 7:], (2, 0, 1)))
+        Qt = Hvr @ St @ np.conj(np.transpose(Htr, (0, 2, 1)))
+        d0t = np.real(np.einsum("fmi,fij,fmj->fm", Htr, St, np.conj(Htr)))
+        tire_ops = (H0[fi, 7:11], H0[fi, :7] @ u_mean, Hts, Qt, d0t)
+    if travel:
+        gain, still = np.ascontiguousarray(H0[ti, 7:11]), H0[ti, :7] @ u_mean
+    else:
+        gain, still = np.zeros((4, 4)), np.zeros(4)
+    return ElementOperands(jinv=padded_bands(-1.0 / w), w2inv=w2inv, travel_gain_m_n=gain,
+                           travel_static_m=still, travel_rms0_m=sigs0, tire=tire_ops)
+
+
+def tire_force_statistics(ops, eops, lag, elements):
+    """Mean and standard deviation of the tire forces at the screening's linearization.
+
+    Parameters
+    ----------
+    ops : ScreenOperands
+    eops : ElementOperands
+        With ``tire`` (:func:`element_operands` with ``tire=True``).
+    lag : ndarray, shape (n_setups, 4)
+        Shock lags [s].
+    elements : ndarray, shape (n_setups, 6, 4)
+        The kernels' element rows (:func:`screen_packed_elements`), with the shocks' mean
+        forces filled in where the kernel left them (setups without a stop).
+
+    Returns
+    -------
+    mean, std : ndarray, shape (n_setups, 4)
+        Tire force [N] (the model's sign: added to the static load it is the contact
+        force), over the whole band of the drive (not the metric band).
+    """
+    gain, static, Hts, Qt, d0t = eops.tire
+    w = ops.w
+    keq, ceq = elements[:, 2], elements[:, 4]
+    mean = static[None, :] + (elements[:, 5] + elements[:, 3]) @ gain.T
+    var = np.zeros_like(mean)
+    eye = np.eye(4)
+    for a in range(0, lag.shape[0], 256):  # bounded memory: 256 setups x bands x 4 x 4
+        sl = slice(a, a + 256)
+        D = (ceq[sl, None, :] / (1.0 + 1j * w[None, :, None] * lag[sl, None, :])
+             - ops.cbar[None, None, :] + 1j * keq[sl, None, :] * eops.jinv[None, :w.size, None])
+        K = np.linalg.inv(eye - ops.Hvs[None] * D[:, :, None, :])
+        W = Hts[None] @ (D[..., :, None] * K)  # (n, nf, 4 tires, 4 corners)
+        pw = (d0t[None] + 2.0 * np.real(np.einsum("nfab,fba->nfa", W, Qt))
+              + np.real(np.einsum("nfab,fbc,nfac->nfa", W, ops.P, np.conj(W))))
+        var[sl] = pw.sum(axis=1)
+    return mean, np.sqrt(np.maximum(var, 0.0))
+
+
 #: Batches of fewer setups are screened by the scalar kernel
 #: (:func:`planner.screen_kernels.screen_batch_scalar`: the same numbers, about 2.4x slower
 #: per setup, but compiled in 6 s instead of 30-40 s): at 8,000 setups/s a batch below this
@@ -353,26 +528,83 @@ def screen_packed(ops, kv, kf, nk, slo, shi, lag, *, max_iter=30, tol=1e-5):
     results do not depend on which other setups share the call (bit for bit):
     chunking and the order of chunks change nothing.
     """
+    return _run_packed(ops, None, kv, kf, nk, slo, shi, lag, None, max_iter, tol)[:3]
+
+
+def screen_packed_elements(ops, eops, kv, kf, nk, slo, shi, lag, stops, *, max_iter=30,
+                           tol=1e-5):
+    """:func:`screen_packed` with bump stops (the stops' stochastic linearization).
+
+    Parameters
+    ----------
+    ops : ScreenOperands
+    eops : ElementOperands
+        Of the same model and drive (:func:`element_operands`).
+    kv, kf, nk, slo, shi, lag
+        As :func:`screen_packed`.
+    stops : tuple or None
+        The setups' bump stops packed by :func:`ident.sim.closedloop.pack_bump_stops`
+        (``on, s0, bx, bf, bn, bslope``); None: none (the numbers of :func:`screen_packed`).
+    max_iter, tol
+        As :func:`screen_setups`; the tolerance holds for the travel RMS too.
+
+    Returns
+    -------
+    metrics, sigma, iterations
+        As :func:`screen_packed`.
+    elements : ndarray, shape (n_setups, 6, 4)
+        Per setup and corner the rows of :data:`planner.screen_kernels.STOP_ROWS`: the
+        linearized travel RMS [m] and mean travel [m] (zero in setups without a stop), the
+        stops' equivalent stiffness ``E[g'(s)]`` [N/m] and mean force ``E[g(s)]`` [N], the
+        shocks' equivalent damping [N s/m] and mean force [N] (the latter zero in setups
+        without a stop).
+    """
+    return _run_packed(ops, eops, kv, kf, nk, slo, shi, lag, stops, max_iter, tol)
+
+
+def _no_stops(n):
+    """Packed bump stops of n setups without any (the kernels' arguments)."""
+    return (np.zeros((n, 4), dtype=np.int64), np.zeros((n, 4)), np.zeros((n, 4, 2)),
+            np.zeros((n, 4, 2)), np.full((n, 4), 2, dtype=np.int64), np.zeros((n, 4)))
+
+
+def _run_packed(ops, eops, kv, kf, nk, slo, shi, lag, stops, max_iter, tol):
+    """The kernels on packed setups: (metrics, sigma, iterations, elements)."""
     n = kv.shape[0]
     out = np.zeros((n, len(ops.metric_names)))
     sig = np.zeros((n, 4))
     iters = np.zeros(n, dtype=np.int64)
-    if n:
-        # writable copies: a read-only array (a frozen plant's c_bar) is another numba type,
-        # which would compile the kernel a second time
-        F = metric_form(ops)
-        if n < _VECTOR_MIN_SETUPS:
-            screen_batch_scalar(ops.w, ops.Hvs, ops.P, ops.PB, F, ops.d0,
-                                np.array(ops.cbar, dtype=float), ops.sig0, kv, kf, nk, slo,
-                                shi, lag, int(max_iter), float(tol), out, sig, iters)
-            return out, sig, iters
-        Fp = np.zeros(F.shape[:2] + (-(-F.shape[2] // 4) * 4,))  # metrics padded with zeros
-        Fp[:, :, :F.shape[2]] = F
-        screen_batch(ops.w, band_operands(ops), Fp, ops.d0,
-                     np.array(ops.cbar, dtype=float),
-                     ops.sig0, kv, kf, nk, slo, shi, lag, int(max_iter), float(tol), out, sig,
-                     iters, min(n, 4 * nb.get_num_threads()))
-    return out, sig, iters
+    trav = np.zeros((n, len(STOP_ROWS), 4))
+    if not n:
+        return out, sig, iters, trav
+    if stops is None:
+        stops = _no_stops(n)
+    if eops is None:
+        if np.any(stops[0]):
+            raise TypeError("screen_packed_elements: bump stops need the element operands "
+                            "(eops = element_operands(...))")
+        jinv, w2inv = padded_bands(np.zeros(ops.w.size)), np.zeros(ops.w.size)
+        Hs0, mu_rig, sigs0 = np.zeros((4, 4)), np.zeros(4), np.zeros(4)
+    else:
+        jinv, w2inv = eops.jinv, eops.w2inv
+        Hs0, mu_rig, sigs0 = eops.travel_gain_m_n, eops.travel_static_m, eops.travel_rms0_m
+    on, s0, bx, bf, bn, bslope = (np.ascontiguousarray(a) for a in stops)
+    el = (jinv, w2inv, Hs0, mu_rig, sigs0, on, s0, bx, bf, bn, bslope, trav)
+    # writable copies: a read-only array (a frozen plant's c_bar) is another numba type,
+    # which would compile the kernel a second time
+    F = metric_form(ops)
+    if n < _VECTOR_MIN_SETUPS:
+        screen_batch_scalar(ops.w, ops.Hvs, ops.P, ops.PB, F, ops.d0,
+                            np.array(ops.cbar, dtype=float), ops.sig0, kv, kf, nk, slo,
+                            shi, lag, int(max_iter), float(tol), out, sig, iters, *el)
+        return out, sig, iters, trav
+    Fp = np.zeros(F.shape[:2] + (-(-F.shape[2] // 4) * 4,))  # metrics padded with zeros
+    Fp[:, :, :F.shape[2]] = F
+    screen_batch(ops.w, band_operands(ops), Fp, ops.d0,
+                 np.array(ops.cbar, dtype=float),
+                 ops.sig0, kv, kf, nk, slo, shi, lag, int(max_iter), float(tol), out, sig,
+                 iters, min(n, 4 * nb.get_num_threads()), *el)
+    return out, sig, iters, trav
 
 
 def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, tol=1e-5,
@@ -421,7 +653,7 @@ def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, 
 
 def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands=96,
                   max_iter=30, tol=1e-5, reduce_rtol=LOOP_REDUCE_RTOL, chunk_size=20000,
-                  progress=False):
+                  progress=False, bump_stops=None, static_corner_load_n=None):
     """Predict setups' metrics fast, with each shock linearized (see the module docstring).
 
     Parameters
@@ -440,12 +672,61 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
         tolerance.
     chunk_size : int
         Setups per compiled batch (bounds memory).
+    bump_stops : sequence, optional
+        One entry per setup, in the closed loop's form
+        (:func:`ident.sim.closedloop.simulate_batch`, ``bump_stops=``): None, or 4 (or a
+        mapping corner ->) None or ``(contact_travel_m, travel_table_m, force_table_n)``
+        (:func:`ident.models.bumpstops.contact_tables` builds one setup's). Each stop is
+        linearized with the shocks (see Notes). Needs the model's ``shock_travel_XX``.
+        None (default): today's screening, the same numbers.
+    static_corner_load_n : array_like, shape (4,) or mapping, optional
+        Static tire load per corner [N] (a corner left out or None: none): adds the
+        Gaussian lift-off estimates (see Notes). The metrics are not changed by it. Needs
+        the model's ``tire_force_XX``.
 
     Returns
     -------
     planner.predict.Predictions
         ``settings["kind"] == "screening"``; diagnostics hold the linearized
-        shock-velocity RMS per setup and corner and the iteration counts.
+        shock-velocity RMS per setup and corner and the iteration counts. With bump stops
+        the table adds ``bump_stop_contact_share_XX`` (0-1; for every corner where any
+        setup has a stop, 0 where a setup has none) and the diagnostics the linearized
+        travel (``shock_travel_rms_linearized``, ``shock_travel_mean`` [m]) and the stops'
+        ``bump_stop_stiffness_eq`` [N/m] and ``bump_stop_force_mean`` [N], each (n_setups,
+        4); with static loads ``tire_liftoff_share_XX`` (0-1) and ``tire_contact_min_XX``
+        [N] for the corners given.
+
+    Raises
+    ------
+    PlannerError
+        If bump stops or static loads are given for a model without the outputs they
+        need, or their count does not match the setups.
+    ValueError, TypeError
+        On a malformed bump stop or static load (named by setup and corner).
+
+    Notes
+    -----
+    Bump stops (issue 25): with the travel ``s ~ N(mu_s, sigma_s^2)`` per corner, a stop
+    of force ``g(s)`` (zero up to the contact travel ``s0``, then its table extended with
+    its last slope) is replaced by its equivalent stiffness ``k_eq = E[g'(s)]`` on the
+    travel and its mean force ``E[g(s)]`` (both in closed form over the table's segments,
+    :func:`planner.screen_kernels.gaussian_pwl`). The mean force, with the shocks' mean
+    force at their Gaussian velocity, moves the static point: ``mu_s`` solves
+    ``mu_s = s_drive + H_s(0) (E[f_shock] + E[g(s)])`` (``H_s(0)``: the model's static
+    travel gain from the corner forces). The fluctuating part feeds back as
+    ``dF = (c_eq(w) - c_bar) v + k_eq v / (j w)``; ``sigma_s`` is the RMS of ``v / (j w)``
+    and is iterated with the shock-velocity RMS. ``bump_stop_contact_share_XX`` is the
+    Gaussian ``P(s > s0)``. The travel the stops act on is the velocity's integral: exact
+    for a physical model; an identified model's own travel rows (which the time domain
+    uses, and the travel metrics here) differ from it by its fit error.
+
+    Lift-off has no useful linearization (a one-sided clip of the contact force): the
+    metrics stay linear and, with static loads, ``tire_liftoff_share_XX`` is the Gaussian
+    ``P(static + tire_force < 0)`` (mean and RMS of the tire force over the drive's whole
+    band at the linearization) and ``tire_contact_min_XX`` the Gaussian estimate
+    ``max(static + mean - TIRE_CONTACT_MIN_SIGMAS std, 0)``. Above about 1 %
+    (:data:`LIFTOFF_LINEAR_LIMIT`, logged) the lift-off changes the metrics: use the time
+    domain (:func:`planner.predict.predict_setups`).
     """
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
     drive = prepare_drive(drive, getattr(model, "fs_hz", None))
@@ -453,11 +734,122 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
     models = resolve_setups(setups, library)
     bands = drive_bands(drive, band_hz=band_hz, n_bands=n_bands)
     H = plant.frequency_response(bands.f_hz)  # (p_all, 11, nf)
-    names, out, sig, iters = screen_response(H, plant.output_names, plant.cbar_n_s_m, bands,
-                                             models, max_iter=max_iter, tol=tol,
-                                             chunk_size=chunk_size, progress=progress)
-    return screening_predictions(plant, drive, setups, names, out, sig, iters, band_hz=band_hz,
-                                 n_bands=bands.f_hz.size, max_iter=max_iter, tol=tol)
+    if bump_stops is None and static_corner_load_n is None:
+        names, out, sig, iters = screen_response(H, plant.output_names, plant.cbar_n_s_m,
+                                                 bands, models, max_iter=max_iter, tol=tol,
+                                                 chunk_size=chunk_size, progress=progress)
+        return screening_predictions(plant, drive, setups, names, out, sig, iters,
+                                     band_hz=band_hz, n_bands=bands.f_hz.size,
+                                     max_iter=max_iter, tol=tol)
+    return _screen_elements(plant, drive, setups, models, bands, H, bump_stops,
+                            static_corner_load_n, band_hz=band_hz, max_iter=max_iter, tol=tol,
+                            chunk_size=chunk_size, progress=progress)
+
+
+def _static_loads(static_corner_load_n):
+    """``(on (4,) bool, static (4,))`` from the static loads, checked."""
+    vals = corner_values(static_corner_load_n, "screen_setups", "static_corner_load_n")
+    on = np.array([v is not None for v in vals])
+    static = np.array([np.nan if v is None else float(v) for v in vals])
+    for c, ok, val in zip(CORNERS, on, static):
+        if ok and not (np.isfinite(val) and val > 0):
+            raise PlannerError(f"screen_setups: static_corner_load_n at {c} is {val!r} N; give "
+                               "the tire's positive static load (the car at rest on the rig)")
+    return on, np.where(on, static, 0.0)
+
+
+def _pack_stops_shared(per_setup):
+    """:func:`ident.sim.closedloop.pack_bump_stops` of the setups' stops, each distinct entry
+    (by identity: a sweep repeats a few stop sets over many setups) checked and packed once:
+    packing is ~0.2 ms per setup, more than its screening."""
+    first = {}
+    index = np.empty(len(per_setup), dtype=np.int64)
+    unique = []
+    for i, entry in enumerate(per_setup):
+        j = first.get(id(entry))
+        if j is None:
+            j = first[id(entry)] = len(unique)
+            unique.append(entry)
+        index[i] = j
+    packed = pack_bump_stops(unique, "screen_setups: bump_stops")
+    return tuple(np.ascontiguousarray(a[index]) for a in packed)
+
+
+def _screen_elements(plant, drive, setups, models, bands, H, bump_stops, static_corner_load_n,
+                     *, band_hz, max_iter, tol, chunk_size, progress):
+    """:func:`screen_setups` with bump stops and/or static loads."""
+    n = len(models)
+    if bump_stops is not None and len(bump_stops) != n:
+        raise PlannerError(f"screen_setups: bump_stops has {len(bump_stops)} entries for {n} "
+                           "setups; give one per setup (None: none)")
+    stops = _pack_stops_shared([None] * n if bump_stops is None else list(bump_stops))
+    any_stop = bool(stops[0].any())
+    lo_on, static = (np.zeros(4, bool), np.zeros(4)) if static_corner_load_n is None else \
+        _static_loads(static_corner_load_n)
+    ops = screen_operands(H, plant.output_names, plant.cbar_n_s_m, bands)
+    eops = None
+    if any_stop or lo_on.any():
+        eops = element_operands(plant, drive, bands, ops, travel=any_stop,
+                                tire=bool(lo_on.any()))
+    h = 1.0 / bands.fs_hz
+    p = len(ops.metric_names)
+    out, sig = np.zeros((n, p)), np.zeros((n, 4))
+    iters = np.zeros(n, dtype=np.int64)
+    trav = np.zeros((n, len(STOP_ROWS), 4))
+    lag = np.zeros((n, 4))
+    starts = range(0, n, chunk_size)
+    if progress:
+        starts = tqdm(starts, desc="screen", unit="chunk")
+    for a in starts:
+        chunk = models[a:a + chunk_size]
+        b = a + len(chunk)
+        kv, kf, nk, slo, shi, *_ = pack_setups(chunk, h)
+        lag[a:b] = np.array([[m.lag_s for m in row] for row in chunk])
+        out[a:b], sig[a:b], iters[a:b], trav[a:b] = _run_packed(
+            ops, eops, kv, kf, nk, slo, shi, lag[a:b], tuple(x[a:b] for x in stops),
+            max_iter, tol)
+        if lo_on.any():
+            for i in range(a, b):  # the shocks' mean force where the kernel had no stop
+                if not stops[0][i].any():
+                    for c in range(4):
+                        trav[i, 5, c] = gaussian_pwl(0.0, sig[i, c], 0.0, kv[i - a, c],
+                                                     kf[i - a, c], nk[i - a, c],
+                                                     slo[i - a, c], shi[i - a, c])[0]
+    pred = screening_predictions(plant, drive, setups, list(ops.metric_names), out, sig, iters,
+                                 band_hz=band_hz, n_bands=bands.f_hz.size, max_iter=max_iter,
+                                 tol=tol)
+    table, diag = pred.table, dict(pred.diagnostics)
+    extra = {}
+    if any_stop:
+        on = stops[0].astype(bool)
+        s0 = stops[1]
+        z = (s0 - trav[:, 1]) / np.maximum(trav[:, 0], 1e-15)
+        share = np.where(on, 0.5 * erfc(z / np.sqrt(2.0)), 0.0)
+        for c, corner in enumerate(CORNERS):
+            if on[:, c].any():
+                extra[f"bump_stop_contact_share_{corner}"] = share[:, c]
+        diag.update(shock_travel_rms_linearized=trav[:, 0], shock_travel_mean=trav[:, 1],
+                    bump_stop_stiffness_eq=trav[:, 2], bump_stop_force_mean=trav[:, 3])
+    if lo_on.any():
+        mean, std = tire_force_statistics(ops, eops, lag, trav)
+        contact = static[None, :] + mean
+        lift = 0.5 * erfc(contact / np.maximum(std, 1e-12) / np.sqrt(2.0))
+        cmin = np.maximum(contact - TIRE_CONTACT_MIN_SIGMAS * std, 0.0)
+        for c, corner in enumerate(CORNERS):
+            if lo_on[c]:
+                extra[f"tire_liftoff_share_{corner}"] = lift[:, c]
+                extra[f"tire_contact_min_{corner}"] = cmin[:, c]
+        worst = float(np.max(lift[:, lo_on]))
+        if worst > LIFTOFF_LINEAR_LIMIT:
+            log.warning("screening: a Gaussian lift-off share of %.1f %% (above %.0f %%): "
+                        "lift-off changes the metrics there, which the screening leaves "
+                        "linear; predict those setups in the time domain", 100 * worst,
+                        100 * LIFTOFF_LINEAR_LIMIT)
+    if extra:
+        table = pd.concat([table, pd.DataFrame(extra, index=table.index)], axis=1)
+    settings = dict(pred.settings, bump_stops=any_stop,
+                    static_corner_load_n=static.tolist() if lo_on.any() else None)
+    return Predictions(table=table, setups=pred.setups, settings=settings, diagnostics=diag)
 
 
 def screening_predictions(plant, drive, setups, names, out, sig, iters, *, band_hz, n_bands,

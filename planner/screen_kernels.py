@@ -27,9 +27,170 @@ import math
 import numba as nb
 import numpy as np
 
-__all__ = ["screen_batch", "screen_batch_scalar", "band_operands", "metric_form"]
+__all__ = [
+    "STOP_ROWS",
+    "band_operands",
+    "gaussian_pwl",
+    "metric_form",
+    "padded_bands",
+    "screen_batch",
+    "screen_batch_scalar",
+]
 
 _SQRT2 = math.sqrt(2.0)
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+#: Rows of the kernels' per-setup element output ``trav`` (n_setups, len(STOP_ROWS), 4):
+#: the linearized travel RMS [m], the mean travel [m], the bump stops' equivalent
+#: stiffness [N/m] and mean force [N], the shocks' equivalent damping [N s/m] and mean
+#: force [N]. In a setup without any stop the travel rows and the shocks' mean force are
+#: zero (not computed); the stops' rows are zero at a corner without one.
+STOP_ROWS = ("travel_rms", "travel_mean", "stop_stiffness", "stop_force_mean",
+             "shock_damping", "shock_force_mean")
+#: Newton iterations on the mean travel (:func:`_stop_means`) and their tolerance [m]: the
+#: mean travel solves a smooth monotone 4x4 system, converged in 3-6 steps from the last
+#: iterate's mean.
+_MEAN_MAX_ITER = 50
+_MEAN_TOL_M = 1e-12
+
+
+@nb.njit(cache=True, error_model="numpy")
+def gaussian_pwl(mu, sig, x0, x, f, n, slo, shi):
+    """Gaussian expectations of a piecewise-linear function and of its slope, in closed form.
+
+    Parameters
+    ----------
+    mu, sig : float
+        Mean and standard deviation of ``X ~ N(mu, sig^2)`` (``sig`` floored at 1e-15).
+    x0 : float
+        Offset of the knots (a bump stop's contact travel; 0 for a shock curve).
+    x, f : ndarray, shape (>= n,)
+        Knots ``x0 + x[i]`` (strictly increasing) and values ``f[i]``, ``i < n`` (n >= 1).
+    n : int
+        Knots in use.
+    slo, shi : float
+        Slopes below the first and above the last knot.
+
+    Returns
+    -------
+    (float, float)
+        ``E[g(X)]`` and ``E[g'(X)]``: per segment ``[a, b]`` with ``g = f_i + k_i (X - a)``,
+        ``f_i dPhi + k_i sig (phi(alpha) - phi(beta) - alpha dPhi)`` and ``k_i dPhi``
+        (``alpha, beta`` the standardized ends, ``dPhi`` the segment's probability).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> e, k = gaussian_pwl(0.0, 1.0, 0.0, np.array([0.0]), np.array([0.0]), 1, 0.0, 1.0)
+    >>> round(e, 12), k  # E[max(X, 0)] = 1 / sqrt(2 pi); P(X > 0) = 1/2
+    (0.398942280401, 0.5)
+    """
+    if not sig > 1e-15:
+        sig = 1e-15
+    a = (x0 + x[0] - mu) / sig
+    Pa = 0.5 * math.erfc(-a / _SQRT2)
+    pa = _INV_SQRT_2PI * math.exp(-0.5 * a * a)
+    # below the first knot: g = f0 + slo (X - x_0); int_-inf^a (z - a) phi = -phi(a) - a Phi(a)
+    eg = f[0] * Pa + slo * sig * (-pa - a * Pa)
+    ek = slo * Pa
+    for i in range(n - 1):
+        b = (x0 + x[i + 1] - mu) / sig
+        Pb = 0.5 * math.erfc(-b / _SQRT2)
+        pb = _INV_SQRT_2PI * math.exp(-0.5 * b * b)
+        k = (f[i + 1] - f[i]) / (x[i + 1] - x[i])
+        dP = Pb - Pa
+        eg += f[i] * dP + k * sig * (pa - pb - a * dP)
+        ek += k * dP
+        a, Pa, pa = b, Pb, pb
+    Qa = 0.5 * math.erfc(a / _SQRT2)  # the upper tail without cancellation
+    eg += f[n - 1] * Qa + shi * sig * (pa - a * Qa)
+    ek += shi * Qa
+    return eg, ek
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _stop_means(sigv, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0, mu_rig,
+                mu, keq, eg, ef, J, r):
+    """The mean travel and the bump stops' linearization at the current RMS (in place).
+
+    The mean travel ``mu`` solves ``mu = mu_rig + Hs0 (E[f_shock(v)] + E[g(s)])`` (the
+    static point moved by the mean forces: the shocks' at the zero-mean Gaussian velocity,
+    the stops' at ``s ~ N(mu, sigs^2)``) by Newton's method from the given ``mu`` (Jacobian
+    ``I - Hs0 diag(k_eq)``: k_eq >= 0 and Hs0 a compliance, so the system is monotone);
+    then ``keq = E[g'(s)]`` and ``eg = E[g(s)]`` at the solution (zero without a stop), ``ef``
+    the shocks' mean forces. J (4, 4) and r (4,) are scratch.
+    """
+    for c in range(4):
+        ef[c] = gaussian_pwl(0.0, sigv[c], 0.0, kv[c], kf[c], nk[c], slo[c], shi[c])[0]
+    for _ in range(_MEAN_MAX_ITER):
+        for c in range(4):
+            if son[c]:
+                eg[c], keq[c] = gaussian_pwl(mu[c], sigs[c], s0[c], bx[c], bf[c], bn[c], 0.0,
+                                             bslope[c])
+            else:
+                eg[c] = 0.0
+                keq[c] = 0.0
+        step = 0.0
+        for a in range(4):
+            acc = mu_rig[a]
+            for b in range(4):
+                acc += Hs0[a, b] * (ef[b] + eg[b])
+                J[a, b] = -Hs0[a, b] * keq[b]
+            J[a, a] += 1.0
+            r[a] = acc - mu[a]  # mu_new - mu = J^-1 r
+        # Gauss elimination with partial pivoting, r <- J^-1 r
+        for c in range(4):
+            p = c
+            for i in range(c + 1, 4):
+                if abs(J[i, c]) > abs(J[p, c]):
+                    p = i
+            if p != c:
+                for j in range(4):
+                    t = J[c, j]
+                    J[c, j] = J[p, j]
+                    J[p, j] = t
+                t = r[c]
+                r[c] = r[p]
+                r[p] = t
+            for i in range(c + 1, 4):
+                m = J[i, c] / J[c, c]
+                for j in range(c, 4):
+                    J[i, j] -= m * J[c, j]
+                r[i] -= m * r[c]
+        for c in range(3, -1, -1):
+            acc = r[c]
+            for j in range(c + 1, 4):
+                acc -= J[c, j] * r[j]
+            r[c] = acc / J[c, c]
+        for c in range(4):
+            mu[c] += r[c]
+            step = max(step, abs(r[c]))
+        if step < _MEAN_TOL_M:
+            break
+    for c in range(4):
+        if son[c]:
+            eg[c], keq[c] = gaussian_pwl(mu[c], sigs[c], s0[c], bx[c], bf[c], bn[c], 0.0,
+                                         bslope[c])
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _secant(sig, new, s_prev, h_prev, c, it):
+    """The fixed point's step on one RMS (``sig[c]`` <- next), as the shocks' inline code:
+    ``new = g(sig)``, a secant step on ``h = g(sig) - sig`` once two iterates exist
+    (safeguarded to a factor 2). Returns the relative change."""
+    change = abs(new - sig[c]) / max(sig[c], 1e-12)
+    hc = new - sig[c]
+    nxt = new if new > 0 else 0.5 * sig[c]
+    if it > 0:
+        dh = hc - h_prev[c]
+        ds = sig[c] - s_prev[c]
+        if dh != 0.0 and ds != 0.0:
+            cand = sig[c] - hc * ds / dh
+            if 0.5 * sig[c] < cand < 2.0 * sig[c]:
+                nxt = cand
+    s_prev[c] = sig[c]
+    h_prev[c] = hc
+    sig[c] = nxt
+    return change
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -646,8 +807,41 @@ def _band_features(e, pb):
 
 
 @nb.njit(cache=True, error_model="numpy")
+def _start_stops(son, sigs0, mu_rig, sigs, keq, eg, mu, ef, ss_prev, hs_prev):
+    """Start the elements' part of the fixed point (in place); True when a corner has a stop."""
+    any_stop = False
+    for c in range(4):
+        any_stop = any_stop or son[c] != 0
+        sigs[c] = sigs0[c]
+        mu[c] = mu_rig[c]
+        keq[c] = 0.0
+        eg[c] = 0.0
+        ef[c] = 0.0
+        ss_prev[c] = 0.0
+        hs_prev[c] = 0.0
+    return any_stop
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _finish_stops(any_stop, sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0,
+                  mu_rig, mu, keq, eg, ef, Jm, rr, ceq, trav_out):
+    """The stops' linearization at the converged RMS, and the element rows (:data:`STOP_ROWS`)."""
+    if any_stop:
+        _stop_means(sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0, mu_rig,
+                    mu, keq, eg, ef, Jm, rr)
+    for c in range(4):
+        trav_out[0, c] = sigs[c] if any_stop else 0.0
+        trav_out[1, c] = mu[c] if any_stop else 0.0
+        trav_out[2, c] = keq[c]
+        trav_out[3, c] = eg[c]
+        trav_out[4, c] = ceq[c]
+        trav_out[5, c] = ef[c]
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _screen_one(w, ops, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol, sig_out, roll,
-                acc, V, st):
+                acc, V, st, jinv, w2inv, Hs0, mu_rig, sigs0, son, s0, bx, bf, bn, bslope,
+                trav_out, Jm):
     """Screen one setup: the fixed point on the shock-velocity RMS, then its band features.
 
     The fixed point's arithmetic (the loop inverse and the order of the sum
@@ -663,8 +857,18 @@ def _screen_one(w, ops, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol, si
     them (:func:`_metrics_of`).
 
     roll (n_blocks * 12 * _BK), acc (n_blocks * 4 * _BK), V (n_blocks * _NFEAT * _BK; out:
-    feature i of band b _BK + j at (b _NFEAT + i) _BK + j), st (5, 4) are scratch,
-    allocated once per chunk of setups (:func:`screen_batch`).
+    feature i of band b _BK + j at (b _NFEAT + i) _BK + j), st (14, 4), Jm (4, 4) are
+    scratch, allocated once per chunk of setups (:func:`screen_batch`).
+
+    Bump stops (``son`` (4,) nonzero where a corner has one; ``s0``, ``bx``, ``bf``, ``bn``,
+    ``bslope`` its contact travel and table, as ``ident.sim.closedloop.pack_bump_stops``):
+    the fixed point runs on the travel RMS as well (``sigs``, from ``sigs0``: the velocity
+    power over ``w^2``, ``w2inv``), the mean travel solved at each iterate
+    (:func:`_stop_means`: ``Hs0`` the travel's static gain from dF, ``mu_rig`` the drive's
+    static travel), and each corner's loop gain takes ``+ k_eq / (j w)`` (``jinv``: ``-1 / w``
+    per band in the blocks' layout, zero on padding). Without a stop ``k_eq`` is zero and
+    the added ``complex(0.0, -0.0)`` leaves every value as it was (bit for bit).
+    ``trav_out`` (len(STOP_ROWS), 4) receives the element rows (:data:`STOP_ROWS`).
     """
     nf = w.size
     nblk = (nf + _BK - 1) // _BK
@@ -704,25 +908,38 @@ def _screen_one(w, ops, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol, si
         sig[c] = sig0[c]
         s_prev[c] = 0.0
         h_prev[c] = 0.0
+    sigs, keq, eg, mu, ef, ss_prev, hs_prev, sss, rr = (st[5], st[6], st[7], st[8], st[9],
+                                                       st[10], st[11], st[12], st[13])
+    any_stop = _start_stops(son, sigs0, mu_rig, sigs, keq, eg, mu, ef, ss_prev, hs_prev)
     it = 0
     for it in range(max_iter):
         for c in range(4):
             ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
             svv[c] = 0.0
+        if any_stop:
+            _stop_means(sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0,
+                        mu_rig, mu, keq, eg, ef, Jm, rr)
         e0, e1, e2, e3 = ceq[0], ceq[1], ceq[2], ceq[3]
+        k0, k1, k2, k3 = keq[0], keq[1], keq[2], keq[3]
         for blk in range(nblk):
             ob = blk * 96 * _BK
             rb = blk * 12 * _BK
             ab = blk * 4 * _BK
+            jb = blk * _BK
             for j in range(_BK):  # vectorized over bands: no branches, no stores but acc
                 r = rb + j
+                jk = jinv[jb + j]  # -1 / w: the stop's k_eq on the travel v / (j w)
                 D0 = _over_roll(e0, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb0
+                D0 = D0 + complex(0.0, k0 * jk)
                 r += _BK
                 D1 = _over_roll(e1, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb1
+                D1 = D1 + complex(0.0, k1 * jk)
                 r += _BK
                 D2 = _over_roll(e2, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb2
+                D2 = D2 + complex(0.0, k2 * jk)
                 r += _BK
                 D3 = _over_roll(e3, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb3
+                D3 = D3 + complex(0.0, k3 * jk)
                 o = ob + j
                 h = (complex(ops[o + 0 * _BK], ops[o + 16 * _BK]),
                      complex(ops[o + 1 * _BK], ops[o + 17 * _BK]),
@@ -766,6 +983,13 @@ def _screen_one(w, ops, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol, si
             ab = (k // _BK) * 4 * _BK + k % _BK
             for c in range(4):
                 svv[c] += acc[ab + c * _BK]
+        if any_stop:
+            for c in range(4):
+                sss[c] = 0.0
+            for k in range(nf):
+                ab = (k // _BK) * 4 * _BK + k % _BK
+                for c in range(4):
+                    sss[c] += acc[ab + c * _BK] * w2inv[k]
         # fixed point sigma = g(sigma) per corner, accelerated by a secant step on
         # h = g(sigma) - sigma once two iterates exist (safeguarded to a factor 2)
         change = 0.0
@@ -784,27 +1008,40 @@ def _screen_one(w, ops, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol, si
             s_prev[c] = sig[c]
             h_prev[c] = hc
             sig[c] = nxt
+        if any_stop:
+            for c in range(4):
+                change = max(change, _secant(sigs, math.sqrt(max(sss[c], 0.0)), ss_prev,
+                                             hs_prev, c, it))
         if change < tol:
             break
     for c in range(4):
         ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
         sig_out[c] = sig[c]
+    _finish_stops(any_stop, sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0,
+                  mu_rig, mu, keq, eg, ef, Jm, rr, ceq, trav_out)
     e0, e1, e2, e3 = ceq[0], ceq[1], ceq[2], ceq[3]
+    k0, k1, k2, k3 = keq[0], keq[1], keq[2], keq[3]
     # the features v of every band (see _NFEAT), vectorized over bands like the fixed point,
     # into V by block: band blk * _BK + j, feature i at (blk * _NFEAT + i) * _BK + j
     for blk in range(nblk):
         ob = blk * 96 * _BK
         rb = blk * 12 * _BK
         vb = blk * _NFEAT * _BK
+        jb = blk * _BK
         for j in range(_BK):
             r = rb + j
+            jk = jinv[jb + j]  # -1 / w: the stop's k_eq on the travel v / (j w)
             D0 = _over_roll(e0, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb0
+            D0 = D0 + complex(0.0, k0 * jk)
             r += _BK
             D1 = _over_roll(e1, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb1
+            D1 = D1 + complex(0.0, k1 * jk)
             r += _BK
             D2 = _over_roll(e2, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb2
+            D2 = D2 + complex(0.0, k2 * jk)
             r += _BK
             D3 = _over_roll(e3, roll[r] > 0.5, roll[r + 4 * _BK], roll[r + 8 * _BK]) - cb3
+            D3 = D3 + complex(0.0, k3 * jk)
             o = ob + j
             h = (complex(ops[o + 0 * _BK], ops[o + 16 * _BK]),
                  complex(ops[o + 1 * _BK], ops[o + 17 * _BK]),
@@ -931,8 +1168,13 @@ def _metrics_of(F, d0, V, G, out, pw):
 
 @nb.njit(cache=True, error_model="numpy", parallel=True)
 def screen_batch(w, ops, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol,
-                 out, sig_out, iters, n_chunks):
-    """Screen setups in n_chunks chunks, in parallel (scratch allocated once per chunk)."""
+                 out, sig_out, iters, n_chunks, jinv, w2inv, Hs0, mu_rig, sigs0, son, s0, bx,
+                 bf, bn, bslope, trav_out):
+    """Screen setups in n_chunks chunks, in parallel (scratch allocated once per chunk).
+
+    The bump stops' arguments as :func:`_screen_one` takes them, per setup (``son``, ``s0``,
+    ``bn``, ``bslope`` (n, 4), ``bx``, ``bf`` (n, 4, n_points)); ``trav_out`` (n,
+    len(STOP_ROWS), 4) receives the element rows."""
     n = kv.shape[0]
     nf = w.size
     nblk = (nf + _BK - 1) // _BK
@@ -942,20 +1184,24 @@ def screen_batch(w, ops, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter,
         acc = np.empty(nblk * 4 * _BK)
         V = np.empty((_GROUP, nblk * _NFEAT * _BK))
         pw = np.zeros((_GROUP, F.shape[2]))
-        st = np.empty((5, 4))
+        st = np.empty((14, 4))
+        Jm = np.empty((4, 4))
         stop = (ch + 1) * n // n_chunks
-        for s0 in range(ch * n // n_chunks, stop, _GROUP):
-            G = min(_GROUP, stop - s0)
+        for first in range(ch * n // n_chunks, stop, _GROUP):
+            G = min(_GROUP, stop - first)
             for g in range(G):
-                s = s0 + g
+                s = first + g
                 iters[s] = _screen_one(w, ops, cbar, sig0, kv[s], kf[s], nk[s], slo[s], shi[s],
-                                       lag[s], max_iter, tol, sig_out[s], roll, acc, V[g], st)
-            _metrics_of(F, d0, V, G, out[s0:s0 + G], pw)
+                                       lag[s], max_iter, tol, sig_out[s], roll, acc, V[g], st,
+                                       jinv, w2inv, Hs0, mu_rig, sigs0, son[s], s0[s], bx[s],
+                                       bf[s], bn[s], bslope[s], trav_out[s], Jm)
+            _metrics_of(F, d0, V, G, out[first:first + G], pw)
 
 
 @nb.njit(cache=True, error_model="numpy")
 def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
-                       max_iter, tol, out, sig_out):
+                       max_iter, tol, out, sig_out, jinv, w2inv, Hs0, mu_rig, sigs0, son, s0,
+                       bx, bf, bn, bslope, trav_out):
     """Screen one setup, one band after the other (the scalar kernel).
 
     The same operations in the same order as :func:`_screen_one`, which runs them on four
@@ -970,6 +1216,9 @@ def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, l
     sigma by up to ~1e-9 relative on some setups. The final pass is rewritten: each metric's
     band power is ``d0`` plus a setup-independent linear form ``F`` (:func:`metric_form`) of
     the 48 features of ``E = diag(D) K`` and ``R = E PB E^H``.
+
+    Bump stops as in :func:`_screen_one` (``jinv`` (n_bands,) here: band order, no blocks);
+    without a stop the loop gain is left as it was (no term added).
     """
     nf = w.size
     p = d0.shape[1]
@@ -989,14 +1238,25 @@ def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, l
     svv = np.zeros(4)
     s_prev = np.zeros(4)
     h_prev = np.zeros(4)
+    st = np.empty((9, 4))
+    Jm = np.empty((4, 4))
+    sigs, keq, eg, mu, ef, ss_prev, hs_prev, sss, rr = (st[0], st[1], st[2], st[3], st[4],
+                                                       st[5], st[6], st[7], st[8])
+    any_stop = _start_stops(son, sigs0, mu_rig, sigs, keq, eg, mu, ef, ss_prev, hs_prev)
     it = 0
     for it in range(max_iter):
         for c in range(4):
             ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
             svv[c] = 0.0
+            sss[c] = 0.0
+        if any_stop:
+            _stop_means(sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0,
+                        mu_rig, mu, keq, eg, ef, Jm, rr)
         for k in range(nf):
             for c in range(4):
                 D[c] = ceq[c] / roll[k, c] - cbar[c]
+                if any_stop:
+                    D[c] = D[c] + complex(0.0, keq[c] * jinv[k])
             _loop_inverse(Hvs[k], D, K, perm)
             for c in range(4):
                 acc = 0.0
@@ -1004,6 +1264,7 @@ def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, l
                     for b in range(4):
                         acc += (K[c, a] * P[k, a, b] * np.conj(K[c, b])).real
                 svv[c] += acc
+                sss[c] += acc * w2inv[k]
         # fixed point sigma = g(sigma) per corner, accelerated by a secant step on
         # h = g(sigma) - sigma once two iterates exist (safeguarded to a factor 2)
         change = 0.0
@@ -1022,16 +1283,24 @@ def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, l
             s_prev[c] = sig[c]
             h_prev[c] = hc
             sig[c] = nxt
+        if any_stop:
+            for c in range(4):
+                change = max(change, _secant(sigs, math.sqrt(max(sss[c], 0.0)), ss_prev,
+                                             hs_prev, c, it))
         if change < tol:
             break
     for c in range(4):
         ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
         sig_out[c] = sig[c]
+    _finish_stops(any_stop, sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0,
+                  mu_rig, mu, keq, eg, ef, Jm, rr, ceq, trav_out)
     for o in range(p):
         out[o] = 0.0
     for k in range(nf):
         for c in range(4):
             D[c] = ceq[c] / roll[k, c] - cbar[c]
+            if any_stop:
+                D[c] = D[c] + complex(0.0, keq[c] * jinv[k])
         _loop_inverse(Hvs[k], D, K, perm)
         # E = diag(D) K, in place of K
         for a in range(4):
@@ -1079,12 +1348,15 @@ def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, l
 
 @nb.njit(cache=True, error_model="numpy", parallel=True)
 def screen_batch_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
-                        max_iter, tol, out, sig_out, iters):
-    """:func:`_screen_one_scalar` over setups, in parallel."""
+                        max_iter, tol, out, sig_out, iters, jinv, w2inv, Hs0, mu_rig, sigs0,
+                        son, s0, bx, bf, bn, bslope, trav_out):
+    """:func:`_screen_one_scalar` over setups, in parallel (bump stops as
+    :func:`screen_batch`)."""
     for s in nb.prange(kv.shape[0]):
         iters[s] = _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv[s], kf[s], nk[s],
                                       slo[s], shi[s], lag[s], max_iter, tol, out[s],
-                                      sig_out[s])
+                                      sig_out[s], jinv, w2inv, Hs0, mu_rig, sigs0, son[s],
+                                      s0[s], bx[s], bf[s], bn[s], bslope[s], trav_out[s])
 
 
 def band_operands(ops):
@@ -1111,6 +1383,15 @@ def band_operands(ops):
     x[64:80, :nf] = PB.real
     x[80:, :nf] = PB.imag
     return np.ascontiguousarray(x.reshape(96, nblk, _BK).transpose(1, 0, 2)).reshape(-1)
+
+
+def padded_bands(x):
+    """A per-band vector (n_bands,) padded with zeros to whole blocks of bands, as the
+    kernels read per-band rows (``jinv``: band k at k, padding never summed)."""
+    x = np.asarray(x, dtype=float)
+    out = np.zeros(-(-x.size // _BK) * _BK)
+    out[:x.size] = x
+    return out
 
 
 def metric_form(ops):

@@ -83,6 +83,8 @@ from ident.sim.closedloop import pack_setups
 from planner.errors import PlannerError
 from planner.objective import (Objective, default_objective, mark_inventory, ranking_order,
                                ranking_position, score_setups)
+from planner.elements import (ELEMENT_COLUMNS, distinct_setups, model_elements,
+                              model_setup_elements, vary_elements)
 from planner.predict import as_loop_plant, predict_setups, prepare_drive, resolve_setups
 from planner.runner import KERNEL_LOCK, start_runner
 from planner.screen import (drive_bands, screen_operands, screen_packed,
@@ -287,13 +289,13 @@ def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_ba
     return pred
 
 
-def _warm(ops, shocks, codes, plant, drive, setups, library, oversample, band_hz):
+def _warm(ops, shocks, codes, plant, drive, setups, library, oversample, band_hz, elements=None):
     """Import the engine and load both compiled kernels (from numba's cache) on a worker."""
     _screen_codes(ops, shocks, codes, 30, 1e-5)
-    _simulate_chunk(plant, drive, setups, library, oversample, band_hz)
+    _simulate_chunk(plant, drive, setups, library, oversample, band_hz, elements)
 
 
-def _simulate_chunk(plant, drive, setups, library, oversample, band_hz):
+def _simulate_chunk(plant, drive, setups, library, oversample, band_hz, elements=None):
     """Time-domain metrics of a group of setups on one case (a task).
 
     BLAS runs on one thread, as in a Dask worker (which sets ``OPENBLAS_NUM_THREADS=1``):
@@ -301,8 +303,27 @@ def _simulate_chunk(plant, drive, setups, library, oversample, band_hz):
     """
     with KERNEL_LOCK, threadpool_limits(1):
         table = predict_setups(plant, drive, setups, library, oversample=oversample,
-                               band_hz=band_hz).table
+                               band_hz=band_hz, **(elements or {})).table
     return table
+
+
+def _element_variants(sim, vary_bump_stops, vary_packers_m, bump_stops, car, ekw, model):
+    """The simulated setups with every bump-stop and packer choice, and each one's parent
+    (the index of its shock setup in `sim`); the same setups without choices."""
+    if not (vary_bump_stops or vary_packers_m):
+        return sim, np.arange(len(sim))
+    lib = bump_stops if bump_stops is not None else getattr(car, "bump_stops", None)
+    out, parent = [], []
+    for i, s in enumerate(sim):
+        got = vary_elements([s], bump_stops=vary_bump_stops, packers_m=vary_packers_m,
+                            library=lib, where="sweep")
+        out += got
+        parent += [i] * len(got)
+    elem = model_setup_elements(out, model, **ekw)
+    if elem is not None:
+        out, keep = distinct_setups(out, elem)
+        parent = [parent[k] for k in keep]
+    return out, np.asarray(parent, dtype=np.intp)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -503,7 +524,8 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
                  chunk_size=DEFAULT_CHUNK_SIZE, simulate_chunk=DEFAULT_SIMULATE_CHUNK,
                  oversample=2, band_hz=(1.0, 20.0), n_bands=96, max_iter=30, tol=1e-5,
                  reduce_rtol=LOOP_REDUCE_RTOL, scheduler=None, client=None, n_workers=None,
-                 processes=True, progress=True):
+                 processes=True, progress=True, bump_stops=None, static_corner_load_n=None,
+                 elements=True, vary_bump_stops=None, vary_packers_m=None):
     """Screen a large set of setups on several models and drives, simulate and rank the best.
 
     Parameters
@@ -556,6 +578,16 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         LocalCluster workers as processes (default) or threads of this process.
     progress : bool
         Progress bars (tqdm) over the tasks.
+    bump_stops, static_corner_load_n, elements
+        The real car's elements in the time domain, as
+        :func:`planner.predict.predict_setups` (default: each model's own, e.g. an
+        identified model's bump stops and static loads). The screening stage ranks the
+        shocks without them (its codes are shocks only); the time domain decides.
+    vary_bump_stops, vary_packers_m : mapping, optional
+        Bump-stop and packer choices per group (:func:`planner.elements.vary_elements`):
+        every simulated setup (the screening's best and the baseline) is simulated with
+        each combination too, and ranked with them; a variant's screening score is its
+        shocks'.
 
     Returns
     -------
@@ -583,6 +615,14 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     _check_options(top_share, top, chunk_size, simulate_chunk, combine)
     if setups is not None and constraints:
         raise PlannerError("sweep: give either setups or constraints, not both")
+    named = [st.name for st in setups or () if st.bump_stops is not None
+             or st.packers_m is not None]
+    if named:
+        raise PlannerError(f"sweep: setup {named[0]!r} names bump stops or packers; the sweep "
+                           "enumerates shocks (its setups are shock codes): give the choices "
+                           "as vary_bump_stops / vary_packers_m (shockplan sweep "
+                           "--try-bump-stops, --try-packers), or rank these setups with "
+                           "shockplan rank --setups")
     space = setup_space(library, setups=setups, **(constraints or {}), where="sweep")
     model_list = _as_list(models, "models")
     drive_list = _as_list(drives, "drives", Drive)
@@ -609,8 +649,13 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         n_top_max = int(top) if top is not None else max(1, math.ceil(top_share * n_cand))
         # every worker imports the engine and loads its kernels before the clock starts
         plant0, drive0, ops0 = cases[0]
+        cars = [model_elements(model) if elements is True else elements
+                for _, model in model_list for _ in drive_list]
+        ekws = [{"bump_stops": bump_stops, "static_corner_load_n": static_corner_load_n,
+                 "elements": False if car is False else (car if car is not None else True)}
+                for car in cars]
         runner.everywhere(_warm, ops0, shocks, base_codes, plant0, drive0, [base], library,
-                          oversample, tuple(band_hz))
+                          oversample, tuple(band_hz), ekws[0])
         t_prep = time.perf_counter() - t0
         # 2. screening, chunk by chunk
         t1 = time.perf_counter()
@@ -666,12 +711,15 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
                 raise PlannerError(f"sweep: baseline {base.name!r} has the name of a swept "
                                    "setup with other shocks; rename the baseline")
             sim.append(base)
+        sim0 = sim
+        sim, parent = _element_variants(sim0, vary_bump_stops, vary_packers_m,
+                                        bump_stops, cars[0], ekws[0], model_list[0][1])
         plant_refs = [runner.scatter(p) for p, _, _ in cases]
         drive_refs = [runner.scatter(d) for _, d, _ in cases]
         lib_ref = runner.scatter(library)
         groups = [sim[a:a + simulate_chunk] for a in range(0, len(sim), simulate_chunk)]
-        targs = [(plant_refs[k], drive_refs[k], g, lib_ref, oversample, tuple(band_hz))
-                 for k in range(len(cases)) for g in groups]
+        targs = [(plant_refs[k], drive_refs[k], g, lib_ref, oversample, tuple(band_hz),
+                  ekws[k]) for k in range(len(cases)) for g in groups]
         tparts = [None] * len(targs)
         for j, res in runner.map_unordered(_simulate_chunk, targs, progress,
                                            "sweep: simulate"):
@@ -681,17 +729,18 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         runner.close()
     # 4. scores per case, combined, ranked
     names = [s.name for s in sim]
+    names0 = [s.name for s in sim0]
     case_tables, screen_tables = {}, {}
     metric_names = list(cases[0][2].metric_names)
     for k, label in enumerate(labels):
         td = pd.concat(tparts[k * len(groups):(k + 1) * len(groups)])
         sc = score_setups(td, objective, baseline=base.name).table
         case_tables[label] = pd.concat([td, mark_inventory(sc, sim, library)], axis=1)
-        rows = np.vstack([top_met[:, k], base_metrics[k][None, :]])[:len(sim)]
-        st = pd.DataFrame(rows, columns=metric_names, index=pd.Index(names, name="setup"))
-        st.insert(0, "LF", [s.ids()[0] for s in sim])
+        rows = np.vstack([top_met[:, k], base_metrics[k][None, :]])[:len(sim0)]
+        st = pd.DataFrame(rows, columns=metric_names, index=pd.Index(names0, name="setup"))
+        st.insert(0, "LF", [s.ids()[0] for s in sim0])
         for c, col in enumerate(CORNERS[1:], start=1):
-            st.insert(c, col, [s.ids()[c] for s in sim])
+            st.insert(c, col, [s.ids()[c] for s in sim0])
         screen_tables[label] = pd.concat(
             [st, score_setups(st, objective, baseline=base.name).table], axis=1)
     case_scores = [case_tables[lab]["score"].to_numpy(dtype=float) for lab in labels]
@@ -708,17 +757,22 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     rank = np.empty(len(sim), dtype=np.int64)
     rank[order] = np.arange(1, len(sim) + 1)
     # screening score and rank of every simulated setup among all screened
-    scr_score = np.append(top_score, [np.nan] * (len(sim) - n_top))
+    scr_score = np.append(top_score, [np.nan] * (len(sim0) - n_top))
     scr_rank = np.arange(1, n_top + 1).tolist()
-    if len(sim) > n_top:  # the baseline, below the top
+    if len(sim0) > n_top:  # the baseline, below the top
         if base_idx is not None:
             at = int(np.searchsorted(index, base_idx))
             scr_score[-1] = score[at]
             scr_rank.append(ranking_position(at, feasible, score, index))
         else:
             scr_rank.append(-1)  # not among the swept setups
+    scr_score = np.asarray(scr_score, dtype=float)[parent]
+    scr_rank = np.asarray(scr_rank, dtype=np.int64)[parent]
     table = pd.DataFrame({c: [s.ids()[j] for s in sim] for j, c in enumerate(CORNERS)},
                          index=pd.Index(names, name="setup"))
+    elem_cols = [c for c in ELEMENT_COLUMNS if c in case_tables[labels[0]].columns]
+    for c in elem_cols:
+        table[c] = case_tables[labels[0]][c].to_numpy()
     table["score"] = comb
     table["feasible"] = feas
     table["violations"] = viol
@@ -745,6 +799,9 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
                 "band_hz": tuple(band_hz), "seconds": seconds,
                 "screen_setups_per_s": n_scr * len(cases) / max(t_screen, 1e-9),
                 "simulate_setups_per_s": len(sim) * len(cases) / max(t_sim, 1e-9)}
+    if vary_bump_stops or vary_packers_m:
+        settings["elements"] = {"vary_bump_stops": vary_bump_stops,
+                                "vary_packers_m": vary_packers_m, "n_simulated": len(sim)}
     log.info("sweep: simulated %d setups x %d case(s) in %.1f s; best %r", len(sim),
              len(cases), t_sim, table.index[0])
     return SweepResult(table=table, cases=case_tables, screening_top=screen_tables,

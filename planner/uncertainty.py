@@ -323,7 +323,8 @@ def _correlated_factor(C):
 
 def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
                            quantiles=(0.025, 0.975), band_hz=(1.0, 20.0), n_bands=96,
-                           predictions=None, oversample=2, random_scale=None):
+                           predictions=None, oversample=2, random_scale=None,
+                           element_options=None):
     """Intervals of setups' metrics from the identification's random and systematic errors.
 
     Parameters
@@ -351,6 +352,11 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
     random_scale : float, optional
         Factor on the FRF's standard errors in the random part; default
         :func:`random_error_scale` of the model's FRF (the calibrated value).
+    element_options : dict, optional
+        The real car's elements of `predictions` (:func:`planner.predict.predict_setups`'
+        ``bump_stops``, ``static_corner_load_n``, ``elements``), for the finer simulation
+        of the discretization term; default the model's. The random and fit terms come
+        from the screening of the shocks (the stops' share of them is left out).
 
     Returns
     -------
@@ -428,7 +434,8 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
             components["reduction"] = frame(red / base - 1)
     if predictions is not None:
         finer = predict_setups(model, drive, setups, library, oversample=2 * oversample,
-                               band_hz=band_hz)
+                               band_hz=band_hz, check_coverage=False,
+                               **(element_options or {}))
         p1 = predictions.table.loc[index, names].to_numpy()
         p2 = finer.table.loc[index, names].to_numpy()
         with np.errstate(divide="ignore", invalid="ignore"):

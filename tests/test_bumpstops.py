@@ -346,3 +346,42 @@ def test_library_refuses_duplicates_and_strangers(stop):
     with pytest.raises(TypeError, match="item 0 is a str, not a BumpStop"):
         BumpStopLibrary(["BS-F"])
     assert BumpStopLibrary({"BS-F": stop}) == BumpStopLibrary([stop])
+
+
+# ----------------------------------------------------------------------------
+# CarElements
+# ----------------------------------------------------------------------------
+
+
+def test_car_elements_round_trip_and_check():
+    """What a model keeps of the session's elements: JSON-able, read back equal, checked."""
+    import json
+
+    from ident.models.bumpstops import CarElements
+
+    lib = BumpStopLibrary([BumpStop("BS-F", 0.006, [0.0, 0.002, 0.01], [0.0, 200.0, 3000.0],
+                                    description="front"),
+                           BumpStop("BS-R", 0.008, [0.0, 0.01], [0.0, 2000.0])])
+    el = CarElements(lib, {"LF": "BS-F", "RF": "BS-F"}, {"LF": 0.001},
+                     [3000.0, 3000.0, 3500.0, 3500.0])
+    assert el.baseline_stops == {"LF": "BS-F", "RF": "BS-F", "LR": None, "RR": None}
+    assert el.baseline_packers_m == {"LF": 0.001, "RF": 0.0, "LR": 0.0, "RR": 0.0}
+    doc = json.loads(json.dumps(el.to_dict()))
+    back = CarElements.from_dict(doc)
+    assert back.bump_stops == lib
+    assert back.baseline_stops == el.baseline_stops
+    assert back.baseline_packers_m == el.baseline_packers_m
+    np.testing.assert_array_equal(back.static_corner_load_n, el.static_corner_load_n)
+    tables = back.baseline_tables()
+    assert tables[0][0] == pytest.approx(0.005) and tables[1][0] == pytest.approx(0.006)
+    assert tables[2] is None
+    assert "BS-F" in el.describe() and "LR 3500 N" in el.describe()
+    only_loads = CarElements(None, {}, {}, [1.0, 2.0, 3.0, 4.0])
+    assert only_loads.baseline_tables() is None
+    assert CarElements.from_dict(only_loads.to_dict()).bump_stops is None
+    with pytest.raises(BumpStopError, match="not a bump stop|BS-X"):
+        CarElements(lib, {"LF": "BS-X"}, {})
+    with pytest.raises(BumpStopError, match="thicker|packer"):
+        CarElements(lib, {"LF": "BS-F"}, {"LF": 0.01})
+    with pytest.raises(BumpStopError, match="4 finite"):
+        CarElements(None, {}, {}, [1.0, 2.0])

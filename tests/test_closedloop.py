@@ -714,6 +714,66 @@ def test_elements_batch_equals_single(gt_plant, bumpstop_vehicle, one_blas_threa
         assert {k: got[k] for k in one.elements} == one.elements
 
 
+def test_batch_metrics_with_elements_equal_metrics_of_the_batch(gt_plant, bumpstop_vehicle):
+    """simulate_batch_metrics with bump stops and/or static loads (the fused elements worker)
+    gives compute_metrics of simulate_batch's channels plus its elements to rounding: stops
+    on some setups of the batch only, static loads (lift-off: the tire force at -static on
+    lifted samples, the ride heights without the pad's direct path), both, the normalized
+    tire forces and split bands, the planner's metric outputs, no metric output at all."""
+    from ident.sim.closedloop import simulate_batch_metrics
+    from ident.sim.metrics import compute_metrics
+
+    drive = _gt_drive(bumpstop_vehicle, 6.0, roughness_m3=32e-6)
+    setups = [_gt_shocks(), _gt_shocks(0.7), _gt_shocks(1.4), _gt_shocks(0.9)]
+    stops = [_stops(0.0035, 0.0045), None, {"LF": (0.002, STOP_TRAVEL_M, STOP_FORCE_N)}, None]
+    static = bumpstop_vehicle.static_corner_load_n * 0.8
+    loads = dict(zip(("LF", "RF", "LR", "RR"), static))
+    metric_outputs = [f"{k}_{c}" for k in ("tire_force", "ride_height", "shock_travel",
+                                           "shock_velocity") for c in ("LF", "RF", "LR", "RR")]
+    cases = [({"bump_stops": stops}, {}, None),
+             ({"static_corner_load_n": static}, {"static_loads_n": loads, "split_hz": 8.0},
+              None),
+             ({"bump_stops": stops, "static_corner_load_n": static}, {}, metric_outputs),
+             ({"bump_stops": stops, "static_corner_load_n": {"LR": static[2]}}, {},
+              ["spring_force_LF"])]
+    for elements, kw, outs in cases:
+        got = simulate_batch_metrics(gt_plant, drive, setups, oversample=2, outputs=outs,
+                                     **elements, **kw)
+        batch = simulate_batch(gt_plant, drive, setups, oversample=2, outputs=outs, **elements)
+        ref = dict(compute_metrics(batch.channels, fs=batch.fs_hz, **kw).values,
+                   **batch.elements)
+        assert list(got.metrics.values) == list(ref)
+        for name, x in ref.items():
+            np.testing.assert_allclose(got.metrics.values[name], x, rtol=RTOL_FUSED_METRICS,
+                                       err_msg=name)
+        np.testing.assert_array_equal(got.newton_iterations, batch.newton_iterations)
+        assert got.settings == batch.settings
+    # the elements do act here: contact on the setups with stops only, tires lifted
+    assert np.all(got.metrics.values["bump_stop_contact_share_LF"][[0, 2]] > 0.01)
+    assert np.all(got.metrics.values["bump_stop_contact_share_LF"][[1, 3]] == 0.0)
+    assert np.all(got.metrics.values["tire_liftoff_share_LR"] > 0.005)
+    assert "tire_liftoff_share_LF" not in got.metrics.values
+    assert got.metrics.as_frame().shape == (len(setups), len(ref))  # units known for all
+
+
+def test_batch_metrics_with_elements_of_a_setup_do_not_depend_on_its_batch(
+        gt_plant, bumpstop_vehicle, one_blas_thread):
+    """With the elements too, a setup's metrics are the same bits alone or in a batch."""
+    from ident.sim.closedloop import simulate_batch_metrics
+
+    drive = _gt_drive(bumpstop_vehicle, 6.0, roughness_m3=32e-6)
+    setups = [_gt_shocks(), _gt_shocks(0.7), _gt_shocks(1.4)]
+    stops = [_stops(0.0035, 0.0045), None, _stops(0.002, 1.0)]
+    static = bumpstop_vehicle.static_corner_load_n * 0.8
+    batch = simulate_batch_metrics(gt_plant, drive, setups, oversample=2, bump_stops=stops,
+                                   static_corner_load_n=static)
+    for i in range(len(setups)):
+        one = simulate_batch_metrics(gt_plant, drive, setups[i:i + 1], oversample=2,
+                                     bump_stops=stops[i:i + 1], static_corner_load_n=static)
+        for name, x in one.metrics.values.items():
+            assert batch.metrics.values[name][i] == x[0], name
+
+
 BAD_ELEMENTS = [
     ({"bump_stops": {"LF": (0.003, [0.0, 0.01], [0.0, -5.0])}}, ValueError, "falls"),
     ({"bump_stops": {"LF": (-0.001, [0.0, 0.01], [0.0, 50.0])}}, ValueError, ">= 0"),
@@ -730,3 +790,27 @@ def test_bad_elements(gt_plant, bumpstop_vehicle, kw, exc, match):
     drive = _gt_drive(bumpstop_vehicle, 4.0)
     with pytest.raises(exc, match=match):
         simulate(gt_plant, drive, _gt_shocks(), oversample=2, **kw)
+
+
+def test_unphysical_same_step_travel_weights_are_dropped():
+    """A corner whose same-step travel weight has the unphysical sign (a compression force
+    adding compression within the step: an identified model far outside its fitted band)
+    has its stop evaluated from the state (weights 0); physical rows are kept as given."""
+    from ident.sim.closedloop import _physical_same_step
+
+    rng = np.random.default_rng(5)
+    Dt = -np.abs(rng.normal(size=(4, 4))) * 1e-7
+    Dt[2, 2] = 3e-6  # the unphysical corner
+    Dtw = rng.normal(size=(4, 4))
+    head = (np.ones(3), np.zeros(2))
+    tail = (rng.normal(size=(4, 4)), rng.normal(size=(4, 4)), rng.normal(size=(4, 4)))
+    got = _physical_same_step((*head, Dt, Dtw, *tail))
+    np.testing.assert_array_equal(got[2][[0, 1, 3]], Dt[[0, 1, 3]])
+    np.testing.assert_array_equal(got[2][2], 0.0)
+    np.testing.assert_array_equal(got[3][2], 0.0)
+    np.testing.assert_array_equal(got[3][[0, 1, 3]], Dtw[[0, 1, 3]])
+    for a, b in zip(got[4:], tail):
+        assert a is b
+    physical = (*head, Dt * (Dt < 0), Dtw, *tail)
+    assert all(a is b for a, b in zip(_physical_same_step(physical), physical))
+    assert _physical_same_step(()) == ()

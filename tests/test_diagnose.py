@@ -12,6 +12,8 @@ import pytest
 from ident.data.channels import CORNERS
 from ident.data.session import make_session
 from ident.identify.diagnose import (
+    FRICTION_FORCE_SHARE,
+    FRICTION_Z,
     RESIDUAL_EXCESS_MAX,
     STIFFENING_FORCE_SHARE,
     STIFFENING_Z,
@@ -43,12 +45,18 @@ LIFTOFF_SHARE_ATOL = 0.005
 #: Lift-off with the static load carried by the channel against given: the rest level
 #: (noisy, 10 samples) stands for the load in the near-zero threshold; measured up to 1.2e-3.
 CARRIED_SHARE_ATOL = 2e-3
+#: Lift-off from the floor of a dynamic tire-force channel (no static loads given) against
+#: the simulation's share: the floor's band also holds the samples about to lift and the
+#: filter's dip; measured within 0.6 points.
+FLOOR_SHARE_ATOL = 0.01
+#: The floor's level against minus the static load (the dip and noise around it).
+FLOOR_LOAD_RTOL = 0.05
 #: The declared stop's contact share (measured travel, filtered and noisy) against the
 #: simulation's (its solved travel): measured within 0.1 points.
 CONTACT_SHARE_ATOL = 0.005
 
 
-def _rig_session(paper_plan, vehicle, *, noise=0.02):
+def _rig_session(paper_plan, vehicle, *, noise=0.02, friction=None):
     """The GT-like car on the virtual rig: bump stops at the front, the car's static loads
     (the tires lift off), everything declared as the rig records it; and the shares the
     simulation reports per run (``run -> {element stat: value}``, the rig's log)."""
@@ -63,7 +71,8 @@ def _rig_session(paper_plan, vehicle, *, noise=0.02):
                  roll_moment_multiple=MOMENT_MULTIPLE, pitch_moment_multiple=MOMENT_MULTIPLE)
     plan = dataclasses.replace(paper_plan, runs=runs, noise=noise, drive=drive,
                                bump_stops=library,
-                               static_corner_load_n=vehicle.static_corner_load_n)
+                               static_corner_load_n=vehicle.static_corner_load_n,
+                               suspension_friction_n=friction)
     truth = {}
 
     class Elements(logging.Handler):
@@ -115,6 +124,23 @@ def real_car(paper_plan, bumpstop_vehicle):
         warnings.simplefilter("ignore")
         model = identify_session(_declared(session))
     return session, model, truth
+
+
+#: Suspension friction of the friction car [N per corner]: a realistic size (the smallest
+#: found in every run and corner at 2 % noise is 15 N).
+FRICTION_N = 60.0
+#: The friction read from the balance against the truth: within 5 % at a corner with a
+#: linear shock (measured 97-100 % at 100 N); behind the swapped shock's 4 ms lag the
+#: friction builds over the lag after a reversal and reads 76-79 %.
+FRICTION_RTOL = 0.05
+FRICTION_LAGGED = (0.6, 0.9)
+
+
+@pytest.fixture(scope="module")
+def friction_session(paper_plan, bumpstop_vehicle):
+    """The real car's session with suspension friction too (nothing of it in the files)."""
+    session, _ = _rig_session(paper_plan, bumpstop_vehicle, friction=[FRICTION_N] * 4)
+    return session
 
 
 def _found(diag, kind):
@@ -186,8 +212,15 @@ def test_lift_off_with_static_loads_given_or_carried_by_the_channel(real_car):
         true = truth[f.run][f"tire_liftoff_share_{f.corner}"]
         assert true > 0.005
         assert f.share == pytest.approx(true, abs=LIFTOFF_SHARE_ATOL)
-    # nothing declared and a dynamic channel: no contact level to judge
-    assert len(_found(Diagnosis.from_dict(model.settings["diagnosis"]), "lift-off")) == 0
+    # nothing declared and a dynamic channel: the floor the tire force sits on while off
+    floor = _found(Diagnosis.from_dict(model.settings["diagnosis"]), "lift-off")
+    assert len(floor) and all("floor" in m for m in floor.message)
+    for f in floor.itertuples():
+        true = truth[f.run][f"tire_liftoff_share_{f.corner}"]
+        assert f.share == pytest.approx(true, abs=FLOOR_SHARE_ATOL), (f.run, f.corner, true)
+        # the floor is minus the static load (the channel's dynamic part)
+        load = session.static_corner_load_n[CORNERS.index(f.corner)]
+        assert f.value == pytest.approx(-load, rel=FLOOR_LOAD_RTOL)
 
 
 def test_declared_bump_stops_give_the_contact_share(real_car):
@@ -241,3 +274,54 @@ def test_lines_and_round_trip(real_car):
     assert len(lines) == 2 * len(diag.groups())
     assert lines[0].startswith("LF: stiffening ") and lines[1].startswith("    fix: declare")
     assert diag.settings["amplitude"].startswith("not checked")  # one drive level
+
+
+def test_friction_is_found_with_its_corner_size_and_share(real_car, friction_session):
+    """Bump stops, lift-off and friction, nothing declared: friction at every corner of
+    every run (its size near the truth, a share of time in the sticking band) besides the
+    bump stops' stiffening at the front; none on the car without friction."""
+    session, model, _ = real_car
+    diag = diagnose_session(_declared(friction_session), model, residual=False)
+    fr = _found(diag, "friction")
+    assert len(fr) == 4 * len(session.runs)
+    assert set(_found(diag, "stiffening").corner) == {"LF", "RF"}
+    for f in fr.itertuples():
+        lagged = session.shocks[friction_session.run(f.run).setup[f.corner]].lag_s > 0
+        if lagged:
+            assert FRICTION_LAGGED[0] * FRICTION_N < f.value < FRICTION_LAGGED[1] * FRICTION_N
+        else:
+            assert f.value == pytest.approx(FRICTION_N, rel=FRICTION_RTOL)
+        assert 0.01 < f.share < 0.1
+    rows = diag.checks.set_index(["run", "corner"])
+    assert (rows.friction_z > 2 * FRICTION_Z).all()
+    assert "suspension friction" in fr.message.iloc[0] and "slow ramp" in fr.fix.iloc[0]
+    lines = [g for g in diag.lines() if re.match(r"[LR][FR]: friction ", g)]
+    assert len(lines) == 4 and re.match(r"LF: friction \d+\.\d-\d+\.\d % of the time "
+                                        r"\(5 runs\): a force in phase", lines[0])
+    # the car without friction (stops and lift-off): none, far inside the thresholds
+    plain = Diagnosis.from_dict(model.settings["diagnosis"])
+    assert len(_found(plain, "friction")) == 0
+    assert plain.checks.friction_z.abs().max() < FRICTION_Z / 2
+    assert plain.checks.friction_force_share.max() < FRICTION_FORCE_SHARE / 2
+
+
+@pytest.mark.slow
+def test_identify_warns_of_friction_bump_stops_and_lift_off(friction_session):
+    """The done-when of issue 25: identified with nothing declared, the car with bump
+    stops, lift-off and friction; the identification's diagnosis names the corners and
+    kinds with their shares (friction everywhere, stops at the front, residuals)."""
+    from ident.identify.pipeline import identify_session
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify_session(_declared(friction_session))
+    diag = Diagnosis.from_dict(model.settings["diagnosis"])
+    kinds = {(g["corner"], g["kind"]) for g in diag.groups()}
+    assert {(c, "friction") for c in CORNERS} <= kinds
+    assert {("LF", "stiffening"), ("RF", "stiffening")} <= kinds
+    assert all(0 < g["share_min"] <= g["share_max"] < 1 for g in diag.groups()
+               if g["kind"] == "friction")
+    # lift-off without static loads: the floor the tire force sits on while off its pad
+    lifted = [g for g in diag.groups() if g["kind"] == "lift-off"]
+    assert lifted and all(0 < g["share_max"] < 0.1 for g in lifted)
+    assert all("floor" in line for line in diag.lines() if "lift-off" in line.split(":")[1])

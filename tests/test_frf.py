@@ -127,3 +127,37 @@ def test_missing_shock_velocity(paper_plan):
                                time_s=run.time_s, channels=ch, fs_hz=run.fs_hz),))
     with pytest.raises(IdentificationError, match="shock_velocity_RR"):
         estimate_frf(bad)
+
+
+def test_bump_stop_force_from_the_travel_measured_from_rest():
+    """The declared stop's force of a run: its table at the measured travel from the car at
+    rest (the start of a tapered drive), the packer shortening the gap; none without stops."""
+    from ident.data.channels import CORNERS as _C
+    from ident.data.session import Run
+    from ident.identify.frf import bump_stop_force
+    from ident.models.bumpstops import BumpStop, BumpStopLibrary
+
+    fs, n = 100.0, 2000
+    t = np.arange(n) / fs
+    taper = np.clip(t - 1.0, 0.0, 1.0)  # at rest for the first second
+    rest = 0.002  # the travel channel's offset at rest [m]
+    travel = rest + 0.008 * taper * np.sin(2 * np.pi * 1.3 * t)
+    channels = {f"shock_travel_{c}": travel for c in _C}
+    channels.update({f"wheelloader_{c}": 0.01 * taper * np.sin(2 * np.pi * 2.1 * t) for c in _C})
+    stop = BumpStop("BS-F", 0.006, [0.0, 0.002, 0.01], [0.0, 200.0, 3000.0])
+    lib = BumpStopLibrary([stop])
+    run = Run(name="r", file="r.csv", setup=dict.fromkeys(_C, "B20"), time_s=t,
+              channels=channels, fs_hz=fs, bump_stops={"LF": "BS-F", "RR": "BS-F"},
+              packers_m={"RR": 0.002})
+    G, info = bump_stop_force(run, lib)
+    np.testing.assert_allclose(G[0], stop.force(travel - rest), atol=1e-9)
+    np.testing.assert_allclose(G[3], stop.force(travel - rest, 0.002), atol=1e-9)
+    assert not G[1].any() and not G[2].any()
+    assert G[3].max() > G[0].max() > 0
+    assert info["rest"] == "rest (start)"
+    assert info["contact_share"]["LF"] == pytest.approx(np.mean(travel - rest > 0.006))
+    assert info["rest_minus_mean_m"]["LF"] == pytest.approx(rest - travel.mean())
+    plain = Run(name="p", file="p.csv", setup=dict.fromkeys(_C, "B20"), time_s=t,
+                channels=channels, fs_hz=fs)
+    assert bump_stop_force(plain, lib) == (None, None)
+    assert bump_stop_force(run, None) == (None, None)

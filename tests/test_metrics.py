@@ -54,7 +54,23 @@ def test_metric_names_follow_the_spec():
     assert METRIC_QUANTITY["shock_travel_rms_LF"] == "displacement"
     assert METRIC_QUANTITY["shock_velocity_rms_LR_wheelhop"] == "velocity"
     assert METRIC_QUANTITY["tire_force_rms_norm_LF_body"] == "dimensionless"
+    # the closed loop's element metrics (issue 25), not band-passed: no band variants
+    assert METRIC_QUANTITY["tire_contact_min_RR"] == "force"
+    assert METRIC_QUANTITY["tire_liftoff_share_LF"] == "dimensionless"
+    assert METRIC_QUANTITY["bump_stop_contact_share_LR"] == "dimensionless"
+    assert "tire_contact_min_RR_body" not in METRIC_QUANTITY
     assert set(METRIC_QUANTITY.values()) <= set(TO_SI)
+
+
+def test_element_metrics_convert_to_imperial():
+    """Metrics holding the closed loop's element metrics convert: the contact force as a
+    force, the shares unchanged."""
+    m = Metrics(values={"tire_contact_min_LF": np.array([4.4482216152605, 0.0]),
+                        "tire_liftoff_share_LF": np.array([0.0, 0.02])},
+                band_hz=(1.0, 20.0), order=4, fs_hz=100.0)
+    got = m.to_units("imperial")
+    np.testing.assert_allclose(got["tire_contact_min_LF"], [1.0, 0.0], rtol=1e-12)
+    np.testing.assert_array_equal(got["tire_liftoff_share_LF"], [0.0, 0.02])
 
 
 def test_bandpass_is_the_reference_filter(rng):

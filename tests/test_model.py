@@ -457,3 +457,21 @@ def test_model_summary_file_says_its_units(identified_model, tmp_path):
     summary = identified_model.summary()
     assert units == "imperial" and list(frame.columns) == list(summary.columns)
     assert frame["fit_error"].tolist() == summary["fit_error"].tolist()
+
+
+def test_model_keeps_its_declared_elements(tmp_path, identified_model):
+    """settings["elements"]: read as CarElements, saved and loaded with the model, named in
+    the summary; a model without them has none."""
+    from ident.models.bumpstops import BumpStop, BumpStopLibrary, CarElements
+
+    assert identified_model.elements is None
+    lib = BumpStopLibrary([BumpStop("BS-F", 0.006, [0.0, 0.01], [0.0, 2000.0])])
+    el = CarElements(lib, {"LF": "BS-F", "RF": "BS-F"}, {"RF": 0.001},
+                     [3000.0, 3000.0, 3200.0, 3200.0])
+    model = identified_model.with_settings(dict(identified_model.settings,
+                                                elements=el.to_dict()))
+    back = load_model(model.save(tmp_path / "m.npz"))
+    assert back.elements.to_dict() == el.to_dict()
+    assert back.elements.bump_stops == lib
+    assert "BS-F" in back.summary().attrs["elements"]
+    assert "no bump stops" in identified_model.summary().attrs["elements"]

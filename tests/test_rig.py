@@ -561,3 +561,102 @@ def test_rig_simulate_cli_records_the_real_car(tmp_path, capsys):
                  str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "unknown bump-stop id 'BS-X'" in err and err.count("\n") == 1
+
+
+#: Friction at a corner [N] for the rig's friction tests (a realistic size on the GT car).
+FRICTION_N = 100.0
+#: The shock force channel against the shock's own force at the solved velocity, and the
+#: wheel's force balance with the friction in it: the loop's rounding (seen 1e-12 N).
+ATOL_FORCE_N = 1e-8
+
+
+def _friction_plan(paper_plan, friction):
+    """The paper's plan, two 5 s runs (B20; N8 at LF: a lagged shock) on an 800 Hz grid
+    without oversampling, so the recorded channels are the loop's own steps."""
+    runs = tuple(replace(r, duration_s=5.0) for r in paper_plan.runs[:2])
+    drive = dict(paper_plan.drive, peak_wheelloader_m=0.006, roll_moment_multiple=0.5,
+                 pitch_moment_multiple=0.5)
+    return replace(paper_plan, runs=runs, drive=drive, fs_hz=800.0, oversample=1, noise=0.0,
+                   suspension_friction_n=friction)
+
+
+def test_suspension_friction_acts_outside_the_shock_force(paper_plan, bumpstop_vehicle,
+                                                          monkeypatch):
+    """Friction at LF: the shock force channel stays the shock's own force (behind its lag
+    for N8), the wheel's balance holds with the friction in it, the car feels it; no
+    friction (the key absent, or all 0) runs the plan's shocks themselves: the loop of
+    before, to the bit."""
+    from scipy.signal import lfilter
+
+    from ident.models.lti import lag_hold_coefficients
+    from ident.sim import rig
+    from ident.sim.rig import friction_force
+
+    s = simulate_session(_friction_plan(paper_plan, {"LF": FRICTION_N}), bumpstop_vehicle)
+    h = 1.0 / 800.0
+    for run in s.runs:
+        ch = run.channels
+        shock = paper_plan.shocks[run.setup["LF"]]
+        v = ch["shock_velocity_LF"]
+        own, fric = shock.force(v), friction_force(v, FRICTION_N)
+        if shock.lag_s:
+            alpha, b0, b1, bm = (float(x) for x in lag_hold_coefficients(shock.lag_s, h))
+            own = lfilter([b0, b1, bm], [1.0, -alpha], own)
+            fric = lfilter([b0, b1, bm], [1.0, -alpha], fric)
+        np.testing.assert_allclose(ch["shock_force_LF"], own, rtol=0, atol=ATOL_FORCE_N)
+        for c, m_u in zip(CORNERS, bumpstop_vehicle.unsprung_mass_kg):
+            balance = (ch[f"tire_force_{c}"] - ch[f"spring_force_{c}"]
+                       - ch[f"shock_force_{c}"] - m_u * ch[f"wheel_accel_{c}"])
+            np.testing.assert_allclose(balance, fric if c == "LF" else 0.0, rtol=0,
+                                       atol=ATOL_FORCE_N, err_msg=c)
+        assert np.abs(fric).max() > 0.99 * FRICTION_N
+    seen = []
+    real_simulate = rig.simulate
+    monkeypatch.setattr(rig, "simulate",
+                        lambda plant, drive, models, **kw: seen.append(models) or
+                        real_simulate(plant, drive, models, **kw))
+    plain = simulate_session(_friction_plan(paper_plan, None), bumpstop_vehicle)
+    zero = simulate_session(_friction_plan(paper_plan, [0.0] * 4), bumpstop_vehicle)
+    for models, run in zip(seen, plain.runs + zero.runs):
+        assert models == [paper_plan.shocks[run.setup[c]] for c in CORNERS]
+    for a, b, f in zip(plain.runs, zero.runs, s.runs):
+        for name, x in a.channels.items():
+            np.testing.assert_array_equal(b.channels[name], x, err_msg=name)
+        # the car feels the friction
+        assert np.abs(f.channels["tire_force_LF"] - a.channels["tire_force_LF"]).max() > 10.0
+
+
+@pytest.mark.parametrize("units", ["SI", "imperial"])
+def test_suspension_friction_key(tmp_path, units, caplog):
+    """``suspension_friction`` at the top of a plan, in the plan's units (a corner left out
+    has none); logged by the rig, not written to the session."""
+    import logging
+
+    from ident.data.session import write_session
+
+    value = "{ LF = 60.0, RR = 45.0 }" if units == "SI" else "{ LF = 13.5, RR = 10.1 }"
+    plan = read_rig_plan(_real_plan(tmp_path / "plan", units=units,
+                                    top=f"suspension_friction = {value}\n", run=""))
+    want = [60.0, 0.0, 0.0, 45.0] if units == "SI" else to_si(
+        np.array([13.5, 0.0, 0.0, 10.1]), "force", "imperial")
+    np.testing.assert_allclose(plan.suspension_friction_n, want, rtol=RTOL_UNITS)
+    with caplog.at_level(logging.INFO, logger="ident.sim.rig"):
+        session = simulate_session(plan)
+    assert any("suspension_friction_LF 60" in r.getMessage() and "_RF 0 N" in r.getMessage()
+               for r in caplog.records)
+    write_session(session, tmp_path / "sess")
+    assert "friction" not in (tmp_path / "sess" / "session.toml").read_text()
+
+
+@pytest.mark.parametrize("change, match", [
+    ({"top": 'suspension_friction = { FL = 50.0 }\n'},
+     r"suspension_friction names unknown corner\(s\) \['FL'\]"),
+    ({"top": 'suspension_friction = { LF = -5.0 }\n'},
+     "suspension_friction LF = -5.0 is not a friction force"),
+    ({"top": 'suspension_friction = 50.0\n'}, "suspension_friction must be a table"),
+    ({"top": "", "run": 'suspension_friction = { LF = 50.0 }\n'},
+     "'suspension_friction' is a key of the plan"),
+])
+def test_bad_suspension_friction(tmp_path, change, match):
+    with pytest.raises(SessionError, match=match):
+        read_rig_plan(_real_plan(tmp_path / "plan", **change))

@@ -671,3 +671,99 @@ def test_cli_whatif_scheduler(tmp_path, short_drive, capsys):
     assert err.startswith("shockplan: error: whatif: scheduler 'nonsense'")
     assert err.count("\n") == 1 and "Traceback" not in err
     assert not (tmp_path / "bad").exists()
+
+
+# ----------------------------------------------------------------------------------------------
+# the real car's elements: packer +-1 mm and bump stop swaps (issue 25)
+# ----------------------------------------------------------------------------------------------
+
+def test_packer_and_bump_stop_factors_are_read(tmp_path):
+    from planner.whatif import read_perturbations
+
+    p = _toml(tmp_path, """
+        format = "shockplan-whatif/1"
+        units = "imperial"
+        [[factor]]
+        name = "front packers"
+        kind = "packer"
+        corners = ["LF", "RF"]
+        levels = [-0.04, 0.04]
+        [[factor]]
+        name = "front stops"
+        kind = "bump_stop"
+        corners = ["LF", "RF"]
+        levels = ["BS-F2", "none"]
+        """)
+    ps = read_perturbations(p)
+    packer, swap = ps.factors
+    assert packer.levels == pytest.approx((-0.04 * 0.0254, 0.04 * 0.0254))
+    assert swap.levels == ("BS-F2", "none") and swap.change == "set"
+    names = [q.name for q in ps.perturbations]
+    assert names == ["nominal", "front packers -1.016 mm", "front packers +1.016 mm",
+                     "front stops = BS-F2", "front stops = none"]
+
+
+@pytest.mark.parametrize("body, match", [
+    ('kind = "bump_stop"\ncorners = ["LF"]\nlevels = [3]', "not a bump-stop id"),
+    ('kind = "bump_stop"\ncorners = ["LF"]\nlevels = ["BS-F"]\n'
+     'distribution = { kind = "uniform", low = 0.0, high = 1.0 }', "distribution"),
+    ('kind = "packer"\naxles = ["front"]\nlevels = [0.001]', "axles"),
+    ('kind = "packer"\ncorners = ["LF"]\nchange = "scale"\nlevels = [1.1]', "change"),
+])
+def test_bad_element_factors_name_the_key(tmp_path, body, match):
+    from planner.whatif import read_perturbations
+
+    text = 'format = "shockplan-whatif/1"\n[[factor]]\nname = "f"\n' + body + "\n"
+    with pytest.raises(PlannerError, match=match):
+        read_perturbations(_toml(tmp_path, text))
+
+
+def test_condition_setups_change_each_setups_packers_and_stops():
+    """A packer change moves each setup's stop contact (a moved stop, the packer kept; also
+    below no packer: the stop's tolerance); a swap replaces the stop; nominal changes
+    nothing."""
+    from ident.models.bumpstops import BumpStop, BumpStopLibrary, CarElements
+    from ident.models.library import ShockLibrary
+    from ident.models.shocks import LinearShock
+    from planner.elements import setup_elements
+    from planner.setups import Setup
+    from planner.whatif.conditions import (
+        ShockVariants,
+        StopVariants,
+        condition_effect,
+        condition_setups,
+    )
+    from planner.whatif.spec import Factor, Perturbation
+
+    lib = ShockLibrary.from_models([LinearShock("B20", 3500.0)])
+    stops = BumpStopLibrary([BumpStop("BS-F", 0.015, [0.0, 0.01], [0.0, 1e3]),
+                             BumpStop("BS-F2", 0.012, [0.0, 0.01], [0.0, 2e3])])
+    car = CarElements(stops, {"LF": "BS-F", "RF": "BS-F"}, {"LF": 0.001, "RF": 0.001}, None)
+    setups = [Setup("a", dict.fromkeys(CORNERS, "B20")),
+              Setup("b", dict.fromkeys(CORNERS, "B20"), packers_m={"LF": 0.0, "RF": 0.0})]
+    resolved = setup_elements(setups, car)
+    packer = Factor("p", "packer", ("LF", "RF"), levels=(0.001,))
+    swap = Factor("s", "bump_stop", ("RF",), levels=("BS-F2",))
+    e = condition_effect(Perturbation("x", {"p": (0.001, 0.001), "s": ("BS-F2",)}),
+                         [packer, swap])
+    moved = StopVariants(stops)
+    got = condition_setups(setups, e, ShockVariants(lib), "0:1", resolved, moved)
+    assert got[0].bump_stops["LF"] == "BS-F~p+1mm" and got[0].packers_m["LF"] == 0.001
+    assert got[0].bump_stops["RF"] == "BS-F2~p+1mm"
+    full = moved.full_library()
+    assert full["BS-F~p+1mm"].gap_m == pytest.approx(0.014)
+    back = setup_elements(got, car, bump_stops=full)
+    # the contact travel: gap - packer - change
+    assert back.tables[0][0][0] == pytest.approx(0.015 - 0.001 - 0.001)
+    assert back.tables[1][1][0] == pytest.approx(0.012 - 0.0 - 0.001)
+    down = condition_effect(Perturbation("y", {"p": (-0.001, -0.001)}), [packer])
+    got = condition_setups(setups, down, ShockVariants(lib), "0:2", resolved, moved)
+    assert setup_elements(got, car, bump_stops=moved.full_library()).tables[1][0][0] == \
+        pytest.approx(0.016)
+    far = condition_effect(Perturbation("z", {"p": (0.02, 0.02)}), [packer])
+    with pytest.raises(PlannerError, match="press on the car at rest"):
+        condition_setups(setups, far, ShockVariants(lib), "0:3", resolved, moved)
+    nominal = condition_effect(Perturbation("nominal", {}), [packer])
+    assert not nominal.changes_elements
+    assert condition_setups(setups, nominal, ShockVariants(lib), "0:0", resolved)[0] \
+        .bump_stops is None

@@ -24,6 +24,13 @@ The checks, per run and corner:
     (:data:`STIFFENING_FORCE_SHARE`). Without those channels the same hinge is fitted to
     the validation residual of the travel (measured less than the model's;
     :data:`STIFFENING_TRAVEL_SHARE`), a weaker check.
+``friction``
+    Suspension friction (bushings, bearings, seals, in parallel with the shock): the same
+    balance regressed on its linear part, the shock velocity and the sign of the shock
+    velocity as the samples see it (:func:`_friction`); reported when significant
+    (:data:`FRICTION_Z`) and large (:data:`FRICTION_FORCE_SHARE`), with the share of time
+    within the sticking band (:data:`FRICTION_BAND_M_S`) and the force [N]. It needs the
+    force channels (no check without them).
 ``lift-off``
     The share of time the contact force is near zero (below :data:`NEAR_ZERO_CONTACT` of
     the static load): ``static + tire_force`` with static loads given, or the channel
@@ -62,9 +69,9 @@ import numpy as np
 import pandas as pd
 
 from ident.data.channels import CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
-from ident.data.drive import Drive
+from ident.data.drive import Drive, decimate_bandlimited
 from ident.data.session import STATIC_OFFSET_SHARE
-from ident.sim.closedloop import simulate
+from ident.sim.closedloop import refine_input, simulate
 
 __all__ = [
     "AMPLITUDE_GROWTH",
@@ -72,6 +79,10 @@ __all__ = [
     "CARRIED_REST_SIGMAS",
     "CONTACT_SHARE_MIN",
     "FINDING_COLUMNS",
+    "FRICTION_BAND_M_S",
+    "FRICTION_FORCE_SHARE",
+    "FRICTION_REFINE",
+    "FRICTION_Z",
     "KINDS",
     "LIFTOFF_SHARE_MIN",
     "NEAR_ZERO_CONTACT",
@@ -87,6 +98,7 @@ __all__ = [
     "channel_noise",
     "diagnose_session",
     "rest_levels",
+    "shock_velocity",
 ]
 
 log = logging.getLogger(__name__)
@@ -94,7 +106,7 @@ log = logging.getLogger(__name__)
 #: Columns of :attr:`Diagnosis.findings`.
 FINDING_COLUMNS = ("run", "corner", "kind", "share", "value", "message", "fix")
 #: The kinds of finding.
-KINDS = ("bump stop contact", "stiffening", "lift-off", "residual", "amplitude")
+KINDS = ("bump stop contact", "stiffening", "lift-off", "friction", "residual", "amplitude")
 
 #: Length of the start and end windows that give a channel's rest level [s]: the drives
 #: fade in and out over 1 s (raised cosine), whose first 0.1 s is below 2.5 % of full level.
@@ -124,6 +136,24 @@ STIFFENING_FORCE_SHARE = 0.2
 #: cars: at most 0.041; stops touched 5-9 %: 0.23-0.68 at the front, but lift-off alone
 #: gives 0.22 at a rear corner, and the onsets scatter (shares 2-50 %): a weaker check.
 STIFFENING_TRAVEL_SHARE = 0.3
+#: The sticking band of the suspension friction [m/s]: the friction changes sign within
+#: +-this shock velocity (or within the velocity's measured noise, where larger: the data
+#: cannot place the reversal closer). 5 mm/s: the virtual rig's smoothing
+#: (:data:`ident.sim.rig.FRICTION_V0_M_S`), below a rig's velocity noise at 2 %.
+FRICTION_BAND_M_S = 0.005
+#: Steps per sample on which the friction's regressor is formed (see :func:`_friction`).
+FRICTION_REFINE = 8
+#: The friction is significant at this many standard errors. Measured on the GT-like cars
+#: at 2 % sensor noise (5 x 100 s, every run and corner): plain, bump stops only, lift-off
+#: only, both: |z| at most 2.7 (one regressor: no search); friction of 15 N per corner:
+#: z 7.9-16, of 100 N: 53-104. Noise-free data make any force significant (the paper car:
+#: up to 67 for forces of 1e-15 of the shock's), so :data:`FRICTION_FORCE_SHARE` decides.
+FRICTION_Z = 6.0
+#: ... and large: the friction at least this share of the shock force's RMS at the
+#: corner. Plain cars: at most 0.0067 (the paper car 2e-15); 15 N: 0.024-0.035; 100 N:
+#: 0.20-0.24. The smallest friction found in every run and corner: 15 N (10 N: z from 5.1,
+#: shares from 0.015).
+FRICTION_FORCE_SHARE = 0.02
 #: Contact counts as near zero below this share of the static load: the acquisition
 #: filter rings below zero at the lift-off edges by up to about 5 % of the static load.
 NEAR_ZERO_CONTACT = 0.05
@@ -134,6 +164,16 @@ LIFTOFF_SHARE_MIN = 1e-3
 #: rests at 0; a tire that carries 3 kN with a dynamic RMS beyond it is off the pad most of
 #: the time).
 CARRIED_REST_SIGMAS = 1.0
+#: Without static loads, lift-off shows as a floor in the tire-force channel (its dynamic
+#: part sits at minus the static load while the tire is off): the samples within this many
+#: standard deviations of the channel's minimum. A Gaussian response puts about 1e-5 of
+#: its samples there, a floor its whole lift-off share; the width covers the acquisition
+#: filter's dip below the floor at the lift-off edges (up to 5 % of the static load, about
+#: 0.15 standard deviations on the GT-like car) and 2 % sensor noise.
+FLOOR_WIDTH_SIGMAS = 0.25
+#: ... and the floor is that many times more crowded than the same band below the
+#: channel's maximum (a bump stop stretches the upper tail, it does not crowd it).
+FLOOR_CROWDING = 5.0
 #: The band of the validation residual [Hz] (the fit's band, :data:`ident.identify.pipeline.
 #: PAPER_WEIGHTS`): outside it the model is not fitted.
 RESIDUAL_BAND_HZ = (0.5, 20.0)
@@ -167,14 +207,17 @@ class Diagnosis:
         .. ``RR``, or ``"all"``), ``kind`` (:data:`KINDS`), ``share`` (share of the
         run's time, 0-1, NaN where not a share), ``value`` (the kind's number: contact
         travel or onset [m] for stops, the smallest contact force [N] for lift-off, the
-        relative residual beyond noise for residuals, its growth for amplitude),
+        friction force [N] for friction, the relative residual beyond noise for
+        residuals, its growth for amplitude),
         ``message`` (what was seen and what it does to the predictions) and ``fix``.
         Empty when nothing was found.
     checks : pandas.DataFrame
         The measured numbers per run and corner, found or not: ``rest`` (``"rest"`` or
         ``"mean"``), ``rest_minus_mean_m`` (travel), ``contact_share`` (declared stop),
         ``stiffening_z``, ``stiffening_onset_m``, ``stiffening_share``,
-        ``stiffening_force_share``, ``liftoff_share``, ``contact_min_n``,
+        ``stiffening_force_share``, ``friction_n``, ``friction_z``, ``friction_share``,
+        ``friction_band_m_s``, ``friction_v_rms_m_s``, ``friction_force_share``,
+        ``liftoff_share``, ``contact_min_n``,
         ``residual_excess``, ``residual_channel``, ``noise`` (relative noise of that
         channel in the band), ``drive_level_m``.
     settings : dict
@@ -351,13 +394,9 @@ def _hinge(x, r, sigma):
     return best
 
 
-def _balance_residual(run, corner, levels, declared_force):
-    """The wheel's force balance beyond the linear part: ``(residual, sigma)`` or None.
-
-    ``tire - spring - shock`` regressed (where the travel is below its median) on the
-    wheel's acceleration, both travels of the axle and a constant; the declared stop's
-    force is taken out first.
-    """
+def _balance_parts(run, corner, levels, declared_force):
+    """The wheel's force balance ``tire - spring - shock`` (less the declared stop's force)
+    and its linear columns: ``(e, X, travel)``, or None without the channels."""
     other = {"LF": "RF", "RF": "LF", "LR": "RR", "RR": "LR"}[corner]
     need = [f"{k}_{corner}" for k in ("tire_force", "spring_force", "shock_force",
                                       "wheel_accel", "shock_travel")]
@@ -371,12 +410,89 @@ def _balance_residual(run, corner, levels, declared_force):
     cols = [ch[f"wheel_accel_{corner}"], s, np.ones_like(s)]
     if f"shock_travel_{other}" in run.channels:
         cols.append(run.channels[f"shock_travel_{other}"] - levels[f"shock_travel_{other}"])
-    X = np.column_stack(cols)
+    return e, np.column_stack(cols), s
+
+
+def _balance_residual(run, corner, levels, declared_force):
+    """The wheel's force balance beyond the linear part: ``(residual, sigma)`` or None.
+
+    ``tire - spring - shock`` regressed (where the travel is below its median) on the
+    wheel's acceleration, both travels of the axle and a constant; the declared stop's
+    force is taken out first.
+    """
+    parts = _balance_parts(run, corner, levels, declared_force)
+    if parts is None:
+        return None
+    e, X, s = parts
     low = s < np.median(s)
     scale = np.maximum(np.abs(X[low]).max(axis=0), 1e-300)
     coef = np.linalg.lstsq(X[low] / scale, e[low], rcond=None)[0] / scale
     r = e - X @ coef
     return r, float(np.std(r[low]))
+
+
+def shock_velocity(run, corner):
+    """A corner's shock velocity [m/s]: the channel, else the travel differentiated.
+
+    Parameters
+    ----------
+    run : ident.data.session.Run
+    corner : str
+
+    Returns
+    -------
+    ndarray, shape (n_samples,), or None
+        ``shock_velocity_XX``, else the central difference of ``shock_travel_XX``
+        (:func:`numpy.gradient` times the sample rate); None without either.
+    """
+    name = f"shock_velocity_{corner}"
+    if name in run.channels:
+        return np.asarray(run.channels[name], dtype=float)
+    travel = run.channels.get(f"shock_travel_{corner}")
+    return None if travel is None else np.gradient(travel) * run.fs_hz
+
+
+def _friction(run, corner, levels, declared_force):
+    """The Coulomb friction the wheel's force balance holds beyond its linear part.
+
+    ``tire - spring - shock`` (less a declared stop) regressed, where the travel is below
+    its median (no bump stop), on the balance's linear columns (:func:`_balance_parts`),
+    the shock velocity (a viscous part: a shock-force gain or a damping the channels miss)
+    and ``tanh(v / band)`` as the samples see it, band the sticking band
+    :data:`FRICTION_BAND_M_S` or the velocity's measured noise if larger. As the samples
+    see it: the velocity interpolated :data:`FRICTION_REFINE` x (band limited), the tanh
+    taken there and decimated back through the band-limited filter; at 100 Hz the
+    velocity moves by about 0.1 m/s per sample, far more than the band, so the sampled
+    friction is a sign smoothed by the acquisition filter, and ``tanh(v / band)`` on the
+    samples themselves would read 100 N as 74 N (measured; matched: 98-99 N). Returns ``dict(friction_n, friction_z,
+    friction_share, friction_band_m_s, friction_v_rms_m_s)`` or None without the
+    channels: ``friction_n`` the tanh's coefficient [N], ``friction_z`` it over its
+    standard error, ``friction_share`` the share of the run's time within the band.
+    """
+    parts = _balance_parts(run, corner, levels, declared_force)
+    v = shock_velocity(run, corner)
+    if parts is None or v is None:
+        return None
+    e, X, s = parts
+    v = v - np.mean(v)
+    band = max(FRICTION_BAND_M_S, channel_noise(v, run.fs_hz))
+    fine = refine_input(v[:, None], FRICTION_REFINE)[:, 0]
+    sign = decimate_bandlimited([np.tanh(fine / band)], FRICTION_REFINE, v.size)[0]
+    low = s < np.median(s)
+    A = np.column_stack([X, v, sign])[low]
+    scale = np.maximum(np.abs(A).max(axis=0), 1e-300)
+    An = A / scale
+    coef = np.linalg.lstsq(An, e[low], rcond=None)[0]
+    res = e[low] - An @ coef
+    dof = max(int(low.sum()) - A.shape[1], 1)
+    sigma = float(np.sqrt(res @ res / dof))
+    cov = np.linalg.pinv(An.T @ An)
+    se = sigma * np.sqrt(max(float(cov[-1, -1]), 0.0))
+    fc = float(coef[-1] / scale[-1])
+    z = fc / (se / scale[-1]) if se > 0 else (np.inf if fc > 0 else 0.0)
+    return {"friction_n": fc, "friction_z": float(z),
+            "friction_share": float(np.mean(np.abs(v) < band)),
+            "friction_band_m_s": float(band), "friction_v_rms_m_s": float(np.std(v))}
 
 
 def _simulate_run(plant, run, session, levels, oversample, failed):
@@ -456,11 +572,30 @@ _EFFECTS = {
                           ("none needed (declared); for a model that rests less on the "
                           "stop, lower the drive level so that it is touched less")),
     "lift-off": (("contact force near zero (below {near:.0f} % of the static load) "
-                 "{share_pct:.1f} % of the time, smallest {value:.0f} N ({how}); the "
-                 "identified model is linear and lets the tire pull on the pad: predicted "
-                 "metrics are off by up to a few per cent (issue 25: 0.2 % median, 2.6 % "
-                 "max at 0.5-1.9 %) unless the static loads are declared"),
+                 "{share_pct:.1f} % of the time, smallest {value:.0f} N ({how}); a linear "
+                 "model lets the tire pull on the pad: without the static loads, predicted "
+                 "metrics are off by up to a few per cent (measured 0.2 % median, 2.6 % max "
+                 "at 0.5-1.9 % of the time off the pads)"),
                  "{fix_static}lower the drive level so that the tires stay on the pads"),
+    "lift-off floor": (("the tire force sits on a floor at {value:.0f} N {share_pct:.1f} % of "
+                       "the time: the tire leaves its pad there (contact zero, the static "
+                       "load about {load:.0f} N); a linear model lets the tire pull on the "
+                       "pad: predicted metrics are off by up to a few per cent (measured "
+                       "0.2 % median, 2.6 % max at 0.5-1.9 % of the time off the pads)"),
+                       "{fix_static}lower the drive level so that the tires stay on the pads"),
+    "friction": (("a force in phase with the sign of the shock velocity, {value:.0f} N "
+                 "beyond the wheel's linear force balance: suspension friction in parallel "
+                 "with the shock (bushings, bearings, seals; the shock's load cell does not "
+                 "see it), the shock within its sticking band (|v| < {band_mm_s:.1f} mm/s) "
+                 "{share_pct:.1f} % of the time; the identified model is linear and holds it "
+                 "as an equivalent damping of about {c_eq:.0f} N/(m/s) at this run's shock "
+                 "velocity ({v_rms:.3f} m/s RMS): low-speed damping is over-estimated for "
+                 "light setups and drives that move the shock faster, under-estimated for "
+                 "stiff ones, and predictions near low shock speeds are less certain"),
+                 ("friction is not a declarable element of the session: measure its "
+                 "breakaway force on the rig with a slow ramp (a few mm/s), lower it "
+                 "(bushings, bearings, seals), or accept it and trust predictions for setups "
+                 "far from the session's shock velocities less")),
     "residual": (("the run re-simulated on the identified model with its own shocks misses "
                  "{value_pct:.0f} % of {channel} in {band} Hz beyond its noise "
                  "({noise_pct:.1f} %): the model does not describe this run, and predictions "
@@ -584,6 +719,18 @@ def diagnose_session(session, model, *, oversample=2, residual=True, plant=None)
                     if z >= STIFFENING_Z and force_share >= limit:
                         findings.append(_finding(run.name, c, "stiffening", share, s0,
                                                  variant=variant, rest=rest_word))
+            # suspension friction: a force in phase with the sign of the shock velocity
+            fr = _friction(run, c, levels, declared_force)
+            if fr is not None:
+                row.update(fr)
+                shock_rms = float(np.std(run.channels[f"shock_force_{c}"]))
+                row["friction_force_share"] = (fr["friction_n"] / shock_rms if shock_rms > 0
+                                               else np.inf)
+                if (fr["friction_z"] >= FRICTION_Z
+                        and row["friction_force_share"] >= FRICTION_FORCE_SHARE):
+                    findings.append(_finding(
+                        run.name, c, "friction", fr["friction_share"], fr["friction_n"],
+                        band=fr["friction_band_m_s"], v_rms=fr["friction_v_rms_m_s"]))
             # lift-off: contact near zero
             if tire_name in run.channels:
                 x = run.channels[tire_name]
@@ -600,6 +747,13 @@ def diagnose_session(session, model, *, oversample=2, residual=True, plant=None)
                     load = levels[tire_name]
                     contact, how = x, ("the tire-force channel carries the static load, "
                                        f"{load:.0f} N at rest")
+                if contact is None:  # no static load known: a floor in the channel
+                    floor = _tire_floor(x)
+                    if floor is not None:
+                        share, level = floor
+                        row["liftoff_share"] = share
+                        findings.append(_finding(run.name, c, "lift-off", share, level,
+                                                 variant="lift-off floor"))
                 if contact is not None:
                     share = float(np.mean(contact < NEAR_ZERO_CONTACT * load))
                     row["liftoff_share"] = share
@@ -643,6 +797,8 @@ def diagnose_session(session, model, *, oversample=2, residual=True, plant=None)
     settings = {"oversample": int(oversample), "residual": bool(residual),
                 "rest_window_s": REST_WINDOW_S, "stiffening_z": STIFFENING_Z,
                 "stiffening_force_share": STIFFENING_FORCE_SHARE,
+                "friction_z": FRICTION_Z, "friction_force_share": FRICTION_FORCE_SHARE,
+                "friction_band_m_s": FRICTION_BAND_M_S,
                 "near_zero_contact": NEAR_ZERO_CONTACT, "liftoff_share_min": LIFTOFF_SHARE_MIN,
                 "contact_share_min": CONTACT_SHARE_MIN, "residual_band_hz": RESIDUAL_BAND_HZ,
                 "residual_excess_max": RESIDUAL_EXCESS_MAX,
@@ -687,8 +843,25 @@ def _amplitude(checks, level_by_run):
     return out
 
 
+def _tire_floor(x):
+    """``(share, level)`` of a floor at the bottom of a dynamic tire-force channel (the tire
+    off its pad, :data:`FLOOR_WIDTH_SIGMAS`, :data:`FLOOR_CROWDING`), or None."""
+    x = np.asarray(x, dtype=float)
+    sd = float(np.std(x))
+    if not sd > 0:
+        return None
+    width = FLOOR_WIDTH_SIGMAS * sd
+    lo, hi = float(x.min()), float(x.max())
+    bottom = float(np.mean(x <= lo + width))
+    top = float(np.mean(x >= hi - width))
+    if bottom < LIFTOFF_SHARE_MIN or bottom < FLOOR_CROWDING * top:
+        return None
+    return bottom, float(np.median(x[x <= lo + width]))
+
+
 def _finding(run, corner, kind, share, value, *, variant=None, rest="rest", how="",
-             given=False, channel="", noise=0.0, low="", low_mm=0.0, high_mm=0.0):
+             given=False, channel="", noise=0.0, low="", low_mm=0.0, high_mm=0.0,
+             band=np.nan, v_rms=np.nan):
     message, fix = _EFFECTS[variant or kind]
     fields = {"value_mm": 1e3 * value if np.isfinite(value) else np.nan, "value": value,
               "rest": rest, "share_pct": 100 * share if np.isfinite(share) else np.nan,
@@ -698,7 +871,10 @@ def _finding(run, corner, kind, share, value, *, variant=None, rest="rest", how=
                                              "at or above zero; to identify cleanly, "),
               "value_pct": 100 * value, "channel": channel, "noise_pct": 100 * noise,
               "band": f"{RESIDUAL_BAND_HZ[0]:g}-{RESIDUAL_BAND_HZ[1]:g}", "low": low,
-              "low_mm": low_mm, "high_mm": high_mm}
+              "low_mm": low_mm, "high_mm": high_mm, "band_mm_s": 1e3 * band,
+              "v_rms": v_rms, "c_eq": (value * np.sqrt(2 / np.pi) / v_rms
+                                       if v_rms > 0 else np.nan),
+              "load": -value if np.isfinite(value) else np.nan}
     fix = fix.format(**fields)
     if kind == "lift-off" and given:
         fix = ("the static loads are declared (the loop keeps the contact); to identify "

@@ -97,6 +97,7 @@ from scipy import signal
 from ident.data.channels import (CORNERS, RESPONSE_CHANNELS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES,
                             rig_inputs_of)
 from ident.errors import IdentificationError, LowCoherenceWarning
+from ident.identify.diagnose import rest_levels
 from ident.models.lti import lag_coefficients
 from ident.models.shocks import LinearShock
 
@@ -110,6 +111,7 @@ __all__ = [
     "estimate_frf",
     "frf_from_arrays",
     "shock_force_deviation",
+    "bump_stop_force",
     "baseline_damping",
     "default_nperseg",
     "ESTIMATORS",
@@ -778,6 +780,80 @@ def shock_force_deviation(run, shocks, cbar_n_s_m, *, exact_linear=True):
     return F, dF
 
 
+def bump_stop_force(run, library):
+    """The declared bump stops' force of one run, from its measured shock travel.
+
+    The stop of corner ``c`` pushes with ``G_c(s_c)`` (its table beyond the contact travel
+    ``gap - packer``, :meth:`ident.models.bumpstops.BumpStop.force`), ``s_c`` the shock
+    travel (compression positive) from the car at rest. The rest comes from the data
+    (:func:`ident.identify.diagnose.rest_levels`: the drives are tapered, so the car is at
+    rest at the start of a run; else at its end; else the run's mean).
+
+    Parameters
+    ----------
+    run : ident.data.session.Run
+        Needs ``shock_travel_XX`` at every corner with a stop.
+    library : ident.models.bumpstops.BumpStopLibrary or None
+        The session's bump stops.
+
+    Returns
+    -------
+    force : ndarray, shape (4, n_samples), or None
+        The stop forces [N] (0 at corners without a stop and out of contact; not
+        mean-removed); None when the run has no stop (or no library).
+    info : dict or None
+        ``rest`` (``"rest (start)"``, ``"rest (end)"`` or ``"mean"``),
+        ``rest_minus_mean_m`` (corner -> the travel's rest level less its mean [m]) and
+        ``contact_share`` (corner -> share of samples beyond contact) of the corners
+        with a stop; None with `force`.
+
+    Raises
+    ------
+    IdentificationError
+        If a corner with a stop has no ``shock_travel_XX`` channel.
+    """
+    if library is None or all(run.bump_stops.get(c) is None for c in CORNERS):
+        return None, None
+    levels, used = rest_levels(run)
+    G = np.zeros((4, run.n_samples))
+    info = {"rest": used, "rest_minus_mean_m": {}, "contact_share": {}}
+    for i, c in enumerate(CORNERS):
+        sid = run.bump_stops.get(c)
+        if sid is None:
+            continue
+        name = f"shock_travel_{c}"
+        if name not in run.channels:
+            raise IdentificationError(
+                f"run '{run.name}': corner {c} has bump stop {sid!r} but no {name} channel; "
+                "the stop's force is computed from the measured shock travel: record "
+                f"{name}, or remove the run's bump_stops {c}")
+        stop = library.get(sid, where=f"run '{run.name}' bump_stops {c}")
+        packer = float(run.packers_m.get(c, 0.0))
+        x = run.channels[name]
+        travel = x - levels[name]
+        G[i] = stop.force(travel, packer)
+        info["rest_minus_mean_m"][c] = levels[name] - float(np.mean(x))
+        info["contact_share"][c] = float(np.mean(travel > stop.contact_travel_m(packer)))
+    log.info("run %s: bump-stop force from the travel measured from %s (rest less mean: %s); "
+             "contact %s", run.name, used,
+             ", ".join(f"{c} {v * 1e3:+.2f} mm" for c, v in info["rest_minus_mean_m"].items()),
+             ", ".join(f"{c} {v * 100:.1f} %" for c, v in info["contact_share"].items()))
+    return G, info
+
+
+def _stop_deviations(session, runs):
+    """Per run the dynamic part (mean removed) of the declared stops' force, or None, and
+    the settings that record how it was computed (empty without stops)."""
+    library = getattr(session, "bump_stops", None)
+    out, info = [], {}
+    for run in runs:
+        G, inf = bump_stop_force(run, library)
+        out.append(None if G is None else G - G.mean(axis=1, keepdims=True))
+        if inf is not None:
+            info[run.name] = inf
+    return out, ({"bump_stop_force": info} if info else {})
+
+
 def _is_cbar_linear(model, cbar):
     """True if a shock model is linear with rate ``cbar`` (relative 1e-9) and has no lag."""
     return (isinstance(model, LinearShock) and model.lag_s == 0
@@ -914,7 +990,12 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
         (module notes) and ``settings`` holds
         ``estimator``, ``lpm_degree``, ``lpm_half_width``, ``lpm_rows``,
         ``lpm_unknowns``, ``lpm_dof`` (residual degrees of freedom),
-        ``lpm_coherence_dof``, ``resolution_hz`` (per run).
+        ``lpm_coherence_dof``, ``resolution_hz`` (per run). A session that declares
+        bump stops has their force in the ``dF`` of the corners that have one
+        (:func:`bump_stop_force`: the table at the travel measured from the car at rest),
+        so that the estimate is of the car without them; ``settings["bump_stop_force"]``
+        then says per run where the rest was taken, the rest less the mean travel and
+        the share of time in contact.
 
     Raises
     ------
@@ -962,8 +1043,11 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
         return _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, lpm_degree, lpm_half_width,
                                  lpm_coherence_dof, exact_linear)
     per_run = []
-    for run in session.runs:
+    stop_dev, stop_settings = _stop_deviations(session, session.runs)
+    for run, G in zip(session.runs, stop_dev):
         _, dF = shock_force_deviation(run, session.shocks, cbar, exact_linear=exact_linear)
+        if G is not None:
+            dF = dF + G  # the stops' force is part of the corner's input (issue 25)
         x = np.vstack([np.vstack([run.dynamic(c) for c in rig]), dF,
                        np.vstack([run.dynamic(o) for o in outs])])
         f, X = block_spectra(x, fs=fs, window=window, nperseg=nperseg, noverlap=noverlap)
@@ -975,7 +1059,7 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     settings = {"estimator": "welch", "exact_linear": bool(exact_linear), "method": method,
                 "window": window, "nperseg": nperseg,
                 "noverlap": noverlap, "runs": [r.name for r in session.runs],
-                "band_hz": tuple(band_hz)}
+                "band_hz": tuple(band_hz), **stop_settings}
     band = (f >= band_hz[0]) & (f <= band_hz[1])
     Suu = sum(pr[1] for pr in per_run)
     Suy = sum(pr[2] for pr in per_run)
@@ -1020,8 +1104,11 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
     runs = list(session.runs)
     n_samples = [r.n_samples for r in runs]
     records, dF_pow = [], []
-    for run in runs:
+    stop_dev, stop_settings = _stop_deviations(session, runs)
+    for run, G in zip(runs, stop_dev):
         _, dF = shock_force_deviation(run, session.shocks, cbar, exact_linear=exact_linear)
+        if G is not None:
+            dF = dF + G  # the stops' force is part of the corner's input (issue 25)
         records.append(np.vstack([np.vstack([run.dynamic(c) for c in rig]), dF,
                                   np.vstack([run.dynamic(o) for o in outs])]))
         dF_pow.append(np.mean(dF**2, axis=1))
@@ -1040,7 +1127,7 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
     _warn_flagged(session, flagged, band, band_hz, stacklevel=3)
     settings = _lpm_settings(nperseg, fs, degree, half_width, dof, coherence_dof, n_samples, m)
     settings.update(method="global", runs=[r.name for r in runs], band_hz=tuple(band_hz),
-                    exact_linear=bool(exact_linear))
+                    exact_linear=bool(exact_linear), **stop_settings)
     return Frf(f_hz=f, H=H, input_names=inputs, output_names=outs,
                multiple_coherence=mult, partial_coherence=partial, input_condition=cond,
                independent_fraction=indep, flagged=flagged, n_averages=coherence_dof + m,

@@ -37,6 +37,7 @@ from ident.data.files import atomic_path, write_csv
 from ident.errors import ModelFileError
 from ident.identify.condition import conditioned_standard_error
 from ident.identify.frf import Frf
+from ident.models.bumpstops import CarElements
 from ident.models.lti import GRAM_FACTOR_RTOL, LoopPlant, ModalSystem, balanced_reduce
 
 __all__ = [
@@ -126,7 +127,8 @@ class VehicleModel:
     frf : Frf or None
         The conditioned FRF the model was fitted to (with ``H_raw`` and coherence).
     settings : dict
-        How the model was made (fit method, weights, orders, session).
+        How the model was made (fit method, weights, orders, session); ``"elements"``
+        the declared bump stops and static loads (:attr:`elements`).
     noise_level : ndarray or None, shape (n_out, n_in)
         Relative noise of each pair's conditioned FRF over the fitted lines
         (:func:`ident.identify.pipeline.pair_noise_level`): the fit error a perfect
@@ -150,6 +152,15 @@ class VehicleModel:
     settings: dict = field(default_factory=dict)
     noise_level: np.ndarray | None = None
     _plants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @property
+    def elements(self):
+        """CarElements or None: The bump stops, the baseline's stops and packers and the
+        static corner loads the session declared (``settings["elements"]``, written by
+        :func:`ident.identify.pipeline.identify_session`; saved and loaded with the model);
+        None for a model identified without any."""
+        doc = self.settings.get("elements")
+        return None if doc is None else CarElements.from_dict(doc)
 
     @property
     def rig_inputs(self):
@@ -379,7 +390,8 @@ class VehicleModel:
         unknown), ``status`` (``fit``; ``zero`` for a pair fitted as zero because nothing in it is
         above the noise; ``noise-limited`` for a fit whose error is at the
         noise level and above :data:`NOISE_LIMITED`) and ``noise_bands_hz``
-        (:meth:`noise_bands`, as text).
+        (:meth:`noise_bands`, as text). ``attrs["elements"]`` says which bump stops and
+        static loads the model was identified with (:meth:`CarElements.describe`).
         """
         import pandas as pd
 
@@ -402,7 +414,11 @@ class VehicleModel:
                              "noise_level": noise, "status": status,
                              "noise_bands_hz": " ".join(f"{a:.2f}-{b:.2f}"
                                                         for a, b in bands.get((out, inp), []))})
-        return pd.DataFrame(rows)
+        table = pd.DataFrame(rows)
+        elements = self.elements
+        table.attrs["elements"] = (elements.describe() if elements is not None else
+                                   "no bump stops or static loads declared")
+        return table
 
     def noise_bands(self, *, max_rel_error=NOISE_BAND_REL_ERROR, min_width_hz=0.2,
                     floor_db=-40.0):

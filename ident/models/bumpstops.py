@@ -62,6 +62,7 @@ __all__ = [
     "PACKER_GAP_ATOL_M",
     "BumpStop",
     "BumpStopLibrary",
+    "CarElements",
     "check_packer",
     "contact_tables",
     "parse_bump_stop_id",
@@ -841,3 +842,135 @@ def contact_tables(stops, packers_m=None, *, where="", error=BumpStopError):
         p = check_packer(stop, float(p), label, error=error)
         out.append((max(stop.gap_m - p, 0.0), stop.travel_m, stop.force_n))
     return None if all(t is None for t in out) else tuple(out)
+
+
+# ----------------------------------------------------------------------------
+# CarElements
+# ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class CarElements:
+    """The real car's declared elements an identified model carries (issue 25).
+
+    What a session declares beyond the shocks, kept with the model it identified so that
+    predictions put the same elements in the loop: the bump-stop library, the baseline
+    run's stops and packers, and the tires' static loads.
+
+    Parameters
+    ----------
+    bump_stops : BumpStopLibrary or None
+        The session's bump-stop library (None: none declared).
+    baseline_stops : dict of str to (str or None)
+        Corner -> bump-stop id of the baseline run (None: no stop there); every corner.
+    baseline_packers_m : dict of str to float
+        Corner -> packer thickness [m] of the baseline run; every corner (0: none).
+    static_corner_load_n : ndarray, shape (4,), or None
+        Static corner loads [N] (LF, RF, LR, RR), or None (not declared).
+
+    Raises
+    ------
+    BumpStopError
+        If a baseline stop is not in the library, or a packer is negative or thicker than
+        its stop's gap.
+    TypeError
+        If `bump_stops` is not a library.
+
+    Examples
+    --------
+    >>> lib = BumpStopLibrary([BumpStop("BS-F", 0.006, [0.0, 0.01], [0.0, 1000.0])])
+    >>> el = CarElements(lib, {"LF": "BS-F", "RF": "BS-F"}, {"LF": 0.001})
+    >>> el.baseline_stops["LR"], el.baseline_packers_m["LF"]
+    (None, 0.001)
+    >>> CarElements.from_dict(el.to_dict()).to_dict() == el.to_dict()
+    True
+    """
+
+    bump_stops: BumpStopLibrary | None = None
+    baseline_stops: dict = field(default_factory=lambda: dict.fromkeys(CORNERS))
+    baseline_packers_m: dict = field(default_factory=lambda: dict.fromkeys(CORNERS, 0.0))
+    static_corner_load_n: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.bump_stops is not None and not isinstance(self.bump_stops, BumpStopLibrary):
+            raise TypeError(f"CarElements: bump_stops must be a BumpStopLibrary or None, got "
+                            f"{type(self.bump_stops).__name__}")
+        stops = dict.fromkeys(CORNERS)
+        stops.update({c: v for c, v in (self.baseline_stops or {}).items()})
+        packers = dict.fromkeys(CORNERS, 0.0)
+        packers.update({c: float(v) for c, v in (self.baseline_packers_m or {}).items()})
+        for c in stops:
+            if c not in CORNERS:
+                raise BumpStopError(f"CarElements: baseline_stops has corner {c!r}; corners "
+                                    f"are {list(CORNERS)}")
+            sid = stops[c]
+            if sid is None:
+                continue
+            if self.bump_stops is None:
+                raise BumpStopError(f"CarElements: baseline_stops {c} = {sid!r} but no "
+                                    "bump-stop library is given; give bump_stops")
+            check_packer(self.bump_stops.get(sid, where=f"CarElements baseline_stops {c}"),
+                         packers.get(c, 0.0), f"CarElements corner {c}")
+        object.__setattr__(self, "baseline_stops", stops)
+        object.__setattr__(self, "baseline_packers_m", packers)
+        if self.static_corner_load_n is not None:
+            loads = np.array(self.static_corner_load_n, dtype=float).reshape(-1)
+            if loads.size != len(CORNERS) or not np.all(np.isfinite(loads)):
+                raise BumpStopError(f"CarElements: static_corner_load_n must be 4 finite loads "
+                                    f"[N] (LF, RF, LR, RR), got {self.static_corner_load_n!r}")
+            loads.flags.writeable = False
+            object.__setattr__(self, "static_corner_load_n", loads)
+
+    def baseline_tables(self):
+        """The baseline stops in the loop's form (:func:`contact_tables`), or None."""
+        if self.bump_stops is None:
+            return None
+        stops = [None if self.baseline_stops[c] is None else
+                 self.bump_stops[self.baseline_stops[c]] for c in CORNERS]
+        return contact_tables(stops, [self.baseline_packers_m[c] for c in CORNERS],
+                              where="baseline")
+
+    def describe(self):
+        """One line for a model's summary: what the model was identified with."""
+        parts = []
+        if self.bump_stops is not None:
+            st = ", ".join(f"{c} {self.baseline_stops[c]}"
+                           + (f" (packer {_mm_in(self.baseline_packers_m[c])})"
+                              if self.baseline_packers_m[c] else "")
+                           for c in CORNERS if self.baseline_stops[c] is not None)
+            parts.append(f"bump stops {list(self.bump_stops.ids)} declared; baseline: "
+                         f"{st or 'none fitted'}")
+        if self.static_corner_load_n is not None:
+            parts.append("static corner loads " + ", ".join(
+                f"{c} {v:.0f} N" for c, v in zip(CORNERS, self.static_corner_load_n)))
+        return "; ".join(parts) if parts else "no bump stops or static loads declared"
+
+    def to_dict(self):
+        """JSON-able dict (SI): ``bump_stops`` (list of stop tables or None),
+        ``baseline_stops``, ``baseline_packers_m``, ``static_corner_load_n`` (list or None)."""
+        return {"bump_stops": None if self.bump_stops is None else
+                [self.bump_stops[i].to_toml_dict("SI") for i in self.bump_stops.ids],
+                "baseline_stops": dict(self.baseline_stops),
+                "baseline_packers_m": {c: float(v) for c, v in self.baseline_packers_m.items()},
+                "static_corner_load_n": None if self.static_corner_load_n is None else
+                [float(v) for v in self.static_corner_load_n]}
+
+    @classmethod
+    def from_dict(cls, d):
+        """The elements :meth:`to_dict` wrote.
+
+        Raises
+        ------
+        BumpStopError
+            If a stop's table is invalid or a key is missing (the dict names the fix).
+        """
+        if not isinstance(d, Mapping):
+            raise BumpStopError(f"CarElements.from_dict: a dict is needed, got "
+                                f"{type(d).__name__}")
+        lib = d.get("bump_stops")
+        if lib is not None:
+            lib = BumpStopLibrary([BumpStop(t["id"], t["gap"], t["travel"], t["force"],
+                                            description=t.get("description", ""))
+                                   for t in lib])
+        return cls(lib, d.get("baseline_stops") or {}, d.get("baseline_packers_m") or {},
+                   d.get("static_corner_load_n"))

@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import logging
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Mapping
 
 import numba as _nb
@@ -63,8 +63,8 @@ from ident.data.drive import FIR_HALF_LENGTH, check_drive_inputs, resample_bandl
 from ident.models.lti import (hold_coefficients, join_inputs, lag_coefficients,
                               lag_hold_coefficients)
 from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, loop_batch, loop_elements_batch,
-                                    loop_elements_serial, loop_metrics_worker, loop_serial,
-                                    rig_kernel)
+                                    loop_elements_serial, loop_metrics_elements_worker,
+                                    loop_metrics_worker, loop_serial, rig_kernel)
 from ident.sim.metrics import METRIC_CHANNELS, compute_metrics, metric_plan
 
 __all__ = [
@@ -539,7 +539,8 @@ class BatchMetrics:
     newton_iterations : ndarray of int, shape (n_setups,)
         Largest Newton iteration count per setup.
     settings : dict
-        ``oversample``, ``plant``, ``drive``.
+        ``oversample``, ``plant``, ``drive`` (and ``bump_stops``, ``static_corner_load_n``
+        when given, as :attr:`BatchResponse.settings`).
     """
 
     metrics: object
@@ -549,7 +550,8 @@ class BatchMetrics:
 
 
 def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, rig=None,
-                           band_hz=(1.0, 20.0), order=4, static_loads_n=None, split_hz=None):
+                           band_hz=(1.0, 20.0), order=4, static_loads_n=None, split_hz=None,
+                           bump_stops=None, static_corner_load_n=None):
     """The metrics of several shock setups in closed loop, without keeping their responses.
 
     The numbers of :func:`ident.sim.metrics.compute_metrics` on the channels of
@@ -569,6 +571,14 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
         As :func:`simulate_batch`; the metrics are those of `outputs` (default all).
     band_hz, order, static_loads_n, split_hz
         As :func:`ident.sim.metrics.compute_metrics`.
+    bump_stops, static_corner_load_n
+        As :func:`simulate_batch` (`bump_stops` one entry per setup). The metrics then
+        also hold :attr:`BatchResponse.elements`' values (:data:`ELEMENT_STATS`, after
+        the band-passed ones): ``bump_stop_contact_share_XX`` for every corner with a
+        stop in any setup, ``tire_contact_min_XX`` [N] and ``tire_liftoff_share_XX`` for
+        every corner with a static load. `static_loads_n` (normalized tire forces) and
+        `static_corner_load_n` (lift-off) are the same car's numbers, given separately.
+        ``None`` (default): today's path, the same numbers.
 
     Returns
     -------
@@ -579,24 +589,35 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     ValueError
         As :func:`simulate_batch` and :func:`ident.sim.metrics.compute_metrics`.
     """
-    loop = _loop_setup(plant, drive, setups, oversample, outputs, rig, "simulate_batch_metrics")
+    where = "simulate_batch_metrics"
+    loop = _loop_setup(plant, drive, setups, oversample, outputs, rig, where)
     plan = metric_plan(loop.names, loop.rig.fs_hz, band_hz=band_hz, order=order,
                        static_loads_n=static_loads_n, split_hz=split_hz)
+    el = None
+    if bump_stops is not None or static_corner_load_n is not None:
+        el = _element_args(plant, loop, bump_stops, static_corner_load_n, where)
     filters = [plan.filter(b) for b in plan.bands.values()]
     S, N = len(loop.models), loop.rig.n_samples
     if not plan.names or N <= filters[0][1]:
         # no metric, or a record too short for the filter: the two steps (the second
         # raises the filter's error, naming the channel)
-        batch = _batch_response(plant, drive, loop)
+        if el is None:
+            batch = _batch_response(plant, drive, loop)
+        else:
+            batch = _element_response(plant, drive, loop, bump_stops, static_corner_load_n,
+                                      where)
         met = compute_metrics(batch.channels, fs=batch.fs_hz, band_hz=band_hz, order=order,
                               static_loads_n=static_loads_n, split_hz=split_hz)
+        if batch.elements:
+            met = replace(met, values={**met.values, **batch.elements})
         return BatchMetrics(metrics=met, setups=batch.setups,
                             newton_iterations=batch.newton_iterations, settings=batch.settings)
     # the metrics' signals as the product's rows: a channel's row of the output matrix,
     # the mean of two rows for a ride height of two corners; the shock velocities are the
     # loop's own (appended after the rows)
-    Cout, y_rig = loop.cout, loop.y_rig
+    Cout, y_rig = (loop.cout if el is None else el.cout), loop.y_rig
     cols, rig_cols, lanes = [], [], []
+    tf_rows = np.full(4, -1, dtype=np.int64)
     for name in plan.names:
         chans = METRIC_CHANNELS[name]
         if len(chans) == 1 and chans[0] in SHOCK_VELOCITIES:
@@ -606,6 +627,8 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
         cols.append(Cout[:, idx].mean(axis=1))
         rig_cols.append(y_rig[:, idx].mean(axis=1))
         lanes.append(len(cols) - 1)
+        if len(chans) == 1 and kind_of(chans[0]) == "tire_force":
+            tf_rows[CORNERS.index(chans[0][-2:])] = len(cols) - 1
     p_red = len(cols)
     ia = np.array([i if i >= 0 else p_red + (-1 - i) for i in lanes], dtype=np.int64)
     c_red = np.ascontiguousarray(np.stack(cols, axis=1) if cols else np.zeros((Cout.shape[0], 0)))
@@ -615,24 +638,39 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     zi = np.ascontiguousarray(np.stack([f[2] for f in filters]), dtype=float)
     out = np.empty((S, len(filters), len(plan.names)))
     iters = np.zeros(S, dtype=np.int64)
-    n_workers = min(S, int(_nb.config.NUMBA_NUM_THREADS))
-    args = (*loop.args[:-1], c_red, y_rig_red, N, ia, sos, zi, int(filters[0][1]), out,
-            iters)
-    if n_workers == 1:
-        loop_metrics_worker(0, 1, *args)
+    tail = (N, ia, sos, zi, int(filters[0][1]), out, iters)
+    if el is None:
+        _run_workers(loop_metrics_worker, S, (*loop.args[:-1], c_red, y_rig_red) + tail)
     else:
-        # threads, not a parallel kernel: the worker releases the GIL, compiles in a third of
-        # the time a prange kernel of it takes, and starts no OpenMP pool (a process forked
-        # after one cannot use it)
-        with ThreadPoolExecutor(n_workers) as pool:
-            for job in [pool.submit(loop_metrics_worker, w, n_workers, *args)
-                        for w in range(n_workers)]:
-                job.result()
+        stats = np.zeros((S, 3, 4))
+        _run_workers(loop_metrics_elements_worker, S,
+                     (*el.kernel_args(loop, c_red), tf_rows, el.max_iter, y_rig_red) + tail
+                     + (stats,))
     _check_converged(plant, iters)
     rms = {name + suffix: out[:, b, i] for b, suffix in enumerate(plan.bands)
            for i, name in enumerate(plan.names)}
-    return BatchMetrics(metrics=plan.assemble(rms), setups=tuple(tuple(m) for m in loop.models),
-                        newton_iterations=iters, settings=loop.settings(drive))
+    met = plan.assemble(rms)
+    settings = loop.settings(drive)
+    if el is not None:
+        met = replace(met, values={**met.values, **el.values(stats, N)})
+        settings = el.settings(loop, drive)
+    return BatchMetrics(metrics=met, setups=tuple(tuple(m) for m in loop.models),
+                        newton_iterations=iters, settings=settings)
+
+
+def _run_workers(worker, n_setups, args):
+    """Run the fused metrics `worker` on ``min(n_setups, numba's threads)`` threads: worker
+    ``w`` of ``n`` takes the setups ``w, w + n, ...``."""
+    n_workers = min(n_setups, int(_nb.config.NUMBA_NUM_THREADS))
+    if n_workers == 1:
+        worker(0, 1, *args)
+        return
+    # threads, not a parallel kernel: the worker releases the GIL, compiles in a third of
+    # the time a prange kernel of it takes, and starts no OpenMP pool (a process forked
+    # after one cannot use it)
+    with ThreadPoolExecutor(n_workers) as pool:
+        for job in [pool.submit(worker, w, n_workers, *args) for w in range(n_workers)]:
+            job.result()
 
 
 @dataclass(frozen=True, eq=False)
@@ -942,9 +980,79 @@ def _corner_rows(plant, kind, where, why):
     return [plant.output_names.index(n) for n in names]
 
 
-def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, where):
-    """:func:`simulate_batch` with bump stops and/or static loads (the elements' kernels)."""
-    S, N = len(loop.models), loop.rig.n_samples
+def _physical_same_step(extra):
+    """The travel's same-step weights with the sign physics gives them (issue 25).
+
+    A force in compression cannot add compression within the step: ``Dt[c, c] <= 0`` (the
+    physical GT car: -0.045 / 600 kN/m at oversample 2; models identified from clean
+    sessions: -0.03 to -0.07). The travel rows from ``dF`` have no feedthrough, and an
+    identified model's weight over one internal step is the fit's behaviour far outside
+    the fitted band: a model identified from a session whose stops and lift-off were not
+    declared had +0.3 to +2.4 (x 1 / 600 kN/m), which makes the step's bump-stop equation
+    ``G = g(s_free + Dt G)`` have no root (a loop gain above 1 within the step: "Newton's
+    method did not converge"). Such a corner's same-step travel weights (``Dt`` and
+    ``Dtw`` rows) are set to 0: its stop is evaluated at the travel from the state
+    (explicit there; 5.1e-4 of the metrics at oversample 2 on the physical car, against
+    4.7e-4 implicit). Rows of physical sign are kept as they are (the same numbers).
+    """
+    if not extra:
+        return extra
+    *head, Dt, Dtw, Dvw, Dcf, Dcw = extra
+    bad = np.diag(Dt) > 0.0
+    if bad.any():
+        Dt, Dtw = Dt.copy(), Dtw.copy()
+        Dt[bad] = 0.0
+        Dtw[bad] = 0.0
+    return (*head, Dt, Dtw, Dvw, Dcf, Dcw)
+
+
+@dataclass(frozen=True, eq=False)
+class _Elements:
+    """The elements' kernel arguments for a batch (:func:`_element_args`).
+
+    ``modal`` and ``cout`` replace the plain loop's (with lift-off the shock part has the
+    wheelloader inputs joined, and ``cout`` the ``w`` rows); ``args`` runs from ``Bwr`` to
+    ``static`` of :func:`ident.sim.loop_kernels.loop_one_elements`' batch kernels; ``on``
+    (n_setups, 4) and ``lo_on`` (4,) say where there are stops and static loads."""
+
+    modal: tuple
+    cout: np.ndarray
+    args: tuple
+    on: np.ndarray
+    lo_on: np.ndarray
+    static: np.ndarray
+
+    def kernel_args(self, loop, cout):
+        """The batch kernels' arguments up to ``static`` with the output rows `cout`."""
+        packed = loop.args[len(self.modal) + 2:-2]  # the setups' curves (see _loop_setup)
+        return (*self.modal, loop.rig.v_fine, loop.args[len(self.modal) + 1], *packed,
+                loop.oversample, cout, *self.args)
+
+    @property
+    def max_iter(self):
+        return ELEMENT_MAX_ITERATIONS if _ELEMENT_IMPLICIT else 1
+
+    def settings(self, loop, drive):
+        """The batch's settings with the elements'."""
+        return dict(loop.settings(drive), bump_stops=bool(self.on.any()),
+                    static_corner_load_n=None if not self.lo_on.any() else self.static.tolist())
+
+    def values(self, stats, n_samples):
+        """:attr:`BatchResponse.elements` from the kernels' ``stats`` (n_setups, 3, 4)."""
+        elements = {}
+        for c, corner in enumerate(CORNERS):
+            if self.on[:, c].any():
+                elements[f"bump_stop_contact_share_{corner}"] = stats[:, 0, c] / max(n_samples, 1)
+            if self.lo_on[c]:
+                elements[f"tire_liftoff_share_{corner}"] = stats[:, 1, c] / max(n_samples, 1)
+                elements[f"tire_contact_min_{corner}"] = np.maximum(stats[:, 2, c], 0.0)
+        return elements
+
+
+def _element_args(plant, loop, bump_stops, static_corner_load_n, where):
+    """Check the bump stops (one entry per setup) and static loads and build the elements'
+    kernel arguments for the batch `loop` (:func:`_loop_setup`): an :class:`_Elements`."""
+    S = len(loop.models)
     if bump_stops is None:
         bump_stops = [None] * S
     bump_stops = list(bump_stops)
@@ -972,6 +1080,7 @@ def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, wher
         w_out = np.array(ms.D[oi][:, 4:], dtype=float)
         w_out[[kind_of(n) == "ride_height" for n in loop.names]] = 0.0
     modal, Cout, extra = _modal_args(ms, vi, oi, h, erows=erows, w_out=w_out)
+    extra = _physical_same_step(extra)
     # the element rows' rig-input part on the internal grid
     key = tuple(int(i) for i in erows)
     e_rig = loop.rig.element_rows.get(key)
@@ -979,18 +1088,23 @@ def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, wher
         mr = plant.rig.select(outputs=np.concatenate([vi, erows])).pruned()
         _, e_y = _rig_outputs(mr, h, loop.rig.u_fine, 1)
         e_rig = loop.rig.element_rows[key] = np.ascontiguousarray(e_y.T)
+    args = (*extra[:4], e_rig, *extra[4:], on, s0, bx, bf, bn, bslope,
+            np.repeat(lo_on[None], S, axis=0), np.repeat(static[None], S, axis=0))
+    return _Elements(modal=modal, cout=Cout, args=args, on=on, lo_on=lo_on, static=static)
+
+
+def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, where):
+    """:func:`simulate_batch` with bump stops and/or static loads (the elements' kernels)."""
+    S, N = len(loop.models), loop.rig.n_samples
+    el = _element_args(plant, loop, bump_stops, static_corner_load_n, where)
     tf_rows = np.array([loop.names.index(f"tire_force_{c}") if f"tire_force_{c}" in loop.names
                         else -1 for c in CORNERS], dtype=np.int64)
-    packed = loop.args[len(modal) + 2:-2]  # the setups' curves (see _loop_setup)
-    r = loop.oversample
     y = np.empty((S, len(loop.names), N))
     F = np.empty((S, N, 4))
     iters = np.zeros(S, dtype=np.int64)
     stats = np.zeros((S, 3, 4))
-    args = (*modal, loop.rig.v_fine, _writable(plant.cbar_n_s_m), *packed, r, Cout, *extra[:4],
-            e_rig, *extra[4:], on, s0, bx, bf, bn, bslope,
-            np.repeat(lo_on[None], S, axis=0), np.repeat(static[None], S, axis=0), tf_rows,
-            ELEMENT_MAX_ITERATIONS if _ELEMENT_IMPLICIT else 1, loop.y_rig, y, F, iters, stats)
+    args = (*el.kernel_args(loop, el.cout), tf_rows, el.max_iter, loop.y_rig, y, F, iters,
+            stats)
     if S == 1:
         loop_elements_serial(*args)
     else:
@@ -999,18 +1113,9 @@ def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, wher
     channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
     for c, name in enumerate(SHOCK_FORCES):
         channels[name] = F[:, :, c]
-    elements = {}
-    for c, corner in enumerate(CORNERS):
-        if on[:, c].any():
-            elements[f"bump_stop_contact_share_{corner}"] = stats[:, 0, c] / max(N, 1)
-        if lo_on[c]:
-            elements[f"tire_liftoff_share_{corner}"] = stats[:, 1, c] / max(N, 1)
-            elements[f"tire_contact_min_{corner}"] = np.maximum(stats[:, 2, c], 0.0)
-    settings = dict(loop.settings(drive), bump_stops=any_bs,
-                    static_corner_load_n=None if not any_lo else static.tolist())
     return BatchResponse(channels=channels, fs_hz=loop.rig.fs_hz,
                          setups=tuple(tuple(m) for m in loop.models), newton_iterations=iters,
-                         settings=settings, elements=elements)
+                         settings=el.settings(loop, drive), elements=el.values(stats, N))
 
 
 #: Solve bump stops and lift-off within the step (True); False evaluates the bump stop at

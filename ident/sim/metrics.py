@@ -85,6 +85,11 @@ for _suffix in ("",) + BAND_SUFFIXES:
                             for name, chans in METRIC_CHANNELS.items()})
     METRIC_QUANTITY.update({f"{name}{_suffix}": "dimensionless" for name in _NORM_NAMES})
 del _suffix
+#: The closed loop's element metrics (bump stops and tire lift-off, issue 25; not band-passed:
+#: :data:`ident.sim.closedloop.ELEMENT_STATS`), per corner.
+METRIC_QUANTITY.update({f"bump_stop_contact_share_{c}": "dimensionless" for c in CORNERS})
+METRIC_QUANTITY.update({f"tire_liftoff_share_{c}": "dimensionless" for c in CORNERS})
+METRIC_QUANTITY.update({f"tire_contact_min_{c}": "force" for c in CORNERS})
 
 
 @dataclass(frozen=True)
@@ -99,7 +104,11 @@ class Metrics:
         the normalized tire forces ``tire_force_rms_norm_XX``, then the same
         with the suffix ``_body`` and then ``_wheelhop`` when `split_hz` is
         set. A float for signals of shape ``(n_samples,)``; an array of the
-        leading shape for batched signals of shape ``(..., n_samples)``.
+        leading shape for batched signals of shape ``(..., n_samples)``. The closed
+        loop with bump stops or static loads
+        (:func:`ident.sim.closedloop.simulate_batch_metrics`) appends its element
+        metrics: ``bump_stop_contact_share_XX``, ``tire_liftoff_share_XX`` (0-1) and
+        ``tire_contact_min_XX`` [N].
     band_hz : tuple of float
         The band-pass edges (low, high) [Hz].
     order : int

@@ -24,6 +24,13 @@ library (``bump_stop_library``), fit bump stops and packers per run (``bump_stop
 ``packers``) and give the tires' static loads (``static_corner_load``: the tires may then
 leave the pads). The loop then carries the stops' forces and the lift-off, and the
 session written records what was fitted, as a real rig's session would.
+
+Suspension friction (``suspension_friction``, optional): a Coulomb friction per corner in
+parallel with the shock (bushings, bearings, seals), ``F = F_c tanh(v / v0)``
+(:data:`FRICTION_V0_M_S`) at the shock velocity: the chassis and the tire feel it, the
+shock's load cell does not (``shock_force_XX`` stays the shock's own force). It is the
+car's undeclared truth: the session written does not record it (the rig logs it per
+corner), and ``identify`` finds it (:mod:`ident.identify.diagnose`, kind ``friction``).
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.signal import lfilter
 
 from ident.data.channels import (ALL_CHANNELS, CORNERS, RESPONSE_KINDS, RIG_INPUTS, RIG_KINDS,
                                  WHEELLOADER_INPUTS, kind_of)
@@ -48,7 +56,8 @@ from ident.errors import BumpStopError, DriveError, SessionError, ShockModelErro
 from ident.models.bumpstops import (BumpStopLibrary, check_packer, contact_tables,
                                     parse_bump_stop_id, read_bump_stops)
 from ident.models.library import read_shock_library
-from ident.models.shocks import is_real_number
+from ident.models.lti import lag_hold_coefficients
+from ident.models.shocks import PiecewiseLinear, is_real_number
 from ident.models.vehicle import build_full_car, example_vehicle
 from ident.sim.closedloop import refine_input, simulate
 
@@ -61,6 +70,10 @@ __all__ = [
     "simulate_session",
     "DEFAULT_PLAN_PATH",
     "NOMINAL_V_RMS_M_S",
+    "FRICTION_V0_M_S",
+    "FRICTION_KNOTS",
+    "friction_force",
+    "check_suspension_friction",
     "loop_damping",
 ]
 
@@ -70,6 +83,18 @@ DEFAULT_PLAN_PATH = Path(__file__).parents[1] / "examples" / "paper_plan.toml"
 #: Shock-velocity RMS at which the loop's baseline damping is linearized [m/s].
 #: Any value gives the same closed loop; a typical one keeps the feedback small.
 NOMINAL_V_RMS_M_S = 0.1
+
+#: Velocity scale [m/s] of the suspension friction ``F = F_c tanh(v / v0)``. A true Coulomb
+#: step is ill posed in the loop (at rest any force within +-F_c: sticking) and its slope
+#: infinite; smoothed over 5 mm/s, the curve's steepest slope (F_c / v0: 20 kN/(m/s) at
+#: 100 N) is of the order of a shock's low-speed damping, so Newton's method keeps
+#: converging, while the band stays below a rig's measured velocity noise (2 % of 0.1-0.3
+#: m/s RMS: 2-6 mm/s), where the data cannot tell it from a step.
+FRICTION_V0_M_S = 0.005
+#: Knots of the friction curve in the loop's piecewise-linear form, in units of
+#: :data:`FRICTION_V0_M_S`: the tanh interpolated at 0.25 v0 steps (within 0.6 % of F_c),
+#: constant beyond +-4 v0 (``tanh 4``: 0.07 % short of F_c).
+FRICTION_KNOTS = np.linspace(-4.0, 4.0, 33)
 
 _DRIVE_KINDS = ("noise", "sweep", "track", "multisine")
 #: The rigs a plan may name (key ``rig``): a 4-post rig has no aero actuators.
@@ -240,6 +265,10 @@ class RigPlan:
     bump_stops : ident.models.bumpstops.BumpStopLibrary or None
         The bump stops the runs name (an iterable of ``BumpStop`` is made a library).
         None: no run may name one.
+    suspension_friction_n : array_like, shape (4,), mapping or None
+        Coulomb friction ``F_c`` per corner [N] (LF, RF, LR, RR; a mapping may leave a
+        corner out: 0), in parallel with the shock in every run (:func:`friction_force`);
+        stored as a read-only array. None (or all 0): none, the loop of before.
     """
 
     name: str
@@ -256,6 +285,7 @@ class RigPlan:
     rig: str = "7-post"
     static_corner_load_n: object = None
     bump_stops: object = None
+    suspension_friction_n: object = None
 
     def __post_init__(self):
         if self.rig not in RIG_KINDS:
@@ -265,6 +295,8 @@ class RigPlan:
             self.static_corner_load_n, f"rig plan {self.name!r}"))
         if self.bump_stops is not None and not isinstance(self.bump_stops, BumpStopLibrary):
             object.__setattr__(self, "bump_stops", BumpStopLibrary(self.bump_stops))
+        object.__setattr__(self, "suspension_friction_n", check_suspension_friction(
+            self.suspension_friction_n, f"rig plan {self.name!r}"))
 
     @property
     def aero(self):
@@ -306,12 +338,12 @@ def _noise_group(channel):
 #: silently fall back to a default).
 _PLAN_KEYS = ("format", "name", "units", "shock_library", "fs_hz", "duration_s", "oversample",
               "seed", "noise", "input_noise", "channel_noise", "rig", "drive", "run",
-              "bump_stop_library", "static_corner_load")
+              "bump_stop_library", "static_corner_load", "suspension_friction")
 _PLAN_RUN_KEYS = ("name", "setup", "role", "seed", "duration_s", "drive", "bump_stops",
                   "packers")
 #: Plan keys that a TOML file gives to the table above them when written below one, and
 #: the run keys that belong in a [[run]]: refused with where they go.
-_PLAN_ONLY_KEYS = ("bump_stop_library", "static_corner_load")
+_PLAN_ONLY_KEYS = ("bump_stop_library", "static_corner_load", "suspension_friction")
 _RUN_ONLY_KEYS = ("bump_stops", "packers")
 
 
@@ -325,6 +357,125 @@ def _check_misplaced(table, where, *, plan_keys, run_keys):
         if run_keys and key in _RUN_ONLY_KEYS:
             raise SessionError(f"{where}: {key!r} is a key of a run (what was fitted on "
                                "that run); move it into each [[run]] that has it")
+
+
+def check_suspension_friction(value, where, *, key="suspension_friction_n", unit="N"):
+    """The friction per corner as a plan holds it, or raise.
+
+    Parameters
+    ----------
+    value : mapping of str to float, array_like, shape (4,), or None
+        ``{LF = ..., ...}`` (a corner left out: 0) or 4 values in corner order.
+    where : str
+        The plan, put first in messages.
+    key : str
+        The key named in messages.
+    unit : str
+        The unit of `value` named in messages (values are returned as given).
+
+    Returns
+    -------
+    ndarray, shape (4,), or None
+        Read-only; None for None.
+
+    Raises
+    ------
+    SessionError
+        On an unknown corner, not 4 values, or a value that is not a finite number >= 0.
+    """
+    if value is None:
+        return None
+    if isinstance(value, dict):
+        unknown = [c for c in value if c not in CORNERS]
+        if unknown:
+            raise SessionError(f"{where}: {key} names unknown corner(s) {unknown}; the "
+                               f"corners are {', '.join(CORNERS)}")
+        vals = [value.get(c, 0.0) for c in CORNERS]
+    elif isinstance(value, str) or not hasattr(value, "__len__") or len(value) != 4:
+        raise SessionError(f"{where}: {key} must be a table {{ LF = ..., RF = ..., LR = ..., "
+                           f"RR = ... }} of friction forces ({unit}), got {value!r}")
+    else:
+        vals = list(value)
+    for c, f in zip(CORNERS, vals):
+        if not is_real_number(f) or not np.isfinite(f) or f < 0:
+            raise SessionError(f"{where}: {key} {c} = {f!r} is not a friction force; give a "
+                               f"number >= 0 ({unit}, 0 = none)")
+    out = np.array(vals, dtype=float)
+    out.flags.writeable = False
+    return out
+
+
+def friction_force(v_m_s, friction_n):
+    """The suspension friction at a shock velocity, as the virtual rig's loop applies it.
+
+    Parameters
+    ----------
+    v_m_s : array_like, any shape
+        Shock velocity [m/s], compression positive.
+    friction_n : float
+        Coulomb force ``F_c`` [N] (>= 0).
+
+    Returns
+    -------
+    ndarray, same shape as `v_m_s`
+        ``F_c tanh(v / v0)`` (:data:`FRICTION_V0_M_S`) interpolated at
+        :data:`FRICTION_KNOTS`, constant beyond them [N]: the loop's piecewise-linear
+        curve, exactly.
+
+    Examples
+    --------
+    >>> friction_force([-1.0, 0.0, 0.005], 100.0).round(1).tolist()
+    [-99.9, 0.0, 76.2]
+    """
+    pwl = _friction_pwl(friction_n)
+    return np.asarray(pwl.force(v_m_s), dtype=float)
+
+
+def _friction_pwl(friction_n):
+    v = FRICTION_KNOTS * FRICTION_V0_M_S
+    return PiecewiseLinear(v, friction_n * np.tanh(FRICTION_KNOTS), 0.0, 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class _ShockWithFriction:
+    """A shock and the suspension friction in parallel, as the loop takes a shock: one
+    force-velocity curve (the shock's plus the friction's, exact on the union of their
+    knots) behind the shock's lag (see :func:`simulate_session`'s notes)."""
+
+    shock: object
+    friction_n: float
+
+    @property
+    def lag_s(self):
+        return self.shock.lag_s
+
+    @property
+    def id(self):
+        return getattr(self.shock, "id", None)
+
+    def to_pwl(self):
+        shock = self.shock.to_pwl()
+        friction = _friction_pwl(self.friction_n)
+        v = np.union1d(shock.v_knots_m_s, friction.v_knots_m_s)
+        return PiecewiseLinear(v, shock.force(v) + friction.force(v),
+                               shock.slope_below + friction.slope_below,
+                               shock.slope_above + friction.slope_above)
+
+
+def _shock_own_force(resp, models, friction_n, h):
+    """``shock_force_XX`` of a response with friction: the solved total less the friction
+    at the solved velocity, behind the shock's lag as the loop applied it (the lag's
+    recursion is linear: the total's is the shock's plus the friction's)."""
+    channels = dict(resp.channels)
+    for c, mdl, fc in zip(CORNERS, models, friction_n):
+        if fc <= 0:
+            continue
+        f = friction_force(channels[f"shock_velocity_{c}"], fc)
+        if mdl.lag_s > 0:
+            alpha, b0, b1, bm = (float(x) for x in lag_hold_coefficients(mdl.lag_s, h))
+            f = lfilter([b0, b1, bm], [1.0, -alpha], f)
+        channels[f"shock_force_{c}"] = channels[f"shock_force_{c}"] - f
+    return channels
 
 
 def _read_plan_bump_stops(doc, folder, where):
@@ -437,7 +588,9 @@ def read_rig_plan(path):
     unknown id or corner, a bump stop without a library, a packer that is negative or
     thicker than its stop's gap, static loads that are not 4 positive numbers, and
     these keys where TOML put them by mistake (a plan key below ``[drive]`` or a
-    ``[[run]]``, a run key at the top).
+    ``[[run]]``, a run key at the top). ``suspension_friction = { LF = ..., ... }`` (N or
+    lbf, a corner left out has none; at the top too): a Coulomb friction in parallel with
+    each corner's shock, the car's undeclared truth (not written to the session).
     """
     path = Path(path)
     where = str(path)
@@ -467,6 +620,11 @@ def read_rig_plan(path):
         static = to_si(check_static_corner_loads(static, where, key="static_corner_load",
                                                  unit=UNIT_LABELS[units]["force"]),
                        "force", units)
+    friction = doc.get("suspension_friction")
+    if friction is not None:
+        friction = to_si(check_suspension_friction(friction, where, key="suspension_friction",
+                                                   unit=UNIT_LABELS[units]["force"]),
+                         "force", units)
     rig = doc.get("rig", "7-post")
     if rig not in RIG_KINDS:
         close = difflib.get_close_matches(str(rig), RIG_KINDS, n=1)
@@ -540,7 +698,8 @@ def read_rig_plan(path):
                    input_noise=_noise_num(doc, "input_noise", where),
                    channel_noise=_parse_channel_noise(doc.get("channel_noise", {}),
                                                       f"{where}: [channel_noise]"),
-                   rig=rig, static_corner_load_n=static, bump_stops=bump_stops)
+                   rig=rig, static_corner_load_n=static, bump_stops=bump_stops,
+                   suspension_friction_n=friction)
 
 
 #: Keys of ``[channel_noise]`` besides the canonical channels.
@@ -773,6 +932,17 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
     ``static + tire_force_XX`` (exactly ``-static`` while a tire is off its pad, up to
     the acquisition filter's ringing at the edges). ``shock_force_XX`` is the shock's
     alone (the bump stop's force is not in it, as on a real shock's load cell).
+
+    Suspension friction (:attr:`RigPlan.suspension_friction_n`) is simulated exactly as
+    one force-velocity curve with the shock (:func:`friction_force` added to the shock's
+    curve on the union of their knots); ``shock_force_XX`` is the solved total less the
+    friction at the solved shock velocity, the shock's own force to rounding. The loop
+    puts the shock's lag on the whole curve, so behind a shock with a lag (the paper's
+    N8: 4 ms) the friction lags too: its force builds over the lag after a reversal, like
+    the pre-sliding of a real bushing or seal (a Dahl-type friction), and the recorded
+    shock force takes the lagged friction out (the lag is linear), so it stays exact.
+    The friction is logged per corner (``suspension_friction_XX``) and not recorded in
+    the session (the car's undeclared truth).
     """
     plan = default_plan() if plan is None else plan
     vehicle = example_vehicle() if vehicle is None else vehicle
@@ -811,15 +981,26 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
             fine = fine_drives[key] = _fine_drive(drive, plan.oversample)
         jobs.append((pr, drive, plant, fine, models, stops))
 
+    friction = plan.suspension_friction_n
+    if friction is not None and not np.any(friction > 0):
+        friction = None
+    if friction is not None:
+        log.info("suspension friction (not recorded in the session): %s", ", ".join(
+            f"suspension_friction_{c} {f:.4g} N" for c, f in zip(CORNERS, friction)))
+
     def run_one(job):
         pr, drive, plant, fine, models, stops = job
-        resp = simulate(plant, fine, models, oversample=1, bump_stops=stops,
+        loop_models = models if friction is None else [
+            m if f <= 0 else _ShockWithFriction(m, float(f)) for m, f in zip(models, friction)]
+        resp = simulate(plant, fine, loop_models, oversample=1, bump_stops=stops,
                         static_corner_load_n=plan.static_corner_load_n)
         if resp.elements:
             log.info("run %s: %s", pr.name, ", ".join(f"{k} {v:.4g}"
                                                       for k, v in resp.elements.items()))
-        return resp.newton_iterations, _daq_sample(resp.channels, plan.oversample,
-                                                   drive.n_samples)
+        channels = resp.channels
+        if friction is not None:
+            channels = _shock_own_force(resp, models, friction, 1.0 / fine.fs_hz)
+        return resp.newton_iterations, _daq_sample(channels, plan.oversample, drive.n_samples)
 
     # the runs on threads (the compiled loop and rig response release the GIL, and a run
     # is one setup: the loop itself is serial); each run's numbers do not depend on it

@@ -9,6 +9,12 @@ iterate and the scan's best in the time domain
 (:func:`planner.predict.predict_setups`) and keeps the best, and maps the
 optimum to the crate (the nearest setups and the crate's best).
 :func:`compile_curves` compiles a problem's step functions ahead.
+
+With the real car's elements (issue 25): bump stops in the optimizer's loop
+and in every verification, packers as decision variables per corner group
+(IPOPT's variables after the curves', bounded), and static loads for lift-off
+in the verification (the objective's limits on ``tire_liftoff_share_XX`` and
+``tire_contact_min_XX`` are held there; IPOPT's loop has no lift-off).
 """
 
 from __future__ import annotations
@@ -24,9 +30,11 @@ from scipy import optimize as sopt
 
 from ident.data.channels import CORNERS
 from ident.data.drive import Drive
+from ident.models.bumpstops import BumpStop, check_packer
 from ident.models.library import ShockLibrary
-from ident.sim.closedloop import simulate
+from ident.sim.closedloop import corner_values, simulate
 from ident.sim.metrics import METRIC_NAMES
+from planner.elements import model_setup_elements
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
 from planner.optimize.cache import jit_available
@@ -44,7 +52,13 @@ from planner.optimize.knots import (
     velocity_range,
 )
 from planner.optimize.loop import LoopModel
-from planner.optimize.scan import scan_curves, time_domain_scores
+from planner.optimize.scan import (
+    element_predictions,
+    is_element_metric,
+    linear_objective,
+    scan_curves,
+    time_domain_scores,
+)
 from planner.optimize.solve import Evaluator, OptimizeWarning, solve_problem
 from planner.optimize.space import CurveSpace, curve_space, symmetry_groups
 from planner.predict import as_loop_plant, predict_setups, prepare_drive
@@ -55,6 +69,7 @@ from planner.uncertainty import prediction_uncertainty
 __all__ = [
     "KNOT_UPDATE_RTOL",
     "MULTI_START_ITER",
+    "PACKER_SCALE_M",
     "CurveOptimum",
     "optimize_curves",
     "compile_curves",
@@ -71,6 +86,9 @@ KNOT_UPDATE_RTOL = 0.1
 #: ``max_iter``; a further one refines a different shape (about 0.5 s an iteration on a 120 s
 #: drive), so the call stays within 1.5 times a single start's time (bench_optimize).
 MULTI_START_ITER = 10
+#: Scale of a packer decision variable [m] in IPOPT (1 mm: the curves' variables are scaled
+#: to order 1 as well).
+PACKER_SCALE_M = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,13 +141,20 @@ class CurveOptimum:
     constraints : CurveConstraints
     objective : planner.objective.Objective
     baseline : planner.setups.Setup
+    packers_m : dict of str -> float
+        The chosen packer [m] per group given in ``packers`` (empty without).
+    bump_stops : tuple or None
+        The optimum's bump stops in the loop's form (the car's, shortened by the chosen
+        packers), as its verification simulated them; None without stops.
     settings : dict
         The call's settings and what the run decided: ``knots_m_s`` and
         ``rebound_knots_m_s`` (the knots used [m/s]), ``v_range_m_s`` (the
         baseline's 99 % shock speeds, rebound and bump), ``scan``
         (:meth:`ScanResult.summary`), ``envelope_n`` (``lo`` and ``hi``, the
         least and greatest force [N] the constraints allow at each group's
-        knots, :func:`~planner.optimize.constraints.constraint_envelope`), ...
+        knots, :func:`~planner.optimize.constraints.constraint_envelope`), and with
+        the car's elements ``bump_stops`` (True), ``packers`` (the bounds [m] per group)
+        and ``static_corner_load_n`` [N] ...
     """
 
     x: np.ndarray
@@ -149,6 +174,8 @@ class CurveOptimum:
     objective: object
     baseline: object
     settings: dict = field(default_factory=dict)
+    packers_m: dict = field(default_factory=dict)
+    bump_stops: tuple | None = None
 
     @property
     def score(self):
@@ -170,12 +197,155 @@ class CurveOptimum:
                 f"curves from what the crate already does; relax them{note}")
 
 
+@dataclass(frozen=True, eq=False)
+class _Elements:
+    """The car's elements of an optimization (checked): its stops in the loop's form, the
+    packer variables (groups, bounds [m], per corner the variable's index) and the static
+    loads. Inactive (all None): the optimization without elements, unchanged."""
+
+    stops: list | None = None
+    groups: tuple = ()
+    bounds: tuple = ()
+    index: list | None = None
+    static: list | None = None
+
+    @property
+    def active(self):
+        return self.stops is not None or self.static is not None
+
+    @property
+    def n_packers(self):
+        return len(self.groups)
+
+    @property
+    def start(self):
+        """The packers' start: the stops as given (0) where the bounds allow, [m]."""
+        return np.array([min(max(0.0, lo), hi) for lo, hi in self.bounds])
+
+    def stops_at(self, p):
+        """The stops with packers `p` [m] (shape (n_packers,)) in the loop's form."""
+        if self.stops is None or not self.n_packers:
+            return self.stops
+        return [None if st is None else
+                (st[0] - (float(p[self.index[c]]) if self.index[c] is not None else 0.0),
+                 st[1], st[2]) for c, st in enumerate(self.stops)]
+
+    def rows(self, A, b):
+        """The linear constraints `A`, `b` of the curves with the packers' bounds."""
+        k = self.n_packers
+        if not k:
+            return A, b
+        lo = np.array([a for a, _ in self.bounds])
+        hi = np.array([h for _, h in self.bounds])
+        A2 = np.block([[A, np.zeros((A.shape[0], k))],
+                       [np.zeros((k, A.shape[1])), np.eye(k)],
+                       [np.zeros((k, A.shape[1])), -np.eye(k)]])
+        return A2, np.concatenate([b, hi, -lo])
+
+    def extend(self, x):
+        """A curve vector with the packers' start appended."""
+        return np.concatenate([x, self.start]) if self.n_packers else x
+
+    def clip(self, p):
+        return np.array([min(max(float(v), lo), hi) for v, (lo, hi) in zip(p, self.bounds)])
+
+    def verify(self, p, names):
+        """``time_domain_scores``' element arguments: setups `names` with packers `p`, the
+        others with the car's stops."""
+        if not self.active:
+            return {}
+        own = None if self.stops is None else {n: self.stops_at(p) for n in names}
+        return {"bump_stops": self.stops, "setup_stops": own,
+                "static_corner_load_n": self.static}
+
+
+def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective):
+    """The checked elements of :func:`optimize_curves` (:class:`_Elements`)."""
+    where = "optimize"
+    stops = None
+    if bump_stops is not None:
+        vals = corner_values(bump_stops, f"{where}: bump_stops", "bump stops")
+        stops = []
+        for c, st in zip(CORNERS, vals):
+            if st is None:
+                stops.append(None)
+                continue
+            try:
+                s0, x, f = st
+            except (TypeError, ValueError):
+                raise TypeError(f"{where}: bump_stops at {c}: a stop is (contact_travel_m, "
+                                f"travel_table_m, force_table_n) or None, got "
+                                f"{type(st).__name__}") from None
+            # the stop checks itself (a table that falls, a negative gap: BumpStopError)
+            stop = BumpStop(c, float(s0), x, f)
+            stops.append((stop.gap_m, stop.travel_m, stop.force_n))
+        if all(st is None for st in stops):
+            stops = None
+        else:
+            names = [f"shock_travel_{c}" for c in CORNERS]
+            missing = [n for n in names if n not in plant.output_names]
+            if missing:
+                raise PlannerError(f"{where}: bump_stops need the model's outputs {missing}; "
+                                   f"model {plant.name!r} has none of them: identify it with "
+                                   "the shock travel channels, or leave bump_stops out")
+    groups, bounds, index = [], [], None
+    if packers:
+        if stops is None:
+            raise PlannerError(f"{where}: packers {dict(packers)} given without bump stops; "
+                               "give bump_stops (the car's stops), or leave packers out")
+        known = {name: corners for name, corners in space.groups}
+        index = [None] * 4
+        for name, bound in dict(packers).items():
+            if name not in known:
+                raise PlannerError(f"{where}: packers: unknown group {name!r}; with symmetry "
+                                   f"{space.symmetry!r} the groups are {list(known)}")
+            try:
+                lo, hi = (float(v) for v in bound)
+            except (TypeError, ValueError):
+                raise PlannerError(f"{where}: packers[{name!r}] = {bound!r}; give the bounds "
+                                   "(min_m, max_m), e.g. (0.0, 0.006)") from None
+            if not lo <= hi:
+                raise PlannerError(f"{where}: packers[{name!r}]: the lower bound {lo!r} m "
+                                   f"is above the upper {hi!r} m")
+            for c in known[name]:
+                k = CORNERS.index(c)
+                if stops[k] is None:
+                    raise PlannerError(f"{where}: packers[{name!r}]: corner {c} has no bump "
+                                       "stop; give its stop in bump_stops, or leave the "
+                                       "group's packers out")
+                stop = BumpStop(c, stops[k][0], stops[k][1], stops[k][2])
+                for v in (lo, hi):  # a packer thicker than the gap is refused here
+                    check_packer(stop, v, f"{where}: packers[{name!r}] at {c}",
+                                 error=PlannerError)
+                index[k] = len(groups)
+            groups.append(name)
+            bounds.append((lo, hi))
+    static = None
+    if static_corner_load_n is not None:
+        vals = corner_values(static_corner_load_n, f"{where}: static_corner_load_n",
+                             "static_corner_load_n")
+        static = [None if v is None else float(v) for v in vals]
+    need_static = [m for m in objective.limits if is_element_metric(m)
+                   and not m.startswith("bump_stop") and static is None]
+    need_stops = [m for m in objective.limits if m.startswith("bump_stop_contact")
+                  and stops is None]
+    if need_static or need_stops:
+        raise PlannerError(f"{where}: objective {objective.name!r} limits "
+                           f"{need_static + need_stops}, which only a loop with the car's "
+                           "elements gives; give static_corner_load_n (lift-off, contact) "
+                           "or bump_stops (contact share)")
+    return _Elements(stops=stops, groups=tuple(groups), bounds=tuple(bounds), index=index,
+                     static=static)
+
+
 def _check_objective(objective):
     objective = default_objective() if objective is None else objective
     if not isinstance(objective, Objective):
         raise TypeError(f"objective must be a planner.objective.Objective, got "
                         f"{type(objective).__name__}")
-    other = [m for m in objective.metrics if m not in METRIC_NAMES]
+    # element statistics (lift-off, contact) as limits only: held in the verification
+    other = [m for m in objective.metrics if m not in METRIC_NAMES
+             and not (is_element_metric(m) and m not in objective.weights)]
     if other:
         raise PlannerError(f"objective {objective.name!r}: optimize works on the spec's metrics "
                            f"{list(METRIC_NAMES)}; {other} are not among them (normalized and "
@@ -214,7 +384,9 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
                     symmetry="left-right", knots_m_s=QUANTILE_KNOTS, linear=False,
                     constraints=None, lag_s=None, drive_weights=None, aggregate="sum",
                     robust=False, oversample=2, max_iter=80, n_starts=2, n_closest=5,
-                    jit=None, stationarity=True, progress=False):
+                    jit=None, stationarity=True, progress=False, bump_stops=None,
+                    packers=None, static_corner_load_n=None, elements=True,
+                    bump_stop_library=None):
     """The best force-velocity curve per corner group (see the module docstring).
 
     Parameters
@@ -276,6 +448,32 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     stationarity : bool
         Report the effect of moving each knot force by +-5 % (time domain).
     progress : bool
+    bump_stops : sequence of 4 or mapping, optional
+        The car's bump stops in the loop's form (per corner None or
+        ``(contact_travel_m, travel_table_m, force_table_n)``,
+        :func:`ident.models.bumpstops.contact_tables`). The optimizer's loop adds each
+        corner's stop force at the model's ``shock_travel_XX`` (its kinks rounded,
+        :data:`planner.optimize.loop.STOP_SMOOTHING_M`; solved with the shocks within the
+        step), and every verification simulates with them; the screening of the scan sees
+        the car without them. Default: none (the loop unchanged).
+    packers : mapping of str -> (float, float), optional
+        Packers as decision variables: per corner group (``space.groups`` of the
+        symmetry, e.g. ``{"front": (0.0, 0.006), "rear": (0.0, 0.006)}``) the bounds [m]
+        of a packer that shortens the contact travel of `bump_stops` at the group's
+        corners (``s0 - packer``). IPOPT starts from the stops as given (0, within the
+        bounds); the chosen packers are ``packers_m`` of the result and the optimum is
+        verified with them (the baseline and the crate with the stops as given).
+    static_corner_load_n : array_like, shape (4,) or mapping, optional
+        Static tire loads [N]: the verification simulates tire lift-off, and the
+        objective may limit ``tire_liftoff_share_XX`` and ``tire_contact_min_XX`` (the
+        verification holds such limits; IPOPT's loop has no lift-off).
+    elements : bool
+        True (default): without `bump_stops` and `static_corner_load_n`, the model's own
+        (an identified model of a session that declared them, ``model.elements``: the
+        baseline's stops and packers, the static loads,
+        :func:`planner.elements.model_setup_elements`). False: the car without them.
+    bump_stop_library : ident.models.bumpstops.BumpStopLibrary, optional
+        Replaces the model's library where its elements are used (``--bump-stops``).
 
     Returns
     -------
@@ -284,7 +482,9 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     Raises
     ------
     PlannerError
-        On constraints no curve meets (naming them), an objective with
+        On packers thicker than a stop's contact travel, for a group without stops or
+        without bump stops, bump stops on a model without ``shock_travel_XX``;
+        on constraints no curve meets (naming them), an objective with
         metrics other than the spec's, an unknown baseline shock, a bad
         symmetry, aggregate or weights; drive errors as :mod:`planner.predict`.
     TypeError
@@ -306,14 +506,27 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     need = rows[0]
     weights = _weights(drive_weights, drives)
     constraints = _check_constraints_arg(constraints)
+    if elements is not False and bump_stops is None and static_corner_load_n is None:
+        own = model_setup_elements([base], model, elements=elements, where="optimize",
+                                   bump_stops=bump_stop_library)
+        if own is not None:
+            bump_stops, static_corner_load_n = own.tables[0], own.static_corner_load_n
+    elements = _elements(plant, space, bump_stops, packers, static_corner_load_n, objective)
     # the baseline's (verified) values per drive of the metrics the objective needs
-    m_base = [predict_setups(model, d, [base], library, oversample=oversample).table.loc[
-        base.name, need].to_numpy(float) for d in drives]
+    if elements.active:
+        m_base = [element_predictions(model, d, [base], library, [elements.stops],
+                                      oversample=oversample,
+                                      static_corner_load_n=elements.static).loc[
+            base.name, need].to_numpy(float) for d in drives]
+    else:
+        m_base = [predict_setups(model, d, [base], library, oversample=oversample,
+                                 elements=False).table.loc[
+            base.name, need].to_numpy(float) for d in drives]
 
     # the global stage (the knots moved once onto the scan's best curve's speeds)
     space, A_lin, b_lin, scan, x0, knot_log = _start(
         model, plant, drives, library, space, constraints, base, objective, weights, aggregate,
-        oversample, _quantile_knots(knots_m_s))
+        oversample, _quantile_knots(knots_m_s), elements)
 
     # scaling of the decision variables: forces by c_bar |v|, slopes by c_bar
     cbar = float(np.mean(plant.cbar_n_s_m))
@@ -331,11 +544,19 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         tight = _robust_factors(model, drives, library, space, x0, base, need)
     C, kinds = score_rows(objective, need, m_base, tight)
     t_build = time.perf_counter()
-    models_cl = [LoopModel(plant, d, space, rows, oversample, jit) for d in drives]
-    ev = Evaluator(models_cl, space.expansion(), scale, C)
+    models_cl = [LoopModel(plant, d, space, rows, oversample, jit, bump_stops=elements.stops,
+                           packer_index=elements.index) for d in drives]
+    T = space.expansion()
+    A_opt, b_opt = elements.rows(A_lin, b_lin)
+    if elements.n_packers:  # the packers after the curves' variables
+        k = elements.n_packers
+        T = np.block([[T, np.zeros((T.shape[0], k))], [np.zeros((k, T.shape[1])), np.eye(k)]])
+        scale = np.concatenate([scale, np.full(k, PACKER_SCALE_M)])
+    x0 = elements.extend(x0)
+    ev = Evaluator(models_cl, T, scale, C)
     build_s = time.perf_counter() - t_build
-    x_opt, solver, history = solve_problem(ev, space, kinds, weights, aggregate, A_lin,
-                                           b_lin, x0 / scale, scale, max_iter, progress)
+    x_opt, solver, history = solve_problem(ev, space, kinds, weights, aggregate, A_opt,
+                                           b_opt, x0 / scale, scale, max_iter, progress)
     # multi-start: from the best verified scan curve of the other kind (linear or two-slope),
     # a short solve; its result and best iterate join the verification
     extra, starts = [], [{"start": "scan best", "iterations": solver["iterations"],
@@ -344,8 +565,9 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     if others:
         history = history.assign(start=1)
     for label, xs in others:
-        x_k, solver_k, hist_k = solve_problem(ev, space, kinds, weights, aggregate, A_lin,
-                                              b_lin, xs / scale, scale,
+        xs = elements.extend(xs)
+        x_k, solver_k, hist_k = solve_problem(ev, space, kinds, weights, aggregate, A_opt,
+                                              b_opt, xs / scale, scale,
                                               min(max_iter, MULTI_START_ITER), progress)
         extra.append((f"start {len(starts) + 1}", x_k))
         solver["iterates"] += solver_k.pop("iterates")
@@ -365,10 +587,10 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
                                            "knots": ("quantiles" if _quantile_knots(knots_m_s)
                                                      else "fixed"),
                                            "robust": bool(robust), "max_iter": max_iter,
-                                           "x_start": x0.tolist(),
+                                           "x_start": x0[:space.n_vars].tolist(),
                                            "limit_factors": tight.tolist(),
                                            "scan": None if scan is None else scan.summary()},
-                   scan=scan, extra=extra)
+                   scan=scan, extra=extra, elements=elements)
 
 
 def _other_starts(scan, n):
@@ -415,7 +637,7 @@ def _linear_rows(space, constraints, library):
 
 
 def _start(model, plant, drives, library, space, constraints, base, objective, weights,
-           aggregate, oversample, quantile_knots):
+           aggregate, oversample, quantile_knots, elements=_Elements()):
     """The global stage: IPOPT's curve space, constraints, scan and start.
 
     The scan (:func:`planner.optimize.scan.scan_curves`) screens linear and
@@ -433,8 +655,12 @@ def _start(model, plant, drives, library, space, constraints, base, objective, w
     space, A_lin, b_lin, scan, x0, knot_log
     """
     A_lin, b_lin = _linear_rows(space, constraints, library)
+    # the scan's candidates verified with the packers' start (the stops as given)
+    el = {} if not elements.active else {
+        "bump_stops": elements.stops_at(elements.start),
+        "static_corner_load_n": elements.static}
     scan = scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin, base,
-                       objective, weights, aggregate, oversample=oversample)
+                       objective, weights, aggregate, oversample=oversample, **el)
     log = {"baseline_knots_m_s": _bump_knots(space),
            "baseline_rebound_knots_m_s": _bump_knots(space, -1),
            "baseline_v_range_m_s": list(space.v_range_m_s), "moved": 0.0, "updated": False}
@@ -456,7 +682,7 @@ def _start(model, plant, drives, library, space, constraints, base, objective, w
                 A1 = None  # the new knots conflict with the constraints: keep the first
             scan1 = None if A1 is None else scan_curves(
                 model, plant, drives, library, space1, constraints, A1, b1, base, objective,
-                weights, aggregate, oversample=oversample)
+                weights, aggregate, oversample=oversample, **el)
             if scan1 is not None and (scan1.feasible, -scan1.score) >= (scan.feasible,
                                                                         -scan.score):
                 space, A_lin, b_lin, scan = space1, A1, b1, scan1
@@ -466,7 +692,7 @@ def _start(model, plant, drives, library, space, constraints, base, objective, w
     free = np.zeros((0, space.n_vars)), np.zeros(0)
     scan_any = scan_curves(model, plant, drives, library, space, constraints, *free, base,
                            objective, weights, aggregate, n_verify=1, two_slope=False,
-                           oversample=oversample)
+                           oversample=oversample, **el)
     return space, A_lin, b_lin, None, _project(scan_any.x, A_lin, b_lin), log
 
 
@@ -505,7 +731,7 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
                         linear=linear, lag_s=lag_s, v_range_m_s=velocity_range(speeds))
     names_all, L_all = metric_rows(plant)
     need = [m for m in objective.metrics if m in names_all]
-    missing = [m for m in objective.metrics if m not in names_all]
+    missing = [m for m in objective.metrics if m not in names_all and not is_element_metric(m)]
     if missing:
         raise PlannerError(f"the model has no outputs for {missing}; its outputs are "
                            f"{list(plant.output_names)}")
@@ -514,7 +740,7 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
 
 def compile_curves(model, drives, library, *, objective=None, baseline=None,
                    symmetry="left-right", knots_m_s=QUANTILE_KNOTS, linear=False,
-                   lag_s=None, oversample=2):
+                   lag_s=None, oversample=2, bump_stops=None, packers=None):
     """Compile the optimizer's step functions of a problem ahead of :func:`optimize_curves`.
 
     The C compile of the closed loop's step and its adjoint (10-30 s on a
@@ -533,6 +759,8 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     ----------
     model, drives, library, objective, baseline, symmetry, knots_m_s, linear, lag_s, oversample
         As :func:`optimize_curves`.
+    bump_stops, packers
+        As :func:`optimize_curves` (the stops and packer variables are compiled in).
 
     Returns
     -------
@@ -548,10 +776,12 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     objective = _check_objective(objective)
     plant, drives, _, space, rows = _problem(model, drives, library, objective, baseline,
                                              symmetry, knots_m_s, linear, lag_s, oversample)
+    elements = _elements(plant, space, bump_stops, packers, None, objective)
     if not jit_available():
         return False
     for d in drives:
-        LoopModel(plant, d, space, rows, oversample, True, inputs=False)
+        LoopModel(plant, d, space, rows, oversample, True, inputs=False,
+                  bump_stops=elements.stops, packer_index=elements.index)
     return True
 
 
@@ -629,7 +859,7 @@ def curve_distance(pwl_a, pwl_b, v_samples):
 
 def _finish(model, plant, drives, library, space, constraints, objective, base, weights,
             aggregate, oversample, x_opt, solver, history, n_closest, stationarity, A_lin,
-            b_lin, t_start, settings, scan=None, extra=()):
+            b_lin, t_start, settings, scan=None, extra=(), elements=_Elements()):
     # verify the optimum, the other starts' results, the best feasible iterate and the scan's
     # best curve (the floor: the result is never worse than it in the time domain); keep the
     # best verified
@@ -637,30 +867,35 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     for src, x in extra:
         cands.append(x)
         sources.append(src)
+    A_it, b_it = elements.rows(A_lin, b_lin)
     feas = [(f, x) for x, f in solver.pop("iterates")
-            if np.all(A_lin @ x <= b_lin + 1e-6 * (1 + np.abs(b_lin)))]
+            if np.all(A_it @ x <= b_it + 1e-6 * (1 + np.abs(b_it)))]
     if feas:
         cands.append(min(feas, key=lambda fx: fx[0])[1])
         sources.append("iterate")
     if scan is not None and not settings.get("robust"):
         # (robust limits are tightened by the model's intervals, which the scan does not
         # hold: there the scan's curve is only the start)
-        cands.append(scan.x)
+        cands.append(elements.extend(scan.x))
         sources.append("scan")
+    n = space.n_vars
     verified = []
     for k, x in enumerate(cands):
-        shocks = space.shocks(x)
+        shocks = space.shocks(x[:n])
         lib = ShockLibrary(list(shocks.values()) + list(library.values()))
         setup = space.setup(shocks)
         sc, _ = time_domain_scores(model, drives, [setup], lib, objective, base, weights,
-                                    oversample, aggregate)
+                                    oversample, aggregate,
+                                    **elements.verify(elements.clip(x[n:]), [setup.name]))
         verified.append((float(sc.loc["optimum", "score"]), bool(sc.loc["optimum", "feasible"]),
                          k))
     ok = [v for v in verified if v[1]] or verified
     best_k = min(ok)[2]
     solver["source"] = sources[best_k]
     solver["candidates"] = {src: v[0] for src, v in zip(sources, verified)}
-    x_opt = space.valid(cands[best_k])
+    x_opt = space.valid(cands[best_k][:n])
+    p_opt = elements.clip(cands[best_k][n:])
+    stops_opt = elements.stops_at(p_opt)
     shocks = space.shocks(x_opt)
     lib = ShockLibrary(list(shocks.values()) + list(library.values()))
     setup = space.setup(shocks)
@@ -678,7 +913,8 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
                       OptimizeWarning, stacklevel=3)
 
     # the optimum's shock velocities (first drive): the distribution the crate is compared over
-    resp = simulate(plant, drives[0], setup.resolve(lib), oversample=oversample)
+    resp = simulate(plant, drives[0], setup.resolve(lib), oversample=oversample,
+                    bump_stops=stops_opt, static_corner_load_n=elements.static)
     vel = {c: np.asarray(resp.channels[f"shock_velocity_{c}"]) for c in CORNERS}
     # the crate: every setup of the same symmetry, by distance to the optimal curves
     sym, axles = {"left-right": ("left-right", "independent"), "all": ("left-right", "same"),
@@ -694,7 +930,8 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     order = np.argsort(dist, kind="stable")
     closest = [crate[i] for i in order[:n_closest]]
     best_name, crate_scores = _crate_best(model, drives, library, crate, objective, base,
-                                          weights, oversample, aggregate)
+                                          weights, oversample, aggregate,
+                                          elements=elements.verify(p_opt, ()))
     by_name = {s.name: s for s in crate}
     listed = [setup, base] + [by_name[best_name]] + closest
     uniq, seen = [], set()
@@ -703,7 +940,8 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
             uniq.append(s)
             seen.add(s.name)
     table, metrics = time_domain_scores(model, drives, uniq, lib, objective, base, weights,
-                                         oversample, aggregate)
+                                         oversample, aggregate,
+                                         **elements.verify(p_opt, [setup.name]))
     table = table.loc[[s.name for s in uniq]]
     kinds = {setup.name: "optimum", base.name: "baseline"}
     kinds.setdefault(best_name, "crate best")
@@ -720,7 +958,8 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     stat = None
     if stationarity and not space.linear:
         stat = _stationarity(model, drives, lib, space, x_opt, A_lin, b_lin, objective, base,
-                             weights, oversample, aggregate, solver["verified_score"])
+                             weights, oversample, aggregate, solver["verified_score"],
+                             elements=elements, packers_m=p_opt)
     settings.update(oversample=oversample, aggregate=aggregate, weights=weights.tolist(),
                     drives=[d.name for d in drives], symmetry=space.symmetry,
                     linear=space.linear, lag_s=list(space.lag_s), total_s=None,
@@ -728,36 +967,45 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     if not space.linear:
         lo, hi = constraint_envelope(space, constraints, library)
         settings["envelope_n"] = {"lo": lo.tolist(), "hi": hi.tolist()}
+    if elements.active:
+        settings.update(bump_stops=elements.stops is not None,
+                        packers={g: list(b) for g, b in zip(elements.groups, elements.bounds)},
+                        static_corner_load_n=elements.static)
     settings["total_s"] = time.perf_counter() - t_start
     return CurveOptimum(x=np.asarray(x_opt), curves=space.curves(x_opt), shocks=shocks,
                         setup=setup, table=table, metrics=metrics, crate_best=best_name,
                         gap=float(gap), velocity_m_s=vel, stationarity=stat, history=history,
                         solver=solver, space=space, constraints=constraints,
-                        objective=objective, baseline=base, settings=settings)
+                        objective=objective, baseline=base, settings=settings,
+                        packers_m={g: float(v) for g, v in zip(elements.groups, p_opt)},
+                        bump_stops=None if stops_opt is None else tuple(stops_opt))
 
 
 def _crate_best(model, drives, library, crate, objective, base, weights, oversample, aggregate,
-                top=20):
-    """The crate's best feasible setup: screened on every drive, the best `top` verified."""
+                top=20, elements=None):
+    """The crate's best feasible setup: screened on every drive, the best `top` verified
+    (with the car's `elements`, ``time_domain_scores``' arguments, if any)."""
     total = None
+    screen_obj = linear_objective(objective)
     for w, d in zip(weights, drives):
         sc = screen_setups(model, d, crate, library).table
-        s = score_setups(sc, objective, baseline=base.name).table
+        s = score_setups(sc, screen_obj, baseline=base.name).table
         v = s["score"].where(s["feasible"], np.inf)
         total = w * v if total is None else (total + w * v if aggregate == "sum"
                                              else np.maximum(total, v))
     order = total.sort_values(kind="stable").index.tolist()
     cand = [s for s in crate if s.name in set(order[:top])]
     table, _ = time_domain_scores(model, drives, cand, library, objective, base, weights,
-                                   oversample, aggregate)
+                                   oversample, aggregate, **(elements or {}))
     feas = table[table["feasible"]]
     pick = feas if len(feas) else table
     return str(pick["score"].idxmin()), {n: float(v) for n, v in pick["score"].items()}
 
 
 def _stationarity(model, drives, lib, space, x, A, b, objective, base, weights, oversample,
-                  aggregate, score):
-    """Each decision variable moved by +-5 % (within the linear constraints), verified."""
+                  aggregate, score, elements=_Elements(), packers_m=()):
+    """Each curve variable moved by +-5 % (within the linear constraints), verified (with
+    the optimum's packers)."""
     rows, setups, extra = [], [], []
     # a move is within the constraints if it violates none more than the optimum does (an
     # interior-point solution meets its constraints to the solver's tolerance)
@@ -777,7 +1025,8 @@ def _stationarity(model, drives, lib, space, x, A, b, objective, base, weights, 
         return pd.DataFrame(columns=["variable", "change", "score", "relative_change"])
     lib2 = ShockLibrary(list(lib.values()) + extra)
     table, _ = time_domain_scores(model, drives, setups, lib2, objective, base, weights,
-                                   oversample, aggregate)
+                                   oversample, aggregate,
+                                   **elements.verify(packers_m, [s.name for s in setups]))
     out = pd.DataFrame({"variable": [j for j, _ in rows], "change": [0.05 * s for _, s in rows],
                         "score": table.loc[[s.name for s in setups], "score"].to_numpy(),
                         "feasible": table.loc[[s.name for s in setups], "feasible"].to_numpy()})

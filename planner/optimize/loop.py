@@ -13,6 +13,14 @@ discrete recursion (a fold, single shooting) over the drive's samples:
   by Newton's method on the 4 shock velocities (3 iterations from ``v_free``;
   with piecewise-linear curves it is exact once the segments are found, and
   ``D_eff`` is small), never broken by a delay;
+- with the car's bump stops (``bump_stops=``), each corner's stop force
+  ``g(s - s0)`` at the model's shock travel joins the corner's force input,
+  its table's kinks rounded by a quadratic (:func:`stop_force_sx`,
+  :data:`STOP_SMOOTHING_M`), and the travels join the shock velocities as
+  Newton's unknowns (:data:`STOP_NEWTON_ITERATIONS`): travel, stop force and
+  shock force agree within the sub-step, as in
+  :func:`ident.sim.closedloop.simulate_batch`; a packer is a parameter that
+  shortens ``s0`` (its gradient ``-g'(s - s0)``, nonzero only in contact);
 - each metric channel passes the metric filter's power response ``|B|^4``
   (the 1-20 Hz Butterworth twice, forward) and its mean is removed exactly
   (``sum (z - m s)^2`` with ``s`` the filter's step response): within 0.001 %
@@ -38,16 +46,71 @@ from scipy import signal
 from ident.data.channels import CORNERS
 from ident.models.lti import hold_coefficients, lag_hold_coefficients
 from ident.sim.closedloop import rig_response
+from planner.errors import PlannerError
 from planner.optimize.cache import compiled_steps
 
 __all__ = [
     "LoopModel",
     "NEWTON_ITERATIONS",
+    "STOP_NEWTON_ITERATIONS",
+    "STOP_SMOOTHING_M",
     "FOLD_BASE",
+    "stop_force_sx",
 ]
 
 #: Newton iterations of the shock loop per sub-step in the casadi recursion.
 NEWTON_ITERATIONS = 3
+#: Newton iterations per sub-step with bump stops (shock velocities and travels together, the
+#: stop's force at the step's own travel: implicit). ``k Dt`` is about -0.04 at oversample 2
+#: on the GT car, so the travel barely moves the stop's segment: a fourth iteration changed
+#: no metric by more than 1e-9 (60 s drive).
+STOP_NEWTON_ITERATIONS = 3
+#: Half-width [m] of the quadratic that rounds each kink of a bump stop's piecewise-linear
+#: table in the casadi loop (0.1 mm, the kink spread over 0.2 mm): IPOPT's gradients, also
+#: with respect to a packer (nonzero only in contact), stay continuous, and the force is the
+#: table's exactly beyond a half-width from every kink; at a kink it is off by its slope
+#: change times a quarter of the half-width (15 N for a 600 kN/m stop at contact).
+STOP_SMOOTHING_M = 1e-4
+
+
+def stop_force_sx(z, x_m, f_n, width_m=None):
+    """A bump stop's force and stiffness at travel `z` beyond contact, its kinks rounded.
+
+    ``g(z) = sum_i dk_i r(z - x_i)``: the table's slope changes ``dk_i`` (the first
+    segment's slope at contact ``x_0 = 0``) at its points ``x_i``, with ``r`` the ramp
+    ``max(u, 0)`` rounded by a quadratic within ``|u| < w`` (``(u + w)^2 / (4 w)``; value
+    and slope continuous), ``w`` = `width_m`; beyond the table the last slope continues
+    (as :func:`ident.sim.closedloop.pack_bump_stops`). Exact beyond ``w`` from every kink;
+    no transcendental function (the loop evaluates it every Newton iteration).
+
+    Parameters
+    ----------
+    z : casadi.SX or float
+        Travel beyond contact [m] (negative: not in contact).
+    x_m, f_n : ndarray, shape (K,)
+        The stop's table [m], [N] (from 0, as the loop's form).
+    width_m : float, optional
+        Default :data:`STOP_SMOOTHING_M`.
+
+    Returns
+    -------
+    g, dg : casadi.SX
+        Force [N] and stiffness [N/m].
+    """
+    w = STOP_SMOOTHING_M if width_m is None else float(width_m)
+    x = np.asarray(x_m, dtype=float)
+    f = np.asarray(f_n, dtype=float)
+    k = np.diff(f) / np.diff(x)
+    dk = np.diff(np.concatenate([[0.0], k]))
+    g, dg = 0, 0
+    for xi, d in zip(x[:-1], dk):
+        if d == 0.0:
+            continue
+        u = z - float(xi)
+        t = ca.fmin(ca.fmax(u, -w), w) + w  # 0 .. 2 w
+        g = g + float(d) * (t * t / (4 * w) + ca.fmax(u - w, 0))
+        dg = dg + float(d) * t / (2 * w)
+    return g, dg
 
 
 def _pwl_sx(v, p, vk):
@@ -70,9 +133,17 @@ def _pwl_sx(v, p, vk):
 class LoopModel:
     """The closed loop of one plant and drive as a casadi recursion (module notes)."""
 
-    def __init__(self, plant, drive, space, metric_rows, oversample, jit, *, inputs=True):
+    def __init__(self, plant, drive, space, metric_rows, oversample, jit, *, inputs=True,
+                 bump_stops=None, packer_index=None):
         """`inputs` False: build (and compile) the step functions only, for the drive's
-        sample rate; the rig response and the recursion's inputs are left out."""
+        sample rate; the rig response and the recursion's inputs are left out.
+
+        `bump_stops`: the car's stops in the loop's form (4 of None or ``(contact_travel_m,
+        travel_table_m, force_table_n)``), their force ``g(s - s0)`` (kinks smoothed,
+        :func:`stop_force_sx`) at the model's ``shock_travel_XX`` added to the corner's
+        force input and solved with the shocks within the sub-step (implicit);
+        `packer_index`: per corner the index of its packer among the parameters after the
+        curves' (``s0`` then is the contact travel less that parameter), or None."""
         self.space = space
         r = int(oversample)
         names, L = metric_rows
@@ -98,6 +169,15 @@ class LoopModel:
         G, npar = len(space.groups), space.n_params
         vk = space.v_knots_m_s
         grp = [space.group_of(c) for c in CORNERS]
+        stops = None
+        if bump_stops is not None and any(st is not None for st in bump_stops):
+            stops = [None if st is None else (float(st[0]), np.asarray(st[1], dtype=float),
+                                              np.asarray(st[2], dtype=float))
+                     for st in bump_stops]
+            pidx = [None] * 4 if packer_index is None else list(packer_index)
+            ti = _travel_rows(plant)
+        n_pack = 0 if stops is None else 1 + max([i for i in pidx if i is not None],
+                                                 default=-1)
 
         # state: modes (re, im), dF[k-1], dF[k-2], F[k-1], f[k-1], f[k-2] (the loop part),
         # filter states, sums (z^2, z s, y) per metric, then the curve parameters (carried,
@@ -106,7 +186,7 @@ class LoopModel:
         n_loop = 2 * n + 20
         nx = n_loop + 2 * ns * nm + 3 * nm
         S = ca.SX.sym("s", n_loop)
-        Pc = ca.SX.sym("p", G * npar)
+        Pc = ca.SX.sym("p", G * npar + n_pack)
         xr, xi = S[:n], S[n:2 * n]
         dF1, dF2, F1, f1, f2 = (S[2 * n + 4 * k:2 * n + 4 * k + 4] for k in range(5))
         Br, Bi = ca.DM(B.real), ca.DM(B.imag)
@@ -126,18 +206,57 @@ class LoopModel:
         vfree = vr + Cvr @ xpr - Cvi @ xpi
         c0 = alpha * F1 + b1 * f1 + bm * f2
         v = vfree
-        for _ in range(NEWTON_ITERATIONS):
-            fs = [_pwl_sx(v[c], pg[grp[c]], vk) for c in range(4)]
-            fv = ca.vertcat(*[a for a, _ in fs])
-            sl = ca.vertcat(*[s for _, s in fs])
-            res = v - vfree - De @ (c0 + b0 * fv - cbar * v)
-            J = ca.DM.eye(4) - De @ ca.diag(b0 * sl - cbar)
-            v = v - ca.solve(J, res)
-        fv = ca.vertcat(*[_pwl_sx(v[c], pg[grp[c]], vk)[0] for c in range(4)])
-        F = c0 + b0 * fv
-        dF = F - cbar * v
+        if stops is None:
+            for _ in range(NEWTON_ITERATIONS):
+                fs = [_pwl_sx(v[c], pg[grp[c]], vk) for c in range(4)]
+                fv = ca.vertcat(*[a for a, _ in fs])
+                sl = ca.vertcat(*[s for _, s in fs])
+                res = v - vfree - De @ (c0 + b0 * fv - cbar * v)
+                J = ca.DM.eye(4) - De @ ca.diag(b0 * sl - cbar)
+                v = v - ca.solve(J, res)
+            fv = ca.vertcat(*[_pwl_sx(v[c], pg[grp[c]], vk)[0] for c in range(4)])
+            F = c0 + b0 * fv
+            dF = F - cbar * v
+            extra_in = []
+        else:
+            # the travel: the rig part's (an input) + the predictor's + the step's own
+            # input through the hold's same-step weight, as the velocity
+            Ct = ms.C[ti]
+            Dte = ca.DM(np.real(Ct @ (g1[:, None] * B)) + ms.D[ti])
+            sr = ca.SX.sym("sr", 4)
+            sfree = sr + ca.DM(Ct.real) @ xpr - ca.DM(Ct.imag) @ xpi
+            s0 = [None if st is None else
+                  (st[0] - Pc[G * npar + pidx[c]] if pidx[c] is not None else st[0])
+                  for c, st in enumerate(stops)]
+
+            def stop_at(trav):
+                gd = [(0, 0) if st is None else stop_force_sx(trav[c] - s0[c], st[1], st[2])
+                      for c, st in enumerate(stops)]
+                return ca.vertcat(*[a for a, _ in gd]), ca.vertcat(*[b for _, b in gd])
+
+            trav = sfree
+            I4 = ca.DM.eye(4)
+            for _ in range(STOP_NEWTON_ITERATIONS if _STOP_IMPLICIT else NEWTON_ITERATIONS):
+                fs = [_pwl_sx(v[c], pg[grp[c]], vk) for c in range(4)]
+                fv = ca.vertcat(*[a for a, _ in fs])
+                sl = ca.vertcat(*[s for _, s in fs])
+                gs, dgs = stop_at(trav if _STOP_IMPLICIT else sfree)
+                dF = c0 + b0 * fv - cbar * v + gs
+                Av = ca.diag(b0 * sl - cbar)
+                if _STOP_IMPLICIT:
+                    Ag = ca.diag(dgs)
+                    res = ca.vertcat(v - vfree - De @ dF, trav - sfree - Dte @ dF)
+                    J = ca.blockcat([[I4 - De @ Av, -De @ Ag], [-Dte @ Av, I4 - Dte @ Ag]])
+                    d = ca.solve(J, res)
+                    v, trav = v - d[:4], trav - d[4:]
+                else:
+                    v = v - ca.solve(I4 - De @ Av, v - vfree - De @ dF)
+            fv = ca.vertcat(*[_pwl_sx(v[c], pg[grp[c]], vk)[0] for c in range(4)])
+            F = c0 + b0 * fv
+            dF = F - cbar * v + stop_at(trav if _STOP_IMPLICIT else sfree)[0]
+            extra_in = [sr]
         t0r, t0i = cmul(g1.real, g1.imag, Br @ dF, Bi @ dF)
-        substep = ca.Function("substep", [S, vr, Pc],
+        substep = ca.Function("substep", [S, vr, *extra_in, Pc],
                               [ca.vertcat(xpr + t0r, xpi + t0i, dF, dF1, F, fv, f1)])
 
         # the metrics' part: (loop state, filter states, sums, the rig part's metric rows and
@@ -157,18 +276,27 @@ class LoopModel:
         new_sums = ca.vertcat(sums[:nm] + sig**2, sums[nm:2 * nm] + sig * sk, sums[2 * nm:] + y)
         outputs = ca.Function("outputs", [S, zf, sums, uy], [ca.vertcat(*newz, new_sums)])
 
-        XP, U = ca.MX.sym("x", nx + G * npar), ca.MX.sym("u", 4 * r + nm + 1)
+        # inputs per sample: the r fine shock velocities of the rig part (with stops: then its
+        # r fine travels), its metric rows, the filter's step response
+        n_fine = 4 * r if stops is None else 8 * r
+        XP, U = ca.MX.sym("x", nx + G * npar + n_pack), ca.MX.sym("u", n_fine + nm + 1)
         P = XP[nx:]
 
         def body(nsub):
             s = XP[:n_loop]
             for k in range(nsub):
-                s = substep(s, U[4 * k:4 * k + 4], P)
+                more = [] if stops is None else [U[4 * r + 4 * k:4 * r + 4 * k + 4]]
+                s = substep(s, U[4 * k:4 * k + 4], *more, P)
             rest = outputs(s, XP[n_loop:n_loop + 2 * ns * nm], XP[n_loop + 2 * ns * nm:nx],
-                           U[4 * r:])
+                           U[n_fine:])
             return ca.Function(f"step{nsub}", [XP, U], [ca.vertcat(s, rest, P)])
 
-        key = _step_key(ms, h, r, lag, vk, grp, Cm, Dm, Deff, cbar, bool(jit))
+        key_parts = (ms, h, r, lag, vk, grp, Cm, Dm, Deff, cbar, bool(jit))
+        if stops is not None:
+            key_parts += (repr([None if st is None else (st[0], st[1].tolist(), st[2].tolist())
+                                for st in stops]), repr(pidx), ti, STOP_SMOOTHING_M,
+                          _STOP_IMPLICIT)
+        key = _step_key(*key_parts)
         if key not in _STEP_CACHE:
             first, step = body(1), body(r)
             # instructions of the symbolic step (not of a library)
@@ -188,11 +316,15 @@ class LoopModel:
         # inputs per sample: the r fine shock velocities of the rig part ending at the sample
         # (the first sample: its own), the metric rows of the rig part, the step response
         v_fine = rig.v_fine
-        Uin = np.zeros((4 * r + nm + 1, N))
-        Uin[:4, 0] = v_fine[0]
-        for k in range(r):
-            Uin[4 * k:4 * k + 4, 1:] = v_fine[k + 1::r][:N - 1].T
-        Uin[4 * r:4 * r + nm] = Lm @ rig.y
+        Uin = np.zeros((n_fine + nm + 1, N))
+        fine = [v_fine]
+        if stops is not None:
+            fine.append(_rig_fine_rows(plant, ti, rig.u_fine, h))
+        for j, a in enumerate(fine):
+            Uin[4 * r * j:4 * r * j + 4, 0] = a[0]
+            for k in range(r):
+                Uin[4 * r * j + 4 * k:4 * r * j + 4 * k + 4, 1:] = a[k + 1::r][:N - 1].T
+        Uin[n_fine:n_fine + nm] = Lm @ rig.y
         Uin[-1] = step_resp
         self.N, self.nm, self.names = N, nm, list(names)
         self._first, self._step, self._U = first, step, Uin
@@ -210,6 +342,36 @@ class LoopModel:
         ss = float(np.sum(self._U[-1] ** 2))
         power = (zz - 2 * mean * zs + mean**2 * ss) / N
         return ca.sqrt(ca.fmax(power, 1e-300))
+
+
+#: Bump stops solved within the sub-step (True); False evaluates each stop at the travel
+#: extrapolated from the state (the step's own input left out): kept to measure the
+#: difference (tests), not an option.
+_STOP_IMPLICIT = True
+
+
+def _travel_rows(plant):
+    """Rows of ``shock_travel_XX`` in the plant's outputs (bump stops need them)."""
+    names = [f"shock_travel_{c}" for c in CORNERS]
+    missing = [n for n in names if n not in plant.output_names]
+    if missing:
+        raise PlannerError(f"optimize: bump_stops need the model's outputs {missing}; model "
+                           f"{plant.name!r} has none of them: identify it with the shock "
+                           "travel channels, or leave bump_stops out")
+    return [plant.output_names.index(n) for n in names]
+
+
+def _rig_fine_rows(plant, rows, u_fine, h):
+    """The rig part's outputs `rows` on the internal grid, shape (n_fine, len(rows)): each
+    mode's hold recursion (as :func:`ident.sim.closedloop.rig_response` forms its
+    velocities) from rest."""
+    mr = plant.rig.select(outputs=list(rows)).pruned()
+    phi, g1, g0, gm = hold_coefficients(mr.lam, h)
+    bu = u_fine @ np.asarray(mr.B).T  # (n_fine, modes), complex
+    x = np.empty_like(bu, dtype=complex)
+    for i in range(bu.shape[1]):
+        x[:, i] = signal.lfilter([g1[i], g0[i], gm[i]], [1.0, -phi[i]], bu[:, i])
+    return np.real(x @ np.asarray(mr.C).T) + u_fine @ np.asarray(mr.D, dtype=float).T
 
 
 #: Steps per level of the optimizer's recursion (:func:`_fold_chain`).

@@ -32,18 +32,25 @@ shortlist, which always holds the best linear point, does.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 
 from ident.data.channels import CORNERS
-from ident.models.library import ShockLibrary
 from ident.data.units import UNIT_LABELS, check_units, from_si
+from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock
+from ident.sim.closedloop import ELEMENT_STATS, rig_response, simulate_batch
+from ident.sim.metrics import compute_metrics
 from planner.objective import score_setups
 from planner.optimize.constraints import MAX_FORCE_VELOCITY_M_S
-from planner.predict import predict_setups
+from planner.predict import (
+    METRIC_OUTPUTS,
+    as_loop_plant,
+    predict_setups,
+    resolve_setups,
+)
 from planner.screen import drive_bands, screen_response
 
 __all__ = [
@@ -54,6 +61,9 @@ __all__ = [
     "REBOUND_FACTORS",
     "ScanResult",
     "curve_words",
+    "element_predictions",
+    "is_element_metric",
+    "linear_objective",
     "scan_curves",
     "time_domain_scores",
 ]
@@ -142,10 +152,84 @@ class ScanResult:
                 "screen_s": self.screen_s, "verify_s": self.verify_s}
 
 
+def is_element_metric(name):
+    """bool: `name` is a closed-loop element statistic (``tire_liftoff_share_XX``,
+    ``tire_contact_min_XX``, ``bump_stop_contact_share_XX``,
+    :data:`ident.sim.closedloop.ELEMENT_STATS`), which only the time domain gives."""
+    return any(name == f"{k}_{c}" for k in ELEMENT_STATS for c in CORNERS)
+
+
+def linear_objective(objective):
+    """The objective without its limits on element statistics (:func:`is_element_metric`):
+    the one the screening (frequency domain, no elements) ranks by; the objective itself
+    when it has none."""
+    if not any(is_element_metric(m) for m in objective.limits):
+        return objective
+    return replace(objective, limits={m: dict(v) for m, v in objective.limits.items()
+                                      if not is_element_metric(m)})
+
+
+def element_predictions(model, drive, setups, library, bump_stops, *, oversample=2,
+                        static_corner_load_n=None, chunk_size=32):
+    """The spec's metrics of setups with the car's elements, in the time domain.
+
+    :func:`ident.sim.closedloop.simulate_batch` with ``bump_stops=`` and
+    ``static_corner_load_n=``, then :func:`ident.sim.metrics.compute_metrics` on its
+    channels, with the elements' statistics (``bump_stop_contact_share_XX``,
+    ``tire_liftoff_share_XX``, ``tire_contact_min_XX``) as extra columns: the table
+    :func:`planner.predict.predict_setups` gives without elements.
+
+    Parameters
+    ----------
+    model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
+    drive : ident.data.drive.Drive
+        Prepared (:func:`planner.predict.prepare_drive`).
+    setups : sequence of planner.setups.Setup
+    library : ident.models.library.ShockLibrary
+    bump_stops : list
+        Per setup the stops in the loop's form (4 of None or ``(contact_travel_m,
+        travel_table_m, force_table_n)``), or None.
+    oversample : int
+    static_corner_load_n : array_like, shape (4,), optional
+        Static tire loads [N]: lift-off in the loop.
+    chunk_size : int
+        Setups per simulated batch (their responses are kept until their metrics are).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per setup (its name), the shock ids and the metrics (SI).
+    """
+    plant = as_loop_plant(model)
+    models = resolve_setups(setups, library)
+    outputs = [o for o in METRIC_OUTPUTS if o in plant.output_names]
+    rig = rig_response(plant, drive, oversample=oversample, outputs=outputs)
+    rows = []
+    for a in range(0, len(models), chunk_size):
+        batch = simulate_batch(plant, drive, models[a:a + chunk_size], oversample=oversample,
+                               outputs=outputs, rig=rig,
+                               bump_stops=list(bump_stops[a:a + chunk_size]),
+                               static_corner_load_n=static_corner_load_n)
+        met = compute_metrics(batch.channels, fs=batch.fs_hz)
+        cols = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in met.values.items()}
+        cols.update({k: np.asarray(v, dtype=float) for k, v in batch.elements.items()})
+        rows.append(pd.DataFrame(cols))
+    table = pd.concat(rows, ignore_index=True)
+    ids = pd.DataFrame([s.ids() for s in setups], columns=list(CORNERS))
+    table = pd.concat([ids, table], axis=1)
+    table.index = pd.Index([s.name for s in setups], name="setup")
+    return table
+
+
 def time_domain_scores(model, drives, setups, library, objective, baseline, weights,
-                       oversample, aggregate):
+                       oversample, aggregate, *, bump_stops=None, setup_stops=None,
+                       static_corner_load_n=None):
     """Verified scores of setups: :func:`planner.predict.predict_setups` per drive, scored
     against the baseline, aggregated over the drives.
+
+    With the car's elements (`bump_stops`, `static_corner_load_n`) the setups are
+    simulated with them (:func:`element_predictions`); without, the numbers of
+    :func:`planner.predict.predict_setups`.
 
     Parameters
     ----------
@@ -161,6 +245,12 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
     oversample : int
     aggregate : {"sum", "worst"}
         Weighted sum of the drives' scores, or the worst.
+    bump_stops : sequence of 4, optional
+        The car's stops in the loop's form, for every setup not in `setup_stops`.
+    setup_stops : dict of str -> sequence of 4, optional
+        A setup's own stops by its name (e.g. the optimum with its chosen packers).
+    static_corner_load_n : array_like, shape (4,), optional
+        Static tire loads [N]: lift-off in the loop.
 
     Returns
     -------
@@ -171,10 +261,19 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
     """
     cand = [baseline] + [s for s in setups if s.name != baseline.name]
     per, metrics, feasible = [], {}, None
+    elements = bump_stops is not None or setup_stops or static_corner_load_n is not None
+    own = dict(setup_stops or {})
     for d in drives:
-        pred = predict_setups(model, d, cand, library, oversample=oversample)
-        metrics[d.name] = pred.table
-        sc = score_setups(pred.table, objective, baseline=baseline.name).table
+        if elements:
+            table = element_predictions(model, d, cand, library,
+                                        [own.get(s.name, bump_stops) for s in cand],
+                                        oversample=oversample,
+                                        static_corner_load_n=static_corner_load_n)
+        else:
+            table = predict_setups(model, d, cand, library, oversample=oversample,
+                                   elements=False).table
+        metrics[d.name] = table
+        sc = score_setups(table, objective, baseline=baseline.name).table
         per.append(sc["score"])
         feasible = sc["feasible"] if feasible is None else (feasible & sc["feasible"])
     S = pd.concat(per, axis=1)
@@ -188,7 +287,7 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
 
 def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin, baseline,
                 objective, weights, aggregate, *, grid_n_s_m=None, n_verify=SCAN_VERIFY,
-                two_slope=True, oversample=2):
+                two_slope=True, oversample=2, bump_stops=None, static_corner_load_n=None):
     """The best linear and two-slope curves per corner group: screened, verified.
 
     Parameters
@@ -221,6 +320,11 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
     two_slope : bool
         Also scan two-slope curves (not in a linear space).
     oversample : int
+    bump_stops, static_corner_load_n : optional
+        The car's elements, as :func:`time_domain_scores` takes them: the verification
+        simulates with them; the screening (frequency domain) sees the car without them
+        and ranks by the objective without its limits on element statistics
+        (:func:`linear_objective`).
 
     Returns
     -------
@@ -228,6 +332,7 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
         None if no candidate meets the constraints.
     """
     t0 = time.perf_counter()
+    screen_obj = linear_objective(objective)
     G = len(space.groups)
     cbar = float(np.mean(plant.cbar_n_s_m))
     grid = cbar * SCAN_GRID_RATIOS if grid_n_s_m is None else np.asarray(grid_n_s_m, float)
@@ -283,7 +388,7 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
                                                    models + [base_models])
                 t = pd.DataFrame(met, columns=names)
                 t.index = [f"s{k}" for k in range(len(todo))] + ["baseline"]
-                sc = score_setups(t, objective, baseline="baseline").table
+                sc = score_setups(t, screen_obj, baseline="baseline").table
                 per.append(sc["score"].where(sc["feasible"], np.inf).to_numpy()[:-1])
             per = np.array(per)
             agg = (np.asarray(weights) @ per if aggregate == "sum" else per.max(axis=0))
@@ -341,7 +446,8 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
     lib = ShockLibrary(lib_models + [m for m in library.values()
                                      if m.id not in {s.id for s in lib_models}])
     table, _ = time_domain_scores(model, drives, setups, lib, objective, baseline, weights,
-                                  oversample, aggregate)
+                                  oversample, aggregate, bump_stops=bump_stops,
+                                  static_corner_load_n=static_corner_load_n)
     table = table.loc[[s.name for s in setups]]
     for g, (name, _) in reversed(list(enumerate(space.groups))):
         table.insert(0, f"curve_{name}", [curve_words(c[g]) for c in order])

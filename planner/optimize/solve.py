@@ -291,9 +291,11 @@ def solve_problem(ev, space, kinds, weights, aggregate, A_lin, b_lin, xs0, scale
 
 def _ipopt(ev, space, score_rows, limit_rows, weights, aggregate, A_lin, b_lin, xs0, scale,
            max_iter, progress):
-    """One IPOPT solve with the given score and limit rows of ``z``."""
+    """One IPOPT solve with the given score and limit rows of ``z``; the decision variables
+    are the columns of `A_lin` (the curves', then any packers')."""
+    n_x = A_lin.shape[1]
     cb = _MetricsCallback(ev, score_rows + limit_rows)
-    xs = ca.MX.sym("xs", space.n_vars)
+    xs = ca.MX.sym("xs", n_x)
     z = cb(xs)
     scores = [z[k] for k in range(len(score_rows))]
     g, lbg, ubg = [], [], []
@@ -339,10 +341,10 @@ def _ipopt(ev, space, score_rows, limit_rows, weights, aggregate, A_lin, b_lin, 
     for key in ("inf_pr", "inf_du"):
         if key in its and len(its[key]) == len(hist):
             hist[key] = its[key]
-    hist.attrs["iterates"] = [(h["x"][:space.n_vars] * scale, h["objective"])
+    hist.attrs["iterates"] = [(h["x"][:n_x] * scale, h["objective"])
                               for h in it_cb.history]
     info = {"status": stats.get("return_status", "unknown"),
             "success": stats.get("return_status") in _SOLVED,
             "iterations": int(stats.get("iter_count", len(hist))),
             "objective": float(sol["f"])}
-    return np.array(sol["x"]).ravel()[:space.n_vars], info, hist
+    return np.array(sol["x"]).ravel()[:n_x], info, hist

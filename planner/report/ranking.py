@@ -79,6 +79,8 @@ log = logging.getLogger(__name__)
 
 #: Suffixes of the lower and upper interval columns of a metric.
 INTERVAL_SUFFIXES = ("_lo", "_hi")
+#: Setup columns holding lengths (packers, :mod:`planner.elements`), converted with the units.
+PACKER_COLUMNS = tuple(f"packer_{c}" for c in CORNERS)
 #: Files written by :func:`write_ranking` (key -> file name); plots only when possible.
 RANKING_FILES = {"csv": "ranking.csv", "xlsx": "ranking.xlsx", "pareto": "pareto.png",
                  "top_setups": "top_setups.png"}
@@ -213,7 +215,8 @@ def ranking_to_units(table, units):
     pandas.DataFrame
         A copy; every metric column and its ``_lo``/``_hi`` columns converted
         with :func:`ident.data.units.from_si` (quantity from
-        :data:`ident.sim.metrics.METRIC_QUANTITY`), every other column unchanged.
+        :data:`ident.sim.metrics.METRIC_QUANTITY`), the packer columns ``packer_XX``
+        (lengths), every other column unchanged.
 
     Raises
     ------
@@ -240,6 +243,9 @@ def ranking_to_units(table, units):
     for col in out.columns:
         metric = metric_of_column(col)
         if metric is None:
+            if col in PACKER_COLUMNS:  # a setup column, a length (read back by read_setups)
+                out[col] = from_si(out[col].to_numpy(dtype=float, na_value=np.nan), "displacement",
+                                   units)
             continue
         values = out[col]
         if not pd.api.types.is_numeric_dtype(values) or pd.api.types.is_bool_dtype(values):

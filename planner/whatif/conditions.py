@@ -13,13 +13,14 @@ and a drive (one simulation call per group in :mod:`planner.whatif.evaluate`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ident.data.channels import CORNERS, RIG_INPUTS
 from ident.data.drive import Drive
 from ident.errors import VehicleError
+from ident.models.bumpstops import BumpStop, BumpStopLibrary
 from ident.models.library import ShockLibrary
 from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
 from ident.sim import stiffness as ident_stiffness
@@ -38,6 +39,7 @@ __all__ = [
     "condition_plant",
     "condition_drive",
     "ShockVariants",
+    "StopVariants",
     "condition_setups",
 ]
 
@@ -80,6 +82,13 @@ class ConditionEffect:
     channel_scale: np.ndarray      # (7,)
     window: tuple | None
     drive: object | None
+    packer_add: np.ndarray = field(default_factory=lambda: np.zeros(4))  # (4,) [m]
+    stop_set: tuple = (None,) * 4  # per corner: None (unchanged), an id or "none"
+
+    @property
+    def changes_elements(self):
+        """True if the condition changes a bump stop or a packer."""
+        return bool(np.any(self.packer_add)) or any(v is not None for v in self.stop_set)
 
 
 def condition_effect(perturbation, factors):
@@ -97,7 +106,8 @@ def condition_effect(perturbation, factors):
     """
     e = dict(corner_scale=np.ones(4), id_scale={}, corner_lag=np.zeros(4), id_lag={},
              spring_add=np.zeros(4), spring_scale=np.ones(4), arb_add=np.zeros(2),
-             arb_scale=np.ones(2), vehicle=[], channel_scale=np.ones(7), window=None, drive=None)
+             arb_scale=np.ones(2), vehicle=[], channel_scale=np.ones(7), window=None, drive=None,
+             packer_add=np.zeros(4), stop_set=[None] * 4)
     for f in factors:
         vals = perturbation.values.get(f.name)
         if vals is None:
@@ -140,7 +150,12 @@ def condition_effect(perturbation, factors):
                 e["drive"] = v
             elif f.kind == "vehicle":
                 e["vehicle"].append((t, f.change, v, f.name))
+            elif f.kind == "packer":
+                e["packer_add"][CORNERS.index(t)] += v
+            elif f.kind == "bump_stop" and v is not None:
+                e["stop_set"][CORNERS.index(t)] = v
     e["vehicle"] = tuple(e["vehicle"])
+    e["stop_set"] = tuple(e["stop_set"])
     return ConditionEffect(**e)
 
 
@@ -384,8 +399,9 @@ class ShockVariants:
                             source=self.library.source)
 
 
-def condition_setups(setups, e, variants, tag):
-    """The setups under a condition: their shocks scaled or lagged, names tagged.
+def condition_setups(setups, e, variants, tag, elements=None, stop_variants=None):
+    """The setups under a condition: their shocks scaled or lagged, their bump stops swapped
+    and packers changed, names tagged.
 
     Parameters
     ----------
@@ -395,14 +411,29 @@ def condition_setups(setups, e, variants, tag):
         Makes (once) and names the derived shocks.
     tag : str
         The condition's tag, ``"<drive>:<perturbation>"`` (indices).
+    elements : planner.elements.SetupElements, optional
+        The setups' bump stops and packers, resolved (needed when the condition changes
+        them: a swap replaces a stop, a packer change moves its contact).
+    stop_variants : StopVariants, optional
+        Makes (once) and names the moved stops of packer changes.
 
     Returns
     -------
     list of planner.setups.Setup
-        Named ``"<setup>\x1f<tag>"``.
+        Named ``"<setup>\x1f<tag>"``; with every corner's bump stop and packer given
+        when the condition changes them.
+
+    Raises
+    ------
+    PlannerError
+        A packer change at a corner without a stop, or one that makes the stop press on
+        the car at rest.
     """
     out = []
-    for s in setups:
+    for k, s in enumerate(setups):
+        if e.changes_elements:
+            out.append(_element_setup(s, k, e, variants, tag, elements, stop_variants))
+            continue
         ids = {}
         for i, c in enumerate(CORNERS):
             sid = s.ids()[i]
@@ -411,3 +442,76 @@ def condition_setups(setups, e, variants, tag):
             ids[c] = variants.model_id(sid, scale, lag)
         out.append(Setup(f"{s.name}\x1f{tag}", ids))
     return out
+
+
+class StopVariants:
+    """Bump stops moved by a packer change, made once per (stop, change) and named.
+
+    A what-if ``packer`` change of ``d`` [m] moves the stop's contact ``d`` closer (a
+    thicker packer) or farther (thinner, also below none: the stop's tolerance): the
+    variant is the stop with the gap ``gap - d``, named ``"<id>~p<+d mm>"``, and the
+    setup keeps its packer.
+
+    Parameters
+    ----------
+    library : ident.models.bumpstops.BumpStopLibrary or None
+    """
+
+    def __init__(self, library):
+        self.library = library
+        self.extra = {}
+
+    def stop_id(self, stop_id, change_m, where):
+        """The id of `stop_id` with its contact moved by `change_m` [m] (made once)."""
+        if not change_m:
+            return stop_id
+        if self.library is None or stop_id not in self.library:
+            raise PlannerError(f"{where}: bump stop {stop_id!r} is not in the bump-stop "
+                               "library; give the library (--bump-stops FILE)")
+        new_id = f"{stop_id}~p{change_m * 1e3:+g}mm"
+        if new_id not in self.extra:
+            base = self.library[stop_id]
+            gap = base.gap_m - change_m
+            if gap < 0:
+                raise PlannerError(f"{where}: the packer change {change_m * 1e3:+g} mm is more "
+                                   f"than bump stop {stop_id!r}'s gap "
+                                   f"({base.gap_m * 1e3:g} mm): the stop would press on the "
+                                   "car at rest; use a smaller change")
+            self.extra[new_id] = BumpStop(new_id, gap, base.travel_m, base.force_n)
+        return new_id
+
+    def full_library(self):
+        """The library and the moved stops in one library (None without a library)."""
+        if self.library is None:
+            return None
+        return BumpStopLibrary(list(self.library.values()) + list(self.extra.values()))
+
+
+def _element_setup(s, k, e, variants, tag, elements, stop_variants):
+    """One setup under a condition that changes its bump stops or packers."""
+    ids = {c: variants.model_id(s.ids()[i], e.corner_scale[i] * e.id_scale.get(s.ids()[i], 1.0),
+                                e.corner_lag[i] + e.id_lag.get(s.ids()[i], 0.0))
+           for i, c in enumerate(CORNERS)}
+    if elements is None:
+        stops, packers = [None] * 4, np.zeros(4)
+    else:
+        stops, packers = list(elements.stop_ids[k]), elements.packers_m[k].copy()
+    for i, c in enumerate(CORNERS):
+        if e.stop_set[i] is not None:
+            stops[i] = None if e.stop_set[i].lower() == "none" else e.stop_set[i]
+    for i, c in enumerate(CORNERS):
+        if not e.packer_add[i]:
+            continue
+        if stops[i] is None:
+            raise PlannerError(f"setup {s.name!r}: a packer change at {c}, which has no bump "
+                               "stop; give the corner a bump stop or leave it out of the "
+                               "packer factor's corners")
+        where = f"setup {s.name!r} corner {c}"
+        stops[i] = stop_variants.stop_id(stops[i], float(e.packer_add[i]), where)
+        if stop_variants.extra[stops[i]].gap_m < packers[i]:
+            raise PlannerError(f"{where}: the packer change {e.packer_add[i] * 1e3:+g} mm with "
+                               f"its packer of {packers[i] * 1e3:g} mm is more than the gap "
+                               "of its bump stop: the stop would press on the car at rest; "
+                               "use a smaller change")
+    return Setup(f"{s.name}\x1f{tag}", ids, bump_stops=dict(zip(CORNERS, stops)),
+                 packers_m={c: float(p) for c, p in zip(CORNERS, packers)})

@@ -27,12 +27,15 @@ from ident.data.drive import Drive
 from ident.models.library import ShockLibrary
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
+from planner.elements import (ELEMENT_COLUMNS, loop_arguments, model_elements,
+                              model_setup_elements)
 from planner.predict import as_loop_plant, predict_setups, prepare_drive
 from planner.runner import KERNEL_LOCK, SCHEDULER_NONE, start_runner
 from planner.screen import screen_setups
 from planner.setups import resolve_baseline
 from planner.whatif.conditions import (
     ShockVariants,
+    StopVariants,
     condition_drive,
     condition_effect,
     condition_plant,
@@ -132,7 +135,7 @@ def _as_drives(drives):
     return drives
 
 
-def _evaluate_group(plant, drive, setups, library, method, oversample, band_hz):
+def _evaluate_group(plant, drive, setups, library, method, oversample, band_hz, elements=None):
     """Metrics of one condition group's setups (a list of condition setups), SI.
 
     Returns
@@ -141,14 +144,17 @@ def _evaluate_group(plant, drive, setups, library, method, oversample, band_hz):
         :func:`planner.predict.predict_setups`' (``method="time"``) or
         :func:`planner.screen.screen_setups`' table: one row per setup, in order.
     """
+    ekw = elements or {}
     if method == "time":
         return predict_setups(plant, drive, setups, library, oversample=oversample,
-                              band_hz=band_hz).table
-    return screen_setups(plant, drive, setups, library, band_hz=band_hz).table
+                              band_hz=band_hz, **ekw).table
+    elem = model_setup_elements(setups, plant, **ekw)
+    return screen_setups(plant, drive, setups, library, band_hz=band_hz,
+                         **loop_arguments(elem)).table
 
 
 def _nominal_agreement(plant, drive, setups, library, objective, baseline, nominal, metrics,
-                       oversample, band_hz):
+                       oversample, band_hz, elements=None):
     """Screening's nominal scores against the time domain's on the same setups.
 
     Returns
@@ -159,7 +165,7 @@ def _nominal_agreement(plant, drive, setups, library, objective, baseline, nomin
         reads.
     """
     td = predict_setups(plant, drive, setups, library, oversample=oversample,
-                        band_hz=band_hz).table
+                        band_hz=band_hz, **(elements or {})).table
     td_score = score_setups(td[metrics], objective, baseline=baseline).table["score"]
     scr_score = nominal.loc[td_score.index, "score"]
     rho = (float(spearmanr(scr_score, td_score).statistic) if len(td_score) > 2
@@ -169,11 +175,12 @@ def _nominal_agreement(plant, drive, setups, library, objective, baseline, nomin
             "time_best": time_best, "screening_best": screening_best}
 
 
-def _group_setups(setups, members, effects, variants):
+def _group_setups(setups, members, effects, variants, resolved=None, stop_variants=None):
     """The setups of a condition group: every setup under every member condition."""
     cond_setups = []
     for (dj, pj) in members:
-        cond_setups += condition_setups(setups, effects[pj], variants, f"{dj}:{pj}")
+        cond_setups += condition_setups(setups, effects[pj], variants, f"{dj}:{pj}", resolved,
+                                        stop_variants)
     return cond_setups
 
 
@@ -199,7 +206,7 @@ def _blas_threads():
 
 
 def _whatif_task(plant, drive, effect, where, setups, library, extra, method, oversample,
-                 band_hz, blas):
+                 band_hz, blas, elements=None):
     """Metrics of a chunk of a condition group's setups (a task on a Dask worker).
 
     Parameters
@@ -225,6 +232,8 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
         The client's BLAS threads per library: the screening operands' products differ
         in the last bits with the BLAS thread count, so the worker uses the client's (a
         Dask worker process starts with one).
+    elements : dict, optional
+        The real car's elements, :func:`planner.predict.predict_setups`' keywords.
 
     Returns
     -------
@@ -236,7 +245,8 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
     with KERNEL_LOCK:
         drive = condition_drive(drive, effect, where)
         with threadpool_limits(limits=blas):
-            return _evaluate_group(plant, drive, setups, lib, method, oversample, band_hz)
+            return _evaluate_group(plant, drive, setups, lib, method, oversample, band_hz,
+                                   elements)
 
 
 class _LazyTasks:
@@ -272,7 +282,8 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                     baseline=None, method="time", oversample=2, band_hz=(1.0, 20.0),
                     nominal_spring_rates_n_m=None, rank_tolerance=RANK_TOLERANCE,
                     fragile_share=FRAGILE_SHARE, progress=False, scheduler=None, client=None,
-                    n_workers=None, processes=True, chunk_size=None):
+                    n_workers=None, processes=True, chunk_size=None, bump_stops=None,
+                    static_corner_load_n=None, elements=True):
     """Evaluate every setup under every perturbation of a what-if design.
 
     Parameters
@@ -325,6 +336,10 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
         Evaluations (setup x condition) per task at most on a cluster; default the
         groups cut so that every worker thread gets about four tasks (at least
         :data:`MIN_TASK_EVALUATIONS` evaluations a task). Ignored in this process.
+    bump_stops, static_corner_load_n, elements
+        The real car's elements, as :func:`planner.predict.predict_setups` (default: the
+        model's). ``packer`` and ``bump_stop`` factors change each setup's resolved
+        packers and stops (:func:`planner.whatif.conditions.condition_setups`).
 
     Returns
     -------
@@ -379,6 +394,12 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     base = resolve_baseline(baseline, library, setups=setups, default=objective.baseline)
     if base.name not in {s.name for s in setups}:
         setups = [base] + setups
+    car = model_elements(model) if elements is True else (elements or None)
+    resolved = model_setup_elements(setups, model, bump_stops=bump_stops,
+                                    static_corner_load_n=static_corner_load_n,
+                                    elements=elements)
+    ekw = {"bump_stops": bump_stops, "static_corner_load_n": static_corner_load_n,
+           "elements": car if car is not None else elements is not False}
     names = [s.name for s in setups]
     if len(set(names)) != len(names):
         raise PlannerError("setup names repeat; give each setup its own name")
@@ -403,6 +424,14 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                 groups.setdefault((plant_key(e), di, drive_key(e)), []).append((di, pi))
         plants, tables = {}, []
         variants = ShockVariants(library)
+        stop_variants = StopVariants(bump_stops if bump_stops is not None
+                                     else getattr(car, "bump_stops", None))
+
+        def group_ekw():
+            """The elements' keywords with the stops moved so far (packer changes)."""
+            if not stop_variants.extra:
+                return ekw
+            return dict(ekw, bump_stops=stop_variants.full_library())
         by_name = {s.name: s for s in setups}
 
         def condition(pkey, members):
@@ -422,10 +451,11 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
             for (pkey, di, _), members in items:
                 plant, e0, where = condition(pkey, members)
                 drive = condition_drive(drives[di], e0, where)
-                cond_setups = _group_setups(setups, members, effects, variants)
+                cond_setups = _group_setups(setups, members, effects, variants, resolved,
+                                            stop_variants)
                 lib = variants.full_library()
                 pred_table = _evaluate_group(plant, drive, cond_setups, lib, method,
-                                             oversample, band_hz)
+                                             oversample, band_hz, group_ekw())
                 n_eval += len(cond_setups)
                 tables.append(_group_table(pred_table, by_name, drives, perturbations))
             kind, address, workers, n_tasks = "none", None, 1, len(groups)
@@ -448,12 +478,12 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                 if current.get("g") != g:
                     current.clear()
                     current.update(g=g, setups=_group_setups(setups, members, effects,
-                                                             variants))
+                                                             variants, resolved, stop_variants))
                 chunk_setups = current["setups"][a:b]
                 extra = list({sid: variants.extra[sid] for s in chunk_setups
                               for sid in s.ids() if sid in variants.extra}.values())
                 return (plant, drive_refs[di], e0, where, chunk_setups, lib_ref, extra,
-                        method, oversample, tuple(band_hz), blas)
+                        method, oversample, tuple(band_hz), blas, group_ekw())
 
             log.info("what-if: %d condition groups, %d evaluations in %d tasks (%s, %d "
                      "worker(s))", len(keys), sum(sizes), len(specs), runner.kind,
@@ -475,7 +505,8 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
             runner.close()
     table = pd.concat(tables).sort_values("_order", kind="stable").drop(columns="_order")
     table = table.reset_index(drop=True)
-    metrics = [c for c in table.columns if c not in ("drive", "perturbation", "setup") + CORNERS]
+    metrics = [c for c in table.columns if c not in ("drive", "perturbation", "setup") + CORNERS
+               and c not in ELEMENT_COLUMNS]
     # score each condition against the baseline in that condition
     scored = []
     for _, cond in table.groupby(["drive", "perturbation"], sort=False):
@@ -494,7 +525,7 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     agreement = None
     if method == "screening":  # the decision checked where it is made: the time domain
         agreement = _nominal_agreement(base_plant, drives[0], setups, library, objective,
-                                       base.name, nominal, metrics, oversample, band_hz)
+                                       base.name, nominal, metrics, oversample, band_hz, ekw)
     robust = robust_table(table, names, rank_tolerance, fragile_share)
     ptab = perturbations.table()
     conditions = pd.concat([ptab.assign(drive=d.name) for d in drives]).reset_index()

@@ -43,7 +43,7 @@ __all__ = [
 #: Factor kinds and their default change ("scale": multiply, "add": add to the value).
 FACTOR_KINDS = {"shock_scale": "scale", "shock_lag": "add", "spring_rate": "scale",
                 "arb_rate": "add", "drive_scale": "scale", "drive_window": "set",
-                "drive_file": "set", "vehicle": "scale"}
+                "drive_file": "set", "vehicle": "scale", "packer": "add", "bump_stop": "set"}
 #: Designs of a perturbation set.
 DESIGNS = ("one-at-a-time", "factorial", "monte-carlo")
 #: Largest number of conditions of a factorial design (guard against a typo exploding it).
@@ -191,6 +191,8 @@ class PerturbationSet:
 def _value_text(v):
     if v is None:
         return "nominal"
+    if isinstance(v, str):
+        return v
     if isinstance(v, tuple) and len(v) == 2:
         return f"{v[0]:g}-{v[1]:g} s"
     if hasattr(v, "channels"):
@@ -203,6 +205,10 @@ def _level_label(factor, v):
         return f"{v[0]:g}-{v[1]:g} s"
     if factor.kind == "drive_file":
         return v.name
+    if factor.kind == "bump_stop":
+        return f"= {v}"
+    if factor.kind == "packer":
+        return f"{v * 1e3:+.4g} mm"
     if factor.change == "scale":
         return f"x{v:.4g}"
     unit = {"shock_lag": " s", "spring_rate": " N/m", "arb_rate": " N/m"}.get(factor.kind, "")
@@ -321,14 +327,16 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
     change = t.get("change", FACTOR_KINDS[kind])
     allowed = {"shock_scale": ("scale",), "shock_lag": ("add",), "spring_rate": ("scale", "add"),
                "arb_rate": ("add", "scale"), "drive_scale": ("scale",), "drive_window": ("set",),
-               "drive_file": ("set",), "vehicle": ("scale", "add")}[kind]
+               "drive_file": ("set",), "vehicle": ("scale", "add"), "packer": ("add",),
+               "bump_stop": ("set",)}[kind]
     if change not in allowed:
         raise _fail(where, "change", f"= {change!r} does not apply to a {kind} factor",
                     f"use {' or '.join(repr(a) for a in allowed)}")
     # targets
     target_key = {"shock_scale": ("corners", "shocks"), "shock_lag": ("corners", "shocks"),
                   "spring_rate": ("corners",), "arb_rate": ("axles",),
-                  "drive_scale": ("channels",), "vehicle": ("parameter",)}.get(kind, ())
+                  "drive_scale": ("channels",), "vehicle": ("parameter",),
+                  "packer": ("corners",), "bump_stop": ("corners",)}.get(kind, ())
     given = [k for k in ("corners", "shocks", "axles", "channels", "parameter") if k in t]
     wrong = [k for k in given if k not in target_key]
     if wrong:
@@ -383,8 +391,8 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
                 raise _fail(where, key, "names a target twice", "list each once")
     # unit of "add" values
     if change == "add":
-        qty = {"shock_lag": None, "spring_rate": "stiffness", "arb_rate": "stiffness"}.get(kind,
-                                                                                          qty)
+        qty = {"shock_lag": None, "spring_rate": "stiffness", "arb_rate": "stiffness",
+               "packer": "displacement"}.get(kind, qty)
 
     def value(x, key):
         v = _number(where, key, x)
@@ -420,11 +428,18 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
                 # else the drive file's marker, else SI
                 lv.append(read_drive(path, units=units if stated_units else None))
             levels = tuple(lv)
+        elif kind == "bump_stop":
+            bad = [x for x in raw if not isinstance(x, str) or not x.strip()]
+            if bad:
+                raise _fail(where, "levels", f"has {bad[0]!r}, not a bump-stop id",
+                            'write e.g. levels = ["BS-F2", "none"] (ids of the bump-stop '
+                            'library, "none" for no bump stop)')
+            levels = tuple(x.strip() for x in raw)
         else:
             levels = tuple(value(x, "levels") for x in raw)
     distribution = None
     if "distribution" in t:
-        if kind in ("drive_window", "drive_file"):
+        if kind in ("drive_window", "drive_file", "bump_stop"):
             raise _fail(where, "distribution", f"does not apply to a {kind} factor",
                         "give levels; a monte-carlo design draws among them")
         d = t["distribution"]
