@@ -144,6 +144,9 @@ REAL_MEDIAN, REAL_MAX, REAL_SPEARMAN = 0.002, 0.01, 0.99
 #: The lift-off share against the known car's: the issue's 0.5 percentage points
 #: (measured 0.07).
 LIFTOFF_SHARE_ATOL = 0.005
+#: The rest found in the data (the start of a tapered run) against the run's mean travel [m]:
+#: the stops hold the mean back by 0.01-0.2 mm.
+REST_MEAN_M = 5e-4
 #: Session runs [s]: 5 runs of 400 s (the paper's are 800 s); 100 s runs leave this car's
 #: identification a floor of about 0.3 % median, above the bar.
 REAL_RUN_S = 400.0
@@ -161,7 +164,7 @@ def _gt_crate():
             for s in (0.6, 0.8, 1.0, 1.25, 1.5)]
 
 
-def _real_car(paper_plan, vehicle, *, stops, static, moment_multiple):
+def _real_car(paper_plan, vehicle, *, stops, static, moment_multiple, diagnose=False):
     """The GT-like car on the virtual rig (the paper's plan, 2 % noise), identified with the
     elements it has declared; returns (model, session)."""
     import dataclasses
@@ -180,7 +183,7 @@ def _real_car(paper_plan, vehicle, *, stops, static, moment_multiple):
     session = simulate_session(plan, vehicle)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return identify_session(session, diagnose=False), session
+        return identify_session(session, diagnose=diagnose), session
 
 
 def _validation_drive(vehicle, roughness_m3):
@@ -220,9 +223,21 @@ def test_declared_bump_stops_predict_the_known_car(paper_plan, bumpstop_vehicle)
     stops = BumpStopLibrary([BumpStop("BS-F", 0.0045, *REAL_TABLE),
                              BumpStop("BS-F2", 0.006, *REAL_TABLE),
                              BumpStop("BS-R", 0.006, *REAL_TABLE)])
+    from ident.identify.diagnose import RESIDUAL_EXCESS_MAX, Diagnosis
+
     model, session = _real_car(paper_plan, bumpstop_vehicle, stops=stops, static=None,
-                               moment_multiple=0.5)
+                               moment_multiple=0.5, diagnose=True)
     assert model.elements.baseline_stops["LF"] == "BS-F"
+    # the stop force from the travel measured from rest (the start of each tapered run)
+    info = model.frf.settings["bump_stop_force"]
+    assert set(info) == {r.name for r in session.runs}
+    for run in session.runs:
+        assert info[run.name]["rest"] == "rest (start)"
+        assert max(abs(v) for v in info[run.name]["rest_minus_mean_m"].values()) < REST_MEAN_M
+    # declared, the diagnosis reports the stops' contact and nothing the model cannot see
+    diag = Diagnosis.from_dict(model.settings["diagnosis"])
+    assert set(diag.findings.kind) == {"bump stop contact"}
+    assert diag.checks.residual_excess.max() < RESIDUAL_EXCESS_MAX
     crate = _gt_crate()
     lib = ShockLibrary.from_models(crate + list(session.shocks.values()))
     setups = []
@@ -249,6 +264,12 @@ def test_declared_bump_stops_predict_the_known_car(paper_plan, bumpstop_vehicle)
                                truth.table["bump_stop_contact_share_LF"], atol=0.01)
     linear = predict_setups(model, drive, setups, lib, elements=False, bump_stops=stops)
     assert _compare(truth, linear)[1] > 3 * REAL_MAX  # the stops matter on this car
+    # the linear part is the car without its stops: the stop force left the model
+    bare = [Setup(s.name, dict(s.shocks)) for s in setups if s.bump_stops is None
+            and s.packers_m is None]
+    med, mx, _, _ = _compare(predict_setups(bumpstop_vehicle, drive, bare, lib),
+                             predict_setups(model, drive, bare, lib, elements=False))
+    assert med <= REAL_MEDIAN and mx <= REAL_MAX
 
 
 @pytest.mark.slow
