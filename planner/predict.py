@@ -287,8 +287,8 @@ def warn_outside_session(model, table, static_corner_load_n=None):
         contact the session never reached), so the predictions of those setups are
         less certain than the intervals say.
     """
-    cov = getattr(model, "settings", {}).get("coverage") if isinstance(
-        getattr(model, "settings", None), dict) else None
+    settings = getattr(model, "settings", None)
+    cov = settings.get("coverage") if isinstance(settings, dict) else None
     if cov is None:
         return None
     rows = outside_coverage(table, Coverage.from_dict(cov), static_corner_load_n)

@@ -652,7 +652,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         cars = [model_elements(model) if elements is True else elements
                 for _, model in model_list for _ in drive_list]
         ekws = [{"bump_stops": bump_stops, "static_corner_load_n": static_corner_load_n,
-                 "elements": False if car is False else (car if car is not None else True)}
+                 "elements": elements if car is None else car}
                 for car in cars]
         runner.everywhere(_warm, ops0, shocks, base_codes, plant0, drive0, [base], library,
                           oversample, tuple(band_hz), ekws[0])
