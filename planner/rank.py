@@ -155,7 +155,8 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     lib_stops = bump_stops if bump_stops is not None else getattr(car, "bump_stops", None)
     if vary_bump_stops or vary_packers_m:
         setups = vary_elements(setups, bump_stops=vary_bump_stops, packers_m=vary_packers_m,
-                               library=lib_stops)
+                               library=lib_stops, where="rank: the bump-stop and packer "
+                               "choices (--try-bump-stops, --try-packers)")
     ekw = {"bump_stops": bump_stops, "static_corner_load_n": static_corner_load_n,
            "elements": elements}
     elem = model_setup_elements(setups, model, **ekw)

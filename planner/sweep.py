@@ -316,7 +316,8 @@ def _element_variants(sim, vary_bump_stops, vary_packers_m, bump_stops, car, ekw
     out, parent = [], []
     for i, s in enumerate(sim):
         got = vary_elements([s], bump_stops=vary_bump_stops, packers_m=vary_packers_m,
-                            library=lib, where="sweep")
+                            library=lib, where="sweep: the bump-stop and packer choices "
+                            "(--try-bump-stops, --try-packers)")
         out += got
         parent += [i] * len(got)
     elem = model_setup_elements(out, model, **ekw)
