@@ -443,7 +443,7 @@ BAD_FILES = [
      r"#2 \('X'\): key 'kind' is missing"),
     ("unknown kind", _HEAD + '[[shock]]\nid = "X"\nkind = "magic"\n',
      r"#2 \('X'\): key 'kind' is 'magic', an unknown kind; use one of \['linear', 'table', "
-     r"'digressive'\]"),
+     r"'digressive', 'adjustable'\]"),
     ("missing damping", '[[shock]]\nid = "X"\nkind = "linear"\n',
      r"#1 \('X'\): key 'damping' is missing .* N/\(m/s\)"),
     ("string damping", '[[shock]]\nid = "X"\nkind = "linear"\ndamping = "3502"\n',

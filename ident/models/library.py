@@ -20,14 +20,18 @@ Examples
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
 
-from ident.data.files import atomic_write_toml, did_you_mean, read_toml
-from ident.data.units import UNIT_LABELS, to_si
+from ident.data.files import (atomic_write_toml, check_can_write, did_you_mean, read_toml,
+                              write_csv_frame)
+from ident.data.units import UNIT_LABELS, from_si, to_si
 from ident.errors import ShockModelError
+from ident.models.adjustable import (AdjustableShock, format_shock_name, parse_shock_name,
+                                     read_dyno_sheets)
 from ident.models.shocks import SHOCK_KINDS, ShockModel, check_shock_units, is_real_number
 
 __all__ = [
@@ -41,6 +45,14 @@ logger = logging.getLogger(__name__)
 
 class ShockLibrary(Mapping):
     """An ordered, read-only mapping ``id -> ShockModel``.
+
+    Adjustable shocks (:class:`~ident.models.adjustable.AdjustableShock`) are entries
+    too: ``lib["TTX@ls=6,hs=2"]`` is the concrete curve at that setting (a
+    :class:`~ident.models.shocks.TableShock` whose id is the canonical name, cached),
+    ``lib["TTX"]`` the default setting, and ``"TTX@ls=6" in lib`` is true for any
+    setting name of an adjustable entry (a bad setting raises on lookup, naming the
+    adjuster). Iteration gives the entries' ids; :meth:`entries` the entries
+    themselves.
 
     Parameters
     ----------
@@ -91,10 +103,10 @@ class ShockLibrary(Mapping):
                             f"{type(models).__name__}")
         out = {}
         for j, model in enumerate(items):
-            if not isinstance(model, ShockModel):
+            if not isinstance(model, (ShockModel, AdjustableShock)):
                 raise TypeError(f"shock library: item {j} is a {type(model).__name__}, not a "
-                                "ShockModel; build it with LinearShock, TableShock or "
-                                "DigressiveShock")
+                                "ShockModel; build it with LinearShock, TableShock, "
+                                "DigressiveShock or AdjustableShock")
             if model.id in out:
                 raise ShockModelError(f"shock library{self._at(source)}: duplicate shock id "
                                       f"{model.id!r} (items {list(out).index(model.id)} and "
@@ -122,8 +134,78 @@ class ShockLibrary(Mapping):
         """tuple of str: the shock ids, in order."""
         return tuple(self._models)
 
+    @property
+    def adjustable_ids(self):
+        """tuple of str: the ids of the adjustable entries, in order."""
+        return tuple(k for k, m in self._models.items() if isinstance(m, AdjustableShock))
+
+    def entries(self):
+        """list of ShockModel or AdjustableShock: the entries as given, in order."""
+        return list(self._models.values())
+
+    def entry(self, shock_id):
+        """The entry of `shock_id` or of a setting name's base (``KeyError`` if none)."""
+        if shock_id in self._models:
+            return self._models[shock_id]
+        base = shock_id.partition("@")[0].strip() if isinstance(shock_id, str) else shock_id
+        return self._models[base]
+
+    def adjustable(self, shock_id):
+        """The :class:`~ident.models.adjustable.AdjustableShock` named by `shock_id`.
+
+        Parameters
+        ----------
+        shock_id : str
+            The adjustable's id or one of its setting names.
+
+        Raises
+        ------
+        ShockModelError
+            If the id is unknown or names a fixed shock.
+        """
+        base = shock_id.partition("@")[0].strip() if isinstance(shock_id, str) else shock_id
+        entry = self._models.get(base)
+        if not isinstance(entry, AdjustableShock):
+            known = list(self.adjustable_ids)
+            what = "is not adjustable" if entry is not None else "is not in the library"
+            raise ShockModelError(f"shock {base!r} {what}; the adjustable shocks are {known}")
+        return entry
+
+    def base_id(self, shock_id):
+        """The library entry's id of a shock name (``"TTX@ls=6"`` -> ``"TTX"``)."""
+        return shock_id.partition("@")[0].strip() if isinstance(shock_id, str) else shock_id
+
+    def canonical_name(self, shock_id, *, where=""):
+        """A shock name with every adjuster written in order (plain ids unchanged)."""
+        if not isinstance(shock_id, str) or "@" not in shock_id:
+            return shock_id
+        base, settings = parse_shock_name(shock_id, where=where)
+        entry = self.adjustable(base)
+        return format_shock_name(base, entry.resolve(settings, where=where), entry.names)
+
     def __getitem__(self, shock_id):
-        return self._models[shock_id]
+        entry = self._models.get(shock_id) if isinstance(shock_id, str) else None
+        if entry is None:
+            if not isinstance(shock_id, str) or "@" not in shock_id:
+                return self._models[shock_id]
+            base, settings = parse_shock_name(shock_id)
+            entry = self._models[base]
+            if not isinstance(entry, AdjustableShock):
+                raise ShockModelError(f"shock {shock_id!r}: {base!r} is a fixed shock, it has "
+                                      f"no adjusters; write {base!r} alone, or name an "
+                                      f"adjustable shock {list(self.adjustable_ids)}")
+            return entry.at(settings)
+        if isinstance(entry, AdjustableShock):
+            return entry.default_shock()
+        return entry
+
+    def __contains__(self, shock_id):
+        if not isinstance(shock_id, str):
+            return False
+        if shock_id in self._models:
+            return True
+        base, sep, _ = shock_id.partition("@")
+        return bool(sep) and base.strip() in self._models
 
     def __iter__(self):
         return iter(self._models)
@@ -160,7 +242,12 @@ class ShockLibrary(Mapping):
             If `shock_id` is not in the library and no `default` is given.
         """
         try:
-            return self._models[shock_id]
+            if isinstance(shock_id, str) and "@" in shock_id and shock_id in self:
+                base, settings = parse_shock_name(shock_id, where=where)
+                entry = self._models[base.strip()]
+                if isinstance(entry, AdjustableShock):
+                    return entry.at(settings, where=where)
+            return self[shock_id]
         except (KeyError, TypeError):
             if default is not ShockLibrary._MISSING:
                 return default
@@ -207,9 +294,11 @@ def _model_from_toml(table, units, where, index):
     if "kind" not in table:
         raise _fail(label, "kind", "is missing", f"give kind = one of {list(SHOCK_KINDS)}")
     kind = table["kind"]
+    if kind == AdjustableShock.kind:
+        return _adjustable_from_toml(table, units, where, label, raw_id)
     if not isinstance(kind, str) or kind not in SHOCK_KINDS:
         raise _fail(label, "kind", f"is {kind!r}, an unknown kind",
-                    f"use one of {list(SHOCK_KINDS)}")
+                    f"use one of {[*SHOCK_KINDS, AdjustableShock.kind]}")
     cls = SHOCK_KINDS[kind]
     allowed = {"id", "kind", "lag", "description", "count", *cls.TOML_FIELDS}
     extra = [k for k in table if k not in allowed]
@@ -248,6 +337,66 @@ def _model_from_toml(table, units, where, index):
         base, _, sub = attr.partition("[")
         key = keys.get(base, base) + (f"[{sub}" if sub else "")
         raise ShockModelError(f"{label}: key {key!r} {exc.problem}; {exc.fix}") from None
+
+
+ADJUSTABLE_KEYS = ("id", "kind", "adjusters", "default", "stiffer", "step", "dyno", "lag",
+                   "description", "count")
+
+
+def _adjustable_from_toml(table, units, where, label, raw_id):
+    """Build an :class:`AdjustableShock` from its ``[[shock]]`` table and dyno sheets."""
+    extra = [k for k in table if k not in ADJUSTABLE_KEYS]
+    if extra:
+        raise _fail(label, extra[0], "is not a key of an 'adjustable' shock",
+                    f"remove it or fix its spelling (keys: {list(ADJUSTABLE_KEYS)})")
+    for key in ("adjusters", "dyno"):
+        if key not in table:
+            raise _fail(label, key, "is missing (required for kind 'adjustable')",
+                        "see the spec's 'Adjustable shocks': adjusters = { ls = [0, 25] }, "
+                        "dyno = \"sheet.csv\"")
+    for key in ("adjusters", "default", "stiffer", "step"):
+        if key in table and not isinstance(table[key], dict):
+            raise _fail(label, key, f"must be a table {{adjuster = ...}}, got "
+                        f"{type(table[key]).__name__}", f"write {key} = {{ ls = ..., hs = ... }}")
+    dyno = table["dyno"]
+    files = [dyno] if isinstance(dyno, str) else dyno
+    if not isinstance(files, list) or not files or not all(isinstance(f, str) for f in files):
+        raise _fail(label, "dyno", f"must be a file name or a list of them, got {dyno!r}",
+                    "write dyno = \"ttx_dyno.csv\" (relative to the library file)")
+    base = Path(where).parent if where else Path(".")
+    for key in ("default", "step"):
+        for name, x in table.get(key, {}).items():
+            if not is_real_number(x):
+                raise _fail(label, f"{key}.{name}", f"must be a number, got {x!r}",
+                            "write clicks or turns as a number")
+    adjusters = table["adjusters"]
+    names = list(adjusters)
+    for name, rng in adjusters.items():
+        if not isinstance(rng, list) or len(rng) != 2 or not all(is_real_number(x)
+                                                                 for x in rng):
+            raise _fail(label, f"adjusters.{name}", f"must be [lo, hi], got {rng!r}",
+                        "write the adjuster's range of settings, e.g. ls = [0, 25]")
+    points = read_dyno_sheets([base / f for f in files], names, units=units,
+                              where=f"{label}")
+    kwargs = {}
+    if "lag" in table:
+        kwargs["lag_s"] = _toml_number(label, "lag", table["lag"])
+    if "description" in table:
+        if not isinstance(table["description"], str):
+            raise _fail(label, "description", "must be a string", "write it in quotes")
+        kwargs["description"] = table["description"]
+    if "count" in table:
+        if not isinstance(table["count"], int) or isinstance(table["count"], bool):
+            raise _fail(label, "count", f"must be an integer, got {table['count']!r}",
+                        "write a whole number, or omit it for unlimited")
+        kwargs["count"] = table["count"]
+    try:
+        return AdjustableShock(raw_id, {k: tuple(v) for k, v in adjusters.items()}, points,
+                               default=table.get("default"), stiffer=table.get("stiffer"),
+                               step=table.get("step"), dyno_files=tuple(files),
+                               sheet_units=units, **kwargs)
+    except ShockModelError as exc:
+        raise ShockModelError(f"{label}: {exc}") from None
 
 
 def read_shock_library(path):
@@ -310,6 +459,24 @@ def read_shock_library(path):
     return ShockLibrary(models, source=path)
 
 
+def _sheet_paths(shock, path, units, overwrite):
+    """The ``dyno`` value of an adjustable shock written next to `path`.
+
+    Sheets read from files are referenced relative to the new library (not copied);
+    points built in memory are written as ``<library stem>.<id>.dyno.csv``.
+    """
+    if shock.points.sources and units == shock.sheet_units:
+        rel = [os.path.relpath(src, path.parent.resolve()) for src in shock.points.sources]
+        return rel[0] if len(rel) == 1 else rel
+    name = f"{path.stem}.{shock.id}.dyno.csv"
+    check_can_write(path.parent / name, overwrite=overwrite)
+    frame = shock.points.to_frame()
+    frame["velocity"] = from_si(frame["velocity"].to_numpy(), "velocity", units)
+    frame["force"] = from_si(frame["force"].to_numpy(), "force", units)
+    write_csv_frame(frame, path.parent / name, units=units)
+    return name
+
+
 def write_shock_library(library, path, *, units="SI", overwrite=False):
     """Write a shock library as ``shocks.toml``, atomically.
 
@@ -341,7 +508,13 @@ def write_shock_library(library, path, *, units="SI", overwrite=False):
         library = ShockLibrary.from_models(library)
     units = check_shock_units(units, "write_shock_library: units")
     path = Path(path)
-    doc = {"units": units, "shock": [m.to_toml_dict(units) for m in library.values()]}
+    tables = []
+    for m in library.entries():
+        table = m.to_toml_dict(units)
+        if isinstance(m, AdjustableShock):
+            table["dyno"] = _sheet_paths(m, path, units, overwrite)
+        tables.append(table)
+    doc = {"units": units, "shock": tables}
     atomic_write_toml(path, doc, overwrite=overwrite,
                       header="Shock library (rig-session/1), written by shockplan.")
     logger.info("wrote %d shock(s) to %s (%s)", len(library), path, units)
