@@ -14,6 +14,7 @@ __all__ = [
     "DriveError",
     "IdentificationError",
     "ModelFileError",
+    "DynoError",
     "ShockplanWarning",
     "LowCoherenceWarning",
     "FitWarning",
@@ -50,6 +51,10 @@ class IdentificationError(ShockplanError):
 
 class ModelFileError(ShockplanError):
     """A saved model file is corrupt or of an unsupported version."""
+
+
+class DynoError(ShockplanError):
+    """A raw dyno file, its dyno map or a dyno sheet cannot be read or turned into points."""
 
 
 class ShockplanWarning(UserWarning):

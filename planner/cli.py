@@ -27,6 +27,7 @@ import numpy as np
 from ident.data.files import check_output
 from ident.data.channels import RIG_KINDS
 from ident.data.units import UNIT_SYSTEMS
+from planner.dyno_cli import add_parser as add_dyno_parser
 
 __all__ = ["main", "build_parser", "noise_report"]
 
@@ -170,8 +171,10 @@ def cmd_identify(args):
     out = Path(args.out)
     session = read_session(args.session)
     diagnose_log = logging.getLogger("ident.identify.diagnose")
-    level = diagnose_log.level
+    shocks_log = logging.getLogger("ident.identify.shockcheck")
+    level, shocks_level = diagnose_log.level, shocks_log.level
     diagnose_log.setLevel(logging.ERROR)  # its findings are printed below, once
+    shocks_log.setLevel(logging.ERROR)  # so are the shock library's
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -181,6 +184,7 @@ def cmd_identify(args):
                                      max_order=args.max_order, diagnose=not args.no_diagnosis)
     finally:
         diagnose_log.setLevel(level)
+        shocks_log.setLevel(shocks_level)
     noise = noise_report(model, session)
     # the noise report built the loop plant; the copy keeps it, and save stores it
     model = model.with_settings(dict(model.settings, noise=noise))
@@ -211,6 +215,10 @@ def cmd_identify(args):
               + ("" if not lift else "; samples where a tire left its pad were corrected "
                  "(pad corrections, settings['liftoff'])"))
     print(_diagnosis_summary(model))
+    if "shock_check" in model.settings:  # the session's shock forces against the library
+        from ident.identify.shockcheck import ShockLibraryCheck
+
+        print("\n".join(ShockLibraryCheck.from_dict(model.settings["shock_check"]).lines()))
     for w in caught:
         print(f"warning: {w.message}")
     print(f"wrote model {out} and its per-pair summary {summary_file}")
@@ -382,6 +390,7 @@ def _parse_fixed(items):
 def cmd_rank(args):
     """``shockplan rank``: rank setups (screen, simulate the best, score) and write a report."""
     from planner.objective import default_objective, read_objective
+    from planner.clicks import MAX_CLICK_SETUPS, clicks_option, split_shock_ids
     from planner.rank import rank_setups
     from planner.report import write_ranking
     from planner.setups import read_setups
@@ -390,14 +399,17 @@ def cmd_rank(args):
     model, drive, library = _read_inputs(args)
     objective = default_objective() if args.objective is None else read_objective(args.objective)
     setups, constraints = None, None
+    clicks = clicks_option(args)
     stops = _bump_stop_library(args, model)
     if args.setups:
         setups = read_setups(args.setups, library, stops, units=args.units)
     else:
         constraints = {"symmetry": args.symmetry, "axles": args.axles,
                        "fixed": _parse_fixed(args.fixed) or None}
+        if clicks is not None:  # screened, then the best --simulate in the time domain
+            constraints.update(clicks=clicks, max_setups=MAX_CLICK_SETUPS)
         if args.only:
-            constraints["shocks"] = [s.strip() for s in args.only.split(",") if s.strip()]
+            constraints["shocks"] = split_shock_ids(args.only)
     baseline = _baseline_arg(args, library, setups)
     variations = _element_choices(args)
     out = Path(args.out)
@@ -509,6 +521,7 @@ def cmd_sweep(args):
     from ident.models.library import read_shock_library
     from planner.objective import default_objective, read_objective
     from planner.report.sweep import write_sweep
+    from planner.clicks import clicks_option, split_shock_ids
     from planner.setups import read_setups
     from planner.sweep import sweep_setups
 
@@ -519,14 +532,15 @@ def cmd_sweep(args):
     library = read_shock_library(args.shocks)
     objective = default_objective() if args.objective is None else read_objective(args.objective)
     setups, constraints = None, None
+    clicks = clicks_option(args)
     if args.setups:
         setups = read_setups(args.setups, library)
     else:
         constraints = {"symmetry": args.symmetry, "axles": args.axles,
                        "fixed": _parse_fixed(args.fixed) or None,
-                       "respect_inventory": not args.ignore_inventory}
+                       "respect_inventory": not args.ignore_inventory, "clicks": clicks}
         if args.only:
-            constraints["shocks"] = [s.strip() for s in args.only.split(",") if s.strip()]
+            constraints["shocks"] = split_shock_ids(args.only)
     baseline = _baseline_arg(args, library, setups)
     scheduler = args.scheduler
     result = sweep_setups(models, drives, library, setups=setups, constraints=constraints,
@@ -574,7 +588,7 @@ def cmd_optimize(args):
         read_curve_constraints,
         write_optimum,
     )
-    from planner.report.optimize import STATIONARY_FLAT
+    from planner.report.optimize import STATIONARY_FLAT, click_summary
 
     out = Path(args.out)
     _check_out(args, folder=True)
@@ -604,7 +618,7 @@ def cmd_optimize(args):
                                          else DEFAULT_KNOTS_M_S),
                               elements=not args.no_elements,
                               bump_stop_library=_bump_stop_library(args, model),
-                              packers=_packer_bounds(args))
+                              packers=_packer_bounds(args), click_radius=args.click_radius)
     files = write_optimum(opt, library, out, units=args.units, overwrite=args.overwrite)
     t = opt.table
     s = opt.solver
@@ -655,6 +669,7 @@ def cmd_optimize(args):
         vs = "/".join(f"{from_si(v, 'velocity', args.units):.3g}" for v in ref)
         lines.append(f"{sid}: bump/rebound force at {vs} {unit_v}: {vals} "
                      f"{'N' if args.units == 'SI' else 'lbf'}")
+    lines += click_summary(opt)
     for w in caught:
         lines.append(f"warning: {w.message}")
     lines.append("wrote " + ", ".join(str(p) for p in files.values()))
@@ -814,6 +829,7 @@ def _whatif_summary(result, n=10):
     lines.append(f"fragile ranks: {', '.join(fr)}" if fr else
                  f"no fragile ranks (rank moved > {st['rank_tolerance']} places in more than "
                  f"{100 * st['fragile_share']:.0f} % of conditions)")
+    lines += [f"note: {note}" for note in st.get("notes", ())]  # clicks clipped, ...
     return "\n".join(lines)
 
 
@@ -825,6 +841,20 @@ def cmd_demo(args):
     summary = run_demo(Path(args.out), overwrite=args.overwrite, progress=not args.quiet)
     print(summary)
     return 0
+
+
+def cmd_dyno_table(args):
+    """``shockplan dyno table`` (:func:`planner.dyno_commands.cmd_dyno_table`)."""
+    from planner.dyno_commands import cmd_dyno_table as run
+
+    return run(args)
+
+
+def cmd_dyno_check(args):
+    """``shockplan dyno check`` (:func:`planner.dyno_commands.cmd_dyno_check`)."""
+    from planner.dyno_commands import cmd_dyno_check as run
+
+    return run(args)
 
 
 #: difflib similarity a misspelled option or command must reach for the nearest valid one to
@@ -1022,6 +1052,8 @@ _OBJECTIVE_HELP = "objective TOML (default: the built-in 'grip and platform')"
 
 def build_parser():
     """Build the argument parser (exposed for documentation and tests)."""
+    from planner.clicks import add_click_arguments
+
     p = _Parser(
         prog="shockplan",
         description="Shock-absorber selection planner for 7-post, 8-post and 4-post shaker "
@@ -1126,6 +1158,7 @@ def build_parser():
                             help="fix a corner's shock (repeatable; default: none fixed)")
             sp.add_argument("--only", help="comma-separated shock ids to consider (default: "
                             "every shock of the library)")
+            add_click_arguments(sp)
             sp.add_argument("--baseline", help="baseline: a setup of --setups by name, one "
                             "shock id (all corners) or four LF,RF,LR,RR (default: the first "
                             "setup)")
@@ -1185,6 +1218,9 @@ def build_parser():
                      "drive's units or with a unit: front=0:4mm); needs bump stops (the "
                      "model's, or --bump-stops); repeatable (default: packers as the "
                      "baseline's)")
+    opt.add_argument("--click-radius", type=_int_at_least(1), default=2, metavar="K",
+                     help="adjustable shocks: the click search moves one adjuster by 1..K "
+                     "steps (default %(default)s)")
     opt.add_argument("--out", required=True, help="output folder")
     opt.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     opt.set_defaults(func=cmd_optimize)
@@ -1284,6 +1320,7 @@ def build_parser():
                     help="fix a corner's shock (repeatable; default: none fixed)")
     sw.add_argument("--only", help="comma-separated shock ids to consider (default: every "
                     "shock of the library)")
+    add_click_arguments(sw)
     sw.add_argument("--ignore-inventory", action="store_true",
                     help="enumerate setups beyond the crate's counts, ranked infeasible "
                     "(default: only setups the crate can build)")
@@ -1353,6 +1390,8 @@ def build_parser():
                        "(default: the vehicle's own)")
     _add_units(modes, "units of --damping")
     modes.set_defaults(func=cmd_vehicle_modes)
+
+    add_dyno_parser(sub, table=cmd_dyno_table, check=cmd_dyno_check)
 
     _add_flags_anywhere(p)
     return p

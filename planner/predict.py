@@ -157,10 +157,17 @@ def resolve_setups(setups, library):
         the corner and the known ids).
     """
     out = []
+    known = {}  # each id looked up once: a setting name (TTX@ls=6,hs=2) costs ~10 us a lookup
     for s in setups:
         if not isinstance(s, Setup):
             raise TypeError(f"setups must be planner.setups.Setup objects, got {type(s).__name__}")
-        out.append(s.resolve(library))
+        ids = s.ids()
+        if all(sid in known for sid in ids):
+            out.append(tuple(known[sid] for sid in ids))
+            continue
+        row = s.resolve(library)
+        known.update(zip(ids, row))
+        out.append(row)
     if not out:
         raise PlannerError("no setups to predict; give at least one setup")
     return out

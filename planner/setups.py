@@ -77,8 +77,10 @@ import pandas as pd
 from ident.data.files import check_can_write, csv_preamble, resolve_units, write_csv
 from ident.data.channels import CORNERS
 from ident.data.units import UNIT_LABELS, from_si, to_si
+from ident.errors import ShockModelError
 from ident.models.bumpstops import (NO_BUMP_STOP, BumpStopLibrary, check_packer,
                                     parse_bump_stop_id)
+from planner.clicks import base_id, canonical_id, click_steps, expand_candidates, split_shock_ids
 from planner.errors import PlannerError
 
 __all__ = [
@@ -354,7 +356,10 @@ class Setup:
         for c, sid in zip(CORNERS, self._ids):
             if sid not in library:
                 raise unknown_id_error(f"setup {self.name!r}: corner {c}", sid, library)
-            out.append(library[sid])
+            try:
+                out.append(library[sid])
+            except ShockModelError as exc:  # a setting name out of range, unknown adjuster
+                raise PlannerError(f"setup {self.name!r}: corner {c}: {exc}") from None
         return tuple(out)
 
 
@@ -410,7 +415,8 @@ def read_setups(path, library=None, bump_stops=None, *, units=None):
         a corner column, repeats a column, has a column that looks like an
         unknown corner (two letters, e.g. ``LM``), a row with the wrong number
         of fields, an empty cell, a duplicate setup name, or (with `library`) an
-        unknown shock id; a column that looks like a misspelt ``bump_stop_XX`` or
+        unknown shock id, or a setting name with an unknown adjuster or a setting out of
+        range; a column that looks like a misspelt ``bump_stop_XX`` or
         ``packer_XX``, a packer that is not a number >= 0, or (with `bump_stops`) an
         unknown bump-stop id or a packer thicker than the gap of the row's bump stop.
         The message names the file, the line and setup, the column, and the fix.
@@ -511,6 +517,9 @@ def read_setups(path, library=None, bump_stops=None, *, units=None):
                                    "every corner")
             if library is not None and sid not in library:
                 raise unknown_id_error(f"{where}: column {c!r}", sid, library)
+        if library is not None:  # setting names checked and canonical: TTX@ls=6,hs=2
+            ids = tuple(canonical_id(library, sid, f"{where}: column {c!r}")
+                        for c, sid in zip(CORNERS, ids))
         if not i_stop and not i_packer:
             out.append(Setup._unchecked(name, ids))
             continue
@@ -723,6 +732,7 @@ def _id_list(values, what, library, where="enumerate_setups"):
     for sid in values:
         if sid not in library:
             raise unknown_id_error(f"{where}: {what}", sid, library)
+        sid = canonical_id(library, sid, f"{where}: {what}")
         if sid not in out:
             out.append(sid)
     if not out:
@@ -769,6 +779,7 @@ def _check_fixed(fixed, library, groups, symmetry, axles):
                                f"{list(CORNERS)}")
         if sid not in library:
             raise unknown_id_error(f"enumerate_setups: fixed[{c!r}]", sid, library)
+        sid = canonical_id(library, sid, f"enumerate_setups: fixed[{c!r}]")
         g = next(j for j, grp in enumerate(groups) if c in grp)
         if g in out and out[g][1] != sid:
             c0, sid0 = out[g]
@@ -781,7 +792,8 @@ def _check_fixed(fixed, library, groups, symmetry, axles):
 
 
 def _inventory(library):
-    """Return id -> count for the shocks with a finite count."""
+    """Return id -> count for the shocks with a finite count (an adjustable's settings share
+    its count: they are one damper's)."""
     return {sid: int(m.count) for sid, m in library.items()
             if getattr(m, "count", None) is not None}
 
@@ -811,7 +823,7 @@ def inventory_shortfall(setup, library):
     """
     counts = _inventory(library)
     used = {}
-    for sid in setup.ids():
+    for sid in map(base_id, setup.ids()):
         used[sid] = used.get(sid, 0) + 1
     return "; ".join(f"needs {n} x {sid!r} but the library's count is {counts[sid]}"
                      for sid, n in used.items() if sid in counts and n > counts[sid])
@@ -885,9 +897,10 @@ class SetupSpace:
         Per corner group, the codes of its candidates (empty for a list).
     corner_group : tuple of int, shape (4,)
         The group of each corner ``LF RF LR RR``.
-    inventory : tuple of (int, int)
-        ``(code, count)`` of the shocks whose candidates are skipped beyond their count
-        (empty for a list or ``respect_inventory=False``).
+    inventory : tuple of (tuple of int, int)
+        ``(codes, count)`` per shock with a count: a candidate using more than ``count`` of
+        ``codes`` (one fixed shock, or an adjustable's settings) is skipped (empty for a
+        list or ``respect_inventory=False``).
     listed_codes : ndarray of int, shape (n_setups, 4), or None
         The codes of a given list of setups.
     listed_names : tuple of str, or None
@@ -951,7 +964,8 @@ class SetupSpace:
         if self.inventory:
             keep = np.ones(idx.size, dtype=bool)
             for code, count in self.inventory:
-                keep &= (codes == code).sum(axis=1) <= count
+                hit = codes == code[0] if len(code) == 1 else np.isin(codes, code)
+                keep &= hit.sum(axis=1) <= count
             idx, codes = idx[keep], codes[keep]
         return idx, codes
 
@@ -1057,7 +1071,7 @@ class SetupSpace:
 
 def setup_space(library, *, setups=None, symmetry="left-right", axles="independent",
                 fixed=None, shocks=None, respect_inventory=True,
-                name_format=DEFAULT_NAME_FORMAT, where="setup_space"):
+                name_format=DEFAULT_NAME_FORMAT, clicks=None, where="setup_space"):
     """The setups of an enumeration (decoded lazily) or of a given list, as integer codes.
 
     The one enumeration: :func:`enumerate_setups` decodes the whole space at once,
@@ -1070,9 +1084,10 @@ def setup_space(library, *, setups=None, symmetry="left-right", axles="independe
     setups : sequence of planner.setups.Setup, optional
         A given list (unique names); then the enumeration options must stay at their
         defaults.
-    symmetry, axles, fixed, shocks, respect_inventory, name_format
+    symmetry, axles, fixed, shocks, respect_inventory, name_format, clicks
         As :func:`enumerate_setups` (which decodes this space, in its order and with
-        its names); there is no ``max_setups``: a space may be large.
+        its names); there is no ``max_setups``: a space may be large. Setting names get
+        codes after the library's ids.
     where : str
         The caller named at the start of the errors.
 
@@ -1091,14 +1106,18 @@ def setup_space(library, *, setups=None, symmetry="left-right", axles="independe
         raise PlannerError(f"{where}: the shock library is empty; add shocks to it")
     code_of = {sid: j for j, sid in enumerate(all_ids)}
     if setups is not None:
-        if (symmetry, axles, fixed, shocks) != ("left-right", "independent", None, None):
+        if (symmetry, axles, fixed, shocks, clicks) != ("left-right", "independent", None,
+                                                        None, None):
             raise PlannerError(f"{where}: give either setups or enumeration options "
-                               "(symmetry, axles, fixed, shocks), not both")
+                               "(symmetry, axles, fixed, shocks, clicks), not both")
         setups = _check_setups(setups, where)
         if not setups:
             raise PlannerError(f"{where}: no setups given; give at least one setup")
         for s in setups:
             s.resolve(library)
+            for sid in s.ids():  # setting names: codes after the library's ids
+                code_of.setdefault(sid, len(code_of))
+        all_ids = list(code_of)
         codes = np.array([[code_of[sid] for sid in s.ids()] for s in setups], dtype=np.intp)
         return SetupSpace(shock_ids=tuple(all_ids), group_codes=(), corner_group=(),
                           inventory=(), listed_codes=codes,
@@ -1107,6 +1126,10 @@ def setup_space(library, *, setups=None, symmetry="left-right", axles="independe
     groups = _corner_groups(symmetry, axles)
     fixed_by_group = _check_fixed(fixed, library, groups, symmetry, axles)
     per_corner = _corner_candidates(shocks, library)
+    steps = click_steps(clicks, library, where)
+    if steps:  # each adjustable id among the candidates: its settings' names
+        per_corner = {c: expand_candidates(ids, library, steps, where)
+                      for c, ids in per_corner.items()}
     group_codes = []
     for g, grp in enumerate(groups):
         if g in fixed_by_group:
@@ -1118,10 +1141,13 @@ def setup_space(library, *, setups=None, symmetry="left-right", axles="independe
                 raise PlannerError(f"{where}: corners {list(grp)} share one shock but their "
                                    "candidate lists have no id in common; give the same ids "
                                    "for both axles or use axles='independent'")
-        group_codes.append(np.array([code_of[sid] for sid in cand], dtype=np.intp))
+        group_codes.append(np.array([code_of.setdefault(sid, len(code_of)) for sid in cand],
+                                    dtype=np.intp))
+    all_ids = list(code_of)
     corner_group = tuple(next(g for g, grp in enumerate(groups) if c in grp) for c in CORNERS)
-    inventory = tuple((code_of[sid], n) for sid, n in _inventory(library).items()) \
-        if respect_inventory else ()
+    counts = _inventory(library) if respect_inventory else {}
+    inventory = tuple((tuple(j for sid, j in code_of.items() if base_id(sid) == b), n)
+                      for b, n in counts.items())
     if name_format == DEFAULT_NAME_FORMAT:
         name_format = DEFAULT_NAME_FORMAT
     return SetupSpace(shock_ids=tuple(all_ids), group_codes=tuple(group_codes),
@@ -1133,7 +1159,7 @@ def setup_space(library, *, setups=None, symmetry="left-right", axles="independe
 
 def enumerate_setups(library, *, symmetry="left-right", axles="independent", fixed=None,
                      shocks=None, respect_inventory=True, max_setups=DEFAULT_MAX_SETUPS,
-                     name_format=DEFAULT_NAME_FORMAT):
+                     name_format=DEFAULT_NAME_FORMAT, clicks=None):
     """Enumerate the setups that can be built from a shock library.
 
     Parameters
@@ -1173,6 +1199,11 @@ def enumerate_setups(library, *, symmetry="left-right", axles="independent", fix
         ``str.format`` template with the fields ``{LF} {RF} {LR} {RR}``
         (default ``"{LF}/{RF}/{LR}/{RR}"``, e.g. ``"B20/B20/D8/D8"``), or a
         callable taking the dict corner -> id and returning the name.
+    clicks : None, "all" or mapping
+        Enumerate the settings of adjustable shocks (:mod:`planner.clicks`): None keeps an
+        adjustable id as one candidate (its default); ``"all"`` expands each adjustable
+        candidate into its settings grid; ``{"ls": 2}`` steps per adjuster, ``{"TTX":
+        "all"}`` per shock. Names are canonical, ``TTX@ls=6,hs=2``; counts per base id.
 
     Returns
     -------
@@ -1210,7 +1241,7 @@ def enumerate_setups(library, *, symmetry="left-right", axles="independent", fix
     where = "enumerate_setups"
     space = setup_space(library, symmetry=symmetry, axles=axles, fixed=fixed, shocks=shocks,
                         respect_inventory=respect_inventory, name_format=name_format,
-                        where=where)
+                        clicks=clicks, where=where)
     n_total = len(space)
     if max_setups is not None:
         if isinstance(max_setups, bool) or not isinstance(max_setups, (int, np.integer)) \
@@ -1243,6 +1274,7 @@ def enumerate_setups(library, *, symmetry="left-right", axles="independent", fix
 
 
 def _fits_inventory(ids, inventory):
+    ids = [base_id(sid) for sid in ids]
     return all(ids.count(sid) <= n for sid, n in inventory.items() if sid in ids)
 
 
@@ -1397,10 +1429,10 @@ def resolve_baseline(baseline, library, *, setups=(), default=None, find=None,
     elif isinstance(baseline, str):
         if baseline in names:
             return setups[names.index(baseline)]
-        if baseline in library:
+        if baseline in library and "@" not in baseline:
             given = [baseline]
-        elif "," in baseline:
-            given = [s.strip() for s in baseline.split(",")]
+        elif "," in baseline or baseline in library:  # commas of TTX@ls=6,hs=2 kept
+            given = split_shock_ids(baseline)
         elif "/" in baseline:
             raise PlannerError(f"{pre}baseline {baseline!r}: separate the shock ids with "
                                f"commas, {baseline.replace('/', ',')!r} (LF,RF,LR,RR)")
@@ -1413,9 +1445,11 @@ def resolve_baseline(baseline, library, *, setups=(), default=None, find=None,
             raise PlannerError(f"{pre}baseline {baseline!r} is neither a shock id nor four ids "
                                f"LF,RF,LR,RR; {_lib_label(library)} has {list(library)}; give "
                                "one shock id (every corner) or four separated by commas")
-        setup = _baseline_from_ids(given, name, pre)
+        setup = _baseline_from_ids([canonical_id(library, s, f"{pre}baseline") for s in given],
+                                   name, pre)
     elif isinstance(baseline, (list, tuple)) and all(isinstance(s, str) for s in baseline):
-        setup = _baseline_from_ids(list(baseline), name, pre)
+        setup = _baseline_from_ids([canonical_id(library, s, f"{pre}baseline")
+                                    for s in baseline], name, pre)
     else:
         raise TypeError(f"{pre}baseline must be a Setup, a setup name or shock ids (str), got "
                         f"{type(baseline).__name__}")

@@ -89,6 +89,7 @@ from planner.predict import as_loop_plant, predict_setups, prepare_drive, resolv
 from planner.runner import KERNEL_LOCK, start_runner
 from planner.screen import (drive_bands, screen_operands, screen_packed,
                             screening_predictions)
+from planner.clicks import base_id
 from planner.setups import SetupSpace, resolve_baseline, setup_space
 
 __all__ = [
@@ -123,7 +124,8 @@ MIN_CHUNK_SIZE = 1000
 
 @dataclass(frozen=True, eq=False)
 class _ShockTable:
-    """Every shock of the library packed once (the kernel's curve arrays, by code)."""
+    """Every shock of a space packed once (the kernel's curve arrays, by code): the library's
+    and the setting names of adjustable shocks (one curve each)."""
 
     kv: np.ndarray  # (n_shocks, n_knots)
     kf: np.ndarray
@@ -132,10 +134,12 @@ class _ShockTable:
     shi: np.ndarray
     lag: np.ndarray
     count: np.ndarray  # (n_shocks,), -1 = unlimited
+    base: np.ndarray | None = None  # (n_shocks,) code of each one's base id (settings share)
 
     @classmethod
-    def of(cls, library):
-        models = [library[sid] for sid in library]
+    def of(cls, library, ids=None):
+        ids = list(library) if ids is None else list(ids)
+        models = [library[sid] for sid in ids]
         pwls = [m.to_pwl() for m in models]
         K = max(p.v_knots_m_s.size for p in pwls)
         n = len(models)
@@ -148,9 +152,12 @@ class _ShockTable:
             nk[j] = k
         count = np.array([-1 if getattr(m, "count", None) is None else int(m.count)
                           for m in models], dtype=np.int64)
+        bases = [base_id(sid) for sid in ids]
+        base = None if bases == ids else np.array([ids.index(b) if b in ids else len(ids)
+                                                   for b in bases], dtype=np.intp)
         return cls(kv=kv, kf=kf, nk=nk, slo=np.array([p.slope_below for p in pwls]),
                    shi=np.array([p.slope_above for p in pwls]),
-                   lag=np.array([m.lag_s for m in models]), count=count)
+                   lag=np.array([m.lag_s for m in models]), count=count, base=base)
 
     def pack(self, codes):
         """Kernel arrays of setups given as codes, shape (n, 4)."""
@@ -160,6 +167,11 @@ class _ShockTable:
     def buildable(self, codes):
         """True where the crate's counts can build the setup."""
         ok = np.ones(codes.shape[0], dtype=bool)
+        if self.base is not None:  # an adjustable's settings count as units of one damper
+            by_base = self.base[codes]
+            for b in np.unique(self.base[self.count >= 0]):
+                ok &= (by_base == b).sum(axis=1) <= self.count[self.base == b][0]
+            return ok
         for code in np.flatnonzero(self.count >= 0):
             ok &= (codes == code).sum(axis=1) <= self.count[code]
         return ok
@@ -640,7 +652,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
             for _, drive in drive_list:
                 cases.append(_prepare_case(labels[k], model, drive, band_hz, n_bands, reduce_rtol))
                 k += 1
-        shocks = _ShockTable.of(library)
+        shocks = _ShockTable.of(library, space.shock_ids)
         code_of = {sid: j for j, sid in enumerate(space.shock_ids)}
         base_codes = np.array([[code_of[sid] for sid in base.ids()]], dtype=np.intp)
         base_metrics = [_screen_codes(ops, shocks, base_codes, max_iter, tol)[0][0]

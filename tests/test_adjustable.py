@@ -116,10 +116,10 @@ def test_softer_towards_stiffer_refused():
     with pytest.raises(ShockModelError, match=r"TTX@ls=4,hs=2 is \d+\.\d % softer than at "
                                               r"TTX@ls=8,hs=2.*curves cross"):
         AdjustableShock("TTX", TRUTH.adjusters, points_from(sheet, rows))
-    # a 1 % crossing is within dyno repeatability: a warning, fitted flat
+    # a 2 % crossing at one speed is dyno noise: a warning, fitted flat
     sheet = TRUTH.dyno_sheet(TRUTH.sweep_settings(), DYNO_SPEEDS)
     sheet.loc[(sheet.ls == 0) & (sheet.velocity == 0.5), "force"] = float(
-        TRUTH.force(0.5, {"ls": 4, "hs": 2})) * 0.995
+        TRUTH.force(0.5, {"ls": 4, "hs": 2})) * 0.98
     pts = points_from(sheet)
     found = check_dyno_points(pts, shock="TTX", adjusters=TRUTH.adjusters,
                               stiffer={"ls": "lower", "hs": "lower"})

@@ -457,7 +457,8 @@ def _required_argv(parser):
 def test_the_walk_finds_every_command():
     assert {" ".join(path) for path, _ in _commands(build_parser())} == {
         "demo", "rig simulate", "identify", "predict", "rank", "optimize", "plan", "whatif",
-        "sweep", "import", "export-drive", "vehicle modes"}
+        "sweep", "import", "export-drive", "vehicle modes", "dyno import", "dyno table",
+        "dyno check"}
 
 
 @pytest.mark.parametrize("given, canonical", [
@@ -468,7 +469,7 @@ def test_units_in_any_case_become_the_canonical_name(given, canonical):
     parser = build_parser()
     with_units = [(path, sub) for path, sub in _commands(parser)
                   if "--units" in sub._option_string_actions]
-    assert len(with_units) == 10
+    assert len(with_units) == 13
     for path, sub in with_units:
         args = parser.parse_args([*path, *_required_argv(sub), "--units", given])
         assert args.units == canonical, path

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from ident.data.channels import ALL_CHANNELS, RIG_INPUTS
+from ident.data.dyno_raw import read_dyno_map
 from ident.data.formats.channel_map import apply_channel_map, read_channel_map
 from ident.data.units import to_si
-from ident.errors import BumpStopError, SessionError
+from ident.errors import BumpStopError, DynoError, SessionError
 from ident.models.bumpstops import read_bump_stops
 from ident.models.library import read_shock_library
 from ident.models.vehicle import EXAMPLE_VEHICLE_PATH, example_vehicle, read_vehicle
@@ -39,6 +40,7 @@ READERS = {
     "rig": (read_rig, PlannerError),
     "channel-map": (read_channel_map, SessionError),
     "bump-stops": (read_bump_stops, BumpStopError),
+    "dyno-map": (read_dyno_map, DynoError),
 }
 #: A shock's force read back from an imperial file: SI -> imperial text -> SI, shortest
 #: round-trip float text each way, so a few ulps.
@@ -96,6 +98,11 @@ def _check_constraints(cons):
 
 def _check_whatif(ps):
     kinds = [f.kind for f in ps.factors]
+    if kinds == ["click", "fade"]:  # the adjustable shocks' example
+        assert ps.factors[0].adjusters == ("ls",) and ps.factors[0].levels == (-1, 0, 1)
+        assert ps.factors[1].part == "low-speed" and ps.factors[1].targets == ("id:TTX",)
+        assert len(ps.perturbations) == 1 + 3 + 2
+        return
     assert kinds == ["shock_scale", "shock_lag", "spring_rate", "arb_rate", "drive_scale",
                      "drive_window"]
     rear = ps.factors[2]
@@ -127,9 +134,17 @@ def _check_bump_stops(stops):
                                to_si(180.0, "force", "imperial"))
 
 
+def _check_dyno_map(dmap):
+    assert list(dmap.columns) == ["time", "force", "displacement", "temperature"]
+    force, disp = dmap.columns["force"], dmap.columns["displacement"]
+    np.testing.assert_allclose(force.convert([10.0]), -to_si(10.0, "force", "imperial"))
+    np.testing.assert_allclose(disp.convert([3.0]), to_si(1.0, "displacement", "imperial"))
+    np.testing.assert_allclose(dmap.columns["temperature"].convert([212.0]), 100.0)
+
+
 CHECKS = {"objective": _check_objective, "constraints": _check_constraints,
           "whatif": _check_whatif, "rig": _check_rig, "channel-map": _check_channel_map,
-          "bump-stops": _check_bump_stops}
+          "bump-stops": _check_bump_stops, "dyno-map": _check_dyno_map}
 
 
 @pytest.mark.parametrize("tag, body", FORMAT_BLOCKS,

@@ -18,6 +18,7 @@ from planner.optimize import (
     CurveConstraints,
     OptimizeWarning,
     check_constraints,
+    click_summary,
     curve_space,
     curve_table,
     default_constraints,
@@ -239,6 +240,9 @@ def test_constraints_hold_on_the_written_curves(known_optimum, demo_library, tmp
                         rtol=1e-9, atol=1e-6)
     setups = read_setups(files["setups"], lib)
     assert setups[0].name == "optimum" and setups[0].ids() == opt.setup.ids()
+    # a crate without adjustable shocks: no click search, no click files or lines
+    assert opt.clicks is None and "clicks" not in files and click_summary(opt) == []
+    assert "clicks" not in set(opt.table["kind"])
     wb = openpyxl.load_workbook(files["xlsx"])
     assert wb.sheetnames == ["curves SI", "curves imperial", "setups", "solver"]
     rows = list(wb["curves imperial"].iter_rows(values_only=True))

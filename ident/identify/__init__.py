@@ -7,5 +7,6 @@ poor, smoothing), :mod:`~ident.identify.fit` (rational fits per pair),
 :mod:`~ident.identify.pipeline` (the stages put together:
 :func:`~ident.identify.pipeline.fit_model` and
 :func:`~ident.identify.pipeline.identify_session`), :mod:`~ident.identify.fir`
-(a nonparametric reference) and :mod:`~ident.identify.plots` (FRF figures).
+(a nonparametric reference), :mod:`~ident.identify.shockcheck` (the session's shock
+forces against the library) and :mod:`~ident.identify.plots` (FRF figures).
 """

@@ -44,6 +44,7 @@ from ident.identify.frf import (
     shock_force_deviation,
 )
 from ident.identify.model import VehicleModel, has_feedthrough
+from ident.identify.shockcheck import check_shock_library
 from ident.models.bumpstops import CarElements
 
 __all__ = [
@@ -516,7 +517,7 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
                      coherence_min=0.9, smooth_width_hz=None, smooth_domain=None,
                      fit_method="invfreqs",
                      orders="auto", weighting="paper", band_hz=(0.5, 20.0), max_order=10,
-                     diagnose=True):
+                     diagnose=True, check_shocks=True):
     """Identify a vehicle model from a rig session: estimate, condition, fit, check.
 
     Parameters
@@ -542,6 +543,13 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         :meth:`~ident.identify.diagnose.Diagnosis.from_dict` reads it back). It builds
         the model's loop plant (kept with the model) and adds about 5-8 % to the time.
         False: skip it.
+    check_shocks : bool
+        Where the runs log ``shock_force_XX``, compare the measured forces with the
+        library's curves (:func:`ident.identify.shockcheck.check_shock_library`: the scale
+        per shock, a warning logged per shock that is off) and keep the per-shock summary
+        in ``settings["shock_check"]`` (:meth:`~ident.identify.shockcheck.
+        ShockLibraryCheck.to_dict` without the per-run rows). The model's numbers do not
+        depend on it. False, or a session without the force channels: nothing.
 
     Returns
     -------
@@ -603,6 +611,10 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         model = model.with_settings(settings)
     if diagnose:
         settings["diagnosis"] = diagnose_session(session, model).to_dict()
+    if check_shocks:
+        check = check_shock_library(session)
+        if len(check):
+            settings["shock_check"] = check.to_dict(series=False)
     return model.with_settings(settings)
 
 

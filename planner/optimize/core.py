@@ -38,6 +38,7 @@ from planner.elements import model_setup_elements
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
 from planner.optimize.cache import jit_available
+from planner.optimize.clicks import CLICK_RADIUS, ClickResult, curve_distance, search_clicks
 from planner.optimize.constraints import (
     CurveConstraints,
     check_constraints,
@@ -155,6 +156,12 @@ class CurveOptimum:
         knots, :func:`~planner.optimize.constraints.constraint_envelope`), and with
         the car's elements ``bump_stops`` (True), ``packers`` (the bounds [m] per group)
         and ``static_corner_load_n`` [N] ...
+    clicks : planner.optimize.clicks.ClickResult or None
+        With adjustable shocks in the crate: each one's best settings per corner group
+        (a neighbourhood search from the settings nearest the optimum's curves, verified
+        in the time domain, :func:`planner.optimize.clicks.search_clicks`), the gain over
+        the crate's best fixed setup and the gap to the optimum; their setups are rows of
+        `table` of kind ``"clicks"``. None without adjustables (or ``click_radius=None``).
     """
 
     x: np.ndarray
@@ -176,6 +183,7 @@ class CurveOptimum:
     settings: dict = field(default_factory=dict)
     packers_m: dict = field(default_factory=dict)
     bump_stops: tuple | None = None
+    clicks: ClickResult | None = None
 
     @property
     def score(self):
@@ -386,7 +394,7 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
                     robust=False, oversample=2, max_iter=80, n_starts=2, n_closest=5,
                     jit=None, stationarity=True, progress=False, bump_stops=None,
                     packers=None, static_corner_load_n=None, elements=True,
-                    bump_stop_library=None):
+                    bump_stop_library=None, click_radius=CLICK_RADIUS):
     """The best force-velocity curve per corner group (see the module docstring).
 
     Parameters
@@ -474,6 +482,10 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         :func:`planner.elements.model_setup_elements`). False: the car without them.
     bump_stop_library : ident.models.bumpstops.BumpStopLibrary, optional
         Replaces the model's library where its elements are used (``--bump-stops``).
+    click_radius : int or None
+        With adjustable shocks in the crate: the click search's moves, +-1..`click_radius`
+        steps of one adjuster (``clicks`` of the result,
+        :func:`planner.optimize.clicks.search_clicks`); None: no click search.
 
     Returns
     -------
@@ -501,6 +513,11 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     objective = _check_objective(objective)
     if aggregate not in ("sum", "worst"):
         raise PlannerError(f"aggregate must be 'sum' or 'worst', got {aggregate!r}")
+    if click_radius is not None and not (isinstance(click_radius, int)
+                                         and not isinstance(click_radius, bool)
+                                         and click_radius >= 1):
+        raise PlannerError(f"click_radius must be an integer >= 1 (clicks per move) or None, "
+                           f"got {click_radius!r}")
     plant, drives, base, space, rows = _problem(model, drives, library, objective, baseline,
                                                 symmetry, knots_m_s, linear, lag_s, oversample)
     need = rows[0]
@@ -590,7 +607,7 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
                                            "x_start": x0[:space.n_vars].tolist(),
                                            "limit_factors": tight.tolist(),
                                            "scan": None if scan is None else scan.summary()},
-                   scan=scan, extra=extra, elements=elements)
+                   scan=scan, extra=extra, elements=elements, click_radius=click_radius)
 
 
 def _other_starts(scan, n):
@@ -840,26 +857,10 @@ def _robust_factors(model, drives, library, space, x, base, need):
     return np.array([max(float(hi.get(m, 1.0)), 1.0) for m in need])
 
 
-def curve_distance(pwl_a, pwl_b, v_samples):
-    """RMS difference of two curves over velocity samples, relative to the second's RMS force.
-
-    Parameters
-    ----------
-    pwl_a, pwl_b : PiecewiseLinear
-    v_samples : ndarray
-        Shock velocities [m/s] (the distribution the curves are compared over).
-
-    Returns
-    -------
-    float
-    """
-    fa, fb = pwl_a.force(v_samples), pwl_b.force(v_samples)
-    return float(np.sqrt(np.mean((fa - fb) ** 2) / max(np.mean(fb**2), 1e-300)))
-
-
 def _finish(model, plant, drives, library, space, constraints, objective, base, weights,
             aggregate, oversample, x_opt, solver, history, n_closest, stationarity, A_lin,
-            b_lin, t_start, settings, scan=None, extra=(), elements=_Elements()):
+            b_lin, t_start, settings, scan=None, extra=(), elements=_Elements(),
+            click_radius=None):
     # verify the optimum, the other starts' results, the best feasible iterate and the scan's
     # best curve (the floor: the result is never worse than it in the time domain); keep the
     # best verified
@@ -897,7 +898,8 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     p_opt = elements.clip(cands[best_k][n:])
     stops_opt = elements.stops_at(p_opt)
     shocks = space.shocks(x_opt)
-    lib = ShockLibrary(list(shocks.values()) + list(library.values()))
+    # (the crate's entries: its adjustables keep their settings; its fixed shocks as values)
+    lib = ShockLibrary(list(shocks.values()) + library.entries())
     setup = space.setup(shocks)
     if not solver["success"]:
         warnings.warn(f"optimize: IPOPT stopped with status {solver['status']!r} after "
@@ -933,7 +935,13 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
                                           weights, oversample, aggregate,
                                           elements=elements.verify(p_opt, ()))
     by_name = {s.name: s for s in crate}
-    listed = [setup, base] + [by_name[best_name]] + closest
+    searches, skipped, t_clicks = [], {}, time.perf_counter()
+    if click_radius is not None and library.adjustable_ids:
+        searches, skipped = _click_search(model, drives, library, space, objective, base,
+                                          weights, oversample, aggregate, opt_pwl, vel,
+                                          by_name[best_name], click_radius,
+                                          elements.verify(p_opt, ()))
+    listed = [setup, base] + [by_name[best_name]] + [s.setup for s in searches] + closest
     uniq, seen = [], set()
     for s in listed:
         if s.name not in seen:
@@ -945,6 +953,8 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     table = table.loc[[s.name for s in uniq]]
     kinds = {setup.name: "optimum", base.name: "baseline"}
     kinds.setdefault(best_name, "crate best")
+    for s in searches:
+        kinds.setdefault(s.setup.name, "clicks")
     for s in closest:
         kinds.setdefault(s.name, "closest")
     table.insert(0, "kind", [kinds[n] for n in table.index])
@@ -954,6 +964,14 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     table["distance"] = [0.0 if n == setup.name else dmap.get(n, np.nan) for n in table.index]
     table.index.name = "setup"
     gap = 1.0 - table.loc[setup.name, "score"] / table.loc[best_name, "score"]
+    clicks = None
+    if searches or skipped:
+        clicks = ClickResult(searches=tuple(searches), skipped=skipped, crate_best=best_name,
+                             crate_best_score=float(table.loc[best_name, "score"]),
+                             optimum_score=float(table.loc[setup.name, "score"]),
+                             radius=click_radius,
+                             settings={"search_s": time.perf_counter() - t_clicks,
+                                       "n_simulated": sum(s.n_simulated for s in searches)})
     solver["verified_score"] = float(table.loc[setup.name, "score"])
     stat = None
     if stationarity and not space.linear:
@@ -978,7 +996,25 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
                         solver=solver, space=space, constraints=constraints,
                         objective=objective, baseline=base, settings=settings,
                         packers_m={g: float(v) for g, v in zip(elements.groups, p_opt)},
-                        bump_stops=None if stops_opt is None else tuple(stops_opt))
+                        bump_stops=None if stops_opt is None else tuple(stops_opt),
+                        clicks=clicks)
+
+
+def _click_search(model, drives, library, space, objective, base, weights, oversample,
+                  aggregate, opt_pwl, vel, crate_best, radius, element_args):
+    """The crate's adjustables' best settings per group (:func:`search_clicks`): started from
+    the settings nearest the optimum's curves and nearest the crate best's, verified as the
+    crate is (the car's stops as given)."""
+
+    def score(setups):
+        t, _ = time_domain_scores(model, drives, setups, library, objective, base, weights,
+                                  oversample, aggregate, **element_args)
+        return {s.name: (bool(t.loc[s.name, "feasible"]), float(t.loc[s.name, "score"]))
+                for s in setups}
+
+    targets = {"optimum": opt_pwl,
+               "crate best": {c: library[crate_best.shocks[c]].to_pwl() for c in CORNERS}}
+    return search_clicks(library, space.groups, targets, vel, score, radius=radius)
 
 
 def _crate_best(model, drives, library, crate, objective, base, weights, oversample, aggregate,

@@ -10,7 +10,10 @@ tornado charts show off the what-if's table (:func:`factor_effects`).
 :mod:`~planner.report.optimize` writes a curve optimum's files (``optimize.xlsx``,
 ``curves.png``, ``convergence.csv``, the optimal shocks and setups).
 :mod:`~planner.report.sweep` writes a sweep's files (``ranking.csv``, a CSV per case
-named from its model and drive, ``sweep.toml``). Compute lives in
+named from its model and drive, ``sweep.toml``).
+:mod:`~planner.report.dyno` writes ``shockplan dyno table``'s curve CSV and ``shockplan
+dyno check``'s folder (``summary.md``, ``findings.csv``, per adjustable shock its fit,
+worst error per setting and ``<id>.curves.png``). Compute lives in
 the decision modules; these only format and write their results.
 """
 

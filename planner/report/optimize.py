@@ -3,7 +3,10 @@
 :func:`write_optimum` writes a :class:`planner.optimize.CurveOptimum` into a
 folder; :func:`curve_table` is the shock builder's force table (the xlsx's
 curve sheets) and :func:`curves_figure` the optimal curves against the
-crate's. Compute lives in :mod:`planner.optimize`.
+crate's. With adjustable shocks in the crate, the best clicks
+(``CurveOptimum.clicks``) too: ``clicks.csv``, a ``clicks`` sheet, their curves
+in ``curves.png`` and :func:`click_summary` (the command's printed lines).
+Compute lives in :mod:`planner.optimize`.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from ident.data.channels import CORNERS
 from ident.data.files import atomic_dir, write_csv
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from ident.models.library import ShockLibrary, write_shock_library
+from ident.models.shocks import format_number
 from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
 from planner.errors import PlannerError
 from planner.report.ranking import ranking_to_units
@@ -34,6 +38,8 @@ __all__ = [
     "BUILDER_VELOCITIES_M_S",
     "BUILDER_VELOCITIES_IN_S",
     "CURVE_V_MAX",
+    "click_summary",
+    "click_table",
     "curve_table",
     "curves_figure",
     "write_optimum",
@@ -127,6 +133,11 @@ def curves_figure(optimum, library, *, units="SI"):
         for sid in sorted(set(optimum.table.loc[optimum.crate_best, list(corners)])):
             ax.plot(v, force(library[sid], v_si), color="tab:orange", lw=1.6,
                     label=f"crate best ({sid})")
+        best = None if optimum.clicks is None else optimum.clicks.best
+        if best is not None:
+            for sid in sorted(set(best.setup.shocks[c] for c in corners)):
+                ax.plot(v, force(library[sid], v_si), color="tab:red", lw=1.6, ls="--",
+                        label=f"best clicks ({sid})")
         vk = from_si(pwl.v_knots_m_s, "velocity", units)
         f_lim = 1.5 * max(np.max(np.abs(force(pwl, v_si))), 1e-9)
         lo = np.clip(from_si(env_lo[g], "force", units), -f_lim, f_lim)
@@ -161,6 +172,59 @@ def _setups_sheet(optimum, units):
     t = optimum.table.copy()
     t = pd.concat([t, ranking_to_units(met[metric_cols], units)], axis=1)
     return t.reset_index()
+
+
+def click_table(optimum):
+    """The best clicks per adjustable shock and corner group (``clicks.csv``).
+
+    Parameters
+    ----------
+    optimum : CurveOptimum
+
+    Returns
+    -------
+    pandas.DataFrame or None
+        :meth:`planner.optimize.clicks.ClickResult.table` (one column per adjuster, in
+        its own units, clicks or turns); None without adjustable shocks.
+    """
+    return None if optimum.clicks is None else optimum.clicks.table()
+
+
+def click_summary(optimum):
+    """The printed lines of the click search (``shockplan optimize``); none without it.
+
+    Parameters
+    ----------
+    optimum : CurveOptimum
+
+    Returns
+    -------
+    list of str
+        A header line, the settings table (a column per adjuster, a row per adjustable
+        and corner group) and the verdict: the gain over the best fixed setup and the
+        gap to the continuous optimum.
+    """
+    clicks = optimum.clicks
+    if clicks is None:
+        return []
+    lines = [f"clicks: each adjustable's settings per corner group, from the settings nearest "
+             f"the optimum's curves and the crate best's, moves of +-1..{clicks.radius} "
+             "steps, verified in the time domain"]
+    tab = clicks.table()
+    if len(tab):
+        cols = list(tab.columns)
+        adj = cols[cols.index("corners") + 1:cols.index("setting")]
+        heads = ["shock", "group", "corners"] + adj + ["score", "simulated"]
+        rows = [[r["shock"], r["group"], r["corners"]]
+                + ["" if pd.isna(r[a]) else format_number(r[a]) for a in adj]
+                + [f"{r['score']:.4f}", str(int(r["simulated"]))] for _, r in tab.iterrows()]
+        width = [max(len(h), *(len(row[j]) for row in rows)) for j, h in enumerate(heads)]
+        for row in [heads] + rows:
+            lines.append("  " + "  ".join(x.ljust(w) for x, w in zip(row, width)).rstrip())
+    for sid, why in clicks.skipped.items():
+        lines.append(f"  {sid} not searched: {why}")
+    lines.append(clicks.verdict())
+    return lines
 
 
 def _write_workbook(optimum, units, path):
@@ -240,8 +304,26 @@ def _write_workbook(optimum, units, path):
                      f"{-100 * min(0.0, st.relative_change.min()):.4f} %"))
         rows.append(("variables whose +-5 % moves change the score by less than "
                      f"{100 * STATIONARY_FLAT:g} % (flat)", f"{int(flat.sum())} of {len(flat)}"))
+    clicks = optimum.clicks
+    if clicks is not None:
+        best = clicks.best
+        rows += [("clicks: best", "none searched" if best is None else best.setup.name),
+                 ("clicks: best score (time domain)", "-" if best is None else best.score),
+                 ("clicks: gain over the best fixed setup", f"{100 * clicks.gain:.2f} %"),
+                 ("clicks: gap to the optimum (a custom valving)", f"{100 * clicks.gap:.2f} %"),
+                 ("clicks: moves", f"+-1..{clicks.radius} steps of one adjuster, then the "
+                                   "+-1 step product")]
     last = write_key_values(rep, rows)
     print_setup(rep, units=units, area=f"A1:B{last}", footer=f"{what}: the solver's report")
+    tab = click_table(optimum)
+    if tab is not None:
+        cs = wb.create_sheet("clicks")
+        last = write_table(cs, tab, formats={"score": "0.0000", "gain": "0.00%",
+                                             "gap": "0.00%"}, freeze_cols=2)
+        print_setup(cs, units=units, area=f"A1:{get_column_letter(tab.shape[1])}{last}",
+                    title_rows="1:1", footer=f"{what}: the best clicks per adjustable shock "
+                    f"and corner group; gain over the best fixed setup {clicks.crate_best}, "
+                    "gap to the continuous optimum")
     wb.save(path)
 
 
@@ -252,7 +334,9 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
     crate's, so the setups file reads against it), ``optimal_setup.csv`` (the optimum,
     then the crate setups closest to it), ``optimize.xlsx`` (force tables for the shock
     builder in SI and imperial, the setups side by side, the solver's report),
-    ``curves.png`` and ``convergence.csv``. Each CSV's first line is the unit marker
+    ``curves.png`` and ``convergence.csv``; with adjustable shocks in the crate,
+    ``clicks.csv`` (:func:`click_table`), the click setups after the optimum in
+    ``optimal_setup.csv`` and a ``clicks`` sheet. Each CSV's first line is the unit marker
     ``# units: <units>``.
 
     Parameters
@@ -281,12 +365,15 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
     names = {"shocks": "optimal_shocks.toml", "setups": "optimal_setup.csv",
              "xlsx": "optimize.xlsx", "curves": "curves.png", "convergence": "convergence.csv"}
     with atomic_dir(out, overwrite=overwrite) as work:
+        # (the crate's entries: its adjustables stay adjustable, the setups name settings)
         lib = ShockLibrary(list(optimum.shocks.values())
-                           + [m for m in library.values() if m.id not in optimum.shocks])
+                           + [m for m in library.entries() if m.id not in optimum.shocks])
         write_shock_library(lib, work / names["shocks"], units=units)
-        closest = [s for s in _table_setups(optimum) if s.name != optimum.setup.name
+        setups = _table_setups(optimum)
+        clicks = [s for s in setups if optimum.table.loc[s.name, "kind"] == "clicks"]
+        closest = [s for s in setups if s.name != optimum.setup.name
                    and optimum.table.loc[s.name, "kind"] == "closest"]
-        write_setups([optimum.setup] + closest, work / names["setups"], units=units)
+        write_setups([optimum.setup] + clicks + closest, work / names["setups"], units=units)
         _write_workbook(optimum, units, work / names["xlsx"])
         fig = curves_figure(optimum, library, units=units)
         fig.savefig(work / names["curves"], dpi=110)
@@ -294,6 +381,10 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
         write_csv(work / names["convergence"],
                   optimum.history.drop(columns=["time_s"], errors="ignore"), units=units,
                   float_format="%.9g")
+        tab = click_table(optimum)
+        if tab is not None:
+            names["clicks"] = "clicks.csv"
+            write_csv(work / names["clicks"], tab, units=units, float_format="%.9g")
     return {k: out / v for k, v in names.items()}
 
 

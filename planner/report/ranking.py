@@ -54,6 +54,7 @@ from ident.data.files import atomic_write_bytes, check_can_write, write_csv
 from ident.data.channels import CORNERS
 from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
+from planner.clicks import adjuster_columns
 from planner.errors import PlannerError
 from planner.objective import Objective, pareto_front
 from planner.report.sheets import (
@@ -263,8 +264,15 @@ def _sorted_by_rank(table):
 
 
 def _file_frame(table, units, *, rank_first):
-    """The table as written: converted, columns ordered, ``setup`` a column."""
-    conv = ranking_to_units(table, units)[ranking_columns(table, rank_first=rank_first)]
+    """The table as written: converted, columns ordered, ``setup`` a column; with setting
+    names of adjustable shocks, one column per adjuster per corner after the metrics."""
+    cols = ranking_columns(table, rank_first=rank_first)
+    conv = ranking_to_units(table, units)[cols]
+    adj = adjuster_columns(conv)
+    adj = adj[[c for c in adj.columns if c not in conv.columns]]
+    if len(adj.columns):
+        at = 1 + max(j for j, c in enumerate(cols) if c in CORNERS or c in METRIC_QUANTITY)
+        conv = pd.concat([conv.iloc[:, :at], adj, conv.iloc[:, at:]], axis=1)
     frame = conv.reset_index()
     if rank_first and "rank" in frame.columns:
         frame = frame[["rank", "setup"] + [c for c in frame.columns if c not in ("rank", "setup")]]
@@ -311,6 +319,8 @@ def write_predictions_csv(table, path, *, units="SI", overwrite=False):
     Notes
     -----
     Columns ``setup, LF, RF, LR, RR``, the metrics (spec order first), then
+    with setting names of adjustable shocks (``TTX@ls=6,hs=2``) one column per adjuster per
+    corner (``LF_ls, LF_hs, ...``, :func:`planner.clicks.adjuster_columns`), then the
     further columns (intervals, scores, ranks) in table order; rows in the
     table's order; floats at full precision (they read back bit-identical);
     NaN as an empty field. The first line is the unit marker ``# units: <units>``
@@ -410,7 +420,9 @@ def _sheet_columns(frame, objective):
     """
     cols = list(frame.columns)
     intervals = [c for c in cols if metric_of_column(c) not in (None, c)]
-    key = [c for c in ("rank", "setup", *CORNERS, "score") if c in cols]
+    key = [c for c in ("rank", "setup", *CORNERS) if c in cols]
+    key += [c for c in cols if c[:3] in {f"{k}_" for k in CORNERS}]  # adjusters: LF_ls
+    key += [c for c in ("score",) if c in cols]
     key += [c for c in cols if str(c).startswith("score_")]
     key += [c for c in ("feasible",) if c in cols]
     if objective is not None:

@@ -197,6 +197,10 @@ def _level_text(result, column, value, units):
                 continue
             if f.change == "scale":
                 return f"x{value:.4g}"
+            if f.kind == "click":
+                return f"{value:+g} click"
+            if f.kind == "fade":
+                return f"{100 * value:.4g} % fade"
             qty = {"shock_lag": "time", "spring_rate": "stiffness",
                    "arb_rate": "stiffness"}.get(f.kind)
             if f.kind == "vehicle" and f.targets:
@@ -346,8 +350,11 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
     Files: ``whatif.xlsx`` (sheets ``robust``, ``conditions``, ``effects`` and
     ``table``), ``whatif.csv`` (the long table, metrics in `units`), ``robust.csv``,
     ``conditions.csv``, ``rank_stability.png`` and ``tornado/<nn>_<setup>.png`` for the
-    `top` setups of the robust ranking. Each CSV's first line is the unit marker
-    ``# units: <units>``.
+    `top` setups of the robust ranking. With ``click`` or ``fade`` factors also
+    ``tolerance.csv`` and the sheet ``tolerance`` (each setup's spread of score, rank
+    and metrics over each such factor's levels, :attr:`WhatIf.tolerance`); the table's
+    ``clipped`` column says where a click hit the end of an adjuster's range. Each
+    CSV's first line is the unit marker ``# units: <units>``.
 
     Returns
     -------
@@ -368,6 +375,9 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
         write_csv(work / "robust.csv", result.robust, units=units, index=True,
                   float_format="%.6g")
         write_csv(work / "conditions.csv", result.conditions, units=units, index=True)
+        tolerance = _tolerance_to_units(getattr(result, "tolerance", None), units)
+        if tolerance is not None:
+            write_csv(work / "tolerance.csv", tolerance, units=units, float_format="%.6g")
         top_names = list(result.robust.index[:top])
         effects = []
         (work / "tornado").mkdir()
@@ -378,7 +388,7 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
             fig.savefig(work / "tornado" / f"{k + 1:02d}_{_safe_name(n)}.png", dpi=110)
         fig = rank_stability_figure(result)
         fig.savefig(work / "rank_stability.png", dpi=110)
-        _write_workbook(result, table, effects, units, work / "whatif.xlsx")
+        _write_workbook(result, table, effects, units, work / "whatif.xlsx", tolerance)
     for p in sorted(out.rglob("*")):
         if p.is_file():
             files[str(p.relative_to(out))] = p
@@ -388,7 +398,21 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
 _CHANGE_PCT = "_change_pct"
 
 
-def _write_workbook(result, table, effects, units, path):
+def _tolerance_to_units(tol, units):
+    """The tolerance table with each metric's values in `units` (None stays None)."""
+    if tol is None:
+        return None
+    out = tol.copy()
+    for q, rows in out.groupby("quantity").groups.items():
+        qty = METRIC_QUANTITY.get(q)
+        if qty is None or units == "SI":
+            continue
+        for c in ("nominal", "low", "high", "spread", "worst"):
+            out.loc[rows, c] = from_si(out.loc[rows, c].to_numpy(dtype=float), qty, units)
+    return out
+
+
+def _write_workbook(result, table, effects, units, path, tolerance=None):
     """``whatif.xlsx``: sheets robust, conditions, effects, table and settings, each laid out
     and set to print with :mod:`planner.report.sheets` (the wide table across pages, the
     drive, condition and setup repeated on each)."""
@@ -428,9 +452,18 @@ def _write_workbook(result, table, effects, units, path):
         last = write_table(ws, eff, freeze_cols=2)
         print_setup(ws, units=units, area=area(eff, last), title_rows="1:1",
                     title_cols="A:B", footer=f"{what}: each factor's effect on the score")
+    if tolerance is not None:
+        ws = wb.create_sheet("tolerance")
+        tol = tolerance.assign(quantity=[column_label(q) if q in METRIC_QUANTITY else q
+                                         for q in tolerance["quantity"]])
+        last = write_table(ws, tol, freeze_cols=3, formats={"spread_pct": "0.00"})
+        print_setup(ws, units=units, area=area(tol, last), title_rows="1:1", title_cols="A:C",
+                    footer=f"{what}: each setup's spread over each click or fade factor's "
+                           "levels and the nominal condition")
     changes = [c for c in table.columns if c.endswith(_CHANGE_PCT)]
     cols = ["drive", "perturbation", "setup", "score", "rank", "score_change",
-            "rank_change", "feasible"] + changes
+            "rank_change", "feasible"] + (["clipped"] if "clipped" in table.columns
+                                          else []) + changes
     heads = [f"{column_label(c[:-len(_CHANGE_PCT)])} change [%]" if c in changes
              else column_label(c) for c in cols]
     # pages across break between metric families (tire force, ride height, ...)

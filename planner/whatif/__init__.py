@@ -38,6 +38,18 @@ Perturbations
     inertias, tire and spring rates, CG position, tracks, anti-roll bars, torsion):
     needs a known model (a vehicle TOML); an identified model cannot change a mass
     without re-identification, and says so.
+``click``
+    Adjustable shocks (setting names ``"TTX@ls=6,hs=2"``) a whole number of clicks off,
+    every adjuster or those named in ``adjusters``, clipped at the range ends (the
+    table's ``clipped`` column); fixed shocks untouched (:mod:`planner.whatif.clicks`).
+``fade``
+    Adjustable shocks warmed up: a fractional force loss of the whole curve or, with
+    ``part = "low-speed"``, mostly of its low-speed part; fixed shocks untouched.
+
+``shock_scale`` and ``shock_lag`` act on setting names too: ``shocks = ["TTX"]`` names
+every setting of an adjustable shock, ``shocks = ["TTX@ls=6,hs=2"]`` one setting. With
+click or fade factors, :attr:`WhatIf.tolerance` gives each setup's spread and worst case
+over each such factor's levels (levels ``[-1, 0, 1]``: the "+-1 click" tolerance).
 
 Designs: ``one-at-a-time`` (each factor level alone), ``factorial`` (every combination
 of levels) and ``monte-carlo`` (draws from each factor's distribution, uniform or
@@ -92,6 +104,8 @@ Modules
     :func:`evaluate_whatif` and its result :class:`WhatIf`, in this process or on Dask.
 :mod:`planner.whatif.robust`
     The robust ranking and the fragile-rank rule.
+:mod:`planner.whatif.clicks`
+    Click tolerance and adjuster fade of adjustable shocks, and the tolerance table.
 
 The effects, figures and files (:func:`factor_effects`, :func:`tornado_figure`,
 :func:`rank_stability_figure`, :func:`write_whatif`) are in
@@ -105,6 +119,7 @@ from planner.report.whatif import (
     tornado_figure,
     write_whatif,
 )
+from planner.whatif.clicks import FADE_HIGH_SPEED_SHARE, FADE_KNEE_M_S
 from planner.whatif.conditions import MIN_WINDOW_S, stiffened_plant
 from planner.whatif.evaluate import (
     MIN_TASK_EVALUATIONS,
@@ -118,6 +133,7 @@ from planner.whatif.spec import (
     CHANNEL_GROUPS,
     DESIGNS,
     FACTOR_KINDS,
+    FADE_PARTS,
     MAX_CONDITIONS,
     Factor,
     Perturbation,
@@ -151,4 +167,7 @@ __all__ = [
     "AXLE_CORNERS",
     "TASKS_PER_THREAD",
     "MIN_TASK_EVALUATIONS",
+    "FADE_PARTS",
+    "FADE_HIGH_SPEED_SHARE",
+    "FADE_KNEE_M_S",
 ]

@@ -26,6 +26,8 @@ from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
 from ident.sim import stiffness as ident_stiffness
 from planner.errors import PlannerError
 from planner.setups import Setup
+from planner.whatif.clicks import (click_note, click_steps, clicked_settings, fade_amounts,
+                                   faded_shock, parse_setting)
 from planner.whatif.spec import AXLE_CORNERS
 
 __all__ = [
@@ -41,6 +43,7 @@ __all__ = [
     "ShockVariants",
     "StopVariants",
     "condition_setups",
+    "condition_notes",
 ]
 
 #: A drive window shorter than this cannot resolve the 1 Hz end of the metric band with
@@ -84,6 +87,13 @@ class ConditionEffect:
     drive: object | None
     packer_add: np.ndarray = field(default_factory=lambda: np.zeros(4))  # (4,) [m]
     stop_set: tuple = (None,) * 4  # per corner: None (unchanged), an id or "none"
+    click: tuple = ()              # ((corner or "id:<name>", adjusters, steps), ...)
+    fade: tuple = ()               # ((corner or "id:<name>", part, loss), ...)
+
+    @property
+    def changes_adjustables(self):
+        """True if the condition clicks or fades the adjustable shocks."""
+        return any(v for _, _, v in self.click) or any(v for _, _, v in self.fade)
 
     @property
     def changes_elements(self):
@@ -107,7 +117,7 @@ def condition_effect(perturbation, factors):
     e = dict(corner_scale=np.ones(4), id_scale={}, corner_lag=np.zeros(4), id_lag={},
              spring_add=np.zeros(4), spring_scale=np.ones(4), arb_add=np.zeros(2),
              arb_scale=np.ones(2), vehicle=[], channel_scale=np.ones(7), window=None, drive=None,
-             packer_add=np.zeros(4), stop_set=[None] * 4)
+             packer_add=np.zeros(4), stop_set=[None] * 4, click=[], fade=[])
     for f in factors:
         vals = perturbation.values.get(f.name)
         if vals is None:
@@ -154,6 +164,15 @@ def condition_effect(perturbation, factors):
                 e["packer_add"][CORNERS.index(t)] += v
             elif f.kind == "bump_stop" and v is not None:
                 e["stop_set"][CORNERS.index(t)] = v
+            elif f.kind == "click" and v:
+                e["click"].append((t, f.adjusters, float(v)))
+            elif f.kind == "fade" and v:
+                if not 0.0 <= v < 1.0:
+                    raise PlannerError(f"factor {f.name!r}: a fade of {v:g} is not a force "
+                                       "loss in [0, 1); give fades such as 0.05 or 0.1")
+                e["fade"].append((t, f.part, float(v)))
+    e["click"] = tuple(e["click"])
+    e["fade"] = tuple(e["fade"])
     e["vehicle"] = tuple(e["vehicle"])
     e["stop_set"] = tuple(e["stop_set"])
     return ConditionEffect(**e)
@@ -376,26 +395,87 @@ class ShockVariants:
         self.library = library
         self.extra = {}
         self._key = {}
+        self._names = {}
 
-    def model_id(self, shock_id, scale, lag_add):
-        """The id of shock `shock_id` scaled by `scale` with `lag_add` [s] more lag (made once)."""
-        if scale == 1.0 and lag_add == 0.0:
+    def model_id(self, shock_id, scale, lag_add, fade=(0.0, 0.0)):
+        """The id of shock `shock_id` scaled by `scale` with `lag_add` [s] more lag and
+        faded by ``fade = (fade_all, fade_low)`` (made once)."""
+        if scale == 1.0 and lag_add == 0.0 and not any(fade):
             return shock_id
         key = (shock_id, round(float(scale), 14), round(float(lag_add), 14))
+        if any(fade):
+            key += (round(float(fade[0]), 14), round(float(fade[1]), 14))
         if key not in self._key:
             base = self.library.get(shock_id)
             lag = base.lag_s + lag_add
             if lag < 0:
                 raise PlannerError(f"shock {shock_id!r}: the lag change {lag_add:g} s makes its "
                                    f"lag {lag:g} s negative; reduce the change")
-            new_id = f"{shock_id}~{len(self._key) + 1}"
+            # a setting name's variant is named without its '@' (not a setting name)
+            new_id = f"{shock_id.replace('@', '~at~')}~{len(self._key) + 1}"
+            if any(fade):
+                base = faded_shock(base, *fade)
             self.extra[new_id] = base.scaled(scale, lag_s=lag, id=new_id)
             self._key[key] = new_id
         return self._key[key]
 
+    def names(self, shock_id):
+        """``(base id, full setting or None, canonical name or None)`` of a shock name."""
+        hit = self._names.get(shock_id)
+        if hit is None:
+            hit = self._names[shock_id] = parse_setting(self.library, shock_id)
+        return hit
+
+    def matches(self, target, shock_id):
+        """True if a factor's shock target (an id or a setting name) names `shock_id`."""
+        if target == shock_id:
+            return True
+        base, _, canonical = self.names(shock_id)
+        if canonical is None:
+            return False
+        if target == base:
+            return True
+        return "@" in target and self.names(target)[2] == canonical
+
+    def corner_shock(self, sid, i, e):
+        """The id a corner's shock `sid` takes under condition `e`, and a clip note.
+
+        Clicks move an adjustable shock's setting first (clipped at its range ends),
+        then the fade, the scale and the lag apply (fixed shocks: scale and lag only).
+        """
+        base, settings, canonical = self.names(sid)
+        if canonical is None and "@" not in sid:  # a fixed shock: the plain path
+            return self.model_id(sid, e.corner_scale[i] * e.id_scale.get(sid, 1.0),
+                                 e.corner_lag[i] + e.id_lag.get(sid, 0.0)), ""
+        c = CORNERS[i]
+        scale, lag = e.corner_scale[i], e.corner_lag[i]
+        for k, v in e.id_scale.items():
+            if self.matches(k, sid):
+                scale = scale * v
+        for k, v in e.id_lag.items():
+            if self.matches(k, sid):
+                lag = lag + v
+        if settings is None:  # a setting name of a fixed shock is refused on lookup
+            return self.model_id(sid, scale, lag), ""
+
+        def match(target):
+            return self.matches(target, sid)
+
+        note = ""
+        name = sid
+        steps = click_steps(e, c, match)
+        if steps:
+            entry = self.library.adjustable(base)
+            every = steps.pop("*", 0.0)
+            per = {k: every + steps.get(k, 0.0) for k in entry.names}
+            moved, clipped = clicked_settings(entry, settings, per)
+            name = entry.name(moved) if moved != settings else sid
+            note = click_note(c, base, clipped)
+        return self.model_id(name, scale, lag, fade_amounts(e, c, match)), note
+
     def full_library(self):
-        """The crate and the derived shocks in one library."""
-        return ShockLibrary(list(self.library.values()) + list(self.extra.values()),
+        """The crate (adjustable entries kept) and the derived shocks in one library."""
+        return ShockLibrary(self.library.entries() + list(self.extra.values()),
                             source=self.library.source)
 
 
@@ -434,13 +514,34 @@ def condition_setups(setups, e, variants, tag, elements=None, stop_variants=None
         if e.changes_elements:
             out.append(_element_setup(s, k, e, variants, tag, elements, stop_variants))
             continue
-        ids = {}
-        for i, c in enumerate(CORNERS):
-            sid = s.ids()[i]
-            scale = e.corner_scale[i] * e.id_scale.get(sid, 1.0)
-            lag = e.corner_lag[i] + e.id_lag.get(sid, 0.0)
-            ids[c] = variants.model_id(sid, scale, lag)
+        ids = {c: variants.corner_shock(sid, i, e)[0]
+               for i, (c, sid) in enumerate(zip(CORNERS, s.ids()))}
         out.append(Setup(f"{s.name}\x1f{tag}", ids))
+    return out
+
+
+def condition_notes(setups, e, variants):
+    """Where a condition's clicks hit the end of an adjuster's range, per setup.
+
+    Parameters
+    ----------
+    setups : sequence of planner.setups.Setup
+    e : ConditionEffect
+    variants : ShockVariants
+
+    Returns
+    -------
+    dict of str -> str
+        Setup name -> ``"LF TTX ls 0-1 -> 0; RF ..."`` for the setups clipped.
+    """
+    out = {}
+    if not e.click:
+        return out
+    for s in setups:
+        notes = [variants.corner_shock(sid, i, e)[1] for i, sid in enumerate(s.ids())]
+        text = "; ".join(n for n in notes if n)
+        if text:
+            out[s.name] = text
     return out
 
 
@@ -489,9 +590,8 @@ class StopVariants:
 
 def _element_setup(s, k, e, variants, tag, elements, stop_variants):
     """One setup under a condition that changes its bump stops or packers."""
-    ids = {c: variants.model_id(s.ids()[i], e.corner_scale[i] * e.id_scale.get(s.ids()[i], 1.0),
-                                e.corner_lag[i] + e.id_lag.get(s.ids()[i], 0.0))
-           for i, c in enumerate(CORNERS)}
+    ids = {c: variants.corner_shock(sid, i, e)[0]
+           for i, (c, sid) in enumerate(zip(CORNERS, s.ids()))}
     if elements is None:
         stops, packers = [None] * 4, np.zeros(4)
     else:

@@ -33,11 +33,13 @@ from planner.predict import as_loop_plant, predict_setups, prepare_drive
 from planner.runner import KERNEL_LOCK, SCHEDULER_NONE, start_runner
 from planner.screen import screen_setups
 from planner.setups import resolve_baseline
+from planner.whatif.clicks import ADJUSTER_KINDS, check_adjuster_factors, tolerance_table
 from planner.whatif.conditions import (
     ShockVariants,
     StopVariants,
     condition_drive,
     condition_effect,
+    condition_notes,
     condition_plant,
     condition_setups,
     drive_key,
@@ -92,9 +94,16 @@ class WhatIf:
         One row per condition (``drive``, ``perturbation``) with the factor values.
     baseline : str
     objective : planner.objective.Objective
+    tolerance : pandas.DataFrame or None
+        With ``click`` or ``fade`` factors: per setup, factor and quantity (score, rank,
+        metric) the nominal, lowest, highest and worst value and the spread over the
+        nominal condition and the factor's conditions on the first drive
+        (:func:`planner.whatif.clicks.tolerance_table`); None without such factors.
     settings : dict
         ``method``, ``oversample``, ``band_hz``, ``rank_tolerance``, ``fragile_share``,
-        ``n_evaluations``, ``elapsed_s``, ``model``, ``drives``; where it ran:
+        ``n_evaluations``, ``elapsed_s``, ``model``, ``drives``; with click factors
+        ``clipped`` (how many rows have a click clipped at a range end) and ``notes``;
+        where it ran:
         ``scheduler`` (``"none"``, ``"local"``, ``"address"`` or ``"client"``),
         ``address``, ``n_workers`` and ``n_tasks`` (neither these nor the timings are
         written to the files).
@@ -107,6 +116,7 @@ class WhatIf:
     baseline: str
     objective: object
     settings: dict = field(default_factory=dict)
+    tolerance: pd.DataFrame | None = None
 
     @property
     def fragile(self):
@@ -240,7 +250,7 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
     pandas.DataFrame, shape (n, 4 + n_metrics)
         The metrics only (no time histories).
     """
-    lib = ShockLibrary(list(library.values()) + list(extra), source=library.source) \
+    lib = ShockLibrary(library.entries() + list(extra), source=library.source) \
         if extra else library
     with KERNEL_LOCK:
         drive = condition_drive(drive, effect, where)
@@ -403,6 +413,10 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     names = [s.name for s in setups]
     if len(set(names)) != len(names):
         raise PlannerError("setup names repeat; give each setup its own name")
+    adjusting = any(f.kind in ADJUSTER_KINDS for f in perturbations.factors)
+    notes = (check_adjuster_factors(perturbations.factors, setups, library,
+                                    perturbations.settings.get("source") or "what-if")
+             if adjusting else [])
     # the scheduler before any work: a wrong address fails here
     runner = None
     if not _is_serial(scheduler, client):
@@ -507,6 +521,20 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     table = table.reset_index(drop=True)
     metrics = [c for c in table.columns if c not in ("drive", "perturbation", "setup") + CORNERS
                and c not in ELEMENT_COLUMNS]
+    n_clipped = 0
+    if any(f.kind == "click" for f in perturbations.factors):
+        # the clicks clipped at a range end, per (perturbation, setup), said in the table
+        clip = {}
+        for p, e in zip(perturbations.perturbations, effects):
+            for n, text in condition_notes(setups, e, variants).items():
+                clip[(p.name, n)] = text
+        table["clipped"] = [clip.get((p, n), "") for p, n in
+                            zip(table["perturbation"], table["setup"])]
+        n_clipped = int((table["clipped"] != "").sum())
+        if n_clipped:
+            notes.append(f"{n_clipped} of {len(table)} evaluations have a click clipped at the "
+                         "end of an adjuster's range (the table's 'clipped' column)")
+            log.warning("what-if: %s", notes[-1])
     # score each condition against the baseline in that condition
     scored = []
     for _, cond in table.groupby(["drive", "perturbation"], sort=False):
@@ -540,6 +568,9 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                 "design": perturbations.design, "source": perturbations.settings.get("source"),
                 "scheduler": kind, "address": address, "n_workers": int(workers),
                 "n_tasks": int(n_tasks)}
+    if adjusting:
+        settings["clipped"] = n_clipped
+        settings["notes"] = list(notes)
     if agreement is not None:
         settings["agreement"] = agreement
         log.info("what-if by screening, nominal condition checked in the time domain: "
@@ -547,5 +578,8 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                  agreement["n"], agreement["same_best"])
     log.info("what-if: %d setups x %d conditions (%d evaluations, %s, scheduler %s) in %.1f s",
              len(setups), len(conditions), n_eval, method, kind, elapsed)
+    tolerance = (tolerance_table(table, perturbations, drives[0].name) if adjusting
+                 else None)
     return WhatIf(table=table, robust=robust, perturbations=perturbations, conditions=conditions,
-                  baseline=base.name, objective=objective, settings=settings)
+                  baseline=base.name, objective=objective, settings=settings,
+                  tolerance=tolerance)

@@ -29,6 +29,7 @@ from planner.errors import PlannerError
 
 __all__ = [
     "FACTOR_KINDS",
+    "FADE_PARTS",
     "DESIGNS",
     "MAX_CONDITIONS",
     "CHANNEL_GROUPS",
@@ -43,7 +44,10 @@ __all__ = [
 #: Factor kinds and their default change ("scale": multiply, "add": add to the value).
 FACTOR_KINDS = {"shock_scale": "scale", "shock_lag": "add", "spring_rate": "scale",
                 "arb_rate": "add", "drive_scale": "scale", "drive_window": "set",
-                "drive_file": "set", "vehicle": "scale", "packer": "add", "bump_stop": "set"}
+                "drive_file": "set", "vehicle": "scale", "packer": "add", "bump_stop": "set",
+                "click": "add", "fade": "add"}
+#: Where a ``fade`` factor acts (:mod:`planner.whatif.clicks`).
+FADE_PARTS = ("all", "low-speed")
 #: Designs of a perturbation set.
 DESIGNS = ("one-at-a-time", "factorial", "monte-carlo")
 #: Largest number of conditions of a factorial design (guard against a typo exploding it).
@@ -54,7 +58,7 @@ CHANNEL_GROUPS = {"wheel": WHEELLOADER_INPUTS, "aero": AERO_INPUTS}
 AXLE_CORNERS = {"front": (0, 1), "rear": (2, 3)}
 _TOP_KEYS = {"format", "units", "design", "n_draws", "seed", "factor", "name"}
 _FACTOR_KEYS = {"name", "kind", "corners", "shocks", "axles", "channels", "parameter", "change",
-                "levels", "distribution", "independent", "baseline_rate"}
+                "levels", "distribution", "independent", "baseline_rate", "adjusters", "part"}
 _DIST_KEYS = {"uniform": ("low", "high"), "normal": ("mean", "sd")}
 _FORMAT = "shockplan-whatif/1"
 
@@ -90,6 +94,11 @@ class Factor:
     baseline_rate : ndarray or None
         The current rate per target [N/m] for a ``scale`` change of a rate on an
         identified model.
+    adjusters : tuple of str
+        ``click``: the adjusters that move (empty: every adjuster of each shock).
+    part : {"all", "low-speed"}
+        ``fade``: the whole curve loses force, or mostly its low-speed part
+        (:func:`planner.whatif.clicks.faded_shock`).
     """
 
     name: str
@@ -100,12 +109,24 @@ class Factor:
     distribution: tuple | None = None
     independent: bool = False
     baseline_rate: np.ndarray | None = None
+    adjusters: tuple = ()
+    part: str = "all"
 
     def __post_init__(self):
         where = f"factor {self.name!r}"
         if self.kind not in FACTOR_KINDS:
             raise PlannerError(f"{where}: kind {self.kind!r} is unknown; use one of "
                                f"{sorted(FACTOR_KINDS)}")
+        object.__setattr__(self, "adjusters", tuple(self.adjusters))
+        if self.adjusters and self.kind != "click":
+            raise PlannerError(f"{where}: adjusters apply to a click factor only; remove them")
+        if self.part not in FADE_PARTS:
+            raise PlannerError(f"{where}: part {self.part!r} is unknown; use one of "
+                               f"{list(FADE_PARTS)}")
+        if self.kind in ("click", "fade") and self.change != FACTOR_KINDS[self.kind] \
+                and self.change is not None:
+            raise PlannerError(f"{where}: change {self.change!r} does not apply to a "
+                               f"{self.kind} factor; use 'add'")
         if self.change is None:
             object.__setattr__(self, "change", FACTOR_KINDS[self.kind])
         if self.change not in ("scale", "add", "set"):
@@ -209,6 +230,10 @@ def _level_label(factor, v):
         return f"= {v}"
     if factor.kind == "packer":
         return f"{v * 1e3:+.4g} mm"
+    if factor.kind == "click":
+        return f"{v:+g} click"
+    if factor.kind == "fade":
+        return f"{v * 100:.4g} %{' low-speed' if factor.part == 'low-speed' else ''} fade"
     if factor.change == "scale":
         return f"x{v:.4g}"
     unit = {"shock_lag": " s", "spring_rate": " N/m", "arb_rate": " N/m"}.get(factor.kind, "")
@@ -328,7 +353,7 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
     allowed = {"shock_scale": ("scale",), "shock_lag": ("add",), "spring_rate": ("scale", "add"),
                "arb_rate": ("add", "scale"), "drive_scale": ("scale",), "drive_window": ("set",),
                "drive_file": ("set",), "vehicle": ("scale", "add"), "packer": ("add",),
-               "bump_stop": ("set",)}[kind]
+               "bump_stop": ("set",), "click": ("add",), "fade": ("add",)}[kind]
     if change not in allowed:
         raise _fail(where, "change", f"= {change!r} does not apply to a {kind} factor",
                     f"use {' or '.join(repr(a) for a in allowed)}")
@@ -336,7 +361,8 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
     target_key = {"shock_scale": ("corners", "shocks"), "shock_lag": ("corners", "shocks"),
                   "spring_rate": ("corners",), "arb_rate": ("axles",),
                   "drive_scale": ("channels",), "vehicle": ("parameter",),
-                  "packer": ("corners",), "bump_stop": ("corners",)}.get(kind, ())
+                  "packer": ("corners",), "bump_stop": ("corners",),
+                  "click": ("corners", "shocks"), "fade": ("corners", "shocks")}.get(kind, ())
     given = [k for k in ("corners", "shocks", "axles", "channels", "parameter") if k in t]
     wrong = [k for k in given if k not in target_key]
     if wrong:
@@ -437,9 +463,19 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
             levels = tuple(x.strip() for x in raw)
         else:
             levels = tuple(value(x, "levels") for x in raw)
+        if kind == "click":
+            bad = [x for x in levels if x != round(x)]
+            if bad:
+                raise _fail(where, "levels", f"has {bad[0]:g}, not a whole number of clicks",
+                            "write e.g. levels = [-1, 0, 1] (steps of each adjuster)")
+        if kind == "fade":
+            bad = [x for x in levels if not 0.0 <= x < 1.0]
+            if bad:
+                raise _fail(where, "levels", f"has {bad[0]:g}, not a force loss in [0, 1)",
+                            "write e.g. levels = [0.0, 0.05, 0.1] (5 %, 10 % less force)")
     distribution = None
     if "distribution" in t:
-        if kind in ("drive_window", "drive_file", "bump_stop"):
+        if kind in ("drive_window", "drive_file", "bump_stop", "click"):
             raise _fail(where, "distribution", f"does not apply to a {kind} factor",
                         "give levels; a monte-carlo design draws among them")
         d = t["distribution"]
@@ -466,6 +502,9 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
                 raise _fail(where, "distribution.sd", f"= {b:g} is not positive",
                             "give a positive standard deviation")
         distribution = (d["kind"], a, b)
+        if kind == "fade" and (d["kind"] != "uniform" or a < 0 or b >= 1):
+            raise _fail(where, "distribution", f"= {d!r} may draw a fade outside [0, 1)",
+                        'write e.g. distribution = { kind = "uniform", low = 0.0, high = 0.1 }')
     independent = t.get("independent", False)
     if not isinstance(independent, bool):
         raise _fail(where, "independent", f"must be true or false, got {independent!r}",
@@ -495,9 +534,29 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
                                   for x in raw])
         if np.any(baseline_rate <= 0):
             raise _fail(where, "baseline_rate", "is not positive", "give the current rate(s)")
+    adjusters = ()
+    if "adjusters" in t:
+        raw = t["adjusters"]
+        raw = [raw] if isinstance(raw, str) else raw
+        if kind != "click":
+            raise _fail(where, "adjusters", f"does not apply to a {kind} factor",
+                        "remove it (only a click factor names adjusters)")
+        if (not isinstance(raw, list) or not raw
+                or not all(isinstance(x, str) and x.strip() for x in raw)
+                or len(set(raw)) != len(raw)):
+            raise _fail(where, "adjusters", f"must be a list of adjuster names, got "
+                        f"{t['adjusters']!r}", 'write e.g. adjusters = ["ls"] (or leave it out '
+                        'for every adjuster)')
+        adjusters = tuple(x.strip() for x in raw)
+    part = t.get("part", "all")
+    if "part" in t and kind != "fade":
+        raise _fail(where, "part", f"does not apply to a {kind} factor",
+                    "remove it (only a fade factor has a part)")
+    if part not in FADE_PARTS:
+        raise _fail(where, "part", f"= {part!r} is unknown", f"use one of {list(FADE_PARTS)}")
     return Factor(name=name.strip(), kind=kind, targets=targets, change=change, levels=levels,
                   distribution=distribution, independent=independent,
-                  baseline_rate=baseline_rate)
+                  baseline_rate=baseline_rate, adjusters=adjusters, part=part)
 
 
 def read_perturbations(path):
