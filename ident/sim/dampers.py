@@ -27,9 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ident.models.adjustable import AdjustableShock, DynoPoints
 from ident.models.shocks import TableShock
 
-__all__ = ["ClickerDamper"]
+__all__ = ["ClickerDamper", "gt_clicker", "clicker_shock"]
 
 
 @dataclass(frozen=True)
@@ -131,3 +132,53 @@ class ClickerDamper:
         out += [{"ls": float(ls_held), "hs": float(x)} for x in np.arange(lo, hi + 1e-9, hs_step)
                 if float(x) != float(hs_held)]
         return out
+
+
+def gt_clicker():
+    """The clicker of the GT-like car (:func:`ident.models.vehicle.example_gt_vehicle`).
+
+    Sized so that the car's best setting lies inside both ranges: low-speed slope
+    28,000 to 8,000 N/(m/s) over ``ls`` 0-20 clicks, high-speed slope 17,000 to 6,000
+    N/(m/s) over ``hs`` 0-4 turns, knee 0.02-0.04 m/s. On a track drive the two
+    adjusters trade against each other along a valley of near-equal scores (a stiffer
+    ``hs`` pairs with a softer ``ls``), as on real cars.
+
+    Returns
+    -------
+    ClickerDamper
+    """
+    return ClickerDamper(c_low_n_s_m=24000.0, c_low_floor_n_s_m=4000.0, c_high_n_s_m=14000.0,
+                         c_high_floor_n_s_m=3000.0, knee_m_s=0.02, knee_per_click_m_s=0.001,
+                         hs_rate=0.4)
+
+
+#: The dyno's speeds [m/s] of :func:`clicker_shock`'s sheets (a 7-speed sweep).
+DYNO_SPEEDS_M_S = (0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.5)
+
+
+def clicker_shock(damper, id="TTX", *, step=None, default=None, count=None, lag_s=0.0):
+    """An adjustable shock from a damper's one-at-a-time dyno sweeps (the test crate).
+
+    Parameters
+    ----------
+    damper : ClickerDamper
+        The truth; its sheets are :meth:`ClickerDamper.sweep_settings` (``ls`` every 4
+        clicks at ``hs`` 2, ``hs`` every turn at ``ls`` 8) at :data:`DYNO_SPEEDS_M_S`.
+    id : str
+    step : dict, optional
+        The adjusters' resolution (default ``ls`` 1 click, ``hs`` 0.5 turn).
+    default : dict, optional
+        Default ``{"ls": 8, "hs": 2}``.
+    count : int, optional
+    lag_s : float
+
+    Returns
+    -------
+    ident.models.adjustable.AdjustableShock
+    """
+    sheet = damper.dyno_sheet(damper.sweep_settings(), DYNO_SPEEDS_M_S)
+    points = DynoPoints(sheet["velocity"].to_numpy(), sheet["force"].to_numpy(),
+                        sheet[["ls", "hs"]].to_numpy(), ("ls", "hs"))
+    return AdjustableShock(id, damper.adjusters, points, default=default or {"ls": 8, "hs": 2},
+                           stiffer={"ls": "lower", "hs": "lower"},
+                           step=step or {"ls": 1, "hs": 0.5}, count=count, lag_s=lag_s)
