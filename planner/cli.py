@@ -1243,9 +1243,9 @@ def build_parser():
     pl.add_argument("--drive", action="append", help="the team's drive for the decision "
                     "criterion and the validation runs; repeatable (default: a 120 s "
                     "synthetic track drive of the car)")
-    pl.add_argument("--rig-costs", metavar="RIG.toml", help="the rig's time costs (rig "
-                    "TOML, docs/formats.md): swap_min and run_overhead_min [min] (default: "
-                    "6 min a changed corner, no overhead)")
+    pl.add_argument("--rig-costs", metavar="RIG.toml", help="the rig's time costs (rig TOML, "
+                    "docs/formats.md): swap_min, run_overhead_min [min], click_change_s [s] "
+                    "(default: 6 min a changed corner, 20 s an adjuster turned, no overhead)")
     pl.add_argument("--baseline", help="the car's setup at the start: one shock id or "
                     "LF,RF,LR,RR (default: the session's baseline, or the crate's first shock)")
     pl.add_argument("--validate", type=int, default=0,

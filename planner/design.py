@@ -46,10 +46,24 @@ every corner it changes and the rig's overhead per run; the order that swaps
 least is found exactly for up to 9 runs (Held-Karp), by nearest neighbour and
 2-opt above, and runs are dropped (least criterion share first) until the
 ordered plan fits the budget.
+
+Adjustable shocks (clickers)
+----------------------------
+The candidates include each adjustable shock of the crate at a few settings
+(:func:`click_settings`: each adjuster across its range, all stiff, all soft),
+named with every adjuster (``TTX@ls=0,hs=2``). A corner that keeps its
+adjustable shock and changes its settings is a click change: it costs the
+rig's ``click_change_s`` per adjuster turned (seconds), not ``swap_min``
+(minutes) (:func:`change_time_min`), in the candidates' costs, the greedy's
+insertion, the run order and the schedule. With an adjustable shock on the
+baseline the design can thus vary a corner's damping for seconds of rig time;
+the criterion decides which settings inform. A crate without adjustable shocks
+plans exactly as before.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 import logging
 import math
@@ -69,6 +83,7 @@ from ident.data.files import read_toml
 from ident.identify.condition import frf_standard_error
 from ident.identify.frf import shock_force_deviation
 from ident.identify.model import VehicleModel
+from ident.models.adjustable import parse_shock_name
 from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
 from ident.sim.rig import default_plan, loop_damping, make_plan_drive
 from planner.errors import PlannerError
@@ -90,6 +105,8 @@ __all__ = [
     "default_rig",
     "read_rig",
     "candidate_runs",
+    "click_settings",
+    "change_time_min",
     "design_experiment",
     "criterion_value",
     "greedy_design",
@@ -112,6 +129,8 @@ _EPS = 1e-9
 _RANK_TOL = 1e-8
 #: Bands of the information (common to every candidate) and the design band [Hz].
 DEFAULT_BAND_HZ = (0.5, 20.0)
+#: Settings per adjuster that candidate runs try across its range (ends included).
+DEFAULT_CLICK_LEVELS = 3
 
 
 # ----------------------------------------------------------------------------------------------
@@ -130,21 +149,39 @@ class RigSpec:
     run_overhead_min : float
         Time per run besides its drive (load, start, check) [min].
     source : str or None
+    click_change_s : float
+        Time to change one adjuster of an adjustable shock at one corner (clicks or
+        turns, the shock staying on the car) [s].
+
+    Notes
+    -----
+    Going from one setup to the next costs :attr:`swap_min` for every corner whose
+    shock is swapped, and :attr:`click_change_s` for every adjuster turned at a
+    corner that keeps its adjustable shock (``TTX@ls=6,hs=2`` -> ``TTX@ls=8,hs=2``:
+    one click change): :func:`change_time_min`.
     """
 
     name: str = "rig"
     swap_min: float = 6.0
     run_overhead_min: float = 0.0
     source: str | None = None
+    click_change_s: float = 20.0
+
+    @property
+    def click_change_min(self):
+        """float: :attr:`click_change_s` in minutes."""
+        return self.click_change_s / 60.0
 
 
 def default_rig():
-    """A rig where a shock change takes 6 minutes and runs cost only their drive."""
+    """A rig where a shock change takes 6 minutes, a click change 20 s, and runs cost only
+    their drive."""
     return RigSpec()
 
 
 def read_rig(path):
-    """Read a rig TOML: ``format = "rig/1"``, ``name``, ``swap_min``, ``run_overhead_min``.
+    """Read a rig TOML: ``format = "rig/1"``, ``name``, ``swap_min``, ``run_overhead_min``,
+    ``click_change_s``.
 
     Raises
     ------
@@ -154,7 +191,7 @@ def read_rig(path):
     """
     path = Path(path)
     doc = read_toml(path, error=PlannerError, what="rig file")
-    known = {"format", "name", "swap_min", "run_overhead_min"}
+    known = {"format", "name", "swap_min", "run_overhead_min", "click_change_s"}
     for key in doc:
         if key not in known:
             raise PlannerError(f"{path}: unknown key {key!r}; a rig file has {sorted(known)}")
@@ -169,6 +206,14 @@ def read_rig(path):
                     or v < 0:
                 raise PlannerError(f"{path}: {key} = {v!r} must be a number of minutes >= 0")
             out[key] = float(v)
+    if "click_change_s" in doc:
+        v = doc["click_change_s"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                or v < 0:
+            raise PlannerError(f"{path}: click_change_s = {v!r} must be a number of seconds "
+                               ">= 0 (the time to turn one adjuster at one corner); write e.g. "
+                               "click_change_s = 20")
+        out["click_change_s"] = float(v)
     name = doc.get("name", path.stem)
     if not isinstance(name, str) or not name:
         raise PlannerError(f"{path}: 'name' must be a non-empty string")
@@ -191,9 +236,11 @@ class Candidate:
         Drive kind (:data:`DRIVE_KINDS`).
     duration_s : float
     changed : tuple of str
-        Corners whose shock differs from the baseline's.
+        Corners whose shock (or its setting) differs from the baseline's.
     cost_min : float
-        Duration, swaps (from the baseline) and overhead [min].
+        Duration, swaps and click changes (from the baseline) and overhead [min].
+    clicks : int
+        Adjusters turned from the baseline (corners keeping their adjustable shock).
     """
 
     name: str
@@ -202,6 +249,7 @@ class Candidate:
     duration_s: float
     changed: tuple
     cost_min: float
+    clicks: int = 0
 
 
 @dataclass(frozen=True)
@@ -223,11 +271,15 @@ class PlannedRun:
     start_min : float
         Planned start, minutes from the plan's start (swaps before it included).
     changed : tuple of str
-        Corners changed before this run.
+        Corners changed before this run: a shock swapped, or an adjustable shock's
+        setting changed.
     swap_min : float
-        Time of those changes [min].
+        Time of those changes [min], swaps and click changes.
     share : float
         The run's share of the criterion (leave-one-out, the shares summing to 1).
+    clicks : tuple of (str, str)
+        ``(corner, adjuster)`` of every adjuster turned before this run at a corner that
+        kept its adjustable shock (those corners are in `changed` too).
     """
 
     number: int
@@ -241,6 +293,20 @@ class PlannedRun:
     changed: tuple
     swap_min: float
     share: float
+    clicks: tuple = ()
+
+    @property
+    def swapped(self):
+        """tuple of str: the corners of `changed` whose shock was swapped."""
+        clicked = {c for c, _ in self.clicks}
+        return tuple(c for c in self.changed if c not in clicked)
+
+    @property
+    def change(self):
+        """str: the kind of change before the run: ``"swap"``, ``"clicks"``,
+        ``"swap+clicks"`` or ``""`` (none)."""
+        kinds = [k for k, on in (("swap", self.swapped), ("clicks", self.clicks)) if on]
+        return "+".join(kinds)
 
 
 @dataclass(frozen=True, eq=False)
@@ -291,15 +357,18 @@ class ExperimentPlan:
     settings: dict = field(default_factory=dict)
 
     def table(self):
-        """The runs as a DataFrame (one row per run, in rig order)."""
+        """The runs as a DataFrame (one row per run, in rig order); with adjustable shocks
+        in the crate, a ``change`` column holds :attr:`PlannedRun.change`."""
         rows = []
         for r in self.runs:
             row = {"run": r.number, "name": r.name, "purpose": r.purpose,
                    "start_min": r.start_min, "duration_s": r.duration_s, "drive": r.drive,
                    "kind": r.kind}
             row.update(dict(zip(CORNERS, r.setup.ids())))
-            row.update({"changed": " ".join(r.changed), "swap_min": r.swap_min,
-                        "share": r.share})
+            row["changed"] = " ".join(r.changed)
+            if self.library.adjustable_ids:
+                row["change"] = r.change
+            row.update({"swap_min": r.swap_min, "share": r.share})
             rows.append(row)
         return pd.DataFrame(rows).set_index("run")
 
@@ -364,9 +433,147 @@ _GROUPS = {"single": [(c,) for c in CORNERS], "diagonal": [("LF", "RR"), ("RF", 
            "axle": [("LF", "RF"), ("LR", "RR")], "all": [CORNERS]}
 
 
+def click_settings(shock, levels=DEFAULT_CLICK_LEVELS):
+    """Settings of an adjustable shock that candidate runs try.
+
+    Each adjuster at `levels` settings evenly across its range (its ends included,
+    snapped to its step), the others at their default; and, with two adjusters or
+    more, every adjuster at its stiffer end and every one at its softer end. The
+    design criterion chooses among them (the ends usually: they move the damping
+    most from the baseline's).
+
+    Parameters
+    ----------
+    shock : ident.models.adjustable.AdjustableShock
+    levels : int
+        Settings per adjuster, >= 2.
+
+    Returns
+    -------
+    list of str
+        Canonical setting names (``"TTX@ls=0,hs=2"``), each once: the stiffest, the
+        softest, then each adjuster's levels.
+
+    Examples
+    --------
+    >>> from ident.models.adjustable import AdjustableShock, DynoPoints
+    >>> rows = [(v, 3000 * v * (1.5 - ls / 40), ls) for ls in (0, 20)
+    ...         for v in (-0.5, -0.1, 0.1, 0.5)]
+    >>> ttx = AdjustableShock("TTX", {"ls": (0, 20)}, DynoPoints.from_rows(rows, ("ls",)),
+    ...                       default={"ls": 8}, step={"ls": 1})
+    >>> click_settings(ttx)
+    ['TTX@ls=0', 'TTX@ls=10', 'TTX@ls=20']
+    """
+    if isinstance(levels, bool) or not isinstance(levels, int) or levels < 2:
+        raise PlannerError(f"click levels = {levels!r}: give a whole number >= 2 of settings "
+                           "per adjuster (2: the ends of its range)")
+    ends = {}
+    for k, (lo, hi) in shock.adjusters.items():
+        ends[k] = (lo, hi) if shock.stiffer[k] == "lower" else (hi, lo)
+    out = []
+    if len(ends) > 1:
+        out += [shock.name({k: e[0] for k, e in ends.items()}),
+                shock.name({k: e[1] for k, e in ends.items()})]
+    for k, (lo, hi) in shock.adjusters.items():
+        st = shock.step.get(k)
+        for j in range(levels):
+            x = lo + (hi - lo) * j / (levels - 1)
+            if st:
+                x = min(lo + st * math.floor((x - lo) / st + 0.5), hi)
+            out.append(shock.name({k: x}))
+    return list(dict.fromkeys(out))
+
+
+@functools.lru_cache(maxsize=4096)
+def _named_settings(name):
+    base, settings = parse_shock_name(name)
+    return base, tuple(settings.items())
+
+
+def _corner_change(before, after):
+    """(swaps, click changes) to go from shock name `before` to `after` at one corner: 0 and
+    the adjusters whose setting differs when both name settings of one adjustable shock
+    (every adjuster written, as :func:`design_experiment` keeps them), else one swap."""
+    if before == after:
+        return 0, 0
+    if "@" not in before or "@" not in after:
+        return 1, 0
+    (ba, sa), (bb, sb) = _named_settings(before), _named_settings(after)
+    da, db = dict(sa), dict(sb)
+    if ba != bb or da.keys() != db.keys():
+        return 1, 0
+    return 0, sum(da[k] != db[k] for k in da)
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _id_change_counts(ids_a, ids_b):
+    swaps = clicks = 0
+    for x, y in zip(ids_a, ids_b):
+        ds, dc = _corner_change(x, y)
+        swaps += ds
+        clicks += dc
+    return swaps, clicks
+
+
+def _change_counts(a, b):
+    """Swaps and click changes from setup `a` to setup `b` (the greedy asks for the same
+    pairs again and again: cached on the ids)."""
+    return _id_change_counts(a.ids(), b.ids())
+
+
+def change_time_min(before, after, rig=None):
+    """Rig time [min] to change the car from one setup to the next.
+
+    Parameters
+    ----------
+    before, after : planner.setups.Setup
+        Adjustable shocks named with every adjuster (``TTX@ls=6,hs=2``; a corner whose
+        name keeps its adjustable shock and changes settings is a click change).
+    rig : RigSpec, optional
+        Default :func:`default_rig`.
+
+    Returns
+    -------
+    float
+        ``swap_min`` a corner whose shock is swapped plus ``click_change_s / 60`` an
+        adjuster turned.
+
+    Examples
+    --------
+    >>> a = Setup("a", dict.fromkeys(CORNERS, "TTX@ls=6,hs=2"))
+    >>> b = Setup("b", {**dict.fromkeys(CORNERS, "TTX@ls=6,hs=2"), "LF": "TTX@ls=8,hs=1"})
+    >>> round(change_time_min(a, b, RigSpec(swap_min=6.0, click_change_s=20.0)), 3)
+    0.667
+    >>> change_time_min(a, Setup("c", {**a.shocks, "LF": "B20"}), RigSpec(swap_min=6.0))
+    6.0
+    """
+    rig = default_rig() if rig is None else rig
+    swaps, clicks = _change_counts(before, after)
+    return rig.swap_min * swaps + rig.click_change_min * clicks
+
+
+def _full_name(library, sid):
+    """An adjustable shock's name with every adjuster written (fixed ids unchanged)."""
+    base = library.base_id(sid)
+    if base not in library.adjustable_ids:
+        return sid
+    _, settings = parse_shock_name(sid)
+    return library.adjustable(base).name(settings)
+
+
+def _full_names(setup, library):
+    """`setup` with its adjustable shocks named in full (itself when nothing changes)."""
+    if not library.adjustable_ids:
+        return setup
+    ids = tuple(_full_name(library, sid) for sid in setup.ids())
+    if ids == setup.ids():
+        return setup
+    return Setup(setup.name, dict(zip(CORNERS, ids)), setup.bump_stops, setup.packers_m)
+
+
 def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
                    durations_s=(120.0, 300.0, 600.0), shocks=None, n_shocks=4, c_bar=None,
-                   v_rms_m_s=0.1):
+                   v_rms_m_s=0.1, click_levels=DEFAULT_CLICK_LEVELS):
     """The runs a design chooses from.
 
     The baseline, and the baseline with shocks swapped in at one corner, at a
@@ -374,26 +581,34 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
     `durations_s`. The shocks swapped in are `shocks`, or the `n_shocks` crate
     shocks whose linearized damping (at `v_rms_m_s`) differs most from the
     baseline damping `c_bar` (the most informative, Eq. 22), softest and
-    firmest alternating.
+    firmest alternating, followed by each adjustable shock of the crate at its
+    :func:`click_settings` (`click_levels` per adjuster). A corner whose baseline
+    shock is that adjustable shock changes clicks, not its shock: the run costs
+    ``click_change_s`` an adjuster turned, not ``swap_min``.
 
     Returns
     -------
     list of Candidate
     """
     rig = default_rig() if rig is None else rig
+    baseline = _full_names(baseline, library)
     base_ids = baseline.ids()
+    adjustable = set(library.adjustable_ids)
     if shocks is None:
         cb = np.mean(c_bar) if c_bar is not None else np.mean(
             [library[s].equivalent_damping(v_rms_m_s) for s in base_ids])
-        others = [s for s in library.ids if s not in base_ids]
+        others = [s for s in library.ids if s not in base_ids and s not in adjustable]
         ceq = {s: float(library[s].equivalent_damping(v_rms_m_s)) for s in others}
         soft = sorted([s for s in others if ceq[s] < cb], key=lambda s: ceq[s])
         firm = sorted([s for s in others if ceq[s] >= cb], key=lambda s: -ceq[s])
         shocks = [s for pair in itertools.zip_longest(soft, firm) for s in pair if s][:n_shocks]
+        for sid in library.adjustable_ids:
+            shocks += click_settings(library.adjustable(sid), click_levels)
     else:
         for s in shocks:
             if s not in library:
                 raise unknown_id_error("candidate shocks", s, library)
+        shocks = list(dict.fromkeys(_full_name(library, s) for s in shocks))
     setups = [("baseline", baseline, ())]
     for group, sets in _GROUPS.items():
         for corners in sets:
@@ -408,13 +623,15 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
                                                                              base_ids))[c])))
     out = []
     for name, setup, changed in setups:
+        swaps, clicks = _change_counts(baseline, setup)
         for kind in kinds:
             if kind not in DRIVE_KINDS:
                 raise PlannerError(f"drive kind {kind!r} is not one of {list(DRIVE_KINDS)}")
             for T in durations_s:
-                cost = T / 60.0 + rig.swap_min * len(changed) + rig.run_overhead_min
+                cost = (T / 60.0 + rig.swap_min * swaps + rig.click_change_min * clicks
+                        + rig.run_overhead_min)
                 out.append(Candidate(f"{name} {kind} {T:g}s", setup, kind, float(T),
-                                     changed, cost))
+                                     changed, cost, clicks))
     return out
 
 
@@ -626,8 +843,9 @@ def _seq_cost(seq, cands, base, rig):
     """Rig time [min] of candidate runs in the order `seq`, from the baseline installed."""
     t, prev = 0.0, base
     for c in seq:
-        t += cands[c].duration_s / 60 + rig.run_overhead_min + rig.swap_min * _changes(
-            prev, cands[c].setup)
+        swaps, clicks = _change_counts(prev, cands[c].setup)
+        t += (cands[c].duration_s / 60 + rig.run_overhead_min + rig.swap_min * swaps
+              + rig.click_change_min * clicks)
         prev = cands[c].setup
     return t
 
@@ -640,9 +858,11 @@ def _insertion(seq, c, cands, base, rig):
     setups = [base] + [cands[i].setup for i in seq]
     for p in range(len(seq) + 1):
         prev, nxt = setups[p], (setups[p + 1] if p + 1 < len(setups) else None)
-        d = _changes(prev, s) + (_changes(s, nxt) - _changes(prev, nxt) if nxt is not None
-                                 else 0)
-        best = min(best, (own + rig.swap_min * d, p))
+        ds, dc = _change_counts(prev, s)
+        if nxt is not None:
+            (s1, c1), (s0, c0) = _change_counts(s, nxt), _change_counts(prev, nxt)
+            ds, dc = ds + s1 - s0, dc + c1 - c0
+        best = min(best, (own + rig.swap_min * ds + rig.click_change_min * dc, p))
     return best
 
 
@@ -716,13 +936,21 @@ def _changes(a, b):
     return sum(x != y for x, y in zip(a.ids(), b.ids()))
 
 
-def _order(setups, start):
-    """Run order (indices) that swaps the fewest corners, starting from setup `start`."""
+def _order(setups, start, rig=None):
+    """Run order (indices) that changes the car least, starting from setup `start`: the
+    fewest corners swapped, a click change counting its time in swaps of `rig`."""
     n = len(setups)
     if n <= 1:
         return list(range(n))
-    d = np.array([[_changes(a, b) for b in setups] for a in setups])
-    d0 = np.array([_changes(start, s) for s in setups])
+    rig = default_rig() if rig is None else rig
+    w = rig.click_change_min / rig.swap_min if rig.swap_min > 0 else 1.0
+
+    def dist(a, b):
+        swaps, clicks = _change_counts(a, b)
+        return swaps + w * clicks if clicks else swaps
+
+    d = np.array([[dist(a, b) for b in setups] for a in setups])
+    d0 = np.array([dist(start, s) for s in setups])
     if n <= 9:  # Held-Karp, exact
         best = {}
         for j in range(n):
@@ -805,7 +1033,8 @@ def _noise_variance(plant, frf, f_c, edges, M0, S_ref, noise):
 def design_experiment(model, library, *, budget_min, criterion="d", session=None,
                       objective=None, baseline=None, drives=None, rig=None,
                       kinds=("noise", "multisine"), durations_s=(120.0, 300.0, 600.0),
-                      shocks=None, n_shocks=4, n_bands=96, n_design_bands=12,
+                      shocks=None, n_shocks=4, click_levels=DEFAULT_CLICK_LEVELS,
+                      n_bands=96, n_design_bands=12,
                       band_hz=DEFAULT_BAND_HZ, noise=0.02, baseline_every=0, n_validation=0,
                       top=10, seed=0, date=None):
     """Choose the next rig runs within a budget, order them, and predict them.
@@ -834,7 +1063,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         120 s track-like drive.
     rig : RigSpec, optional
         Default :func:`default_rig`.
-    kinds, durations_s, shocks, n_shocks
+    kinds, durations_s, shocks, n_shocks, click_levels
         The candidate runs (:func:`candidate_runs`).
     n_bands : int
         Log-spaced bands over `band_hz` the criterion sums over.
@@ -878,6 +1107,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         base_run = next((r for r in session.runs if r.role == "baseline"), session.runs[0])
         baseline = [base_run.setup[c] for c in CORNERS]
     base = resolve_baseline(library.ids[0] if baseline is None else baseline, library)
+    base = _full_names(base, library)  # adjustable shocks named with every adjuster
     plant, vehicle, ident_model = _plant_and_vehicle(model, base, library)
     if ident_model is not None and session is None:
         raise PlannerError("an identified model needs the session it came from (its runs are "
@@ -897,7 +1127,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         drives = [make("track", 120.0, seed + 777, "validation-track")]
     drives = list(drives)
     cands = candidate_runs(library, base, rig=rig, kinds=kinds, durations_s=durations_s,
-                           shocks=shocks, n_shocks=n_shocks, c_bar=plant.cbar_n_s_m)
+                           shocks=shocks, n_shocks=n_shocks, c_bar=plant.cbar_n_s_m,
+                           click_levels=click_levels)
     cheapest = min(c.cost_min for c in cands)
     if budget_min < cheapest:
         raise PlannerError(f"a budget of {budget_min:g} min is shorter than one run (the "
@@ -922,7 +1153,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         ranked = score_setups(sc.table, objective, baseline=base.name).table.sort_values("rank")
         names = [n for n in ranked.index if n != base.name][:n_validation]
         by = {s.name: s for s in pool}
-        val_setups = [by[n] for n in names]
+        val_setups = [_full_names(by[n], library) for n in names]
     val_info = None
     if val_setups:
         vi, _ = _candidate_information(plant, val_setups, ["validation"],
@@ -949,7 +1180,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     val_cost = []
     for s in val_setups:
         val_cost.append(drives[0].duration_s / 60 + rig.run_overhead_min
-                        + rig.swap_min * _changes(base, s))
+                        + change_time_min(base, s, rig))
         reserve += val_cost[-1]
     short = min(durations_s) / 60 + rig.run_overhead_min
     if baseline_every:
@@ -974,7 +1205,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     if relaxed is not None:
         counts = np.floor(relaxed + 0.5).astype(int)
         start = [c for c in np.flatnonzero(counts) for _ in range(counts[c])]
-        order = _order([cands[c].setup for c in start], base)
+        order = _order([cands[c].setup for c in start], base, rig)
         starts.append(_fit_budget([start[k] for k in order], Mc_s, M0_s, cands, base, rig,
                                   budget_id, criterion, W_s))
     else:
@@ -985,7 +1216,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     best = None
     for st in starts:
         seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s, start=st)
-        order = _order([cands[c].setup for c in seq], base)  # the fill may have left swaps
+        order = _order([cands[c].setup for c in seq], base, rig)  # the fill may have left swaps
         seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s,
                             start=[seq[k] for k in order])
         M = M0_s + sum((Mc_s[c] for c in seq), np.zeros_like(M0_s))
@@ -1143,7 +1374,7 @@ def _schedule(seq, cands, val_setups, base, rig, make, val_drive, baseline_every
         items.append(("identification", g, None))
     if val_setups:
         last = cands[seq[-1]].setup if seq else base
-        items += [("validation", None, j) for j in _order(val_setups, last)]
+        items += [("validation", None, j) for j in _order(val_setups, last, rig)]
     runs, drives, infos = [], {}, []
     t, prev = 0.0, base
     for n, (purpose, g, vj) in enumerate(items, 1):
@@ -1152,7 +1383,14 @@ def _schedule(seq, cands, val_setups, base, rig, make, val_drive, baseline_every
         dur = (sum(cands[i].duration_s for i in g) if c is not None
                else val_drive.duration_s)
         changed = tuple(k for k, a, b in zip(CORNERS, prev.ids(), setup.ids()) if a != b)
-        swap = rig.swap_min * len(changed)
+        clicks = []
+        for k, a, b in zip(CORNERS, prev.ids(), setup.ids()):
+            if a != b and _corner_change(a, b)[0] == 0:
+                da, db = dict(_named_settings(a)[1]), dict(_named_settings(b)[1])
+                clicks += [(k, adj) for adj in da if da[adj] != db[adj]]
+        swap = rig.swap_min * (len(changed) - len({k for k, _ in clicks}))
+        if clicks:
+            swap += rig.click_change_min * len(clicks)
         start = t + swap + rig.run_overhead_min
         t, prev = start + dur / 60.0, setup
         if c is not None:
@@ -1170,7 +1408,7 @@ def _schedule(seq, cands, val_setups, base, rig, make, val_drive, baseline_every
         runs.append(PlannedRun(number=n, name=f"run{n:02d}-{label}".replace("/", "-"),
                                setup=setup, purpose=purpose, drive=dname, kind=kind,
                                duration_s=float(dur), start_min=float(start), changed=changed,
-                               swap_min=float(swap), share=0.0))
+                               swap_min=float(swap), share=0.0, clicks=tuple(clicks)))
     return runs, drives, infos
 
 

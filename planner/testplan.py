@@ -33,6 +33,16 @@ reference velocities (:data:`REFERENCE_VELOCITIES`) and the runs that use
 them; sheet "information" holds each run's share of the criterion, the
 criterion's values, the solver's report and the design settings.
 
+With adjustable shocks on the car (a plan whose setups name settings, ``TTX@ls=6,hs=2``),
+each corner is a group of columns: the shock's id and one column per adjuster
+(its setting, clicks or turns; empty for a fixed shock). A corner whose shock was
+swapped before the run is filled amber (:data:`CHANGED_FILL`, the shock and its
+settings: set them all); an adjuster turned with the shock staying on, blue
+(:data:`CLICK_FILL`), that cell alone. The column "change [min]" holds the time of
+the changes before the run, shown after their kind (``swap``, ``clicks``,
+``swap+clicks``); the legend says which fill is which. A plan without adjustable
+shocks gets the sheet above, unchanged.
+
 Every sheet prints landscape, one page wide with its smallest text at >= 7 pt
 (:func:`planner.report.sheets.print_setup`), the table's header repeated on
 every page, on A4 for SI and US letter for imperial
@@ -61,7 +71,9 @@ from ident.data.channels import CORNERS
 from ident.data.drive import write_drive
 from ident.data.files import atomic_dir, atomic_path, check_can_write, write_csv
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
+from ident.models.adjustable import format_shock_name, parse_shock_name
 from ident.models.library import write_shock_library
+from ident.models.shocks import format_number
 from ident.sim.metrics import METRIC_QUANTITY
 from planner.design import ExperimentPlan
 from planner.errors import PlannerError
@@ -69,7 +81,8 @@ from planner.report.sheets import (column_label, fit_column_width, fit_width_uni
                                    print_setup, printable_size_pt, text_width, wrap_lines)
 
 __all__ = ["write_plan", "plan_toml", "run_sheet_rows", "design_figure", "write_run_sheet",
-           "read_run_sheet", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES"]
+           "read_run_sheet", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES", "CHANGED_FILL",
+           "CLICK_FILL"]
 
 log = logging.getLogger(__name__)
 
@@ -81,6 +94,9 @@ RUN_SHEET_TITLE = "shockplan run sheet"
 MAX_SHEET_METRICS = 6
 #: Fill of a shock changed before a run (amber: mid-grey on a black-and-white printer).
 CHANGED_FILL = "FFC000"
+#: Fill of an adjuster turned before a run, its shock staying on the car (light blue:
+#: light grey on a black-and-white printer, lighter than a swap's amber).
+CLICK_FILL = "9DC3E6"
 #: Fill of the plan's own cells (predictions, intervals): white cells are written in.
 PLAN_FILL = "F2F2F2"
 #: Velocities at which the crate sheet gives each shock's force (the sheet's units).
@@ -105,6 +121,10 @@ _HEAD = {"run": "run", "start": "start [h:mm]", "duration_min": "duration [min]"
          "purpose": "purpose", "drive_file": "drive file (in drives/)", "swap_min": "swap [min]",
          "row": "", "notes": "notes"}
 _SHOCKS_GROUP = "shock fitted (changed: filled)"
+# the run sheet with adjustable shocks: a group per corner (the shock, one column per
+# adjuster), and the change before the run: its time, its kind in the cell's number format
+_SHOCK_HEAD = "shock"
+_CLICK_HEAD = {"swap_min": "change [min]"}
 _METRICS_GROUP = "key metrics"
 _TEMPS_GROUP = "shock temperature"
 _DRIVE_DIR = "drives"
@@ -143,14 +163,44 @@ def plan_toml(plan, *, units="SI", drive_dir=_DRIVE_DIR, shock_library="shocks.t
     return "".join(f"# {line}\n" for line in header.splitlines()) + tomli_w.dumps(doc)
 
 
+def _shock_settings(library, sid):
+    """(entry id, settings) of a shock name: every adjuster of an adjustable shock (its
+    default where the name leaves it out), ``{}`` for a fixed shock."""
+    base = library.base_id(sid)
+    if base not in library.adjustable_ids:
+        return sid, {}
+    return base, library.adjustable(base).resolve(parse_shock_name(sid)[1])
+
+
+def _corner_adjusters(plan):
+    """Corner -> the adjusters of the adjustable shocks the plan fits there, in order; ``{}``
+    when it fits none (the run sheet then has one shock column per corner, as ever)."""
+    lib = plan.library
+    if not lib.adjustable_ids:
+        return {}
+    out = {c: {} for c in CORNERS}
+    for setup in [plan.baseline] + [r.setup for r in plan.runs]:
+        for c, sid in zip(CORNERS, setup.ids()):
+            out[c].update(dict.fromkeys(_shock_settings(lib, sid)[1]))
+    if not any(out.values()):
+        return {}
+    return {c: tuple(v) for c, v in out.items()}
+
+
 def run_sheet_rows(plan, *, units="SI"):
     """The run sheet's rows (one per run, rig order) as a DataFrame, metrics in `units`.
 
     Columns: ``run``, ``start``, ``start_min``, ``duration_min``, ``purpose``,
     ``drive_file``, ``LF`` .. ``RR``, ``changed``, ``swap_min``, the predicted key
-    metrics with ``_lo``/``_hi``, ``share``.
+    metrics with ``_lo``/``_hi``, ``share``. When the plan fits adjustable shocks,
+    also each corner's settings ``<corner>_<adjuster>`` (clicks or turns; NaN where the
+    corner has a fixed shock) after ``RR``, and after ``changed`` the kind of change
+    ``change`` (``swap``, ``clicks``, ``swap+clicks`` or empty) and ``clicks`` (the
+    adjusters turned, ``LF_ls RF_hs``); ``swap_min`` is then the time of every change
+    before the run, swaps and clicks.
     """
     units = check_units(units, where="units", error=PlannerError)
+    adj = _corner_adjusters(plan)
     rows = []
     for r in plan.runs:
         h, m = divmod(int(round(r.start_min)), 60)
@@ -158,6 +208,12 @@ def run_sheet_rows(plan, *, units="SI"):
                "duration_min": round(r.duration_s / 60, 2), "purpose": r.purpose,
                "drive_file": f"{_DRIVE_DIR}/{r.drive}.csv"}
         row.update(dict(zip(CORNERS, r.setup.ids())))
+        if adj:
+            for c, sid in zip(CORNERS, r.setup.ids()):
+                settings = _shock_settings(plan.library, sid)[1]
+                row.update({f"{c}_{a}": settings.get(a, np.nan) for a in adj[c]})
+            row.update({"changed": " ".join(r.changed), "change": r.change,
+                        "clicks": " ".join(f"{c}_{a}" for c, a in r.clicks)})
         row.update({"changed": " ".join(r.changed), "swap_min": r.swap_min})
         pred = plan.predictions.loc[r.number] if r.number in plan.predictions.index else {}
         for col, val in (pred.items() if len(pred) else []):
@@ -252,23 +308,34 @@ def _border(*, left=False, top=False, bottom=False):
                   bottom=_HEAVY if bottom else _THIN)
 
 
-def _run_sheet_columns(units, metrics):
-    """The table's columns: key, group header (or None), header, group start."""
+def _run_sheet_columns(units, metrics, adj=None):
+    """The table's columns: key, group header (or None), header, group start. With `adj`
+    (corner -> adjusters, :func:`_corner_adjusters`), a group per corner: the shock and
+    one column per adjuster (keyed ``<corner>_<adjuster>``), then the change's kind."""
     cols = [("run", None, _HEAD["run"]), ("start", None, _HEAD["start"]),
             ("duration_min", None, _HEAD["duration_min"]), ("purpose", None, _HEAD["purpose"]),
             ("drive_file", None, _HEAD["drive_file"])]
-    cols += [(c, _SHOCKS_GROUP, c) for c in CORNERS]
-    cols += [("swap_min", None, _HEAD["swap_min"]), ("row", _METRICS_GROUP, _HEAD["row"])]
+    if adj:
+        for c in CORNERS:
+            cols += [(c, c, _SHOCK_HEAD)] + [(f"{c}_{a}", c, a) for a in adj[c]]
+        cols += [("swap_min", None, _CLICK_HEAD["swap_min"])]
+        starts = {"run", *CORNERS, "swap_min"}
+    else:
+        cols += [(c, _SHOCKS_GROUP, c) for c in CORNERS]
+        cols += [("swap_min", None, _HEAD["swap_min"])]
+        starts = {"run", CORNERS[0], "swap_min"}
+    cols += [("row", _METRICS_GROUP, _HEAD["row"])]
     cols += [(m, _METRICS_GROUP, _metric_header(m, units)) for m in metrics]
     # the shock temperatures are written under the shocks, in the measured row (a column
     # each would take the width of three key metrics off a page)
     cols += [("notes", None, _HEAD["notes"])]
-    starts = {"run", CORNERS[0], "swap_min", "row", "notes"}
+    starts |= {"row", "notes"}
     return [(k, g, h, k in starts) for k, g, h in cols]
 
 
-def _header_block(ws, plan, units, date, label_col, intervals):
-    """Rows 1-7: the title, two columns of facts, the legend; returns the next free row."""
+def _header_block(ws, plan, units, date, label_col, intervals, clicks=False):
+    """Rows 1-7: the title, two columns of facts, the legend (`clicks`: of the layout with
+    adjustable shocks); returns the next free row."""
     fonts = _fonts()
     s = plan.settings
     car = s.get("car") or "car"
@@ -276,8 +343,9 @@ def _header_block(ws, plan, units, date, label_col, intervals):
     ws.row_dimensions[1].height = 21
     n = len(plan.runs)
     rig = plan.rig
+    turn = f"{rig.click_change_s:g} s to turn an adjuster, " if clicks else ""
     left = [("car", car),
-            ("rig", f"{rig.name}: {rig.swap_min:g} min to swap a corner's shock, "
+            ("rig", f"{rig.name}: {rig.swap_min:g} min to swap a corner's shock, {turn}"
                     f"{rig.run_overhead_min:g} min a run besides its drive"),
             ("date", date),
             ("crate", str(s.get("crate") or "(not from a file)")),
@@ -285,7 +353,8 @@ def _header_block(ws, plan, units, date, label_col, intervals):
     right = [("budget", f"{plan.budget_min:g} min"),
              ("planned rig time", f"{plan.total_min:.1f} min, {n} run{'s' * (n != 1)}"),
              ("criterion", _CRITERIA.get(plan.criterion, plan.criterion)),
-             ("baseline", "/".join(plan.baseline.ids())),
+             ("baseline", plan.baseline.ids()[0] if clicks and len(set(plan.baseline.ids())) == 1
+              else "/".join(plan.baseline.ids())),
              ("units", units)]
     for k, ((la, va), (lb, vb)) in enumerate(zip(left, right)):
         r = 2 + k
@@ -298,13 +367,29 @@ def _header_block(ws, plan, units, date, label_col, intervals):
               f"{', intervals' if intervals else ''}); write the measured values, each shock's "
               f"temperature [{_TEMPERATURE_UNIT[units]}] (in the measured row, under the shock) "
               "and notes in the white cells. Start times count from the first run's start.")
+    if clicks:
+        legend = ("Each corner: the shock and its adjusters' settings (clicks or turns). Amber: "
+                  "shock swapped before the run (set its adjusters as shown); blue: adjuster "
+                  "turned before the run (the shock stays on). 'change [min]': the kind (swap, "
+                  "clicks, swap+clicks) and time of the changes. Grey cells are the plan's "
+                  f"(predictions{', intervals' if intervals else ''}); write the measured "
+                  f"values, each shock's temperature [{_TEMPERATURE_UNIT[units]}] (in the "
+                  "measured row, under the shock) and notes in the white cells. Start times "
+                  "count from the first run's start.")
     ws.cell(row=7, column=1, value=legend).font = fonts["note"]
     ws.row_dimensions[7].height = 14
     return 9
 
 
-def _run_table_widths(rows, metrics, cols, intervals, *, notes=_NOTES_MIN_W):
-    """Widths of the run table's columns (keyed as `cols`) and their headers' lines."""
+def _setting_text(value):
+    """A setting as the sheet shows it (``8``, ``2.25``; empty for a fixed shock)."""
+    v = _number(value)
+    return "" if v is None else format_number(v)
+
+
+def _run_table_widths(rows, metrics, cols, intervals, *, notes=_NOTES_MIN_W, shock_of=None):
+    """Widths of the run table's columns (keyed as `cols`) and their headers' lines
+    (`shock_of`: corner -> the shock shown per row, when not the rows' own)."""
     kinds = [k for k in ("predicted", "interval", "measured") if k != "interval" or intervals]
     shown = {k: [] for k, *_ in cols}
     small = {k: [] for k, *_ in cols}  # texts in the small font (intervals, row labels)
@@ -314,9 +399,13 @@ def _run_table_widths(rows, metrics, cols, intervals, *, notes=_NOTES_MIN_W):
         shown["duration_min"].append(f"{row['duration_min']:g}")
         shown["purpose"].append(max(str(row["purpose"]).split(), key=len))
         shown["drive_file"].append(max(Path(row["drive_file"]).name.split(), key=len))
-        shown["swap_min"].append(f"{row['swap_min']:g}")
+        shown["swap_min"].append(f"{row['swap_min']:g}" if shock_of is None
+                                 else f"{row['change']} {row['swap_min']:.2f}")
         for c in CORNERS:
-            shown[c].append(str(row[c]))
+            shown[c].append(str(row[c]) if shock_of is None else shock_of[c][len(shown[c])])
+        for key in shown:
+            if key in row and key[:2] in CORNERS and key[2:3] == "_":
+                shown[key].append(_setting_text(row[key]))
         for m in metrics:
             v = _number(row.get(m))
             if v is not None:
@@ -330,8 +419,9 @@ def _run_table_widths(rows, metrics, cols, intervals, *, notes=_NOTES_MIN_W):
     widths = {}
     head_lines = {}
     for key, group, head, _ in cols:
-        size = _SHOCK_PT if key in CORNERS else _DATA_PT
-        data = max([text_width(t, size=size, bold=key in CORNERS) for t in shown[key]]
+        size = _SHOCK_PT if key in CORNERS or group in CORNERS else _DATA_PT
+        bold = key in CORNERS or group in CORNERS
+        data = max([text_width(t, size=size, bold=bold) for t in shown[key]]
                    + [text_width(t, size=_SMALL_PT) for t in small[key]] or [0])
         data = max(data, minimum.get(key, 0))
         w, lines = fit_column_width(head, data, size=_HEAD_PT)
@@ -339,14 +429,15 @@ def _run_table_widths(rows, metrics, cols, intervals, *, notes=_NOTES_MIN_W):
     return widths, head_lines
 
 
-def _fit_run_table(rows, metrics, units, intervals):
+def _fit_run_table(rows, metrics, units, intervals, adj=None, shock_of=None):
     """The key metrics that fit the run table one page wide with its smallest text at
     >= MIN_PRINT_PT (the first ones, at least one), the columns, their widths and header
     lines; the notes column takes the room left (up to :data:`_NOTES_MAX_W`)."""
     budget = fit_width_units(min(_SMALL_PT, _HEAD_PT), units=units) - _FIT_SPARE_W
     while True:
-        cols = _run_sheet_columns(units, metrics)
-        widths, head_lines = _run_table_widths(rows, metrics, cols, intervals)
+        cols = _run_sheet_columns(units, metrics, adj)
+        widths, head_lines = _run_table_widths(rows, metrics, cols, intervals,
+                                               shock_of=shock_of)
         if sum(widths.values()) <= budget or len(metrics) <= 1:
             break
         log.info("run sheet: %d key metrics are too wide for one page; it shows the first "
@@ -358,11 +449,15 @@ def _fit_run_table(rows, metrics, units, intervals):
     return metrics, cols, widths, head_lines
 
 
-def _write_run_table(ws, units, rows, metrics, cols, top, intervals, widths, head_lines):
-    """The table header at rows `top`, `top` + 1 and the runs' blocks; returns the last row."""
+def _write_run_table(ws, units, rows, metrics, cols, top, intervals, widths, head_lines,
+                     shock_of=None):
+    """The table header at rows `top`, `top` + 1 and the runs' blocks; returns the last row.
+    `shock_of` (corner -> the shock's id per row): the layout with adjustable shocks."""
     fonts = _fonts()
     plan_fill = PatternFill("solid", fgColor=PLAN_FILL)
     changed_fill = PatternFill("solid", fgColor=CHANGED_FILL)
+    click_fill = PatternFill("solid", fgColor=CLICK_FILL)
+    group_of = {k: g for k, g, *_ in cols}
     center = Alignment(horizontal="center", vertical="center", wrap_text=True)
     left_mid = Alignment(horizontal="left", vertical="center", wrap_text=True)
     right_mid = Alignment(horizontal="right", vertical="center")
@@ -424,6 +519,14 @@ def _write_run_table(ws, units, rows, metrics, cols, top, intervals, widths, hea
                   "drive_file": Path(row["drive_file"]).name,
                   "swap_min": float(row["swap_min"]), "notes": None}
         values.update({c: row[c] for c in CORNERS})
+        clicked = set()
+        if shock_of is not None:
+            clicked = set(str(row["clicks"]).split())
+            changed -= {k.split("_", 1)[0] for k in clicked}  # the swapped corners
+            values.update({c: shock_of[c][n] for c in CORNERS})
+            change = str(row["change"])
+            values.update({k: _number(row[k]) for k, g, *_ in cols if g in CORNERS
+                           and k not in CORNERS})
         r_meas = r0 + kinds.index("measured")
         for key in merged_keys:
             j = col_of[key]
@@ -437,12 +540,29 @@ def _write_run_table(ws, units, rows, metrics, cols, top, intervals, widths, hea
                 if r_meas - 1 > r0:
                     ws.merge_cells(start_row=r0, start_column=j, end_row=r_meas - 1,
                                    end_column=j)
+            elif group_of[key] in CORNERS:  # an adjuster's setting: level with the shock
+                cell.border = _border(top=True)
+                below = ws.cell(row=r_meas, column=j)
+                below.border, below.fill = _border(bottom=end), plan_fill
+                if r_meas - 1 > r0:
+                    ws.merge_cells(start_row=r0, start_column=j, end_row=r_meas - 1,
+                                   end_column=j)
             cell.font = fonts["data"]
             cell.alignment = center
             if key in CORNERS:
                 cell.font = fonts["changed"] if key in changed else fonts["shock"]
                 if key in changed:
                     cell.fill = changed_fill
+            elif group_of[key] in CORNERS:  # an adjuster's setting
+                turned = key in clicked or group_of[key] in changed
+                cell.font = fonts["changed"] if turned else fonts["shock"]
+                cell.number_format = "General"
+                if key in clicked:
+                    cell.fill = click_fill
+                elif group_of[key] in changed:
+                    cell.fill = changed_fill
+            elif key == "swap_min" and shock_of is not None:  # the kind, then the time
+                cell.number_format = f'"{change} "0.00;-0.00;"-"' if change else '0;-0;"-"'
             elif key == "start":
                 cell.number_format = "[h]:mm"
             elif key in ("duration_min", "swap_min"):
@@ -455,7 +575,7 @@ def _write_run_table(ws, units, rows, metrics, cols, top, intervals, widths, hea
                 cell.alignment = top_left
             if key in ("run", "start", "duration_min", "purpose", "drive_file", "swap_min"):
                 cell.fill = plan_fill
-            if len(kinds) > 1 and key not in CORNERS:
+            if len(kinds) > 1 and key not in CORNERS and group_of[key] not in CORNERS:
                 ws.merge_cells(start_row=r0, start_column=j, end_row=r_end, end_column=j)
         for i, kind in enumerate(kinds):
             r = r0 + i
@@ -561,7 +681,7 @@ def _crate_sheet(ws, plan, units, footer):
     f_unit = UNIT_LABELS[units]["force"]
     used = {sid: [] for sid in lib.ids}
     for r in plan.runs:
-        for sid in dict.fromkeys(r.setup.ids()):
+        for sid in dict.fromkeys(lib.base_id(s) for s in r.setup.ids()):
             used.setdefault(sid, []).append(str(r.number))
     ws.cell(row=1, column=1, value=f"crate: {lib.source or '(not from a file)'}").font = \
         fonts["title"]
@@ -575,14 +695,24 @@ def _crate_sheet(ws, plan, units, footer):
     force_cols = range(5, 5 + 2 * nv)
     rows = []
     v_si = to_si(np.asarray(v_ref, dtype=float), "velocity", units)
+    adjustable = set(lib.adjustable_ids)
     for sid in lib.ids:
         m = lib[sid]
         bump = from_si(np.asarray(m.force(v_si), dtype=float), "force", units)
         reb = from_si(np.abs(np.asarray(m.force(-v_si), dtype=float)), "force", units)
-        rows.append([sid, m.kind, 1e3 * m.lag_s, "unlimited" if m.count is None else m.count,
+        kind, description = m.kind, m.description or ""
+        if sid in adjustable:  # the forces at its default setting, its adjusters named
+            entry = lib.adjustable(sid)
+            kind, description = entry.kind, entry.description or ""
+            ranges = ", ".join(f"{a} {format_number(lo)}-{format_number(hi)} (stiffer "
+                               f"{entry.stiffer[a]})" for a, (lo, hi) in entry.adjusters.items())
+            default = ", ".join(f"{a} {format_number(x)}" for a, x in entry.default.items())
+            description = (f"adjusters {ranges}; forces at the default {default}"
+                           + (f". {description}" if description else ""))
+        rows.append([sid, kind, 1e3 * m.lag_s, "unlimited" if m.count is None else m.count,
                      " ".join(used.get(sid, [])) or "-"]
                     + [float(x) for x in bump] + [float(x) for x in reb]
-                    + [m.description or ""])
+                    + [description])
     widths = []
     for j, (head, group) in enumerate(heads):
         texts = [f"{v:.0f}" if j in force_cols else f"{v:g}" if isinstance(v, float)
@@ -744,14 +874,21 @@ def write_run_sheet(plan, path, *, units="SI", overwrite=False):
     rows = run_sheet_rows(plan, units=units)
     footer = f"{RUN_SHEET_TITLE}: {plan.settings.get('car') or 'car'}, {date}"
     intervals = bool(metrics) and all(f"{m}_lo" in rows and f"{m}_hi" in rows for m in metrics)
-    metrics, cols, widths, head_lines = _fit_run_table(rows, metrics, units, intervals)
+    adj = _corner_adjusters(plan)
+    shock_of = ({c: [_shock_settings(plan.library, sid)[0] for sid in rows[c]] for c in CORNERS}
+                if adj else None)
+    metrics, cols, widths, head_lines = _fit_run_table(rows, metrics, units, intervals, adj,
+                                                       shock_of)
 
     wb = Workbook()
     ws = wb.active
     ws.title = "run sheet"
-    label_col = [k for k, *_ in cols].index("row") + 1
-    top = _header_block(ws, plan, units, str(date), label_col, intervals)
-    last = _write_run_table(ws, units, rows, metrics, cols, top, intervals, widths, head_lines)
+    # the header's right-hand facts: over the key metrics, or (with the adjusters' columns
+    # taking the width) from the last corner on
+    label_col = [k for k, *_ in cols].index(CORNERS[-1] if adj else "row") + 1
+    top = _header_block(ws, plan, units, str(date), label_col, intervals, clicks=bool(adj))
+    last = _write_run_table(ws, units, rows, metrics, cols, top, intervals, widths, head_lines,
+                            shock_of)
     last_col = get_column_letter(len(cols))
     # the legend wraps over the table's width (the print area ends there)
     ws.merge_cells(f"A7:{last_col}7")
@@ -774,6 +911,17 @@ def write_run_sheet(plan, path, *, units="SI", overwrite=False):
 # ----------------------------------------------------------------------------------------------
 # reading it back
 # ----------------------------------------------------------------------------------------------
+
+def _change_kind(before, after):
+    """``"swap"``, ``"clicks"``, ``"swap+clicks"`` or ``""`` between two runs' shock names."""
+    swap = clicks = False
+    for a, b in zip(before, after):
+        if a != b:
+            same = "@" in a and "@" in b and a.partition("@")[0] == b.partition("@")[0]
+            clicks |= same
+            swap |= not same
+    return "+".join(k for k, on in (("swap", swap), ("clicks", clicks)) if on)
+
 
 def _not_a_run_sheet(path, why):
     return PlannerError(f"{path}: not a shockplan run sheet ({why}); give the test_plan.xlsx "
@@ -837,7 +985,10 @@ def read_run_sheet(path):
         ``start_min``, ``duration_min``, ``purpose``, ``drive_file``
         (``drives/<name>.csv``), ``LF`` .. ``RR``, ``changed`` (corners whose
         shock differs from the run before, the first run from the baseline),
-        ``swap_min``, every key metric's prediction (SI), ``<metric>_measured``
+        ``swap_min``, ``change`` (the kind of change, as :attr:`PlannedRun.change
+        <planner.design.PlannedRun>`, on a sheet with adjustable shocks; their names
+        read back in full, ``TTX@ls=6,hs=2``), every key metric's prediction (SI),
+        ``<metric>_measured``
         (SI, NaN where empty), ``shock_temp_<corner>_c`` [degC] and ``notes``.
         ``attrs`` holds ``units`` and the header block (``header``: label ->
         text).
@@ -887,11 +1038,17 @@ def read_run_sheet(path):
         raise _not_a_run_sheet(path, "the header block has no 'units'") from None
     labels = {column_label(m): m for m in METRIC_QUANTITY}
     heads = {v: k for k, v in _HEAD.items()}
+    heads.update({v: k for k, v in _CLICK_HEAD.items()})
     col = {}
+    settings_cols = {c: [] for c in CORNERS}  # (adjuster, column) per corner
     for j in range(1, ws.max_column + 1):
         g, h = _merged_value(ws, h1, j), ws.cell(row=h1 + 1, column=j).value
         if g == _SHOCKS_GROUP and h in CORNERS:
             col[h] = j
+        elif g in CORNERS and h == _SHOCK_HEAD:
+            col[g] = j
+        elif g in CORNERS and isinstance(h, str) and h:
+            settings_cols[g].append((h, j))
         elif isinstance(g, str) and g.startswith(_TEMPS_GROUP) and h in CORNERS:
             col[f"temp_{h}"] = j
         elif g == _METRICS_GROUP and h in (None, ""):
@@ -911,6 +1068,8 @@ def read_run_sheet(path):
         raise _not_a_run_sheet(path, f"its table has no column(s) {missing}")
     metrics = [k for k in col if k in METRIC_QUANTITY]
     baseline = header.get("baseline", "").split("/")
+    if len(baseline) == 1 and baseline[0]:  # one shock at every corner
+        baseline = baseline * 4
     prev = baseline if len(baseline) == 4 else None
     out = []
     r = h1 + 2
@@ -928,7 +1087,13 @@ def read_run_sheet(path):
                 break
             rows[kind] = k
             k += 1
-        ids = [str(ws.cell(row=r, column=col[c]).value) for c in CORNERS]
+        ids = []
+        for c in CORNERS:
+            sid = str(ws.cell(row=r, column=col[c]).value)
+            settings = {a: _read_number(ws.cell(row=r, column=j).value, where, f"{c} {a}")
+                        for a, j in settings_cols[c]}
+            settings = {a: v for a, v in settings.items() if np.isfinite(v)}
+            ids.append(format_shock_name(sid, settings) if settings else sid)
         start = _minutes(ws.cell(row=r, column=col["start"]).value, where)
         h, mm = divmod(int(round(start)), 60)
         drive = ws.cell(row=r, column=col["drive_file"]).value
@@ -941,6 +1106,8 @@ def read_run_sheet(path):
         rec.update(dict(zip(CORNERS, ids)))
         rec["changed"] = (" ".join(c for c, a, b in zip(CORNERS, prev, ids) if a != b)
                           if prev is not None else "")
+        if any(settings_cols.values()):  # the kind of change, as PlannedRun.change
+            rec["change"] = _change_kind(prev, ids) if prev is not None else ""
         swap = ws.cell(row=r, column=col["swap_min"]).value
         rec["swap_min"] = 0.0 if swap in (None, "-") else _read_number(swap, where, "swap")
         for m in metrics:

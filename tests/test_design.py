@@ -11,12 +11,16 @@ from scipy import signal
 
 from ident.data.channels import CORNERS, RIG_INPUTS
 from planner.errors import PlannerError
+from ident.models.adjustable import AdjustableShock, DynoPoints
 from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock
+from ident.sim.dampers import ClickerDamper
 from planner import design as D
 from planner.design import (
     RigSpec,
     candidate_runs,
+    change_time_min,
+    click_settings,
     criterion_value,
     default_rig,
     design_experiment,
@@ -35,11 +39,41 @@ RTOL_DESIGNED_MEDIAN = 0.002
 RTOL_DESIGNED_MAX = 0.01
 SPEARMAN_DESIGNED = 0.995
 HALF_PAPER_BUDGET_MIN = 35.0
+#: The adjustable crate's plan (issue 26): a small design (one drive kind and duration, 24
+#: bands) whose front corners start on a clicker, the rear on B20.
+CLICK_BUDGET_MIN = 20.0
+CLICK_RIG = RigSpec(swap_min=6.0, click_change_s=20.0)
+#: The dyno's speeds [m/s] of the clicker's sweeps (as tests/test_adjustable.py).
+DYNO_SPEEDS = (0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.5)
 
 
 @pytest.fixture(scope="module")
 def base():
     return Setup("baseline", dict.fromkeys(CORNERS, "B20"))
+
+
+@pytest.fixture(scope="module")
+def click_crate(demo_library):
+    """B20 and a clicker (ls 0-20 clicks, hs 0-4 turns, lower = stiffer) from its dyno sweeps."""
+    truth = ClickerDamper()
+    sheet = truth.dyno_sheet(truth.sweep_settings(), DYNO_SPEEDS)
+    ttx = AdjustableShock("TTX", truth.adjusters,
+                          DynoPoints(sheet["velocity"].to_numpy(), sheet["force"].to_numpy(),
+                                     sheet[["ls", "hs"]].to_numpy(), ("ls", "hs"), ()),
+                          default={"ls": 8, "hs": 2}, stiffer={"ls": "lower", "hs": "lower"},
+                          step={"ls": 1, "hs": 0.25})
+    return ShockLibrary([demo_library.entry("B20"), ttx])
+
+
+@pytest.fixture(scope="module")
+def click_plan(paper_vehicle, click_crate):
+    """A plan on the adjustable crate, the clicker at the front, three of its settings the
+    candidates (about 2 s; candidate_runs' own choice is tested on its own)."""
+    return design_experiment(paper_vehicle, click_crate, budget_min=CLICK_BUDGET_MIN,
+                             baseline=["TTX", "TTX", "B20", "B20"], kinds=("noise",),
+                             durations_s=(60.0,), n_bands=24, n_design_bands=4,
+                             shocks=["TTX@ls=0,hs=0", "TTX@ls=20,hs=4", "TTX@hs=0"],
+                             rig=CLICK_RIG)
 
 
 # ---------------------------------------------------------------------------- rig, candidates
@@ -51,9 +85,17 @@ def test_read_rig(tmp_path):
     rig = read_rig(path)
     assert (rig.name, rig.swap_min, rig.run_overhead_min) == ("8-post", 4.5, 1.0)
     assert default_rig().swap_min == 6.0
+    assert rig.click_change_s == default_rig().click_change_s == 20.0  # left out: the default
+    path.write_text('format = "rig/1"\nswap_min = 4.5\nclick_change_s = 15\n')
+    assert read_rig(path).click_change_s == 15.0
     for text, match in (("swap_min = -2.0\n", "swap_min = -2.0 must be a number of minutes"),
                         ("swap = 3.0\n", "unknown key 'swap'"),
-                        ('format = "rig/2"\n', "format")):
+                        ('format = "rig/2"\n', "format"),
+                        ("click_change_s = -5\n", r"rig\.toml: click_change_s = -5 must be a "
+                                                  r"number of seconds >= 0.*click_change_s = 20"),
+                        ('click_change_s = "20 s"\n', "click_change_s = '20 s' must be a number"),
+                        ("click_change_s = nan\n", "click_change_s = nan must be"),
+                        ("click_changes_s = 20\n", "unknown key 'click_changes_s'")):
         path.write_text(text)
         with pytest.raises(PlannerError, match=match):
             read_rig(path)
@@ -275,3 +317,84 @@ def test_an_unidentifiable_plan_within_budget_does_not_blame_the_budget():
     assert "give more time" not in str(exc.value) and "drive" in str(exc.value)
     with pytest.raises(PlannerError, match="cannot buy runs"):
         _check_plan_identifiable(singular, 10.0, cands, rig)
+
+
+# ---------------------------------------------------------------------------- clicks (issue 26)
+
+
+def test_click_settings_span_each_adjuster(click_crate):
+    """Every adjuster at the ends (and middle) of its range, the others at their default; all
+    stiff and all soft first."""
+    ttx = click_crate.adjustable("TTX")
+    assert click_settings(ttx, 2) == ["TTX@ls=0,hs=0", "TTX@ls=20,hs=4", "TTX@ls=0,hs=2",
+                                      "TTX@ls=20,hs=2", "TTX@ls=8,hs=0", "TTX@ls=8,hs=4"]
+    assert "TTX@ls=10,hs=2" in click_settings(ttx, 3) and "TTX@ls=8,hs=2" in click_settings(ttx, 3)
+    with pytest.raises(PlannerError, match="click levels = 1"):
+        click_settings(ttx, 1)
+
+
+def test_a_click_change_costs_seconds_a_swap_minutes(click_crate):
+    """Turning an adjuster costs click_change_s, swapping the shock swap_min: in the change
+    time, the candidates' costs and the run order."""
+    rig = RigSpec(swap_min=6.0, click_change_s=20.0, run_overhead_min=1.0)
+    on = Setup("on", dict.fromkeys(CORNERS, "TTX@ls=8,hs=2"))
+    two_clicks = Setup("c", {**on.shocks, "LF": "TTX@ls=0,hs=0"})
+    one_click = Setup("d", {**on.shocks, "LF": "TTX@ls=8,hs=0", "RF": "TTX@ls=8,hs=2"})
+    swapped = Setup("s", {**on.shocks, "LF": "B20"})
+    assert change_time_min(on, two_clicks, rig) == pytest.approx(40.0 / 60.0)
+    assert change_time_min(on, one_click, rig) == pytest.approx(20.0 / 60.0)
+    assert change_time_min(on, swapped, rig) == pytest.approx(6.0)
+    assert change_time_min(swapped, two_clicks, rig) == pytest.approx(6.0)  # B20 -> TTX: swap
+    assert change_time_min(on, on, rig) == 0.0
+    # candidates from a baseline on the clicker: its settings are click changes
+    cands = candidate_runs(click_crate, Setup("b", dict.fromkeys(CORNERS, "TTX")), rig=rig,
+                           kinds=("noise",), durations_s=(120.0,), click_levels=2)
+    by = {c.name.rsplit(" ", 2)[0]: c for c in cands}  # "<setup> <kind> <duration>"
+    assert by["baseline"].setup.ids() == on.ids()  # named with every adjuster
+    assert by["TTX@ls=0,hs=0@LF"].cost_min == pytest.approx(2 + 40 / 60 + 1)
+    assert by["TTX@ls=0,hs=0@LF"].clicks == 2
+    assert by["TTX@ls=8,hs=4@all"].cost_min == pytest.approx(2 + 4 * 20 / 60 + 1)
+    assert by["B20@LF"].cost_min == pytest.approx(2 + 6 + 1) and by["B20@LF"].clicks == 0
+    # the order changes the car least: clicks between the swaps, not swaps between clicks
+    soft = Setup("soft", dict.fromkeys(CORNERS, "TTX@ls=20,hs=4"))
+    b20 = Setup("b20", dict.fromkeys(CORNERS, "B20"))
+    order = D._order([soft, b20, two_clicks], on, rig)
+    assert [("soft", "b20", "c")[k] for k in order] in (["c", "soft", "b20"],
+                                                      ["soft", "c", "b20"])
+
+
+def test_a_plan_with_an_adjustable_shock_changes_clicks(click_plan, click_crate):
+    """With a clicker on the car the design varies its damping by clicks (seconds), each run's
+    change time is its swaps and clicks, and the plan fits the budget."""
+    plan = click_plan
+    assert plan.total_min <= CLICK_BUDGET_MIN + 1e-9
+    t = plan.table()
+    assert "change" in t.columns and t.iloc[0]["changed"] == ""
+    prev = plan.baseline
+    assert prev.ids() == ("TTX@ls=8,hs=2", "TTX@ls=8,hs=2", "B20", "B20")
+    kinds = set()
+    for r in plan.runs:
+        assert all(sid == "B20" or sid.count("=") == 2 for sid in r.setup.ids())  # in full
+        assert r.swap_min == pytest.approx(change_time_min(prev, r.setup, CLICK_RIG))
+        for c, adj in r.clicks:
+            a, b = (dict(zip(CORNERS, s.ids()))[c] for s in (prev, r.setup))
+            assert a.split("@")[0] == b.split("@")[0] == "TTX" and a != b and f"{adj}=" in b
+        assert r.change == "+".join(k for k, on in (("swap", r.swapped), ("clicks", r.clicks))
+                                    if on)
+        kinds.add(r.change)
+        prev = r.setup
+    assert {"clicks", "swap"} <= kinds  # the cheap way to vary the front dampers is taken
+    assert sum(r.share for r in plan.runs) == pytest.approx(1.0)
+    # the cost of a click plan: every change but the clicks would cost a swap
+    n_clicks = sum(len(r.clicks) for r in plan.runs)
+    assert sum(r.swap_min for r in plan.runs) == pytest.approx(
+        CLICK_RIG.swap_min * sum(len(r.swapped) for r in plan.runs)
+        + CLICK_RIG.click_change_s / 60 * n_clicks)
+
+
+def test_a_crate_without_adjustables_plans_as_before(demo_library, base):
+    """No adjustable in the crate: no click candidate, no click in any cost, no 'change'
+    column (the plans' numbers are those of before issue 26)."""
+    cands = candidate_runs(demo_library, base, kinds=("noise",), durations_s=(120.0,))
+    assert all(c.clicks == 0 and "=" not in c.setup.name for c in cands)
+    assert len(cands) == 1 + 4 * 9

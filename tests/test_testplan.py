@@ -17,14 +17,19 @@ from openpyxl import Workbook, load_workbook
 from openpyxl.utils import get_column_letter
 
 from ident.data.channels import CORNERS
+from ident.models.adjustable import AdjustableShock, DynoPoints
+from ident.models.library import ShockLibrary
+from ident.sim.dampers import ClickerDamper
 from planner.errors import PlannerError
 from ident.sim.metrics import METRIC_QUANTITY
 from ident.sim.rig import read_rig_plan
 from ident.data.units import TO_SI
-from planner.design import design_experiment
+from planner.design import change_time_min, design_experiment
 from planner.report import PAPER_SIZE, write_ranking
+from planner.setups import Setup
 from planner.testplan import (
     CHANGED_FILL,
+    CLICK_FILL,
     RUN_SHEET_TITLE,
     read_run_sheet,
     run_sheet_rows,
@@ -44,6 +49,13 @@ INTERVAL = 0.05
 # key metrics the run sheet shows one page wide with its smallest text at >= 7 pt (of the
 # fixture's six): all on A4, the four tire forces on the narrower US letter
 MIN_SHEET_METRICS = {"SI": 6, "imperial": 4}
+#: The clicker plan's setups, run after run (the last one repeats): clicks at one corner,
+#: a swap, clicks and a swap together, both front clickers turned.
+CLICK_SETUPS = [("TTX@ls=8,hs=2", "TTX@ls=8,hs=2", "B20", "B20"),
+                ("TTX@ls=4,hs=2", "TTX@ls=8,hs=2", "B20", "B20"),
+                ("TTX@ls=4,hs=2", "TTX@ls=8,hs=2", "TTX@ls=20,hs=4", "TTX@ls=20,hs=4"),
+                ("TTX@ls=4,hs=0.5", "TTX@ls=8,hs=2", "B20", "TTX@ls=20,hs=4"),
+                ("TTX@ls=0,hs=0", "TTX@ls=0,hs=0", "B20", "TTX@ls=20,hs=4")]
 
 
 @pytest.fixture(scope="module")
@@ -61,6 +73,33 @@ def plan_with_intervals(plan):
         pred[f"{m}_lo"] = pred[m] * (1 - INTERVAL)
         pred[f"{m}_hi"] = pred[m] * (1 + INTERVAL)
     return dataclasses.replace(plan, predictions=pred)
+
+
+@pytest.fixture(scope="module")
+def click_plan(plan, demo_library):
+    """The plan's runs refitted with a clicker (ls 0-20 clicks, hs 0-4 turns) at the front and
+    the settings of CLICK_SETUPS: a run sheet's worth of swaps and click changes."""
+    truth = ClickerDamper()
+    sheet = truth.dyno_sheet(truth.sweep_settings(), (0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.5))
+    ttx = AdjustableShock("TTX", truth.adjusters,
+                          DynoPoints(sheet["velocity"].to_numpy(), sheet["force"].to_numpy(),
+                                     sheet[["ls", "hs"]].to_numpy(), ("ls", "hs"), ()),
+                          default={"ls": 8, "hs": 2}, step={"ls": 1, "hs": 0.25})
+    library = ShockLibrary(demo_library.entries() + [ttx])
+    base = Setup("baseline", dict(zip(CORNERS, CLICK_SETUPS[0])))
+    runs, prev = [], base
+    for k, r in enumerate(plan.runs):
+        setup = Setup(r.name, dict(zip(CORNERS, CLICK_SETUPS[min(k, len(CLICK_SETUPS) - 1)])))
+        clicks = []
+        for c, a, b in zip(CORNERS, prev.ids(), setup.ids()):
+            if a != b and "@" in a and "@" in b:
+                sa, sb = (dict(x.split("=") for x in n.split("@")[1].split(",")) for n in (a, b))
+                clicks += [(c, adj) for adj in sa if sa[adj] != sb[adj]]
+        changed = tuple(c for c, a, b in zip(CORNERS, prev.ids(), setup.ids()) if a != b)
+        runs.append(dataclasses.replace(r, setup=setup, changed=changed, clicks=tuple(clicks),
+                                        swap_min=change_time_min(prev, setup, plan.rig)))
+        prev = setup
+    return dataclasses.replace(plan, runs=tuple(runs), library=library, baseline=base)
 
 
 def _blocks(ws):
@@ -323,3 +362,71 @@ def test_write_plan_files_and_rig_plan(plan, tmp_path):
     assert all((tmp_path / "plan" / f).is_file() for f in back["drive_file"])
     with pytest.raises(FileExistsError, match="overwrite"):
         write_plan(plan, tmp_path / "plan")
+
+
+# ---------------------------------------------------------------------------- clicks (issue 26)
+
+
+def _fill(cell):
+    return cell.fill.fgColor.rgb[-6:] if cell.fill.fill_type == "solid" else None
+
+
+def test_click_sheet_shows_the_settings_and_highlights_the_changes(click_plan, tmp_path):
+    """With a clicker on the car: per corner the shock and one column per adjuster; a swapped
+    corner amber (shock and settings), a turned adjuster blue, the rest unfilled; the change's
+    kind and time per run; the legend says which fill is which."""
+    plan = click_plan
+    ws = load_workbook(write_run_sheet(plan, tmp_path / "c.xlsx"))["run sheet"]
+    top, runs = _blocks(ws)
+    groups = [ws.cell(top, j).value for j in range(1, ws.max_column + 1)]
+    heads = [ws.cell(top + 1, j).value for j in range(1, ws.max_column + 1)]
+    col = {}
+    for c in CORNERS:
+        j = groups.index(c)
+        assert heads[j:j + 3] == ["shock", "ls", "hs"], c
+        col.update({c: j + 1, (c, "ls"): j + 2, (c, "hs"): j + 3})
+    j_change = groups.index("change [min]") + 1
+    kinds = set()
+    for r in plan.runs:
+        row = runs[r.number]
+        swapped, clicked = set(r.swapped), set(r.clicks)
+        for c, sid in zip(CORNERS, r.setup.ids()):
+            base, _, rest = sid.partition("@")
+            settings = {k: float(v) for k, v in (x.split("=") for x in rest.split(","))} \
+                if rest else {}
+            shock = ws.cell(row, col[c])
+            assert shock.value == base
+            assert _fill(shock) == (CHANGED_FILL if c in swapped else None), (r.number, c)
+            for adj in ("ls", "hs"):
+                cell = ws.cell(row, col[(c, adj)])
+                assert cell.value == settings.get(adj), (r.number, c, adj)
+                want = (CHANGED_FILL if c in swapped else CLICK_FILL if (c, adj) in clicked
+                        else None)
+                assert _fill(cell) == want, (r.number, c, adj)
+                assert cell.font.bold == (want is not None)
+        change = ws.cell(row, j_change)
+        assert change.value == pytest.approx(r.swap_min)
+        assert (f'"{r.change} "' in change.number_format) == bool(r.change)
+        kinds.add(r.change)
+    assert {"clicks", "swap", "swap+clicks"} <= kinds
+    text = " ".join(str(c.value) for row in ws.iter_rows(max_row=top - 1) for c in row
+                    if c.value is not None)
+    assert "Amber: shock swapped" in text and "blue: adjuster turned" in text
+    assert f"{plan.rig.click_change_s:g} s to turn an adjuster" in text
+
+
+def test_click_sheet_reads_back_and_the_csv_has_the_settings(click_plan, tmp_path):
+    plan = click_plan
+    files = write_plan(plan, tmp_path / "plan")
+    back = read_run_sheet(files["xlsx"])
+    table = plan.table()
+    for c in CORNERS:  # the names in full, from the shock and its adjusters' cells
+        assert back[c].tolist() == table[c].tolist(), c
+    assert back["changed"].tolist() == table["changed"].tolist()
+    assert back["change"].tolist() == table["change"].tolist()
+    assert_allclose(back["swap_min"], table["swap_min"], atol=ATOL_MIN)
+    rows = run_sheet_rows(plan)
+    assert rows["LF_ls"].tolist()[:2] == [8.0, 4.0] and rows["LR_ls"].isna().iloc[0]
+    assert rows["clicks"].iloc[1] == "LF_ls" and rows["change"].iloc[1] == "clicks"
+    rig = read_rig_plan(files["plan"])  # the rig plan names the settings the library resolves
+    assert [r.setup for r in rig.runs] == [dict(zip(CORNERS, r.setup.ids())) for r in plan.runs]
