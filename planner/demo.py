@@ -43,7 +43,7 @@ from planner.objective import default_objective, objective_to_toml
 
 __all__ = ["run_demo", "write_demo_inputs", "write_demo_rig_files", "write_real_car_example",
            "DEMO_LIBRARY_PATH", "DEMO_INPUT_FILES", "DEMO_RIG_FILES", "REAL_CAR_FOLDER",
-           "REAL_CAR_FILES"]
+           "REAL_CAR_FILES", "write_clicks_example", "CLICKS_FOLDER", "CLICKS_FILES"]
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +66,78 @@ _SI_UNIT = {q: next(u for u, f in table.items() if f == 1.0) for q, table in UNI
 DEMO_RIG_FILES = "rig_files"
 #: Folder of the README's real-car example (:func:`write_real_car_example`).
 REAL_CAR_FOLDER = "real_car"
+#: Folder of the README's adjustable-damper example (:func:`write_clicks_example`).
+CLICKS_FOLDER = "clicks"
+#: The settings of the clicks example's raw dyno runs: the low-speed adjuster swept at
+#: ``hs`` 2, the high-speed one at ``ls`` 10, as a dyno session records them.
+_CLICKS_DYNO_SETTINGS = ({"ls": 0, "hs": 2}, {"ls": 10, "hs": 2}, {"ls": 20, "hs": 2},
+                         {"ls": 10, "hs": 0}, {"ls": 10, "hs": 4})
+#: The dyno program of each raw run: peak velocities [m/s], 50 mm stroke, 3 cycles each.
+_CLICKS_DYNO_SPEEDS = (0.025, 0.05, 0.1, 0.2, 0.35, 0.5)
+#: The clicker's lag [s] (hysteresis; the import reports its estimate per file).
+_CLICKS_LAG_S = 0.004
+#: The adjustable-damper example's files (name -> what it is), in README order.
+CLICKS_FILES = {
+    **{f"dyno/ls{s['ls']}-hs{s['hs']}.csv": f"a raw dyno run (time, load, position, "
+       f"temperature as the dyno logs them) at ls={s['ls']}, hs={s['hs']}"
+       for s in _CLICKS_DYNO_SETTINGS},
+    "dyno_map.toml": "the dyno map: the raw files' column names, units, signs and offsets",
+    "shocks.toml": "the crate: B20 and the adjustable TTX (ls 0-20 clicks, hs 0-4 turns), "
+                   "whose curves come from ttx_dyno.csv (which `dyno import` writes)",
+    "rig.toml": "rig costs: a shock swap 12 min a corner, an adjuster turned 20 s",
+}
+_CLICKS_MAP = """\
+format = "dyno-map/1"
+name = "shock dyno, CSV export"
+
+[columns.time]
+source = "Time (ms)"
+units = "ms"
+
+[columns.force]
+source = "Load"
+units = "lbf"
+sign = -1                  # this dyno logs tension positive
+
+[columns.displacement]
+source = "Position"
+units = "mm"
+sign = 1
+offset = 25.0              # the raw position at mid-stroke
+
+[columns.temperature]
+source = "Shock Temp"
+units = "degC"
+"""
+_CLICKS_SHOCKS = """\
+# The clicks example's crate (rig-session/1 shock library, SI). TTX's curves at any
+# setting come from its dyno sheet: `shockplan dyno import` writes ttx_dyno.csv.
+units = "SI"
+
+[[shock]]
+id = "B20"
+kind = "linear"
+damping = 3502.5
+
+[[shock]]
+id = "TTX"
+kind = "adjustable"
+description = "two-way clicker: ls = low-speed bleed (clicks from closed), hs = high-speed preload (turns)"
+adjusters = { ls = [0, 20], hs = [0, 4] }
+default = { ls = 10, hs = 2 }
+stiffer = { ls = "lower", hs = "lower" }
+step = { ls = 1, hs = 0.5 }
+dyno = "ttx_dyno.csv"
+lag = 0.004
+count = 4
+"""
+_CLICKS_RIG = """\
+format = "rig/1"
+name = "7-post rig, one crew"
+swap_min = 12.0            # min per corner to swap a shock
+run_overhead_min = 3.0     # min per run: start, settle, save
+click_change_s = 20.0      # s per adjuster turned at a corner (the shock stays on)
+"""
 #: The real-car example's files (name -> what it is), in README order.
 REAL_CAR_FILES = {
     "car.toml": "a GT-like car (ident.models.vehicle.example_gt_vehicle), vehicle TOML",
@@ -253,6 +325,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             write_drive(drive, work / "track_drive.csv", units=units)
             write_demo_inputs(work, units=units, channels=session.runs[0].channels)
             write_real_car_example(work / REAL_CAR_FOLDER)
+            write_clicks_example(work / CLICKS_FOLDER)
             write_demo_rig_files(work / DEMO_RIG_FILES, session)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -674,4 +747,63 @@ def write_real_car_example(folder, *, overwrite=False):
     write_drive(drive, paths["track_drive.csv"], overwrite=True)
     atomic_write_text(paths["whatif.toml"], _REAL_CAR_WHATIF)
     log.info("demo: wrote the real-car example to %s", folder)
+    return paths
+
+
+def write_clicks_example(folder, *, overwrite=False):
+    """Write the README's adjustable-damper example (:data:`CLICKS_FILES`) into `folder`.
+
+    Raw dyno runs of a two-adjuster clicker (:class:`ident.sim.dampers.ClickerDamper`,
+    the truth) at five settings, as a dyno logs them (time in ms, load in lbf with
+    tension positive, position in mm from full extension, oil temperature; 50 N gas
+    force, a 4 ms lag, noise), the dyno map that reads them, the crate naming the clicker
+    as an adjustable shock whose sheet the user imports, and rig costs with a click change
+    time. The clicker suits the demo's (the paper's) car: its best setting on the demo's
+    track lies inside both ranges.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Created if missing.
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        File name -> written path, in :data:`CLICKS_FILES` order.
+
+    Raises
+    ------
+    FileExistsError
+        If one of the files exists and `overwrite` is false (none is written then).
+    """
+    import numpy as np
+    import pandas as pd
+
+    from ident.sim.dampers import ClickerDamper
+    from ident.sim.dyno import simulate_dyno_run
+
+    folder = Path(folder)
+    paths = {name: folder / name for name in CLICKS_FILES}
+    for path in paths.values():
+        check_can_write(path, overwrite=overwrite)
+    (folder / "dyno").mkdir(parents=True, exist_ok=True)
+    truth = ClickerDamper()
+    rng = np.random.default_rng(26)
+    for j, setting in enumerate(_CLICKS_DYNO_SETTINGS):
+        run = simulate_dyno_run(truth.shock_at(setting), peak_velocities_m_s=_CLICKS_DYNO_SPEEDS,
+                                stroke_m=0.05, cycles_per_speed=3, fs_hz=500.0,
+                                lag_s=_CLICKS_LAG_S, gas_force_n=50.0, noise_force_n=3.0,
+                                noise_disp_m=2e-5, temperature_c=(40.0 + j, 41.0 + j), rng=rng)
+        raw = pd.DataFrame({"Time (ms)": np.round(run["time"].to_numpy() * 1e3, 3),
+                            "Load": np.round(-run["force"].to_numpy() / 4.4482216152605, 3),
+                            "Position": np.round(run["displacement"].to_numpy() * 1e3 + 25.0, 4),
+                            "Shock Temp": np.round(run["temperature"].to_numpy(), 2)})
+        name = f"dyno/ls{setting['ls']}-hs{setting['hs']}.csv"
+        atomic_write_text(paths[name], raw.to_csv(index=False, lineterminator="\n"))
+    atomic_write_text(paths["dyno_map.toml"], _CLICKS_MAP)
+    atomic_write_text(paths["shocks.toml"], _CLICKS_SHOCKS)
+    atomic_write_text(paths["rig.toml"], _CLICKS_RIG)
+    log.info("demo: wrote the adjustable-damper example to %s", folder)
     return paths
