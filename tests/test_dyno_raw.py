@@ -292,3 +292,41 @@ def test_cli_dyno_import_end_to_end(dyno_files, tmp_path, capsys):
     assert main([*base[:2], str(files[1]), *base[2:], "--settings", "ls=14", "--append"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("shockplan: error: ") and "missing [], extra ['hs']" in err
+
+
+#: Held-out settings from a library built on imported sheets, at the dyno's speeds above
+#: 0.02 m/s (the issue's bar: 5 %; the click model alone 3.4 %, the import 0.6 %).
+RTOL_HELD_OUT = 0.05
+
+
+def test_imported_sweeps_predict_held_out_settings(tmp_path):
+    """Issue 26's done-when end to end: raw runs of a known clicker (noise, gas force,
+    lag) at its one-at-a-time sweep settings -> dyno import -> a sheet -> an adjustable
+    shock in a library -> every setting on a grid the dyno never ran within 5 %."""
+    from ident.models.library import read_shock_library
+    from ident.sim.dampers import ClickerDamper
+
+    damper = ClickerDamper()
+    sweep = damper.sweep_settings(ls_step=10, hs_step=2, ls_held=10, hs_held=2)
+    sheet = tmp_path / "ttx.csv"
+    for j, s in enumerate(sweep):
+        raw = simulate_dyno_run(damper.shock_at(s), peak_velocities_m_s=PEAKS_M_S,
+                                stroke_m=0.025, cycles_per_speed=2, lag_s=LAG_S,
+                                gas_force_n=GAS_N, noise_force_n=5.0, noise_disp_m=1e-5,
+                                fs_hz=500.0, rng=np.random.default_rng(100 + j))
+        raw.to_csv(tmp_path / f"run{j}.csv", index=False)
+        result = import_dyno_runs([tmp_path / f"run{j}.csv"], settings=s)
+        write_dyno_sheet(result, sheet, append=j > 0)
+    (tmp_path / "shocks.toml").write_text(
+        '[[shock]]\nid = "TTX"\nkind = "adjustable"\nadjusters = { ls = [0, 20], hs = [0, 4] }'
+        '\ndefault = { ls = 10, hs = 2 }\nstep = { hs = 0.5 }\ndyno = "ttx.csv"\n')
+    ttx = read_shock_library(tmp_path / "shocks.toml").adjustable("TTX")
+    v = np.concatenate([-np.asarray(PEAKS_M_S), PEAKS_M_S])
+    measured = {(s["ls"], s["hs"]) for s in sweep}
+    worst = 0.0
+    for s in ttx.settings_grid(step={"ls": 1, "hs": 0.5}):
+        if (s["ls"], s["hs"]) in measured:
+            continue
+        err = np.abs(ttx.at(s).force(v) / damper.force(v, s) - 1.0)
+        worst = max(worst, float(err.max()))
+    assert worst < RTOL_HELD_OUT, worst

@@ -98,12 +98,13 @@ def test_bad_setups(paper_model, track_drive, demo_library):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("noise", [0.0, 0.02])
-def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, baseline_setup,
-                                    noise):
+def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, baseline_setup):
     """A car that is not the 7-DOF model: chassis torsion, unequal half-tracks and tire
-    damping, with and without 2 % measurement noise, identified and validated on a track-like
-    drive."""
+    damping, with 2 % measurement noise, identified and validated on a track-like drive.
+    (Its noise-free twin was dropped for CI time, issue 26: the noisy case holds the same
+    bars, and the noise-free accuracy of the method is held by tests/test_model.py's truth
+    round trips.)"""
+    noise = 0.02
     import warnings
     from dataclasses import replace
 
