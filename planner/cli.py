@@ -498,6 +498,15 @@ def _element_choices(args):
     return out
 
 
+def _polish_line(polish):
+    """The click polish's line of a ranking summary (none without adjustable settings)."""
+    if not polish:
+        return []
+    moved = f"; it moved the best from {polish['start']}" if polish["moved"] else ""
+    return [f"click polish: {polish['simulated']} neighbouring setting(s) simulated in "
+            f"{polish['rounds']} round(s){moved}"]
+
+
 def _ranking_summary(ranking, units, n=5):
     from planner.screen import describe_agreement
 
@@ -505,6 +514,7 @@ def _ranking_summary(ranking, units, n=5):
     lines = [f"screened {len(ranking.screening)} setups, simulated {len(t)} in the time domain; "
              f"screening vs time-domain Spearman {ranking.agreement['spearman']:.3f}",
              describe_agreement(ranking.agreement, what="ranking"),
+             *_polish_line(ranking.settings.get("click_polish")),
              f"baseline '{ranking.baseline}' scores {ranking.objective.total_weight:.3f}; best:"]
     rows = []
     for name, r in t.head(n).iterrows():

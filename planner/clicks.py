@@ -42,6 +42,7 @@ Examples
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 
@@ -55,6 +56,8 @@ from ident.models.shocks import is_real_number
 from planner.errors import PlannerError
 
 __all__ = [
+    "click_values",
+    "click_neighbours",
     "CLICKS_ALL",
     "MAX_CLICK_SETUPS",
     "base_id",
@@ -353,4 +356,71 @@ def adjuster_columns(table):
         whole = fin.size and np.all(fin == np.round(fin)) and np.all(np.abs(fin) < 2**53)
         out[name] = pd.array([None if math.isnan(x) else int(x) for x in v], dtype="Int64") \
             if whole else v
+    return out
+
+
+def click_values(setups):
+    """The settings each adjuster takes in a list of setups (the enumeration's grid).
+
+    Parameters
+    ----------
+    setups : sequence of planner.setups.Setup
+
+    Returns
+    -------
+    dict of (str, str) to ndarray
+        ``(base id, adjuster) -> sorted distinct settings`` over every setting name in
+        `setups`; empty when no setup names a setting.
+    """
+    names = {sid for s in setups for sid in s.ids() if "@" in sid}
+    out = {}
+    for sid in names:
+        base, settings = parse_shock_name(sid)
+        for adj, x in settings.items():
+            out.setdefault((base, adj), set()).add(float(x))
+    return {k: np.array(sorted(v)) for k, v in out.items()}
+
+
+def click_neighbours(ids, values, library):
+    """Every corner assignment one grid step away in each adjuster of each corner.
+
+    Parameters
+    ----------
+    ids : tuple of str, length 4
+        A setup's shock names (LF, RF, LR, RR).
+    values : dict
+        :func:`click_values` of the setups the neighbours must come from.
+    library : ident.models.library.ShockLibrary
+        Gives the canonical names.
+
+    Returns
+    -------
+    list of tuple of str
+        The id tuples with every adjuster of every corner at its setting or the grid's
+        next lower or higher one (the product, `ids` itself left out); fixed shocks stay.
+        The caller keeps those that are setups of its enumeration (symmetry and fixed
+        corners filter the product).
+    """
+    per_corner = []
+    for sid in ids:
+        if "@" not in sid:
+            per_corner.append([sid])
+            continue
+        base, settings = parse_shock_name(sid)
+        adj = library.adjustable(base)
+        choices = []
+        for name in adj.names:
+            grid = values.get((base, name))
+            x = float(settings.get(name, adj.default[name]))
+            if grid is None or grid.size == 0:
+                choices.append([x])
+                continue
+            k = int(np.argmin(np.abs(grid - x)))
+            choices.append(sorted({float(grid[j]) for j in (k - 1, k, k + 1)
+                                   if 0 <= j < grid.size}))
+        names = []
+        for combo in itertools.product(*choices):
+            names.append(adj.name(dict(zip(adj.names, combo))))
+        per_corner.append(names)
+    out = [c for c in itertools.product(*per_corner) if c != tuple(ids)]
     return out

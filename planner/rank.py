@@ -29,6 +29,7 @@ from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, mark_inventory, score_setups
 from planner.predict import predict_setups
 from planner.screen import screen_setups
+from planner.clicks import click_neighbours, click_values
 from planner.setups import enumerate_setups, resolve_baseline
 from planner.sweep import screen_setups_on
 from planner.uncertainty import prediction_uncertainty, unresolved_pairs
@@ -74,11 +75,49 @@ class Ranking:
         return self.table.index[0]
 
 
+#: Rounds of the click polish at most (each simulates the best's untried neighbours).
+MAX_POLISH_ROUNDS = 10
+
+
+def _polish_clicks(td, scores, cand, setups, library, objective, base_name, simulate):
+    """Move the time domain's best to a better neighbouring click setting until none is.
+
+    Returns (predictions, scores, candidates, summary) with the neighbours simulated added.
+    """
+    values = click_values(setups)
+    index = {s.ids(): s for s in setups}
+    start = best = scores.table["rank"].idxmin()
+    simulated = set(td.table.index)
+    added, rounds = 0, 0
+    by_name = {c.name: c for c in cand}
+    for rounds in range(1, MAX_POLISH_ROUNDS + 1):
+        more = [index[ids] for ids in click_neighbours(by_name[best].ids(), values, library)
+                if ids in index and index[ids].name not in simulated]
+        if not more:
+            break
+        extra = simulate(more)
+        td = replace(td, table=pd.concat([td.table, extra.table]))
+        cand = cand + more
+        by_name.update((m.name, m) for m in more)
+        simulated.update(m.name for m in more)
+        added += len(more)
+        scores = score_setups(td.table, objective, baseline=base_name)
+        new = scores.table["rank"].idxmin()
+        if new == best:
+            break
+        best = new
+    log.info("rank: click polish simulated %d neighbouring setting(s) in %d round(s); best "
+             "%s%s", added, rounds, best, "" if best == start else f" (screening's choice "
+             f"led to {start})")
+    return td, scores, cand, {"simulated": added, "rounds": rounds, "start": start,
+                              "best": best, "moved": best != start}
+
+
 def rank_setups(model, drive, library, *, setups=None, constraints=None, objective=None,
                 baseline=None, top=40, n_check=20, oversample=2, uncertainty=True, n_draws=40,
                 seed=0, band_hz=(1.0, 20.0), scheduler=None, n_workers=None, progress=False,
                 bump_stops=None, static_corner_load_n=None, elements=True, vary_bump_stops=None,
-                vary_packers_m=None):
+                vary_packers_m=None, polish_clicks=True):
     """Rank shock setups on a model and a drive.
 
     Parameters
@@ -131,6 +170,13 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         Bump-stop and packer choices per group enumerated as setup columns
         (:func:`planner.elements.vary_elements`): every setup is ranked with each
         combination too (e.g. ``vary_packers_m={"front": [0, 0.002, 0.004]}``).
+    polish_clicks : bool
+        Where the time domain's best names settings of adjustable shocks, also simulate
+        its neighbours among the ranked setups (every adjuster of every corner at its
+        setting or the next one on the grid) and move to a better one until none is
+        (at most :data:`MAX_POLISH_ROUNDS` rounds): screening orders neighbouring
+        settings less well than it orders different shocks, so the decision is made in
+        the time domain. ``settings["click_polish"]`` says what it simulated.
 
     Returns
     -------
@@ -198,20 +244,30 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     td = predict_setups(model, drive, cand, library, oversample=oversample, band_hz=band_hz,
                         progress=progress, **ekw)
     scores = score_setups(td.table, objective, baseline=base.name)
+    polish = None
+    if polish_clicks and any("@" in sid for c in cand for sid in c.ids()):
+        td, scores, cand, polish = _polish_clicks(
+            td, scores, cand, setups, library, objective, base.name,
+            lambda more: predict_setups(model, drive, more, library, oversample=oversample,
+                                        band_hz=band_hz, progress=False, **ekw))
     table = pd.concat([td.table, mark_inventory(scores.table, setups, library)], axis=1)
     table["screening_rank"] = sc.loc[table.index, "rank"].to_numpy()
     table["baseline"] = table.index == base.name  # the setup the scores are ratios to
     # 3. agreement between screening and time domain over the simulated setups
-    rho = float(spearmanr(sc.loc[table.index, "score"], table["score"]).statistic) \
-        if len(table) > 2 else float("nan")
-    time_best, screening_best = table["rank"].idxmin(), sc.loc[table.index, "rank"].idxmin()
-    agreement = {"spearman": rho, "n": int(len(table)), "same_best": bool(time_best == screening_best),
+    # (over the setups screening chose: the click polish's near-ties would blur it)
+    judged = table.index if polish is None else table.index[:len(chosen)]
+    rho = float(spearmanr(sc.loc[judged, "score"], table.loc[judged, "score"]).statistic) \
+        if len(judged) > 2 else float("nan")
+    time_best, screening_best = table["rank"].idxmin(), sc.loc[judged, "rank"].idxmin()
+    agreement = {"spearman": rho, "n": int(len(judged)), "same_best": bool(time_best == screening_best),
                  "time_best": time_best, "screening_best": screening_best}
     # 4. uncertainty (identified models)
     settings = {"top": top, "n_check": n_check, "oversample": oversample, "band_hz": tuple(band_hz),
                 "n_setups": len(setups), "model": td.settings.get("model"),
                 "drive": td.settings.get("drive"),
                 "scheduler": screened.settings.get("scheduler", "none")}
+    if polish is not None:
+        settings["click_polish"] = polish
     if elem is not None:
         settings["elements"] = dict(elem.settings, n_variants=len(setups),
                                     vary_bump_stops=vary_bump_stops,

@@ -176,7 +176,9 @@ def test_rank_screens_the_grid_and_simulates_the_best(ranked, paper_model, track
     """rank on a click grid: every setting screened, only the best 4 (and the baseline) in
     the time domain; its best is the brute force's (every grid setup simulated)."""
     assert len(ranked.screening) == N_GRID + 1           # the grid and the baseline B20
-    assert len(ranked.table) == 4 + 1
+    polish = ranked.settings["click_polish"]               # the best's grid neighbours
+    assert len(ranked.table) == 4 + 1 + polish["simulated"] and polish["simulated"] <= 8
+    assert ranked.agreement["n"] == 4 + 1                  # judged on screening's choice
     base = Setup("baseline", {c: "B20" for c in CORNERS})
     setups = [base, *enumerate_setups(lib, **front_grid)]
     brute = predict_setups(paper_model, track_drive, setups, lib).table
@@ -288,3 +290,21 @@ def test_rank_in_clicks_finds_the_known_cars_best(click_car, gt_vehicle, gt_trac
         assert abs(s_found[k] - s_want[k]) <= tol + 1e-9, (found, want)
     name_found = next(s.name for s in setups if s.shocks["LF"] == found)
     assert true_score[name_found] <= true_score[best] * (1 + CLICK_SCORE_RTOL)
+
+
+def test_click_neighbours_step_on_the_enumerated_grid(lib):
+    """The polish's neighbourhood: each adjuster of each corner at its setting or the next
+    on the enumeration's grid (not the adjuster's own step), fixed shocks kept."""
+    from planner.clicks import click_neighbours, click_values
+
+    setups = enumerate_setups(lib, shocks={"front": ["TTX"]}, fixed={"LR": "B20"}, clicks=GRID)
+    values = click_values(setups)
+    assert values[("TTX", "ls")].tolist() == [0, 5, 10, 15, 20]
+    assert values[("TTX", "hs")].tolist() == [0, 2, 4]
+    mid = ("TTX@ls=10,hs=2", "TTX@ls=10,hs=2", "B20", "B20")
+    near = click_neighbours(mid, values, lib)
+    assert len(near) == 9 * 9 - 1 and mid not in near      # 3 x 3 settings at two corners
+    known = {s.ids() for s in setups}
+    assert sum(ids in known for ids in near) == 8        # left-right: 3 x 3 - 1
+    corner = ("TTX@ls=0,hs=0", "TTX@ls=0,hs=0", "B20", "B20")
+    assert sum(ids in known for ids in click_neighbours(corner, values, lib)) == 3
