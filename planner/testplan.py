@@ -431,14 +431,16 @@ def _run_table_widths(rows, metrics, cols, intervals, *, notes=_NOTES_MIN_W, sho
 
 def _fit_run_table(rows, metrics, units, intervals, adj=None, shock_of=None):
     """The key metrics that fit the run table one page wide with its smallest text at
-    >= MIN_PRINT_PT (the first ones, at least one), the columns, their widths and header
+    >= MIN_PRINT_PT (the first ones, at least one; with the adjusters' columns none where
+    one does not fit: the settings come first, the predictions are in test_plan.csv), the
+    columns, their widths and header
     lines; the notes column takes the room left (up to :data:`_NOTES_MAX_W`)."""
     budget = fit_width_units(min(_SMALL_PT, _HEAD_PT), units=units) - _FIT_SPARE_W
     while True:
         cols = _run_sheet_columns(units, metrics, adj)
         widths, head_lines = _run_table_widths(rows, metrics, cols, intervals,
                                                shock_of=shock_of)
-        if sum(widths.values()) <= budget or len(metrics) <= 1:
+        if sum(widths.values()) <= budget or len(metrics) <= (0 if adj else 1):
             break
         log.info("run sheet: %d key metrics are too wide for one page; it shows the first "
                  "%d (all are in test_plan.csv)", len(metrics), len(metrics) - 1)
