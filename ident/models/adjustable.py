@@ -635,32 +635,31 @@ class AdjustableShock:
             ranges[name] = (float(rng[0]), float(rng[1]))
         object.__setattr__(self, "adjusters", ranges)
         names = tuple(ranges)
-        stiffer = dict(self.stiffer or {})
-        for k in stiffer:
-            if k not in ranges:
-                raise _err(f"{who}: stiffer names unknown adjuster {k!r}"
-                           f"{did_you_mean(k, names)}; adjusters are {list(names)}")
+
+        def per_adjuster(table, key):
+            """`table` (stiffer, step, default) as a dict, refusing unknown adjusters."""
+            out = dict(table or {})
+            for k in out:
+                if k not in ranges:
+                    raise _err(f"{who}: {key} names unknown adjuster {k!r}"
+                               f"{did_you_mean(k, names)}; adjusters are {list(names)}")
+            return out
+
+        stiffer = per_adjuster(self.stiffer, "stiffer")
         for k in names:
             stiffer.setdefault(k, "lower")
             if stiffer[k] not in STIFFER_CHOICES:
                 raise _err(f"{who}: stiffer.{k} is {stiffer[k]!r}; write \"lower\" or "
                            "\"higher\" (the end of the range that is stiffer)")
         object.__setattr__(self, "stiffer", stiffer)
-        step = dict(self.step or {})
+        step = per_adjuster(self.step, "step")
         for k, x in step.items():
-            if k not in ranges:
-                raise _err(f"{who}: step names unknown adjuster {k!r}"
-                           f"{did_you_mean(k, names)}; adjusters are {list(names)}")
             if not is_real_number(x) or not float(x) > 0:
                 raise _err(f"{who}: step.{k} = {x!r} must be a number > 0 (clicks or turns "
                            "per setting)")
             step[k] = float(x)
         object.__setattr__(self, "step", step)
-        default = dict(self.default or {})
-        for k in default:
-            if k not in ranges:
-                raise _err(f"{who}: default names unknown adjuster {k!r}"
-                           f"{did_you_mean(k, names)}; adjusters are {list(names)}")
+        default = per_adjuster(self.default, "default")
         for k in names:
             if k not in default:
                 lo, hi = ranges[k]
