@@ -8,6 +8,7 @@ and a project class so that callers who do can catch a whole family.
 __all__ = [
     "ShockplanError",
     "SessionError",
+    "TrackLogError",
     "ShockModelError",
     "BumpStopError",
     "VehicleError",
@@ -15,6 +16,7 @@ __all__ = [
     "IdentificationError",
     "ModelFileError",
     "DynoError",
+    "AeroModelError",
     "ShockplanWarning",
     "LowCoherenceWarning",
     "FitWarning",
@@ -27,6 +29,13 @@ class ShockplanError(ValueError):
 
 class SessionError(ShockplanError):
     """A rig session folder, manifest or run file is malformed."""
+
+
+class TrackLogError(SessionError):
+    """A track log (a car's data-logger file) or its channel map cannot be read as one.
+
+    A :class:`SessionError` too: a track log is read by the same engines as the rig's runs.
+    """
 
 
 class ShockModelError(ShockplanError):
@@ -55,6 +64,11 @@ class ModelFileError(ShockplanError):
 
 class DynoError(ShockplanError):
     """A raw dyno file, its dyno map or a dyno sheet cannot be read or turned into points."""
+
+
+class AeroModelError(ShockplanError):
+    """An aero model (downforce and balance by speed or ride height) or its file is malformed,
+    or its loads are asked for with bad speeds or ride heights."""
 
 
 class ShockplanWarning(UserWarning):

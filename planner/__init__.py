@@ -4,8 +4,10 @@ Modules, from the shared vocabulary up to the decisions (a module imports only t
 before it):
 
 - vocabulary: :mod:`~planner.errors`, :mod:`~planner.setups` (setups and their files,
-  the one enumeration, the one baseline resolver, the symmetry names) and
-  :mod:`~planner.objective` (scores, limits and the one ranking rule);
+  the one enumeration, the one baseline resolver, the symmetry names),
+  :mod:`~planner.objective` (scores, limits and the one ranking rule) and
+  :mod:`~planner.rig` (the rig TOML: time costs and actuator limits, and the limits
+  applied to a drive);
 - engines: :mod:`~planner.runner` (tasks in this process or on Dask),
   :mod:`~planner.predict` (the closed loop in the time domain), :mod:`~planner.screen`
   with :mod:`~planner.screen_kernels` and :mod:`~planner.screen_codegen` (the frequency

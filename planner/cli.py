@@ -27,6 +27,7 @@ import numpy as np
 from ident.data.files import check_output
 from ident.data.channels import RIG_KINDS
 from ident.data.units import UNIT_SYSTEMS
+from planner.drive_args import add_parser as add_drive_parser
 from planner.dyno_cli import add_parser as add_dyno_parser
 
 __all__ = ["main", "build_parser", "noise_report"]
@@ -143,15 +144,9 @@ def cmd_vehicle_modes(args):
 
 def _load_any_model(path):
     """An identified model (.npz), a vehicle TOML (the known physical model) or 'paper'."""
-    from ident.identify.model import load_model
-    from ident.models.vehicle import build_full_car, example_vehicle, read_vehicle
+    from planner.predict import load_any_model
 
-    if path == "paper":
-        return build_full_car(example_vehicle())
-    p = Path(path)
-    if p.suffix.lower() == ".toml":
-        return build_full_car(read_vehicle(p))
-    return load_model(p)
+    return load_any_model(path)
 
 
 def cmd_identify(args):
@@ -693,8 +688,9 @@ def cmd_plan(args):
     from ident.identify.model import load_model
     from ident.data.session import read_session
     from ident.models.library import read_shock_library
-    from planner.design import design_experiment, read_rig
+    from planner.design import design_experiment
     from planner.objective import default_objective, read_objective
+    from planner.rig import read_rig
     from planner.testplan import write_plan
 
     out = Path(args.out)
@@ -851,6 +847,13 @@ def cmd_demo(args):
     summary = run_demo(Path(args.out), overwrite=args.overwrite, progress=not args.quiet)
     print(summary)
     return 0
+
+
+def cmd_drive(args):
+    """``shockplan drive from-track|iterate|section`` (:mod:`planner.drive_commands`)."""
+    from planner.drive_commands import run_drive_command
+
+    return run_drive_command(args)
 
 
 def cmd_dyno_table(args):
@@ -1402,6 +1405,7 @@ def build_parser():
     modes.set_defaults(func=cmd_vehicle_modes)
 
     add_dyno_parser(sub, table=cmd_dyno_table, check=cmd_dyno_check)
+    add_drive_parser(sub, cmd_drive)
 
     _add_flags_anywhere(p)
     return p

@@ -321,7 +321,8 @@ def add_click_arguments(parser):
                         "simulated")
     parser.add_argument("--click-step", metavar="ADJ=N[,ADJ=N]",
                         help="as --clicks on a coarser grid: a step per adjuster, e.g. "
-                        "ls=2,hs=0.5 (SHOCK.ADJ=N for one shock; others keep their own step)")
+                        "ls=2,hs=0.5 (SHOCK.ADJ=N for one shock; others keep their own step); default: "
+                        "each adjuster's own step (its resolution) with --clicks, none without")
 
 
 def adjuster_columns(table):

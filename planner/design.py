@@ -70,7 +70,6 @@ import math
 import re
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -79,7 +78,6 @@ from scipy import signal
 
 from ident.data import drive as drv
 from ident.data.channels import CORNERS, RIG_INPUTS
-from ident.data.files import read_toml
 from ident.identify.condition import frf_standard_error
 from ident.identify.frf import shock_force_deviation
 from ident.identify.model import VehicleModel
@@ -89,21 +87,18 @@ from ident.sim.rig import default_plan, loop_damping, make_plan_drive
 from planner.errors import PlannerError
 from planner.objective import default_objective, score_setups
 from planner.predict import predict_setups
+from planner.rig import RigSpec, default_rig
 from planner.screen import DriveBands, metric_rows, screen_response, screen_setups
 from planner.setups import Setup, enumerate_setups, resolve_baseline, unknown_id_error
 from planner.uncertainty import interpolate, prediction_uncertainty
 
 __all__ = [
-    "RigSpec",
     "Candidate",
     "PlannedRun",
     "ExperimentPlan",
     "CRITERIA",
     "DRIVE_KINDS",
     "PURPOSES",
-    "RIG_FORMAT",
-    "default_rig",
-    "read_rig",
     "candidate_runs",
     "click_settings",
     "change_time_min",
@@ -120,8 +115,6 @@ CRITERIA = ("d", "a", "decision")
 DRIVE_KINDS = ("noise", "multisine", "sweep", "track")
 #: What a planned run is for.
 PURPOSES = ("identification", "baseline repeat", "validation")
-#: The ``format`` of rig TOML files.
-RIG_FORMAT = "rig/1"
 #: Regularization of log det and inverses of the scaled information matrices (a direction
 #: with less information than this, relative to the whole candidate set, counts as none).
 _EPS = 1e-9
@@ -131,93 +124,6 @@ _RANK_TOL = 1e-8
 DEFAULT_BAND_HZ = (0.5, 20.0)
 #: Settings per adjuster that candidate runs try across its range (ends included).
 DEFAULT_CLICK_LEVELS = 3
-
-
-# ----------------------------------------------------------------------------------------------
-# the rig
-# ----------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class RigSpec:
-    """A rig's time costs.
-
-    Attributes
-    ----------
-    name : str
-    swap_min : float
-        Time to change the shock at one corner [min].
-    run_overhead_min : float
-        Time per run besides its drive (load, start, check) [min].
-    source : str or None
-    click_change_s : float
-        Time to change one adjuster of an adjustable shock at one corner (clicks or
-        turns, the shock staying on the car) [s].
-
-    Notes
-    -----
-    Going from one setup to the next costs :attr:`swap_min` for every corner whose
-    shock is swapped, and :attr:`click_change_s` for every adjuster turned at a
-    corner that keeps its adjustable shock (``TTX@ls=6,hs=2`` -> ``TTX@ls=8,hs=2``:
-    one click change): :func:`change_time_min`.
-    """
-
-    name: str = "rig"
-    swap_min: float = 6.0
-    run_overhead_min: float = 0.0
-    source: str | None = None
-    click_change_s: float = 20.0
-
-    @property
-    def click_change_min(self):
-        """float: :attr:`click_change_s` in minutes."""
-        return self.click_change_s / 60.0
-
-
-def default_rig():
-    """A rig where a shock change takes 6 minutes, a click change 20 s, and runs cost only
-    their drive."""
-    return RigSpec()
-
-
-def read_rig(path):
-    """Read a rig TOML: ``format = "rig/1"``, ``name``, ``swap_min``, ``run_overhead_min``,
-    ``click_change_s``.
-
-    Raises
-    ------
-    PlannerError
-        On a missing or malformed file, an unknown key, or a time that is not a
-        number >= 0 (a negative swap time); the message names the file and key.
-    """
-    path = Path(path)
-    doc = read_toml(path, error=PlannerError, what="rig file")
-    known = {"format", "name", "swap_min", "run_overhead_min", "click_change_s"}
-    for key in doc:
-        if key not in known:
-            raise PlannerError(f"{path}: unknown key {key!r}; a rig file has {sorted(known)}")
-    if doc.get("format", RIG_FORMAT) != RIG_FORMAT:
-        raise PlannerError(f"{path}: 'format' is {doc.get('format')!r}; write format = "
-                           f"\"{RIG_FORMAT}\"")
-    out = {}
-    for key in ("swap_min", "run_overhead_min"):
-        if key in doc:
-            v = doc[key]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
-                    or v < 0:
-                raise PlannerError(f"{path}: {key} = {v!r} must be a number of minutes >= 0")
-            out[key] = float(v)
-    if "click_change_s" in doc:
-        v = doc["click_change_s"]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
-                or v < 0:
-            raise PlannerError(f"{path}: click_change_s = {v!r} must be a number of seconds "
-                               ">= 0 (the time to turn one adjuster at one corner); write e.g. "
-                               "click_change_s = 20")
-        out["click_change_s"] = float(v)
-    name = doc.get("name", path.stem)
-    if not isinstance(name, str) or not name:
-        raise PlannerError(f"{path}: 'name' must be a non-empty string")
-    return RigSpec(name=name, source=str(path), **out)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -337,7 +243,7 @@ class ExperimentPlan:
         The criterion after each run against the rig time so far.
     solver : dict
         cvxpy's status, solver, times.
-    rig : RigSpec
+    rig : planner.rig.RigSpec
     settings : dict
     """
 
@@ -529,8 +435,8 @@ def change_time_min(before, after, rig=None):
     before, after : planner.setups.Setup
         Adjustable shocks named with every adjuster (``TTX@ls=6,hs=2``; a corner whose
         name keeps its adjustable shock and changes settings is a click change).
-    rig : RigSpec, optional
-        Default :func:`default_rig`.
+    rig : planner.rig.RigSpec, optional
+        Default :func:`planner.rig.default_rig`.
 
     Returns
     -------
@@ -878,7 +784,7 @@ def greedy_design(Mc, M0, cands, base, rig, budget, criterion, W=None, start=())
     cands : list of Candidate
     base : Setup
         The setup installed at the start.
-    rig : RigSpec
+    rig : planner.rig.RigSpec
     budget : float
         [min]
     criterion : str
@@ -1061,8 +967,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         The team's drives (e.g. a track's): the contenders of the decision
         criterion are ranked on the first, validation runs play it. Default a
         120 s track-like drive.
-    rig : RigSpec, optional
-        Default :func:`default_rig`.
+    rig : planner.rig.RigSpec, optional
+        Default :func:`planner.rig.default_rig`.
     kinds, durations_s, shocks, n_shocks, click_levels
         The candidate runs (:func:`candidate_runs`).
     n_bands : int

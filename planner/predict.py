@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -26,9 +27,10 @@ from tqdm.auto import tqdm
 from ident.data.channels import CORNERS
 from ident.data.drive import Drive, resample_drive
 from ident.identify.coverage import Coverage, outside_coverage
-from ident.identify.model import LOOP_REDUCE_RTOL, VehicleModel
+from ident.identify.model import LOOP_REDUCE_RTOL, VehicleModel, load_model
 from ident.models.lti import LoopPlant
-from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
+from ident.models.vehicle import (FullCarModel, VehicleParams, build_full_car, example_vehicle,
+                                  read_vehicle)
 from ident.sim.closedloop import rig_response, simulate_batch_metrics
 from planner.elements import ELEMENT_COLUMNS, model_setup_elements
 from planner.errors import PlannerError
@@ -38,6 +40,7 @@ __all__ = [
     "Predictions",
     "METRIC_OUTPUTS",
     "as_loop_plant",
+    "load_any_model",
     "prepare_drive",
     "predict_setups",
     "resolve_setups",
@@ -120,6 +123,26 @@ def as_loop_plant(model, *, reduce_rtol=LOOP_REDUCE_RTOL):
         return model.loop_plant()
     raise TypeError(f"model must be a VehicleModel, FullCarModel, VehicleParams or LoopPlant, "
                     f"got {type(model).__name__}")
+
+
+def load_any_model(path):
+    """A model from the command line's ``--model``: an identified model (``.npz``), a vehicle
+    TOML (the known physical model, built) or ``"paper"`` (the seed paper's car).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    VehicleModel or FullCarModel
+    """
+    if str(path) == "paper":
+        return build_full_car(example_vehicle())
+    p = Path(path)
+    if p.suffix.lower() == ".toml":
+        return build_full_car(read_vehicle(p))
+    return load_model(p)
 
 
 def prepare_drive(drive, fs_hz=None, *, where="drive"):

@@ -458,7 +458,7 @@ def test_the_walk_finds_every_command():
     assert {" ".join(path) for path, _ in _commands(build_parser())} == {
         "demo", "rig simulate", "identify", "predict", "rank", "optimize", "plan", "whatif",
         "sweep", "import", "export-drive", "vehicle modes", "dyno import", "dyno table",
-        "dyno check"}
+        "dyno check", "drive from-track", "drive iterate", "drive section"}
 
 
 @pytest.mark.parametrize("given, canonical", [
@@ -469,7 +469,7 @@ def test_units_in_any_case_become_the_canonical_name(given, canonical):
     parser = build_parser()
     with_units = [(path, sub) for path, sub in _commands(parser)
                   if "--units" in sub._option_string_actions]
-    assert len(with_units) == 13
+    assert len(with_units) == 16
     for path, sub in with_units:
         args = parser.parse_args([*path, *_required_argv(sub), "--units", given])
         assert args.units == canonical, path
@@ -672,7 +672,7 @@ def test_help_defaults_are_what_runs():
     import dataclasses
 
     from ident.sim.rig import RigPlan, default_plan
-    from planner.design import default_rig
+    from planner.rig import default_rig
     from planner.whatif import FRAGILE_SHARE, RANK_TOLERANCE
 
     plan = default_plan()

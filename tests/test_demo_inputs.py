@@ -19,12 +19,12 @@ from ident.models.library import read_shock_library
 from ident.models.vehicle import EXAMPLE_VEHICLE_PATH, example_vehicle, read_vehicle
 from ident.sim.rig import default_plan, simulate_session
 from planner.demo import DEMO_INPUT_FILES, DEMO_LIBRARY_PATH, write_demo_inputs
-from planner.design import read_rig
 from planner.errors import PlannerError
 from planner.objective import default_objective, read_objective
 from planner.optimize.constraints import (check_constraints, default_constraints,
                                           read_curve_constraints)
 from planner.optimize.space import SYMMETRIES, curve_space
+from planner.rig import read_rig
 from planner.whatif import read_perturbations
 
 ROOT = Path(__file__).resolve().parents[1]

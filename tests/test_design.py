@@ -1,6 +1,6 @@
-"""Tests of planner.design: the rig, candidate runs, their information, the criteria, the
-relaxed and greedy designs, the run order, the refusals, and a designed plan run on the virtual
-rig and identified."""
+"""Tests of planner.design: candidate runs and their costs on a rig, their information, the
+criteria, the relaxed and greedy designs, the run order, the refusals, and a designed plan run on
+the virtual rig and identified (the rig file itself: tests/test_rigspec.py)."""
 
 import itertools
 
@@ -17,16 +17,14 @@ from ident.models.shocks import LinearShock
 from ident.sim.dampers import ClickerDamper
 from planner import design as D
 from planner.design import (
-    RigSpec,
     candidate_runs,
     change_time_min,
     click_settings,
     criterion_value,
-    default_rig,
     design_experiment,
-    read_rig,
 )
 from planner.objective import default_objective
+from planner.rig import RigSpec, default_rig
 from planner.setups import Setup
 
 # the analytic score gradient against forward differences of the same (frozen) linearization,
@@ -76,29 +74,7 @@ def click_plan(paper_vehicle, click_crate):
                              rig=CLICK_RIG)
 
 
-# ---------------------------------------------------------------------------- rig, candidates
-
-
-def test_read_rig(tmp_path):
-    path = tmp_path / "rig.toml"
-    path.write_text('format = "rig/1"\nname = "8-post"\nswap_min = 4.5\nrun_overhead_min = 1.0\n')
-    rig = read_rig(path)
-    assert (rig.name, rig.swap_min, rig.run_overhead_min) == ("8-post", 4.5, 1.0)
-    assert default_rig().swap_min == 6.0
-    assert rig.click_change_s == default_rig().click_change_s == 20.0  # left out: the default
-    path.write_text('format = "rig/1"\nswap_min = 4.5\nclick_change_s = 15\n')
-    assert read_rig(path).click_change_s == 15.0
-    for text, match in (("swap_min = -2.0\n", "swap_min = -2.0 must be a number of minutes"),
-                        ("swap = 3.0\n", "unknown key 'swap'"),
-                        ('format = "rig/2"\n', "format"),
-                        ("click_change_s = -5\n", r"rig\.toml: click_change_s = -5 must be a "
-                                                  r"number of seconds >= 0.*click_change_s = 20"),
-                        ('click_change_s = "20 s"\n', "click_change_s = '20 s' must be a number"),
-                        ("click_change_s = nan\n", "click_change_s = nan must be"),
-                        ("click_changes_s = 20\n", "unknown key 'click_changes_s'")):
-        path.write_text(text)
-        with pytest.raises(PlannerError, match=match):
-            read_rig(path)
+# --------------------------------------------------------------------------------- candidates
 
 
 def test_candidates_and_their_costs(demo_library, base):

@@ -29,8 +29,8 @@ from ident.data.runs import read_run_table
 from ident.data.session import read_session
 from ident.models.library import read_shock_library
 from ident.models.vehicle import read_vehicle
-from planner.design import read_rig
 from planner.objective import read_objective
+from planner.rig import read_rig
 from planner.setups import read_setups
 from planner.whatif import read_perturbations
 

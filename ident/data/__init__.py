@@ -6,6 +6,7 @@ Modules: :mod:`~ident.data.units` (unit systems and conversions),
 (run tables: one CSV or Parquet file of signals, read and written through one checking
 engine), :mod:`~ident.data.session` (rig-session folders: the manifest, the runs and
 their shock library), :mod:`~ident.data.drive` (drive signals, generators and drive
-files) and :mod:`~ident.data.formats` (RPC III, MDF and TDMS files through channel
-maps).
+files), :mod:`~ident.data.formats` (RPC III, MDF and TDMS files through channel
+maps) and :mod:`~ident.data.tracklog` (track logs: what a car's data logger recorded on
+track, from CSV, Parquet, MDF, TDMS or RPC III files).
 """

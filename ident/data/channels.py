@@ -19,6 +19,7 @@ __all__ = [
     "SHOCK_VELOCITIES",
     "SHOCK_FORCES",
     "ALL_CHANNELS",
+    "TRACK_CHANNELS",
     "rig_inputs_of",
     "missing_aero",
     "quantity_of",
@@ -48,9 +49,14 @@ RESPONSE_CHANNELS = tuple(f"{k}_{c}" for k in RESPONSE_KINDS for c in CORNERS)
 SHOCK_VELOCITIES = tuple(f"shock_velocity_{c}" for c in CORNERS)
 SHOCK_FORCES = tuple(f"shock_force_{c}" for c in CORNERS)
 ALL_CHANNELS = RIG_INPUTS + RESPONSE_CHANNELS
+#: Channels of a track log (:mod:`ident.data.tracklog`) that no rig run has: ``speed``, the
+#: car's speed [m/s]. Not in :data:`ALL_CHANNELS` (session runs and drives never hold them)
+#: and without a response kind (:func:`kind_of` refuses them); :func:`quantity_of` knows them.
+TRACK_CHANNELS = ("speed",)
 
 _INPUT_QUANTITY = {"aero_heave": "force", "aero_roll": "moment", "aero_pitch": "moment"}
 _INPUT_QUANTITY.update({w: "displacement" for w in WHEELLOADER_INPUTS})
+_TRACK_QUANTITY = {"speed": "velocity"}
 
 
 def rig_inputs_of(channels):
@@ -110,13 +116,18 @@ def corner_of(channel):
 def quantity_of(channel):
     """Return the physical quantity of a canonical channel (key of ``units.TO_SI``).
 
+    The canonical channels are :data:`ALL_CHANNELS` and the track-log channels
+    :data:`TRACK_CHANNELS`.
+
     Examples
     --------
-    >>> quantity_of("aero_roll"), quantity_of("shock_velocity_RR")
-    ('moment', 'velocity')
+    >>> quantity_of("aero_roll"), quantity_of("shock_velocity_RR"), quantity_of("speed")
+    ('moment', 'velocity', 'velocity')
     """
     if channel in _INPUT_QUANTITY:
         return _INPUT_QUANTITY[channel]
+    if channel in _TRACK_QUANTITY:
+        return _TRACK_QUANTITY[channel]
     return RESPONSE_KINDS[kind_of(channel)]
 
 

@@ -289,7 +289,7 @@ def _is_parquet(path):
     return Path(path).suffix.lower() in (".parquet", ".pq")
 
 
-def read_units_marker(path, *, where=None, error=ValueError):
+def read_units_marker(path, *, where=None, error=ValueError, kind=None):
     """The unit system a CSV or Parquet file says it is in, or None.
 
     Parameters
@@ -301,6 +301,9 @@ def read_units_marker(path, *, where=None, error=ValueError):
         How to name the file in messages (default: the path).
     error : type
         The ``ValueError`` subclass to raise.
+    kind : {"csv", "parquet"}, optional
+        The file's format, for a file whose suffix does not say it (default: Parquet for
+        ``.parquet`` and ``.pq``, else CSV).
 
     Returns
     -------
@@ -317,7 +320,7 @@ def read_units_marker(path, *, where=None, error=ValueError):
 
     where = str(path) if where is None else where
     try:
-        if _is_parquet(path):
+        if kind == "parquet" or (kind is None and _is_parquet(path)):
             raw = (pq.read_schema(path).metadata or {}).get(UNITS_KEY.encode())
         else:
             with open(path, encoding="utf-8-sig", newline="") as fh:

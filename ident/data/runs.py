@@ -47,6 +47,7 @@ __all__ = [
     "write_run_table",
     "write_mapped_run_table",
     "check_columns",
+    "read_table_columns",
     "check_channel_map",
     "check_session_units",
     "in_memory_columns",
@@ -228,7 +229,7 @@ def _seconds(values):
     return values
 
 
-def check_columns(columns, *, where, units, channel_map, required):
+def check_columns(columns, *, where, units, channel_map, required, names=None):
     """The checking engine: map, check and convert a table of raw columns.
 
     Parameters
@@ -243,12 +244,17 @@ def check_columns(columns, *, where, units, channel_map, required):
         Checked ``{canonical: column}`` mapping (may be empty).
     required : iterable of str
         Canonical channels that must be present.
+    names : sequence of str, optional
+        The canonical channels the table may hold (default
+        :data:`ident.data.channels.ALL_CHANNELS`); other columns are ignored (logged at
+        debug level). A track log reads its own
+        (:data:`ident.data.tracklog.TRACK_LOG_CHANNELS`, ``speed`` among them).
 
     Returns
     -------
     time_s : ndarray, shape (n_samples,)
     channels : dict of str to ndarray, shape (n_samples,)
-        SI, read-only, in :data:`ident.data.channels.ALL_CHANNELS` order.
+        SI, read-only, in the order of `names`.
     fs_hz : float
 
     Raises
@@ -258,7 +264,8 @@ def check_columns(columns, *, where, units, channel_map, required):
         missing required channel, a non-numeric or NaN/inf value, time not
         strictly increasing and uniform, or a value that overflows in SI.
     """
-    source = {c: channel_map.get(c, c) for c in (_TIME,) + ALL_CHANNELS}
+    names = ALL_CHANNELS if names is None else tuple(names)
+    source = {c: channel_map.get(c, c) for c in (_TIME,) + names}
     by_column = {col: c for c, col in source.items()}
     present = {}  # canonical -> column
     for col in columns:
@@ -325,7 +332,7 @@ def check_columns(columns, *, where, units, channel_map, required):
     step = (t[-1] - t[0]) / (t.size - 1)
 
     channels = {}
-    for canonical in ALL_CHANNELS:
+    for canonical in names:
         if canonical not in present:
             continue
         col = present[canonical]
@@ -405,15 +412,38 @@ def _file_kind(path, *, where):
     )
 
 
-def _read_columns(path, *, where):
+def read_table_columns(path, *, where, kind=None):
     """Read a CSV or Parquet file into ``{column: 1-D ndarray}`` and its unit marker.
 
     A CSV's leading ``#`` comment and blank lines (the unit marker among them) are skipped.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        An existing file.
+    where : str
+        How to name the file in messages.
+    kind : {"csv", "parquet"}, optional
+        The file's format (default: from its suffix, ``.csv``, ``.parquet`` or ``.pq``).
+
+    Returns
+    -------
+    columns : dict of str to ndarray, shape (n_rows,)
+        Column name (stripped of spaces) -> values as read, in file order.
+    units : {"SI", "imperial"} or None
+        The file's unit marker (:mod:`ident.data.files`), or None.
+
+    Raises
+    ------
+    SessionError
+        If the suffix is not a table's (without `kind`), the file is empty or cannot be
+        read as that format, its marker is invalid, or two columns share a name.
     """
     import pandas as pd
     import pyarrow
 
-    kind = _file_kind(path, where=where)
+    path = Path(path)
+    kind = _file_kind(path, where=where) if kind is None else kind
     try:
         if kind == "csv":
             with open(path, newline="", encoding="utf-8-sig") as fh:
@@ -432,7 +462,7 @@ def _read_columns(path, *, where):
         else:
             frame = pd.read_parquet(path)
             names = [str(c).strip() for c in frame.columns]
-            marker = read_units_marker(path, where=where, error=SessionError)
+            marker = read_units_marker(path, where=where, error=SessionError, kind=kind)
     except SessionError:
         raise
     except (OSError, ValueError, UnicodeDecodeError, pyarrow.ArrowException) as exc:
@@ -518,7 +548,7 @@ def read_run_table(path, *, units=None, channel_map=None, required=(), where=Non
         raise SessionError(f"{where}: file not found{at}; check the path")
     if not path.is_file():
         raise SessionError(f"{where}: {path} is not a file; give the path of a run file")
-    columns, marker = _read_columns(path, where=where)
+    columns, marker = read_table_columns(path, where=where)
     units = resolve_units(marker, units, where=where, given_as=units_from, fix=units_fix,
                           error=SessionError)
     time_s, channels, fs_hz = check_columns(

@@ -34,8 +34,11 @@ Examples
 from ident.data.formats.engine import (
     READERS,
     as_channel_map,
+    check_time_base,
     import_runs,
+    mapped_channel_si,
     parse_setup,
+    read_mapped_raw,
     read_raw,
     read_run,
 )
@@ -70,6 +73,9 @@ __all__ = [
     "as_channel_map",
     "sniff_format",
     "read_raw",
+    "read_mapped_raw",
+    "check_time_base",
+    "mapped_channel_si",
     "read_rpc3",
     "read_mdf",
     "read_tdms",

@@ -52,6 +52,11 @@ The optional top-level ``time`` names a channel holding the time in seconds,
 for files without a time base of their own (a TDMS file without waveform
 properties); otherwise the file's own time base is used.
 
+The same file maps a car's data logger onto a track log (:mod:`ident.data.tracklog`),
+whose maps may also hold ``speed`` (velocity units, :data:`ident.data.channels.TRACK_CHANNELS`);
+a session import's map may not (the ``allowed`` option of :func:`make_channel_map` and
+:func:`read_channel_map`).
+
 Examples
 --------
 >>> cmap = make_channel_map({"wheelloader_LF": {"source": "WL_LF", "units": "mm", "sign": 1},
@@ -77,7 +82,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ident.data.files import read_toml
-from ident.data.channels import ALL_CHANNELS, quantity_of
+from ident.data.channels import ALL_CHANNELS, TRACK_CHANNELS, quantity_of
 from ident.errors import SessionError
 from ident.data.units import TO_SI
 
@@ -329,7 +334,9 @@ class ChannelMap:
     Attributes
     ----------
     channels : mapping of str to ChannelSpec
-        Read-only, in :data:`ident.data.channels.ALL_CHANNELS` order.
+        Read-only, in :data:`ident.data.channels.ALL_CHANNELS` order (then the track-log
+        channels of :data:`ident.data.channels.TRACK_CHANNELS`, which only a map built with
+        them ``allowed`` holds).
     time : str or None
         The source channel holding time [s], or ``None`` to use the file's own
         time base.
@@ -345,7 +352,8 @@ class ChannelMap:
     path: Path | None = None
 
     def __post_init__(self):
-        ordered = {c: self.channels[c] for c in ALL_CHANNELS if c in self.channels}
+        ordered = {c: self.channels[c] for c in ALL_CHANNELS + TRACK_CHANNELS
+                   if c in self.channels}
         object.__setattr__(self, "channels", MappingProxyType(ordered))
 
     @property
@@ -389,13 +397,19 @@ def _number(value, *, where, key, nonzero=False):
     return float(value)
 
 
-def _spec_from_table(canonical, table, *, where):
+def _spec_from_table(canonical, table, *, where, allowed=ALL_CHANNELS):
     entry = f"{where}: [channels.{canonical}]"
-    if canonical not in ALL_CHANNELS:
+    if canonical not in allowed:
+        extra = [c for c in allowed if c not in ALL_CHANNELS]
+        if set(ALL_CHANNELS) <= set(allowed):
+            keys = ("the rig inputs and '<kind>_<corner>' names of "
+                    "ident.data.channels.ALL_CHANNELS"
+                    + (f", and {', '.join(map(repr, extra))}" if extra else ""))
+        else:
+            keys = ", ".join(allowed)
         raise SessionError(
             f"{entry}: {canonical!r} is not a canonical channel"
-            f"{_suggest(canonical, ALL_CHANNELS)}; keys are the rig inputs and "
-            "'<kind>_<corner>' names of ident.data.channels.ALL_CHANNELS"
+            f"{_suggest(canonical, allowed)}; keys are {keys}"
         )
     if not isinstance(table, Mapping):
         raise SessionError(
@@ -438,7 +452,7 @@ def _spec_from_table(canonical, table, *, where):
                        sign=int(sign), scale=scale, offset=offset)
 
 
-def make_channel_map(channels, *, time=None, name="channel map", path=None):
+def make_channel_map(channels, *, time=None, name="channel map", path=None, allowed=None):
     """Build a checked :class:`ChannelMap` from plain tables (as in the TOML file).
 
     Parameters
@@ -452,6 +466,12 @@ def make_channel_map(channels, *, time=None, name="channel map", path=None):
         The map's name, used in messages.
     path : str or os.PathLike, optional
         The file the tables came from (used in messages).
+    allowed : iterable of str, optional
+        The canonical channels the map may hold (default
+        :data:`ident.data.channels.ALL_CHANNELS`, those of session runs and drives). A
+        track log's map (:mod:`ident.data.tracklog`) also allows the channels of
+        :data:`ident.data.channels.TRACK_CHANNELS` (``speed``); a name outside
+        ``ALL_CHANNELS + TRACK_CHANNELS`` is never held.
 
     Returns
     -------
@@ -459,20 +479,28 @@ def make_channel_map(channels, *, time=None, name="channel map", path=None):
 
     Raises
     ------
+    ValueError
+        If `allowed` names a channel that is not canonical.
     SessionError
         One sentence naming the map and the channel, if: a key is not a
-        canonical channel; an entry misses ``source``, ``units`` or ``sign`` or
-        has an unknown key; ``units`` is not a unit of the channel's quantity
+        canonical channel (not in `allowed`); an entry misses ``source``, ``units`` or
+        ``sign`` or has an unknown key; ``units`` is not a unit of the channel's quantity
         (the accepted ones are listed); ``sign`` is not +1/-1; ``scale`` is
         zero or not a number; ``offset`` is not a number; two channels (or a
         channel and ``time``) name the same source.
     """
     path = None if path is None else Path(path)
     where = f"channel map {path}" if path is not None else str(name)
+    allowed = ALL_CHANNELS if allowed is None else tuple(dict.fromkeys(allowed))
+    unknown = [c for c in allowed if c not in ALL_CHANNELS + TRACK_CHANNELS]
+    if unknown:
+        raise ValueError(f"make_channel_map: allowed names {unknown}, which are not canonical "
+                         "channels (ident.data.channels.ALL_CHANNELS, TRACK_CHANNELS)")
     if not isinstance(channels, Mapping):
         raise SessionError(f"{where}: [channels] must be a table of [channels.<canonical>] "
                            f"tables, got {type(channels).__name__}")
-    specs = {c: _spec_from_table(c, t, where=where) for c, t in channels.items()}
+    specs = {c: _spec_from_table(c, t, where=where, allowed=allowed)
+             for c, t in channels.items()}
     if time is not None and (not isinstance(time, str) or not time.strip()):
         raise SessionError(f"{where}: time = {time!r} must be the name of the channel "
                            "holding time in seconds (a non-empty string), or be omitted")
@@ -487,13 +515,16 @@ def make_channel_map(channels, *, time=None, name="channel map", path=None):
     return ChannelMap(channels=specs, time=time, name=str(name), path=path)
 
 
-def read_channel_map(path):
+def read_channel_map(path, *, allowed=None):
     """Read and check a channel-map TOML file.
 
     Parameters
     ----------
     path : str or os.PathLike
         The TOML file (format in the module docstring).
+    allowed : iterable of str, optional
+        The canonical channels the map may hold, as :func:`make_channel_map` (default
+        :data:`ident.data.channels.ALL_CHANNELS`).
 
     Returns
     -------
@@ -541,7 +572,8 @@ def read_channel_map(path):
     name = doc.get("name", path.name)
     if not isinstance(name, str):
         raise SessionError(f"{where}: name = {name!r} must be a string")
-    cmap = make_channel_map(doc["channels"], time=doc.get("time"), name=name, path=path)
+    cmap = make_channel_map(doc["channels"], time=doc.get("time"), name=name, path=path,
+                            allowed=allowed)
     logger.debug("read channel map %s: %d channel(s)", path, len(cmap.channels))
     return cmap
 

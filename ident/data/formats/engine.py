@@ -30,8 +30,8 @@ from ident.data.session import (
 from ident.models.library import ShockLibrary, read_shock_library
 from ident.data.units import check_units
 
-__all__ = ["READERS", "read_raw", "read_run", "import_runs", "parse_setup",
-           "as_channel_map"]
+__all__ = ["READERS", "read_raw", "read_mapped_raw", "check_time_base", "mapped_channel_si",
+           "read_run", "import_runs", "parse_setup", "as_channel_map"]
 
 logger = logging.getLogger(__name__)
 
@@ -118,6 +118,152 @@ def _time_base(raw, cmap, *, where):
     raise SessionError(f"{cmap.where}: maps no channel")  # pragma: no cover - map checks
 
 
+def read_mapped_raw(path, *, format, channel_map, where=None):
+    """Read the channels a channel map names from a rig data file, checked against the map.
+
+    The first half of :func:`read_run`, shared with the track-log reader
+    (:mod:`ident.data.tracklog`): the file is read and the map's sources looked up; nothing
+    about lengths, times or values is checked here.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An RPC III, MDF or TDMS file.
+    format : {"rpc3", "mdf", "tdms"}
+        The file's format; a file of another format is refused.
+    channel_map : ChannelMap or str or os.PathLike
+        The map, or its TOML file.
+    where : str, optional
+        How to name the file in messages (default ``"file <path>"``).
+
+    Returns
+    -------
+    RawRecord
+        The map's source channels (and its ``time`` channel) as stored: raw values, each
+        with its own times [s] (or ``None``) and the unit the file gives it.
+
+    Raises
+    ------
+    SessionError
+        One sentence naming the file and the channel, if: `format` is unknown; the file
+        is missing, empty, of another format or damaged; the file lacks a mapped source
+        channel (did you mean, and the list of the channels it has); the file gives a
+        source channel a known unit other than the map's.
+    """
+    fmt = _check_format(format)
+    cmap = as_channel_map(channel_map)
+    path = Path(path)
+    where = f"file {path}" if where is None else where
+    needed = list(cmap.sources.values()) + ([cmap.time] if cmap.time else [])
+    raw = READERS[fmt](path, channels=needed, where=where)
+
+    if not raw.available:
+        raise SessionError(
+            f"{where}: holds no data channels (an empty {FORMAT_NAMES[fmt]} file, or a "
+            "damaged one); check the export"
+        )
+    absent = [(c, s.source) for c, s in cmap.channels.items() if s.source not in raw.channels]
+    if cmap.time is not None and cmap.time not in raw.channels:
+        absent.insert(0, ("time", cmap.time))
+    if absent:
+        canonical, source = absent[0]
+        more = f", {len(absent)} mapped channels are missing" if len(absent) > 1 else ""
+        names = list(raw.available)
+        if fmt == "tdms":  # a bare channel name is accepted too
+            names += [a.partition("/")[2] for a in raw.available]
+        close = difflib.get_close_matches(source, names, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise SessionError(
+            f"{where}: has no channel {source!r}{hint} (mapped to {canonical} by "
+            f"{cmap.where}{more}); the file has {_listing(raw.available)}: fix the map's "
+            "source names or check the file"
+        )
+    for spec in cmap.channels.values():
+        spec.check_file_unit(raw.units.get(spec.source, ""), where=where)
+    return raw
+
+
+def check_time_base(t, *, source, where):
+    """Check that sample times are finite, strictly increasing and uniform.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n_samples,)
+        Sample times [s], at least 2.
+    source : str
+        The channel the times belong to (named in messages).
+    where : str
+        How to name the file in messages.
+
+    Returns
+    -------
+    float
+        The median time step [s].
+
+    Raises
+    ------
+    SessionError
+        If a time is NaN/inf, the times are not strictly increasing, or a step differs
+        from the median step by more than :data:`ident.data.runs.RTOL_TIME_STEP` of it.
+    """
+    if not np.all(np.isfinite(t)):
+        raise SessionError(f"{where}: the time of {source!r} has NaN/inf values; check "
+                           "the export")
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        i = int(np.argmax(dt <= 0))
+        raise SessionError(
+            f"{where}: the time of {source!r} is not strictly increasing at sample "
+            f"{i + 1} (t={t[i]:.9g} s then {t[i + 1]:.9g} s); check the export"
+        )
+    typical = float(np.median(dt))
+    off = np.abs(dt - typical) > RTOL_TIME_STEP * typical
+    if off.any():
+        i = int(np.argmax(off))
+        raise SessionError(
+            f"{where}: the time of {source!r} is not uniformly sampled: step "
+            f"{dt[i]:.9g} s at t={t[i + 1]:.9g} s vs the typical {typical:.9g} s (relative "
+            f"tolerance {RTOL_TIME_STEP:g}); resample to a uniform rate or fill the gap"
+        )
+    return typical
+
+
+def mapped_channel_si(spec, raw_values, t, *, where):
+    """Convert one mapped channel to SI with shockplan's sign, refusing NaN/inf values.
+
+    Parameters
+    ----------
+    spec : ChannelSpec
+        The channel's entry of the map.
+    raw_values : array_like, shape (n_samples,)
+        Its values as stored in the file.
+    t : ndarray, shape (n_samples,)
+        Its sample times [s] (to name the first bad sample).
+    where : str
+        How to name the file in messages.
+
+    Returns
+    -------
+    ndarray, shape (n_samples,)
+        ``spec.to_si(raw_values)``, float64, read-only.
+
+    Raises
+    ------
+    SessionError
+        If a converted value is NaN/inf (the message gives the time of the first).
+    """
+    x = spec.to_si(raw_values)
+    bad = ~np.isfinite(x)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SessionError(
+            f"{where}: channel {spec.source!r} ({spec.canonical}) has {int(bad.sum())} "
+            f"NaN/inf value(s) from t={t[i]:.6g} s; fill or cut the run"
+        )
+    x.flags.writeable = False
+    return x
+
+
 def read_run(path, *, format, channel_map, required=(), where=None):
     """Read one rig data file into SI canonical channels, through a channel map.
 
@@ -166,32 +312,7 @@ def read_run(path, *, format, channel_map, required=(), where=None):
             "session run needs the 4 wheelloaders, and all 3 aero channels on a rig with aero "
             "actuators); add a [channels.<name>] table for each"
         )
-    needed = list(cmap.sources.values()) + ([cmap.time] if cmap.time else [])
-    raw = READERS[fmt](path, channels=needed, where=where)
-
-    if not raw.available:
-        raise SessionError(
-            f"{where}: holds no data channels (an empty {FORMAT_NAMES[fmt]} file, or a "
-            "damaged one); check the export"
-        )
-    absent = [(c, s.source) for c, s in cmap.channels.items() if s.source not in raw.channels]
-    if cmap.time is not None and cmap.time not in raw.channels:
-        absent.insert(0, ("time", cmap.time))
-    if absent:
-        canonical, source = absent[0]
-        more = f", {len(absent)} mapped channels are missing" if len(absent) > 1 else ""
-        names = list(raw.available)
-        if fmt == "tdms":  # a bare channel name is accepted too
-            names += [a.partition("/")[2] for a in raw.available]
-        close = difflib.get_close_matches(source, names, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise SessionError(
-            f"{where}: has no channel {source!r}{hint} (mapped to {canonical} by "
-            f"{cmap.where}{more}); the file has {_listing(raw.available)}: fix the map's "
-            "source names or check the file"
-        )
-    for spec in cmap.channels.values():
-        spec.check_file_unit(raw.units.get(spec.source, ""), where=where)
+    raw = read_mapped_raw(path, format=fmt, channel_map=cmap, where=where)
 
     t_raw, t_source = _time_base(raw, cmap, where=where)
     t = np.asarray(t_raw, dtype=np.float64)
@@ -206,25 +327,7 @@ def read_run(path, *, format, channel_map, required=(), where=None):
             )
     if n < 2:
         raise SessionError(f"{where}: has {n} sample(s); a run needs at least 2")
-    if not np.all(np.isfinite(t)):
-        raise SessionError(f"{where}: the time of {t_source!r} has NaN/inf values; check "
-                           "the export")
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        i = int(np.argmax(dt <= 0))
-        raise SessionError(
-            f"{where}: the time of {t_source!r} is not strictly increasing at sample "
-            f"{i + 1} (t={t[i]:.9g} s then {t[i + 1]:.9g} s); check the export"
-        )
-    typical = float(np.median(dt))
-    off = np.abs(dt - typical) > RTOL_TIME_STEP * typical
-    if off.any():
-        i = int(np.argmax(off))
-        raise SessionError(
-            f"{where}: the time of {t_source!r} is not uniformly sampled: step "
-            f"{dt[i]:.9g} s at t={t[i + 1]:.9g} s vs the typical {typical:.9g} s (relative "
-            f"tolerance {RTOL_TIME_STEP:g}); resample to a uniform rate or fill the gap"
-        )
+    typical = check_time_base(t, source=t_source, where=where)
     for canonical, spec in cmap.channels.items():
         tc = raw.time_s.get(spec.source)
         if cmap.time is None and tc is not None and \
@@ -235,18 +338,8 @@ def read_run(path, *, format, channel_map, required=(), where=None):
                 "map channels of one acquisition (one time base)"
             )
 
-    channels = {}
-    for canonical, spec in cmap.channels.items():
-        x = spec.to_si(raw.channels[spec.source])
-        bad = ~np.isfinite(x)
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise SessionError(
-                f"{where}: channel {spec.source!r} ({canonical}) has {int(bad.sum())} "
-                f"NaN/inf value(s) from t={t[i]:.6g} s; fill or cut the run"
-            )
-        x.flags.writeable = False
-        channels[canonical] = x
+    channels = {canonical: mapped_channel_si(spec, raw.channels[spec.source], t, where=where)
+                for canonical, spec in cmap.channels.items()}
     t = np.array(t)
     t.flags.writeable = False
     step = (t[-1] - t[0]) / (n - 1)
