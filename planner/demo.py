@@ -28,6 +28,7 @@ formats.
 from __future__ import annotations
 
 import logging
+import os
 import warnings
 from pathlib import Path
 
@@ -43,7 +44,8 @@ from planner.objective import default_objective, objective_to_toml
 
 __all__ = ["run_demo", "write_demo_inputs", "write_demo_rig_files", "write_real_car_example",
            "DEMO_LIBRARY_PATH", "DEMO_INPUT_FILES", "DEMO_RIG_FILES", "REAL_CAR_FOLDER",
-           "REAL_CAR_FILES", "write_clicks_example", "CLICKS_FOLDER", "CLICKS_FILES"]
+           "REAL_CAR_FILES", "write_clicks_example", "CLICKS_FOLDER", "CLICKS_FILES",
+           "write_track_example", "TRACK_FOLDER", "TRACK_FILES"]
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +70,70 @@ DEMO_RIG_FILES = "rig_files"
 REAL_CAR_FOLDER = "real_car"
 #: Folder of the README's adjustable-damper example (:func:`write_clicks_example`).
 CLICKS_FOLDER = "clicks"
+#: Folder of the README's track-data example (:func:`write_track_example`).
+TRACK_FOLDER = "track"
+#: The track example's files (name -> what it is), in README order.
+TRACK_FILES = {
+    "lap.mf4": "two laps of the paper car on a virtual track, as its logger writes them "
+               "(MDF4: damper pots and ride-height lasers in mm at 200 Hz, speed in km/h at "
+               "20 Hz), DM shocks all round",
+    "log_map.toml": "the channel map of the logger's channels to the canonical log channels",
+    "aero.toml": "the car's downforce and balance (aero model TOML, constant coefficients)",
+    "rig.toml": "the rig's wheelloader and aero limits (rig TOML with [limits])",
+    "plan.toml": "a rig plan that plays drive.csv (which `drive from-track` writes) on the car",
+}
+#: The logger's channels: canonical -> (name, unit, offset in the logged unit).
+_TRACK_LOGGER = {
+    **{f"shock_travel_{c}": (f"Damper Pos {w}", "mm", o) for c, w, o in (
+        ("LF", "FL", 31.0), ("RF", "FR", 29.0), ("LR", "RL", 42.0), ("RR", "RR", 40.0))},
+    **{f"ride_height_{c}": (f"Ride Height {w}", "mm", 0.0) for c, w in (
+        ("LF", "FL"), ("RF", "FR"), ("LR", "RL"), ("RR", "RR"))},
+}
+#: The example's track run: 120 s (two laps of 60 s) at 200 Hz, seed, the car's downforce.
+_TRACK_RUN = {"duration_s": 120.0, "fs_hz": 200.0, "seed": 27}
+_TRACK_AERO = """# Aero model (shockplan-aero/1), written by shockplan demo: the README's "From track data
+# to a rig drive" example. The paper car's downforce, growing with the square of speed,
+# 45 % on the front axle.
+format = "shockplan-aero/1"
+units = "SI"
+name = "paper car, constant coefficients"
+kind = "constant"
+cg_to_front_axle = 1.524     # m (60 in)
+cg_to_rear_axle = 1.27       # m (50 in)
+reference_speed = 60.0       # m/s
+downforce = 3000.0           # N at the reference speed
+balance = 0.45               # front share
+"""
+_TRACK_RIG = """# Rig TOML (rig/1), written by shockplan demo: the README's "From track data to a rig
+# drive" example. What the 7-post's actuators can play; a drive beyond it is clipped
+# (smoothly, with a warning) or scaled (--limit-action scale).
+format = "rig/1"
+name = "7-post"
+units = "imperial"
+
+[limits]
+wheelloader_displacement = 1.5      # in, +-
+wheelloader_velocity = 40.0         # in/s
+wheelloader_acceleration = 3000.0   # in/s^2
+aero_heave = 1500.0                 # lbf
+"""
+_TRACK_PLAN = """# Rig plan (rig-plan/1), written by shockplan demo: the README's "From track data to a rig
+# drive" example. The rig plays drive.csv (written by shockplan drive from-track) on the
+# car with the DM shocks it ran at the track, 2 % sensor noise. Run it with
+#   shockplan rig simulate --plan track/plan.toml --vehicle car.toml --out track/session
+format = "rig-plan/1"
+name = "track drive on the rig"
+shock_library = "../crate.toml"
+fs_hz = 100.0
+noise = 0.02
+
+[[run]]
+name = "track"
+setup = { LF = "DM", RF = "DM", LR = "DM", RR = "DM" }
+role = "validation"
+drive = "drive.csv"
+"""
+
 #: The settings of the clicks example's raw dyno runs: the low-speed adjuster swept at
 #: ``hs`` 2, the high-speed one at ``ls`` 10, as a dyno session records them.
 _CLICKS_DYNO_SETTINGS = ({"ls": 0, "hs": 2}, {"ls": 10, "hs": 2}, {"ls": 20, "hs": 2},
@@ -326,6 +392,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             write_demo_inputs(work, units=units, channels=session.runs[0].channels)
             write_real_car_example(work / REAL_CAR_FOLDER)
             write_clicks_example(work / CLICKS_FOLDER)
+            write_track_example(work / TRACK_FOLDER)
             write_demo_rig_files(work / DEMO_RIG_FILES, session)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -806,4 +873,89 @@ def write_clicks_example(folder, *, overwrite=False):
     atomic_write_text(paths["shocks.toml"], _CLICKS_SHOCKS)
     atomic_write_text(paths["rig.toml"], _CLICKS_RIG)
     log.info("demo: wrote the adjustable-damper example to %s", folder)
+    return paths
+
+
+def write_track_example(folder, *, overwrite=False):
+    """Write the README's track-data example (:data:`TRACK_FILES`) into `folder`.
+
+    The paper car (the truth) runs two laps of a virtual track (:mod:`ident.sim.track`: a
+    road at a varying speed, 35-75 m/s, with the aero loads of ``aero.toml``) on the demo
+    crate's DM shocks, and its logger writes them: an MDF4 file with the damper
+    potentiometers (mm, with their zero offsets) and the ride-height lasers (mm, absolute)
+    at 200 Hz, and the speed in km/h at 20 Hz, 2 % sensor noise. Beside it: the channel map
+    that reads the log, the aero model, rig limits, and a rig plan that plays the drive
+    ``drive from-track`` writes (``drive.csv``) for ``drive iterate``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Created if missing.
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        File name -> written path, in :data:`TRACK_FILES` order.
+
+    Raises
+    ------
+    FileExistsError
+        If one of the files exists and `overwrite` is false (none is written then).
+    """
+    import numpy as np
+    from asammdf import MDF, Signal  # heavy: only the demo writes an MDF file
+
+    from ident.models.aero import read_aero_model
+    from ident.models.library import read_shock_library
+    from ident.models.vehicle import build_full_car, example_vehicle
+    from ident.sim.track import log_track_run, make_track_run
+
+    folder = Path(folder)
+    paths = {name: folder / name for name in TRACK_FILES}
+    for path in paths.values():
+        check_can_write(path, overwrite=overwrite)
+    folder.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(paths["aero.toml"], _TRACK_AERO)
+    atomic_write_text(paths["rig.toml"], _TRACK_RIG)
+    atomic_write_text(paths["plan.toml"], _TRACK_PLAN)
+    vehicle = example_vehicle()
+    aero = read_aero_model(paths["aero.toml"])
+    run = make_track_run(**_TRACK_RUN, wheelbase_m=vehicle.a_m + vehicle.b_m,
+                         track_width_m=vehicle.track_front_m, aero=aero, name="lap")
+    library = read_shock_library(DEMO_LIBRARY_PATH)
+    shocks = [library["DM"]] * 4
+    logged = log_track_run(build_full_car(vehicle).loop_plant(), run, shocks, noise=0.02,
+                           seed=27, pot_offset_m=(0.0, 0.0, 0.0, 0.0))
+    t = logged.time_s
+    fast = []
+    for canonical, (name, unit, offset) in _TRACK_LOGGER.items():
+        values = np.round(logged.channels[canonical] * 1e3 + offset, 3)
+        fast.append(Signal(values, t, name=name, unit=unit))
+    slow = slice(None, None, int(round(logged.fs_hz / 20.0)))
+    speed = Signal(np.round(logged.channels["speed"][slow] * 3.6, 2), t[slow],
+                   name="Ground Speed", unit="km/h")
+    mdf = MDF(version="4.10")
+    mdf.append(fast, comment="200 Hz")
+    mdf.append([speed], comment="20 Hz")
+    part = folder / ".lap.part.mf4"   # asammdf names its file by the suffix: keep .mf4
+    try:
+        saved = Path(mdf.save(part, overwrite=True))
+        mdf.close()
+        os.replace(saved, paths["lap.mf4"])
+    finally:
+        part.unlink(missing_ok=True)
+    lines = ['format = "channel-map/1"', 'name = "the demo car\'s logger (MDF4)"', ""]
+    for canonical, (name, unit, offset) in _TRACK_LOGGER.items():
+        lines += [f"[channels.{canonical}]", f'source = "{name}"', f'units = "{unit}"',
+                  "sign = 1"] + ([f"offset = {offset!r}                  # the pot's reading "
+                                  "at zero travel, mm"] if offset else []) + [""]
+    lines += ["[channels.speed]", 'source = "Ground Speed"', 'units = "m/s"', "sign = 1",
+              "scale = 0.2777777777777778      # logged in km/h", ""]
+    header = ("# Channel map (channel-map/1), written by shockplan demo: the README's \"From "
+              "track data to a\n# rig drive\" example. The logger's channel names and units to "
+              "the canonical log channels.\n")
+    atomic_write_text(paths["log_map.toml"], header + "\n".join(lines))
+    log.info("demo: wrote the track-data example to %s", folder)
     return paths

@@ -118,6 +118,15 @@ def _print_result(result, units):
         print(f"residual (RMS over target RMS, 1-20 Hz): plain inverse {100 * first:.2f} %, "
               f"after {iters} iteration(s) {100 * best:.2f} % (best: iteration "
               f"{result.settings['best_iteration']}, {result.settings['stopped']})")
+    preload = t.settings.get("aero_preload") or []
+    if preload:
+        mean = {k: float(np.mean([p[k] for p in preload])) for k in preload[0]}
+        lab = UNIT_LABELS[units]
+        print("aero loads: their mean is the aeroloaders' static preload, set before the drive "
+              f"plays (the drive holds the rest): heave "
+              f"{float(from_si(mean['aero_heave'], 'force', units)):.5g} {lab['force']}, pitch "
+              f"{float(from_si(mean['aero_pitch'], 'moment', units)):.5g} {lab['moment']}, roll "
+              f"{float(from_si(mean['aero_roll'], 'moment', units)):.5g} {lab['moment']}")
     reach = result.reach["unreachable_share"]
     rows = []
     for c in per.index:
@@ -128,9 +137,14 @@ def _print_result(result, units):
                     f"({float(from_si(rms, q, units)):.4g} {UNIT_LABELS[units][q]} RMS), "
                     f"out of reach {100 * reach[c]:5.2f} %")
     print("\n".join(rows))
-    if result.limits is not None and len(result.limits.report):
-        for w in result.limits.warnings:
-            print(f"  limits: {w}")
+    lim = result.limits
+    if lim is not None and len(lim.report):
+        hit = lim.report[lim.report["exceeded"]]
+        if len(hit):
+            print(f"  rig limits: {len(hit)} channel limit(s) exceeded and "
+                  f"{'scaled' if lim.action == 'scale' else 'clipped'} "
+                  f"({', '.join(f'{c} {q}' for c, q in zip(hit['channel'], hit['quantity']))});"
+                  " see the report's limits.csv")
 
 
 def cmd_from_track(args):

@@ -451,7 +451,7 @@ def _check_apply_inputs(drive, limits, action):
                            f"{list(LIMIT_ACTIONS)}{did_you_mean(action, LIMIT_ACTIONS)}")
 
 
-def apply_rig_limits(drive, limits, *, action="clip"):
+def apply_rig_limits(drive, limits, *, action="clip", warn=True):
     """Make a drive respect a rig's actuator limits, by clipping smoothly or scaling.
 
     Parameters
@@ -465,6 +465,10 @@ def apply_rig_limits(drive, limits, *, action="clip"):
         ``limit / peak`` over their channels and quantities (their relative content
         kept); the aero inputs by one factor of their own. ``"clip"``: each channel
         limited where it exceeds, smoothly (Notes); the rest of the drive unchanged.
+    warn : bool
+        Log the warnings (default); False only collects them in
+        :attr:`LimitedDrive.warnings` (a caller that limits every iterate of a drive
+        iteration logs the final drive's once).
 
     Returns
     -------
@@ -556,7 +560,7 @@ def apply_rig_limits(drive, limits, *, action="clip"):
             if peaks[q] > lim[q]:
                 messages.append(_warning(drive.name, c, q, lim[q], peaks[q], changed[c],
                                          action, factors.get(c), detail.get(c)))
-    for m in messages:
+    for m in messages if warn else ():
         log.warning("%s", m)
     wl = [factors[c] for c in WHEELLOADER_INPUTS if c in factors]
     aero = [factors[c] for c in AERO_INPUTS if c in factors]

@@ -2,6 +2,7 @@
 :func:`planner.demo.write_demo_inputs` writes, each read by its reader as is."""
 
 import dataclasses
+import functools
 import re
 import tomllib
 from pathlib import Path
@@ -9,11 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident.data.channels import ALL_CHANNELS, RIG_INPUTS
+from ident.data.channels import ALL_CHANNELS, CORNERS, RIG_INPUTS, TRACK_CHANNELS
 from ident.data.dyno_raw import read_dyno_map
 from ident.data.formats.channel_map import apply_channel_map, read_channel_map
 from ident.data.units import to_si
-from ident.errors import BumpStopError, DynoError, SessionError
+from ident.errors import AeroModelError, BumpStopError, DynoError, SessionError
+from ident.models.aero import read_aero_model
 from ident.models.bumpstops import read_bump_stops
 from ident.models.library import read_shock_library
 from ident.models.vehicle import EXAMPLE_VEHICLE_PATH, example_vehicle, read_vehicle
@@ -41,6 +43,9 @@ READERS = {
     "channel-map": (read_channel_map, SessionError),
     "bump-stops": (read_bump_stops, BumpStopError),
     "dyno-map": (read_dyno_map, DynoError),
+    "track-map": (functools.partial(read_channel_map, allowed=ALL_CHANNELS + TRACK_CHANNELS),
+                  SessionError),
+    "aero": (read_aero_model, AeroModelError),
 }
 #: A shock's force read back from an imperial file: SI -> imperial text -> SI, shortest
 #: round-trip float text each way, so a few ulps.
@@ -142,9 +147,30 @@ def _check_dyno_map(dmap):
     np.testing.assert_allclose(dmap.columns["temperature"].convert([212.0]), 100.0)
 
 
+def _check_track_map(cmap):
+    assert cmap.time == "Time" and set(cmap.channels) >= {
+        f"shock_travel_{c}" for c in CORNERS} | {"speed"}
+    np.testing.assert_allclose(cmap.channels["speed"].to_si([36.0]), [10.0])
+    np.testing.assert_allclose(cmap.channels["shock_travel_LF"].to_si([35.0]), [0.010])
+    np.testing.assert_allclose(cmap.channels["shock_travel_LR"].to_si([10.0]), [-0.010])
+
+
+def _check_aero(model):
+    if model.kind == "constant":
+        assert model.loads(55.0).downforce_n == pytest.approx(5200.0)
+    elif model.kind == "speed_table":
+        assert model.loads(50.0).downforce_n == pytest.approx(4350.0)
+    else:  # imperial: the middle node at 150 mph
+        got = model.loads(to_si(2640.0, "velocity", "imperial"),
+                          ride_height_front_m=to_si(2.0, "displacement", "imperial"),
+                          ride_height_rear_m=to_si(3.2, "displacement", "imperial"))
+        np.testing.assert_allclose(got.downforce_n, to_si(1240.0, "force", "imperial"))
+
+
 CHECKS = {"objective": _check_objective, "constraints": _check_constraints,
           "whatif": _check_whatif, "rig": _check_rig, "channel-map": _check_channel_map,
-          "bump-stops": _check_bump_stops, "dyno-map": _check_dyno_map}
+          "bump-stops": _check_bump_stops, "dyno-map": _check_dyno_map,
+          "track-map": _check_track_map, "aero": _check_aero}
 
 
 @pytest.mark.parametrize("tag, body", FORMAT_BLOCKS,

@@ -59,11 +59,15 @@ def test_rear_follows_front_by_the_wheelbase(run, paper_vehicle):
 
 
 def test_aero_loads_follow_the_speed(run, aero):
+    """The drive holds the loads' dynamic part; their mean is the static preload."""
     loads = aero.loads(run.speed_m_s)
     mid = slice(400, run.drive.n_samples - 400)     # outside the fades
+    pre = run.settings["aero_preload"]
     for a in AERO_INPUTS:
-        np.testing.assert_allclose(run.drive.channels[a][mid], loads.channels[a][mid])
-    assert np.all(run.drive.channels["aero_heave"][mid] < 0)       # downforce pushes down
+        assert pre[a] == pytest.approx(np.mean(loads.channels[a]))
+        np.testing.assert_allclose(run.drive.channels[a][mid] + pre[a], loads.channels[a][mid],
+                                   atol=1e-9 * abs(pre["aero_heave"]))
+    assert pre["aero_heave"] < 0                    # downforce pushes down
 
 
 def test_run_starts_and_ends_at_rest(run):

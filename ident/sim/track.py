@@ -132,10 +132,11 @@ class TrackRun:
     Attributes
     ----------
     drive : ident.data.drive.Drive
-        The road under each wheel (``wheelloader_XX`` [m]) and, with an aero model, the aero
-        loads at the run's speed (``aero_heave`` [N], ``aero_roll``, ``aero_pitch`` [N*m]),
-        both faded in and out over ``settings["taper_s"]`` (the car starts and ends at rest
-        on a rig).
+        The road under each wheel (``wheelloader_XX`` [m]) and, with an aero model, the
+        dynamic part of the aero loads at the run's speed (``aero_heave`` [N], ``aero_roll``,
+        ``aero_pitch`` [N*m]: their mean is the aeroloaders' static preload, in
+        ``settings["aero_preload"]``, as on a rig), both faded in and out over
+        ``settings["taper_s"]`` (the car starts and ends at rest on a rig).
     speed_m_s : ndarray, shape (n_samples,)
         The car's speed [m/s].
     settings : dict
@@ -216,9 +217,12 @@ def make_track_run(*, duration_s, fs_hz, seed, speed_range_m_s=(35.0, 75.0),
         fine_x = np.interp(at, grid, road.channels[c])
         channels[c] = resample_bandlimited(fine_x, 1, r)[:n]
     speed = speed_fine[::r][:n]
+    preload = None
     if aero is not None:
         loads = aero.loads(speed)
-        channels.update({c: np.asarray(loads.channels[c], float) for c in AERO_INPUTS})
+        preload = {c: float(np.mean(loads.channels[c])) for c in AERO_INPUTS}
+        channels.update({c: np.asarray(loads.channels[c], float) - preload[c]
+                         for c in AERO_INPUTS})
     w = _taper(n, fs_hz, taper_s)
     channels = {c: v * w for c, v in channels.items()}
     name = name or f"track-run-{seed}"
@@ -229,6 +233,7 @@ def make_track_run(*, duration_s, fs_hz, seed, speed_range_m_s=(35.0, 75.0),
                 "waviness": float(waviness), "left_right_coherence": float(left_right_coherence),
                 "road_band_cycles_m": (n_lo, n_hi), "taper_s": float(taper_s),
                 "distance_m": float(x[-1]), "aero": None if aero is None else aero.name,
+                "aero_preload": preload,
                 "wheel_rms_m": float(np.sqrt(np.mean(np.square(channels["wheelloader_LF"]))))}
     log.debug("virtual track %s: %.0f m at %.0f-%.0f m/s", name, x[-1], speed.min(), speed.max())
     return TrackRun(drive=Drive(name=name, fs_hz=float(fs_hz), channels=channels,

@@ -138,6 +138,7 @@ def convergence_figure(result):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker  # noqa: F401  (the axis formatters)
 
     h = result.history
     fig, ax = plt.subplots(figsize=(6.5, 4.0))
@@ -150,6 +151,9 @@ def convergence_figure(result):
         ax.axvline(best, color="0.5", ls=":", lw=1)
     ax.set_xlabel("iteration (1: the plain frequency-domain inverse)")
     ax.set_ylabel("residual RMS / target RMS, 1-20 Hz [%]")
+    ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()

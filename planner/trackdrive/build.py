@@ -321,10 +321,10 @@ def _check_options(max_iter, tol, gain, limit_action, where):
                            f"{list(LIMIT_ACTIONS)}")
 
 
-def _limited(drive, limits, action):
+def _limited(drive, limits, action, *, warn=True):
     if limits is None:
         return drive, None
-    out = apply_rig_limits(drive, limits, action=action)
+    out = apply_rig_limits(drive, limits, action=action, warn=warn)
     return out.drive, out
 
 
@@ -394,7 +394,7 @@ def build_track_drive(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
     for it in range(1, max_iter + 2):
         drive = p.drive(wheels, name)
         if limits is not None and limit_action == "clip":
-            drive, limit_report = _limited(drive, limits, "clip")
+            drive, limit_report = _limited(drive, limits, "clip", warn=False)
             wheels = np.array([drive.channels[w] for w in WHEELLOADER_INPUTS])
         resp = p.simulate(drive)
         shares = residual_shares(target, resp, mask=p.mask)
@@ -424,6 +424,9 @@ def build_track_drive(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
         drive, limit_report = _limited(drive, limits, "scale")
         if limit_report is not None and min(limit_report.scale, limit_report.aero_scale) < 1:
             resp = p.simulate(drive)
+    if limit_report is not None and limit_action == "clip":
+        for w in limit_report.warnings:     # the final drive's, once
+            log.warning("%s", w)
     p.linearize(p.velocity_rms(resp))
     settings = {"alpha": alpha, "max_iter": max_iter, "tol": tol, "gain": gain,
                 "oversample": oversample, "setup": dict(zip(CORNERS, setup.ids())),

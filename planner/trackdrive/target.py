@@ -4,7 +4,10 @@
 into a :class:`DriveTarget`: the response channels the rig drive must reproduce (shock
 travels, and ride heights and accelerations where logged and the model has them), as their
 dynamic part at the model's sample rate, and the aero inputs the drive will carry (from the
-logged speed through the team's aero model, from logged aero loads, or none on a 4-post rig).
+logged speed through the team's aero model, from logged aero loads, or none on a 4-post rig),
+also as their dynamic part: the mean aero load is the aeroloaders' static preload, which a
+rig applies before the drive plays (the spec's static corner loads include it), so a drive
+never ramps the whole downforce on in its first second.
 
 Several logs are played one after the other: each log's channels lose their own mean, are
 faded in and out over ``taper_s`` (the rig starts and ends each at rest), and are joined
@@ -26,6 +29,7 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 
 import numpy as np
+from scipy import signal
 
 from ident.data.channels import AERO_INPUTS, CORNERS
 from ident.data.drive import resample_bandlimited
@@ -40,6 +44,8 @@ __all__ = [
     "MIN_RATE_FACTOR",
     "METRIC_BAND_TOP_HZ",
     "AERO_SOURCES",
+    "AERO_SPEED_LOWPASS_HZ",
+    "AERO_RIDE_HEIGHT_LOWPASS_HZ",
 ]
 
 log = logging.getLogger(__name__)
@@ -57,6 +63,13 @@ MIN_RATE_FACTOR = 2.5
 METRIC_BAND_TOP_HZ = 20.0
 #: Where a drive's aero inputs come from.
 AERO_SOURCES = ("auto", "model", "logged", "none")
+#: Low-pass of the logged speed [Hz] before the aero model: a car's speed changes over
+#: seconds, and a speed sensor's noise, passed through the model, would become a broadband
+#: aero command (0.5 % speed noise: 17 N RMS of the 1-20 Hz heave against 6 N of true load).
+AERO_SPEED_LOWPASS_HZ = 2.0
+#: Low-pass of the logged ride heights [Hz] before an aero map: the platform moves at the
+#: body modes (1-4 Hz); above that the lasers' noise and the road would drive the map.
+AERO_RIDE_HEIGHT_LOWPASS_HZ = 5.0
 #: Largest denominator of a resampling ratio (as :func:`ident.data.drive.resample_drive`).
 _MAX_DENOMINATOR = 1000
 
@@ -74,8 +87,11 @@ class DriveTarget:
         Target response channels (canonical names, SI): each log's dynamic part (its mean
         removed), faded at the ends of each log, joined.
     aero : dict of str to ndarray or None
-        ``aero_heave`` [N], ``aero_roll``, ``aero_pitch`` [N*m] of the drive (faded as the
-        targets), or None (no aero inputs: a 4-post rig, or none given).
+        ``aero_heave`` [N], ``aero_roll``, ``aero_pitch`` [N*m] of the drive: each log's
+        loads less their mean (the mean is the aeroloaders' static preload, applied before
+        a drive plays, as the spec's static corner loads include it; in
+        ``settings["aero_preload"]``, one per log), faded as the targets; or None (no aero
+        inputs: a 4-post rig, or none given).
     band_hz : (float, float)
         The band the drive reproduces [Hz].
     segments : tuple of (str, int, int)
@@ -198,6 +214,15 @@ def _aero_source(source, aero, logs, rig_inputs, where):
     return source
 
 
+def _lowpass(x, f_hz, fs_hz):
+    """Zero-phase 4th-order Butterworth low-pass at `f_hz` (none at or above Nyquist)."""
+    x = np.asarray(x, float)
+    if f_hz >= 0.5 * fs_hz or x.size < 30:
+        return x
+    sos = signal.butter(4, f_hz, "lowpass", fs=fs_hz, output="sos")
+    return signal.sosfiltfilt(sos, x)
+
+
 def _log_aero(lg, aero, source, where):
     """The aero loads of one log (SI), or None."""
     if source == "logged":
@@ -217,9 +242,13 @@ def _log_aero(lg, aero, source, where):
                                f"but log {lg.name!r} has no {lacking}; map the ride heights or "
                                "give a model by speed")
         ch = lg.channels
-        kw = {"ride_height_front_m": 0.5 * (ch["ride_height_LF"] + ch["ride_height_RF"]),
-              "ride_height_rear_m": 0.5 * (ch["ride_height_LR"] + ch["ride_height_RR"])}
-    loads = aero.loads(np.abs(np.asarray(lg.channels["speed"], float)), **kw)
+        kw = {"ride_height_front_m": _lowpass(0.5 * (ch["ride_height_LF"] + ch["ride_height_RF"]),
+                                              AERO_RIDE_HEIGHT_LOWPASS_HZ, lg.fs_hz),
+              "ride_height_rear_m": _lowpass(0.5 * (ch["ride_height_LR"] + ch["ride_height_RR"]),
+                                             AERO_RIDE_HEIGHT_LOWPASS_HZ, lg.fs_hz)}
+    speed = _lowpass(np.abs(np.asarray(lg.channels["speed"], float)), AERO_SPEED_LOWPASS_HZ,
+                     lg.fs_hz)
+    loads = aero.loads(np.maximum(speed, 0.0), **kw)
     if loads.outside_share > 0:
         log.warning("%s: log %r: %.1f %% of the samples lie outside the aero model %r's "
                     "table (extrapolated or clamped)", where, lg.name,
@@ -251,7 +280,9 @@ def make_target(logs, *, model_outputs, rig_inputs, fs_hz=None, band_hz=None, ae
         The team's downforce and balance model (aero loads from the logged speed).
     aero_source : {"auto", "model", "logged", "none"}
         ``auto``: the aero model if given, else the logs' aero channels if every log has
-        them and the model has aero inputs, else none.
+        them and the model has aero inputs, else none. The aero model reads the logged
+        speed low-passed at :data:`AERO_SPEED_LOWPASS_HZ` (and a map the ride heights at
+        :data:`AERO_RIDE_HEIGHT_LOWPASS_HZ`), zero phase.
     targets : sequence of str, optional
         The channels to reproduce (canonical names or kinds such as ``ride_height``);
         default every logged channel of :data:`TARGET_KINDS` the model has. A named
@@ -335,7 +366,7 @@ def make_target(logs, *, model_outputs, rig_inputs, fs_hz=None, band_hz=None, ae
                                "shock velocities of every corner")
     source = _aero_source(aero_source, aero, logs, rig_inputs, where)
 
-    parts, aeros, segments, start = {c: [] for c in chosen}, [], [], 0
+    parts, aeros, preloads, segments, start = {c: [] for c in chosen}, [], [], [], 0
     for lg in logs:
         n_log = lg.n_samples
         n = int(np.ceil(n_log * fs_work / fs_log - 1e-9))
@@ -348,8 +379,10 @@ def make_target(logs, *, model_outputs, rig_inputs, fs_hz=None, band_hz=None, ae
                 x = np.fft.irfft(2j * np.pi * f * np.fft.rfft(x), x.size)
             parts[c].append(w * (x - x.mean()))
         a = _log_aero(lg, aero, source, where)
-        if a is not None:
-            aeros.append({k: w * _resample(v, fs_log, fs_work, where)[:n] for k, v in a.items()})
+        if a is not None:  # the dynamic part: the mean is the aeroloaders' static preload
+            preloads.append({k: float(np.mean(v)) for k, v in a.items()})
+            aeros.append({k: w * _resample(v - np.mean(v), fs_log, fs_work, where)[:n]
+                          for k, v in a.items()})
         segments.append((lg.name, start, n))
         start += n
     channels = {mapped[c]: np.concatenate(parts[c]) for c in chosen}
@@ -359,6 +392,7 @@ def make_target(logs, *, model_outputs, rig_inputs, fs_hz=None, band_hz=None, ae
     settings = {"logs": [lg.settings.get("source", lg.name) for lg in logs],
                 "log_fs_hz": fs_log, "aero_source": source,
                 "aero_model": None if aero is None or source != "model" else aero.name,
+                "aero_preload": [dict(p) for p in preloads],
                 "derived": {mapped[c]: c for c in chosen if mapped[c] != c},
                 "left_out": [c for c in logged if c not in chosen]}
     return DriveTarget(name=name, fs_hz=fs_work, channels=channels, aero=aero_ch,
