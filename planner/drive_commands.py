@@ -147,13 +147,18 @@ def _print_result(result, units):
                   " see the report's limits.csv")
 
 
+def _outputs(args):
+    """The drive file and the report folder, checked before any work."""
+    out, report = Path(args.out), report_folder(args)
+    check_output(out, overwrite=args.overwrite)
+    check_output(report, overwrite=args.overwrite, folder=True, what="the report folder")
+    return out, report
+
+
 def cmd_from_track(args):
     """``shockplan drive from-track``: track logs -> the rig drive that reproduces them."""
     where = "drive from-track"
-    out = Path(args.out)
-    report = report_folder(args)
-    check_output(out, overwrite=args.overwrite)
-    check_output(report, overwrite=args.overwrite, folder=True, what="the report folder")
+    out, report = _outputs(args)
     sections = _sections(args, where)
     for name, _, _ in sections:
         check_output(section_path(out, name), overwrite=args.overwrite,
@@ -199,10 +204,7 @@ def _run_of(session, name, where):
 def cmd_iterate(args):
     """``shockplan drive iterate``: a drive corrected by the response the rig recorded."""
     where = "drive iterate"
-    out = Path(args.out)
-    report = report_folder(args)
-    check_output(out, overwrite=args.overwrite)
-    check_output(report, overwrite=args.overwrite, folder=True, what="the report folder")
+    out, report = _outputs(args)
     model = load_any_model(args.model)
     library = read_shock_library(args.shocks)
     logs = _read_logs(args)

@@ -130,7 +130,8 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     constraints : dict, optional
         Keyword arguments of :func:`planner.setups.enumerate_setups`
         (``symmetry``, ``axles``, ``fixed``, ``shocks``, ``respect_inventory``,
-        ``max_setups``).
+        ``max_setups``, ``clicks``: the settings of adjustable shocks, ``"all"`` or a step
+        per adjuster).
     objective : planner.objective.Objective, optional
         Default :func:`planner.objective.default_objective`.
     baseline : Setup or str, optional

@@ -173,6 +173,27 @@ def test_a_target_no_input_moves_is_refused():
                                                   "ride_height_LF"])
 
 
+def test_coherence_weights_trust_rows_where_the_identification_did():
+    """Known answer: sqrt of the interpolated multiple coherence, floored; a model without
+    an FRF gives None; a row with poor coherence counts less in the least squares."""
+    from types import SimpleNamespace
+
+    from planner.trackdrive.inverse import COHERENCE_FLOOR, coherence_weights
+
+    frf = SimpleNamespace(f_hz=np.array([0.0, 10.0, 20.0]), output_names=("a", "b"),
+                          multiple_coherence=np.array([[1.0, 0.25, 1.0], [0.0, 0.0, 0.0]]))
+    w = coherence_weights(SimpleNamespace(frf=frf), ["a", "b", "c"], np.array([5.0, 10.0]))
+    np.testing.assert_allclose(w[0], np.sqrt([0.625, 0.25]))
+    np.testing.assert_allclose(w[1], np.sqrt(COHERENCE_FLOOR))
+    np.testing.assert_allclose(w[2], 1.0)                  # not in the FRF: trusted
+    assert coherence_weights(SimpleNamespace(), ["a"], np.array([1.0])) is None
+    # two targets that disagree about one input: the trusted one wins
+    g = np.ones((2, 1, 1), complex)
+    ginv, _ = regularized_inverse(g, np.array([[1.0], [0.1]]), alpha=1e-9)
+    u = (ginv[:, :, 0] @ np.array([1.0, 2.0]))[0]
+    assert u.real == pytest.approx((1.0 + 0.01 * 2.0) / 1.01)
+
+
 @pytest.mark.parametrize("alpha", [0.0, -1.0, np.nan])
 def test_bad_regularization_refused(alpha):
     with pytest.raises(PlannerError, match="regularization alpha"):

@@ -47,8 +47,9 @@ from planner.errors import PlannerError
 from planner.predict import as_loop_plant
 from planner.rig import apply_rig_limits
 from planner.setups import Setup
-from planner.trackdrive.inverse import (DEFAULT_ALPHA, close_loop, open_loop_parts,
-                                        reach_shares, regularized_inverse, shock_linearization)
+from planner.trackdrive.inverse import (DEFAULT_ALPHA, close_loop, coherence_weights,
+                                        open_loop_parts, reach_shares, regularized_inverse,
+                                        shock_linearization)
 from planner.trackdrive.target import DriveTarget, segment_taper
 
 __all__ = [
@@ -206,6 +207,9 @@ class _Problem:
                                       for _, _, cnt in target.segments])
         self.weights = np.array([1.0 / _band_rms(target.channels[c], fs, target.band_hz,
                                                  self.mask, c, where) for c in self.names])
+        trust = coherence_weights(model, self.names, self.f_band)
+        self.row_weights = (self.weights[:, None] if trust is None
+                            else self.weights[:, None] * trust)          # (n_t, n_f)
         self.c_eq = None
         self.outputs = list(dict.fromkeys(self.names + list(SHOCK_VELOCITIES)))
 
@@ -222,7 +226,8 @@ class _Problem:
         g = close_loop(self.parts, c, lag)
         self.g_free = g[:, :4]
         self.g_aero = g[:, 4:]
-        self.ginv, self.gain = regularized_inverse(self.g_free, self.weights, alpha=self.alpha,
+        self.ginv, self.gain = regularized_inverse(self.g_free, self.row_weights,
+                                                   alpha=self.alpha,
                                                    names=self.names, where=self.where)
         return True
 
@@ -257,7 +262,7 @@ class _Problem:
     def reach(self):
         """Unreachable share per target channel (1-20 Hz) at the current linearization."""
         y = np.array([self.target.channels[c] for c in self.names])
-        yw = self.spectrum(y * self.window) * self.weights[:, None]
+        yw = self.spectrum(y * self.window) * self.row_weights
         b = self.report_bins
         shares = reach_shares(self.gain[:, :, b], yw[:, b])
         return pd.DataFrame({"unreachable_share": shares}, index=pd.Index(self.names,
