@@ -3,7 +3,7 @@ model and on a (virtual) rig, sections.
 
 Named fixture systems: the paper car (``paper_vehicle``) as a known plant, its crate
 (``demo_library``), and a target logged from it on a track-like drive; the issue's done-when
-on the GT-like car identified at 2 % noise lives in ``tests/test_drive_from_track.py``.
+on the GT-like car identified at 2 % noise (``gt_identified``) closes the file.
 """
 
 from dataclasses import replace
