@@ -3,6 +3,10 @@ the other from inside the demo's output folder as the README says, exit 0 and wr
 files they name; the ``rank`` example gives the demo's ranking.
 
 The blocks are read from README.md itself, so an example edited there is the example tested.
+Running every block takes about 8 minutes, beyond CI's time with the rest of the suite: the
+runs are marked ``heavy`` (``python -m pytest -m heavy``), and every test run parses each
+command of each block with the command line's own parser; the demo itself runs in every
+test run (:func:`test_demo_outputs`).
 The quick start's and the test command's blocks (``pip install``) are left to CI, which runs
 them on a fresh machine; the demo they start runs here as written (``shockplan demo``).
 """
@@ -78,10 +82,16 @@ def demo(tmp_path_factory):
     done = subprocess.run(["shockplan", "-q", "demo"], cwd=home, env=env, capture_output=True,
                           text=True, timeout=BLOCK_TIMEOUT_S)
     assert done.returncode == 0, done.stderr
+    DEMO_STDOUT.append(done.stdout)
     return home / "shockplan-demo", env
 
 
+#: What the fixture's ``shockplan demo`` printed (one run of the demo serves every test).
+DEMO_STDOUT = []
+
+
 @pytest.mark.slow
+@pytest.mark.heavy
 @pytest.mark.parametrize("k", range(len(BLOCKS)))
 def test_readme_example_runs_as_written(demo, k):
     folder, env = demo
@@ -95,6 +105,7 @@ def test_readme_example_runs_as_written(demo, k):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_readme_rank_gives_the_demos_ranking(demo):
     """The README's first example, `rank` without --units on the demo's imperial drive: the
     demo's ranking (the drive's unit marker, not a silent SI reading)."""
@@ -105,6 +116,22 @@ def test_readme_rank_gives_the_demos_ranking(demo):
     mine = pd.read_csv(folder / "my_ranking" / "ranking.csv", comment="#")
     theirs = pd.read_csv(folder / "ranking" / "ranking.csv", comment="#")
     assert mine["setup"].head(5).tolist() == theirs["setup"].head(5).tolist()
+
+
+@pytest.mark.parametrize("k", range(len(BLOCKS)))
+def test_readme_example_commands_parse(k):
+    """Every command of every example is one the command line takes as written (its
+    command, options and values parse), so an example never names a renamed or misspelt
+    option: the cheap half of running them, in every test run (the runs themselves are
+    ``heavy``: about 8 minutes)."""
+    from planner.cli import build_parser
+
+    for argv in commands(BLOCKS[k]):
+        try:
+            args = build_parser().parse_args(argv[1:])
+        except SystemExit as exc:  # argparse's refusal: exit 2 with a message on stderr
+            raise AssertionError(f"README block {k}: {' '.join(argv)} does not parse") from exc
+        assert callable(args.func), argv
 
 
 def test_every_file_the_readme_links_is_in_the_repository():
@@ -122,3 +149,74 @@ def test_the_spec_copy_is_the_rigs_spec():
     if not shared.is_file():
         pytest.skip("the rigs' spec is not beside the repository here")
     assert (ROOT / "docs" / "rig-session.md").read_bytes() == shared.read_bytes()
+
+
+#: The demo's best setup. Its defaults fix it: the paper's car and identification
+#: experiment (seeded noise), the seed-7 track drive of 120 s, the built-in crate, the B20
+#: baseline and the default objective.
+DEMO_BEST = "L28/L28/L28/L28"
+
+
+@pytest.mark.slow
+def test_demo_outputs(demo):
+    """The demo's files and what they say: the ranking screened every left/right-symmetric
+    setup the crate can build, its columns, its best setup (by the ranking rule, and the
+    known one), the baseline's score; the optimizer's figures printed are those of its
+    workbook, and its setup file names the optimal shocks (the README's demo, run once for
+    the suite by the ``demo`` fixture)."""
+    from openpyxl import load_workbook
+
+    from ident.data.channels import CORNERS
+    from ident.models.library import read_shock_library
+    from ident.sim.metrics import METRIC_NAMES
+    from planner.demo import DEMO_LIBRARY_PATH
+    from planner.objective import default_objective, ranking_order
+    from planner.setups import enumerate_setups, read_setups
+
+    out, _ = demo
+    assert (out / "session" / "session.toml").is_file()
+    assert (out / "model.npz").is_file() and any((out / "frf_plots").glob("*.png"))
+    for name in ("ranking.csv", "ranking.xlsx", "pareto.png", "top_setups.png", "screening.csv"):
+        assert (out / "ranking" / name).is_file(), name
+    for name in ("optimal_shocks.toml", "optimal_setup.csv", "optimize.xlsx", "curves.png",
+                 "convergence.csv"):
+        assert (out / "optimize" / name).is_file(), name
+    text = DEMO_STDOUT[-1]
+    assert "shockplan demo" in text and "best:" in text
+    assert "optimized curves" in text and "better" in text
+    assert f"-> {out.name}" in text and ".shockplan-demo." not in text  # the final folder
+    # every CSV says the demo's unit system (issue 23): the drive first, read without --units
+    for csv_file in ("track_drive.csv", "model_summary.csv", "ranking/ranking.csv",
+                     "ranking/screening.csv", "optimize/optimal_setup.csv",
+                     "optimize/convergence.csv", "session/runs/baseline.csv"):
+        assert (out / csv_file).read_text().startswith("# units: imperial\n"), csv_file
+    # the ranking: every setup of the crate's left/right-symmetric enumeration screened
+    library = read_shock_library(DEMO_LIBRARY_PATH)
+    screening = pd.read_csv(out / "ranking" / "screening.csv", comment="#")
+    assert sorted(screening["setup"]) == sorted(s.name for s in enumerate_setups(library))
+    ranking = pd.read_csv(out / "ranking" / "ranking.csv", keep_default_na=False, comment="#")
+    assert list(ranking.columns) == [
+        "rank", "setup", *CORNERS, *METRIC_NAMES, "score", "score_grip", "score_platform",
+        "feasible", "violations", "screening_rank", "baseline", "unresolved",
+        *(f"{m}{s}" for m in METRIC_NAMES for s in ("_lo", "_hi"))]
+    # its best setup: first by the ranking rule, the known one, the one printed
+    feasible = ranking["feasible"].to_numpy(dtype=bool)
+    score = ranking["score"].to_numpy(dtype=float)
+    assert ranking_order(feasible, score)[0] == 0 and ranking["rank"].iloc[0] == 1
+    assert feasible[0] and ranking["setup"].iloc[0] == DEMO_BEST
+    assert f"best: {DEMO_BEST} (score {score[0]:.4f} vs baseline" in text
+    base = ranking.set_index("setup").loc["B20/B20/B20/B20"]  # the baseline, B20 all round
+    assert base["score"] == pytest.approx(default_objective().total_weight, rel=1e-12)
+    # the optimizer: the printed figures are its workbook's, its setup the optimal shocks
+    said = re.search(r"optimized curves \(front, rear\): the optimum \(([\d.]+)\) is "
+                     r"([\d.]+) % better than the crate's best (\S+) \(([\d.]+)\)", text)
+    assert said is not None, text
+    solver = dict(load_workbook(out / "optimize" / "optimize.xlsx")["solver"].iter_rows(
+        values_only=True))
+    assert said.group(1) == f"{solver['optimum score (time domain)']:.4f}"
+    assert f"{said.group(2)} %" == solver["gain over the crate best"]
+    assert said.group(3) == solver["crate best"]
+    assert said.group(4) == f"{solver['crate best score']:.4f}"
+    assert float(said.group(1)) < float(said.group(4))
+    optimal = read_setups(out / "optimize" / "optimal_setup.csv")
+    assert optimal[0].ids() == ("OPT-front", "OPT-front", "OPT-rear", "OPT-rear")

@@ -553,6 +553,7 @@ def held_out_coverage(demo_library):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_intervals_cover_95_percent_on_held_out_cars(held_out_coverage):
     """Issue 24: rank's 95 % intervals, calibrated on other cars, cover 90-98 % of the known
     model's metrics on the held-out cars (pooled), and no car falls far out of it."""
