@@ -1,11 +1,71 @@
-"""Shared fixtures: a seeded random generator, the paper car, virtual-rig sessions."""
+"""Shared fixtures: a seeded random generator, the paper car, virtual-rig sessions.
 
+The suite runs on two worker processes (pytest-xdist, ``pyproject.toml``); each builds the
+session fixtures its tests need. The identified models, the costliest (15-60 s each), are
+built once for both: the first worker to ask builds and pickles the model into the run's
+shared temporary folder, the other waits for the file and loads it (:func:`built_once`).
+"""
+
+import os
+import pickle
+import time
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from ident.data.channels import CORNERS
+
+
+#: Longest a worker waits for another to build a shared fixture [s] (the GT-like car's
+#: identification takes about 60 s on a busy 2-core machine).
+SHARED_FIXTURE_TIMEOUT_S = 900.0
+
+
+def built_once(tmp_path_factory, name, build):
+    """A session fixture's value built by one worker of the run and loaded by the others.
+
+    Parameters
+    ----------
+    tmp_path_factory : pytest.TempPathFactory
+    name : str
+        The fixture's name (its file's stem).
+    build : callable
+        ``build() -> value``; the value must pickle.
+
+    Returns
+    -------
+    object
+        The value (built here when this process is not an xdist worker, or is the first
+        worker to ask).
+    """
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return build()
+    root = tmp_path_factory.getbasetemp().parent       # shared by the run's workers
+    path, lock, failed = (root / f"{name}.pickle", root / f"{name}.lock",
+                          root / f"{name}.failed")
+    try:
+        os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:             # another worker builds it: wait for the file
+        deadline = time.monotonic() + SHARED_FIXTURE_TIMEOUT_S
+        while not path.exists():
+            if failed.exists():
+                raise RuntimeError(f"the worker building fixture {name!r} failed; see its "
+                                   "error") from None
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"fixture {name!r}: no worker built it within "
+                                   f"{SHARED_FIXTURE_TIMEOUT_S:g} s")
+            time.sleep(0.2)
+        return pickle.loads(path.read_bytes())
+    try:
+        value = build()
+    except BaseException:
+        failed.touch()
+        raise
+    tmp = path.with_suffix(".part")
+    tmp.write_bytes(pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL))
+    os.replace(tmp, path)
+    return value
 
 
 @pytest.fixture
@@ -57,15 +117,19 @@ def paper_session(paper_plan):
 
 
 @pytest.fixture(scope="session")
-def identified_model(paper_session):
-    """The paper session identified with the default settings."""
+def identified_model(paper_plan, tmp_path_factory):
+    """The paper session identified with the default settings (built once for the run)."""
     import warnings
 
     from ident.identify.pipeline import identify_session
+    from ident.sim.rig import simulate_session
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return identify_session(paper_session)
+    def build():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return identify_session(simulate_session(paper_plan))
+
+    return built_once(tmp_path_factory, "identified_model", build)
 
 
 #: Run length of the 4-post session [s]: 100 s runs identify the 4-post model to 0.03 % on
@@ -83,15 +147,21 @@ def four_post_session(paper_plan):
 
 
 @pytest.fixture(scope="session")
-def four_post_model(four_post_session):
-    """The 4-post session identified with the default settings."""
+def four_post_model(paper_plan, tmp_path_factory):
+    """The 4-post session identified with the default settings (built once for the run)."""
     import warnings
 
     from ident.identify.pipeline import identify_session
+    from ident.sim.rig import simulate_session
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return identify_session(four_post_session)
+    def build():
+        runs = tuple(replace(r, duration_s=FOUR_POST_RUN_S) for r in paper_plan.runs)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return identify_session(simulate_session(replace(paper_plan, rig="4-post",
+                                                             runs=runs)))
+
+    return built_once(tmp_path_factory, "four_post_model", build)
 
 
 @pytest.fixture(scope="session")
@@ -139,20 +209,23 @@ def gt_vehicle():
 
 
 @pytest.fixture(scope="session")
-def gt_identified(gt_vehicle, paper_plan):
+def gt_identified(gt_vehicle, paper_plan, tmp_path_factory):
     """The GT-like car identified from the paper's plan (5 runs of 100 s) at 2 % sensor
-    noise, with the defaults."""
+    noise, with the defaults (built once for the run)."""
     import warnings
 
     from ident.identify.pipeline import identify_session
     from ident.sim.rig import simulate_session
 
-    plan = replace(paper_plan, runs=tuple(replace(r, duration_s=100.0) for r in paper_plan.runs),
-                   noise=0.02)
-    session = simulate_session(plan, gt_vehicle)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return identify_session(session)
+    def build():
+        plan = replace(paper_plan, runs=tuple(replace(r, duration_s=100.0)
+                                              for r in paper_plan.runs), noise=0.02)
+        session = simulate_session(plan, gt_vehicle)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return identify_session(session)
+
+    return built_once(tmp_path_factory, "gt_identified", build)
 
 
 @pytest.fixture(scope="session")

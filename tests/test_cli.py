@@ -111,6 +111,7 @@ def _small_session(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
     from ident.data.drive import make_track_drive, write_drive
     from ident.identify.model import load_model

@@ -225,6 +225,7 @@ def test_refusals(paper_vehicle, demo_library, base):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_a_designed_plan_run_on_the_virtual_rig_identifies_the_car(paper_vehicle, paper_model,
                                                                    demo_library, tmp_path,
                                                                    baseline_setup):

@@ -94,6 +94,7 @@ def test_predict_and_rank_are_byte_identical(tmp_path, inputs):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_whatif_and_plan_are_byte_identical(tmp_path, inputs):
     _twice(tmp_path / "whatif", [
         "whatif", "--model", "paper", "--drive", str(inputs / "drive.csv"), "--shocks",

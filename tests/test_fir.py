@@ -116,6 +116,8 @@ def test_linear_shocks_equal_to_cbar_match_the_modal_simulation(comparison):
     assert np.all(np.abs(fir.channels["shock_force_RR"][0]) > 0)
 
 
+@pytest.mark.slow
+@pytest.mark.heavy
 def test_nonlinear_shocks_metrics_match_the_modal_simulation(comparison):
     ref, fir = comparison
     m_ref, m_fir = compute_metrics(ref).values, compute_metrics(fir).values

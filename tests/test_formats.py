@@ -473,6 +473,7 @@ def csv_metrics(paper_plan_session, demo_library, track_drive, tmp_path_factory)
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["rpc3-float", "mdf", "tdms"])
+@pytest.mark.heavy
 def test_imported_session_identifies_to_the_csv_model(case, paper_plan_session, csv_metrics,
                                                       demo_library, track_drive, shocks_path,
                                                       tmp_path):

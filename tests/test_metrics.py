@@ -359,6 +359,7 @@ def test_pairwise_sum_of_all_lanes_is_numpys(rng, n):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_metric_kernels_load_from_numba_cache(tmp_path):
     """The compiled metric kernels work when numba loads them from its cache in a new
     process, not only when compiled in it (numba's cache could not reload a self-recursive

@@ -63,6 +63,7 @@ def test_fitted_frf_matches_truth(identified_model, paper_model):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_truth_round_trip_metrics_with_noise(paper_plan, paper_model, validation_drive):
     """The same round trip with 2 % measurement noise on every response channel."""
     import warnings

@@ -98,6 +98,7 @@ def test_bad_setups(paper_model, track_drive, demo_library):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, baseline_setup):
     """A car that is not the 7-DOF model: chassis torsion, unequal half-tracks and tire
     damping, with 2 % measurement noise, identified and validated on a track-like drive.

@@ -132,6 +132,7 @@ RTOL_SHORT_RUNS_MAX_PCT = 5.0
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_rig_time_study_small(tmp_path):
     """The paper plan with 60 s runs: its rig time counts the swaps; identified, predicted.
     (The designed plans' path, design -> plan.toml -> virtual rig -> identify, is
@@ -163,6 +164,7 @@ def test_random_plan_swaps_every_corner_within_budget():
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_noise_study_small_with_missing_shock_forces(tmp_path):
     """The paper plan at 2 % noise without shock-force channels (the exact library standing
     in for the load cells) identifies and predicts."""
@@ -265,6 +267,7 @@ REAL_CAR_MAX_GAIN = 3.0
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_real_car_study_small(tmp_path):
     """Bump stops at 3.5 mm (front contact about 10 % of the time), 200 s runs: declaring never
     loses, and wins by far where the stops act; the undeclared identification finds them
