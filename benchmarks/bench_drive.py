@@ -30,13 +30,11 @@ Prints, one figure per line, each timing with the 1-minute load average:
    target, band-passed 1-20 Hz, per channel: max and RMS over channels, at the best
    iteration) and the time per iteration;
 2. the reference in the same run: the plain frequency-domain inverse with no iteration,
-   written out with the package's public functions (``open_loop_parts``, ``close_loop``,
-   ``shock_linearization``, ``regularized_inverse``): the shocks linearized at the logged
-   travel's velocity RMS, ``u = G+ (y - G_aero u_aero)`` on the zero-padded FFT grid as
-   ``build.py`` does, the drive simulated once on the model
-   (``ident.sim.closedloop.simulate``) and judged by ``residual_shares``: its median time
-   (from the target, as the build), its residual (checked against the iteration's history,
-   iteration 1), and the ratios time iterated / plain and residual plain / iterated;
+   ``build_track_drive(..., max_iter=0)``: the shocks linearized at the logged travel's
+   velocity RMS, ``u = G+ (y - G_aero u_aero)`` on the zero-padded FFT grid, the drive
+   simulated once on the model and judged by ``residual_shares``: its median time (from the
+   target, as the build), its residual (checked against the iteration's history, iteration
+   1), and the ratios time iterated / plain and residual plain / iterated;
 3. both drives played on the known car (the truth; by default the model itself, simulated at
    the logger's oversampling 4 instead of the build's 2): each one's residual against the
    log, what a rig would see; and the true road on the known car: the log's noise floor;
@@ -58,30 +56,23 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from scipy import fft as sp_fft
 
 # benchmark the working tree this script lives in, installed or not
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks._common import engine_version, jit_source, load  # noqa: E402
-from ident.data.channels import AERO_INPUTS, CORNERS, SHOCK_VELOCITIES  # noqa: E402
-from ident.data.channels import WHEELLOADER_INPUTS  # noqa: E402
-from ident.data.drive import Drive, resample_drive  # noqa: E402
+from ident.data.channels import CORNERS  # noqa: E402
+from ident.data.drive import resample_drive  # noqa: E402
 from ident.models.aero import AeroModel  # noqa: E402
 from ident.models.library import read_shock_library  # noqa: E402
 from ident.models.vehicle import build_full_car, example_gt_vehicle  # noqa: E402
 from ident.sim.closedloop import simulate  # noqa: E402
-from ident.sim.metrics import bandpass  # noqa: E402
 from ident.sim.track import log_track_run, make_track_run  # noqa: E402
 from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
-from planner.elements import loop_arguments, model_setup_elements  # noqa: E402
 from planner.predict import as_loop_plant  # noqa: E402
 from planner.setups import Setup  # noqa: E402
-from planner.trackdrive import (DEFAULT_ALPHA, build_track_drive, close_loop,  # noqa: E402
-                                make_target, open_loop_parts, regularized_inverse,
-                                residual_shares, shock_linearization)
-from planner.trackdrive.build import PAD_S  # noqa: E402
-from planner.trackdrive.target import segment_taper  # noqa: E402
+from planner.trackdrive import (build_track_drive, make_target,  # noqa: E402
+                                residual_shares)
 
 #: Issue 27: a 120 s drive at 200 Hz built in under 30 s on the 2-core machine.
 TARGET_S = 30.0
@@ -95,7 +86,6 @@ NOISE = 0.02
 LOGGED = ("shock_travel", "ride_height")
 #: The logger's and the known car's replay oversampling; the build's default is 2.
 TRUTH_OVERSAMPLE = 4
-BUILD_OVERSAMPLE = 2
 
 
 def _median(fn, repeat):
@@ -125,80 +115,19 @@ def _rms_share(shares):
     return float(np.sqrt(np.mean(s * s)))
 
 
-def _band_rms(x, fs, band, mask):
-    """As build.py's: RMS of the band-passed (top at most 0.45 fs) signal over `mask`."""
-    y = bandpass(np.asarray(x, float) - np.mean(x), fs=fs, band_hz=(band[0], min(band[1],
-                                                                                0.45 * fs)))
-    y = y[mask]
-    return float(np.sqrt(np.mean(y * y)))
-
-
-def plain_inverse(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
-                  oversample=BUILD_OVERSAMPLE):
-    """The plain frequency-domain inverse with no iteration, from public functions.
-
-    The shocks linearized at the logged travels' velocity RMS (their spectral derivative,
-    in the band), ``u = G+ (y - G_aero u_aero)`` on the zero-padded FFT grid, the drive
-    simulated once on the model.
+def plain_inverse(model, target, setup, library):
+    """The plain frequency-domain inverse with no iteration: ``build_track_drive`` with
+    ``max_iter=0`` (the shocks linearized at the logged travels' velocity RMS,
+    ``u = G+ (y - G_aero u_aero)``, the drive simulated once on the model).
 
     Returns
     -------
-    drive : Drive
-    response : dict of str to ndarray
+    drive : ident.data.drive.Drive
     shares : pandas.DataFrame
-        ``residual_shares`` of the response (1-20 Hz).
+        ``residual_shares`` of its response (1-20 Hz).
     """
-    plant = as_loop_plant(model)
-    shocks = setup.resolve(library)
-    loop_kw = loop_arguments(model_setup_elements([setup], model, where="plain inverse"))
-    if loop_kw.get("bump_stops") is not None:
-        loop_kw["bump_stops"] = loop_kw["bump_stops"][0]
-    names = list(target.channels)
-    aero_inputs = [a for a in AERO_INPUTS if a in plant.rig_inputs]
-    n, fs, band = target.n_samples, target.fs_hz, target.band_hz
-    pad = int(round(PAD_S * fs))
-    n_fft = sp_fft.next_fast_len(n + 2 * pad, real=True)
-    f = np.fft.rfftfreq(n_fft, 1.0 / fs)
-    bins = np.flatnonzero((f >= band[0]) & (f <= band[1]))
-    parts = open_loop_parts(plant, f[bins], outputs=names,
-                            inputs=list(WHEELLOADER_INPUTS) + aero_inputs)
-    mask = target.interior()
-    window = np.concatenate([segment_taper(cnt, fs, target.taper_s)
-                             for _, _, cnt in target.segments])
-    weights = np.array([1.0 / _band_rms(target.channels[c], fs, band, mask) for c in names])
-
-    # the shocks linearized at the logged travel's velocity RMS
-    fn = np.fft.rfftfreq(n, 1.0 / fs)
-    v_rms = []
-    for c in CORNERS:
-        tv = f"shock_travel_{c}"
-        v = (np.fft.irfft(2j * np.pi * fn * np.fft.rfft(target.channels[tv]), n)
-             if tv in target.channels else target.channels[f"shock_velocity_{c}"])
-        v_rms.append(_band_rms(v, fs, band, mask))
-    c_eq, lag = shock_linearization(shocks, v_rms)
-    g = close_loop(parts, c_eq, lag)
-    ginv, _ = regularized_inverse(g[:, :4], weights, alpha=alpha, names=names)
-
-    def spectrum(x):
-        padded = np.zeros(x.shape[:-1] + (n_fft,))
-        padded[..., pad:pad + n] = x
-        return np.fft.rfft(padded, axis=-1)[..., bins]
-
-    ys = spectrum(np.array([target.channels[c] for c in names]) * window)
-    if target.aero is not None and aero_inputs:
-        ua = spectrum(np.array([target.aero[a] for a in aero_inputs]))
-        ys = ys - np.einsum("taf,af->tf", g[:, 4:], ua)
-    full = np.zeros((4, n_fft // 2 + 1), complex)
-    full[:, bins] = np.einsum("itf,tf->if", ginv, ys)
-    wheels = np.fft.irfft(full, n_fft, axis=-1)[:, pad:pad + n] * window
-    channels = {w: wheels[j] for j, w in enumerate(WHEELLOADER_INPUTS)}
-    for a in aero_inputs:
-        channels[a] = np.zeros(n) if target.aero is None else np.asarray(target.aero[a], float)
-    drive = Drive(name=f"{target.name}-plain", fs_hz=fs, channels=channels)
-    outputs = list(dict.fromkeys(names + list(SHOCK_VELOCITIES)))
-    resp = simulate(plant, drive, shocks, oversample=oversample, outputs=outputs, **loop_kw)
-    resp = {c: np.asarray(v) for c, v in resp.channels.items()}
-    return drive, resp, residual_shares(target, resp)
+    res = build_track_drive(model, target, setup, library, max_iter=0)
+    return res.drive, res.residual_share.to_frame("residual_share")
 
 
 def identified_model(vehicle, run_s):
@@ -318,7 +247,7 @@ def main(argv=None):
           + ", ".join(f"{i}: {100 * s:.2f} %" for i, s in h_all["residual_share"].items()))
 
     # -- reference: the plain inverse, no iteration -------------------------------------------
-    med_ref, times_ref, ld_ref, (ref_drive, _, ref_shares) = _median(
+    med_ref, times_ref, ld_ref, (ref_drive, ref_shares) = _median(
         lambda: plain_inverse(model, target, setup, library), args.repeat)
     ref_rms = _rms_share(ref_shares)
     hist1 = float(h_all.loc[1, "residual_share"])

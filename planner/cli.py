@@ -28,6 +28,7 @@ from ident.data.files import check_output
 from ident.data.channels import RIG_KINDS
 from ident.data.units import UNIT_SYSTEMS
 from planner.drive_args import add_parser as add_drive_parser
+from planner.dyno_args import unit_system
 from planner.dyno_cli import add_parser as add_dyno_parser
 
 __all__ = ["main", "build_parser", "noise_report"]
@@ -898,16 +899,6 @@ _FLAGS_ANYWHERE = (("-v", "--verbose",
                     "no progress bars (default: shown); before or after the command"))
 
 
-def _unit_system(text):
-    """``--units`` in any case (``si``, ``Imperial``) as its canonical name in
-    :data:`ident.data.units.UNIT_SYSTEMS` ("SI" or "imperial"); any other text unchanged,
-    for argparse's ``choices`` to refuse with the valid names."""
-    for name in UNIT_SYSTEMS:
-        if text.strip().lower() == name.lower():
-            return name
-    return text
-
-
 def _int_at_least(low):
     """An argparse type: an integer >= `low`, refused before any work with the bound named."""
     def parse(text):
@@ -942,7 +933,7 @@ _UNITS_OF_DRIVES = ("each drive file's own, from its '# units:' line, else SI; t
 
 def _add_units(parser, what, *, default="SI", default_text="SI"):
     """Add ``--units`` (``SI`` or ``imperial``, any case) to `parser`."""
-    parser.add_argument("--units", type=_unit_system, choices=list(UNIT_SYSTEMS),
+    parser.add_argument("--units", type=unit_system, choices=list(UNIT_SYSTEMS),
                         default=default, help=f"{what}: SI or imperial, in any case (default: "
                         f"{default_text})")
 

@@ -32,7 +32,7 @@ import os
 import warnings
 from pathlib import Path
 
-from ident.data.channels import ALL_CHANNELS, quantity_of
+from ident.data.channels import ALL_CHANNELS, CORNERS, quantity_of
 from ident.data.files import (atomic_write_bytes, atomic_write_text, atomic_write_toml,
                               check_can_write, write_csv)
 from ident.data.formats.channel_map import CHANNEL_MAP_FORMAT, UNIT_FACTORS
@@ -82,12 +82,12 @@ TRACK_FILES = {
     "rig.toml": "the rig's wheelloader and aero limits (rig TOML with [limits])",
     "plan.toml": "a rig plan that plays drive.csv (which `drive from-track` writes) on the car",
 }
-#: The logger's channels: canonical -> (name, unit, offset in the logged unit).
+#: The logger's channels: canonical -> (name, unit); the pots carry the virtual logger's
+#: zero offsets (:data:`ident.sim.track.POT_OFFSET_M`), which the map takes off.
 _TRACK_LOGGER = {
-    **{f"shock_travel_{c}": (f"Damper Pos {w}", "mm", o) for c, w, o in (
-        ("LF", "FL", 31.0), ("RF", "FR", 29.0), ("LR", "RL", 42.0), ("RR", "RR", 40.0))},
-    **{f"ride_height_{c}": (f"Ride Height {w}", "mm", 0.0) for c, w in (
-        ("LF", "FL"), ("RF", "FR"), ("LR", "RL"), ("RR", "RR"))},
+    **{f"{kind}_{c}": (f"{label} {w}", "mm")
+       for kind, label in (("shock_travel", "Damper Pos"), ("ride_height", "Ride Height"))
+       for c, w in (("LF", "FL"), ("RF", "FR"), ("LR", "RL"), ("RR", "RR"))},
 }
 #: The example's track run: 120 s (two laps of 60 s) at 200 Hz, seed, the car's downforce.
 _TRACK_RUN = {"duration_s": 120.0, "fs_hz": 200.0, "seed": 27}
@@ -910,7 +910,7 @@ def write_track_example(folder, *, overwrite=False):
     from ident.models.aero import read_aero_model
     from ident.models.library import read_shock_library
     from ident.models.vehicle import build_full_car, example_vehicle
-    from ident.sim.track import log_track_run, make_track_run
+    from ident.sim.track import POT_OFFSET_M, log_track_run, make_track_run
 
     folder = Path(folder)
     paths = {name: folder / name for name in TRACK_FILES}
@@ -927,12 +927,10 @@ def write_track_example(folder, *, overwrite=False):
     library = read_shock_library(DEMO_LIBRARY_PATH)
     shocks = [library["DM"]] * 4
     logged = log_track_run(build_full_car(vehicle).loop_plant(), run, shocks, noise=0.02,
-                           seed=27, pot_offset_m=(0.0, 0.0, 0.0, 0.0))
+                           seed=27)
     t = logged.time_s
-    fast = []
-    for canonical, (name, unit, offset) in _TRACK_LOGGER.items():
-        values = np.round(logged.channels[canonical] * 1e3 + offset, 3)
-        fast.append(Signal(values, t, name=name, unit=unit))
+    fast = [Signal(np.round(logged.channels[canonical] * 1e3, 3), t, name=name, unit=unit)
+            for canonical, (name, unit) in _TRACK_LOGGER.items()]
     slow = slice(None, None, int(round(logged.fs_hz / 20.0)))
     speed = Signal(np.round(logged.channels["speed"][slow] * 3.6, 2), t[slow],
                    name="Ground Speed", unit="km/h")
@@ -947,12 +945,13 @@ def write_track_example(folder, *, overwrite=False):
     finally:
         part.unlink(missing_ok=True)
     lines = ['format = "channel-map/1"', 'name = "the demo car\'s logger (MDF4)"', ""]
-    for canonical, (name, unit, offset) in _TRACK_LOGGER.items():
+    offsets_mm = {f"shock_travel_{c}": round(1e3 * o, 6) for c, o in zip(CORNERS, POT_OFFSET_M)}
+    for canonical, (name, unit) in _TRACK_LOGGER.items():
+        offset = offsets_mm.get(canonical)
         lines += [f"[channels.{canonical}]", f'source = "{name}"', f'units = "{unit}"',
                   "sign = 1"] + ([f"offset = {offset!r}                  # the pot's reading "
                                   "at zero travel, mm"] if offset else []) + [""]
-    lines += ["[channels.speed]", 'source = "Ground Speed"', 'units = "m/s"', "sign = 1",
-              "scale = 0.2777777777777778      # logged in km/h", ""]
+    lines += ["[channels.speed]", 'source = "Ground Speed"', 'units = "km/h"', "sign = 1", ""]
     header = ("# Channel map (channel-map/1), written by shockplan demo: the README's \"From "
               "track data to a\n# rig drive\" example. The logger's channel names and units to "
               "the canonical log channels.\n")

@@ -15,20 +15,12 @@ fast); the commands run in :mod:`planner.drive_commands`, reached through the fu
 from __future__ import annotations
 
 from ident.data.units import UNIT_SYSTEMS
+from planner.dyno_args import unit_system
 
 __all__ = ["add_parser", "LOG_FORMATS"]
 
 #: The track-log formats ``--format`` names (default: by the file's extension).
 LOG_FORMATS = ("csv", "parquet", "mdf", "tdms", "rpc3")
-
-
-def _unit_system(text):
-    """``--units`` in any case as its canonical name (other text unchanged, for argparse's
-    ``choices`` to refuse)."""
-    for name in UNIT_SYSTEMS:
-        if text.strip().lower() == name.lower():
-            return name
-    return text
 
 
 def _common(p, *, logs_help):
@@ -44,7 +36,7 @@ def _common(p, *, logs_help):
                    "canonical names: time, shock_travel_XX, ride_height_XX, speed ...)")
     p.add_argument("--format", choices=list(LOG_FORMATS), default=None,
                    help="the logs' format (default: by each file's extension)")
-    p.add_argument("--units", type=_unit_system, choices=list(UNIT_SYSTEMS), default=None,
+    p.add_argument("--units", type=unit_system, choices=list(UNIT_SYSTEMS), default=None,
                    help="unit system of canonical-name CSV/Parquet logs and of the outputs: SI "
                    "or imperial, in any case (default: the first log's '# units:' line, "
                    "else SI)")
@@ -58,6 +50,12 @@ def _common(p, *, logs_help):
                    help="relative regularization of the inverse: directions the rig moves the "
                    "targets less than ALPHA times its best one are not inverted "
                    "(default: %(default)s)")
+    p.add_argument("--band", metavar="LOW,HIGH", default=None,
+                   help="band the drive reproduces [Hz]; iterate: the one from-track used "
+                   "(default: 0.5 to 30 Hz, the top lowered to the sample rate / 2.5)")
+    p.add_argument("--taper", type=float, default=1.0, metavar="S",
+                   help="fade-in and fade-out of each log [s]; iterate: the one from-track "
+                   "used (default: %(default)s)")
     p.add_argument("--report", metavar="DIR", default=None,
                    help="folder of the report: residuals, reach, PSD overlays, convergence, "
                    "the target (default: DRIVE_report/ beside the drive)")
@@ -84,17 +82,12 @@ def _add_from_track(sub, func):
                    help="the channels to reproduce, kinds (shock_travel, ride_height, "
                    "wheel_accel, chassis_accel) or channels (default: every logged one the "
                    "model has)")
-    p.add_argument("--band", metavar="LOW,HIGH", default=None,
-                   help="band the drive reproduces [Hz] (default: 0.5 to 30 Hz, the top "
-                   "lowered to the sample rate / 2.5)")
     p.add_argument("--max-iter", type=int, default=20, metavar="N",
                    help="most time-domain iterations after the plain inverse (default: "
                    "%(default)s)")
     p.add_argument("--tol", type=float, default=0.01,
                    help="stop when an iteration lowers the residual by less than this share "
                    "of itself, twice (default: %(default)s)")
-    p.add_argument("--taper", type=float, default=1.0, metavar="S",
-                   help="fade-in and fade-out of each log [s] (default: %(default)s)")
     p.add_argument("--section", action="append", metavar="NAME=START:STOP", default=None,
                    help="also write this time window [s] as a drive of its own, "
                    "DRIVE_NAME.csv (repeatable; default: none)")
@@ -133,7 +126,7 @@ def _add_section(sub, func):
                    help="a time window [s] (repeatable; default: none, give --laps)")
     p.add_argument("--laps", metavar="T0,T1,...", default=None,
                    help="lap-start times [s]: one drive per lap (default: none)")
-    p.add_argument("--units", type=_unit_system, choices=list(UNIT_SYSTEMS), default=None,
+    p.add_argument("--units", type=unit_system, choices=list(UNIT_SYSTEMS), default=None,
                    help="unit system of the drive and the sections: SI or imperial (default: "
                    "the drive file's '# units:' line, else SI)")
     p.add_argument("--out", required=True, metavar="DIR",

@@ -26,8 +26,8 @@ from planner.predict import as_loop_plant, load_any_model
 from planner.report.trackdrive import write_drive_report
 from planner.rig import read_rig
 from planner.setups import Setup, resolve_baseline
-from planner.trackdrive import (build_track_drive, cut_sections, lap_sections, make_target,
-                                parse_sections, update_drive)
+from planner.trackdrive import (build_track_drive, check_sections, cut_sections, lap_sections,
+                                make_target, parse_sections, update_drive)
 
 __all__ = ["run_drive_command", "cmd_from_track", "cmd_iterate", "cmd_section",
            "report_folder", "section_path"]
@@ -175,15 +175,19 @@ def cmd_from_track(args):
                          fs_hz=_model_rate(model), band_hz=band, aero=aero,
                          aero_source=args.aero_source, targets=_targets(args.targets),
                          taper_s=args.taper, name=out.stem, where=where)
+    check_sections(sections, n_samples=target.n_samples, fs_hz=target.fs_hz,
+                   of=f"the logs ({len(logs)} of them)" if len(logs) > 1 else "the log",
+                   where=where)
     result = build_track_drive(model, target, setup, library, alpha=args.regularization,
                                max_iter=args.max_iter, tol=args.tol, limits=limits,
                                limit_action=args.limit_action, name=out.stem, where=where)
     units = args.units
+    section_drives = cut_sections(result.drive, sections, where=where)
     write_drive(result.drive, out, units=units, overwrite=args.overwrite)
     write_drive_report(result, report, units=units, overwrite=args.overwrite)
     _print_result(result, units)
     written = [str(out), f"{report}/"]
-    for d, (name, _, _) in zip(cut_sections(result.drive, sections, where=where), sections):
+    for d, (name, _, _) in zip(section_drives, sections):
         path = section_path(out, name)
         write_drive(d, path, units=units, overwrite=args.overwrite)
         written.append(str(path))
@@ -219,7 +223,8 @@ def cmd_iterate(args):
     limits = _limits(args)
     plant = as_loop_plant(model)
     target = make_target(logs, model_outputs=plant.output_names, rig_inputs=plant.rig_inputs,
-                         fs_hz=drive.fs_hz, aero_source="none", name=out.stem, where=where)
+                         fs_hz=drive.fs_hz, band_hz=_band(args.band), aero_source="none",
+                         taper_s=args.taper, name=out.stem, where=where)
     result = update_drive(model, drive, target, run, setup, library, gain=args.gain,
                           alpha=args.regularization, limits=limits,
                           limit_action=args.limit_action, where=where)
@@ -244,8 +249,8 @@ def cmd_section(args):
     drive = read_drive(args.drive, units=args.units)
     units = args.units or drive.settings.get("units", "SI")
     folder = Path(args.out)
-    stem = Path(args.drive).stem
-    paths = [folder / f"{stem}_{name}.csv" for name, _, _ in sections]
+    base = folder / f"{Path(args.drive).stem}.csv"     # sections are CSV drives
+    paths = [section_path(base, name) for name, _, _ in sections]
     for p in paths:
         check_output(p, overwrite=args.overwrite)
     for d, p in zip(cut_sections(drive, sections, where=where), paths):

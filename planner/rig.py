@@ -73,7 +73,7 @@ from scipy import ndimage, signal
 from ident.data.channels import AERO_INPUTS, WHEELLOADER_INPUTS, quantity_of
 from ident.data.drive import Drive
 from ident.data.files import did_you_mean, read_toml
-from ident.data.units import UNIT_LABELS, check_units, to_si
+from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from planner.errors import PlannerError
 
 __all__ = [
@@ -291,7 +291,8 @@ def read_rig(path):
     known = set(_TOP_KEYS)
     for key in doc:
         if key not in known:
-            raise PlannerError(f"{path}: unknown key {key!r}; a rig file has {sorted(known)}")
+            raise PlannerError(f"{path}: unknown key {key!r}{did_you_mean(key, known)}; a rig "
+                               f"file has {sorted(known)}: fix its spelling or remove it")
     if doc.get("format", RIG_FORMAT) != RIG_FORMAT:
         raise PlannerError(f"{path}: 'format' is {doc.get('format')!r}; write format = "
                            f"\"{RIG_FORMAT}\"")
@@ -320,6 +321,11 @@ def read_rig(path):
     return RigSpec(name=name, source=str(path), **out)
 
 
+#: A typical rig's limit per quantity, SI: the example a refusal gives (in the file's units).
+_LIMIT_EXAMPLE_SI = {"displacement": 0.025, "velocity": 0.5, "acceleration": 50.0,
+                     "force": 5000.0, "moment": 3000.0}
+
+
 def _read_limits(table, units, path):
     """The ``[limits]`` table of a rig file as :class:`RigLimits` (SI)."""
     if not isinstance(table, dict):
@@ -335,9 +341,10 @@ def _read_limits(table, units, path):
         field_name, quantity, _ = LIMIT_KEYS[key]
         if not _is_positive_number(v):
             unit = UNIT_LABELS[units][quantity]
+            example = float(from_si(_LIMIT_EXAMPLE_SI[quantity], quantity, units))
             raise PlannerError(f"{path}: [limits] {key} = {v!r} must be a positive number "
-                               f"[{unit}] (units = \"{units}\"); write e.g. {key} = 1.5, or "
-                               "remove the key for no limit")
+                               f"[{unit}] (units = \"{units}\"); write e.g. {key} = "
+                               f"{example:.2g}, or remove the key for no limit")
         values[field_name] = float(to_si(float(v), quantity, units))
     return RigLimits(**values)
 

@@ -444,9 +444,14 @@ def test_bad_files_are_refused_naming_the_file_the_key_and_the_fix(kind, change,
     assert message.startswith(f"{path}: ") and message.count("; ") >= 1
 
 
-def test_an_imperial_files_numbers_are_said_to_be_converted(tmp_path):
-    doc = dict(CONSTANT, units="imperial", balance=1.5)
-    with pytest.raises(AeroModelError, match=r"= 1.5 is outside \[0, 1\] \(converted to SI\)"):
+def test_an_imperial_files_numbers_are_quoted_as_written(tmp_path):
+    """The model checks SI values; a refusal of an imperial file quotes the file's number."""
+    doc = dict(CONSTANT, units="imperial", downforce=-4000.0)
+    with pytest.raises(AeroModelError, match=r"checked in SI; the file has downforce = "
+                                             r"-4000.0 lbf"):
+        read_aero_model(_write(tmp_path, doc))
+    doc = dict(CONSTANT, units="imperial", balance=1.5)   # no unit: nothing to convert
+    with pytest.raises(AeroModelError, match=r"= 1.5 is outside \[0, 1\];"):
         read_aero_model(_write(tmp_path, doc))
 
 

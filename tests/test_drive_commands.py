@@ -147,6 +147,11 @@ def _slow_log(files, tmp_path):
     ("targets", ["--targets", "wheel_accel"], "not in the logs"),
     ("section", ["--section", "x=5"], "NAME=START:STOP"),
     ("aero source", ["--aero-source", "logged"], "no aero_heave"),
+    ("one corner", ["--targets", "shock_travel_LF"], "missing shock_travel_RF"),
+    ("negative taper", ["--taper", "-1"], "must be a time >= 0"),
+    ("nan taper", ["--taper", "nan"], "must be a time >= 0"),
+    ("lap text", ["--laps", "0,a"], "lap-start times"),
+    ("lap beyond", ["--laps", "0,20,100"], "beyond the log"),
 ])
 def test_from_track_refusals_are_one_line(files, tmp_path, capsys, case, extra, message):
     log = files / "log.csv"
@@ -163,6 +168,29 @@ def test_from_track_refusals_are_one_line(files, tmp_path, capsys, case, extra, 
     assert code == 2, err
     assert message in err and err.count("\n") == 1, err
     assert not (tmp_path / "d.csv").exists()
+    assert not (tmp_path / "d_report").exists()
+
+
+def test_parser_defaults_are_the_library_defaults():
+    """The command line's defaults are the functions' (one value, not two to keep equal)."""
+    import argparse
+
+    from planner.drive_args import LOG_FORMATS, add_parser
+    from ident.data.tracklog import TRACK_LOG_FORMATS
+    from planner.trackdrive import DEFAULT_ALPHA
+    from planner.trackdrive.build import DEFAULT_MAX_ITER, DEFAULT_TOL, RIG_GAIN
+
+    top = argparse.ArgumentParser()
+    add_parser(top.add_subparsers(dest="command"), func=None)
+    built = top.parse_args(["drive", "from-track", "L.csv", "--model", "m", "--shocks", "s",
+                            "--setup", "DM", "--out", "d.csv"])
+    assert built.regularization == DEFAULT_ALPHA
+    assert built.max_iter == DEFAULT_MAX_ITER and built.tol == DEFAULT_TOL
+    iterated = top.parse_args(["drive", "iterate", "T.csv", "--model", "m", "--shocks", "s",
+                               "--drive", "d.csv", "--session", "S", "--run", "r",
+                               "--out", "n.csv"])
+    assert iterated.gain == RIG_GAIN and iterated.regularization == DEFAULT_ALPHA
+    assert sorted(LOG_FORMATS) == sorted(TRACK_LOG_FORMATS)
 
 
 def test_target_channel_the_model_lacks_cannot_be_named(files):

@@ -158,7 +158,8 @@ def test_read_rig_refuses(tmp_path, limits, units, match):
 @pytest.mark.parametrize("text, match", [
     ("limits = 3\n", r"rig\.toml: 'limits' must be a table, got int; write it as \[limits\]"),
     ("units = 1\n", r"rig\.toml: 'units': unknown unit system 1"),
-    ("limit = 3\n", r"rig\.toml: unknown key 'limit'; a rig file has \[.*'limits'"),
+    ("limit = 3\n", r"rig\.toml: unknown key 'limit' \(did you mean 'limits'\?\); a rig file "
+                    r"has \[.*'limits'"),
 ])
 def test_read_rig_refuses_top_level(tmp_path, text, match):
     path = tmp_path / "rig.toml"
@@ -384,3 +385,15 @@ def test_limited_drive_is_frozen():
     out = apply_rig_limits(_wheel_drive(_sine(1.0)), None)
     with pytest.raises(dataclasses.FrozenInstanceError):
         out.scale = 2.0
+
+
+def test_limit_refusal_gives_an_example_in_the_files_units(tmp_path):
+    """The example value is a typical limit in the file's own units (1 in, not 0.025)."""
+    path = tmp_path / "rig.toml"
+    path.write_text('units = "imperial"\n[limits]\nwheelloader_displacement = -1\n')
+    with pytest.raises(PlannerError, match=r"\[in\].*write e.g. wheelloader_displacement = "
+                                           r"0\.98,"):
+        read_rig(path)
+    path.write_text('[limits]\nwheelloader_displacement = -1\n')
+    with pytest.raises(PlannerError, match=r"write e.g. wheelloader_displacement = 0\.025,"):
+        read_rig(path)

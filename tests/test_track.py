@@ -91,6 +91,16 @@ def test_ride_height_map_refused(paper_vehicle):
         make_track_run(duration_s=20.0, fs_hz=100.0, seed=2, aero=rh)
 
 
+@pytest.mark.parametrize("kw, message", [
+    ({"duration_s": 0.0}, "duration_s"), ({"fs_hz": float("nan")}, "fs_hz"),
+    ({"taper_s": -1.0}, "taper_s"), ({"oversample": 2.5}, "oversample"),
+    ({"oversample": 0}, "oversample"), ({"duration_s": 0.001}, "at least 2")])
+def test_bad_run_arguments_refused(kw, message):
+    args = dict(duration_s=20.0, fs_hz=100.0, seed=2) | kw
+    with pytest.raises(DriveError, match=message):
+        make_track_run(**args)
+
+
 def test_logger_records_the_car_with_noise_and_offsets(run, paper_vehicle, demo_library):
     car = build_full_car(paper_vehicle).loop_plant()
     shocks = Setup("t", {c: "DM" for c in CORNERS}).resolve(demo_library)

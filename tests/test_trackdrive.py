@@ -246,11 +246,35 @@ def test_four_post_model_and_target_without_aero(paper_vehicle, demo_library, dm
 
 
 @pytest.mark.parametrize("kw, message", [
-    ({"max_iter": 0}, "max_iter"), ({"tol": 1.5}, "tol"), ({"gain": 0.0}, "gain"),
+    ({"max_iter": -1}, "max_iter"), ({"tol": 1.5}, "tol"), ({"gain": 0.0}, "gain"),
     ({"limit_action": "squash"}, "limit action"), ({"alpha": -1.0}, "alpha")])
 def test_bad_options_refused(car, target, dm_setup, demo_library, kw, message):
     with pytest.raises(PlannerError, match=message):
         build_track_drive(car, target, dm_setup, demo_library, **kw)
+
+
+def test_max_iter_zero_is_the_plain_inverse(built, car, target, dm_setup, demo_library):
+    plain = build_track_drive(car, target, dm_setup, demo_library, max_iter=0)
+    h, h0 = built.history, plain.history
+    assert set(h0["iteration"]) == {1} and plain.settings["best_iteration"] == 1
+    first = h[(h["iteration"] == 1) & (h["channel"] == "all")]["residual_share"].iloc[0]
+    assert h0[h0["channel"] == "all"]["residual_share"].iloc[0] == pytest.approx(first,
+                                                                                rel=1e-12)
+
+
+def test_clipped_drive_keeps_its_clipped_aero_loads(car, target, dm_setup, demo_library):
+    """With clip, the drive written is the one limited and simulated: its aero loads too."""
+    from planner.rig import RigLimits
+
+    limit = 0.5 * float(np.max(np.abs(target.aero["aero_heave"])))
+    out = build_track_drive(car, target, dm_setup, demo_library, max_iter=2,
+                            limits=RigLimits(aero_heave_n=limit), limit_action="clip")
+    assert np.max(np.abs(out.drive.channels["aero_heave"])) <= limit * (1 + 1e-9)
+    replay = simulate(car, out.drive, dm_setup.resolve(demo_library), oversample=2,
+                      outputs=list(target.channels))
+    for c in target.channels:   # the response reported is that of the drive written
+        np.testing.assert_allclose(out.response[c], replay.channels[c], rtol=0,
+                                   atol=1e-9 * np.max(np.abs(out.response[c])))
 
 
 def test_target_channel_the_model_lacks_is_refused(car, target, dm_setup, demo_library):

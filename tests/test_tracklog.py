@@ -639,3 +639,13 @@ def test_every_refusal_is_a_session_error_too(tmp_path):
     with pytest.raises(SessionError):
         read_track_log(tmp_path / "none.csv")
     assert TRACK_LOG_RESPONSES[:4] == tuple(f"shock_travel_{c}" for c in CORNERS)
+
+
+def test_loggers_speed_units_are_known():
+    """A logger's km/h and mph are channel-map units (no scale factor to write by hand)."""
+    from ident.data.formats.channel_map import unit_factor
+
+    mph_m_s = 1609.344 / 3600.0   # the international mile, by definition
+    assert unit_factor("km/h", "velocity") == pytest.approx(KMH_M_S, rel=1e-15)
+    assert unit_factor("kph", "velocity") == unit_factor("km/h", "velocity")
+    assert unit_factor("mph", "velocity") == pytest.approx(mph_m_s, rel=1e-15)

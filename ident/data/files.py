@@ -36,7 +36,7 @@ import tomli_w
 
 from ident.data.units import check_units
 
-__all__ = ["read_toml", "write_csv", "write_csv_frame", "write_parquet_frame",
+__all__ = ["read_toml", "write_csv", "write_csv_frame", "write_parquet_frame", "write_table_file",
            "atomic_write_text", "atomic_write_bytes", "atomic_write_toml", "atomic_path",
            "atomic_dir", "check_can_write", "check_output", "did_you_mean",
            "UNITS_KEY", "units_marker", "csv_preamble", "read_units_marker", "read_csv_table",
@@ -542,6 +542,38 @@ def write_csv_frame(frame, path, *, units, index=False, float_format=None):
     with open(path, "wb") as fh:
         fh.write((marker + head.getvalue()).encode("utf-8"))
         pacsv.write_csv(table, fh, write_options=pacsv.WriteOptions(include_header=False))
+
+
+def write_table_file(frame, path, *, kind, units, overwrite):
+    """Write a run-like table atomically as CSV or Parquet, its unit system marked.
+
+    The one writer of run files, mapped run files and track logs: the frame goes to a
+    temporary file beside `path` (:func:`write_csv_frame` or :func:`write_parquet_frame`),
+    which then replaces `path`.
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame
+        The table (values already in `units`).
+    path : str or Path
+        The file to write.
+    kind : {"csv", "parquet"}
+        The file format.
+    units : {"SI", "imperial"}
+        The unit system of the values (the file's marker).
+    overwrite : bool
+        Replace an existing file.
+
+    Raises
+    ------
+    FileExistsError
+        If `path` exists and `overwrite` is false.
+    """
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        if kind == "csv":
+            write_csv_frame(frame, tmp, units=units)
+        else:
+            write_parquet_frame(frame, tmp, units=units)
 
 
 def write_parquet_frame(frame, path, *, units):

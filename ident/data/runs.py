@@ -35,8 +35,8 @@ import numpy as np
 
 from ident.data.channels import (ALL_CHANNELS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero,
                                  quantity_of)
-from ident.data.files import (atomic_path, csv_preamble, read_csv_after, read_units_marker,
-                              resolve_units, write_csv_frame, write_parquet_frame)
+from ident.data.files import (csv_preamble, read_csv_after, read_units_marker, resolve_units,
+                              write_table_file)
 from ident.data.units import check_units, from_si, to_si
 from ident.errors import SessionError
 
@@ -649,11 +649,7 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
     frame = pd.DataFrame(
         {_TIME: t, **{c: from_si(x, quantity_of(c), units) for c, x in si.items()}}
     )
-    with atomic_path(path, overwrite=overwrite) as tmp:
-        if kind == "csv":
-            write_csv_frame(frame, tmp, units=units)
-        else:
-            write_parquet_frame(frame, tmp, units=units)
+    write_table_file(frame, path, kind=kind, units=units, overwrite=overwrite)
 
 
 # --------------------------------------------------------------------------------------
@@ -686,8 +682,4 @@ def write_mapped_run_table(path, time_s, channels, *, units, channel_map):
             )
         data[column] = from_si(x, quantity_of(c), units)
     frame = pd.DataFrame(data)
-    with atomic_path(path, overwrite=False) as tmp:
-        if kind == "csv":
-            write_csv_frame(frame, tmp, units=units)
-        else:
-            write_parquet_frame(frame, tmp, units=units)
+    write_table_file(frame, path, kind=kind, units=units, overwrite=False)

@@ -106,10 +106,10 @@ import numpy as np
 
 from ident.data.channels import (AERO_INPUTS, ALL_CHANNELS, CORNERS, TRACK_CHANNELS,
                                  missing_aero, quantity_of)
-from ident.data.files import (atomic_path, did_you_mean, resolve_units, write_csv_frame,
-                              write_parquet_frame)
+from ident.data.files import did_you_mean, resolve_units, write_table_file
 from ident.data.formats.channel_map import ChannelMap, read_channel_map
-from ident.data.formats.engine import check_time_base, mapped_channel_si, read_mapped_raw
+from ident.data.formats.engine import (check_time_base, mapped_channel_si, mapped_time_base,
+                                      missing_source_error, read_mapped_raw)
 from ident.data.formats.record import FORMAT_NAMES, sniff_format
 from ident.data.runs import (RTOL_TIME_STEP, check_columns, frozen_array,
                              read_table_columns)
@@ -158,8 +158,6 @@ RTOL_SAME_RATE = 0.01
 
 _TRAVELS = tuple(f"shock_travel_{c}" for c in CORNERS)
 _TIME = "time"
-#: Longest list of a file's columns quoted in a message (as ident.data.formats.engine).
-_MAX_LISTED = 30
 #: What ``sniff_format`` answers -> the log format it means.
 _SNIFFED = {"mdf": "mdf", "zip": "mdf", "tdms": "tdms", "rpc3": "rpc3", "parquet": "parquet",
             "text": "csv"}
@@ -388,9 +386,6 @@ def _read_table(path, fmt, cmap, units, *, where):
                                        required=_TRAVELS, names=TRACK_LOG_CHANNELS)
         return t, channels, units
 
-    if units is not None:
-        logger.info("%s: units=%r not used: the channel map %s gives every channel's unit",
-                    where, units, cmap.where)
     time_column = cmap.time or _TIME
     absent = [(c, s.source) for c, s in cmap.channels.items() if s.source not in columns]
     if time_column not in columns:
@@ -400,15 +395,8 @@ def _read_table(path, fmt, cmap, units, *, where):
                 f"top of {cmap.where} (or call it 'time' in the file)")
         absent.insert(0, (_TIME, cmap.time))
     if absent:
-        canonical, source = absent[0]
-        more = f", {len(absent)} mapped columns are missing" if len(absent) > 1 else ""
-        listed = list(columns)
-        shown = (repr(listed) if len(listed) <= _MAX_LISTED else
-                 f"{listed[:_MAX_LISTED]!r} and {len(listed) - _MAX_LISTED} more")
-        raise TrackLogError(
-            f"{where}: has no column {source!r}{did_you_mean(source, listed, cutoff=0.6)} "
-            f"(mapped to {canonical} by {cmap.where}{more}); the file has {shown}: fix the "
-            "map's source names or check the file")
+        raise missing_source_error(absent, list(columns), where=where, map_where=cmap.where,
+                                   noun="column", error=TrackLogError)
     sources = {_TIME: time_column, **cmap.sources}
     t, raw, _ = check_columns(columns, where=where, units="SI", channel_map=sources,
                               required=tuple(cmap.channels), names=tuple(cmap.channels))
@@ -459,8 +447,10 @@ def _read_file(path, fmt, cmap, *, where):
             "(channel_map=, --map MAP.toml) with a [channels.shock_travel_XX] table per corner "
             "naming the logger's channels")
     raw = read_mapped_raw(path, format=fmt, channel_map=cmap, where=where)
+    t, reference = mapped_time_base(raw, cmap, where=where, reference=_TRAVELS[0],
+                                    error=TrackLogError)
+    t = np.asarray(t, dtype=np.float64)
     if cmap.time is not None:
-        t, reference = np.asarray(raw.channels[cmap.time], dtype=np.float64), cmap.time
         for canonical, spec in cmap.channels.items():
             m = raw.channels[spec.source].size
             if m != t.size:
@@ -469,15 +459,6 @@ def _read_file(path, fmt, cmap, *, where):
                     f"map's time channel {cmap.time!r} has {t.size}; with time = \"...\" in "
                     f"{cmap.where} every channel is of that one acquisition: remove time to "
                     "use each channel's own time base")
-    else:
-        reference = cmap.channels[_TRAVELS[0]].source
-        t = raw.time_s.get(reference)
-        if t is None:
-            raise TrackLogError(
-                f"{where}: channel {reference!r} (shock_travel_LF) has no time base in the "
-                "file (no waveform properties); name the channel holding time in seconds with "
-                f"time = \"...\" at the top of {cmap.where}")
-        t = np.asarray(t, dtype=np.float64)
     if t.size < 2:
         raise TrackLogError(f"{where}: has {t.size} sample(s) of {reference!r}; a track log "
                             "needs at least 2")
@@ -486,12 +467,11 @@ def _read_file(path, fmt, cmap, *, where):
     channels, resampled = {}, []
     for canonical, spec in cmap.channels.items():
         x_raw = raw.channels[spec.source]
-        tc = t if cmap.time is not None else raw.time_s.get(spec.source)
-        if tc is None:
-            raise TrackLogError(
-                f"{where}: channel {spec.source!r} ({canonical}) has no time base in the file "
-                "(no waveform properties); name the channel holding time in seconds with "
-                f"time = \"...\" at the top of {cmap.where}")
+        if cmap.time is not None:
+            channels[canonical] = mapped_channel_si(spec, x_raw, t, where=where)
+            continue
+        tc, _ = mapped_time_base(raw, cmap, where=where, reference=canonical,
+                                 error=TrackLogError)
         tc = np.asarray(tc, dtype=np.float64)
         if tc.size == t.size and np.max(np.abs(tc - t)) <= RTOL_TIME_STEP * typical:
             channels[canonical] = mapped_channel_si(spec, x_raw, t, where=where)
@@ -578,13 +558,15 @@ def read_track_log(path, *, channel_map=None, units=None, format=None, name=None
     try:
         fmt = _log_format(path, format, where=where)
         cmap = None if channel_map is None else _log_map(channel_map, where=where)
+        if units is not None:
+            units = check_units(units, where=f"{where}: --units", error=TrackLogError)
+            if cmap is not None:
+                logger.info("%s: units=%r not used: the channel map %s gives every "
+                            "channel's unit", where, units, cmap.where)
         if fmt in ("csv", "parquet"):
             t, channels, units = _read_table(path, fmt, cmap, units, where=where)
             resampled = []
         else:
-            if units is not None:
-                logger.info("%s: units=%r not used: the channel map gives every channel's "
-                            "unit", where, units)
             t, channels, resampled = _read_file(path, fmt, cmap, where=where)
             units = None
     except TrackLogError:
@@ -664,11 +646,7 @@ def write_track_log(log, path, *, units="SI", overwrite=False):
     frame = pd.DataFrame({_TIME: t0 + log.time_s,
                           **{c: from_si(x, quantity_of(c), units)
                              for c, x in log.channels.items()}})
-    with atomic_path(path, overwrite=overwrite) as tmp:
-        if kind == "csv":
-            write_csv_frame(frame, tmp, units=units)
-        else:
-            write_parquet_frame(frame, tmp, units=units)
+    write_table_file(frame, path, kind=kind, units=units, overwrite=overwrite)
     logger.info("wrote track log %r to %s (%s, %d samples)", log.name, path, units,
                 log.n_samples)
     return path

@@ -96,6 +96,7 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
+from ident.data.channels import AERO_INPUTS
 from ident.data.files import atomic_write_toml, did_you_mean, read_toml
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from ident.errors import AeroModelError
@@ -119,7 +120,7 @@ AERO_FORMAT = "shockplan-aero/1"
 #: The kinds of aero model (see the module docstring).
 AERO_KINDS = ("constant", "speed_table", "ride_height_map")
 #: The rig-input channels :meth:`AeroModel.loads` gives, in the spec's order.
-AERO_CHANNELS = ("aero_heave", "aero_roll", "aero_pitch")
+AERO_CHANNELS = AERO_INPUTS
 
 #: TOML key -> (attribute, quantity) of the keys every kind has.
 _GEOMETRY = {"cg_to_front_axle": ("cg_to_front_axle_m", "displacement"),
@@ -770,8 +771,14 @@ def aero_model_from_dict(doc, *, where="aero model", units="SI"):
         problem = exc.problem
         for attr, file_key in _ATTR_KEYS.items():  # attribute names in the problem, too
             problem = problem.replace(attr, file_key)
-        if units != "SI":  # the model speaks SI: say so beside an imperial file's numbers
-            problem += " (converted to SI)"
+        file_key = _ATTR_KEYS.get(base, base)
+        spec = _GEOMETRY.get(file_key) or fields_.get(file_key)
+        unit = None if spec is None else UNIT_LABELS[units][spec[1]]
+        if units != "SI" and unit not in (None, "-"):  # checked in SI: show the file's number
+            raw = doc.get(file_key)
+            shown = (f"{file_key} = {raw!r} {unit}" if isinstance(raw, (int, float))
+                     else f"{file_key} in {unit}")
+            problem += f" (checked in SI; the file has {shown})"
         raise AeroModelError(f"{where}: key {key!r} {problem}; {exc.fix}") from None
 
 

@@ -323,7 +323,7 @@ def bandpass(x, *, fs, band_hz=(1.0, 20.0), order=4, axis=-1):
     x = np.asarray(x, dtype=float)
     if x.ndim == 0:
         raise ValueError("bandpass: x must have a time axis, got a scalar")
-    sos, padlen = _design(band, order, fs)
+    sos, padlen, _ = _band_filter(band, order, fs)   # designed once per (band, order, rate)
     return _filtfilt(x, sos, padlen, axis, "bandpass: x")
 
 

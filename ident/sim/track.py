@@ -38,6 +38,8 @@ Examples
 from __future__ import annotations
 
 import logging
+import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -193,10 +195,19 @@ def make_track_run(*, duration_s, fs_hz, seed, speed_range_m_s=(35.0, 75.0),
         raise DriveError(f"{where}: the aero model {aero.name!r} needs ride heights; the "
                          "virtual track computes aero loads from the speed only: give a "
                          "'constant' or 'speed_table' model")
-    r = int(oversample)
-    if r < 1:
+    for key, value in (("duration_s", duration_s), ("fs_hz", fs_hz), ("taper_s", taper_s)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                or not math.isfinite(value) or value < 0 or (value == 0 and key != "taper_s"):
+            raise DriveError(f"{where}: {key} = {value!r} must be a finite number "
+                             f"{'>= 0' if key == 'taper_s' else '> 0'}")
+    if isinstance(oversample, bool) or not isinstance(oversample, numbers.Real) \
+            or oversample != int(oversample) or oversample < 1:
         raise DriveError(f"{where}: oversample = {oversample!r} must be an integer >= 1")
+    r = int(oversample)
     n = int(round(duration_s * fs_hz))
+    if n < 2:
+        raise DriveError(f"{where}: duration_s * fs_hz = {duration_s * fs_hz:g} samples; a run "
+                         "needs at least 2: lengthen it")
     fine = n * r
     speed_fine = make_speed_trace(duration_s=duration_s, fs_hz=fs_hz * r, seed=seed,
                                   speed_range_m_s=speed_range_m_s,

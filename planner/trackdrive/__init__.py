@@ -18,7 +18,8 @@ from planner.trackdrive.build import (DEFAULT_MAX_ITER, DEFAULT_TOL, LIMIT_ACTIO
                                       residual_shares, update_drive)
 from planner.trackdrive.inverse import (DEFAULT_ALPHA, close_loop, loop_frf, open_loop_parts,
                                         reach_shares, regularized_inverse, shock_linearization)
-from planner.trackdrive.sections import cut_sections, lap_sections, parse_sections
+from planner.trackdrive.sections import (check_sections, cut_sections, lap_sections,
+                                         parse_sections)
 from planner.trackdrive.target import (AERO_SOURCES, DEFAULT_BAND_HZ, MIN_RATE_FACTOR,
                                        TARGET_KINDS, DriveTarget, make_target)
 
@@ -37,6 +38,7 @@ __all__ = [
     "reach_shares",
     "parse_sections",
     "lap_sections",
+    "check_sections",
     "cut_sections",
     "TARGET_KINDS",
     "AERO_SOURCES",

@@ -45,12 +45,12 @@ from ident.sim.metrics import bandpass
 from planner.elements import loop_arguments, model_setup_elements
 from planner.errors import PlannerError
 from planner.predict import as_loop_plant
-from planner.rig import apply_rig_limits
+from planner.rig import LIMIT_ACTIONS, apply_rig_limits
 from planner.setups import Setup
 from planner.trackdrive.inverse import (DEFAULT_ALPHA, close_loop, coherence_weights,
                                         open_loop_parts, reach_shares, regularized_inverse,
                                         shock_linearization)
-from planner.trackdrive.target import DriveTarget, segment_taper
+from planner.trackdrive.target import DriveTarget, segment_taper, spectral_derivative
 
 __all__ = [
     "TrackDrive",
@@ -69,7 +69,6 @@ log = logging.getLogger(__name__)
 #: The band residuals are reported in [Hz]: the metrics'.
 REPORT_BAND_HZ = (1.0, 20.0)
 #: What to do where the drive exceeds the rig's limits.
-LIMIT_ACTIONS = ("clip", "scale")
 #: Most time-domain iterations of :func:`build_track_drive`.
 DEFAULT_MAX_ITER = 20
 #: The residual "stops falling" when an iteration lowers it by less than this share of
@@ -212,6 +211,9 @@ class _Problem:
                             else self.weights[:, None] * trust)          # (n_t, n_f)
         self.c_eq = None
         self.outputs = list(dict.fromkeys(self.names + list(SHOCK_VELOCITIES)))
+        # the target's band spectrum (n_t, n_b), faded as every correction is
+        self.y_spec = self.spectrum(np.array([target.channels[c] for c in self.names])
+                                    * self.window)
 
     # -- the linear loop ----------------------------------------------------------------
     def linearize(self, v_rms):
@@ -237,32 +239,29 @@ class _Problem:
         padded[..., self.pad:self.pad + self.n] = x
         return np.fft.rfft(padded, axis=-1)[..., self.bins]
 
-    def correction(self, residual):
-        """Wheelloader correction (4, n) for a residual (n_t, n) of the target channels."""
-        r = self.spectrum(residual * self.window)                          # (n_t, n_b)
-        du = np.einsum("itf,tf->if", self.ginv, r)                        # (4, n_b)
+    def _inverted(self, spec):
+        """The wheelloader inputs (4, n) the inverse gives for target-row spectra (n_t, n_b)."""
+        du = np.einsum("itf,tf->if", self.ginv, spec)                     # (4, n_b)
         full = np.zeros((4, self.n_fft // 2 + 1), complex)
         full[:, self.bins] = du
         x = np.fft.irfft(full, self.n_fft, axis=-1)[:, self.pad:self.pad + self.n]
         return x * self.window
+
+    def correction(self, residual):
+        """Wheelloader correction (4, n) for a residual (n_t, n) of the target channels."""
+        return self._inverted(self.spectrum(residual * self.window))
 
     def plain_inverse(self):
         """The drive of the linear inverse alone: ``G+ (y - G_aero u_aero)`` (4, n)."""
-        y = np.array([self.target.channels[c] for c in self.names])
-        ys = self.spectrum(y * self.window)
+        ys = self.y_spec
         if self.target.aero is not None:
             ua = self.spectrum(np.array([self.target.aero[a] for a in self.aero_inputs]))
             ys = ys - np.einsum("taf,af->tf", self.g_aero, ua)
-        du = np.einsum("itf,tf->if", self.ginv, ys)
-        full = np.zeros((4, self.n_fft // 2 + 1), complex)
-        full[:, self.bins] = du
-        x = np.fft.irfft(full, self.n_fft, axis=-1)[:, self.pad:self.pad + self.n]
-        return x * self.window
+        return self._inverted(ys)
 
     def reach(self):
         """Unreachable share per target channel (1-20 Hz) at the current linearization."""
-        y = np.array([self.target.channels[c] for c in self.names])
-        yw = self.spectrum(y * self.window) * self.row_weights
+        yw = self.y_spec * self.row_weights
         b = self.report_bins
         shares = reach_shares(self.gain[:, :, b], yw[:, b])
         return pd.DataFrame({"unreachable_share": shares}, index=pd.Index(self.names,
@@ -315,8 +314,9 @@ def _history_rows(iteration, shares, gain, seconds):
 
 
 def _check_options(max_iter, tol, gain, limit_action, where):
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise PlannerError(f"{where}: max_iter = {max_iter!r} must be an integer >= 1")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 0:
+        raise PlannerError(f"{where}: max_iter = {max_iter!r} must be an integer >= 0 (0: the "
+                           "plain inverse alone)")
     if not np.isfinite(tol) or not 0 <= tol < 1:
         raise PlannerError(f"{where}: tol = {tol!r} must be in [0, 1)")
     if not np.isfinite(gain) or not 0 < gain <= 2:
@@ -351,7 +351,8 @@ def build_track_drive(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
     alpha : float
         Relative regularization of the inverse (:data:`DEFAULT_ALPHA`).
     max_iter : int
-        Most time-domain iterations after the plain inverse.
+        Most time-domain iterations after the plain inverse (0: the plain frequency-domain
+        inverse alone, simulated once).
     tol : float
         Stop when an iteration lowers the residual by less than this share, twice.
     gain : float
@@ -385,8 +386,7 @@ def build_track_drive(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
     for c in CORNERS:
         tv = f"shock_travel_{c}"
         if tv in target.channels:
-            f = np.fft.rfftfreq(p.n, 1.0 / p.fs)
-            v = np.fft.irfft(2j * np.pi * f * np.fft.rfft(target.channels[tv]), p.n)
+            v = spectral_derivative(target.channels[tv], p.fs)
         else:
             v = target.channels[f"shock_velocity_{c}"]
         v0.append(_band_rms(v, p.fs, target.band_hz, p.mask, tv, where, allow_zero=True))
@@ -410,12 +410,13 @@ def build_track_drive(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
         log.info("%s: iteration %d: residual %.4f (gain %.2f)", where, it, total, step)
         if best is None or total < best[0]:
             improved = best is None or total < best[0] * (1 - tol)
-            best = (total, it, wheels, resp, limit_report)
+            best = (total, it, drive, resp, limit_report)   # the drive as limited and played
             stalls = 0 if improved else stalls + 1
         else:
             stalls += 1
             step *= 0.5
-            wheels, resp = best[2], best[3]
+            drive, resp = best[2], best[3]
+            wheels = np.array([drive.channels[w] for w in WHEELLOADER_INPUTS])
         if stalls >= 2:
             stop = "converged"
             break
@@ -423,8 +424,7 @@ def build_track_drive(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
             break
         p.linearize(p.velocity_rms(resp))
         wheels = wheels + step * p.correction(p.residual(resp))
-    total, best_it, wheels, resp, limit_report = best
-    drive = p.drive(wheels, name)
+    total, best_it, drive, resp, limit_report = best
     if limits is not None and limit_action == "scale":
         drive, limit_report = _limited(drive, limits, "scale")
         if limit_report is not None and min(limit_report.scale, limit_report.aero_scale) < 1:

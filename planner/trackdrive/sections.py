@@ -24,7 +24,7 @@ from ident.data.drive import Drive
 from planner.errors import PlannerError
 from planner.trackdrive.target import segment_taper
 
-__all__ = ["parse_sections", "lap_sections", "cut_sections", "SECTION_TAPER_S"]
+__all__ = ["parse_sections", "lap_sections", "check_sections", "cut_sections", "SECTION_TAPER_S"]
 
 #: Fade at each end of a section's drive [s].
 SECTION_TAPER_S = 0.5
@@ -82,11 +82,55 @@ def lap_sections(lap_times_s, *, where="--laps"):
     PlannerError
         Fewer than two times, or times not strictly increasing or negative.
     """
-    t = np.asarray([float(x) for x in lap_times_s], float)
+    try:
+        t = np.asarray([float(x) for x in lap_times_s], float)
+    except (TypeError, ValueError):
+        t = np.array([np.nan])
     if t.size < 2 or np.any(np.diff(t) <= 0) or t[0] < 0 or not np.all(np.isfinite(t)):
         raise PlannerError(f"{where}: give two or more lap-start times in seconds, increasing "
                            "and >= 0 (e.g. --laps 3.0,95.2,187.9: two laps)")
     return [(f"lap{k + 1}", float(t[k]), float(t[k + 1])) for k in range(t.size - 1)]
+
+
+def check_sections(sections, *, n_samples, fs_hz, of, taper_s=SECTION_TAPER_S,
+                   where="sections"):
+    """Check section windows against a record before anything is built or written.
+
+    Parameters
+    ----------
+    sections : sequence of (str, float, float)
+        Name, start and stop [s].
+    n_samples : int
+        The record's length.
+    fs_hz : float
+        Its sample rate [Hz].
+    of : str
+        The record, as named in messages (``"the drive 'lap'"``).
+    taper_s : float
+        Fade at each end of a section [s].
+    where : str
+        Who asks, first in messages.
+
+    Returns
+    -------
+    list of (int, int, ndarray)
+        Per section: first and end sample, and its fade window, shape (end - first,).
+
+    Raises
+    ------
+    PlannerError
+        A window that ends beyond the record or holds too few samples for its fades.
+    """
+    out = []
+    for name, a, b in sections:
+        i, j = int(round(a * fs_hz)), int(round(b * fs_hz))
+        if j > n_samples:
+            raise PlannerError(f"{where}: section {name!r} ends at {b:g} s, beyond {of} "
+                               f"({n_samples / fs_hz:g} s); shorten it")
+        w = segment_taper(j - i, fs_hz, taper_s, where=f"{where}: section {name!r}",
+                          fix="give a longer window")
+        out.append((i, j, w))
+    return out
 
 
 def cut_sections(drive, sections, *, taper_s=SECTION_TAPER_S, where="sections"):
@@ -113,13 +157,10 @@ def cut_sections(drive, sections, *, taper_s=SECTION_TAPER_S, where="sections"):
     PlannerError
         A window that ends beyond the drive or holds too few samples for its fades.
     """
+    windows = check_sections(sections, n_samples=drive.n_samples, fs_hz=drive.fs_hz,
+                             of=f"the drive '{drive.name}'", taper_s=taper_s, where=where)
     out = []
-    for name, a, b in sections:
-        i, j = int(round(a * drive.fs_hz)), int(round(b * drive.fs_hz))
-        if j > drive.n_samples:
-            raise PlannerError(f"{where}: section {name!r} ends at {b:g} s, beyond the drive "
-                               f"'{drive.name}' ({drive.duration_s:g} s); shorten it")
-        w = segment_taper(j - i, drive.fs_hz, taper_s, where=f"{where}: section {name!r}")
+    for (name, a, b), (i, j, w) in zip(sections, windows):
         channels = {c: np.asarray(drive.channels[c][i:j], float) * w for c in drive.rig_inputs}
         settings = dict(drive.settings, section=name, window_s=(float(a), float(b)),
                         section_of=drive.name, section_taper_s=float(taper_s))

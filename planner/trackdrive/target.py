@@ -39,6 +39,7 @@ __all__ = [
     "DriveTarget",
     "make_target",
     "segment_taper",
+    "spectral_derivative",
     "TARGET_KINDS",
     "DEFAULT_BAND_HZ",
     "MIN_RATE_FACTOR",
@@ -136,19 +137,53 @@ class DriveTarget:
         return mask
 
 
-def segment_taper(n, fs_hz, taper_s, *, where="target"):
-    """Raised-cosine fade-in and fade-out over `taper_s` [s] at both ends, shape (n,)."""
+def segment_taper(n, fs_hz, taper_s, *, where="target",
+                  fix="give a longer log or a shorter --taper"):
+    """Raised-cosine fade-in and fade-out over `taper_s` [s] at both ends, shape (n,).
+
+    Raises
+    ------
+    PlannerError
+        If `taper_s` is not a finite time >= 0, or the record is shorter than four fades
+        (the message ends with `fix`).
+    """
+    try:
+        taper_s = float(taper_s)
+    except (TypeError, ValueError):
+        taper_s = float("nan")
+    if not np.isfinite(taper_s) or taper_s < 0:
+        raise PlannerError(f"{where}: the fade (--taper) must be a time >= 0 [s]; give e.g. "
+                           "--taper 1.0")
     w = np.ones(n)
     m = int(round(taper_s * fs_hz))
     if m > 0:
         if 4 * m > n:
             raise PlannerError(f"{where}: {n / fs_hz:g} s is too short for fades of "
-                               f"{taper_s:g} s at each end (at least 4 x the fade); give a "
-                               "longer log or a shorter --taper")
+                               f"{taper_s:g} s at each end (at least 4 x the fade); {fix}")
         ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(m) + 0.5) / m)
         w[:m] = ramp
         w[n - m:] = ramp[::-1]
     return w
+
+
+def spectral_derivative(x, fs_hz):
+    """The time derivative of a record by the FFT (exact for its band-limited content).
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        The record (e.g. a shock travel [m]), faded to zero at its ends.
+    fs_hz : float
+        Its sample rate [Hz].
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``dx/dt`` (e.g. the shock velocity [m/s]).
+    """
+    x = np.asarray(x, float)
+    f = np.fft.rfftfreq(x.size, 1.0 / fs_hz)
+    return np.fft.irfft(2j * np.pi * f * np.fft.rfft(x), x.size)
 
 
 def _resample(x, fs_from, fs_to, where):
@@ -344,8 +379,10 @@ def make_target(logs, *, model_outputs, rig_inputs, fs_hz=None, band_hz=None, ae
                         "leave it out of --targets")
                 wanted.append(nm)
         chosen = list(dict.fromkeys(wanted))
-        if not any(c.startswith("shock_travel_") for c in chosen):
-            raise PlannerError(f"{where}: --targets must include the shock travels")
+        absent = [f"shock_travel_{c}" for c in CORNERS if f"shock_travel_{c}" not in chosen]
+        if absent:  # the loop is linearized at every corner's logged shock speed
+            raise PlannerError(f"{where}: --targets must include the shock travels of every "
+                               f"corner (missing {', '.join(absent)}); add shock_travel")
     else:
         chosen = [c for c in logged if c in outputs or c.startswith("shock_travel_")]
         left_out = [c for c in logged if c not in chosen]
@@ -375,8 +412,7 @@ def make_target(logs, *, model_outputs, rig_inputs, fs_hz=None, band_hz=None, ae
             x = np.asarray(lg.channels[c], float)
             x = _resample(x - x.mean(), fs_log, fs_work, where)[:n]
             if mapped[c] != c:  # travel to velocity: the spectral derivative
-                f = np.fft.rfftfreq(x.size, 1.0 / fs_work)
-                x = np.fft.irfft(2j * np.pi * f * np.fft.rfft(x), x.size)
+                x = spectral_derivative(x, fs_work)
             parts[c].append(w * (x - x.mean()))
         a = _log_aero(lg, aero, source, where)
         if a is not None:  # the dynamic part: the mean is the aeroloaders' static preload

@@ -113,7 +113,9 @@ _LBF = TO_SI["force"]  # lbf -> N
 #: Factor from each accepted unit to the SI unit, per quantity.
 UNIT_FACTORS = MappingProxyType({
     "displacement": MappingProxyType({"m": 1.0, "cm": 1e-2, "mm": 1e-3, "in": _IN}),
-    "velocity": MappingProxyType({"m/s": 1.0, "mm/s": 1e-3, "in/s": _IN}),
+    # km/h and mph: a track logger's speed (the shock velocities are never in them)
+    "velocity": MappingProxyType({"m/s": 1.0, "mm/s": 1e-3, "in/s": _IN, "km/h": 1.0 / 3.6,
+                                  "mph": 0.44704}),
     "acceleration": MappingProxyType({"m/s^2": 1.0, "mm/s^2": 1e-3, "in/s^2": _IN,
                                       "g": STANDARD_GRAVITY_M_S2}),
     "force": MappingProxyType({"N": 1.0, "kN": 1e3, "lbf": _LBF}),
@@ -125,6 +127,7 @@ UNIT_FACTORS = MappingProxyType({
 UNIT_ALIASES = MappingProxyType({
     "inch": "in", "inches": "in",
     "in/sec": "in/s", "ips": "in/s",
+    "kph": "km/h", "kmh": "km/h", "km/hr": "km/h", "mi/h": "mph",
     "m/s2": "m/s^2", "m/s²": "m/s^2", "m/sec^2": "m/s^2",
     "mm/s2": "mm/s^2", "mm/s²": "mm/s^2",
     "in/s2": "in/s^2", "in/s²": "in/s^2", "in/sec^2": "in/s^2",

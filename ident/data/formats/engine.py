@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
 import logging
 import os
 from collections.abc import Mapping, Sequence
@@ -11,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ident.data.channels import AERO_INPUTS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
+from ident.data.files import did_you_mean
 from ident.errors import SessionError
 from ident.data.formats.record import FORMAT_NAMES, FORMATS
 from ident.data.formats.channel_map import ChannelMap, read_channel_map
@@ -31,7 +31,8 @@ from ident.models.library import ShockLibrary, read_shock_library
 from ident.data.units import check_units
 
 __all__ = ["READERS", "read_raw", "read_mapped_raw", "check_time_base", "mapped_channel_si",
-           "read_run", "import_runs", "parse_setup", "as_channel_map"]
+           "read_run", "import_runs", "parse_setup", "as_channel_map", "missing_source_error",
+           "mapped_time_base"]
 
 logger = logging.getLogger(__name__)
 
@@ -75,6 +76,44 @@ def _listing(names):
     return f"{names[:_MAX_LISTED]!r} and {len(names) - _MAX_LISTED} more"
 
 
+def missing_source_error(absent, available, *, where, map_where, noun="channel",
+                         candidates=None, error=SessionError):
+    """The error for mapped sources a file lacks: the first named, with a did-you-mean.
+
+    One sentence for every reader of mapped files (rig runs, track logs): the missing
+    source, the canonical channel it was mapped to and by which map, how many more are
+    missing, and the file's own names (the first 30).
+
+    Parameters
+    ----------
+    absent : sequence of (str, str)
+        ``(canonical, source)`` of each mapped source the file lacks, the first reported.
+    available : sequence of str
+        The file's channel (or column) names, as listed in the message.
+    where, map_where : str
+        The file and the map, as named in messages.
+    noun : str
+        What the file's names are (``"channel"``, ``"column"``).
+    candidates : sequence of str, optional
+        The names a typo is matched against (default: `available`).
+    error : type
+        The exception class returned.
+
+    Returns
+    -------
+    Exception
+        An instance of `error`, for the caller to raise.
+    """
+    canonical, source = absent[0]
+    more = f", {len(absent)} mapped {noun}s are missing" if len(absent) > 1 else ""
+    hint = did_you_mean(source, available if candidates is None else candidates, cutoff=0.6)
+    return error(
+        f"{where}: has no {noun} {source!r}{hint} (mapped to {canonical} by "
+        f"{map_where}{more}); the file has {_listing(available)}: fix the map's source names "
+        "or check the file"
+    )
+
+
 def read_raw(path, *, format, channels=None, where=None):
     """Read a rig data file of the given format, as stored (no map).
 
@@ -102,20 +141,50 @@ def read_raw(path, *, format, channels=None, where=None):
     return READERS[_check_format(format)](path, channels=channels, where=where)
 
 
-def _time_base(raw, cmap, *, where):
-    """Return (times [s], the channel they came from) shared by the mapped channels."""
+def mapped_time_base(raw, cmap, *, where, reference=None, error=SessionError):
+    """Return the times [s] the mapped channels are read on, and the channel they came from.
+
+    The map's ``time`` channel if it names one, else the file's own time base of the
+    `reference` channel's source.
+
+    Parameters
+    ----------
+    raw : RawRecord
+        The file's channels (:func:`read_mapped_raw`).
+    cmap : ChannelMap
+        The map.
+    where : str
+        The file, as named in messages.
+    reference : str, optional
+        The canonical channel whose time base is taken when the map names no ``time``
+        (default: the map's first channel).
+    error : type
+        The exception class raised.
+
+    Returns
+    -------
+    times : ndarray, shape (n_samples,)
+        As stored in the file [s].
+    source : str
+        The file's channel the times belong to.
+
+    Raises
+    ------
+    SessionError
+        (or `error`) If the channel has no time base in the file.
+    """
     if cmap.time is not None:
         return raw.channels[cmap.time], cmap.time
-    for canonical, spec in cmap.channels.items():
-        t = raw.time_s.get(spec.source)
-        if t is None:
-            raise SessionError(
-                f"{where}: channel {spec.source!r} ({canonical}) has no time base in the "
-                f"file (no waveform properties); name the channel holding time in seconds "
-                f"with time = \"...\" at the top of {cmap.where}"
-            )
-        return t, spec.source
-    raise SessionError(f"{cmap.where}: maps no channel")  # pragma: no cover - map checks
+    canonical = next(iter(cmap.channels)) if reference is None else reference
+    source = cmap.channels[canonical].source
+    t = raw.time_s.get(source)
+    if t is None:
+        raise error(
+            f"{where}: channel {source!r} ({canonical}) has no time base in the "
+            f"file (no waveform properties); name the channel holding time in seconds "
+            f"with time = \"...\" at the top of {cmap.where}"
+        )
+    return t, source
 
 
 def read_mapped_raw(path, *, format, channel_map, where=None):
@@ -166,18 +235,11 @@ def read_mapped_raw(path, *, format, channel_map, where=None):
     if cmap.time is not None and cmap.time not in raw.channels:
         absent.insert(0, ("time", cmap.time))
     if absent:
-        canonical, source = absent[0]
-        more = f", {len(absent)} mapped channels are missing" if len(absent) > 1 else ""
         names = list(raw.available)
         if fmt == "tdms":  # a bare channel name is accepted too
             names += [a.partition("/")[2] for a in raw.available]
-        close = difflib.get_close_matches(source, names, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise SessionError(
-            f"{where}: has no channel {source!r}{hint} (mapped to {canonical} by "
-            f"{cmap.where}{more}); the file has {_listing(raw.available)}: fix the map's "
-            "source names or check the file"
-        )
+        raise missing_source_error(absent, list(raw.available), where=where,
+                                   map_where=cmap.where, candidates=names)
     for spec in cmap.channels.values():
         spec.check_file_unit(raw.units.get(spec.source, ""), where=where)
     return raw
@@ -314,7 +376,7 @@ def read_run(path, *, format, channel_map, required=(), where=None):
         )
     raw = read_mapped_raw(path, format=fmt, channel_map=cmap, where=where)
 
-    t_raw, t_source = _time_base(raw, cmap, where=where)
+    t_raw, t_source = mapped_time_base(raw, cmap, where=where)
     t = np.asarray(t_raw, dtype=np.float64)
     n = t.size
     for canonical, spec in cmap.channels.items():
