@@ -75,7 +75,7 @@ import numpy as np
 import pandas as pd
 
 from ident.data.files import check_can_write, csv_preamble, resolve_units, write_csv
-from ident.data.channels import CORNERS
+from ident.data.channels import CORNERS, corner_table
 from ident.data.units import UNIT_LABELS, from_si, to_si
 from ident.errors import ShockModelError
 from ident.models.bumpstops import (NO_BUMP_STOP, BumpStopLibrary, check_packer,
@@ -194,13 +194,8 @@ def _corner_elements(who, bump_stops, packers_m):
         if values is None:
             out.append(None)
             continue
-        if not isinstance(values, Mapping):
-            raise TypeError(f"{who}: {key} must be a mapping corner -> value, got "
-                            f"{type(values).__name__}")
-        unknown = [c for c in values if c not in CORNERS]
-        if unknown:
-            raise PlannerError(f"{who}: {key}: unknown corner {unknown[0]!r}; corners are "
-                               f"{list(CORNERS)}")
+        values = corner_table(values, name=key, where=who, error=PlannerError,
+                              what="bump-stop id" if key == "bump_stops" else "packer [m]")
         given = {}
         for c in (c for c in CORNERS if c in values):
             v = values[c]
@@ -270,18 +265,13 @@ class Setup:
         _check_text(self.name, "setup name", "give a non-empty name without surrounding "
                     "spaces")
         who = f"setup {self.name!r}"
-        if not isinstance(self.shocks, Mapping):
-            raise TypeError(f"{who}: shocks must be a mapping corner -> shock id, got "
-                            f"{type(self.shocks).__name__}")
-        unknown = [c for c in self.shocks if c not in CORNERS]
-        if unknown:
-            raise PlannerError(f"{who}: unknown corner {unknown[0]!r}; corners are "
-                               f"{list(CORNERS)}")
-        missing = [c for c in CORNERS if c not in self.shocks]
+        shocks = corner_table(self.shocks, name="shocks", where=who, what="shock id",
+                              error=PlannerError)
+        missing = [c for c in CORNERS if c not in shocks]
         if missing:
             raise PlannerError(f"{who}: no shock for corner(s) {missing}; give a shock id for "
                                f"each of {list(CORNERS)}")
-        ids = tuple(self.shocks[c] for c in CORNERS)
+        ids = tuple(shocks[c] for c in CORNERS)
         for c, sid in zip(CORNERS, ids):
             _check_text(sid, f"{who}: corner {c}: shock id", "give a shock id from the "
                         "library (non-empty, no surrounding spaces)")

@@ -779,7 +779,8 @@ BAD_ELEMENTS = [
     ({"bump_stops": {"LF": (-0.001, [0.0, 0.01], [0.0, 50.0])}}, ValueError, ">= 0"),
     ({"bump_stops": {"LF": (0.003, [0.0, 0.01, 0.005], [0.0, 50.0, 60.0])}}, ValueError,
      "strictly"),
-    ({"bump_stops": {"XX": (0.003, [0.0, 0.01], [0.0, 50.0])}}, ValueError, "unknown corners"),
+    ({"bump_stops": {"XX": (0.003, [0.0, 0.01], [0.0, 50.0])}}, ValueError,
+     r"unknown corner\(s\) \['XX'\]"),
     ({"bump_stops": {"LF": "BS-F"}}, TypeError, "contact_travel_m"),
     ({"static_corner_load_n": [3000.0, -1.0, 3000.0, 3000.0]}, ValueError, "positive static"),
 ]

@@ -881,7 +881,7 @@ BAD_REAL_CARS = [
     ("static string", _edit_manifest(lambda d: d["static_corner_load"].update(LR="3300")),
      r"static_corner_load LR = '3300' is not a load"),
     ("static not a table", _edit_manifest(lambda d: d.update(static_corner_load=3100.0)),
-     r"static_corner_load must be 4 positive numbers"),
+     r"static_corner_load must be a table"),
     ("static mismatch", _edit_manifest(lambda d: d["static_corner_load"].update(LF=2500.0)),
      r"run 'baseline-1' \(.*baseline-1.csv\): tire_force_LF has a mean of 3\d{3}(\.\d+)? N, so "
      r"it carries the static load, but static_corner_load LF = 2500 N \(\+2\d%, more than 10% "

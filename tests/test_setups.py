@@ -95,7 +95,7 @@ BAD_SETUPS = [
      r"setup 'x': no shock for corner\(s\) \['RR'\]"),
     ("unknown corner", lambda: Setup("x", {"LF": "A", "RF": "A", "LR": "A", "RR": "A",
                                            "LM": "A"}),
-     r"setup 'x': unknown corner 'LM'"),
+     r"setup 'x': shocks names unknown corner\(s\) \['LM'\]"),
     ("empty id", lambda: _setup("x", "A", "", "A", "A"), r"setup 'x': corner RF: shock id ''"),
     ("id not str", lambda: _setup("x", "A", "A", 20, "A"), r"corner LR: shock id 20"),
 ]
@@ -682,7 +682,7 @@ def test_setup_with_elements_compares_pickles_and_reprs():
 
 
 @pytest.mark.parametrize("kwargs, err, match", [
-    ({"bump_stops": {"FL": "BS-F"}}, PlannerError, r"bump_stops: unknown corner 'FL'"),
+    ({"bump_stops": {"FL": "BS-F"}}, PlannerError, r"bump_stops names unknown corner\(s\) \['FL'\]"),
     ({"bump_stops": {"LF": ""}}, PlannerError, r"bump_stops LF: bump stop '' is not an id"),
     ({"packers_m": {"LF": -0.001}}, PlannerError, r"packers_m LF = -0\.001 is not a thickness"),
     ({"packers_m": {"LF": "0.003"}}, PlannerError, r"packers_m LF = '0\.003' is not a thickness"),

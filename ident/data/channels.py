@@ -8,6 +8,8 @@ compression.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 __all__ = [
     "CORNERS",
     "AERO_INPUTS",
@@ -25,6 +27,7 @@ __all__ = [
     "quantity_of",
     "corner_of",
     "kind_of",
+    "corner_table",
 ]
 
 CORNERS = ("LF", "RF", "LR", "RR")
@@ -134,3 +137,76 @@ def quantity_of(channel):
 #: The rigs a session or plan may come from: 7- and 8-post rigs have aero actuators, a
 #: 4-post rig has the wheel pads only.
 RIG_KINDS = ("7-post", "8-post", "4-post")
+
+
+def corner_table(value, *, name, where, what="values", error=ValueError, type_error=TypeError,
+                 sequence=False):
+    """Check a per-corner table and return it as a dict in :data:`CORNERS` order.
+
+    The one check of the per-corner inputs (a session's, a plan's and a setup's bump stops
+    and packers, static loads, friction, a setup's shocks, a simulation's per-corner
+    arguments): a mapping corner -> value whose keys are corners, or (with `sequence`) 4
+    values in corner order. Which corners must be given and what a value must be is the
+    caller's check.
+
+    Parameters
+    ----------
+    value : mapping, sequence of 4 or None
+        The table; None is the empty table.
+    name : str
+        The argument or key named in messages (``"bump_stops"``).
+    where : str
+        Who asks, put first in messages.
+    what : str, optional
+        What a value is, named in messages (``"bump-stop ids"``).
+    error : type, optional
+        The exception raised on an unknown corner or a sequence not of 4 (default
+        :class:`ValueError`; a caller passes its own subclass).
+    type_error : type, optional
+        The exception raised when `value` is neither a mapping nor (with `sequence`) a
+        sequence (default :class:`TypeError`: an argument, the message names a mapping;
+        a file's error class, such as :class:`~ident.errors.SessionError`, names a table).
+    sequence : bool, optional
+        Accept 4 values in the order LF, RF, LR, RR too (default False).
+
+    Returns
+    -------
+    dict of str to object
+        Corner -> value for the corners given, in :data:`CORNERS` order (all four for
+        a sequence).
+
+    Raises
+    ------
+    error
+        On an unknown corner, or a sequence not of 4.
+    type_error
+        If `value` is not a table.
+
+    Examples
+    --------
+    >>> corner_table({"RR": 1.0, "LF": 2.0}, name="packers", where="run 'a'")
+    {'LF': 2.0, 'RR': 1.0}
+    >>> corner_table({"FL": 1.0}, name="packers", where="run 'a'")
+    Traceback (most recent call last):
+    ...
+    ValueError: run 'a': packers names unknown corner(s) ['FL']; the corners are LF, RF, LR, RR
+    """
+    if value is None:
+        return {}
+    if isinstance(value, Mapping):
+        unknown = [c for c in value if c not in CORNERS]
+        if unknown:
+            raise error(f"{where}: {name} names unknown corner(s) {unknown}; the corners are "
+                        f"{', '.join(CORNERS)}")
+        return {c: value[c] for c in CORNERS if c in value}
+    if sequence and not isinstance(value, (str, bytes)) and hasattr(value, "__len__"):
+        if len(value) != 4:
+            raise error(f"{where}: {name} must be 4 {what}, one per corner LF, RF, LR, RR "
+                        f"(or a table {{ LF = ..., RF = ... }}), got {value!r}")
+        return dict(zip(CORNERS, value))
+    or_4 = " or 4 of them in corner order" if sequence else ""
+    if issubclass(type_error, TypeError):   # an argument
+        raise type_error(f"{where}: {name} must be a mapping corner -> {what}{or_4}, got "
+                         f"{type(value).__name__}")
+    raise type_error(f"{where}: {name} must be a table {{ LF = ..., RF = ... }} of {what}{or_4}, "
+                     f"got {value!r}")

@@ -67,6 +67,7 @@ __all__ = [
     "resample_bandlimited",
     "check_drive_inputs",
     "drive_label",
+    "fade_window",
     "ISO8608_N0_CYCLES_M",
 ]
 
@@ -308,6 +309,49 @@ def _taper(n, fs_hz, taper_s, *, where):
     ramp = 0.5 * (1.0 - np.cos(np.pi * np.arange(m) / m))
     w[:m] = ramp
     w[n - m:] = ramp[::-1]
+    return w
+
+
+def fade_window(n, fs_hz, fade_s):
+    """Ones with a raised-cosine fade-in and fade-out of `fade_s` [s] at each end, shape (n,).
+
+    The ramps are sampled half a sample in (neither end sample is exactly 0), the fade
+    of a track record (:func:`ident.sim.track.make_track_log`) and of a drive's target
+    (:mod:`planner.trackdrive.target`). The generated drives' own fade starts at exactly
+    0 instead.
+
+    Parameters
+    ----------
+    n : int
+        Samples in the record.
+    fs_hz : float
+        Sample rate [Hz].
+    fade_s : float
+        Duration of each fade [s] (>= 0; rounded to whole samples; 0: all ones).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+
+    Raises
+    ------
+    ValueError
+        If the two fades do not fit the record (callers check first, with their own message).
+
+    Examples
+    --------
+    >>> fade_window(6, 1.0, 2.0).round(3).tolist()
+    [0.146, 0.854, 1.0, 1.0, 0.854, 0.146]
+    """
+    w = np.ones(n)
+    m = int(round(fade_s * fs_hz))
+    if m > 0:
+        if 2 * m > n:
+            raise ValueError(f"fades of {fade_s:g} s at each end do not fit a record of "
+                             f"{n / fs_hz:g} s; shorten the fade")
+        ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(m) + 0.5) / m)
+        w[:m] = ramp
+        w[n - m:] = ramp[::-1]
     return w
 
 

@@ -41,7 +41,8 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from ident.data.channels import CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS, rig_inputs_of
+from ident.data.channels import (CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS, corner_table,
+                                 rig_inputs_of)
 from ident.data.files import atomic_write_text, did_you_mean, read_toml
 from ident.data.runs import (RTOL_TIME_STEP, check_channel_map, check_columns,
                              check_session_units, frozen_array, in_memory_columns,
@@ -295,17 +296,8 @@ class Session:
 
 def _check_setup(setup, shocks, *, where, library):
     """Return the setup as ``{corner: id}`` in CORNERS order, or raise."""
-    if not isinstance(setup, Mapping):
-        raise SessionError(
-            f"{where}: setup must be a table {{ LF = \"id\", RF = \"id\", LR = \"id\", "
-            f"RR = \"id\" }}, got {setup!r}"
-        )
-    unknown = [c for c in setup if c not in CORNERS]
-    if unknown:
-        raise SessionError(
-            f"{where}: setup names unknown corner(s) {unknown}; corners are "
-            f"{', '.join(CORNERS)}"
-        )
+    setup = corner_table(setup, name="setup", where=where, what='shock ids ("id")',
+                         error=SessionError, type_error=SessionError)
     missing = [c for c in CORNERS if c not in setup]
     if missing:
         raise SessionError(
@@ -384,20 +376,6 @@ def _run_where(name, file_path):
     return f"run {name!r} ({file_path})"
 
 
-def _corner_table(value, key, *, where, what):
-    """Return `value` (a table corner -> value, or None) as a dict, or raise."""
-    if value is None:
-        return {}
-    if not isinstance(value, Mapping):
-        raise SessionError(f"{where}: {key} must be a table {{ LF = ..., RF = ... }} of "
-                           f"{what}, got {value!r}")
-    unknown = [c for c in value if c not in CORNERS]
-    if unknown:
-        raise SessionError(f"{where}: {key} names unknown corner(s) {unknown}; corners are "
-                           f"{', '.join(CORNERS)}")
-    return dict(value)
-
-
 def _check_bump_stops(bump_stops, packers_m, library, *, where):
     """A run's bump stops and packers [m], checked; ``({corner: id or None},
     {corner: m})`` in corner order.
@@ -405,8 +383,9 @@ def _check_bump_stops(bump_stops, packers_m, library, *, where):
     `library` is the session's bump-stop library, or None when it has none (then a run
     naming a bump stop is refused).
     """
-    stops = _corner_table(bump_stops, "bump_stops", where=where,
-                          what='bump-stop ids or "none"')
+    stops = corner_table(bump_stops, name="bump_stops", where=where,
+                         what='bump-stop ids or "none"', error=SessionError,
+                         type_error=SessionError)
     ids = {}
     for c in CORNERS:
         sid = stops.get(c)
@@ -422,8 +401,9 @@ def _check_bump_stops(bump_stops, packers_m, library, *, where):
             raise library.unknown_id_error(sid, where=f"{where}: bump_stops {c}",
                                            error=SessionError)
         ids[c] = sid
-    given = _corner_table(packers_m, "packers", where=where,
-                          what="thicknesses (numbers >= 0)")
+    given = corner_table(packers_m, name="packers", where=where,
+                         what="thicknesses (numbers >= 0)", error=SessionError,
+                         type_error=SessionError)
     packers = {}
     for c in CORNERS:
         p = given.get(c, 0.0)
@@ -445,13 +425,8 @@ def _check_static_loads(value, *, where, key, unit):
     """The static corner loads as an array (4,) in the units given, or raise."""
     if value is None:
         return None
-    if not isinstance(value, Mapping):
-        if isinstance(value, (str, bytes)) or not np.iterable(value) or len(value) != 4:
-            raise SessionError(
-                f"{where}: {key} must be 4 positive numbers, one per corner "
-                f"{{ LF = ..., RF = ..., LR = ..., RR = ... }} ({unit}), got {value!r}")
-        value = dict(zip(CORNERS, value))
-    loads = _corner_table(value, key, where=where, what=f"positive numbers ({unit})")
+    loads = corner_table(value, name=key, where=where, what=f"positive numbers ({unit})",
+                         error=SessionError, type_error=SessionError, sequence=True)
     missing = [c for c in CORNERS if c not in loads]
     if missing:
         raise SessionError(f"{where}: {key} has no load for corner(s) {', '.join(missing)}; "
@@ -737,8 +712,9 @@ def read_session(path):
     static = None if static is None else to_si(static, "force", units)
     elements = []
     for e in entries:
-        packers = _corner_table(e["packers"], "packers", where=e["label"],
-                                what="thicknesses (numbers >= 0)")
+        packers = corner_table(e["packers"], name="packers", where=e["label"],
+                               what="thicknesses (numbers >= 0)", error=SessionError,
+                               type_error=SessionError)
         packers = {c: to_si(p, "displacement", units) if is_real_number(p) else p
                    for c, p in packers.items()}
         elements.append(_check_bump_stops(e["bump_stops"], packers, bump_stops,

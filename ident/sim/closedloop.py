@@ -58,7 +58,7 @@ import numba as _nb
 import numpy as np
 
 from ident.data.channels import (CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCITIES,
-                                 WHEELLOADER_INPUTS, kind_of)
+                                 WHEELLOADER_INPUTS, corner_table, kind_of)
 from ident.data.drive import FIR_HALF_LENGTH, check_drive_inputs, resample_bandlimited
 from ident.models.lti import (hold_coefficients, join_inputs, lag_coefficients,
                               lag_hold_coefficients)
@@ -306,12 +306,12 @@ def setup_models(setup, where):
         If a corner is not a shock model (``to_pwl`` and ``lag_s``).
     """
     if isinstance(setup, Mapping):
-        missing = [c for c in CORNERS if c not in setup]
-        extra = [c for c in setup if c not in CORNERS]
-        if missing or extra:
+        table = corner_table(setup, name="setup", where=where, what="shock models")
+        missing = [c for c in CORNERS if c not in table]
+        if missing:
             raise ValueError(f"{where}: a setup needs exactly the corners {list(CORNERS)}; "
-                             f"missing {missing}, unknown {extra}")
-        models = [setup[c] for c in CORNERS]
+                             f"missing {missing}")
+        models = [table[c] for c in CORNERS]
     else:
         models = list(setup)
         if len(models) != 4:
@@ -849,16 +849,10 @@ def corner_values(values, where, what):
     ValueError
         On an unknown corner or a sequence not of 4.
     """
-    if isinstance(values, Mapping):
-        unknown = [c for c in values if c not in CORNERS]
-        if unknown:
-            raise ValueError(f"{where}: {what} names unknown corners {unknown}; the corners are "
-                             f"{list(CORNERS)}")
-        return [values.get(c) for c in CORNERS]
-    vals = list(values)
-    if len(vals) != 4:
-        raise ValueError(f"{where}: {what} needs 4 values (LF, RF, LR, RR), got {len(vals)}")
-    return vals
+    if not isinstance(values, Mapping):
+        values = list(values)
+    table = corner_table(values, name=what, where=where, sequence=True)
+    return [table.get(c) for c in CORNERS]
 
 
 def _check_stop(stop, where):

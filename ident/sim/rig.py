@@ -45,7 +45,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from ident.data.channels import (ALL_CHANNELS, CORNERS, RESPONSE_KINDS, RIG_INPUTS, RIG_KINDS,
-                                 WHEELLOADER_INPUTS, kind_of)
+                                 WHEELLOADER_INPUTS, corner_table, kind_of)
 from ident.data.drive import (Drive, check_drive_inputs, decimate_bandlimited, make_multisine_drive,
                               make_noise_drive, make_sweep_drive, make_track_drive, read_drive)
 from ident.data.files import read_toml
@@ -158,18 +158,11 @@ class PlanRun:
             that is not a number, negative, or thicker than its stop's gap.
         """
         where = f"run '{self.name}'" if where is None else where
-        given = {}
-        for key, table in (("bump_stops", self.bump_stops), ("packers", self.packers_m)):
-            if table is None:
-                table = {}
-            if not isinstance(table, dict):
-                raise SessionError(f"{where}: {key} must be a table {{ LF = ..., RF = ... }}, "
-                                   f"got {table!r}")
-            unknown = [c for c in table if c not in CORNERS]
-            if unknown:
-                raise SessionError(f"{where}: {key} names unknown corner(s) {unknown}; the "
-                                   f"corners are {', '.join(CORNERS)}")
-            given[key] = table
+        given = {key: corner_table(table, name=key, where=where, what=what,
+                                   error=SessionError, type_error=SessionError)
+                 for key, table, what in (
+                     ("bump_stops", self.bump_stops, 'bump-stop ids or "none"'),
+                     ("packers", self.packers_m, "thicknesses (numbers >= 0)"))}
         stops, packers = {}, {}
         for c in CORNERS:
             sid = given["bump_stops"].get(c)
@@ -385,17 +378,9 @@ def check_suspension_friction(value, where, *, key="suspension_friction_n", unit
     """
     if value is None:
         return None
-    if isinstance(value, dict):
-        unknown = [c for c in value if c not in CORNERS]
-        if unknown:
-            raise SessionError(f"{where}: {key} names unknown corner(s) {unknown}; the "
-                               f"corners are {', '.join(CORNERS)}")
-        vals = [value.get(c, 0.0) for c in CORNERS]
-    elif isinstance(value, str) or not hasattr(value, "__len__") or len(value) != 4:
-        raise SessionError(f"{where}: {key} must be a table {{ LF = ..., RF = ..., LR = ..., "
-                           f"RR = ... }} of friction forces ({unit}), got {value!r}")
-    else:
-        vals = list(value)
+    table = corner_table(value, name=key, where=where, what=f"friction forces ({unit})",
+                         error=SessionError, type_error=SessionError, sequence=True)
+    vals = [table.get(c, 0.0) for c in CORNERS]
     for c, f in zip(CORNERS, vals):
         if not is_real_number(f) or not np.isfinite(f) or f < 0:
             raise SessionError(f"{where}: {key} {c} = {f!r} is not a friction force; give a "

@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ident.data.channels import AERO_INPUTS, CORNERS, WHEELLOADER_INPUTS
-from ident.data.drive import Drive, make_track_drive, resample_bandlimited
+from ident.data.drive import Drive, fade_window, make_track_drive, resample_bandlimited
 from ident.data.tracklog import TrackLog
 from ident.errors import DriveError
 from ident.sim.closedloop import simulate
@@ -78,16 +78,10 @@ POT_OFFSET_M = (0.031, 0.029, 0.042, 0.040)
 
 def _taper(n, fs_hz, taper_s):
     """Raised-cosine fade-in and fade-out over `taper_s` at each end, shape (n,)."""
-    w = np.ones(n)
-    m = int(round(taper_s * fs_hz))
-    if m > 0:
-        if 2 * m > n:
-            raise DriveError(f"virtual track: the fades of {taper_s:g} s do not fit a record of "
-                             f"{n / fs_hz:g} s; shorten taper_s")
-        ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(m) + 0.5) / m)
-        w[:m] = ramp
-        w[n - m:] = ramp[::-1]
-    return w
+    if 2 * int(round(taper_s * fs_hz)) > n:
+        raise DriveError(f"virtual track: the fades of {taper_s:g} s do not fit a record of "
+                         f"{n / fs_hz:g} s; shorten taper_s")
+    return fade_window(n, fs_hz, taper_s)
 
 
 def make_speed_trace(*, duration_s, fs_hz, seed, speed_range_m_s=(35.0, 75.0),

@@ -32,7 +32,7 @@ import numpy as np
 from scipy import signal
 
 from ident.data.channels import AERO_INPUTS, CORNERS
-from ident.data.drive import resample_bandlimited
+from ident.data.drive import fade_window, resample_bandlimited
 from planner.errors import PlannerError
 
 __all__ = [
@@ -154,16 +154,10 @@ def segment_taper(n, fs_hz, taper_s, *, where="target",
     if not np.isfinite(taper_s) or taper_s < 0:
         raise PlannerError(f"{where}: the fade (--taper) must be a time >= 0 [s]; give e.g. "
                            "--taper 1.0")
-    w = np.ones(n)
-    m = int(round(taper_s * fs_hz))
-    if m > 0:
-        if 4 * m > n:
-            raise PlannerError(f"{where}: {n / fs_hz:g} s is too short for fades of "
-                               f"{taper_s:g} s at each end (at least 4 x the fade); {fix}")
-        ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(m) + 0.5) / m)
-        w[:m] = ramp
-        w[n - m:] = ramp[::-1]
-    return w
+    if 4 * int(round(taper_s * fs_hz)) > n:
+        raise PlannerError(f"{where}: {n / fs_hz:g} s is too short for fades of "
+                           f"{taper_s:g} s at each end (at least 4 x the fade); {fix}")
+    return fade_window(n, fs_hz, taper_s)
 
 
 def spectral_derivative(x, fs_hz):
