@@ -29,17 +29,17 @@ from ident.data.drive import Drive, resample_drive
 from ident.identify.coverage import Coverage, outside_coverage
 from ident.identify.model import LOOP_REDUCE_RTOL, VehicleModel, load_model
 from ident.models.lti import LoopPlant
-from ident.models.vehicle import (FullCarModel, VehicleParams, build_full_car, example_vehicle,
-                                  read_vehicle)
+from ident.models.vehicle import build_full_car, example_vehicle, read_vehicle
 from ident.sim.closedloop import rig_response, simulate_batch_metrics
 from planner.elements import ELEMENT_COLUMNS, model_setup_elements
 from planner.errors import PlannerError
+from planner.plant import as_loop_plant
 from planner.setups import Setup
 
 __all__ = [
     "Predictions",
     "METRIC_OUTPUTS",
-    "as_loop_plant",
+    "as_loop_plant",  # from planner.plant
     "load_any_model",
     "prepare_drive",
     "predict_setups",
@@ -99,30 +99,6 @@ def _warn_implausible(table, drive):
                     "(10 x a race car's typical tire force); check the drive's units "
                     "(--units) and scale", drive.name, worst / 1e3,
                     PLAUSIBLE_TIRE_FORCE_RMS_N / 1e3)
-
-
-def as_loop_plant(model, *, reduce_rtol=LOOP_REDUCE_RTOL):
-    """Return a :class:`ident.models.lti.LoopPlant` for a vehicle model.
-
-    Parameters
-    ----------
-    model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
-    reduce_rtol : float or None
-        Balanced-truncation bound for an identified model's shock part
-        (:meth:`ident.identify.model.VehicleModel.loop_plant`).
-    """
-    if isinstance(model, LoopPlant):
-        return model
-    if hasattr(model, "frequency_response") and hasattr(model, "velocity_idx"):
-        return model  # a frequency-response plant (planner.uncertainty.FrfPlant): screening only
-    if isinstance(model, VehicleModel):
-        return model.loop_plant(reduce_rtol=reduce_rtol)
-    if isinstance(model, VehicleParams):
-        model = build_full_car(model)
-    if isinstance(model, FullCarModel):
-        return model.loop_plant()
-    raise TypeError(f"model must be a VehicleModel, FullCarModel, VehicleParams or LoopPlant, "
-                    f"got {type(model).__name__}")
 
 
 def load_any_model(path):

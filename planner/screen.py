@@ -42,7 +42,8 @@ from ident.identify.model import LOOP_REDUCE_RTOL
 from ident.sim.closedloop import corner_values, pack_bump_stops, pack_setups
 from ident.sim.metrics import METRIC_NAMES
 from planner.errors import PlannerError
-from planner.predict import Predictions, as_loop_plant, prepare_drive, resolve_setups
+from planner.plant import as_loop_plant
+from planner.predict import Predictions, prepare_drive, resolve_setups
 from planner.screen_kernels import (
     STOP_ROWS,
     band_operands,

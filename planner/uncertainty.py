@@ -53,7 +53,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from ident.data.channels import SHOCK_VELOCITIES
 from ident.data.drive import check_drive_inputs
 from ident.identify.condition import (
     conditioned_error_kernel,
@@ -61,6 +60,7 @@ from ident.identify.condition import (
 )
 from ident.identify.frf import embed_inputs
 from planner.objective import score_setups
+from planner.plant import FrfPlant, interpolate
 from planner.predict import predict_setups, prepare_drive, resolve_setups
 from planner.screen import drive_bands, screen_response
 
@@ -70,12 +70,12 @@ __all__ = [
     "RANDOM_ERROR_SCALE",
     "REFERENCE_RUN_S",
     "SYSTEMATIC_TERMS",
-    "FrfPlant",
+    "FrfPlant",  # from planner.plant
     "Uncertainty",
     "combine_terms",
     "error_correlation",
     "frf_relative_error",
-    "interpolate",
+    "interpolate",  # from planner.plant
     "light_modes",
     "prediction_uncertainty",
     "random_error_scale",
@@ -173,64 +173,6 @@ def random_error_scale(frf):
     if not res:
         return run_length_scale(None)
     return run_length_scale(float(np.median(1.0 / np.asarray(res, dtype=float))))
-
-
-class FrfPlant:
-    """A plant given by a frequency response on a grid (for frequency-domain screening).
-
-    Parameters
-    ----------
-    f_hz : ndarray, shape (n_f,)
-    H : ndarray of complex, shape (n_out, 11, n_f)
-        Inputs rig (7) then dF (4).
-    output_names : sequence of str
-    cbar_n_s_m : ndarray, shape (4,)
-    name : str
-    """
-
-    def __init__(self, f_hz, H, output_names, cbar_n_s_m, name="frf"):
-        self.f_hz = np.asarray(f_hz, dtype=float)
-        self.H = H
-        self.output_names = tuple(output_names)
-        self.cbar_n_s_m = np.asarray(cbar_n_s_m, dtype=float)
-        self.name = name
-        self.velocity_idx = np.array([self.output_names.index(v) for v in SHOCK_VELOCITIES])
-
-    def frequency_response(self, f_hz):
-        """Linear interpolation of the real and imaginary parts, shape (n_out, 11, n_f)."""
-        return interpolate(self.f_hz, self.H, f_hz)
-
-
-def interpolate(f_grid, X, f_hz):
-    """Linear interpolation of ``X[..., grid]`` at `f_hz` along the last axis.
-
-    Real and imaginary parts (of a complex `X`) alike, each between its two
-    neighbouring grid lines; outside the grid, the first or last segment is
-    extended linearly.
-
-    Parameters
-    ----------
-    f_grid : ndarray, shape (n_grid,)
-        Increasing frequencies [Hz], at least two.
-    X : ndarray, shape (..., n_grid)
-        Values on the grid (real or complex).
-    f_hz : array_like, shape (n,)
-        Frequencies to interpolate at [Hz].
-
-    Returns
-    -------
-    ndarray, shape (..., n)
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> interpolate(np.array([1.0, 2.0, 4.0]), np.array([0.0, 1.0, 3.0]), [1.5, 3.0, 5.0])
-    array([0.5, 2. , 4. ])
-    """
-    f = np.asarray(f_hz, dtype=float)
-    idx = np.clip(np.searchsorted(f_grid, f) - 1, 0, f_grid.size - 2)
-    t = (f - f_grid[idx]) / (f_grid[idx + 1] - f_grid[idx])
-    return X[..., idx] * (1 - t) + X[..., idx + 1] * t
 
 
 @dataclass(frozen=True, eq=False)

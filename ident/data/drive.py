@@ -53,6 +53,7 @@ from scipy import signal
 
 from ident.data.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero, rig_inputs_of
 from ident.data.runs import read_run_table, write_run_table
+from ident.data.timebase import TimeRecord
 from ident.errors import DriveError
 
 __all__ = [
@@ -103,7 +104,7 @@ _SWEEP_METHODS = ("linear", "quadratic", "logarithmic", "hyperbolic")
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class Drive:
+class Drive(TimeRecord):
     """The 7 rig-input time histories of one drive, in SI units.
 
     Attributes
@@ -202,21 +203,6 @@ class Drive:
         object.__setattr__(self, "rig_inputs", given)
         object.__setattr__(self, "channels", channels)
         object.__setattr__(self, "settings", dict(self.settings))
-
-    @property
-    def n_samples(self):
-        """int: Number of samples."""
-        return int(self.channels[RIG_INPUTS[0]].size)
-
-    @property
-    def duration_s(self):
-        """float: Record length ``n_samples / fs_hz`` [s]."""
-        return self.n_samples / self.fs_hz
-
-    @property
-    def time_s(self):
-        """ndarray, shape (n_samples,): Sample times ``k / fs_hz`` [s]."""
-        return np.arange(self.n_samples) / self.fs_hz
 
     def as_array(self):
         """Return the inputs as one array.

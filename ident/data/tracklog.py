@@ -114,6 +114,7 @@ from ident.data.formats.record import FORMAT_NAMES, sniff_format
 from ident.data.runs import (RTOL_TIME_STEP, check_columns, frozen_array,
                              read_table_columns)
 from ident.data.units import check_units, from_si
+from ident.data.timebase import TimeRecord
 from ident.errors import SessionError, TrackLogError
 
 __all__ = [
@@ -171,7 +172,7 @@ _LOG_CHANNELS_TEXT = ("shock_travel_XX, ride_height_XX, wheel_accel_XX, chassis_
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class TrackLog:
+class TrackLog(TimeRecord):
     """The channels a car's data logger recorded on track, in SI on one uniform time base.
 
     Attributes
@@ -268,22 +269,6 @@ class TrackLog:
         object.__setattr__(self, "fs_hz", float(fs))
         object.__setattr__(self, "channels", channels)
         object.__setattr__(self, "settings", dict(self.settings))
-
-    @property
-    def n_samples(self):
-        """int: Number of samples."""
-        return int(self.channels[_TRAVELS[0]].size)
-
-    @property
-    def duration_s(self):
-        """float: Record length ``n_samples / fs_hz`` [s]."""
-        return self.n_samples / self.fs_hz
-
-    @property
-    def time_s(self):
-        """ndarray, shape (n_samples,): Sample times ``k / fs_hz`` [s], from 0 at the first
-        sample (``settings["t0_s"]`` is the first sample's time in the file)."""
-        return np.arange(self.n_samples) / self.fs_hz
 
     def __repr__(self):
         return (f"TrackLog(name={self.name!r}, fs_hz={self.fs_hz:g}, "

@@ -33,6 +33,7 @@ from scipy import signal
 
 from ident.data.channels import AERO_INPUTS, CORNERS
 from ident.data.drive import fade_window, resample_bandlimited
+from ident.data.timebase import TimeRecord
 from planner.errors import PlannerError
 
 __all__ = [
@@ -76,7 +77,7 @@ _MAX_DENOMINATOR = 1000
 
 
 @dataclass(frozen=True, eq=False)
-class DriveTarget:
+class DriveTarget(TimeRecord):
     """The response a rig drive must reproduce, and the aero loads it carries.
 
     Attributes
@@ -111,21 +112,6 @@ class DriveTarget:
     segments: tuple
     taper_s: float
     settings: dict = field(default_factory=dict)
-
-    @property
-    def n_samples(self):
-        """int: Samples of the joined record."""
-        return int(next(iter(self.channels.values())).size)
-
-    @property
-    def duration_s(self):
-        """float: Length [s]."""
-        return self.n_samples / self.fs_hz
-
-    @property
-    def time_s(self):
-        """ndarray, shape (n_samples,): Sample times [s] from 0."""
-        return np.arange(self.n_samples) / self.fs_hz
 
     def interior(self):
         """ndarray of bool, shape (n_samples,): the samples outside every log's fades, where
