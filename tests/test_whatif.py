@@ -147,7 +147,12 @@ def test_design_sizes_and_seed(tmp_path):
     lf = ta["tol LF"].iloc[1:]
     assert lf.between(0.95, 1.05).all() and lf.std() > 0.02  # uniform, spread
     assert (ta["tol LF"].iloc[1:] != ta["tol RF"].iloc[1:]).all()  # independent corners
-    np.testing.assert_array_equal(ta["rear"].iloc[1:], ta["rear"].iloc[1:])  # one draw per axle
+    # one draw per axle: both rear corners get the same value, the table one column for it
+    rear = np.array([p.values["rear"] for p in a.perturbations[1:]])  # (draws, [LR, RR])
+    assert rear.shape == (30, 2) and rear[:, 0].std() > 500.0
+    np.testing.assert_array_equal(rear[:, 0], rear[:, 1])
+    assert "rear LR" not in ta and "rear RR" not in ta
+    np.testing.assert_array_equal(ta["rear"].iloc[1:].to_numpy(float), rear[:, 0])
 
 
 def test_read_perturbations_units_and_files(tmp_path, track_drive):

@@ -548,8 +548,9 @@ _EFFECTS = {
     "stiffening": (("signs of a bump stop: the wheel's force balance stiffens in compression "
                    "beyond {value_mm:.1f} mm of travel from rest ({rest}); the identified "
                    "model is linear and reads the stop as a stiffer car everywhere, so "
-                   "predicted metrics are off by up to a few per cent (issue 25: 0.4 % median, "
-                   "3 % max with stops touched 2-6 %) and most for setups that change travel"),
+                   "predicted metrics are off by up to a few per cent (on the virtual rig: "
+                   "0.4 % median, 3 % max with stops touched 2-6 %) and most for setups "
+                   "that change travel"),
                    ("declare the bump stops: bump_stop_library = \"bumpstops.toml\" in "
                    "session.toml and each run's bump_stops (and packers); or lower the drive "
                    "level so that the stops are not reached")),
