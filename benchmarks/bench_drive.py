@@ -7,17 +7,17 @@ Run::
 
 The problem (built once, not timed): the GT-like car
 (``ident.models.vehicle.example_gt_vehicle()``) on a ``--duration`` (120 s) run of the
-virtual track at ``--fs`` (200 Hz) (``ident.sim.track.make_track_run``, seed ``--seed``, the
+virtual track at ``--fs`` (200 Hz) (``ident.sim.virtual_track.make_track_run``, seed ``--seed``, the
 car's wheelbase and track, the aero loads of a ``constant`` :class:`~ident.models.aero.
 AeroModel`: the car's a/b, 4000 N at 60 m/s, balance 0.45), logged by
-``ident.sim.track.log_track_run`` on the known car (``build_full_car(veh).loop_plant()``)
+``ident.sim.virtual_track.log_track_run`` on the known car (``build_full_car(veh).loop_plant()``)
 with the crate's ``DM`` shock at every corner (``planner/examples/library.toml``), 2 % sensor
 noise, shock travels and ride heights.
 
 The model the drive is built on: by default the known car itself
 (``build_full_car(veh)``, a vehicle model: it runs at the log's rate, so the drive is built at
 ``--fs``). ``--identified``: the GT car identified on the virtual rig instead
-(``ident.sim.rig.default_plan()`` with runs of ``--run-s`` (100 s) at 2 % noise,
+(``ident.sim.virtual_rig.default_plan()`` with runs of ``--run-s`` (100 s) at 2 % noise,
 ``simulate_session``, ``ident.identify.pipeline.identify_session``; not timed); that model
 is at 100 Hz, so the drive is then built at 100 Hz (the log resampled to it).
 
@@ -67,7 +67,7 @@ from ident.models.aero import AeroModel  # noqa: E402
 from ident.models.library import read_shock_library  # noqa: E402
 from ident.models.vehicle import build_full_car, example_gt_vehicle  # noqa: E402
 from ident.sim.closedloop import simulate  # noqa: E402
-from ident.sim.track import log_track_run, make_track_run  # noqa: E402
+from ident.sim.virtual_track import log_track_run, make_track_run  # noqa: E402
 from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
 from planner.predict import as_loop_plant  # noqa: E402
 from planner.setups import Setup  # noqa: E402
@@ -133,7 +133,7 @@ def plain_inverse(model, target, setup, library):
 def identified_model(vehicle, run_s):
     """The GT car identified on the virtual rig (default plan, runs of `run_s`, 2 % noise)."""
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import default_plan, simulate_session
+    from ident.sim.virtual_rig import default_plan, simulate_session
 
     plan = default_plan()
     plan = replace(plan, runs=tuple(replace(r, duration_s=float(run_s)) for r in plan.runs),

@@ -9,7 +9,7 @@ Prints, one figure per line, each timing with the machine's 1-minute load
 average at that moment:
 
 1. the session: the seed paper's experiment (5 runs x 800 s at 100 Hz, every
-   channel of the spec) built once in memory with ``ident.sim.rig.simulate_session()``.
+   channel of the spec) built once in memory with ``ident.sim.virtual_rig.simulate_session()``.
    Building it is *not* part of any timing below;
 2. the engine: the median, min and max wall time of ``--repeat`` calls of
    ``ident.identify.pipeline.identify_session(session)`` (FRF estimate, conditioning,
@@ -73,7 +73,7 @@ from ident.data.channels import CORNERS, RIG_INPUTS  # noqa: E402
 from ident.identify.condition import condition_frf  # noqa: E402
 from ident.identify.frf import estimate_frf  # noqa: E402
 from ident.identify.pipeline import fit_model, identify_session  # noqa: E402
-from ident.sim.rig import simulate_session  # noqa: E402
+from ident.sim.virtual_rig import simulate_session  # noqa: E402
 from _common import engine_version as _engine_version  # noqa: E402
 from _common import load as _load, maxrss_mib as _maxrss_mib, mib as _mib  # noqa: E402
 
@@ -238,7 +238,7 @@ def main(argv=None):
     n_ch = len(session.runs[0].channels)
     total_s = sum(r.n_samples for r in session.runs) / session.fs_hz
     nbytes = sum(np.asarray(v).nbytes for r in session.runs for v in r.channels.values())
-    print(f"session: {session.name!r} built once in memory with ident.sim.rig.simulate_session() "
+    print(f"session: {session.name!r} built once in memory with ident.sim.virtual_rig.simulate_session() "
           f"in {build_s:.1f} s (NOT part of any timing below): {len(session.runs)} runs, "
           f"{total_s:g} s of data at {session.fs_hz:g} Hz, {n_ch} channels per run, "
           f"{_mib(nbytes):.0f} MiB of samples")

@@ -9,7 +9,7 @@ Run::
 
 Two models, each reported: the known paper car
 (``ident.models.vehicle.build_full_car(example_vehicle())``) and a model identified from
-the paper session (``ident.sim.rig.simulate_session()`` then
+the paper session (``ident.sim.virtual_rig.simulate_session()`` then
 ``ident.identify.pipeline.identify_session``, built once and not timed). The identified one
 is the product's case. One drive: ``ident.data.drive.make_track_drive(duration_s=120,
 fs_hz=100, seed=1, ...)`` with the paper car's wheelbase and track. Shocks: the
@@ -753,7 +753,7 @@ def _main(args, child):
 
     # the models (not timed)
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     car = build_full_car(vehicle)
     # warm-up before the virtual rig below, which runs the same compiled shock loop

@@ -6,7 +6,7 @@ Run::
 
 Prints, one figure per line:
 
-1. the engine: the first call of ``ident.sim.rig.simulate_session(default_plan(),
+1. the engine: the first call of ``ident.sim.virtual_rig.simulate_session(default_plan(),
    example_vehicle())`` (imports numba and compiles the JIT or loads it from the
    cache), then the median, min and max wall time of ``--repeat`` further calls:
    the whole plan (5 runs x 800 s at 100 Hz, oversample 8, nonlinear digressive
@@ -20,7 +20,7 @@ Prints, one figure per line:
    baseline and the swap-LF run over the first ``--ref-seconds`` of the drive;
    its time scaled to the whole plan and the ratio reference / engine;
 3. like-for-like accuracy on that segment: ``ident.sim.closedloop.simulate`` on the
-   same plant, drive segment and setup (as ``ident.sim.rig`` does it) against the
+   same plant, drive segment and setup (as ``ident.sim.virtual_rig`` does it) against the
    reference, as relative RMS differences. The script first checks how the
    engine refines the drive onto its internal grid (``rig_response().u_fine``);
    if that is not linear interpolation, the comparison is not like-for-like in
@@ -65,7 +65,7 @@ from scipy.integrate import solve_ivp
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ident.data.channels import CORNERS  # noqa: E402
-from ident.sim.rig import NOMINAL_V_RMS_M_S, default_plan, make_plan_drive, simulate_session  # noqa: E402
+from ident.sim.virtual_rig import NOMINAL_V_RMS_M_S, default_plan, make_plan_drive, simulate_session  # noqa: E402
 from ident.data.session import write_session  # noqa: E402
 from ident.models.vehicle import build_full_car, example_vehicle  # noqa: E402
 from _common import drive_segment, rel_rms  # noqa: E402
@@ -240,7 +240,7 @@ def reference_run(model, shocks, u, fs_u_hz, fs_out_hz):
 
 
 def loop_damping(shocks):
-    """Baseline damping of the loop plant, as ``ident.sim.rig`` chooses it [N/(m/s)], shape (4,)."""
+    """Baseline damping of the loop plant, as ``ident.sim.virtual_rig`` chooses it [N/(m/s)], shape (4,)."""
     return np.array([float(s.equivalent_damping(NOMINAL_V_RMS_M_S)) for s in shocks])
 
 
@@ -257,7 +257,7 @@ def engine_inputs(model, shocks, drive, oversample):
 
 
 def engine_run(model, shocks, drive, oversample):
-    """``ident.sim.closedloop.simulate`` as ``ident.sim.rig`` calls it (baseline damping at the nominal RMS)."""
+    """``ident.sim.closedloop.simulate`` as ``ident.sim.virtual_rig`` calls it (baseline damping at the nominal RMS)."""
     from ident.sim.closedloop import simulate
 
     return simulate(model.loop_plant(loop_damping(shocks)), drive, list(shocks),

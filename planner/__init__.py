@@ -6,7 +6,7 @@ before it):
 - vocabulary: :mod:`~planner.errors`, :mod:`~planner.setups` (setups and their files,
   the one enumeration, the one baseline resolver, the symmetry names),
   :mod:`~planner.objective` (scores, limits and the one ranking rule) and
-  :mod:`~planner.rig` (the rig TOML: time costs and actuator limits, and the limits
+  :mod:`~planner.rig_spec` (the rig TOML: time costs and actuator limits, and the limits
   applied to a drive);
 - engines: :mod:`~planner.runner` (tasks in this process or on Dask),
   :mod:`~planner.predict` (the closed loop in the time domain), :mod:`~planner.screen`

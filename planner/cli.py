@@ -80,7 +80,7 @@ def _load_vehicle(path):
 def cmd_rig_simulate(args):
     """``shockplan rig simulate``: run a rig plan on the virtual rig, write a session."""
 
-    from ident.sim.rig import default_plan, read_rig_plan, simulate_session
+    from ident.sim.virtual_rig import default_plan, read_rig_plan, simulate_session
     from ident.data.session import write_session
 
     _check_out(args, folder=True)
@@ -386,7 +386,7 @@ def _parse_fixed(items):
 def cmd_rank(args):
     """``shockplan rank``: rank setups (screen, simulate the best, score) and write a report."""
     from planner.objective import default_objective, read_objective
-    from planner.clicks import MAX_CLICK_SETUPS, clicks_option, split_shock_ids
+    from planner.click_settings import MAX_CLICK_SETUPS, clicks_option, split_shock_ids
     from planner.rank import rank_setups
     from planner.report import write_ranking
     from planner.setups import read_setups
@@ -526,8 +526,8 @@ def cmd_sweep(args):
     from ident.data.drive import read_drive
     from ident.models.library import read_shock_library
     from planner.objective import default_objective, read_objective
-    from planner.report.sweep import write_sweep
-    from planner.clicks import clicks_option, split_shock_ids
+    from planner.report.sweep_files import write_sweep
+    from planner.click_settings import clicks_option, split_shock_ids
     from planner.setups import read_setups
     from planner.sweep import sweep_setups
 
@@ -691,7 +691,7 @@ def cmd_plan(args):
     from ident.models.library import read_shock_library
     from planner.design import design_experiment
     from planner.objective import default_objective, read_objective
-    from planner.rig import read_rig
+    from planner.rig_spec import read_rig
     from planner.testplan import write_plan
 
     out = Path(args.out)
@@ -1056,7 +1056,7 @@ _OBJECTIVE_HELP = "objective TOML (default: the built-in 'grip and platform')"
 
 def build_parser():
     """Build the argument parser (exposed for documentation and tests)."""
-    from planner.clicks import add_click_arguments
+    from planner.click_settings import add_click_arguments
 
     p = _Parser(
         prog="shockplan",

@@ -83,7 +83,7 @@ TRACK_FILES = {
     "plan.toml": "a rig plan that plays drive.csv (which `drive from-track` writes) on the car",
 }
 #: The logger's channels: canonical -> (name, unit); the pots carry the virtual logger's
-#: zero offsets (:data:`ident.sim.track.POT_OFFSET_M`), which the map takes off.
+#: zero offsets (:data:`ident.sim.virtual_track.POT_OFFSET_M`), which the map takes off.
 _TRACK_LOGGER = {
     **{f"{kind}_{c}": (f"{label} {w}", "mm")
        for kind, label in (("shock_travel", "Damper Pos"), ("ride_height", "Ride Height"))
@@ -341,7 +341,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     from ident.data.files import atomic_dir
     from ident.data.drive import make_track_drive, write_drive
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import default_plan, simulate_session
+    from ident.sim.virtual_rig import default_plan, simulate_session
     from ident.data.session import write_session
     from ident.models.library import read_shock_library
     from ident.models.vehicle import example_vehicle, modal_summary
@@ -849,7 +849,7 @@ def write_clicks_example(folder, *, overwrite=False):
     import pandas as pd
 
     from ident.sim.dampers import ClickerDamper
-    from ident.sim.dyno import simulate_dyno_run
+    from ident.dyno.virtual import simulate_dyno_run
 
     folder = Path(folder)
     paths = {name: folder / name for name in CLICKS_FILES}
@@ -879,7 +879,7 @@ def write_clicks_example(folder, *, overwrite=False):
 def write_track_example(folder, *, overwrite=False):
     """Write the README's track-data example (:data:`TRACK_FILES`) into `folder`.
 
-    The paper car (the truth) runs two laps of a virtual track (:mod:`ident.sim.track`: a
+    The paper car (the truth) runs two laps of a virtual track (:mod:`ident.sim.virtual_track`: a
     road at a varying speed, 35-75 m/s, with the aero loads of ``aero.toml``) on the demo
     crate's DM shocks, and its logger writes them: an MDF4 file with the damper
     potentiometers (mm, with their zero offsets) and the ride-height lasers (mm, absolute)
@@ -910,7 +910,7 @@ def write_track_example(folder, *, overwrite=False):
     from ident.models.aero import read_aero_model
     from ident.models.library import read_shock_library
     from ident.models.vehicle import build_full_car, example_vehicle
-    from ident.sim.track import POT_OFFSET_M, log_track_run, make_track_run
+    from ident.sim.virtual_track import POT_OFFSET_M, log_track_run, make_track_run
 
     folder = Path(folder)
     paths = {name: folder / name for name in TRACK_FILES}

@@ -83,11 +83,11 @@ from ident.identify.frf import shock_force_deviation
 from ident.identify.model import VehicleModel
 from ident.models.adjustable import parse_shock_name
 from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
-from ident.sim.rig import default_plan, loop_damping, make_plan_drive
+from ident.sim.virtual_rig import default_plan, loop_damping, make_plan_drive
 from planner.errors import PlannerError
 from planner.objective import default_objective, score_setups
 from planner.predict import predict_setups
-from planner.rig import RigSpec, default_rig
+from planner.rig_spec import RigSpec, default_rig
 from planner.screen import DriveBands, metric_rows, screen_response, screen_setups
 from planner.setups import Setup, enumerate_setups, resolve_baseline, unknown_id_error
 from planner.uncertainty import interpolate, prediction_uncertainty
@@ -243,7 +243,7 @@ class ExperimentPlan:
         The criterion after each run against the rig time so far.
     solver : dict
         cvxpy's status, solver, times.
-    rig : planner.rig.RigSpec
+    rig : planner.rig_spec.RigSpec
     settings : dict
     """
 
@@ -435,8 +435,8 @@ def change_time_min(before, after, rig=None):
     before, after : planner.setups.Setup
         Adjustable shocks named with every adjuster (``TTX@ls=6,hs=2``; a corner whose
         name keeps its adjustable shock and changes settings is a click change).
-    rig : planner.rig.RigSpec, optional
-        Default :func:`planner.rig.default_rig`.
+    rig : planner.rig_spec.RigSpec, optional
+        Default :func:`planner.rig_spec.default_rig`.
 
     Returns
     -------
@@ -784,7 +784,7 @@ def greedy_design(Mc, M0, cands, base, rig, budget, criterion, W=None, start=())
     cands : list of Candidate
     base : Setup
         The setup installed at the start.
-    rig : planner.rig.RigSpec
+    rig : planner.rig_spec.RigSpec
     budget : float
         [min]
     criterion : str
@@ -967,8 +967,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         The team's drives (e.g. a track's): the contenders of the decision
         criterion are ranked on the first, validation runs play it. Default a
         120 s track-like drive.
-    rig : planner.rig.RigSpec, optional
-        Default :func:`planner.rig.default_rig`.
+    rig : planner.rig_spec.RigSpec, optional
+        Default :func:`planner.rig_spec.default_rig`.
     kinds, durations_s, shocks, n_shocks, click_levels
         The candidate runs (:func:`candidate_runs`).
     n_bands : int

@@ -24,7 +24,7 @@ from ident.models.library import read_shock_library
 from planner.errors import PlannerError
 from planner.predict import as_loop_plant, load_any_model
 from planner.report.trackdrive import write_drive_report
-from planner.rig import read_rig
+from planner.rig_spec import read_rig
 from planner.setups import Setup, resolve_baseline
 from planner.trackdrive import (build_track_drive, check_sections, cut_sections, lap_sections,
                                 make_target, parse_sections, update_drive)

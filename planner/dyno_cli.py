@@ -2,8 +2,8 @@
 
 ``shockplan dyno import RAW.csv [RAW.csv ...] --map MAP.toml --settings ls=6,hs=2 --out
 SHEET.csv [--append] [--units SI|imperial]`` turns raw dyno time series into dyno-sheet
-rows (:func:`ident.data.dyno_raw.import_dyno_runs`,
-:func:`ident.data.dyno_raw.write_dyno_sheet`) and prints a short report per file.
+rows (:func:`ident.dyno.raw.import_dyno_runs`,
+:func:`ident.dyno.raw.write_dyno_sheet`) and prints a short report per file.
 
 Each sub-command is one entry of :data:`SUBCOMMANDS` (name -> the function that adds its
 parser); ``table`` and ``check`` (:mod:`planner.dyno_args`, run by
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import logging
 
-from ident.data.dyno_raw import import_dyno_runs, parse_settings, write_dyno_sheet
+from ident.dyno.raw import import_dyno_runs, parse_settings, write_dyno_sheet
 from ident.data.files import check_output, read_units_marker
 from ident.data.units import UNIT_LABELS, UNIT_SYSTEMS, from_si
 from ident.errors import DynoError
@@ -40,7 +40,7 @@ def format_import_report(result, *, units="SI"):
 
     Parameters
     ----------
-    result : ident.data.dyno_raw.DynoImport
+    result : ident.dyno.raw.DynoImport
     units : {"SI", "imperial"}
         Velocity and force units of the report.
 

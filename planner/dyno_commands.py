@@ -1,6 +1,6 @@
 """``shockplan dyno table`` and ``shockplan dyno check``: the commands (a thin layer).
 
-Each command is a call into :mod:`planner.dyno_check` (compute) and
+Each command is a call into :mod:`planner.dyno.check` (compute) and
 :mod:`planner.report.dyno` (files); this module prints the summaries, as the command
 line does. Its options are in :mod:`planner.dyno_args` (light, for the parser built on
 every start); :func:`add_table_parser` and :func:`add_check_parser` here add them with
@@ -17,7 +17,7 @@ from ident.models import adjustable
 from ident.models.library import read_shock_library
 from ident.models.shocks import format_number
 from planner import dyno_args
-from planner.dyno_check import check_dyno_library, dyno_curve, library_units
+from planner.dyno.check import check_dyno_library, dyno_curve, library_units
 from planner.report.dyno import write_dyno_check, write_dyno_curve
 
 __all__ = ["cmd_dyno_table", "cmd_dyno_check", "add_table_parser", "add_check_parser"]

@@ -29,7 +29,7 @@ from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, mark_inventory, score_setups
 from planner.predict import predict_setups
 from planner.screen import screen_setups
-from planner.clicks import click_neighbours, click_values
+from planner.click_settings import click_neighbours, click_values
 from planner.setups import enumerate_setups, resolve_baseline
 from planner.sweep import screen_setups_on
 from planner.uncertainty import prediction_uncertainty, unresolved_pairs

@@ -89,7 +89,7 @@ from planner.predict import as_loop_plant, predict_setups, prepare_drive, resolv
 from planner.runner import KERNEL_LOCK, start_runner
 from planner.screen import (drive_bands, screen_operands, screen_packed,
                             screening_predictions)
-from planner.clicks import base_id
+from planner.click_settings import base_id
 from planner.setups import SetupSpace, resolve_baseline, setup_space
 
 __all__ = [
@@ -379,7 +379,7 @@ class SweepResult:
     settings : dict
         ``cases`` (the labels, models outer, drives inner), ``models`` and ``drives``
         (their names: the mapping's keys, else the objects' ``name``; the case files'
-        names come from them, :func:`planner.report.sweep.case_file_names`),
+        names come from them, :func:`planner.report.sweep_files.case_file_names`),
         ``combine``, ``n_candidates``, ``n_screened``, ``n_top``, ``top_share``,
         ``chunk_size``, ``scheduler`` (kind), ``address``, ``n_workers``,
         ``seconds`` (prepare, screen, simulate), ``screen_setups_per_s`` (setups x cases)

@@ -3,7 +3,7 @@
 ``write_plan(plan, out_dir)`` writes, into a folder built aside and moved into
 place:
 
-- ``plan.toml``: a rig plan (``format = "rig-plan/1"``, :mod:`ident.sim.rig`) whose
+- ``plan.toml``: a rig plan (``format = "rig-plan/1"``, :mod:`ident.sim.virtual_rig`) whose
   runs play the drive files below, so ``shockplan rig simulate --plan`` runs it
   as is; a real rig's session of the same runs is what ``shockplan identify``
   expects next;

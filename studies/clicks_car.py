@@ -5,7 +5,7 @@ on the virtual rig with an adjustable damper at each corner: the known clicker
 ``ident.sim.dampers.gt_clicker`` (``ls`` 0-20 clicks, ``hs`` 0-4 turns), measured by
 one-at-a-time dyno sweeps into a library entry (``ident.sim.dampers.clicker_shock``,
 ``TTX``; ``ls`` in clicks, ``hs`` in half turns: 21 x 9 = 189 settings). The car, the
-session and the drive are those of ``tests/test_clicks.py`` (fixture ``click_car``) and
+session and the drive are those of ``tests/test_click_settings.py`` (fixture ``click_car``) and
 ``tests/conftest.py`` (``gt_track_drive``):
 
 1. A rig session of click changes only (the paper's plan with its runs replaced, 2 %
@@ -79,8 +79,8 @@ from ident.models.library import ShockLibrary
 from ident.models.vehicle import example_gt_vehicle
 from ident.sim.dampers import clicker_shock, gt_clicker
 from ident.sim.metrics import METRIC_NAMES
-from ident.sim.rig import PlanRun, default_plan, simulate_session
-from planner.clicks import MAX_CLICK_SETUPS, parse_click_step
+from ident.sim.virtual_rig import PlanRun, default_plan, simulate_session
+from planner.click_settings import MAX_CLICK_SETUPS, parse_click_step
 from planner.objective import score_setups
 from planner.predict import METRIC_OUTPUTS, as_loop_plant, predict_setups
 from planner.rank import rank_setups

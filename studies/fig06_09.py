@@ -1,6 +1,6 @@
 """Identified FRFs against the known car: raw, conditioned, fit, ideal (paper Figs. 6-9).
 
-The virtual rig runs the seed paper's identification plan (``ident.sim.rig.default_plan``:
+The virtual rig runs the seed paper's identification plan (``ident.sim.virtual_rig.default_plan``:
 a baseline run with the linear B20 shocks and four single-corner swaps to the
 nonlinear N8, the same 800 s band-limited white-noise drive in every run, no
 sensor noise) on the paper's car, and shockplan identifies the session with
@@ -59,7 +59,7 @@ from ident.identify.condition import condition_frf
 from ident.identify.frf import DF_INPUTS, estimate_frf
 from ident.identify.pipeline import fit_model
 from ident.identify.plots import plot_frf
-from ident.sim.rig import default_plan, simulate_session
+from ident.sim.virtual_rig import default_plan, simulate_session
 from ident.models.vehicle import build_full_car, example_vehicle
 
 log = logging.getLogger("studies.fig06_09")

@@ -1,6 +1,6 @@
 """Validation: identified model against the known car on crate setups (paper Figs. 10-12).
 
-The virtual rig runs the seed paper's identification plan (``ident.sim.rig.default_plan``,
+The virtual rig runs the seed paper's identification plan (``ident.sim.virtual_rig.default_plan``,
 runs of ``--run-s``, no sensor noise) on the paper's car and shockplan
 identifies it with the defaults of ``ident.identify.pipeline.identify_session``; only the
 outputs the metrics need are identified (``planner.predict.METRIC_OUTPUTS``:
@@ -52,7 +52,7 @@ from ident.identify.condition import condition_frf
 from ident.identify.frf import estimate_frf
 from ident.sim.metrics import METRIC_QUANTITY, bandpass
 from ident.identify.pipeline import fit_model
-from ident.sim.rig import default_plan, make_plan_drive, simulate_session
+from ident.sim.virtual_rig import default_plan, make_plan_drive, simulate_session
 from ident.models.library import read_shock_library
 from ident.data.units import from_si
 from ident.models.vehicle import build_full_car, example_vehicle

@@ -62,7 +62,7 @@ from ident.models.vehicle import (
     modal_summary,
 )
 from ident.sim.metrics import METRIC_NAMES
-from ident.sim.rig import default_plan, simulate_session
+from ident.sim.virtual_rig import default_plan, simulate_session
 from planner.demo import DEMO_LIBRARY_PATH
 from planner.predict import predict_setups
 from planner.setups import Setup, enumerate_setups

@@ -44,7 +44,7 @@ from scipy.stats import spearmanr
 from ident.data.drive import make_track_drive
 from ident.sim.metrics import METRIC_NAMES
 from ident.identify.pipeline import identify_session
-from ident.sim.rig import default_plan, simulate_session
+from ident.sim.virtual_rig import default_plan, simulate_session
 from ident.models.library import ShockLibrary, read_shock_library
 from ident.models.vehicle import build_full_car, example_vehicle
 from planner.demo import DEMO_LIBRARY_PATH

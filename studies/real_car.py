@@ -63,7 +63,7 @@ from ident.models.library import ShockLibrary
 from ident.models.shocks import DigressiveShock
 from ident.models.vehicle import VehicleParams
 from ident.sim.metrics import METRIC_NAMES
-from ident.sim.rig import default_plan, simulate_session
+from ident.sim.virtual_rig import default_plan, simulate_session
 from planner.objective import score_setups
 from planner.predict import predict_setups
 from planner.setups import Setup

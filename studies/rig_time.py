@@ -2,7 +2,7 @@
 
 Rig time is what a plan costs on the rig: every run's duration plus the swap
 time of every corner whose shock changes from the run before (6 min a corner,
-``planner.rig.default_rig``), starting from the plan's first setup. For each
+``planner.rig_spec.default_rig``), starting from the plan's first setup. For each
 plan the virtual rig runs it on the paper's car (with sensor noise, by default
 2 % of each response channel's RMS and 0.5 % on the rig inputs), shockplan
 identifies the session with its defaults, and the identified model predicts a
@@ -43,14 +43,14 @@ from scipy.stats import spearmanr
 from ident.data.drive import make_track_drive
 from ident.sim.metrics import METRIC_NAMES
 from ident.identify.pipeline import identify_session
-from ident.sim.rig import PlanRun, default_plan, read_rig_plan, simulate_session
+from ident.sim.virtual_rig import PlanRun, default_plan, read_rig_plan, simulate_session
 from ident.models.library import read_shock_library
 from ident.models.vehicle import build_full_car, example_vehicle
 from planner.demo import DEMO_LIBRARY_PATH
 from planner.design import design_experiment
 from planner.objective import default_objective, score_setups
 from planner.predict import predict_setups
-from planner.rig import default_rig
+from planner.rig_spec import default_rig
 from planner.setups import Setup, enumerate_setups
 from planner.testplan import write_plan
 

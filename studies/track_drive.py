@@ -11,10 +11,10 @@ tracks, and measures the method's own floor (the known car as the model). Per ca
   2.9-5.0, wheel hops 14.2-16.9 Hz; ``modal_summary``); each with an aero model of
   kind ``constant`` on its own a / b, the GT test's downforce per kg of sprung mass
   (4,000 N at 60 m/s for 1,350 kg) and balance 0.45;
-- identified on the virtual rig from the paper's plan (``ident.sim.rig.default_plan``,
+- identified on the virtual rig from the paper's plan (``ident.sim.virtual_rig.default_plan``,
   its five runs of ``--run-s`` each, 2 % sensor noise; ``identify_session``'s defaults);
 - per seed of ``--seeds``: a run of ``--track-s`` on the virtual track at 200 Hz
-  (``ident.sim.track.make_track_run``: a road at 35-75 m/s under the car's wheelbase and
+  (``ident.sim.virtual_track.make_track_run``: a road at 35-75 m/s under the car's wheelbase and
   track, aero loads from the speed; never shown to shockplan) logged with
   ``log_track_run`` (shock travels and ride heights at 2 % noise, the crate's ``DM`` at
   every corner; the crate is ``planner/examples/library.toml``);
@@ -83,8 +83,8 @@ from ident.models.library import read_shock_library
 from ident.models.vehicle import build_full_car, example_gt_vehicle, example_vehicle, modal_summary
 from ident.sim.closedloop import simulate
 from ident.sim.metrics import METRIC_NAMES
-from ident.sim.rig import default_plan, simulate_session
-from ident.sim.track import log_track_run, make_track_run
+from ident.sim.virtual_rig import default_plan, simulate_session
+from ident.sim.virtual_track import log_track_run, make_track_run
 from planner.demo import DEMO_LIBRARY_PATH
 from planner.objective import score_setups
 from planner.predict import METRIC_OUTPUTS, as_loop_plant, predict_setups

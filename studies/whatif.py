@@ -35,7 +35,7 @@ import pandas as pd
 
 from ident.data.drive import make_track_drive
 from ident.identify.pipeline import identify_session
-from ident.sim.rig import default_plan, simulate_session
+from ident.sim.virtual_rig import default_plan, simulate_session
 from ident.models.library import read_shock_library
 from ident.models.vehicle import example_vehicle
 from planner.demo import DEMO_LIBRARY_PATH

@@ -93,7 +93,7 @@ def paper_model(paper_vehicle):
 @pytest.fixture(scope="session")
 def paper_plan():
     """The built-in plan: the paper's identification experiment."""
-    from ident.sim.rig import default_plan
+    from ident.sim.virtual_rig import default_plan
 
     return default_plan()
 
@@ -101,7 +101,7 @@ def paper_plan():
 @pytest.fixture(scope="session")
 def linear_session(paper_plan):
     """One 800 s run of the paper drive with linear B20 shocks (no shock loop error)."""
-    from ident.sim.rig import PlanRun, simulate_session
+    from ident.sim.virtual_rig import PlanRun, simulate_session
 
     plan = replace(paper_plan, runs=(PlanRun("linear", {c: "B20" for c in CORNERS}, "baseline",
                                              1, 800.0),))
@@ -111,7 +111,7 @@ def linear_session(paper_plan):
 @pytest.fixture(scope="session")
 def paper_session(paper_plan):
     """The paper's experiment (5 runs x 800 s) from the virtual rig."""
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     return simulate_session(paper_plan)
 
@@ -122,7 +122,7 @@ def identified_model(paper_plan, tmp_path_factory):
     import warnings
 
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     def build():
         with warnings.catch_warnings():
@@ -140,7 +140,7 @@ FOUR_POST_RUN_S = 100.0
 @pytest.fixture(scope="session")
 def four_post_session(paper_plan):
     """The paper's plan on a 4-post rig (no aero actuators, no aero channels), short runs."""
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     runs = tuple(replace(r, duration_s=FOUR_POST_RUN_S) for r in paper_plan.runs)
     return simulate_session(replace(paper_plan, rig="4-post", runs=runs))
@@ -152,7 +152,7 @@ def four_post_model(paper_plan, tmp_path_factory):
     import warnings
 
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     def build():
         runs = tuple(replace(r, duration_s=FOUR_POST_RUN_S) for r in paper_plan.runs)
@@ -167,7 +167,7 @@ def four_post_model(paper_plan, tmp_path_factory):
 @pytest.fixture(scope="session")
 def validation_drive(paper_plan, paper_vehicle):
     """A 300 s paper drive of another seed than the identification runs."""
-    from ident.sim.rig import make_plan_drive
+    from ident.sim.virtual_rig import make_plan_drive
 
     return make_plan_drive(paper_plan, paper_vehicle, seed=77, duration_s=300.0)
 
@@ -215,7 +215,7 @@ def gt_identified(gt_vehicle, paper_plan, tmp_path_factory):
     import warnings
 
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     def build():
         plan = replace(paper_plan, runs=tuple(replace(r, duration_s=100.0)

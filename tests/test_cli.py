@@ -598,8 +598,8 @@ def test_help_defaults_are_what_runs():
     duration, the rig swap time, the what-if tolerances."""
     import dataclasses
 
-    from ident.sim.rig import RigPlan, default_plan
-    from planner.rig import default_rig
+    from ident.sim.virtual_rig import RigPlan, default_plan
+    from planner.rig_spec import default_rig
     from planner.whatif import FRAGILE_SHARE, RANK_TOLERANCE
 
     plan = default_plan()

@@ -564,7 +564,7 @@ def _stops(gap_front_m, gap_rear_m):
 @pytest.fixture(scope="module")
 def gt_plant(bumpstop_vehicle):
     from ident.models.vehicle import build_full_car
-    from ident.sim.rig import loop_damping
+    from ident.sim.virtual_rig import loop_damping
 
     return build_full_car(bumpstop_vehicle).loop_plant(loop_damping(_gt_shocks()))
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from ident.data.channels import ALL_CHANNELS, CORNERS, RIG_INPUTS, TRACK_CHANNELS
-from ident.data.dyno_raw import read_dyno_map
+from ident.dyno.raw import read_dyno_map
 from ident.data.formats.channel_map import apply_channel_map, read_channel_map
 from ident.data.units import to_si
 from ident.errors import AeroModelError, BumpStopError, DynoError, SessionError
@@ -19,14 +19,14 @@ from ident.models.aero import read_aero_model
 from ident.models.bumpstops import read_bump_stops
 from ident.models.library import read_shock_library
 from ident.models.vehicle import EXAMPLE_VEHICLE_PATH, example_vehicle, read_vehicle
-from ident.sim.rig import default_plan, simulate_session
+from ident.sim.virtual_rig import default_plan, simulate_session
 from planner.demo import DEMO_INPUT_FILES, DEMO_LIBRARY_PATH, write_demo_inputs
 from planner.errors import PlannerError
 from planner.objective import default_objective, read_objective
 from planner.optimize.constraints import (check_constraints, default_constraints,
                                           read_curve_constraints)
 from planner.optimize.space import SYMMETRIES, curve_space
-from planner.rig import read_rig
+from planner.rig_spec import read_rig
 from planner.whatif import read_perturbations
 
 ROOT = Path(__file__).resolve().parents[1]

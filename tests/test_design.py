@@ -1,6 +1,6 @@
 """Tests of planner.design: candidate runs and their costs on a rig, their information, the
 criteria, the relaxed and greedy designs, the run order, the refusals, and a designed plan run on
-the virtual rig and identified (the rig file itself: tests/test_rigspec.py)."""
+the virtual rig and identified (the rig file itself: tests/test_rig_spec.py)."""
 
 import itertools
 
@@ -24,7 +24,7 @@ from planner.design import (
     design_experiment,
 )
 from planner.objective import default_objective
-from planner.rig import RigSpec, default_rig
+from planner.rig_spec import RigSpec, default_rig
 from planner.setups import Setup
 
 # the analytic score gradient against forward differences of the same (frozen) linearization,
@@ -238,7 +238,7 @@ def test_a_designed_plan_run_on_the_virtual_rig_identifies_the_car(paper_vehicle
     from ident.data.drive import make_track_drive
     from ident.sim.metrics import METRIC_NAMES
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import read_rig_plan, simulate_session
+    from ident.sim.virtual_rig import read_rig_plan, simulate_session
     from planner.objective import score_setups
     from planner.predict import predict_setups
     from planner.setups import enumerate_setups

@@ -61,7 +61,7 @@ def _rig_session(paper_plan, vehicle, *, noise=0.02, friction=None):
     (the tires lift off), everything declared as the rig records it; and the shares the
     simulation reports per run (``run -> {element stat: value}``, the rig's log)."""
     from ident.models.bumpstops import BumpStop, BumpStopLibrary
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     library = BumpStopLibrary([BumpStop("BS-F", FRONT_GAP_M, *STOP_TABLE)])
     stops = {"LF": "BS-F", "RF": "BS-F"}
@@ -84,7 +84,7 @@ def _rig_session(paper_plan, vehicle, *, noise=0.02, friction=None):
                                      re.findall(r"(\w+_(?:LF|RF|LR|RR)) (\S+?)(?:,|$)",
                                                 m.group(2))}
 
-    logger = logging.getLogger("ident.sim.rig")
+    logger = logging.getLogger("ident.sim.virtual_rig")
     handler, level = Elements(), logger.level
     logger.addHandler(handler)
     logger.setLevel(logging.INFO)

@@ -11,7 +11,7 @@ from ident.data.tracklog import read_track_log, write_track_log
 from ident.models.aero import AeroModel, write_aero_model
 from ident.models.vehicle import build_full_car
 from ident.sim.metrics import bandpass
-from ident.sim.track import log_track_run, make_track_run
+from ident.sim.virtual_track import log_track_run, make_track_run
 from planner.cli import main
 from planner.demo import DEMO_LIBRARY_PATH
 from planner.setups import Setup

@@ -1,4 +1,4 @@
-"""Tests of planner.dyno_check: a shock's curve as a table, and a library's dyno check."""
+"""Tests of planner.dyno.check: a shock's curve as a table, and a library's dyno check."""
 
 import numpy as np
 import pytest
@@ -9,7 +9,7 @@ from ident.models.adjustable import AdjustableShock, DynoPoints
 from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock, TableShock
 from ident.sim.dampers import ClickerDamper
-from planner.dyno_check import (BUILDER_GRID, check_dyno_library, default_velocities,
+from planner.dyno.check import (BUILDER_GRID, check_dyno_library, default_velocities,
                                 dyno_curve)
 from planner.errors import PlannerError
 

@@ -9,7 +9,7 @@ from ident.data.files import read_csv_table
 from ident.models.library import read_shock_library
 from ident.sim.dampers import ClickerDamper
 from planner.cli import main
-from planner.dyno_check import dyno_curve
+from planner.dyno.check import dyno_curve
 
 #: The dyno's speeds [m/s], each side.
 DYNO_SPEEDS = (0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.5)

@@ -1,6 +1,6 @@
-"""Raw dyno files to dyno sheets (ident.data.dyno_raw, ``shockplan dyno import``).
+"""Raw dyno files to dyno sheets (ident.dyno.raw, ``shockplan dyno import``).
 
-The truth is a digressive adjustable-like damper on the virtual dyno (ident.sim.dyno):
+The truth is a digressive adjustable-like damper on the virtual dyno (ident.dyno.virtual):
 raw runs with noise, a gas-force offset and a lag, exported through a dyno map in a
 dyno's own units and signs, must give back the curve at the measured settings.
 """
@@ -11,13 +11,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ident.data.dyno_raw import (DynoImport, import_dyno_runs, make_dyno_map, parse_settings,
+from ident.dyno.raw import (DynoImport, import_dyno_runs, make_dyno_map, parse_settings,
                                  read_dyno_map, read_dyno_raw, write_dyno_sheet)
 from ident.data.units import to_si
 from ident.errors import DynoError
-from ident.models.dyno import fit_shock_to_dyno
+from ident.dyno.sheet_fit import fit_shock_to_dyno
 from ident.models.shocks import TableShock
-from ident.sim.dyno import simulate_dyno_run
+from ident.dyno.virtual import simulate_dyno_run
 from planner.cli import main
 
 #: The done-when of issue 26: the curve at the measured settings within 2 % of force

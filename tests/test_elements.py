@@ -171,7 +171,7 @@ def _real_car(paper_plan, vehicle, *, stops, static, moment_multiple, diagnose=F
     import warnings
 
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     base = {"LF": "BS-F", "RF": "BS-F", "LR": "BS-R", "RR": "BS-R"} if stops else None
     runs = tuple(dataclasses.replace(r, duration_s=REAL_RUN_S, bump_stops=base)

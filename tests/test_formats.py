@@ -38,7 +38,7 @@ from ident.data.formats import (
     write_rpc3,
 )
 from ident.data.formats.channel_map import STANDARD_GRAVITY_M_S2
-from ident.sim.rig import PlanRun, default_plan, simulate_session
+from ident.sim.virtual_rig import PlanRun, default_plan, simulate_session
 from ident.data.session import Run, append_runs, make_session, read_session, write_session
 from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock

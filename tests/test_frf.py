@@ -90,7 +90,7 @@ def test_sequential_agrees_with_global(paper_session):
 
 
 def _linear_session(paper_plan, setups):
-    from ident.sim.rig import PlanRun, simulate_session
+    from ident.sim.virtual_rig import PlanRun, simulate_session
 
     runs = tuple(PlanRun(f"r{k}", s, "baseline" if k == 0 else "swap", 1, 60.0)
                  for k, s in enumerate(setups))

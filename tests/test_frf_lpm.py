@@ -124,7 +124,7 @@ def test_single_run_equals_list_of_one(rng):
 
 
 def _session(paper_plan, setups, duration_s, shocks=None):
-    from ident.sim.rig import PlanRun, simulate_session
+    from ident.sim.virtual_rig import PlanRun, simulate_session
 
     runs = tuple(PlanRun(f"r{k}", s, "baseline" if k == 0 else "swap", 1, duration_s)
                  for k, s in enumerate(setups))
@@ -188,7 +188,7 @@ def test_noisy_inputs_of_one_drive_keep_the_repeated_drive_window(paper_plan):
     base = {c: "B20" for c in CORNERS}
     setups = [base] + [dict(base, **{c: "N8"}) for c in CORNERS]
     clean = _session(paper_plan, setups, 60.0)
-    from ident.sim.rig import PlanRun, simulate_session
+    from ident.sim.virtual_rig import PlanRun, simulate_session
 
     runs = tuple(PlanRun(f"r{k}", st, "baseline" if k == 0 else "swap", 1, 60.0)
                  for k, st in enumerate(setups))

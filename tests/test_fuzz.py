@@ -24,13 +24,13 @@ from ident.data.drive import read_drive
 from ident.errors import ShockplanError
 from ident.data.formats import read_channel_map
 from ident.identify.model import load_model
-from ident.sim.rig import read_rig_plan
+from ident.sim.virtual_rig import read_rig_plan
 from ident.data.runs import read_run_table
 from ident.data.session import read_session
 from ident.models.library import read_shock_library
 from ident.models.vehicle import read_vehicle
 from planner.objective import read_objective
-from planner.rig import read_rig
+from planner.rig_spec import read_rig
 from planner.setups import read_setups
 from planner.whatif import read_perturbations
 

@@ -70,7 +70,7 @@ def test_truth_round_trip_metrics_with_noise(paper_plan, paper_model, validation
     from dataclasses import replace
 
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     session = simulate_session(replace(paper_plan, noise=0.02))
     with warnings.catch_warnings():

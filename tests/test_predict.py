@@ -111,7 +111,7 @@ def test_generalized_car_with_noise(paper_vehicle, paper_plan, demo_library, bas
 
     from ident.data.drive import make_track_drive
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
     from ident.models.vehicle import build_full_car, modal_summary
 
     car = paper_vehicle.replace(torsion_stiffness_n_m_rad=3.0e5, cg_lateral_offset_m=0.04,
@@ -155,7 +155,7 @@ def test_noisy_session_of_the_papers_plan(paper_vehicle, paper_plan, demo_librar
 
     from ident.data.drive import make_track_drive
     from ident.identify.pipeline import identify_session
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     runs = tuple(replace(r, duration_s=200.0) for r in paper_plan.runs)
     session = simulate_session(replace(paper_plan, runs=runs, noise=0.02, input_noise=0.005))

@@ -644,7 +644,7 @@ def _stops(front_m, rear_m, travel=STOP_TRAVEL_M, force=STOP_FORCE_N):
 @pytest.fixture(scope="module")
 def gt_loop_plant():
     from ident.models.vehicle import build_full_car
-    from ident.sim.rig import loop_damping
+    from ident.sim.virtual_rig import loop_damping
 
     return build_full_car(_gt_car()).loop_plant(loop_damping([_gt_library()["G10"]] * 4))
 
@@ -747,7 +747,7 @@ def test_linear_stop_in_contact_is_a_stiffer_spring():
     moves only the static point, which the band-passed metrics do not see), its k_eq is k
     and its mean travel the static deflection of spring plus stop."""
     from ident.models.vehicle import build_full_car
-    from ident.sim.rig import loop_damping
+    from ident.sim.virtual_rig import loop_damping
 
     k = 150e3
     lib = _gt_library()

@@ -43,7 +43,7 @@ LAG_RTOL = 1e-3
 @pytest.fixture(scope="module")
 def session(paper_plan):
     """The paper's plan on a 4-post rig, 5 runs of 60 s with 2 % sensor noise."""
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
 
     runs = tuple(dataclasses.replace(r, duration_s=RUN_S) for r in paper_plan.runs)
     return simulate_session(dataclasses.replace(paper_plan, rig="4-post", runs=runs,

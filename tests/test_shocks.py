@@ -18,7 +18,7 @@ from scipy.stats import norm
 
 import ident.models.shocks as shocks
 from ident.errors import FitWarning, ShockModelError
-from ident.models.dyno import fit_shock_to_dyno
+from ident.dyno.sheet_fit import fit_shock_to_dyno
 from ident.models.library import ShockLibrary, read_shock_library, write_shock_library
 from ident.models.shocks import (
     DigressiveShock,

@@ -1,7 +1,7 @@
 """Tests of planner.sweep: the lazy setup space against enumerate_setups, bounded memory,
 the Dask sweep against the single-process path (bit for bit), chunking invariance,
 agreement with screen_setups / predict_setups / rank_setups, several cases, bad options
-and schedulers, the files (planner.report.sweep) and the command line."""
+and schedulers, the files (planner.report.sweep_files) and the command line."""
 
 import math
 import re
@@ -21,7 +21,7 @@ from planner.objective import score_setups
 from planner.predict import predict_setups
 from planner.rank import rank_setups
 from planner.screen import screen_setups
-from planner.report.sweep import (MAX_STEM_CHARS, case_file_name, case_file_names, name_stem,
+from planner.report.sweep_files import (MAX_STEM_CHARS, case_file_name, case_file_names, name_stem,
                                   write_sweep)
 from planner.setups import Setup, enumerate_setups, setup_space
 from planner.sweep import RTOL_SCORE_ROUNDOFF, sweep_setups

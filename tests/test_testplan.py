@@ -1,6 +1,6 @@
 """Tests of planner.testplan: the run sheet (layout, print setup, highlighted swaps, reading
 it back as filled in), overwrite refusal, refusal of other workbooks, and the plan folder
-(``write_plan``, its ``plan.toml`` read by ``ident.sim.rig.read_rig_plan``)."""
+(``write_plan``, its ``plan.toml`` read by ``ident.sim.virtual_rig.read_rig_plan``)."""
 
 import dataclasses
 import datetime
@@ -22,7 +22,7 @@ from ident.models.library import ShockLibrary
 from ident.sim.dampers import ClickerDamper
 from planner.errors import PlannerError
 from ident.sim.metrics import METRIC_QUANTITY
-from ident.sim.rig import read_rig_plan
+from ident.sim.virtual_rig import read_rig_plan
 from ident.data.units import TO_SI
 from planner.design import change_time_min, design_experiment
 from planner.report import PAPER_SIZE, write_ranking

@@ -264,7 +264,7 @@ def test_max_iter_zero_is_the_plain_inverse(built, car, target, dm_setup, demo_l
 
 def test_clipped_drive_keeps_its_clipped_aero_loads(car, target, dm_setup, demo_library):
     """With clip, the drive written is the one limited and simulated: its aero loads too."""
-    from planner.rig import RigLimits
+    from planner.rig_spec import RigLimits
 
     limit = 0.5 * float(np.max(np.abs(target.aero["aero_heave"])))
     out = build_track_drive(car, target, dm_setup, demo_library, max_iter=2,
@@ -380,7 +380,7 @@ def gt_track(gt_vehicle, demo_library):
     speed (never shown to shockplan: only the log and the aero model are), and its log:
     shock travels and ride heights at 2 % noise, DM shocks all round."""
     from ident.models.aero import AeroModel
-    from ident.sim.track import log_track_run, make_track_run
+    from ident.sim.virtual_track import log_track_run, make_track_run
 
     aero = AeroModel(name="gt", kind="constant", cg_to_front_axle_m=gt_vehicle.a_m,
                      cg_to_rear_axle_m=gt_vehicle.b_m, reference_speed_m_s=60.0,
@@ -441,7 +441,7 @@ def test_rig_iteration_on_the_virtual_rig_corrects_a_wrong_model(gt_vehicle, gt_
     """The virtual rig closes the loop: a drive built on a model whose springs are 15 %
     off misses the log on the real (known) car; the rig plays it, records the response (at
     2 % noise), and one update from that run brings the residual down by half or more."""
-    from ident.sim.rig import PlanRun, default_plan, simulate_session
+    from ident.sim.virtual_rig import PlanRun, default_plan, simulate_session
     from ident.models.library import ShockLibrary
     from planner.predict import as_loop_plant
     from planner.trackdrive import make_target

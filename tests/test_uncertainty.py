@@ -522,7 +522,7 @@ def held_out_coverage(demo_library):
     from ident.identify.pipeline import fit_model
     from ident.models.vehicle import build_full_car
     from ident.sim.metrics import METRIC_NAMES
-    from ident.sim.rig import default_plan, simulate_session
+    from ident.sim.virtual_rig import default_plan, simulate_session
     from planner.predict import METRIC_OUTPUTS, predict_setups
     from planner.setups import Setup
 

@@ -302,7 +302,7 @@ def fade_window(n, fs_hz, fade_s):
     """Ones with a raised-cosine fade-in and fade-out of `fade_s` [s] at each end, shape (n,).
 
     The ramps are sampled half a sample in (neither end sample is exactly 0), the fade
-    of a track record (:func:`ident.sim.track.make_track_log`) and of a drive's target
+    of a track record (:func:`ident.sim.virtual_track.make_track_log`) and of a drive's target
     (:mod:`planner.trackdrive.target`). The generated drives' own fade starts at exactly
     0 instead.
 

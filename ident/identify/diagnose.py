@@ -139,7 +139,7 @@ STIFFENING_TRAVEL_SHARE = 0.3
 #: The sticking band of the suspension friction [m/s]: the friction changes sign within
 #: +-this shock velocity (or within the velocity's measured noise, where larger: the data
 #: cannot place the reversal closer). 5 mm/s: the virtual rig's smoothing
-#: (:data:`ident.sim.rig.FRICTION_V0_M_S`), below a rig's velocity noise at 2 %.
+#: (:data:`ident.sim.virtual_rig.FRICTION_V0_M_S`), below a rig's velocity noise at 2 %.
 FRICTION_BAND_M_S = 0.005
 #: Steps per sample on which the friction's regressor is formed (see :func:`_friction`).
 FRICTION_REFINE = 8

@@ -58,7 +58,7 @@ standard errors, else ``"ok"``.
 What could contaminate the comparison:
 
 bump stops
-    By the spec (and the virtual rig, :mod:`ident.sim.rig`), ``shock_force_XX`` is
+    By the spec (and the virtual rig, :mod:`ident.sim.virtual_rig`), ``shock_force_XX`` is
     the shock's alone: the bump stop is in parallel, outside the load cell. A load
     cell mounted where it also carries the stop (at the top mount, the stop riding on
     the shaft) would read the stop's force as shock force, so the samples where a
@@ -130,7 +130,7 @@ REFINE = 8
 #: 1-2 Hz) decorrelate within about 1 s.
 SE_WINDOW_S = 1.0
 #: The travel's derivative, the instrument of the scale, is kept below this share of the
-#: Nyquist frequency (the acquisition filter's flat band, :func:`ident.sim.rig`'s
+#: Nyquist frequency (the acquisition filter's flat band, :func:`ident.sim.virtual_rig`'s
 #: ``_daq_sample``: 0.8).
 INSTRUMENT_BAND = 0.8
 #: A series (run and corner) with fewer usable samples is left out.

@@ -5,7 +5,7 @@ loop plant the simulator steps, their exact discretization and balanced reductio
 :mod:`~ident.models.vehicle` (the paper's 7-DOF full-car model and its vehicle TOML),
 :mod:`~ident.models.shocks` (shock force-velocity models: piecewise-linear curves with a
 lag), :mod:`~ident.models.library` (the shock library and its TOML file, ``shocks.toml``),
-:mod:`~ident.models.dyno` (shock models fitted to dyno data),
+:mod:`~ident.dyno.sheet_fit` (shock models fitted to dyno data),
 :mod:`~ident.models.bumpstops` (bump stops, packers and their library file,
 ``bumpstops.toml``) and :mod:`~ident.models.aero` (the team's downforce and balance
 model, the aero loads it gives from speed and ride heights, and its TOML file).

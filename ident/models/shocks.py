@@ -5,7 +5,7 @@ Every shock kind is exactly a continuous piecewise-linear force-velocity curve
 force and the applied force, ``lag * dF/dt + F = f(v)``. The closed-loop
 simulator only sees :meth:`ShockModel.to_pwl`, so a new kind needs no simulator
 change. The shock library and its file ``shocks.toml`` are in
-:mod:`ident.models.library`, fits to dyno data in :mod:`ident.models.dyno`.
+:mod:`ident.models.library`, fits to dyno data in :mod:`ident.dyno.sheet_fit`.
 
 SI inside: velocity [m/s], force [N], damping [N/(m/s)], lag [s]. Shock
 velocity and force are positive in **compression** (bump), negative in

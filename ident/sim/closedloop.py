@@ -39,7 +39,7 @@ The plant types and the discretization live in :mod:`ident.models.lti`
 inputs), the compiled kernels in :mod:`ident.sim.loop_kernels`; this module checks the inputs, builds the kernels'
 arguments and returns the results. :func:`refine_input`, :func:`drive_array`,
 :func:`check_oversample`, :func:`setup_models` and :func:`pack_setups` are the input
-steps shared with the virtual rig (:mod:`ident.sim.rig`), the FIR simulator
+steps shared with the virtual rig (:mod:`ident.sim.virtual_rig`), the FIR simulator
 (:mod:`ident.identify.fir`) and the planner's screening and sweeps.
 
 :func:`simulate_batch` returns every setup's channels; :func:`simulate_batch_metrics`

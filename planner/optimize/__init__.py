@@ -8,7 +8,7 @@ constraints that make the curve buildable. It then maps the optimum to the
 crate: the crate's setups nearest to the optimal curves, simulated, and the
 crate's best, so the gap between them prices a new shock. With adjustable shocks
 in the crate, each one's best settings per corner group
-(:mod:`planner.optimize.clicks`: from the settings nearest the optimum, a
+(:mod:`planner.optimize.click_search`: from the settings nearest the optimum, a
 neighbourhood search in clicks verified in the time domain), their gain over the
 best fixed setup and the gap to the optimum (what a custom valving adds).
 
@@ -59,7 +59,7 @@ Modules
   on a grid and the best verified in the time domain (IPOPT's start and a floor
   under the result);
 - :mod:`~planner.optimize.solve`: the metrics' evaluator and IPOPT;
-- :mod:`~planner.optimize.clicks`: the click search of the crate's adjustable
+- :mod:`~planner.optimize.click_search`: the click search of the crate's adjustable
   shocks (:func:`search_clicks`) and :func:`curve_distance`;
 - :mod:`~planner.optimize.core`: :func:`optimize_curves` and
   :func:`compile_curves`, the crate mapping and the verification.
@@ -70,7 +70,7 @@ names are re-exported here.
 """
 
 from planner.optimize.cache import JIT_CACHE_MAX_FILES, JIT_FLAGS, jit_cache_dir
-from planner.optimize.clicks import CLICK_RADIUS, ClickResult, ClickSearch, search_clicks
+from planner.optimize.click_search import CLICK_RADIUS, ClickResult, ClickSearch, search_clicks
 from planner.optimize.constraints import (
     CONSTRAINTS_FORMAT,
     MAX_FORCE_VELOCITY_M_S,

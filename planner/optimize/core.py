@@ -38,7 +38,7 @@ from planner.elements import model_setup_elements
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
 from planner.optimize.cache import jit_available
-from planner.optimize.clicks import CLICK_RADIUS, ClickResult, curve_distance, search_clicks
+from planner.optimize.click_search import CLICK_RADIUS, ClickResult, curve_distance, search_clicks
 from planner.optimize.constraints import (
     CurveConstraints,
     check_constraints,
@@ -156,10 +156,10 @@ class CurveOptimum:
         knots, :func:`~planner.optimize.constraints.constraint_envelope`), and with
         the car's elements ``bump_stops`` (True), ``packers`` (the bounds [m] per group)
         and ``static_corner_load_n`` [N] ...
-    clicks : planner.optimize.clicks.ClickResult or None
+    clicks : planner.optimize.click_search.ClickResult or None
         With adjustable shocks in the crate: each one's best settings per corner group
         (a neighbourhood search from the settings nearest the optimum's curves, verified
-        in the time domain, :func:`planner.optimize.clicks.search_clicks`), the gain over
+        in the time domain, :func:`planner.optimize.click_search.search_clicks`), the gain over
         the crate's best fixed setup and the gap to the optimum; their setups are rows of
         `table` of kind ``"clicks"``. None without adjustables (or ``click_radius=None``).
     """
@@ -485,7 +485,7 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     click_radius : int or None
         With adjustable shocks in the crate: the click search's moves, +-1..`click_radius`
         steps of one adjuster (``clicks`` of the result,
-        :func:`planner.optimize.clicks.search_clicks`); None: no click search.
+        :func:`planner.optimize.click_search.search_clicks`); None: no click search.
 
     Returns
     -------

@@ -9,7 +9,7 @@ files (``ranking.csv``, ``ranking.xlsx``, ``pareto.png``, ``top_setups.png``).
 tornado charts show off the what-if's table (:func:`factor_effects`).
 :mod:`~planner.report.optimize` writes a curve optimum's files (``optimize.xlsx``,
 ``curves.png``, ``convergence.csv``, the optimal shocks and setups).
-:mod:`~planner.report.sweep` writes a sweep's files (``ranking.csv``, a CSV per case
+:mod:`~planner.report.sweep_files` writes a sweep's files (``ranking.csv``, a CSV per case
 named from its model and drive, ``sweep.toml``).
 :mod:`~planner.report.dyno` writes ``shockplan dyno table``'s curve CSV and ``shockplan
 dyno check``'s folder (``summary.md``, ``findings.csv``, per adjustable shock its fit,
@@ -41,7 +41,7 @@ from planner.report.sheets import (
     text_width,
     wrap_lines,
 )
-from planner.report.sweep import case_file_names, write_sweep
+from planner.report.sweep_files import case_file_names, write_sweep
 from planner.report.whatif import (
     factor_effects,
     rank_stability_figure,

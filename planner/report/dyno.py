@@ -1,12 +1,12 @@
 """The files of ``shockplan dyno table`` and ``shockplan dyno check``.
 
-:func:`write_dyno_curve` writes a :class:`planner.dyno_check.DynoCurve` as the CSV a shock
+:func:`write_dyno_curve` writes a :class:`planner.dyno.check.DynoCurve` as the CSV a shock
 builder reads (``velocity, force``, compression positive, the unit marker first).
-:func:`write_dyno_check` writes a :class:`planner.dyno_check.DynoCheck` into a folder:
+:func:`write_dyno_check` writes a :class:`planner.dyno.check.DynoCheck` into a folder:
 ``summary.md``, ``findings.csv`` and, per adjustable shock, ``<id>.fit.csv`` (the model
 against every measured point), ``<id>.worst.csv`` (the worst error per setting) and
 ``<id>.curves.png`` (:func:`check_figure`: measured points and model lines, one colour
-per setting, one panel per adjuster sweep). Compute lives in :mod:`planner.dyno_check`.
+per setting, one panel per adjuster sweep). Compute lives in :mod:`planner.dyno.check`.
 matplotlib is imported where a figure is drawn (heavy).
 """
 

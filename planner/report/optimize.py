@@ -184,7 +184,7 @@ def click_table(optimum):
     Returns
     -------
     pandas.DataFrame or None
-        :meth:`planner.optimize.clicks.ClickResult.table` (one column per adjuster, in
+        :meth:`planner.optimize.click_search.ClickResult.table` (one column per adjuster, in
         its own units, clicks or turns); None without adjustable shocks.
     """
     return None if optimum.clicks is None else optimum.clicks.table()

@@ -54,7 +54,7 @@ from ident.data.files import atomic_write_bytes, check_can_write, write_csv
 from ident.data.channels import CORNERS
 from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
-from planner.clicks import adjuster_columns
+from planner.click_settings import adjuster_columns
 from planner.errors import PlannerError
 from planner.objective import Objective, pareto_front
 from planner.report.sheets import (
@@ -320,7 +320,7 @@ def write_predictions_csv(table, path, *, units="SI", overwrite=False):
     -----
     Columns ``setup, LF, RF, LR, RR``, the metrics (spec order first), then
     with setting names of adjustable shocks (``TTX@ls=6,hs=2``) one column per adjuster per
-    corner (``LF_ls, LF_hs, ...``, :func:`planner.clicks.adjuster_columns`), then the
+    corner (``LF_ls, LF_hs, ...``, :func:`planner.click_settings.adjuster_columns`), then the
     further columns (intervals, scores, ranks) in table order; rows in the
     table's order; floats at full precision (they read back bit-identical);
     NaN as an empty field. The first line is the unit marker ``# units: <units>``

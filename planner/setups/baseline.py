@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 
 from ident.data.channels import CORNERS
-from planner.clicks import canonical_id, split_shock_ids
+from planner.click_settings import canonical_id, split_shock_ids
 from planner.errors import PlannerError
 from planner.setups.setup import Setup, library_label
 

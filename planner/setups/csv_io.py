@@ -19,7 +19,7 @@ from ident.data.files import check_can_write, csv_preamble, resolve_units, write
 from ident.data.channels import CORNERS
 from ident.data.units import UNIT_LABELS, from_si, to_si
 from ident.models.bumpstops import NO_BUMP_STOP, BumpStopLibrary, check_packer, parse_bump_stop_id
-from planner.clicks import canonical_id
+from planner.click_settings import canonical_id
 from planner.errors import PlannerError
 from planner.setups.setup import Setup, check_setups, library_ids, unknown_id_error
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ident.data.channels import CORNERS
-from planner.clicks import base_id, canonical_id, click_steps, expand_candidates
+from planner.click_settings import base_id, canonical_id, click_steps, expand_candidates
 from planner.errors import PlannerError
 from planner.setups.setup import Setup, check_setups, library_ids, unknown_id_error
 
@@ -558,7 +558,7 @@ def enumerate_setups(library, *, symmetry="left-right", axles="independent", fix
         (default ``"{LF}/{RF}/{LR}/{RR}"``, e.g. ``"B20/B20/D8/D8"``), or a
         callable taking the dict corner -> id and returning the name.
     clicks : None, "all" or mapping
-        Enumerate the settings of adjustable shocks (:mod:`planner.clicks`): None keeps an
+        Enumerate the settings of adjustable shocks (:mod:`planner.click_settings`): None keeps an
         adjustable id as one candidate (its default); ``"all"`` expands each adjustable
         candidate into its settings grid; ``{"ls": 2}`` steps per adjuster, ``{"TTX":
         "all"}`` per shock. Names are canonical, ``TTX@ls=6,hs=2``; counts per base id.

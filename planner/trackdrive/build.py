@@ -15,7 +15,7 @@ reference [1] of the seed paper; MTS RPC), done on the identified model before r
    gain halved. The best drive is kept.
 
 A linear inverse alone leaves an error of the size of the shocks' nonlinearity; the
-iteration removes what the model can reach. The rig's limits (:func:`planner.rig.
+iteration removes what the model can reach. The rig's limits (:func:`planner.rig_spec.
 apply_rig_limits`) are applied to every iterate with ``limit_action="clip"`` (so that the
 iteration works around them) or to the final drive with ``"scale"``.
 
@@ -45,7 +45,7 @@ from ident.sim.metrics import bandpass
 from planner.elements import loop_arguments, model_setup_elements
 from planner.errors import PlannerError
 from planner.predict import as_loop_plant
-from planner.rig import LIMIT_ACTIONS, apply_rig_limits
+from planner.rig_spec import LIMIT_ACTIONS, apply_rig_limits
 from planner.setups import Setup
 from planner.trackdrive.inverse import (DEFAULT_ALPHA, close_loop, coherence_weights,
                                         open_loop_parts, reach_shares, regularized_inverse,
@@ -105,7 +105,7 @@ class TrackDrive:
     reach : pandas.DataFrame
         Per target channel: ``unreachable_share``, the share of the target's power
         (1-20 Hz) the regularized inverse of the linearized loop cannot reach.
-    limits : planner.rig.LimitedDrive or None
+    limits : planner.rig_spec.LimitedDrive or None
         How the rig's limits changed the drive (None without limits).
     settings : dict
         The options, the setup, the linearization, the best iteration and why it stopped.
@@ -359,7 +359,7 @@ def build_track_drive(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
         Step of each correction (1: the full inverse).
     oversample : int
         The simulator's internal steps per sample.
-    limits : planner.rig.RigLimits, optional
+    limits : planner.rig_spec.RigLimits, optional
         The rig's actuator limits.
     limit_action : {"clip", "scale"}
         ``clip`` limits every iterate locally (the iteration works around it); ``scale``

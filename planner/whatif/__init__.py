@@ -41,7 +41,7 @@ Perturbations
 ``click``
     Adjustable shocks (setting names ``"TTX@ls=6,hs=2"``) a whole number of clicks off,
     every adjuster or those named in ``adjusters``, clipped at the range ends (the
-    table's ``clipped`` column); fixed shocks untouched (:mod:`planner.whatif.clicks`).
+    table's ``clipped`` column); fixed shocks untouched (:mod:`planner.whatif.click_factors`).
 ``fade``
     Adjustable shocks warmed up: a fractional force loss of the whole curve or, with
     ``part = "low-speed"``, mostly of its low-speed part; fixed shocks untouched.
@@ -104,7 +104,7 @@ Modules
     :func:`evaluate_whatif` and its result :class:`WhatIf`, in this process or on Dask.
 :mod:`planner.whatif.robust`
     The robust ranking and the fragile-rank rule.
-:mod:`planner.whatif.clicks`
+:mod:`planner.whatif.click_factors`
     Click tolerance and adjuster fade of adjustable shocks, and the tolerance table.
 
 The effects, figures and files (:func:`factor_effects`, :func:`tornado_figure`,
@@ -119,7 +119,7 @@ from planner.report.whatif import (
     tornado_figure,
     write_whatif,
 )
-from planner.whatif.clicks import FADE_HIGH_SPEED_SHARE, FADE_KNEE_M_S
+from planner.whatif.click_factors import FADE_HIGH_SPEED_SHARE, FADE_KNEE_M_S
 from planner.whatif.conditions import MIN_WINDOW_S, stiffened_plant
 from planner.whatif.evaluate import (
     MIN_TASK_EVALUATIONS,

@@ -26,7 +26,7 @@ from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
 from ident.sim import stiffness as ident_stiffness
 from planner.errors import PlannerError
 from planner.setups import Setup
-from planner.whatif.clicks import (click_note, click_steps, clicked_settings, fade_amounts,
+from planner.whatif.click_factors import (click_note, click_steps, clicked_settings, fade_amounts,
                                    faded_shock, parse_setting)
 from planner.whatif.spec import AXLE_CORNERS
 

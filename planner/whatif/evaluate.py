@@ -33,7 +33,7 @@ from planner.predict import as_loop_plant, predict_setups, prepare_drive
 from planner.runner import KERNEL_LOCK, SCHEDULER_NONE, start_runner
 from planner.screen import screen_setups
 from planner.setups import resolve_baseline
-from planner.whatif.clicks import ADJUSTER_KINDS, check_adjuster_factors, tolerance_table
+from planner.whatif.click_factors import ADJUSTER_KINDS, check_adjuster_factors, tolerance_table
 from planner.whatif.conditions import (
     ShockVariants,
     StopVariants,
@@ -98,7 +98,7 @@ class WhatIf:
         With ``click`` or ``fade`` factors: per setup, factor and quantity (score, rank,
         metric) the nominal, lowest, highest and worst value and the spread over the
         nominal condition and the factor's conditions on the first drive
-        (:func:`planner.whatif.clicks.tolerance_table`); None without such factors.
+        (:func:`planner.whatif.click_factors.tolerance_table`); None without such factors.
     settings : dict
         ``method``, ``oversample``, ``band_hz``, ``rank_tolerance``, ``fragile_share``,
         ``n_evaluations``, ``elapsed_s``, ``model``, ``drives``; with click factors

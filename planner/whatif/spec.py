@@ -46,7 +46,7 @@ FACTOR_KINDS = {"shock_scale": "scale", "shock_lag": "add", "spring_rate": "scal
                 "arb_rate": "add", "drive_scale": "scale", "drive_window": "set",
                 "drive_file": "set", "vehicle": "scale", "packer": "add", "bump_stop": "set",
                 "click": "add", "fade": "add"}
-#: Where a ``fade`` factor acts (:mod:`planner.whatif.clicks`).
+#: Where a ``fade`` factor acts (:mod:`planner.whatif.click_factors`).
 FADE_PARTS = ("all", "low-speed")
 #: Designs of a perturbation set.
 DESIGNS = ("one-at-a-time", "factorial", "monte-carlo")
@@ -98,7 +98,7 @@ class Factor:
         ``click``: the adjusters that move (empty: every adjuster of each shock).
     part : {"all", "low-speed"}
         ``fade``: the whole curve loses force, or mostly its low-speed part
-        (:func:`planner.whatif.clicks.faded_shock`).
+        (:func:`planner.whatif.click_factors.faded_shock`).
     """
 
     name: str

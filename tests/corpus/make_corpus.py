@@ -71,7 +71,7 @@ class Case:
 
 def _plan(shock_library, *, duration_s=RUN_S, units="SI"):
     from ident.data.channels import CORNERS
-    from ident.sim.rig import PlanRun, default_plan
+    from ident.sim.virtual_rig import PlanRun, default_plan
 
     base = {c: "B20" for c in CORNERS}
     plan = default_plan()
@@ -133,7 +133,7 @@ def build_base(root):
     """
     from ident.data.channels import RIG_INPUTS, SHOCK_VELOCITIES
     from ident.data.drive import Drive, write_drive
-    from ident.sim.rig import simulate_session
+    from ident.sim.virtual_rig import simulate_session
     from ident.data.runs import write_run_table
     from ident.data.session import write_session
     from planner.setups import Setup, write_setups

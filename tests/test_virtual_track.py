@@ -1,4 +1,4 @@
-"""ident.sim.track: the virtual track (a road at a varying speed, aero loads from the speed)
+"""ident.sim.virtual_track: the virtual track (a road at a varying speed, aero loads from the speed)
 and its logger."""
 
 import numpy as np
@@ -9,7 +9,7 @@ from ident.errors import DriveError
 from ident.models.aero import AeroModel
 from ident.models.vehicle import build_full_car
 from ident.sim.closedloop import simulate
-from ident.sim.track import (POT_OFFSET_M, STATIC_RIDE_HEIGHT_M, log_track_run,
+from ident.sim.virtual_track import (POT_OFFSET_M, STATIC_RIDE_HEIGHT_M, log_track_run,
                              make_speed_trace, make_track_run)
 from planner.setups import Setup
 

@@ -1009,7 +1009,7 @@ def analyze_dyno_run(frame, *, source="dyno run", min_cycles=MIN_CYCLES):
     frame : pandas.DataFrame
         SI columns ``time`` [s], ``force`` [N], ``displacement`` [m] (compression
         positive) and optional ``temperature`` [deg C] (:func:`read_dyno_raw`,
-        :func:`ident.sim.dyno.simulate_dyno_run`).
+        :func:`ident.dyno.virtual.simulate_dyno_run`).
     source : str
         The run's name in messages and in the sheet.
     min_cycles : int

@@ -1,4 +1,4 @@
-"""Tests of ident.sim.rig: experiment plans and the virtual rig."""
+"""Tests of ident.sim.virtual_rig: experiment plans and the virtual rig."""
 
 import shutil
 from dataclasses import replace
@@ -12,7 +12,7 @@ from ident.data.channels import CORNERS, RIG_INPUTS
 from ident.errors import SessionError
 from ident.models.bumpstops import BumpStop, BumpStopLibrary, write_bump_stops
 from ident.identify.frf import frf_from_arrays
-from ident.sim.rig import PlanRun, default_plan, read_rig_plan, simulate_session
+from ident.sim.virtual_rig import PlanRun, default_plan, read_rig_plan, simulate_session
 from ident.data.units import to_si
 
 DB_TOL_FRF = 0.5  # issue: H1 vs analytic within 0.5 dB where coherence > 0.99
@@ -87,7 +87,7 @@ def test_acquisition_filter_removes_aliases():
     """Every simulated channel passes the same anti-aliasing low-pass before decimation:
     a tone above the sampled Nyquist frequency (it would alias to 10 Hz) is removed, an in-band
     tone passes unchanged, and the samples stay aligned in time."""
-    from ident.sim.rig import _daq_sample
+    from ident.sim.virtual_rig import _daq_sample
 
     r, fs, n = 8, 100.0, 2000
     t = np.arange((n - 1) * r + 1) / (fs * r)
@@ -108,7 +108,7 @@ def test_acquisition_filter_equals_polyphase_reference(rng, r, n):
     (edge-extended record, resample_bandlimited, decimated), on records of odd and
     even length, shorter than the filter and longer than one FFT segment."""
     from ident.data.drive import FIR_HALF_LENGTH, resample_bandlimited
-    from ident.sim.rig import _daq_sample
+    from ident.sim.virtual_rig import _daq_sample
 
     n_fine = (n - 1) * r + 1
     t = np.arange(n_fine) / (100.0 * r)
@@ -195,7 +195,7 @@ def test_write_and_read_back(tmp_path, paper_plan):
 
 
 def _plan_text():
-    from ident.sim.rig import DEFAULT_PLAN_PATH
+    from ident.sim.virtual_rig import DEFAULT_PLAN_PATH
 
     return DEFAULT_PLAN_PATH.read_text()
 
@@ -221,7 +221,7 @@ BAD_PLANS = [
 
 @pytest.mark.parametrize("edit,match", BAD_PLANS)
 def test_bad_plans(tmp_path, edit, match):
-    from ident.sim.rig import DEFAULT_PLAN_PATH
+    from ident.sim.virtual_rig import DEFAULT_PLAN_PATH
 
     (tmp_path / "paper_shocks.toml").write_text(
         (DEFAULT_PLAN_PATH.parent / "paper_shocks.toml").read_text())
@@ -243,7 +243,7 @@ def test_default_plan_reads():
 
 
 def test_plan_noise_keys(tmp_path):
-    from ident.sim.rig import DEFAULT_PLAN_PATH
+    from ident.sim.virtual_rig import DEFAULT_PLAN_PATH
 
     (tmp_path / "paper_shocks.toml").write_text(
         (DEFAULT_PLAN_PATH.parent / "paper_shocks.toml").read_text())
@@ -374,7 +374,7 @@ SHOCKS = {"SI": "B20", "imperial": "B20"}
 def _real_plan(folder, *, units="SI", top=None, run=None, drive=None, stops_units=None):
     """A tiny plan (2 runs of 3 s at 100 Hz) with the real car's keys; `top`, `run` and
     `drive` replace the keys at the top, of the first run and below [drive]."""
-    from ident.sim.rig import DEFAULT_PLAN_PATH
+    from ident.sim.virtual_rig import DEFAULT_PLAN_PATH
 
     folder.mkdir(exist_ok=True)
     shutil.copy(DEFAULT_PLAN_PATH.parent / "paper_shocks.toml", folder / "shocks.toml")
@@ -508,7 +508,7 @@ def test_the_formats_doc_plan_reads(tmp_path):
     """docs/formats.md's rig-plan example, with its bump-stop library example, reads."""
     import re
 
-    from ident.sim.rig import DEFAULT_PLAN_PATH
+    from ident.sim.virtual_rig import DEFAULT_PLAN_PATH
 
     doc = (Path(__file__).resolve().parents[1] / "docs" / "formats.md").read_text()
     stops = re.search(r"```toml bump-stops\n(.*?)```", doc, re.DOTALL)[1]
@@ -589,8 +589,8 @@ def test_suspension_friction_acts_outside_the_shock_force(paper_plan, bumpstop_v
     from scipy.signal import lfilter
 
     from ident.models.lti import lag_hold_coefficients
-    from ident.sim import rig
-    from ident.sim.rig import friction_force
+    from ident.sim import virtual_rig as rig
+    from ident.sim.virtual_rig import friction_force
 
     s = simulate_session(_friction_plan(paper_plan, {"LF": FRICTION_N}), bumpstop_vehicle)
     h = 1.0 / 800.0
@@ -640,7 +640,7 @@ def test_suspension_friction_key(tmp_path, units, caplog):
     want = [60.0, 0.0, 0.0, 45.0] if units == "SI" else to_si(
         np.array([13.5, 0.0, 0.0, 10.1]), "force", "imperial")
     np.testing.assert_allclose(plan.suspension_friction_n, want, rtol=RTOL_UNITS)
-    with caplog.at_level(logging.INFO, logger="ident.sim.rig"):
+    with caplog.at_level(logging.INFO, logger="ident.sim.virtual_rig"):
         session = simulate_session(plan)
     assert any("suspension_friction_LF 60" in r.getMessage() and "_RF 0 N" in r.getMessage()
                for r in caplog.records)

@@ -1,7 +1,7 @@
-"""Tests of planner.rig: the rig TOML (time costs, units, [limits]) and the rig's limits
+"""Tests of planner.rig_spec: the rig TOML (time costs, units, [limits]) and the rig's limits
 applied to a drive (scaled, or clipped by the smooth local limiter).
 
-(tests/test_rig.py tests the virtual rig, ident.sim.rig.)"""
+(tests/test_virtual_rig.py tests the virtual rig, ident.sim.virtual_rig.)"""
 
 import dataclasses
 import logging
@@ -15,7 +15,7 @@ from ident.data.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS
 from ident.data.drive import Drive, make_noise_drive, make_track_drive
 from ident.data.units import to_si
 from planner.errors import PlannerError
-from planner.rig import (
+from planner.rig_spec import (
     CLIP_WINDOW_S,
     LIMIT_KEYS,
     LIMIT_RTOL,
@@ -191,7 +191,7 @@ def test_derivatives_are_numpy_gradients():
 
 def test_no_limits_or_none_exceeded_returns_the_same_drive(caplog):
     drive = _wheel_drive(_sine(1.0))
-    with caplog.at_level(logging.WARNING, logger="planner.rig"):
+    with caplog.at_level(logging.WARNING, logger="planner.rig_spec"):
         for limits in (None, RigLimits(), RigLimits(wheelloader_displacement_m=0.05),
                        RigLimits(aero_heave_n=1.0)):  # a 4-post drive: no aero to limit
             for action in ("clip", "scale"):
@@ -208,7 +208,7 @@ def test_scale_halves_a_sine_twice_over_the_limit(caplog):
     x = _sine(1.0)
     drive = Drive("sine", FS_HZ, {"wheelloader_LF": x, "wheelloader_RF": 0.5 * x,
                                   "wheelloader_LR": -0.25 * x, "wheelloader_RR": 0.0 * x})
-    with caplog.at_level(logging.WARNING, logger="planner.rig"):
+    with caplog.at_level(logging.WARNING, logger="planner.rig_spec"):
         out = apply_rig_limits(drive, RigLimits(wheelloader_displacement_m=LIMIT_M),
                                action="scale")
     assert out.scale == 0.5 and out.aero_scale == 1.0 and out.action == "scale"

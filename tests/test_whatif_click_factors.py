@@ -1,4 +1,4 @@
-"""Tests of planner.whatif.clicks: click tolerance and adjuster fade of adjustable shocks."""
+"""Tests of planner.whatif.click_factors: click tolerance and adjuster fade of adjustable shocks."""
 
 import textwrap
 
@@ -13,7 +13,7 @@ from ident.sim.dampers import ClickerDamper
 from planner.errors import PlannerError
 from planner.setups import Setup
 from planner.whatif import Factor, evaluate_whatif, perturbation_set, read_perturbations
-from planner.whatif.clicks import (FADE_HIGH_SPEED_SHARE, FADE_KNEE_M_S, clicked_settings,
+from planner.whatif.click_factors import (FADE_HIGH_SPEED_SHARE, FADE_KNEE_M_S, clicked_settings,
                                    fade_weight, faded_shock)
 from planner.whatif.conditions import ShockVariants, condition_effect, condition_setups
 

@@ -1,4 +1,4 @@
-"""The virtual shock dyno (ident.sim.dyno): known answers of its program, lag and noise."""
+"""The virtual shock dyno (ident.dyno.virtual): known answers of its program, lag and noise."""
 
 import math
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ident.models.shocks import LinearShock, TableShock
-from ident.sim.dyno import simulate_dyno_run
+from ident.dyno.virtual import simulate_dyno_run
 
 #: The program's velocity from the sampled displacement: central differences at 2 kHz of a
 #: sine of period >= 0.2 s are exact to (omega dt)^2 / 6 < 1e-4.

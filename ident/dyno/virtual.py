@@ -1,6 +1,6 @@
 """A virtual shock dyno: a known shock driven by a sinusoidal stroke program.
 
-The truth of the raw-dyno import (:mod:`ident.data.dyno_raw`): a shock whose curve is
+The truth of the raw-dyno import (:mod:`ident.dyno.raw`): a shock whose curve is
 known (any object with ``.force(v)`` in SI, e.g. a
 :class:`~ident.models.shocks.TableShock`) is driven, as a crank or hydraulic dyno does,
 by a sinusoidal displacement of constant stroke, in blocks of whole cycles at increasing

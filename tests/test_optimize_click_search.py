@@ -1,4 +1,4 @@
-"""Tests of planner.optimize.clicks: the continuous optimum mapped to an adjustable shock's
+"""Tests of planner.optimize.click_search: the continuous optimum mapped to an adjustable shock's
 clicks (the start nearest the optimum, the neighbourhood search, the report)."""
 
 import itertools
@@ -22,7 +22,7 @@ from planner.optimize import (
     search_clicks,
     write_optimum,
 )
-from planner.optimize.clicks import click_axes, nearest_setting
+from planner.optimize.click_search import click_axes, nearest_setting
 from planner.predict import predict_setups
 from planner.setups import Setup, read_setups
 

@@ -1,4 +1,4 @@
-"""Tests of planner.clicks and ranking in clicks: setting names in setups, the enumeration of
+"""Tests of planner.click_settings and ranking in clicks: setting names in setups, the enumeration of
 adjustable shocks' settings (sizes, names, inventory per base id), screening then the time
 domain on a click grid (rank and sweep against a brute force), the refusals naming the file,
 row and corner, and one table column per adjuster per corner."""
@@ -12,7 +12,7 @@ from ident.models.adjustable import AdjustableShock, DynoPoints, parse_shock_nam
 from ident.models.library import ShockLibrary
 from ident.sim.dampers import ClickerDamper
 from ident.sim.metrics import METRIC_NAMES
-from planner.clicks import (adjuster_columns, click_steps, clicks_option, parse_click_step,
+from planner.click_settings import (adjuster_columns, click_steps, clicks_option, parse_click_step,
                             split_shock_ids)
 from planner.errors import PlannerError
 from planner.objective import score_setups
@@ -243,7 +243,7 @@ def click_car(gt_vehicle, paper_plan):
 
     from ident.identify.pipeline import identify_session
     from ident.sim.dampers import clicker_shock, gt_clicker
-    from ident.sim.rig import PlanRun, simulate_session
+    from ident.sim.virtual_rig import PlanRun, simulate_session
 
     ttx = clicker_shock(gt_clicker())
     base, stiff = ttx.name({"ls": 10, "hs": 2}), ttx.name({"ls": 2, "hs": 0.5})
@@ -295,7 +295,7 @@ def test_rank_in_clicks_finds_the_known_cars_best(click_car, gt_vehicle, gt_trac
 def test_click_neighbours_step_on_the_enumerated_grid(lib):
     """The polish's neighbourhood: each adjuster of each corner at its setting or the next
     on the enumeration's grid (not the adjuster's own step), fixed shocks kept."""
-    from planner.clicks import click_neighbours, click_values
+    from planner.click_settings import click_neighbours, click_values
 
     setups = enumerate_setups(lib, shocks={"front": ["TTX"]}, fixed={"LR": "B20"}, clicks=GRID)
     values = click_values(setups)
