@@ -14,6 +14,9 @@ layers before it in this list:
     The one closed-loop simulator (a linear plant with nonlinear shock
     feedback) with its compiled kernels, the RMS metrics, stiffness changes of a
     plant, and the virtual rig that writes rig sessions from a known car.
+:mod:`ident.dyno`
+    The shock dyno: raw dyno runs to dyno sheets, shock models fitted to a dyno
+    sheet, and a virtual dyno (imports data and models; nothing in ident imports it).
 :mod:`ident.identify`
     Identification: the multi-input FRF (the paper's Eqs. 18-28), its
     conditioning, rational fits, the identified model and its file, the pipeline

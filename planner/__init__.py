@@ -3,12 +3,14 @@
 Modules, from the shared vocabulary up to the decisions (a module imports only those
 before it):
 
-- vocabulary: :mod:`~planner.errors`, :mod:`~planner.setups` (setups and their files,
-  the one enumeration, the one baseline resolver, the symmetry names),
+- vocabulary: :mod:`~planner.errors`, :mod:`~planner.click_settings` (adjustable
+  shocks' settings as setup candidates), :mod:`planner.setups` (the setup type, its
+  files, the one enumeration, the one baseline resolver, the symmetry names),
   :mod:`~planner.objective` (scores, limits and the one ranking rule) and
   :mod:`~planner.rig_spec` (the rig TOML: time costs and actuator limits, and the limits
   applied to a drive);
 - engines: :mod:`~planner.runner` (tasks in this process or on Dask),
+  :mod:`~planner.plant` (any model to the loop plant),
   :mod:`~planner.predict` (the closed loop in the time domain), :mod:`~planner.screen`
   with :mod:`~planner.screen_kernels` and :mod:`~planner.screen_codegen` (the frequency
   domain, stochastic linearization) and :mod:`~planner.uncertainty` (intervals from the
@@ -18,7 +20,8 @@ before it):
 - decisions: :mod:`~planner.sweep` and :mod:`~planner.rank` (which crate setup),
   :mod:`planner.optimize` (which damper curve), :mod:`~planner.design` and
   :mod:`~planner.testplan` (which rig runs, the run sheet) and :mod:`planner.whatif`
-  (does the best stay best);
+  (does the best stay best); :mod:`planner.dyno` (a shock's curve as a table, the dyno
+  check);
 - :mod:`~planner.cli` (the command line, a thin layer) and :mod:`~planner.demo`.
 
 ``planner`` imports :mod:`ident`, never the reverse.
