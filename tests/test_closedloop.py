@@ -490,7 +490,7 @@ def test_shock_step_at_rest_on_a_knot_converges():
     knot at 0 between a nearly flat and a steep segment (an optimizer's curve moved 5 %):
     the damped Newton iteration cycled on 1e-20 m/s half steps and reported failure; its
     convergence test counts velocities below 1 mm/s as 1 mm/s (``_V_SCALE_MIN_M_S``)."""
-    from ident.sim.loop_kernels import shock_step, solver_state
+    from ident.sim.loop_kernels import ShockCurves, shock_step, solver_state
 
     vfree = np.array([-2.3212568161800419e-20, -2.5951432654329554e-20, -3.9278851021791510e-20,
                       -3.8266021543416934e-20])
@@ -518,9 +518,10 @@ def test_shock_step_at_rest_on_a_knot_converges():
     nk = np.full(4, knots.size, dtype=np.int64)
     slo = np.array([6227.081290671564, 6227.081290671564, 6210.6443743976615, 6210.6443743976615])
     shi = np.array([6231.043068320205, 6231.043068320205, 6236.682297036815, 6236.682297036815])
-    v, _, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = solver_state(kv, nk)
-    it = shock_step(vfree, c0, Deff, cbar, np.ones(4), kv, kf, nk, slo, shi, v, fv, sv, seg, av,
-                     vnew, res, J, Jinv, state)
+    curves = ShockCurves(kv, kf, nk, slo, shi)
+    st = solver_state(curves)
+    v = st.v
+    it = shock_step(vfree, st.c0, Deff, cbar, np.ones(4), curves, st)
     assert it > 0
     assert np.all(np.abs(v) < 1e-18)  # at rest, to far below any physical velocity
 
