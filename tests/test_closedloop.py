@@ -757,6 +757,30 @@ def test_batch_metrics_with_elements_equal_metrics_of_the_batch(gt_plant, bumpst
     assert got.metrics.as_frame().shape == (len(setups), len(ref))  # units known for all
 
 
+def test_metrics_of_the_elements_path_without_an_active_element_are_the_plain_paths(
+        gt_plant, bumpstop_vehicle, one_blas_thread):
+    """The one loop kernel with the elements given but none active (no stop on any setup,
+    no static loads) and the same kernel with ``elements=None`` (its own compiled
+    specialization, the elements' code pruned): the same metrics and Newton counts to the
+    bit, in the fused metrics worker and in the batch kernel."""
+    from ident.sim.closedloop import simulate_batch_metrics
+
+    drive = _gt_drive(bumpstop_vehicle, 4.0, roughness_m3=32e-6)
+    setups = [_gt_shocks(), _gt_shocks(0.7), _gt_shocks(1.4)]
+    plain = simulate_batch_metrics(gt_plant, drive, setups, oversample=2)
+    idle = simulate_batch_metrics(gt_plant, drive, setups, oversample=2,
+                                  bump_stops=[None] * len(setups))
+    assert list(idle.metrics.values) == list(plain.metrics.values)
+    for name, x in plain.metrics.values.items():
+        np.testing.assert_array_equal(idle.metrics.values[name], x, err_msg=name)
+    np.testing.assert_array_equal(idle.newton_iterations, plain.newton_iterations)
+    batch = simulate_batch(gt_plant, drive, setups, oversample=2)
+    idle_batch = simulate_batch(gt_plant, drive, setups, oversample=2,
+                                bump_stops=[None] * len(setups))
+    for name, x in batch.channels.items():
+        np.testing.assert_array_equal(idle_batch.channels[name], x, err_msg=name)
+
+
 def test_batch_metrics_with_elements_of_a_setup_do_not_depend_on_its_batch(
         gt_plant, bumpstop_vehicle, one_blas_thread):
     """With the elements too, a setup's metrics are the same bits alone or in a batch."""

@@ -62,9 +62,9 @@ from ident.data.channels import (CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCI
 from ident.data.drive import FIR_HALF_LENGTH, check_drive_inputs, resample_bandlimited
 from ident.models.lti import (hold_coefficients, join_inputs, lag_coefficients,
                               lag_hold_coefficients)
-from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, Elements, LoopDrive, LoopPlant,
-                                    MetricFilters, RigModes, ShockSetups,
-                                    loop_batch, loop_metrics_worker, loop_serial, rig_kernel)
+from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, Elements, LoopDrive, MetricFilters,
+                                    ModalLoop, RigModes, ShockSetups, loop_batch,
+                                    loop_metrics_worker, loop_serial, rig_kernel)
 from ident.sim.metrics import METRIC_CHANNELS, compute_metrics, metric_plan
 
 __all__ = [
@@ -677,7 +677,7 @@ class _Loop:
     models: list
     rig: RigResponse
     names: list
-    plant: LoopPlant  # the kernels' plant (ident.sim.loop_kernels)
+    plant: ModalLoop  # the kernels' plant (ident.sim.loop_kernels)
     shocks: ShockSetups
     cout: np.ndarray  # the outputs' coefficients on [Re x, Im x, dF], shape (2 n + 4, p)
     y_rig: np.ndarray
@@ -691,7 +691,7 @@ class _Loop:
 
 def _loop_setup(plant, drive, setups, oversample, outputs, rig, where):
     """Check the inputs of a batch simulation and build the kernels' arguments (the
-    plant's :class:`~ident.sim.loop_kernels.LoopPlant`, the setups'
+    plant's :class:`~ident.sim.loop_kernels.ModalLoop`, the setups'
     :class:`~ident.sim.loop_kernels.ShockSetups` and the output matrix)."""
     r = check_oversample(oversample)
     models = [setup_models(s, f"setup {i}") for i, s in enumerate(setups)]
@@ -719,8 +719,8 @@ def _loop_setup(plant, drive, setups, oversample, outputs, rig, where):
     shocks = ShockSetups(*packed)
     modal, Cout, _ = _modal_args(plant.shock, vi, oi, h)
     return _Loop(models=models, rig=rig, names=names,
-                 plant=LoopPlant(*modal, _writable(plant.cbar_n_s_m)), shocks=shocks, cout=Cout,
-                 y_rig=y_rig, oversample=r, plant_name=plant.name)
+                 plant=ModalLoop(*modal, _writable(plant.cbar_n_s_m)), shocks=shocks,
+                 cout=Cout, y_rig=y_rig, oversample=r, plant_name=plant.name)
 
 
 def _run_loop(kernel_plant, loop, cout, tail):
@@ -1024,7 +1024,7 @@ class _Elements:
     :class:`ident.sim.loop_kernels.Elements` but ``tf_rows`` and ``max_iter``; ``on``
     (n_setups, 4) and ``lo_on`` (4,) say where there are stops and static loads."""
 
-    plant: LoopPlant
+    plant: ModalLoop
     cout: np.ndarray
     args: dict
     on: np.ndarray
@@ -1101,7 +1101,7 @@ def _element_args(plant, loop, bump_stops, static_corner_load_n, where):
                 Dcw=Dcw, bs_on=on, s0=s0, bx=bx, bf=bf, bn=bn, bslope=bslope,
                 lo_on=np.repeat(lo_on[None], S, axis=0),
                 static=np.repeat(static[None], S, axis=0))
-    return _Elements(plant=LoopPlant(*modal, loop.plant.cbar), cout=Cout, args=args, on=on,
+    return _Elements(plant=ModalLoop(*modal, loop.plant.cbar), cout=Cout, args=args, on=on,
                      lo_on=lo_on, static=static)
 
 

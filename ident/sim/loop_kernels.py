@@ -7,7 +7,7 @@ the kernels run no checks. Their arguments travel in named tuples (numba compile
 function per argument type and reads a named tuple's fields at no cost):
 
 - :class:`RigModes`: a plant's rig-input modes for :func:`rig_kernel`;
-- :class:`LoopPlant`: the shock part's modes, its same-step velocity response ``Deff`` and
+- :class:`ModalLoop`: the shock part's modes, its same-step velocity response ``Deff`` and
   ``cbar`` (shared by every setup of a batch);
 - :class:`ShockSetups` (the curves and the lag's coefficients): the setups' shocks, one
   row per setup (:func:`ident.sim.closedloop.pack_setups`); :class:`ShockCurves`, one
@@ -51,7 +51,7 @@ from ident.sim.metric_kernels import setup_metric_rms
 
 __all__ = [
     "RigModes",
-    "LoopPlant",
+    "ModalLoop",
     "ShockCurves",
     "ShockSetups",
     "LoopDrive",
@@ -94,9 +94,9 @@ DT : ndarray, shape (m, p)
     ``D.T``.
 """
 
-LoopPlant = namedtuple("LoopPlant", ["pr", "pi", "g1r", "g1i", "g0r", "g0i", "gmr", "gmi", "Br",
+ModalLoop = namedtuple("ModalLoop", ["pr", "pi", "g1r", "g1i", "g0r", "g0i", "gmr", "gmi", "Br",
                                      "Bi", "Cvr", "Cvi", "Deff", "cbar"])
-LoopPlant.__doc__ = """The shock loop's plant: the shock-force part's modes (shared by every setup).
+ModalLoop.__doc__ = """The shock loop's plant: the shock-force part's modes (shared by every setup).
 
 Attributes
 ----------
@@ -104,9 +104,9 @@ pr, pi : ndarray, shape (n,)
     ``phi = exp(lambda h)`` per mode, real and imaginary parts (h the internal step).
 g1r, g1i, g0r, g0i, gmr, gmi : ndarray, shape (n,)
     The quadratic hold's coefficients per mode (:func:`ident.models.lti.hold_coefficients`).
-Br, Bi : ndarray, shape (4 (+ 4), n)
+Br, Bi : ndarray, shape (4, n)
     ``B.T`` of the force inputs ``dF`` [N] (real, imaginary); with lift-off the pad
-    corrections' rows are in :attr:`Elements.Bwr` instead (these stay the 4 force rows).
+    corrections' rows are :attr:`Elements.Bwr`, :attr:`Elements.Bwi`.
 Cvr, Cvi : ndarray, shape (4, n)
     The shock velocities' rows of ``C`` [m/s per state].
 Deff : ndarray, shape (4, 4)
@@ -785,7 +785,7 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
 
     Parameters
     ----------
-    plant : LoopPlant
+    plant : ModalLoop
     setup : ShockSetups
         One setup's rows.
     drive : LoopDrive
