@@ -490,7 +490,7 @@ def test_shock_step_at_rest_on_a_knot_converges():
     knot at 0 between a nearly flat and a steep segment (an optimizer's curve moved 5 %):
     the damped Newton iteration cycled on 1e-20 m/s half steps and reported failure; its
     convergence test counts velocities below 1 mm/s as 1 mm/s (``_V_SCALE_MIN_M_S``)."""
-    from ident.sim.loop_kernels import shock_step, solver_state
+    from ident.sim.loop_kernels import ShockCurves, shock_step, solver_state
 
     vfree = np.array([-2.3212568161800419e-20, -2.5951432654329554e-20, -3.9278851021791510e-20,
                       -3.8266021543416934e-20])
@@ -518,9 +518,10 @@ def test_shock_step_at_rest_on_a_knot_converges():
     nk = np.full(4, knots.size, dtype=np.int64)
     slo = np.array([6227.081290671564, 6227.081290671564, 6210.6443743976615, 6210.6443743976615])
     shi = np.array([6231.043068320205, 6231.043068320205, 6236.682297036815, 6236.682297036815])
-    v, _, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = solver_state(kv, nk)
-    it = shock_step(vfree, c0, Deff, cbar, np.ones(4), kv, kf, nk, slo, shi, v, fv, sv, seg, av,
-                     vnew, res, J, Jinv, state)
+    curves = ShockCurves(kv, kf, nk, slo, shi)
+    st = solver_state(curves)
+    v = st.v
+    it = shock_step(vfree, st.c0, Deff, cbar, np.ones(4), curves, st)
     assert it > 0
     assert np.all(np.abs(v) < 1e-18)  # at rest, to far below any physical velocity
 
@@ -754,6 +755,30 @@ def test_batch_metrics_with_elements_equal_metrics_of_the_batch(gt_plant, bumpst
     assert np.all(got.metrics.values["tire_liftoff_share_LR"] > 0.005)
     assert "tire_liftoff_share_LF" not in got.metrics.values
     assert got.metrics.as_frame().shape == (len(setups), len(ref))  # units known for all
+
+
+def test_metrics_of_the_elements_path_without_an_active_element_are_the_plain_paths(
+        gt_plant, bumpstop_vehicle, one_blas_thread):
+    """The one loop kernel with the elements given but none active (no stop on any setup,
+    no static loads) and the same kernel with ``elements=None`` (its own compiled
+    specialization, the elements' code pruned): the same metrics and Newton counts to the
+    bit, in the fused metrics worker and in the batch kernel."""
+    from ident.sim.closedloop import simulate_batch_metrics
+
+    drive = _gt_drive(bumpstop_vehicle, 4.0, roughness_m3=32e-6)
+    setups = [_gt_shocks(), _gt_shocks(0.7), _gt_shocks(1.4)]
+    plain = simulate_batch_metrics(gt_plant, drive, setups, oversample=2)
+    idle = simulate_batch_metrics(gt_plant, drive, setups, oversample=2,
+                                  bump_stops=[None] * len(setups))
+    assert list(idle.metrics.values) == list(plain.metrics.values)
+    for name, x in plain.metrics.values.items():
+        np.testing.assert_array_equal(idle.metrics.values[name], x, err_msg=name)
+    np.testing.assert_array_equal(idle.newton_iterations, plain.newton_iterations)
+    batch = simulate_batch(gt_plant, drive, setups, oversample=2)
+    idle_batch = simulate_batch(gt_plant, drive, setups, oversample=2,
+                                bump_stops=[None] * len(setups))
+    for name, x in batch.channels.items():
+        np.testing.assert_array_equal(idle_batch.channels[name], x, err_msg=name)
 
 
 def test_batch_metrics_with_elements_of_a_setup_do_not_depend_on_its_batch(

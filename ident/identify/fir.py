@@ -74,7 +74,7 @@ from ident.data.drive import FIR_HALF_LENGTH, resample_bandlimited
 from ident.errors import FitWarning
 from ident.sim.closedloop import (BatchResponse, check_oversample, drive_array, pack_setups,
                                   refine_input, setup_models)
-from ident.sim.loop_kernels import shock_step, solver_state
+from ident.sim.loop_kernels import ShockCurves, shock_step, solver_state
 from ident.identify.frf import MODEL_INPUTS, Frf
 
 __all__ = ["FirPlant", "fir_from_frf", "simulate_fir_batch"]
@@ -440,7 +440,12 @@ def _fir_loop_one(hrev, D0, v_free, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, r
     F_prev = np.zeros(m)
     f_prev = np.zeros(m)
     hist = np.zeros(m)
-    v, vfree, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = solver_state(kv, nk)
+    curves = ShockCurves(kv, kf, nk, slo, shi)
+    st = solver_state(curves)
+    v = st.v
+    vfree = st.vfree
+    c0 = st.c0
+    fv = st.fv
     worst = 0
     failed = False
     for k in range(N):
@@ -450,8 +455,7 @@ def _fir_loop_one(hrev, D0, v_free, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, r
             vfree[c] = v_free[c, k] + hist[c]
             c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c]
         # v = vfree + D0 (c0 + b0 f(v) - cbar v): the modal simulator's step with Deff = D0
-        it = shock_step(vfree, c0, D0, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av, vnew,
-                        res, J, Jinv, state)
+        it = shock_step(vfree, c0, D0, cbar, b0, curves, st)
         if it < 0:
             failed = True
             it = 80

@@ -62,8 +62,8 @@ from ident.data.channels import (CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCI
 from ident.data.drive import FIR_HALF_LENGTH, check_drive_inputs, resample_bandlimited
 from ident.models.lti import (hold_coefficients, join_inputs, lag_coefficients,
                               lag_hold_coefficients)
-from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, loop_batch, loop_elements_batch,
-                                    loop_elements_serial, loop_metrics_elements_worker,
+from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, Elements, LoopDrive, MetricFilters,
+                                    ModalLoop, RigModes, ShockSetups, loop_batch,
                                     loop_metrics_worker, loop_serial, rig_kernel)
 from ident.sim.metrics import METRIC_CHANNELS, compute_metrics, metric_plan
 
@@ -242,11 +242,11 @@ def _rig_outputs(mr, h, u_fine, r):
                 np.ascontiguousarray(a.imag, dtype=float))
 
     C = mr.C
-    rig_kernel(np.ascontiguousarray(u_fine, dtype=float), *split(np.asarray(mr.B).T), *split(phi),
-               *split(g1), *split(g0), *split(gm), *split(phiL),
-               np.ascontiguousarray(C.real.T, dtype=float),
-               np.ascontiguousarray(-C.imag.T, dtype=float),
-               np.ascontiguousarray(np.asarray(mr.D, dtype=float).T), r, L, n_chunks, v, yT)
+    modes = RigModes(*split(np.asarray(mr.B).T), *split(phi), *split(g1), *split(g0), *split(gm),
+                     *split(phiL), np.ascontiguousarray(C.real.T, dtype=float),
+                     np.ascontiguousarray(-C.imag.T, dtype=float),
+                     np.ascontiguousarray(np.asarray(mr.D, dtype=float).T))
+    rig_kernel(np.ascontiguousarray(u_fine, dtype=float), modes, r, L, n_chunks, v, yT)
     return v, y
 
 
@@ -491,7 +491,7 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     Notes
     -----
     Bump stops and lift-off are solved within each internal step with the shocks
-    (:func:`ident.sim.loop_kernels.loop_one_elements`): the travel, the stop's force, the
+    (:func:`ident.sim.loop_kernels.loop_one`): the travel, the stop's force, the
     contact force and the shock forces agree at the step (implicit). The pad correction
     of lift-off enters the model through its wheelloader inputs (the rig part's wheelloader
     columns joined to the shock part, :func:`ident.models.lti.join_inputs`), so the tire
@@ -511,12 +511,7 @@ def _batch_response(plant, drive, loop):
     y = np.empty((S, len(loop.names), N))
     F = np.empty((S, N, 4))  # (setup, sample, corner): written per sample in the kernel
     iters = np.zeros(S, dtype=np.int64)
-    if S == 1:
-        # not through _run_parallel: setting the chunk size starts numba's thread pool,
-        # and a process forked after that (the demo's warm-up workers) cannot use it
-        loop_serial(*loop.args, loop.y_rig, y, F, iters)
-    else:
-        _run_parallel(loop_batch, *loop.args, loop.y_rig, y, F, iters)
+    _run_loop(loop.plant, loop, loop.cout, (y, F, iters, None, None))
     _check_converged(plant, iters)
     channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
     for c, name in enumerate(SHOCK_FORCES):
@@ -638,14 +633,14 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     zi = np.ascontiguousarray(np.stack([f[2] for f in filters]), dtype=float)
     out = np.empty((S, len(filters), len(plan.names)))
     iters = np.zeros(S, dtype=np.int64)
-    tail = (N, ia, sos, zi, int(filters[0][1]), out, iters)
+    metrics = MetricFilters(ia, sos, zi, int(filters[0][1]))
+    drive_args = LoopDrive(loop.rig.v_fine, loop.oversample, y_rig_red, c_red)
     if el is None:
-        _run_workers(loop_metrics_worker, S, (*loop.args[:-1], c_red, y_rig_red) + tail)
+        _run_workers(S, (loop.plant, loop.shocks, drive_args, metrics, out, iters, None, None))
     else:
         stats = np.zeros((S, 3, 4))
-        _run_workers(loop_metrics_elements_worker, S,
-                     (*el.kernel_args(loop, c_red), tf_rows, el.max_iter, y_rig_red) + tail
-                     + (stats,))
+        _run_workers(S, (el.plant, loop.shocks, drive_args, metrics, out, iters,
+                         el.kernel_elements(tf_rows), stats))
     _check_converged(plant, iters)
     rms = {name + suffix: out[:, b, i] for b, suffix in enumerate(plan.bands)
            for i, name in enumerate(plan.names)}
@@ -658,9 +653,11 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
                         newton_iterations=iters, settings=settings)
 
 
-def _run_workers(worker, n_setups, args):
-    """Run the fused metrics `worker` on ``min(n_setups, numba's threads)`` threads: worker
-    ``w`` of ``n`` takes the setups ``w, w + n, ...``."""
+def _run_workers(n_setups, args):
+    """Run the fused metrics worker (:func:`ident.sim.loop_kernels.loop_metrics_worker`) on
+    ``min(n_setups, numba's threads)`` threads: worker ``w`` of ``n`` takes the setups ``w,
+    w + n, ...``."""
+    worker = loop_metrics_worker
     n_workers = min(n_setups, int(_nb.config.NUMBA_NUM_THREADS))
     if n_workers == 1:
         worker(0, 1, *args)
@@ -680,16 +677,12 @@ class _Loop:
     models: list
     rig: RigResponse
     names: list
-    args: tuple
+    plant: ModalLoop  # the kernels' plant (ident.sim.loop_kernels)
+    shocks: ShockSetups
+    cout: np.ndarray  # the outputs' coefficients on [Re x, Im x, dF], shape (2 n + 4, p)
     y_rig: np.ndarray
     oversample: int
     plant_name: str
-
-    @property
-    def cout(self):
-        """The output rows' coefficients on ``[Re x, Im x, dF]``, shape (2 n + 4, p): the
-        kernels' last argument (the fused metrics path passes reduced rows in its place)."""
-        return self.args[-1]
 
     def settings(self, drive):
         return {"oversample": self.oversample, "plant": self.plant_name,
@@ -697,8 +690,9 @@ class _Loop:
 
 
 def _loop_setup(plant, drive, setups, oversample, outputs, rig, where):
-    """Check the inputs of a batch simulation and build the kernels' arguments up to the
-    outputs (``args``: the modal loop, the setups' curves, ``r`` and the output matrix)."""
+    """Check the inputs of a batch simulation and build the kernels' arguments (the
+    plant's :class:`~ident.sim.loop_kernels.ModalLoop`, the setups'
+    :class:`~ident.sim.loop_kernels.ShockSetups` and the output matrix)."""
     r = check_oversample(oversample)
     models = [setup_models(s, f"setup {i}") for i, s in enumerate(setups)]
     if not models:
@@ -722,10 +716,25 @@ def _loop_setup(plant, drive, setups, oversample, outputs, rig, where):
     else:
         y_rig = np.ascontiguousarray(rig.y[[rig.output_names.index(o) for o in names]].T)
     packed = pack_setups(models, h)
+    shocks = ShockSetups(*packed)
     modal, Cout, _ = _modal_args(plant.shock, vi, oi, h)
-    args = (*modal, rig.v_fine, _writable(plant.cbar_n_s_m), *packed, r, Cout)
-    return _Loop(models=models, rig=rig, names=names, args=args, y_rig=y_rig, oversample=r,
-                 plant_name=plant.name)
+    return _Loop(models=models, rig=rig, names=names,
+                 plant=ModalLoop(*modal, _writable(plant.cbar_n_s_m)), shocks=shocks,
+                 cout=Cout, y_rig=y_rig, oversample=r, plant_name=plant.name)
+
+
+def _run_loop(kernel_plant, loop, cout, tail):
+    """Run the batch loop (one setup: :func:`ident.sim.loop_kernels.loop_serial`, else
+    :func:`ident.sim.loop_kernels.loop_batch`) of `loop` with the plant `kernel_plant`, the
+    output rows `cout` and ``tail = (y_out, F_out, iters, elements, stats)``."""
+    args = (kernel_plant, loop.shocks, LoopDrive(loop.rig.v_fine, loop.oversample, loop.y_rig,
+                                                 cout)) + tuple(tail)
+    if len(loop.models) == 1:
+        # not through _run_parallel: setting the chunk size starts numba's thread pool,
+        # and a process forked after that (the demo's warm-up workers) cannot use it
+        loop_serial(*args)
+    else:
+        _run_parallel(loop_batch, *args)
 
 
 def _split(a):
@@ -1004,23 +1013,22 @@ def _physical_same_step(extra):
 class _Elements:
     """The elements' kernel arguments for a batch (:func:`_element_args`).
 
-    ``modal`` and ``cout`` replace the plain loop's (with lift-off the shock part has the
-    wheelloader inputs joined, and ``cout`` the ``w`` rows); ``args`` runs from ``Bwr`` to
-    ``static`` of :func:`ident.sim.loop_kernels.loop_one_elements`' batch kernels; ``on``
+    ``plant`` and ``cout`` replace the plain loop's (with lift-off the shock part has the
+    wheelloader inputs joined, and ``cout`` the ``w`` rows); ``args`` are the fields of
+    :class:`ident.sim.loop_kernels.Elements` but ``tf_rows`` and ``max_iter``; ``on``
     (n_setups, 4) and ``lo_on`` (4,) say where there are stops and static loads."""
 
-    modal: tuple
+    plant: ModalLoop
     cout: np.ndarray
-    args: tuple
+    args: dict
     on: np.ndarray
     lo_on: np.ndarray
     static: np.ndarray
 
-    def kernel_args(self, loop, cout):
-        """The batch kernels' arguments up to ``static`` with the output rows `cout`."""
-        packed = loop.args[len(self.modal) + 2:-2]  # the setups' curves (see _loop_setup)
-        return (*self.modal, loop.rig.v_fine, loop.args[len(self.modal) + 1], *packed,
-                loop.oversample, cout, *self.args)
+    def kernel_elements(self, tf_rows):
+        """The kernels' :class:`ident.sim.loop_kernels.Elements` with the tire-force output
+        columns `tf_rows`."""
+        return Elements(tf_rows=tf_rows, max_iter=self.max_iter, **self.args)
 
     @property
     def max_iter(self):
@@ -1082,9 +1090,13 @@ def _element_args(plant, loop, bump_stops, static_corner_load_n, where):
         mr = plant.rig.select(outputs=np.concatenate([vi, erows])).pruned()
         _, e_y = _rig_outputs(mr, h, loop.rig.u_fine, 1)
         e_rig = loop.rig.element_rows[key] = np.ascontiguousarray(e_y.T)
-    args = (*extra[:4], e_rig, *extra[4:], on, s0, bx, bf, bn, bslope,
-            np.repeat(lo_on[None], S, axis=0), np.repeat(static[None], S, axis=0))
-    return _Elements(modal=modal, cout=Cout, args=args, on=on, lo_on=lo_on, static=static)
+    Bwr, Bwi, Cer, Cei, Dt, Dtw, Dvw, Dcf, Dcw = extra
+    args = dict(Bwr=Bwr, Bwi=Bwi, Cer=Cer, Cei=Cei, e_rig=e_rig, Dt=Dt, Dtw=Dtw, Dvw=Dvw, Dcf=Dcf,
+                Dcw=Dcw, bs_on=on, s0=s0, bx=bx, bf=bf, bn=bn, bslope=bslope,
+                lo_on=np.repeat(lo_on[None], S, axis=0),
+                static=np.repeat(static[None], S, axis=0))
+    return _Elements(plant=ModalLoop(*modal, loop.plant.cbar), cout=Cout, args=args, on=on,
+                     lo_on=lo_on, static=static)
 
 
 def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, where):
@@ -1097,12 +1109,7 @@ def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, wher
     F = np.empty((S, N, 4))
     iters = np.zeros(S, dtype=np.int64)
     stats = np.zeros((S, 3, 4))
-    args = (*el.kernel_args(loop, el.cout), tf_rows, el.max_iter, loop.y_rig, y, F, iters,
-            stats)
-    if S == 1:
-        loop_elements_serial(*args)
-    else:
-        _run_parallel(loop_elements_batch, *args)
+    _run_loop(el.plant, loop, el.cout, (y, F, iters, el.kernel_elements(tf_rows), stats))
     _check_converged(plant, iters)
     channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
     for c, name in enumerate(SHOCK_FORCES):

@@ -3,17 +3,33 @@ loop's solve and the time loops.
 
 The caller is :mod:`ident.sim.closedloop`, which checks every input and builds these
 kernels' arguments (the FIR simulator, :mod:`ident.identify.fir`, takes the shock solve);
-the kernels take plain arrays and run no checks. Public names, for them:
+the kernels run no checks. Their arguments travel in named tuples (numba compiles a
+function per argument type and reads a named tuple's fields at no cost):
+
+- :class:`RigModes`: a plant's rig-input modes for :func:`rig_kernel`;
+- :class:`ModalLoop`: the shock part's modes, its same-step velocity response ``Deff`` and
+  ``cbar`` (shared by every setup of a batch);
+- :class:`ShockSetups` (the curves and the lag's coefficients): the setups' shocks, one
+  row per setup (:func:`ident.sim.closedloop.pack_setups`); :class:`ShockCurves`, one
+  setup's curves for the shock solve;
+- :class:`LoopDrive`: the drive's rig-input part on the internal grid and the outputs'
+  coefficients;
+- :class:`Elements`: bump stops and tire lift-off (issue 25), or ``None`` for a loop
+  without them;
+- :class:`MetricFilters`: the fused metrics' channels and band-pass filters;
+- :class:`SolverState`: the per-setup state and scratch of :func:`shock_step`.
+
+Public kernels:
 
 - :func:`rig_kernel`: the rig-input part of a plant's response on the internal grid,
   parallel over time chunks (:func:`ident.sim.closedloop.rig_response`);
+- :func:`loop_one`: the time loop of one setup, with the elements or without
+  (``elements=None``: numba compiles that case on its own and drops the elements' code
+  from it at compile time, so the plain loop runs as fast as a loop without them);
 - :func:`loop_batch`, :func:`loop_serial`: the closed loop of a batch of setups (parallel
-  over setups, or one after the other), each setup by :func:`loop_one`;
+  over setups, or one after the other);
 - :func:`loop_metrics_worker`: a thread's share of the setups with their metrics computed
   right after each loop (:func:`ident.sim.metric_kernels.setup_metric_rms`);
-- :func:`loop_one_elements` (bump stops and tire lift-off in the loop) and its drivers
-  :func:`loop_elements_serial`, :func:`loop_elements_batch` and
-  :func:`loop_metrics_elements_worker` (the fused metrics path with the elements);
 - :func:`solver_state`, :func:`shock_step`: the per-step solve of the 4 shock equations,
   shared with the FIR simulator (:mod:`ident.identify.fir`); :func:`invert_small`, the
   4x4 inverse inside it.
@@ -24,6 +40,8 @@ hold, Newton's method on the piecewise-linear shock curves).
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba as _nb
 import numpy as np
 
@@ -32,6 +50,14 @@ from ident.sim.metric_kernels import PW_LEVELS as METRIC_PW_LEVELS
 from ident.sim.metric_kernels import setup_metric_rms
 
 __all__ = [
+    "RigModes",
+    "ModalLoop",
+    "ShockCurves",
+    "ShockSetups",
+    "LoopDrive",
+    "Elements",
+    "MetricFilters",
+    "SolverState",
     "rig_kernel",
     "solver_state",
     "invert_small",
@@ -40,16 +66,196 @@ __all__ = [
     "loop_batch",
     "loop_serial",
     "loop_metrics_worker",
-    "loop_one_elements",
-    "loop_elements_serial",
-    "loop_elements_batch",
-    "loop_metrics_elements_worker",
 ]
 
+# ----------------------------------------------------------------------------------------------
+# the kernels' argument types. Arrays are float64 and C-contiguous unless said otherwise;
+# ``n`` counts the modes (padded with zero modes by the caller), ``N`` the internal steps,
+# ``n_out`` the output samples (every r-th step), ``S`` the setups.
+# ----------------------------------------------------------------------------------------------
+
+RigModes = namedtuple("RigModes", ["BrT", "BiT", "pr", "pi", "g1r", "g1i", "g0r", "g0i", "gmr",
+                                   "gmi", "pLr", "pLi", "CrT", "CmiT", "DT"])
+RigModes.__doc__ = """A plant's rig-input modes for :func:`rig_kernel` (:func:`ident.sim.closedloop.rig_response`).
+
+Attributes
+----------
+BrT, BiT : ndarray, shape (m, n)
+    Real and imaginary parts of ``B.T`` (m rig inputs).
+pr, pi : ndarray, shape (n,)
+    ``phi = exp(lambda h)`` per mode, real and imaginary parts.
+g1r, g1i, g0r, g0i, gmr, gmi : ndarray, shape (n,)
+    The quadratic hold's coefficients per mode (:func:`ident.models.lti.hold_coefficients`).
+pLr, pLi : ndarray, shape (n,)
+    ``phi^(L-1)`` (a time chunk's zero-input propagation).
+CrT, CmiT : ndarray, shape (n, p)
+    ``Re(C).T`` and ``-Im(C).T``; the first 4 outputs are the shock velocities [m/s].
+DT : ndarray, shape (m, p)
+    ``D.T``.
+"""
+
+ModalLoop = namedtuple("ModalLoop", ["pr", "pi", "g1r", "g1i", "g0r", "g0i", "gmr", "gmi", "Br",
+                                     "Bi", "Cvr", "Cvi", "Deff", "cbar"])
+ModalLoop.__doc__ = """The shock loop's plant: the shock-force part's modes (shared by every setup).
+
+Attributes
+----------
+pr, pi : ndarray, shape (n,)
+    ``phi = exp(lambda h)`` per mode, real and imaginary parts (h the internal step).
+g1r, g1i, g0r, g0i, gmr, gmi : ndarray, shape (n,)
+    The quadratic hold's coefficients per mode (:func:`ident.models.lti.hold_coefficients`).
+Br, Bi : ndarray, shape (4, n)
+    ``B.T`` of the force inputs ``dF`` [N] (real, imaginary); with lift-off the pad
+    corrections' rows are :attr:`Elements.Bwr`, :attr:`Elements.Bwi`.
+Cvr, Cvi : ndarray, shape (4, n)
+    The shock velocities' rows of ``C`` [m/s per state].
+Deff : ndarray, shape (4, 4)
+    Same-step response of the shock velocities to ``dF`` [m/(s N)]: ``Re(Cv g1 B) + Dv``.
+cbar : ndarray, shape (4,)
+    The damping the plant's shock part is closed with [N s/m] (``dF = F - cbar v``).
+"""
+
+ShockCurves = namedtuple("ShockCurves", ["kv", "kf", "nk", "slo", "shi"])
+ShockCurves.__doc__ = """The shocks' piecewise-linear force-velocity curves, one row per corner.
+
+Batch kernels take them with a leading setup axis (as
+:func:`ident.sim.closedloop.pack_setups` packs them); :func:`loop_one`, :func:`solver_state`
+and :func:`shock_step` take one setup's rows.
+
+Attributes
+----------
+kv, kf : ndarray, shape (4, n_knots)
+    Knot velocities [m/s] and forces [N], padded with the last knot.
+nk : ndarray of int64, shape (4,)
+    Knots per curve.
+slo, shi : ndarray, shape (4,)
+    End slopes below the first and above the last knot [N s/m].
+"""
+
+ShockSetups = namedtuple("ShockSetups", ["kv", "kf", "nk", "slo", "shi", "alpha", "b0", "b1",
+                                         "bm"])
+ShockSetups.__doc__ = """The setups' shocks: the curves (:class:`ShockCurves`' fields) and the lag's coefficients.
+
+One row per setup in the batch kernels (every array with a leading axis of S, as
+:func:`ident.sim.closedloop.pack_setups` returns them); one setup's rows in
+:func:`loop_one`. Flat, not a :class:`ShockCurves` inside: numba's parallel loops take
+named tuples of arrays, not nested ones.
+
+Attributes
+----------
+kv, kf, nk, slo, shi : ndarray
+    As :class:`ShockCurves`.
+alpha, b0, b1, bm : ndarray, shape (4,)
+    The lag's coefficients (:func:`ident.models.lti.lag_hold_coefficients`): ``F[k] =
+    alpha F[k-1] + b0 f[k] + b1 f[k-1] + bm f[k-2]`` with ``f`` the curve's force.
+"""
+
+LoopDrive = namedtuple("LoopDrive", ["v_rig", "r", "y_rig", "Cy"])
+LoopDrive.__doc__ = """The drive's part of the loop and the outputs asked for.
+
+Attributes
+----------
+v_rig : ndarray, shape (N, 4)
+    The shock velocities' rig-input part on the internal grid [m/s].
+r : int
+    Internal steps per output sample (the oversampling).
+y_rig : ndarray, shape (n_out, p)
+    The outputs' rig-input part at the output samples (SI).
+Cy : ndarray, shape (2 n + 4 (+ 4), p)
+    The outputs' coefficients on the buffered rows ``[Re x, Im x, dF (, w)]``:
+    ``[Re(Cy).T; -Im(Cy).T; Dy.T (; Dw.T)]`` (the ``w`` rows with lift-off only).
+"""
+
+Elements = namedtuple("Elements", ["Bwr", "Bwi", "Cer", "Cei", "e_rig", "Dt", "Dtw", "Dvw", "Dcf",
+                                   "Dcw", "tf_rows", "max_iter", "bs_on", "s0", "bx", "bf", "bn",
+                                   "bslope", "lo_on", "static"])
+Elements.__doc__ = """Bump stops and tire lift-off in the loop (:func:`loop_one`; issue 25).
+
+The fields from ``bs_on`` on are setup choices: one row per setup in the batch kernels
+(a leading axis of S), one setup's rows in :func:`loop_one`.
+
+Attributes
+----------
+Bwr, Bwi : ndarray, shape (4, n) or (0, n)
+    ``B.T`` of the pad corrections ``w`` [m] (the wheelloader inputs) with lift-off; no
+    rows without.
+Cer, Cei : ndarray, shape (8, n)
+    The element rows of ``C``: shock travels [m] (compression positive), then tire
+    forces [N].
+e_rig : ndarray, shape (N, 8)
+    The element rows' rig-input part on the internal grid.
+Dt, Dtw : ndarray, shape (4, 4)
+    Same-step response of the travels to ``dF`` [m/N] and to ``w`` [m/m].
+Dvw : ndarray, shape (4, 4)
+    Same-step response of the shock velocities to ``w`` [1/s].
+Dcf, Dcw : ndarray, shape (4, 4)
+    Same-step response of the tire forces to ``dF`` [N/N] and to ``w`` [N/m].
+tf_rows : ndarray of int64, shape (4,)
+    The output columns holding the corners' tire forces (-1: not an output), set to
+    ``-static`` at lifted samples.
+max_iter : int
+    Element iterations per step (1: the bump stop explicit).
+bs_on : ndarray of int64, shape (4,)
+    1 where a corner has a bump stop.
+s0 : ndarray, shape (4,)
+    Contact travels [m].
+bx, bf : ndarray, shape (4, n_points)
+    Bump-stop tables: travel beyond contact [m] and force [N], padded with the last point.
+bn : ndarray of int64, shape (4,)
+    Points per table.
+bslope : ndarray, shape (4,)
+    Slope beyond the table [N/m].
+lo_on : ndarray of int64, shape (4,)
+    1 where a corner has a static load (lift-off solved).
+static : ndarray, shape (4,)
+    Static tire loads [N].
+"""
+
+MetricFilters = namedtuple("MetricFilters", ["ia", "sos", "zi", "padlen"])
+MetricFilters.__doc__ = """The fused metrics' channels and filters (:func:`loop_metrics_worker`).
+
+Attributes
+----------
+ia : ndarray of int64, shape (n_metrics,)
+    Each metric's row of the setup's buffer (outputs, then the 4 shock velocities).
+sos : ndarray, shape (n_bands, n_sections, 6)
+    Each band's band-pass filter (second-order sections).
+zi : ndarray, shape (n_bands, n_sections, 2)
+    Their steady-state initial conditions (:func:`scipy.signal.sosfilt_zi`).
+padlen : int
+    Odd-extension length of the zero-phase filter [samples].
+"""
+
+SolverState = namedtuple("SolverState", ["v", "vfree", "c0", "fv", "sv", "seg", "av", "vnew",
+                                         "res", "J", "Jinv", "state"])
+SolverState.__doc__ = """The state and scratch of :func:`shock_step` for one setup (:func:`solver_state`).
+
+Attributes
+----------
+v : ndarray, shape (4,)
+    The shock velocities solved for [m/s].
+vfree, c0 : ndarray, shape (4,)
+    Scratch for the caller's right-hand side (free velocities [m/s], the lag's known force
+    part [N]).
+fv, sv, av : ndarray, shape (4,)
+    The curves' force [N], slope [N s/m] and intercept [N] at `v` on their segments.
+seg : ndarray of int64, shape (4,)
+    Each curve's segment (carried over between steps).
+vnew, res : ndarray, shape (4,)
+    Scratch.
+J, Jinv : ndarray, shape (4, 4)
+    The linear system on the current segments and its cached inverse.
+state : ndarray of int64, shape (1,)
+    0: `Jinv` invalid; k >= 1: valid for `seg`, k - 1 rank-1 updates since computed.
+"""
+
+
+# ----------------------------------------------------------------------------------------------
+# the rig-input response
+# ----------------------------------------------------------------------------------------------
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
-def _rig_chunk(u, BrT, BiT, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, CrT, CmiT, DT, r, z, k0, k1,
-               v, y, outputs):
+def _rig_chunk(u, modes, r, z, k0, k1, v, y, outputs):
     """Steps ``k0 <= k < k1`` of :func:`rig_kernel` from the states ``z`` (4, n): rows
     ``Re z0, Im z0, Re z1, Im z1`` of the transposed direct form II per mode, updated in
     place. With `outputs` False only the states are run (the chunk end states).
@@ -59,6 +265,19 @@ def _rig_chunk(u, BrT, BiT, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, CrT, CmiT, DT,
     modes' hold recursions, and the outputs (over the outputs, one mode after the other).
     Every sum keeps its order: the numbers of a loop over modes with the sums inside.
     """
+    BrT = modes.BrT
+    BiT = modes.BiT
+    pr = modes.pr
+    pi = modes.pi
+    g1r = modes.g1r
+    g1i = modes.g1i
+    g0r = modes.g0r
+    g0i = modes.g0i
+    gmr = modes.gmr
+    gmi = modes.gmi
+    CrT = modes.CrT
+    CmiT = modes.CmiT
+    DT = modes.DT
     n = pr.size
     m = u.shape[1]
     p = CrT.shape[1]
@@ -123,24 +342,25 @@ def _rig_chunk(u, BrT, BiT, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, CrT, CmiT, DT,
 
 
 @_nb.njit(cache=True, error_model="numpy", parallel=True, nogil=True)
-def rig_kernel(u, BrT, BiT, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, pLr, pLi, CrT, CmiT, DT, r,
-               L, n_chunks, v, y):
+def rig_kernel(u, modes, r, L, n_chunks, v, y):
     """Kernel of :func:`ident.sim.closedloop.rig_response`'s outputs, parallel over time
     chunks of `L` steps.
 
-    ``u`` (N, m) inputs; ``B.T`` (m, n) split in real and imaginary parts; the hold
-    coefficients per mode; ``pL = phi^(L-1)``; ``CrT = Re(C).T``, ``CmiT = -Im(C).T`` (n, p)
-    and ``DT = D.T`` (m, p), whose first 4 columns (the shock velocities) go to ``v`` (N, 4)
-    on every step and the rest to ``y`` (n_out, p - 4) on every r-th step.
+    ``u`` (N, m) inputs; `modes` a :class:`RigModes` (``pL = phi^(L-1)``), whose first 4
+    outputs (the shock velocities) go to ``v`` (N, 4) on every step and the rest to ``y``
+    (n_out, p - 4) on every r-th step; `n_chunks` chunks.
     """
     N = u.shape[0]
+    pr = modes.pr
+    pi = modes.pi
+    pLr = modes.pLr
+    pLi = modes.pLi
     n = pr.size
     S = np.zeros((n_chunks, 4, n))  # chunk start states
     if n_chunks > 1:
         E = np.zeros((n_chunks, 4, n))  # chunk end states from rest
         for c in _nb.prange(n_chunks - 1):
-            _rig_chunk(u, BrT, BiT, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, CrT, CmiT, DT, r, E[c],
-                       c * L, (c + 1) * L, v, y, False)
+            _rig_chunk(u, modes, r, E[c], c * L, (c + 1) * L, v, y, False)
         for c in range(1, n_chunks):
             for i in range(n):
                 # the previous start state propagated over a chunk without input, plus the
@@ -152,9 +372,12 @@ def rig_kernel(u, BrT, BiT, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, pLr, pLi, CrT,
                 S[c, 2, i] = E[c - 1, 2, i]
                 S[c, 3, i] = E[c - 1, 3, i]
     for c in _nb.prange(n_chunks):
-        _rig_chunk(u, BrT, BiT, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, CrT, CmiT, DT, r, S[c],
-                   c * L, min(N, (c + 1) * L), v, y, True)
+        _rig_chunk(u, modes, r, S[c], c * L, min(N, (c + 1) * L), v, y, True)
 
+
+# ----------------------------------------------------------------------------------------------
+# the shock solve
+# ----------------------------------------------------------------------------------------------
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
 def _segment_line(seg, kv, kf, c, nk, slo, shi):
@@ -214,16 +437,18 @@ def _pwl(v, kv, kf, c, nk, slo, shi):
 
 
 @_nb.njit(cache=True, error_model="numpy")
-def solver_state(kv, nk):
-    """Fresh per-setup state of :func:`shock_step`: ``v, vfree, c0, fv, sv, seg, av, vnew,
-    res, J, Jinv, state`` (velocities at rest, each shock on the segment holding 0)."""
+def solver_state(curves):
+    """Fresh per-setup :class:`SolverState` of :func:`shock_step` for the :class:`ShockCurves`
+    `curves` (one setup's rows): velocities at rest, each shock on the segment holding 0."""
+    kv = curves.kv
+    nk = curves.nk
     m = 4
     seg = np.zeros(m, dtype=np.int64)
     for c in range(m):
         seg[c] = _segment_of(0.0, kv, c, nk[c], 0)
-    return (np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), seg, np.zeros(m),
-            np.zeros(m), np.zeros(m), np.zeros((m, m)), np.zeros((m, m)),
-            np.zeros(1, dtype=np.int64))
+    return SolverState(np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), seg,
+                       np.zeros(m), np.zeros(m), np.zeros(m), np.zeros((m, m)),
+                       np.zeros((m, m)), np.zeros(1, dtype=np.int64))
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
@@ -277,19 +502,35 @@ _MAX_RANK1_UPDATES = 64
 _V_SCALE_MIN_M_S = 1e-3
 
 
+
 @_nb.njit(cache=True, error_model="numpy")
-def shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av, vnew, res,
-               J, Jinv, state):
+def shock_step(vfree, c0, Deff, cbar, b0, curves, st):
     """Solve one step of the shock loop in place; return the iteration count (-1: failed).
 
-    Solves ``v = vfree + Deff (c0 + b0 f(v) - cbar v)`` for the 4 shock velocities and
-    leaves ``f(v)`` in `fv`. `seg`, `Jinv` and ``state[0]`` (0: `Jinv` invalid; k >= 1:
-    valid for `seg`, k - 1 rank-1 updates since it was computed) carry over between steps.
-    Shared by the modal and the FIR simulators; the modal time loop first tries the
-    common cases inline (every shock on its segment, or segment changes by rank-1 updates
-    of the cached inverse) and calls this for the rest. Not inlined: an inlined body with
-    many array arguments costs more in reference counting than the solve.
+    Solves ``v = vfree + Deff (c0 + b0 f(v) - cbar v)`` for the 4 shock velocities (``f``
+    the :class:`ShockCurves` `curves`, one setup's rows) into ``st.v`` and leaves ``f(v)``
+    in ``st.fv`` (`st` a :class:`SolverState`). ``st.seg``, ``st.Jinv`` and
+    ``st.state[0]`` carry over between steps. Shared by the modal and the FIR simulators;
+    the modal time loop first tries the common cases inline (every shock on its segment,
+    or segment changes by rank-1 updates of the cached inverse) and calls this for the
+    rest. Not inlined: an inlined body with many array arguments costs more in reference
+    counting than the solve.
     """
+    kv = curves.kv
+    kf = curves.kf
+    nk = curves.nk
+    slo = curves.slo
+    shi = curves.shi
+    v = st.v
+    fv = st.fv
+    sv = st.sv
+    seg = st.seg
+    av = st.av
+    vnew = st.vnew
+    res = st.res
+    J = st.J
+    Jinv = st.Jinv
+    state = st.state
     m = 4
     # Solve v = vfree + Deff (c0 + b0 f(v) - cbar v). f is piecewise linear, so on a
     # fixed set of segments (f = a + s v) this is linear: J v = vfree + Deff (c0 + b0 a)
@@ -376,6 +617,7 @@ def shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, 
     return it
 
 
+
 #: Output samples gathered before one matrix product writes them (the loop's states are
 #: buffered so the outputs cost a BLAS product per block, not a scalar sum per sample).
 #: 128 with one product of ``[Re x, Im x, dF]``: 0.65 ms less per setup (12,000 samples,
@@ -384,11 +626,22 @@ _OUT_BLOCK = 128
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
-def _fast_solve(vfree, c0, Deff, b0, kv, nk, lines_s, lines_a, v, fv, sv, seg, av, vnew, res, J,
-                Jinv, state):
+def _fast_solve(vfree, c0, Deff, b0, curves, lines_s, lines_a, st):
     """The shock loop's common cases (see :func:`loop_one`); returns the iteration count, 0
     when :func:`shock_step` must solve the step. Inlined: the same operations in the same
     order wherever it is used."""
+    kv = curves.kv
+    nk = curves.nk
+    v = st.v
+    fv = st.fv
+    sv = st.sv
+    seg = st.seg
+    av = st.av
+    vnew = st.vnew
+    res = st.res
+    J = st.J
+    Jinv = st.Jinv
+    state = st.state
     m = 4
     # the common cases inline: every shock on its segment, or segment changes (a zero
     # crossing of a digressive shock, a knee) by Sherman-Morrison updates of the cached
@@ -461,206 +714,6 @@ def _fast_solve(vfree, c0, Deff, b0, kv, nk, lines_s, lines_a, v, fv, sv, seg, a
     return it
 
 
-@_nb.njit(cache=True, error_model="numpy")
-def loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
-             kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, y_rig, y_out, F_out, v_row):
-    """Time loop of one setup on the internal grid.
-
-    The modal states are held as separate real and imaginary arrays (the mode loops
-    vectorize). At every r-th step (an output sample) the states and ``dF`` are buffered
-    as rows ``[Re x, Im x, dF]``; every :data:`_OUT_BLOCK` samples the outputs
-    ``y_rig + Re(Cy x) + Dy dF`` are written by one matrix product with ``Cy`` (2 n + 4,
-    p) ``= [Re(Cy).T; -Im(Cy).T; Dy.T]``, and the applied shock forces per sample. With
-    ``v_row >= 0`` the shock velocities the loop solved for go to the rows ``v_row ..
-    v_row + 3`` of `y_out` (they equal the velocity outputs: ``v = v_free + Deff dF``).
-    Returns the largest Newton iteration count (-1: no convergence).
-    """
-    n = pr.size
-    m = 4
-    p = Cy.shape[1]
-    N = v_rig.shape[0]
-    n_out = y_out.shape[1]
-    xr = np.zeros(n)
-    xi = np.zeros(n)
-    bdr = np.zeros(n)  # B dF of the last step
-    bdi = np.zeros(n)
-    bpr = np.zeros(n)  # B dF of the step before
-    bpi = np.zeros(n)
-    St = np.zeros((_OUT_BLOCK, 2 * n + m))  # output samples' [Re x, Im x, dF]
-    dF_prev = np.zeros(m)
-    F_prev = np.zeros(m)
-    f_prev = np.zeros(m)
-    f_prev2 = np.zeros(m)
-    v, vfree, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = solver_state(kv, nk)
-    # every segment's line (slope, intercept) once, for the segment changes below
-    lines_s = np.empty((m, kv.shape[1] + 1))
-    lines_a = np.empty((m, kv.shape[1] + 1))
-    for c in range(m):
-        for sg in range(nk[c] + 1):
-            lines_s[c, sg], lines_a[c, sg] = _segment_line(sg, kv, kf, c, nk[c], slo[c], shi[c])
-    worst = 0
-    failed = False
-    col = 0
-    kk0 = 0
-    phase = 0  # k % r
-    for k in range(N):
-        # predictor: x[k] without the unknown g1 * B dF[k] term, and v_free from it
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        a3 = 0.0
-        for i in range(n):
-            tr = (pr[i] * xr[i] - pi[i] * xi[i] + g0r[i] * bdr[i] - g0i[i] * bdi[i]
-                  + gmr[i] * bpr[i] - gmi[i] * bpi[i])
-            ti = (pr[i] * xi[i] + pi[i] * xr[i] + g0r[i] * bdi[i] + g0i[i] * bdr[i]
-                  + gmr[i] * bpi[i] + gmi[i] * bpr[i])
-            xr[i] = tr
-            xi[i] = ti
-        # the velocities in a loop of their own: the update above has no loop-carried
-        # chain and vectorizes; fused with these sums (strict FP order) it ran scalar.
-        # Same sums in the same order as before, so the same rounding.
-        for i in range(n):
-            tr = xr[i]
-            ti = xi[i]
-            a0 += Cvr[0, i] * tr - Cvi[0, i] * ti
-            a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
-            a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
-            a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
-        vfree[0] = v_rig[k, 0] + a0
-        vfree[1] = v_rig[k, 1] + a1
-        vfree[2] = v_rig[k, 2] + a2
-        vfree[3] = v_rig[k, 3] + a3
-        for c in range(m):
-            c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
-        it = _fast_solve(vfree, c0, Deff, b0, kv, nk, lines_s, lines_a, v, fv, sv, seg, av,
-                         vnew, res, J, Jinv, state)
-        if it == 0:
-            it = shock_step(vfree, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg, av,
-                            vnew, res, J, Jinv, state)
-        if it < 0:
-            failed = True
-            it = 80
-        if it > worst:
-            worst = it
-        for c in range(m):
-            F = c0[c] + b0[c] * fv[c]
-            F_prev[c] = F
-            f_prev2[c] = f_prev[c]
-            f_prev[c] = fv[c]
-            dF_prev[c] = F - cbar[c] * v[c]
-        # corrector: complete x[k] with g1 * B dF[k]
-        d0 = dF_prev[0]
-        d1 = dF_prev[1]
-        d2 = dF_prev[2]
-        d3 = dF_prev[3]
-        for i in range(n):
-            ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
-            ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
-            bpr[i] = bdr[i]
-            bpi[i] = bdi[i]
-            bdr[i] = ur
-            bdi[i] = ui
-            xr[i] += g1r[i] * ur - g1i[i] * ui
-            xi[i] += g1r[i] * ui + g1i[i] * ur
-        # an output sample every r-th step (a counter: no integer division per step)
-        if phase == 0:
-            kk = k // r
-            for c in range(m):
-                F_out[kk, c] = F_prev[c]
-                St[col, 2 * n + c] = dF_prev[c]
-            if v_row >= 0:
-                for c in range(m):
-                    y_out[v_row + c, kk] = v[c]
-            for i in range(n):
-                St[col, i] = xr[i]
-                St[col, n + i] = xi[i]
-            col += 1
-            if col == _OUT_BLOCK or kk == n_out - 1:
-                Y = np.dot(St[:col], Cy)  # (col, p)
-                for j in range(col):
-                    for o in range(p):
-                        y_out[o, kk0 + j] = y_rig[kk0 + j, o] + Y[j, o]
-                kk0 += col
-                col = 0
-        phase += 1
-        if phase == r:
-            phase = 0
-    return -1 if failed else worst
-
-
-@_nb.njit(cache=True, error_model="numpy", parallel=True)
-def loop_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
-               kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, y_rig, y_out, F_out, iters):
-    """The closed loop of every setup (``kv`` and the curves' other arrays: one row per
-    setup, as :func:`ident.sim.closedloop.pack_setups` packs them), in parallel over the
-    setups, each by :func:`loop_one`: outputs into ``y_out`` (n_setups, p, n_out), applied
-    shock forces into ``F_out`` (n_setups, n_out, 4), Newton iteration counts into
-    ``iters`` (-1: no convergence)."""
-    for s in _nb.prange(kv.shape[0]):
-        iters[s] = loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
-                            v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s], b0[s],
-                            b1[s], bm[s], r, Cy, y_rig, y_out[s], F_out[s], -1)
-    return
-
-
-@_nb.njit(cache=True, error_model="numpy", nogil=True)
-def loop_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
-                kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, y_rig, y_out, F_out, iters):
-    """:func:`loop_batch` one setup after the other (the same `loop_one`, the same numbers).
-
-    A single setup gains nothing from the parallel loop, and this kernel compiles in about
-    60 % of its time: the virtual rig (one setup per run) uses it, so a fresh machine's first
-    ``rig simulate`` or demo waits for the smaller compilation only (the demo compiles the
-    parallel kernel meanwhile in a worker). It releases the GIL (as :func:`rig_kernel`
-    does): the virtual rig runs its runs on threads.
-    """
-    for s in range(kv.shape[0]):
-        iters[s] = loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
-                            v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s], b0[s],
-                            b1[s], bm[s], r, Cy, y_rig, y_out[s], F_out[s], -1)
-    return
-
-
-@_nb.njit(cache=True, error_model="numpy", nogil=True)
-def loop_metrics_worker(w, n_workers, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi,
-                        Deff, v_rig, cbar, kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy,
-                        y_rig, n_out, ia, sos, zi, padlen, out, iters):
-    """Worker `w` of `n_workers` of :func:`ident.sim.closedloop.simulate_batch_metrics`:
-    the setups ``w, w + n_workers, ...`` (interleaved, so that each worker gets a mix of
-    cheap and costly setups), each simulated by :func:`loop_one` and its metrics computed
-    right after (:func:`ident.sim.metric_kernels.setup_metric_rms`, per band: ``sos``
-    (n_bands, n_sections, 6), ``zi`` (n_bands, n_sections, 2)) into ``out`` (n_setups,
-    n_bands, n_metrics).
-
-    The outputs ``Cy`` (2 n + 4, p) are the metrics' signals (a ride height pair as one
-    row of averaged coefficients); the shock velocities come from the loop's own solve
-    (rows p .. p + 3 of the setup's buffer), not from the product. The worker keeps one
-    setup's outputs and the metric's scratch (about 2 MB for 12,000 samples): nothing of
-    size (setups x samples) is written. It releases the GIL: the workers are threads.
-    """
-    p = Cy.shape[1]
-    L = METRIC_LANES
-    ns = sos.shape[1]
-    S = kv.shape[0]
-    # the outputs, then the 4 shock velocities. Channel-major, as simulate_batch's: the
-    # loop kernel is then the one-setup loop's compiled code (sample-major rows were about
-    # 4 % faster but compile the loop once more, 4 s on a fresh machine's first demo)
-    y = np.empty((p + 4, n_out))
-    F = np.empty((n_out, 4))
-    buf = np.empty((n_out + 2 * padlen, L))
-    z0 = np.empty((ns, L))
-    z1 = np.empty((ns, L))
-    stack = np.empty((METRIC_PW_LEVELS, 10, L))
-    sums = np.empty(L)
-    for s in range(w, S, n_workers):
-        iters[s] = loop_one(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff,
-                            v_rig, cbar, kv[s], kf[s], nk[s], slo[s], shi[s], alpha[s], b0[s],
-                            b1[s], bm[s], r, Cy, y_rig, y, F, p)
-        for b in range(sos.shape[0]):
-            setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack, sums)
-    return
-
-
 # ----------------------------------------------------------------------------------------------
 # the loop with the car's other nonlinear elements: bump stops and tire lift-off (issue 25)
 # ----------------------------------------------------------------------------------------------
@@ -706,92 +759,186 @@ def _stop_force(s, c, s0, bx, bf, bn, bslope):
     return bf[c, lo] + k * (x - bx[c, lo]), k
 
 
+# ----------------------------------------------------------------------------------------------
+# the time loops
+# ----------------------------------------------------------------------------------------------
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _setup_row(setups, s):
+    """Setup `s`'s rows of the batch :class:`ShockSetups` `setups`."""
+    return ShockSetups(setups.kv[s], setups.kf[s], setups.nk[s], setups.slo[s], setups.shi[s],
+                       setups.alpha[s], setups.b0[s], setups.b1[s], setups.bm[s])
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _element_row(el, s):
+    """Setup `s`'s rows of the batch :class:`Elements` `el` (the setup choices' fields)."""
+    return Elements(el.Bwr, el.Bwi, el.Cer, el.Cei, el.e_rig, el.Dt, el.Dtw, el.Dvw, el.Dcf,
+                    el.Dcw, el.tf_rows, el.max_iter, el.bs_on[s], el.s0[s], el.bx[s], el.bf[s],
+                    el.bn[s], el.bslope[s], el.lo_on[s], el.static[s])
+
+
 @_nb.njit(cache=True, error_model="numpy")
-def loop_one_elements(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar,
-                      kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, y_rig, y_out, F_out, v_row,
-                      Bwr, Bwi, Cer, Cei, e_rig, Dt, Dtw, Dvw, Dcf, Dcw, bs_on, s0, bx, bf, bn,
-                      bslope, lo_on, static, tf_rows, max_iter, stats):
-    """:func:`loop_one` with bump stops and tire lift-off in the loop.
+def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
+    """Time loop of one setup on the internal grid; returns the largest Newton iteration
+    count (-1: no convergence).
 
-    The plant's force input of corner ``c`` is ``dF = F_shock + G(s) - cbar v`` with ``G``
-    the bump stop's force at the shock travel ``s``; with lift-off the pad input of corner
-    ``c`` gets ``w_c >= 0`` (``Bw``: the modes' wheelloader columns), the pad following the
-    tire so that the contact force ``static + tire_force`` is zero while ``w_c > 0``.
+    Parameters
+    ----------
+    plant : ModalLoop
+    setup : ShockSetups
+        One setup's rows.
+    drive : LoopDrive
+    y_out : ndarray, shape (p (+ 4), n_out)
+        The outputs (channel-major); with ``v_row >= 0`` the shock velocities the loop
+        solved for go to its rows ``v_row .. v_row + 3`` (they equal the velocity outputs:
+        ``v = v_free + Deff dF``).
+    F_out : ndarray, shape (n_out, 4)
+        The applied shock forces [N] per output sample (the load cell measures the shock).
+    v_row : int
+    elements : Elements or None
+        One setup's rows; ``None``: the loop without bump stops and lift-off (numba
+        compiles that case apart and drops the elements' code from it).
+    stats : ndarray, shape (3, 4), or None (with ``elements=None``)
+        Output samples in bump-stop contact, output samples lifted off, smallest contact
+        force [N].
 
-    Per step: the predictor gives ``v_free`` and the element rows' free parts ``s_free``,
-    ``c_free`` (``Ce`` (8, n): travel then tire force rows; ``e_rig`` (N, 8): their
-    rig-input part on the internal grid). Then, until ``G`` and ``w`` stop changing (by
+    Notes
+    -----
+    The modal states are held as separate real and imaginary arrays (the mode loops
+    vectorize). At every r-th step (an output sample) the states and ``dF`` (and ``w``
+    with lift-off) are buffered as rows ``[Re x, Im x, dF (, w)]``; every
+    :data:`_OUT_BLOCK` samples the outputs ``y_rig + [Re x, Im x, dF (, w)] Cy`` are
+    written by one matrix product.
+
+    With the elements the plant's force input of corner ``c`` is ``dF = F_shock + G(s) -
+    cbar v`` with ``G`` the bump stop's force at the shock travel ``s``; with lift-off the
+    pad input of corner ``c`` gets ``w_c >= 0`` (``Bw``: the modes' wheelloader columns),
+    the pad following the tire so that the contact force ``static + tire_force`` is zero
+    while ``w_c > 0``. Per step: the predictor gives ``v_free`` and the element rows' free
+    parts ``s_free``, ``c_free``. Then, until ``G`` and ``w`` stop changing (by
     :data:`ELEMENT_STOP_TOL_N`, :data:`ELEMENT_TOL_N`): the shock solve with ``v_free +
-    Deff G + Dvw w``; the travel
-    ``s = s_free + Dt dF + Dtw w`` and contact ``c = static + c_free + Dcf dF + Dcw w``;
-    Newton updates of ``G`` on ``G - g(s)`` and of ``w`` on ``c = 0`` with their diagonal
-    derivatives (``Dt[c, c] g'(s)`` and ``Dcw[c, c]``). So the travel, the bump-stop force,
-    the contact and the shock forces agree within the step (implicit); ``max_iter = 1``
-    evaluates ``G`` at the travel extrapolated from the state and the last step's force
-    (explicit: kept to measure what the iteration buys).
-
-    ``F_out`` holds the shock forces only (the load cell measures the shock). ``Cy`` has
-    rows ``[Re x, Im x, dF, w]`` (the ``w`` rows only with lift-off, ``Bwr.shape[0] == 4``
-    then; 0 rows without). At an output sample with ``w_c > 0`` the output row
-    ``tf_rows[c]`` (the tire force, if an output) is set to ``-static[c]`` exactly.
-    ``stats`` (3, 4): output samples in bump-stop contact, output samples lifted off,
-    smallest contact force. Returns the largest Newton iteration count over the element
-    iterations of a step (-1: no convergence).
+    Deff G + Dvw w``; the travel ``s = s_free + Dt dF + Dtw w`` and contact ``c = static +
+    c_free + Dcf dF + Dcw w``; Newton updates of ``G`` on ``G - g(s)`` and of ``w`` on ``c
+    = 0`` with their diagonal derivatives (``Dt[c, c] g'(s)`` and ``Dcw[c, c]``). So the
+    travel, the bump-stop force, the contact and the shock forces agree within the step
+    (implicit); ``max_iter = 1`` evaluates ``G`` at the travel extrapolated from the state
+    and the last step's force (explicit: kept to measure what the iteration buys). At an
+    output sample with ``w_c > 0`` the output row ``tf_rows[c]`` (the tire force, if an
+    output) is set to ``-static[c]`` exactly. The iteration count is then the largest over
+    the element iterations of a step.
     """
+    pr = plant.pr
+    pi = plant.pi
+    g1r = plant.g1r
+    g1i = plant.g1i
+    g0r = plant.g0r
+    g0i = plant.g0i
+    gmr = plant.gmr
+    gmi = plant.gmi
+    Br = plant.Br
+    Bi = plant.Bi
+    Cvr = plant.Cvr
+    Cvi = plant.Cvi
+    Deff = plant.Deff
+    cbar = plant.cbar
+    curves = ShockCurves(setup.kv, setup.kf, setup.nk, setup.slo, setup.shi)
+    kv = curves.kv
+    kf = curves.kf
+    nk = curves.nk
+    slo = curves.slo
+    shi = curves.shi
+    alpha = setup.alpha
+    b0 = setup.b0
+    b1 = setup.b1
+    bm = setup.bm
+    v_rig = drive.v_rig
+    r = drive.r
+    y_rig = drive.y_rig
+    Cy = drive.Cy
     n = pr.size
     m = 4
     p = Cy.shape[1]
     N = v_rig.shape[0]
     n_out = y_out.shape[1]
-    nw = Bwr.shape[0]  # 4 with lift-off, 0 without
-    CeTr = np.ascontiguousarray(Cer.T)
-    CeTi = np.ascontiguousarray(Cei.T)
-    any_bs = False
-    any_lo = False
-    for c in range(m):
-        if bs_on[c]:
-            any_bs = True
-        if lo_on[c]:
-            any_lo = True
+    nw = 0  # w rows of the output buffer: 4 with lift-off
+    if elements is not None:
+        Bwr = elements.Bwr
+        Bwi = elements.Bwi
+        e_rig = elements.e_rig
+        Dt = elements.Dt
+        Dtw = elements.Dtw
+        Dvw = elements.Dvw
+        Dcf = elements.Dcf
+        Dcw = elements.Dcw
+        tf_rows = elements.tf_rows
+        max_iter = elements.max_iter
+        bs_on = elements.bs_on
+        s0 = elements.s0
+        bx = elements.bx
+        bf = elements.bf
+        bn = elements.bn
+        bslope = elements.bslope
+        lo_on = elements.lo_on
+        static = elements.static
+        nw = Bwr.shape[0]
+        CeTr = np.ascontiguousarray(elements.Cer.T)
+        CeTi = np.ascontiguousarray(elements.Cei.T)
+        any_bs = False
+        any_lo = False
+        for c in range(m):
+            if bs_on[c]:
+                any_bs = True
+            if lo_on[c]:
+                any_lo = True
+        sfree = np.zeros(m)
+        cfree = np.zeros(m)
+        vf2 = np.zeros(m)
+        G = np.zeros(m)
+        Gn = np.zeros(m)
+        w = np.zeros(m)
+        wn = np.zeros(m)
+        s = np.zeros(m)
+        cc = np.zeros(m)
+        Fsh = np.zeros(m)
+        # the counts in arrays of the kernel's own, written to `stats` at the end: stores
+        # into an argument inside the time loop (which may alias the others, for all the
+        # compiler knows) made the whole loop twice as slow
+        n_bs = np.zeros(m)
+        n_lo = np.zeros(m)
+        c_min = np.full(m, np.inf)
     xr = np.zeros(n)
     xi = np.zeros(n)
-    bdr = np.zeros(n)
+    bdr = np.zeros(n)  # B dF of the last step
     bdi = np.zeros(n)
-    bpr = np.zeros(n)
+    bpr = np.zeros(n)  # B dF of the step before
     bpi = np.zeros(n)
-    St = np.zeros((_OUT_BLOCK, 2 * n + m + nw))
+    St = np.zeros((_OUT_BLOCK, 2 * n + m + nw))  # output samples' [Re x, Im x, dF (, w)]
     dF_prev = np.zeros(m)
     F_prev = np.zeros(m)
     f_prev = np.zeros(m)
     f_prev2 = np.zeros(m)
-    vf2 = np.zeros(m)
-    sfree = np.zeros(m)
-    cfree = np.zeros(m)
-    G = np.zeros(m)
-    Gn = np.zeros(m)
-    w = np.zeros(m)
-    wn = np.zeros(m)
-    s = np.zeros(m)
-    cc = np.zeros(m)
-    Fsh = np.zeros(m)
-    v, vfree, c0, fv, sv, seg, av, vnew, res, J, Jinv, state = solver_state(kv, nk)
+    st = solver_state(curves)
+    v = st.v
+    vfree = st.vfree
+    c0 = st.c0
+    fv = st.fv
+    sv = st.sv
+    Jinv = st.Jinv
+    state = st.state
+    # every segment's line (slope, intercept) once, for the segment changes below
     lines_s = np.empty((m, kv.shape[1] + 1))
     lines_a = np.empty((m, kv.shape[1] + 1))
     for c in range(m):
         for sg in range(nk[c] + 1):
             lines_s[c, sg], lines_a[c, sg] = _segment_line(sg, kv, kf, c, nk[c], slo[c], shi[c])
-    # the counts in arrays of the kernel's own, written to `stats` at the end: stores into an
-    # argument inside the time loop (which may alias the others, for all the compiler
-    # knows) made the whole loop twice as slow
-    n_bs = np.zeros(m)
-    n_lo = np.zeros(m)
-    c_min = np.full(m, np.inf)
     worst = 0
     failed = False
     col = 0
     kk0 = 0
-    phase = 0
+    phase = 0  # k % r
     for k in range(N):
+        # predictor: x[k] without the unknown g1 * B dF[k] term, and v_free from it
         a0 = 0.0
         a1 = 0.0
         a2 = 0.0
@@ -803,6 +950,9 @@ def loop_one_elements(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, De
                   + gmr[i] * bpi[i] + gmi[i] * bpr[i])
             xr[i] = tr
             xi[i] = ti
+        # the velocities in a loop of their own: the update above has no loop-carried
+        # chain and vectorizes; fused with these sums (strict FP order) it ran scalar.
+        # Same sums in the same order as before, so the same rounding.
         for i in range(n):
             tr = xr[i]
             ti = xi[i]
@@ -810,251 +960,305 @@ def loop_one_elements(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, De
             a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
             a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
             a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
-        if any_bs:
-            # the travel rows (Ce rows 0-3, held mode-major: CeTr[i, c]), the 4 corners as
-            # the inner loop, which the compiler can run as one vector
-            for c in range(m):
-                sfree[c] = e_rig[k, c]
-            for i in range(n):
-                tr = xr[i]
-                ti = xi[i]
+        if elements is not None:
+            if any_bs:
+                # the travel rows (Ce rows 0-3, held mode-major: CeTr[i, c]), the 4 corners
+                # as the inner loop, which the compiler can run as one vector
                 for c in range(m):
-                    sfree[c] += CeTr[i, c] * tr - CeTi[i, c] * ti
+                    sfree[c] = e_rig[k, c]
+                for i in range(n):
+                    tr = xr[i]
+                    ti = xi[i]
+                    for c in range(m):
+                        sfree[c] += CeTr[i, c] * tr - CeTi[i, c] * ti
         vfree[0] = v_rig[k, 0] + a0
         vfree[1] = v_rig[k, 1] + a1
         vfree[2] = v_rig[k, 2] + a2
         vfree[3] = v_rig[k, 3] + a3
-        if any_lo:
-            for c in range(m):
-                cfree[c] = static[c] + e_rig[k, 4 + c]
-            for i in range(n):
-                tr = xr[i]
-                ti = xi[i]
-                for c in range(m):
-                    cfree[c] += CeTr[i, 4 + c] * tr - CeTi[i, 4 + c] * ti
-        for c in range(m):
-            c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
-        # first guesses: the bump-stop forces and pad corrections of the last step (zero
-        # out of contact, the common case: one solve, then the check). The explicit
-        # variant (max_iter 1) takes the stop at the travel extrapolated with the last
-        # step's inputs.
-        if any_bs:
-            for c in range(m):
-                if bs_on[c] and (G[c] != 0.0 or sfree[c] > s0[c] or max_iter == 1):
-                    acc = sfree[c]
-                    for j in range(m):
-                        acc += Dt[c, j] * dF_prev[j] + Dtw[c, j] * w[j]
-                    G[c], kb = _stop_force(acc, c, s0, bx, bf, bn, bslope)
-        step_worst = 0
-        for itx in range(max_iter):
-            for c in range(m):
-                vf2[c] = vfree[c]
-            g_any = False
-            for c in range(m):
-                if G[c] != 0.0:
-                    g_any = True
-            if g_any:
-                for c in range(m):
-                    acc = vf2[c]
-                    for j in range(m):
-                        acc += Deff[c, j] * G[j]
-                    vf2[c] = acc
-            w_nz = False
+        if elements is not None:
             if any_lo:
                 for c in range(m):
-                    if w[c] != 0.0:
-                        w_nz = True
-            if w_nz:
-                for c in range(m):
-                    acc = vf2[c]
-                    for j in range(m):
-                        acc += Dvw[c, j] * w[j]
-                    vf2[c] = acc
-            it = _fast_solve(vf2, c0, Deff, b0, kv, nk, lines_s, lines_a, v, fv, sv, seg, av,
-                             vnew, res, J, Jinv, state)
+                    cfree[c] = static[c] + e_rig[k, 4 + c]
+                for i in range(n):
+                    tr = xr[i]
+                    ti = xi[i]
+                    for c in range(m):
+                        cfree[c] += CeTr[i, 4 + c] * tr - CeTi[i, 4 + c] * ti
+        for c in range(m):
+            c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
+        if elements is None:
+            it = _fast_solve(vfree, c0, Deff, b0, curves, lines_s, lines_a, st)
             if it == 0:
-                it = shock_step(vf2, c0, Deff, cbar, b0, kv, kf, nk, slo, shi, v, fv, sv, seg,
-                                av, vnew, res, J, Jinv, state)
+                it = shock_step(vfree, c0, Deff, cbar, b0, curves, st)
             if it < 0:
                 failed = True
                 it = 80
-            step_worst = max(step_worst, it)
+            if it > worst:
+                worst = it
             for c in range(m):
-                Fsh[c] = c0[c] + b0[c] * fv[c]
-                dF_prev[c] = Fsh[c] - cbar[c] * v[c] + G[c]
-            change = 0.0  # of the pad corrections
-            change_g = 0.0  # of the bump-stop forces
+                F = c0[c] + b0[c] * fv[c]
+                F_prev[c] = F
+                f_prev2[c] = f_prev[c]
+                f_prev[c] = fv[c]
+                dF_prev[c] = F - cbar[c] * v[c]
+            # corrector: complete x[k] with g1 * B dF[k]
+            d0 = dF_prev[0]
+            d1 = dF_prev[1]
+            d2 = dF_prev[2]
+            d3 = dF_prev[3]
+            for i in range(n):
+                ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
+                ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
+                bpr[i] = bdr[i]
+                bpi[i] = bdi[i]
+                bdr[i] = ur
+                bdi[i] = ui
+                xr[i] += g1r[i] * ur - g1i[i] * ui
+                xi[i] += g1r[i] * ui + g1i[i] * ur
+        else:
+            # first guesses: the bump-stop forces and pad corrections of the last step
+            # (zero out of contact, the common case: one solve, then the check). The
+            # explicit variant (max_iter 1) takes the stop at the travel extrapolated with
+            # the last step's inputs.
             if any_bs:
                 for c in range(m):
-                    acc = sfree[c]
-                    for j in range(m):
-                        acc += Dt[c, j] * dF_prev[j]
-                    if any_lo:
+                    if bs_on[c] and (G[c] != 0.0 or sfree[c] > s0[c] or max_iter == 1):
+                        acc = sfree[c]
                         for j in range(m):
-                            acc += Dtw[c, j] * w[j]
-                    s[c] = acc
-                    Gn[c] = G[c]
-                    if bs_on[c] and (acc > s0[c] or G[c] != 0.0):
-                        g, kb = _stop_force(acc, c, s0, bx, bf, bn, bslope)
-                        # Newton on G - g(s(G)) with ds_c/dG_c: through the plant (Dt[c, c],
-                        # < 0: the stop pushes the wheel away) and the shocks' answer (with
-                        # the solve's cached inverse: dv/dG = Jinv Deff)
-                        dsdg = Dt[c, c]
-                        if state[0] >= 1:
-                            for j in range(m):
-                                u = 0.0
-                                for q in range(m):
-                                    u += Jinv[j, q] * Deff[q, c]
-                                dsdg += Dt[c, j] * (b0[j] * sv[j] - cbar[j]) * u
-                        den = 1.0 - kb * dsdg
-                        den = max(den, 0.5)
-                        Gn[c] = G[c] + (g - G[c]) / den
-                        change_g = max(change_g, abs(Gn[c] - G[c]))
-            if any_lo:
+                            acc += Dt[c, j] * dF_prev[j] + Dtw[c, j] * w[j]
+                        G[c], kb = _stop_force(acc, c, s0, bx, bf, bn, bslope)
+            step_worst = 0
+            for itx in range(max_iter):
                 for c in range(m):
-                    acc = cfree[c]
-                    for j in range(m):
-                        acc += Dcf[c, j] * dF_prev[j] + Dcw[c, j] * w[j]
-                    cc[c] = acc
-                    wn[c] = w[c]
-                    if lo_on[c]:
-                        wn[c] = max(0.0, w[c] - acc / Dcw[c, c])
-                        change = max(change, abs(Dcw[c, c] * (wn[c] - w[c])))
-            if change <= ELEMENT_TOL_N and change_g <= ELEMENT_STOP_TOL_N:
-                break
-            if itx == max_iter - 1:
-                if max_iter > 1:
+                    vf2[c] = vfree[c]
+                g_any = False
+                for c in range(m):
+                    if G[c] != 0.0:
+                        g_any = True
+                if g_any:
+                    for c in range(m):
+                        acc = vf2[c]
+                        for j in range(m):
+                            acc += Deff[c, j] * G[j]
+                        vf2[c] = acc
+                w_nz = False
+                if any_lo:
+                    for c in range(m):
+                        if w[c] != 0.0:
+                            w_nz = True
+                if w_nz:
+                    for c in range(m):
+                        acc = vf2[c]
+                        for j in range(m):
+                            acc += Dvw[c, j] * w[j]
+                        vf2[c] = acc
+                it = _fast_solve(vf2, c0, Deff, b0, curves, lines_s, lines_a, st)
+                if it == 0:
+                    it = shock_step(vf2, c0, Deff, cbar, b0, curves, st)
+                if it < 0:
                     failed = True
-                break
+                    it = 80
+                step_worst = max(step_worst, it)
+                for c in range(m):
+                    Fsh[c] = c0[c] + b0[c] * fv[c]
+                    dF_prev[c] = Fsh[c] - cbar[c] * v[c] + G[c]
+                change = 0.0  # of the pad corrections
+                change_g = 0.0  # of the bump-stop forces
+                if any_bs:
+                    for c in range(m):
+                        acc = sfree[c]
+                        for j in range(m):
+                            acc += Dt[c, j] * dF_prev[j]
+                        if any_lo:
+                            for j in range(m):
+                                acc += Dtw[c, j] * w[j]
+                        s[c] = acc
+                        Gn[c] = G[c]
+                        if bs_on[c] and (acc > s0[c] or G[c] != 0.0):
+                            g, kb = _stop_force(acc, c, s0, bx, bf, bn, bslope)
+                            # Newton on G - g(s(G)) with ds_c/dG_c: through the plant
+                            # (Dt[c, c], < 0: the stop pushes the wheel away) and the shocks'
+                            # answer (with the solve's cached inverse: dv/dG = Jinv Deff)
+                            dsdg = Dt[c, c]
+                            if state[0] >= 1:
+                                for j in range(m):
+                                    u = 0.0
+                                    for q in range(m):
+                                        u += Jinv[j, q] * Deff[q, c]
+                                    dsdg += Dt[c, j] * (b0[j] * sv[j] - cbar[j]) * u
+                            den = 1.0 - kb * dsdg
+                            den = max(den, 0.5)
+                            Gn[c] = G[c] + (g - G[c]) / den
+                            change_g = max(change_g, abs(Gn[c] - G[c]))
+                if any_lo:
+                    for c in range(m):
+                        acc = cfree[c]
+                        for j in range(m):
+                            acc += Dcf[c, j] * dF_prev[j] + Dcw[c, j] * w[j]
+                        cc[c] = acc
+                        wn[c] = w[c]
+                        if lo_on[c]:
+                            wn[c] = max(0.0, w[c] - acc / Dcw[c, c])
+                            change = max(change, abs(Dcw[c, c] * (wn[c] - w[c])))
+                if change <= ELEMENT_TOL_N and change_g <= ELEMENT_STOP_TOL_N:
+                    break
+                if itx == max_iter - 1:
+                    if max_iter > 1:
+                        failed = True
+                    break
+                for c in range(m):
+                    G[c] = Gn[c]
+                    w[c] = wn[c]
+            worst = max(worst, step_worst)
             for c in range(m):
-                G[c] = Gn[c]
-                w[c] = wn[c]
-        worst = max(worst, step_worst)
-        for c in range(m):
-            F_prev[c] = Fsh[c]
-            f_prev2[c] = f_prev[c]
-            f_prev[c] = fv[c]
-        w_now = False
-        for c in range(m):
-            if w[c] != 0.0:
-                w_now = True
-        d0 = dF_prev[0]
-        d1 = dF_prev[1]
-        d2 = dF_prev[2]
-        d3 = dF_prev[3]
-        for i in range(n):
-            ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
-            ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
-            bpr[i] = bdr[i]
-            bpi[i] = bdi[i]
-            bdr[i] = ur
-            bdi[i] = ui
-        if w_now:
+                F_prev[c] = Fsh[c]
+                f_prev2[c] = f_prev[c]
+                f_prev[c] = fv[c]
+            w_now = False
+            for c in range(m):
+                if w[c] != 0.0:
+                    w_now = True
+            # corrector: complete x[k] with g1 * (B dF[k] + Bw w[k])
+            d0 = dF_prev[0]
+            d1 = dF_prev[1]
+            d2 = dF_prev[2]
+            d3 = dF_prev[3]
             for i in range(n):
-                bdr[i] += Bwr[0, i] * w[0] + Bwr[1, i] * w[1] + Bwr[2, i] * w[2] + Bwr[3, i] * w[3]
-                bdi[i] += Bwi[0, i] * w[0] + Bwi[1, i] * w[1] + Bwi[2, i] * w[2] + Bwi[3, i] * w[3]
-        for i in range(n):
-            ur = bdr[i]
-            ui = bdi[i]
-            xr[i] += g1r[i] * ur - g1i[i] * ui
-            xi[i] += g1r[i] * ui + g1i[i] * ur
+                ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
+                ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
+                bpr[i] = bdr[i]
+                bpi[i] = bdi[i]
+                bdr[i] = ur
+                bdi[i] = ui
+            if w_now:
+                for i in range(n):
+                    bdr[i] += (Bwr[0, i] * w[0] + Bwr[1, i] * w[1] + Bwr[2, i] * w[2]
+                               + Bwr[3, i] * w[3])
+                    bdi[i] += (Bwi[0, i] * w[0] + Bwi[1, i] * w[1] + Bwi[2, i] * w[2]
+                               + Bwi[3, i] * w[3])
+            for i in range(n):
+                ur = bdr[i]
+                ui = bdi[i]
+                xr[i] += g1r[i] * ur - g1i[i] * ui
+                xi[i] += g1r[i] * ui + g1i[i] * ur
+        # an output sample every r-th step (a counter: no integer division per step)
         if phase == 0:
             kk = k // r
             for c in range(m):
                 F_out[kk, c] = F_prev[c]
                 St[col, 2 * n + c] = dF_prev[c]
-            for c in range(nw):
-                St[col, 2 * n + m + c] = w[c]
             if v_row >= 0:
                 for c in range(m):
                     y_out[v_row + c, kk] = v[c]
             for i in range(n):
                 St[col, i] = xr[i]
                 St[col, n + i] = xi[i]
-            for c in range(m):
-                if bs_on[c] and s[c] > s0[c]:
-                    n_bs[c] += 1.0
-                if lo_on[c]:
-                    cont = 0.0
-                    if w[c] > 0.0:
-                        n_lo[c] += 1.0
-                    else:
-                        cont = cc[c]
-                    c_min[c] = min(c_min[c], cont)
+            if elements is not None:
+                for c in range(nw):
+                    St[col, 2 * n + m + c] = w[c]
+                for c in range(m):
+                    if bs_on[c] and s[c] > s0[c]:
+                        n_bs[c] += 1.0
+                    if lo_on[c]:
+                        cont = 0.0
+                        if w[c] > 0.0:
+                            n_lo[c] += 1.0
+                        else:
+                            cont = cc[c]
+                        c_min[c] = min(c_min[c], cont)
             col += 1
             if col == _OUT_BLOCK or kk == n_out - 1:
-                Y = np.dot(St[:col], Cy)
+                Y = np.dot(St[:col], Cy)  # (col, p)
                 for j in range(col):
                     for o in range(p):
                         y_out[o, kk0 + j] = y_rig[kk0 + j, o] + Y[j, o]
-                if nw > 0:
-                    for j in range(col):
-                        for c in range(m):
-                            if tf_rows[c] >= 0 and St[j, 2 * n + m + c] > 0.0:
-                                y_out[tf_rows[c], kk0 + j] = -static[c]
+                if elements is not None:
+                    if nw > 0:
+                        for j in range(col):
+                            for c in range(m):
+                                if tf_rows[c] >= 0 and St[j, 2 * n + m + c] > 0.0:
+                                    y_out[tf_rows[c], kk0 + j] = -static[c]
                 kk0 += col
                 col = 0
         phase += 1
         if phase == r:
             phase = 0
-    for c in range(m):
-        stats[0, c] = n_bs[c]
-        stats[1, c] = n_lo[c]
-        stats[2, c] = c_min[c]
+    if elements is not None:
+        for c in range(m):
+            stats[0, c] = n_bs[c]
+            stats[1, c] = n_lo[c]
+            stats[2, c] = c_min[c]
     return -1 if failed else worst
 
 
-@_nb.njit(cache=True, error_model="numpy", nogil=True)
-def loop_elements_serial(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig,
-                         cbar, kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, Bwr, Bwi, Cer, Cei,
-                         e_rig, Dt, Dtw, Dvw, Dcf, Dcw, bs_on, s0, bx, bf, bn, bslope, lo_on,
-                         static, tf_rows, max_iter, y_rig, y_out, F_out, iters, stats):
-    """:func:`loop_one_elements` of every setup, one after the other: the element arrays
-    ``bs_on, s0, bx, bf, bn, bslope, lo_on, static`` have one row per setup (bump stops and
-    packers are setup choices), ``stats`` (n_setups, 3, 4)."""
-    for s_ in range(kv.shape[0]):
-        iters[s_] = loop_one_elements(
-            pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar, kv[s_],
-            kf[s_], nk[s_], slo[s_], shi[s_], alpha[s_], b0[s_], b1[s_], bm[s_], r, Cy, y_rig,
-            y_out[s_], F_out[s_], -1, Bwr, Bwi, Cer, Cei, e_rig, Dt, Dtw, Dvw, Dcf, Dcw,
-            bs_on[s_], s0[s_], bx[s_], bf[s_], bn[s_], bslope[s_], lo_on[s_], static[s_],
-            tf_rows, max_iter, stats[s_])
-
-
 @_nb.njit(cache=True, error_model="numpy", parallel=True)
-def loop_elements_batch(pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig,
-                        cbar, kv, kf, nk, slo, shi, alpha, b0, b1, bm, r, Cy, Bwr, Bwi, Cer, Cei,
-                        e_rig, Dt, Dtw, Dvw, Dcf, Dcw, bs_on, s0, bx, bf, bn, bslope, lo_on,
-                        static, tf_rows, max_iter, y_rig, y_out, F_out, iters, stats):
-    """:func:`loop_elements_serial` in parallel over the setups (the same numbers)."""
-    for s_ in _nb.prange(kv.shape[0]):
-        iters[s_] = loop_one_elements(
-            pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar, kv[s_],
-            kf[s_], nk[s_], slo[s_], shi[s_], alpha[s_], b0[s_], b1[s_], bm[s_], r, Cy, y_rig,
-            y_out[s_], F_out[s_], -1, Bwr, Bwi, Cer, Cei, e_rig, Dt, Dtw, Dvw, Dcf, Dcw,
-            bs_on[s_], s0[s_], bx[s_], bf[s_], bn[s_], bslope[s_], lo_on[s_], static[s_],
-            tf_rows, max_iter, stats[s_])
+def loop_batch(plant, setups, drive, y_out, F_out, iters, elements, stats):
+    """The closed loop of every setup (`setups` a :class:`ShockSetups` with one row per
+    setup), in parallel over the setups, each by :func:`loop_one`: outputs into ``y_out``
+    (n_setups, p, n_out), applied shock forces into ``F_out`` (n_setups, n_out, 4), Newton
+    iteration counts into ``iters`` (-1: no convergence). `elements`: ``None`` or an
+    :class:`Elements` with one row per setup of its setup fields, the element counts then
+    into ``stats`` (n_setups, 3, 4) (``None`` without)."""
+    for s in _nb.prange(setups.b0.shape[0]):
+        if elements is None:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
+                                None, None)
+        else:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
+                                _element_row(elements, s), stats[s])
+    return
 
 
 @_nb.njit(cache=True, error_model="numpy", nogil=True)
-def loop_metrics_elements_worker(w, n_workers, pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi,
-                                 Cvr, Cvi, Deff, v_rig, cbar, kv, kf, nk, slo, shi, alpha, b0,
-                                 b1, bm, r, Cy, Bwr, Bwi, Cer, Cei, e_rig, Dt, Dtw, Dvw, Dcf, Dcw,
-                                 bs_on, s0, bx, bf, bn, bslope, lo_on, static, tf_rows, max_iter,
-                                 y_rig, n_out, ia, sos, zi, padlen, out, iters, stats):
-    """:func:`loop_metrics_worker` with bump stops and tire lift-off: each setup of worker
-    `w` simulated by :func:`loop_one_elements` (the element arrays one row per setup, as
-    :func:`loop_elements_serial`) and its metrics computed right after into ``out``
-    (n_setups, n_bands, n_metrics), the element counts into ``stats`` (n_setups, 3, 4).
+def loop_serial(plant, setups, drive, y_out, F_out, iters, elements, stats):
+    """:func:`loop_batch` one setup after the other (the same `loop_one`, the same numbers).
 
-    ``Cy`` (2 n + 4 (+ 4), p) are the metrics' signals with the ``w`` rows under lift-off
-    (zero for a ride-height pair: measured from the real pad); ``tf_rows`` the columns of
-    ``Cy`` holding the tire forces (-1: none), set to ``-static`` at lifted samples.
+    A single setup gains nothing from the parallel loop, and this kernel compiles in about
+    60 % of its time: the virtual rig (one setup per run) uses it, so a fresh machine's first
+    ``rig simulate`` or demo waits for the smaller compilation only (the demo compiles the
+    parallel kernel meanwhile in a worker). It releases the GIL (as :func:`rig_kernel`
+    does): the virtual rig runs its runs on threads.
     """
-    p = Cy.shape[1]
+    for s in range(setups.b0.shape[0]):
+        if elements is None:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
+                                None, None)
+        else:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
+                                _element_row(elements, s), stats[s])
+    return
+
+
+@_nb.njit(cache=True, error_model="numpy", nogil=True)
+def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters, elements,
+                        stats):
+    """Worker `w` of `n_workers` of :func:`ident.sim.closedloop.simulate_batch_metrics`:
+    the setups ``w, w + n_workers, ...`` (interleaved, so that each worker gets a mix of
+    cheap and costly setups), each simulated by :func:`loop_one` and its metrics computed
+    right after (:func:`ident.sim.metric_kernels.setup_metric_rms`, per band of the
+    :class:`MetricFilters` `metrics`) into ``out`` (n_setups, n_bands, n_metrics).
+
+    The outputs ``drive.Cy`` (2 n + 4 (+ 4), p) are the metrics' signals (a ride height
+    pair as one row of averaged coefficients; with lift-off the ``w`` rows, zero for a
+    ride height: measured from the real pad; ``elements.tf_rows`` then the columns of the
+    tire forces); the shock velocities come from the loop's own solve (rows p .. p + 3 of
+    the setup's buffer), not from the product. `elements` and `stats` as
+    :func:`loop_batch`. The worker keeps one setup's outputs and the metric's scratch
+    (about 2 MB for 12,000 samples): nothing of size (setups x samples) is written. It
+    releases the GIL: the workers are threads.
+    """
+    p = drive.Cy.shape[1]
+    n_out = drive.y_rig.shape[0]
+    ia = metrics.ia
+    sos = metrics.sos
+    zi = metrics.zi
+    padlen = metrics.padlen
     L = METRIC_LANES
     ns = sos.shape[1]
-    S = kv.shape[0]
+    S = setups.b0.shape[0]
+    # the outputs, then the 4 shock velocities. Channel-major, as simulate_batch's: the
+    # loop kernel is then the one-setup loop's compiled code (sample-major rows were about
+    # 4 % faster but compile the loop once more, 4 s on a fresh machine's first demo)
     y = np.empty((p + 4, n_out))
     F = np.empty((n_out, 4))
     buf = np.empty((n_out + 2 * padlen, L))
@@ -1062,12 +1266,12 @@ def loop_metrics_elements_worker(w, n_workers, pr, pi, g1r, g1i, g0r, g0i, gmr, 
     z1 = np.empty((ns, L))
     stack = np.empty((METRIC_PW_LEVELS, 10, L))
     sums = np.empty(L)
-    for s_ in range(w, S, n_workers):
-        iters[s_] = loop_one_elements(
-            pr, pi, g1r, g1i, g0r, g0i, gmr, gmi, Br, Bi, Cvr, Cvi, Deff, v_rig, cbar, kv[s_],
-            kf[s_], nk[s_], slo[s_], shi[s_], alpha[s_], b0[s_], b1[s_], bm[s_], r, Cy, y_rig,
-            y, F, p, Bwr, Bwi, Cer, Cei, e_rig, Dt, Dtw, Dvw, Dcf, Dcw, bs_on[s_], s0[s_],
-            bx[s_], bf[s_], bn[s_], bslope[s_], lo_on[s_], static[s_], tf_rows, max_iter,
-            stats[s_])
+    for s in range(w, S, n_workers):
+        if elements is None:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y, F, p, None, None)
+        else:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y, F, p,
+                                _element_row(elements, s), stats[s])
         for b in range(sos.shape[0]):
-            setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s_, b], buf, z0, z1, stack, sums)
+            setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack, sums)
+    return
