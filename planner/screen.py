@@ -534,7 +534,8 @@ def screen_packed(ops, kv, kf, nk, slo, shi, lag, *, max_iter=30, tol=1e-5):
     results do not depend on which other setups share the call (bit for bit):
     chunking and the order of chunks change nothing.
     """
-    return _run_packed(ops, None, kv, kf, nk, slo, shi, lag, None, max_iter, tol)[:3]
+    return _run_packed(ops, None, ShockTables(kv, kf, nk, slo, shi, lag), None, max_iter,
+                       tol)[:3]
 
 
 def screen_packed_elements(ops, eops, kv, kf, nk, slo, shi, lag, stops, *, max_iter=30,
@@ -565,7 +566,8 @@ def screen_packed_elements(ops, eops, kv, kf, nk, slo, shi, lag, stops, *, max_i
         shocks' equivalent damping [N s/m] and mean force [N] (the latter zero in setups
         without a stop).
     """
-    return _run_packed(ops, eops, kv, kf, nk, slo, shi, lag, stops, max_iter, tol)
+    return _run_packed(ops, eops, ShockTables(kv, kf, nk, slo, shi, lag), stops, max_iter,
+                       tol)
 
 
 def _no_stops(n):
@@ -574,9 +576,10 @@ def _no_stops(n):
             np.zeros((n, 4, 2)), np.full((n, 4), 2, dtype=np.int64), np.zeros((n, 4)))
 
 
-def _run_packed(ops, eops, kv, kf, nk, slo, shi, lag, stops, max_iter, tol):
-    """The kernels on packed setups: (metrics, sigma, iterations, elements)."""
-    n = kv.shape[0]
+def _run_packed(ops, eops, shocks, stops, max_iter, tol):
+    """The kernels on packed setups (``shocks``: :class:`~planner.screen_kernels.ShockTables`,
+    ``stops``: as :func:`screen_packed_elements`): (metrics, sigma, iterations, elements)."""
+    n = shocks.kv.shape[0]
     out = ScreenOutputs(metrics=np.zeros((n, len(ops.metric_names))), sigma=np.zeros((n, 4)),
                         iterations=np.zeros(n, dtype=np.int64),
                         elements=np.zeros((n, len(STOP_ROWS), 4)))
@@ -594,7 +597,6 @@ def _run_packed(ops, eops, kv, kf, nk, slo, shi, lag, stops, max_iter, tol):
         travel = TravelData(jinv=eops.jinv, w2inv=eops.w2inv, gain=eops.travel_gain_m_n,
                             static=eops.travel_static_m, rms0=eops.travel_rms0_m)
     stops = StopTables(*(np.ascontiguousarray(a) for a in stops))
-    shocks = ShockTables(kv=kv, kf=kf, nk=nk, slo=slo, shi=shi, lag=lag)
     settings = IterSettings(max_iter=int(max_iter), tol=float(tol))
     F = metric_form(ops)
     Fp = np.zeros(F.shape[:2] + (-(-F.shape[2] // 4) * 4,))  # metrics padded with zeros
@@ -810,8 +812,8 @@ def _screen_elements(plant, drive, setups, models, bands, H, bump_stops, static_
         kv, kf, nk, slo, shi, *_ = pack_setups(chunk, h)
         lag[a:b] = np.array([[m.lag_s for m in row] for row in chunk])
         out[a:b], sig[a:b], iters[a:b], trav[a:b] = _run_packed(
-            ops, eops, kv, kf, nk, slo, shi, lag[a:b], tuple(x[a:b] for x in stops),
-            max_iter, tol)
+            ops, eops, ShockTables(kv, kf, nk, slo, shi, lag[a:b]),
+            tuple(x[a:b] for x in stops), max_iter, tol)
         if lo_on.any():
             for i in range(a, b):  # the shocks' mean force where the kernel had no stop
                 if not stops[0][i].any():

@@ -10,9 +10,15 @@ those features. Two kernels give the same numbers bit for bit:
 - :func:`screen_batch_scalar`, one band after the other, which compiles in a
   fraction of the time, for small ones.
 
-:func:`metric_form` builds the setup-independent linear form both apply. These
-public names serve :mod:`planner.screen`, their one caller; everything else here
-is private to the kernels. The straight-line band inverse, :func:`_band_inverse`,
+:func:`metric_form` builds the setup-independent linear form both apply. Both kernels take
+their arguments grouped in named tuples, packed by :mod:`planner.screen`:
+:class:`BandData` (the plant's band data), :class:`ShockTables` and :class:`StopTables`
+(the setups' shocks and bump stops), :class:`TravelData` (the stops' setup-independent
+operands), :class:`IterSettings` (the fixed point's) and :class:`ScreenOutputs` (written in
+place); the two share the fixed point's start, step and finish (:func:`_start`,
+:func:`_step`, :func:`_finish`) and differ only in their band loops. These public names
+serve :mod:`planner.screen`, their one caller; everything else here is private to the
+kernels. The straight-line band inverse, :func:`_band_inverse`,
 is generated code: its block is written by :mod:`planner.screen_codegen`
 (``python -m planner.screen_codegen --write``) and checked by ``tests/test_screen.py``.
 
@@ -292,7 +298,7 @@ def _stop_means(st, shock, stop, travel, J):
     the stops' at ``s ~ N(mu, sigs^2)``) by Newton's method from the given ``mu`` (Jacobian
     ``I - Hs0 diag(k_eq)``: k_eq >= 0 and Hs0 a compliance, so the system is monotone);
     then ``keq = E[g'(s)]`` and ``eg = E[g(s)]`` at the solution (zero without a stop), ``ef``
-    the shocks' mean forces. st: the setup's state (rows :data:`_ST`), shock and stop: one
+    the shocks' mean forces. st: the setup's state (rows ``_ST_*``), shock and stop: one
     setup's :class:`ShockTables` and :class:`StopTables`, travel: :class:`TravelData`;
     J (4, 4) is scratch (and the state's row ``r``).
     """
@@ -1004,7 +1010,7 @@ def _stop_row(stops, s):
 
 @nb.njit(cache=True, error_model="numpy")
 def _start(st, sig0, stop, travel):
-    """Start a setup's fixed point (state ``st``, rows :data:`_ST`, in place): the velocity
+    """Start a setup's fixed point (state ``st``, rows ``_ST_*``, in place): the velocity
     RMS at ``sig0``, the elements' part at the travel's static point; True when a corner
     has a stop."""
     sig, s_prev, h_prev = st[_ST_SIG], st[_ST_SPREV], st[_ST_HPREV]
@@ -1096,7 +1102,7 @@ def _screen_one(plant, shock, stop, travel, settings, sig_out, trav_out, V, scra
     V (n_blocks * _NFEAT * _BK; out: feature i of band b _BK + j at (b _NFEAT + i) _BK + j)
     and ``scratch = (roll (n_blocks * 12 * _BK), acc (n_blocks * 4 * _BK), st (_NST, 4),
     Jm (4, 4))`` are allocated once per chunk of setups (:func:`screen_batch`); ``st`` holds
-    the setup's state (rows :data:`_ST`).
+    the setup's state (rows ``_ST_*``).
 
     Bump stops (``stop.on`` (4,) nonzero where a corner has one): the fixed point runs on the
     travel RMS as well (``sigs``, from ``travel.rms0``: the velocity power over ``w^2``,
