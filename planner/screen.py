@@ -46,6 +46,12 @@ from planner.plant import as_loop_plant
 from planner.predict import Predictions, prepare_drive, resolve_setups
 from planner.screen_kernels import (
     STOP_ROWS,
+    BandData,
+    IterSettings,
+    ScreenOutputs,
+    ShockTables,
+    StopTables,
+    TravelData,
     band_operands,
     gaussian_pwl,
     metric_form,
@@ -529,7 +535,8 @@ def screen_packed(ops, kv, kf, nk, slo, shi, lag, *, max_iter=30, tol=1e-5):
     results do not depend on which other setups share the call (bit for bit):
     chunking and the order of chunks change nothing.
     """
-    return _run_packed(ops, None, kv, kf, nk, slo, shi, lag, None, max_iter, tol)[:3]
+    return _run_packed(ops, None, ShockTables(kv, kf, nk, slo, shi, lag), None, max_iter,
+                       tol)[:3]
 
 
 def screen_packed_elements(ops, eops, kv, kf, nk, slo, shi, lag, stops, *, max_iter=30,
@@ -560,7 +567,8 @@ def screen_packed_elements(ops, eops, kv, kf, nk, slo, shi, lag, stops, *, max_i
         shocks' equivalent damping [N s/m] and mean force [N] (the latter zero in setups
         without a stop).
     """
-    return _run_packed(ops, eops, kv, kf, nk, slo, shi, lag, stops, max_iter, tol)
+    return _run_packed(ops, eops, ShockTables(kv, kf, nk, slo, shi, lag), stops, max_iter,
+                       tol)
 
 
 def _no_stops(n):
@@ -569,43 +577,41 @@ def _no_stops(n):
             np.zeros((n, 4, 2)), np.full((n, 4), 2, dtype=np.int64), np.zeros((n, 4)))
 
 
-def _run_packed(ops, eops, kv, kf, nk, slo, shi, lag, stops, max_iter, tol):
-    """The kernels on packed setups: (metrics, sigma, iterations, elements)."""
-    n = kv.shape[0]
-    out = np.zeros((n, len(ops.metric_names)))
-    sig = np.zeros((n, 4))
-    iters = np.zeros(n, dtype=np.int64)
-    trav = np.zeros((n, len(STOP_ROWS), 4))
+def _run_packed(ops, eops, shocks, stops, max_iter, tol):
+    """The kernels on packed setups (``shocks``: :class:`~planner.screen_kernels.ShockTables`,
+    ``stops``: as :func:`screen_packed_elements`): (metrics, sigma, iterations, elements)."""
+    n = shocks.kv.shape[0]
+    out = ScreenOutputs(metrics=np.zeros((n, len(ops.metric_names))), sigma=np.zeros((n, 4)),
+                        iterations=np.zeros(n, dtype=np.int64),
+                        elements=np.zeros((n, len(STOP_ROWS), 4)))
     if not n:
-        return out, sig, iters, trav
+        return tuple(out)
     if stops is None:
         stops = _no_stops(n)
     if eops is None:
         if np.any(stops[0]):
             raise TypeError("screen_packed_elements: bump stops need the element operands "
                             "(eops = element_operands(...))")
-        jinv, w2inv = padded_bands(np.zeros(ops.w.size)), np.zeros(ops.w.size)
-        Hs0, mu_rig, sigs0 = np.zeros((4, 4)), np.zeros(4), np.zeros(4)
+        travel = TravelData(jinv=padded_bands(np.zeros(ops.w.size)), w2inv=np.zeros(ops.w.size),
+                            gain=np.zeros((4, 4)), static=np.zeros(4), rms0=np.zeros(4))
     else:
-        jinv, w2inv = eops.jinv, eops.w2inv
-        Hs0, mu_rig, sigs0 = eops.travel_gain_m_n, eops.travel_static_m, eops.travel_rms0_m
-    on, s0, bx, bf, bn, bslope = (np.ascontiguousarray(a) for a in stops)
-    el = (jinv, w2inv, Hs0, mu_rig, sigs0, on, s0, bx, bf, bn, bslope, trav)
-    # writable copies: a read-only array (a frozen plant's c_bar) is another numba type,
-    # which would compile the kernel a second time
+        travel = TravelData(jinv=eops.jinv, w2inv=eops.w2inv, gain=eops.travel_gain_m_n,
+                            static=eops.travel_static_m, rms0=eops.travel_rms0_m)
+    stops = StopTables(*(np.ascontiguousarray(a) for a in stops))
+    settings = IterSettings(max_iter=int(max_iter), tol=float(tol))
     F = metric_form(ops)
-    if n < _VECTOR_MIN_SETUPS:
-        screen_batch_scalar(ops.w, ops.Hvs, ops.P, ops.PB, F, ops.d0,
-                            np.array(ops.cbar, dtype=float), ops.sig0, kv, kf, nk, slo,
-                            shi, lag, int(max_iter), float(tol), out, sig, iters, *el)
-        return out, sig, iters, trav
     Fp = np.zeros(F.shape[:2] + (-(-F.shape[2] // 4) * 4,))  # metrics padded with zeros
     Fp[:, :, :F.shape[2]] = F
-    screen_batch(ops.w, band_operands(ops), Fp, ops.d0,
-                 np.array(ops.cbar, dtype=float),
-                 ops.sig0, kv, kf, nk, slo, shi, lag, int(max_iter), float(tol), out, sig,
-                 iters, min(n, 4 * nb.get_num_threads()), *el)
-    return out, sig, iters, trav
+    # writable copies: a read-only array (a frozen plant's c_bar) is another numba type,
+    # which would compile the kernel a second time
+    plant = BandData(w=ops.w, Hvs=ops.Hvs, P=ops.P, PB=ops.PB, blocks=band_operands(ops), F=Fp,
+                     d0=ops.d0, cbar=np.array(ops.cbar, dtype=float), sig0=ops.sig0)
+    if n < _VECTOR_MIN_SETUPS:
+        screen_batch_scalar(plant, shocks, stops, travel, settings, out)
+    else:
+        screen_batch(plant, shocks, stops, travel, settings, out,
+                     min(n, 4 * nb.get_num_threads()))
+    return tuple(out)
 
 
 def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, tol=1e-5,
@@ -807,8 +813,8 @@ def _screen_elements(plant, drive, setups, models, bands, H, bump_stops, static_
         kv, kf, nk, slo, shi, *_ = pack_setups(chunk, h)
         lag[a:b] = np.array([[m.lag_s for m in row] for row in chunk])
         out[a:b], sig[a:b], iters[a:b], trav[a:b] = _run_packed(
-            ops, eops, kv, kf, nk, slo, shi, lag[a:b], tuple(x[a:b] for x in stops),
-            max_iter, tol)
+            ops, eops, ShockTables(kv, kf, nk, slo, shi, lag[a:b]),
+            tuple(x[a:b] for x in stops), max_iter, tol)
         if lo_on.any():
             for i in range(a, b):  # the shocks' mean force where the kernel had no stop
                 if not stops[0][i].any():

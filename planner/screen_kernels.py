@@ -10,9 +10,15 @@ those features. Two kernels give the same numbers bit for bit:
 - :func:`screen_batch_scalar`, one band after the other, which compiles in a
   fraction of the time, for small ones.
 
-:func:`metric_form` builds the setup-independent linear form both apply. These
-public names serve :mod:`planner.screen`, their one caller; everything else here
-is private to the kernels. The straight-line band inverse, :func:`_band_inverse`,
+:func:`metric_form` builds the setup-independent linear form both apply. Both kernels take
+their arguments grouped in named tuples, packed by :mod:`planner.screen`:
+:class:`BandData` (the plant's band data), :class:`ShockTables` and :class:`StopTables`
+(the setups' shocks and bump stops), :class:`TravelData` (the stops' setup-independent
+operands), :class:`IterSettings` (the fixed point's) and :class:`ScreenOutputs` (written in
+place); the two share the fixed point's start, step and finish (:func:`_start`,
+:func:`_step`, :func:`_finish`) and differ only in their band loops. These public names
+serve :mod:`planner.screen`, their one caller; everything else here is private to the
+kernels. The straight-line band inverse, :func:`_band_inverse`,
 is generated code: its block is written by :mod:`planner.screen_codegen`
 (``python -m planner.screen_codegen --write``) and checked by ``tests/test_screen.py``.
 
@@ -23,12 +29,19 @@ file recompiles them on first use (the vectorized kernel takes 30-40 s).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
 __all__ = [
     "STOP_ROWS",
+    "BandData",
+    "IterSettings",
+    "ScreenOutputs",
+    "ShockTables",
+    "StopTables",
+    "TravelData",
     "band_operands",
     "gaussian_pwl",
     "metric_form",
@@ -51,6 +64,175 @@ STOP_ROWS = ("travel_rms", "travel_mean", "stop_stiffness", "stop_force_mean",
 #: iterate's mean.
 _MEAN_MAX_ITER = 50
 _MEAN_TOL_M = 1e-12
+#: Rows of a setup's state ``st`` (_NST, 4) in the kernels: the fixed point on the velocity
+#: RMS (its iterate [m/s], the equivalent damping [N s/m], the band sum of the velocity
+#: power [(m/s)^2], the secant's last iterate and residual) and the elements' part (the
+#: travel RMS [m], the stops' k_eq [N/m] and mean force [N], the mean travel [m], the
+#: shocks' mean force [N], the travel RMS's secant state, the band sum of the travel power
+#: [m^2], and a Newton step's scratch).
+(_ST_SIG, _ST_CEQ, _ST_SVV, _ST_SPREV, _ST_HPREV, _ST_SIGS, _ST_KEQ, _ST_EG, _ST_MU, _ST_EF,
+ _ST_SSPREV, _ST_HSPREV, _ST_SSS, _ST_R) = range(14)
+_NST = 14
+
+
+class BandData(NamedTuple):
+    """The plant's band data: what the kernels need of the model and drive (no setup changes it).
+
+    Packed once per call by :mod:`planner.screen` from its
+    :class:`~planner.screen.ScreenOperands`. Each kernel reads the loop's operands in its
+    own layout: :func:`screen_batch` in ``blocks``, :func:`screen_batch_scalar` in ``Hvs``,
+    ``P``, ``PB``.
+
+    Attributes
+    ----------
+    w : ndarray, shape (n_bands,)
+        Band centres [rad/s].
+    Hvs : ndarray of complex, shape (n_bands, 4, 4)
+        Shock velocities per unit shock force change dF [m/s per N].
+    P, PB : ndarray of complex, shape (n_bands, 4, 4)
+        Band power of the shock velocities from the rig inputs [(m/s)^2], unweighted and
+        weighted by the metric filter.
+    blocks : ndarray, shape (n_blocks * 96 * 16,)
+        ``-Hvs``, ``P`` and ``PB`` in blocks of 16 bands (:func:`band_operands`).
+    F : ndarray, shape (n_bands, 48, n_padded)
+        The metrics' band power as a linear form of the band features
+        (:func:`metric_form`), the metrics padded with zero columns to a multiple of 4.
+    d0 : ndarray, shape (n_bands, n_metrics)
+        Weighted metric power with the shock loop open (dF = 0) [SI unit of the metric,
+        squared].
+    cbar : ndarray, shape (4,)
+        The plant's built-in damping [N s/m] (writable: a read-only array is another numba
+        type, which would compile the kernels again).
+    sig0 : ndarray, shape (4,)
+        Starting shock-velocity RMS of the fixed point [m/s].
+    """
+
+    w: np.ndarray
+    Hvs: np.ndarray
+    P: np.ndarray
+    PB: np.ndarray
+    blocks: np.ndarray
+    F: np.ndarray
+    d0: np.ndarray
+    cbar: np.ndarray
+    sig0: np.ndarray
+
+
+class ShockTables(NamedTuple):
+    """The setups' shocks as packed curves (:func:`ident.sim.closedloop.pack_setups`).
+
+    The batch kernels take every setup's (the shapes below); the per-setup ones one row of
+    each (the leading axis dropped).
+
+    Attributes
+    ----------
+    kv, kf : ndarray, shape (n_setups, 4, n_knots)
+        Knot velocities [m/s] and forces [N] per setup and corner, padded past ``nk``
+        (padding never read).
+    nk : ndarray of int, shape (n_setups, 4)
+        Knots in use.
+    slo, shi : ndarray, shape (n_setups, 4)
+        Slopes below the first and above the last knot [N s/m].
+    lag : ndarray, shape (n_setups, 4)
+        Shock lags [s].
+    """
+
+    kv: np.ndarray
+    kf: np.ndarray
+    nk: np.ndarray
+    slo: np.ndarray
+    shi: np.ndarray
+    lag: np.ndarray
+
+
+class TravelData(NamedTuple):
+    """What the bump stops need of the model and drive (setup-independent; zeros without any
+    stop), from :class:`planner.screen.ElementOperands`.
+
+    Attributes
+    ----------
+    jinv : ndarray, shape (n_blocks * 16,)
+        ``-1 / w`` per band [s/rad], padded with zeros to whole blocks (:func:`padded_bands`):
+        the travel ``s = v / (j w)`` the stops' equivalent stiffness acts on.
+    w2inv : ndarray, shape (n_bands,)
+        ``1 / w^2`` per band [s^2/rad^2]: the travel power from the velocity power.
+    gain : ndarray, shape (4, 4)
+        Static shock travel per unit dF [m/N].
+    static : ndarray, shape (4,)
+        Static shock travel of the drive's mean rig inputs [m].
+    rms0 : ndarray, shape (4,)
+        Starting travel RMS of the fixed point [m].
+    """
+
+    jinv: np.ndarray
+    w2inv: np.ndarray
+    gain: np.ndarray
+    static: np.ndarray
+    rms0: np.ndarray
+
+
+class StopTables(NamedTuple):
+    """The setups' bump stops as :func:`ident.sim.closedloop.pack_bump_stops` packs them.
+
+    The batch kernels take every setup's (the shapes below); the per-setup ones one row of
+    each (the leading axis dropped).
+
+    Attributes
+    ----------
+    on : ndarray of int, shape (n_setups, 4)
+        Nonzero where a corner has a stop.
+    s0 : ndarray, shape (n_setups, 4)
+        Contact travel [m].
+    bx, bf : ndarray, shape (n_setups, 4, n_points)
+        The stop's table: travel beyond contact [m] and force [N], padded with the last point.
+    bn : ndarray of int, shape (n_setups, 4)
+        Points in use.
+    bslope : ndarray, shape (n_setups, 4)
+        Slope beyond the table [N/m].
+    """
+
+    on: np.ndarray
+    s0: np.ndarray
+    bx: np.ndarray
+    bf: np.ndarray
+    bn: np.ndarray
+    bslope: np.ndarray
+
+
+class IterSettings(NamedTuple):
+    """The fixed point's settings.
+
+    Attributes
+    ----------
+    max_iter : int
+        Iterations at most.
+    tol : float
+        Relative change of every RMS (velocity, and travel with stops) below which it stops.
+    """
+
+    max_iter: int
+    tol: float
+
+
+class ScreenOutputs(NamedTuple):
+    """The kernels' outputs, written in place (allocated by the caller, zeros).
+
+    Attributes
+    ----------
+    metrics : ndarray, shape (n_setups, n_metrics)
+        The metrics [SI].
+    sigma : ndarray, shape (n_setups, 4)
+        Linearized shock-velocity RMS [m/s].
+    iterations : ndarray of int, shape (n_setups,)
+        Fixed-point iterations taken.
+    elements : ndarray, shape (n_setups, len(STOP_ROWS), 4)
+        The element rows (:data:`STOP_ROWS`).
+    """
+
+    metrics: np.ndarray
+    sigma: np.ndarray
+    iterations: np.ndarray
+    elements: np.ndarray
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -108,8 +290,7 @@ def gaussian_pwl(mu, sig, x0, x, f, n, slo, shi):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _stop_means(sigv, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0, mu_rig,
-                mu, keq, eg, ef, J, r):
+def _stop_means(st, shock, stop, travel, J):
     """The mean travel and the bump stops' linearization at the current RMS (in place).
 
     The mean travel ``mu`` solves ``mu = mu_rig + Hs0 (E[f_shock(v)] + E[g(s)])`` (the
@@ -117,8 +298,15 @@ def _stop_means(sigv, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, H
     the stops' at ``s ~ N(mu, sigs^2)``) by Newton's method from the given ``mu`` (Jacobian
     ``I - Hs0 diag(k_eq)``: k_eq >= 0 and Hs0 a compliance, so the system is monotone);
     then ``keq = E[g'(s)]`` and ``eg = E[g(s)]`` at the solution (zero without a stop), ``ef``
-    the shocks' mean forces. J (4, 4) and r (4,) are scratch.
+    the shocks' mean forces. st: the setup's state (rows ``_ST_*``), shock and stop: one
+    setup's :class:`ShockTables` and :class:`StopTables`, travel: :class:`TravelData`;
+    J (4, 4) is scratch (and the state's row ``r``).
     """
+    sigv, sigs, keq, eg, mu, ef, r = (st[_ST_SIG], st[_ST_SIGS], st[_ST_KEQ], st[_ST_EG],
+                                      st[_ST_MU], st[_ST_EF], st[_ST_R])
+    kv, kf, nk, slo, shi = shock.kv, shock.kf, shock.nk, shock.slo, shock.shi
+    son, s0, bx, bf, bn, bslope = stop.on, stop.s0, stop.bx, stop.bf, stop.bn, stop.bslope
+    Hs0, mu_rig = travel.gain, travel.static
     for c in range(4):
         ef[c] = gaussian_pwl(0.0, sigv[c], 0.0, kv[c], kf[c], nk[c], slo[c], shi[c])[0]
     for _ in range(_MEAN_MAX_ITER):
@@ -807,13 +995,37 @@ def _band_features(e, pb):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _start_stops(son, sigs0, mu_rig, sigs, keq, eg, mu, ef, ss_prev, hs_prev):
-    """Start the elements' part of the fixed point (in place); True when a corner has a stop."""
+def _shock_row(shocks, s):
+    """Setup s's :class:`ShockTables` (views)."""
+    return ShockTables(shocks.kv[s], shocks.kf[s], shocks.nk[s], shocks.slo[s], shocks.shi[s],
+                       shocks.lag[s])
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _stop_row(stops, s):
+    """Setup s's :class:`StopTables` (views)."""
+    return StopTables(stops.on[s], stops.s0[s], stops.bx[s], stops.bf[s], stops.bn[s],
+                      stops.bslope[s])
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _start(st, sig0, stop, travel):
+    """Start a setup's fixed point (state ``st``, rows ``_ST_*``, in place): the velocity
+    RMS at ``sig0``, the elements' part at the travel's static point; True when a corner
+    has a stop."""
+    sig, s_prev, h_prev = st[_ST_SIG], st[_ST_SPREV], st[_ST_HPREV]
+    for c in range(4):
+        sig[c] = sig0[c]
+        s_prev[c] = 0.0
+        h_prev[c] = 0.0
+    sigs, keq, eg, mu, ef, ss_prev, hs_prev = (st[_ST_SIGS], st[_ST_KEQ], st[_ST_EG],
+                                               st[_ST_MU], st[_ST_EF], st[_ST_SSPREV],
+                                               st[_ST_HSPREV])
     any_stop = False
     for c in range(4):
-        any_stop = any_stop or son[c] != 0
-        sigs[c] = sigs0[c]
-        mu[c] = mu_rig[c]
+        any_stop = any_stop or stop.on[c] != 0
+        sigs[c] = travel.rms0[c]
+        mu[c] = travel.static[c]
         keq[c] = 0.0
         eg[c] = 0.0
         ef[c] = 0.0
@@ -823,26 +1035,57 @@ def _start_stops(son, sigs0, mu_rig, sigs, keq, eg, mu, ef, ss_prev, hs_prev):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _finish_stops(any_stop, sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0,
-                  mu_rig, mu, keq, eg, ef, Jm, rr, ceq, trav_out):
-    """The stops' linearization at the converged RMS, and the element rows (:data:`STOP_ROWS`)."""
-    if any_stop:
-        _stop_means(sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0, mu_rig,
-                    mu, keq, eg, ef, Jm, rr)
+def _damping(st, shock):
+    """The shocks' equivalent damping at the velocity RMS (row ``ceq`` of ``st``)."""
+    sig, ceq = st[_ST_SIG], st[_ST_CEQ]
     for c in range(4):
-        trav_out[0, c] = sigs[c] if any_stop else 0.0
-        trav_out[1, c] = mu[c] if any_stop else 0.0
-        trav_out[2, c] = keq[c]
-        trav_out[3, c] = eg[c]
-        trav_out[4, c] = ceq[c]
-        trav_out[5, c] = ef[c]
+        ceq[c] = _ceq(sig[c], shock.kv[c], shock.kf[c], shock.nk[c], shock.slo[c],
+                      shock.shi[c])
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _screen_one(w, ops, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol, sig_out, roll,
-                acc, V, st, jinv, w2inv, Hs0, mu_rig, sigs0, son, s0, bx, bf, bn, bslope,
-                trav_out, Jm):
+def _step(st, any_stop, it):
+    """Iteration ``it``'s step of the fixed point ``sigma = g(sigma)`` per corner from the
+    band sums (rows ``svv``, ``sss`` of ``st``): :func:`_secant` on the velocity RMS, and on
+    the travel RMS with a stop. Returns the largest relative change."""
+    sig, svv, s_prev, h_prev = st[_ST_SIG], st[_ST_SVV], st[_ST_SPREV], st[_ST_HPREV]
+    change = 0.0
+    for c in range(4):
+        change = max(change, _secant(sig, math.sqrt(max(svv[c], 0.0)), s_prev, h_prev, c, it))
+    if any_stop:
+        sigs, sss, ss_prev, hs_prev = st[_ST_SIGS], st[_ST_SSS], st[_ST_SSPREV], st[_ST_HSPREV]
+        for c in range(4):
+            change = max(change, _secant(sigs, math.sqrt(max(sss[c], 0.0)), ss_prev,
+                                         hs_prev, c, it))
+    return change
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _finish(any_stop, st, shock, stop, travel, Jm, sig_out, trav_out):
+    """The shocks' damping and the stops' linearization at the converged RMS; the velocity
+    RMS into ``sig_out`` (4,), the element rows (:data:`STOP_ROWS`) into ``trav_out``."""
+    _damping(st, shock)
+    for c in range(4):
+        sig_out[c] = st[_ST_SIG, c]
+    if any_stop:
+        _stop_means(st, shock, stop, travel, Jm)
+    for c in range(4):
+        trav_out[0, c] = st[_ST_SIGS, c] if any_stop else 0.0
+        trav_out[1, c] = st[_ST_MU, c] if any_stop else 0.0
+        trav_out[2, c] = st[_ST_KEQ, c]
+        trav_out[3, c] = st[_ST_EG, c]
+        trav_out[4, c] = st[_ST_CEQ, c]
+        trav_out[5, c] = st[_ST_EF, c]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _screen_one(plant, shock, stop, travel, settings, sig_out, trav_out, V, scratch):
     """Screen one setup: the fixed point on the shock-velocity RMS, then its band features.
+
+    plant: :class:`BandData` (``blocks`` read), shock and stop: the setup's
+    :class:`ShockTables` and :class:`StopTables` rows, travel: :class:`TravelData`,
+    settings: :class:`IterSettings`; ``sig_out`` (4,) receives the velocity RMS, ``trav_out``
+    (len(STOP_ROWS), 4) the element rows (:data:`STOP_ROWS`). Returns the iterations taken.
 
     The fixed point's arithmetic (the loop inverse and the order of the sum
     ``svv[c] = sum_ab Re(K_ca P_ab conj(K_cb))``) is kept as written: the secant step divides
@@ -856,20 +1099,23 @@ def _screen_one(w, ops, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol, si
     into V (vectorized the same way); the metrics are a setup-independent linear form of
     them (:func:`_metrics_of`).
 
-    roll (n_blocks * 12 * _BK), acc (n_blocks * 4 * _BK), V (n_blocks * _NFEAT * _BK; out:
-    feature i of band b _BK + j at (b _NFEAT + i) _BK + j), st (14, 4), Jm (4, 4) are
-    scratch, allocated once per chunk of setups (:func:`screen_batch`).
+    V (n_blocks * _NFEAT * _BK; out: feature i of band b _BK + j at (b _NFEAT + i) _BK + j)
+    and ``scratch = (roll (n_blocks * 12 * _BK), acc (n_blocks * 4 * _BK), st (_NST, 4),
+    Jm (4, 4))`` are allocated once per chunk of setups (:func:`screen_batch`); ``st`` holds
+    the setup's state (rows ``_ST_*``).
 
-    Bump stops (``son`` (4,) nonzero where a corner has one; ``s0``, ``bx``, ``bf``, ``bn``,
-    ``bslope`` its contact travel and table, as ``ident.sim.closedloop.pack_bump_stops``):
-    the fixed point runs on the travel RMS as well (``sigs``, from ``sigs0``: the velocity
-    power over ``w^2``, ``w2inv``), the mean travel solved at each iterate
-    (:func:`_stop_means`: ``Hs0`` the travel's static gain from dF, ``mu_rig`` the drive's
-    static travel), and each corner's loop gain takes ``+ k_eq / (j w)`` (``jinv``: ``-1 / w``
-    per band in the blocks' layout, zero on padding). Without a stop ``k_eq`` is zero and
-    the added ``complex(0.0, -0.0)`` leaves every value as it was (bit for bit).
-    ``trav_out`` (len(STOP_ROWS), 4) receives the element rows (:data:`STOP_ROWS`).
+    Bump stops (``stop.on`` (4,) nonzero where a corner has one): the fixed point runs on the
+    travel RMS as well (``sigs``, from ``travel.rms0``: the velocity power over ``w^2``,
+    ``w2inv``), the mean travel solved at each iterate (:func:`_stop_means`), and each
+    corner's loop gain takes ``+ k_eq / (j w)`` (``jinv``: ``-1 / w`` per band in the blocks'
+    layout, zero on padding). Without a stop ``k_eq`` is zero and the added
+    ``complex(0.0, -0.0)`` leaves every value as it was (bit for bit).
     """
+    w, ops, cbar = plant.w, plant.blocks, plant.cbar
+    jinv, w2inv = travel.jinv, travel.w2inv
+    lag = shock.lag
+    max_iter, tol = settings
+    roll, acc, st, Jm = scratch
     nf = w.size
     nblk = (nf + _BK - 1) // _BK
     # the lag's roll-off 1 + j w tau per band and corner, the same in every iteration: its
@@ -899,26 +1145,15 @@ def _screen_one(w, ops, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol, si
                     roll[r + 4 * _BK + j] = ratio
                     roll[r + 8 * _BK + j] = br * ratio + bi
     cb0, cb1, cb2, cb3 = cbar[0], cbar[1], cbar[2], cbar[3]
-    sig = st[0]
-    ceq = st[1]
-    svv = st[2]
-    s_prev = st[3]
-    h_prev = st[4]
-    for c in range(4):
-        sig[c] = sig0[c]
-        s_prev[c] = 0.0
-        h_prev[c] = 0.0
-    sigs, keq, eg, mu, ef, ss_prev, hs_prev, sss, rr = (st[5], st[6], st[7], st[8], st[9],
-                                                       st[10], st[11], st[12], st[13])
-    any_stop = _start_stops(son, sigs0, mu_rig, sigs, keq, eg, mu, ef, ss_prev, hs_prev)
+    ceq, svv, keq, sss = st[_ST_CEQ], st[_ST_SVV], st[_ST_KEQ], st[_ST_SSS]
+    any_stop = _start(st, plant.sig0, stop, travel)
     it = 0
     for it in range(max_iter):
+        _damping(st, shock)
         for c in range(4):
-            ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
             svv[c] = 0.0
         if any_stop:
-            _stop_means(sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0,
-                        mu_rig, mu, keq, eg, ef, Jm, rr)
+            _stop_means(st, shock, stop, travel, Jm)
         e0, e1, e2, e3 = ceq[0], ceq[1], ceq[2], ceq[3]
         k0, k1, k2, k3 = keq[0], keq[1], keq[2], keq[3]
         for blk in range(nblk):
@@ -990,35 +1225,9 @@ def _screen_one(w, ops, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol, si
                 ab = (k // _BK) * 4 * _BK + k % _BK
                 for c in range(4):
                     sss[c] += acc[ab + c * _BK] * w2inv[k]
-        # fixed point sigma = g(sigma) per corner, accelerated by a secant step on
-        # h = g(sigma) - sigma once two iterates exist (safeguarded to a factor 2)
-        change = 0.0
-        for c in range(4):
-            new = math.sqrt(max(svv[c], 0.0))
-            change = max(change, abs(new - sig[c]) / max(sig[c], 1e-12))
-            hc = new - sig[c]
-            nxt = new if new > 0 else 0.5 * sig[c]
-            if it > 0:
-                dh = hc - h_prev[c]
-                ds = sig[c] - s_prev[c]
-                if dh != 0.0 and ds != 0.0:
-                    cand = sig[c] - hc * ds / dh
-                    if 0.5 * sig[c] < cand < 2.0 * sig[c]:
-                        nxt = cand
-            s_prev[c] = sig[c]
-            h_prev[c] = hc
-            sig[c] = nxt
-        if any_stop:
-            for c in range(4):
-                change = max(change, _secant(sigs, math.sqrt(max(sss[c], 0.0)), ss_prev,
-                                             hs_prev, c, it))
-        if change < tol:
+        if _step(st, any_stop, it) < tol:
             break
-    for c in range(4):
-        ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
-        sig_out[c] = sig[c]
-    _finish_stops(any_stop, sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0,
-                  mu_rig, mu, keq, eg, ef, Jm, rr, ceq, trav_out)
+    _finish(any_stop, st, shock, stop, travel, Jm, sig_out, trav_out)
     e0, e1, e2, e3 = ceq[0], ceq[1], ceq[2], ceq[3]
     k0, k1, k2, k3 = keq[0], keq[1], keq[2], keq[3]
     # the features v of every band (see _NFEAT), vectorized over bands like the fixed point,
@@ -1167,42 +1376,62 @@ def _metrics_of(F, d0, V, G, out, pw):
 
 
 @nb.njit(cache=True, error_model="numpy", parallel=True)
-def screen_batch(w, ops, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag, max_iter, tol,
-                 out, sig_out, iters, n_chunks, jinv, w2inv, Hs0, mu_rig, sigs0, son, s0, bx,
-                 bf, bn, bslope, trav_out):
-    """Screen setups in n_chunks chunks, in parallel (scratch allocated once per chunk).
+def screen_batch(plant, shocks, stops, travel, settings, out, n_chunks):
+    """Screen setups, vectorized over bands, in n_chunks chunks in parallel.
 
-    The bump stops' arguments as :func:`_screen_one` takes them, per setup (``son``, ``s0``,
-    ``bn``, ``bslope`` (n, 4), ``bx``, ``bf`` (n, 4, n_points)); ``trav_out`` (n,
-    len(STOP_ROWS), 4) receives the element rows."""
-    n = kv.shape[0]
-    nf = w.size
+    Parameters
+    ----------
+    plant : BandData
+        The plant's band data (``blocks`` read, not ``Hvs``, ``P``, ``PB``).
+    shocks : ShockTables
+        The setups' shocks (n_setups rows).
+    stops : StopTables
+        The setups' bump stops (zeros where none).
+    travel : TravelData
+        The stops' operands (zeros without any stop).
+    settings : IterSettings
+    out : ScreenOutputs
+        Written in place.
+    n_chunks : int
+        Chunks of setups run in parallel (scratch allocated once per chunk).
+    """
+    n = shocks.kv.shape[0]
+    nf = plant.w.size
     nblk = (nf + _BK - 1) // _BK
+    F, d0 = plant.F, plant.d0
+    # the outputs one name per statement, outside the prange body: numba 0.68's parallel
+    # loops silently drop the stores ``out.iterations[s] = ...`` in the body and
+    # ``iters[s] = ...`` after ``metrics, sigma, iters, elements = out`` or after
+    # ``metrics, sigma, iters, elements = out.metrics, ..., out.elements``
+    metrics = out.metrics
+    sigma = out.sigma
+    iters = out.iterations
+    elements = out.elements
     for ch in nb.prange(n_chunks):
         # scratch once per chunk of setups
         roll = np.empty(nblk * 12 * _BK)
         acc = np.empty(nblk * 4 * _BK)
         V = np.empty((_GROUP, nblk * _NFEAT * _BK))
         pw = np.zeros((_GROUP, F.shape[2]))
-        st = np.empty((14, 4))
+        st = np.empty((_NST, 4))
         Jm = np.empty((4, 4))
+        scratch = (roll, acc, st, Jm)
         stop = (ch + 1) * n // n_chunks
         for first in range(ch * n // n_chunks, stop, _GROUP):
             G = min(_GROUP, stop - first)
             for g in range(G):
                 s = first + g
-                iters[s] = _screen_one(w, ops, cbar, sig0, kv[s], kf[s], nk[s], slo[s], shi[s],
-                                       lag[s], max_iter, tol, sig_out[s], roll, acc, V[g], st,
-                                       jinv, w2inv, Hs0, mu_rig, sigs0, son[s], s0[s], bx[s],
-                                       bf[s], bn[s], bslope[s], trav_out[s], Jm)
-            _metrics_of(F, d0, V, G, out[first:first + G], pw)
+                iters[s] = _screen_one(plant, _shock_row(shocks, s), _stop_row(stops, s), travel,
+                                       settings, sigma[s], elements[s], V[g], scratch)
+            _metrics_of(F, d0, V, G, metrics[first:first + G], pw)
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
-                       max_iter, tol, out, sig_out, jinv, w2inv, Hs0, mu_rig, sigs0, son, s0,
-                       bx, bf, bn, bslope, trav_out):
+def _screen_one_scalar(plant, shock, stop, travel, settings, out, sig_out, trav_out):
     """Screen one setup, one band after the other (the scalar kernel).
+
+    The arguments as :func:`_screen_one` takes them (``plant``'s ``Hvs``, ``P``, ``PB`` read,
+    not ``blocks``), ``out`` (n_metrics,) receiving the metrics. Returns the iterations taken.
 
     The same operations in the same order as :func:`_screen_one`, which runs them on four
     bands at once: the same numbers bit for bit (tested). It compiles in about 6 s against
@@ -1217,9 +1446,14 @@ def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, l
     band power is ``d0`` plus a setup-independent linear form ``F`` (:func:`metric_form`) of
     the 48 features of ``E = diag(D) K`` and ``R = E PB E^H``.
 
-    Bump stops as in :func:`_screen_one` (``jinv`` (n_bands,) here: band order, no blocks);
+    Bump stops as in :func:`_screen_one` (``jinv`` read in band order);
     without a stop the loop gain is left as it was (no term added).
     """
+    w, Hvs, P, PB, F, d0, cbar = (plant.w, plant.Hvs, plant.P, plant.PB, plant.F, plant.d0,
+                                  plant.cbar)
+    jinv, w2inv = travel.jinv, travel.w2inv
+    max_iter, tol = settings
+    lag = shock.lag
     nf = w.size
     p = d0.shape[1]
     K = np.empty((4, 4), dtype=np.complex128)
@@ -1233,25 +1467,18 @@ def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, l
             roll[k, c] = 1.0 + 1j * w[k] * lag[c]
     v = np.empty(_NFEAT)
     pw = np.empty(p)
-    ceq = np.zeros(4)
-    sig = sig0.copy()
-    svv = np.zeros(4)
-    s_prev = np.zeros(4)
-    h_prev = np.zeros(4)
-    st = np.empty((9, 4))
+    st = np.zeros((_NST, 4))
     Jm = np.empty((4, 4))
-    sigs, keq, eg, mu, ef, ss_prev, hs_prev, sss, rr = (st[0], st[1], st[2], st[3], st[4],
-                                                       st[5], st[6], st[7], st[8])
-    any_stop = _start_stops(son, sigs0, mu_rig, sigs, keq, eg, mu, ef, ss_prev, hs_prev)
+    ceq, svv, keq, sss = st[_ST_CEQ], st[_ST_SVV], st[_ST_KEQ], st[_ST_SSS]
+    any_stop = _start(st, plant.sig0, stop, travel)
     it = 0
     for it in range(max_iter):
+        _damping(st, shock)
         for c in range(4):
-            ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
             svv[c] = 0.0
             sss[c] = 0.0
         if any_stop:
-            _stop_means(sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0,
-                        mu_rig, mu, keq, eg, ef, Jm, rr)
+            _stop_means(st, shock, stop, travel, Jm)
         for k in range(nf):
             for c in range(4):
                 D[c] = ceq[c] / roll[k, c] - cbar[c]
@@ -1265,35 +1492,9 @@ def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, l
                         acc += (K[c, a] * P[k, a, b] * np.conj(K[c, b])).real
                 svv[c] += acc
                 sss[c] += acc * w2inv[k]
-        # fixed point sigma = g(sigma) per corner, accelerated by a secant step on
-        # h = g(sigma) - sigma once two iterates exist (safeguarded to a factor 2)
-        change = 0.0
-        for c in range(4):
-            new = math.sqrt(max(svv[c], 0.0))
-            change = max(change, abs(new - sig[c]) / max(sig[c], 1e-12))
-            hc = new - sig[c]
-            nxt = new if new > 0 else 0.5 * sig[c]
-            if it > 0:
-                dh = hc - h_prev[c]
-                ds = sig[c] - s_prev[c]
-                if dh != 0.0 and ds != 0.0:
-                    cand = sig[c] - hc * ds / dh
-                    if 0.5 * sig[c] < cand < 2.0 * sig[c]:
-                        nxt = cand
-            s_prev[c] = sig[c]
-            h_prev[c] = hc
-            sig[c] = nxt
-        if any_stop:
-            for c in range(4):
-                change = max(change, _secant(sigs, math.sqrt(max(sss[c], 0.0)), ss_prev,
-                                             hs_prev, c, it))
-        if change < tol:
+        if _step(st, any_stop, it) < tol:
             break
-    for c in range(4):
-        ceq[c] = _ceq(sig[c], kv[c], kf[c], nk[c], slo[c], shi[c])
-        sig_out[c] = sig[c]
-    _finish_stops(any_stop, sig, sigs, son, s0, bx, bf, bn, bslope, kv, kf, nk, slo, shi, Hs0,
-                  mu_rig, mu, keq, eg, ef, Jm, rr, ceq, trav_out)
+    _finish(any_stop, st, shock, stop, travel, Jm, sig_out, trav_out)
     for o in range(p):
         out[o] = 0.0
     for k in range(nf):
@@ -1347,16 +1548,25 @@ def _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, l
 
 
 @nb.njit(cache=True, error_model="numpy", parallel=True)
-def screen_batch_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv, kf, nk, slo, shi, lag,
-                        max_iter, tol, out, sig_out, iters, jinv, w2inv, Hs0, mu_rig, sigs0,
-                        son, s0, bx, bf, bn, bslope, trav_out):
-    """:func:`_screen_one_scalar` over setups, in parallel (bump stops as
-    :func:`screen_batch`)."""
-    for s in nb.prange(kv.shape[0]):
-        iters[s] = _screen_one_scalar(w, Hvs, P, PB, F, d0, cbar, sig0, kv[s], kf[s], nk[s],
-                                      slo[s], shi[s], lag[s], max_iter, tol, out[s],
-                                      sig_out[s], jinv, w2inv, Hs0, mu_rig, sigs0, son[s],
-                                      s0[s], bx[s], bf[s], bn[s], bslope[s], trav_out[s])
+def screen_batch_scalar(plant, shocks, stops, travel, settings, out):
+    """Screen setups one band after the other (:func:`_screen_one_scalar`), in parallel over
+    setups: the numbers of :func:`screen_batch` bit for bit.
+
+    Parameters
+    ----------
+    plant : BandData
+        The plant's band data (``Hvs``, ``P``, ``PB`` read, not ``blocks``).
+    shocks, stops, travel, settings, out
+        As :func:`screen_batch`.
+    """
+    # one name per statement, outside the prange body (see screen_batch)
+    metrics = out.metrics
+    sigma = out.sigma
+    iters = out.iterations
+    elements = out.elements
+    for s in nb.prange(shocks.kv.shape[0]):
+        iters[s] = _screen_one_scalar(plant, _shock_row(shocks, s), _stop_row(stops, s), travel,
+                                      settings, metrics[s], sigma[s], elements[s])
 
 
 def band_operands(ops):
