@@ -86,6 +86,7 @@ from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
 from ident.sim.rig import default_plan, loop_damping, make_plan_drive
 from planner.errors import PlannerError
 from planner.objective import default_objective, score_setups
+from planner.options import UncertaintyOptions
 from planner.predict import predict_setups
 from planner.rig import RigSpec, default_rig
 from planner.screen import DriveBands, metric_rows, screen_response, screen_setups
@@ -103,6 +104,9 @@ __all__ = [
     "click_settings",
     "change_time_min",
     "design_experiment",
+    "CandidateOptions",
+    "InformationOptions",
+    "ScheduleOptions",
     "criterion_value",
     "greedy_design",
 ]
@@ -124,6 +128,95 @@ _RANK_TOL = 1e-8
 DEFAULT_BAND_HZ = (0.5, 20.0)
 #: Settings per adjuster that candidate runs try across its range (ends included).
 DEFAULT_CLICK_LEVELS = 3
+
+
+# ----------------------------------------------------------------------------------------------
+# options
+# ----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class CandidateOptions:
+    """The candidate runs a design chooses from (:func:`candidate_runs`).
+
+    Parameters
+    ----------
+    kinds : sequence of str
+        Drive kinds of the candidates (:data:`DRIVE_KINDS`).
+    durations_s : sequence of float
+        Run durations [s]; the shortest is also the baseline repeats'.
+    shocks : sequence of str, optional
+        Shock ids the candidates swap in; default the crate's (``n_shocks`` of them).
+    n_shocks : int
+        Shocks chosen from the crate when `shocks` is not given.
+    click_levels : int
+        Settings per adjuster tried across its range (ends included).
+
+    Raises
+    ------
+    PlannerError
+        Checked where the candidates are built (an unknown kind or shock id).
+    """
+
+    kinds: tuple = ("noise", "multisine")
+    durations_s: tuple = (120.0, 300.0, 600.0)
+    shocks: tuple | None = None
+    n_shocks: int = 4
+    click_levels: int = DEFAULT_CLICK_LEVELS
+
+
+@dataclass(frozen=True)
+class InformationOptions:
+    """The information a design's criterion sums: bands, design bands, noise.
+
+    Parameters
+    ----------
+    n_bands : int
+        Log-spaced bands over `band_hz` the criterion sums over.
+    n_design_bands : int
+        Groups of adjacent bands in the relaxed problem.
+    band_hz : (float, float)
+        The design band [Hz].
+    noise : float
+        Output noise as a fraction of each output's RMS, white (a known model).
+
+    Raises
+    ------
+    ValueError
+        If `n_design_bands` exceeds `n_bands` or a count is below 1.
+    """
+
+    n_bands: int = 96
+    n_design_bands: int = 12
+    band_hz: tuple = DEFAULT_BAND_HZ
+    noise: float = 0.02
+
+    def __post_init__(self):
+        if not (1 <= int(self.n_design_bands) <= int(self.n_bands)):
+            raise ValueError(f"InformationOptions: n_design_bands={self.n_design_bands} must "
+                             f"be between 1 and n_bands={self.n_bands}")
+
+
+@dataclass(frozen=True)
+class ScheduleOptions:
+    """How a design's runs are scheduled and sheeted.
+
+    Parameters
+    ----------
+    baseline_every : int
+        Repeat the baseline (shortest duration) after every this many runs (0: never),
+        to catch drift.
+    n_validation : int
+        Validation runs of the current best setups on the team's drive.
+    seed : int
+        Seeds of the planned drives.
+    date : str, optional
+        For the run sheet's header.
+    """
+
+    baseline_every: int = 0
+    n_validation: int = 0
+    seed: int = 0
+    date: str | None = None
 
 
 # ----------------------------------------------------------------------------------------------
@@ -938,11 +1031,8 @@ def _noise_variance(plant, frf, f_c, edges, M0, S_ref, noise):
 
 def design_experiment(model, library, *, budget_min, criterion="d", session=None,
                       objective=None, baseline=None, drives=None, rig=None,
-                      kinds=("noise", "multisine"), durations_s=(120.0, 300.0, 600.0),
-                      shocks=None, n_shocks=4, click_levels=DEFAULT_CLICK_LEVELS,
-                      n_bands=96, n_design_bands=12,
-                      band_hz=DEFAULT_BAND_HZ, noise=0.02, baseline_every=0, n_validation=0,
-                      top=10, seed=0, date=None):
+                      candidates=CandidateOptions(), information=InformationOptions(),
+                      schedule=ScheduleOptions(), top=10):
     """Choose the next rig runs within a budget, order them, and predict them.
 
     Parameters
@@ -969,25 +1059,21 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         120 s track-like drive.
     rig : planner.rig.RigSpec, optional
         Default :func:`planner.rig.default_rig`.
-    kinds, durations_s, shocks, n_shocks, click_levels
-        The candidate runs (:func:`candidate_runs`).
-    n_bands : int
-        Log-spaced bands over `band_hz` the criterion sums over.
-    n_design_bands : int
-        Groups of adjacent bands in the relaxed problem.
-    noise : float
-        Output noise as a fraction of each output's RMS, white (a known model).
-    baseline_every : int
-        Repeat the baseline (shortest duration) after every this many runs
-        (0: never), to catch drift.
-    n_validation : int
-        Validation runs of the current best setups on the team's drive.
+    candidates : CandidateOptions
+        The candidate runs (:func:`candidate_runs`): ``kinds``, ``durations_s``,
+        ``shocks``, ``n_shocks``, ``click_levels``.
+    information : InformationOptions
+        ``n_bands`` (log-spaced bands over ``band_hz`` the criterion sums over),
+        ``n_design_bands`` (groups of adjacent bands in the relaxed problem), ``band_hz``
+        [Hz], ``noise`` (output noise as a fraction of each output's RMS, white; a known
+        model).
+    schedule : ScheduleOptions
+        ``baseline_every`` (repeat the baseline, shortest duration, after every this many
+        runs; 0: never, to catch drift), ``n_validation`` (validation runs of the current
+        best setups on the team's drive), ``seed`` (seeds of the planned drives),
+        ``date`` (for the run sheet's header).
     top : int
         Contenders of the decision criterion.
-    seed : int
-        Seeds of the planned drives.
-    date : str, optional
-        For the run sheet's header.
 
     Returns
     -------
@@ -1001,6 +1087,19 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         the corners and the fix), or a budget too short for any identifying
         plan.
     """
+    for value, cls, name in ((candidates, CandidateOptions, "candidates"),
+                             (information, InformationOptions, "information"),
+                             (schedule, ScheduleOptions, "schedule")):
+        if not isinstance(value, cls):
+            raise TypeError(f"design: {name} must be a {cls.__name__}, got "
+                            f"{type(value).__name__}; e.g. {name}={cls.__name__}()")
+    kinds, durations_s, shocks, n_shocks, click_levels = (
+        candidates.kinds, candidates.durations_s, candidates.shocks, candidates.n_shocks,
+        candidates.click_levels)
+    n_bands, n_design_bands, band_hz, noise = (information.n_bands, information.n_design_bands,
+                                               information.band_hz, information.noise)
+    baseline_every, n_validation, seed, date = (schedule.baseline_every, schedule.n_validation,
+                                                schedule.seed, schedule.date)
     if criterion not in CRITERIA:
         raise PlannerError(f"criterion {criterion!r} is not one of {list(CRITERIA)}")
     if not (isinstance(budget_min, (int, float)) and math.isfinite(budget_min)
@@ -1349,7 +1448,7 @@ def _predictions(model, ident_model, runs, drives, library, objective):
         t = pred.table
         if ident_model is not None:
             unc = prediction_uncertainty(ident_model, drives[r.drive], [setup], library,
-                                         n_draws=20, predictions=pred)
+                                         draws=UncertaintyOptions(n_draws=20), predictions=pred)
             t = unc.intervals(t)
         row = {"run": r.number}
         for m in keys:

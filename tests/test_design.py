@@ -26,6 +26,7 @@ from planner.design import (
 from planner.objective import default_objective
 from planner.rig import RigSpec, default_rig
 from planner.setups import Setup
+from planner.design import CandidateOptions, InformationOptions
 
 # the analytic score gradient against forward differences of the same (frozen) linearization,
 # with steps of 1e-6 of |H|: second-order terms leave ~1e-5 relative
@@ -68,9 +69,7 @@ def click_plan(paper_vehicle, click_crate):
     """A plan on the adjustable crate, the clicker at the front, three of its settings the
     candidates (about 2 s; candidate_runs' own choice is tested on its own)."""
     return design_experiment(paper_vehicle, click_crate, budget_min=CLICK_BUDGET_MIN,
-                             baseline=["TTX", "TTX", "B20", "B20"], kinds=("noise",),
-                             durations_s=(60.0,), n_bands=24, n_design_bands=4,
-                             shocks=["TTX@ls=0,hs=0", "TTX@ls=20,hs=4", "TTX@hs=0"],
+                             baseline=["TTX", "TTX", "B20", "B20"], candidates=CandidateOptions(kinds=("noise",), durations_s=(60.0,), shocks=["TTX@ls=0,hs=0", "TTX@ls=20,hs=4", "TTX@hs=0"]), information=InformationOptions(n_bands=24, n_design_bands=4),
                              rig=CLICK_RIG)
 
 
@@ -188,7 +187,7 @@ def test_designed_plan_fits_the_budget_and_identifies(paper_vehicle, demo_librar
     """A 30-minute D-optimal plan: in budget (swaps included), every run a known candidate,
     information of rank 11 in every band, shares summing to 1, no worse than the greedy."""
     plan = design_experiment(paper_vehicle, demo_library, budget_min=30.0, baseline="B20",
-                             durations_s=(60.0, 120.0))
+                             candidates=CandidateOptions(durations_s=(60.0, 120.0)))
     assert plan.total_min <= 30.0 + 1e-9 and plan.solver["status"] == "optimal"
     t = plan.table()
     assert t["start_min"].is_monotonic_increasing and t.iloc[0]["changed"] == ""
@@ -221,7 +220,7 @@ def test_refusals(paper_vehicle, demo_library, base):
         design_experiment(paper_vehicle, demo_library, budget_min=30.0, criterion="e")
     with pytest.raises(PlannerError, match="cannot buy runs that identify"):
         design_experiment(paper_vehicle, demo_library, budget_min=8.0, baseline="B20",
-                          durations_s=(60.0,))
+                          candidates=CandidateOptions(durations_s=(60.0,)))
 
 
 @pytest.mark.slow
