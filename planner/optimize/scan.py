@@ -45,6 +45,7 @@ from ident.sim.closedloop import ELEMENT_STATS, rig_response, simulate_batch
 from ident.sim.metrics import compute_metrics
 from planner.objective import score_setups
 from planner.optimize.constraints import MAX_FORCE_VELOCITY_M_S
+from planner.options import ElementOptions, LoopOptions
 from planner.predict import (
     METRIC_OUTPUTS,
     as_loop_plant,
@@ -290,8 +291,9 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
                                         oversample=oversample,
                                         static_corner_load_n=static_corner_load_n)
         else:
-            table = predict_setups(model, d, cand, library, oversample=oversample,
-                                   elements=False).table
+            table = predict_setups(model, d, cand, library,
+                                   loop=LoopOptions(oversample=oversample),
+                                   elements=ElementOptions(use_model=False)).table
         metrics[d.name] = table
         sc = score_setups(table, objective, baseline=baseline.name).table
         per.append(sc["score"])
