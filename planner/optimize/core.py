@@ -918,7 +918,7 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
 
     # the optimum's shock velocities (first drive): the distribution the crate is compared over
     resp = simulate(plant, drives[0], setup.resolve(lib), oversample=oversample,
-                    bump_stops=stops_opt, static_corner_load_n=elements.static)
+                    stop_tables=stops_opt, static_corner_load_n=elements.static)
     vel = {c: np.asarray(resp.channels[f"shock_velocity_{c}"]) for c in CORNERS}
     # the crate: every setup of the same symmetry, by distance to the optimal curves
     sym, axles = {"left-right": ("left-right", "independent"), "all": ("left-right", "same"),

@@ -173,8 +173,9 @@ class _Problem:
         self.shocks = setup.resolve(library)
         elem = model_setup_elements([setup], model, elements, where=where)
         kw = loop_arguments(elem)
-        if kw.get("bump_stops") is not None:
-            kw["bump_stops"] = kw["bump_stops"][0]
+        stops = kw.pop("bump_stops", None)  # simulate takes the one setup's
+        if stops is not None:
+            kw["stop_tables"] = stops[0]
         self.loop_kw = kw
         self.elements = None if elem is None else elem.settings
         self.oversample = oversample
