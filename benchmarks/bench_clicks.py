@@ -131,7 +131,8 @@ def main(argv=None):
         for label, lib, kw in (("fixed", fixed_lib, {}), ("clicks", clicks_lib,
                                                           {"clicks": "all"})):
             n_fixed = len(fixed_lib) if label == "fixed" else None
-            res = sweep_setups(plant, drive, lib, constraints=dict(kw), top=1, run=RunOptions(scheduler="none"),
+            res = sweep_setups(plant, drive, lib, constraints=dict(kw), top=1,
+                               run=RunOptions(scheduler="none"),
                                progress=False, baseline=None)
             st = res.settings
             sweep_rate[label] = st["screen_setups_per_s"]

@@ -57,7 +57,8 @@ def main(argv=None):
     for criterion in ("d", "decision"):
         t0 = time.perf_counter()
         plan = design_experiment(vehicle, library, budget_min=args.budget_min,
-                                 criterion=criterion, baseline="B20", candidates=CandidateOptions(n_shocks=args.n_shocks))
+                                 criterion=criterion, baseline="B20",
+                                 candidates=CandidateOptions(n_shocks=args.n_shocks))
         wall = time.perf_counter() - t0
         s, v = plan.solver, plan.values
         if criterion == "d":

@@ -483,11 +483,13 @@ def bench_time_domain(label, model, drive, setups, library, args):
     rates, prebuilt, tables = {}, {}, {}
     for ov in OVERSAMPLES:
         times, loads, pred = _time(lambda: predict_setups(model, drive, setups, library,
-                                                          loop=LoopOptions(oversample=ov)), args.repeat)
+                                                          loop=LoopOptions(oversample=ov)),
+                                                          args.repeat)
         rates[ov] = _rate_line(f"time domain [{label}]: predict_setups, model as given, "
                                f"oversample {ov}", len(setups), times, loads)
         times, loads, pred = _time(lambda: predict_setups(plant, drive, setups, library,
-                                                          loop=LoopOptions(oversample=ov)), args.repeat)
+                                                          loop=LoopOptions(oversample=ov)),
+                                                          args.repeat)
         prebuilt[ov] = _rate_line(f"time domain [{label}]: predict_setups, prebuilt LoopPlant, "
                                   f"oversample {ov}", len(setups), times, loads)
         tables[ov] = pred.table
@@ -518,7 +520,8 @@ def bench_time_domain(label, model, drive, setups, library, args):
     # accuracy against oversample 16
     idx = _spread_idx(len(setups), args.accuracy_setups)
     few = [setups[i] for i in idx]
-    fine = predict_setups(plant, drive, few, library, loop=LoopOptions(oversample=OVERSAMPLE_FINE)).table
+    fine = predict_setups(plant, drive, few, library,
+                          loop=LoopOptions(oversample=OVERSAMPLE_FINE)).table
     print(f"memory: this process's ru_maxrss after predicting {len(few)} setups at oversample "
           f"{OVERSAMPLE_FINE} [{label}]: {_mib(_maxrss_bytes()):.0f} MiB")
     metrics = [c for c in fine.columns if c not in CORNERS]

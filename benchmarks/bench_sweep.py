@@ -168,7 +168,8 @@ def main():
           f"{args.top_share:g}, chunk {args.chunk_size}")
 
     sweep_setups(model, drives[0], lib, constraints={"symmetry": "none", "shocks": ids[:7]},
-                 run=RunOptions(scheduler="none"), top=5, progress=False)  # warm-up: numba cache loads
+                 run=RunOptions(scheduler="none"), top=5,
+                 progress=False)  # warm-up: numba cache loads
 
     single = None
     if not args.skip_single:

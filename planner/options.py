@@ -277,7 +277,9 @@ class RunOptions:
 
 @dataclass(frozen=True)
 class UncertaintyOptions:
-    """The Monte Carlo intervals of predictions (:func:`planner.uncertainty.prediction_uncertainty`).
+    """The Monte Carlo intervals of predictions.
+
+    The draws of :func:`planner.uncertainty.prediction_uncertainty`.
 
     Parameters
     ----------

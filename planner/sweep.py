@@ -337,7 +337,8 @@ def _element_variants(sim, elements, model):
     out, parent = [], []
     for i, s in enumerate(sim):
         got = vary_elements([s], bump_stops=elements.vary_bump_stops,
-                            packers_m=elements.vary_packers_m, library=lib, where="sweep: the bump-stop and packer choices "
+                            packers_m=elements.vary_packers_m, library=lib,
+                            where="sweep: the bump-stop and packer choices "
                             "(--try-bump-stops, --try-packers)")
         out += got
         parent += [i] * len(got)

@@ -271,8 +271,10 @@ def main(argv=None):
     setups = study_setups()
     truth = build_full_car(vehicle).loop_plant(model.cbar_n_s_m)
     t1 = time.perf_counter()
-    a = predict_setups(model, drive, setups, library, loop=LoopOptions(oversample=OVERSAMPLE)).table
-    b = predict_setups(truth, drive, setups, library, loop=LoopOptions(oversample=OVERSAMPLE)).table
+    a = predict_setups(model, drive, setups, library,
+                       loop=LoopOptions(oversample=OVERSAMPLE)).table
+    b = predict_setups(truth, drive, setups, library,
+                       loop=LoopOptions(oversample=OVERSAMPLE)).table
     names = [c for c in a.columns if c not in CORNERS and c in b.columns]
     rows = [{"setup": s.name, "shocks": " ".join(s.ids()), "metric": m,
              "predicted": float(a.loc[s.name, m]), "true": float(b.loc[s.name, m]),

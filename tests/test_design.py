@@ -71,7 +71,11 @@ def click_plan(paper_vehicle, click_crate):
     """A plan on the adjustable crate, the clicker at the front, three of its settings the
     candidates (about 2 s; candidate_runs' own choice is tested on its own)."""
     return design_experiment(paper_vehicle, click_crate, budget_min=CLICK_BUDGET_MIN,
-                             baseline=["TTX", "TTX", "B20", "B20"], candidates=CandidateOptions(kinds=("noise",), durations_s=(60.0,), shocks=["TTX@ls=0,hs=0", "TTX@ls=20,hs=4", "TTX@hs=0"]), information=InformationOptions(n_bands=24, n_design_bands=4),
+                             baseline=["TTX", "TTX", "B20", "B20"],
+                             candidates=CandidateOptions(kinds=("noise",), durations_s=(60.0,),
+                                                         shocks=["TTX@ls=0,hs=0", "TTX@ls=20,hs=4",
+                                                                 "TTX@hs=0"]),
+                             information=InformationOptions(n_bands=24, n_design_bands=4),
                              rig=CLICK_RIG)
 
 

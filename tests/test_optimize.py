@@ -75,7 +75,8 @@ def known_run(paper_model, short_drive, demo_library):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                              curves=CurveOptions(knots_m_s=SMALL_KNOTS), solver=SolverOptions(max_iter=60))
+                              curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                              solver=SolverOptions(max_iter=60))
     return opt, [w for w in caught if issubclass(w.category, OptimizeWarning)]
 
 
@@ -299,7 +300,8 @@ def test_linear_curves_match_a_brute_force_scan(paper_model, short_drive):
     a, b, _ = np.polyfit(lx, s[k - 1:k + 2], 2)
     best = float(np.exp(-b / (2 * a)))
     opt = optimize_curves(paper_model, short_drive, lib, objective=obj, baseline="B",
-                          curves=CurveOptions(symmetry="all", linear=True), solver=SolverOptions(stationarity=False))
+                          curves=CurveOptions(symmetry="all", linear=True),
+                          solver=SolverOptions(stationarity=False))
     assert opt.solver["success"]
     assert opt.x[0] == pytest.approx(best, rel=RTOL_LINEAR_DAMPING)
     assert opt.curves[0].force(0.1) == pytest.approx(0.1 * opt.x[0])
@@ -311,7 +313,8 @@ def test_symmetry_axle_is_refused_naming_all(paper_model, short_drive, demo_libr
     with pytest.raises(PlannerError, match=r"use 'all' \(one curve for every corner\)"):
         curve_space(symmetry="axle")
     with pytest.raises(PlannerError, match=r"use 'all' \(one curve for every corner\)"):
-        optimize_curves(paper_model, short_drive, demo_library, baseline="B20", curves=CurveOptions(symmetry="axle"))
+        optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
+                        curves=CurveOptions(symmetry="axle"))
     assert curve_space(symmetry="all").groups == (("all", CORNERS),)
 
 
@@ -347,7 +350,8 @@ def test_a_stopped_solver_is_reported_with_the_best_verified_iterate(paper_model
     is still a verified, feasible setup no worse than the start."""
     with pytest.warns(OptimizeWarning, match="Maximum_Iterations_Exceeded"):
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                              curves=CurveOptions(knots_m_s=SMALL_KNOTS), solver=SolverOptions(max_iter=2, stationarity=False, n_closest=1))
+                              curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                              solver=SolverOptions(max_iter=2, stationarity=False, n_closest=1))
     assert not opt.solver["success"] and opt.solver["status"] == "Maximum_Iterations_Exceeded"
     assert opt.table.loc["optimum", "feasible"]
     assert np.isfinite(opt.score)
@@ -686,7 +690,8 @@ def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                              curves=CurveOptions(knots_m_s=SMALL_KNOTS), solver=SolverOptions(max_iter=2, n_closest=1, stationarity=False))
+                              curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                              solver=SolverOptions(max_iter=2, n_closest=1, stationarity=False))
     assert opt.solver["jit"] and opt.solver["n_grad"] > 0
     assert list(po.jit_cache_dir().glob("steps-*.so")) == libs
     with pytest.raises(PlannerError, match="symmetry"):
@@ -722,7 +727,8 @@ def test_quantile_knots_sit_on_the_baselines_shock_speeds(paper_model, short_dri
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                              curves=CurveOptions(knots_m_s="quantiles"), solver=SolverOptions(max_iter=3, stationarity=False, n_closest=1))
+                              curves=CurveOptions(knots_m_s="quantiles"),
+                              solver=SolverOptions(max_iter=3, stationarity=False, n_closest=1))
     assert opt.settings["knots"] == "quantiles" and opt.settings["knots_m_s"] == bump
     assert opt.settings["rebound_knots_m_s"] == rebound
     vk = opt.curves[0].v_knots_m_s

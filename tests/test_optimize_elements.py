@@ -174,7 +174,10 @@ def test_optimum_with_stops_is_verified_with_them(bumpstop_vehicle, drive, demo_
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(bumpstop_vehicle, drive, demo_library, baseline="DM",
-                              curves=CurveOptions(knots_m_s=SMALL_KNOTS), solver=SolverOptions(max_iter=15, n_starts=1, stationarity=False, n_closest=1), stop_tables=_stops(), elements=ElementOptions(static_corner_load_n=static))
+                              curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                              solver=SolverOptions(max_iter=15, n_starts=1, stationarity=False,
+                                                   n_closest=1), stop_tables=_stops(),
+                              elements=ElementOptions(static_corner_load_n=static))
     assert opt.settings["bump_stops"] and opt.settings["static_corner_load_n"] == static
     assert opt.packers_m == {}
     assert [st[0] for st in opt.bump_stops] == [0.0035, 0.0035, 0.0045, 0.0045]
@@ -208,7 +211,10 @@ def test_packers_move_where_the_objective_asks(bumpstop_vehicle, drive, demo_lib
             warnings.simplefilter("ignore", OptimizeWarning)
             runs[name] = optimize_curves(bumpstop_vehicle, drive, demo_library, baseline="DM",
                                          objective=Objective(name, weights),
-                                         curves=CurveOptions(knots_m_s=SMALL_KNOTS), solver=SolverOptions(max_iter=15, n_starts=1, stationarity=False, n_closest=1), stop_tables=_stops(), packers=bounds)
+                                         curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                                         solver=SolverOptions(max_iter=15, n_starts=1,
+                                                              stationarity=False, n_closest=1),
+                                         stop_tables=_stops(), packers=bounds)
     for opt in runs.values():
         assert opt.settings["packers"] == {g: list(b) for g, b in bounds.items()}
         for g, p in opt.packers_m.items():

@@ -174,7 +174,8 @@ def test_fixed_point_is_the_stochastic_linearization(paper_model, track_drive, d
     nl = {k: replace(demo_library[k], lag_s=0.0) for k in ("BO", "RB", "TD", "DS")}
     lib = ShockLibrary.from_models(list(nl.values()))
     setup = _lin_setup("nonlinear", "BO", "RB", "TD", "DS")
-    a = screen_setups(paper_model, track_drive, [setup], lib, screen=ScreenOptions(tol=1e-11, max_iter=200))
+    a = screen_setups(paper_model, track_drive, [setup], lib, screen=ScreenOptions(tol=1e-11,
+                                                                                   max_iter=200))
     sig = a.diagnostics["shock_velocity_rms_linearized"][0]
     assert a.diagnostics["iterations"][0] < 200
     assert np.all((sig > 0.005) & (sig < 0.5))  # plausible shock velocities [m/s]
@@ -476,7 +477,8 @@ def test_deterministic_and_batch_independent(paper_model, track_drive, demo_libr
     setups = [baseline_setup] + list(enumerate_setups(demo_library)[::7])
     whole = screen_setups(paper_model, track_drive, setups, demo_library)
     again = screen_setups(paper_model, track_drive, setups, demo_library)
-    chunked = screen_setups(paper_model, track_drive, setups, demo_library, screen=ScreenOptions(chunk_size=3))
+    chunked = screen_setups(paper_model, track_drive, setups, demo_library,
+                            screen=ScreenOptions(chunk_size=3))
     parts = [screen_setups(paper_model, track_drive, setups[a:a + 5], demo_library)
              for a in range(0, len(setups), 5)]
     names = whole.metric_names
@@ -518,7 +520,8 @@ def test_band_hz_is_the_metric_band(paper_model, track_drive, demo_library, base
     linear setup), and gives less RMS than the full band."""
     band = (2.0, 8.0)
     s = screen_setups(paper_model, track_drive, [baseline_setup], demo_library, band_hz=band)
-    p = predict_setups(paper_model, track_drive, [baseline_setup], demo_library, loop=LoopOptions(band_hz=band))
+    p = predict_setups(paper_model, track_drive, [baseline_setup], demo_library,
+                       loop=LoopOptions(band_hz=band))
     full = screen_setups(paper_model, track_drive, [baseline_setup], demo_library)
     names = s.metric_names
     assert s.settings["band_hz"] == band
@@ -530,7 +533,8 @@ def test_max_iter_reached_is_logged(paper_model, track_drive, demo_library, capl
     """A setup that does not reach the tolerance within max_iter is reported."""
     setup = _lin_setup("nl", "BO", "RB", "TD", "DS")
     with caplog.at_level("WARNING", logger="planner.screen"):
-        s = screen_setups(paper_model, track_drive, [setup], demo_library, screen=ScreenOptions(max_iter=1))
+        s = screen_setups(paper_model, track_drive, [setup], demo_library,
+                          screen=ScreenOptions(max_iter=1))
     assert s.diagnostics["iterations"][0] == 1
     assert "did not reach the tolerance in 1 iterations" in caplog.text
     assert np.all(np.isfinite(s.table[s.metric_names].to_numpy(float)))

@@ -122,7 +122,8 @@ def test_dask_sweep_equals_single_process(single, paper_model, track_drive, demo
     """A LocalCluster of 2 worker processes gives the same ranking and the same numbers, bit
     for bit, as one process (other chunk size too)."""
     dask = sweep_setups(paper_model, track_drive, demo_library, constraints=TEN_THOUSAND,
-                        run=RunOptions(scheduler="local", n_workers=2, chunk_size=1500), progress=False)
+                        run=RunOptions(scheduler="local", n_workers=2, chunk_size=1500),
+                        progress=False)
     assert single.settings["n_screened"] == dask.settings["n_screened"] == 10_000
     assert dask.settings["scheduler"] == "local" and dask.settings["n_workers"] == 2
     assert single.table.index.tolist() == dask.table.index.tolist()
@@ -159,7 +160,8 @@ def test_existing_cluster_by_client_and_address(paper_model, track_drive, demo_l
                            top=8, run=RunOptions(client=client, chunk_size=9), progress=False)
         by_address = sweep_setups(paper_model, track_drive, demo_library,
                                   constraints=constraints, top=8,
-                                  run=RunOptions(scheduler=cluster.scheduler_address), progress=False)
+                                  run=RunOptions(scheduler=cluster.scheduler_address),
+                                  progress=False)
     assert got.settings["scheduler"] == "client"
     assert by_address.settings["scheduler"] == "address"
     assert by_address.settings["address"] == cluster.scheduler_address
@@ -272,7 +274,8 @@ def test_unreachable_scheduler_is_a_clear_error(paper_model, track_drive, demo_l
     monkeypatch.setattr(runner_mod, "CONNECT_TIMEOUT_S", 2.0)
     with pytest.raises(PlannerError, match=r"cannot reach the Dask scheduler at "
                        r"'tcp://127.0.0.1:9'.*dask scheduler"):
-        sweep_setups(paper_model, track_drive, demo_library, run=RunOptions(scheduler="tcp://127.0.0.1:9"),
+        sweep_setups(paper_model, track_drive, demo_library,
+                     run=RunOptions(scheduler="tcp://127.0.0.1:9"),
                      progress=False)
 
 
@@ -400,7 +403,8 @@ def test_screen_on_a_cluster_equals_screen_setups(paper_model, track_drive, demo
     ref = screen_setups(paper_model, track_drive, setups, demo_library)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                       dashboard_address=None) as cluster:
-        got = screen_setups_on(paper_model, track_drive, setups, demo_library, run=RunOptions(chunk_size=97, scheduler=cluster.scheduler_address))
+        got = screen_setups_on(paper_model, track_drive, setups, demo_library,
+                               run=RunOptions(chunk_size=97, scheduler=cluster.scheduler_address))
         ranked = rank_setups(paper_model, track_drive, demo_library, setups=setups[:60],
                              top=6, n_check=4, uncertainty=False,
                              run=RunOptions(scheduler=cluster.scheduler_address))
@@ -413,7 +417,8 @@ def test_screen_on_a_cluster_equals_screen_setups(paper_model, track_drive, demo
     _frames_identical(plain.table, ranked.table)
     _frames_identical(plain.screening, ranked.screening)
     with pytest.raises(PlannerError, match="chunk_size"):
-        screen_setups_on(paper_model, track_drive, setups, demo_library, run=RunOptions(chunk_size=0, scheduler="none"))
+        screen_setups_on(paper_model, track_drive, setups, demo_library,
+                         run=RunOptions(chunk_size=0, scheduler="none"))
 
 
 def test_cli_rank_scheduler(tmp_path, track_drive, capsys):

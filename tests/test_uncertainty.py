@@ -277,10 +277,13 @@ def test_systematic_terms_of_an_identified_model(identified_model, track_drive, 
     from oversample 2 to 4 (the quadratic hold's error falls as h^3)."""
     from planner.predict import predict_setups
 
-    p2 = predict_setups(identified_model, track_drive, few_setups, demo_library, loop=LoopOptions(oversample=2))
-    p4 = predict_setups(identified_model, track_drive, few_setups, demo_library, loop=LoopOptions(oversample=4))
+    p2 = predict_setups(identified_model, track_drive, few_setups, demo_library,
+                        loop=LoopOptions(oversample=2))
+    p4 = predict_setups(identified_model, track_drive, few_setups, demo_library,
+                        loop=LoopOptions(oversample=4))
     u = prediction_uncertainty(identified_model, track_drive, few_setups, demo_library,
-                               draws=UncertaintyOptions(n_draws=8), loop=LoopOptions(oversample=2), predictions=p2)
+                               draws=UncertaintyOptions(n_draws=8), loop=LoopOptions(oversample=2),
+                               predictions=p2)
     names = u.metric_names
     assert u.settings["terms"] == ["random", "fit", "reduction", "discretization"]
     disc = 8 / 7 * (p2.table[names] - p4.table[names]) / p2.table[names]
@@ -333,15 +336,18 @@ def test_random_scale_option_and_its_default(known_plant, track_drive, demo_libr
     u = _unc(known_plant, 0.99, track_drive, few_setups, demo_library)
     assert u.settings["random_scale"] == random_error_scale(frf)
     assert u.settings["light_modes"] == []
-    u1 = prediction_uncertainty(model, track_drive, few_setups, demo_library, draws=UncertaintyOptions(n_draws=20, random_scale=1.0))
-    u2 = prediction_uncertainty(model, track_drive, few_setups, demo_library, draws=UncertaintyOptions(n_draws=20, random_scale=2.0))
+    u1 = prediction_uncertainty(model, track_drive, few_setups, demo_library,
+                                draws=UncertaintyOptions(n_draws=20, random_scale=1.0))
+    u2 = prediction_uncertainty(model, track_drive, few_setups, demo_library,
+                                draws=UncertaintyOptions(n_draws=20, random_scale=2.0))
     assert u1.settings["random_scale"] == 1.0
     w1 = (u1.ratio_hi - u1.ratio_lo).to_numpy()
     w2 = (u2.ratio_hi - u2.ratio_lo).to_numpy()
     assert_allclose(w2 / w1, 2.0, rtol=RTOL_WIDTH_SCALING_SMALL)
     for bad in (-1.0, np.nan):
         with pytest.raises(ValueError, match="random_scale must be a finite number >= 0"):
-            prediction_uncertainty(model, track_drive, few_setups, demo_library, draws=UncertaintyOptions(n_draws=2, random_scale=bad))
+            prediction_uncertainty(model, track_drive, few_setups, demo_library,
+                                   draws=UncertaintyOptions(n_draws=2, random_scale=bad))
 
 
 def _modal_model(zeta, f_hz=13.0, n_out=4, light_pairs=None):

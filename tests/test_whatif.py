@@ -588,14 +588,17 @@ def test_whatif_on_a_cluster_equals_one_process(cluster_case):
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                       dashboard_address=None) as cluster:
         for method, chunk in (("time", 2), ("time", None), ("screening", 5)):
-            got = evaluate_whatif(*args, method=method, run=RunOptions(scheduler=cluster.scheduler_address, chunk_size=chunk), **kw)
+            got = evaluate_whatif(*args, method=method,
+                                  run=RunOptions(scheduler=cluster.scheduler_address,
+                                                 chunk_size=chunk), **kw)
             _same_whatif(single[method], got)
             assert got.settings["scheduler"] == "address"
             assert got.settings["address"] == cluster.scheduler_address
             assert got.settings["n_workers"] == 2
         assert got.settings["n_tasks"] > got.settings["n_conditions"] // 2  # groups were cut
         with Client(cluster, set_as_default=False) as client:
-            got = evaluate_whatif(*args, method="time", run=RunOptions(client=client, chunk_size=7), **kw)
+            got = evaluate_whatif(*args, method="time", run=RunOptions(client=client,
+                                                                       chunk_size=7), **kw)
         assert got.settings["scheduler"] == "client"
         _same_whatif(single["time"], got)
 

@@ -251,7 +251,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     ref_drives = {k: make(k, 120.0, seed + 1000 + j, f"reference {k}")
                   for j, k in enumerate(kinds)}
     info, powers = candidate_information(plant, setups, list(kinds), ref_drives, library,
-                                          edges, f_c)
+                                         edges, f_c)
     M0 = (session_information(session, plant.cbar_n_s_m, edges) if session is not None
           else np.zeros((n_bands, 11, 11), dtype=complex))
     s_index = {s: i for i, s in enumerate(setups)}
@@ -270,7 +270,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     val_info = None
     if val_setups:
         vi, _ = candidate_information(plant, val_setups, ["validation"],
-                                       {"validation": drives[0]}, library, edges, f_c)
+                                      {"validation": drives[0]}, library, edges, f_c)
         val_info = drives[0].duration_s * vi[:, 0]
 
     # scaling: unit diagonal of the whole candidate set's information per band
@@ -286,8 +286,9 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
 
     W_s = None
     if criterion == "decision":
-        W_s = scale(decision_weight_matrices(plant, ident_model, library, base, objective, drives[0], f_c,
-                                edges, M0, powers[0], noise, top))
+        W_s = scale(decision_weight_matrices(plant, ident_model, library, base, objective,
+                                             drives[0], f_c, edges, M0, powers[0], noise,
+                                             top))
     # the budget the identification runs may spend: validation and repeats come out of it
     reserve = 0.0
     val_cost = []
@@ -320,7 +321,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         start = [c for c in np.flatnonzero(counts) for _ in range(counts[c])]
         order = swap_order([cands[c].setup for c in start], base, rig)
         starts.append(fit_budget([start[k] for k in order], Mc_s, M0_s, cands, base, rig,
-                                  budget_id, criterion, W_s))
+                                 budget_id, criterion, W_s))
     else:
         log.warning("design: the relaxed problem's status is %r; greedy designs stand in",
                     status)
@@ -329,7 +330,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     best = None
     for st in starts:
         seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s, start=st)
-        order = swap_order([cands[c].setup for c in seq], base, rig)  # the fill may have left swaps
+        # the fill may have left swaps
+        order = swap_order([cands[c].setup for c in seq], base, rig)
         seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s,
                             start=[seq[k] for k in order])
         M = M0_s + sum((Mc_s[c] for c in seq), np.zeros_like(M0_s))
@@ -345,8 +347,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         plan_M = plan_M + scale(val_info).sum(axis=0)
     _check_plan_identifiable(plan_M, budget_min, cands, rig)
     runs, drives_out, infos = schedule_runs(seq, cands, val_setups, base, rig, make, drives[0],
-                                        baseline_every, min(durations_s), seed, Mc_s,
-                                        val_info, scale)
+                                            baseline_every, min(durations_s), seed, Mc_s,
+                                            val_info, scale)
     preds = run_predictions(model, ident_model, runs, drives_out, library, objective)
     runs = criterion_shares(runs, infos, M0_s, criterion, W_s)
     curve = criterion_curve(runs, infos, M0_s, criterion, W_s)

@@ -312,8 +312,8 @@ def _noise_variance(plant, frf, f_c, edges, M0, S_ref, noise):
     return (noise**2) * total[None, :] * bw[:, None]
 
 
-def decision_weight_matrices(plant, ident_model, library, base, objective, drive, f_c, edges, M0, S_ref,
-                noise, top):
+def decision_weight_matrices(plant, ident_model, library, base, objective, drive, f_c, edges,
+                             M0, S_ref, noise, top):
     """The decision criterion's weights (unscaled): the top contenders' score differences."""
     pool = [base] + [s for s in enumerate_setups(library) if s.ids() != base.ids()]
     sc = screen_setups(plant, drive, pool, library)

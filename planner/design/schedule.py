@@ -116,7 +116,7 @@ class PlannedRun:
 
 
 def schedule_runs(seq, cands, val_setups, base, rig, make, val_drive, baseline_every, short_s,
-              seed, Mc_s, val_info, scale):
+                  seed, Mc_s, val_info, scale):
     """The planned runs in rig order: the identification sequence with baseline repeats
     every `baseline_every` runs, then the validation runs (fewest swaps); their drives and
     scaled information."""
