@@ -7,7 +7,8 @@ before it):
   the one enumeration, the one baseline resolver, the symmetry names),
   :mod:`~planner.objective` (scores, limits and the one ranking rule) and
   :mod:`~planner.rig` (the rig TOML: time costs and actuator limits, and the limits
-  applied to a drive);
+  applied to a drive), :mod:`~planner.options` (the commands' option objects: the car's
+  elements, the loop, the screening, where it runs, the intervals' draws);
 - engines: :mod:`~planner.runner` (tasks in this process or on Dask),
   :mod:`~planner.predict` (the closed loop in the time domain), :mod:`~planner.screen`
   with :mod:`~planner.screen_kernels` and :mod:`~planner.screen_codegen` (the frequency
