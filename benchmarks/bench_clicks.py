@@ -49,10 +49,12 @@ from ident.models.library import ShockLibrary  # noqa: E402
 from ident.models.shocks import TableShock  # noqa: E402
 from ident.models.vehicle import build_full_car, example_vehicle  # noqa: E402
 from ident.sim.dampers import ClickerDamper  # noqa: E402
+from planner.plant import as_loop_plant
 from planner.predict import as_loop_plant  # noqa: E402
 from planner.screen import screen_setups  # noqa: E402
 from planner.setups import enumerate_setups  # noqa: E402
 from planner.sweep import sweep_setups  # noqa: E402
+from planner.options import RunOptions
 
 #: Issue 26: screening settings of adjustable shocks within 1.5x the time of fixed shocks.
 TARGET_RATIO = 1.5
@@ -130,7 +132,8 @@ def main(argv=None):
         for label, lib, kw in (("fixed", fixed_lib, {}), ("clicks", clicks_lib,
                                                           {"clicks": "all"})):
             n_fixed = len(fixed_lib) if label == "fixed" else None
-            res = sweep_setups(plant, drive, lib, constraints=dict(kw), top=1, scheduler="none",
+            res = sweep_setups(plant, drive, lib, constraints=dict(kw), top=1,
+                               run=RunOptions(scheduler="none"),
                                progress=False, baseline=None)
             st = res.settings
             sweep_rate[label] = st["screen_setups_per_s"]

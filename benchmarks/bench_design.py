@@ -38,6 +38,7 @@ from ident.models.vehicle import example_vehicle  # noqa: E402
 from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
 from planner.design import design_experiment  # noqa: E402
 from _common import engine_version, load  # noqa: E402
+from planner.design import CandidateOptions
 
 #: The issue's target for one design (about 200 candidates, 96 bands) [s].
 TARGET_S = 20.0
@@ -56,7 +57,8 @@ def main(argv=None):
     for criterion in ("d", "decision"):
         t0 = time.perf_counter()
         plan = design_experiment(vehicle, library, budget_min=args.budget_min,
-                                 criterion=criterion, baseline="B20", n_shocks=args.n_shocks)
+                                 criterion=criterion, baseline="B20",
+                                 candidates=CandidateOptions(n_shocks=args.n_shocks))
         wall = time.perf_counter() - t0
         s, v = plan.solver, plan.values
         if criterion == "d":

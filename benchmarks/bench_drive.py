@@ -69,6 +69,7 @@ from ident.models.vehicle import build_full_car, example_gt_vehicle  # noqa: E40
 from ident.sim.closedloop import simulate  # noqa: E402
 from ident.sim.virtual_track import log_track_run, make_track_run  # noqa: E402
 from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
+from planner.plant import as_loop_plant
 from planner.predict import as_loop_plant  # noqa: E402
 from planner.setups import Setup  # noqa: E402
 from planner.trackdrive import (build_track_drive, make_target,  # noqa: E402

@@ -51,6 +51,7 @@ from planner.demo import DEMO_LIBRARY_PATH  # noqa: E402
 from planner.objective import default_objective  # noqa: E402
 from planner.screen import metric_rows  # noqa: E402
 from _common import engine_version, load  # noqa: E402
+from planner.optimize import CurveOptions
 
 #: The issue's target for one optimization (2 groups x about 10 knots, 120 s at 100 Hz) [s].
 TARGET_S = 60.0
@@ -113,7 +114,7 @@ def main(argv=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             opt = opt_mod.optimize_curves(model, drive, library, baseline="B20",
-                                          knots_m_s=knots)
+                                          curves=CurveOptions(knots_m_s=knots))
         wall = time.perf_counter() - t0
         times.append(wall)
         s = opt.solver

@@ -126,12 +126,14 @@ from ident.data.drive import make_track_drive  # noqa: E402
 from ident.models.library import read_shock_library  # noqa: E402
 from ident.models.vehicle import build_full_car, example_gt_vehicle, example_vehicle  # noqa: E402
 from planner.objective import default_objective, score_setups  # noqa: E402
-from planner.predict import METRIC_OUTPUTS, as_loop_plant, predict_setups  # noqa: E402
+from planner.plant import as_loop_plant
+from planner.predict import METRIC_OUTPUTS, predict_setups  # noqa: E402
 from planner.screen import drive_spectrum, metric_rows, screen_setups  # noqa: E402
 from planner.setups import Setup, enumerate_setups  # noqa: E402
 from _common import drive_segment, rel_rms  # noqa: E402
 from _common import engine_version as _engine_version  # noqa: E402
 from _common import jit_source as _jit_source, load as _load, mib as _mib  # noqa: E402
+from planner.options import LoopOptions
 
 LIBRARY_PATH = ROOT / "planner" / "examples" / "library.toml"
 DRIVE_S = 120.0
@@ -482,18 +484,20 @@ def bench_time_domain(label, model, drive, setups, library, args):
     rates, prebuilt, tables = {}, {}, {}
     for ov in OVERSAMPLES:
         times, loads, pred = _time(lambda: predict_setups(model, drive, setups, library,
-                                                          oversample=ov), args.repeat)
+                                                          loop=LoopOptions(oversample=ov)),
+                                                          args.repeat)
         rates[ov] = _rate_line(f"time domain [{label}]: predict_setups, model as given, "
                                f"oversample {ov}", len(setups), times, loads)
         times, loads, pred = _time(lambda: predict_setups(plant, drive, setups, library,
-                                                          oversample=ov), args.repeat)
+                                                          loop=LoopOptions(oversample=ov)),
+                                                          args.repeat)
         prebuilt[ov] = _rate_line(f"time domain [{label}]: predict_setups, prebuilt LoopPlant, "
                                   f"oversample {ov}", len(setups), times, loads)
         tables[ov] = pred.table
     free = list(enumerate_setups(library, symmetry="none", max_setups=None))
     sweep = free[:args.sweep_setups]
     t0 = time.perf_counter()
-    predict_setups(model, drive, sweep, library, oversample=OVERSAMPLE_DEFAULT)
+    predict_setups(model, drive, sweep, library, loop=LoopOptions(oversample=OVERSAMPLE_DEFAULT))
     dt = time.perf_counter() - t0
     rates["sweep"] = len(sweep) / dt
     print(f"time domain [{label}]: crate sweep, predict_setups on {len(sweep):,} "
@@ -517,7 +521,8 @@ def bench_time_domain(label, model, drive, setups, library, args):
     # accuracy against oversample 16
     idx = _spread_idx(len(setups), args.accuracy_setups)
     few = [setups[i] for i in idx]
-    fine = predict_setups(plant, drive, few, library, oversample=OVERSAMPLE_FINE).table
+    fine = predict_setups(plant, drive, few, library,
+                          loop=LoopOptions(oversample=OVERSAMPLE_FINE)).table
     print(f"memory: this process's ru_maxrss after predicting {len(few)} setups at oversample "
           f"{OVERSAMPLE_FINE} [{label}]: {_mib(_maxrss_bytes()):.0f} MiB")
     metrics = [c for c in fine.columns if c not in CORNERS]
@@ -758,7 +763,7 @@ def _main(args, child):
     car = build_full_car(vehicle)
     # warm-up before the virtual rig below, which runs the same compiled shock loop
     t0 = time.perf_counter()
-    predict_setups(car, drive, sym[:2], library, oversample=OVERSAMPLES[0])
+    predict_setups(car, drive, sym[:2], library, loop=LoopOptions(oversample=OVERSAMPLES[0]))
     print(f"warm-up: first predict_setups call, 2 setups (numba {_jit_source()}): "
           f"{time.perf_counter() - t0:.2f} s")
     t0 = time.perf_counter()

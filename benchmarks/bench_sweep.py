@@ -48,6 +48,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from planner.options import RunOptions
 
 # benchmark the working tree this script lives in, installed or not
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -161,26 +162,30 @@ def main():
         {"symmetry": "none", "shocks": corner_lists(ids, args.n)}
     baseline = Setup("baseline", dict.fromkeys(("LF", "RF", "LR", "RR"), "B20"))
     common = dict(constraints=constraints, baseline=baseline, top_share=args.top_share,
-                  chunk_size=args.chunk_size, progress=False)
+                  progress=False)
     print(f"problem: paper car, {len(drives)} drive(s) x {args.drive_s:g} s at 100 Hz, "
           f"crate of {len(lib)} shocks, every-corner-free setups, top share "
           f"{args.top_share:g}, chunk {args.chunk_size}")
 
     sweep_setups(model, drives[0], lib, constraints={"symmetry": "none", "shocks": ids[:7]},
-                 scheduler="none", top=5, progress=False)  # warm-up: numba cache loads
+                 run=RunOptions(scheduler="none"), top=5,
+                 progress=False)  # warm-up: numba cache loads
 
     single = None
     if not args.skip_single:
         with TreeRss() as rss:
             t = time.perf_counter()
-            single = sweep_setups(model, drives, lib, scheduler="none", **common)
+            single = sweep_setups(model, drives, lib,
+                                  run=RunOptions(scheduler="none", chunk_size=args.chunk_size),
+                                  **common)
             wall = time.perf_counter() - t
         report("one process", single, wall, rss.peak, load())
 
     with TreeRss() as rss:
         t = time.perf_counter()
-        cluster = sweep_setups(model, drives, lib, scheduler="local", n_workers=args.workers,
-                               **common)
+        cluster = sweep_setups(model, drives, lib,
+                               run=RunOptions(scheduler="local", n_workers=args.workers,
+                                              chunk_size=args.chunk_size), **common)
         wall = time.perf_counter() - t
     report(f"LocalCluster ({args.workers} worker processes)", cluster, wall, rss.peak, load())
     peak_cluster = rss.peak

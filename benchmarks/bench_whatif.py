@@ -59,6 +59,7 @@ from planner.whatif import (  # noqa: E402
     stiffened_plant,
 )
 from _common import engine_version, load  # noqa: E402
+from planner.options import RunOptions
 
 CORNERS = ("LF", "RF", "LR", "RR")
 #: Evaluations (setup x condition) per second on the 2-core machine.
@@ -182,7 +183,7 @@ def main(argv=None):
             if runner is not None:
                 t0 = time.perf_counter()
                 dres = evaluate_whatif(plant, drive, setups, library, pset, baseline=base,
-                                       method=method, client=runner.client)
+                                       method=method, run=RunOptions(client=runner.client))
                 dt = time.perf_counter() - t0
                 same = all(getattr(res, k).equals(getattr(dres, k))
                            for k in ("table", "robust", "conditions"))

@@ -8,7 +8,8 @@ before it):
   files, the one enumeration, the one baseline resolver, the symmetry names),
   :mod:`~planner.objective` (scores, limits and the one ranking rule) and
   :mod:`~planner.rig_spec` (the rig TOML: time costs and actuator limits, and the limits
-  applied to a drive);
+  applied to a drive), :mod:`~planner.options` (the commands' option objects: the car's
+  elements, the loop, the screening, where it runs, the intervals' draws);
 - engines: :mod:`~planner.runner` (tasks in this process or on Dask),
   :mod:`~planner.plant` (any model to the loop plant),
   :mod:`~planner.predict` (the closed loop in the time domain), :mod:`~planner.screen`

@@ -246,6 +246,7 @@ def noise_report(model, session, *, n_draws=20, seed=0):
     from ident.data.channels import CORNERS
     from ident.data.drive import Drive
     from planner.setups import Setup
+    from planner.options import UncertaintyOptions
     from planner.uncertainty import prediction_uncertainty
 
     table = model.summary()
@@ -253,8 +254,8 @@ def noise_report(model, session, *, n_draws=20, seed=0):
     drive = Drive(name=f"run {base.name}", fs_hz=session.fs_hz,
                   channels={c: base.dynamic(c) for c in session.rig_inputs})
     setup = Setup("reference", {c: base.setup[c] for c in CORNERS})
-    unc = prediction_uncertainty(model, drive, [setup], session.shocks, n_draws=n_draws,
-                                 seed=seed)
+    unc = prediction_uncertainty(model, drive, [setup], session.shocks,
+                                 draws=UncertaintyOptions(n_draws=n_draws, seed=seed))
     lo, hi = unc.components["random_lo"].iloc[0], unc.components["random_hi"].iloc[0]
     half = {m: 100 * float(max(hi[m] - 1, 1 - lo[m])) for m in unc.metric_names}
     return {"noise_limited_pairs": int((table.status == "noise-limited").sum()),
@@ -325,6 +326,7 @@ def _output_units(args, drives):
 
 def cmd_predict(args):
     """``shockplan predict``: metrics of every setup of a setups CSV (spec's predictions CSV)."""
+    from planner.options import ElementOptions, LoopOptions
     from planner.predict import predict_setups
     from planner.report import write_predictions_csv
     from planner.setups import read_setups
@@ -334,9 +336,11 @@ def cmd_predict(args):
     stops = _bump_stop_library(args, model)
     setups = read_setups(args.setups, library, stops, units=args.units)
     _warn_inventory(setups, library)
-    pred = predict_setups(model, drive, setups, library, oversample=args.oversample,
-                          static_loads_n=None, progress=not args.quiet, bump_stops=stops,
-                          elements=not args.no_elements)
+    pred = predict_setups(model, drive, setups, library,
+                          loop=LoopOptions(oversample=args.oversample),
+                          elements=ElementOptions(use_model=not args.no_elements,
+                                                  bump_stops=stops),
+                          progress=not args.quiet)
     write_predictions_csv(pred.table, args.out, units=args.units, overwrite=args.overwrite)
     print(f"predicted {len(setups)} setups on drive '{drive.name}' ({drive.duration_s:g} s): "
           f"wrote {args.out} ({args.units})")
@@ -387,6 +391,7 @@ def cmd_rank(args):
     """``shockplan rank``: rank setups (screen, simulate the best, score) and write a report."""
     from planner.objective import default_objective, read_objective
     from planner.click_settings import MAX_CLICK_SETUPS, clicks_option, split_shock_ids
+    from planner.options import ElementOptions, LoopOptions, RunOptions
     from planner.rank import rank_setups
     from planner.report import write_ranking
     from planner.setups import read_setups
@@ -407,14 +412,15 @@ def cmd_rank(args):
         if args.only:
             constraints["shocks"] = split_shock_ids(args.only)
     baseline = _baseline_arg(args, library, setups)
-    variations = _element_choices(args)
+    elements = ElementOptions(use_model=not args.no_elements, bump_stops=stops,
+                              **_element_choices(args))
     out = Path(args.out)
     ranking = rank_setups(model, drive, library, setups=setups, constraints=constraints,
                           objective=objective, baseline=baseline, top=args.simulate,
-                          oversample=args.oversample, uncertainty=not args.no_uncertainty,
-                          scheduler=args.scheduler, n_workers=args.workers,
-                          progress=not args.quiet, bump_stops=stops,
-                          elements=not args.no_elements, **variations)
+                          uncertainty=not args.no_uncertainty,
+                          loop=LoopOptions(oversample=args.oversample), elements=elements,
+                          run=RunOptions(scheduler=args.scheduler, n_workers=args.workers),
+                          progress=not args.quiet)
     files = write_ranking(ranking.table, out, units=args.units, objective=objective,
                           baseline=ranking.baseline, overwrite=args.overwrite)
     write_ranking_screening = out / "screening.csv"
@@ -529,6 +535,7 @@ def cmd_sweep(args):
     from planner.report.sweep_files import write_sweep
     from planner.click_settings import clicks_option, split_shock_ids
     from planner.setups import read_setups
+    from planner.options import ElementOptions, LoopOptions, RunOptions
     from planner.sweep import sweep_setups
 
     _check_out(args, folder=True)
@@ -551,11 +558,14 @@ def cmd_sweep(args):
     scheduler = args.scheduler
     result = sweep_setups(models, drives, library, setups=setups, constraints=constraints,
                           objective=objective, baseline=baseline, top_share=args.simulate_share,
-                          top=args.simulate, combine=args.combine, chunk_size=args.chunk_size,
-                          oversample=args.oversample, scheduler=scheduler,
-                          n_workers=args.workers, progress=not args.quiet,
-                          bump_stops=_bump_stop_library(args, None),
-                          elements=not args.no_elements, **_element_choices(args))
+                          top=args.simulate, combine=args.combine,
+                          loop=LoopOptions(oversample=args.oversample),
+                          elements=ElementOptions(use_model=not args.no_elements,
+                                                  bump_stops=_bump_stop_library(args, None),
+                                                  **_element_choices(args)),
+                          run=RunOptions(scheduler=scheduler, n_workers=args.workers,
+                                         chunk_size=args.chunk_size),
+                          progress=not args.quiet)
     written = write_sweep(result, args.out, units=args.units, overwrite=args.overwrite)
     print(_sweep_summary(result))
     print("wrote " + ", ".join(str(p) for p in written))
@@ -587,9 +597,12 @@ def cmd_optimize(args):
     from ident.models.library import read_shock_library
     from ident.data.units import from_si
     from planner.objective import default_objective, read_objective
+    from planner.options import ElementOptions, LoopOptions
     from planner.optimize import (
         DEFAULT_KNOTS_M_S,
         QUANTILE_KNOTS,
+        CurveOptions,
+        SolverOptions,
         optimize_curves,
         read_curve_constraints,
         write_optimum,
@@ -614,17 +627,20 @@ def cmd_optimize(args):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         opt = optimize_curves(model, drives, library, objective=objective,
-                              baseline=args.baseline, symmetry=args.symmetry,
+                              baseline=args.baseline,
+                              curves=CurveOptions(symmetry=args.symmetry,
+                                                  knots_m_s=(QUANTILE_KNOTS
+                                                             if args.knots == "quantiles"
+                                                             else DEFAULT_KNOTS_M_S)),
                               constraints=constraints, drive_weights=weights,
                               aggregate="worst" if args.worst_case else "sum",
-                              robust=args.robust, oversample=args.oversample,
-                              max_iter=args.max_iter, n_starts=args.starts,
-                              progress=not args.quiet,
-                              knots_m_s=(QUANTILE_KNOTS if args.knots == "quantiles"
-                                         else DEFAULT_KNOTS_M_S),
-                              elements=not args.no_elements,
-                              bump_stop_library=_bump_stop_library(args, model),
-                              packers=_packer_bounds(args), click_radius=args.click_radius)
+                              robust=args.robust, loop=LoopOptions(oversample=args.oversample),
+                              solver=SolverOptions(max_iter=args.max_iter, n_starts=args.starts,
+                                                   click_radius=args.click_radius),
+                              elements=ElementOptions(
+                                  use_model=not args.no_elements,
+                                  bump_stops=_bump_stop_library(args, model)),
+                              packers=_packer_bounds(args), progress=not args.quiet)
     files = write_optimum(opt, library, out, units=args.units, overwrite=args.overwrite)
     t = opt.table
     s = opt.solver
@@ -689,7 +705,7 @@ def cmd_plan(args):
     from ident.identify.model import load_model
     from ident.data.session import read_session
     from ident.models.library import read_shock_library
-    from planner.design import design_experiment
+    from planner.design import ScheduleOptions, design_experiment
     from planner.objective import default_objective, read_objective
     from planner.rig_spec import read_rig
     from planner.testplan import write_plan
@@ -716,7 +732,8 @@ def cmd_plan(args):
     plan = design_experiment(model, library, budget_min=args.budget_min,
                              criterion=args.criterion, session=session, objective=objective,
                              baseline=args.baseline, drives=drives, rig=rig,
-                             baseline_every=args.baseline_every, n_validation=args.validate)
+                             schedule=ScheduleOptions(baseline_every=args.baseline_every,
+                                                      n_validation=args.validate))
     files = write_plan(plan, out, units=args.units, overwrite=args.overwrite)
     t = plan.table()
     rows = [(n, r["name"], f"{r['start_min']:.1f}", f"{r['duration_s'] / 60:.1f}", r["purpose"],
@@ -765,6 +782,7 @@ def cmd_whatif(args):
     from ident.models.library import read_shock_library
     from planner.objective import default_objective, read_objective
     from planner.setups import read_ranking_baseline, read_setups
+    from planner.options import ElementOptions, LoopOptions, RunOptions
     from planner.whatif import (FRAGILE_SHARE, RANK_TOLERANCE, evaluate_whatif,
                                 read_perturbations, write_whatif)
 
@@ -796,11 +814,12 @@ def cmd_whatif(args):
               "(give --baseline to score against another)")
     result = evaluate_whatif(
         model, drives, setups, library, perturbations, objective=objective, baseline=baseline,
-        method=args.method, oversample=args.oversample,
+        method=args.method, loop=LoopOptions(oversample=args.oversample),
         rank_tolerance=RANK_TOLERANCE if args.rank_tolerance is None else args.rank_tolerance,
         fragile_share=FRAGILE_SHARE if args.fragile_share is None else args.fragile_share,
-        scheduler=args.scheduler, n_workers=args.workers, progress=not args.quiet,
-        bump_stops=stops, elements=not args.no_elements)
+        elements=ElementOptions(use_model=not args.no_elements, bump_stops=stops),
+        run=RunOptions(scheduler=args.scheduler, n_workers=args.workers),
+        progress=not args.quiet)
     files = write_whatif(result, out, units=args.units, overwrite=args.overwrite)
     print(_whatif_summary(result))
     print(f"wrote {len(files)} files to {out}: " + ", ".join(sorted(files)[:6])

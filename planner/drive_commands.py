@@ -22,7 +22,8 @@ from ident.data.units import UNIT_LABELS, from_si
 from ident.models.aero import read_aero_model
 from ident.models.library import read_shock_library
 from planner.errors import PlannerError
-from planner.predict import as_loop_plant, load_any_model
+from planner.plant import as_loop_plant
+from planner.predict import load_any_model
 from planner.report.trackdrive import write_drive_report
 from planner.rig_spec import read_rig
 from planner.setups import Setup, resolve_baseline

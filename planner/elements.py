@@ -30,6 +30,7 @@ from ident.data.channels import CORNERS
 from ident.models.bumpstops import (BumpStopLibrary, check_packer, contact_tables,
                                     resolve_corner_stops)
 from planner.errors import PlannerError
+from planner.options import ElementOptions, as_options
 from planner.setups import Setup
 
 __all__ = [
@@ -207,32 +208,32 @@ def setup_elements(setups, car=None, *, bump_stops=None, static_corner_load_n=No
                          library=library, settings=settings)
 
 
-def model_setup_elements(setups, model, *, bump_stops=None, static_corner_load_n=None,
-                         elements=True, where="setups"):
-    """:func:`setup_elements` with the planner's ``elements=`` switch, for a model.
+def model_setup_elements(setups, model, elements=None, *, where="setups"):
+    """:func:`setup_elements` of setups on a model, with the planner's element options.
 
     Parameters
     ----------
     setups : sequence of planner.setups.Setup
     model : object
         The model (its ``elements``, if any, are the car's).
-    bump_stops, static_corner_load_n
-        As :func:`setup_elements`.
-    elements : bool or ident.models.bumpstops.CarElements
-        True: the model's elements; a ``CarElements``: those (a model given as a plant);
-        False: none of the car's (no static loads; only stops the setups name, from
-        `bump_stops`).
+    elements : planner.options.ElementOptions, optional
+        Default ``ElementOptions()``: the model's elements (``use_model=True``); a
+        ``CarElements`` as ``use_model``: those (a model given as a plant); False: none of
+        the car's (no static loads; only stops the setups name, from ``bump_stops``). The
+        choices (``vary_*``) are not used here (:func:`vary_elements` enumerates them).
+    where : str
+        Who asks, put first in messages.
 
     Returns
     -------
     SetupElements or None
     """
-    if elements is False:
-        return setup_elements(setups, None, bump_stops=bump_stops, use_static_loads=False,
-                              where=where)
-    car = model_elements(model) if elements is True else elements
-    return setup_elements(setups, car, bump_stops=bump_stops,
-                          static_corner_load_n=static_corner_load_n, where=where)
+    elements = as_options(elements, ElementOptions, "elements", where)
+    if elements.use_model is False:
+        return setup_elements(setups, None, bump_stops=elements.bump_stops,
+                              use_static_loads=False, where=where)
+    return setup_elements(setups, elements.car(model), bump_stops=elements.bump_stops,
+                          static_corner_load_n=elements.static_corner_load_n, where=where)
 
 
 def loop_arguments(elem):

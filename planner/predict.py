@@ -33,6 +33,7 @@ from ident.models.vehicle import build_full_car, example_vehicle, read_vehicle
 from ident.sim.closedloop import rig_response, simulate_batch_metrics
 from planner.elements import ELEMENT_COLUMNS, model_setup_elements
 from planner.errors import PlannerError
+from planner.options import ElementOptions, LoopOptions, as_options
 from planner.plant import as_loop_plant
 from planner.setups import Setup
 
@@ -176,10 +177,8 @@ def _model_fs(model):
     return getattr(model, "fs_hz", None)
 
 
-def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64,
-                   band_hz=(1.0, 20.0), static_loads_n=None, reduce_rtol=LOOP_REDUCE_RTOL,
-                   progress=False, bump_stops=None, static_corner_load_n=None,
-                   elements=True, check_coverage=True):
+def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
+                   elements=ElementOptions(), progress=False, check_coverage=True):
     """Predict the metrics of shock setups on a model and drive (time domain).
 
     Parameters
@@ -188,33 +187,25 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
     drive : ident.data.drive.Drive
     setups : sequence of planner.setups.Setup
     library : ident.models.library.ShockLibrary
-    oversample : int
-        Internal steps per drive sample of the shock loop (quadratic hold: at 2, metrics
-        within about 0.3 % of a 32x run on a track drive at 100 Hz).
-    chunk_size : int
-        Setups simulated per compiled call (a progress bar's step). Memory does not grow
-        with it: each thread keeps one setup's outputs, whose metrics it computes right
-        after simulating it (:func:`ident.sim.closedloop.simulate_batch_metrics`).
-    band_hz : (float, float)
-        Metric band [Hz] (spec default 1-20 Hz).
-    static_loads_n : dict, optional
-        Corner -> static load [N] for normalized tire-force metrics.
-    reduce_rtol : float or None
-        See :func:`as_loop_plant`.
+    loop : planner.options.LoopOptions
+        The loop: ``oversample``, the metric band ``band_hz`` [Hz], ``reduce_rtol`` (see
+        :func:`as_loop_plant`), ``chunk_size`` (setups per compiled call, a progress bar's
+        step; memory does not grow with it: each thread keeps one setup's outputs, whose
+        metrics it computes right after simulating it,
+        :func:`ident.sim.closedloop.simulate_batch_metrics`), ``metric_loads_n`` (the
+        normalized tire-force metrics' loads).
+    elements : planner.options.ElementOptions
+        The real car's elements (:func:`planner.elements.model_setup_elements`): by
+        default the model's (``model.elements``, an identified model of a session that
+        declared them: the bump stops the setups name, ``bump_stop_XX``, else the
+        baseline run's, and the static tire loads, tire lift-off); ``bump_stops`` a
+        library replacing the model's, ``static_corner_load_n`` loads [N] replacing its;
+        ``use_model=False``: the setups without the model's bump stops and static loads
+        (the linear car of the paper; only stops the setups name, with ``bump_stops``).
+        The setups are simulated as given: choices (``vary_*``) are refused (rank and
+        sweep enumerate them).
     progress : bool
         Show a progress bar.
-    bump_stops : ident.models.bumpstops.BumpStopLibrary, optional
-        The bump stops the setups name (``bump_stop_XX``); default the model's
-        (``model.elements``, an identified model of a session that declared them).
-    static_corner_load_n : array_like, shape (4,), optional
-        Static tire loads [N]: the loop keeps the contact force at or above zero (tire
-        lift-off); default the model's.
-    elements : bool or ident.models.bumpstops.CarElements
-        True (default): the model's (``model.elements``, see
-        :func:`planner.elements.setup_elements`); a ``CarElements``: those (a model
-        given as a plant); False: the setups without the model's bump stops and static
-        loads (the linear car of the paper; only stops the setups name, with
-        `bump_stops`).
     check_coverage : bool
         Warn when setups take the car beyond what the model's session covered
         (:func:`warn_outside_session`; ``diagnostics["outside_session"]``).
@@ -227,14 +218,21 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
         ``tire_liftoff_share_XX``; then the setup columns ``bump_stop_XX`` and
         ``packer_XX`` [m] (after the metrics, as the spec allows).
     """
+    loop = as_options(loop, LoopOptions, "loop", "predict_setups")
+    elements = as_options(elements, ElementOptions, "elements", "predict_setups")
+    if elements.has_choices:
+        raise ValueError("predict_setups: simulates the setups given; enumerate the bump-stop "
+                         "and packer choices with planner.elements.vary_elements (or rank "
+                         "them with rank_setups)")
+    oversample, chunk_size, band_hz = loop.oversample, loop.chunk_size, loop.band_hz
+    reduce_rtol = loop.reduce_rtol
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
     if not isinstance(plant, LoopPlant):
         raise TypeError(f"time-domain prediction needs a state-space model, got "
                         f"{type(plant).__name__}; use planner.screen for frequency-response plants")
     drive = prepare_drive(drive, _model_fs(model))
     models = resolve_setups(setups, library)
-    elem = model_setup_elements(setups, model, bump_stops=bump_stops,
-                                static_corner_load_n=static_corner_load_n, elements=elements)
+    elem = model_setup_elements(setups, model, elements)
     outputs = [o for o in METRIC_OUTPUTS if o in plant.output_names]
     rig = rig_response(plant, drive, oversample=oversample, outputs=outputs)
     extra = {} if elem is None else {
@@ -248,7 +246,8 @@ def predict_setups(model, drive, setups, library, *, oversample=2, chunk_size=64
             extra["bump_stops"] = elem.loop_stops(slice(a, a + chunk_size))
         batch = simulate_batch_metrics(plant, drive, models[a:a + chunk_size],
                                        oversample=oversample, outputs=outputs, rig=rig,
-                                       band_hz=band_hz, static_loads_n=static_loads_n, **extra)
+                                       band_hz=band_hz, static_loads_n=loop.metric_loads_n,
+                                       **extra)
         rows.append(pd.DataFrame({k: np.asarray(v) for k, v in batch.metrics.values.items()}))
         iters.append(batch.newton_iterations)
     table = pd.concat(rows, ignore_index=True)

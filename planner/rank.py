@@ -23,9 +23,11 @@ import numpy as np
 import pandas as pd
 from scipy.stats import spearmanr
 
-from planner.elements import (distinct_setups, loop_arguments, model_elements,
-                              model_setup_elements, vary_elements)
+from planner.elements import (distinct_setups, loop_arguments, model_setup_elements,
+                              vary_elements)
 from planner.errors import PlannerError
+from planner.options import (ElementOptions, LoopOptions, RunOptions, UncertaintyOptions,
+                             as_options)
 from planner.objective import Objective, default_objective, mark_inventory, score_setups
 from planner.predict import predict_setups
 from planner.screen import screen_setups
@@ -114,10 +116,9 @@ def _polish_clicks(td, scores, cand, setups, library, objective, base_name, simu
 
 
 def rank_setups(model, drive, library, *, setups=None, constraints=None, objective=None,
-                baseline=None, top=40, n_check=20, oversample=2, uncertainty=True, n_draws=40,
-                seed=0, band_hz=(1.0, 20.0), scheduler=None, n_workers=None, progress=False,
-                bump_stops=None, static_corner_load_n=None, elements=True, vary_bump_stops=None,
-                vary_packers_m=None, polish_clicks=True):
+                baseline=None, top=40, n_check=20, uncertainty=UncertaintyOptions(),
+                loop=LoopOptions(), elements=ElementOptions(), run=RunOptions(),
+                progress=False, polish_clicks=True):
     """Rank shock setups on a model and a drive.
 
     Parameters
@@ -150,27 +151,24 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         top, also simulated, so that the screening/time-domain agreement is
         measured over the whole range (near the top the scores are close and
         a rank correlation among near-ties says little).
-    oversample : int
-        Internal steps per sample of the time-domain shock loop.
-    uncertainty : bool
-        Attach Monte Carlo intervals and unresolved pairs (identified models only).
-    n_draws, seed : int
-        Monte Carlo draws and seed.
-    scheduler : str, optional
-        Screen on Dask (:func:`planner.sweep.screen_setups_on`): ``"local"`` (a
-        LocalCluster of `n_workers`, default one per core) or a scheduler address
-        (``"tcp://host:8786"``). Default (None): in this process. The metrics, and so
-        the ranking, are the same bit for bit; it pays from about 10^5 setups.
-    n_workers : int, optional
-        Workers of a new LocalCluster.
-    bump_stops, static_corner_load_n, elements
+    uncertainty : planner.options.UncertaintyOptions or bool
+        Attach Monte Carlo intervals and unresolved pairs (identified models only) with
+        these draws (True: the defaults); False: none.
+    loop : planner.options.LoopOptions
+        The time-domain loop (``oversample``: internal steps per sample of the shock
+        loop; ``band_hz``: the metric band [Hz], the screening's too; ``reduce_rtol``).
+    elements : planner.options.ElementOptions
         The real car's elements, as :func:`planner.predict.predict_setups`: by default the
         model's bump stops (each setup's, else the baseline run's) and static loads are in
-        the loop.
-    vary_bump_stops, vary_packers_m : mapping, optional
-        Bump-stop and packer choices per group enumerated as setup columns
-        (:func:`planner.elements.vary_elements`): every setup is ranked with each
-        combination too (e.g. ``vary_packers_m={"front": [0, 0.002, 0.004]}``).
+        the loop. Its choices ``vary_bump_stops``, ``vary_packers_m`` per group are
+        enumerated as setup columns (:func:`planner.elements.vary_elements`): every setup
+        is ranked with each combination too (e.g. ``vary_packers_m={"front": [0, 0.002,
+        0.004]}``).
+    run : planner.options.RunOptions
+        Screen on Dask (:func:`planner.sweep.screen_setups_on`): ``scheduler``
+        ``"local"`` (a LocalCluster of ``n_workers``, default one per core) or a scheduler
+        address (``"tcp://host:8786"``). Default (None): in this process. The metrics,
+        and so the ranking, are the same bit for bit; it pays from about 10^5 setups.
     polish_clicks : bool
         Where the time domain's best names settings of adjustable shocks, also simulate
         its neighbours among the ranked setups (every adjuster of every corner at its
@@ -183,6 +181,14 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     -------
     Ranking
     """
+    loop = as_options(loop, LoopOptions, "loop", "rank")
+    elements = as_options(elements, ElementOptions, "elements", "rank")
+    run = as_options(run, RunOptions, "run", "rank")
+    if uncertainty is True:
+        uncertainty = UncertaintyOptions()
+    elif uncertainty is not False and uncertainty is not None:
+        uncertainty = as_options(uncertainty, UncertaintyOptions, "uncertainty", "rank")
+    oversample, band_hz, scheduler = loop.oversample, loop.band_hz, run.scheduler
     objective = default_objective() if objective is None else objective
     if not isinstance(objective, Objective):
         raise TypeError(f"objective must be a planner.objective.Objective (read one with "
@@ -197,20 +203,17 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     base = resolve_baseline(baseline, library, setups=setups, default=objective.baseline)
     if base.name not in {s.name for s in setups}:
         setups = [base] + setups
-    car = model_elements(model) if elements is True else (None if elements is False
-                                                          else elements)
-    lib_stops = bump_stops if bump_stops is not None else getattr(car, "bump_stops", None)
-    if vary_bump_stops or vary_packers_m:
-        setups = vary_elements(setups, bump_stops=vary_bump_stops, packers_m=vary_packers_m,
-                               library=lib_stops, where="rank: the bump-stop and packer "
-                               "choices (--try-bump-stops, --try-packers)")
-    ekw = {"bump_stops": bump_stops, "static_corner_load_n": static_corner_load_n,
-           "elements": elements}
-    elem = model_setup_elements(setups, model, **ekw)
+    if elements.has_choices:
+        setups = vary_elements(setups, bump_stops=elements.vary_bump_stops,
+                               packers_m=elements.vary_packers_m,
+                               library=elements.library(model), where="rank: the bump-stop "
+                               "and packer choices (--try-bump-stops, --try-packers)")
+    ekw = elements.without_choices()  # the setups' elements, once enumerated
+    elem = model_setup_elements(setups, model, ekw)
     if elem is not None:
         setups, keep = distinct_setups(setups, elem)
         if len(keep) < len(elem.tables):
-            elem = model_setup_elements(setups, model, **ekw)
+            elem = model_setup_elements(setups, model, ekw)
     if top < 1:
         raise PlannerError(f"top must be at least 1, got {top}")
     # 1. screening of everything
@@ -219,15 +222,16 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
             log.info("rank: screening with bump stops or static loads runs in this process "
                      "(not on %s)", scheduler)
         screened = screen_setups(model, drive, setups, library, band_hz=band_hz,
-                                 progress=progress, **loop_arguments(elem))
+                                 reduce_rtol=loop.reduce_rtol, progress=progress,
+                                 **loop_arguments(elem))
         screened = replace(screened, table=pd.concat(
             [screened.table, elem.columns(screened.table.index)], axis=1))
     elif scheduler is None or str(scheduler).strip().lower() == "none":
         screened = screen_setups(model, drive, setups, library, band_hz=band_hz,
-                                 progress=progress)
+                                 reduce_rtol=loop.reduce_rtol, progress=progress)
     else:
         screened = screen_setups_on(model, drive, setups, library, band_hz=band_hz,
-                                    scheduler=scheduler, n_workers=n_workers, progress=progress)
+                                    reduce_rtol=loop.reduce_rtol, run=run, progress=progress)
     sc = mark_inventory(score_setups(screened.table, objective, baseline=base.name).table,
                          setups, library)
     screening = pd.concat([screened.table, sc], axis=1)
@@ -242,15 +246,15 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         chosen.append(base.name)
     by_name = {s.name: s for s in setups}
     cand = [by_name[n] for n in chosen]
-    td = predict_setups(model, drive, cand, library, oversample=oversample, band_hz=band_hz,
-                        progress=progress, **ekw)
+    td = predict_setups(model, drive, cand, library, loop=loop, elements=ekw,
+                        progress=progress)
     scores = score_setups(td.table, objective, baseline=base.name)
     polish = None
     if polish_clicks and any("@" in sid for c in cand for sid in c.ids()):
         td, scores, cand, polish = _polish_clicks(
             td, scores, cand, setups, library, objective, base.name,
-            lambda more: predict_setups(model, drive, more, library, oversample=oversample,
-                                        band_hz=band_hz, progress=False, **ekw))
+            lambda more: predict_setups(model, drive, more, library, loop=loop, elements=ekw,
+                                        progress=False))
     table = pd.concat([td.table, mark_inventory(scores.table, setups, library)], axis=1)
     table["screening_rank"] = sc.loc[table.index, "rank"].to_numpy()
     table["baseline"] = table.index == base.name  # the setup the scores are ratios to
@@ -271,13 +275,12 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         settings["click_polish"] = polish
     if elem is not None:
         settings["elements"] = dict(elem.settings, n_variants=len(setups),
-                                    vary_bump_stops=vary_bump_stops,
-                                    vary_packers_m=vary_packers_m)
+                                    vary_bump_stops=elements.vary_bump_stops,
+                                    vary_packers_m=elements.vary_packers_m)
     table["unresolved"] = ""
     if uncertainty and getattr(model, "frf", None) is not None:
-        unc = prediction_uncertainty(model, drive, cand, library, n_draws=n_draws, seed=seed,
-                                     element_options=ekw,
-                                     band_hz=band_hz, predictions=td, oversample=oversample)
+        unc = prediction_uncertainty(model, drive, cand, library, draws=uncertainty, loop=loop,
+                                     elements=ekw, predictions=td)
         table = unc.intervals(table)
         pairs = unresolved_pairs(td.table, unc, objective, baseline=base.name)
         table["unresolved"] = [" ".join(pairs.get(n, [])) for n in table.index]

@@ -42,6 +42,7 @@ from ident.identify.model import LOOP_REDUCE_RTOL
 from ident.sim.closedloop import corner_values, pack_bump_stops, pack_setups
 from ident.sim.metrics import METRIC_NAMES
 from planner.errors import PlannerError
+from planner.options import ScreenOptions, as_options
 from planner.plant import as_loop_plant
 from planner.predict import Predictions, prepare_drive, resolve_setups
 from planner.screen_kernels import (
@@ -658,9 +659,9 @@ def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, 
     return list(ops.metric_names), out, sig, iters
 
 
-def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands=96,
-                  max_iter=30, tol=1e-5, reduce_rtol=LOOP_REDUCE_RTOL, chunk_size=20000,
-                  progress=False, bump_stops=None, static_corner_load_n=None):
+def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), screen=ScreenOptions(),
+                  reduce_rtol=LOOP_REDUCE_RTOL, progress=False, bump_stops=None,
+                  static_corner_load_n=None):
     """Predict setups' metrics fast, with each shock linearized (see the module docstring).
 
     Parameters
@@ -672,13 +673,12 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
     band_hz : (float, float)
         Metric band [Hz]; the metric filter's power response ``|B(f)|^4``
         (Butterworth order 4, applied forward and backward) weights the bands.
-    n_bands : int
-        Log-spaced frequency bands of the integration.
-    max_iter, tol : int, float
-        Fixed-point iterations on the shock-velocity RMS and their relative
-        tolerance.
-    chunk_size : int
-        Setups per compiled batch (bounds memory).
+    screen : planner.options.ScreenOptions
+        ``n_bands`` (log-spaced frequency bands of the integration), ``max_iter`` and
+        ``tol`` (fixed-point iterations on the shock-velocity RMS and their relative
+        tolerance), ``chunk_size`` (setups per compiled batch, bounds memory).
+    reduce_rtol : float or None
+        See :func:`planner.plant.as_loop_plant`.
     bump_stops : sequence, optional
         One entry per setup, in the closed loop's form
         (:func:`ident.sim.closedloop.simulate_batch`, ``bump_stops=``): None, or 4 (or a
@@ -735,6 +735,9 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands
     (:data:`LIFTOFF_LINEAR_LIMIT`, logged) the lift-off changes the metrics: use the time
     domain (:func:`planner.predict.predict_setups`).
     """
+    screen = as_options(screen, ScreenOptions, "screen", "screen_setups")
+    n_bands, max_iter, tol, chunk_size = (screen.n_bands, screen.max_iter, screen.tol,
+                                          screen.chunk_size)
     plant = as_loop_plant(model, reduce_rtol=reduce_rtol)
     drive = prepare_drive(drive, getattr(model, "fs_hz", None))
     check_drive_inputs(drive, getattr(plant, "rig_inputs", RIG_INPUTS), model=plant.name)

@@ -69,7 +69,7 @@ import logging
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -83,9 +83,11 @@ from ident.sim.closedloop import pack_setups
 from planner.errors import PlannerError
 from planner.objective import (Objective, default_objective, mark_inventory, ranking_order,
                                ranking_position, score_setups)
-from planner.elements import (ELEMENT_COLUMNS, distinct_setups, model_elements,
-                              model_setup_elements, vary_elements)
-from planner.predict import as_loop_plant, predict_setups, prepare_drive, resolve_setups
+from planner.elements import (ELEMENT_COLUMNS, distinct_setups, model_setup_elements,
+                              vary_elements)
+from planner.options import ElementOptions, LoopOptions, RunOptions, ScreenOptions, as_options
+from planner.plant import as_loop_plant
+from planner.predict import predict_setups, prepare_drive, resolve_setups
 from planner.runner import KERNEL_LOCK, start_runner
 from planner.screen import (drive_bands, screen_operands, screen_packed,
                             screening_predictions)
@@ -111,6 +113,8 @@ RTOL_SCORE_ROUNDOFF = 1e-13
 DEFAULT_CHUNK_SIZE = 20_000
 #: Default setups per time-domain task (the rig response, about 0.1 s, is redone per task).
 DEFAULT_SIMULATE_CHUNK = 128
+#: Setups per task of :func:`screen_setups_on` by default.
+SCREEN_ON_CHUNK_SIZE = 5000
 #: Screening tasks per worker thread at least (smaller chunks than `chunk_size` if need be).
 TASKS_PER_THREAD = 4
 #: Smallest screening chunk made to spread the work (the kernel's per-call overhead).
@@ -246,9 +250,9 @@ def _screen_packed_chunk(ops, packed, max_iter, tol):
         return screen_packed(ops, *packed, max_iter=max_iter, tol=tol)
 
 
-def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_bands=96,
-                     max_iter=30, tol=1e-5, reduce_rtol=LOOP_REDUCE_RTOL, chunk_size=5000,
-                     scheduler=None, client=None, n_workers=None, progress=False):
+def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0),
+                     screen=ScreenOptions(), reduce_rtol=LOOP_REDUCE_RTOL, run=RunOptions(),
+                     progress=False):
     """:func:`planner.screen.screen_setups` with the chunks screened on a Dask cluster.
 
     The operands are built once here and scattered; each task screens one chunk of packed
@@ -258,12 +262,12 @@ def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_ba
 
     Parameters
     ----------
-    model, drive, setups, library, band_hz, n_bands, max_iter, tol, reduce_rtol
-        As :func:`planner.screen.screen_setups`.
-    chunk_size : int
-        Setups per task.
-    scheduler, client, n_workers
-        As :func:`sweep_setups` (default ``"local"``: a LocalCluster, one worker per core).
+    model, drive, setups, library, band_hz, screen, reduce_rtol
+        As :func:`planner.screen.screen_setups` (``screen.chunk_size`` is not used: a
+        task's setups are one compiled batch).
+    run : planner.options.RunOptions
+        Where it runs, as :func:`sweep_setups` (default ``"local"``: a LocalCluster, one
+        worker per core); ``run.chunk_size`` setups per task (default 5000).
     progress : bool
 
     Returns
@@ -271,11 +275,16 @@ def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_ba
     planner.predict.Predictions
         As ``screen_setups`` returns; ``settings["scheduler"]`` names where it ran.
     """
+    screen = as_options(screen, ScreenOptions, "screen", "screen_setups_on")
+    run = as_options(run, RunOptions, "run", "screen_setups_on")
+    n_bands, max_iter, tol = screen.n_bands, screen.max_iter, screen.tol
+    chunk_size = SCREEN_ON_CHUNK_SIZE if run.chunk_size is None else run.chunk_size
     if int(chunk_size) < 1:
         raise PlannerError(f"chunk_size must be at least 1, got {chunk_size}")
     setups = list(setups)
     models = resolve_setups(setups, library)
-    runner = start_runner(scheduler, client, n_workers, True, "rank")  # a wrong address fails first
+    # a wrong address fails first
+    runner = start_runner(run.scheduler, run.client, run.n_workers, run.processes, "rank")
     try:
         plant, drive, ops = _prepare_case("rank", model, drive, band_hz, n_bands, reduce_rtol)
         h = 1.0 / drive.fs_hz  # as screen_response: the bands are of the drive at this rate
@@ -301,38 +310,40 @@ def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0), n_ba
     return pred
 
 
-def _warm(ops, shocks, codes, plant, drive, setups, library, oversample, band_hz, elements=None):
+def _warm(ops, shocks, codes, plant, drive, setups, library, loop, elements):
     """Import the engine and load both compiled kernels (from numba's cache) on a worker."""
     _screen_codes(ops, shocks, codes, 30, 1e-5)
-    _simulate_chunk(plant, drive, setups, library, oversample, band_hz, elements)
+    _simulate_chunk(plant, drive, setups, library, loop, elements)
 
 
-def _simulate_chunk(plant, drive, setups, library, oversample, band_hz, elements=None):
+def _simulate_chunk(plant, drive, setups, library, loop, elements):
     """Time-domain metrics of a group of setups on one case (a task).
 
     BLAS runs on one thread, as in a Dask worker (which sets ``OPENBLAS_NUM_THREADS=1``):
     the drive's rig response differs in the last bits with the BLAS thread count.
     """
     with KERNEL_LOCK, threadpool_limits(1):
-        table = predict_setups(plant, drive, setups, library, oversample=oversample,
-                               band_hz=band_hz, **(elements or {})).table
+        table = predict_setups(plant, drive, setups, library, loop=loop,
+                               elements=elements).table
     return table
 
 
-def _element_variants(sim, vary_bump_stops, vary_packers_m, bump_stops, car, ekw, model):
-    """The simulated setups with every bump-stop and packer choice, and each one's parent
-    (the index of its shock setup in `sim`); the same setups without choices."""
-    if not (vary_bump_stops or vary_packers_m):
+def _element_variants(sim, elements, model):
+    """The simulated setups with every bump-stop and packer choice of `elements` (an
+    ElementOptions), and each one's parent (the index of its shock setup in `sim`); the
+    same setups without choices."""
+    if not elements.has_choices:
         return sim, np.arange(len(sim))
-    lib = bump_stops if bump_stops is not None else getattr(car, "bump_stops", None)
+    lib = elements.library(model)
     out, parent = [], []
     for i, s in enumerate(sim):
-        got = vary_elements([s], bump_stops=vary_bump_stops, packers_m=vary_packers_m,
-                            library=lib, where="sweep: the bump-stop and packer choices "
+        got = vary_elements([s], bump_stops=elements.vary_bump_stops,
+                            packers_m=elements.vary_packers_m, library=lib,
+                            where="sweep: the bump-stop and packer choices "
                             "(--try-bump-stops, --try-packers)")
         out += got
         parent += [i] * len(got)
-    elem = model_setup_elements(out, model, **ekw)
+    elem = model_setup_elements(out, model, elements)
     if elem is not None:
         out, keep = distinct_setups(out, elem)
         parent = [parent[k] for k in keep]
@@ -533,12 +544,9 @@ def _case_labels(model_names, drive_names):
 
 
 def sweep_setups(models, drives, library, *, setups=None, constraints=None, objective=None,
-                 baseline=None, top_share=0.01, top=None, combine="mean",
-                 chunk_size=DEFAULT_CHUNK_SIZE, simulate_chunk=DEFAULT_SIMULATE_CHUNK,
-                 oversample=2, band_hz=(1.0, 20.0), n_bands=96, max_iter=30, tol=1e-5,
-                 reduce_rtol=LOOP_REDUCE_RTOL, scheduler=None, client=None, n_workers=None,
-                 processes=True, progress=True, bump_stops=None, static_corner_load_n=None,
-                 elements=True, vary_bump_stops=None, vary_packers_m=None):
+                 baseline=None, top_share=0.01, top=None, combine="mean", loop=LoopOptions(),
+                 screen=ScreenOptions(), elements=ElementOptions(), run=RunOptions(),
+                 progress=True):
     """Screen a large set of setups on several models and drives, simulate and rank the best.
 
     Parameters
@@ -570,37 +578,34 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         Simulate this many instead of `top_share`.
     combine : {"mean", "worst"}
         A setup's sweep score: the mean or the largest of its case scores.
-    chunk_size : int
-        Candidates per screening task at most (bounds a task's memory: under 1 kB a
-        setup); smaller when needed to give every worker thread at least
-        :data:`TASKS_PER_THREAD` tasks (but not below :data:`MIN_CHUNK_SIZE`).
-    simulate_chunk : int
-        Setups per time-domain task.
-    oversample, band_hz, n_bands, max_iter, tol, reduce_rtol
-        As :func:`planner.predict.predict_setups` and
-        :func:`planner.screen.screen_setups`.
-    scheduler : str, optional
-        ``"local"`` (default): a new :class:`dask.distributed.LocalCluster` (`n_workers`,
-        default one per core, closed at the end); a scheduler address
-        (``"tcp://host:8786"``); or ``"none"`` for this process only.
-    client : distributed.Client, optional
-        An existing client to use instead (not closed).
-    n_workers : int, optional
-        Workers of a new LocalCluster.
-    processes : bool
-        LocalCluster workers as processes (default) or threads of this process.
-    progress : bool
-        Progress bars (tqdm) over the tasks.
-    bump_stops, static_corner_load_n, elements
+    loop : planner.options.LoopOptions
+        The time domain, as :func:`planner.predict.predict_setups`; its ``band_hz`` and
+        ``reduce_rtol`` also the screening's.
+    screen : planner.options.ScreenOptions
+        The screening's ``n_bands``, ``max_iter``, ``tol``, as
+        :func:`planner.screen.screen_setups` (its ``chunk_size`` is not used: see `run`).
+    elements : planner.options.ElementOptions
         The real car's elements in the time domain, as
         :func:`planner.predict.predict_setups` (default: each model's own, e.g. an
         identified model's bump stops and static loads). The screening stage ranks the
-        shocks without them (its codes are shocks only); the time domain decides.
-    vary_bump_stops, vary_packers_m : mapping, optional
-        Bump-stop and packer choices per group (:func:`planner.elements.vary_elements`):
-        every simulated setup (the screening's best and the baseline) is simulated with
-        each combination too, and ranked with them; a variant's screening score is its
-        shocks'.
+        shocks without them (its codes are shocks only); the time domain decides. Its
+        choices ``vary_bump_stops``, ``vary_packers_m`` (per group,
+        :func:`planner.elements.vary_elements`): every simulated setup (the screening's
+        best and the baseline) is simulated with each combination too, and ranked with
+        them; a variant's screening score is its shocks'.
+    run : planner.options.RunOptions
+        Where it runs: ``scheduler`` ``"local"`` (default): a new
+        :class:`dask.distributed.LocalCluster` (``n_workers``, default one per core,
+        closed at the end); a scheduler address (``"tcp://host:8786"``); or ``"none"``
+        for this process only; ``client`` an existing client to use instead (not
+        closed); ``processes`` LocalCluster workers as processes (default) or threads of
+        this process; ``chunk_size`` candidates per screening task at most (default
+        :data:`DEFAULT_CHUNK_SIZE`; bounds a task's memory: under 1 kB a setup; smaller
+        when needed to give every worker thread at least :data:`TASKS_PER_THREAD` tasks,
+        but not below :data:`MIN_CHUNK_SIZE`); ``simulate_chunk`` setups per time-domain
+        task (default :data:`DEFAULT_SIMULATE_CHUNK`).
+    progress : bool
+        Progress bars (tqdm) over the tasks.
 
     Returns
     -------
@@ -616,7 +621,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
 
     Notes
     -----
-    The results do not depend on `scheduler`, `n_workers`, `chunk_size` or the order the
+    The results do not depend on the scheduler, the workers, the chunk sizes or the order the
     tasks finish in (see the module docstring). Memory: the driver keeps 17 bytes per
     screened setup and the metrics of ``2 * n_top`` setups; a task holds one chunk.
     """
@@ -625,6 +630,14 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     if not isinstance(objective, Objective):
         raise TypeError(f"sweep: objective must be a planner.objective.Objective (read one "
                         f"with read_objective), got {type(objective).__name__}")
+    loop = as_options(loop, LoopOptions, "loop", "sweep")
+    screen = as_options(screen, ScreenOptions, "screen", "sweep")
+    elements = as_options(elements, ElementOptions, "elements", "sweep")
+    run = as_options(run, RunOptions, "run", "sweep")
+    oversample, band_hz, reduce_rtol = loop.oversample, loop.band_hz, loop.reduce_rtol
+    n_bands, max_iter, tol = screen.n_bands, screen.max_iter, screen.tol
+    chunk_size = DEFAULT_CHUNK_SIZE if run.chunk_size is None else run.chunk_size
+    simulate_chunk = DEFAULT_SIMULATE_CHUNK if run.simulate_chunk is None else run.simulate_chunk
     _check_options(top_share, top, chunk_size, simulate_chunk, combine)
     if setups is not None and constraints:
         raise PlannerError("sweep: give either setups or constraints, not both")
@@ -643,7 +656,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     labels = _case_labels(model_names, drive_names)
     base, base_idx = _baseline_setup(space, library, objective, baseline)
     # the scheduler first: a wrong address fails before any work
-    runner = start_runner(scheduler, client, n_workers, processes)
+    runner = start_runner(run.scheduler, run.client, run.n_workers, run.processes)
     try:
         # 1. the cases, once, here
         cases = []
@@ -662,13 +675,12 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         n_top_max = int(top) if top is not None else max(1, math.ceil(top_share * n_cand))
         # every worker imports the engine and loads its kernels before the clock starts
         plant0, drive0, ops0 = cases[0]
-        cars = [model_elements(model) if elements is True else elements
+        # each case's elements with its model's fixed (the workers get only its plant)
+        ekws = [elements.without_choices().for_model(model)
                 for _, model in model_list for _ in drive_list]
-        ekws = [{"bump_stops": bump_stops, "static_corner_load_n": static_corner_load_n,
-                 "elements": elements if car is None else car}
-                for car in cars]
+        loop_w = replace(loop, band_hz=tuple(band_hz))
         runner.everywhere(_warm, ops0, shocks, base_codes, plant0, drive0, [base], library,
-                          oversample, tuple(band_hz), ekws[0])
+                          loop_w, ekws[0])
         t_prep = time.perf_counter() - t0
         # 2. screening, chunk by chunk
         t1 = time.perf_counter()
@@ -725,14 +737,13 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
                                    "setup with other shocks; rename the baseline")
             sim.append(base)
         sim0 = sim
-        sim, parent = _element_variants(sim0, vary_bump_stops, vary_packers_m,
-                                        bump_stops, cars[0], ekws[0], model_list[0][1])
+        sim, parent = _element_variants(sim0, elements, model_list[0][1])
         plant_refs = [runner.scatter(p) for p, _, _ in cases]
         drive_refs = [runner.scatter(d) for _, d, _ in cases]
         lib_ref = runner.scatter(library)
         groups = [sim[a:a + simulate_chunk] for a in range(0, len(sim), simulate_chunk)]
-        targs = [(plant_refs[k], drive_refs[k], g, lib_ref, oversample, tuple(band_hz),
-                  ekws[k]) for k in range(len(cases)) for g in groups]
+        targs = [(plant_refs[k], drive_refs[k], g, lib_ref, loop_w, ekws[k])
+                 for k in range(len(cases)) for g in groups]
         tparts = [None] * len(targs)
         for j, res in runner.map_unordered(_simulate_chunk, targs, progress,
                                            "sweep: simulate"):
@@ -812,9 +823,10 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
                 "band_hz": tuple(band_hz), "seconds": seconds,
                 "screen_setups_per_s": n_scr * len(cases) / max(t_screen, 1e-9),
                 "simulate_setups_per_s": len(sim) * len(cases) / max(t_sim, 1e-9)}
-    if vary_bump_stops or vary_packers_m:
-        settings["elements"] = {"vary_bump_stops": vary_bump_stops,
-                                "vary_packers_m": vary_packers_m, "n_simulated": len(sim)}
+    if elements.has_choices:
+        settings["elements"] = {"vary_bump_stops": elements.vary_bump_stops,
+                                "vary_packers_m": elements.vary_packers_m,
+                                "n_simulated": len(sim)}
     log.info("sweep: simulated %d setups x %d case(s) in %.1f s; best %r", len(sim),
              len(cases), t_sim, table.index[0])
     return SweepResult(table=table, cases=case_tables, screening_top=screen_tables,

@@ -48,7 +48,7 @@ the known model's metrics; see ``docs/DESIGN.md`` for the figures now.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -60,6 +60,7 @@ from ident.identify.condition import (
 )
 from ident.identify.frf import embed_inputs
 from planner.objective import score_setups
+from planner.options import ElementOptions, LoopOptions, UncertaintyOptions, as_options
 from planner.plant import FrfPlant, interpolate
 from planner.predict import predict_setups, prepare_drive, resolve_setups
 from planner.screen import drive_bands, screen_response
@@ -263,10 +264,9 @@ def _correlated_factor(C):
     return V * np.sqrt(np.clip(w, 0.0, None))
 
 
-def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
-                           quantiles=(0.025, 0.975), band_hz=(1.0, 20.0), n_bands=96,
-                           predictions=None, oversample=2, random_scale=None,
-                           element_options=None):
+def prediction_uncertainty(model, drive, setups, library, *, draws=UncertaintyOptions(),
+                           loop=LoopOptions(), n_bands=96, predictions=None,
+                           elements=ElementOptions()):
     """Intervals of setups' metrics from the identification's random and systematic errors.
 
     Parameters
@@ -276,29 +276,24 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
     drive : ident.data.drive.Drive
     setups : sequence of planner.setups.Setup
     library : ident.models.library.ShockLibrary
-    n_draws : int
-        Monte Carlo draws of the random part (at least 2).
-    seed : int
-    quantiles : (float, float)
-        Interval bounds (default a 95 % interval).
-    band_hz : (float, float)
-        Metric band [Hz].
+    draws : planner.options.UncertaintyOptions
+        ``n_draws`` Monte Carlo draws of the random part (at least 2), their ``seed``,
+        the interval's ``quantiles`` (default a 95 % interval), ``random_scale`` (factor
+        on the FRF's standard errors in the random part; default
+        :func:`random_error_scale` of the model's FRF, the calibrated value).
+    loop : planner.options.LoopOptions
+        The loop of `predictions` (its ``oversample``) and the metric band ``band_hz``
+        [Hz].
     n_bands : int
         Screening bands.
     predictions : planner.predict.Predictions, optional
-        The time-domain predictions the intervals are for (at `oversample`):
-        given, the discretization error is estimated by simulating the setups
-        once more at twice the oversampling; without, that term is left out.
-    oversample : int
-        The oversampling of `predictions`.
-    random_scale : float, optional
-        Factor on the FRF's standard errors in the random part; default
-        :func:`random_error_scale` of the model's FRF (the calibrated value).
-    element_options : dict, optional
-        The real car's elements of `predictions` (:func:`planner.predict.predict_setups`'
-        ``bump_stops``, ``static_corner_load_n``, ``elements``), for the finer simulation
-        of the discretization term; default the model's. The random and fit terms come
-        from the screening of the shocks (the stops' share of them is left out).
+        The time-domain predictions the intervals are for (with `loop`): given, the
+        discretization error is estimated by simulating the setups once more at twice
+        the oversampling; without, that term is left out.
+    elements : planner.options.ElementOptions
+        The real car's elements of `predictions`, for the finer simulation of the
+        discretization term; default the model's. The random and fit terms come from
+        the screening of the shocks (the stops' share of them is left out).
 
     Returns
     -------
@@ -310,6 +305,10 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
         If the model has no FRF (a known physical model has no estimation
         error) or `n_draws` is below 2.
     """
+    draws = as_options(draws, UncertaintyOptions, "draws", "prediction_uncertainty")
+    loop = as_options(loop, LoopOptions, "loop", "prediction_uncertainty")
+    n_draws, seed, quantiles = draws.n_draws, draws.seed, draws.quantiles
+    random_scale, band_hz = draws.random_scale, loop.band_hz
     frf = getattr(model, "frf", None)
     if frf is None:
         raise ValueError("prediction_uncertainty needs an identified model with its FRF "
@@ -375,9 +374,9 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
             components["fit"] = frame(base / measured - 1)
             components["reduction"] = frame(red / base - 1)
     if predictions is not None:
-        finer = predict_setups(model, drive, setups, library, oversample=2 * oversample,
-                               band_hz=band_hz, check_coverage=False,
-                               **(element_options or {}))
+        finer = predict_setups(model, drive, setups, library,
+                               loop=replace(loop, oversample=2 * loop.oversample),
+                               elements=elements, check_coverage=False)
         p1 = predictions.table.loc[index, names].to_numpy()
         p2 = finer.table.loc[index, names].to_numpy()
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -398,7 +397,7 @@ def prediction_uncertainty(model, drive, setups, library, *, n_draws=40, seed=0,
                 "n_averages": frf.n_averages,
                 "smooth_width_hz": (frf.settings.get("conditioning") or {}).get("smooth_width_hz"),
                 "terms": ["random"] + [k for k in SYSTEMATIC_TERMS if k in components],
-                "oversample": oversample if predictions is not None else None}
+                "oversample": loop.oversample if predictions is not None else None}
     return Uncertainty(ratio_lo=frame(lo), ratio_hi=frame(hi), draws=draws, metric_names=names,
                        components=components, settings=settings)
 

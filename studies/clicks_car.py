@@ -82,7 +82,8 @@ from ident.sim.metrics import METRIC_NAMES
 from ident.sim.virtual_rig import PlanRun, default_plan, simulate_session
 from planner.click_settings import MAX_CLICK_SETUPS, parse_click_step
 from planner.objective import score_setups
-from planner.predict import METRIC_OUTPUTS, as_loop_plant, predict_setups
+from planner.plant import as_loop_plant
+from planner.predict import METRIC_OUTPUTS, predict_setups
 from planner.rank import rank_setups
 from planner.setups import Setup, enumerate_setups
 

@@ -57,8 +57,10 @@ from ident.models.library import read_shock_library
 from ident.data.units import from_si
 from ident.models.vehicle import build_full_car, example_vehicle
 from planner.demo import DEMO_LIBRARY_PATH
-from planner.predict import METRIC_OUTPUTS, as_loop_plant, predict_setups, resolve_setups
+from planner.plant import as_loop_plant
+from planner.predict import METRIC_OUTPUTS, predict_setups, resolve_setups
 from planner.setups import Setup
+from planner.options import LoopOptions
 
 log = logging.getLogger("studies.fig10_12")
 
@@ -270,8 +272,10 @@ def main(argv=None):
     setups = study_setups()
     truth = build_full_car(vehicle).loop_plant(model.cbar_n_s_m)
     t1 = time.perf_counter()
-    a = predict_setups(model, drive, setups, library, oversample=OVERSAMPLE).table
-    b = predict_setups(truth, drive, setups, library, oversample=OVERSAMPLE).table
+    a = predict_setups(model, drive, setups, library,
+                       loop=LoopOptions(oversample=OVERSAMPLE)).table
+    b = predict_setups(truth, drive, setups, library,
+                       loop=LoopOptions(oversample=OVERSAMPLE)).table
     names = [c for c in a.columns if c not in CORNERS and c in b.columns]
     rows = [{"setup": s.name, "shocks": " ".join(s.ids()), "metric": m,
              "predicted": float(a.loc[s.name, m]), "true": float(b.loc[s.name, m]),

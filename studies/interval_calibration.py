@@ -75,6 +75,7 @@ from planner.uncertainty import (
     random_error_scale,
     run_length_scale,
 )
+from planner.options import UncertaintyOptions
 
 log = logging.getLogger("studies.interval_calibration")
 
@@ -205,7 +206,8 @@ def run_case(name, spec, k, *, run_s, drive_s, n_setups, cache):
     drive = validation_drive(spec, drive_s)
     setups = study_setups(library, n_setups)
     pred = predict_setups(model, drive, setups, library)
-    unc = prediction_uncertainty(model, drive, setups, library, predictions=pred, random_scale=1.0)
+    unc = prediction_uncertainty(model, drive, setups, library, predictions=pred,
+                                 draws=UncertaintyOptions(random_scale=1.0))
     t2 = time.perf_counter()
     truth = predict_setups(build_full_car(vehicle).loop_plant(model.cbar_n_s_m), drive, setups,
                            library).table

@@ -66,6 +66,7 @@ from ident.sim.metrics import METRIC_NAMES
 from ident.sim.virtual_rig import default_plan, simulate_session
 from planner.objective import score_setups
 from planner.predict import predict_setups
+from planner.options import ElementOptions
 from planner.setups import Setup
 
 log = logging.getLogger("studies.real_car")
@@ -237,7 +238,8 @@ def bump_stop_cases(vehicle, gap_m, *, run_s, n_setups):
     lib = ShockLibrary.from_models(gt_crate() + list(session.shocks.values()))
     setups = crate_setups(session.runs[0].setup, packers=True, n=n_setups)
     drive = validation_drive(vehicle, STOP_ROUGHNESS_M3)
-    truth = predict(vehicle, drive, setups, lib, elements=declared.elements)
+    truth = predict(vehicle, drive, setups, lib,
+                    elements=ElementOptions(use_model=declared.elements))
     share = float(truth.loc["baseline", "bump_stop_contact_share_LF"])
     # the undeclared model knows no stops: the packers are beyond what it can express
     linear = [Setup(s.name, dict(s.shocks)) for s in setups]
@@ -272,7 +274,8 @@ def liftoff_cases(vehicle, roughness, *, run_s, n_setups):
     rows = []
     for rough in roughness:
         drive = validation_drive(vehicle, rough)
-        truth = predict(vehicle, drive, setups, lib, static_corner_load_n=static)
+        truth = predict(vehicle, drive, setups, lib,
+                        elements=ElementOptions(static_corner_load_n=static))
         share = float(truth.loc["baseline", [f"tire_liftoff_share_{c}" for c in CORNERS]].max())
         for is_declared, model, t_id in ((True, declared, t_dec), (False, plain, t_und)):
             pred = predict(model, drive, setups, lib)

@@ -53,6 +53,7 @@ from planner.predict import predict_setups
 from planner.rig_spec import default_rig
 from planner.setups import Setup, enumerate_setups
 from planner.testplan import write_plan
+from planner.design import ScheduleOptions
 
 log = logging.getLogger("studies.rig_time")
 
@@ -85,7 +86,7 @@ def paper_plan(run_s):
 def designed_plan(vehicle, library, budget_min, seed, work):
     """``shockplan plan`` for `budget_min`, written and read back as the rig plays it."""
     plan = design_experiment(vehicle, library, budget_min=budget_min, baseline=BASELINE,
-                             seed=seed)
+                             schedule=ScheduleOptions(seed=seed))
     files = write_plan(plan, Path(work) / f"designed-{budget_min:g}")
     return read_rig_plan(files["plan"])
 

@@ -87,7 +87,8 @@ from ident.sim.virtual_rig import default_plan, simulate_session
 from ident.sim.virtual_track import log_track_run, make_track_run
 from planner.demo import DEMO_LIBRARY_PATH
 from planner.objective import score_setups
-from planner.predict import METRIC_OUTPUTS, as_loop_plant, predict_setups
+from planner.plant import as_loop_plant
+from planner.predict import METRIC_OUTPUTS, predict_setups
 from planner.setups import Setup, enumerate_setups
 from planner.trackdrive import build_track_drive, make_target, residual_shares
 

@@ -10,6 +10,7 @@ import pytest
 import ident
 from ident.data.session import read_session
 from planner.cli import build_parser, main
+from planner.options import LoopOptions
 
 
 def test_rig_simulate_writes_a_session(tmp_path, capsys):
@@ -159,7 +160,8 @@ def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
 
     lib = read_shock_library(tmp_path / "shocks.toml")
     ref = predict_setups(load_model(model), read_drive(tmp_path / "drive.csv", units="imperial"),
-                         read_setups(tmp_path / "setups.csv", lib), lib, oversample=2).table
+                         read_setups(tmp_path / "setups.csv", lib), lib,
+                         loop=LoopOptions(oversample=2)).table
     ref = ranking_to_units(ref, "imperial")
     for c in ("LF", "RF", "LR", "RR"):
         np.testing.assert_allclose(table[f"tire_force_rms_{c}"].to_numpy(),

@@ -23,6 +23,7 @@ from planner.report.ranking import ranking_columns
 from planner.setups import (Setup, enumerate_setups, inventory_shortfall, read_setups,
                             resolve_baseline, setup_space)
 from planner.sweep import sweep_setups
+from planner.options import RunOptions
 
 TRUTH = ClickerDamper()   # ls 0-20 clicks (step 1), hs 0-4 turns (step 0.25): 21 x 17
 DYNO_SPEEDS = (0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.5)
@@ -192,7 +193,7 @@ def test_rank_screens_the_grid_and_simulates_the_best(ranked, paper_model, track
 def test_sweep_screens_the_grid_lazily(ranked, paper_model, track_drive, lib, front_grid):
     """sweep on the same grid (one process): the same best setup as rank."""
     res = sweep_setups(paper_model, track_drive, lib, constraints=front_grid, baseline="B20",
-                       top=4, scheduler="none", progress=False)
+                       top=4, run=RunOptions(scheduler="none"), progress=False)
     assert res.settings["n_candidates"] == N_GRID
     assert res.best == ranked.best
     assert res.table.index[0].startswith("TTX@")

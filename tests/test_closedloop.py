@@ -576,9 +576,9 @@ def test_elements_never_active_change_nothing(gt_plant, bumpstop_vehicle, one_bl
     more rows, to RTOL_OUTPUT_PRODUCT)."""
     drive = _gt_drive(bumpstop_vehicle, 10.0)
     plain = simulate(gt_plant, drive, _gt_shocks(), oversample=2)
-    far = simulate(gt_plant, drive, _gt_shocks(), oversample=2, bump_stops=_stops(1.0, 1.0))
+    far = simulate(gt_plant, drive, _gt_shocks(), oversample=2, stop_tables=_stops(1.0, 1.0))
     none = simulate(gt_plant, drive, _gt_shocks(), oversample=2,
-                    bump_stops={"LF": None, "RR": None})
+                    stop_tables={"LF": None, "RR": None})
     heavy = simulate(gt_plant, drive, _gt_shocks(), oversample=2,
                      static_corner_load_n=[1e8] * 4)
     for res in (far, none):
@@ -629,7 +629,7 @@ def test_bump_stop_and_spring_share_a_quasi_static_push():
     shocks = [LinearShock("L", 9000.0)] * 4
     s0 = 0.004
     stop = (s0, STOP_TRAVEL_M, STOP_FORCE_N)
-    res = simulate(plant, drive, shocks, oversample=2, bump_stops=[stop] * 4)
+    res = simulate(plant, drive, shocks, oversample=2, stop_tables=[stop] * 4)
     plain = simulate(plant, drive, shocks, oversample=2)
     # the table, linear between its points (the answer lies inside it)
     expected = brentq(lambda s: k * s + np.interp(s - s0, STOP_TRAVEL_M, STOP_FORCE_N, left=0.0)
@@ -658,8 +658,8 @@ def test_bump_stops_at_realistic_stiffness_converge_with_the_step(gt_plant, bump
 
     drive = _gt_drive(bumpstop_vehicle, 20.0)
     stops = _stops(0.0035, 0.0045)
-    ref = simulate(gt_plant, drive, _gt_shocks(), oversample=16, bump_stops=stops)
-    got = simulate(gt_plant, drive, _gt_shocks(), oversample=2, bump_stops=stops)
+    ref = simulate(gt_plant, drive, _gt_shocks(), oversample=16, stop_tables=stops)
+    got = simulate(gt_plant, drive, _gt_shocks(), oversample=2, stop_tables=stops)
     share = ref.elements["bump_stop_contact_share_LF"]
     assert 0.03 < share < 0.10
     m_ref = compute_metrics(ref.channels, fs=100.0).values
@@ -705,7 +705,7 @@ def test_elements_batch_equals_single(gt_plant, bumpstop_vehicle, one_blas_threa
     batch = simulate_batch(gt_plant, drive, setups, oversample=2, bump_stops=stops,
                            static_corner_load_n=static)
     for i, (s, st) in enumerate(zip(setups, stops)):
-        one = simulate(gt_plant, drive, s, oversample=2, bump_stops=st,
+        one = simulate(gt_plant, drive, s, oversample=2, stop_tables=st,
                        static_corner_load_n=static)
         assert batch.newton_iterations[i] == one.newton_iterations
         for name, x in one.channels.items():
@@ -800,13 +800,13 @@ def test_batch_metrics_with_elements_of_a_setup_do_not_depend_on_its_batch(
 
 
 BAD_ELEMENTS = [
-    ({"bump_stops": {"LF": (0.003, [0.0, 0.01], [0.0, -5.0])}}, ValueError, "falls"),
-    ({"bump_stops": {"LF": (-0.001, [0.0, 0.01], [0.0, 50.0])}}, ValueError, ">= 0"),
-    ({"bump_stops": {"LF": (0.003, [0.0, 0.01, 0.005], [0.0, 50.0, 60.0])}}, ValueError,
+    ({"stop_tables": {"LF": (0.003, [0.0, 0.01], [0.0, -5.0])}}, ValueError, "falls"),
+    ({"stop_tables": {"LF": (-0.001, [0.0, 0.01], [0.0, 50.0])}}, ValueError, ">= 0"),
+    ({"stop_tables": {"LF": (0.003, [0.0, 0.01, 0.005], [0.0, 50.0, 60.0])}}, ValueError,
      "strictly"),
-    ({"bump_stops": {"XX": (0.003, [0.0, 0.01], [0.0, 50.0])}}, ValueError,
+    ({"stop_tables": {"XX": (0.003, [0.0, 0.01], [0.0, 50.0])}}, ValueError,
      r"unknown corner\(s\) \['XX'\]"),
-    ({"bump_stops": {"LF": "BS-F"}}, TypeError, "contact_travel_m"),
+    ({"stop_tables": {"LF": "BS-F"}}, TypeError, "contact_travel_m"),
     ({"static_corner_load_n": [3000.0, -1.0, 3000.0, 3000.0]}, ValueError, "positive static"),
 ]
 

@@ -16,6 +16,8 @@ from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock
 from ident.sim.dampers import ClickerDamper
 from planner import design as D
+from planner.design import information as DI
+from planner.design import solve as DS
 from planner.design import (
     candidate_runs,
     change_time_min,
@@ -26,6 +28,7 @@ from planner.design import (
 from planner.objective import default_objective
 from planner.rig_spec import RigSpec, default_rig
 from planner.setups import Setup
+from planner.design import CandidateOptions, InformationOptions
 
 # the analytic score gradient against forward differences of the same (frozen) linearization,
 # with steps of 1e-6 of |H|: second-order terms leave ~1e-5 relative
@@ -68,9 +71,11 @@ def click_plan(paper_vehicle, click_crate):
     """A plan on the adjustable crate, the clicker at the front, three of its settings the
     candidates (about 2 s; candidate_runs' own choice is tested on its own)."""
     return design_experiment(paper_vehicle, click_crate, budget_min=CLICK_BUDGET_MIN,
-                             baseline=["TTX", "TTX", "B20", "B20"], kinds=("noise",),
-                             durations_s=(60.0,), n_bands=24, n_design_bands=4,
-                             shocks=["TTX@ls=0,hs=0", "TTX@ls=20,hs=4", "TTX@hs=0"],
+                             baseline=["TTX", "TTX", "B20", "B20"],
+                             candidates=CandidateOptions(kinds=("noise",), durations_s=(60.0,),
+                                                         shocks=["TTX@ls=0,hs=0", "TTX@ls=20,hs=4",
+                                                                 "TTX@hs=0"]),
+                             information=InformationOptions(n_bands=24, n_design_bands=4),
                              rig=CLICK_RIG)
 
 
@@ -118,17 +123,18 @@ def test_one_run_has_rank_seven_swaps_add_up_to_eleven(paper_model, demo_library
     edges = np.geomspace(0.5, 20, 9)
     f_c = np.sqrt(edges[:-1] * edges[1:])
     setups = [base, Setup("s", dict(zip(CORNERS, ("L12", "L28", "DS", "L12"))))]
-    from planner.design import _candidate_information, _drive_maker
+    from planner.design.information import candidate_information as _candidate_information
+    from planner.design.information import drive_maker as _drive_maker
 
     make = _drive_maker(paper_model.params, None)
     info, _ = _candidate_information(plant, setups, ["noise"],
                                      {"noise": make("noise", 60.0, 1, "n")}, demo_library,
                                      edges, f_c)
-    both = D._herm(info[0, 0, 3] + info[1, 0, 3])
+    both = DI.hermitian(info[0, 0, 3] + info[1, 0, 3])
     d = 1 / np.sqrt(np.real(np.diag(both)))  # the inputs' units span 12 decades: scale first
 
     def rank(M):
-        return np.linalg.matrix_rank(d[:, None] * D._herm(M) * d[None, :], tol=1e-8)
+        return np.linalg.matrix_rank(d[:, None] * DI.hermitian(M) * d[None, :], tol=1e-8)
 
     assert [rank(info[0, 0, 3]), rank(info[1, 0, 3])] == [7, 7]
     assert np.allclose(info[0, 0][:, 7:, 7:], 0.0)  # c_bar linear: dF = 0
@@ -150,16 +156,16 @@ def test_score_gradient_against_finite_differences(paper_model, demo_library, tr
     f_c = np.sqrt(edges[:-1] * edges[1:])
     sos = signal.butter(4, (1, 20), "bandpass", fs=100.0, output="sos")
     x = np.vstack([track_drive.channels[c] - track_drive.channels[c].mean() for c in RIG_INPUTS])
-    _, SB = D._band_power(x, 100.0, edges,
+    _, SB = DI._band_power(x, 100.0, edges,
                           weight=lambda f: np.abs(signal.sosfreqz(sos, f, fs=100.0)[1]) ** 4)
     H = plant.frequency_response(f_c)
     models = [s.resolve(demo_library) for s in setups]
     args = (plant.output_names, plant.cbar_n_s_m, f_c, SB, models, sig, default_objective(),
             sc.table.loc["baseline"].to_dict())
-    g, s0 = D._score_gradients(H, *args, return_scores=True)
+    g, s0 = DI._score_gradients(H, *args, return_scores=True)
     rng = np.random.default_rng(5)
     dH = (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape)) * np.abs(H) * 1e-6
-    _, s1 = D._score_gradients(H + dH, *args, return_scores=True)
+    _, s1 = DI._score_gradients(H + dH, *args, return_scores=True)
     pred = np.array([2 * np.real(np.sum(g[k] * np.transpose(dH, (2, 0, 1))))
                      for k in range(len(models))])
     assert_allclose(s1 - s0, pred, rtol=RTOL_GRADIENT, atol=1e-3 * np.abs(pred).max())
@@ -177,10 +183,10 @@ def test_order_swaps_least():
 
     def changes(order):
         seq = [start] + [setups[k] for k in order]
-        return sum(D._changes(a, b) for a, b in zip(seq, seq[1:]))
+        return sum(DS._changes(a, b) for a, b in zip(seq, seq[1:]))
 
     best = min(changes(p) for p in itertools.permutations(range(len(setups))))
-    order = D._order(setups, start)
+    order = DS.swap_order(setups, start)
     assert sorted(order) == list(range(len(setups))) and changes(order) == best
 
 
@@ -188,7 +194,7 @@ def test_designed_plan_fits_the_budget_and_identifies(paper_vehicle, demo_librar
     """A 30-minute D-optimal plan: in budget (swaps included), every run a known candidate,
     information of rank 11 in every band, shares summing to 1, no worse than the greedy."""
     plan = design_experiment(paper_vehicle, demo_library, budget_min=30.0, baseline="B20",
-                             durations_s=(60.0, 120.0))
+                             candidates=CandidateOptions(durations_s=(60.0, 120.0)))
     assert plan.total_min <= 30.0 + 1e-9 and plan.solver["status"] == "optimal"
     t = plan.table()
     assert t["start_min"].is_monotonic_increasing and t.iloc[0]["changed"] == ""
@@ -221,7 +227,7 @@ def test_refusals(paper_vehicle, demo_library, base):
         design_experiment(paper_vehicle, demo_library, budget_min=30.0, criterion="e")
     with pytest.raises(PlannerError, match="cannot buy runs that identify"):
         design_experiment(paper_vehicle, demo_library, budget_min=8.0, baseline="B20",
-                          durations_s=(60.0,))
+                          candidates=CandidateOptions(durations_s=(60.0,)))
 
 
 @pytest.mark.slow
@@ -284,7 +290,7 @@ def test_an_unidentifiable_plan_within_budget_does_not_blame_the_budget():
     runs still not identifying, the message names the runs and the drive, not the budget."""
     from types import SimpleNamespace
 
-    from planner.design import _check_plan_identifiable
+    from planner.design.core import _check_plan_identifiable
 
     rig = default_rig()
     cands = [SimpleNamespace(duration_s=60.0)]
@@ -335,7 +341,7 @@ def test_a_click_change_costs_seconds_a_swap_minutes(click_crate):
     # the order changes the car least: clicks between the swaps, not swaps between clicks
     soft = Setup("soft", dict.fromkeys(CORNERS, "TTX@ls=20,hs=4"))
     b20 = Setup("b20", dict.fromkeys(CORNERS, "B20"))
-    order = D._order([soft, b20, two_clicks], on, rig)
+    order = DS.swap_order([soft, b20, two_clicks], on, rig)
     assert [("soft", "b20", "c")[k] for k in order] in (["c", "soft", "b20"],
                                                       ["soft", "c", "b20"])
 

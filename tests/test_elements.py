@@ -14,6 +14,7 @@ from planner.elements import (
 )
 from planner.errors import PlannerError
 from planner.setups import Setup
+from planner.options import ElementOptions, RunOptions
 
 #: Contact travels are gap - packer: exact in binary for these millimetre values to 1e-15 m.
 TRAVEL_TOL_M = 1e-12
@@ -253,7 +254,8 @@ def test_declared_bump_stops_predict_the_known_car(paper_plan, bumpstop_vehicle)
     setups.append(Setup("baseline", base_ids))
     assert len(setups) >= 40
     drive = _validation_drive(bumpstop_vehicle, 16e-6)
-    truth = predict_setups(bumpstop_vehicle, drive, setups, lib, elements=model.elements)
+    truth = predict_setups(bumpstop_vehicle, drive, setups, lib,
+                           elements=ElementOptions(use_model=model.elements))
     pred = predict_setups(model, drive, setups, lib)
     front = truth.table.loc["baseline", ["bump_stop_contact_share_LF",
                                          "bump_stop_contact_share_RF"]]
@@ -262,13 +264,15 @@ def test_declared_bump_stops_predict_the_known_car(paper_plan, bumpstop_vehicle)
     assert med <= REAL_MEDIAN and mx <= REAL_MAX and rho >= REAL_SPEARMAN and same
     np.testing.assert_allclose(pred.table["bump_stop_contact_share_LF"],
                                truth.table["bump_stop_contact_share_LF"], atol=0.01)
-    linear = predict_setups(model, drive, setups, lib, elements=False, bump_stops=stops)
+    linear = predict_setups(model, drive, setups, lib, elements=ElementOptions(use_model=False,
+                                                                               bump_stops=stops))
     assert _compare(truth, linear)[1] > 3 * REAL_MAX  # the stops matter on this car
     # the linear part is the car without its stops: the stop force left the model
     bare = [Setup(s.name, dict(s.shocks)) for s in setups if s.bump_stops is None
             and s.packers_m is None]
     med, mx, _, _ = _compare(predict_setups(bumpstop_vehicle, drive, bare, lib),
-                             predict_setups(model, drive, bare, lib, elements=False))
+                             predict_setups(model, drive, bare, lib,
+                                            elements=ElementOptions(use_model=False)))
     assert med <= REAL_MEDIAN and mx <= REAL_MAX
 
 
@@ -289,7 +293,8 @@ def test_declared_static_loads_predict_lift_off(paper_plan, bumpstop_vehicle):
     setups = [Setup(f"{f.id}/{r.id}", {"LF": f.id, "RF": f.id, "LR": r.id, "RR": r.id})
               for f in crate for r in crate]
     drive = _validation_drive(bumpstop_vehicle, 32e-6)
-    truth = predict_setups(bumpstop_vehicle, drive, setups, lib, static_corner_load_n=static)
+    truth = predict_setups(bumpstop_vehicle, drive, setups, lib,
+                           elements=ElementOptions(static_corner_load_n=static))
     pred = predict_setups(model, drive, setups, lib)
     shares = truth.table[[f"tire_liftoff_share_{c}" for c in CORNERS]].max()
     assert 0.01 <= shares.max() <= 0.03
@@ -337,8 +342,9 @@ def test_rank_tries_packers_and_stops(bumpstop_vehicle, gt_case):
 
     setups = enumerate_setups(gt_case["crate"])
     r = rank_setups(bumpstop_vehicle, gt_case["drive"], gt_case["crate"], setups=setups,
-                    elements=gt_case["car"], vary_packers_m={"front": [0.0, 0.002]},
-                    vary_bump_stops={"front": ["BS-F", "BS-F2"]}, top=40, n_check=0,
+                    elements=ElementOptions(use_model=gt_case["car"],
+                                            vary_packers_m={"front": [0.0, 0.002]},
+                    vary_bump_stops={"front": ["BS-F", "BS-F2"]}), top=40, n_check=0,
                     uncertainty=False)
     # per setup: itself (BS-F, 0 mm), BS-F 2 mm, BS-F2 0 mm, BS-F2 2 mm
     assert len(r.screening) == 4 * len(setups)
@@ -356,8 +362,10 @@ def test_sweep_simulates_every_choice(bumpstop_vehicle, gt_case):
     from planner.sweep import sweep_setups
 
     res = sweep_setups(bumpstop_vehicle, gt_case["drive"], gt_case["crate"],
-                       elements=gt_case["car"], vary_packers_m={"front": [0.0, 0.002]},
-                       top=2, scheduler="none", progress=False)
+                       elements=ElementOptions(use_model=gt_case["car"],
+                                               vary_packers_m={"front": [0.0, 0.002]}),
+                       run=RunOptions(scheduler="none"),
+                       top=2, progress=False)
     n_top = res.settings["n_top"]
     assert len(res.table) >= 2 * n_top
     assert {"packer_LF", "bump_stop_LF"} <= set(res.table.columns)
@@ -365,7 +373,7 @@ def test_sweep_simulates_every_choice(bumpstop_vehicle, gt_case):
         sweep_setups(bumpstop_vehicle, gt_case["drive"], gt_case["crate"],
                      setups=[Setup("x", dict.fromkeys(CORNERS, "G1.00"),
                                    packers_m={"LF": 0.001})],
-                     scheduler="none", progress=False)
+                     run=RunOptions(scheduler="none"), progress=False)
 
 
 def test_cli_predict_and_rank_with_bump_stops(gt_case, capsys):

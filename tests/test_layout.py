@@ -26,7 +26,12 @@ one subprocess check) and enforces, one test per rule:
   module is a kernel module when more than half of its lines lie in
   module-level functions decorated with a numba compiler (:data:`NUMBA_DECORATORS`,
   as ``@numba.njit``, ``@nb.njit(...)``, ``@njit`` ...; from the first
-  decorator line to the function's last line).
+  decorator line to the function's last line);
+- no public function or method (numba kernels included) with more than
+  :data:`MAX_PARAMETERS` parameters (positional, keyword-only, ``*args`` and
+  ``**kwargs`` each count one; a method's ``self``/``cls`` does not); private
+  names (a leading underscore) and functions nested in functions are exempt: group
+  the options of a concept in one keyword-only object (:mod:`planner.options`).
 
 Every checker takes the scanned tree as an argument, and the self-tests at the
 end feed each one a small synthetic package in ``tmp_path`` with one violation
@@ -56,6 +61,8 @@ HEAVY = ("casadi", "cvxpy", "distributed", "dask", "matplotlib", "openpyxl")
 #: The lower layer never imports the upper one.
 LOWER, UPPER = "ident", "planner"
 MAX_LINES = 1500
+#: Parameters a public function or method may take at most.
+MAX_PARAMETERS = 16
 #: numba's compiling decorators; a function decorated with one of these is compiled code.
 NUMBA_DECORATORS = frozenset({"jit", "njit", "vectorize", "guvectorize", "cfunc",
                               "generated_jit", "stencil"})
@@ -476,6 +483,43 @@ def long_modules(project, max_lines=MAX_LINES):
     return out
 
 
+def n_parameters(node):
+    """Parameters of a function definition: positional, keyword-only, ``*args``,
+    ``**kwargs``; a first ``self``/``cls`` not counted."""
+    a = node.args
+    names = [p.arg for p in a.posonlyargs + a.args]
+    n = len(names) + len(a.kwonlyargs) + (a.vararg is not None) + (a.kwarg is not None)
+    return n - 1 if names and names[0] in ("self", "cls") else n
+
+
+def _public_functions(body, prefix=""):
+    """``(qualified name, node)`` of the public functions and methods in `body` (module or
+    class level; a private class's methods and nested functions are not public)."""
+    for node in body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            if not _is_private(node.name):
+                yield prefix + node.name, node
+        elif isinstance(node, ast.ClassDef) and not _is_private(node.name):
+            yield from _public_functions(node.body, f"{prefix}{node.name}.")
+        elif isinstance(node, (ast.If, ast.Try)):
+            yield from _public_functions(node.body, prefix)
+            for part in getattr(node, "orelse", []), getattr(node, "finalbody", []):
+                yield from _public_functions(part, prefix)
+            for h in getattr(node, "handlers", []):
+                yield from _public_functions(h.body, prefix)
+
+
+def many_parameters(project, max_parameters=MAX_PARAMETERS):
+    """Public functions and methods with more than `max_parameters` parameters."""
+    out = []
+    for mod in project.modules.values():
+        for name, node in _public_functions(mod.tree.body):
+            n = n_parameters(node)
+            if n > max_parameters:
+                out.append(f"{mod.rel}:{node.lineno}: {mod.name}.{name}: {n} parameters")
+    return out
+
+
 _PROBE = """\
 import sys
 heavy = {heavy!r}
@@ -572,6 +616,14 @@ def test_no_module_over_max_lines(project):
     assert not offenders, _message(
         f"modules over {MAX_LINES} lines that are not compiled-kernel modules", offenders,
         "split them by concept")
+
+
+def test_no_public_function_over_max_parameters(project):
+    offenders = many_parameters(project)
+    assert not offenders, _message(
+        f"public functions or methods with more than {MAX_PARAMETERS} parameters", offenders,
+        "group the options of one concept in a keyword-only options object "
+        "(planner.options), or make a kernel's helper private")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -707,3 +759,27 @@ def test_self_long_modules(tmp_path):
     assert kernel_share(project.modules["pkg.half"])[0] == 43
     found = long_modules(project, max_lines=100)
     assert sorted(f.split(":")[0] for f in found) == ["pkg/half.py", "pkg/long.py"], found
+
+
+def test_self_many_parameters(tmp_path):
+    def sig(n, first=""):
+        return ", ".join(([first] if first else []) + [f"a{k}" for k in range(n)])
+    root = _tree(tmp_path, {
+        "pkg/a.py": (f"def wide({sig(17)}):\n    pass\n"                    # 17: caught
+                     f"def ok({sig(16)}):\n    pass\n"                      # 16: fine
+                     f"def _private({sig(30)}):\n    pass\n"               # private: exempt
+                     f"def star({sig(15)}, *args, **kwargs):\n    pass\n"  # 17 with both
+                     f"def kwonly({sig(10)}, *, {', '.join(f'k{k}' for k in range(7))}):\n"
+                     "    pass\n"                                          # 17
+                     f"def outer():\n    def inner({sig(20)}):\n        pass\n"),
+        "pkg/b.py": (f"class C:\n    def m({sig(16, 'self')}):\n        pass\n"  # 16 + self
+                     f"    @classmethod\n    def c({sig(17, 'cls')}):\n        pass\n"
+                     f"class _P:\n    def m({sig(20, 'self')}):\n        pass\n"
+                     "import numba as nb\n"
+                     f"@nb.njit\ndef kern({sig(18)}):\n    pass\n"),         # kernels too
+    })
+    project = scan(root, ("pkg",))
+    found = many_parameters(project)
+    assert sorted(f.split(": ")[1] for f in found) == [
+        "pkg.a.kwonly", "pkg.a.star", "pkg.a.wide", "pkg.b.C.c", "pkg.b.kern"], found
+    assert n_parameters(ast.parse(f"def f({sig(3, 'self')}): pass").body[0]) == 3

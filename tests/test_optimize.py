@@ -28,8 +28,11 @@ from planner.optimize import (
 )
 from planner.optimize.constraints import constraint_rows
 from planner.optimize.scan import scan_curves
-from planner.predict import as_loop_plant, predict_setups, prepare_drive
+from planner.plant import as_loop_plant
+from planner.predict import predict_setups, prepare_drive
 from planner.setups import Setup, read_setups, resolve_baseline
+from planner.optimize import CurveOptions, SolverOptions
+from planner.optimize.scan import ScanOptions
 
 # issue 9: a knot force moved by +-5 % (within the constraints) improves the verified score by
 # no more than 0.2 %: the optimum is a stationary point of the time-domain score
@@ -73,7 +76,8 @@ def known_run(paper_model, short_drive, demo_library):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                              knots_m_s=SMALL_KNOTS, max_iter=60)
+                              curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                              solver=SolverOptions(max_iter=60))
     return opt, [w for w in caught if issubclass(w.category, OptimizeWarning)]
 
 
@@ -297,7 +301,8 @@ def test_linear_curves_match_a_brute_force_scan(paper_model, short_drive):
     a, b, _ = np.polyfit(lx, s[k - 1:k + 2], 2)
     best = float(np.exp(-b / (2 * a)))
     opt = optimize_curves(paper_model, short_drive, lib, objective=obj, baseline="B",
-                          symmetry="all", linear=True, stationarity=False)
+                          curves=CurveOptions(symmetry="all", linear=True),
+                          solver=SolverOptions(stationarity=False))
     assert opt.solver["success"]
     assert opt.x[0] == pytest.approx(best, rel=RTOL_LINEAR_DAMPING)
     assert opt.curves[0].force(0.1) == pytest.approx(0.1 * opt.x[0])
@@ -309,7 +314,8 @@ def test_symmetry_axle_is_refused_naming_all(paper_model, short_drive, demo_libr
     with pytest.raises(PlannerError, match=r"use 'all' \(one curve for every corner\)"):
         curve_space(symmetry="axle")
     with pytest.raises(PlannerError, match=r"use 'all' \(one curve for every corner\)"):
-        optimize_curves(paper_model, short_drive, demo_library, baseline="B20", symmetry="axle")
+        optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
+                        curves=CurveOptions(symmetry="axle"))
     assert curve_space(symmetry="all").groups == (("all", CORNERS),)
 
 
@@ -325,7 +331,7 @@ def test_bad_inputs(paper_model, short_drive, demo_library):
         optimize_curves(paper_model, short_drive, demo_library, baseline="Z99")
     with pytest.raises(PlannerError, match="symmetry"):
         optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                        symmetry="diagonal")
+                        curves=CurveOptions(symmetry="diagonal"))
     with pytest.raises(PlannerError, match="sampled at 40 Hz"):
         optimize_curves(paper_model, resample_drive(short_drive, 40.0), demo_library,
                         baseline="B20")
@@ -345,8 +351,8 @@ def test_a_stopped_solver_is_reported_with_the_best_verified_iterate(paper_model
     is still a verified, feasible setup no worse than the start."""
     with pytest.warns(OptimizeWarning, match="Maximum_Iterations_Exceeded"):
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                              knots_m_s=SMALL_KNOTS, max_iter=2, stationarity=False,
-                              n_closest=1)
+                              curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                              solver=SolverOptions(max_iter=2, stationarity=False, n_closest=1))
     assert not opt.solver["success"] and opt.solver["status"] == "Maximum_Iterations_Exceeded"
     assert opt.table.loc["optimum", "feasible"]
     assert np.isfinite(opt.score)
@@ -404,7 +410,7 @@ def test_scan_best_linear_matches_a_brute_force_scan(paper_model, short_drive, d
     obj = default_objective()
     scan = scan_curves(paper_model, as_loop_plant(paper_model), [drive], demo_library, space,
                        CurveConstraints(), np.zeros((0, space.n_vars)), np.zeros(0), base, obj,
-                       np.ones(1), "sum", grid_n_s_m=grid, two_slope=False)
+                       np.ones(1), "sum", scan=ScanOptions(grid_n_s_m=grid, two_slope=False))
     lib = ShockLibrary(list(demo_library.values())
                        + [LinearShock(f"c{k}", c, lag_s=lag) for k, c in enumerate(grid)])
     setups = [Setup(f"f{i}r{j}", {"LF": f"c{i}", "RF": f"c{i}", "LR": f"c{j}", "RR": f"c{j}"})
@@ -431,7 +437,7 @@ def test_identified_model_optimum_holds_on_the_known_car(identified_model, paper
                              wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,
                              track_width_m=paper_vehicle.track_front_m, name="track")
     opt = optimize_curves(identified_model, drive, demo_library, baseline="B20",
-                          stationarity=True)
+                          solver=SolverOptions(stationarity=True))
     truth = paper_model.loop_plant(identified_model.cbar_n_s_m)
     lib = ShockLibrary(list(opt.shocks.values()) + list(demo_library.values()))
     names = ["baseline", "optimum", opt.crate_best]
@@ -478,7 +484,7 @@ def test_second_car_optimum_beats_linear_and_two_slope_scans(gt_vehicle, gt_iden
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(gt_identified, drive, demo_library, baseline="DM",
-                              stationarity=False, n_closest=1)
+                              solver=SolverOptions(stationarity=False, n_closest=1))
     assert opt.solver["status"] and "source" in opt.solver
     # buildable: the default constraints hold on the curves
     lo_s, hi_s = SEGMENT_SLOPE_N_S_M
@@ -673,7 +679,7 @@ def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive
     monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(pl, "_STEP_CACHE", {})
     assert compile_curves(paper_model, short_drive, demo_library, baseline="B20",
-                          knots_m_s=SMALL_KNOTS) is True
+                          curves=CurveOptions(knots_m_s=SMALL_KNOTS)) is True
     libs = list(po.jit_cache_dir().glob("steps-*.so"))
     assert len(libs) == 1
 
@@ -685,13 +691,13 @@ def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                              knots_m_s=SMALL_KNOTS, max_iter=2, n_closest=1,
-                              stationarity=False)
+                              curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                              solver=SolverOptions(max_iter=2, n_closest=1, stationarity=False))
     assert opt.solver["jit"] and opt.solver["n_grad"] > 0
     assert list(po.jit_cache_dir().glob("steps-*.so")) == libs
     with pytest.raises(PlannerError, match="symmetry"):
         compile_curves(paper_model, short_drive, demo_library, baseline="B20",
-                       symmetry="diagonal")
+                       curves=CurveOptions(symmetry="diagonal"))
 
 
 def test_quantile_knots_sit_on_the_baselines_shock_speeds(paper_model, short_drive,
@@ -722,8 +728,8 @@ def test_quantile_knots_sit_on_the_baselines_shock_speeds(paper_model, short_dri
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                              knots_m_s="quantiles", max_iter=3, stationarity=False,
-                              n_closest=1)
+                              curves=CurveOptions(knots_m_s="quantiles"),
+                              solver=SolverOptions(max_iter=3, stationarity=False, n_closest=1))
     assert opt.settings["knots"] == "quantiles" and opt.settings["knots_m_s"] == bump
     assert opt.settings["rebound_knots_m_s"] == rebound
     vk = opt.curves[0].v_knots_m_s
@@ -732,7 +738,7 @@ def test_quantile_knots_sit_on_the_baselines_shock_speeds(paper_model, short_dri
     assert opt.score <= opt.settings["scan"]["score"] * (1 + RTOL_SCAN_FLOOR)
     with pytest.raises(PlannerError, match="quantiles"):
         optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                        knots_m_s="median")
+                        curves=CurveOptions(knots_m_s="median"))
 
 
 def test_scan_four_groups_is_coordinate_wise(paper_model, short_drive, demo_library):
@@ -749,7 +755,7 @@ def test_scan_four_groups_is_coordinate_wise(paper_model, short_drive, demo_libr
     cap = 8000.0  # [N s/m] a linear constraint: every rate below it
     scan = scan_curves(paper_model, plant, [drive], demo_library, space, CurveConstraints(),
                        np.eye(4), np.full(4, cap), base, default_objective(), np.ones(1), "sum",
-                       n_verify=4)
+                       scan=ScanOptions(n_verify=4))
     n = SCAN_GRID_RATIOS.size
     assert scan.rates_n_s_m.shape == (4,) and np.all(scan.rates_n_s_m < cap)
     assert scan.n_candidates <= n + 2 * 4 * n
@@ -1027,7 +1033,7 @@ def test_quantile_knots_end_at_the_velocity_range(paper_model, short_drive, demo
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
-                              max_iter=1, stationarity=False, n_closest=1)
+                              solver=SolverOptions(max_iter=1, stationarity=False, n_closest=1))
     s, up = opt.settings, opt.settings["knot_update"]
     assert s["knots"] == "quantiles"
     rng = s["v_range_m_s"]
@@ -1065,7 +1071,7 @@ def default_scan(paper_model, short_drive, demo_library):
     A = np.vstack([a for _, a, _ in fams]) @ space.expansion()
     b = np.concatenate([b for _, _, b in fams])
     scan = scan_curves(paper_model, plant, [drive], demo_library, space, cons, A, b, base,
-                       default_objective(), np.ones(1), "sum", n_verify=3)
+                       default_objective(), np.ones(1), "sum", scan=ScanOptions(n_verify=3))
     return space, A, b, scan, drive, base
 
 

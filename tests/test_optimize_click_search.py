@@ -25,6 +25,8 @@ from planner.optimize import (
 from planner.optimize.click_search import click_axes, nearest_setting
 from planner.predict import predict_setups
 from planner.setups import Setup, read_setups
+from planner.optimize import CurveOptions, SolverOptions
+from planner.options import ElementOptions
 
 TRUTH = ClickerDamper()
 #: The dyno's speeds [m/s] (a 7-speed sweep a side).
@@ -81,14 +83,15 @@ def click_run(paper_model, click_drive, crate):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         return optimize_curves(paper_model, click_drive, crate, baseline="F14",
-                               knots_m_s=SMALL_KNOTS, max_iter=15, n_starts=1,
-                               stationarity=False)
+                               curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                               solver=SolverOptions(max_iter=15, n_starts=1, stationarity=False))
 
 
 def _verified(model, drive, setups, library, optimum):
     """Scores of setups, simulated here (predict_setups, scored against the baseline)."""
     base = optimum.baseline
-    table = predict_setups(model, drive, [base] + list(setups), library, elements=False).table
+    table = predict_setups(model, drive, [base] + list(setups), library,
+                           elements=ElementOptions(use_model=False)).table
     sc = score_setups(table, optimum.objective, baseline=base.name).table
     return sc
 

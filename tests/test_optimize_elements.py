@@ -19,6 +19,8 @@ from planner.optimize.scan import element_predictions, is_element_metric
 from planner.optimize.space import curve_space
 from planner.predict import prepare_drive
 from planner.screen import metric_rows
+from planner.optimize import CurveOptions, SolverOptions
+from planner.options import ElementOptions
 
 #: A progressive bump stop: 100, 267, 500 and 600 kN/m over 15 mm beyond contact (as
 #: tests/test_closedloop.py), touching at 3.5 mm front and 4.5 mm rear from rest.
@@ -148,14 +150,15 @@ def test_element_metric_names():
 def test_bad_packers_are_refused(bumpstop_vehicle, drive, demo_library):
     """A packer thicker than the contact travel, packers without stops, for an unknown group
     or a group without stops, and bounds the wrong way round: refused, naming the fix."""
-    kw = {"baseline": "DM", "knots_m_s": SMALL_KNOTS, "max_iter": 1}
+    kw = {"baseline": "DM", "curves": CurveOptions(knots_m_s=SMALL_KNOTS),
+          "solver": SolverOptions(max_iter=1)}
     cases = [
-        ({"bump_stops": _stops(), "packers": {"front": (0.0, 0.004)}}, "thicker than the gap"),
+        ({"stop_tables": _stops(), "packers": {"front": (0.0, 0.004)}}, "thicker than the gap"),
         ({"packers": {"front": (0.0, 0.002)}}, "without bump stops"),
-        ({"bump_stops": _stops(), "packers": {"axle": (0.0, 0.002)}}, "unknown group 'axle'"),
-        ({"bump_stops": [None, None, *_stops()[2:]], "packers": {"front": (0.0, 0.002)}},
+        ({"stop_tables": _stops(), "packers": {"axle": (0.0, 0.002)}}, "unknown group 'axle'"),
+        ({"stop_tables": [None, None, *_stops()[2:]], "packers": {"front": (0.0, 0.002)}},
          "has no bump stop"),
-        ({"bump_stops": _stops(), "packers": {"rear": (0.003, 0.001)}}, "above the upper"),
+        ({"stop_tables": _stops(), "packers": {"rear": (0.003, 0.001)}}, "above the upper"),
     ]
     for extra, words in cases:
         with pytest.raises(PlannerError, match=words):
@@ -171,9 +174,10 @@ def test_optimum_with_stops_is_verified_with_them(bumpstop_vehicle, drive, demo_
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(bumpstop_vehicle, drive, demo_library, baseline="DM",
-                              knots_m_s=SMALL_KNOTS, max_iter=15, n_starts=1,
-                              stationarity=False, n_closest=1, bump_stops=_stops(),
-                              static_corner_load_n=static)
+                              curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                              solver=SolverOptions(max_iter=15, n_starts=1, stationarity=False,
+                                                   n_closest=1), stop_tables=_stops(),
+                              elements=ElementOptions(static_corner_load_n=static))
     assert opt.settings["bump_stops"] and opt.settings["static_corner_load_n"] == static
     assert opt.packers_m == {}
     assert [st[0] for st in opt.bump_stops] == [0.0035, 0.0035, 0.0045, 0.0045]
@@ -207,9 +211,10 @@ def test_packers_move_where_the_objective_asks(bumpstop_vehicle, drive, demo_lib
             warnings.simplefilter("ignore", OptimizeWarning)
             runs[name] = optimize_curves(bumpstop_vehicle, drive, demo_library, baseline="DM",
                                          objective=Objective(name, weights),
-                                         knots_m_s=SMALL_KNOTS, max_iter=15, n_starts=1,
-                                         stationarity=False, n_closest=1,
-                                         bump_stops=_stops(), packers=bounds)
+                                         curves=CurveOptions(knots_m_s=SMALL_KNOTS),
+                                         solver=SolverOptions(max_iter=15, n_starts=1,
+                                                              stationarity=False, n_closest=1),
+                                         stop_tables=_stops(), packers=bounds)
     for opt in runs.values():
         assert opt.settings["packers"] == {g: list(b) for g, b in bounds.items()}
         for g, p in opt.packers_m.items():

@@ -17,6 +17,7 @@ from planner.predict import predict_setups
 from planner.rank import Ranking, rank_setups
 from planner.screen import screen_setups
 from planner.setups import Setup, enumerate_setups
+from planner.options import UncertaintyOptions
 
 RTOL_SUM = 1e-14  # a weighted sum of metric ratios, summed in another order: round-off only
 TOP = 5
@@ -199,7 +200,7 @@ def test_uncertainty_on_an_identified_model(identified_model, track_drive, demo_
     Monte Carlo settings."""
     r = rank_setups(identified_model, track_drive, demo_library,
                     setups=[baseline_setup] + list(enumerate_setups(demo_library)[::10]),
-                    top=3, n_check=2, uncertainty=True, n_draws=4, seed=5)
+                    top=3, n_check=2, uncertainty=UncertaintyOptions(n_draws=4, seed=5))
     t = r.table
     for m in METRIC_NAMES:
         lo, hi = t[f"{m}_lo"].to_numpy(float), t[f"{m}_hi"].to_numpy(float)

@@ -21,7 +21,8 @@ from planner import screen as screen_mod
 from planner import screen_codegen
 from planner.errors import PlannerError
 from planner.objective import default_objective, score_setups
-from planner.predict import as_loop_plant, predict_setups
+from planner.plant import as_loop_plant
+from planner.predict import predict_setups
 from planner.screen import (
     drive_bands,
     drive_spectrum,
@@ -32,6 +33,7 @@ from planner.screen import (
 )
 from planner.screen_kernels import _band_inverse, _loop_inverse
 from planner.setups import Setup, enumerate_setups
+from planner.options import LoopOptions, ScreenOptions
 
 # Linear shocks, screening vs the time domain on the 60 s track drive. Both are exact linear
 # analyses; what differs is how the drive's power is taken: screening from a Welch estimate
@@ -173,7 +175,8 @@ def test_fixed_point_is_the_stochastic_linearization(paper_model, track_drive, d
     nl = {k: replace(demo_library[k], lag_s=0.0) for k in ("BO", "RB", "TD", "DS")}
     lib = ShockLibrary.from_models(list(nl.values()))
     setup = _lin_setup("nonlinear", "BO", "RB", "TD", "DS")
-    a = screen_setups(paper_model, track_drive, [setup], lib, tol=1e-11, max_iter=200)
+    a = screen_setups(paper_model, track_drive, [setup], lib, screen=ScreenOptions(tol=1e-11,
+                                                                                   max_iter=200))
     sig = a.diagnostics["shock_velocity_rms_linearized"][0]
     assert a.diagnostics["iterations"][0] < 200
     assert np.all((sig > 0.005) & (sig < 0.5))  # plausible shock velocities [m/s]
@@ -475,7 +478,8 @@ def test_deterministic_and_batch_independent(paper_model, track_drive, demo_libr
     setups = [baseline_setup] + list(enumerate_setups(demo_library)[::7])
     whole = screen_setups(paper_model, track_drive, setups, demo_library)
     again = screen_setups(paper_model, track_drive, setups, demo_library)
-    chunked = screen_setups(paper_model, track_drive, setups, demo_library, chunk_size=3)
+    chunked = screen_setups(paper_model, track_drive, setups, demo_library,
+                            screen=ScreenOptions(chunk_size=3))
     parts = [screen_setups(paper_model, track_drive, setups[a:a + 5], demo_library)
              for a in range(0, len(setups), 5)]
     names = whole.metric_names
@@ -517,7 +521,8 @@ def test_band_hz_is_the_metric_band(paper_model, track_drive, demo_library, base
     linear setup), and gives less RMS than the full band."""
     band = (2.0, 8.0)
     s = screen_setups(paper_model, track_drive, [baseline_setup], demo_library, band_hz=band)
-    p = predict_setups(paper_model, track_drive, [baseline_setup], demo_library, band_hz=band)
+    p = predict_setups(paper_model, track_drive, [baseline_setup], demo_library,
+                       loop=LoopOptions(band_hz=band))
     full = screen_setups(paper_model, track_drive, [baseline_setup], demo_library)
     names = s.metric_names
     assert s.settings["band_hz"] == band
@@ -529,7 +534,8 @@ def test_max_iter_reached_is_logged(paper_model, track_drive, demo_library, capl
     """A setup that does not reach the tolerance within max_iter is reported."""
     setup = _lin_setup("nl", "BO", "RB", "TD", "DS")
     with caplog.at_level("WARNING", logger="planner.screen"):
-        s = screen_setups(paper_model, track_drive, [setup], demo_library, max_iter=1)
+        s = screen_setups(paper_model, track_drive, [setup], demo_library,
+                          screen=ScreenOptions(max_iter=1))
     assert s.diagnostics["iterations"][0] == 1
     assert "did not reach the tolerance in 1 iterations" in caplog.text
     assert np.all(np.isfinite(s.table[s.metric_names].to_numpy(float)))
@@ -759,8 +765,8 @@ def test_linear_stop_in_contact_is_a_stiffer_spring():
     setups = [Setup(f"s{i}", {c: sid for c in CORNERS}) for i, sid in enumerate(lib.ids)]
     stop = (0.0, [0.0, 0.01], [0.0, k * 0.01])
     got = screen_setups(plant, drive, setups, lib, bump_stops=[[stop] * 4] * len(setups),
-                        tol=1e-11)
-    want = screen_setups(plant_stiff, drive, setups, lib, tol=1e-11)
+                        screen=ScreenOptions(tol=1e-11))
+    want = screen_setups(plant_stiff, drive, setups, lib, screen=ScreenOptions(tol=1e-11))
     names = [n for n in want.metric_names if not n.startswith("spring_force")]
     assert_allclose(got.table[names].to_numpy(float), want.table[names].to_numpy(float),
                     rtol=RTOL_STIFFER_SPRING)

@@ -32,6 +32,8 @@ from planner.report.sheets import (
     write_key_values,
     write_table,
 )
+from planner.optimize import CurveOptions, SolverOptions
+from planner.design import InformationOptions, ScheduleOptions
 
 # printed width of one Excel width unit at 100 % [pt]: LibreOffice, DejaVu Sans for Calibri
 UNIT_PT = 7.0
@@ -238,7 +240,8 @@ def test_run_sheet_workbook_prints_readably(paper_vehicle, demo_library, tmp_pat
     from planner.testplan import write_run_sheet
 
     plan = design_experiment(paper_vehicle, demo_library, budget_min=90.0, baseline="B20",
-                             n_validation=2, n_bands=24, n_design_bands=6)
+                             schedule=ScheduleOptions(n_validation=2),
+                             information=InformationOptions(n_bands=24, n_design_bands=6))
     for units in ("SI", "imperial"):
         path = write_run_sheet(plan, tmp_path / f"{units}.xlsx", units=units)
         wb = _check_workbook(path, key_value=("information",))
@@ -272,7 +275,8 @@ def test_optimize_workbook_prints_readably(paper_model, track_drive, demo_librar
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(paper_model, drive, demo_library, baseline="B20",
-                              knots_m_s=(0.05, 0.15, 0.4), max_iter=5)
+                              curves=CurveOptions(knots_m_s=(0.05, 0.15, 0.4)),
+                              solver=SolverOptions(max_iter=5))
     files = write_optimum(opt, demo_library, tmp_path / "o", units="imperial")
     wb = _check_workbook(files["xlsx"], key_value=("solver",))
     rep = wb["solver"]

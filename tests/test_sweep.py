@@ -25,6 +25,7 @@ from planner.report.sweep_files import (MAX_STEM_CHARS, case_file_name, case_fil
                                   write_sweep)
 from planner.setups import Setup, enumerate_setups, setup_space
 from planner.sweep import RTOL_SCORE_ROUNDOFF, sweep_setups
+from planner.options import RunOptions
 
 # the drive's rig response is computed with one BLAS thread in a sweep, with all in
 # predict_setups: the last bits of the metrics differ (measured 3e-13 relative)
@@ -114,14 +115,15 @@ def test_space_generation_is_memory_bounded():
 def single(paper_model, track_drive, demo_library):
     """10,000 setups (every 4-corner combination of 10 shocks), one process."""
     return sweep_setups(paper_model, track_drive, demo_library, constraints=TEN_THOUSAND,
-                        scheduler="none", progress=False)
+                        run=RunOptions(scheduler="none"), progress=False)
 
 
 def test_dask_sweep_equals_single_process(single, paper_model, track_drive, demo_library):
     """A LocalCluster of 2 worker processes gives the same ranking and the same numbers, bit
     for bit, as one process (other chunk size too)."""
     dask = sweep_setups(paper_model, track_drive, demo_library, constraints=TEN_THOUSAND,
-                        scheduler="local", n_workers=2, chunk_size=1500, progress=False)
+                        run=RunOptions(scheduler="local", n_workers=2, chunk_size=1500),
+                        progress=False)
     assert single.settings["n_screened"] == dask.settings["n_screened"] == 10_000
     assert dask.settings["scheduler"] == "local" and dask.settings["n_workers"] == 2
     assert single.table.index.tolist() == dask.table.index.tolist()
@@ -138,7 +140,7 @@ def test_dask_sweep_equals_single_process(single, paper_model, track_drive, demo
 def test_chunking_does_not_change_results(single, paper_model, track_drive, demo_library,
                                           chunk_size):
     other = sweep_setups(paper_model, track_drive, demo_library, constraints=TEN_THOUSAND,
-                         scheduler="none", chunk_size=chunk_size, simulate_chunk=7,
+                         run=RunOptions(scheduler="none", chunk_size=chunk_size, simulate_chunk=7),
                          progress=False)
     _frames_identical(single.table, other.table)
     assert_array_equal(single.screening_score, other.screening_score)
@@ -151,14 +153,15 @@ def test_existing_cluster_by_client_and_address(paper_model, track_drive, demo_l
 
     constraints = {"shocks": CRATE_10}
     ref = sweep_setups(paper_model, track_drive, demo_library, constraints=constraints,
-                       top=8, scheduler="none", progress=False)
+                       top=8, run=RunOptions(scheduler="none"), progress=False)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                       dashboard_address=None) as cluster, Client(cluster) as client:
         got = sweep_setups(paper_model, track_drive, demo_library, constraints=constraints,
-                           top=8, client=client, chunk_size=9, progress=False)
+                           top=8, run=RunOptions(client=client, chunk_size=9), progress=False)
         by_address = sweep_setups(paper_model, track_drive, demo_library,
                                   constraints=constraints, top=8,
-                                  scheduler=cluster.scheduler_address, progress=False)
+                                  run=RunOptions(scheduler=cluster.scheduler_address),
+                                  progress=False)
     assert got.settings["scheduler"] == "client"
     assert by_address.settings["scheduler"] == "address"
     assert by_address.settings["address"] == cluster.scheduler_address
@@ -190,7 +193,7 @@ def test_agrees_with_screen_predict_and_rank(paper_model, track_drive, demo_libr
     setups = [baseline_setup] + list(enumerate_setups(demo_library)[::4])
     n_top = 6
     res = sweep_setups(paper_model, track_drive, demo_library, setups=setups, top=n_top,
-                       baseline="baseline", scheduler="none", progress=False)
+                       baseline="baseline", run=RunOptions(scheduler="none"), progress=False)
     label = next(iter(res.cases))
     scr = screen_setups(paper_model, track_drive, setups, demo_library)
     st = res.screening_top[label]
@@ -224,7 +227,7 @@ def test_several_drives_and_models_combine(paper_vehicle, track_drive, demo_libr
               "heavy": build_full_car(replace(paper_vehicle,
                                               sprung_mass_kg=1.2 * paper_vehicle.sprung_mass_kg))}
     kw = dict(constraints={"shocks": ["B20", "L12", "L28", "DS", "DF"]}, top=5,
-              scheduler="none", progress=False)
+              run=RunOptions(scheduler="none"), progress=False)
     mean = sweep_setups(models, [track_drive, other], demo_library, **kw)
     worst = sweep_setups(models, [track_drive, other], demo_library, combine="worst", **kw)
     labels = mean.settings["cases"]
@@ -258,9 +261,12 @@ def test_several_drives_and_models_combine(paper_vehicle, track_drive, demo_libr
     ({"objective": "grip"}, TypeError, "Objective"),
 ])
 def test_bad_options(paper_model, track_drive, demo_library, kwargs, error, match):
+    run_keys = ("scheduler", "chunk_size")
     with pytest.raises(error, match=match):
-        sweep_setups(paper_model, track_drive, demo_library, progress=False,
-                     **{"scheduler": "none", **kwargs})
+        run = RunOptions(**{"scheduler": "none",
+                            **{k: v for k, v in kwargs.items() if k in run_keys}})
+        sweep_setups(paper_model, track_drive, demo_library, progress=False, run=run,
+                     **{k: v for k, v in kwargs.items() if k not in run_keys})
 
 
 def test_unreachable_scheduler_is_a_clear_error(paper_model, track_drive, demo_library,
@@ -268,7 +274,8 @@ def test_unreachable_scheduler_is_a_clear_error(paper_model, track_drive, demo_l
     monkeypatch.setattr(runner_mod, "CONNECT_TIMEOUT_S", 2.0)
     with pytest.raises(PlannerError, match=r"cannot reach the Dask scheduler at "
                        r"'tcp://127.0.0.1:9'.*dask scheduler"):
-        sweep_setups(paper_model, track_drive, demo_library, scheduler="tcp://127.0.0.1:9",
+        sweep_setups(paper_model, track_drive, demo_library,
+                     run=RunOptions(scheduler="tcp://127.0.0.1:9"),
                      progress=False)
 
 
@@ -319,7 +326,7 @@ def test_write_sweep(tmp_path, paper_model, track_drive, demo_library):
     it) names its case file ``case-1-track.csv``; sweep.toml points to it."""
     res = sweep_setups({"paper": paper_model}, {"runs/track.csv": track_drive}, demo_library,
                        constraints={"shocks": ["B20", "L12", "L28", "DS"]}, top=3,
-                       scheduler="none", progress=False)
+                       run=RunOptions(scheduler="none"), progress=False)
     assert res.settings["models"] == ("paper",)
     assert res.settings["drives"] == ("runs/track.csv",)
     out = tmp_path / "out"
@@ -396,11 +403,11 @@ def test_screen_on_a_cluster_equals_screen_setups(paper_model, track_drive, demo
     ref = screen_setups(paper_model, track_drive, setups, demo_library)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                       dashboard_address=None) as cluster:
-        got = screen_setups_on(paper_model, track_drive, setups, demo_library, chunk_size=97,
-                               scheduler=cluster.scheduler_address)
+        got = screen_setups_on(paper_model, track_drive, setups, demo_library,
+                               run=RunOptions(chunk_size=97, scheduler=cluster.scheduler_address))
         ranked = rank_setups(paper_model, track_drive, demo_library, setups=setups[:60],
                              top=6, n_check=4, uncertainty=False,
-                             scheduler=cluster.scheduler_address)
+                             run=RunOptions(scheduler=cluster.scheduler_address))
     assert got.settings["scheduler"] == "address"
     _frames_identical(ref.table, got.table)
     assert_array_equal(ref.diagnostics["iterations"], got.diagnostics["iterations"])
@@ -410,8 +417,8 @@ def test_screen_on_a_cluster_equals_screen_setups(paper_model, track_drive, demo
     _frames_identical(plain.table, ranked.table)
     _frames_identical(plain.screening, ranked.screening)
     with pytest.raises(PlannerError, match="chunk_size"):
-        screen_setups_on(paper_model, track_drive, setups, demo_library, chunk_size=0,
-                         scheduler="none")
+        screen_setups_on(paper_model, track_drive, setups, demo_library,
+                         run=RunOptions(chunk_size=0, scheduler="none"))
 
 
 def test_cli_rank_scheduler(tmp_path, track_drive, capsys):

@@ -36,6 +36,7 @@ from planner.testplan import (
     write_plan,
     write_run_sheet,
 )
+from planner.design import ScheduleOptions
 
 #: The plan: a budget that buys identification runs and two validation runs.
 BUDGET_MIN = 90.0
@@ -62,7 +63,7 @@ CLICK_SETUPS = [("TTX@ls=8,hs=2", "TTX@ls=8,hs=2", "B20", "B20"),
 def plan(paper_vehicle, demo_library):
     """A plan on the paper car and the demo crate, with validation runs (about 15 s)."""
     return design_experiment(paper_vehicle, demo_library, budget_min=BUDGET_MIN,
-                             baseline="B20", n_validation=N_VALIDATION)
+                             baseline="B20", schedule=ScheduleOptions(n_validation=N_VALIDATION))
 
 
 @pytest.fixture(scope="module")

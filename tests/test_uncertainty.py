@@ -26,6 +26,7 @@ from planner.uncertainty import (
     random_error_scale,
     unresolved_pairs,
 )
+from planner.options import LoopOptions, UncertaintyOptions
 
 N_AVERAGES = 51  # the paper's 5 runs of 800 s in Welch blocks: 51 averages, 11 inputs
 # For small errors the draws are a linear function of the perturbation, which scales with the
@@ -179,7 +180,7 @@ def test_screening_an_frf_plant_matches_the_state_space_plant(known_plant, track
 
 def _unc(plant, g2, drive, setups, library, **kw):
     return prediction_uncertainty(SimpleNamespace(frf=_frf(plant, g2)), drive, setups, library,
-                                  **{"n_draws": 20, "seed": 1, **kw})
+                                  draws=UncertaintyOptions(**{"n_draws": 20, "seed": 1, **kw}))
 
 
 def test_perfect_coherence_gives_no_spread(known_plant, track_drive, demo_library,
@@ -276,10 +277,13 @@ def test_systematic_terms_of_an_identified_model(identified_model, track_drive, 
     from oversample 2 to 4 (the quadratic hold's error falls as h^3)."""
     from planner.predict import predict_setups
 
-    p2 = predict_setups(identified_model, track_drive, few_setups, demo_library, oversample=2)
-    p4 = predict_setups(identified_model, track_drive, few_setups, demo_library, oversample=4)
+    p2 = predict_setups(identified_model, track_drive, few_setups, demo_library,
+                        loop=LoopOptions(oversample=2))
+    p4 = predict_setups(identified_model, track_drive, few_setups, demo_library,
+                        loop=LoopOptions(oversample=4))
     u = prediction_uncertainty(identified_model, track_drive, few_setups, demo_library,
-                               n_draws=8, predictions=p2, oversample=2)
+                               draws=UncertaintyOptions(n_draws=8), loop=LoopOptions(oversample=2),
+                               predictions=p2)
     names = u.metric_names
     assert u.settings["terms"] == ["random", "fit", "reduction", "discretization"]
     disc = 8 / 7 * (p2.table[names] - p4.table[names]) / p2.table[names]
@@ -300,7 +304,7 @@ def test_prediction_uncertainty_bad_inputs(paper_model, known_plant, track_drive
         prediction_uncertainty(paper_model, track_drive, few_setups, demo_library)
     with pytest.raises(ValueError, match="n_draws must be at least 2, got 1"):
         prediction_uncertainty(SimpleNamespace(frf=_frf(known_plant, 0.9)), track_drive,
-                               few_setups, demo_library, n_draws=1)
+                               few_setups, demo_library, draws=UncertaintyOptions(n_draws=1))
 
 
 # ---------------------------------------------------------------- calibration and light modes
@@ -332,18 +336,18 @@ def test_random_scale_option_and_its_default(known_plant, track_drive, demo_libr
     u = _unc(known_plant, 0.99, track_drive, few_setups, demo_library)
     assert u.settings["random_scale"] == random_error_scale(frf)
     assert u.settings["light_modes"] == []
-    u1 = prediction_uncertainty(model, track_drive, few_setups, demo_library, n_draws=20,
-                                random_scale=1.0)
-    u2 = prediction_uncertainty(model, track_drive, few_setups, demo_library, n_draws=20,
-                                random_scale=2.0)
+    u1 = prediction_uncertainty(model, track_drive, few_setups, demo_library,
+                                draws=UncertaintyOptions(n_draws=20, random_scale=1.0))
+    u2 = prediction_uncertainty(model, track_drive, few_setups, demo_library,
+                                draws=UncertaintyOptions(n_draws=20, random_scale=2.0))
     assert u1.settings["random_scale"] == 1.0
     w1 = (u1.ratio_hi - u1.ratio_lo).to_numpy()
     w2 = (u2.ratio_hi - u2.ratio_lo).to_numpy()
     assert_allclose(w2 / w1, 2.0, rtol=RTOL_WIDTH_SCALING_SMALL)
     for bad in (-1.0, np.nan):
         with pytest.raises(ValueError, match="random_scale must be a finite number >= 0"):
-            prediction_uncertainty(model, track_drive, few_setups, demo_library, n_draws=2,
-                                   random_scale=bad)
+            prediction_uncertainty(model, track_drive, few_setups, demo_library,
+                                   draws=UncertaintyOptions(n_draws=2, random_scale=bad))
 
 
 def _modal_model(zeta, f_hz=13.0, n_out=4, light_pairs=None):

@@ -9,6 +9,7 @@ import pytest
 
 from ident.data.channels import CORNERS
 from planner.errors import PlannerError
+from planner.options import RunOptions
 
 #: The stiffened plant and the rebuilt physical model are the same linear system: they
 #: agree to rounding (1e-13 measured; the modal forms differ).
@@ -592,15 +593,17 @@ def test_whatif_on_a_cluster_equals_one_process(cluster_case):
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                       dashboard_address=None) as cluster:
         for method, chunk in (("time", 2), ("time", None), ("screening", 5)):
-            got = evaluate_whatif(*args, method=method, scheduler=cluster.scheduler_address,
-                                  chunk_size=chunk, **kw)
+            got = evaluate_whatif(*args, method=method,
+                                  run=RunOptions(scheduler=cluster.scheduler_address,
+                                                 chunk_size=chunk), **kw)
             _same_whatif(single[method], got)
             assert got.settings["scheduler"] == "address"
             assert got.settings["address"] == cluster.scheduler_address
             assert got.settings["n_workers"] == 2
         assert got.settings["n_tasks"] > got.settings["n_conditions"] // 2  # groups were cut
         with Client(cluster, set_as_default=False) as client:
-            got = evaluate_whatif(*args, method="time", client=client, chunk_size=7, **kw)
+            got = evaluate_whatif(*args, method="time", run=RunOptions(client=client,
+                                                                       chunk_size=7), **kw)
         assert got.settings["scheduler"] == "client"
         _same_whatif(single["time"], got)
 
@@ -623,9 +626,9 @@ def test_whatif_bad_scheduler_fails_before_any_work(cluster_case, monkeypatch):
             ("tcp://127.0.0.1:9", PlannerError,
              r"cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'.*dask scheduler")):
         with pytest.raises(error, match=match):
-            whatif_mod.evaluate_whatif(*args, scheduler=scheduler, **kw)
+            whatif_mod.evaluate_whatif(*args, run=RunOptions(scheduler=scheduler), **kw)
     with pytest.raises(PlannerError, match=r"chunk_size=0 must be a positive integer"):
-        whatif_mod.evaluate_whatif(*args, scheduler="local", chunk_size=0, **kw)
+        whatif_mod.evaluate_whatif(*args, run=RunOptions(scheduler="local", chunk_size=0), **kw)
 
 
 def test_cli_whatif_scheduler(tmp_path, short_drive, capsys):

@@ -532,7 +532,7 @@ def _simulate_run(plant, run, session, levels, oversample, failed):
     tries = [t for t in tries if t[0] not in failed]
     for k, (key, st, sl, note) in enumerate(tries):
         try:
-            resp = simulate(plant, drive, models, oversample=oversample, bump_stops=st,
+            resp = simulate(plant, drive, models, oversample=oversample, stop_tables=st,
                             static_corner_load_n=sl)
         except ValueError as exc:
             if k == len(tries) - 1:

@@ -829,15 +829,16 @@ def _check_converged(plant, iters):
                          "and the model's stability, or raise oversample)")
 
 
-def simulate(plant, drive, setup, *, oversample=4, outputs=None, rig=None, bump_stops=None,
+def simulate(plant, drive, setup, *, oversample=4, outputs=None, rig=None, stop_tables=None,
              static_corner_load_n=None):
     """Simulate one shock setup on a plant and a drive in closed loop.
 
     Same as :func:`simulate_batch` with one setup; returns a :class:`Response`.
-    `bump_stops` is the setup's (a mapping corner -> stop or 4 stops), not a list of them.
+    `stop_tables` is the setup's bump stops in the loop's form (a mapping corner -> stop
+    or 4 stops: :func:`simulate_batch`'s ``bump_stops`` entry of one setup), not a list.
     """
     return simulate_batch(plant, drive, [setup], oversample=oversample, outputs=outputs,
-                          rig=rig, bump_stops=None if bump_stops is None else [bump_stops],
+                          rig=rig, bump_stops=None if stop_tables is None else [stop_tables],
                           static_corner_load_n=static_corner_load_n).response(0)
 
 

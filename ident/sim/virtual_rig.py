@@ -977,7 +977,7 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
         pr, drive, plant, fine, models, stops = job
         loop_models = models if friction is None else [
             m if f <= 0 else _ShockWithFriction(m, float(f)) for m, f in zip(models, friction)]
-        resp = simulate(plant, fine, loop_models, oversample=1, bump_stops=stops,
+        resp = simulate(plant, fine, loop_models, oversample=1, stop_tables=stops,
                         static_corner_load_n=plan.static_corner_load_n)
         if resp.elements:
             log.info("run %s: %s", pr.name, ", ".join(f"{k} {v:.4g}"

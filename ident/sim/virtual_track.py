@@ -292,7 +292,7 @@ def log_track_run(plant, run, setup, *, noise=0.02, speed_noise=0.005, kinds=LOG
         raise DriveError(f"log_track_run: the plant has no output(s) {missing}; log only the "
                          "kinds it has")
     resp = simulate(plant, run.drive, setup, oversample=oversample, outputs=outputs,
-                    bump_stops=bump_stops, static_corner_load_n=static_corner_load_n)
+                    stop_tables=bump_stops, static_corner_load_n=static_corner_load_n)
     rng = np.random.default_rng(seed)
     channels = {}
     for k in kinds:

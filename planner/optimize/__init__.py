@@ -61,6 +61,8 @@ Modules
 - :mod:`~planner.optimize.solve`: the metrics' evaluator and IPOPT;
 - :mod:`~planner.optimize.click_search`: the click search of the crate's adjustable
   shocks (:func:`search_clicks`) and :func:`curve_distance`;
+- :mod:`~planner.optimize.options`: the optimizer's option objects (:class:`CurveOptions`,
+  :class:`SolverOptions`);
 - :mod:`~planner.optimize.core`: :func:`optimize_curves` and
   :func:`compile_curves`, the crate mapping and the verification.
 
@@ -82,7 +84,8 @@ from planner.optimize.constraints import (
 from planner.optimize.core import CurveOptimum, compile_curves, curve_distance, optimize_curves
 from planner.optimize.knots import KNOT_QUANTILES, QUANTILE_KNOTS, velocity_knots
 from planner.optimize.loop import FOLD_BASE, NEWTON_ITERATIONS
-from planner.optimize.scan import ScanResult, scan_curves
+from planner.optimize.options import CurveOptions, SolverOptions
+from planner.optimize.scan import ScanOptions, ScanResult, scan_curves
 from planner.optimize.solve import ACCEPTABLE_CHANGE, OptimizeWarning
 from planner.optimize.space import DEFAULT_KNOTS_M_S, SYMMETRIES, CurveSpace, curve_space
 from planner.report.optimize import (
@@ -109,7 +112,10 @@ __all__ = [
     "check_constraints",
     "optimize_curves",
     "ScanResult",
+    "ScanOptions",
     "scan_curves",
+    "CurveOptions",
+    "SolverOptions",
     "velocity_knots",
     "KNOT_QUANTILES",
     "QUANTILE_KNOTS",

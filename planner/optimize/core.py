@@ -35,10 +35,11 @@ from ident.models.library import ShockLibrary
 from ident.sim.closedloop import corner_values, simulate
 from ident.sim.metrics import METRIC_NAMES
 from planner.elements import model_setup_elements
+from planner.options import ElementOptions, LoopOptions, as_options
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
 from planner.optimize.cache import jit_available
-from planner.optimize.click_search import CLICK_RADIUS, ClickResult, curve_distance, search_clicks
+from planner.optimize.click_search import ClickResult, curve_distance, search_clicks
 from planner.optimize.constraints import (
     CurveConstraints,
     check_constraints,
@@ -53,7 +54,9 @@ from planner.optimize.knots import (
     velocity_range,
 )
 from planner.optimize.loop import LoopModel
+from planner.optimize.options import CurveOptions, SolverOptions
 from planner.optimize.scan import (
+    ScanOptions,
     element_predictions,
     is_element_metric,
     linear_objective,
@@ -62,7 +65,8 @@ from planner.optimize.scan import (
 )
 from planner.optimize.solve import Evaluator, OptimizeWarning, solve_problem
 from planner.optimize.space import CurveSpace, curve_space, symmetry_groups
-from planner.predict import as_loop_plant, predict_setups, prepare_drive
+from planner.plant import as_loop_plant
+from planner.predict import predict_setups, prepare_drive
 from planner.screen import metric_rows, screen_setups
 from planner.setups import Setup, enumerate_setups, resolve_baseline
 from planner.uncertainty import prediction_uncertainty
@@ -272,7 +276,7 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
     where = "optimize"
     stops = None
     if bump_stops is not None:
-        vals = corner_values(bump_stops, f"{where}: bump_stops", "bump stops")
+        vals = corner_values(bump_stops, f"{where}: stop_tables", "bump stops")
         stops = []
         for c, st in zip(CORNERS, vals):
             if st is None:
@@ -281,7 +285,7 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
             try:
                 s0, x, f = st
             except (TypeError, ValueError):
-                raise TypeError(f"{where}: bump_stops at {c}: a stop is (contact_travel_m, "
+                raise TypeError(f"{where}: stop_tables at {c}: a stop is (contact_travel_m, "
                                 f"travel_table_m, force_table_n) or None, got "
                                 f"{type(st).__name__}") from None
             # the stop checks itself (a table that falls, a negative gap: BumpStopError)
@@ -300,7 +304,7 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
     if packers:
         if stops is None:
             raise PlannerError(f"{where}: packers {dict(packers)} given without bump stops; "
-                               "give bump_stops (the car's stops), or leave packers out")
+                               "give stop_tables (the car's stops), or leave packers out")
         known = {name: corners for name, corners in space.groups}
         index = [None] * 4
         for name, bound in dict(packers).items():
@@ -319,7 +323,7 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
                 k = CORNERS.index(c)
                 if stops[k] is None:
                     raise PlannerError(f"{where}: packers[{name!r}]: corner {c} has no bump "
-                                       "stop; give its stop in bump_stops, or leave the "
+                                       "stop; give its stop in stop_tables, or leave the "
                                        "group's packers out")
                 stop = BumpStop(c, stops[k][0], stops[k][1], stops[k][2])
                 for v in (lo, hi):  # a packer thicker than the gap is refused here
@@ -341,7 +345,7 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
         raise PlannerError(f"{where}: objective {objective.name!r} limits "
                            f"{need_static + need_stops}, which only a loop with the car's "
                            "elements gives; give static_corner_load_n (lift-off, contact) "
-                           "or bump_stops (contact share)")
+                           "or stop_tables (contact share)")
     return _Elements(stops=stops, groups=tuple(groups), bounds=tuple(bounds), index=index,
                      static=static)
 
@@ -389,12 +393,9 @@ def _project(x0, A, b):
 
 
 def optimize_curves(model, drives, library, *, objective=None, baseline=None,
-                    symmetry="left-right", knots_m_s=QUANTILE_KNOTS, linear=False,
-                    constraints=None, lag_s=None, drive_weights=None, aggregate="sum",
-                    robust=False, oversample=2, max_iter=80, n_starts=2, n_closest=5,
-                    jit=None, stationarity=True, progress=False, bump_stops=None,
-                    packers=None, static_corner_load_n=None, elements=True,
-                    bump_stop_library=None, click_radius=CLICK_RADIUS):
+                    curves=CurveOptions(), constraints=None, drive_weights=None,
+                    aggregate="sum", robust=False, loop=LoopOptions(), solver=SolverOptions(),
+                    elements=ElementOptions(), stop_tables=None, packers=None, progress=False):
     """The best force-velocity curve per corner group (see the module docstring).
 
     Parameters
@@ -412,24 +413,17 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         :func:`planner.setups.resolve_baseline`: a Setup, a shock id (every
         corner) or four ids ``"LF,RF,LR,RR"``; default the crate's first shock
         at every corner.
-    symmetry : {"left-right", "all", "none"}
-        Corner groups (:func:`~planner.optimize.space.curve_space`).
-    knots_m_s : "quantiles" or sequence of float
-        ``"quantiles"`` (default): per side on the quantiles
-        ``KNOT_QUANTILES`` of the baseline's shock speeds on the drives, every
-        corner pooled (:func:`planner.optimize.knots.velocity_knots`), the
-        last at their 99 %; or bump knot velocities [m/s] (rebound mirrors
-        them), e.g. ``DEFAULT_KNOTS_M_S``. The knots used are in
-        ``settings["knots_m_s"]`` and ``settings["rebound_knots_m_s"]``, the
-        velocity range of the constraints (the baseline's 99 % speeds) in
-        ``settings["v_range_m_s"]``.
-    linear : bool
-        One damping rate per group (the known-answer case).
+    curves : planner.optimize.options.CurveOptions
+        The curves: ``symmetry`` (corner groups,
+        :func:`~planner.optimize.space.curve_space`), ``knots_m_s`` (``"quantiles"``,
+        the default, or bump knot velocities [m/s]; the knots used are in
+        ``settings["knots_m_s"]`` and ``settings["rebound_knots_m_s"]``, the velocity
+        range of the constraints, the baseline's 99 % speeds, in
+        ``settings["v_range_m_s"]``), ``linear`` (one damping rate per group: the
+        known-answer case), ``lag_s`` (the optimal shocks' lag [s]; default per group the
+        mean lag of the baseline's shocks at its corners).
     constraints : CurveConstraints, optional
         Default :func:`default_constraints`.
-    lag_s : float, optional
-        The optimal shocks' lag [s]; default per group the mean lag of the
-        baseline's shocks at its corners.
     drive_weights : sequence of float, optional
         Per drive (default equal), for ``aggregate="sum"``.
     aggregate : {"sum", "worst"}
@@ -441,51 +435,46 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         point; identified models only). The score of a weighted sum of
         metrics is unbiased under the zero-mean model errors, so its expected
         value is its nominal value to first order: only the limits need it.
-    oversample : int
-        Sub-steps per sample in the optimizer's loop and in the verification.
-    max_iter : int
-        IPOPT iterations (of the first start).
-    n_starts : int
-        IPOPT starts: the scan's best verified curve, then the best verified
-        curve of the other kind (linear or two-slope) with
-        :data:`MULTI_START_ITER` iterations; every start's result is verified.
-    n_closest : int
-        Crate setups nearest the optimum to simulate and report.
-    jit : bool, optional
-        Compile the loop to C (default: when a C compiler is found).
-    stationarity : bool
-        Report the effect of moving each knot force by +-5 % (time domain).
-    progress : bool
-    bump_stops : sequence of 4 or mapping, optional
+    loop : planner.options.LoopOptions
+        ``oversample``: sub-steps per sample in the optimizer's loop and in the
+        verification (the verification's loop otherwise as :func:`predict_setups`).
+    solver : planner.optimize.options.SolverOptions
+        ``max_iter`` (IPOPT iterations of the first start), ``n_starts`` (the scan's best
+        verified curve, then the best verified curve of the other kind, linear or
+        two-slope, with :data:`MULTI_START_ITER` iterations; every start's result is
+        verified), ``jit`` (compile the loop to C; default when a C compiler is found),
+        ``stationarity`` (report the effect of moving each knot force by +-5 %, time
+        domain), ``n_closest`` (crate setups nearest the optimum to simulate and report),
+        ``click_radius`` (with adjustable shocks in the crate: the click search's moves,
+        +-1..``click_radius`` steps of one adjuster, ``clicks`` of the result,
+        :func:`planner.optimize.click_search.search_clicks`; None: no click search).
+    elements : planner.options.ElementOptions
+        The car's elements when `stop_tables` and ``elements.static_corner_load_n`` are
+        not given: the model's own (``use_model=True``, an identified model of a session
+        that declared them, ``model.elements``: the baseline's stops and packers, the
+        static loads, :func:`planner.elements.model_setup_elements`; ``bump_stops`` a
+        library replacing the model's); ``use_model=False``: the car without them.
+        ``static_corner_load_n`` (shape (4,) [N]): the verification simulates tire
+        lift-off, and the objective may limit ``tire_liftoff_share_XX`` and
+        ``tire_contact_min_XX`` (the verification holds such limits; IPOPT's loop has no
+        lift-off).
+    stop_tables : sequence of 4 or mapping, optional
         The car's bump stops in the loop's form (per corner None or
         ``(contact_travel_m, travel_table_m, force_table_n)``,
-        :func:`ident.models.bumpstops.contact_tables`). The optimizer's loop adds each
-        corner's stop force at the model's ``shock_travel_XX`` (its kinks rounded,
-        :data:`planner.optimize.loop.STOP_SMOOTHING_M`; solved with the shocks within the
-        step), and every verification simulates with them; the screening of the scan sees
-        the car without them. Default: none (the loop unchanged).
+        :func:`ident.models.bumpstops.contact_tables`), instead of the model's. The
+        optimizer's loop adds each corner's stop force at the model's ``shock_travel_XX``
+        (its kinks rounded, :data:`planner.optimize.loop.STOP_SMOOTHING_M`; solved with
+        the shocks within the step), and every verification simulates with them; the
+        screening of the scan sees the car without them. Default: the model's (see
+        `elements`), else none (the loop unchanged).
     packers : mapping of str -> (float, float), optional
         Packers as decision variables: per corner group (``space.groups`` of the
         symmetry, e.g. ``{"front": (0.0, 0.006), "rear": (0.0, 0.006)}``) the bounds [m]
-        of a packer that shortens the contact travel of `bump_stops` at the group's
+        of a packer that shortens the contact travel of the stops at the group's
         corners (``s0 - packer``). IPOPT starts from the stops as given (0, within the
         bounds); the chosen packers are ``packers_m`` of the result and the optimum is
         verified with them (the baseline and the crate with the stops as given).
-    static_corner_load_n : array_like, shape (4,) or mapping, optional
-        Static tire loads [N]: the verification simulates tire lift-off, and the
-        objective may limit ``tire_liftoff_share_XX`` and ``tire_contact_min_XX`` (the
-        verification holds such limits; IPOPT's loop has no lift-off).
-    elements : bool
-        True (default): without `bump_stops` and `static_corner_load_n`, the model's own
-        (an identified model of a session that declared them, ``model.elements``: the
-        baseline's stops and packers, the static loads,
-        :func:`planner.elements.model_setup_elements`). False: the car without them.
-    bump_stop_library : ident.models.bumpstops.BumpStopLibrary, optional
-        Replaces the model's library where its elements are used (``--bump-stops``).
-    click_radius : int or None
-        With adjustable shocks in the crate: the click search's moves, +-1..`click_radius`
-        steps of one adjuster (``clicks`` of the result,
-        :func:`planner.optimize.click_search.search_clicks`); None: no click search.
+    progress : bool
 
     Returns
     -------
@@ -510,6 +499,16 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         (``solver["acceptable"]``), with the reason (``solver["reason"]``).
     """
     t_start = time.perf_counter()
+    curves = as_options(curves, CurveOptions, "curves", "optimize")
+    loop = as_options(loop, LoopOptions, "loop", "optimize")
+    solver = as_options(solver, SolverOptions, "solver", "optimize")
+    elements = as_options(elements, ElementOptions, "elements", "optimize")
+    symmetry, knots_m_s, linear, lag_s = (curves.symmetry, curves.knots_m_s, curves.linear,
+                                          curves.lag_s)
+    oversample, max_iter, n_starts, jit = (loop.oversample, solver.max_iter, solver.n_starts,
+                                           solver.jit)
+    n_closest, stationarity, click_radius = (solver.n_closest, solver.stationarity,
+                                             solver.click_radius)
     objective = _check_objective(objective)
     if aggregate not in ("sum", "worst"):
         raise PlannerError(f"aggregate must be 'sum' or 'worst', got {aggregate!r}")
@@ -523,12 +522,12 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     need = rows[0]
     weights = _weights(drive_weights, drives)
     constraints = _check_constraints_arg(constraints)
-    if elements is not False and bump_stops is None and static_corner_load_n is None:
-        own = model_setup_elements([base], model, elements=elements, where="optimize",
-                                   bump_stops=bump_stop_library)
+    stops, static = stop_tables, elements.static_corner_load_n
+    if elements.use_model is not False and stops is None and static is None:
+        own = model_setup_elements([base], model, elements, where="optimize")
         if own is not None:
-            bump_stops, static_corner_load_n = own.tables[0], own.static_corner_load_n
-    elements = _elements(plant, space, bump_stops, packers, static_corner_load_n, objective)
+            stops, static = own.tables[0], own.static_corner_load_n
+    elements = _elements(plant, space, stops, packers, static, objective)
     # the baseline's (verified) values per drive of the metrics the objective needs
     if elements.active:
         m_base = [element_predictions(model, d, [base], library, [elements.stops],
@@ -536,8 +535,9 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
                                       static_corner_load_n=elements.static).loc[
             base.name, need].to_numpy(float) for d in drives]
     else:
-        m_base = [predict_setups(model, d, [base], library, oversample=oversample,
-                                 elements=False).table.loc[
+        m_base = [predict_setups(model, d, [base], library,
+                                 loop=LoopOptions(oversample=oversample),
+                                 elements=ElementOptions(use_model=False)).table.loc[
             base.name, need].to_numpy(float) for d in drives]
 
     # the global stage (the knots moved once onto the scan's best curve's speeds)
@@ -674,7 +674,7 @@ def _start(model, plant, drives, library, space, constraints, base, objective, w
     A_lin, b_lin = _linear_rows(space, constraints, library)
     # the scan's candidates verified with the packers' start (the stops as given)
     el = {} if not elements.active else {
-        "bump_stops": elements.stops_at(elements.start),
+        "stop_tables": elements.stops_at(elements.start),
         "static_corner_load_n": elements.static}
     scan = scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin, base,
                        objective, weights, aggregate, oversample=oversample, **el)
@@ -708,7 +708,8 @@ def _start(model, plant, drives, library, space, constraints, base, objective, w
         return space, A_lin, b_lin, scan, scan.x, log
     free = np.zeros((0, space.n_vars)), np.zeros(0)
     scan_any = scan_curves(model, plant, drives, library, space, constraints, *free, base,
-                           objective, weights, aggregate, n_verify=1, two_slope=False,
+                           objective, weights, aggregate,
+                           scan=ScanOptions(n_verify=1, two_slope=False),
                            oversample=oversample, **el)
     return space, A_lin, b_lin, None, _project(scan_any.x, A_lin, b_lin), log
 
@@ -756,8 +757,7 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
 
 
 def compile_curves(model, drives, library, *, objective=None, baseline=None,
-                   symmetry="left-right", knots_m_s=QUANTILE_KNOTS, linear=False,
-                   lag_s=None, oversample=2, bump_stops=None, packers=None):
+                   curves=CurveOptions(), loop=LoopOptions(), stop_tables=None, packers=None):
     """Compile the optimizer's step functions of a problem ahead of :func:`optimize_curves`.
 
     The C compile of the closed loop's step and its adjoint (10-30 s on a
@@ -774,9 +774,9 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
 
     Parameters
     ----------
-    model, drives, library, objective, baseline, symmetry, knots_m_s, linear, lag_s, oversample
+    model, drives, library, objective, baseline, curves, loop
         As :func:`optimize_curves`.
-    bump_stops, packers
+    stop_tables, packers
         As :func:`optimize_curves` (the stops and packer variables are compiled in).
 
     Returns
@@ -791,9 +791,12 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
         As :func:`optimize_curves`.
     """
     objective = _check_objective(objective)
+    curves = as_options(curves, CurveOptions, "curves", "compile_curves")
+    oversample = as_options(loop, LoopOptions, "loop", "compile_curves").oversample
     plant, drives, _, space, rows = _problem(model, drives, library, objective, baseline,
-                                             symmetry, knots_m_s, linear, lag_s, oversample)
-    elements = _elements(plant, space, bump_stops, packers, None, objective)
+                                             curves.symmetry, curves.knots_m_s, curves.linear,
+                                             curves.lag_s, oversample)
+    elements = _elements(plant, space, stop_tables, packers, None, objective)
     if not jit_available():
         return False
     for d in drives:
@@ -916,7 +919,7 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
 
     # the optimum's shock velocities (first drive): the distribution the crate is compared over
     resp = simulate(plant, drives[0], setup.resolve(lib), oversample=oversample,
-                    bump_stops=stops_opt, static_corner_load_n=elements.static)
+                    stop_tables=stops_opt, static_corner_load_n=elements.static)
     vel = {c: np.asarray(resp.channels[f"shock_velocity_{c}"]) for c in CORNERS}
     # the crate: every setup of the same symmetry, by distance to the optimal curves
     sym, axles = {"left-right": ("left-right", "independent"), "all": ("left-right", "same"),

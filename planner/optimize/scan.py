@@ -45,6 +45,7 @@ from ident.sim.closedloop import ELEMENT_STATS, rig_response, simulate_batch
 from ident.sim.metrics import compute_metrics
 from planner.objective import score_setups
 from planner.optimize.constraints import MAX_FORCE_VELOCITY_M_S
+from planner.options import ElementOptions, LoopOptions
 from planner.predict import (
     METRIC_OUTPUTS,
     as_loop_plant,
@@ -59,6 +60,7 @@ __all__ = [
     "TWO_SLOPE_RATES",
     "TWO_SLOPE_RATIOS",
     "REBOUND_FACTORS",
+    "ScanOptions",
     "ScanResult",
     "curve_words",
     "element_predictions",
@@ -82,6 +84,25 @@ TWO_SLOPE_RATES = (0.7, 0.85, 1.0, 1.2, 1.45, 1.75)
 TWO_SLOPE_RATIOS = (0.6, 0.35, 0.2)
 #: Two-slope candidates: rebound slope over bump slope.
 REBOUND_FACTORS = (0.8, 1.0, 1.25)
+
+
+@dataclass(frozen=True, eq=False)
+class ScanOptions:
+    """The scan's grid and its verification (:func:`scan_curves`).
+
+    Parameters
+    ----------
+    grid_n_s_m : array_like, optional
+        Linear rates per group [N s/m]; default ``cbar * SCAN_GRID_RATIOS``.
+    n_verify : int
+        Screening's best candidates of each kind verified in the time domain.
+    two_slope : bool
+        Also scan two-slope curves (not in a linear space).
+    """
+
+    grid_n_s_m: object = None
+    n_verify: int = SCAN_VERIFY
+    two_slope: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -270,8 +291,9 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
                                         oversample=oversample,
                                         static_corner_load_n=static_corner_load_n)
         else:
-            table = predict_setups(model, d, cand, library, oversample=oversample,
-                                   elements=False).table
+            table = predict_setups(model, d, cand, library,
+                                   loop=LoopOptions(oversample=oversample),
+                                   elements=ElementOptions(use_model=False)).table
         metrics[d.name] = table
         sc = score_setups(table, objective, baseline=baseline.name).table
         per.append(sc["score"])
@@ -286,8 +308,8 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
 
 
 def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin, baseline,
-                objective, weights, aggregate, *, grid_n_s_m=None, n_verify=SCAN_VERIFY,
-                two_slope=True, oversample=2, bump_stops=None, static_corner_load_n=None):
+                objective, weights, aggregate, *, scan=ScanOptions(), oversample=2,
+                stop_tables=None, static_corner_load_n=None):
     """The best linear and two-slope curves per corner group: screened, verified.
 
     Parameters
@@ -295,7 +317,7 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
     model : VehicleModel, FullCarModel, VehicleParams or LoopPlant
         The model the verification simulates (as given to the optimizer).
     plant : LoopPlant
-        Its loop plant (:func:`planner.predict.as_loop_plant`), screened.
+        Its loop plant (:func:`planner.plant.as_loop_plant`), screened.
     drives : list of ident.data.drive.Drive
         Prepared.
     library : ident.models.library.ShockLibrary
@@ -313,15 +335,13 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
     objective : planner.objective.Objective
     weights : ndarray, shape (n_drives,)
     aggregate : {"sum", "worst"}
-    grid_n_s_m : ndarray, optional
-        Linear rates per group [N s/m]; default ``cbar * SCAN_GRID_RATIOS``.
-    n_verify : int
-        Screening's best candidates of each kind verified in the time domain.
-    two_slope : bool
-        Also scan two-slope curves (not in a linear space).
+    scan : ScanOptions
+        The grid (``grid_n_s_m``), the candidates verified (``n_verify``), whether
+        two-slope curves are scanned (``two_slope``).
     oversample : int
-    bump_stops, static_corner_load_n : optional
-        The car's elements, as :func:`time_domain_scores` takes them: the verification
+    stop_tables, static_corner_load_n : optional
+        The car's elements, as :func:`time_domain_scores` takes them (`stop_tables` as
+        its ``bump_stops``: the car's stops in the loop's form): the verification
         simulates with them; the screening (frequency domain) sees the car without them
         and ranks by the objective without its limits on element statistics
         (:func:`linear_objective`).
@@ -332,6 +352,9 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
         None if no candidate meets the constraints.
     """
     t0 = time.perf_counter()
+    if not isinstance(scan, ScanOptions):
+        raise TypeError(f"scan_curves: scan must be a ScanOptions, got {type(scan).__name__}")
+    grid_n_s_m, n_verify, two_slope = scan.grid_n_s_m, scan.n_verify, scan.two_slope
     screen_obj = linear_objective(objective)
     G = len(space.groups)
     cbar = float(np.mean(plant.cbar_n_s_m))
@@ -446,7 +469,7 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
     lib = ShockLibrary(lib_models + [m for m in library.values()
                                      if m.id not in {s.id for s in lib_models}])
     table, _ = time_domain_scores(model, drives, setups, lib, objective, baseline, weights,
-                                  oversample, aggregate, bump_stops=bump_stops,
+                                  oversample, aggregate, bump_stops=stop_tables,
                                   static_corner_load_n=static_corner_load_n)
     table = table.loc[[s.name for s in setups]]
     for g, (name, _) in reversed(list(enumerate(space.groups))):

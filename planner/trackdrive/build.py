@@ -43,8 +43,9 @@ from ident.data.drive import Drive
 from ident.sim.closedloop import simulate
 from ident.sim.metrics import bandpass
 from planner.elements import loop_arguments, model_setup_elements
+from planner.options import ElementOptions, as_options
 from planner.errors import PlannerError
-from planner.predict import as_loop_plant
+from planner.plant import as_loop_plant
 from planner.rig_spec import LIMIT_ACTIONS, apply_rig_limits
 from planner.setups import Setup
 from planner.trackdrive.inverse import (DEFAULT_ALPHA, close_loop, coherence_weights,
@@ -159,8 +160,7 @@ def residual_shares(target, response, *, band_hz=REPORT_BAND_HZ, mask=None):
 class _Problem:
     """What every iteration shares: the plant, the shocks, the grid, the open loop."""
 
-    def __init__(self, model, target, setup, library, *, alpha, oversample, elements,
-                 bump_stops, where):
+    def __init__(self, model, target, setup, library, *, alpha, oversample, elements, where):
         if not isinstance(target, DriveTarget):
             raise TypeError(f"{where}: target must be a DriveTarget, got {type(target).__name__}")
         if not isinstance(setup, Setup):
@@ -171,11 +171,11 @@ class _Problem:
         self.setup = setup
         self.plant = as_loop_plant(model)
         self.shocks = setup.resolve(library)
-        elem = model_setup_elements([setup], model, bump_stops=bump_stops, elements=elements,
-                                    where=where)
+        elem = model_setup_elements([setup], model, elements, where=where)
         kw = loop_arguments(elem)
-        if kw.get("bump_stops") is not None:
-            kw["bump_stops"] = kw["bump_stops"][0]
+        stops = kw.pop("bump_stops", None)  # simulate takes the one setup's
+        if stops is not None:
+            kw["stop_tables"] = stops[0]
         self.loop_kw = kw
         self.elements = None if elem is None else elem.settings
         self.oversample = oversample
@@ -335,8 +335,8 @@ def _limited(drive, limits, action, *, warn=True):
 
 def build_track_drive(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
                       max_iter=DEFAULT_MAX_ITER, tol=DEFAULT_TOL, gain=1.0, oversample=2,
-                      limits=None, limit_action="clip", elements=True, bump_stops=None,
-                      name=None, progress=None, where="drive from-track"):
+                      limits=None, limit_action="clip", elements=ElementOptions(), name=None,
+                      progress=None, where="drive from-track"):
     """Build the rig drive that reproduces a target on a model (drive iteration).
 
     Parameters
@@ -364,8 +364,9 @@ def build_track_drive(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
     limit_action : {"clip", "scale"}
         ``clip`` limits every iterate locally (the iteration works around it); ``scale``
         scales the final drive as a whole.
-    elements, bump_stops
-        The car's bump stops and static loads, as :func:`planner.predict.predict_setups`.
+    elements : planner.options.ElementOptions
+        The car's bump stops and static loads, as :func:`planner.predict.predict_setups`
+        (default the model's).
     name : str, optional
         The drive's name (default ``"<target>-drive"``).
     progress : callable, optional
@@ -378,8 +379,9 @@ def build_track_drive(model, target, setup, library, *, alpha=DEFAULT_ALPHA,
     TrackDrive
     """
     _check_options(max_iter, tol, gain, limit_action, where)
+    elements = as_options(elements, ElementOptions, "elements", where)
     p = _Problem(model, target, setup, library, alpha=alpha, oversample=oversample,
-                 elements=elements, bump_stops=bump_stops, where=where)
+                 elements=elements, where=where)
     name = name or f"{target.name}-drive"
     # linearize at the logged travel's velocity: the spectral derivative, in the band
     v0 = []
@@ -478,8 +480,8 @@ def update_drive(model, drive, target, recorded, setup, library, *, gain=RIG_GAI
         run's; ``reach`` at the recorded linearization.
     """
     _check_options(1, 0.0, gain, limit_action, where)
-    p = _Problem(model, target, setup, library, alpha=alpha, oversample=2, elements=False,
-                 bump_stops=None, where=where)
+    p = _Problem(model, target, setup, library, alpha=alpha, oversample=2,
+                 elements=ElementOptions(use_model=False), where=where)
     fs = getattr(recorded, "fs_hz", target.fs_hz)
     channels = getattr(recorded, "channels", recorded)
     if abs(fs - target.fs_hz) > 1e-6 * target.fs_hz:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -27,9 +27,10 @@ from ident.data.drive import Drive
 from ident.models.library import ShockLibrary
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
-from planner.elements import (ELEMENT_COLUMNS, loop_arguments, model_elements,
-                              model_setup_elements)
-from planner.predict import as_loop_plant, predict_setups, prepare_drive
+from planner.elements import ELEMENT_COLUMNS, loop_arguments, model_setup_elements
+from planner.options import ElementOptions, LoopOptions, RunOptions, as_options
+from planner.plant import as_loop_plant
+from planner.predict import predict_setups, prepare_drive
 from planner.runner import KERNEL_LOCK, SCHEDULER_NONE, start_runner
 from planner.screen import screen_setups
 from planner.setups import resolve_baseline
@@ -145,7 +146,7 @@ def _as_drives(drives):
     return drives
 
 
-def _evaluate_group(plant, drive, setups, library, method, oversample, band_hz, elements=None):
+def _evaluate_group(plant, drive, setups, library, method, loop, elements):
     """Metrics of one condition group's setups (a list of condition setups), SI.
 
     Returns
@@ -154,17 +155,16 @@ def _evaluate_group(plant, drive, setups, library, method, oversample, band_hz, 
         :func:`planner.predict.predict_setups`' (``method="time"``) or
         :func:`planner.screen.screen_setups`' table: one row per setup, in order.
     """
-    ekw = elements or {}
     if method == "time":
-        return predict_setups(plant, drive, setups, library, oversample=oversample,
-                              band_hz=band_hz, **ekw).table
-    elem = model_setup_elements(setups, plant, **ekw)
-    return screen_setups(plant, drive, setups, library, band_hz=band_hz,
+        return predict_setups(plant, drive, setups, library, loop=loop,
+                              elements=elements).table
+    elem = model_setup_elements(setups, plant, elements)
+    return screen_setups(plant, drive, setups, library, band_hz=loop.band_hz,
                          **loop_arguments(elem)).table
 
 
 def _nominal_agreement(plant, drive, setups, library, objective, baseline, nominal, metrics,
-                       oversample, band_hz, elements=None):
+                       loop, elements):
     """Screening's nominal scores against the time domain's on the same setups.
 
     Returns
@@ -174,8 +174,7 @@ def _nominal_agreement(plant, drive, setups, library, objective, baseline, nomin
         ``screening_best``, ``time_best``: what :func:`planner.screen.describe_agreement`
         reads.
     """
-    td = predict_setups(plant, drive, setups, library, oversample=oversample,
-                        band_hz=band_hz, **(elements or {})).table
+    td = predict_setups(plant, drive, setups, library, loop=loop, elements=elements).table
     td_score = score_setups(td[metrics], objective, baseline=baseline).table["score"]
     scr_score = nominal.loc[td_score.index, "score"]
     rho = (float(spearmanr(scr_score, td_score).statistic) if len(td_score) > 2
@@ -215,8 +214,8 @@ def _blas_threads():
             if i.get("user_api") == "blas"}
 
 
-def _whatif_task(plant, drive, effect, where, setups, library, extra, method, oversample,
-                 band_hz, blas, elements=None):
+def _whatif_task(plant, drive, effect, where, setups, library, extra, method, loop, blas,
+                 elements):
     """Metrics of a chunk of a condition group's setups (a task on a Dask worker).
 
     Parameters
@@ -236,14 +235,14 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
         The crate.
     extra : list of ident.models.shocks.ShockModel
         The scaled or lagged shocks `setups` use.
-    method, oversample, band_hz
+    method, loop
         As :func:`evaluate_whatif`.
     blas : dict of str -> int
         The client's BLAS threads per library: the screening operands' products differ
         in the last bits with the BLAS thread count, so the worker uses the client's (a
         Dask worker process starts with one).
-    elements : dict, optional
-        The real car's elements, :func:`planner.predict.predict_setups`' keywords.
+    elements : planner.options.ElementOptions
+        The real car's elements (the model's fixed: :meth:`ElementOptions.for_model`).
 
     Returns
     -------
@@ -255,8 +254,7 @@ def _whatif_task(plant, drive, effect, where, setups, library, extra, method, ov
     with KERNEL_LOCK:
         drive = condition_drive(drive, effect, where)
         with threadpool_limits(limits=blas):
-            return _evaluate_group(plant, drive, setups, lib, method, oversample, band_hz,
-                                   elements)
+            return _evaluate_group(plant, drive, setups, lib, method, loop, elements)
 
 
 class _LazyTasks:
@@ -289,11 +287,10 @@ def _task_specs(sizes, chunk):
 
 
 def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=None,
-                    baseline=None, method="time", oversample=2, band_hz=(1.0, 20.0),
+                    baseline=None, method="time", loop=LoopOptions(),
                     nominal_spring_rates_n_m=None, rank_tolerance=RANK_TOLERANCE,
-                    fragile_share=FRAGILE_SHARE, progress=False, scheduler=None, client=None,
-                    n_workers=None, processes=True, chunk_size=None, bump_stops=None,
-                    static_corner_load_n=None, elements=True):
+                    fragile_share=FRAGILE_SHARE, elements=ElementOptions(), run=RunOptions(),
+                    progress=False):
     """Evaluate every setup under every perturbation of a what-if design.
 
     Parameters
@@ -319,37 +316,31 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
         ``time``: the nonlinear shocks in the time domain (:func:`planner.predict.
         predict_setups`, the reference); ``screening``: frequency-domain screening
         (:func:`planner.screen.screen_setups`), about 100x faster, for large sweeps.
-    oversample : int
-        Internal steps per sample of the time-domain loop.
-    band_hz : (float, float)
-        Metric band [Hz].
+    loop : planner.options.LoopOptions
+        The time-domain loop (``oversample``: internal steps per sample) and the metric
+        band ``band_hz`` [Hz] (the screening's too).
     nominal_spring_rates_n_m : array_like, shape (4,), optional
         The identified car's spring wheel rates [N/m], if known: a change that would
         make one negative is refused.
     rank_tolerance, fragile_share : int, float
         See the module docstring (fragile ranks).
-    progress : bool
-        Show a progress bar over the condition groups (over the tasks on a cluster).
-    scheduler : str, optional
-        Where the condition groups are evaluated: None or ``"none"`` (default) in this
-        process, one group after the other; ``"local"`` on a new
-        :class:`dask.distributed.LocalCluster` (`n_workers`, default one per core,
-        closed at the end); or a scheduler address (``"tcp://host:8786"``). Checked
-        before any work: an unknown value or an unreachable address raises at once.
-    client : distributed.Client, optional
-        An existing client to use instead of `scheduler` (not closed).
-    n_workers : int, optional
-        Workers of a new LocalCluster.
-    processes : bool
-        LocalCluster workers as processes (default) or threads of this process.
-    chunk_size : int, optional
-        Evaluations (setup x condition) per task at most on a cluster; default the
-        groups cut so that every worker thread gets about four tasks (at least
-        :data:`MIN_TASK_EVALUATIONS` evaluations a task). Ignored in this process.
-    bump_stops, static_corner_load_n, elements
+    elements : planner.options.ElementOptions
         The real car's elements, as :func:`planner.predict.predict_setups` (default: the
         model's). ``packer`` and ``bump_stop`` factors change each setup's resolved
         packers and stops (:func:`planner.whatif.conditions.condition_setups`).
+    run : planner.options.RunOptions
+        Where the condition groups are evaluated: ``scheduler`` None or ``"none"``
+        (default) in this process, one group after the other; ``"local"`` on a new
+        :class:`dask.distributed.LocalCluster` (``n_workers``, default one per core,
+        closed at the end; ``processes``: workers as processes, default, or threads); or
+        a scheduler address (``"tcp://host:8786"``). Checked before any work: an unknown
+        value or an unreachable address raises at once. ``client``: an existing client to
+        use instead (not closed). ``chunk_size``: evaluations (setup x condition) per
+        task at most on a cluster; default the groups cut so that every worker thread
+        gets about four tasks (at least :data:`MIN_TASK_EVALUATIONS` evaluations a task).
+        Ignored in this process.
+    progress : bool
+        Show a progress bar over the condition groups (over the tasks on a cluster).
 
     Returns
     -------
@@ -368,7 +359,7 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     Notes
     -----
     On a cluster the tables are the one-process tables bit for bit, whatever the
-    workers, `chunk_size` or the order tasks finish in: the plants are built here as in
+    workers, the chunk size or the order tasks finish in: the plants are built here as in
     one process, every setup is simulated on its own (a chunk of a group gives the rows
     of the whole group), the workers compute the drive's rig response with this
     process's BLAS thread count (its last bits depend on it) and the rows are put back
@@ -379,6 +370,14 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     submitted.
     """
     t_start = time.perf_counter()
+    loop = as_options(loop, LoopOptions, "loop", "whatif")
+    elements = as_options(elements, ElementOptions, "elements", "whatif")
+    run = as_options(run, RunOptions, "run", "whatif")
+    if elements.has_choices:
+        raise PlannerError("whatif: evaluates the setups given; enumerate bump-stop and "
+                           "packer choices with planner.elements.vary_elements first")
+    oversample, band_hz, chunk_size = loop.oversample, loop.band_hz, run.chunk_size
+    scheduler, client = run.scheduler, run.client
     if not isinstance(perturbations, PerturbationSet):
         raise TypeError("perturbations must be a PerturbationSet (read_perturbations or "
                         f"perturbation_set), got {type(perturbations).__name__}")
@@ -404,12 +403,8 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     base = resolve_baseline(baseline, library, setups=setups, default=objective.baseline)
     if base.name not in {s.name for s in setups}:
         setups = [base] + setups
-    car = model_elements(model) if elements is True else (elements or None)
-    resolved = model_setup_elements(setups, model, bump_stops=bump_stops,
-                                    static_corner_load_n=static_corner_load_n,
-                                    elements=elements)
-    ekw = {"bump_stops": bump_stops, "static_corner_load_n": static_corner_load_n,
-           "elements": car if car is not None else elements is not False}
+    resolved = model_setup_elements(setups, model, elements)
+    ekw = elements.for_model(model)  # the workers get the condition's plant only
     names = [s.name for s in setups]
     if len(set(names)) != len(names):
         raise PlannerError("setup names repeat; give each setup its own name")
@@ -420,7 +415,7 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     # the scheduler before any work: a wrong address fails here
     runner = None
     if not _is_serial(scheduler, client):
-        runner = start_runner(scheduler, client, n_workers, processes, "whatif")
+        runner = start_runner(scheduler, client, run.n_workers, run.processes, "whatif")
     try:
         src = perturbations.settings.get("source") or "what-if"
         fs = getattr(model, "fs_hz", None)
@@ -438,14 +433,13 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                 groups.setdefault((plant_key(e), di, drive_key(e)), []).append((di, pi))
         plants, tables = {}, []
         variants = ShockVariants(library)
-        stop_variants = StopVariants(bump_stops if bump_stops is not None
-                                     else getattr(car, "bump_stops", None))
+        stop_variants = StopVariants(elements.library(model))
 
         def group_ekw():
-            """The elements' keywords with the stops moved so far (packer changes)."""
+            """The elements with the stops moved so far (packer changes)."""
             if not stop_variants.extra:
                 return ekw
-            return dict(ekw, bump_stops=stop_variants.full_library())
+            return replace(ekw, bump_stops=stop_variants.full_library())
         by_name = {s.name: s for s in setups}
 
         def condition(pkey, members):
@@ -469,7 +463,7 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                                             stop_variants)
                 lib = variants.full_library()
                 pred_table = _evaluate_group(plant, drive, cond_setups, lib, method,
-                                             oversample, band_hz, group_ekw())
+                                             loop, group_ekw())
                 n_eval += len(cond_setups)
                 tables.append(_group_table(pred_table, by_name, drives, perturbations))
             kind, address, workers, n_tasks = "none", None, 1, len(groups)
@@ -483,6 +477,7 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
             drive_refs = [runner.scatter(d) for d in drives]
             lib_ref = runner.scatter(library)
             blas = _blas_threads()
+            loop_w = replace(loop, band_hz=tuple(band_hz))
             current = {}  # the group being submitted: its condition setups
 
             def make(g, a, b):
@@ -497,7 +492,7 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                 extra = list({sid: variants.extra[sid] for s in chunk_setups
                               for sid in s.ids() if sid in variants.extra}.values())
                 return (plant, drive_refs[di], e0, where, chunk_setups, lib_ref, extra,
-                        method, oversample, tuple(band_hz), blas, group_ekw())
+                        method, loop_w, blas, group_ekw())
 
             log.info("what-if: %d condition groups, %d evaluations in %d tasks (%s, %d "
                      "worker(s))", len(keys), sum(sizes), len(specs), runner.kind,
@@ -553,7 +548,7 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     agreement = None
     if method == "screening":  # the decision checked where it is made: the time domain
         agreement = _nominal_agreement(base_plant, drives[0], setups, library, objective,
-                                       base.name, nominal, metrics, oversample, band_hz, ekw)
+                                       base.name, nominal, metrics, loop, ekw)
     robust = robust_table(table, names, rank_tolerance, fragile_share)
     ptab = perturbations.table()
     conditions = pd.concat([ptab.assign(drive=d.name) for d in drives]).reset_index()
