@@ -1,4 +1,4 @@
-"""``shockplan drive from-track | iterate | section`` (planner.drive_commands, drive_args):
+"""``shockplan drive from-track | iterate | section`` (planner.cli.drive):
 files in, files out, one-line refusals."""
 
 import numpy as np

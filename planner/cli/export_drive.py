@@ -9,8 +9,8 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(subparsers):
     """Add ``export-drive`` to `subparsers`."""
-    exp = subparsers.add_parser("export-drive", help="write a drive file as the RPC III file a rig "
-                         "controller plays")
+    exp = subparsers.add_parser("export-drive", help="write a drive file as the RPC III file "
+                                "a rig controller plays")
     exp.add_argument("drive", help="drive file (CSV or Parquet)")
     exp.add_argument("--format", required=True, choices=["rpc3"],
                      help="the file format written: RPC III (rpc3)")

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES, add_element_options,
-                                add_units, bump_stop_library, check_out, int_at_least,
+from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES,
+                                add_element_options, add_units, bump_stop_library, check_out, int_at_least,
                                 load_any_model, output_units, packer_bounds)
 
 __all__ = ["add_parser", "run"]
@@ -15,8 +15,8 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(subparsers):
     """Add ``optimize`` to `subparsers`."""
-    opt = subparsers.add_parser("optimize", help="the best damper curve per corner group, mapped to "
-                         "the crate")
+    opt = subparsers.add_parser("optimize", help="the best damper curve per corner group, "
+                                "mapped to the crate")
     opt.add_argument("--model", required=True, help=MODEL_HELP)
     opt.add_argument("--drive", required=True, action="append",
                      help="drive file (CSV or Parquet); repeat for several drives")
@@ -37,7 +37,7 @@ def add_parser(subparsers):
     opt.add_argument("--robust", action="store_true", help="hold the objective's limits "
                      "with the identified model's 95 %% intervals (default: nominal limits)")
     add_units(opt, "unit system of the drive files and outputs", default=None,
-               default_text=UNITS_OF_DRIVES)
+              default_text=UNITS_OF_DRIVES)
     opt.add_argument("--oversample", type=int, default=2,
                      help="internal steps per sample (default %(default)s)")
     opt.add_argument("--max-iter", type=int, default=80, help="IPOPT iterations "

@@ -13,8 +13,8 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(subparsers):
     """Add ``plan`` to `subparsers`."""
-    pl = subparsers.add_parser("plan", help="the next rig runs (optimal experiment design) and the "
-                        "rig-day run sheet")
+    pl = subparsers.add_parser("plan", help="the next rig runs (optimal experiment design) "
+                               "and the rig-day run sheet")
     pl.add_argument("--vehicle", help="before rig day: the known car, a vehicle TOML or "
                     "'paper' (give this or --model)")
     pl.add_argument("--model", help="between runs: the model identified so far (.npz; give "
@@ -43,7 +43,7 @@ def add_parser(subparsers):
                     help="repeat the baseline after every this many runs, for drift (default "
                     "%(default)s: never)")
     add_units(pl, "units of the drive files read and written", default=None,
-               default_text=UNITS_OF_DRIVES + ", SI without --drive")
+              default_text=UNITS_OF_DRIVES + ", SI without --drive")
     pl.add_argument("--out", required=True, help="output folder")
     pl.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     pl.set_defaults(func=run)

@@ -9,8 +9,8 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(subparsers):
     """Add ``import`` to `subparsers`."""
-    imp = subparsers.add_parser("import", help="append real rig files (RPC III, MDF4, TDMS) to a "
-                         "session")
+    imp = subparsers.add_parser("import", help="append real rig files (RPC III, MDF4, TDMS) "
+                                "to a session")
     imp.add_argument("files", nargs="+", help="the rig's files, one run each")
     imp.add_argument("--format", required=True, choices=["rpc3", "mdf", "tdms"],
                      help="the files' format: RPC III (rpc3), MDF4 (mdf) or TDMS (tdms)")
@@ -25,7 +25,7 @@ def add_parser(subparsers):
                      help="the runs' role in the session (default %(default)s)")
     imp.add_argument("--names", help="run names, comma-separated (default: the file names)")
     add_units(imp, "units of a new session's run files", default=None,
-               default_text="SI for a new session, the session's when appending")
+              default_text="SI for a new session, the session's when appending")
     imp.set_defaults(func=run)
     return imp
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES, add_element_options,
-                                add_units, baseline_arg, bump_stop_library, check_out,
+from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES,
+                                add_element_options, add_units, baseline_arg, bump_stop_library, check_out,
                                 load_any_model, output_units)
 
 __all__ = ["add_parser", "run"]
@@ -13,8 +13,8 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(subparsers):
     """Add ``whatif`` to `subparsers`."""
-    wi = subparsers.add_parser("whatif", help="what-if study: setups under spring, shock, drive and "
-                        "vehicle changes; robust ranking")
+    wi = subparsers.add_parser("whatif", help="what-if study: setups under spring, shock, "
+                               "drive and vehicle changes; robust ranking")
     wi.add_argument("--model", required=True, help=MODEL_HELP)
     wi.add_argument("--drive", required=True, action="append",
                     help="drive file (CSV or Parquet); repeat for several drives")
@@ -40,7 +40,7 @@ def add_parser(subparsers):
                     help="share of conditions with a moved rank that makes it fragile "
                     "(default 0.1)")
     add_units(wi, "units of the drive files and outputs", default=None,
-               default_text=UNITS_OF_DRIVES)
+              default_text=UNITS_OF_DRIVES)
     wi.add_argument("--oversample", type=int, default=2,
                     help="internal steps per sample (default %(default)s)")
     wi.add_argument("--scheduler", metavar="ADDRESS|local",
