@@ -14,16 +14,18 @@ before it):
   :mod:`~planner.plant` (any model to the loop plant),
   :mod:`~planner.predict` (the closed loop in the time domain), :mod:`~planner.screen`
   with :mod:`~planner.screen_kernels` and :mod:`~planner.screen_codegen` (the frequency
-  domain, stochastic linearization) and :mod:`~planner.uncertainty` (intervals from the
-  identification's random error);
+  domain, stochastic linearization), :mod:`~planner.uncertainty` (intervals from the
+  identification's random error) and :mod:`~planner.noise` (an identified model's noise
+  report);
 - writers: :mod:`planner.report` (ranking, optimum and what-if files and figures, the
-  print layout of every workbook);
+  print layout of every workbook) and :mod:`~planner.text` (the summaries' tables);
 - decisions: :mod:`~planner.sweep` and :mod:`~planner.rank` (which crate setup),
   :mod:`planner.optimize` (which damper curve), :mod:`~planner.design` and
   :mod:`~planner.testplan` (which rig runs, the run sheet) and :mod:`planner.whatif`
   (does the best stay best); :mod:`planner.dyno` (a shock's curve as a table, the dyno
   check);
-- :mod:`~planner.cli` (the command line, a thin layer) and :mod:`~planner.demo`.
+- :mod:`planner.cli` (the command line, a thin layer: a module per command) and
+  :mod:`~planner.demo`.
 
 ``planner`` imports :mod:`ident`, never the reverse.
 """

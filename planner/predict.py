@@ -87,6 +87,32 @@ class Predictions:
         """The metric columns of the table."""
         return [c for c in self.table.columns if c not in CORNERS and c not in ELEMENT_COLUMNS]
 
+    def element_lines(self):
+        """What the loop held besides the shocks (``settings["elements"]``), and the largest
+        shares of time in it, as lines for a terminal; none without elements.
+
+        Returns
+        -------
+        list of str
+        """
+        settings, table = self.settings.get("elements"), self.table
+        if not settings:
+            return []
+        lines = []
+        shares = [c for c in table.columns if c.startswith("bump_stop_contact_share_")]
+        if shares:
+            worst = table[shares].max()
+            lines.append("bump stops in the loop (library: " + str(settings.get("library"))
+                         + "); largest share of time in contact: "
+                         + ", ".join(f"{c[-2:]} {100 * v:.1f} %" for c, v in worst.items()))
+        lifts = [c for c in table.columns if c.startswith("tire_liftoff_share_")]
+        if lifts:
+            worst = table[lifts].max()
+            lines.append("static corner loads in the loop (tire lift-off); largest share of "
+                         "time off the pad: " + ", ".join(f"{c[-2:]} {100 * v:.2f} %"
+                                                          for c, v in worst.items()))
+        return lines
+
 
 def _warn_implausible(table, drive):
     """Log a warning when predicted tire forces are beyond any race car (wrong drive units?)."""

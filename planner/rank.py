@@ -30,10 +30,11 @@ from planner.options import (ElementOptions, LoopOptions, RunOptions, Uncertaint
                              as_options)
 from planner.objective import Objective, default_objective, mark_inventory, score_setups
 from planner.predict import predict_setups
-from planner.screen import screen_setups
+from planner.screen import describe_agreement, screen_setups
 from planner.click_settings import click_neighbours, click_values
 from planner.setups import enumerate_setups, resolve_baseline
 from planner.sweep import screen_setups_on
+from planner.text import format_table
 from planner.uncertainty import prediction_uncertainty, unresolved_pairs
 
 __all__ = ["Ranking", "rank_setups"]
@@ -75,6 +76,49 @@ class Ranking:
         """Name of the best setup: the best feasible one (the top row, even if infeasible,
         when no setup is feasible)."""
         return self.table.index[0]
+
+    def polish_lines(self):
+        """The click polish's line (``settings["click_polish"]``): none without adjustable
+        settings.
+
+        Returns
+        -------
+        list of str
+        """
+        polish = self.settings.get("click_polish")
+        if not polish:
+            return []
+        moved = f"; it moved the best from {polish['start']}" if polish["moved"] else ""
+        return [f"click polish: {polish['simulated']} neighbouring setting(s) simulated in "
+                f"{polish['rounds']} round(s){moved}"]
+
+    def summary(self, n=5):
+        """The ranking for a terminal: what was screened and simulated, how screening and the
+        time domain agree, the click polish, the baseline, and the best `n` setups.
+
+        Parameters
+        ----------
+        n : int
+            Setups in the table.
+
+        Returns
+        -------
+        str
+        """
+        t = self.table
+        lines = [f"screened {len(self.screening)} setups, simulated {len(t)} in the time "
+                 f"domain; screening vs time-domain Spearman {self.agreement['spearman']:.3f}",
+                 describe_agreement(self.agreement, what="ranking"),
+                 *self.polish_lines(),
+                 f"baseline '{self.baseline}' scores {self.objective.total_weight:.3f}; best:"]
+        rows = []
+        for name, r in t.head(n).iterrows():
+            rows.append((int(r["rank"]), name, f"{r['score']:.4f}",
+                         "yes" if r.get("feasible", True) else "no",
+                         r.get("unresolved", "") or "-"))
+        lines.append(format_table(rows, ["rank", "setup", "score", "feasible",
+                                         "not resolved from"]))
+        return "\n".join(lines)
 
 
 #: Rounds of the click polish at most (each simulates the best's untried neighbours).

@@ -89,10 +89,11 @@ from planner.options import ElementOptions, LoopOptions, RunOptions, ScreenOptio
 from planner.plant import as_loop_plant
 from planner.predict import predict_setups, prepare_drive, resolve_setups
 from planner.runner import KERNEL_LOCK, start_runner
-from planner.screen import (drive_bands, screen_operands, screen_packed,
+from planner.screen import (describe_agreement, drive_bands, screen_operands, screen_packed,
                             screening_predictions)
 from planner.click_settings import base_id
 from planner.setups import SetupSpace, resolve_baseline, setup_space
+from planner.text import format_table
 
 __all__ = [
     "COMBINE_MODES",
@@ -413,6 +414,34 @@ class SweepResult:
     def best(self):
         """Name of the best setup (the top row)."""
         return self.table.index[0]
+
+    def summary(self, n=5):
+        """The sweep for a terminal: screened and simulated with their speeds, how screening
+        and the time domain agree, the baseline, and the best `n` setups.
+
+        Parameters
+        ----------
+        n : int
+            Setups in the table.
+
+        Returns
+        -------
+        str
+        """
+        st, t = self.settings, self.table
+        sec = st["seconds"]
+        lines = [f"screened {st['n_screened']:,} setups x {len(st['cases'])} case(s) in "
+                 f"{sec['screen']:.1f} s ({st['screen_setups_per_s']:,.0f} setup-cases/s, "
+                 f"scheduler {st['scheduler']}, {st['n_workers']} worker(s)); simulated "
+                 f"{len(t)} in {sec['simulate']:.1f} s ({st['simulate_setups_per_s']:,.0f} "
+                 "setup-cases/s)",
+                 describe_agreement(self.agreement, what="ranking"),
+                 f"baseline '{self.baseline}'; {st['combine']} of the cases' scores; best:"]
+        rows = [(int(r["rank"]), name, f"{r['score']:.4f}", int(r["screening_rank"]),
+                 "yes" if r["feasible"] else "no") for name, r in t.head(n).iterrows()]
+        lines.append(format_table(rows, ["rank", "setup", "score", "screening rank",
+                                         "feasible"]))
+        return "\n".join(lines)
 
     def screening_order(self, n=None):
         """Candidate indices of the screened setups, best first.

@@ -56,7 +56,6 @@ from scipy.stats import spearmanr
 from ident.data.channels import CORNERS
 from ident.data.drive import make_track_drive
 from ident.data.session import make_session
-from ident.identify.diagnose import Diagnosis
 from ident.identify.pipeline import identify_session
 from ident.models.bumpstops import BumpStop, BumpStopLibrary
 from ident.models.library import ShockLibrary
@@ -202,10 +201,9 @@ def compare(truth, pred):
 
 def findings_text(model):
     """The undeclared identification's diagnosis in one line: ``corner kind share range``."""
-    doc = model.settings.get("diagnosis")
-    if doc is None:
+    if model.diagnosis is None:
         return ""
-    groups = Diagnosis.from_dict(doc).groups()
+    groups = model.diagnosis.groups()
     if not groups:
         return "none"
     parts = []

@@ -128,9 +128,9 @@ def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
     assert "noise:" in out and "expected metric error" in out
     loaded = load_model(model)
     assert loaded.settings["session"] == "paper identification experiment"
-    noise = loaded.settings["noise"]
-    assert set(noise["expected_metric_error_pct"]) >= {"tire_force_rms_LF", "ride_height_rms_rear"}
-    assert noise["reference"] == {"run": "baseline", "setup": "B20/B20/B20/B20"}
+    noise = loaded.noise
+    assert set(noise.expected_metric_error_pct) >= {"tire_force_rms_LF", "ride_height_rms_rear"}
+    assert noise.reference == {"run": "baseline", "setup": "B20/B20/B20/B20"}
     assert any((tmp_path / "plots").glob("frf_*.png")) and (tmp_path / "m.mat").is_file()
     # the drive and the shocks in imperial units, setups CSV per the spec
     drive = make_track_drive(duration_s=30.0, fs_hz=100.0, seed=2,

@@ -152,7 +152,7 @@ def test_plain_cars_print_nothing(identified_model, gt_identified):
     """The paper car (noise-free) and a GT-like car with a flexible chassis (2 % noise): the
     identification's diagnosis finds nothing, with every run re-simulated."""
     for model in (identified_model, gt_identified):
-        diag = Diagnosis.from_dict(model.settings["diagnosis"])
+        diag = model.diagnosis
         assert len(diag) == 0, diag.lines()
         assert diag.lines() == []
         assert len(diag.checks) == 4 * len(model.settings["runs"])
@@ -167,8 +167,8 @@ def test_undeclared_bump_stops_are_found_with_their_corner_and_share(real_car):
     corners in every run, with its share of time near the travel beyond the true gap, and
     at no rear corner."""
     session, model, _ = real_car
-    diag = Diagnosis.from_dict(model.settings["diagnosis"])
-    json.dumps(model.settings["diagnosis"])  # kept in the model file's JSON
+    diag = model.diagnosis
+    json.dumps(model.file_settings()["diagnosis"])  # kept in the model file's JSON
     stiff = _found(diag, "stiffening")
     assert set(stiff.corner) == {"LF", "RF"}
     assert len(stiff) == 2 * len(session.runs)
@@ -213,7 +213,7 @@ def test_lift_off_with_static_loads_given_or_carried_by_the_channel(real_car):
         assert true > 0.005
         assert f.share == pytest.approx(true, abs=LIFTOFF_SHARE_ATOL)
     # nothing declared and a dynamic channel: the floor the tire force sits on while off
-    floor = _found(Diagnosis.from_dict(model.settings["diagnosis"]), "lift-off")
+    floor = _found(model.diagnosis, "lift-off")
     assert len(floor) and all("floor" in m for m in floor.message)
     for f in floor.itertuples():
         true = truth[f.run][f"tire_liftoff_share_{f.corner}"]
@@ -267,7 +267,7 @@ def test_lines_and_round_trip(real_car):
     """What ``shockplan identify`` prints: one line per corner and kind over the runs, then
     its fix; the dict kept in the model's settings reads back to the same findings."""
     _, model, _ = real_car
-    diag = Diagnosis.from_dict(model.settings["diagnosis"])
+    diag = model.diagnosis
     again = Diagnosis.from_dict(json.loads(json.dumps(diag.to_dict())))
     assert again.findings.equals(diag.findings)
     lines = diag.lines()
@@ -299,7 +299,7 @@ def test_friction_is_found_with_its_corner_size_and_share(real_car, friction_ses
     assert len(lines) == 4 and re.match(r"LF: friction \d+\.\d-\d+\.\d % of the time "
                                         r"\(5 runs\): a force in phase", lines[0])
     # the car without friction (stops and lift-off): none, far inside the thresholds
-    plain = Diagnosis.from_dict(model.settings["diagnosis"])
+    plain = model.diagnosis
     assert len(_found(plain, "friction")) == 0
     assert plain.checks.friction_z.abs().max() < FRICTION_Z / 2
     assert plain.checks.friction_force_share.max() < FRICTION_FORCE_SHARE / 2
@@ -315,7 +315,7 @@ def test_identify_warns_of_friction_bump_stops_and_lift_off(friction_session):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = identify_session(_declared(friction_session))
-    diag = Diagnosis.from_dict(model.settings["diagnosis"])
+    diag = model.diagnosis
     kinds = {(g["corner"], g["kind"]) for g in diag.groups()}
     assert {(c, "friction") for c in CORNERS} <= kinds
     assert {("LF", "stiffening"), ("RF", "stiffening")} <= kinds

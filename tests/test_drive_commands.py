@@ -1,4 +1,4 @@
-"""``shockplan drive from-track | iterate | section`` (planner.drive_commands, drive_args):
+"""``shockplan drive from-track | iterate | section`` (planner.cli.drive):
 files in, files out, one-line refusals."""
 
 import numpy as np
@@ -175,13 +175,13 @@ def test_parser_defaults_are_the_library_defaults():
     """The command line's defaults are the functions' (one value, not two to keep equal)."""
     import argparse
 
-    from planner.drive_args import LOG_FORMATS, add_parser
+    from planner.cli.drive import LOG_FORMATS, add_parser
     from ident.data.tracklog import TRACK_LOG_FORMATS
     from planner.trackdrive import DEFAULT_ALPHA
     from planner.trackdrive.build import DEFAULT_MAX_ITER, DEFAULT_TOL, RIG_GAIN
 
     top = argparse.ArgumentParser()
-    add_parser(top.add_subparsers(dest="command"), func=None)
+    add_parser(top.add_subparsers(dest="command"))
     built = top.parse_args(["drive", "from-track", "L.csv", "--model", "m", "--shocks", "s",
                             "--setup", "DM", "--out", "d.csv"])
     assert built.regularization == DEFAULT_ALPHA

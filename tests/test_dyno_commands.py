@@ -1,4 +1,4 @@
-"""Tests of planner.dyno_commands (with planner.dyno_args and planner.report.dyno):
+"""Tests of planner.cli.dyno (with planner.report.dyno):
 ``shockplan dyno table`` and ``shockplan dyno check`` end to end."""
 
 import numpy as np

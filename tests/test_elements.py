@@ -224,7 +224,7 @@ def test_declared_bump_stops_predict_the_known_car(paper_plan, bumpstop_vehicle)
     stops = BumpStopLibrary([BumpStop("BS-F", 0.0045, *REAL_TABLE),
                              BumpStop("BS-F2", 0.006, *REAL_TABLE),
                              BumpStop("BS-R", 0.006, *REAL_TABLE)])
-    from ident.identify.diagnose import RESIDUAL_EXCESS_MAX, Diagnosis
+    from ident.identify.diagnose import RESIDUAL_EXCESS_MAX
 
     model, session = _real_car(paper_plan, bumpstop_vehicle, stops=stops, static=None,
                                moment_multiple=0.5, diagnose=True)
@@ -236,7 +236,7 @@ def test_declared_bump_stops_predict_the_known_car(paper_plan, bumpstop_vehicle)
         assert info[run.name]["rest"] == "rest (start)"
         assert max(abs(v) for v in info[run.name]["rest_minus_mean_m"].values()) < REST_MEAN_M
     # declared, the diagnosis reports the stops' contact and nothing the model cannot see
-    diag = Diagnosis.from_dict(model.settings["diagnosis"])
+    diag = model.diagnosis
     assert set(diag.findings.kind) == {"bump stop contact"}
     assert diag.checks.residual_excess.max() < RESIDUAL_EXCESS_MAX
     crate = _gt_crate()

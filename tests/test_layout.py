@@ -14,7 +14,7 @@ one subprocess check) and enforces, one test per rule:
   first-party import, in function bodies and ``TYPE_CHECKING`` blocks too);
 - first-party imports at module top (module level, including inside a
   top-level ``if``/``try``); function-body imports only in
-  :data:`BODY_IMPORT_MODULES` (the command line);
+  :data:`BODY_IMPORT_MODULES` (the command line's package and the demo);
 - no heavy optional library (:data:`HEAVY`) imported at module top by
   :data:`CLI` or by any module it imports at module top, so that
   ``shockplan --help`` stays fast; and a subprocess confirms that importing
@@ -52,9 +52,12 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("ident", "planner")
-#: Modules allowed to import first-party modules inside function bodies.
-BODY_IMPORT_MODULES = frozenset({"planner.cli", "planner.demo"})
-#: The command line, whose module-top import closure must stay light.
+#: Modules allowed to import first-party modules inside function bodies: a name, or
+#: ``"pkg.*"`` for every module under the package ``pkg`` (the command line's package: its
+#: command modules import the library when a command runs).
+BODY_IMPORT_MODULES = frozenset({"planner.cli", "planner.cli.*", "planner.demo"})
+#: The command line (a package: its ``__init__`` imports every command module), whose
+#: module-top import closure must stay light.
 CLI = "planner.cli"
 #: Heavy optional libraries, imported only where used (never on the CLI's start-up path).
 HEAVY = ("casadi", "cvxpy", "distributed", "dask", "matplotlib", "openpyxl")
@@ -372,11 +375,17 @@ def import_cycles(project):
     return out
 
 
+def _allowed(name, allowed):
+    """Whether module `name` is one of `allowed`: a module's name, or ``"pkg.*"`` for the
+    modules under the package ``pkg``."""
+    return any(name == a or (a.endswith(".*") and name.startswith(a[:-1])) for a in allowed)
+
+
 def body_imports(project, allowed=BODY_IMPORT_MODULES):
     """First-party imports not at module top, outside the modules allowed them."""
     out = []
     for mod in project.modules.values():
-        if mod.name in allowed:
+        if _allowed(mod.name, allowed):
             continue
         for imp in mod.imports:
             if not imp.top and project.first_party(imp.target):
@@ -554,6 +563,12 @@ def project():
 
 def test_scan_sees_the_packages(project):
     assert {CLI, "planner.design", "ident.sim.closedloop"} <= set(project.modules)
+    # the command line is a package whose every module is on its start-up path
+    commands = {m for m in project.modules if m.startswith(CLI + ".")} - {CLI + ".__main__"}
+    assert {CLI + ".common", CLI + ".rank", CLI + ".dyno", CLI + ".drive"} <= commands
+    edges = _module_edges(project, top_only=True, runtime_only=True)
+    assert commands <= set(edges[CLI]) | set(edges[CLI + ".common"]), (
+        commands - set(edges[CLI]))
     assert len(project.modules) > 40
     assert sum(len(m.imports) for m in project.modules.values()) > 300
 
@@ -590,8 +605,10 @@ def test_cli_start_up_skips_heavy_libraries_statically(project):
 def test_cli_start_up_skips_heavy_libraries():
     """A fresh interpreter: ``import planner.cli`` and ``shockplan --help`` load no heavy
     library (what is loaded is checked, not how long it takes)."""
-    run = ("try:\n    planner.cli.main(['--help'])\n"
-           "except SystemExit as e:\n    assert e.code in (0, None), e.code\n")
+    run = ("for argv in (['--help'], ['rank', '--help'], ['dyno', 'check', '--help'],\n"
+           "             ['drive', 'from-track', '--help']):\n"
+           "    try:\n        planner.cli.main(argv)\n"
+           "    except SystemExit as e:\n        assert e.code in (0, None), e.code\n")
     loaded = heavy_loaded(CLI, HEAVY, cwd=ROOT, run=run)
     assert loaded == {"import": [], "run": []}, (
         f"heavy optional libraries loaded by `import {CLI}` / `shockplan --help`: {loaded}; "
@@ -695,9 +712,13 @@ def test_self_body_imports(tmp_path):
                        "def f():\n    import json\n    return json\n"),
         "pkg/bad.py": "class C:\n    def m(self):\n        from pkg.a import X\n        return X\n",
         "pkg/cli.py": "def main():\n    from pkg.a import X\n",
+        "pkg/cmd/run.py": "def main():\n    from pkg.a import X\n",      # under pkg.cmd.*
+        "pkg/cmdx.py": "def main():\n    from pkg.a import X\n",        # not under it
     })
-    found = body_imports(scan(root, ("pkg",)), allowed={"pkg.cli"})
-    assert len(found) == 1 and found[0].startswith("pkg/bad.py:3:") and "C.m" in found[0], found
+    found = body_imports(scan(root, ("pkg",)), allowed={"pkg.cli", "pkg.cmd.*"})
+    assert len(found) == 2, found
+    assert found[0].startswith("pkg/bad.py:3:") and "C.m" in found[0], found
+    assert found[1].startswith("pkg/cmdx.py:2:"), found
 
 
 def test_self_heavy_at_startup(tmp_path):
@@ -711,6 +732,20 @@ def test_self_heavy_at_startup(tmp_path):
     found = heavy_at_startup(scan(root, ("pkg",)), entry="pkg.cli")
     assert len(found) == 1 and found[0].startswith("pkg/sub/__init__.py:1:"), found
     assert "pkg.sub <- pkg.sub.x <- pkg.light <- pkg.cli" in found[0], found
+
+
+def test_self_heavy_at_startup_of_a_package(tmp_path):
+    """The command line as a package: its __init__ imports the command modules, whose
+    module tops are on the start-up path (their functions' imports are not)."""
+    root = _tree(tmp_path, {
+        "pkg/cli/__init__.py": "from pkg.cli import a, b\n",
+        "pkg/cli/a.py": "def run():\n    import dask\n",              # in a function: fine
+        "pkg/cli/b.py": "from pkg.cli.common import x\n",
+        "pkg/cli/common.py": "import openpyxl\nx = 1\n",
+    })
+    found = heavy_at_startup(scan(root, ("pkg",)), entry="pkg.cli")
+    assert len(found) == 1 and found[0].startswith("pkg/cli/common.py:1:"), found
+    assert "pkg.cli.common <- pkg.cli.b <- pkg.cli" in found[0], found
 
 
 def test_self_heavy_loaded(tmp_path):

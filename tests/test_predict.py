@@ -204,7 +204,7 @@ def test_four_post_session_identifies_and_predicts(four_post_session, four_post_
 
     from ident.data.channels import AERO_INPUTS, WHEELLOADER_INPUTS
     from ident.identify.frf import DF_INPUTS
-    from planner.cli import noise_report
+    from planner.noise import noise_report
 
     assert four_post_session.rig_inputs == WHEELLOADER_INPUTS
     assert not any(c in r.channels for r in four_post_session.runs for c in AERO_INPUTS)
@@ -243,7 +243,7 @@ def test_four_post_session_identifies_and_predicts(four_post_session, four_post_
     np.testing.assert_allclose(a[names], b[names], rtol=RTOL_SAME_DRIVE)
     # the identify command's noise report (intervals through the 8-input FRF)
     report = noise_report(four_post_model, four_post_session, n_draws=4)
-    assert np.all(np.isfinite(list(report["expected_metric_error_pct"].values())))
+    assert np.all(np.isfinite(list(report.expected_metric_error_pct.values())))
 
 
 def test_four_post_model_refuses_an_aero_drive(four_post_model, validation_drive, track_drive,

@@ -176,7 +176,7 @@ def test_not_a_session_is_refused():
 
 
 def test_identify_keeps_the_summary(four_post_model):
-    doc = four_post_model.settings["shock_check"]
+    doc = four_post_model.file_settings()["shock_check"]
     json.dumps(doc)
     assert "series" not in doc
     assert [s["verdict"] for s in doc["shocks"]] == ["ok", "ok"]

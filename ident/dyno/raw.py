@@ -117,7 +117,7 @@ import numpy as np
 
 from ident.data.files import (atomic_write_text, check_can_write, csv_preamble, did_you_mean,
                               read_csv_table, read_toml, read_units_marker, units_marker)
-from ident.data.units import TO_SI, check_units, from_si
+from ident.data.units import TO_SI, UNIT_LABELS, check_units, from_si
 from ident.errors import DynoError
 
 __all__ = [
@@ -776,6 +776,35 @@ class DynoImport:
                                                 _MERGE_RTOL * np.abs(v[1:]))])
         count = np.bincount(groups)
         return np.bincount(groups, v) / count, np.bincount(groups, f) / count
+
+    def report(self, *, units="SI"):
+        """The import for a terminal: one block of lines per file, then the warnings.
+
+        Parameters
+        ----------
+        units : {"SI", "imperial"}
+            Velocity and force units of the report.
+
+        Returns
+        -------
+        str
+        """
+        lab = UNIT_LABELS[units]
+        settings = ",".join(f"{k}={v:g}" for k, v in self.settings.items()) or "(no adjusters)"
+        lines = [f"dyno import at {settings}: {len(self.runs)} file(s)"]
+        for run in self.runs:
+            speeds = [b.bump_velocity_m_s for b in run.blocks]
+            temp = ("no temperature" if run.temperature_c is None else
+                    f"temperature {run.temperature_c:.1f} deg C (rise "
+                    f"{run.temperature_rise_c:+.1f})")
+            lines.append(
+                f"  {run.source}: {run.cycles} cycles, {len(run.blocks)} speeds "
+                f"{from_si(min(speeds), 'velocity', units):.4g}-"
+                f"{from_si(max(speeds), 'velocity', units):.4g} {lab['velocity']}, gas force "
+                f"{from_si(run.gas_force_n, 'force', units):.4g} {lab['force']} (removed), lag "
+                f"{run.lag_s * 1e3:.2f} ms, {temp}")
+        lines += [f"  warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
 
     def sheet(self, units="SI"):
         """The sheet rows as a table in `units` (what :func:`write_dyno_sheet` writes).

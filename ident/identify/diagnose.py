@@ -4,9 +4,9 @@
 the identified model (linear, but for the shocks) leaves out, and returns a
 :class:`Diagnosis`: a findings table (run, corner, kind, share of time, a value, what it
 does to the predictions, how to fix it), the measured numbers behind it, and its settings.
-:func:`ident.identify.pipeline.identify_session` calls it and keeps it in the model's
-settings (``settings["diagnosis"]``, :meth:`Diagnosis.to_dict`); ``shockplan identify``
-prints it.
+:func:`ident.identify.pipeline.identify_session` calls it and keeps it as the model's
+``diagnosis`` (saved in the model file as :meth:`Diagnosis.to_dict`); ``shockplan identify``
+prints it (:meth:`Diagnosis.summary_lines`).
 
 The checks, per run and corner:
 
@@ -265,8 +265,29 @@ class Diagnosis:
             out.append(f"    fix: {g['fix']}")
         return out
 
+    def summary_lines(self):
+        """The diagnosis for a terminal: a headline (nothing found, or how many findings),
+        then :meth:`lines` with each finding marked as a warning.
+
+        Returns
+        -------
+        list of str
+        """
+        amplitude = self.settings.get("amplitude", "")
+        if not len(self):
+            return ["diagnosis: nothing the linear model cannot see (bump stops, lift-off, the "
+                    "runs re-simulated on the model against their noise; amplitude dependence "
+                    f"{amplitude})"]
+        groups = self.groups()
+        lines = [(f"diagnosis: {len(groups)} finding(s) the linear model cannot see (per corner "
+                  f"over the runs; {len(self)} per run and corner in the model's settings; "
+                  f"amplitude dependence {amplitude}):")]
+        lines += [f"  warning: {line}" if not line.startswith("    ") else f"  {line}"
+                  for line in self.lines()]
+        return lines
+
     def to_dict(self):
-        """A JSON-able dict (kept in the model's settings; :meth:`from_dict` reads it)."""
+        """A JSON-able dict (kept in the model file; :meth:`from_dict` reads it)."""
         def records(df):
             return [{k: (None if isinstance(v, float) and not np.isfinite(v) else v)
                      for k, v in row.items()} for row in df.to_dict("records")]

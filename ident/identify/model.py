@@ -36,12 +36,16 @@ from ident.data.channels import RIG_INPUTS
 from ident.data.files import atomic_path, write_csv
 from ident.errors import ModelFileError
 from ident.identify.condition import conditioned_standard_error
+from ident.identify.diagnose import Diagnosis
 from ident.identify.frf import Frf
+from ident.identify.shockcheck import ShockLibraryCheck
 from ident.models.bumpstops import CarElements
 from ident.models.lti import GRAM_FACTOR_RTOL, LoopPlant, ModalSystem, balanced_reduce
 
 __all__ = [
     "VehicleModel",
+    "NoiseReport",
+    "RESULT_KEYS",
     "load_model",
     "summary_path",
     "write_model_summary",
@@ -77,6 +81,76 @@ NOISE_LIMITED = 0.1
 #: :meth:`VehicleModel.noise_bands`: a line rests on noise where the conditioned estimate's
 #: relative standard error exceeds this (a signal-to-noise amplitude ratio below 3).
 NOISE_BAND_REL_ERROR = 1.0 / 3.0
+
+#: The model's sub-results (:class:`VehicleModel` fields), stored in the model file's
+#: settings under these keys, after the settings and in this order.
+RESULT_KEYS = ("liftoff", "diagnosis", "shock_check", "noise")
+
+
+@dataclass(frozen=True)
+class NoiseReport:
+    """How much an identified model rests on noise: per pair and in metrics.
+
+    Made by :func:`planner.noise.noise_report`; kept with the model
+    (:attr:`VehicleModel.noise`) and in its file.
+
+    Attributes
+    ----------
+    noise_limited_pairs, zero_pairs : int
+        Pairs whose conditioned FRF's relative noise is at least :data:`NOISE_LIMITED`,
+        and pairs fitted as zero (nothing above the noise).
+    expected_metric_error_pct : dict of str to float
+        Metric -> half-width of the 95 % interval of its prediction from the
+        identification's random error [%].
+    reference : dict
+        ``run`` and ``setup`` (``LF/RF/LR/RR`` ids) the metric error is computed for.
+    """
+
+    noise_limited_pairs: int
+    zero_pairs: int
+    expected_metric_error_pct: dict
+    reference: dict
+
+    def to_dict(self):
+        """A JSON-able dict (the model file's ``noise`` entry; :meth:`from_dict` reads it)."""
+        return {"noise_limited_pairs": self.noise_limited_pairs, "zero_pairs": self.zero_pairs,
+                "expected_metric_error_pct": dict(self.expected_metric_error_pct),
+                "reference": dict(self.reference)}
+
+    @classmethod
+    def from_dict(cls, doc):
+        """The :class:`NoiseReport` of :meth:`to_dict`."""
+        return cls(noise_limited_pairs=doc["noise_limited_pairs"], zero_pairs=doc["zero_pairs"],
+                   expected_metric_error_pct=dict(doc["expected_metric_error_pct"]),
+                   reference=dict(doc["reference"]))
+
+    def lines(self, table):
+        """Lines for a terminal: pairs resting on noise and the metric error to expect.
+
+        Parameters
+        ----------
+        table : pandas.DataFrame
+            The model's per-pair summary (:meth:`VehicleModel.summary`): the pairs with
+            bands resting on noise are named from it.
+
+        Returns
+        -------
+        list of str
+        """
+        half = self.expected_metric_error_pct
+        worst = max(half, key=half.get)
+        lines = [f"noise: {self.noise_limited_pairs} pairs noise-limited (relative noise of "
+                 f"the conditioned FRF >= 10 %), {self.zero_pairs} fitted as zero (nothing "
+                 "above the noise); expected metric error from the identification's random "
+                 f"error (95 %, the session's run '{self.reference['run']}'): median "
+                 f"{np.median(list(half.values())):.3f} %, max {half[worst]:.3f} % ({worst})"]
+        banded = table[table.noise_bands_hz != ""].sort_values("noise_level", ascending=False)
+        if len(banded):
+            lines.append(f"{len(banded)} pairs have bands resting on noise (within 40 dB of "
+                         "their peak), e.g.:")
+            lines += [f"  {r.output} <- {r.input}: {r.noise_bands_hz} Hz"
+                      for r in banded.head(3).itertuples()]
+        return lines
 
 
 def has_feedthrough(output, input):
@@ -134,6 +208,19 @@ class VehicleModel:
         (:func:`ident.identify.pipeline.pair_noise_level`): the fit error a perfect
         model would have. Pairs at or above
         :data:`ident.identify.pipeline.ZERO_FIT_NOISE` are fitted as zero.
+    liftoff : dict or None
+        The lift-off correction (:func:`ident.identify.pipeline.identify_session`): the
+        lifted samples and pad corrections per run; None when the tires kept the pads.
+    diagnosis : ident.identify.diagnose.Diagnosis or None
+        What the session shows that the linear model cannot see; None when skipped.
+    shock_check : ident.identify.shockcheck.ShockLibraryCheck or None
+        The session's shock forces against the library, per shock (without the per-run
+        rows); None without force channels.
+    noise : NoiseReport or None
+        How much the model rests on noise (:func:`planner.noise.noise_report`).
+
+    The sub-results are saved in the model file's settings under :data:`RESULT_KEYS`
+    (:meth:`file_settings`) and read back into these fields by :func:`load_model`.
     """
 
     name: str
@@ -151,6 +238,10 @@ class VehicleModel:
     frf: Frf | None = field(default=None, repr=False)
     settings: dict = field(default_factory=dict)
     noise_level: np.ndarray | None = None
+    liftoff: dict | None = None
+    diagnosis: Diagnosis | None = field(default=None, repr=False)
+    shock_check: ShockLibraryCheck | None = field(default=None, repr=False)
+    noise: NoiseReport | None = None
     _plants: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
@@ -340,9 +431,53 @@ class VehicleModel:
         -------
         VehicleModel
         """
-        new = dataclasses.replace(self, settings=settings)
+        return self.with_results(settings=settings)
+
+    def with_results(self, **changes):
+        """A copy with other settings or sub-results that keeps the loop plants built so far
+        (they depend on neither; :meth:`loop_plant`).
+
+        Parameters
+        ----------
+        **changes
+            ``settings`` and any of :data:`RESULT_KEYS` (``liftoff``, ``diagnosis``,
+            ``shock_check``, ``noise``).
+
+        Returns
+        -------
+        VehicleModel
+
+        Raises
+        ------
+        TypeError
+            For another field (a changed array changes the loop plant: build a new model).
+        """
+        other = set(changes) - {"settings", *RESULT_KEYS}
+        if other:
+            raise TypeError(f"with_results() takes settings and {', '.join(RESULT_KEYS)}, not "
+                            f"{', '.join(sorted(other))}; a model with other arrays is a new "
+                            "VehicleModel")
+        new = dataclasses.replace(self, **changes)
         new._plants.update(self.__dict__.get("_plants", {}))
         return new
+
+    def file_settings(self):
+        """The settings as the model file stores them: :attr:`settings`, then the
+        sub-results' documents under :data:`RESULT_KEYS` (those the model has).
+
+        Returns
+        -------
+        dict
+            JSON-able after :meth:`save`'s conversion of numpy scalars and arrays.
+        """
+        out = dict(self.settings)
+        docs = {"liftoff": self.liftoff,
+                "diagnosis": None if self.diagnosis is None else self.diagnosis.to_dict(),
+                "shock_check": (None if self.shock_check is None else
+                                self.shock_check.to_dict(series=False)),
+                "noise": None if self.noise is None else self.noise.to_dict()}
+        out.update({k: v for k, v in docs.items() if v is not None})
+        return out
 
     def to_control(self, *, inputs=None):
         """A python-control ``StateSpace`` in real block-diagonal modal form.
@@ -485,7 +620,8 @@ class VehicleModel:
         """
         meta = {"format": MODEL_FORMAT, "version": MODEL_VERSION, "name": self.name,
                 "input_names": list(self.input_names), "output_names": list(self.output_names),
-                "fs_hz": self.fs_hz, "units": self.units, "settings": _jsonable(self.settings),
+                "fs_hz": self.fs_hz, "units": self.units,
+                "settings": _jsonable(self.file_settings()),
                 "has_frf": self.frf is not None}
         arrays = {"poles": self.poles, "residues": self.residues, "direct": self.direct,
                   "n_poles": self.n_poles, "order": self.order, "fit_error": self.fit_error,
@@ -615,14 +751,22 @@ def load_model(path):
                       cbar_n_s_m=data["cbar_n_s_m"], fs_hz=float(meta["fs_hz"]),
                       settings=fm["settings"], H_raw=data.get("frf_H_raw"),
                       replaced=data.get("frf_replaced"), sigma=data.get("frf_sigma"))
+        settings = dict(meta.get("settings", {}))
+        docs = {k: settings.pop(k, None) for k in RESULT_KEYS}
         model = VehicleModel(name=meta["name"], input_names=tuple(meta["input_names"]),
                              output_names=tuple(meta["output_names"]), poles=data["poles"],
                              residues=data["residues"], direct=data["direct"],
                              n_poles=data["n_poles"], order=data["order"],
                              fit_error=data["fit_error"], cbar_n_s_m=data["cbar_n_s_m"],
                              fs_hz=float(meta["fs_hz"]), units=meta.get("units", "SI"), frf=frf,
-                             settings=meta.get("settings", {}),
-                             noise_level=data.get("noise_level"))
+                             settings=settings, noise_level=data.get("noise_level"),
+                             liftoff=docs["liftoff"],
+                             diagnosis=(None if docs["diagnosis"] is None else
+                                        Diagnosis.from_dict(docs["diagnosis"])),
+                             shock_check=(None if docs["shock_check"] is None else
+                                          ShockLibraryCheck.from_dict(docs["shock_check"])),
+                             noise=(None if docs["noise"] is None else
+                                    NoiseReport.from_dict(docs["noise"])))
         if "loop_plant" in meta:
             _restore_plant(model, meta["loop_plant"], data, path)
         return model

@@ -538,18 +538,17 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
     diagnose : bool
         Check the session against the model (:func:`ident.identify.diagnose.
         diagnose_session`: bump stops, lift-off, the runs re-simulated on the model,
-        amplitude dependence), log a warning per finding and keep the result in
-        ``settings["diagnosis"]`` (:meth:`ident.identify.diagnose.Diagnosis.to_dict`;
-        :meth:`~ident.identify.diagnose.Diagnosis.from_dict` reads it back). It builds
-        the model's loop plant (kept with the model) and adds about 5-8 % to the time.
-        False: skip it.
+        amplitude dependence), log a warning per finding and keep the result as the
+        model's ``diagnosis`` (:class:`ident.identify.diagnose.Diagnosis`, saved with the
+        model). It builds the model's loop plant (kept with the model) and adds about
+        5-8 % to the time. False: skip it (``diagnosis`` None).
     check_shocks : bool
         Where the runs log ``shock_force_XX``, compare the measured forces with the
         library's curves (:func:`ident.identify.shockcheck.check_shock_library`: the scale
         per shock, a warning logged per shock that is off) and keep the per-shock summary
-        in ``settings["shock_check"]`` (:meth:`~ident.identify.shockcheck.
-        ShockLibraryCheck.to_dict` without the per-run rows). The model's numbers do not
-        depend on it. False, or a session without the force channels: nothing.
+        as the model's ``shock_check`` (:class:`~ident.identify.shockcheck.
+        ShockLibraryCheck` without the per-run rows). The model's numbers do not
+        depend on it. False, or a session without the force channels: None.
 
     Returns
     -------
@@ -564,8 +563,8 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         With static loads declared and tires that leave the pads
         (:func:`liftoff_samples`), the wheelloader inputs are corrected where the pad
         lost the tire (:func:`pad_corrected_session`, :data:`LIFTOFF_PASSES` times, each on
-        a model of the tire forces fitted to the session as corrected so far), and
-        ``settings["liftoff"]`` records the lifted samples and corrections per run.
+        a model of the tire forces fitted to the session as corrected so far), and the
+        model's ``liftoff`` records the lifted samples and corrections per run.
     """
     cond = {} if smooth_domain is None else {"smooth_domain": smooth_domain}
     measured = session
@@ -605,17 +604,15 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
     elements = session_elements(session)
     if elements is not None:
         settings["elements"] = elements.to_dict()
-        model = model.with_settings(settings)
-    if liftoff is not None:
-        settings["liftoff"] = liftoff
-        model = model.with_settings(settings)
+    model = model.with_results(settings=settings, liftoff=liftoff)
     if diagnose:
-        settings["diagnosis"] = diagnose_session(session, model).to_dict()
+        model = model.with_results(diagnosis=diagnose_session(session, model))
     if check_shocks:
         check = check_shock_library(session)
-        if len(check):
-            settings["shock_check"] = check.to_dict(series=False)
-    return model.with_settings(settings)
+        if len(check):  # the per-shock summary, without the per-run rows
+            model = model.with_results(shock_check=dataclasses.replace(
+                check, series=check.series.iloc[:0]))
+    return model
 
 
 def session_elements(session):

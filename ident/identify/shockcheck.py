@@ -9,9 +9,9 @@ measured force (``measured ~= a * library``), its standard error, the RMS gap, a
 verdict per shock. A library entry 4 % off moves predictions by about 2 % while the
 identification's intervals cover a few percent of the truth (issue 26), so a library
 that is off must be caught here, not in the predictions.
-:func:`ident.identify.pipeline.identify_session` calls it and keeps
-:meth:`ShockLibraryCheck.to_dict` in the model's settings (``settings["shock_check"]``);
-``shockplan identify`` prints :meth:`ShockLibraryCheck.lines`.
+:func:`ident.identify.pipeline.identify_session` calls it and keeps it as the model's
+``shock_check`` (saved in the model file as :meth:`ShockLibraryCheck.to_dict` without the
+per-run rows); ``shockplan identify`` prints :meth:`ShockLibraryCheck.lines`.
 
 Per run and corner (a *series*):
 
@@ -388,7 +388,7 @@ class ShockLibraryCheck:
         return out
 
     def to_dict(self, *, series=True):
-        """A JSON-able dict (kept in the model's settings; :meth:`from_dict` reads it);
+        """A JSON-able dict (kept in the model file; :meth:`from_dict` reads it);
         ``series=False`` leaves the per-run rows out (the compact per-shock summary)."""
         def records(df):
             return [{k: (None if isinstance(v, float) and not np.isfinite(v) else

@@ -104,6 +104,8 @@ Modules
     :func:`evaluate_whatif` and its result :class:`WhatIf`, in this process or on Dask.
 :mod:`planner.whatif.robust`
     The robust ranking and the fragile-rank rule.
+:mod:`planner.whatif.baseline`
+    The baseline when none is given: a ranking's own (:func:`whatif_baseline`).
 :mod:`planner.whatif.click_factors`
     Click tolerance and adjuster fade of adjustable shocks, and the tolerance table.
 
@@ -119,6 +121,7 @@ from planner.report.whatif import (
     tornado_figure,
     write_whatif,
 )
+from planner.whatif.baseline import whatif_baseline
 from planner.whatif.click_factors import FADE_HIGH_SPEED_SHARE, FADE_KNEE_M_S
 from planner.whatif.conditions import MIN_WINDOW_S, stiffened_plant
 from planner.whatif.evaluate import (
@@ -156,6 +159,7 @@ __all__ = [
     "suspension_stiffness",
     "stiffened_plant",
     "evaluate_whatif",
+    "whatif_baseline",
     "factor_effects",
     "tornado_figure",
     "rank_stability_figure",

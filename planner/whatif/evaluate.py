@@ -32,8 +32,9 @@ from planner.options import ElementOptions, LoopOptions, RunOptions, as_options
 from planner.plant import as_loop_plant
 from planner.predict import predict_setups, prepare_drive
 from planner.runner import KERNEL_LOCK, SCHEDULER_NONE, start_runner
-from planner.screen import screen_setups
+from planner.screen import describe_agreement, screen_setups
 from planner.setups import resolve_baseline
+from planner.text import format_table
 from planner.whatif.click_factors import ADJUSTER_KINDS, check_adjuster_factors, tolerance_table
 from planner.whatif.conditions import (
     ShockVariants,
@@ -123,6 +124,49 @@ class WhatIf:
     def fragile(self):
         """Names of the setups whose rank is fragile, in robust order."""
         return list(self.robust.index[self.robust["fragile"]])
+
+    def summary(self, n=10):
+        """The study for a terminal: its size and time, the baseline, the nominal
+        condition's check in the time domain (screening), the robust ranking's best `n`
+        setups, the fragile ranks and the notes.
+
+        Parameters
+        ----------
+        n : int
+            Setups in the table.
+
+        Returns
+        -------
+        str
+        """
+        st = self.settings
+        rob = self.robust
+        lines = [f"{st['n_setups']} setups x {st['n_conditions']} conditions "
+                 f"({self.perturbations.design}, {st['method']}): {st['n_evaluations']} "
+                 f"evaluations in {st['elapsed_s']:.1f} s"
+                 + (f" on Dask ({st['scheduler']}, {st['n_workers']} worker(s))"
+                    if st.get("scheduler", "none") != "none" else "")
+                 + f"; baseline '{self.baseline}'"]
+        if "agreement" in st:
+            agree = st["agreement"]
+            lines.append("nominal condition checked in the time domain: "
+                         + describe_agreement(agree, what=None)
+                         + ("" if agree["same_best"] else
+                            "; decide with --method time, the reference"))
+        rows = []
+        for name, r in rob.head(n).iterrows():
+            rows.append((name, int(r["nominal_rank"]), f"{r['mean_score']:.4f}",
+                         f"{r['worst_score']:.4f}",
+                         f"{int(r['best_rank'])}-{int(r['worst_rank'])}",
+                         f"{100 * r['moved_share']:.0f} %", "FRAGILE" if r["fragile"] else "-"))
+        lines.append(format_table(rows, ["setup", "nominal", "mean score", "worst score",
+                                         "ranks", "moved", "rank"]))
+        fr = self.fragile
+        lines.append(f"fragile ranks: {', '.join(fr)}" if fr else
+                     f"no fragile ranks (rank moved > {st['rank_tolerance']} places in more "
+                     f"than {100 * st['fragile_share']:.0f} % of conditions)")
+        lines += [f"note: {note}" for note in st.get("notes", ())]  # clicks clipped, ...
+        return "\n".join(lines)
 
     def condition(self, perturbation="nominal", drive=None):
         """The rows of one condition (default the nominal one), indexed by setup."""

@@ -1,0 +1,130 @@
+"""``shockplan identify``: rig session -> identified vehicle model (with its noise report)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from ident.data.files import check_output
+from planner.cli.common import check_out, int_at_least
+from planner.text import format_table
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers):
+    """Add ``identify`` to `subparsers`."""
+    ident_p = subparsers.add_parser("identify", help="identify a vehicle model from a rig session")
+    ident_p.add_argument("session", help="rig session folder (or its session.toml)")
+    ident_p.add_argument("--out", required=True, help="model file to write (.npz); its "
+                         "per-pair summary goes beside it as <name>_summary.csv")
+    ident_p.add_argument("--method", choices=["invfreqs", "vf"], default="invfreqs",
+                         help="per-pair rational fits (invfreqs, default) or common-pole "
+                         "vector fitting (vf)")
+    ident_p.add_argument("--estimator", choices=["lpm", "welch"], default="lpm",
+                         help="FRF estimator: local polynomial method (lpm, default, "
+                         "leakage-free) or the paper's Welch H1 (welch)")
+    ident_p.add_argument("--frf-method", choices=["global", "sequential"], default="global",
+                         help="least squares over all runs (global, Eq. 23, default) or "
+                         "sequential (Eqs. 25-28; needs --estimator welch)")
+    ident_p.add_argument("--nperseg", type=int, help="FRF block length [samples]: Welch's "
+                         "block, and the frequency grid fs/nperseg of both estimators "
+                         "(default: the power of two nearest the shortest run's samples / 20, "
+                         "4096 for 800 s at 100 Hz)")
+    ident_p.add_argument("--coherence-min", type=float, default=0.9,
+                         help="coherence (0 to 1) below which band ends are replaced "
+                         "(default %(default)s)")
+    ident_p.add_argument("--max-order", type=int_at_least(2), default=10, metavar="N",
+                         help="highest denominator order (poles) a pair's fit may take "
+                         "(default %(default)s; raise it when identify warns that a pair "
+                         "took the highest order)")
+    ident_p.add_argument("--plots", help="folder for FRF-vs-fit plots (PNG) (default: no plots)")
+    ident_p.add_argument("--mat", help="also export the model to this MATLAB .mat file "
+                         "(default: no export)")
+    ident_p.add_argument("--all-pairs", action="store_true", help="print every pair's summary "
+                         "(default: the 12 pairs with the largest fit error)")
+    ident_p.add_argument("--no-diagnosis", action="store_true", help="skip the check of the "
+                         "session against the model (bump stops, lift-off, the runs "
+                         "re-simulated on the model; about 5-8 %% of the time)")
+    ident_p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    ident_p.set_defaults(func=run)
+    return ident_p
+
+
+def run(args):
+    """``shockplan identify``: rig session -> identified vehicle model."""
+    import warnings
+
+    from ident.data.session import read_session
+    from ident.identify.model import summary_path, write_model_summary
+    from ident.identify.pipeline import identify_session
+    from planner.noise import with_noise_report
+
+    check_out(args)
+    check_output(summary_path(args.out), overwrite=args.overwrite, what="the model's summary")
+    if args.mat:
+        check_output(args.mat, overwrite=args.overwrite, what="--mat")
+    if args.plots:
+        check_output(args.plots, overwrite=True, folder=True, what="--plots")
+    out = Path(args.out)
+    session = read_session(args.session)
+    diagnose_log = logging.getLogger("ident.identify.diagnose")
+    shocks_log = logging.getLogger("ident.identify.shockcheck")
+    level, shocks_level = diagnose_log.level, shocks_log.level
+    diagnose_log.setLevel(logging.ERROR)  # its findings are printed below, once
+    shocks_log.setLevel(logging.ERROR)  # so are the shock library's
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            model = identify_session(session, estimator=args.estimator,
+                                     frf_method=args.frf_method, nperseg=args.nperseg,
+                                     coherence_min=args.coherence_min, fit_method=args.method,
+                                     max_order=args.max_order, diagnose=not args.no_diagnosis)
+    finally:
+        diagnose_log.setLevel(level)
+        shocks_log.setLevel(shocks_level)
+    # the model with its noise report (planner.noise.identify_with_noise's model; its
+    # warnings, if any, are not the identification's)
+    model = with_noise_report(model, session)
+    model.save(out, overwrite=args.overwrite)
+    summary_file = write_model_summary(model, summary_path(out), units=session.units,
+                                       overwrite=args.overwrite)
+    table = model.summary()
+    print(f"identified '{session.name}' ({len(session.runs)} runs, {session.fs_hz:g} Hz, "
+          f"estimator {model.frf.settings.get('estimator')}) with {args.method}: "
+          f"{len(table)} pairs")
+    rows = [(r.output, r.input, r.order, f"{r.fit_error:.4f}", f"{r.median_coherence:.3f}")
+            for r in table.itertuples()]
+    if not args.all_pairs:
+        worst = table.sort_values("fit_error", ascending=False).head(12)
+        rows = [(r.output, r.input, r.order, f"{r.fit_error:.4f}", f"{r.median_coherence:.3f}")
+                for r in worst.itertuples()]
+        print("the 12 pairs with the largest fit error (--all-pairs for every pair):")
+    print(format_table(rows, ["output", "input", "order", "fit error", "median coh 0.5-20 Hz"]))
+    print(f"median fit error {table.fit_error.median():.4f}, orders "
+          f"{int(table.order.min())}..{int(table.order.max())}; c_bar "
+          f"{', '.join(f'{c:.0f}' for c in model.cbar_n_s_m)} N/(m/s)")
+    print("\n".join(model.noise.lines(table)))
+    if model.elements is not None:  # what the session declared: in the loop of predictions
+        lift = model.liftoff
+        print(f"real car: {model.elements.describe()}; the bump stops' force is in the "
+              "corners' force inputs (the linear model is free of it), and predictions put "
+              "the stops and static loads in the loop"
+              + ("" if not lift else "; samples where a tire left its pad were corrected "
+                 "(pad corrections, settings['liftoff'])"))
+    print("diagnosis: skipped (--no-diagnosis)" if model.diagnosis is None else
+          "\n".join(model.diagnosis.summary_lines()))
+    if model.shock_check is not None:  # the session's shock forces against the library
+        print("\n".join(model.shock_check.lines()))
+    for w in caught:
+        print(f"warning: {w.message}")
+    print(f"wrote model {out} and its per-pair summary {summary_file}")
+    if args.mat:
+        model.export_mat(args.mat, overwrite=args.overwrite)
+        print(f"wrote MATLAB export {args.mat}")
+    if args.plots:
+        from ident.identify.plots import write_frf_plots
+
+        paths = write_frf_plots(model, args.plots, units=session.units)
+        print(f"wrote {len(paths)} FRF plots to {args.plots}")
+    return 0

@@ -1,0 +1,99 @@
+"""``shockplan plan``: the next rig runs (optimal experiment design) and the run sheet."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from planner.cli.common import (UNITS_OF_DRIVES, add_units, check_out, load_vehicle,
+                                output_units)
+from planner.text import format_table
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers):
+    """Add ``plan`` to `subparsers`."""
+    pl = subparsers.add_parser("plan", help="the next rig runs (optimal experiment design) "
+                               "and the rig-day run sheet")
+    pl.add_argument("--vehicle", help="before rig day: the known car, a vehicle TOML or "
+                    "'paper' (give this or --model)")
+    pl.add_argument("--model", help="between runs: the model identified so far (.npz; give "
+                    "this and --session, or --vehicle)")
+    pl.add_argument("--session", help="the session the model came from (with --model)")
+    pl.add_argument("--shocks", required=True, help="the crate: shock library TOML")
+    pl.add_argument("--budget-min", type=float, required=True,
+                    help="rig time for the plan [min], swaps included")
+    pl.add_argument("--criterion", choices=["d", "a", "decision"], default="d",
+                    help="D-optimal (d, default), A-optimal (a), or the ranking's decisions "
+                    "(decision)")
+    pl.add_argument("--objective", help="objective TOML for the decision criterion and the "
+                    "predictions (default: the built-in 'grip and platform')")
+    pl.add_argument("--drive", action="append", help="the team's drive for the decision "
+                    "criterion and the validation runs; repeatable (default: a 120 s "
+                    "synthetic track drive of the car)")
+    pl.add_argument("--rig-costs", metavar="RIG.toml", help="the rig's time costs (rig TOML, "
+                    "docs/formats.md): swap_min, run_overhead_min [min], click_change_s [s] "
+                    "(default: 6 min a changed corner, 20 s an adjuster turned, no overhead)")
+    pl.add_argument("--baseline", help="the car's setup at the start: one shock id or "
+                    "LF,RF,LR,RR (default: the session's baseline, or the crate's first shock)")
+    pl.add_argument("--validate", type=int, default=0,
+                    help="validation runs of the current best setups on --drive (default "
+                    "%(default)s)")
+    pl.add_argument("--baseline-every", type=int, default=0,
+                    help="repeat the baseline after every this many runs, for drift (default "
+                    "%(default)s: never)")
+    add_units(pl, "units of the drive files read and written", default=None,
+              default_text=UNITS_OF_DRIVES + ", SI without --drive")
+    pl.add_argument("--out", required=True, help="output folder")
+    pl.add_argument("--overwrite", action="store_true", help="replace an existing folder")
+    pl.set_defaults(func=run)
+    return pl
+
+
+def run(args):
+    """``shockplan plan``: the next rig runs (optimal experiment design) and the run sheet."""
+    from ident.data.drive import read_drive
+    from ident.identify.model import load_model
+    from ident.data.session import read_session
+    from ident.models.library import read_shock_library
+    from planner.design import ScheduleOptions, design_experiment
+    from planner.objective import default_objective, read_objective
+    from planner.rig_spec import read_rig
+    from planner.testplan import write_plan
+
+    out = Path(args.out)
+    check_out(args, folder=True)
+    if (args.vehicle is None) == (args.model is None):
+        raise ValueError("give either --vehicle (before rig day: the known car, a vehicle TOML "
+                         "or 'paper') or --model with --session (between runs)")
+    session = None
+    if args.model is not None:
+        if args.session is None:
+            raise ValueError("--model needs --session: the runs the model was identified from "
+                             "are the plan's prior information")
+        model = load_model(args.model)
+        session = read_session(args.session)
+    else:
+        model = load_vehicle(None if args.vehicle == "paper" else args.vehicle)
+    library = read_shock_library(args.shocks)
+    objective = default_objective() if args.objective is None else read_objective(args.objective)
+    drives = [read_drive(d, units=args.units) for d in args.drive] if args.drive else None
+    output_units(args, drives)
+    rig = read_rig(args.rig_costs) if args.rig_costs else None
+    plan = design_experiment(model, library, budget_min=args.budget_min,
+                             criterion=args.criterion, session=session, objective=objective,
+                             baseline=args.baseline, drives=drives, rig=rig,
+                             schedule=ScheduleOptions(baseline_every=args.baseline_every,
+                                                      n_validation=args.validate))
+    files = write_plan(plan, out, units=args.units, overwrite=args.overwrite)
+    t = plan.table()
+    rows = [(n, r["name"], f"{r['start_min']:.1f}", f"{r['duration_s'] / 60:.1f}", r["purpose"],
+             "/".join(r[c] for c in ("LF", "RF", "LR", "RR")), r["changed"] or "-",
+             f"{100 * r['share']:.0f} %") for n, r in t.iterrows()]
+    print(f"planned {len(t)} runs in {plan.total_min:.1f} of {plan.budget_min:g} min "
+          f"(criterion {plan.criterion}; cvxpy {plan.solver['status']} in "
+          f"{plan.solver['solve_s']:.1f} s; {plan.solver['n_candidates']} candidate runs)")
+    print(format_table(rows, ["run", "name", "start min", "min", "purpose", "LF/RF/LR/RR",
+                            "changed", "share"]))
+    print("wrote " + ", ".join(str(p) for p in files.values()))
+    return 0
