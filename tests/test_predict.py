@@ -274,3 +274,23 @@ def test_four_post_model_refuses_an_aero_drive(four_post_model, validation_drive
     assert back.rig_inputs == WHEELLOADER_INPUTS
     with pytest.raises(DriveError, match=match):
         predict_setups(back, drive, [baseline_setup], demo_library)
+
+
+def test_noise_report_is_kept_with_the_model(four_post_model, four_post_session, tmp_path):
+    """The identify command's model: the identified model plus its noise report, a typed
+    field (not a setting) saved and loaded with the model."""
+    from ident.identify.model import RESULT_KEYS, NoiseReport, load_model
+    from planner.noise import noise_report, with_noise_report
+
+    model = with_noise_report(four_post_model, four_post_session, n_draws=4)
+    assert isinstance(model.noise, NoiseReport)
+    assert model.noise == noise_report(four_post_model, four_post_session, n_draws=4)
+    assert model.settings == four_post_model.settings
+    assert not set(RESULT_KEYS) & set(model.settings)
+    back = load_model(model.save(tmp_path / "m.npz"))
+    assert back.noise == model.noise and list(back.settings) == list(model.settings)
+    assert list(back.file_settings()) == list(model.file_settings())
+    assert list(model.file_settings())[-1] == "noise"
+    assert back.diagnosis is not None and back.shock_check is not None
+    with pytest.raises(TypeError, match="new VehicleModel"):
+        model.with_results(poles=model.poles)

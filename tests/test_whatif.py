@@ -775,3 +775,22 @@ def test_condition_setups_change_each_setups_packers_and_stops():
     assert not nominal.changes_elements
     assert condition_setups(setups, nominal, ShockVariants(lib), "0:0", resolved)[0] \
         .bump_stops is None
+
+
+def test_whatif_baseline_from_a_ranking(tmp_path, demo_library):
+    """The what-if baseline: the one given; else a ranking's own (found among every ranked
+    setup, beyond the ones studied); None without a ranking or its mark."""
+    from planner.setups import Setup, read_setups
+    from planner.whatif import whatif_baseline
+
+    path = tmp_path / "ranking.csv"
+    path.write_text("rank,setup,LF,RF,LR,RR,baseline\n1,best,L28,L28,L28,L28,False\n"
+                    "2,base,B20,B20,B20,B20,True\n")
+    ranked = read_setups(path, demo_library)
+    given = Setup("given", {c: "DM" for c in CORNERS})
+    assert whatif_baseline(given, ranking=path, ranked=ranked) is given
+    assert whatif_baseline(None, ranking=path, ranked=ranked) is ranked[1]
+    assert whatif_baseline(None, ranking=path, ranked=ranked[:1]) is None
+    assert whatif_baseline(None) is None
+    path.write_text("setup,LF,RF,LR,RR\nbest,L28,L28,L28,L28\n")
+    assert whatif_baseline(None, ranking=path, ranked=ranked) is None
