@@ -46,6 +46,8 @@ kernels, and nothing is written into the installs.
       data bytes;
     - ``.mat``: every byte after the 116-byte text header, and that header with its
       ``Created on:`` date masked;
+    - ``.mf4``: every byte but the MDF4 header's start time and the file history's time
+      (asammdf stamps the write time there);
     - ``.png .pdf .svg``: present or absent only (not compared);
     - ``_logs/*``: stdout and stderr after the folder path is normalized and timing
       figures are masked; a difference there is a warning, not a failure;
@@ -791,6 +793,33 @@ def cmp_mat(rel, a, b, ra, rb):
     return "same", "identical (header date masked)"
 
 
+def _mdf4_time_fields(data):
+    """Byte ranges of an MDF4 file's write times: the header's start time (HD block at 64,
+    ``hd_start_time_ns`` after its 24-byte block header and 6 links) and the first file
+    history entry's time (FH block, ``fh_time_ns`` after its header and 2 links)."""
+    import struct
+
+    if data[64:68] != b"##HD":
+        return []
+    fields = [(136, 144)]
+    fh = struct.unpack_from("<Q", data, 64 + 24 + 8)[0]  # hd_fh_first: the second link
+    if fh and data[fh:fh + 4] == b"##FH":
+        fields.append((fh + 40, fh + 48))
+    return fields
+
+
+def cmp_mdf(rel, a, b, ra, rb):
+    da, db = bytearray(a.read_bytes()), bytearray(b.read_bytes())
+    if len(da) != len(db):
+        return "DIFF", f"sizes differ ({len(da)} vs {len(db)} bytes)"
+    for data in (da, db):
+        for lo, hi in _mdf4_time_fields(data):
+            data[lo:hi] = bytes(hi - lo)
+    if da == db:
+        return "same", "identical (write times masked)"
+    return "DIFF", "contents differ"
+
+
 def cmp_bytes(rel, a, b, ra, rb):
     if _normalize_bytes(a.read_bytes(), ra) == _normalize_bytes(b.read_bytes(), rb):
         return "same", "bytes"
@@ -852,6 +881,8 @@ def _kind(rel):
         return "rpc3", cmp_rpc
     if suf == ".mat":
         return "mat", cmp_mat
+    if suf in (".mf4", ".mdf"):
+        return "mdf4", cmp_mdf
     if suf in IMAGE_SUFFIXES:
         return "image", None
     return "bytes", cmp_bytes
