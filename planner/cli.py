@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ident import interrupts
 from ident.data.files import check_output
 from ident.data.channels import RIG_KINDS
 from ident.data.units import UNIT_SYSTEMS
@@ -1415,6 +1416,7 @@ def main(argv=None):
     """Entry point of the ``shockplan`` program; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    interrupts.install()  # a Ctrl-C swallowed by C code still stops the command
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:
