@@ -107,7 +107,7 @@ class TimeBase:
 
 
 def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueError,
-                      row_offset=2):
+                      row_offset=2, row_label="data row"):
     """Check a record's time stamps and give its uniform time base (see the module docstring).
 
     Parameters
@@ -125,6 +125,8 @@ def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueErro
         Added to the 0-based index of a step (from sample ``i`` to ``i + 1``) to give the
         data row an error message names: the default 2 names sample ``i + 1`` as a 1-based
         data row.
+    row_label : str
+        What a file's sample is called in messages (``"sample"`` in a binary file).
 
     Returns
     -------
@@ -151,7 +153,7 @@ def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueErro
     dt = np.diff(t)
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
-        raise error(f"{where}: time is not strictly increasing at data row {i + row_offset} "
+        raise error(f"{where}: time is not strictly increasing at {row_label} {i + row_offset} "
                     f"(t={t[i]:.9g} s then {t[i + 1]:.9g} s); sort the samples and remove "
                     "duplicated rows")
     typical = float(np.median(dt))
@@ -167,7 +169,7 @@ def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueErro
                 f"a step of {steps:.3g} sample intervals")
         raise error(
             f"{where}: time is not uniformly sampled: {what} ({dt[i]:.6g} s against the "
-            f"typical {typical:.6g} s) at t={t[i + 1]:.9g} s (data row {i + row_offset}); "
+            f"typical {typical:.6g} s) at t={t[i + 1]:.9g} s ({row_label} {i + row_offset}); "
             f"steps within {100 * jitter_rtol:g} % of the typical one are a logger's jitter "
             "and resampled, this one is dropped or repeated samples or a changed rate: cut "
             "the record at the gap, fill it, or export at one constant rate")
