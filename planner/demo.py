@@ -33,6 +33,7 @@ import warnings
 from pathlib import Path
 
 from ident.data.channels import ALL_CHANNELS, CORNERS, quantity_of
+from ident.interrupts import die_with_parent
 from ident.data.files import (atomic_write_bytes, atomic_write_text, atomic_write_toml,
                               check_can_write, write_csv)
 from ident.data.formats.channel_map import CHANNEL_MAP_FORMAT, UNIT_FACTORS
@@ -727,7 +728,8 @@ def _start_job(func, *args, method="fork"):
         func(*args)
         return None
     pool = concurrent.futures.ProcessPoolExecutor(
-        max_workers=1, mp_context=multiprocessing.get_context(method))
+        max_workers=1, mp_context=multiprocessing.get_context(method),
+        initializer=die_with_parent, initargs=(os.getpid(),))
     future = pool.submit(func, *args)
     pool.shutdown(wait=False)
     return future

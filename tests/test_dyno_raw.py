@@ -145,6 +145,41 @@ def test_canonical_csv_needs_no_map(tmp_path):
     assert result.runs[0].temperature_c is None and "temperature" not in result.columns
 
 
+#: Curves from millisecond stamps against those from exact ones: the stamps' rounding
+#: (up to half a millisecond) is not in the data, which is on the dyno's uniform clock.
+RTOL_ROUNDED_STAMPS = 1e-3
+
+
+def test_millisecond_time_stamps_are_read_as_the_grid_they_round(tmp_path, caplog):
+    """A dyno PC that writes time in whole milliseconds at 512 Hz (steps of 1 or 2 ms, 50 %
+    off the 1.95 ms interval) was refused; its stamps round a uniform clock: the run is read
+    on that grid, said in one warning, and gives the curve of the exact stamps."""
+    frame = run_frame(SETTINGS[0], seed=5, peak_velocities_m_s=[0.1, 0.3], cycles_per_speed=2,
+                      temperature=None, fs_hz=512.0)
+    frame.to_csv(tmp_path / "exact.csv", index=False)
+    frame["time"] = np.round(frame["time"], 3)
+    frame.to_csv(tmp_path / "ms.csv", index=False)
+    with caplog.at_level("WARNING"):
+        rounded = import_dyno_runs([tmp_path / "ms.csv"], settings={})
+    said = [r.getMessage() for r in caplog.records if "rounded to" in r.getMessage()]
+    assert len(said) == 1 and "0.001 s" in said[0] and "512 Hz grid" in said[0], said
+    exact = import_dyno_runs([tmp_path / "exact.csv"], settings={})
+    (v0, f0), (v1, f1) = exact.points(), rounded.points()
+    np.testing.assert_allclose(v1, v0, rtol=RTOL_ROUNDED_STAMPS)
+    np.testing.assert_allclose(f1, f0, rtol=RTOL_ROUNDED_STAMPS)
+
+
+def test_dropped_sample_among_millisecond_stamps_is_refused(tmp_path):
+    """Rounded stamps widen the tolerance by the rounding only: a dropped sample still is
+    one."""
+    frame = run_frame(SETTINGS[0], seed=5, peak_velocities_m_s=[0.1, 0.3], cycles_per_speed=2,
+                      temperature=None, fs_hz=512.0)
+    frame["time"] = np.round(frame["time"], 3)
+    frame.drop(index=700).to_csv(tmp_path / "ms.csv", index=False)
+    with pytest.raises(DynoError, match=r"\(time\) is not uniformly sampled"):
+        import_dyno_runs([tmp_path / "ms.csv"], settings={})
+
+
 # ---------------------------------------------------------------------------------------
 # refusals
 # ---------------------------------------------------------------------------------------

@@ -752,8 +752,10 @@ def test_bad_channel_data(rig_session, map_path, tmp_path):
     t = run.time_s.copy()
     t[700:] += 0.003  # a gap in the acquisition
     path = write_mdf_file(tmp_path / "gap.mf4", run, time_s=t)
-    with pytest.raises(SessionError, match=r"gap.mf4: the time of 'Aero Heave' is not "
-                                           r"uniformly sampled: step 0.013 s at t=7.003 s"):
+    with pytest.raises(SessionError, match=r"gap.mf4: the time of 'Aero Heave': time is not "
+                                           r"uniformly sampled: a gap of 1\.3 sample "
+                                           r"intervals \(0\.013 s against the typical 0\.01 "
+                                           r"s\) at t=7\.003 s"):
         read_run(path, format="mdf", channel_map=map_path)
 
     raw = _raw_channels(run)

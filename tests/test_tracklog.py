@@ -463,14 +463,17 @@ def _case_time_not_uniform_csv(d):
     t = np.arange(50) / 100.0
     t[20:] += 0.004
     return (dict(path=_canonical_csv(d, time=t)),
-            r"log.csv: time is not uniformly sampled: step 0.014 s at data row 21")
+            r"log.csv: time is not uniformly sampled: a gap of 1\.4 sample intervals \(0\.014 s "
+            r"against the typical 0\.01 s\) at t=0\.204 s \(data row 21\)")
 
 
 def _case_time_not_uniform_mdf(d):
     t = np.arange(1000) / 500.0
     t[600:] += 0.001
     return (dict(path=_mdf(d, pot_t=t), channel_map=_pot_map(d)),
-            r"log.mf4: the time of 'Pot LF' is not uniformly sampled: step 0.003 s at t=1.201 s")
+            r"log.mf4: the time of 'Pot LF': time is not uniformly sampled: a gap of 1\.5 "
+            r"sample intervals \(0\.003 s against the typical 0\.002 s\) at t=1\.201 s "
+            r"\(sample 600\)")
 
 
 def _case_one_sample(d):

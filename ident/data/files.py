@@ -34,6 +34,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 import tomli_w
 
+from ident import interrupts
 from ident.data.units import check_units
 
 __all__ = ["read_toml", "write_csv", "write_csv_frame", "write_parquet_frame", "write_table_file",
@@ -66,6 +67,12 @@ def read_toml(path, *, error=ValueError, what="TOML file"):
         raise error(f"{path}: cannot read the {what} ({exc.strerror}); check the file") from None
 
 
+def _umask():
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
 class atomic_path:
     """Context manager giving a temporary path that replaces `path` on success.
 
@@ -87,10 +94,11 @@ class atomic_path:
         return self.tmp
 
     def __exit__(self, exc_type, exc, tb):
+        if exc_type is None and interrupts.requested():  # Ctrl-C lost on the way: write nothing
+            self.tmp.unlink(missing_ok=True)
+            raise KeyboardInterrupt
         if exc_type is None:
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(self.tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual mode
+            os.chmod(self.tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the usual mode
             os.replace(self.tmp, self.path)
         else:
             self.tmp.unlink(missing_ok=True)
@@ -121,7 +129,11 @@ class atomic_dir:
     def __exit__(self, exc_type, exc, tb):
         import shutil
 
+        if exc_type is None and interrupts.requested():  # Ctrl-C lost on the way: write nothing
+            shutil.rmtree(self.work, ignore_errors=True)
+            raise KeyboardInterrupt
         if exc_type is None:
+            os.chmod(self.work, 0o777 & ~_umask())  # mkdtemp creates 0700; the usual mode
             if self.path.exists():
                 shutil.rmtree(self.path) if self.path.is_dir() else self.path.unlink()
             self.work.rename(self.path)

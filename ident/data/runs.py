@@ -37,6 +37,7 @@ from ident.data.channels import (ALL_CHANNELS, RIG_INPUTS, WHEELLOADER_INPUTS, m
                                  quantity_of)
 from ident.data.files import (csv_preamble, read_csv_after, read_units_marker, resolve_units,
                               write_table_file)
+from ident.data.timebase import uniform_time_base
 from ident.data.units import check_units, from_si, to_si
 from ident.errors import SessionError
 
@@ -310,26 +311,10 @@ def check_columns(columns, *, where, units, channel_map, required, names=None):
             f"{where}: column {_label(_TIME, present[_TIME])} has {int(bad.sum())} "
             f"NaN/inf value(s), the first at data row {i + 1}; fill or cut the run"
         )
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        i = int(np.argmax(dt <= 0))
-        raise SessionError(
-            f"{where}: time is not strictly increasing at data row {i + 2} "
-            f"(t={t[i]:.9g} s then {t[i + 1]:.9g} s); sort the samples and remove "
-            "duplicated rows"
-        )
-    # against the median step, so that a gap is reported where it is, not at row 2
-    typical = float(np.median(dt))
-    off = np.abs(dt - typical) > RTOL_TIME_STEP * typical
-    if off.any():
-        i = int(np.argmax(off))
-        raise SessionError(
-            f"{where}: time is not uniformly sampled: step {dt[i]:.9g} s at data row "
-            f"{i + 2} (t={t[i + 1]:.9g} s) vs the typical step {typical:.9g} s (relative "
-            f"tolerance {RTOL_TIME_STEP:g}); resample the run to a uniform rate, fill "
-            "missing samples, or write time with full precision"
-        )
-    step = (t[-1] - t[0]) / (t.size - 1)
+    base = uniform_time_base(t, where=where, error=SessionError)
+    if base.resampled:  # a logger's jittered time stamps
+        logger.warning(base.describe(where))
+    t = base.time_s
 
     channels = {}
     for canonical in names:
@@ -337,10 +322,10 @@ def check_columns(columns, *, where, units, channel_map, required, names=None):
             continue
         col = present[canonical]
         label = _label(canonical, col)
-        x = _as_numeric(columns[col], label=label, where=where, time=t)
+        x = _as_numeric(columns[col], label=label, where=where, time=base.raw_time_s)
         bad = ~np.isfinite(x)
         if bad.any():
-            t0 = t[int(np.argmax(bad))]
+            t0 = base.raw_time_s[int(np.argmax(bad))]
             raise SessionError(
                 f"{where}: column {label} has {int(bad.sum())} NaN/inf value(s) from "
                 f"t={t0:.6g} s; fill or cut the run"
@@ -352,11 +337,12 @@ def check_columns(columns, *, where, units, channel_map, required, names=None):
             i = int(np.argmax(bad))
             raise SessionError(
                 f"{where}: column {label} has {int(bad.sum())} value(s) that overflow when "
-                f"converted from {units} to SI, the first {x[i]:.6g} at t={t[i]:.6g} s; "
+                f"converted from {units} to SI, the first {x[i]:.6g} at "
+                f"t={base.raw_time_s[i]:.6g} s; "
                 "fix or cut the run (a logger's overflow or fill value?)"
             )
-        channels[canonical] = frozen_array(si)
-    return frozen_array(t), channels, float(1.0 / step)
+        channels[canonical] = frozen_array(base.resample(si))
+    return frozen_array(t), channels, base.fs_hz
 
 
 def check_session_units(units, *, where):

@@ -1,16 +1,66 @@
-"""The time base of a sampled record: samples, length and times from ``fs_hz``.
+"""Time bases: a record's sample times, and time stamps as instruments write them.
 
 :class:`TimeRecord` is the base of the records that hold equal-length channels sampled
 uniformly from t = 0 (:class:`ident.data.drive.Drive`, :class:`ident.data.tracklog.TrackLog`,
 :class:`planner.trackdrive.target.DriveTarget`): it reads ``n_samples``, ``duration_s`` and
 ``time_s`` from their ``fs_hz`` and ``channels``, so the three are written once.
+
+:func:`uniform_time_base` checks the time column of a file as it was written and gives the
+uniform time base its samples are read onto.
+
+A rig controller writes time on an exact grid. A data logger on a CAN or serial bus stamps
+each sample when it arrives, so its steps jitter around the sample interval (a 77 Hz logger:
+steps of 12.7-13.4 ms), and a dyno's PC writes millisecond time stamps. Both are sound
+records of a uniformly sampled signal. :func:`uniform_time_base` tells the cases apart by
+each step's deviation from the median step:
+
+- every step within :data:`EXACT_RTOL` (1e-6) of the median: the time base is uniform, and
+  is used as it is (bit for bit as before);
+- every step within `jitter_rtol` (default :data:`JITTER_RTOL`, 5 %) of the median: the
+  time stamps jitter; the signals are resampled onto a uniform base (from the first stamp,
+  at the stamps' least-squares rate snapped to the nominal one by :func:`nominal_rate`, up
+  to the last stamp) by interpolation through the *measured* time stamps (:meth:`TimeBase.resample`), and the caller says so in one line
+  with the jitter measured (:meth:`TimeBase.describe`);
+- any step further off: samples were dropped, repeated, or the rate changed. That is not
+  jitter, and resampling across it would invent data: refused at its time with the fix.
+
+The interpolation is a B-spline of degree :data:`SPLINE_DEGREE` (7) through the measured
+samples. As the degree grows, spline interpolation converges to band-limited (sinc)
+interpolation; at degree 7 a signal with content up to a quarter of the sample rate is
+reproduced within 2e-4 of its RMS (steps jittered by +-3 %, measured in
+``tests/test_timebase.py``), against 5e-3 for a cubic spline and 9e-2 for linear
+interpolation. 20 channels of 160,000 samples take about a second.
 """
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import dataclass
 
-__all__ = ["TimeRecord"]
+import numpy as np
+from scipy.interpolate import make_interp_spline
+
+__all__ = [
+    "TimeRecord",
+    "EXACT_RTOL",
+    "JITTER_RTOL",
+    "NOMINAL_RATE_RTOL",
+    "SPLINE_DEGREE",
+    "TimeBase",
+    "nominal_rate",
+    "uniform_time_base",
+]
+
+#: Largest deviation of a step from the median step, relative to it, of a time base taken
+#: as exactly uniform (a rig controller's, or one written with full precision).
+EXACT_RTOL = 1e-6
+#: Largest deviation of a step from the median step, relative to it, taken as a logger's
+#: jitter and resampled; a step further off is a gap (dropped or repeated samples).
+JITTER_RTOL = 0.05
+#: Largest relative difference between a jittered record's estimated rate and the nominal
+#: rate it is snapped to (:func:`nominal_rate`).
+NOMINAL_RATE_RTOL = 1e-4
+#: Degree of the interpolating B-spline through jittered samples (see the module docstring).
+SPLINE_DEGREE = 7
 
 
 class TimeRecord:
@@ -49,3 +99,161 @@ class TimeRecord:
         """ndarray, shape (n_samples,): Sample times ``k / fs_hz`` [s] from 0 at the first
         sample."""
         return np.arange(self.n_samples) / self.fs_hz
+
+
+@dataclass(frozen=True, eq=False)
+class TimeBase:
+    """A record's time base, checked: uniform as written, or the uniform one it is resampled to.
+
+    Attributes
+    ----------
+    time_s : ndarray, shape (n_samples,)
+        The uniform sample times [s]: as written when :attr:`resampled` is False, else
+        ``t[0] + k / fs_hz`` up to the last stamp (the count may differ from the record's
+        by a sample or two).
+    fs_hz : float
+        Sample rate [Hz] (of a resampled record: its nominal rate, :func:`nominal_rate`).
+    raw_time_s : ndarray, shape (n_samples,)
+        The time stamps as written [s].
+    jitter : float
+        The largest deviation of a step from the median step, relative to it.
+    resampled : bool
+        True if the signals must be resampled onto :attr:`time_s` (:meth:`resample`).
+    """
+
+    time_s: np.ndarray
+    fs_hz: float
+    raw_time_s: np.ndarray
+    jitter: float
+    resampled: bool
+
+    def resample(self, values):
+        """Signals sampled at :attr:`raw_time_s`, on :attr:`time_s`.
+
+        Parameters
+        ----------
+        values : array_like, shape (n_samples,) or (n_samples, n_signals)
+
+        Returns
+        -------
+        ndarray
+            The same shape, float; `values` itself (as an array) when the time base is
+            uniform as written.
+        """
+        x = np.asarray(values, dtype=float)
+        if not self.resampled:
+            return x
+        return make_interp_spline(self.raw_time_s, x, k=SPLINE_DEGREE, axis=0)(self.time_s)
+
+    def describe(self, where):
+        """One line saying what was resampled, with the jitter measured (for the log)."""
+        step_ms = 1e3 / self.fs_hz
+        return (f"{where}: time stamps jitter by up to {100 * self.jitter:.2g} % of the "
+                f"{step_ms:.4g} ms step: resampled onto a uniform {self.fs_hz:.6g} Hz time "
+                f"base ({self.time_s.size} samples, band-limited interpolation)")
+
+
+def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueError,
+                      row_offset=2, row_label="data row"):
+    """Check a record's time stamps and give its uniform time base (see the module docstring).
+
+    Parameters
+    ----------
+    time_s : array_like, shape (n_samples,)
+        Time stamps [s], finite.
+    where : str
+        Prefix of every error message (the file, the run).
+    jitter_rtol : float
+        Largest deviation of a step from the median step, relative to it, resampled as
+        jitter (default 5 %); 0 accepts only an exactly uniform base.
+    error : type
+        The exception raised (a subclass of ``ValueError``, e.g. ``SessionError``).
+    row_offset : int
+        Added to the 0-based index of a step (from sample ``i`` to ``i + 1``) to give the
+        data row an error message names: the default 2 names sample ``i + 1`` as a 1-based
+        data row.
+    row_label : str
+        What a file's sample is called in messages (``"sample"`` in a binary file).
+
+    Returns
+    -------
+    TimeBase
+
+    Raises
+    ------
+    error
+        If there are fewer than 2 samples, time is not strictly increasing, or a step
+        differs from the median step by more than `jitter_rtol` (a gap, a repeated
+        sample, a changed rate), naming the first such step's time and row, and the fix.
+
+    Examples
+    --------
+    >>> tb = uniform_time_base([0.0, 0.0101, 0.0199, 0.0301, 0.04], where="log.csv")
+    >>> tb.resampled, round(tb.fs_hz, 6), round(tb.jitter, 3)
+    (True, 100.0, 0.02)
+    >>> uniform_time_base([0.0, 0.01, 0.02], where="run.csv").resampled
+    False
+    """
+    t = np.asarray(time_s, dtype=float)
+    if t.ndim != 1 or t.size < 2:
+        raise error(f"{where}: time needs at least 2 samples; export the whole record")
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        i = int(np.argmax(dt <= 0))
+        raise error(f"{where}: time is not strictly increasing at {row_label} {i + row_offset} "
+                    f"(t={t[i]:.9g} s then {t[i + 1]:.9g} s); sort the samples and remove "
+                    "duplicated rows")
+    typical = float(np.median(dt))
+    dev = np.abs(dt - typical) / typical
+    jitter = float(dev.max())
+    if jitter <= EXACT_RTOL:
+        step = (t[-1] - t[0]) / (t.size - 1)
+        return TimeBase(t, float(1.0 / step), t, jitter, False)
+    if jitter > jitter_rtol:
+        i = int(np.argmax(dev > jitter_rtol))
+        steps = dt[i] / typical
+        what = (f"a gap of {steps:.3g} sample intervals" if steps > 1 else
+                f"a step of {steps:.3g} sample intervals")
+        raise error(
+            f"{where}: time is not uniformly sampled: {what} ({dt[i]:.6g} s against the "
+            f"typical {typical:.6g} s) at t={t[i + 1]:.9g} s ({row_label} {i + row_offset}); "
+            f"steps within {100 * jitter_rtol:g} % of the typical one are a logger's jitter "
+            "and resampled, this one is dropped or repeated samples or a changed rate: cut "
+            "the record at the gap, fill it, or export at one constant rate")
+    step = np.polyfit(np.arange(t.size, dtype=float), t, 1)[0]  # jitter averages out
+    fs = nominal_rate(1.0 / step)
+    n = int(np.floor((t[-1] - t[0]) * fs * (1.0 + 1e-12))) + 1  # inside the record: no
+    return TimeBase(t[0] + np.arange(n) / fs, float(fs), t, jitter, True)  # extrapolation
+
+
+def nominal_rate(fs_hz):
+    """A jittered record's rate, snapped to the nominal rate it was logged at.
+
+    The least-squares rate of jittered stamps is within about 1e-5 of the logger's true rate
+    (stamps off by a few per cent of a step, a few hundred samples or more), and loggers run
+    at a whole number of hertz or a whole number of microseconds per sample. The nearest
+    such rate within :data:`NOMINAL_RATE_RTOL` is taken, so that runs logged at one rate
+    share it exactly (a session's runs must); otherwise the estimate itself.
+
+    Parameters
+    ----------
+    fs_hz : float
+        The estimated rate [Hz].
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> nominal_rate(99.99917), round(nominal_rate(76.923069), 6), nominal_rate(55.51)
+    (100.0, 76.923077, 55.51)
+    """
+    whole_hz = float(round(fs_hz))
+    if whole_hz > 0 and abs(whole_hz - fs_hz) <= NOMINAL_RATE_RTOL * fs_hz:
+        return whole_hz
+    # whole microseconds per sample lie densely below 1 kHz: only a much closer one counts
+    whole_us = 1e6 / round(1e6 / fs_hz)
+    if abs(whole_us - fs_hz) <= 0.01 * NOMINAL_RATE_RTOL * fs_hz:
+        return whole_us
+    return float(fs_hz)

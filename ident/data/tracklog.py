@@ -447,28 +447,29 @@ def _read_file(path, fmt, cmap, *, where):
     if t.size < 2:
         raise TrackLogError(f"{where}: has {t.size} sample(s) of {reference!r}; a track log "
                             "needs at least 2")
-    typical = check_time_base(t, source=reference, where=where)
+    base = check_time_base(t, source=reference, where=where, error=TrackLogError)
+    typical = float(np.median(np.diff(t)))
 
     channels, resampled = {}, []
     for canonical, spec in cmap.channels.items():
         x_raw = raw.channels[spec.source]
         if cmap.time is not None:
-            channels[canonical] = mapped_channel_si(spec, x_raw, t, where=where)
+            channels[canonical] = base.resample(mapped_channel_si(spec, x_raw, t, where=where))
             continue
         tc, _ = mapped_time_base(raw, cmap, where=where, reference=canonical,
                                  error=TrackLogError)
         tc = np.asarray(tc, dtype=np.float64)
         if tc.size == t.size and np.max(np.abs(tc - t)) <= RTOL_TIME_STEP * typical:
-            channels[canonical] = mapped_channel_si(spec, x_raw, t, where=where)
+            channels[canonical] = base.resample(mapped_channel_si(spec, x_raw, t, where=where))
             continue
         x = mapped_channel_si(spec, x_raw, tc, where=where)
-        channels[canonical] = _onto(t, typical, tc, x, canonical=canonical,
+        channels[canonical] = _onto(base.time_s, typical, tc, x, canonical=canonical,
                                     source=spec.source, reference=reference, where=where)
         resampled.append(canonical)
     if resampled:
         logger.info("%s: %s interpolated linearly onto the time base of %r (%.6g Hz)", where,
-                    ", ".join(resampled), reference, 1.0 / typical)
-    return t, channels, resampled
+                    ", ".join(resampled), reference, base.fs_hz)
+    return base.time_s, channels, resampled
 
 
 def read_track_log(path, *, channel_map=None, units=None, format=None, name=None):

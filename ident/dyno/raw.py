@@ -117,6 +117,7 @@ import numpy as np
 
 from ident.data.files import (atomic_write_text, check_can_write, csv_preamble, did_you_mean,
                               read_csv_table, read_toml, read_units_marker, units_marker)
+from ident.data.timebase import nominal_rate
 from ident.data.units import TO_SI, UNIT_LABELS, check_units, from_si
 from ident.errors import DynoError
 
@@ -133,6 +134,8 @@ __all__ = [
     "LOOP_POINTS",
     "LAG_MAX_S",
     "TIME_GRID_SHARE",
+    "TIME_QUANTA",
+    "time_resolution",
     "TEMPERATURE_DRIFT_C",
     "DynoColumn",
     "DynoMap",
@@ -197,6 +200,8 @@ LOOP_POINTS = 180
 #: (fitted by least squares) makes time non-uniform: a dropped sample is off by one
 #: interval; times printed with 4 decimals at 2048 Hz are off by at most 0.1 of one.
 TIME_GRID_SHARE = 0.25
+#: Resolutions a PC's time stamps are commonly rounded to [s] (:func:`time_resolution`).
+TIME_QUANTA = (1e-3, 1e-4, 1e-5, 1e-6)
 #: Hysteresis of the stroke detection, a share of the half-stroke.
 _STROKE_HYSTERESIS = 0.25
 #: An extreme at the very start or end of a file counts when it is as deep as the
@@ -537,30 +542,69 @@ def _check_columns(cols, sources, where):
                             "the dyno map")
     t = cols["time"]
     dt = np.diff(t)
-    bad = np.flatnonzero(dt <= 0)
+    # a PC's time stamps, rounded to whole milliseconds (or 0.1 ms ...), of a uniform clock:
+    # each stamp is within half a quantum of the grid, so a step may differ by a quantum
+    i = np.arange(n, dtype=float)
+    slope, icpt = np.polyfit(i, t, 1)
+    quantum = time_resolution(t)
+    if quantum and abs(slope / quantum - round(slope / quantum)) < 0.01:
+        quantum = 0.0  # the interval is whole quanta: the stamps are exact, nothing rounded
+    med = float(np.median(dt))
+    bad = np.flatnonzero(dt < 0 if quantum >= med else dt <= 0)
     if bad.size:
         j = int(bad[0])
         raise DynoError(f"{where}: column {sources['time']!r} (time) is not increasing at data "
                         f"row {j + 2} ({_num(t[j])} then {_num(t[j + 1])} s); export one run "
                         "per file, sorted by time, without repeated samples")
-    med = float(np.median(dt))
-    bad = np.flatnonzero(np.abs(dt - med) > TIME_GRID_SHARE * med)
+    if med <= 0:
+        raise DynoError(f"{where}: column {sources['time']!r} (time) repeats most stamps (its "
+                        f"resolution {_num(quantum)} s is coarser than the sample interval): "
+                        "export time with more decimals")
+    bad = np.flatnonzero(np.abs(dt - med) > TIME_GRID_SHARE * med + quantum)
     if bad.size:  # a step: a dropped or repeated sample
         j = int(bad[0]) + 1
         raise DynoError(f"{where}: column {sources['time']!r} (time) is not uniformly sampled: "
                         f"data row {j + 1} (t = {_num(t[j])} s) comes {_num(dt[j - 1])} s after "
                         f"the row before, the file's interval is {_num(med)} s (dropped or "
                         "repeated samples, or a changed rate); export at one constant rate")
-    i = np.arange(n, dtype=float)
-    slope, icpt = np.polyfit(i, t, 1)
     off = np.abs(t - (icpt + slope * i))
-    bad = np.flatnonzero(off > TIME_GRID_SHARE * slope)
+    bad = np.flatnonzero(off > TIME_GRID_SHARE * slope + 0.5 * quantum)
     if bad.size:  # a drift
         j = int(bad[0])
         raise DynoError(f"{where}: column {sources['time']!r} (time) is not uniformly sampled: "
                         f"data row {j + 1} (t = {_num(t[j])} s) is {off[j] / slope:.2g} sample "
                         f"intervals off the {_num(1.0 / slope)} Hz grid (dropped or repeated "
                         "samples, or a changed rate); export at one constant rate")
+    if np.any(off > TIME_GRID_SHARE * slope):
+        logger.warning("%s: time stamps rounded to %s s (steps of %s-%s s): taken as the "
+                       "uniform %s Hz grid they round", where, _num(quantum), _num(dt.min()),
+                       _num(dt.max()), _num(nominal_rate(1.0 / slope)))
+
+
+def time_resolution(time_s):
+    """The resolution a file's time stamps are rounded to [s], or 0 for full precision.
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n,)
+
+    Returns
+    -------
+    float
+        The coarsest of 1 ms, 0.1 ms, 10 us, 1 us that every stamp is a whole multiple of
+        (within float rounding); 0.0 if none.
+
+    Examples
+    --------
+    >>> time_resolution(np.round(np.arange(10) / 512.0, 3)), time_resolution(np.arange(3) / 3)
+    (0.001, 0.0)
+    """
+    t = np.asarray(time_s, dtype=float)
+    for quantum in TIME_QUANTA:
+        k = np.round(t / quantum)
+        if np.all(np.abs(t - k * quantum) <= 1e-9 * quantum + 4 * np.spacing(np.abs(t))):
+            return quantum
+    return 0.0
 
 
 def read_dyno_raw(path, *, dyno_map=None):

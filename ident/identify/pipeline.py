@@ -30,6 +30,7 @@ from scipy import signal, sparse
 from scipy.optimize import lsq_linear
 
 from ident.data.channels import CORNERS
+from ident.interrupts import die_with_parent
 from ident.data.session import STATIC_OFFSET_SHARE, make_session
 from ident.errors import FitWarning, LowCoherenceWarning
 from ident.identify import fit as fitmod
@@ -456,7 +457,9 @@ def _map_pairs(func, common, tasks, n_jobs):
     size = max(1, -(-len(tasks) // (4 * n)))  # about 4 batches per process
     batches = [tasks[k:k + size] for k in range(0, len(tasks), size)]
     ctx = multiprocessing.get_context("fork")
-    with concurrent.futures.ProcessPoolExecutor(max_workers=n, mp_context=ctx) as pool:
+    with concurrent.futures.ProcessPoolExecutor(max_workers=n, mp_context=ctx,
+                                                initializer=die_with_parent,
+                                                initargs=(os.getpid(),)) as pool:
         parts = list(pool.map(func, [common] * len(batches), batches))
     return [r for part in parts for r in part]
 

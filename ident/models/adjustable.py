@@ -76,7 +76,7 @@ from scipy.interpolate import PchipInterpolator
 from scipy.optimize import lsq_linear
 
 from ident.data.files import did_you_mean, read_csv_table
-from ident.data.units import to_si
+from ident.data.units import from_si, to_si
 from ident.errors import ShockModelError
 from ident.models.shocks import TableShock, format_number, is_real_number
 
@@ -84,6 +84,8 @@ __all__ = [
     "MONOTONE_RTOL",
     "POINT_CROSSING_RTOL",
     "CROSSING_WARN_RTOL",
+    "RESOLUTION_SHARE",
+    "force_resolution",
     "SETTING_ATOL",
     "DynoPoints",
     "DynoFinding",
@@ -110,6 +112,11 @@ POINT_CROSSING_RTOL = 0.10
 #: Crossings smaller than this are dyno noise and not reported (0.5 %: the import's
 #: point error); larger ones within the limits above are warnings, fitted flat.
 CROSSING_WARN_RTOL = 0.005
+#: A dyno's force resolution by default, as a share of the sheet's force range (its largest
+#: minus its smallest force): a crossing smaller than the resolution in newtons is noise
+#: however large it is relatively (a few newtons near zero velocity), fitted through with a
+#: warning naming its rows. A sheet may state its dyno's resolution (``force_resolution``).
+RESOLUTION_SHARE = 0.02
 #: Absolute tolerance on settings (clicks or turns): range ends and step grid.
 SETTING_ATOL = 1e-9
 #: Points per side of the model's velocity grid at most (measured velocities thinned).
@@ -466,7 +473,28 @@ def _side_grid(speeds):
     return g
 
 
-def check_dyno_points(points, *, shock, adjusters, stiffer, rtol=MONOTONE_RTOL):
+def force_resolution(points, resolution_n=None):
+    """The force [N] below which two curves' difference is the dyno's noise.
+
+    Parameters
+    ----------
+    points : DynoPoints
+    resolution_n : float, optional
+        The dyno's resolution as stated (the library's ``force_resolution``) [N].
+
+    Returns
+    -------
+    float
+        `resolution_n`, or :data:`RESOLUTION_SHARE` of the points' force range.
+    """
+    if resolution_n is not None:
+        return float(resolution_n)
+    f = np.asarray(points.force_n, dtype=float)
+    return RESOLUTION_SHARE * float(np.ptp(f)) if f.size else 0.0
+
+
+def check_dyno_points(points, *, shock, adjusters, stiffer, rtol=MONOTONE_RTOL,
+                      resolution_n=None):
     """Check an adjustable shock's measured points; return every finding.
 
     Parameters
@@ -480,6 +508,10 @@ def check_dyno_points(points, *, shock, adjusters, stiffer, rtol=MONOTONE_RTOL):
         Which end of each range is stiffer.
     rtol : float
         Relative force drop towards `stiffer` tolerated (:data:`MONOTONE_RTOL`).
+    resolution_n : float, optional
+        The dyno's force resolution [N] (:func:`force_resolution`: default
+        :data:`RESOLUTION_SHARE` of the sheet's force range). A crossing counts only where
+        the force drop exceeds it as well as the relative limits.
 
     Returns
     -------
@@ -487,12 +519,15 @@ def check_dyno_points(points, *, shock, adjusters, stiffer, rtol=MONOTONE_RTOL):
         Errors: a force whose sign differs from its velocity's; a setting outside its
         range; a curve softer than its neighbour setting (same other settings) towards
         `stiffer` by more than `rtol` at the median of the speeds both measured, or at one
-        speed by more than :data:`POINT_CROSSING_RTOL` (a crossing). Warnings: smaller
-        crossings above :data:`CROSSING_WARN_RTOL` (fitted flat).
+        speed by more than :data:`POINT_CROSSING_RTOL`, by more than the resolution (a
+        crossing). Warnings: smaller crossings above :data:`CROSSING_WARN_RTOL` (fitted
+        flat), and crossings within the resolution (noise near zero velocity, fitted
+        through), each naming the rows.
     """
     out = []
     names = tuple(adjusters)
     v, f, s = points.velocity_m_s, points.force_n, points.settings
+    atol_n = force_resolution(points, resolution_n)
 
     def setting_name(row):
         return format_shock_name(shock, dict(zip(names, row)), names)
@@ -538,8 +573,27 @@ def check_dyno_points(points, *, shock, adjusters, stiffer, rtol=MONOTONE_RTOL):
                     fa = _curve_on(va[va_ok], sign * f[ia][va_ok], grid)
                     fb = _curve_on(vb[vb_ok], sign * f[ib][vb_ok], grid)
                     drop = (fa - fb) / np.maximum(np.abs(fa), 1e-9)
+                    noise = (drop > CROSSING_WARN_RTOL) & (fa - fb <= atol_n)
+                    noise_finding = None
+                    if noise.any():  # within the dyno's resolution: fitted through
+                        rows = sorted({points.rows[ib[np.argmin(np.abs(vb - g))]]
+                                       for g in grid[noise]})
+                        shown = ", ".join(rows[:4]) + (f" and {len(rows) - 4} more"
+                                                       if len(rows) > 4 else "")
+                        noise_finding = DynoFinding(
+                            "warning", shock, name, setting_name(kh), rows[0],
+                            f"{shown}: at {side} up to {format_number(grid[noise].max())} m/s "
+                            f"the curve at {setting_name(kh)} crosses the one at "
+                            f"{setting_name(ks)} by at most "
+                            f"{format_number(float((fa - fb)[noise].max()))} N, within the "
+                            f"dyno's resolution ({format_number(atol_n)} N): noise, fitted "
+                            "through")
+                    drop = np.where(fa - fb > atol_n, drop, 0.0)
                     k = int(np.argmax(drop))
                     median = float(np.median(drop))
+                    error = median > rtol or drop[k] > POINT_CROSSING_RTOL
+                    if noise_finding is not None and not error:
+                        out.append(noise_finding)
                     if drop[k] <= CROSSING_WARN_RTOL:
                         continue
                     near = ib[np.argmin(np.abs(vb - grid[k]))]
@@ -547,7 +601,7 @@ def check_dyno_points(points, *, shock, adjusters, stiffer, rtol=MONOTONE_RTOL):
                            f"curve at {setting_name(kh)} is {100 * drop[k]:.1f} % softer than at "
                            f"{setting_name(ks)}, but {name!r} is stiffer towards "
                            f"{stiffer[name]} settings (the curves cross)")
-                    if median > rtol or drop[k] > POINT_CROSSING_RTOL:
+                    if error:
                         why = (f"; {100 * median:.1f} % softer at the median speed"
                                if median > rtol else "")
                         out.append(DynoFinding(
@@ -591,6 +645,9 @@ class AdjustableShock:
     lag_s, description, count, dyno_files, sheet_units
         As for every shock (``dyno_files``: the sheet paths as written in the
         library, relative to it; ``sheet_units``: their unit system).
+    force_resolution_n : float, keyword-only, optional
+        The dyno's force resolution [N] (the library's ``force_resolution``); default
+        :data:`RESOLUTION_SHARE` of the sheets' force range. Crossings within it are noise.
 
     Raises
     ------
@@ -612,6 +669,7 @@ class AdjustableShock:
     count: int | None = field(default=None, kw_only=True)
     dyno_files: tuple = field(default=(), kw_only=True)
     sheet_units: str = field(default="SI", kw_only=True)
+    force_resolution_n: float | None = field(default=None, kw_only=True)
 
     def __post_init__(self):
         who = f"shock {self.id!r}"
@@ -681,8 +739,12 @@ class AdjustableShock:
             raise _err(f"{who}: count {self.count!r} must be an integer >= 0 (the units the "
                        "team has), or left out for unlimited")
         object.__setattr__(self, "dyno_files", tuple(str(p) for p in self.dyno_files))
+        res = self.force_resolution_n
+        if res is not None and (not is_real_number(res) or not 0 < float(res) < math.inf):
+            raise _err(f"{who}: force_resolution {res!r} must be a number > 0 [N] (the "
+                       "dyno's force resolution), or left out for 2 % of the sheet's range")
         findings = check_dyno_points(self.points, shock=self.id, adjusters=ranges,
-                                     stiffer=stiffer)
+                                     stiffer=stiffer, resolution_n=res)
         errors = [x for x in findings if x.severity == "error"]
         if errors:
             more = f" (and {len(errors) - 1} more problem(s))" if len(errors) > 1 else ""
@@ -979,8 +1041,8 @@ class AdjustableShock:
         Parameters
         ----------
         units : {"SI", "imperial"}
-            Kept for the library writer's interface: settings are unit-free and the
-            points stay in their sheets.
+            The unit system of ``force_resolution`` (settings are unit-free and the
+            points stay in their sheets).
         """
         out = {"id": self.id, "kind": self.kind}
         if self.description:
@@ -996,6 +1058,8 @@ class AdjustableShock:
             out["lag"] = float(self.lag_s)
         if self.count is not None:
             out["count"] = int(self.count)
+        if self.force_resolution_n is not None:
+            out["force_resolution"] = float(from_si(self.force_resolution_n, "force", units))
         return out
 
     def __repr__(self):

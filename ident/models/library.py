@@ -340,7 +340,7 @@ def _model_from_toml(table, units, where, index):
 
 
 ADJUSTABLE_KEYS = ("id", "kind", "adjusters", "default", "stiffer", "step", "dyno", "lag",
-                   "description", "count")
+                   "description", "count", "force_resolution")
 
 
 def _adjustable_from_toml(table, units, where, label, raw_id):
@@ -390,6 +390,9 @@ def _adjustable_from_toml(table, units, where, label, raw_id):
             raise _fail(label, "count", f"must be an integer, got {table['count']!r}",
                         "write a whole number, or omit it for unlimited")
         kwargs["count"] = table["count"]
+    if "force_resolution" in table:
+        kwargs["force_resolution_n"] = to_si(
+            _toml_number(label, "force_resolution", table["force_resolution"]), "force", units)
     try:
         return AdjustableShock(raw_id, {k: tuple(v) for k, v in adjusters.items()}, points,
                                default=table.get("default"), stiffer=table.get("stiffer"),

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import sys
 
+from ident import interrupts
 from planner.cli import (demo, drive, dyno, export_drive, identify, optimize, plan, predict,
                          rank, rig, rigfiles, sweep, vehicle, whatif)
 from planner.cli.common import FLAGS_ANYWHERE, Parser, add_flags_anywhere, one_line
@@ -53,6 +54,7 @@ def main(argv=None):
     """Entry point of the ``shockplan`` program; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    interrupts.install()  # a Ctrl-C swallowed by C code still stops the command
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:

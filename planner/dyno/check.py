@@ -33,7 +33,7 @@ from ident.models.adjustable import (MONOTONE_RTOL, AdjustableShock, DynoFinding
                                      check_dyno_points, format_shock_name,
                                      read_dyno_sheets)
 from ident.models.library import read_shock_library
-from ident.models.shocks import TableShock, check_shock_units, format_number
+from ident.models.shocks import TableShock, check_shock_units, format_number, is_real_number
 from planner.errors import PlannerError
 
 __all__ = [
@@ -493,9 +493,12 @@ def _check_entry(table, units, library_path, index):
         return ShockCheck(shock_id, entry, names, stiffer,
                           tuple(problems) + (_entry_error(shock_id, str(exc)),))
     findings = list(problems)
+    resolution = table.get("force_resolution")
+    resolution_n = (to_si(float(resolution), "force", units) if is_real_number(resolution)
+                    and float(resolution) > 0 else None)
     if len(ranges) == len(names) and not bad:
         findings += check_dyno_points(points, shock=shock_id, adjusters=ranges,
-                                      stiffer=stiffer)
+                                      stiffer=stiffer, resolution_n=resolution_n)
     shock = None
     if not any(f.severity == "error" for f in findings):
         try:
@@ -504,7 +507,8 @@ def _check_entry(table, units, library_path, index):
             if "lag" in table:
                 kwargs["lag_s"] = table["lag"]
             shock = AdjustableShock(shock_id, ranges, points, stiffer=stiffer,
-                                    dyno_files=tuple(files), sheet_units=units, **kwargs)
+                                    dyno_files=tuple(files), sheet_units=units,
+                                    force_resolution_n=resolution_n, **kwargs)
         except (ShockModelError, TypeError) as exc:
             findings.append(_entry_error(shock_id, f"{entry}: {exc}"))
     return _shock_check(shock_id, entry, names, stiffer, points, findings, shock)
@@ -557,7 +561,8 @@ def check_dyno_library(path):
         if library is not None and isinstance(sid, str) and sid in library.adjustable_ids:
             shock = library.adjustable(sid)
             findings = check_dyno_points(shock.points, shock=shock.id,
-                                         adjusters=shock.adjusters, stiffer=shock.stiffer)
+                                         adjusters=shock.adjusters, stiffer=shock.stiffer,
+                                         resolution_n=shock.force_resolution_n)
             checks.append(_shock_check(
                 shock.id, f"{path}: [[shock]] #{j + 1} ({sid!r})", shock.names,
                 shock.stiffer, shock.points, findings, shock))

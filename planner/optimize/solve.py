@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
+from ident import interrupts
 from ident.errors import ShockplanWarning
 
 __all__ = [
@@ -244,7 +245,8 @@ class _Iterations(ca.Callback):
         if self.bar is not None:
             self.bar.update(1)
             self.bar.set_postfix(objective=f"{float(d['f']):.5f}")
-        return [0]
+        # a non-zero return asks IPOPT to stop (User_Requested_Stop)
+        return [1 if interrupts.requested() else 0]
 
     def close(self):
         if self.bar is not None:
@@ -331,9 +333,13 @@ def _ipopt(ev, space, score_rows, limit_rows, weights, aggregate, A_lin, b_lin, 
             "ipopt.mu_strategy": "adaptive"}
     solver = ca.nlpsol("curves", "ipopt", {"x": x_all, "f": f, "g": G}, opts)
     try:
-        sol = solver(x0=x_start, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
+        # casadi would swallow a KeyboardInterrupt raised in a callback and report the solve
+        # as finished: SIGINT only sets a flag while it runs, the callbacks stop IPOPT on it
+        with interrupts.deferred():
+            sol = solver(x0=x_start, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
     finally:
         it_cb.close()
+    interrupts.check()  # an interrupted solve is never reported as a result
     stats = solver.stats()
     its = stats.get("iterations", {})
     hist = pd.DataFrame({"objective": [h["objective"] for h in it_cb.history],

@@ -42,6 +42,7 @@ __all__ = [
     "click_table",
     "curve_table",
     "curves_figure",
+    "stop_reason",
     "write_optimum",
 ]
 
@@ -262,7 +263,7 @@ def _write_workbook(optimum, units, path):
             ("gain over the crate best", f"{100 * optimum.gap:.2f} %"),
             ("IPOPT status", s["status"] + (" (not converged: a warning)"
                                              if s.get("acceptable") else "")),
-            ("IPOPT stop reason", s.get("reason") or "converged"),
+            ("IPOPT stop reason", stop_reason(s)),
             ("iterations", s["iterations"]),
             ("result taken from", {"ipopt": "IPOPT's solution", "iterate": "IPOPT's best "
                                    "feasible iterate", "scan": "the scan's best curve"}
@@ -325,6 +326,32 @@ def _write_workbook(optimum, units, path):
                     f"and corner group; gain over the best fixed setup {clicks.crate_best}, "
                     "gap to the continuous optimum")
     wb.save(path)
+
+
+#: What IPOPT's statuses other than the solved ones mean, for the workbook's stop reason.
+_STOP_REASONS = {"Maximum_Iterations_Exceeded": "the iteration limit (--max-iter)",
+                 "Maximum_CpuTime_Exceeded": "the time limit",
+                 "User_Requested_Stop": "stopped on request"}
+
+
+def stop_reason(solver):
+    """Why IPOPT stopped, in words: ``converged`` only when it did.
+
+    Parameters
+    ----------
+    solver : dict
+        The optimum's solver record (``status``, ``converged``, ``reason``).
+
+    Returns
+    -------
+    str
+    """
+    if solver.get("reason"):
+        return solver["reason"]
+    if solver.get("converged"):
+        return "converged"
+    status = solver.get("status", "unknown")
+    return _STOP_REASONS.get(status, f"not converged ({status})")
 
 
 def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):

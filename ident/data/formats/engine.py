@@ -28,6 +28,7 @@ from ident.data.session import (
     write_session,
 )
 from ident.models.library import ShockLibrary, read_shock_library
+from ident.data.timebase import uniform_time_base
 from ident.data.units import check_units
 
 __all__ = ["READERS", "read_raw", "read_mapped_raw", "check_time_base", "mapped_channel_si",
@@ -245,8 +246,8 @@ def read_mapped_raw(path, *, format, channel_map, where=None):
     return raw
 
 
-def check_time_base(t, *, source, where):
-    """Check that sample times are finite, strictly increasing and uniform.
+def check_time_base(t, *, source, where, error=SessionError):
+    """Check sample times and give their uniform time base (a logger's jitter resampled).
 
     Parameters
     ----------
@@ -256,38 +257,29 @@ def check_time_base(t, *, source, where):
         The channel the times belong to (named in messages).
     where : str
         How to name the file in messages.
+    error : type
+        The exception raised.
 
     Returns
     -------
-    float
-        The median time step [s].
+    ident.data.timebase.TimeBase
+        Uniform as written, or the uniform base jittered times are resampled onto
+        (:func:`ident.data.timebase.uniform_time_base`; said in a warning).
 
     Raises
     ------
-    SessionError
+    error
         If a time is NaN/inf, the times are not strictly increasing, or a step differs
-        from the median step by more than :data:`ident.data.runs.RTOL_TIME_STEP` of it.
+        from the median step by more than :data:`ident.data.timebase.JITTER_RTOL` of it
+        (a gap or a changed rate, named at its time).
     """
     if not np.all(np.isfinite(t)):
-        raise SessionError(f"{where}: the time of {source!r} has NaN/inf values; check "
-                           "the export")
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        i = int(np.argmax(dt <= 0))
-        raise SessionError(
-            f"{where}: the time of {source!r} is not strictly increasing at sample "
-            f"{i + 1} (t={t[i]:.9g} s then {t[i + 1]:.9g} s); check the export"
-        )
-    typical = float(np.median(dt))
-    off = np.abs(dt - typical) > RTOL_TIME_STEP * typical
-    if off.any():
-        i = int(np.argmax(off))
-        raise SessionError(
-            f"{where}: the time of {source!r} is not uniformly sampled: step "
-            f"{dt[i]:.9g} s at t={t[i + 1]:.9g} s vs the typical {typical:.9g} s (relative "
-            f"tolerance {RTOL_TIME_STEP:g}); resample to a uniform rate or fill the gap"
-        )
-    return typical
+        raise error(f"{where}: the time of {source!r} has NaN/inf values; check the export")
+    base = uniform_time_base(t, where=f"{where}: the time of {source!r}", error=error,
+                             row_offset=1, row_label="sample")
+    if base.resampled:
+        logger.warning(base.describe(where))
+    return base
 
 
 def mapped_channel_si(spec, raw_values, t, *, where):
@@ -389,7 +381,8 @@ def read_run(path, *, format, channel_map, required=(), where=None):
             )
     if n < 2:
         raise SessionError(f"{where}: has {n} sample(s); a run needs at least 2")
-    typical = check_time_base(t, source=t_source, where=where)
+    base = check_time_base(t, source=t_source, where=where)
+    typical = 1.0 / base.fs_hz
     for canonical, spec in cmap.channels.items():
         tc = raw.time_s.get(spec.source)
         if cmap.time is None and tc is not None and \
@@ -400,14 +393,14 @@ def read_run(path, *, format, channel_map, required=(), where=None):
                 "map channels of one acquisition (one time base)"
             )
 
-    channels = {canonical: mapped_channel_si(spec, raw.channels[spec.source], t, where=where)
+    channels = {canonical: base.resample(mapped_channel_si(spec, raw.channels[spec.source], t,
+                                                           where=where))
                 for canonical, spec in cmap.channels.items()}
-    t = np.array(t)
+    t = np.array(base.time_s)
     t.flags.writeable = False
-    step = (t[-1] - t[0]) / (n - 1)
-    logger.info("%s: %d channel(s) x %d samples at %.6g Hz (%s)", where, len(channels), n,
-                1.0 / step, FORMAT_NAMES[fmt])
-    return RunTable(time_s=t, channels=channels, fs_hz=float(1.0 / step), path=path)
+    logger.info("%s: %d channel(s) x %d samples at %.6g Hz (%s)", where, len(channels),
+                t.size, base.fs_hz, FORMAT_NAMES[fmt])
+    return RunTable(time_s=t, channels=channels, fs_hz=base.fs_hz, path=path)
 
 
 def parse_setup(setup, *, shocks=None, where="setup"):
