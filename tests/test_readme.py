@@ -220,3 +220,28 @@ def test_demo_outputs(demo):
     assert float(said.group(1)) < float(said.group(4))
     optimal = read_setups(out / "optimize" / "optimal_setup.csv")
     assert optimal[0].ids() == ("OPT-front", "OPT-front", "OPT-rear", "OPT-rear")
+
+
+def python_blocks(text):
+    """The README's ```python blocks, in order, as written."""
+    return [m["body"] for m in _FENCE.finditer(text) if m["lang"] == "python"]
+
+
+def test_the_python_section_is_found():
+    """The section "From Python" has its block, on public names only."""
+    blocks = python_blocks(TEXT)
+    assert len(blocks) == 1 and "rank_setups" in blocks[0]
+    assert not re.search(r"\bimport _|\._[a-z]", blocks[0])
+
+
+@pytest.mark.heavy
+def test_readme_python_runs_as_written(tmp_path):
+    """The "From Python" block runs as written in a fresh folder (a virtual-rig session,
+    its identification and a ranking: about 90 s)."""
+    script = tmp_path / "from_python.py"
+    script.write_text(python_blocks(TEXT)[0], encoding="utf-8")
+    done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=BLOCK_TIMEOUT_S)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "baseline 'B20/B20/B20/B20' scores 1.000" in done.stdout
+    assert done.stdout.strip().splitlines()[-1].split()[0] == "L28/L28/L28/L28"
