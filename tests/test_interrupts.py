@@ -201,3 +201,40 @@ def test_ctrl_c_stops_the_demo_during_optimize(tmp_path, monkeypatch, capsys, si
     assert calls["n"] >= 3
     assert not out.exists()
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.heavy
+@pytest.mark.skipif(not Path("/proc").is_dir() or sys.platform != "linux",
+                    reason="reads /proc to see which processes run")
+def test_killed_identify_leaves_no_worker_and_no_half_output(tmp_path):
+    """SIGKILL to `shockplan identify` while its fit workers run: the workers are gone
+    within seconds, and the model and its summary are both absent (or both present)."""
+    import psutil
+
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    cli = [sys.executable, "-c", "import sys; from planner.cli import main; sys.exit(main())"]
+    subprocess.run(cli + ["-q", "rig", "simulate", "--out", str(tmp_path / "session")],
+                   check=True, env=env, timeout=600)
+    proc = subprocess.Popen(cli + ["-q", "identify", str(tmp_path / "session"), "--out",
+                                   str(tmp_path / "model.npz")], env=env)
+    try:
+        parent = psutil.Process(proc.pid)
+        deadline = time.monotonic() + POOL_START_TIMEOUT_S * 5
+        workers = []
+        while not workers and time.monotonic() < deadline and proc.poll() is None:
+            workers = parent.children(recursive=True)
+            time.sleep(0.05)
+        assert workers, "identify finished before its fit workers could be seen"
+        pids = [w.pid for w in workers]
+        proc.kill()
+        proc.wait(timeout=60)
+        deadline = time.monotonic() + WORKER_END_TIMEOUT_S
+        while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not any(_alive(p) for p in pids), "fit workers outlived the killed identify"
+        written = {(tmp_path / "model.npz").exists(),
+                   (tmp_path / "model_summary.csv").exists()}
+        assert len(written) == 1  # both or neither
+    finally:
+        if proc.poll() is None:
+            proc.kill()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from ident.data.files import check_output
+from ident.data.files import atomic_path, check_output
 from planner.cli.common import check_out, int_at_least
 from planner.text import format_table
 
@@ -86,9 +86,13 @@ def run(args):
     # the model with its noise report (planner.noise.identify_with_noise's model; its
     # warnings, if any, are not the identification's)
     model = with_noise_report(model, session)
-    model.save(out, overwrite=args.overwrite)
-    summary_file = write_model_summary(model, summary_path(out), units=session.units,
-                                       overwrite=args.overwrite)
+    # the model and its summary appear together or not at all: both are written in full
+    # to temporary files beside their targets, then put in place one right after the other
+    summary_file = summary_path(out)
+    with atomic_path(out, overwrite=args.overwrite) as tmp_model, \
+            atomic_path(summary_file, overwrite=args.overwrite) as tmp_summary:
+        model.save(tmp_model, overwrite=True)
+        write_model_summary(model, tmp_summary, units=session.units, overwrite=True)
     table = model.summary()
     print(f"identified '{session.name}' ({len(session.runs)} runs, {session.fs_hz:g} Hz, "
           f"estimator {model.frf.settings.get('estimator')}) with {args.method}: "
