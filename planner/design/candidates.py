@@ -211,6 +211,7 @@ def change_time_min(before, after, rig=None):
 
     Examples
     --------
+    >>> from planner.rig_spec import RigSpec
     >>> a = Setup("a", dict.fromkeys(CORNERS, "TTX@ls=6,hs=2"))
     >>> b = Setup("b", {**dict.fromkeys(CORNERS, "TTX@ls=6,hs=2"), "LF": "TTX@ls=8,hs=1"})
     >>> round(change_time_min(a, b, RigSpec(swap_min=6.0, click_change_s=20.0)), 3)

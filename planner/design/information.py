@@ -184,6 +184,16 @@ def session_information(session, cbar, edges):
 
 
 def hermitian(M):
+    """The Hermitian part of square matrices, ``(M + M^H) / 2`` over the last two axes.
+
+    Parameters
+    ----------
+    M : ndarray, shape (..., n, n), complex or real
+
+    Returns
+    -------
+    ndarray, shape (..., n, n)
+    """
     return 0.5 * (M + np.conj(np.swapaxes(M, -1, -2)))
 
 
