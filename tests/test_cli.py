@@ -387,7 +387,7 @@ def test_the_walk_finds_every_command():
     assert {" ".join(path) for path, _ in _commands(build_parser())} == {
         "demo", "rig simulate", "identify", "predict", "rank", "optimize", "plan", "whatif",
         "sweep", "import", "export-drive", "vehicle modes", "dyno import", "dyno table",
-        "dyno check", "drive from-track", "drive iterate", "drive section"}
+        "dyno check", "drive from-track", "drive iterate", "drive section", "drive resample"}
 
 
 @pytest.mark.parametrize("given, canonical", [
@@ -436,6 +436,67 @@ def test_quiet_and_verbose_before_or_after_the_command(flag, dest):
         for argv in ([flag, *path, *req], [*path, flag, *req], [*path, *req, flag]):
             assert getattr(parser.parse_args(argv), dest) is True, argv
     assert getattr(parser.parse_args(["rig", flag, "simulate", "--out", "o"]), dest) is True
+
+
+def test_version_prints_the_version_and_exits_zero(capsys):
+    """``shockplan --version`` (issue 36): ``shockplan <version>`` on stdout, exit status 0;
+    the installed distribution's version, the package's ``__version__`` without one."""
+    from importlib import metadata
+
+    import planner
+    from planner.cli import common
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    out = capsys.readouterr()
+    assert out.out == f"shockplan {metadata.version('shockplan')}\n" and out.err == ""
+    assert common.package_version() == planner.__version__ == ident.__version__
+
+    def missing(name):
+        raise metadata.PackageNotFoundError(name)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(metadata, "version", missing)
+        assert common.package_version() == planner.__version__
+
+
+class _Stream:
+    def __init__(self, tty):
+        self.tty = tty
+
+    def isatty(self):
+        return self.tty
+
+    def write(self, text):
+        return len(text)
+
+    def flush(self):
+        pass
+
+
+@pytest.mark.parametrize("quiet, tty, shown", [(False, True, True), (False, False, False),
+                                               (True, True, False), (True, False, False)])
+def test_progress_bars_only_on_a_terminal(monkeypatch, quiet, tty, shown):
+    """Progress bars unless -q, and only when stderr (where tqdm draws) is a terminal: a log
+    file gets none (issue 36)."""
+    from planner.cli.common import show_progress
+
+    monkeypatch.setattr("sys.stderr", _Stream(tty))
+    args = build_parser().parse_args(["-q", "vehicle", "modes"] if quiet else
+                                     ["vehicle", "modes"])
+    assert show_progress(args) is shown
+
+
+def test_every_command_decides_progress_bars_in_one_place():
+    """No command passes ``progress=not args.quiet``: every one asks show_progress."""
+    folder = Path(__file__).resolve().parents[1] / "planner" / "cli"
+    calls = 0
+    for path in folder.glob("*.py"):
+        text = path.read_text()
+        assert "not args.quiet" not in text, path.name
+        calls += text.count("progress=show_progress(args)")
+    assert calls >= 7  # demo, rig, predict, rank, optimize, whatif, sweep
 
 
 def test_grouped_flags_equals_form_and_negative_values_still_parse():

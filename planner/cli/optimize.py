@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES,
-                                add_element_options, add_units, bump_stop_library, check_out, int_at_least,
-                                load_any_model, output_units, packer_bounds)
+from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES, add_element_options,
+                                add_units, bump_stop_library, check_out, int_at_least,
+                                load_any_model, output_units, packer_bounds, show_progress)
 
 __all__ = ["add_parser", "run"]
 
@@ -115,7 +115,7 @@ def run(args):
                               elements=ElementOptions(
                                   use_model=not args.no_elements,
                                   bump_stops=bump_stop_library(args, model)),
-                              packers=packer_bounds(args), progress=not args.quiet)
+                              packers=packer_bounds(args), progress=show_progress(args))
     files = write_optimum(opt, library, out, units=args.units, overwrite=args.overwrite)
     t = opt.table
     s = opt.solver
