@@ -461,6 +461,25 @@ def test_version_prints_the_version_and_exits_zero(capsys):
         assert common.package_version() == planner.__version__
 
 
+def test_optimize_messages_name_the_options_and_say_each_score_once():
+    """optimize's summary (issue 36): the library's "raise max_iter" reads "raise --max-iter";
+    the scan's line names the best linear score once when the best curve is linear."""
+    from planner.cli.optimize import cli_wording, scan_line
+
+    warning = ("optimize: IPOPT stopped with status 'Maximum_Iterations_Exceeded' after 80 "
+               "iterations; the best verified iterate is returned (score 0.9285): raise "
+               "max_iter, or check the constraints")
+    assert cli_wording(warning).endswith("raise --max-iter, or check the constraints")
+    assert "max_iter" not in cli_wording(warning)
+    scan = {"n_screened": 120, "n_verified": 16, "linear_score": 0.9285, "best": "linear",
+            "score": 0.9285, "screen_s": 1.0, "verify_s": 2.0}
+    line = scan_line(scan, "IPOPT's solution")
+    assert line.count("0.9285") == 1 and "best linear 0.9285, best linear" not in line
+    assert "a linear curve" in line
+    line = scan_line(dict(scan, best="two-slope", score=0.9102), "the scan's best curve")
+    assert "best linear 0.9285, best two-slope 0.9102 (3.0 s)" in line
+
+
 class _Stream:
     def __init__(self, tty):
         self.tty = tty
