@@ -96,7 +96,8 @@ class Ranking:
 
     def summary(self, n=5):
         """The ranking for a terminal: what was screened and simulated, how screening and the
-        time domain agree, the click polish, the baseline, and the best `n` setups.
+        time domain agree, the click polish, the baseline, the best `n` setups and why those
+        of them that are infeasible are (their ``violations``: a limit, the crate's count).
 
         Parameters
         ----------
@@ -120,6 +121,12 @@ class Ranking:
                          r.get("unresolved", "") or "-"))
         lines.append(format_table(rows, ["rank", "setup", "score", "feasible",
                                          "not resolved from"]))
+        lines += [f"  '{name}' is infeasible: {r.get('violations', '') or 'no reason recorded'}"
+                  for name, r in t.head(n).iterrows() if not r.get("feasible", True)]
+        more = int((~t["feasible"].iloc[n:].astype(bool)).sum()) if "feasible" in t else 0
+        if more:
+            lines.append(f"  {more} more infeasible setup(s) below these; each one's reason is "
+                         "in its 'violations' (ranking.csv)")
         return "\n".join(lines)
 
 

@@ -19,7 +19,7 @@ The run sheet
 -------------
 Sheet "run sheet": a header block (car, rig, date, crate, budget, criterion,
 planned rig time, baseline, units), then one block of rows per run, in rig
-order. The run's columns (number, planned start ``h:mm`` from the first run,
+order. The run's columns (number, planned start ``h:mm`` from the session's start,
 duration, purpose, drive file, swap time, notes) are merged over its block; the
 shock at each corner over the plan's rows, with an empty cell below it in the
 measured row for its temperature; a shock changed before the run
@@ -81,8 +81,8 @@ from planner.report.sheets import (column_label, fit_column_width, fit_width_uni
                                    print_setup, printable_size_pt, text_width, wrap_lines)
 
 __all__ = ["write_plan", "plan_toml", "run_sheet_rows", "design_figure", "write_run_sheet",
-           "read_run_sheet", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES", "CHANGED_FILL",
-           "CLICK_FILL"]
+           "read_run_sheet", "start_times_note", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES",
+           "CHANGED_FILL", "CLICK_FILL"]
 
 log = logging.getLogger(__name__)
 
@@ -333,6 +333,21 @@ def _run_sheet_columns(units, metrics, adj=None):
     return [(k, g, h, k in starts) for k, g, h in cols]
 
 
+def start_times_note(plan):
+    """What the run sheet's start times count from: the session's start, each run after its
+    changes and the rig's time a run besides its drive (so run 1 does not start at 0:00).
+
+    Returns
+    -------
+    str
+    """
+    first = plan.runs[0].start_min if plan.runs else 0.0
+    h, m = divmod(int(round(first)), 60)
+    return (f"Start times count from the session's start (0:00): each run starts after its "
+            f"changes and the rig's {plan.rig.run_overhead_min:g} min a run besides its drive "
+            f"(run 1 at {h:d}:{m:02d}).")
+
+
 def _header_block(ws, plan, units, date, label_col, intervals, clicks=False):
     """Rows 1-7: the title, two columns of facts, the legend (`clicks`: of the layout with
     adjustable shocks); returns the next free row."""
@@ -363,10 +378,11 @@ def _header_block(ws, plan, units, date, label_col, intervals, clicks=False):
             ws.merge_cells(start_row=r, start_column=col, end_row=r, end_column=col + 1)
             ws.cell(row=r, column=col + 2, value=value).font = fonts["data"]
         ws.row_dimensions[r].height = 14
+    starts = start_times_note(plan)
     legend = (f"Filled shock: changed before the run. Grey cells are the plan's (predictions"
               f"{', intervals' if intervals else ''}); write the measured values, each shock's "
               f"temperature [{_TEMPERATURE_UNIT[units]}] (in the measured row, under the shock) "
-              "and notes in the white cells. Start times count from the first run's start.")
+              f"and notes in the white cells. {starts}")
     if clicks:
         legend = ("Each corner: the shock and its adjusters' settings (clicks or turns). Amber: "
                   "shock swapped before the run (set its adjusters as shown); blue: adjuster "
@@ -374,8 +390,7 @@ def _header_block(ws, plan, units, date, label_col, intervals, clicks=False):
                   "clicks, swap+clicks) and time of the changes. Grey cells are the plan's "
                   f"(predictions{', intervals' if intervals else ''}); write the measured "
                   f"values, each shock's temperature [{_TEMPERATURE_UNIT[units]}] (in the "
-                  "measured row, under the shock) and notes in the white cells. Start times "
-                  "count from the first run's start.")
+                  f"measured row, under the shock) and notes in the white cells. {starts}")
     ws.cell(row=7, column=1, value=legend).font = fonts["note"]
     ws.row_dimensions[7].height = 14
     return 9

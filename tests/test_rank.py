@@ -163,6 +163,29 @@ def test_a_differing_best_is_called_out_only_when_it_matters(extra, strong, says
     assert "linearized pre-selection" in text
 
 
+def test_setups_beyond_the_crate_say_why_they_are_infeasible(paper_model, track_drive,
+                                                             demo_library, baseline_setup):
+    """A listed setup needing more of a shock than the crate holds (the demo crate has 2 x RB):
+    infeasible, ranked after the feasible ones, the reason in ``violations`` and in the
+    summary beside the table (issue 36)."""
+    assert demo_library["RB"].count == 2
+    setups = [baseline_setup, Setup("four-RB", dict.fromkeys(CORNERS, "RB")),
+              Setup("two-RB", dict(zip(CORNERS, ("RB", "RB", "DM", "DM"))))]
+    r = rank_setups(paper_model, track_drive, demo_library, setups=setups, top=3, n_check=0,
+                    uncertainty=False)
+    t = r.table
+    assert not t.loc["four-RB", "feasible"] and t.loc["two-RB", "feasible"]
+    assert t.loc["four-RB", "rank"] == len(t)
+    why = "inventory: needs 4 x 'RB' but the library's count is 2"
+    assert t.loc["four-RB", "violations"] == why
+    assert (t.loc[t["feasible"], "violations"] == "").all()
+    assert r.screening.loc["four-RB", "violations"] == why
+    assert f"'four-RB' is infeasible: {why}" in r.summary()
+    short = r.summary(n=2)  # the two feasible ones shown: the infeasible one is counted
+    assert "'four-RB' is infeasible" not in short
+    assert "1 more infeasible setup(s) below these" in short
+
+
 def test_settings_are_remembered(ranking):
     """The settings keep the options, the number of setups, the model and the drive."""
     st = ranking.settings
