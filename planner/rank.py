@@ -60,7 +60,9 @@ class Ranking:
     objective : planner.objective.Objective
     agreement : dict
         ``spearman`` between screening and time-domain scores over the
-        simulated setups, and ``same_best``.
+        simulated setups, ``n``, ``same_best``, ``time_best``, ``screening_best``,
+        ``time_best_screening_rank``, ``top``, ``score_gap`` and ``polished``
+        (:func:`planner.screen.describe_agreement`).
     settings : dict
     """
 
@@ -94,7 +96,8 @@ class Ranking:
 
     def summary(self, n=5):
         """The ranking for a terminal: what was screened and simulated, how screening and the
-        time domain agree, the click polish, the baseline, and the best `n` setups.
+        time domain agree, the click polish, the baseline, the best `n` setups and why those
+        of them that are infeasible are (their ``violations``: a limit, the crate's count).
 
         Parameters
         ----------
@@ -118,6 +121,12 @@ class Ranking:
                          r.get("unresolved", "") or "-"))
         lines.append(format_table(rows, ["rank", "setup", "score", "feasible",
                                          "not resolved from"]))
+        lines += [f"  '{name}' is infeasible: {r.get('violations', '') or 'no reason recorded'}"
+                  for name, r in t.head(n).iterrows() if not r.get("feasible", True)]
+        more = int((~t["feasible"].iloc[n:].astype(bool)).sum()) if "feasible" in t else 0
+        if more:
+            lines.append(f"  {more} more infeasible setup(s) below these; each one's reason is "
+                         "in its 'violations' (ranking.csv)")
         return "\n".join(lines)
 
 
@@ -309,7 +318,12 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         if len(judged) > 2 else float("nan")
     time_best, screening_best = table["rank"].idxmin(), sc.loc[judged, "rank"].idxmin()
     agreement = {"spearman": rho, "n": int(len(judged)), "same_best": bool(time_best == screening_best),
-                 "time_best": time_best, "screening_best": screening_best}
+                 "time_best": time_best, "screening_best": screening_best,
+                 # how far they differ: describe_agreement tells a near-tie from a miss
+                 "time_best_screening_rank": int(sc.loc[time_best, "rank"]), "top": int(top),
+                 "score_gap": float(table.loc[screening_best, "score"]
+                                    / table.loc[time_best, "score"] - 1.0),
+                 "polished": bool(time_best not in judged)}
     # 4. uncertainty (identified models)
     settings = {"top": top, "n_check": n_check, "oversample": oversample, "band_hz": tuple(band_hz),
                 "n_setups": len(setups), "model": td.settings.get("model"),

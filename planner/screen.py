@@ -65,6 +65,7 @@ __all__ = [
     "LIFTOFF_LINEAR_LIMIT",
     "TIRE_CONTACT_MIN_SIGMAS",
     "WEAK_AGREEMENT_SPEARMAN",
+    "DISAGREE_SCORE_GAP",
     "DriveBands",
     "ElementOperands",
     "ScreenOperands",
@@ -86,18 +87,33 @@ log = logging.getLogger(__name__)
 #: Spearman rank correlation (screening against time-domain scores) below which the two
 #: are said to agree only weakly on the order: at 0.8 about one pair in ten is swapped.
 WEAK_AGREEMENT_SPEARMAN = 0.8
+#: Share by which the time domain's best may score better than screening's best (both in the
+#: time domain) for a differing best to be the expected near-tie, not a disagreement.
+DISAGREE_SCORE_GAP = 0.01
 
 
 def describe_agreement(agreement, *, what="ranking"):
     """One sentence on how far screening and the time domain agree, for where results are read.
+
+    Screening is the linearized pre-selection: it chooses which setups to simulate. The time
+    domain (the nonlinear shocks) decides, so its result is the one to use. When the best
+    setups score close together, screening's best and the time domain's differ often and
+    harmlessly; the sentence says so, and calls the disagreement out (``DISAGREE``) only when
+    the time domain's best was outside the setups screening chose to simulate, or scores
+    better than screening's best by more than :data:`DISAGREE_SCORE_GAP` in the time domain.
 
     Parameters
     ----------
     agreement : Mapping
         ``spearman`` (float, NaN with fewer than 3 setups), ``n`` (int, setups in both)
         and ``same_best`` (bool); optionally ``screening_best`` and ``time_best`` (setup
-        names), as :class:`planner.rank.Ranking`, :class:`planner.sweep.Sweep` and a
-        screening what-if (``settings["agreement"]``) hold them.
+        names), ``time_best_screening_rank`` (int, screening's rank of the time domain's
+        best), ``top`` (int, the setups screening chose to simulate), ``score_gap``
+        (float, screening's best's time-domain score over the time domain's best's, less
+        1) and ``polished`` (bool, the time domain's best is a click setting the click
+        polish found), as :class:`planner.rank.Ranking`, :class:`planner.sweep.Sweep` and
+        a screening what-if (``settings["agreement"]``) hold them. Without the gap and the
+        rank, a differing best is called out.
     what : str or None
         What the time domain decides (``"ranking"``), said at the end; None: nothing.
 
@@ -105,27 +121,51 @@ def describe_agreement(agreement, *, what="ranking"):
     -------
     str
         E.g. ``"screening and the time domain agree: the same best setup, Spearman 0.91
-        over 41 setups; the ranking is the time domain's"``; a disagreement on the best
-        setup names both and says which to trust.
+        over 41 setups; the ranking is the time domain's"``; a differing best setup names
+        both and says which to trust.
 
     Examples
     --------
     >>> describe_agreement({"spearman": 0.52, "n": 50, "same_best": False,
     ...                     "screening_best": "A", "time_best": "B"}, what=None)
-    "screening and the time domain DISAGREE on the best setup: screening's best 'A' is not the time domain's 'B' (Spearman 0.52 over 50 setups)"
+    "screening and the time domain DISAGREE on the best setup: screening's best 'A' is not the time domain's 'B' (Spearman 0.52 over 50 setups); the time domain's is the one to use"
+    >>> describe_agreement({"spearman": 0.93, "n": 45, "same_best": False,
+    ...                     "screening_best": "A", "time_best": "B", "top": 40,
+    ...                     "time_best_screening_rank": 3, "score_gap": 0.002})
+    "screening's best 'A' is not the time domain's 'B' (screening's #3), but 'B' scores only 0.2 % better in the time domain: expected when the best setups score this close (Spearman 0.93 over 45 setups); use the ranking: it is the time domain's, and screening is only the linearized pre-selection of what to simulate"
     """
     rho, n = float(agreement.get("spearman", float("nan"))), int(agreement.get("n", 0))
     corr = (f"Spearman {rho:.2f} over {n} setups" if np.isfinite(rho) else
             f"{n} setup(s), too few for a rank correlation")
     tail = "" if what is None else f"; the {what} is the time domain's"
+    use = ("; the time domain's is the one to use" if what is None else
+           f"; use the {what}: it is the time domain's, and screening is only the linearized "
+           "pre-selection of what to simulate")
     if not agreement.get("same_best", True):
-        names = ""
-        if agreement.get("screening_best") and agreement.get("time_best"):
-            names = (f": screening's best '{agreement['screening_best']}' is not the time "
-                     f"domain's '{agreement['time_best']}'")
-        return (f"screening and the time domain DISAGREE on the best setup{names} ({corr})"
-                + ("" if what is None else
-                   f": the {what} is the time domain's; screening only chose what to simulate"))
+        sb, tb = agreement.get("screening_best"), agreement.get("time_best")
+        names = f"screening's best '{sb}' is not the time domain's '{tb}'" if sb and tb else ""
+        rank, top = agreement.get("time_best_screening_rank"), agreement.get("top")
+        gap = agreement.get("score_gap")
+        known = rank is not None and top is not None and gap is not None and np.isfinite(gap)
+        if names and agreement.get("polished"):
+            return (f"{names}, a neighbouring click setting the click polish found: expected, "
+                    f"screening orders neighbouring settings less well ({corr}){use}")
+        outside = known and not 1 <= rank <= top
+        if names and known and not outside and gap <= DISAGREE_SCORE_GAP:
+            return (f"{names} (screening's #{int(rank)}), but '{tb}' scores only "
+                    f"{100 * max(gap, 0.0):.2g} % better in the time domain: expected when the "
+                    f"best setups score this close ({corr}){use}")
+        why = []
+        if outside:
+            why.append(f"'{tb}' was screening's #{int(rank)}, outside the {int(top)} it chose "
+                       "to simulate" if rank >= 1 else f"'{tb}' was not among those screened")
+        if known and gap > DISAGREE_SCORE_GAP:
+            why.append(f"'{tb}' scores {100 * gap:.3g} % better in the time domain")
+        said = f": {names}" if names else ""
+        said += f"; {' and '.join(why)}" if why else ""
+        return (f"screening and the time domain DISAGREE on the best setup{said} ({corr})"
+                + use + ("" if not why or what is None else
+                         "; screening's linearization misjudges these setups"))
     if np.isfinite(rho) and rho < WEAK_AGREEMENT_SPEARMAN:
         return (f"screening and the time domain agree on the best setup but only weakly on the "
                 f"order ({corr}){tail}")

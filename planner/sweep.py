@@ -387,7 +387,9 @@ class SweepResult:
     agreement : dict
         ``spearman`` between screening and time-domain sweep scores over the simulated
         setups (near the top the scores are close: a low value says little), ``n``,
-        ``same_best``.
+        ``same_best``, ``time_best``, ``screening_best``, ``time_best_screening_rank``
+        (-1: not among the swept setups), ``top`` and ``score_gap``
+        (:func:`planner.screen.describe_agreement`).
     settings : dict
         ``cases`` (the labels, models outer, drives inner), ``models`` and ``drives``
         (their names: the mapping's keys, else the objects' ``name``; the case files'
@@ -841,7 +843,11 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     best_scr = table["screening_rank"].where(table["screening_rank"] > 0).idxmin()
     agreement = {"spearman": rho, "n": int(len(table)),
                  "same_best": bool(table.index[0] == best_scr),
-                 "time_best": table.index[0], "screening_best": best_scr}
+                 "time_best": table.index[0], "screening_best": best_scr,
+                 # how far they differ: describe_agreement tells a near-tie from a miss
+                 "time_best_screening_rank": int(table["screening_rank"].iloc[0]),
+                 "top": int(n_top),
+                 "score_gap": float(table.loc[best_scr, "score"] / table["score"].iloc[0] - 1.0)}
     seconds = {"prepare": t_prep, "screen": t_screen, "simulate": t_sim}
     settings = {"cases": tuple(labels), "models": model_names, "drives": drive_names,
                 "combine": combine, "n_candidates": n_cand,

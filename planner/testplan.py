@@ -19,7 +19,7 @@ The run sheet
 -------------
 Sheet "run sheet": a header block (car, rig, date, crate, budget, criterion,
 planned rig time, baseline, units), then one block of rows per run, in rig
-order. The run's columns (number, planned start ``h:mm`` from the first run,
+order. The run's columns (number, planned start ``h:mm`` from the session's start,
 duration, purpose, drive file, swap time, notes) are merged over its block; the
 shock at each corner over the plan's rows, with an empty cell below it in the
 measured row for its temperature; a shock changed before the run
@@ -81,8 +81,8 @@ from planner.report.sheets import (column_label, fit_column_width, fit_width_uni
                                    print_setup, printable_size_pt, text_width, wrap_lines)
 
 __all__ = ["write_plan", "plan_toml", "run_sheet_rows", "design_figure", "write_run_sheet",
-           "read_run_sheet", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES", "CHANGED_FILL",
-           "CLICK_FILL"]
+           "read_run_sheet", "start_times_note", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES",
+           "CHANGED_FILL", "CLICK_FILL"]
 
 log = logging.getLogger(__name__)
 
@@ -113,6 +113,9 @@ _PAD = 1.5  # cell padding [Excel width units] (text_width already spares ~10 % 
 # the notes column [Excel width units]: at least (the run's block is 52 pt tall to write
 # in), and at most where the page leaves room; the fit's spare for rounding
 _NOTES_MIN_W, _NOTES_MAX_W, _FIT_SPARE_W = 12.0, 30.0, 1.0
+# the notes column at its narrowest, when the one key metric the sheet shows needs its room
+# (the adjusters' columns on US letter); a table still wider prints a little smaller
+_NOTES_TIGHT_W = 8.0
 # rows of a run's block: height [pt]; the measured row leaves room to write by hand
 _ROW_PT = {"predicted": 14.0, "interval": 12.5, "measured": 26.0}
 _LINE_PT = 12.0  # a header line of 9 pt text
@@ -333,6 +336,23 @@ def _run_sheet_columns(units, metrics, adj=None):
     return [(k, g, h, k in starts) for k, g, h in cols]
 
 
+def start_times_note(plan):
+    """What the run sheet's start times count from: the session's start, each run after its
+    changes and the rig's time a run besides its drive (so run 1 does not start at 0:00).
+
+    Returns
+    -------
+    str
+    """
+    first = plan.runs[0].start_min if plan.runs else 0.0
+    h, m = divmod(int(round(first)), 60)
+    overhead = plan.rig.run_overhead_min
+    besides = (f" and the rig's {overhead:g} min a run besides its drive" if overhead > 0
+               else "")
+    return (f"Start times count from the session's start (0:00): each run starts after its "
+            f"changes{besides} (run 1 at {h:d}:{m:02d}).")
+
+
 def _header_block(ws, plan, units, date, label_col, intervals, clicks=False):
     """Rows 1-7: the title, two columns of facts, the legend (`clicks`: of the layout with
     adjustable shocks); returns the next free row."""
@@ -363,10 +383,11 @@ def _header_block(ws, plan, units, date, label_col, intervals, clicks=False):
             ws.merge_cells(start_row=r, start_column=col, end_row=r, end_column=col + 1)
             ws.cell(row=r, column=col + 2, value=value).font = fonts["data"]
         ws.row_dimensions[r].height = 14
+    starts = start_times_note(plan)
     legend = (f"Filled shock: changed before the run. Grey cells are the plan's (predictions"
               f"{', intervals' if intervals else ''}); write the measured values, each shock's "
               f"temperature [{_TEMPERATURE_UNIT[units]}] (in the measured row, under the shock) "
-              "and notes in the white cells. Start times count from the first run's start.")
+              f"and notes in the white cells. {starts}")
     if clicks:
         legend = ("Each corner: the shock and its adjusters' settings (clicks or turns). Amber: "
                   "shock swapped before the run (set its adjusters as shown); blue: adjuster "
@@ -374,11 +395,31 @@ def _header_block(ws, plan, units, date, label_col, intervals, clicks=False):
                   "clicks, swap+clicks) and time of the changes. Grey cells are the plan's "
                   f"(predictions{', intervals' if intervals else ''}); write the measured "
                   f"values, each shock's temperature [{_TEMPERATURE_UNIT[units]}] (in the "
-                  "measured row, under the shock) and notes in the white cells. Start times "
-                  "count from the first run's start.")
+                  f"measured row, under the shock) and notes in the white cells. {starts}")
     ws.cell(row=7, column=1, value=legend).font = fonts["note"]
     ws.row_dimensions[7].height = 14
     return 9
+
+
+def _wrap_header_values(ws, widths, label_col):
+    """The header block's values (rows 2-6) merged over the columns up to the next label
+    (the right-hand ones up to the table's edge) and wrapped there, the rows as tall as
+    their lines: a long value (the rig's times, a crate's path) never runs into the next
+    column's text. `widths`: the table's columns' widths [Excel width units]."""
+    top_left = Alignment(vertical="top", wrap_text=True)
+    spans = ((3, label_col - 1), (label_col + 2, len(widths)))
+    for r in range(2, 7):
+        lines = 1
+        for first, last in spans:
+            cell = ws.cell(row=r, column=first)
+            if cell.value is None or last < first:
+                continue
+            if last > first:
+                ws.merge_cells(start_row=r, start_column=first, end_row=r, end_column=last)
+            cell.alignment = top_left
+            room = 0.9 * (sum(widths[first - 1:last]) - _PAD)  # prose: 10 % to spare
+            lines = max(lines, len(_wrap(str(cell.value), room, size=_DATA_PT, bold=False)))
+        ws.row_dimensions[r].height = 14 if lines == 1 else 13 * lines + 1
 
 
 def _setting_text(value):
@@ -431,16 +472,16 @@ def _run_table_widths(rows, metrics, cols, intervals, *, notes=_NOTES_MIN_W, sho
 
 def _fit_run_table(rows, metrics, units, intervals, adj=None, shock_of=None):
     """The key metrics that fit the run table one page wide with its smallest text at
-    >= MIN_PRINT_PT (the first ones, at least one; with the adjusters' columns none where
-    one does not fit: the settings come first, the predictions are in test_plan.csv), the
-    columns, their widths and header
+    >= MIN_PRINT_PT (the first ones, at least one: where even one does not fit, as with the
+    adjusters' columns on US letter, the notes column gives way, down to
+    :data:`_NOTES_TIGHT_W`; all are in test_plan.csv), the columns, their widths and header
     lines; the notes column takes the room left (up to :data:`_NOTES_MAX_W`)."""
     budget = fit_width_units(min(_SMALL_PT, _HEAD_PT), units=units) - _FIT_SPARE_W
     while True:
         cols = _run_sheet_columns(units, metrics, adj)
         widths, head_lines = _run_table_widths(rows, metrics, cols, intervals,
                                                shock_of=shock_of)
-        if sum(widths.values()) <= budget or len(metrics) <= (0 if adj else 1):
+        if sum(widths.values()) <= budget or len(metrics) <= 1:
             break
         log.info("run sheet: %d key metrics are too wide for one page; it shows the first "
                  "%d (all are in test_plan.csv)", len(metrics), len(metrics) - 1)
@@ -448,7 +489,21 @@ def _fit_run_table(rows, metrics, units, intervals, adj=None, shock_of=None):
     spare = budget - sum(widths.values())
     if spare > 0:
         widths["notes"] = min(widths["notes"] + spare, _NOTES_MAX_W)
+    elif spare < 0:  # one key metric that does not fit: the notes give way first
+        widths["notes"] = max(widths["notes"] + spare, _NOTES_TIGHT_W)
+    _fit_groups(cols, widths)
     return metrics, cols, widths, head_lines
+
+
+def _fit_groups(cols, widths):
+    """Widen a group's last column where the group's header (its longest word) is wider than
+    the group's columns, so that the header wraps inside them (never into the next)."""
+    for group in dict.fromkeys(g for _, g, *_ in cols if g is not None):
+        keys = [k for k, g, *_ in cols if g == group]
+        need = max(text_width(w, size=_HEAD_PT, bold=True) for w in group.split()) + _PAD
+        have = sum(widths[k] for k in keys)
+        if need > have:
+            widths[keys[-1]] += need - have
 
 
 def _write_run_table(ws, units, rows, metrics, cols, top, intervals, widths, head_lines,
@@ -897,6 +952,7 @@ def write_run_sheet(plan, path, *, units="SI", overwrite=False):
     ws["A7"].alignment = Alignment(wrap_text=True, vertical="top")
     ws.row_dimensions[7].height = _LINE_PT * len(_wrap(
         ws["A7"].value, 0.9 * (sum(widths.values()) - _PAD), bold=False)) + 2
+    _wrap_header_values(ws, [widths[k] for k, *_ in cols], label_col)
     ws.freeze_panes = ws.cell(row=top + 2, column=2).coordinate
     print_setup(ws, units=units, area=f"A1:{last_col}{last}", title_rows=f"{top}:{top + 1}",
                 footer=footer)

@@ -387,7 +387,7 @@ def test_the_walk_finds_every_command():
     assert {" ".join(path) for path, _ in _commands(build_parser())} == {
         "demo", "rig simulate", "identify", "predict", "rank", "optimize", "plan", "whatif",
         "sweep", "import", "export-drive", "vehicle modes", "dyno import", "dyno table",
-        "dyno check", "drive from-track", "drive iterate", "drive section"}
+        "dyno check", "drive from-track", "drive iterate", "drive section", "drive resample"}
 
 
 @pytest.mark.parametrize("given, canonical", [
@@ -398,7 +398,7 @@ def test_units_in_any_case_become_the_canonical_name(given, canonical):
     parser = build_parser()
     with_units = [(path, sub) for path, sub in _commands(parser)
                   if "--units" in sub._option_string_actions]
-    assert len(with_units) == 16
+    assert len(with_units) == 17  # drive resample is the 17th (issue 36)
     for path, sub in with_units:
         args = parser.parse_args([*path, *_required_argv(sub), "--units", given])
         assert args.units == canonical, path
@@ -436,6 +436,86 @@ def test_quiet_and_verbose_before_or_after_the_command(flag, dest):
         for argv in ([flag, *path, *req], [*path, flag, *req], [*path, *req, flag]):
             assert getattr(parser.parse_args(argv), dest) is True, argv
     assert getattr(parser.parse_args(["rig", flag, "simulate", "--out", "o"]), dest) is True
+
+
+def test_version_prints_the_version_and_exits_zero(capsys):
+    """``shockplan --version`` (issue 36): ``shockplan <version>`` on stdout, exit status 0;
+    the installed distribution's version, the package's ``__version__`` without one."""
+    from importlib import metadata
+
+    import planner
+    from planner.cli import common
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    out = capsys.readouterr()
+    assert out.out == f"shockplan {metadata.version('shockplan')}\n" and out.err == ""
+    assert common.package_version() == planner.__version__ == ident.__version__
+
+    def missing(name):
+        raise metadata.PackageNotFoundError(name)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(metadata, "version", missing)
+        assert common.package_version() == planner.__version__
+
+
+def test_optimize_messages_name_the_options_and_say_each_score_once():
+    """optimize's summary (issue 36): the library's "raise max_iter" reads "raise --max-iter";
+    the scan's line names the best linear score once when the best curve is linear."""
+    from planner.cli.optimize import cli_wording, scan_line
+
+    warning = ("optimize: IPOPT stopped with status 'Maximum_Iterations_Exceeded' after 80 "
+               "iterations; the best verified iterate is returned (score 0.9285): raise "
+               "max_iter, or check the constraints")
+    assert cli_wording(warning).endswith("raise --max-iter, or check the constraints")
+    assert "max_iter" not in cli_wording(warning)
+    scan = {"n_screened": 120, "n_verified": 16, "linear_score": 0.9285, "best": "linear",
+            "score": 0.9285, "screen_s": 1.0, "verify_s": 2.0}
+    line = scan_line(scan, "IPOPT's solution")
+    assert line.count("0.9285") == 1 and "best linear 0.9285, best linear" not in line
+    assert "a linear curve" in line
+    line = scan_line(dict(scan, best="two-slope", score=0.9102), "the scan's best curve")
+    assert "best linear 0.9285, best two-slope 0.9102 (3.0 s)" in line
+
+
+class _Stream:
+    def __init__(self, tty):
+        self.tty = tty
+
+    def isatty(self):
+        return self.tty
+
+    def write(self, text):
+        return len(text)
+
+    def flush(self):
+        pass
+
+
+@pytest.mark.parametrize("quiet, tty, shown", [(False, True, True), (False, False, False),
+                                               (True, True, False), (True, False, False)])
+def test_progress_bars_only_on_a_terminal(monkeypatch, quiet, tty, shown):
+    """Progress bars unless -q, and only when stderr (where tqdm draws) is a terminal: a log
+    file gets none (issue 36)."""
+    from planner.cli.common import show_progress
+
+    monkeypatch.setattr("sys.stderr", _Stream(tty))
+    args = build_parser().parse_args(["-q", "vehicle", "modes"] if quiet else
+                                     ["vehicle", "modes"])
+    assert show_progress(args) is shown
+
+
+def test_every_command_decides_progress_bars_in_one_place():
+    """No command passes ``progress=not args.quiet``: every one asks show_progress."""
+    folder = Path(__file__).resolve().parents[1] / "planner" / "cli"
+    calls = 0
+    for path in folder.glob("*.py"):
+        text = path.read_text()
+        assert "not args.quiet" not in text, path.name
+        calls += text.count("progress=show_progress(args)")
+    assert calls >= 7  # demo, rig, predict, rank, optimize, whatif, sweep
 
 
 def test_grouped_flags_equals_form_and_negative_values_still_parse():

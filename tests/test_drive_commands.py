@@ -1,4 +1,4 @@
-"""``shockplan drive from-track | iterate | section`` (planner.cli.drive):
+"""``shockplan drive from-track | iterate | section | resample`` (planner.cli.drive):
 files in, files out, one-line refusals."""
 
 import numpy as np
@@ -273,3 +273,49 @@ def test_from_track_reads_a_logger_whose_time_stamps_jitter(files, tmp_path, cap
     res = pd.read_csv(out.with_name("drive_report") / "residuals.csv", comment="#")
     assert res[res.channel != "all"].groupby("iteration").residual_share.max().min() \
         < CLI_RESIDUAL
+
+
+# ---------------------------------------------------------------- drive resample (issue 36)
+
+def _noise_drive(folder, fs_hz=200.0, units="imperial"):
+    from ident.data.channels import RIG_INPUTS
+    from ident.data.drive import make_noise_drive, write_drive
+
+    drive = make_noise_drive(duration_s=4.0, fs_hz=fs_hz, seed=1,
+                             peak={c: 0.01 for c in RIG_INPUTS if c.startswith("wheelloader")})
+    path = folder / "drive.csv"
+    write_drive(drive, path, units=units)
+    return path
+
+
+def test_resample_command_is_resample_drive_in_the_files_units(tmp_path, capsys):
+    """``drive resample`` writes ident.data.drive.resample_drive of the drive file, in the
+    file's units (its marker kept); refusals are one line with exit status 2."""
+    from ident.data.drive import resample_drive
+
+    path = _noise_drive(tmp_path)
+    out = tmp_path / "new.csv"
+    code, text, _ = _run(capsys, "drive", "resample", path, "--fs", "512", "--out", out)
+    assert code == 0 and "200 Hz to 512 Hz" in text and "(imperial)" in text
+    assert out.read_text().startswith("# units: imperial\n")
+    new, want = read_drive(out), resample_drive(read_drive(path), 512.0)
+    assert new.settings["units"] == "imperial" and new.fs_hz == 512.0
+    assert new.n_samples == want.n_samples == 2048
+    for c in want.rig_inputs:
+        np.testing.assert_allclose(new.channels[c], want.channels[c], rtol=1e-12, atol=1e-15)
+    code, _, err = _run(capsys, "drive", "resample", path, "--fs", "512", "--out", out)
+    assert code == 2 and "already exists" in err and err.count("\n") == 1
+    code, _, err = _run(capsys, "drive", "resample", path, "--fs", "200.1", "--out",
+                        tmp_path / "odd.csv")
+    assert code == 2 and "closest" in err and err.count("\n") == 1
+    assert not (tmp_path / "odd.csv").exists()
+
+
+def test_export_drive_advises_the_resample_command(tmp_path, caplog):
+    """A drive at a rate that is no MTS playout rate: export-drive's warning names the
+    command that resamples it, with the nearest playout rate above."""
+    path = _noise_drive(tmp_path, units="SI")
+    with caplog.at_level("WARNING"):
+        assert main(["export-drive", str(path), "--format", "rpc3",
+                     "--out", str(tmp_path / "d.drv")]) == 0
+    assert "shockplan drive resample DRIVE --fs 204.8 --out NEW.csv" in caplog.text

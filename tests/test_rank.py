@@ -15,7 +15,7 @@ from ident.sim.metrics import METRIC_NAMES
 from planner.objective import Objective, default_objective, score_setups
 from planner.predict import predict_setups
 from planner.rank import Ranking, rank_setups
-from planner.screen import screen_setups
+from planner.screen import describe_agreement, screen_setups
 from planner.setups import Setup, enumerate_setups
 from planner.options import UncertaintyOptions
 
@@ -59,7 +59,8 @@ def test_result_has_the_documented_fields(ranking):
     assert set(METRIC_NAMES) <= set(s.columns) and "score" in s.columns
     assert ranking.baseline == "baseline" and ranking.objective == default_objective()
     assert set(ranking.agreement) == {"spearman", "n", "same_best", "time_best",
-                                      "screening_best"}
+                                      "screening_best", "time_best_screening_rank", "top",
+                                      "score_gap", "polished"}
     assert ranking.agreement["time_best"] == t.index[0]
     assert t.index[t["baseline"]].tolist() == ["baseline"]  # the one row scores are ratios to
 
@@ -120,6 +121,69 @@ def test_agreement_is_the_spearman_of_screening_and_time_domain(ranking):
     assert a["spearman"] > 0.5  # 10 setups spread over the range of a good screening
     assert a["n"] == len(t)
     assert a["same_best"] == (ranking.best == ranking.screening.index[0])
+
+
+def test_agreement_says_how_far_the_bests_differ(ranking):
+    """The agreement holds what tells a near-tie from a miss (issue 36): screening's rank of
+    the time domain's best, the setups screening chose, and the time-domain score gap."""
+    t, a = ranking.table, ranking.agreement
+    assert a["time_best_screening_rank"] == ranking.screening.loc[a["time_best"], "rank"]
+    assert a["top"] == TOP and a["polished"] is False
+    assert a["score_gap"] == pytest.approx(
+        t.loc[a["screening_best"], "score"] / t.loc[a["time_best"], "score"] - 1.0, abs=1e-15)
+    assert (a["score_gap"] == 0.0) == a["same_best"]
+    assert describe_agreement(a) in ranking.summary()
+
+
+_DIFFER = {"spearman": 0.93, "n": 45, "same_best": False, "screening_best": "A",
+           "time_best": "B", "top": 40}
+
+
+@pytest.mark.parametrize("extra, strong, says", [
+    ({"time_best_screening_rank": 3, "score_gap": 0.002}, False,
+     ["(screening's #3), but 'B' scores only 0.2 % better", "expected when the best setups"]),
+    ({"time_best_screening_rank": 57, "score_gap": 0.002}, True,
+     ["'B' was screening's #57, outside the 40 it chose to simulate"]),
+    ({"time_best_screening_rank": 2, "score_gap": 0.05}, True,
+     ["'B' scores 5 % better in the time domain"]),
+    ({"time_best_screening_rank": 9, "score_gap": 0.0, "polished": True}, False,
+     ["click polish"]),
+    ({}, True, ["screening's best 'A' is not the time domain's 'B'"]),  # no gap: called out
+])
+def test_a_differing_best_is_called_out_only_when_it_matters(extra, strong, says):
+    """Every plain rank used to print "DISAGREE" (issue 36): a differing best within
+    screening's choice and close in score is the expected near-tie; the sentence says so and
+    that the ranking (the time domain's) is the one to use; DISAGREE only for a best outside
+    screening's choice or a gap above DISAGREE_SCORE_GAP."""
+    text = describe_agreement(dict(_DIFFER, **extra))
+    assert ("DISAGREE" in text) == strong, text
+    for part in says:
+        assert part in text, text
+    assert "use the ranking: it is the time domain's" in text
+    assert "linearized pre-selection" in text
+
+
+def test_setups_beyond_the_crate_say_why_they_are_infeasible(paper_model, track_drive,
+                                                             demo_library, baseline_setup):
+    """A listed setup needing more of a shock than the crate holds (the demo crate has 2 x RB):
+    infeasible, ranked after the feasible ones, the reason in ``violations`` and in the
+    summary beside the table (issue 36)."""
+    assert demo_library["RB"].count == 2
+    setups = [baseline_setup, Setup("four-RB", dict.fromkeys(CORNERS, "RB")),
+              Setup("two-RB", dict(zip(CORNERS, ("RB", "RB", "DM", "DM"))))]
+    r = rank_setups(paper_model, track_drive, demo_library, setups=setups, top=3, n_check=0,
+                    uncertainty=False)
+    t = r.table
+    assert not t.loc["four-RB", "feasible"] and t.loc["two-RB", "feasible"]
+    assert t.loc["four-RB", "rank"] == len(t)
+    why = "inventory: needs 4 x 'RB' but the library's count is 2"
+    assert t.loc["four-RB", "violations"] == why
+    assert (t.loc[t["feasible"], "violations"] == "").all()
+    assert r.screening.loc["four-RB", "violations"] == why
+    assert f"'four-RB' is infeasible: {why}" in r.summary()
+    short = r.summary(n=2)  # the two feasible ones shown: the infeasible one is counted
+    assert "'four-RB' is infeasible" not in short
+    assert "1 more infeasible setup(s) below these" in short
 
 
 def test_settings_are_remembered(ranking):

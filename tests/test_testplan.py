@@ -431,3 +431,72 @@ def test_click_sheet_reads_back_and_the_csv_has_the_settings(click_plan, tmp_pat
     assert rows["clicks"].iloc[1] == "LF_ls" and rows["change"].iloc[1] == "clicks"
     rig = read_rig_plan(files["plan"])  # the rig plan names the settings the library resolves
     assert [r.setup for r in rig.runs] == [dict(zip(CORNERS, r.setup.ids())) for r in plan.runs]
+
+
+# ---------------------------------------------------------------------------- issue 36
+
+
+def test_click_sheet_shows_a_key_metric_with_its_values(click_plan, tmp_path):
+    """With the adjusters' columns the run sheet still shows a key metric (at least one),
+    its predictions in the 'predicted' rows, not the row labels alone (issue 36)."""
+    rows = run_sheet_rows(click_plan)
+    for units in ("SI", "imperial"):
+        ws = load_workbook(write_run_sheet(click_plan, tmp_path / f"k_{units}.xlsx",
+                                           units=units))["run sheet"]
+        top, runs = _blocks(ws)
+        groups = [ws.cell(top, j).value for j in range(1, ws.max_column + 1)]
+        j = groups.index("key metrics") + 2  # the row labels, then the first metric
+        metric = click_plan.predictions.columns[0]
+        assert ws.cell(top + 1, j).value.startswith("tire force RMS LF"), units
+        want = run_sheet_rows(click_plan, units=units)[metric]
+        for k, (number, r) in enumerate(runs.items()):
+            assert ws.cell(r, j - 1).value == "predicted"
+            assert ws.cell(r, j).value == pytest.approx(want.iloc[k], rel=1e-12), number
+        assert len(rows) == len(runs)
+
+
+@pytest.mark.parametrize("which", ["plan", "click_plan"])
+def test_header_texts_stay_in_their_cells(which, request, tmp_path):
+    """No header text runs into the next column (issue 36): every group header is as wide
+    as its longest word, and the header block's values are merged up to the next label and
+    wrapped there."""
+    from planner.report.sheets import text_width
+
+    plan = request.getfixturevalue(which)
+    ws = load_workbook(write_run_sheet(plan, tmp_path / "w.xlsx"))["run sheet"]
+    top, _ = _blocks(ws)
+    width = {j: ws.column_dimensions[get_column_letter(j)].width
+             for j in range(1, ws.max_column + 1)}
+    merged = {(m.min_row, m.min_col): m for m in ws.merged_cells.ranges}
+    for j in range(1, ws.max_column + 1):
+        group = ws.cell(top, j).value
+        m = merged.get((top, j))
+        if group is None or (m is not None and m.max_row > top):
+            continue  # a single column's header over both rows: wrapped in its own width
+        span = sum(width[c] for c in range(j, (m.max_col if m else j) + 1))
+        longest = max(text_width(w, size=9, bold=True) for w in str(group).split())
+        assert span >= longest, (group, span, longest)
+    for r in range(2, 7):
+        value = ws.cell(r, 3)
+        assert value.alignment.wrap_text, r
+        m = merged[(r, 3)]
+        label = next(j for j in range(4, ws.max_column + 1) if ws.cell(r, j).value)
+        assert m.max_col == label - 1, r  # up to the right-hand label
+        assert ws.cell(r, label + 2).alignment.wrap_text
+
+
+def test_start_times_note_is_true_to_the_schedule(plan, tmp_path):
+    """The legend says what the start times count from: the session's start, run 1 after its
+    changes and the rig's time a run (issue 36: it said 'from the first run's start' while
+    run 1 started at 0:04)."""
+    rig = dataclasses.replace(plan.rig, run_overhead_min=4.0)
+    runs = tuple(dataclasses.replace(r, start_min=r.start_min + 4.0 * r.number)
+                 for r in plan.runs)
+    late = dataclasses.replace(plan, rig=rig, runs=runs)
+    ws = load_workbook(write_run_sheet(late, tmp_path / "s.xlsx"))["run sheet"]
+    legend = ws["A7"].value
+    assert "first run's start" not in legend
+    assert "Start times count from the session's start (0:00)" in legend
+    first = run_sheet_rows(late)["start"].iloc[0]
+    assert first != "0:00" and f"(run 1 at {first})" in legend
+    assert "4 min a run besides its drive" in legend

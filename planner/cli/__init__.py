@@ -24,7 +24,8 @@ import sys
 from ident import interrupts
 from planner.cli import (demo, drive, dyno, export_drive, identify, optimize, plan, predict,
                          rank, rig, rigfiles, sweep, vehicle, whatif)
-from planner.cli.common import FLAGS_ANYWHERE, Parser, add_flags_anywhere, one_line
+from planner.cli.common import (FLAGS_ANYWHERE, Parser, VersionAction, add_flags_anywhere,
+                                one_line)
 
 __all__ = ["main", "build_parser", "COMMANDS"]
 
@@ -42,6 +43,7 @@ def build_parser():
         "rigs.")
     for short, long, text in FLAGS_ANYWHERE:
         p.add_argument(short, long, action="store_true", help=text)
+    p.add_argument("--version", action=VersionAction)
     sub = p.add_subparsers(dest="command", required=True,
                            help="the command ('shockplan COMMAND --help' for its options)")
     for command in COMMANDS:

@@ -23,6 +23,7 @@ __all__ = [
     "baseline_arg", "load_vehicle", "load_any_model", "read_inputs", "output_units",
     "bump_stop_library", "parse_fixed", "packer_bounds", "element_choices", "one_line",
     "UNITS_OF_DRIVE", "UNITS_OF_DRIVES", "MODEL_HELP", "OBJECTIVE_HELP", "log",
+    "show_progress", "package_version", "VersionAction",
 ]
 
 log = logging.getLogger("shockplan")
@@ -52,7 +53,8 @@ _NEGATIVE_NUMBER = re.compile(r"^-\d+$|^-\d*\.\d+$")
 FLAGS_ANYWHERE = (("-v", "--verbose",
                    "log progress details (default: warnings only); before or after the command"),
                   ("-q", "--quiet",
-                   "no progress bars (default: shown); before or after the command"))
+                   "no progress bars (default: shown when the error output is a terminal, "
+                   "never in a log file); before or after the command"))
 
 #: ``--units`` default of the commands that read one drive file / several (issue 23): the
 #: file's unit marker, else SI; a given ``--units`` that contradicts the marker is an error.
@@ -62,6 +64,43 @@ UNITS_OF_DRIVES = ("each drive file's own, from its '# units:' line, else SI; th
 
 MODEL_HELP = "identified model (.npz), a vehicle TOML (the known physical model) or 'paper'"
 OBJECTIVE_HELP = "objective TOML (default: the built-in 'grip and platform')"
+
+
+def package_version():
+    """shockplan's version: the installed distribution's (:func:`importlib.metadata.version`),
+    else the package's ``__version__`` (a source tree run without installing)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("shockplan")
+    except metadata.PackageNotFoundError:
+        from planner import __version__
+
+        return __version__
+
+
+class VersionAction(argparse.Action):
+    """``--version``: print ``shockplan <version>`` and exit with status 0. The version is
+    looked up only when asked (:func:`package_version`), not on every start."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS,
+                 help="print shockplan's version and exit"):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"{parser.prog.split()[0]} {package_version()}", file=sys.stdout)
+        parser.exit(0)
+
+
+def show_progress(args):
+    """Whether a command shows progress bars: unless ``-q``, and only when the error output
+    (where tqdm draws) is a terminal, so that a log file gets no bars."""
+    if getattr(args, "quiet", False):
+        return False
+    try:
+        return bool(sys.stderr.isatty())
+    except (AttributeError, ValueError):  # replaced by an object without it, or closed
+        return False
 
 
 # -- argument types --------------------------------------------------------------------------

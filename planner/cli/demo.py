@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from planner.cli.common import check_out
+from planner.cli.common import check_out, show_progress
 
 __all__ = ["add_parser", "run"]
 
@@ -25,6 +25,6 @@ def run(args):
     from planner.demo import run_demo
 
     check_out(args, folder=True)
-    summary = run_demo(Path(args.out), overwrite=args.overwrite, progress=not args.quiet)
+    summary = run_demo(Path(args.out), overwrite=args.overwrite, progress=show_progress(args))
     print(summary)
     return 0

@@ -5,7 +5,9 @@ LF,RF,LR,RR --out DRIVE.csv`` builds the rig drive that reproduces track logs on
 ``shockplan drive iterate TARGET --drive DRIVE.csv --session SESSION --run NAME --model MODEL
 --shocks CRATE.toml --out NEW.csv`` corrects a drive by what the rig recorded playing it;
 ``shockplan drive section DRIVE.csv --section NAME=START:STOP --out DIR`` cuts laps and
-named windows into drives of their own.
+named windows into drives of their own; ``shockplan drive resample DRIVE.csv --fs HZ --out
+NEW.csv`` resamples a drive to another rate (e.g. an MTS playout rate before
+``export-drive``).
 
 Each command is a thin call into :mod:`planner.trackdrive` and :mod:`planner.report.
 trackdrive`: it reads the files, checks every output path before any computation, runs,
@@ -22,7 +24,7 @@ from ident.data.files import check_output
 from ident.data.units import UNIT_SYSTEMS
 from planner.cli.common import log, unit_system
 
-__all__ = ["add_parser", "run", "run_from_track", "run_iterate", "run_section",
+__all__ = ["add_parser", "run", "run_from_track", "run_iterate", "run_section", "run_resample",
            "report_folder", "section_path", "LOG_FORMATS", "SUBCOMMANDS"]
 
 #: The track-log formats ``--format`` names (default: by the file's extension).
@@ -139,6 +141,24 @@ def _add_section(sub):
                    help="folder of the section drives (DRIVE_NAME.csv each)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace existing section files (default: refuse)")
+    p.set_defaults(func=run)
+    return p
+
+
+def _add_resample(sub):
+    p = sub.add_parser("resample", help="a drive at another sample rate (band-limited), e.g. "
+                       "an MTS playout rate for export-drive")
+    p.add_argument("drive", metavar="DRIVE.csv", help="the drive (CSV or Parquet)")
+    p.add_argument("--fs", required=True, type=float, metavar="HZ",
+                   help="the new sample rate [Hz]; its ratio to the drive's must be a "
+                   "fraction up/down with down <= 1000 (e.g. 200 -> 512 Hz)")
+    p.add_argument("--units", type=unit_system, choices=list(UNIT_SYSTEMS), default=None,
+                   help="unit system of the drive and the resampled drive: SI or imperial "
+                   "(default: the drive file's '# units:' line, else SI)")
+    p.add_argument("--out", required=True, metavar="NEW.csv",
+                   help="the resampled drive to write (.csv or .parquet)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing file (default: refuse)")
     p.set_defaults(func=run)
     return p
 
@@ -408,9 +428,32 @@ def run_section(args):
     return 0
 
 
+def run_resample(args):
+    """``shockplan drive resample``: a drive at another sample rate
+    (:func:`ident.data.drive.resample_drive`), written in the drive file's units."""
+    from ident.data.drive import read_drive, resample_drive, write_drive
+
+    out = Path(args.out)
+    check_output(out, overwrite=args.overwrite)
+    drive = read_drive(args.drive, units=args.units)
+    units = args.units or drive.settings.get("units", "SI")
+    new = resample_drive(drive, args.fs)
+    write_drive(new, out, units=units, overwrite=args.overwrite)
+    s = new.settings
+    how = ("a copy: the rates are equal" if s["resample_up"] == s["resample_down"] else
+           f"x {s['resample_up']}/{s['resample_down']}, band-limited"
+           + (f": content above {0.5 * new.fs_hz:g} Hz removed" if new.fs_hz < drive.fs_hz
+              else ""))
+    print(f"resampled drive '{drive.name}' from {drive.fs_hz:g} Hz to {new.fs_hz:g} Hz ({how}); "
+          f"{new.duration_s:g} s, {new.n_samples} samples")
+    print(f"wrote {out} ({units})")
+    return 0
+
+
 #: The ``drive`` sub-commands: name -> (function adding its parser, function running it).
 SUBCOMMANDS = {"from-track": (_add_from_track, run_from_track),
-               "iterate": (_add_iterate, run_iterate), "section": (_add_section, run_section)}
+               "iterate": (_add_iterate, run_iterate), "section": (_add_section, run_section),
+               "resample": (_add_resample, run_resample)}
 
 
 def add_parser(subparsers):
@@ -426,7 +469,7 @@ def add_parser(subparsers):
     argparse.ArgumentParser
     """
     drive = subparsers.add_parser("drive", help="rig drives from track data: build, iterate "
-                                  "on the rig, cut sections")
+                                  "on the rig, cut sections, resample")
     sub = drive.add_subparsers(dest="drive_command", required=True, help="the drive command")
     for add, _ in SUBCOMMANDS.values():
         add(sub)

@@ -2,15 +2,48 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
 
-from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES,
-                                add_element_options, add_units, bump_stop_library, check_out, int_at_least,
-                                load_any_model, output_units, packer_bounds)
+from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES, add_element_options,
+                                add_units, bump_stop_library, check_out, int_at_least,
+                                load_any_model, output_units, packer_bounds, show_progress)
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "run", "cli_wording", "scan_line", "OPTION_NAMES"]
+
+#: The library's names of optimize's options -> the command's, for the library's messages
+#: printed by the command ("raise max_iter" reads "raise --max-iter").
+OPTION_NAMES = {"max_iter": "--max-iter", "n_starts": "--starts",
+                "click_radius": "--click-radius"}
+
+
+def cli_wording(message):
+    """A library message (warning) worded for the command line: the options named as the
+    command spells them (:data:`OPTION_NAMES`).
+
+    Examples
+    --------
+    >>> cli_wording("score 0.9285): raise max_iter, or check the constraints")
+    'score 0.9285): raise --max-iter, or check the constraints'
+    """
+    return re.sub(r"\b(" + "|".join(OPTION_NAMES) + r")\b",
+                  lambda m: OPTION_NAMES[m.group(1)], str(message))
+
+
+def scan_line(scan, source):
+    """The summary's line on the scan (:meth:`planner.optimize.scan` ``summary()``): the
+    counts, the best linear score, the best overall when it is of another kind, the time
+    and where the optimum came from (`source`, in words)."""
+    best = f"best linear {scan['linear_score']:.4f}"
+    if scan["best"] == "linear":
+        best = f"best {scan['score']:.4f}, a linear curve (no two-slope one scored better)"
+    else:
+        best += f", best {scan['best']} {scan['score']:.4f}"
+    return (f"scan: {scan['n_screened']} linear and two-slope setups screened, "
+            f"{scan['n_verified']} verified, {best} "
+            f"({scan['screen_s'] + scan['verify_s']:.1f} s); the optimum is {source}")
 
 
 def add_parser(subparsers):
@@ -115,7 +148,7 @@ def run(args):
                               elements=ElementOptions(
                                   use_model=not args.no_elements,
                                   bump_stops=bump_stop_library(args, model)),
-                              packers=packer_bounds(args), progress=not args.quiet)
+                              packers=packer_bounds(args), progress=show_progress(args))
     files = write_optimum(opt, library, out, units=args.units, overwrite=args.overwrite)
     t = opt.table
     s = opt.solver
@@ -135,10 +168,7 @@ def run(args):
         source = {"scan": "the scan's best curve",
                   "iterate": "IPOPT's best feasible iterate"}.get(s.get("source"),
                                                                    "IPOPT's solution")
-        lines.append(f"scan: {scan['n_screened']} linear and two-slope setups screened, "
-                     f"{scan['n_verified']} verified, best linear {scan['linear_score']:.4f}, "
-                     f"best {scan['best']} {scan['score']:.4f} "
-                     f"({scan['screen_s'] + scan['verify_s']:.1f} s); the optimum is {source}")
+        lines.append(scan_line(scan, source))
     close = t[t["kind"] == "closest"]
     if len(close):
         lines.append("closest crate setups: " + ", ".join(
@@ -168,7 +198,7 @@ def run(args):
                      f"{'N' if args.units == 'SI' else 'lbf'}")
     lines += click_summary(opt)
     for w in caught:
-        lines.append(f"warning: {w.message}")
+        lines.append(f"warning: {cli_wording(w.message)}")
     lines.append("wrote " + ", ".join(str(p) for p in files.values()))
     print("\n".join(lines))
     return 0

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from planner.cli.common import (add_prediction_inputs, bump_stop_library, check_out,
-                                read_inputs, warn_inventory)
+from planner.cli.common import (add_prediction_inputs, bump_stop_library, check_out, read_inputs,
+                                show_progress, warn_inventory)
 
 __all__ = ["add_parser", "run"]
 
@@ -33,7 +33,7 @@ def run(args):
                           loop=LoopOptions(oversample=args.oversample),
                           elements=ElementOptions(use_model=not args.no_elements,
                                                   bump_stops=stops),
-                          progress=not args.quiet)
+                          progress=show_progress(args))
     write_predictions_csv(pred.table, args.out, units=args.units, overwrite=args.overwrite)
     print(f"predicted {len(setups)} setups on drive '{drive.name}' ({drive.duration_s:g} s): "
           f"wrote {args.out} ({args.units})")

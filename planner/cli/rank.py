@@ -6,7 +6,7 @@ from pathlib import Path
 
 from planner.cli.common import (OBJECTIVE_HELP, add_prediction_inputs, add_try_options,
                                 baseline_arg, bump_stop_library, check_out, element_choices,
-                                int_at_least, parse_fixed, read_inputs)
+                                int_at_least, parse_fixed, read_inputs, show_progress)
 
 __all__ = ["add_parser", "run"]
 
@@ -84,7 +84,7 @@ def run(args):
                           uncertainty=not args.no_uncertainty,
                           loop=LoopOptions(oversample=args.oversample), elements=elements,
                           run=RunOptions(scheduler=args.scheduler, n_workers=args.workers),
-                          progress=not args.quiet)
+                          progress=show_progress(args))
     files = write_ranking(ranking.table, out, units=args.units, objective=objective,
                           baseline=ranking.baseline, overwrite=args.overwrite)
     write_ranking_screening = out / "screening.csv"

@@ -6,7 +6,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ident.data.channels import RIG_KINDS
-from planner.cli.common import add_units, check_out, load_vehicle
+from planner.cli.common import add_units, check_out, load_vehicle, show_progress
 
 __all__ = ["add_parser", "run"]
 
@@ -66,7 +66,7 @@ def run(args):
         plan = replace(plan, rig=args.rig)
     vehicle = load_vehicle(args.vehicle)
     out = Path(args.out)
-    session = simulate_session(plan, vehicle, progress=not args.quiet)
+    session = simulate_session(plan, vehicle, progress=show_progress(args))
     write_session(session, out, units=args.units or plan.units, run_format=args.format,
                   overwrite=args.overwrite)
     counts = [r.n_samples for r in session.runs]

@@ -6,7 +6,7 @@ from __future__ import annotations
 from planner.cli.common import (OBJECTIVE_HELP, UNITS_OF_DRIVES, add_element_options,
                                 add_try_options, add_units, baseline_arg, bump_stop_library,
                                 check_out, element_choices, int_at_least, load_any_model,
-                                output_units, parse_fixed, share)
+                                output_units, parse_fixed, share, show_progress)
 
 __all__ = ["add_parser", "run"]
 
@@ -106,7 +106,7 @@ def run(args):
                                                   **element_choices(args)),
                           run=RunOptions(scheduler=scheduler, n_workers=args.workers,
                                          chunk_size=args.chunk_size),
-                          progress=not args.quiet)
+                          progress=show_progress(args))
     written = write_sweep(result, args.out, units=args.units, overwrite=args.overwrite)
     print(result.summary())
     print("wrote " + ", ".join(str(p) for p in written))

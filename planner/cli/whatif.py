@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES,
-                                add_element_options, add_units, baseline_arg, bump_stop_library, check_out,
-                                load_any_model, output_units)
+from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES, add_element_options,
+                                add_units, baseline_arg, bump_stop_library, check_out,
+                                load_any_model, output_units, show_progress)
 
 __all__ = ["add_parser", "run"]
 
@@ -96,7 +96,7 @@ def run(args):
         fragile_share=FRAGILE_SHARE if args.fragile_share is None else args.fragile_share,
         elements=ElementOptions(use_model=not args.no_elements, bump_stops=stops),
         run=RunOptions(scheduler=args.scheduler, n_workers=args.workers),
-        progress=not args.quiet)
+        progress=show_progress(args))
     files = write_whatif(result, out, units=args.units, overwrite=args.overwrite)
     print(result.summary())
     print(f"wrote {len(files)} files to {out}: " + ", ".join(sorted(files)[:6])

@@ -152,7 +152,7 @@ class WhatIf:
             lines.append("nominal condition checked in the time domain: "
                          + describe_agreement(agree, what=None)
                          + ("" if agree["same_best"] else
-                            "; decide with --method time, the reference"))
+                            " (--method time, the reference)"))
         rows = []
         for name, r in rob.head(n).iterrows():
             rows.append((name, int(r["nominal_rank"]), f"{r['mean_score']:.4f}",
@@ -215,8 +215,8 @@ def _nominal_agreement(plant, drive, setups, library, objective, baseline, nomin
     -------
     dict
         ``spearman`` (NaN for fewer than 3 setups), ``n``, ``same_best``,
-        ``screening_best``, ``time_best``: what :func:`planner.screen.describe_agreement`
-        reads.
+        ``screening_best``, ``time_best``, ``time_best_screening_rank``, ``top`` (every
+        setup) and ``score_gap``: what :func:`planner.screen.describe_agreement` reads.
     """
     td = predict_setups(plant, drive, setups, library, loop=loop, elements=elements).table
     td_score = score_setups(td[metrics], objective, baseline=baseline).table["score"]
@@ -225,7 +225,11 @@ def _nominal_agreement(plant, drive, setups, library, objective, baseline, nomin
            else float("nan"))
     time_best, screening_best = td_score.idxmin(), scr_score.idxmin()
     return {"spearman": rho, "n": int(len(td_score)), "same_best": bool(time_best == screening_best),
-            "time_best": time_best, "screening_best": screening_best}
+            "time_best": time_best, "screening_best": screening_best,
+            # every setup is checked: how far the bests differ tells a near-tie from a miss
+            "time_best_screening_rank": int((scr_score < scr_score[time_best]).sum()) + 1,
+            "top": int(len(td_score)),
+            "score_gap": float(td_score[screening_best] / td_score[time_best] - 1.0)}
 
 
 def _group_setups(setups, members, effects, variants, resolved=None, stop_variants=None):

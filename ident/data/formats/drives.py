@@ -34,8 +34,9 @@ Sample rate
 The file keeps the drive's rate. MTS time-history playout supports a fixed
 set of file rates (e.g. 102.4, 128, 204.8, 256, 409.6, 512, 1024, 2048 Hz,
 depending on the controller's system rate); a drive at another rate is
-written with a logged warning: resample it first with
-:func:`ident.data.drive.resample_drive` (e.g. 100 Hz -> 512 Hz).
+written with a logged warning (:func:`playout_rate_advice`): resample it first with
+``shockplan drive resample DRIVE --fs 512 --out NEW.csv`` (in Python
+:func:`ident.data.drive.resample_drive`; e.g. 100 Hz -> 512 Hz).
 """
 
 from __future__ import annotations
@@ -53,7 +54,8 @@ from ident.data.formats.channel_map import ChannelMap, unit_factor
 from ident.data.formats.rpc3 import RPC3_DATA_TYPES, read_rpc3, write_rpc3
 from ident.data.units import check_units
 
-__all__ = ["DRIVE_UNITS", "MTS_PLAYOUT_RATES_HZ", "export_drive_rpc3", "read_drive_rpc3"]
+__all__ = ["DRIVE_UNITS", "MTS_PLAYOUT_RATES_HZ", "export_drive_rpc3", "read_drive_rpc3",
+           "playout_rate_advice"]
 
 logger = logging.getLogger(__name__)
 
@@ -64,6 +66,25 @@ DRIVE_UNITS = {
 }
 #: File rates MTS time-history playout supports (at some system rate) [Hz].
 MTS_PLAYOUT_RATES_HZ = (102.4, 128.0, 204.8, 256.0, 409.6, 512.0, 1024.0, 2048.0)
+
+
+def playout_rate_advice(fs_hz):
+    """What to do with a drive at `fs_hz` [Hz], not an MTS playout rate: the command that
+    resamples it to the nearest playout rate at or above it (the highest one, above them all).
+
+    Examples
+    --------
+    >>> playout_rate_advice(200.0)  # doctest: +NORMALIZE_WHITESPACE
+    '200 Hz is not an MTS playout rate (102.4, 128, 204.8, 256, 409.6, 512, 1024, 2048 Hz);
+    if the controller refuses the file, resample the drive first: shockplan drive resample
+    DRIVE --fs 204.8 --out NEW.csv (in Python: ident.data.drive.resample_drive)'
+    """
+    up = [r for r in MTS_PLAYOUT_RATES_HZ if r >= fs_hz]
+    target = up[0] if up else MTS_PLAYOUT_RATES_HZ[-1]
+    return (f"{fs_hz:g} Hz is not an MTS playout rate "
+            f"({', '.join(f'{r:g}' for r in MTS_PLAYOUT_RATES_HZ)} Hz); if the controller "
+            f"refuses the file, resample the drive first: shockplan drive resample DRIVE --fs "
+            f"{target:g} --out NEW.csv (in Python: ident.data.drive.resample_drive)")
 
 
 def export_drive_rpc3(drive, path, *, units=None, channel_map=None,
@@ -154,10 +175,7 @@ def export_drive_rpc3(drive, path, *, units=None, channel_map=None,
             raise DriveError(f"{where}: {cmap.where} maps none of the rig inputs "
                              f"{list(RIG_INPUTS)}; map the rig's actuator channels")
     if not any(np.isclose(drive.fs_hz, r, rtol=1e-9) for r in MTS_PLAYOUT_RATES_HZ):
-        logger.warning(
-            "%s: %g Hz is not an MTS playout rate (%s Hz); resample the drive first "
-            "(ident.data.drive.resample_drive) if the controller refuses the file", where,
-            drive.fs_hz, ", ".join(f"{r:g}" for r in MTS_PLAYOUT_RATES_HZ))
+        logger.warning("%s: %s", where, playout_rate_advice(drive.fs_hz))
     return write_rpc3(path, values, fs_hz=drive.fs_hz, units=file_units,
                       data_type=data_type, time_type="DRIVE", overwrite=overwrite,
                       error=DriveError)
