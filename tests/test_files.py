@@ -201,7 +201,7 @@ def test_resolve_units_refuses_a_contradiction_naming_file_both_systems_and_fix(
     text = str(exc.value)
     assert text.startswith("drive file d.csv: ")
     assert "imperial" in text and "--units says SI" in text
-    assert "drop --units" in text and "'# units: SI'" in text
+    assert "drop --units" in text and "'# units: SI'" in text and "'units' column" in text
     with pytest.raises(SessionError, match="; set the manifest"):
         resolve_units("SI", "imperial", where="run 'a'", fix="set the manifest's units",
                       error=SessionError)

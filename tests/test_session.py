@@ -137,7 +137,7 @@ def test_manifest_is_the_spec_layout(session_dir):
     assert doc["shock_library"] == "shocks.toml" and "channels" not in doc
     assert doc["run"][1] == {"name": "swap-LF", "file": "runs/swap-LF.csv", "role": "swap",
                              "setup": {"LF": "D8", "RF": "B20", "LR": "B20", "RR": "B20"}}
-    header = pd.read_csv(session_dir / "runs" / "baseline-1.csv", nrows=0, comment="#").columns
+    header = pd.read_csv(session_dir / "runs" / "baseline-1.csv", nrows=0).columns
     assert list(header) == ["time", *RIG_INPUTS,
                             *[c for c in ALL_CHANNELS if c in RESPONSES]]
 
@@ -161,8 +161,8 @@ def test_imperial_twin(session, tmp_path):
     imp_dir = write_session(session, tmp_path / "imperial", units="imperial")
     assert tomllib.loads((imp_dir / "session.toml").read_text())["units"] == "imperial"
 
-    si_file = pd.read_csv(si_dir / "runs" / "swap-LF.csv", comment="#")
-    imp_file = pd.read_csv(imp_dir / "runs" / "swap-LF.csv", comment="#")
+    si_file = pd.read_csv(si_dir / "runs" / "swap-LF.csv")
+    imp_file = pd.read_csv(imp_dir / "runs" / "swap-LF.csv")
     expected_factor = {"time": 1.0, "wheelloader_LF": IN_M, "ride_height_RR": IN_M,
                        "shock_velocity_LR": IN_M, "aero_heave": LBF_N,
                        "tire_force_LF": LBF_N, "aero_roll": LBF_N * IN_M}
@@ -267,7 +267,7 @@ def _edit_manifest(edit):
 def _edit_run(edit, name="swap-LF"):
     def mutate(folder):
         path = folder / "runs" / f"{name}.csv"
-        frame = edit(pd.read_csv(path, comment="#"))
+        frame = edit(pd.read_csv(path))
         frame.to_csv(path, index=False)
     return mutate
 

@@ -422,7 +422,7 @@ def test_csv_round_trip(tmp_path):
     assert read_setups(path, lib) == setups
     write_setups(setups, path, units="imperial", overwrite=True)
     assert path.read_text().splitlines()[0] == "# units: imperial"
-    assert pd.read_csv(path, comment="#")["setup"].tolist() == [s.name for s in setups]
+    assert pd.read_csv(path)["setup"].tolist() == [s.name for s in setups]
     assert read_setups(path, lib) == setups
 
 

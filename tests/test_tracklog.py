@@ -499,7 +499,8 @@ def _case_some_aero_map(d):
 
 def _case_marker_contradicts_units(d):
     return (dict(path=_canonical_csv(d, marker="imperial"), units="SI"),
-            r"log.csv: the file says it is in imperial units \('# units: imperial'\) but "
+            r"log.csv: the file says it is in imperial units \(its 'units' column or "
+            r"'# units:' line\) but "
             r"--units says SI; drop --units \(the file's marker decides\)")
 
 

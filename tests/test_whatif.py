@@ -447,7 +447,7 @@ def test_effects_figures_and_files(paper_vehicle, short_drive, demo_library, twe
     assert sum(k.startswith("tornado") for k in files) == 2
     for name in ("whatif.csv", "robust.csv", "conditions.csv"):  # each says its units
         assert files[name].read_text().startswith("# units: imperial\n"), name
-    back = pd.read_csv(files["whatif.csv"], comment="#")
+    back = pd.read_csv(files["whatif.csv"])
     assert len(back) == len(w.table)
     with pytest.raises(FileExistsError):
         write_whatif(w, tmp_path / "out")

@@ -569,7 +569,7 @@ def resolve_units(marked, given, *, where, given_as="units", fix=None, error=Val
     >>> resolve_units("imperial", "SI", where="track.csv", given_as="--units")
     Traceback (most recent call last):
     ...
-    ValueError: track.csv: the file says it is in imperial units ('# units: imperial') but --units says SI; drop --units (the file's marker decides), or if its values really are in SI, correct the marker to '# units: SI'
+    ValueError: track.csv: the file says it is in imperial units (its 'units' column or '# units:' line) but --units says SI; drop --units (the file's marker decides), or if its values really are in SI, correct the marker to SI (its 'units' column, or a line '# units: SI')
     """
     if given is not None:
         given = check_units(given, where=f"{where}: {given_as}", error=error)
@@ -577,9 +577,10 @@ def resolve_units(marked, given, *, where, given_as="units", fix=None, error=Val
         return given or "SI"
     if given is not None and given != marked:
         fix = fix or (f"drop {given_as} (the file's marker decides), or if its values really "
-                      f"are in {given}, correct the marker to '# {UNITS_KEY}: {given}'")
-        raise error(f"{where}: the file says it is in {marked} units ('# {UNITS_KEY}: "
-                    f"{marked}') but {given_as} says {given}; {fix}")
+                      f"are in {given}, correct the marker to {given} (its '{UNITS_COLUMN}' "
+                      f"column, or a line '# {UNITS_KEY}: {given}')")
+        raise error(f"{where}: the file says it is in {marked} units (its '{UNITS_COLUMN}' "
+                    f"column or '# {UNITS_KEY}:' line) but {given_as} says {given}; {fix}")
     return marked
 
 

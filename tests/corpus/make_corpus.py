@@ -207,9 +207,9 @@ def _edit_text(path, old, new, *, count=1):
 
 
 def _edit_frame(path, func):
-    # a CSV's leading '# units: ...' line is skipped, and not written back
+    # a CSV's 'units' column is not written back (nor was the earlier '# units:' line)
     frame = (pd.read_parquet(path) if path.suffix == ".parquet" else
-             pd.read_csv(path, comment="#"))
+             pd.read_csv(path).drop(columns="units"))
     frame = func(frame)
     if path.suffix == ".parquet":
         frame.to_parquet(path, index=False)
