@@ -247,9 +247,8 @@ def test_from_track_reads_a_logger_whose_time_stamps_jitter(files, tmp_path, cap
     log."""
     from scipy.interpolate import make_interp_spline
 
-    text = (files / "log.csv").read_text()
-    marker = "".join(line + "\n" for line in text.splitlines() if line.startswith("#"))
     frame = pd.read_csv(files / "log.csv")
+    units = frame.pop("units")  # the log's unit system, written back as it was
     rng = np.random.default_rng(36)
     t = frame["time"].to_numpy()
     stamps = t + rng.uniform(-LOGGER_STAMP_JITTER, LOGGER_STAMP_JITTER, t.size) * (t[1] - t[0])
@@ -258,8 +257,9 @@ def test_from_track_reads_a_logger_whose_time_stamps_jitter(files, tmp_path, cap
     at_stamps = make_interp_spline(t, values.to_numpy(), k=7, axis=0)(stamps)
     jittered = pd.DataFrame(at_stamps, columns=values.columns)
     jittered.insert(0, "time", stamps)
+    jittered["units"] = units.to_numpy()
     log = tmp_path / "logger.csv"
-    log.write_text(marker + jittered.to_csv(index=False))
+    log.write_text(jittered.to_csv(index=False))
     out = tmp_path / "drive.csv"
     with caplog.at_level("WARNING"):
         code, _, err = _run(capsys, "drive", "from-track", log, "--model", "paper",
