@@ -409,7 +409,7 @@ def units_of_column(values, *, marker=None, where, error=ValueError):
     ValueError: f.csv: column 'units' says both SI and imperial; a file is in one unit system: give every row the one that is true (SI or imperial)
     """
     raw = set()
-    for v in values:
+    for v in set(values):  # a file's rows repeat one value: a set is quick
         if v is None or (isinstance(v, float) and v != v):
             continue
         text = str(v).strip().strip("'\"").strip()
