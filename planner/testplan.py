@@ -8,11 +8,10 @@ place:
   as is; a real rig's session of the same runs is what ``shockplan identify``
   expects next;
 - ``shocks.toml``: the crate (the plan's shock library);
-- ``drives/<run drive>.csv``: every drive the runs play (first line ``# units: ...``);
+- ``drives/<run drive>.csv``: every drive the runs play (a last column ``units``);
 - ``test_plan.xlsx``: the run sheet (:func:`write_run_sheet`), to print and
   fill in on rig day, and to read back (:func:`read_run_sheet`);
-- ``test_plan.csv``: the same rows (:func:`run_sheet_rows`), after the unit marker
-  ``# units: ...``;
+- ``test_plan.csv``: the same rows (:func:`run_sheet_rows`), a last column ``units``;
 - ``design.png``: the criterion against rig time, run by run.
 
 The run sheet

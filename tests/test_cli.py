@@ -147,8 +147,9 @@ def test_identify_predict_rank(tmp_path, capsys, paper_vehicle):
                  str(tmp_path / "setups.csv"), "--out", str(pred), "--units", "imperial"]) == 0
     import pandas as pd
 
-    assert pred.read_text().startswith("# units: imperial\n")
-    table = pd.read_csv(pred, comment="#")
+    assert pred.read_text().splitlines()[0].startswith("setup,")  # the header first
+    table = pd.read_csv(pred)
+    assert (table["units"] == "imperial").all() and table.columns[-1] == "units"
     assert list(table.columns[:6]) == ["setup", "LF", "RF", "LR", "RR", "tire_force_rms_LF"]
     assert table["setup"].tolist() == ["baseline", "firm"]
     assert 5 < table["tire_force_rms_LF"].iloc[0] < 1000  # lbf on a smooth track
@@ -253,7 +254,7 @@ def test_whatif_command(tmp_path, capsys, paper_vehicle, track_drive):
     assert main(args + ["--perturb", str(tmp_path / "perturb.toml"), "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "3 setups x 7 conditions" in text and "baseline 'baseline'" in text
-    rob = pd.read_csv(out / "robust.csv", index_col="setup", comment="#")
+    rob = pd.read_csv(out / "robust.csv", index_col="setup")
     assert set(rob.index) == {"baseline", "soft", "firm"}
     assert (out / "whatif.xlsx").is_file() and (out / "rank_stability.png").is_file()
     (tmp_path / "bad.toml").write_text('format = "shockplan-whatif/1"\n[[factor]]\nname = "m"\n'
@@ -282,6 +283,13 @@ def _short_imperial_drive(track_drive, path, seconds=20.0):
     return path
 
 
+def _without_units_column(src, dst):
+    """Copy CSV file `src` to `dst` without its last column, ``units``, text kept as is."""
+    lines = src.read_text().splitlines()
+    assert lines[0].endswith(",units")
+    dst.write_text("".join(line.rsplit(",", 1)[0] + "\n" for line in lines))
+
+
 def _rank_argv(drive, out, *extra):
     from planner.demo import DEMO_LIBRARY_PATH
 
@@ -297,8 +305,8 @@ def _ranking_lines(text):
 
 def test_rank_gives_one_ranking_with_or_without_units(tmp_path, capsys, track_drive):
     """Issue 23's Done-when on a short imperial drive: ``rank`` with and without
-    ``--units imperial`` gives the same ranking (the file's '# units:' line stands in for
-    the option, and the outputs are in its units); with the line cut off and no --units,
+    ``--units imperial`` gives the same ranking (the file's 'units' column stands in for
+    the option, and the outputs are in its units); with the column cut off and no --units,
     it stops with exit 2 naming --units imperial and writes nothing; --units SI against
     the line is an error naming the file and both unit systems."""
     drive = _short_imperial_drive(track_drive, tmp_path / "track.csv")
@@ -307,13 +315,13 @@ def test_rank_gives_one_ranking_with_or_without_units(tmp_path, capsys, track_dr
     assert main(_rank_argv(drive, tmp_path / "without")) == 0
     said_without = capsys.readouterr().out
     ranking = (tmp_path / "with" / "ranking.csv").read_bytes()
-    assert ranking.startswith(b"# units: imperial\n")
+    assert ranking.split(b"\n", 2)[1].endswith(b",imperial")
     assert (tmp_path / "without" / "ranking.csv").read_bytes() == ranking
     assert _ranking_lines(said_without) == _ranking_lines(said_with)
     assert "best:" in said_with
     # the marker cut off: values nobody says the units of, implausible as SI
     bare = tmp_path / "bare.csv"
-    bare.write_text(drive.read_text().split("\n", 1)[1])
+    _without_units_column(drive, bare)
     assert main(_rank_argv(bare, tmp_path / "bare_out")) == 2
     err = capsys.readouterr().err
     assert err.startswith("shockplan: error: drive file ") and "bare.csv" in err
@@ -347,8 +355,8 @@ def test_units_help_states_the_drive_files_default():
         if path[0] in DRIVE_COMMANDS:
             action = sub._option_string_actions["--units"]
             assert action.default is None, path
-            assert "the drive file's own, from its '# units:' line, else SI" in action.help \
-                or "each drive file's own, from its '# units:' line, else SI" in action.help, path
+            assert "the drive file's own, from its 'units' column, else SI" in action.help \
+                or "each drive file's own, from its 'units' column, else SI" in action.help, path
 
 
 # --- One vocabulary across commands (issue 23, item 3) ---------------------------------

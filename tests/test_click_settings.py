@@ -206,7 +206,7 @@ def test_csv_has_a_column_per_adjuster_per_corner(ranked, tmp_path):
     """After the spec's columns (setup, corners, metrics): LF_ls, LF_hs, RF_ls, RF_hs; the
     rear (B20) has none; a table of fixed shocks gets no such column."""
     path = write_predictions_csv(ranked.table, tmp_path / "p.csv")
-    got = pd.read_csv(path, comment="#")
+    got = pd.read_csv(path)
     spec = ["setup", *CORNERS, *METRIC_NAMES]
     assert list(got.columns[:len(spec)]) == spec
     assert list(got.columns[len(spec):len(spec) + 4]) == ["LF_ls", "LF_hs", "RF_ls", "RF_hs"]
@@ -214,7 +214,7 @@ def test_csv_has_a_column_per_adjuster_per_corner(ranked, tmp_path):
     assert ranked.best.startswith(f"TTX@ls={row['LF_ls']:g},hs={row['LF_hs']:g}/")
     fixed = ranked.table.loc[["baseline"]]
     path = write_predictions_csv(fixed, tmp_path / "f.csv")
-    assert list(pd.read_csv(path, comment="#").columns) == ["setup"] + ranking_columns(fixed)
+    assert list(pd.read_csv(path).columns) == ["setup"] + ranking_columns(fixed) + ["units"]
     cols = adjuster_columns(pd.DataFrame({c: ["B20", "TTX@ls=6,hs=2.5"] for c in CORNERS}))
     assert cols["LF_ls"].isna().tolist() == [True, False] and cols["LF_ls"].iloc[1] == 6
     assert str(cols["LF_ls"].dtype) == "Int64" and cols["LF_hs"].iloc[1] == 2.5

@@ -358,6 +358,13 @@ def test_units_contradicting_the_marker_are_an_error(noise, tmp_path, suffix):
     assert "drop --units" in text  # the fix
 
 
+def _without_units_column(src, dst):
+    """Copy CSV file `src` to `dst` without its last column, ``units``, text kept as is."""
+    lines = src.read_text().splitlines()
+    assert lines[0].endswith(",units")
+    dst.write_text("".join(line.rsplit(",", 1)[0] + "\n" for line in lines))
+
+
 def test_implausible_drive_of_unknown_units_is_refused(tmp_path, caplog):
     """An inch file without a marker read as SI: metres of wheel-pad motion. Nobody said
     the units, so reading stops and names the fix; said (--units SI, or a marker), it
@@ -366,13 +373,13 @@ def test_implausible_drive_of_unknown_units_is_refused(tmp_path, caplog):
     marked = tmp_path / "marked.csv"
     write_drive(drive, marked, units="imperial")
     bare = tmp_path / "bare.csv"
-    bare.write_text(marked.read_text().split("\n", 1)[1])  # the marker line cut off
+    _without_units_column(marked, bare)  # the units column cut off
     with pytest.raises(DriveError) as exc:
         read_drive(bare)
     text = str(exc.value)
     assert isinstance(exc.value, ValueError)
     assert text.startswith(f"drive file {bare}: wheelloader_")
-    assert "--units imperial" in text and "'# units: imperial'" in text
+    assert "--units imperial" in text and "a column 'units' holding imperial" in text
     with caplog.at_level("WARNING", logger="ident.data.drive"):
         as_si = read_drive(bare, units="SI")  # the user said SI: warned, not refused
     assert "--units imperial" in caplog.text and "bare.csv" in caplog.text
@@ -392,12 +399,67 @@ def test_implausible_drive_of_unknown_units_is_refused(tmp_path, caplog):
     assert "said_si.csv" in caplog.text
 
 
+def _scaled_drive_file(path, scale, *, units):
+    """The seed-5 track drive, its wheel pads scaled by `scale`, written without a units
+    column (values in `units`)."""
+    drive = make_track_drive(duration_s=20.0, fs_hz=100.0, seed=5, name="lap")
+    drive = Drive("lap", drive.fs_hz, {c: x * (scale if c in WHEELLOADER_INPUTS else 1.0)
+                                       for c, x in drive.channels.items()})
+    marked = path.with_name("marked.csv")
+    write_drive(drive, marked, units=units, overwrite=True)
+    _without_units_column(marked, path)
+    return drive
+
+
+def test_drive_plausible_in_both_unit_systems_is_read_as_si_with_a_warning(tmp_path, caplog):
+    """Issue 36: an imperial drive at a quarter of the demo's level (0.036 in RMS) without
+    any units statement is plausible as SI too (36 mm): read as SI, the spec's default,
+    with a warning naming --units; a demo-level SI drive is not warned of."""
+    path = tmp_path / "quarter.csv"
+    drive = _scaled_drive_file(path, 1.0, units="imperial")
+    rms_in = max(float(np.std(drive.channels[c])) for c in WHEELLOADER_INPUTS) / IN
+    scale = 0.036 / rms_in  # 0.036 in RMS
+    drive = _scaled_drive_file(path, scale, units="imperial")
+    with caplog.at_level("WARNING", logger="ident.data.drive"):
+        back = read_drive(path)
+    assert back.settings["units"] == "SI" and back.settings["units_from"] == "default"
+    assert_allclose(back.channels["wheelloader_LF"],
+                    drive.channels["wheelloader_LF"] / IN, rtol=1e-12)  # the values as SI
+    assert "quarter.csv" in caplog.text and "--units imperial" in caplog.text
+    assert "--units SI" in caplog.text and "36.0 mm" in caplog.text
+    caplog.clear()
+    si = tmp_path / "si.csv"
+    _scaled_drive_file(si, 1.0, units="SI")  # a few mm RMS: not an inch file's level
+    with caplog.at_level("WARNING", logger="ident.data.drive"):
+        assert read_drive(si).settings["units"] == "SI"
+    assert caplog.text == ""
+
+
+@pytest.mark.parametrize("rms_m", [1e-4, 3.0])
+def test_drive_implausible_in_either_unit_system_is_refused(tmp_path, rms_m):
+    """Without a units statement, a level no rig plays read as SI or as imperial (0.1 mm or
+    3 m as SI: 0.0025 mm or 76 m as inches) is refused, naming the file, the level and the
+    fix; given --units, it reads."""
+    path = tmp_path / "odd.csv"
+    drive = _scaled_drive_file(path, 1.0, units="SI")
+    rms = max(float(np.std(drive.channels[c])) for c in WHEELLOADER_INPUTS)
+    _scaled_drive_file(path, rms_m / rms, units="SI")
+    with pytest.raises(DriveError) as exc:
+        read_drive(path)
+    text = str(exc.value)
+    assert text.startswith(f"drive file {path}: the wheel pads' level, wheelloader_")
+    assert f"RMS of {rms_m:.3g}" in text and "implausible in either unit system" in text
+    assert "--units SI or --units imperial" in text and "'units' column" in text
+    assert read_drive(path, units="SI").settings["units_from"] == "argument"
+
+
 def test_imperial_file_holds_inches_and_pounds(noise, tmp_path):
     path = tmp_path / "drive.csv"
     write_drive(noise, path, units="imperial")
-    assert path.read_text().splitlines()[0] == "# units: imperial"
-    raw = pd.read_csv(path, comment="#")
-    assert list(raw.columns) == ["time", *RIG_INPUTS]
+    assert path.read_text().splitlines()[0] == ",".join(["time", *RIG_INPUTS, "units"])
+    raw = pd.read_csv(path)
+    assert list(raw.columns) == ["time", *RIG_INPUTS, "units"]
+    assert (raw.pop("units") == "imperial").all()
     assert_allclose(raw["wheelloader_LF"].abs().max(), 1.0, rtol=1e-12)  # 1 in
     assert_allclose(raw["aero_heave"].abs().max(), 500.0, rtol=1e-12)  # 500 lbf
     assert_allclose(raw["aero_pitch"].abs().max(), 5.0e4, rtol=1e-12)  # lbf*in
@@ -433,7 +495,7 @@ def test_drive_file_errors(noise, tmp_path):
     with pytest.raises(FileExistsError, match="overwrite=True"):
         write_drive(noise, path)
     write_drive(noise, path, overwrite=True)
-    pd.read_csv(path, comment="#").drop(columns="aero_roll").to_csv(path, index=False)
+    pd.read_csv(path).drop(columns="aero_roll").to_csv(path, index=False)
     with pytest.raises(SessionError, match="missing required channel.*aero_roll"):
         read_drive(path)
     with pytest.raises(SessionError, match="file not found"):

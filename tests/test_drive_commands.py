@@ -65,7 +65,7 @@ def test_from_track_writes_the_drive_report_and_sections(built):
     report = out.with_name("drive_report")
     for name in ("residuals.csv", "reach.csv", "target.csv", "psd.png", "convergence.png"):
         assert (report / name).stat().st_size > 0, name
-    res = pd.read_csv(report / "residuals.csv", comment="#")
+    res = pd.read_csv(report / "residuals.csv")
     best = res[res.channel != "all"].groupby("iteration").residual_share.max().min()
     assert best < CLI_RESIDUAL
     for name in ("drive_lap1.csv", "drive_lap2.csv", "drive_mid.csv"):
@@ -247,9 +247,8 @@ def test_from_track_reads_a_logger_whose_time_stamps_jitter(files, tmp_path, cap
     log."""
     from scipy.interpolate import make_interp_spline
 
-    text = (files / "log.csv").read_text()
-    marker = "".join(line + "\n" for line in text.splitlines() if line.startswith("#"))
-    frame = pd.read_csv(files / "log.csv", comment="#")
+    frame = pd.read_csv(files / "log.csv")
+    units = frame.pop("units")  # the log's unit system, written back as it was
     rng = np.random.default_rng(36)
     t = frame["time"].to_numpy()
     stamps = t + rng.uniform(-LOGGER_STAMP_JITTER, LOGGER_STAMP_JITTER, t.size) * (t[1] - t[0])
@@ -258,8 +257,9 @@ def test_from_track_reads_a_logger_whose_time_stamps_jitter(files, tmp_path, cap
     at_stamps = make_interp_spline(t, values.to_numpy(), k=7, axis=0)(stamps)
     jittered = pd.DataFrame(at_stamps, columns=values.columns)
     jittered.insert(0, "time", stamps)
+    jittered["units"] = units.to_numpy()
     log = tmp_path / "logger.csv"
-    log.write_text(marker + jittered.to_csv(index=False))
+    log.write_text(jittered.to_csv(index=False))
     out = tmp_path / "drive.csv"
     with caplog.at_level("WARNING"):
         code, _, err = _run(capsys, "drive", "from-track", log, "--model", "paper",
@@ -270,7 +270,7 @@ def test_from_track_reads_a_logger_whose_time_stamps_jitter(files, tmp_path, cap
     assert len(said) == 1 and "resampled onto a uniform 200 Hz" in said[0], said
     drive = read_drive(out)
     assert drive.fs_hz == 200.0 and drive.duration_s == pytest.approx(40.0, abs=0.01)
-    res = pd.read_csv(out.with_name("drive_report") / "residuals.csv", comment="#")
+    res = pd.read_csv(out.with_name("drive_report") / "residuals.csv")
     assert res[res.channel != "all"].groupby("iteration").residual_share.max().min() \
         < CLI_RESIDUAL
 

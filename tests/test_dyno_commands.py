@@ -142,4 +142,4 @@ def test_check_refuses_a_full_folder(checked, capsys, good_lib):
     folder = checked["good"][2]
     assert main(["dyno", "check", str(good_lib), "--out", str(folder)]) == 2
     assert "not empty" in capsys.readouterr().err
-    assert isinstance(pd.read_csv(folder / "TTX.worst.csv", comment="#"), pd.DataFrame)
+    assert isinstance(pd.read_csv(folder / "TTX.worst.csv"), pd.DataFrame)

@@ -282,17 +282,39 @@ def test_sheet_written_appended_and_read(imports, tmp_path):
     sheet = tmp_path / "sheet.csv"
     write_dyno_sheet(imports[0], sheet)
     first = sheet.read_bytes()
-    assert first.startswith(b"# units: SI\nvelocity,force,ls,hs,temperature,cycles,lag,source\n")
+    assert first.startswith(b"velocity,force,ls,hs,temperature,cycles,lag,source,units\n")
     with pytest.raises(FileExistsError):
         write_dyno_sheet(imports[1], sheet)
     write_dyno_sheet(imports[1], sheet, append=True)
     assert sheet.read_bytes().startswith(first)  # every byte the sheet had is kept
-    table = pd.read_csv(sheet, comment="#")
+    table = pd.read_csv(sheet)
     assert len(table) == 4 * len(PEAKS_M_S) and sorted(set(table["ls"])) == [6.0, 14.0]
+    assert (table["units"] == "SI").all()
     # the existing dyno fit reads one setting's rows as a table
     rows = table[table["ls"] == 6.0][["velocity", "force"]]
     shock = fit_shock_to_dyno(rows, id="T6")
     np.testing.assert_allclose(shock.force(rows["velocity"]), rows["force"], rtol=1e-12)
+
+
+def test_a_sheet_of_the_earlier_layout_is_read_and_appended_to_as_it_is(imports, tmp_path):
+    """A sheet whose first line is '# units: imperial' (no units column): appended rows
+    keep its layout; a units column that disagrees with the line is refused."""
+    new = tmp_path / "new.csv"
+    write_dyno_sheet(imports[0], new, units="imperial")
+    lines = new.read_text().splitlines()
+    old = tmp_path / "old.csv"
+    old.write_text("# units: imperial\n" + "".join(ln.rsplit(",", 1)[0] + "\n" for ln in lines))
+    before = old.read_bytes()
+    with pytest.raises(DynoError, match=r"in imperial units"):
+        write_dyno_sheet(imports[1], old, append=True)  # SI rows
+    write_dyno_sheet(imports[1], old, units="imperial", append=True)
+    text = old.read_text()
+    assert text.startswith(before.decode()) and "imperial" not in text.split("\n", 1)[1]
+    both = tmp_path / "both.csv"
+    write_dyno_sheet(imports[0], both, units="imperial")
+    both.write_text("# units: SI\n" + both.read_text())
+    with pytest.raises(DynoError, match=r"the line '# units: SI' and the column 'units'"):
+        write_dyno_sheet(imports[1], both, units="imperial", append=True)
 
 
 def test_append_refuses_other_columns_and_units(imports, tmp_path):
@@ -305,7 +327,7 @@ def test_append_refuses_other_columns_and_units(imports, tmp_path):
     with pytest.raises(DynoError, match=r"missing \['clicks'\], extra \['ls', 'hs'\]"):
         write_dyno_sheet(other, sheet, units="imperial", append=True)
     assert sheet.read_bytes() == before
-    v = pd.read_csv(sheet, comment="#")["velocity"].to_numpy()
+    v = pd.read_csv(sheet)["velocity"].to_numpy()
     np.testing.assert_allclose(to_si(v, "velocity", "imperial"),
                                imports[0].sheet()["velocity"], rtol=1e-5)
 
@@ -321,7 +343,7 @@ def test_cli_dyno_import_end_to_end(dyno_files, tmp_path, capsys):
     assert main([*base[:2], str(files[1]), *base[2:], "--settings", "ls=14,hs=2",
                  "--append"]) == 0
     assert "appended 12 rows" in capsys.readouterr().out
-    table = pd.read_csv(sheet, comment="#")
+    table = pd.read_csv(sheet)
     assert list(table["source"].unique()) == ["run0.csv", "run1.csv"]
     # a mismatch is one line naming the sheet and the fix
     assert main([*base[:2], str(files[1]), *base[2:], "--settings", "ls=14", "--append"]) == 2

@@ -1,4 +1,5 @@
-"""Tests of ident.data.files: the CSV writers and the unit marker (issue 23, item 1)."""
+"""Tests of ident.data.files: the CSV writers and the unit marker (issue 23, item 1; the
+header first and a trailing ``units`` column: issue 36, item 1)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from ident.data.files import (
     read_units_marker,
     resolve_units,
     units_marker,
+    units_of_column,
     write_csv,
     write_csv_frame,
     write_parquet_frame,
@@ -32,39 +34,102 @@ def _frames():
 
 
 def test_csv_writer_reads_back_bit_for_bit(tmp_path):
-    """Run CSVs are written by Arrow's writer: the marker, the header as pandas writes it,
-    and every float (tiny, huge, negative zero, thirds) read back exactly."""
+    """Run CSVs are written by Arrow's writer: the header as pandas writes it first, the
+    ``units`` column last, and every float (tiny, huge, negative zero, thirds) read back
+    exactly by a plain ``pandas.read_csv``."""
     rng = np.random.default_rng(7)
     x = rng.standard_normal(1000) * 10.0 ** rng.integers(-300, 300, 1000)
     x[:4] = (-0.0, 1.0 / 3.0, 5e-324, 1.7976931348623157e308)
     frame = pd.DataFrame({"time": np.arange(1000) / 100.0, "a,b": x, "c": -x})
     write_csv_frame(frame, tmp_path / "f.csv", units="SI")
     text = (tmp_path / "f.csv").read_text()
-    assert text.splitlines()[:2] == ["# units: SI", 'time,"a,b",c']
-    back = pd.read_csv(tmp_path / "f.csv", comment="#")
+    assert text.splitlines()[:2] == ['time,"a,b",c,units', "0,-0,0,SI"]
+    back = pd.read_csv(tmp_path / "f.csv")
+    assert list(back.columns) == ["time", "a,b", "c", "units"]
+    assert (back["units"] == "SI").all()
     for col in frame:
         assert_array_equal(back[col].to_numpy(), frame[col].to_numpy())
         assert np.array_equal(np.signbit(back[col].to_numpy()), np.signbit(frame[col].to_numpy()))
 
 
 @pytest.mark.parametrize("units", ["SI", "imperial"])
-def test_every_written_csv_starts_with_its_marker_and_pandas_reads_it(tmp_path, units):
+def test_every_written_csv_has_its_header_first_and_pandas_reads_it(tmp_path, units):
+    """Every writer: the header is line 1, the last column ``units`` holds the unit system
+    on every row (no quotes), and ``pandas.read_csv(path)`` without options reads the
+    table; :func:`read_csv_table` returns it without the column, the unit system apart."""
     numeric, mixed = _frames()
     write_csv(tmp_path / "n.csv", numeric, units=units)
     write_csv(tmp_path / "m.csv", mixed, units=units, index=True, float_format="%.6g")
-    write_csv(tmp_path / "t.csv", "setup,LF\na,B20\n", units=units.lower())
-    for name in ("n.csv", "m.csv", "t.csv"):
+    write_csv(tmp_path / "t.csv", 'setup,LF\na,B20\n"b, c","x""y"\n', units=units.lower())
+    headers = {"n.csv": "time,x,units", "m.csv": "setup,score,note,units",
+               "t.csv": "setup,LF,units"}
+    for name, header in headers.items():
         path = tmp_path / name
-        assert path.read_text().splitlines()[0] == f"# units: {units}"  # one cell, no quotes
+        lines = path.read_text().splitlines()
+        assert lines[0] == header
+        assert all(line.endswith(f",{units}") for line in lines[1:])  # one cell, no quotes
         assert read_units_marker(path) == units
+        plain = pd.read_csv(path)
+        assert list(plain.columns) == header.split(",") and (plain["units"] == units).all()
         frame, marked = read_csv_table(path)
         assert marked == units
-        assert frame.equals(pd.read_csv(path, comment="#"))
-    assert_array_equal(pd.read_csv(tmp_path / "n.csv", comment="#").to_numpy(),
+        assert frame.equals(plain.drop(columns="units"))
+    assert_array_equal(pd.read_csv(tmp_path / "n.csv").drop(columns="units").to_numpy(),
                        numeric.to_numpy())
-    back = pd.read_csv(tmp_path / "m.csv", comment="#", index_col="setup",
-                       keep_default_na=False)
+    back = pd.read_csv(tmp_path / "m.csv", index_col="setup", keep_default_na=False)
     assert list(back.index) == ["base", "soft"] and back.loc["base", "note"] == "a, b"
+    text = pd.read_csv(tmp_path / "t.csv")  # quoted fields of CSV text stay as they were
+    assert text.to_dict("list") == {"setup": ["a", "b, c"], "LF": ["B20", 'x"y'],
+                                    "units": [units] * 2}
+
+
+def test_a_table_with_a_units_column_of_its_own_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="has a column 'units' already"):
+        write_csv(tmp_path / "u.csv", pd.DataFrame({"units": ["mm"]}), units="SI")
+    with pytest.raises(ValueError, match="has a column 'units' already"):
+        write_csv(tmp_path / "u.csv", "a,units\n1,mm\n", units="SI")
+    assert not (tmp_path / "u.csv").exists()
+
+
+@pytest.mark.parametrize("text, units", [
+    ("time,x,units\n0,1,SI\n1,2,SI\n", "SI"),
+    ("time,x,units\n0,1,imperial\n1,2,Imperial\n", "imperial"),  # any case
+    ("units,time,x\n imperial ,0,1\n", "imperial"),  # any position, spaces
+    ("time,x,units\n", None),  # no rows: nothing said
+    ("# units: imperial\ntime,x\n0,1\n", "imperial"),  # the earlier layout
+    ("# units: imperial\ntime,x,units\n0,1,imperial\n", "imperial"),  # both, agreeing
+    ("time,x\n0,1\n", None),  # neither
+])
+def test_the_units_column_and_the_marker_line_both_read(tmp_path, text, units):
+    path = tmp_path / "f.csv"
+    path.write_text(text)
+    assert read_units_marker(path) == units
+    frame, marked = read_csv_table(path)
+    assert marked == units and list(frame.columns) == ["time", "x"]
+
+
+@pytest.mark.parametrize("text, match", [
+    ("# units: SI\ntime,x,units\n0,1,imperial\n",
+     r"f.csv: the line '# units: SI' and the column 'units' \(imperial\) disagree; keep the "
+     "one that is true"),
+    ("time,x,units\n0,1,SI\n1,2,imperial\n",
+     r"f.csv: column 'units' says both SI and imperial; a file is in one unit system"),
+    ("time,x,units\n0,1,metric\n", r"f.csv: column 'units'.*unknown unit system 'metric'"),
+])
+def test_a_units_column_that_contradicts_is_refused(tmp_path, text, match):
+    path = tmp_path / "f.csv"
+    path.write_text(text)
+    with pytest.raises(SessionError, match=match):
+        read_csv_table(path, error=SessionError)
+    with pytest.raises(SessionError, match=match):
+        read_units_marker(path, error=SessionError)
+
+
+def test_units_of_column():
+    assert units_of_column(["SI", "", float("nan"), " si "], where="f") == "SI"
+    assert units_of_column([], marker="imperial", where="f") == "imperial"
+    with pytest.raises(ValueError, match="f: the line '# units: imperial' and the column"):
+        units_of_column(["SI"], marker="imperial", where="f")
 
 
 def test_write_csv_is_atomic_and_refuses_to_overwrite(tmp_path):
@@ -74,7 +139,7 @@ def test_write_csv_is_atomic_and_refuses_to_overwrite(tmp_path):
         write_csv(path, "a\n2\n", units="SI", overwrite=False)
     with pytest.raises(ValueError, match="unknown unit system 'metric'"):
         write_csv(path, "a\n2\n", units="metric")
-    assert path.read_text() == "# units: SI\na\n1\n"
+    assert path.read_text() == "a,units\n1,SI\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.csv"]  # no temporary left
 
 
@@ -136,7 +201,7 @@ def test_resolve_units_refuses_a_contradiction_naming_file_both_systems_and_fix(
     text = str(exc.value)
     assert text.startswith("drive file d.csv: ")
     assert "imperial" in text and "--units says SI" in text
-    assert "drop --units" in text and "'# units: SI'" in text
+    assert "drop --units" in text and "'# units: SI'" in text and "'units' column" in text
     with pytest.raises(SessionError, match="; set the manifest"):
         resolve_units("SI", "imperial", where="run 'a'", fix="set the manifest's units",
                       error=SessionError)

@@ -445,15 +445,18 @@ def test_vector_fitting_weighs_lines_by_their_noise(rng):
 
 
 def test_model_summary_file_says_its_units(identified_model, tmp_path):
-    """``identify``'s summary beside the model: the unit marker first (issue 23), then
-    the summary's table, which pandas and the marker reader both read."""
+    """``identify``'s summary beside the model: the summary's table, then its unit system
+    as the last column (issues 23 and 36), which pandas and the marker reader both read."""
+    import pandas as pd
+
     from ident.data.files import read_csv_table
     from ident.identify.model import summary_path, write_model_summary
 
     path = write_model_summary(identified_model, summary_path(tmp_path / "model.npz"),
                                units="imperial")
     assert path.name == "model_summary.csv"
-    assert path.read_text().startswith("# units: imperial\n")
+    assert path.read_text().splitlines()[0].endswith(",units")
+    assert set(pd.read_csv(path)["units"]) == {"imperial"}
     frame, units = read_csv_table(path)
     summary = identified_model.summary()
     assert units == "imperial" and list(frame.columns) == list(summary.columns)

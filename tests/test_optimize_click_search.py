@@ -155,7 +155,7 @@ def test_the_gap_to_the_optimum_is_reported(click_run, crate, tmp_path):
     assert clicks.gap == pytest.approx(1 - click_run.score / clicks.best.score)
     assert clicks.gap >= 0
     files = write_optimum(click_run, crate, tmp_path / "opt")
-    tab = pd.read_csv(files["clicks"], comment="#")
+    tab = pd.read_csv(files["clicks"])
     assert list(tab["group"]) == ["front", "rear"]
     assert {"ls", "hs", "score", "gain", "gap"} <= set(tab.columns)
     np.testing.assert_allclose(tab["gap"], clicks.gap, rtol=1e-9)
@@ -255,7 +255,7 @@ def test_optimize_command_in_clicks(tmp_path, capsys, paper_vehicle, ttx):
     head = next(line for line in text.splitlines() if line.strip().startswith("shock"))
     assert head.split()[3:5] == ["ls", "hs"]
     assert "TTX in clicks" in text and "custom valving" in text
-    tab = pd.read_csv(out / "clicks.csv", comment="#")
+    tab = pd.read_csv(out / "clicks.csv")
     assert list(tab["shock"]) == ["TTX", "TTX"]
     lib = read_shock_library(out / "optimal_shocks.toml")
     assert "TTX" in lib.adjustable_ids

@@ -225,7 +225,7 @@ def test_four_post_session_identifies_and_predicts(four_post_session, four_post_
     # a 4-post drive file has no aero columns and reads
     path = tmp_path / "track-4-post.csv"
     drive = _four_post_drive(track_drive, path)
-    assert not set(AERO_INPUTS) & set(pd.read_csv(path, comment="#").columns)
+    assert not set(AERO_INPUTS) & set(pd.read_csv(path).columns)
     assert drive.rig_inputs == WHEELLOADER_INPUTS and not drive.as_array()[:, :3].any()
 
     setups = _setups(demo_library, baseline_setup, N_4POST_SETUPS - 1)

@@ -113,8 +113,8 @@ def test_readme_rank_gives_the_demos_ranking(demo):
     k = next(k for k, b in enumerate(BLOCKS) if "--out my_ranking/" in b)
     if not (folder / "my_ranking" / "ranking.csv").exists():
         test_readme_example_runs_as_written(demo, k)
-    mine = pd.read_csv(folder / "my_ranking" / "ranking.csv", comment="#")
-    theirs = pd.read_csv(folder / "ranking" / "ranking.csv", comment="#")
+    mine = pd.read_csv(folder / "my_ranking" / "ranking.csv")
+    theirs = pd.read_csv(folder / "ranking" / "ranking.csv")
     assert mine["setup"].head(5).tolist() == theirs["setup"].head(5).tolist()
 
 
@@ -185,20 +185,23 @@ def test_demo_outputs(demo):
     assert "shockplan demo" in text and "best:" in text
     assert "optimized curves" in text and "better" in text
     assert f"-> {out.name}" in text and ".shockplan-demo." not in text  # the final folder
-    # every CSV says the demo's unit system (issue 23): the drive first, read without --units
+    # every CSV says the demo's unit system (issue 23): the drive first, read without --units;
+    # the header first and the unit system as the last column, on every row (issue 36)
     for csv_file in ("track_drive.csv", "model_summary.csv", "ranking/ranking.csv",
                      "ranking/screening.csv", "optimize/optimal_setup.csv",
                      "optimize/convergence.csv", "session/runs/baseline.csv"):
-        assert (out / csv_file).read_text().startswith("# units: imperial\n"), csv_file
+        lines = (out / csv_file).read_text().splitlines()
+        assert lines[0].endswith(",units"), csv_file
+        assert all(line.endswith(",imperial") for line in lines[1:]), csv_file
     # the ranking: every setup of the crate's left/right-symmetric enumeration screened
     library = read_shock_library(DEMO_LIBRARY_PATH)
-    screening = pd.read_csv(out / "ranking" / "screening.csv", comment="#")
+    screening = pd.read_csv(out / "ranking" / "screening.csv")
     assert sorted(screening["setup"]) == sorted(s.name for s in enumerate_setups(library))
-    ranking = pd.read_csv(out / "ranking" / "ranking.csv", keep_default_na=False, comment="#")
+    ranking = pd.read_csv(out / "ranking" / "ranking.csv", keep_default_na=False)
     assert list(ranking.columns) == [
         "rank", "setup", *CORNERS, *METRIC_NAMES, "score", "score_grip", "score_platform",
         "feasible", "violations", "screening_rank", "baseline", "unresolved",
-        *(f"{m}{s}" for m in METRIC_NAMES for s in ("_lo", "_hi"))]
+        *(f"{m}{s}" for m in METRIC_NAMES for s in ("_lo", "_hi")), "units"]
     # its best setup: first by the ranking rule, the known one, the one printed
     feasible = ranking["feasible"].to_numpy(dtype=bool)
     score = ranking["score"].to_numpy(dtype=float)
@@ -245,3 +248,48 @@ def test_readme_python_runs_as_written(tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     assert "baseline 'B20/B20/B20/B20' scores 1.000" in done.stdout
     assert done.stdout.strip().splitlines()[-1].split()[0] == "L28/L28/L28/L28"
+
+
+#: The demo's CSV files that are not shockplan's: the clicks example's raw dyno runs, as a
+#: dyno's own software exports them (its columns, no unit system stated).
+VENDOR_CSV = re.compile(r"^clicks/dyno/")
+
+
+@pytest.mark.slow
+def test_every_demo_csv_reads_with_a_plain_read_csv(demo):
+    """Issue 36: every CSV in a fresh demo folder reads with ``pandas.read_csv(path)`` and
+    no options (the header is its first line) and has the spec's columns: run files
+    ``time`` and the channels, drives the rig inputs, predictions and rankings ``setup``
+    and the corners; each ends with the column ``units``, one unit system on every row."""
+    from ident.data.channels import ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
+
+    out, _ = demo
+    files = sorted(p for p in out.rglob("*.csv") if not p.name.startswith("."))
+    names = [p.relative_to(out).as_posix() for p in files]
+    assert {"track_drive.csv", "ranking/ranking.csv", "ranking/screening.csv",
+            "optimize/optimal_setup.csv", "session/runs/baseline.csv",
+            "real_car/track_drive.csv"} <= set(names)
+    seen = set()
+    for path, name in zip(files, names):
+        frame = pd.read_csv(path)
+        columns = [str(c) for c in frame.columns]
+        assert len(frame) > 0 and not columns[0].startswith("#"), name
+        if VENDOR_CSV.match(name):
+            assert "units" not in columns, name
+            continue
+        assert columns[-1] == "units" and frame["units"].nunique() == 1, name
+        assert frame["units"].iloc[0] in ("SI", "imperial"), name
+        if name.startswith("session/runs/"):
+            assert columns[0] == "time" and set(RIG_INPUTS) <= set(columns), name
+            assert set(columns[1:-1]) <= set(ALL_CHANNELS), name
+            assert frame["units"].iloc[0] == "imperial", name
+            seen.add("run")
+        elif name.endswith("drive.csv"):
+            assert columns[0] == "time" and set(WHEELLOADER_INPUTS) <= set(columns), name
+            assert set(columns[1:-1]) <= set(RIG_INPUTS), name
+            seen.add("drive")
+        elif name.startswith(("ranking/", "optimize/optimal_setup")):
+            head = columns[columns.index("setup"):columns.index("setup") + 5]
+            assert head == ["setup", *CORNERS], name
+            seen.add("setups")
+    assert seen == {"run", "drive", "setups"}

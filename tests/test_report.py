@@ -82,15 +82,19 @@ def test_ranking_to_units_converts_metrics_and_intervals_only(table):
 def test_predictions_csv_spec_columns_units_and_precision(table, tmp_path):
     si_path = write_predictions_csv(table, tmp_path / "pred_si.csv")
     imp_path = write_predictions_csv(table, tmp_path / "pred_imp.csv", units="imperial")
-    assert si_path.read_text().startswith("# units: SI\nsetup,")  # the unit marker first
-    assert imp_path.read_text().startswith("# units: imperial\nsetup,")
-    si = pd.read_csv(si_path, keep_default_na=False, na_values=[""], comment="#")
-    imp = pd.read_csv(imp_path, keep_default_na=False, na_values=[""], comment="#")
+    for path, units in ((si_path, "SI"), (imp_path, "imperial")):  # the header first, then
+        lines = path.read_text().splitlines()  # the unit system as the last column
+        assert lines[0].startswith("setup,") and lines[0].endswith(",units")
+        assert all(line.endswith(f",{units}") for line in lines[1:])
+    si = pd.read_csv(si_path, keep_default_na=False, na_values=[""])
+    imp = pd.read_csv(imp_path, keep_default_na=False, na_values=[""])
     n_m = len(METRIC_NAMES)
     assert list(si.columns[:5]) == ["setup", *CORNERS]
     assert list(si.columns[5:5 + n_m]) == list(METRIC_NAMES)  # the spec's order
     assert set(si.columns[5 + n_m:]) == {c for c in table.columns
-                                         if c not in CORNERS and c not in METRIC_NAMES}
+                                         if c not in CORNERS and c not in METRIC_NAMES} | {
+                                             "units"}
+    assert si.columns[-1] == "units" and set(si["units"]) == {"SI"}
     assert si["setup"].tolist() == table.index.tolist()  # row order as given
     for c in CORNERS:
         assert si[c].tolist() == table[c].tolist()
@@ -112,7 +116,7 @@ def test_predictions_csv_accepts_a_setup_column_and_refuses_overwrite(table, tmp
         write_predictions_csv(table, path)
     assert path.read_bytes() == before
     write_predictions_csv(table.iloc[:3], path, overwrite=True)
-    assert len(pd.read_csv(path, comment="#")) == 3
+    assert len(pd.read_csv(path)) == 3
 
 
 def test_write_ranking_files(table, tmp_path):
@@ -124,8 +128,9 @@ def test_write_ranking_files(table, tmp_path):
     for key in ("pareto", "top_setups"):
         data = paths[key].read_bytes()
         assert len(data) > 1000 and data[:8] == PNG_MAGIC
-    assert paths["csv"].read_text().startswith("# units: imperial\nrank,setup,")
-    csv = pd.read_csv(paths["csv"], keep_default_na=False, na_values=[""], comment="#")
+    assert paths["csv"].read_text().startswith("rank,setup,")
+    assert paths["csv"].read_text().splitlines()[1].endswith(",imperial")
+    csv = pd.read_csv(paths["csv"], keep_default_na=False, na_values=[""])
     assert list(csv.columns[:6]) == ["rank", "setup", *CORNERS]
     assert list(csv.columns[6:6 + len(METRIC_NAMES)]) == list(METRIC_NAMES)
     assert csv["rank"].tolist() == list(range(1, N_SETUPS + 1))

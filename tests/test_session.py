@@ -137,9 +137,9 @@ def test_manifest_is_the_spec_layout(session_dir):
     assert doc["shock_library"] == "shocks.toml" and "channels" not in doc
     assert doc["run"][1] == {"name": "swap-LF", "file": "runs/swap-LF.csv", "role": "swap",
                              "setup": {"LF": "D8", "RF": "B20", "LR": "B20", "RR": "B20"}}
-    header = pd.read_csv(session_dir / "runs" / "baseline-1.csv", nrows=0, comment="#").columns
+    header = pd.read_csv(session_dir / "runs" / "baseline-1.csv", nrows=0).columns
     assert list(header) == ["time", *RIG_INPUTS,
-                            *[c for c in ALL_CHANNELS if c in RESPONSES]]
+                            *[c for c in ALL_CHANNELS if c in RESPONSES], "units"]
 
 
 def test_csv_is_written_at_full_precision(rng, tmp_path):
@@ -161,8 +161,8 @@ def test_imperial_twin(session, tmp_path):
     imp_dir = write_session(session, tmp_path / "imperial", units="imperial")
     assert tomllib.loads((imp_dir / "session.toml").read_text())["units"] == "imperial"
 
-    si_file = pd.read_csv(si_dir / "runs" / "swap-LF.csv", comment="#")
-    imp_file = pd.read_csv(imp_dir / "runs" / "swap-LF.csv", comment="#")
+    si_file = pd.read_csv(si_dir / "runs" / "swap-LF.csv")
+    imp_file = pd.read_csv(imp_dir / "runs" / "swap-LF.csv")
     expected_factor = {"time": 1.0, "wheelloader_LF": IN_M, "ride_height_RR": IN_M,
                        "shock_velocity_LR": IN_M, "aero_heave": LBF_N,
                        "tire_force_LF": LBF_N, "aero_roll": LBF_N * IN_M}
@@ -267,7 +267,7 @@ def _edit_manifest(edit):
 def _edit_run(edit, name="swap-LF"):
     def mutate(folder):
         path = folder / "runs" / f"{name}.csv"
-        frame = edit(pd.read_csv(path, comment="#"))
+        frame = edit(pd.read_csv(path).drop(columns="units"))  # as the marker line was
         frame.to_csv(path, index=False)
     return mutate
 
@@ -660,7 +660,9 @@ def test_run_files_say_their_units(session, tmp_path, run_format, units):
         path = folder / "runs" / f"{name}.{run_format}"
         assert read_units_marker(path) == units
         if run_format == "csv":
-            assert path.read_text().splitlines()[0] == f"# units: {units}"
+            lines = path.read_text().splitlines()
+            assert lines[0].startswith("time,") and lines[0].endswith(",units")
+            assert all(line.endswith(f",{units}") for line in lines[1:])
     table = read_run_table(folder / "runs" / f"swap-LF.{run_format}")  # no units given
     assert table.units == table.file_units == units
     _assert_same_data(session, read_session(folder))
@@ -682,7 +684,12 @@ def test_a_run_file_contradicting_the_manifest_is_an_error(session, tmp_path, ru
 def test_a_run_file_without_marker_takes_the_manifest_units(session, tmp_path):
     folder = write_session(session, tmp_path / "s", units="imperial")
     for path in (folder / "runs").iterdir():  # an export that says nothing
-        path.write_text(path.read_text().split("\n", 1)[1])
+        path.write_text("".join(line.rsplit(",", 1)[0] + "\n"
+                                for line in path.read_text().splitlines()))
+        assert "units" not in pd.read_csv(path, nrows=1).columns
+    _assert_same_data(session, read_session(folder))
+    for path in (folder / "runs").iterdir():  # the earlier layout: the marker line first
+        path.write_text("# units: imperial\n" + path.read_text())
     _assert_same_data(session, read_session(folder))
 
 

@@ -417,12 +417,13 @@ def test_csv_round_trip(tmp_path):
     setups = enumerate_setups(lib, symmetry="none") + (_setup("with, comma", "S1", "S2",
                                                               "S3", "S1"),)
     path = write_setups(setups, tmp_path / "out" / "setups.csv")
-    assert path.read_text().splitlines()[:3] == ["# units: SI", "setup,LF,RF,LR,RR",
-                                                 "S1/S1/S1/S1,S1,S1,S1,S1"]
+    assert path.read_text().splitlines()[:2] == ["setup,LF,RF,LR,RR,units",
+                                                 "S1/S1/S1/S1,S1,S1,S1,S1,SI"]
     assert read_setups(path, lib) == setups
     write_setups(setups, path, units="imperial", overwrite=True)
-    assert path.read_text().splitlines()[0] == "# units: imperial"
-    assert pd.read_csv(path, comment="#")["setup"].tolist() == [s.name for s in setups]
+    assert path.read_text().splitlines()[0] == "setup,LF,RF,LR,RR,units"
+    assert pd.read_csv(path)["setup"].tolist() == [s.name for s in setups]
+    assert set(pd.read_csv(path)["units"]) == {"imperial"}
     assert read_setups(path, lib) == setups
 
 
@@ -540,6 +541,9 @@ def test_read_ranking_baseline(tmp_path):
     path.write_text("# units: imperial\nrank,setup,LF,RF,LR,RR,baseline\n"
                     "1,best,L28,L28,L28,L28,False\n2,base,B20,B20,B20,B20,True\n")
     assert read_ranking_baseline(path) == "base"
+    path.write_text("rank,setup,LF,RF,LR,RR,baseline,units\n"  # as shockplan writes it now
+                    "1,best,L28,L28,L28,L28,False,SI\n2,base,B20,B20,B20,B20,True,SI\n")
+    assert read_ranking_baseline(path) == "base"
     path.write_text("setup,LF,RF,LR,RR\nbest,L28,L28,L28,L28\n")
     assert read_ranking_baseline(path) is None
     path.write_text("setup,LF,RF,LR,RR,baseline\na,B20,B20,B20,B20,True\n"
@@ -593,6 +597,29 @@ def test_packers_are_read_in_the_files_units(tmp_path):
     with pytest.raises(PlannerError, match=r"the file says it is in SI units .* but units says "
                        "imperial"):
         read_setups(path, units="imperial")
+    # the units column (what shockplan writes) says the same as the line did
+    path.write_text("setup,LF,RF,LR,RR,packer_LR,units\na,B20,B20,B20,B20,0.1,imperial\n")
+    assert read_setups(path)[0].packers_m["LR"] == pytest.approx(0.1 * IN_M, rel=1e-15)
+    with pytest.raises(PlannerError, match=r"the file says it is in imperial units .* but "
+                       "units says SI"):
+        read_setups(path, units="SI")
+
+
+def test_a_units_column_is_the_files_unit_system_not_a_setups_column(tmp_path):
+    """Issue 36: a setups CSV with a units column reads (the column is no setup's); a column
+    with two unit systems, or one against the marker line, is refused."""
+    path = tmp_path / "setups.csv"
+    path.write_text("setup,LF,RF,LR,RR,units\na,B20,B20,B20,B20,SI\nb,D8,D8,B20,B20,SI\n")
+    assert read_setups(path) == (_setup("a", "B20", "B20", "B20", "B20"),
+                                 _setup("b", "D8", "D8", "B20", "B20"))
+    path.write_text("setup,LF,RF,LR,RR,units\na,B20,B20,B20,B20,SI\nb,D8,D8,B20,B20,imperial\n")
+    with pytest.raises(PlannerError, match=r"setups.csv: column 'units' says both SI and "
+                       "imperial"):
+        read_setups(path)
+    path.write_text("# units: imperial\nsetup,LF,RF,LR,RR,units\na,B20,B20,B20,B20,SI\n")
+    with pytest.raises(PlannerError, match=r"setups.csv: the line '# units: imperial' and the "
+                       r"column 'units' \(SI\) disagree"):
+        read_setups(path)
 
 
 @pytest.mark.parametrize("units", ["SI", "imperial"])
@@ -602,12 +629,12 @@ def test_setups_with_elements_round_trip(tmp_path, spec_lib, stops, units):
     setups = read_setups(src, spec_lib, stops)
     path = write_setups(setups, tmp_path / "out.csv", units=units)
     lines = path.read_text().splitlines()
-    assert lines[1] == ("setup,LF,RF,LR,RR,bump_stop_LF,bump_stop_RF,bump_stop_LR,bump_stop_RR,"
-                        "packer_LF,packer_RF,packer_LR,packer_RR")
+    assert lines[0] == ("setup,LF,RF,LR,RR,bump_stop_LF,bump_stop_RF,bump_stop_LR,bump_stop_RR,"
+                        "packer_LF,packer_RF,packer_LR,packer_RR,units")
     if units == "SI":
-        assert lines[2:] == ["packed,D8,D8,B20,B20,BS-F,BS-F,none,,0.003,0.0025,,",
-                             "soft-stops,B20,B20,B20,B20,BS-S,BS-S,,,,,,",
-                             "baseline,B20,B20,B20,B20,,,,,,,,"]
+        assert lines[1:] == ["packed,D8,D8,B20,B20,BS-F,BS-F,none,,0.003,0.0025,,,SI",
+                             "soft-stops,B20,B20,B20,B20,BS-S,BS-S,,,,,,,SI",
+                             "baseline,B20,B20,B20,B20,,,,,,,,,SI"]
     back = read_setups(path, spec_lib, stops)
     assert [(s.name, s.ids(), s.bump_stops) for s in back] == \
         [(s.name, s.ids(), s.bump_stops) for s in setups]
@@ -615,13 +642,14 @@ def test_setups_with_elements_round_trip(tmp_path, spec_lib, stops, units):
 
 
 def test_setups_without_elements_are_written_as_before(tmp_path):
-    """No bump-stop or packer columns unless a setup has some: byte for byte the old file."""
+    """No bump-stop or packer columns unless a setup has some: the spec's columns, then the
+    units column (issue 36)."""
     path = write_setups([_setup("a", "A", "B", "C", "D")], tmp_path / "s.csv")
-    assert path.read_text() == "# units: SI\nsetup,LF,RF,LR,RR\na,A,B,C,D\n"
+    assert path.read_text() == "setup,LF,RF,LR,RR,units\na,A,B,C,D,SI\n"
     only_stops = Setup("b", dict(zip(CORNERS, "ABCD")), bump_stops={"RR": None})
     path = write_setups([only_stops], tmp_path / "t.csv")
-    assert path.read_text() == ("# units: SI\nsetup,LF,RF,LR,RR,bump_stop_LF,bump_stop_RF,"
-                                "bump_stop_LR,bump_stop_RR\nb,A,B,C,D,,,,none\n")
+    assert path.read_text() == ("setup,LF,RF,LR,RR,bump_stop_LF,bump_stop_RF,"
+                                "bump_stop_LR,bump_stop_RR,units\nb,A,B,C,D,,,,none,SI\n")
 
 
 @pytest.mark.parametrize("header, row, match", [

@@ -555,6 +555,10 @@ def test_dyno_csv_with_leading_comment_lines_reads(tmp_path):
     path.write_text("# units: SI\n# dyno of 3 May\n" + body)
     marked = fit_shock_to_dyno(path, id="X")
     np.testing.assert_array_equal(marked.to_pwl().f_knots_n, plain.to_pwl().f_knots_n)
+    path.write_text("".join(line + (",units\n" if k == 0 else ",SI\n")  # a units column
+                            for k, line in enumerate(body.splitlines())))
+    column = fit_shock_to_dyno(path, id="X")
+    np.testing.assert_array_equal(column.to_pwl().f_knots_n, plain.to_pwl().f_knots_n)
 
 
 def test_dyno_missing_file_and_bad_type(tmp_path):

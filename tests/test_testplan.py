@@ -357,7 +357,7 @@ def test_write_plan_files_and_rig_plan(plan, tmp_path):
     assert set(rig.shocks.ids) == set(plan.library.ids)
 
     back = read_run_sheet(files["xlsx"])
-    csv = pd.read_csv(files["csv"], keep_default_na=False, comment="#")
+    csv = pd.read_csv(files["csv"], keep_default_na=False)
     assert back["run"].tolist() == csv["run"].tolist() == [r.number for r in plan.runs]
     assert back["drive_file"].tolist() == csv["drive_file"].tolist()
     assert all((tmp_path / "plan" / f).is_file() for f in back["drive_file"])

@@ -187,7 +187,10 @@ def test_write_read_round_trip(truth, units, suffix, tmp_path):
             assert_array_equal(back.channels[c], x)
     assert all(not x.flags.writeable for x in back.channels.values())
     if suffix == ".csv":
-        assert path.read_text().splitlines()[0] == f"# units: {units}"
+        lines = path.read_text().splitlines()
+        assert lines[0].startswith("time,") and lines[0].endswith(",units")
+        assert all(line.endswith(f",{units}") for line in lines[1:])
+        assert (pd.read_csv(path)["units"] == units).all()
     with pytest.raises(FileExistsError, match="already exists"):
         write_track_log(log, path)
     write_track_log(log, path, units=units, overwrite=True)
@@ -499,8 +502,24 @@ def _case_some_aero_map(d):
 
 def _case_marker_contradicts_units(d):
     return (dict(path=_canonical_csv(d, marker="imperial"), units="SI"),
-            r"log.csv: the file says it is in imperial units \('# units: imperial'\) but "
+            r"log.csv: the file says it is in imperial units \(its 'units' column or "
+            r"'# units:' line\) but "
             r"--units says SI; drop --units \(the file's marker decides\)")
+
+
+def _case_units_column_contradicts_units(d):
+    return (dict(path=_canonical_csv(d, edit=lambda f: f.insert(len(f.columns), "units",
+                                                                "imperial")), units="SI"),
+            r"log.csv: the file says it is in imperial units \(its 'units' column or "
+            r"'# units:' line\) but --units says SI")
+
+
+def _case_units_column_of_two_systems(d):
+    def edit(frame):
+        frame.insert(len(frame.columns), "units", "SI")
+        frame.loc[frame.index[-1], "units"] = "imperial"
+    return (dict(path=_canonical_csv(d, edit=edit)),
+            r"log.csv: column 'units' says both SI and imperial; a file is in one unit system")
 
 
 def _case_source_missing_csv(d):
@@ -575,6 +594,8 @@ REFUSALS = {  # id -> case builder (folder -> (read_track_log kwargs, match))
     "some aero columns": _case_some_aero_csv,
     "some aero in the map": _case_some_aero_map,
     "marker contradicts units": _case_marker_contradicts_units,
+    "units column contradicts units": _case_units_column_contradicts_units,
+    "units column of two systems": _case_units_column_of_two_systems,
     "map source missing (csv)": _case_source_missing_csv,
     "map source missing (mdf)": _case_source_missing_mdf,
     "map channel not a log channel": _case_map_channel_not_a_log_channel,

@@ -23,9 +23,11 @@ Three generators make drives:
 rig-session run-file format, CSV or Parquet, through
 :func:`ident.data.runs.read_run_table` / :func:`ident.data.runs.write_run_table`);
 :func:`resample_drive` changes a drive's sample rate. A written drive file says its
-unit system (a CSV's first line ``# units: imperial``, a Parquet file's metadata); a
-read one takes it from there, from ``units`` (``--units``), or is SI, and a file that
-says nothing and is implausible as SI is refused (see :func:`read_drive`).
+unit system (a CSV's ``units`` column, a Parquet file's metadata; the earlier CSV
+layout's first line ``# units: imperial`` is still read); a read one takes it from there,
+from ``units`` (``--units``), or is SI, and a file that says nothing and is implausible
+as SI is refused, one whose level fits either unit system read as SI with a warning (see
+:func:`read_drive`).
 
 Examples
 --------
@@ -54,6 +56,7 @@ from scipy import signal
 from ident.data.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero, rig_inputs_of
 from ident.data.runs import read_run_table, write_run_table
 from ident.data.timebase import TimeRecord
+from ident.data.units import to_si
 from ident.errors import DriveError
 
 __all__ = [
@@ -79,6 +82,10 @@ MIN_DRIVE_SAMPLES = 28
 #: Wheel-pad RMS above which a drive file is implausible for a shaker rig [m] (race-car
 #: rig drives are a few mm RMS; an inch file read as SI gives 25x its value in metres).
 PLAUSIBLE_WHEELLOADER_RMS_M = 0.05
+#: Wheel-pad RMS below which a drive file is implausible for a shaker rig [m]: the largest
+#: pad RMS of a drive is at least a quarter millimetre (a metre file read as inches gives
+#: 1/25.4 of its value: the demo's 3.7 mm drive would be 0.14 mm).
+PLAUSIBLE_WHEELLOADER_RMS_MIN_M = 0.25e-3
 
 #: Reference spatial frequency of ISO 8608 road spectra [cycles/m].
 ISO8608_N0_CYCLES_M = 0.1
@@ -817,8 +824,8 @@ def read_drive(path, *, units=None, channel_map=None, name=None):
         are ignored.
     units : {"SI", "imperial"}, optional
         Unit system of the values in the file (``--units`` of the CLI). Default: the
-        file's unit marker (a CSV's ``# units: ...`` line, a Parquet file's metadata
-        ``units``), else SI. Given, it must agree with the marker.
+        file's unit marker (a CSV's ``units`` column or ``# units: ...`` line, a Parquet
+        file's metadata ``units``), else SI. Given, it must agree with the marker.
     channel_map : Mapping of str to str, optional
         ``{canonical name: file column}`` for files whose names differ.
     name : str, optional
@@ -841,9 +848,18 @@ def read_drive(path, *, units=None, channel_map=None, name=None):
         `units`.
     DriveError
         If the file has too few samples; or if it does not say its units, none are
-        given, and its wheel-pad motion read as SI is beyond what a shaker rig plays
-        (RMS over :data:`PLAUSIBLE_WHEELLOADER_RMS_M`): an inch file read as metres.
-        Given `units` (or a marker) the same check only logs a warning.
+        given, and its wheel-pad level (the largest pad RMS) read as SI is not what a
+        shaker rig plays (:data:`PLAUSIBLE_WHEELLOADER_RMS_MIN_M` to
+        :data:`PLAUSIBLE_WHEELLOADER_RMS_M`): an inch file read as metres, or a level
+        implausible in either unit system. Given `units` (or a marker) a level over the
+        maximum only logs a warning.
+
+    Notes
+    -----
+    A file that does not say its units, read without `units`, whose level is plausible
+    both as SI and as imperial (e.g. 36 mm RMS as SI, 0.9 mm as inches) is read as SI
+    (the spec's default) with a warning naming ``--units``; a pad still at every corner
+    (an aero-only drive) says nothing about units and is read as SI.
     """
     path = Path(path)
     table = read_run_table(path, units=units, channel_map=channel_map,
@@ -867,20 +883,45 @@ def read_drive(path, *, units=None, channel_map=None, name=None):
 
 
 def _check_plausible(channels, *, where, units, units_from):
-    """Refuse (units nobody stated) or warn (logging) when the wheel-pad motion is beyond
-    what a rig plays: wrong units?"""
+    """Refuse (units nobody stated) or warn (logging) when the wheel-pad level is not what
+    a rig plays in the units read, or (units nobody stated) would be in the other too."""
     rms = {c: float(np.sqrt(np.mean((channels[c] - channels[c].mean()) ** 2)))
            for c in WHEELLOADER_INPUTS if c in channels}
     worst = max(rms, key=rms.get)
-    if rms[worst] <= PLAUSIBLE_WHEELLOADER_RMS_M:
+    level = rms[worst]
+    lo, hi = PLAUSIBLE_WHEELLOADER_RMS_MIN_M, PLAUSIBLE_WHEELLOADER_RMS_M
+    if units_from == "default" and 0.0 < level:  # read as SI: values as the file has them
+        as_si = lo <= level <= hi
+        as_imperial = lo <= to_si(level, "displacement", "imperial") <= hi
+        if as_si and not as_imperial:
+            return
+        if as_si:
+            logger.warning(
+                "%s: the file does not say its units and was read as SI (the spec's default): "
+                "%s has an RMS of %.1f mm; read as inches (%.3g in) it would be %.2f mm, "
+                "plausible too; if the file is in inches and pounds give --units imperial, "
+                "else --units SI (or a 'units' column in the file) to say so", where, worst,
+                1e3 * level, level, 1e3 * to_si(level, "displacement", "imperial"))
+            return
+        if not as_imperial:
+            raise DriveError(
+                f"{where}: the wheel pads' level, {worst} with an RMS of {level:.3g} in the "
+                f"file's values, is implausible in either unit system ({1e3 * level:.3g} mm "
+                f"as SI, {1e3 * to_si(level, 'displacement', 'imperial'):.3g} mm as inches; "
+                f"a shaker rig plays {1e3 * lo:g} to {1e3 * hi:.0f} mm RMS) and the file does "
+                "not say its units: check its values (a wrong scale or column?), and if "
+                "they are right give --units SI or --units imperial (units=...), or a "
+                "'units' column in the file")
+    if level <= hi:
         return
-    said = (f"{where}: {worst} has an RMS of {1e3 * rms[worst]:.0f} mm read as {units}, more "
-            f"than the {1e3 * PLAUSIBLE_WHEELLOADER_RMS_M:.0f} mm a shaker rig plays")
+    said = (f"{where}: {worst} has an RMS of {1e3 * level:.0f} mm read as {units}, more "
+            f"than the {1e3 * hi:.0f} mm a shaker rig plays")
     if units_from == "default":
         raise DriveError(
-            f"{said}: the file does not say its units (no '# units:' line) and was read as "
-            "SI; if it is in inches and pounds give --units imperial (units='imperial'), "
-            "or add the line '# units: imperial' at its top; --units SI reads it as SI anyway")
+            f"{said}: the file does not say its units (no 'units' column or '# units:' line) "
+            "and was read as SI; if it is in inches and pounds give --units imperial "
+            "(units='imperial'), or add a column 'units' holding imperial on every row; "
+            "--units SI reads it as SI anyway")
     hint = ("is the file in imperial units (--units imperial)?" if units == "SI" else
             "check the file's units")
     logger.warning("%s; the predictions will be absurd (tire forces of tens of kN): %s",
@@ -891,9 +932,9 @@ def write_drive(drive, path, *, units="SI", overwrite=False):
     """Write a drive file (``time`` and the drive's rig inputs), atomically.
 
     The columns are ``drive.rig_inputs``: the 7 rig inputs, or the 4
-    wheelloaders of a 4-post drive. The file says its unit system: a CSV's first
-    line is ``# units: SI`` (or ``imperial``), a Parquet file's schema metadata
-    has ``units``; :func:`read_drive` reads it back in those units.
+    wheelloaders of a 4-post drive. The file says its unit system: a CSV's last
+    column is ``units`` (``SI`` or ``imperial`` on every row), a Parquet file's schema
+    metadata has ``units``; :func:`read_drive` reads it back in those units.
 
     Parameters
     ----------

@@ -1,12 +1,17 @@
 """Small file helpers: TOML reading with clear errors, atomic writes, the unit marker.
 
 The unit marker (an optional addition to the rig-session spec, ``docs/formats.md``):
-every CSV shockplan writes starts with the line ``# units: SI`` or ``# units: imperial``
-(:func:`write_csv`, :func:`write_csv_frame`); a Parquet drive or run file carries the
-same in its schema metadata, key ``units`` (:func:`write_parquet_frame`). Readers skip
-the leading ``#`` comment lines of a CSV and take the marker from them
-(:func:`csv_preamble`, :func:`read_csv_table`, :func:`read_csv_after`,
-:func:`read_units_marker`);
+every CSV shockplan writes starts with its header row, as the spec says, and ends each
+row with a ``units`` column, the value ``SI`` or ``imperial`` on every row
+(:func:`write_csv`, :func:`write_csv_frame`), so that ``pandas.read_csv(path)``, MATLAB's
+``readtable`` and a spreadsheet read it as they are; a Parquet drive or run file carries
+the same in its schema metadata, key ``units`` (:func:`write_parquet_frame`). Files of
+the earlier layout, whose first line is the marker line ``# units: SI`` (or ``imperial``)
+above the header, are still read. Readers skip the leading ``#`` comment lines of a CSV,
+take the marker from them, and take the ``units`` column's value (dropping the column)
+when there is one (:func:`csv_preamble`, :func:`read_csv_table`, :func:`read_csv_after`,
+:func:`read_units_marker`, :func:`units_of_column`); a marker line and a column that
+disagree, or a column with more than one value, are refused.
 :func:`resolve_units` decides a file's unit system from its marker and the unit system
 a caller was given (the manifest's ``units``, ``--units``), refusing a contradiction.
 
@@ -40,11 +45,14 @@ from ident.data.units import check_units
 __all__ = ["read_toml", "write_csv", "write_csv_frame", "write_parquet_frame", "write_table_file",
            "atomic_write_text", "atomic_write_bytes", "atomic_write_toml", "atomic_path",
            "atomic_dir", "check_can_write", "check_output", "did_you_mean",
-           "UNITS_KEY", "units_marker", "csv_preamble", "read_units_marker", "read_csv_table",
-           "read_csv_after", "resolve_units"]
+           "UNITS_KEY", "UNITS_COLUMN", "units_marker", "csv_preamble", "read_units_marker",
+           "read_csv_table", "read_csv_after", "units_of_column", "resolve_units"]
 
 #: The key of the unit marker: ``# units: SI`` in a CSV, the Parquet schema metadata key.
 UNITS_KEY = "units"
+#: The last column of every CSV shockplan writes: the unit system (``SI`` or ``imperial``)
+#: on every row.
+UNITS_COLUMN = "units"
 #: A marker line: ``#``, the key, ``:`` or ``=``, the unit system (a spreadsheet that saves
 #: the line back may pad it with commas or quote it; both are tolerated).
 _MARKER_LINE = re.compile(r"#\s*units\s*[:=]\s*(.*)$", re.IGNORECASE)
@@ -235,6 +243,9 @@ def atomic_write_toml(path, data, *, overwrite=True, header=None):
 def units_marker(units):
     """The unit marker line of a CSV (no line end): ``# units: SI`` or ``# units: imperial``.
 
+    The earlier layout's first line, still read (:func:`csv_preamble`); shockplan now
+    writes a trailing ``units`` column instead (:data:`UNITS_COLUMN`).
+
     Parameters
     ----------
     units : {"SI", "imperial"}
@@ -271,6 +282,9 @@ def csv_preamble(lines, *, where, error=ValueError):
     units : str or None
         ``"SI"`` or ``"imperial"`` from a ``# units: ...`` line (any case, ``:`` or ``=``,
         padded with commas or quoted as a spreadsheet may save it); None without one.
+        A ``units`` column below the header is not seen here: the readers of the table
+        (:func:`read_csv_table`, :func:`read_units_marker`) reconcile it with this
+        (:func:`units_of_column`).
     n_lines : int
         The number of leading comment and blank lines (the header is the next line).
 
@@ -307,8 +321,8 @@ def read_units_marker(path, *, where=None, error=ValueError, kind=None):
     Parameters
     ----------
     path : str or os.PathLike
-        A CSV file (its leading ``# units: ...`` line) or a Parquet file (``.parquet``,
-        ``.pq``: its schema metadata ``units``).
+        A CSV file (its ``units`` column, or the earlier layout's leading ``# units: ...``
+        line) or a Parquet file (``.parquet``, ``.pq``: its schema metadata ``units``).
     where : str, optional
         How to name the file in messages (default: the path).
     error : type
@@ -320,13 +334,17 @@ def read_units_marker(path, *, where=None, error=ValueError, kind=None):
     Returns
     -------
     str or None
-        ``"SI"``, ``"imperial"``, or None for a file without a marker.
+        ``"SI"``, ``"imperial"``, or None for a file that does not say.
 
     Raises
     ------
     error
-        If the file cannot be read, or its marker names an unknown unit system.
+        If the file cannot be read, its marker names an unknown unit system, or its
+        ``units`` column holds more than one value or disagrees with its marker line.
     """
+    import csv
+
+    import pandas as pd
     import pyarrow
     import pyarrow.parquet as pq
 
@@ -336,8 +354,18 @@ def read_units_marker(path, *, where=None, error=ValueError, kind=None):
             raw = (pq.read_schema(path).metadata or {}).get(UNITS_KEY.encode())
         else:
             with open(path, encoding="utf-8-sig", newline="") as fh:
-                return csv_preamble(fh, where=where, error=error)[0]
-    except (OSError, UnicodeDecodeError, pyarrow.ArrowException) as exc:
+                marker, n = csv_preamble(fh, where=where, error=error)
+            with open(path, encoding="utf-8-sig", newline="") as fh:
+                for _ in range(n):  # as lines: a quote in a comment opens no field
+                    fh.readline()
+                header = [h.strip() for h in next(csv.reader(fh), [])]
+            if UNITS_COLUMN not in header:
+                return marker
+            values = read_csv_after(path, n, usecols=[header.index(UNITS_COLUMN)],
+                                    dtype=str).iloc[:, 0]
+            return units_of_column(values, marker=marker, where=where, error=error)
+    except (OSError, UnicodeDecodeError, pyarrow.ArrowException, pd.errors.ParserError,
+            pd.errors.EmptyDataError) as exc:
         raise error(f"{where}: cannot read the file ({type(exc).__name__}: {exc}); check "
                     "the path and that it is a UTF-8 CSV or a Parquet file") from None
     if raw is None:
@@ -346,8 +374,82 @@ def read_units_marker(path, *, where=None, error=ValueError, kind=None):
                        where=f"{where}: Parquet metadata '{UNITS_KEY}'", error=error)
 
 
+def units_of_column(values, *, marker=None, where, error=ValueError):
+    """The unit system a CSV's ``units`` column states, checked against its marker line.
+
+    Parameters
+    ----------
+    values : iterable
+        The column's values (strings; blank cells and NaN are skipped).
+    marker : {"SI", "imperial"} or None
+        The file's marker line (:func:`csv_preamble`), if any.
+    where : str
+        How to name the file in messages.
+    error : type
+        The ``ValueError`` subclass to raise.
+
+    Returns
+    -------
+    str or None
+        ``"SI"`` or ``"imperial"``; `marker` for a column without a value (no rows).
+
+    Raises
+    ------
+    error
+        If a value is not a unit system, the column holds more than one (a file is in one
+        unit system), or it disagrees with `marker`.
+
+    Examples
+    --------
+    >>> units_of_column(["imperial", "Imperial"], where="f.csv")
+    'imperial'
+    >>> units_of_column(["SI", "imperial"], where="f.csv")
+    Traceback (most recent call last):
+    ...
+    ValueError: f.csv: column 'units' says both SI and imperial; a file is in one unit system: give every row the one that is true (SI or imperial)
+    """
+    # a file's rows repeat one value: its distinct values are few (a column's own unique()
+    # is 40x quicker than a set of 80 000 Arrow-backed strings)
+    distinct = values.unique() if hasattr(values, "unique") else set(values)
+    raw = set()
+    for v in distinct:
+        if v is None or (isinstance(v, float) and v != v) or type(v).__name__ == "NAType":
+            continue  # a blank cell
+        text = str(v).strip().strip("'\"").strip()
+        if text:
+            raw.add(text)
+    found = []
+    for text in sorted(raw):
+        value = check_units(text, where=f"{where}: column '{UNITS_COLUMN}'", error=error)
+        if value not in found:
+            found.append(value)
+    if not found:
+        return marker
+    if len(found) > 1:
+        raise error(f"{where}: column '{UNITS_COLUMN}' says both {' and '.join(sorted(found))}; "
+                    "a file is in one unit system: give every row the one that is true (SI "
+                    "or imperial)")
+    value = found[0]
+    if marker is not None and marker != value:
+        raise error(f"{where}: the line '# {UNITS_KEY}: {marker}' and the column "
+                    f"'{UNITS_COLUMN}' ({value}) disagree; keep the one that is true: delete "
+                    "or correct the line, or correct the column")
+    return value
+
+
+def _split_units_column(frame, marker, *, where, error):
+    """`frame` without its ``units`` column, and the unit system (column and marker)."""
+    names = [str(c).strip() for c in frame.columns]
+    if UNITS_COLUMN not in names:
+        return frame, marker
+    j = names.index(UNITS_COLUMN)
+    units = units_of_column(frame.iloc[:, j], marker=marker, where=where, error=error)
+    return frame.drop(columns=frame.columns[j]), units
+
+
 def read_csv_table(path, *, where=None, error=ValueError, index_col=None):
-    """Read a CSV file with pandas, its leading ``#`` comment lines skipped.
+    """Read a CSV file with pandas, its leading ``#`` comment lines skipped, its unit
+    system taken from its ``units`` column (dropped from the table) or marker line.
 
     Parameters
     ----------
@@ -364,13 +466,16 @@ def read_csv_table(path, *, where=None, error=ValueError, index_col=None):
     Returns
     -------
     frame : pandas.DataFrame
+        Without a ``units`` column.
     units : str or None
-        The file's unit marker (:func:`csv_preamble`), or None.
+        The file's ``units`` column's value or marker line (:func:`units_of_column`,
+        :func:`csv_preamble`), or None.
 
     Raises
     ------
     error
-        If the file cannot be read or parsed as CSV, or its marker is invalid.
+        If the file cannot be read or parsed as CSV, or its marker or ``units`` column
+        is invalid (:func:`units_of_column`).
 
     Examples
     --------
@@ -391,10 +496,10 @@ def read_csv_table(path, *, where=None, error=ValueError, index_col=None):
     except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise error(f"{where}: cannot read the file as CSV ({type(exc).__name__}: {exc}); "
                     "give a UTF-8 CSV file with a header row") from None
-    return frame, units
+    return _split_units_column(frame, units, where=where, error=error)
 
 
-def read_csv_after(path, n_lines, *, index_col=None):
+def read_csv_after(path, n_lines, *, index_col=None, usecols=None, dtype=None):
     """The table of a UTF-8 CSV file that starts after its first `n_lines` lines (pandas).
 
     The lines skipped are a preamble (:func:`csv_preamble`): whatever they hold, a quote
@@ -407,6 +512,8 @@ def read_csv_after(path, n_lines, *, index_col=None):
         Lines before the header, e.g. :func:`csv_preamble`'s count.
     index_col : int or str, optional
         As :func:`pandas.read_csv`.
+    usecols, dtype : optional
+        As :func:`pandas.read_csv`.
 
     Returns
     -------
@@ -418,10 +525,12 @@ def read_csv_after(path, n_lines, *, index_col=None):
         with open(path, "rb") as fh:
             skipped = b"".join(fh.readline() for _ in range(n_lines))
             if b'"' in skipped:  # pandas' skiprows would parse a quote as opening a field
-                return pd.read_csv(fh, encoding="utf-8", index_col=index_col)
+                return pd.read_csv(fh, encoding="utf-8", index_col=index_col,
+                                   usecols=usecols, dtype=dtype)
     # a path reads a third faster than an open file (measured: 0.65 s against 0.90 s for
     # 80 000 rows x 40 columns)
-    return pd.read_csv(path, skiprows=n_lines, encoding="utf-8-sig", index_col=index_col)
+    return pd.read_csv(path, skiprows=n_lines, encoding="utf-8-sig", index_col=index_col,
+                       usecols=usecols, dtype=dtype)
 
 
 def resolve_units(marked, given, *, where, given_as="units", fix=None, error=ValueError):
@@ -463,7 +572,7 @@ def resolve_units(marked, given, *, where, given_as="units", fix=None, error=Val
     >>> resolve_units("imperial", "SI", where="track.csv", given_as="--units")
     Traceback (most recent call last):
     ...
-    ValueError: track.csv: the file says it is in imperial units ('# units: imperial') but --units says SI; drop --units (the file's marker decides), or if its values really are in SI, correct the marker to '# units: SI'
+    ValueError: track.csv: the file says it is in imperial units (its 'units' column or '# units:' line) but --units says SI; drop --units (the file's marker decides), or if its values really are in SI, correct the marker to SI (its 'units' column, or a line '# units: SI')
     """
     if given is not None:
         given = check_units(given, where=f"{where}: {given_as}", error=error)
@@ -471,25 +580,27 @@ def resolve_units(marked, given, *, where, given_as="units", fix=None, error=Val
         return given or "SI"
     if given is not None and given != marked:
         fix = fix or (f"drop {given_as} (the file's marker decides), or if its values really "
-                      f"are in {given}, correct the marker to '# {UNITS_KEY}: {given}'")
-        raise error(f"{where}: the file says it is in {marked} units ('# {UNITS_KEY}: "
-                    f"{marked}') but {given_as} says {given}; {fix}")
+                      f"are in {given}, correct the marker to {given} (its '{UNITS_COLUMN}' "
+                      f"column, or a line '# {UNITS_KEY}: {given}')")
+        raise error(f"{where}: the file says it is in {marked} units (its '{UNITS_COLUMN}' "
+                    f"column or '# {UNITS_KEY}:' line) but {given_as} says {given}; {fix}")
     return marked
 
 
 def write_csv(path, data, *, units, overwrite=True, index=False, float_format=None):
-    """Write a CSV file atomically, its first line the unit marker ``# units: ...``.
+    """Write a CSV file atomically: its header row first, a last column ``units``.
 
     Parameters
     ----------
     path : str or os.PathLike
         The file to write.
     data : pandas.DataFrame or str
-        A table (written by :func:`write_csv_frame`) or CSV text without a marker (its
-        header line first).
+        A table (written by :func:`write_csv_frame`) or CSV text, its header line first
+        (parsed with :mod:`csv`, so quoted fields stay as they are; each row, blank lines
+        aside, gets the ``units`` cell).
     units : {"SI", "imperial"}
         The unit system the values are written in (a file whose values have no unit says
-        the system of the run that wrote it).
+        the system of the run that wrote it): the value of the ``units`` column.
     overwrite : bool
         Replace an existing file.
     index : bool
@@ -501,21 +612,48 @@ def write_csv(path, data, *, units, overwrite=True, index=False, float_format=No
     Raises
     ------
     ValueError
-        If `units` is not a unit system.
+        If `units` is not a unit system, or the data has a column ``units`` already.
     FileExistsError
         If `path` exists and `overwrite` is false.
+
+    Examples
+    --------
+    >>> import tempfile, os
+    >>> p = os.path.join(tempfile.mkdtemp(), "t.csv")
+    >>> write_csv(p, 'a,b\\n1,"x,y"\\n', units="SI")
+    >>> print(open(p).read(), end="")
+    a,b,units
+    1,"x,y",SI
     """
     units = check_units(units, where=f"{path}: units")
     with atomic_path(path, overwrite=overwrite) as tmp:
         if isinstance(data, str):
-            tmp.write_text(f"{units_marker(units)}\n{data}", encoding="utf-8")
+            tmp.write_text(_text_with_units(data, units, where=str(path)), encoding="utf-8")
         else:
             write_csv_frame(data, tmp, units=units, index=index, float_format=float_format)
 
 
+def _text_with_units(text, units, *, where):
+    """CSV text (header first) with the column ``units`` added: the header names it, every
+    other row (blank lines aside) holds `units`."""
+    import csv
+    import io
+
+    rows = list(csv.reader(io.StringIO(text, newline="")))
+    if rows and UNITS_COLUMN in [c.strip() for c in rows[0]]:
+        raise ValueError(f"{where}: the table has a column '{UNITS_COLUMN}' already; it is "
+                         "the unit system's column: rename the table's")
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    for k, row in enumerate(rows):
+        writer.writerow([*row, UNITS_COLUMN if k == 0 else units] if row else row)
+    return buf.getvalue()
+
+
 def write_csv_frame(frame, path, *, units, index=False, float_format=None):
     """Write a DataFrame as CSV to `path` (not atomically: e.g. the temporary path of
-    :func:`atomic_path`), the unit marker ``# units: ...`` first.
+    :func:`atomic_path`): the header row first, a last column ``units`` (the unit system
+    on every row).
 
     A numeric frame (without `index` or `float_format`) is written fast: the header as
     pandas writes it, the rows by Arrow's C++ writer (shortest round-trip float text,
@@ -525,14 +663,20 @@ def write_csv_frame(frame, path, *, units, index=False, float_format=None):
     Parameters
     ----------
     frame : pandas.DataFrame
+        Without a column ``units``.
     path : str or Path
         The file to write.
     units : {"SI", "imperial"}
-        The unit system of the values (the marker).
+        The unit system of the values (the ``units`` column).
     index : bool
         Write the index as the first column(s).
     float_format : str, optional
         As :meth:`pandas.DataFrame.to_csv`.
+
+    Raises
+    ------
+    ValueError
+        If `units` is not a unit system, or `frame` has a column ``units``.
     """
     import csv
     import io
@@ -540,24 +684,32 @@ def write_csv_frame(frame, path, *, units, index=False, float_format=None):
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    marker = f"{units_marker(units)}\n"
+    units = check_units(units, where=f"{path}: units")
+    if UNITS_COLUMN in [str(c).strip() for c in frame.columns]:
+        raise ValueError(f"{path}: the table has a column '{UNITS_COLUMN}' already; it is "
+                         "the unit system's column: rename the table's")
     fast = (not index and float_format is None
             and all(getattr(dt, "kind", "O") in "fiu" for dt in frame.dtypes))
     if not fast:
+        frame = frame.copy(deep=False)
+        frame[UNITS_COLUMN] = units
         with open(path, "w", encoding="utf-8", newline="") as fh:
-            fh.write(marker)
             frame.to_csv(fh, index=index, float_format=float_format, lineterminator="\n")
         return
     head = io.StringIO()
-    csv.writer(head, lineterminator="\n").writerow([str(c) for c in frame.columns])
+    csv.writer(head, lineterminator="\n").writerow([*(str(c) for c in frame.columns),
+                                                     UNITS_COLUMN])
     table = pa.Table.from_pandas(frame, preserve_index=False)
+    table = table.append_column(UNITS_COLUMN, pa.repeat(pa.scalar(units), table.num_rows))
     with open(path, "wb") as fh:
-        fh.write((marker + head.getvalue()).encode("utf-8"))
-        pacsv.write_csv(table, fh, write_options=pacsv.WriteOptions(include_header=False))
+        fh.write(head.getvalue().encode("utf-8"))
+        # no quotes: the numbers need none, and neither does SI or imperial
+        pacsv.write_csv(table, fh, write_options=pacsv.WriteOptions(include_header=False,
+                                                                    quoting_style="none"))
 
 
 def write_table_file(frame, path, *, kind, units, overwrite):
-    """Write a run-like table atomically as CSV or Parquet, its unit system marked.
+    """Write a run-like table atomically as CSV or Parquet, its unit system stated.
 
     The one writer of run files, mapped run files and track logs: the frame goes to a
     temporary file beside `path` (:func:`write_csv_frame` or :func:`write_parquet_frame`),
@@ -572,7 +724,8 @@ def write_table_file(frame, path, *, kind, units, overwrite):
     kind : {"csv", "parquet"}
         The file format.
     units : {"SI", "imperial"}
-        The unit system of the values (the file's marker).
+        The unit system of the values (a CSV's ``units`` column, a Parquet file's
+        metadata).
     overwrite : bool
         Replace an existing file.
 

@@ -17,8 +17,9 @@ Notes
 Inside the package every value is SI and every channel has its canonical name
 (:mod:`ident.data.channels`). Files may be in ``"imperial"`` units and may name
 their columns differently (a ``{canonical: column}`` channel map, the session
-manifest's ``[channels]`` table). A written file says its unit system: a CSV's first
-line ``# units: SI`` (or ``imperial``), a Parquet file's schema metadata ``units``
+manifest's ``[channels]`` table). A written file says its unit system: a CSV's last
+column ``units`` (``SI`` or ``imperial`` on every row; the earlier layout's first line
+``# units: ...`` is still read), a Parquet file's schema metadata ``units``
 (:mod:`ident.data.files`); a read file's marker decides its units when the caller gives
 none, and contradicts them with an error (:func:`ident.data.files.resolve_units`).
 """
@@ -35,8 +36,8 @@ import numpy as np
 
 from ident.data.channels import (ALL_CHANNELS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero,
                                  quantity_of)
-from ident.data.files import (csv_preamble, read_csv_after, read_units_marker, resolve_units,
-                              write_table_file)
+from ident.data.files import (UNITS_COLUMN, csv_preamble, read_csv_after, read_units_marker,
+                              resolve_units, units_of_column, write_table_file)
 from ident.data.timebase import uniform_time_base
 from ident.data.units import check_units, from_si, to_si
 from ident.errors import SessionError
@@ -401,7 +402,9 @@ def _file_kind(path, *, where):
 def read_table_columns(path, *, where, kind=None):
     """Read a CSV or Parquet file into ``{column: 1-D ndarray}`` and its unit marker.
 
-    A CSV's leading ``#`` comment and blank lines (the unit marker among them) are skipped.
+    A CSV's leading ``#`` comment and blank lines (the earlier layout's unit marker line
+    among them) are skipped; its ``units`` column (the unit system on every row, what
+    shockplan writes) gives the unit system and is not returned.
 
     Parameters
     ----------
@@ -417,13 +420,15 @@ def read_table_columns(path, *, where, kind=None):
     columns : dict of str to ndarray, shape (n_rows,)
         Column name (stripped of spaces) -> values as read, in file order.
     units : {"SI", "imperial"} or None
-        The file's unit marker (:mod:`ident.data.files`), or None.
+        The file's unit marker (a CSV's ``units`` column or marker line, a Parquet file's
+        metadata: :mod:`ident.data.files`), or None.
 
     Raises
     ------
     SessionError
         If the suffix is not a table's (without `kind`), the file is empty or cannot be
-        read as that format, its marker is invalid, or two columns share a name.
+        read as that format, its marker is invalid (a ``units`` column with more than one
+        value, or one that disagrees with the marker line), or two columns share a name.
     """
     import pandas as pd
     import pyarrow
@@ -463,7 +468,11 @@ def read_table_columns(path, *, where, kind=None):
         )
     if len(names) != frame.shape[1]:  # pragma: no cover - pandas always agrees
         raise SessionError(f"{where}: could not parse the header row; check the file")
-    return {name: frame.iloc[:, j].to_numpy() for j, name in enumerate(names)}, marker
+    if kind == "csv" and UNITS_COLUMN in names:
+        marker = units_of_column(frame.iloc[:, names.index(UNITS_COLUMN)], marker=marker,
+                                 where=where, error=SessionError)
+    return {name: frame.iloc[:, j].to_numpy() for j, name in enumerate(names)
+            if not (kind == "csv" and name == UNITS_COLUMN)}, marker
 
 
 def read_run_table(path, *, units=None, channel_map=None, required=(), where=None,
@@ -478,7 +487,8 @@ def read_run_table(path, *, units=None, channel_map=None, required=(), where=Non
     units : {"SI", "imperial"}, optional
         Unit system of the values in the file; each channel is converted to SI by
         its quantity (:func:`ident.data.channels.quantity_of`); ``time`` is in seconds.
-        Default: the file's unit marker (``# units: ...``, Parquet metadata ``units``),
+        Default: the file's unit marker (a ``units`` column or a ``# units: ...`` line,
+        Parquet metadata ``units``),
         else SI. Given, it must agree with the marker.
     channel_map : mapping of str to str, optional
         ``{canonical name: file column}`` for exports whose names differ (the
@@ -609,8 +619,8 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
     Columns are ``time``, the rig inputs, then the responses, in
     :data:`ident.data.channels.ALL_CHANNELS` order. CSV floats are written with full
     precision (shortest repr that round-trips). The file says its unit system: a CSV's
-    first line is ``# units: SI`` (or ``imperial``), a Parquet file has the schema
-    metadata ``units``. The data are checked by the same
+    last column is ``units`` (``SI`` or ``imperial`` on every row), a Parquet file has
+    the schema metadata ``units``. The data are checked by the same
     engine as :func:`read_run_table`, so a written file always reads back.
 
     Raises

@@ -19,7 +19,8 @@ Notes
 Inside the package every value is SI and every channel has its canonical name
 (:mod:`ident.data.channels`). Files may be in ``"imperial"`` units (the manifest's
 ``units`` key; run files take the unit system of the manifest, and a run file that
-says its own, a CSV's ``# units: ...`` line or a Parquet file's metadata, must agree
+says its own, a CSV's ``units`` column or ``# units: ...`` line or a Parquet file's
+metadata, must agree
 with it) and may name
 their columns differently (the manifest's ``[channels]`` table maps canonical
 names to file columns). Values may carry static offsets; :meth:`Run.dynamic`
@@ -735,7 +736,7 @@ def read_session(path):
             file_path, units=units, channel_map=channel_map, required=WHEELLOADER_INPUTS,
             where=run_where, units_from=f"the manifest ({where}: units = \"{units}\")",
             units_fix="make them agree: set the manifest's units to the run files' unit "
-            "system, or correct the run file's '# units:' line")
+            "system, or correct the run file's 'units' column (or '# units:' line)")
         runs.append(Run(name=e["name"], file=e["file"], setup=setup, role=e["role"],
                         time_s=table.time_s, channels=table.channels,
                         fs_hz=table.fs_hz, bump_stops=stops, packers_m=packers))

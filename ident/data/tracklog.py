@@ -33,8 +33,8 @@ Files
 -----
 - **CSV or Parquet with canonical column names**: a ``time`` column [s] and the channels
   above; other columns are ignored (logged at debug level). Units: the file's unit marker
-  (a CSV's ``# units: imperial`` line, a Parquet file's metadata ``units``,
-  :mod:`ident.data.files`), else `units` (``--units``), else SI; a marker and a `units`
+  (a CSV's ``units`` column or ``# units: imperial`` line, a Parquet file's metadata
+  ``units``, :mod:`ident.data.files`), else `units` (``--units``), else SI; a marker and a `units`
   that disagree are refused. Imperial means in, in/s, in/s^2, lbf, lbf*in (the spec's
   table; ``speed`` in in/s).
 - **CSV or Parquet with the logger's own column names**, through a channel map: the
@@ -611,7 +611,7 @@ def write_track_log(log, path, *, units="SI", overwrite=False):
     -----
     The columns are ``time`` [s] then the log's channels, under canonical names. ``time``
     is ``settings["t0_s"] + k / fs_hz``: a written section keeps its times in the log it
-    was cut from. The file says its unit system (a CSV's first line ``# units: SI``, a
+    was cut from. The file says its unit system (a CSV's last column ``units``, a
     Parquet file's metadata ``units``), so :func:`read_track_log` reads it back without
     being told: values equal to float64 rounding (1e-12 relative) in imperial, bit for
     bit in SI.

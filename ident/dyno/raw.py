@@ -7,8 +7,9 @@ shocks"): per block, the force at the block's peak velocity in bump and in rebou
 adjuster settings the run was made at.
 
 **Reading.** A CSV (or Parquet) file with the canonical columns ``time`` [s], ``force``
-[N], ``displacement`` [m] and optional ``temperature`` [deg C] (the unit marker ``# units:
-imperial`` makes them in and lbf) needs no map. Any other file needs a dyno map (TOML)::
+[N], ``displacement`` [m] and optional ``temperature`` [deg C] (a ``units`` column
+holding ``imperial``, or the marker line ``# units: imperial``, makes them in and lbf)
+needs no map. Any other file needs a dyno map (TOML)::
 
     format = "dyno-map/1"
     name = "Roehrig EMX, CSV export"       # optional
@@ -84,10 +85,11 @@ point whose force has the wrong sign once the gas force is removed (a sign in th
 settings, so a spread of their temperatures over :data:`TEMPERATURE_DRIFT_C` is warned
 of (logged, and kept in :attr:`DynoImport.warnings`).
 
-**The sheet** (:func:`write_dyno_sheet`): ``# units: SI`` (or imperial), then columns
-``velocity, force`` (signed, compression positive), one column per adjuster (the
-settings, in the order given), ``temperature`` (deg C, when logged), ``cycles``, ``lag``
-[s] and ``source`` (the file's name).
+**The sheet** (:func:`write_dyno_sheet`): columns ``velocity, force`` (signed,
+compression positive), one column per adjuster (the settings, in the order given),
+``temperature`` (deg C, when logged), ``cycles``, ``lag`` [s], ``source`` (the file's
+name) and ``units`` (``SI`` or ``imperial`` on every row). A sheet of the earlier
+layout, its first line ``# units: SI`` (or imperial), is still read and appended to.
 
 Examples
 --------
@@ -115,8 +117,8 @@ from types import MappingProxyType
 
 import numpy as np
 
-from ident.data.files import (atomic_write_text, check_can_write, csv_preamble, did_you_mean,
-                              read_csv_table, read_toml, read_units_marker, units_marker)
+from ident.data.files import (UNITS_COLUMN, atomic_write_text, check_can_write, csv_preamble,
+                              did_you_mean, read_csv_table, read_toml, read_units_marker)
 from ident.data.timebase import nominal_rate
 from ident.data.units import TO_SI, UNIT_LABELS, check_units, from_si
 from ident.errors import DynoError
@@ -616,7 +618,8 @@ def read_dyno_raw(path, *, dyno_map=None):
         A CSV (header row after optional ``#`` lines) or Parquet file.
     dyno_map : DynoMap or path, optional
         The file's columns, units and signs; without it the file has the canonical
-        columns in SI (or in imperial units with the marker ``# units: imperial``).
+        columns in SI (or in imperial units with a ``units`` column holding
+        ``imperial``, or the marker line ``# units: imperial``).
 
     Returns
     -------
@@ -1281,7 +1284,7 @@ def _row_text(frame, columns):
         row = []
         for c in columns:
             value = rec[c]
-            if c in ("source",):
+            if c in ("source", UNITS_COLUMN):
                 row.append(str(value))
             elif c == "cycles":
                 row.append(str(int(value)))
@@ -1303,7 +1306,8 @@ def write_dyno_sheet(result, path, *, units="SI", append=False, overwrite=False)
         The sheet.
     units : {"SI", "imperial"}
         Velocity m/s or in/s, force N or lbf (temperature deg C, lag s always). When
-        appending it must be the existing sheet's (its ``# units:`` line, else SI).
+        appending it must be the existing sheet's (its ``units`` column or ``# units:``
+        line, else SI).
     append : bool
         Add the rows to an existing sheet with the same columns, keeping every byte of
         it (a missing sheet is created).
@@ -1333,15 +1337,16 @@ def write_dyno_sheet(result, path, *, units="SI", append=False, overwrite=False)
     if not (append and path.exists()):
         check_can_write(path, overwrite=overwrite or append)
         buf = io.StringIO()
-        csv.writer(buf, lineterminator="\n").writerow(columns)
-        atomic_write_text(path, f"{units_marker(units)}\n{buf.getvalue()}"
-                          f"{_row_text(frame, columns)}")
+        csv.writer(buf, lineterminator="\n").writerow([*columns, UNITS_COLUMN])
+        rows = _row_text(frame.assign(**{UNITS_COLUMN: units}), [*columns, UNITS_COLUMN])
+        atomic_write_text(path, f"{buf.getvalue()}{rows}")
         logger.info("wrote %d dyno-sheet rows to %s", len(frame), path)
         return ()
     text = path.read_text(encoding="utf-8-sig")
     lines = text.splitlines()
-    marked, n = csv_preamble(lines, where=str(path), error=DynoError)
-    marked = marked or "SI"
+    _, n = csv_preamble(lines, where=str(path), error=DynoError)
+    # the marker line (an earlier sheet) or the units column, checked against each other
+    marked = read_units_marker(path, error=DynoError) or "SI"
     if marked != units:
         raise DynoError(f"{path}: the sheet is in {marked} units but the rows to append are "
                         f"in {units}; append in {marked} (--units {marked})")
@@ -1349,16 +1354,18 @@ def write_dyno_sheet(result, path, *, units="SI", append=False, overwrite=False)
         raise DynoError(f"{path}: has no header row; append to a dyno sheet written by "
                         "'shockplan dyno import', or write a new one")
     header = [c.strip() for c in next(csv.reader([lines[n]]))]
-    if sorted(header) != sorted(columns):
+    header_data = [c for c in header if c != UNITS_COLUMN]  # a units column: this sheet's
+    if sorted(header_data) != sorted(columns):
         missing = [c for c in columns if c not in header]
-        extra = [c for c in header if c not in columns]
+        extra = [c for c in header_data if c not in columns]
         raise DynoError(f"{path}: its columns {header} are not those of the rows to append "
                         f"{columns} (missing {missing}, extra {extra}); append runs with the "
                         "same adjusters (--settings) and temperature channel, or write a new "
                         "sheet")
     warnings = _drift_against(path, result, header, marked)
     sep = "" if text.endswith("\n") else "\n"
-    atomic_write_text(path, f"{text}{sep}{_row_text(frame, header)}", overwrite=True)
+    rows = _row_text(frame.assign(**{UNITS_COLUMN: units}), header)  # the sheet's layout
+    atomic_write_text(path, f"{text}{sep}{rows}", overwrite=True)
     logger.info("appended %d dyno-sheet rows to %s", len(frame), path)
     return warnings
 

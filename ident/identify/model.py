@@ -817,8 +817,8 @@ def write_model_summary(model, path, *, units="SI", overwrite=False):
     """Write :meth:`VehicleModel.summary` (order, fit error, coherence, noise level and
     status of every input/output pair) as CSV, atomically.
 
-    The first line is the unit marker ``# units: <units>`` (the summary's values have no
-    unit; the marker says the unit system of the session it came from).
+    The last column is ``units`` (`units` on every row: the summary's values have no
+    unit; the column says the unit system of the session it came from).
 
     Parameters
     ----------

@@ -323,7 +323,7 @@ def read_dyno_sheets(paths, adjusters, *, units="SI", where=""):
         The shock's adjusters; every one must have a column.
     units : {"SI", "imperial"}
         The library file's unit system (velocity in/s and force lbf in imperial). A
-        sheet's own ``# units:`` marker must agree.
+        sheet's own (its ``units`` column, or a ``# units:`` line) must agree.
     where : str
         Who reads (the library entry), first in messages.
 
@@ -346,8 +346,9 @@ def read_dyno_sheets(paths, adjusters, *, units="SI", where=""):
                        "the library file)")
         df, marker = read_csv_table(p, where=str(p), error=ShockModelError)
         if marker is not None and marker != units:
-            raise _err(f"{p}: the sheet is marked '# units: {marker}' but the library is "
-                       f"{units}; convert the sheet or set units = \"{marker}\" in the library")
+            raise _err(f"{p}: the sheet says it is in {marker} units (its 'units' column or "
+                       f"'# units:' line) but the library is {units}; convert the sheet or "
+                       f"set units = \"{marker}\" in the library")
         cols = {str(c).strip(): c for c in df.columns}
         lower = {k.lower(): k for k in cols}
         known = {"velocity", "force", "bump_force", "rebound_force", *SHEET_INFO_COLUMNS,

@@ -9,7 +9,8 @@ element and try options, output checks) is in :mod:`planner.cli.common`.
 
 One vocabulary across commands (issue 23): ``--units`` takes ``SI`` or ``imperial`` in
 any case and passes the canonical name on; a command that reads drive files defaults it
-to the drive file's own unit system (its ``# units:`` line), else SI, and writes its
+to the drive file's own unit system (its ``units`` column, or an earlier file's
+``# units:`` line), else SI, and writes its
 outputs in it; ``-q`` and ``-v`` go before or after the
 command; options are spelled out in full, and a misspelled option or command ends with
 exit status 2 and one line naming the nearest valid one; every option's help states its

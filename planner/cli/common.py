@@ -58,8 +58,8 @@ FLAGS_ANYWHERE = (("-v", "--verbose",
 
 #: ``--units`` default of the commands that read one drive file / several (issue 23): the
 #: file's unit marker, else SI; a given ``--units`` that contradicts the marker is an error.
-UNITS_OF_DRIVE = "the drive file's own, from its '# units:' line, else SI"
-UNITS_OF_DRIVES = ("each drive file's own, from its '# units:' line, else SI; the outputs "
+UNITS_OF_DRIVE = "the drive file's own, from its 'units' column, else SI"
+UNITS_OF_DRIVES = ("each drive file's own, from its 'units' column, else SI; the outputs "
                    "in the first drive's")
 
 MODEL_HELP = "identified model (.npz), a vehicle TOML (the known physical model) or 'paper'"
@@ -244,8 +244,8 @@ def read_inputs(args):
 
 def output_units(args, drives):
     """The unit system of the outputs, set as ``args.units``: ``--units`` if given, else the
-    first drive file's (its ``# units:`` line; the spec: predictions in the drive file's
-    units), else SI."""
+    first drive file's (its ``units`` column or ``# units:`` line; the spec: predictions
+    in the drive file's units), else SI."""
     if args.units is None:
         args.units = drives[0].settings.get("units", "SI") if drives else "SI"
     return args.units

@@ -46,7 +46,7 @@ def _common(p, *, logs_help):
                    help="the logs' format (default: by each file's extension)")
     p.add_argument("--units", type=unit_system, choices=list(UNIT_SYSTEMS), default=None,
                    help="unit system of canonical-name CSV/Parquet logs and of the outputs: SI "
-                   "or imperial, in any case (default: the first log's '# units:' line, "
+                   "or imperial, in any case (default: the first log's 'units' column, "
                    "else SI)")
     p.add_argument("--rig", metavar="RIG.toml", default=None,
                    help="rig TOML whose [limits] the drive respects (wheelloader displacement, "
@@ -136,7 +136,7 @@ def _add_section(sub):
                    help="lap-start times [s]: one drive per lap (default: none)")
     p.add_argument("--units", type=unit_system, choices=list(UNIT_SYSTEMS), default=None,
                    help="unit system of the drive and the sections: SI or imperial (default: "
-                   "the drive file's '# units:' line, else SI)")
+                   "the drive file's 'units' column, else SI)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder of the section drives (DRIVE_NAME.csv each)")
     p.add_argument("--overwrite", action="store_true",

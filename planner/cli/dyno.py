@@ -190,7 +190,7 @@ def _add_import(dyno_sub):
     imp.add_argument("--map", metavar="MAP.toml", help="dyno map: the files' time, force, "
                      "displacement (and temperature) columns, units, signs, offsets (default: "
                      "columns time [s], force [N], displacement [m], temperature [deg C], or "
-                     "in and lbf with a '# units: imperial' line)")
+                     "in and lbf with a 'units' column holding imperial)")
     imp.add_argument("--settings", metavar="NAME=VALUE,...", default="",
                      help="the adjusters' settings of the runs, e.g. ls=6,hs=2 (clicks or "
                      "turns; one sheet column each, in this order) (default: none, a shock "
@@ -235,8 +235,7 @@ def _add_table(subparsers):
     p.add_argument("--units", type=unit_system, choices=list(UNIT_SYSTEMS), default=None,
                    help="units of --velocity and of the table: SI or imperial, in any case "
                    "(default: the library's 'units')")
-    p.add_argument("--out", required=True, help="CSV to write (velocity, force; first line "
-                   "'# units: ...')")
+    p.add_argument("--out", required=True, help="CSV to write (velocity, force, units)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing file")
     p.set_defaults(func=run)
     return p

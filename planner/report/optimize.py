@@ -363,8 +363,8 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
     builder in SI and imperial, the setups side by side, the solver's report),
     ``curves.png`` and ``convergence.csv``; with adjustable shocks in the crate,
     ``clicks.csv`` (:func:`click_table`), the click setups after the optimum in
-    ``optimal_setup.csv`` and a ``clicks`` sheet. Each CSV's first line is the unit marker
-    ``# units: <units>``.
+    ``optimal_setup.csv`` and a ``clicks`` sheet. Each CSV's last column is ``units`` (`units` on
+    every row).
 
     Parameters
     ----------

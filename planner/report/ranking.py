@@ -24,8 +24,8 @@ RF, LR, RR``, then the spec's metrics in :data:`ident.sim.metrics.METRIC_NAMES`
 order (those present), then the other metric columns, then every further
 column in table order. The ranking files put ``rank`` first; the workbook
 puts the key columns first and the intervals on their own sheet (see
-:func:`write_ranking`). Every CSV's first line is its unit marker, ``# units: SI``
-or ``# units: imperial`` (:func:`ident.data.files.write_csv`).
+:func:`write_ranking`). Every CSV's last column is ``units``, ``SI`` or ``imperial`` on every row
+(:func:`ident.data.files.write_csv`).
 
 Notes
 -----
@@ -280,7 +280,7 @@ def _file_frame(table, units, *, rank_first):
 
 
 def _write_csv(frame, path, *, units, overwrite):
-    # floats: shortest round-trip repr; the first line is the unit marker '# units: ...'
+    # floats: shortest round-trip repr; the last column is 'units' (the unit system)
     write_csv(path, frame, units=units, overwrite=overwrite)
 
 
@@ -323,9 +323,10 @@ def write_predictions_csv(table, path, *, units="SI", overwrite=False):
     corner (``LF_ls, LF_hs, ...``, :func:`planner.click_settings.adjuster_columns`), then the
     further columns (intervals, scores, ranks) in table order; rows in the
     table's order; floats at full precision (they read back bit-identical);
-    NaN as an empty field. The first line is the unit marker ``# units: <units>``
-    (read with ``pandas.read_csv(path, comment="#")`` or
-    :func:`ident.data.files.read_csv_table`). Written atomically.
+    NaN as an empty field. The header is the first line and the last column
+    is ``units`` (`units` on every row): ``pandas.read_csv(path)`` reads it as it is
+    (:func:`ident.data.files.read_csv_table` also drops the column and returns its
+    value). Written atomically.
     """
     path = Path(path)
     table = _check_table(table, "write_predictions_csv")

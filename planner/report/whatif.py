@@ -354,7 +354,7 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
     ``tolerance.csv`` and the sheet ``tolerance`` (each setup's spread of score, rank
     and metrics over each such factor's levels, :attr:`WhatIf.tolerance`); the table's
     ``clipped`` column says where a click hit the end of an adjuster's range. Each
-    CSV's first line is the unit marker ``# units: <units>``.
+    CSV's last column is ``units`` (`units` on every row).
 
     Returns
     -------
@@ -370,7 +370,7 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
     files = {}
     with atomic_dir(out, overwrite=overwrite) as work:
         table = ranking_to_units(result.table, units)
-        # each CSV's first line is the unit marker '# units: ...'
+        # each CSV's last column is 'units' (the unit system on every row)
         write_csv(work / "whatif.csv", table, units=units, float_format="%.6g")
         write_csv(work / "robust.csv", result.robust, units=units, index=True,
                   float_format="%.6g")

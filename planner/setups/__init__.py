@@ -16,12 +16,13 @@ allowed and ignored**, so a predictions CSV (``setup, LF, RF, LR, RR``, then
 metrics) reads as a setups file. The exception is a column that looks like a
 misspelt corner (two letters, such as ``LM`` or ``lf``): that is an error.
 Cells are stripped of surrounding spaces; blank lines, and ``#`` comment lines before
-the header (the unit marker ``# units: SI`` that every CSV shockplan writes starts
-with), are skipped.
+the header (the earlier layout's unit marker ``# units: SI``), are skipped. The column
+``units`` (``SI`` or ``imperial`` on every row, the last column of every CSV shockplan
+writes) is the file's unit system, not a setup's.
 
 Bump stops and packers (the spec's "The real car"; optional): columns ``bump_stop_XX``
 (a bump-stop id, or ``none``) and ``packer_XX`` (a thickness in the file's unit system:
-m, or in with ``# units: imperial``) give a setup's bump stops and packers at corner
+m, or in with a ``units`` column holding ``imperial``) give a setup's bump stops and packers at corner
 ``XX``. A setup without them, a corner without its column, or an empty cell keeps the
 model's baseline run's (:func:`ident.models.bumpstops.resolve_corner_stops`)::
 

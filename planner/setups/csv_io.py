@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from ident.data.files import check_can_write, csv_preamble, resolve_units, write_csv
+from ident.data.files import (UNITS_COLUMN, check_can_write, csv_preamble, resolve_units,
+                              units_of_column, write_csv)
 from ident.data.channels import CORNERS
 from ident.data.units import UNIT_LABELS, from_si, to_si
 from ident.models.bumpstops import NO_BUMP_STOP, BumpStopLibrary, check_packer, parse_bump_stop_id
@@ -56,8 +57,9 @@ def read_setups(path, library=None, bump_stops=None, *, units=None):
         If given, every id in a ``bump_stop_XX`` column must be in it, and a packer
         beside a bump stop the row names must fit its gap.
     units : {"SI", "imperial"}, optional
-        The unit system of ``packer_XX`` when the file has no unit marker (default SI);
-        a marker that says otherwise is an error.
+        The unit system of ``packer_XX`` when the file has no unit marker (a ``units``
+        column or a ``# units:`` line; default SI); a marker that says otherwise is an
+        error.
 
     Returns
     -------
@@ -84,8 +86,9 @@ def read_setups(path, library=None, bump_stops=None, *, units=None):
     ``none`` (any case) is no bump stop; an empty ``bump_stop_XX`` or ``packer_XX``
     cell keeps the baseline run's (:attr:`Setup.bump_stops` and
     :attr:`Setup.packers_m` hold only the corners a row gives). Leading ``#``
-    comment lines (the unit marker
-    ``# units: ...`` that shockplan writes) are skipped. Line numbers are the file's
+    comment lines (the earlier layout's unit marker ``# units: ...``) are skipped; a
+    ``units`` column (``SI`` or ``imperial`` on every row, what shockplan writes) says
+    the unit system of the packers, as the marker line did. Line numbers are the file's
     (the header is line 1 unless comment lines precede it).
     """
     path = Path(path)
@@ -108,9 +111,9 @@ def read_setups(path, library=None, bump_stops=None, *, units=None):
     # marker checked; line numbers stay the file's
     marked, n_skip = csv_preamble(text.splitlines(), where=str(path), error=PlannerError)
     body = "".join(text.splitlines(keepends=True)[n_skip:])
-    rows = csv.reader(io.StringIO(body, newline=""), skipinitialspace=True)
+    reader = csv.reader(io.StringIO(body, newline=""), skipinitialspace=True)
     header = None
-    for header in rows:
+    for header in reader:
         if any(cell.strip() for cell in header):
             break
     else:
@@ -145,12 +148,16 @@ def read_setups(path, library=None, bump_stops=None, *, units=None):
     i_corner = [header.index(c) for c in CORNERS]
     i_stop = {c: header.index(k) for c, k in zip(CORNERS, _BUMP_COLUMNS) if k in header}
     i_packer = {c: header.index(k) for c, k in zip(CORNERS, _PACKER_COLUMNS) if k in header}
+    rows = [(n_skip + reader.line_num, cells) for cells in reader]
+    if UNITS_COLUMN in header:  # the unit system, not a setup's column
+        i_units = header.index(UNITS_COLUMN)
+        marked = units_of_column((cells[i_units] for _, cells in rows if len(cells) > i_units),
+                                 marker=marked, where=str(path), error=PlannerError)
     packer_units = resolve_units(marked, units, where=str(path), error=PlannerError) \
         if i_packer else None
     out = []
     lines = {}
-    for cells in rows:
-        line = n_skip + rows.line_num
+    for line, cells in rows:
         if not any(cell.strip() for cell in cells):
             continue
         if len(cells) != len(header):
@@ -262,7 +269,7 @@ def read_ranking_baseline(path):
 def write_setups(setups, path, *, units="SI", overwrite=False):
     """Write setups as a setups CSV (``setup,LF,RF,LR,RR``), atomically.
 
-    The first line is the unit marker ``# units: <units>``: shock ids have no unit, but
+    The last column is ``units`` (`units` on every row): shock ids have no unit, but
     every CSV shockplan writes says the unit system of the run that wrote it. Setups with
     bump stops or packers add the columns ``bump_stop_XX`` (``none`` for no stop) or
     ``packer_XX`` (in `units`), empty where a setup keeps the baseline's; without them
