@@ -290,14 +290,15 @@ def _noise_drive(folder, fs_hz=200.0, units="imperial"):
 
 def test_resample_command_is_resample_drive_in_the_files_units(tmp_path, capsys):
     """``drive resample`` writes ident.data.drive.resample_drive of the drive file, in the
-    file's units (its marker kept); refusals are one line with exit status 2."""
+    file's units (its units column kept); refusals are one line with exit status 2."""
     from ident.data.drive import resample_drive
 
     path = _noise_drive(tmp_path)
     out = tmp_path / "new.csv"
     code, text, _ = _run(capsys, "drive", "resample", path, "--fs", "512", "--out", out)
     assert code == 0 and "200 Hz to 512 Hz" in text and "(imperial)" in text
-    assert out.read_text().startswith("# units: imperial\n")
+    lines = out.read_text().splitlines()
+    assert lines[0].endswith(",units") and lines[1].endswith(",imperial")  # the file's units
     new, want = read_drive(out), resample_drive(read_drive(path), 512.0)
     assert new.settings["units"] == "imperial" and new.fs_hz == 512.0
     assert new.n_samples == want.n_samples == 2048
