@@ -57,6 +57,8 @@ from ident.models.shocks import is_real_number
 
 __all__ = [
     "SESSION_FORMAT",
+    "THIRD_ELEMENT_KEYS",
+    "third_elements_warning",
     "MANIFEST_NAME",
     "RUN_ROLES",
     "BUMP_STOP_LIBRARY_NAME",
@@ -552,6 +554,8 @@ def _parse_run_entries(entries, *, where):
         role = _check_role(entry.get("role", "other"), where=label)
         unknown = [k for k in entry if k not in _RUN_KEYS]
         for key in unknown:
+            if key in THIRD_ELEMENT_KEYS:
+                continue
             if key in _SESSION_ONLY_KEYS:  # written below a [[run]], TOML gives it to the run
                 raise SessionError(
                     f"{label}: {key!r} is a key of the session, not of a run; move it to the "
@@ -562,6 +566,9 @@ def _parse_run_entries(entries, *, where):
                     f"{label}: unknown key {key!r}{hint}; a [[run]] has the keys "
                     f"{', '.join(_RUN_KEYS)}"
                 )
+        for key in [k for k in unknown if k in THIRD_ELEMENT_KEYS]:
+            logger.warning(third_elements_warning(label, key))
+        unknown = [k for k in unknown if k not in THIRD_ELEMENT_KEYS]
         if unknown:
             logger.warning("%s: unknown key(s) %s are ignored", label, unknown)
         parsed.append({"name": name, "file": file, "setup": entry["setup"],
@@ -577,6 +584,9 @@ def _check_extra_keys(extra, *, where):
     """
     stated = None
     for key, value in extra.items():
+        if key in THIRD_ELEMENT_KEYS:
+            logger.warning(third_elements_warning(where, key))
+            continue
         if key in _RATE_KEYS:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or \
                     not np.isfinite(value) or value <= 0:
@@ -600,6 +610,20 @@ def _check_extra_keys(extra, *, where):
         logger.warning("%s: key %r is not part of the rig-session format; it is kept but "
                        "not used", where, key)
     return stated
+
+
+#: The keys of the spec's optional section "Third elements" (heave and roll elements per
+#: axle), which this version reads but does not model yet.
+THIRD_ELEMENT_KEYS = ("third_elements", "third", "heave_springs", "heave_packers")
+
+
+def third_elements_warning(where, key):
+    """The one-line warning for a third-element key this version does not model yet."""
+    return (f"{where}: {key!r} declares third elements (heave or roll elements per axle, the "
+            "spec's optional section 'Third elements'); this version does not model them "
+            "yet: the identified model takes their forces as part of the linear car, which "
+            "is wrong where they are nonlinear (a heave spring's gap) or change between "
+            "runs, and predictions cannot vary them")
 
 
 def _read_bump_stop_library(doc, folder, *, where):
