@@ -18,7 +18,8 @@ from ident.data.units import UNIT_SYSTEMS
 
 __all__ = [
     "Parser", "add_flags_anywhere", "FLAGS_ANYWHERE", "TYPO_CUTOFF", "RENAMED_OPTIONS",
-    "unit_system", "int_at_least", "share", "add_units", "add_element_options",
+    "unit_system", "int_at_least", "share", "add_units", "add_command_group",
+    "run_subcommand", "add_element_options",
     "add_try_options", "add_prediction_inputs", "check_out", "warn_inventory",
     "baseline_arg", "load_vehicle", "load_any_model", "read_inputs", "output_units",
     "bump_stop_library", "parse_fixed", "packer_bounds", "element_choices", "one_line",
@@ -146,6 +147,37 @@ def add_units(parser, what, *, default="SI", default_text="SI"):
     parser.add_argument("--units", type=unit_system, choices=list(UNIT_SYSTEMS),
                         default=default, help=f"{what}: SI or imperial, in any case (default: "
                         f"{default_text})")
+
+
+def add_command_group(subparsers, name, subcommands, *, help, dest, dest_help):
+    """Add a command with sub-commands (``dyno``, ``drive``) to `subparsers`.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The top-level parser's commands.
+    name, help : str
+        The command's name and help.
+    subcommands : dict of str to (callable, callable)
+        Sub-command name -> (function adding its parser to the group, function running it).
+    dest, dest_help : str
+        The attribute naming the chosen sub-command, and its help.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The command's parser.
+    """
+    group = subparsers.add_parser(name, help=help)
+    sub = group.add_subparsers(dest=dest, required=True, help=dest_help)
+    for add, _ in subcommands.values():
+        add(sub)
+    return group
+
+
+def run_subcommand(subcommands, args, dest):
+    """Run the sub-command of `subcommands` that ``args.<dest>`` names; its exit status."""
+    return subcommands[getattr(args, dest)][1](args)
 
 
 def add_element_options(parser):

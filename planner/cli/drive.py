@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ident.data.files import check_output
 from ident.data.units import UNIT_SYSTEMS
-from planner.cli.common import log, unit_system
+from planner.cli.common import add_command_group, log, run_subcommand, unit_system
 
 __all__ = ["add_parser", "run", "run_from_track", "run_iterate", "run_section", "run_resample",
            "report_folder", "section_path", "LOG_FORMATS", "SUBCOMMANDS"]
@@ -468,14 +468,12 @@ def add_parser(subparsers):
     -------
     argparse.ArgumentParser
     """
-    drive = subparsers.add_parser("drive", help="rig drives from track data: build, iterate "
-                                  "on the rig, cut sections, resample")
-    sub = drive.add_subparsers(dest="drive_command", required=True, help="the drive command")
-    for add, _ in SUBCOMMANDS.values():
-        add(sub)
-    return drive
+    return add_command_group(subparsers, "drive", SUBCOMMANDS,
+                             help="rig drives from track data: build, iterate on the rig, cut "
+                             "sections, resample", dest="drive_command",
+                             dest_help="the drive command")
 
 
 def run(args):
     """Run the ``drive`` sub-command `args` names; returns the exit status."""
-    return SUBCOMMANDS[args.drive_command][1](args)
+    return run_subcommand(SUBCOMMANDS, args, "drive_command")

@@ -20,7 +20,7 @@ import logging
 
 from ident.data.files import check_output
 from ident.data.units import UNIT_LABELS, UNIT_SYSTEMS
-from planner.cli.common import unit_system
+from planner.cli.common import add_command_group, run_subcommand, unit_system
 
 __all__ = ["add_parser", "run", "run_import", "run_table", "run_check", "parse_velocities",
            "SUBCOMMANDS"]
@@ -286,14 +286,11 @@ def add_parser(subparsers):
     argparse.ArgumentParser
         The ``dyno`` parser.
     """
-    dyno = subparsers.add_parser("dyno", help="shock dyno data: raw runs to dyno sheets")
-    dyno_sub = dyno.add_subparsers(dest="dyno_command", required=True,
-                                   help="the dyno command")
-    for add, _ in SUBCOMMANDS.values():
-        add(dyno_sub)
-    return dyno
+    return add_command_group(subparsers, "dyno", SUBCOMMANDS,
+                             help="shock dyno data: raw runs to dyno sheets",
+                             dest="dyno_command", dest_help="the dyno command")
 
 
 def run(args):
     """Run the ``dyno`` sub-command `args` names; returns the exit status."""
-    return SUBCOMMANDS[args.dyno_command][1](args)
+    return run_subcommand(SUBCOMMANDS, args, "dyno_command")
