@@ -144,7 +144,7 @@ def test_ranking_workbook_layout(table, tmp_path):
     obj = default_objective()
     paths = write_ranking(table, tmp_path, units="imperial", objective=obj)
     wb = load_workbook(paths["xlsx"])
-    assert wb.sheetnames == ["ranking", "intervals", "about"]
+    assert wb.sheetnames == ["summary", "ranking", "intervals", "about"]
     ws = wb["ranking"]
     header = [c.value for c in ws[1]]
     # key columns first: rank, setup, shocks, scores, feasible, the weighted metrics
@@ -256,7 +256,7 @@ def test_ranking_without_scores_and_si(table, tmp_path):
     paths = write_ranking(plain, tmp_path, top=3)
     assert set(paths) == {"csv", "xlsx", "top_setups"}  # no score columns: no Pareto plot
     wb = load_workbook(paths["xlsx"])
-    assert wb.sheetnames == ["ranking", "about"]  # no intervals: no intervals sheet
+    assert wb.sheetnames == ["summary", "ranking", "about"]  # no intervals: no intervals sheet
     ws = wb["ranking"]
     assert ws.freeze_panes == "B2"  # no rank column: setup first
     header = [c.value for c in ws[1]]

@@ -60,11 +60,14 @@ from planner.objective import Objective, pareto_front
 from planner.report.sheets import (
     MAX_COLUMN_WIDTH,
     column_label,
+    decimals_format,
     fit_column_width,
     print_setup,
     text_width,
     wrap_lines,
+    write_table,
 )
+from planner.report.summary import N_SUMMARY_ROWS, summary_figure, verdicts, write_summary_sheet
 
 __all__ = [
     "INTERVAL_SUFFIXES",
@@ -84,7 +87,7 @@ INTERVAL_SUFFIXES = ("_lo", "_hi")
 PACKER_COLUMNS = tuple(f"packer_{c}" for c in CORNERS)
 #: Files written by :func:`write_ranking` (key -> file name); plots only when possible.
 RANKING_FILES = {"csv": "ranking.csv", "xlsx": "ranking.xlsx", "pareto": "pareto.png",
-                 "top_setups": "top_setups.png"}
+                 "top_setups": "top_setups.png", "sections": "sections.csv"}
 #: Metrics shown in ``top_setups.png`` without an objective (those present).
 DEFAULT_KEY_METRICS = tuple(f"tire_force_rms_{c}" for c in CORNERS) + (
     "ride_height_rms_front", "ride_height_rms_rear")
@@ -551,7 +554,8 @@ def _group_starts(cols):
     return [j + 1 for j in range(1, len(cols)) if family[j] != family[j - 1]]
 
 
-def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
+def _workbook_bytes(frame, *, units, objective, baseline, infeasible, summary=None,
+                    sections=None):
     wb = Workbook()
     ws = wb.active
     ws.title = "ranking"
@@ -587,6 +591,18 @@ def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
                     title_cols=f"A:{get_column_letter(cols.index('setup') + 1)}",
                     group_starts=_group_starts(cols),
                     footer=f"{what}: interval of each prediction (lo, hi)")
+
+    if sections is not None:
+        sec = wb.create_sheet("sections")
+        heads = [_section_header(c) for c in sections.columns]
+        last = write_table(sec, sections, headers=heads, freeze_cols=2,
+                           formats={c: SCORE_FORMAT for c in sections.columns
+                                    if str(c).endswith("score")})
+        print_setup(sec, units=units, area=f"A1:{get_column_letter(sections.shape[1])}{last}",
+                    title_rows="1:1", title_cols="A:B",
+                    footer=f"{what}: the whole drive's and each section's score (its rank)")
+    if summary is not None:
+        write_summary_sheet(wb, units=units, footer=f"{what}: summary", **summary)
 
     bold = Font(name=_FONT, bold=True)
     about = wb.create_sheet("about")
@@ -1006,11 +1022,90 @@ def _top_figure(table, metrics, reference, top):
 
 
 # ----------------------------------------------------------------------------------------------
+# the summary sheet and the sections (compute the rows; planner.report.summary lays them out)
+# ----------------------------------------------------------------------------------------------
+
+def _section_header(col):
+    """A sections table's header: ``kerb_score`` -> ``kerb score``; ``score`` -> ``whole
+    drive score``."""
+    if col in ("score", "rank"):
+        return f"whole drive {col}"
+    for end in ("_score", "_rank"):
+        if str(col).endswith(end):
+            return f"{col[:-len(end)]} {end[1:]}"
+    return column_label(col)
+
+
+def _section_frame(sections):
+    """The sections table as written: ``rank, setup``, the shocks, the scores, ``wins``."""
+    t = _check_table(sections, "write_ranking: sections", corners=False)
+    frame = t.reset_index()
+    first = [c for c in ("rank", "setup") if c in frame.columns]
+    return frame[first + [c for c in frame.columns if c not in first]]
+
+
+def _summary_parts(ranked, units, objective, ref, key_metrics, *, sections, run, histograms):
+    """The summary sheet's title, table, notes, what the run used and its figure."""
+    best = str(ranked.index[0])
+    base = ref if ref is not None else best
+    rows = list(ranked.index[:N_SUMMARY_ROWS - 1])
+    if base not in rows:
+        rows.append(base)
+    shown = ranked.loc[rows]
+    cols = [c for c in ("rank",) if c in shown.columns]
+    table = shown[cols].copy() if cols else pd.DataFrame(index=shown.index)
+    table.insert(len(table.columns), "setup", shown.index)
+    if "score" in shown.columns:
+        table["vs best"] = verdicts(ranked, best).loc[rows].replace({"reference": "best"})
+        table["vs baseline"] = verdicts(ranked, base).loc[rows].replace(
+            {"reference": "baseline"})
+        for c in ["score"] + [c for c in shown.columns if str(c).startswith("score_")]:
+            table[c] = shown[c]
+    conv = ranking_to_units(shown[key_metrics], units) if key_metrics else None
+    for m in key_metrics:
+        table[m] = conv[m]
+    heads = [_header(c, units) if c in METRIC_QUANTITY else column_label(c)
+             for c in table.columns]
+    formats = {c: SCORE_FORMAT for c in table.columns if str(c).startswith("score")}
+    formats.update({c: decimals_format(table[c].tolist()) for c in key_metrics})
+    has_pairs = "unresolved" in ranked.columns and ranked["unresolved"].astype(str).str.strip().any()
+    has_intervals = any(str(c).endswith("_lo") for c in ranked.columns)
+    why = ("tied: the identified model's random error does not resolve the two setups' order "
+           "(the 'unresolved' pairs, from the intervals)" if has_intervals or has_pairs else
+           "by the scores alone: the ranking has no intervals (a known model, or "
+           "--no-uncertainty)")
+    notes = [f"best of {len(ranked)} setups simulated in the time domain: '{best}'"
+             + (f"; baseline '{base}'" if base != best else " (also the baseline)")
+             + "; scores are ratios to the baseline's metrics, lower is better",
+             f"verdicts against the best and the baseline: {why}"]
+    if sections is not None and "wins" in sections.columns:
+        won = [(w, s) for s, w in ((s, n) for n, v in sections["wins"].items()
+                                   for s in str(v or "").split()) if w != best]
+        notes.append("sections won by another setup than the whole drive's best: "
+                     + ("; ".join(f"{s}: '{w}'" for w, s in won) if won else "none"))
+    used = list((run or {}).items())
+    if objective is not None and not any(k == "objective" for k, _ in used):
+        used.append(("objective", objective.name + (f" ({objective.source})"
+                                                     if objective.source else "")))
+    used.append(("units", units))
+    figure = None
+    if histograms is not None:
+        figure = summary_figure(best=best, baseline=base, histograms=histograms,
+                                velocity_unit=UNIT_LABELS[units]["velocity"])
+    elif key_metrics and base != best:
+        labels = {m: f"{column_label(m)}: {conv.loc[base, m]:.4g} -> {conv.loc[best, m]:.4g} "
+                     f"{_metric_unit(m, units)}" for m in key_metrics}
+        figure = summary_figure(conv, best=best, baseline=base, labels=labels)
+    return {"title": "shockplan ranking: summary", "table": table, "headers": heads,
+            "formats": formats, "notes": notes, "used": used, "figure": figure}
+
+
+# ----------------------------------------------------------------------------------------------
 # the report folder
 # ----------------------------------------------------------------------------------------------
 
 def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, overwrite=False,
-                  top=10):
+                  top=10, sections=None, run=None, histograms=None):
     """Write the ranking of setups as CSV, Excel workbook and plots.
 
     Parameters
@@ -1033,6 +1128,18 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
         Replace existing files.
     top : int
         Number of best setups in ``top_setups.png``.
+    sections : pandas.DataFrame, optional
+        The section table (:attr:`planner.section_ranking.SectionRanking.table`): written as
+        ``sections.csv`` and the workbook's sheet "sections"; the sections won by another
+        setup than the best are named on the summary sheet.
+    run : dict of str to object, optional
+        What the run used, for the summary sheet (``{"model": ..., "drive": ...,
+        "crate": ...}``); the objective's name is added.
+    histograms : pandas.DataFrame, optional
+        Predicted shock-velocity histograms (columns ``setup, corner, velocity_lo,
+        velocity_hi, share`` in `units`): the summary's plot is the best's against the
+        baseline's (:func:`planner.report.summary.summary_figure`); without them, the key
+        metrics' change.
 
     Returns
     -------
@@ -1040,7 +1147,7 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
         ``"csv"``: ``ranking.csv``; ``"xlsx"``: ``ranking.xlsx``;
         ``"pareto"``: ``pareto.png`` (only with columns ``score_grip`` and
         ``score_platform``); ``"top_setups"``: ``top_setups.png`` (only with
-        metric columns).
+        metric columns); ``"sections"``: ``sections.csv`` (only with `sections`).
 
     Raises
     ------
@@ -1060,6 +1167,12 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
     setup, LF, RF, LR, RR``, metrics, further columns. ``ranking.xlsx``, to
     read and to print:
 
+    - sheet "summary", first, on one page (:func:`planner.report.summary.write_summary_sheet`):
+      the best setups (and the baseline) with their verdicts against the best and the
+      baseline (:func:`planner.report.summary.verdicts`: tied where the ranking's
+      ``unresolved`` pairs say the order is not resolved), scores and key metrics in
+      `units`, the sections' winners, what the run used, and the plot of the best against
+      the baseline;
     - sheet "ranking": the key columns first (``rank, setup, LF, RF, LR, RR,
       score, score_<group>, feasible``, the objective's weighted metrics),
       then the other metrics, then the further columns with the long texts
@@ -1096,6 +1209,8 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
         keys.append("pareto")
     if key_metrics:
         keys.append("top_setups")
+    if sections is not None:
+        keys.append("sections")
     paths = {k: out_dir / RANKING_FILES[k] for k in keys}
     for path in paths.values():
         check_can_write(path, overwrite=overwrite)
@@ -1107,9 +1222,15 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
     infeasible = (~ranked["feasible"].to_numpy(dtype=bool) if "feasible" in ranked.columns
                   else np.zeros(len(ranked), dtype=bool))
     about_base = ref if ref is not None else (objective.baseline if objective else None)
+    section_frame = None
+    if sections is not None:
+        section_frame = _section_frame(sections)
+        write_csv(paths["sections"], section_frame, units=units, overwrite=overwrite)
+    summary = _summary_parts(ranked, units, objective, ref, key_metrics, sections=sections,
+                             run=run, histograms=histograms)
     atomic_write_bytes(paths["xlsx"], _workbook_bytes(
-        frame, units=units, objective=objective, baseline=about_base, infeasible=infeasible),
-        overwrite=overwrite)
+        frame, units=units, objective=objective, baseline=about_base, infeasible=infeasible,
+        summary=summary, sections=section_frame), overwrite=overwrite)
     if "pareto" in paths:
         _save_png(_pareto_figure(table, ref), paths["pareto"], overwrite=overwrite)
     if "top_setups" in paths:
