@@ -60,14 +60,13 @@ from planner.objective import Objective, pareto_front
 from planner.report.sheets import (
     MAX_COLUMN_WIDTH,
     column_label,
-    decimals_format,
     fit_column_width,
     print_setup,
     text_width,
     wrap_lines,
     write_table,
 )
-from planner.report.summary import N_SUMMARY_ROWS, summary_figure, verdicts, write_summary_sheet
+from planner.report.summary import summary_parts, write_summary_sheet
 
 __all__ = [
     "INTERVAL_SUFFIXES",
@@ -1045,59 +1044,25 @@ def _section_frame(sections):
 
 
 def _summary_parts(ranked, units, objective, ref, key_metrics, *, sections, run, histograms):
-    """The summary sheet's title, table, notes, what the run used and its figure."""
+    """The summary sheet's parts (:func:`planner.report.summary.summary_parts`)."""
     best = str(ranked.index[0])
     base = ref if ref is not None else best
-    rows = list(ranked.index[:N_SUMMARY_ROWS - 1])
-    if base not in rows:
-        rows.append(base)
-    shown = ranked.loc[rows]
-    cols = [c for c in ("rank",) if c in shown.columns]
-    table = shown[cols].copy() if cols else pd.DataFrame(index=shown.index)
-    table.insert(len(table.columns), "setup", shown.index)
-    if "score" in shown.columns:
-        table["vs best"] = verdicts(ranked, best).loc[rows].replace({"reference": "best"})
-        table["vs baseline"] = verdicts(ranked, base).loc[rows].replace(
-            {"reference": "baseline"})
-        for c in ["score"] + [c for c in shown.columns if str(c).startswith("score_")]:
-            table[c] = shown[c]
-    conv = ranking_to_units(shown[key_metrics], units) if key_metrics else None
-    for m in key_metrics:
-        table[m] = conv[m]
-    heads = [_header(c, units) if c in METRIC_QUANTITY else column_label(c)
-             for c in table.columns]
-    formats = {c: SCORE_FORMAT for c in table.columns if str(c).startswith("score")}
-    formats.update({c: decimals_format(table[c].tolist()) for c in key_metrics})
-    has_pairs = "unresolved" in ranked.columns and ranked["unresolved"].astype(str).str.strip().any()
-    has_intervals = any(str(c).endswith("_lo") for c in ranked.columns)
-    why = ("tied: the identified model's random error does not resolve the two setups' order "
-           "(the 'unresolved' pairs, from the intervals)" if has_intervals or has_pairs else
-           "by the scores alone: the ranking has no intervals (a known model, or "
-           "--no-uncertainty)")
     notes = [f"best of {len(ranked)} setups simulated in the time domain: '{best}'"
              + (f"; baseline '{base}'" if base != best else " (also the baseline)")
-             + "; scores are ratios to the baseline's metrics, lower is better",
-             f"verdicts against the best and the baseline: {why}"]
+             + "; scores are ratios to the baseline's metrics, lower is better"]
     if sections is not None and "wins" in sections.columns:
-        won = [(w, s) for s, w in ((s, n) for n, v in sections["wins"].items()
-                                   for s in str(v or "").split()) if w != best]
+        won = [(s, str(n)) for n, v in sections["wins"].items() for s in str(v or "").split()
+               if str(n) != best]
         notes.append("sections won by another setup than the whole drive's best: "
-                     + ("; ".join(f"{s}: '{w}'" for w, s in won) if won else "none"))
+                     + ("; ".join(f"{s}: '{w}'" for s, w in won) if won else "none"))
     used = list((run or {}).items())
     if objective is not None and not any(k == "objective" for k, _ in used):
         used.append(("objective", objective.name + (f" ({objective.source})"
                                                      if objective.source else "")))
     used.append(("units", units))
-    figure = None
-    if histograms is not None:
-        figure = summary_figure(best=best, baseline=base, histograms=histograms,
-                                velocity_unit=UNIT_LABELS[units]["velocity"])
-    elif key_metrics and base != best:
-        labels = {m: f"{column_label(m)}: {conv.loc[base, m]:.4g} -> {conv.loc[best, m]:.4g} "
-                     f"{_metric_unit(m, units)}" for m in key_metrics}
-        figure = summary_figure(conv, best=best, baseline=base, labels=labels)
-    return {"title": "shockplan ranking: summary", "table": table, "headers": heads,
-            "formats": formats, "notes": notes, "used": used, "figure": figure}
+    return summary_parts(ranked, best=best, baseline=base, metrics=key_metrics, units=units,
+                         title="shockplan ranking: summary", notes=notes, used=used,
+                         histograms=histograms)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -34,13 +34,14 @@ from openpyxl.utils import get_column_letter
 from openpyxl.worksheet.page import PageMargins
 from openpyxl.worksheet.properties import PageSetupProperties
 
-from ident.data.units import check_units
+from ident.data.units import UNIT_LABELS, check_units, from_si
+from ident.sim.metrics import METRIC_QUANTITY
 from planner.report.sheets import (FOOTER_PT, MIN_PRINT_PT, PAPER_SIZE, PRINT_MARGINS_IN,
-                                   WIDTH_UNIT_PT, column_widths, printable_size_pt,
-                                   smallest_font_pt, wrap_lines, write_table)
+                                   WIDTH_UNIT_PT, column_label, column_widths, decimals_format,
+                                   printable_size_pt, smallest_font_pt, wrap_lines, write_table)
 
 __all__ = ["N_SUMMARY_ROWS", "SUMMARY_FIGURE_IN", "SUMMARY_SHEET", "HISTOGRAM_COLUMNS",
-           "summary_figure", "verdicts", "write_summary_sheet"]
+           "summary_figure", "summary_parts", "verdicts", "write_summary_sheet"]
 
 log = logging.getLogger(__name__)
 
@@ -209,11 +210,88 @@ def summary_figure(metrics=None, *, best, baseline, histograms=None, labels=None
         if np.isfinite(c):
             ax.text(c, yy, f" {c:+.1f} %", va="center", ha="left" if c >= 0 else "right",
                     fontsize=_FIG_PT)
-    ax.set_xlabel(f"'{best}' against baseline '{baseline}': change [%]", fontsize=_FIG_PT)
+    ax.set_xlabel("change from the baseline [%]", fontsize=_FIG_PT)
     ax.grid(True, axis="x", lw=0.3, alpha=0.5)
     fig.suptitle(title or f"key metrics: best '{best}' against baseline '{baseline}'",
                  fontsize=_FIG_PT + 0.5)
     return fig
+
+
+def summary_parts(table, *, best, baseline, metrics=(), units="SI", first=("rank",),
+                  rows=None, title, notes=(), used=(), histograms=None):
+    """The summary sheet of a ranked table: its rows, verdicts, key metrics and plot.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Indexed by setup name, best first: ``score`` (lower is better), optionally
+        ``score_<group>``, ``feasible``, ``unresolved`` and the metric columns (SI).
+    best, baseline : str
+        The setups the verdicts compare with (:func:`verdicts`) and the plot shows.
+    metrics : sequence of str
+        The key metrics shown (converted to `units`, headers with their unit).
+    units : {"SI", "imperial"}
+    first : sequence of str
+        Columns of `table` shown before the setup's name (those present).
+    rows : sequence of str, optional
+        The setups shown; default the first :data:`N_SUMMARY_ROWS` - 1 and the baseline.
+    title : str
+    notes, used : sequence
+        As :func:`write_summary_sheet`; a line on what the verdicts rest on is added to
+        `notes`.
+    histograms : pandas.DataFrame, optional
+        For :func:`summary_figure`, in `units`.
+
+    Returns
+    -------
+    dict
+        The keyword arguments of :func:`write_summary_sheet` but `wb`, `units` and `footer`.
+    """
+    units = check_units(units, where="summary_parts")
+    if rows is None:
+        rows = list(table.index[:N_SUMMARY_ROWS - 1])
+        if baseline in table.index and baseline not in rows:
+            rows.append(baseline)
+    shown = table.loc[list(rows)]
+    frame = shown[[c for c in first if c in shown.columns]].copy()
+    frame.insert(len(frame.columns), "setup", [str(n) for n in shown.index])
+    if "score" in shown.columns:
+        frame["vs best"] = verdicts(table, best).loc[list(rows)].replace({"reference": "best"})
+        if baseline in table.index:
+            frame["vs baseline"] = verdicts(table, baseline).loc[list(rows)].replace(
+                {"reference": "baseline"})
+        for c in ["score"] + [c for c in shown.columns if str(c).startswith("score_")]:
+            frame[c] = shown[c].to_numpy()
+    metrics = [m for m in metrics if m in table.columns]
+    conv = pd.DataFrame({m: from_si(table[m].to_numpy(dtype=float), METRIC_QUANTITY[m], units)
+                         for m in metrics}, index=table.index)
+    for m in metrics:
+        frame[m] = conv.loc[list(rows), m].to_numpy()
+
+    def unit(m):
+        return UNIT_LABELS[units][METRIC_QUANTITY[m]]
+
+    headers = [f"{column_label(c)} [{unit(c)}]" if c in METRIC_QUANTITY else column_label(c)
+               for c in frame.columns]
+    formats = {c: "0.0000" for c in frame.columns if str(c).startswith("score")}
+    formats.update({m: decimals_format(frame[m].tolist()) for m in metrics})
+    pairs = ("unresolved" in table.columns
+             and table["unresolved"].astype(str).str.strip().astype(bool).any())
+    intervals = any(str(c).endswith("_lo") for c in table.columns)
+    why = ("tied: the identified model's random error does not resolve the two setups' order "
+           "(the 'unresolved' pairs, from the intervals)" if intervals or pairs else
+           "by the scores alone (no intervals: a known model, or none asked)")
+    notes = list(notes) + [f"verdicts against the best and the baseline: {why}"]
+    figure = None
+    if histograms is not None:
+        figure = summary_figure(best=best, baseline=baseline, histograms=histograms,
+                                velocity_unit=UNIT_LABELS[units]["velocity"])
+    elif metrics and baseline in table.index and baseline != best:
+        labels = {m: f"{column_label(m)}: {conv.loc[baseline, m]:.4g} -> "
+                     f"{conv.loc[best, m]:.4g} {unit(m)}" for m in metrics}
+        figure = summary_figure(conv, best=best, baseline=baseline, labels=labels)
+    return {"title": title, "table": frame, "headers": headers, "formats": formats,
+            "notes": notes, "used": list(used), "figure": figure}
 
 
 def _merged_text(ws, row, text, last_col, width_units, *, bold=False, size=_NOTE_PT):
