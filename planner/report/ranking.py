@@ -74,6 +74,7 @@ __all__ = [
     "metric_of_column",
     "ranking_columns",
     "ranking_to_units",
+    "short_labels",
     "write_predictions_csv",
     "write_ranking",
 ]
@@ -92,8 +93,14 @@ DEFAULT_KEY_METRICS = tuple(f"tire_force_rms_{c}" for c in CORNERS) + (
     "ride_height_rms_front", "ride_height_rms_rear")
 #: At most this many metrics in ``top_setups.png``.
 MAX_KEY_METRICS = 6
-#: Setups labelled by name in ``pareto.png``.
+#: Setups labelled by name in ``pareto.png``: the best ones; the setups on the Pareto front
+#: are labelled too, up to :data:`MAX_PARETO_LABELS` labels in all (spread along the front
+#: when it has more).
 N_PARETO_LABELS = 5
+#: The most labels in ``pareto.png``.
+MAX_PARETO_LABELS = 14
+#: Setup names longer than this are shown as ``#<rank>`` in the plots, with a key.
+SHORT_LABEL_CHARS = 20
 # Label layout of pareto.png (see _place_labels) [pt]: the farthest a label may sit from
 # its point, the grid its corner is moved on, the gap kept between a label and a marker, a
 # line, a leader line or another label, and a leader line beyond this distance.
@@ -830,10 +837,51 @@ def _place_labels(anchors, sizes, markers, lines, bounds, *, reach=_LABEL_REACH_
     return [None if o is None else o[:3] for o in best[1]]
 
 
-def _pareto_figure(table, baseline):
+def _spread_points(x, y, candidates, chosen, n):
+    """Up to `n` of `candidates` (positions), each the farthest from those chosen so far
+    (`chosen` first; coordinates scaled by their span): the extremes and the isolated
+    points first, one of a cluster at a time. Deterministic (ties: the first candidate)."""
+    pts = np.column_stack([x, y]).astype(float)
+    ok = np.isfinite(pts).all(axis=1)
+    span = np.ptp(pts[ok], axis=0) if ok.any() else np.ones(2)
+    pts = pts / np.where(span > 0, span, 1.0)
+    picked, taken = [], list(chosen)
+    rest = [int(k) for k in candidates if k not in set(chosen)]
+    while rest and len(picked) < n:
+        if taken:
+            d = np.min(np.linalg.norm(pts[rest][:, None, :] - pts[taken][None, :, :], axis=2),
+                       axis=1)
+        else:
+            d = -np.asarray(rest, float)  # none chosen yet: the first candidate
+        k = rest.pop(int(np.argmax(d)))
+        picked.append(k)
+        taken.append(k)
+    return picked
+
+
+def _score_label(column, objective):
+    """An axis label in words for a group's score column (``score_grip``): the group, the
+    metric families it weighs (from the objective), what the score is, which way is better."""
+    group = column[len("score_"):]
+    families = []
+    if objective is not None and group in objective.groups:
+        for m in objective.groups[group]:
+            words = column_label(m).split()
+            fam = " ".join(words[:-1]) if words[-1] in (*CORNERS, "front", "rear") else \
+                " ".join(words)
+            if fam not in families:
+                families.append(fam)
+    what = f": {', '.join(families)} / baseline" if families else ""
+    return f"{group} score [-]{what}"
+
+
+def _pareto_figure(table, baseline, objective=None):
     """score_grip vs score_platform: all setups, the Pareto front, the best labelled.
 
-    The :data:`N_PARETO_LABELS` best setups are labelled by name at the nearest
+    The :data:`N_PARETO_LABELS` best setups and the setups on the Pareto front (up to
+    :data:`MAX_PARETO_LABELS` labels in all, spread along the front) are labelled by name (``#<rank>``
+    and a key under the plot when a name is longer than :data:`SHORT_LABEL_CHARS`) at the
+    nearest
     place beside their point that touches no marker, no line of the front and no
     other label (:func:`_place_labels`, text measured with the Agg renderer), with a
     leader line when the label sits away from its point; a label with no such place
@@ -850,9 +898,22 @@ def _pareto_figure(table, baseline):
     feasible = (table["feasible"].to_numpy(dtype=bool) if "feasible" in table.columns
                 else np.ones(len(table), dtype=bool))
     front = pareto_front(table, x, y)
-    width_in, height_in = _PARETO_SIZE_IN
-    m = _PARETO_MARGIN_IN
-    fig = Figure(figsize=_PARETO_SIZE_IN)
+    # the labelled setups: the best, then the front's others, the best first
+    order = _best_order(table)
+    finite = np.isfinite(xv) & np.isfinite(yv)
+    best = [k for k in order[:N_PARETO_LABELS] if finite[k]]
+    best += _spread_points(xv, yv, np.flatnonzero(front & finite), best,
+                           MAX_PARETO_LABELS - len(best))
+    position = np.empty(len(table))
+    position[order] = np.arange(1, len(table) + 1)
+    ranks = (table["rank"].to_numpy(dtype=float)[best] if "rank" in table.columns
+             else position[best])
+    names, key = short_labels([str(table.index[k]) for k in best], ranks)
+    key = [key[j] for j in np.argsort(ranks, kind="stable")] if key else key
+    key_in = 0.135 * (len(key) + 1) + 0.15 if key else 0.0  # the key's lines under the axes
+    width_in, height_in = _PARETO_SIZE_IN[0], _PARETO_SIZE_IN[1] + key_in
+    m = dict(_PARETO_MARGIN_IN, bottom=_PARETO_MARGIN_IN["bottom"] + key_in)
+    fig = Figure(figsize=(width_in, height_in))
     FigureCanvasAgg(fig)
     ax = fig.add_axes((m["left"] / width_in, m["bottom"] / height_in,
                        1.0 - (m["left"] + m["right"]) / width_in,
@@ -874,9 +935,10 @@ def _pareto_figure(table, baseline):
         b = table.index.get_loc(baseline)
         ax.scatter([xv[b]], [yv[b]], s=120, marker="*", color="k", zorder=4,
                    label=f"baseline ({baseline})")
-    ax.set_xlabel(f"{x} (lower is better)")
-    ax.set_ylabel(f"{y} (lower is better)")
-    ax.set_title(f"Grip vs platform: {int(front.sum())} setups on the Pareto front")
+    ax.set_xlabel(_score_label(x, objective))
+    ax.set_ylabel(_score_label(y, objective))
+    ax.set_title(f"Grip vs platform (weighted RMS ratios, lower is better): "
+                 f"{int(front.sum())} setups on the Pareto front", fontsize=10)
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     ax.set_xlim(ax.get_xlim())  # freeze the limits: the labels are placed in display space
@@ -902,9 +964,8 @@ def _pareto_figure(table, baseline):
                                  np.maximum(c[:-1], c[1:]) + half_lw])
     bounds = np.asarray(ax.bbox.extents) * pt
 
-    best = [k for k in _best_order(table)[:N_PARETO_LABELS]
-            if np.isfinite(xv[k]) and np.isfinite(yv[k])]
-    names = [str(table.index[k]) for k in best]
+    if key:
+        _key_text(fig, key, y_in=0.05)
     renderer = fig.canvas.get_renderer()
     sizes = []
     for name in names:
@@ -982,42 +1043,112 @@ def _normalizing_setup(table, objective, baseline):
     return str(table.index[0]) if 0 in hit else str(table.index[hit[0]])
 
 
+def short_labels(names, ranks=None, *, max_chars=SHORT_LABEL_CHARS):
+    """Plot labels of setups: their names, or ``#<rank>`` and a key when a name is long.
+
+    Parameters
+    ----------
+    names : sequence of str
+    ranks : sequence of int, optional
+        Each setup's rank (default: its position, from 1).
+    max_chars : int
+        Names up to this long are shown as they are.
+
+    Returns
+    -------
+    labels : list of str
+    key : list of str
+        ``"#<rank>  <name>"`` per setup when the labels are short ones, else empty.
+
+    Examples
+    --------
+    >>> short_labels(["L28/L28/DF/DF", "B20/B20/B20/B20"])
+    (['L28/L28/DF/DF', 'B20/B20/B20/B20'], [])
+    >>> short_labels(["TTX@ls=6,hs=2/TTX@ls=6,hs=2/TTX@ls=4,hs=2/TTX@ls=4,hs=2"], [3])[0]
+    ['#3']
+    """
+    names = [str(n) for n in names]
+    ranks = list(range(1, len(names) + 1)) if ranks is None else [
+        int(r) if np.isfinite(r) else k + 1 for k, r in enumerate(np.asarray(ranks, float))]
+    if not names or max(len(n) for n in names) <= max_chars:
+        return names, []
+    labels = [f"#{r}" for r in ranks]
+    width = max(len(lab) for lab in labels)
+    return labels, [f"{lab:<{width}}  {_compact_name(n)}" for lab, n in zip(labels, names)]
+
+
+def _compact_name(name):
+    """A setup's name ``LF/RF/LR/RR`` said once per axle where the sides match (``front A,
+    rear B``; ``all A``); other names as they are."""
+    parts = str(name).split("/")
+    if len(parts) != 4:
+        return str(name)
+    if len(set(parts)) == 1:
+        return f"all {parts[0]}"
+    if parts[0] == parts[1] and parts[2] == parts[3]:
+        return f"front {parts[0]}, rear {parts[2]}"
+    return str(name)
+
+
+def _key_text(fig, key, *, y_in=0.1, size=7):
+    """The key of short labels (``#rank``: the rank in ``ranking.csv``) as lines of text at
+    the bottom left of `fig`."""
+    if key:
+        height_in = fig.figure.get_figheight() * fig.bbox.height / fig.figure.bbox.height
+        fig.text(0.01, y_in / height_in, "\n".join(
+            ["#: the rank in ranking.csv"] + list(key)), ha="left", va="bottom",
+            fontsize=size, family="monospace")
+
+
 def _top_figure(table, metrics, reference, top):
-    """Grouped bars of key metrics of the best setups, relative to a reference row."""
+    """Key metrics of the best setups as their change from a reference row [%], with the
+    intervals; the axis zoomed to the values (the reference at 0), names in words, long
+    setup names shortened to ``#<rank>`` with a key under the plot."""
     order = _best_order(table)[:top]
     sub = table.iloc[order]
     ref_name = reference if reference is not None else str(sub.index[0])
     ref = table.loc[ref_name]
     n_s, n_m = len(sub), len(metrics)
-    width = 0.8 / n_m
-    fig = _new_figure((max(6.0, 0.9 * n_s + 2.5), 5.2))
-    ax = fig.add_subplot()
-    x = np.arange(n_s)
-    for k, m in enumerate(metrics):
-        base = float(ref[m])
-        scale = 1.0 / base if np.isfinite(base) and base != 0 else np.nan
-        v = sub[m].to_numpy(dtype=float, na_value=np.nan) * scale
-        yerr = None
-        if f"{m}_lo" in sub.columns and f"{m}_hi" in sub.columns:
-            lo = sub[f"{m}_lo"].to_numpy(dtype=float, na_value=np.nan) * scale
-            hi = sub[f"{m}_hi"].to_numpy(dtype=float, na_value=np.nan) * scale
-            yerr = np.vstack([np.clip(v - lo, 0, None), np.clip(hi - v, 0, None)])
-            yerr = np.nan_to_num(yerr)
-        ax.bar(x - 0.4 + (k + 0.5) * width, v, width, yerr=yerr, capsize=2,
-               color=f"C{k % 10}", label=m, error_kw={"lw": 0.8})
-    ax.axhline(1.0, color="k", lw=0.8, ls="--")
-    labels = [str(s) for s in sub.index]
+    ranks = sub["rank"].to_numpy(dtype=float) if "rank" in sub.columns else None
+    labels, key = short_labels(sub.index, ranks)
     if "feasible" in sub.columns:
         labels = [s if f else f"{s}\n(infeasible)" for s, f in
                   zip(labels, sub["feasible"].to_numpy(dtype=bool))]
-    ax.set_xticks(x, labels, rotation=30, ha="right", fontsize=8)
+    key_in = 0.135 * (len(key) + 1) + 0.1 if key else 0.0
+    outer = _new_figure((max(6.0, 0.9 * n_s + 2.5), 5.2 + key_in))
+    if key:  # the plot above, the key of the short labels under it
+        fig, low = outer.subfigures(2, 1, height_ratios=(5.2, key_in))
+        _key_text(low, key, y_in=0.02)
+    else:
+        fig = outer
+    ax = fig.add_subplot()
+    x = np.arange(n_s)
+    width = 0.8 / n_m
+    for k, m in enumerate(metrics):
+        base = float(ref[m])
+        scale = 100.0 / base if np.isfinite(base) and base != 0 else np.nan
+        v = sub[m].to_numpy(dtype=float, na_value=np.nan) * scale - 100.0
+        yerr = None
+        if f"{m}_lo" in sub.columns and f"{m}_hi" in sub.columns:
+            lo = sub[f"{m}_lo"].to_numpy(dtype=float, na_value=np.nan) * scale - 100.0
+            hi = sub[f"{m}_hi"].to_numpy(dtype=float, na_value=np.nan) * scale - 100.0
+            yerr = np.nan_to_num(np.vstack([np.clip(v - lo, 0, None), np.clip(hi - v, 0, None)]))
+        ax.errorbar(x - 0.4 + (k + 0.5) * width, v, yerr=yerr, fmt="o", ms=5, capsize=3,
+                    lw=1.0, color=f"C{k % 10}", label=column_label(m))
+    ax.axhline(0.0, color="k", lw=0.8, ls="--")
+    for edge in x[:-1] + 0.5:  # the setups apart
+        ax.axvline(edge, color="0.85", lw=0.6)
+    ax.set_xlim(-0.5, n_s - 0.5)
+    ax.set_xticks(x, labels, rotation=0 if key else 30, ha="center" if key else "right",
+                  fontsize=8)
     what = "baseline" if reference is not None else "best setup"
-    ax.set_ylabel(f"metric / {what} ({ref_name}) [-]")
-    fig.suptitle(f"Top {n_s} setups: key metrics relative to the {what}")
+    ax.set_ylabel(f"change from the {what} ({ref_name}) [%]")
+    fig.suptitle(f"Top {n_s} setups: key metrics against the {what} (lower is lower RMS; "
+                 "whiskers: the prediction's interval)")
     ax.grid(True, axis="y", lw=0.3, alpha=0.5)
-    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", fontsize=7,
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", fontsize=8,
                ncol=min(n_m, 6), frameon=False)
-    return fig
+    return outer
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1197,7 +1328,7 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
         frame, units=units, objective=objective, baseline=about_base, infeasible=infeasible,
         summary=summary, sections=section_frame), overwrite=overwrite)
     if "pareto" in paths:
-        _save_png(_pareto_figure(table, ref), paths["pareto"], overwrite=overwrite)
+        _save_png(_pareto_figure(table, ref, objective), paths["pareto"], overwrite=overwrite)
     if "top_setups" in paths:
         _save_png(_top_figure(table, key_metrics, ref, int(top)), paths["top_setups"],
                   overwrite=overwrite)
