@@ -78,7 +78,7 @@ from planner.design import ExperimentPlan
 from planner.errors import PlannerError
 from planner.report.sheets import (column_label, fit_column_width, fit_width_units,
                                    print_setup, printable_size_pt, text_width, wrap_lines)
-from planner.report.summary import SUMMARY_FIGURE_IN, N_SUMMARY_ROWS, write_summary_sheet
+from planner.report.summary import N_SUMMARY_ROWS, write_summary_sheet
 
 __all__ = ["write_plan", "plan_toml", "run_sheet_rows", "design_figure", "write_run_sheet",
            "read_run_sheet", "start_times_note", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES",
@@ -245,7 +245,7 @@ def design_figure(plan, *, size_in=(7.5, 4.2)):
     ax.axvline(plan.budget_min, color="tab:red", lw=1, label=f"budget {plan.budget_min:g} min")
     names = {"d": "sum of log det (D-optimal)", "a": "- sum of tr M^-1 (A-optimal)",
              "decision": "- variance of score differences"}
-    small = size_in[1] < 3.0  # the summary's plot: smaller text, to scale with the sheet
+    small = size_in[1] < 3.0  # a small plot: smaller text
     ax.set_xlabel("rig time [min]", fontsize=8 if small else None)
     ax.set_ylabel(names.get(plan.criterion, "criterion"), fontsize=8 if small else None)
     ax.set_title(f"information gained against rig time ({len(plan.runs)} runs)",
@@ -258,8 +258,9 @@ def design_figure(plan, *, size_in=(7.5, 4.2)):
 
 
 def _summary(plan, units, date):
-    """The plan's summary sheet: the runs in rig order (the first ones), the budget, what the
-    plan used and the criterion against rig time."""
+    """The plan's summary sheet: the runs in rig order (the first ones), the budget and what
+    the plan used. No picture: the run sheet is filled in and saved again, and openpyxl
+    cannot save a workbook it read with a picture twice (``design.png`` has the plot)."""
     rows = run_sheet_rows(plan, units=units)
     cols = [c for c in ("run", "start", "duration_min", "purpose", *CORNERS, "changed",
                         "share") if c in rows.columns]
@@ -280,7 +281,7 @@ def _summary(plan, units, date):
     return {"title": f"{RUN_SHEET_TITLE}: summary", "table": frame,
             "headers": [heads.get(c, column_label(c)) for c in cols],
             "formats": {"share": "0.0%", "duration_min": "0.0"}, "notes": notes,
-            "used": used, "figure": design_figure(plan, size_in=SUMMARY_FIGURE_IN)}
+            "used": used, "figure": None}
 
 
 # ----------------------------------------------------------------------------------------------

@@ -76,3 +76,39 @@ def test_bad_sections(sections, paper_model, track_drive, demo_library):
         rank_sections(Empty(), paper_model, track_drive, demo_library, sections=[])
     with pytest.raises(PlannerError, match="no candidates"):
         rank_sections(Empty(), paper_model, track_drive, demo_library, sections=SECTIONS)
+
+
+def test_rank_command_ranks_each_section(track_drive, setups, tmp_path, capsys):
+    """``shockplan rank --section``: sections.csv (the whole drive's and each section's score
+    and rank), the workbook's sheet 'sections', the winners in the printed summary; a window
+    beyond the drive is refused before anything is simulated."""
+    import pandas as pd
+    from openpyxl import load_workbook
+
+    from ident.data.drive import Drive
+    from planner.cli import main
+    from planner.demo import DEMO_LIBRARY_PATH
+    from planner.setups import write_setups
+
+    n = int(20 * track_drive.fs_hz)
+    drive = Drive("track 20 s", track_drive.fs_hz,
+                  {c: x[:n] for c, x in track_drive.channels.items()})
+    write_drive(drive, tmp_path / "d.csv", units="SI")
+    write_setups(setups[:4], tmp_path / "s.csv")
+    args = ["-q", "rank", "--model", "paper", "--drive", str(tmp_path / "d.csv"), "--shocks",
+            str(DEMO_LIBRARY_PATH), "--setups", str(tmp_path / "s.csv"), "--simulate", "4",
+            "--no-uncertainty", "--section", "a=1:9", "--laps", "10,14,19.5"]
+    assert main(args + ["--out", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert "sections: 3 (a 1-9 s, lap1 10-14 s, lap2 14-19.5 s)" in out
+    t = pd.read_csv(tmp_path / "r" / "sections.csv")
+    assert list(t.columns[:2]) == ["rank", "setup"] and t.columns[-1] == "units"
+    for name in ("a", "lap1", "lap2"):
+        assert sorted(t[f"{name}_rank"]) == [1, 2, 3, 4]
+    wb = load_workbook(tmp_path / "r" / "ranking.xlsx")
+    assert wb.sheetnames[:3] == ["summary", "ranking", "sections"]
+    summary = " ".join(str(c.value) for row in wb["summary"].iter_rows() for c in row if c.value)
+    assert "sections won by another setup" in summary
+    assert main(args[:-4] + ["--section", "far=15:25", "--out", str(tmp_path / "x")]) == 2
+    assert "beyond the drive" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
