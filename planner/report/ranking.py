@@ -1124,6 +1124,7 @@ def _top_figure(table, metrics, reference, top):
     ax = fig.add_subplot()
     x = np.arange(n_s)
     width = 0.8 / n_m
+    widest = []  # each metric's widest interval [% of the reference]
     for k, m in enumerate(metrics):
         base = float(ref[m])
         scale = 100.0 / base if np.isfinite(base) and base != 0 else np.nan
@@ -1133,6 +1134,7 @@ def _top_figure(table, metrics, reference, top):
             lo = sub[f"{m}_lo"].to_numpy(dtype=float, na_value=np.nan) * scale - 100.0
             hi = sub[f"{m}_hi"].to_numpy(dtype=float, na_value=np.nan) * scale - 100.0
             yerr = np.nan_to_num(np.vstack([np.clip(v - lo, 0, None), np.clip(hi - v, 0, None)]))
+            widest.append(float(np.max(yerr.sum(axis=0), initial=0.0)))
         ax.errorbar(x - 0.4 + (k + 0.5) * width, v, yerr=yerr, fmt="o", ms=5, capsize=3,
                     lw=1.0, color=f"C{k % 10}", label=column_label(m))
     ax.axhline(0.0, color="k", lw=0.8, ls="--")
@@ -1143,8 +1145,12 @@ def _top_figure(table, metrics, reference, top):
                   fontsize=8)
     what = "baseline" if reference is not None else "best setup"
     ax.set_ylabel(f"change from the {what} ({ref_name}) [%]")
+    lo_y, hi_y = ax.get_ylim()
+    whiskers = "whiskers: the prediction's interval"
+    if widest and max(widest) < 0.02 * (hi_y - lo_y):  # hidden by the markers: say how wide
+        whiskers = f"the intervals, {max(widest):.2g} % wide at most, hide behind the points"
     fig.suptitle(f"Top {n_s} setups: key metrics against the {what} (lower is lower RMS; "
-                 "whiskers: the prediction's interval)")
+                 f"{whiskers})")
     ax.grid(True, axis="y", lw=0.3, alpha=0.5)
     fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", fontsize=8,
                ncol=min(n_m, 6), frameon=False)
