@@ -73,6 +73,7 @@ __all__ = [
     "RANKING_FILES",
     "metric_of_column",
     "ranking_columns",
+    "label_key_text",
     "ranking_to_units",
     "short_labels",
     "write_predictions_csv",
@@ -965,7 +966,7 @@ def _pareto_figure(table, baseline, objective=None):
     bounds = np.asarray(ax.bbox.extents) * pt
 
     if key:
-        _key_text(fig, key, y_in=0.05)
+        label_key_text(fig, key, y_in=0.05)
     renderer = fig.canvas.get_renderer()
     sizes = []
     for name in names:
@@ -1090,14 +1091,25 @@ def _compact_name(name):
     return str(name)
 
 
-def _key_text(fig, key, *, y_in=0.1, size=7):
-    """The key of short labels (``#rank``: the rank in ``ranking.csv``) as lines of text at
-    the bottom left of `fig`."""
+def label_key_text(fig, key, *, y_in=0.1, size=7, meaning="the rank in ranking.csv"):
+    """Draw the key of short labels (:func:`short_labels`) at the bottom left of a figure.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure or SubFigure
+    key : list of str
+        The key's lines (none: nothing drawn).
+    y_in : float
+        The key's bottom above the figure's [in].
+    size : float
+        Font size [pt].
+    meaning : str
+        What ``#n`` is, the key's first line.
+    """
     if key:
         height_in = fig.figure.get_figheight() * fig.bbox.height / fig.figure.bbox.height
-        fig.text(0.01, y_in / height_in, "\n".join(
-            ["#: the rank in ranking.csv"] + list(key)), ha="left", va="bottom",
-            fontsize=size, family="monospace")
+        fig.text(0.01, y_in / height_in, "\n".join([f"#: {meaning}"] + list(key)),
+                 ha="left", va="bottom", fontsize=size, family="monospace")
 
 
 def _top_figure(table, metrics, reference, top):
@@ -1118,7 +1130,7 @@ def _top_figure(table, metrics, reference, top):
     outer = _new_figure((max(6.0, 0.9 * n_s + 2.5), 5.2 + key_in))
     if key:  # the plot above, the key of the short labels under it
         fig, low = outer.subfigures(2, 1, height_ratios=(5.2, key_in))
-        _key_text(low, key, y_in=0.02)
+        label_key_text(low, key, y_in=0.02)
     else:
         fig = outer
     ax = fig.add_subplot()

@@ -24,7 +24,7 @@ from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.models.vehicle import VEHICLE_KEYS
 from ident.sim.metrics import METRIC_QUANTITY
 from planner.errors import PlannerError
-from planner.report.ranking import ranking_to_units
+from planner.report.ranking import label_key_text, ranking_to_units, short_labels
 from planner.report.sheets import (
     column_label,
     print_setup,
@@ -300,13 +300,18 @@ def rank_stability_figure(result, *, top=10):
     t = result.table[result.table["setup"].isin(names)].copy()
     t["condition"] = t["drive"] + " | " + t["perturbation"]
     piv = t.pivot_table(index="condition", columns="setup", values="rank", sort=False)[names]
-    fig = Figure(figsize=(9.0, 5.0))
+    # long names (click settings): #<nominal rank> on the plot, the key under it
+    short, key = short_labels(names, rob.loc[names, "nominal_rank"].to_numpy(dtype=float))
+    label = dict(zip(names, short))
+    key_in = 0.135 * (len(key) + 1) + 0.1 if key else 0.0
+    fig = Figure(figsize=(9.0, 5.0 + key_in))
+    label_key_text(fig, key, y_in=0.05, meaning="the nominal rank (robust.csv)")
     ax = fig.add_subplot()
     if len(piv) <= 30:
         x = np.arange(len(piv))
         for n in names:
             ax.plot(x, piv[n].to_numpy(), marker="o", ms=3, lw=1.2,
-                    label=f"{n}{' (fragile)' if rob.loc[n, 'fragile'] else ''}")
+                    label=f"{label[n]}{' (fragile)' if rob.loc[n, 'fragile'] else ''}")
         labels = [c.split(" | ", 1)[1] if len(result.settings["drives"]) == 1 else c
                   for c in piv.index]
         ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)
@@ -317,8 +322,8 @@ def rank_stability_figure(result, *, top=10):
         ax.plot(np.arange(1, len(names) + 1), rob.loc[names, "nominal_rank"].to_numpy(), "D",
                 color="#C44E52", ms=5, label="nominal rank")
         ax.set_xticks(np.arange(1, len(names) + 1),
-                      [f"{n}{' *' if rob.loc[n, 'fragile'] else ''}" for n in names],
-                      rotation=45, ha="right", fontsize=7)
+                      [f"{label[n]}{' *' if rob.loc[n, 'fragile'] else ''}" for n in names],
+                      rotation=0 if key else 45, ha="center" if key else "right", fontsize=7)
         # beside the axes, as the lines' legend: inside, it may cover a box or a whisker
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
         ax.set_xlabel("setup (* fragile rank); boxes 25-75 %, whiskers 5-95 % of conditions")
@@ -327,7 +332,7 @@ def rank_stability_figure(result, *, top=10):
     ax.set_ylabel("rank (1 = best)")
     ax.set_title(f"rank stability over {len(piv)} conditions "
                  f"({result.perturbations.design}, {result.settings['method']})", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, key_in / fig.get_figheight(), 1, 1))
     return fig
 
 
