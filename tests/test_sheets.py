@@ -158,8 +158,14 @@ def _pages(pdf):
     return int(re.search(r"Pages:\s+(\d+)", info).group(1))
 
 
+_CALIBRATION = {}
+
+
 def _box_per_pt(out_dir):
-    """A word's box height per point of font, as LibreOffice prints it here (a 10 pt cell)."""
+    """A word's box height per point of font, as LibreOffice prints it here (a 10 pt cell;
+    measured once a session)."""
+    if "box_per_pt" in _CALIBRATION:
+        return _CALIBRATION["box_per_pt"]
     wb = Workbook()
     cell = wb.active.cell(1, 1, "Calibration")
     cell.font = Font(name="Calibri", sz=CALIBRATION_PT)
@@ -167,7 +173,8 @@ def _box_per_pt(out_dir):
     wb.save(path)
     heights = [h for _, h in _words(_pdf(path, out_dir))]
     assert heights
-    return max(heights) / CALIBRATION_PT
+    _CALIBRATION["box_per_pt"] = max(heights) / CALIBRATION_PT
+    return _CALIBRATION["box_per_pt"]
 
 
 def _check_first_page(path):
