@@ -400,8 +400,11 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
                 log.info("demo: ranking the crate's setups")
                 ranking = rank_setups(model, drive, library, baseline=baseline, top=20,
                                       progress=progress)
+            used = {"model": "model.npz (identified from session/)",
+                    "drive": "track_drive.csv", "crate": "crate.toml"}
             files = write_ranking(ranking.table, work / "ranking", units=units,
-                                  objective=ranking.objective, baseline=ranking.baseline)
+                                  objective=ranking.objective, baseline=ranking.baseline,
+                                  run=used)
             write_predictions_csv(ranking.screening, work / "ranking" / "screening.csv",
                                   units=units)
             plots = _start_job(_frf_plots_job, work / "model.npz", vehicle,
@@ -412,7 +415,8 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
                 warnings.simplefilter("ignore")
                 optimum = optimize_curves(model, drive, library, baseline=baseline,
                                           progress=progress)
-            write_optimum(optimum, library, work / "optimize", units=units)
+            write_optimum(optimum, library, work / "optimize", units=units,
+                          run={k: used[k] for k in ("model", "crate")})
             modes = modal_summary(vehicle).table()
         except BaseException:
             _settle_job(steps)

@@ -64,6 +64,9 @@ class Ranking:
         ``time_best_screening_rank``, ``top``, ``score_gap`` and ``polished``
         (:func:`planner.screen.describe_agreement`).
     settings : dict
+    candidates : tuple of planner.setups.Setup
+        The setups simulated in the time domain (the rows of `table`), with their elements:
+        what :func:`planner.section_ranking.rank_sections` simulates on each section.
     """
 
     table: pd.DataFrame
@@ -72,6 +75,7 @@ class Ranking:
     objective: object
     agreement: dict
     settings: dict = field(default_factory=dict)
+    candidates: tuple = ()
 
     @property
     def best(self):
@@ -345,4 +349,5 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         settings["uncertainty"] = unc.settings
     table = table.sort_values("rank")
     return Ranking(table=table, screening=screening.sort_values("rank"), baseline=base.name,
-                   objective=objective, agreement=agreement, settings=settings)
+                   objective=objective, agreement=agreement, settings=settings,
+                   candidates=tuple(cand))

@@ -78,6 +78,7 @@ from planner.design import ExperimentPlan
 from planner.errors import PlannerError
 from planner.report.sheets import (column_label, fit_column_width, fit_width_units,
                                    print_setup, printable_size_pt, text_width, wrap_lines)
+from planner.report.summary import N_SUMMARY_ROWS, write_summary_sheet
 
 __all__ = ["write_plan", "plan_toml", "run_sheet_rows", "design_figure", "write_run_sheet",
            "read_run_sheet", "start_times_note", "RUN_SHEET_TITLE", "REFERENCE_VELOCITIES",
@@ -226,11 +227,11 @@ def run_sheet_rows(plan, *, units="SI"):
     return pd.DataFrame(rows)
 
 
-def design_figure(plan):
-    """The criterion against rig time, run by run (matplotlib Figure)."""
+def design_figure(plan, *, size_in=(7.5, 4.2)):
+    """The criterion against rig time, run by run (matplotlib Figure), `size_in` [in]."""
     from matplotlib.figure import Figure  # heavy; only when the figure is drawn
 
-    fig = Figure(figsize=(7.5, 4.2), layout="constrained")
+    fig = Figure(figsize=size_in, layout="constrained")
     ax = fig.subplots()
     c = plan.curve
     ax.step(c["time_min"], c["criterion"], where="post", color="tab:blue", lw=2)
@@ -244,11 +245,43 @@ def design_figure(plan):
     ax.axvline(plan.budget_min, color="tab:red", lw=1, label=f"budget {plan.budget_min:g} min")
     names = {"d": "sum of log det (D-optimal)", "a": "- sum of tr M^-1 (A-optimal)",
              "decision": "- variance of score differences"}
-    ax.set(xlabel="rig time [min]", ylabel=names.get(plan.criterion, "criterion"),
-           title=f"information gained against rig time ({len(plan.runs)} runs)")
+    small = size_in[1] < 3.0  # a small plot: smaller text
+    ax.set_xlabel("rig time [min]", fontsize=8 if small else None)
+    ax.set_ylabel(names.get(plan.criterion, "criterion"), fontsize=8 if small else None)
+    ax.set_title(f"information gained against rig time ({len(plan.runs)} runs)",
+                 fontsize=9 if small else None)
+    if small:
+        ax.tick_params(labelsize=8)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="lower right")
     return fig
+
+
+def _summary(plan, units, date):
+    """The plan's summary sheet: the runs in rig order (the first ones), the budget and what
+    the plan used. No picture: the run sheet is filled in and saved again, and openpyxl
+    cannot save a workbook it read with a picture twice (``design.png`` has the plot)."""
+    rows = run_sheet_rows(plan, units=units)
+    cols = [c for c in ("run", "start", "duration_min", "purpose", *CORNERS, "changed",
+                        "share") if c in rows.columns]
+    frame = rows[cols]
+    s = plan.settings
+    n = len(plan.runs)
+    more = (f"; runs {N_SUMMARY_ROWS + 1}-{n} on the sheet 'run sheet'"
+            if n > N_SUMMARY_ROWS else "")
+    notes = [f"{n} run{'s' * (n != 1)} in {plan.total_min:.1f} of the {plan.budget_min:g} "
+             f"min budget, in rig order{more}; share = the run's share of the information "
+             "gained; 'run sheet' (next) is the sheet to fill in on rig day"]
+    used = [("car", s.get("car") or "car"), ("rig", plan.rig.name), ("date", date),
+            ("crate", str(s.get("crate") or "(not from a file)")),
+            ("objective", str(s.get("objective") or "")),
+            ("criterion", _CRITERIA.get(plan.criterion, plan.criterion)),
+            ("baseline", "/".join(plan.baseline.ids())), ("units", units)]
+    heads = {"duration_min": "duration [min]", "share": "share"}
+    return {"title": f"{RUN_SHEET_TITLE}: summary", "table": frame,
+            "headers": [heads.get(c, column_label(c)) for c in cols],
+            "formats": {"share": "0.0%", "duration_min": "0.0"}, "notes": notes,
+            "used": used, "figure": None}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -957,6 +990,8 @@ def write_run_sheet(plan, path, *, units="SI", overwrite=False):
                 footer=footer)
     _crate_sheet(wb.create_sheet("crate"), plan, units, footer)
     _information_sheet(wb.create_sheet("information"), plan, units, footer)
+    write_summary_sheet(wb, units=units, footer=f"{footer}: summary",
+                        **_summary(plan, units, str(date)))
     wb.properties.title = f"{RUN_SHEET_TITLE}: {plan.settings.get('car') or 'car'}"
     wb.properties.creator = "shockplan"
     with atomic_path(path, overwrite=overwrite) as tmp:

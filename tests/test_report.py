@@ -20,7 +20,7 @@ from ident.data.channels import CORNERS
 from planner.errors import PlannerError
 from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
 from ident.data.units import TO_SI, UNIT_LABELS
-from planner.objective import default_objective, score_setups
+from planner.objective import default_objective, pareto_front, score_setups
 from planner.report import (
     PAPER_SIZE,
     column_label,
@@ -144,7 +144,7 @@ def test_ranking_workbook_layout(table, tmp_path):
     obj = default_objective()
     paths = write_ranking(table, tmp_path, units="imperial", objective=obj)
     wb = load_workbook(paths["xlsx"])
-    assert wb.sheetnames == ["ranking", "intervals", "about"]
+    assert wb.sheetnames == ["summary", "ranking", "intervals", "about"]
     ws = wb["ranking"]
     header = [c.value for c in ws[1]]
     # key columns first: rank, setup, shocks, scores, feasible, the weighted metrics
@@ -256,7 +256,7 @@ def test_ranking_without_scores_and_si(table, tmp_path):
     paths = write_ranking(plain, tmp_path, top=3)
     assert set(paths) == {"csv", "xlsx", "top_setups"}  # no score columns: no Pareto plot
     wb = load_workbook(paths["xlsx"])
-    assert wb.sheetnames == ["ranking", "about"]  # no intervals: no intervals sheet
+    assert wb.sheetnames == ["summary", "ranking", "about"]  # no intervals: no intervals sheet
     ws = wb["ranking"]
     assert ws.freeze_panes == "B2"  # no rank column: setup first
     header = [c.value for c in ws[1]]
@@ -288,15 +288,45 @@ def test_baseline_normalization_of_top_setups(table):
         report_mod._normalizing_setup(table, None, "nope")
     assert report_mod._key_metrics(table, obj) == list(obj.weights)
     fig = report_mod._top_figure(table, list(obj.weights), "baseline", 5)
-    from matplotlib.container import BarContainer
+    from matplotlib.container import ErrorbarContainer
 
-    bars = [c for c in fig.axes[0].containers if isinstance(c, BarContainer)][0]
-    # the first metric's bars, best setups first, with error bars from _lo/_hi
-    assert bars.errorbar is not None
+    ax = fig.axes[0]
+    marks = [c for c in ax.containers if isinstance(c, ErrorbarContainer)][0]
+    # the first metric's points: the change from the baseline [%], best setups first, with
+    # the intervals' whiskers from _lo/_hi
+    assert marks.has_yerr
     best = table.sort_values("rank").iloc[:5]
     m = list(obj.weights)[0]
-    assert_allclose([b.get_height() for b in bars.patches],
-                    best[m] / table.loc["baseline", m], rtol=1e-12)
+    points = marks.lines[0].get_ydata()
+    assert_allclose(points, 100 * (best[m] / table.loc["baseline", m] - 1), rtol=1e-12)
+    # zoomed to the values (not from 0 % or -100 %), every whisker inside the axes
+    lo, hi = ax.get_ylim()
+    span = 100 * (best[[f"{m}_hi"]].to_numpy().max() / table.loc["baseline", m] - 1) - \
+        100 * (best[[f"{m}_lo"]].to_numpy().min() / table.loc["baseline", m] - 1)
+    assert hi - lo < 100 and lo > -100
+    assert span > 0.05 * (hi - lo)  # the intervals take a visible share of the axis
+    assert ax.get_xticklabels()[0].get_text() == str(best.index[0])
+    assert "tire force RMS LF" in [t.get_text() for t in fig.legends[0].get_texts()]
+
+
+def test_top_and_pareto_labels_shorten_long_names_with_a_key(table, tmp_path):
+    """Click settings' names (~50 characters) are shown as #rank, with the key beneath."""
+    obj = default_objective()
+    long = table.rename(index=lambda n: "TTX@ls=10,hs=0/TTX@ls=10,hs=0/TTX@ls=9,hs=0/"
+                        f"TTX@ls=9,hs=0-{n}")
+    fig = report_mod._top_figure(long, list(obj.weights), None, 5)
+    ticks = [t.get_text() for t in fig.axes[0].get_xticklabels()]
+    best = long.sort_values("rank")
+    assert ticks[0] == f"#{int(best['rank'].iloc[0])}"
+    key = "\n".join(t.get_text() for sub in fig.subfigs for t in sub.texts)
+    assert all(name in key for name in best.index[:5])
+    same = "/".join(["TTX@ls=10,hs=0"] * 2 + ["TTX@ls=9,hs=0"] * 2)  # said once per axle
+    assert report_mod.short_labels([same])[1] == ["#1  front TTX@ls=10,hs=0, rear TTX@ls=9,hs=0"]
+    fig = report_mod._pareto_figure(long, None, obj)
+    ax = fig.axes[0]
+    assert all(t.get_text().startswith("#") for t in ax.texts)
+    assert "tire force RMS" in ax.get_xlabel() and "score_grip" not in ax.get_xlabel()
+    assert "ride height RMS" in ax.get_ylabel()
 
 
 def _crowded_scores(rng, n, *, grid=False):
@@ -343,7 +373,11 @@ def test_pareto_labels_overlap_no_marker_and_no_other_label(rng, n, grid):
     fig = report_mod._pareto_figure(table, "setup-0010")
     ax = fig.axes[0]
     best = table.sort_values("rank").index[:report_mod.N_PARETO_LABELS]
-    assert sorted(t.get_text() for t in ax.texts) == sorted(best)
+    front = table.index[pareto_front(table, "score_grip", "score_platform")]
+    labelled = {t.get_text() for t in ax.texts}
+    assert set(best) <= labelled and labelled <= set(best) | set(front)
+    # every point of the front labelled, up to the most labels
+    assert len(labelled) == min(report_mod.MAX_PARETO_LABELS, len(set(best) | set(front)))
     for dpi in (fig.dpi, 110):
         fig.set_dpi(dpi)
         labels, markers = _label_and_marker_boxes(fig)

@@ -10,6 +10,9 @@ Calibri or in Excel, so the estimate is a floor.
 """
 
 import math
+import re
+import shutil
+import subprocess
 import warnings
 
 import numpy as np
@@ -75,8 +78,15 @@ def _printed(ws):
     known = _widths(ws)
     widths = [known.get(j, DEFAULT_WIDTH) for j in range(lo_c, hi_c + 1)]
     if ws.sheet_properties.pageSetUpPr.fitToPage:
-        assert (int(ps.fitToWidth), int(ps.fitToHeight or 0)) == (1, 0), ws.title
+        fit = (int(ps.fitToWidth), int(ps.fitToHeight or 0))
+        assert fit in ((1, 0), (1, 1)), ws.title  # one page wide, or one page (a summary)
         scale = min(1.0, math.floor(100 * room_pt / (UNIT_PT * sum(widths))) / 100)
+        if fit == (1, 1):  # the height too: the rows' heights (15 pt where unset)
+            tall_pt = 72.0 * (PAPER_IN[int(ps.paperSize)][0] - ws.page_margins.top
+                              - ws.page_margins.bottom)
+            rows = sum((ws.row_dimensions[r].height if r in ws.row_dimensions else None)
+                       or 15.0 for r in range(lo_r, hi_r + 1))
+            scale = min(scale, math.floor(100 * tall_pt / rows) / 100)
     else:
         scale = int(ps.scale) / 100
         assert ws.print_title_cols, ws.title  # the key columns repeat on every page
@@ -98,14 +108,93 @@ def _printed(ws):
     return min(sizes) * scale
 
 
-def _check_workbook(path, *, key_value=()):
-    """Every sheet prints at >= 7 pt; every table sheet repeats its header rows."""
+def _check_workbook(path, *, key_value=(), summary=False):
+    """Every sheet prints at >= 7 pt; every table sheet repeats its header rows; with
+    `summary` (a written workbook), the first sheet is the one-page summary (checked through
+    LibreOffice where it is installed)."""
     wb = load_workbook(path)
     for ws in wb.worksheets:
         assert _printed(ws) >= SMALLEST_PT, (path.name, ws.title, _printed(ws))
-        if ws.title not in key_value:
+        if ws.title not in key_value and ws.title != "summary":
             assert ws.print_title_rows, (path.name, ws.title)
+    if summary:
+        assert wb.sheetnames[0] == "summary", path.name
+        _check_first_page(path)
     return wb
+
+
+# ----------------------------------------------------------------------------------------------
+# the first sheet through LibreOffice: one page, no text under 7 pt
+# ----------------------------------------------------------------------------------------------
+
+SOFFICE = shutil.which("soffice") or shutil.which("libreoffice")
+PDF_TOOLS = all(shutil.which(t) for t in ("pdftotext", "pdfinfo"))
+CALIBRATION_PT = 10.0  # the calibration cell's font [pt]
+# LibreOffice's text sizes read back to 0.1 pt (the words' boxes, calibrated on a 10 pt cell)
+PT_TOLERANCE = 0.1
+_WORD = re.compile(r'<word xMin="[-\d.]+" yMin="([-\d.]+)" xMax="[-\d.]+" yMax="([-\d.]+)">'
+                   r'(.*?)</word>')
+
+
+def _pdf(xlsx, out_dir):
+    """Convert a workbook to PDF with LibreOffice; return the PDF's path."""
+    subprocess.run([SOFFICE, "--headless", "--norestore", "--convert-to", "pdf", "--outdir",
+                    str(out_dir), str(xlsx)], check=True, capture_output=True, timeout=300)
+    pdf = out_dir / (xlsx.stem + ".pdf")
+    assert pdf.exists(), xlsx
+    return pdf
+
+
+def _words(pdf):
+    """The PDF's words and their box heights [pt] (pdftotext -bbox)."""
+    text = subprocess.run(["pdftotext", "-bbox", str(pdf), "-"], check=True,
+                          capture_output=True, text=True).stdout
+    return [(w, float(y1) - float(y0)) for y0, y1, w in _WORD.findall(text)]
+
+
+def _pages(pdf):
+    info = subprocess.run(["pdfinfo", str(pdf)], check=True, capture_output=True,
+                          text=True).stdout
+    return int(re.search(r"Pages:\s+(\d+)", info).group(1))
+
+
+_CALIBRATION = {}
+
+
+def _box_per_pt(out_dir):
+    """A word's box height per point of font, as LibreOffice prints it here (a 10 pt cell;
+    measured once a session)."""
+    if "box_per_pt" in _CALIBRATION:
+        return _CALIBRATION["box_per_pt"]
+    wb = Workbook()
+    cell = wb.active.cell(1, 1, "Calibration")
+    cell.font = Font(name="Calibri", sz=CALIBRATION_PT)
+    path = out_dir / "calibration.xlsx"
+    wb.save(path)
+    heights = [h for _, h in _words(_pdf(path, out_dir))]
+    assert heights
+    _CALIBRATION["box_per_pt"] = max(heights) / CALIBRATION_PT
+    return _CALIBRATION["box_per_pt"]
+
+
+def _check_first_page(path):
+    """The workbook's first sheet alone, through LibreOffice to PDF: one page, its smallest
+    word >= 7 pt (skipped where LibreOffice or poppler is missing)."""
+    if not (SOFFICE and PDF_TOOLS):
+        return
+    out = path.parent / f"{path.stem}_pdf"
+    out.mkdir(exist_ok=True)
+    wb = load_workbook(path)
+    for name in wb.sheetnames[1:]:
+        del wb[name]
+    first = out / f"{path.stem}_first.xlsx"
+    wb.save(first)
+    pdf = _pdf(first, out)
+    assert _pages(pdf) == 1, (path.name, _pages(pdf))
+    words = _words(pdf)
+    assert len(words) > 20, path.name  # the table, the notes and the footer printed
+    smallest = min(h for _, h in words) / _box_per_pt(out)
+    assert smallest >= SMALLEST_PT - PT_TOLERANCE, (path.name, smallest)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -228,7 +317,7 @@ def ranking_table(rng):
 @pytest.mark.parametrize("units", ["SI", "imperial"])
 def test_ranking_workbook_prints_readably(ranking_table, tmp_path, units):
     paths = write_ranking(ranking_table, tmp_path, units=units, objective=default_objective())
-    wb = _check_workbook(paths["xlsx"], key_value=("about",))
+    wb = _check_workbook(paths["xlsx"], key_value=("about",), summary=True)
     assert wb["ranking"].max_column >= 25  # the ~30-column table of the issue
     for name in ("ranking", "intervals"):  # too wide for one page: across pages at >= 8 pt
         assert not wb[name].sheet_properties.pageSetUpPr.fitToPage
@@ -244,7 +333,7 @@ def test_run_sheet_workbook_prints_readably(paper_vehicle, demo_library, tmp_pat
                              information=InformationOptions(n_bands=24, n_design_bands=6))
     for units in ("SI", "imperial"):
         path = write_run_sheet(plan, tmp_path / f"{units}.xlsx", units=units)
-        wb = _check_workbook(path, key_value=("information",))
+        wb = _check_workbook(path, key_value=("information",), summary=True)
         assert wb["run sheet"].sheet_properties.pageSetUpPr.fitToPage  # one page wide
 
 
@@ -261,7 +350,7 @@ def test_whatif_workbook_prints_readably(paper_vehicle, track_drive, demo_librar
                                   levels=(0.95, 1.05))])
     w = evaluate_whatif(paper_vehicle, drive, setups, demo_library, ps, baseline=setups[0])
     files = write_whatif(w, tmp_path / "w", units="imperial", top=2)
-    wb = _check_workbook(files["whatif.xlsx"], key_value=("settings",))
+    wb = _check_workbook(files["whatif.xlsx"], key_value=("settings",), summary=True)
     assert wb["table"]["A1"].value == "drive"
 
 
@@ -278,7 +367,7 @@ def test_optimize_workbook_prints_readably(paper_model, track_drive, demo_librar
                               curves=CurveOptions(knots_m_s=(0.05, 0.15, 0.4)),
                               solver=SolverOptions(max_iter=5))
     files = write_optimum(opt, demo_library, tmp_path / "o", units="imperial")
-    wb = _check_workbook(files["xlsx"], key_value=("solver",))
+    wb = _check_workbook(files["xlsx"], key_value=("solver",), summary=True)
     rep = wb["solver"]
     labels = [rep.cell(r, 1).value for r in range(1, rep.max_row + 1)]
     values = [rep.cell(r, 2).value for r in range(1, rep.max_row + 1)]

@@ -121,7 +121,7 @@ def test_plan_has_validation_runs(plan):
 def test_run_sheet_reads_back_to_the_plans_runs(plan, tmp_path, units):
     path = write_run_sheet(plan, tmp_path / "test_plan.xlsx", units=units)
     wb = load_workbook(path)
-    assert wb.sheetnames == ["run sheet", "crate", "information"]
+    assert wb.sheetnames == ["summary", "run sheet", "crate", "information"]
     assert wb["run sheet"]["A1"].value.startswith(RUN_SHEET_TITLE)
     assert not list(tmp_path.glob(".*.tmp"))  # written atomically, nothing left over
 

@@ -795,3 +795,24 @@ def test_whatif_baseline_from_a_ranking(tmp_path, demo_library):
     assert whatif_baseline(None) is None
     path.write_text("setup,LF,RF,LR,RR\nbest,L28,L28,L28,L28\n")
     assert whatif_baseline(None, ranking=path, ranked=ranked) is None
+
+
+def test_rank_stability_shortens_long_setup_names_with_a_key(rng):
+    """Click settings' names (~50 characters) show as #<nominal rank>, the key under the plot."""
+    from types import SimpleNamespace
+
+    from planner.report.whatif import rank_stability_figure
+
+    names = [f"TTX@ls={k},hs=0/TTX@ls={k},hs=0/TTX@ls=9,hs=1/TTX@ls=9,hs=1" for k in range(6)]
+    rows = [{"drive": "d", "perturbation": f"c{j}", "setup": n, "rank": int(r)}
+            for j in range(4) for n, r in zip(names, rng.permutation(6) + 1)]
+    result = SimpleNamespace(
+        robust=pd.DataFrame({"nominal_rank": np.arange(1, 7), "fragile": [False] * 6},
+                            index=names),
+        table=pd.DataFrame(rows), settings={"drives": ["d"], "method": "time"},
+        perturbations=SimpleNamespace(design="oat"))
+    fig = rank_stability_figure(result)
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert legend == [f"#{k}" for k in range(1, 7)]
+    key = fig.texts[0].get_text()
+    assert "#1  front TTX@ls=0,hs=0, rear TTX@ls=9,hs=1" in key

@@ -149,7 +149,8 @@ def run(args):
                                   use_model=not args.no_elements,
                                   bump_stops=bump_stop_library(args, model)),
                               packers=packer_bounds(args), progress=show_progress(args))
-    files = write_optimum(opt, library, out, units=args.units, overwrite=args.overwrite)
+    files = write_optimum(opt, library, out, units=args.units, overwrite=args.overwrite,
+                          run={"model": args.model, "crate": args.shocks})
     t = opt.table
     s = opt.solver
     lines = [f"optimized {len(opt.curves)} curve(s) ({opt.space.symmetry}) on "

@@ -47,6 +47,13 @@ def add_parser(subparsers):
                     "the same ranking either way)")
     sp.add_argument("--workers", type=int,
                     help="workers of a local cluster (default: cores)")
+    sp.add_argument("--section", action="append", metavar="NAME=START:STOP", default=None,
+                    help="also rank on this time window [s] of the drive, simulated alone as "
+                    "its drive file ('drive section') would be: sections.csv, the workbook's "
+                    "sheet 'sections' (repeatable; default: none)")
+    sp.add_argument("--laps", metavar="T0,T1,...", default=None,
+                    help="lap-start times [s]: also rank on each lap, as --section "
+                    "lapN=Tk:Tk+1 (default: none)")
     sp.set_defaults(func=run)
     return sp
 
@@ -61,7 +68,13 @@ def run(args):
     from planner.setups import read_setups
 
     check_out(args, folder=True)
+    sections = _sections(args)
     model, drive, library = read_inputs(args)
+    if sections:  # a window beyond the drive: said before anything is simulated
+        from planner.trackdrive import check_sections
+
+        check_sections(sections, n_samples=drive.n_samples, fs_hz=drive.fs_hz,
+                       of=f"the drive '{drive.name}'", where="rank --section")
     objective = default_objective() if args.objective is None else read_objective(args.objective)
     setups, constraints = None, None
     clicks = clicks_option(args)
@@ -85,13 +98,41 @@ def run(args):
                           loop=LoopOptions(oversample=args.oversample), elements=elements,
                           run=RunOptions(scheduler=args.scheduler, n_workers=args.workers),
                           progress=show_progress(args))
+    by_section = None
+    if sections:
+        from planner.section_ranking import rank_sections
+
+        by_section = rank_sections(ranking, model, drive, library, sections=sections,
+                                   loop=LoopOptions(oversample=args.oversample),
+                                   elements=elements, progress=show_progress(args))
+    used = {"model": args.model, "drive": f"{args.drive} ({drive.n_samples / drive.fs_hz:g} s "
+            f"at {drive.fs_hz:g} Hz)", "crate": args.shocks}
     files = write_ranking(ranking.table, out, units=args.units, objective=objective,
-                          baseline=ranking.baseline, overwrite=args.overwrite)
+                          baseline=ranking.baseline, overwrite=args.overwrite,
+                          sections=None if by_section is None else by_section.table, run=used)
     write_ranking_screening = out / "screening.csv"
     from planner.report import write_predictions_csv
 
     write_predictions_csv(ranking.screening, write_ranking_screening, units=args.units,
                           overwrite=args.overwrite)
     print(ranking.summary())
+    if by_section is not None:
+        print(by_section.summary())
     print("wrote " + ", ".join(str(p) for p in list(files.values()) + [write_ranking_screening]))
     return 0
+
+
+def _sections(args):
+    """The ``--section`` windows and the ``--laps`` laps, checked (names, order)."""
+    from planner.errors import PlannerError
+    from planner.trackdrive import lap_sections, parse_sections
+
+    sections = parse_sections(args.section, where="rank --section")
+    if args.laps:
+        laps = lap_sections(str(args.laps).split(","), where="rank --laps")
+        clash = {n for n, _, _ in laps} & {n for n, _, _ in sections}
+        if clash:
+            raise PlannerError(f"rank: --section names {sorted(clash)} clash with the laps' "
+                               "names; rename them")
+        sections += laps
+    return sections

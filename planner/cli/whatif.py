@@ -97,7 +97,10 @@ def run(args):
         elements=ElementOptions(use_model=not args.no_elements, bump_stops=stops),
         run=RunOptions(scheduler=args.scheduler, n_workers=args.workers),
         progress=show_progress(args))
-    files = write_whatif(result, out, units=args.units, overwrite=args.overwrite)
+    used = {"model": args.model, "drive": ", ".join(map(str, args.drive))
+            if isinstance(args.drive, (list, tuple)) else args.drive, "crate": args.shocks,
+            "what-if": args.perturb}
+    files = write_whatif(result, out, units=args.units, overwrite=args.overwrite, run=used)
     print(result.summary())
     print(f"wrote {len(files)} files to {out}: " + ", ".join(sorted(files)[:6])
           + (" ..." if len(files) > 6 else ""))

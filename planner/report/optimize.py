@@ -32,6 +32,7 @@ from planner.report.sheets import (
     write_key_values,
     write_table,
 )
+from planner.report.summary import summary_parts, write_summary_sheet
 from planner.setups import Setup, write_setups
 
 __all__ = [
@@ -228,7 +229,34 @@ def click_summary(optimum):
     return lines
 
 
-def _write_workbook(optimum, units, path):
+def _summary(optimum, units, run):
+    """The optimum's summary sheet: the optimum, the crate's best, the baseline and the
+    closest crate setups with their verdicts, key metrics (the first drive) and the plot."""
+    first = next(iter(optimum.metrics))
+    met = optimum.metrics[first]
+    t = optimum.table.sort_values("score", kind="stable")
+    t = pd.concat([t, met.loc[t.index, [c for c in met.columns if c in METRIC_QUANTITY]]],
+                  axis=1)
+    weighted = [m for m, w in optimum.objective.weights.items() if w > 0 and m in t.columns]
+    base = "/".join(optimum.baseline.ids())
+    base = base if base in t.index else next(
+        (n for n in t.index if t.loc[n, "kind"] == "baseline"), optimum.setup.name)
+    best = str(t.index[0])
+    notes = [f"the optimal curves ('{optimum.setup.name}', to build) gain "
+             f"{100 * optimum.gap:.2f} % over the crate's best '{optimum.crate_best}'; "
+             "scores are ratios to the baseline's metrics over the drives, lower is better; "
+             f"metrics on the drive '{first}'"]
+    used = list((run or {}).items())
+    used += [("drives", ", ".join(optimum.settings["drives"])),
+             ("objective", optimum.objective.name), ("symmetry", optimum.space.symmetry),
+             ("IPOPT", f"{optimum.solver['status']}, {optimum.solver['iterations']} "
+                       "iterations"), ("units", units)]
+    return summary_parts(t, best=best, baseline=base, metrics=weighted[:6], units=units,
+                         first=("kind",), title="shockplan optimize: summary", notes=notes,
+                         used=used)
+
+
+def _write_workbook(optimum, units, path, run=None):
     """``optimize.xlsx``: the force tables (SI, imperial), the setups, the solver's report;
     every sheet laid out and set to print with :mod:`planner.report.sheets`."""
     wb = Workbook()
@@ -325,6 +353,8 @@ def _write_workbook(optimum, units, path):
                     title_rows="1:1", footer=f"{what}: the best clicks per adjustable shock "
                     f"and corner group; gain over the best fixed setup {clicks.crate_best}, "
                     "gap to the continuous optimum")
+    write_summary_sheet(wb, units=units, footer=f"{what}: summary",
+                        **_summary(optimum, units, run))
     wb.save(path)
 
 
@@ -354,7 +384,7 @@ def stop_reason(solver):
     return _STOP_REASONS.get(status, f"not converged ({status})")
 
 
-def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
+def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False, run=None):
     """Write an optimum's files into a folder (built aside, then moved into place).
 
     Files: ``optimal_shocks.toml`` (the optimal shocks, table kind with lag, and the
@@ -376,6 +406,10 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
         Units of the shock library, the metrics and ``curves.png``'s axes.
     overwrite : bool
         Replace an existing folder.
+    run : dict of str to object, optional
+        What the run used (model, drive, crate), on the workbook's first sheet, the one-page
+        ``summary`` (the optimum, the crate's best, the baseline and the closest crate
+        setups with their verdicts and key metrics).
 
     Returns
     -------
@@ -401,7 +435,7 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
         closest = [s for s in setups if s.name != optimum.setup.name
                    and optimum.table.loc[s.name, "kind"] == "closest"]
         write_setups([optimum.setup] + clicks + closest, work / names["setups"], units=units)
-        _write_workbook(optimum, units, work / names["xlsx"])
+        _write_workbook(optimum, units, work / names["xlsx"], run=run)
         fig = curves_figure(optimum, library, units=units)
         fig.savefig(work / names["curves"], dpi=110)
         # wall times are logged, not written: a rerun writes the same bytes

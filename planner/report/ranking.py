@@ -64,14 +64,18 @@ from planner.report.sheets import (
     print_setup,
     text_width,
     wrap_lines,
+    write_table,
 )
+from planner.report.summary import summary_parts, write_summary_sheet
 
 __all__ = [
     "INTERVAL_SUFFIXES",
     "RANKING_FILES",
     "metric_of_column",
     "ranking_columns",
+    "label_key_text",
     "ranking_to_units",
+    "short_labels",
     "write_predictions_csv",
     "write_ranking",
 ]
@@ -84,14 +88,20 @@ INTERVAL_SUFFIXES = ("_lo", "_hi")
 PACKER_COLUMNS = tuple(f"packer_{c}" for c in CORNERS)
 #: Files written by :func:`write_ranking` (key -> file name); plots only when possible.
 RANKING_FILES = {"csv": "ranking.csv", "xlsx": "ranking.xlsx", "pareto": "pareto.png",
-                 "top_setups": "top_setups.png"}
+                 "top_setups": "top_setups.png", "sections": "sections.csv"}
 #: Metrics shown in ``top_setups.png`` without an objective (those present).
 DEFAULT_KEY_METRICS = tuple(f"tire_force_rms_{c}" for c in CORNERS) + (
     "ride_height_rms_front", "ride_height_rms_rear")
 #: At most this many metrics in ``top_setups.png``.
 MAX_KEY_METRICS = 6
-#: Setups labelled by name in ``pareto.png``.
+#: Setups labelled by name in ``pareto.png``: the best ones; the setups on the Pareto front
+#: are labelled too, up to :data:`MAX_PARETO_LABELS` labels in all (spread along the front
+#: when it has more).
 N_PARETO_LABELS = 5
+#: The most labels in ``pareto.png``.
+MAX_PARETO_LABELS = 14
+#: Setup names longer than this are shown as ``#<rank>`` in the plots, with a key.
+SHORT_LABEL_CHARS = 20
 # Label layout of pareto.png (see _place_labels) [pt]: the farthest a label may sit from
 # its point, the grid its corner is moved on, the gap kept between a label and a marker, a
 # line, a leader line or another label, and a leader line beyond this distance.
@@ -551,7 +561,8 @@ def _group_starts(cols):
     return [j + 1 for j in range(1, len(cols)) if family[j] != family[j - 1]]
 
 
-def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
+def _workbook_bytes(frame, *, units, objective, baseline, infeasible, summary=None,
+                    sections=None):
     wb = Workbook()
     ws = wb.active
     ws.title = "ranking"
@@ -587,6 +598,18 @@ def _workbook_bytes(frame, *, units, objective, baseline, infeasible):
                     title_cols=f"A:{get_column_letter(cols.index('setup') + 1)}",
                     group_starts=_group_starts(cols),
                     footer=f"{what}: interval of each prediction (lo, hi)")
+
+    if sections is not None:
+        sec = wb.create_sheet("sections")
+        heads = [_section_header(c) for c in sections.columns]
+        last = write_table(sec, sections, headers=heads, freeze_cols=2,
+                           formats={c: SCORE_FORMAT for c in sections.columns
+                                    if str(c).endswith("score")})
+        print_setup(sec, units=units, area=f"A1:{get_column_letter(sections.shape[1])}{last}",
+                    title_rows="1:1", title_cols="A:B",
+                    footer=f"{what}: the whole drive's and each section's score (its rank)")
+    if summary is not None:
+        write_summary_sheet(wb, units=units, footer=f"{what}: summary", **summary)
 
     bold = Font(name=_FONT, bold=True)
     about = wb.create_sheet("about")
@@ -815,10 +838,51 @@ def _place_labels(anchors, sizes, markers, lines, bounds, *, reach=_LABEL_REACH_
     return [None if o is None else o[:3] for o in best[1]]
 
 
-def _pareto_figure(table, baseline):
+def _spread_points(x, y, candidates, chosen, n):
+    """Up to `n` of `candidates` (positions), each the farthest from those chosen so far
+    (`chosen` first; coordinates scaled by their span): the extremes and the isolated
+    points first, one of a cluster at a time. Deterministic (ties: the first candidate)."""
+    pts = np.column_stack([x, y]).astype(float)
+    ok = np.isfinite(pts).all(axis=1)
+    span = np.ptp(pts[ok], axis=0) if ok.any() else np.ones(2)
+    pts = pts / np.where(span > 0, span, 1.0)
+    picked, taken = [], list(chosen)
+    rest = [int(k) for k in candidates if k not in set(chosen)]
+    while rest and len(picked) < n:
+        if taken:
+            d = np.min(np.linalg.norm(pts[rest][:, None, :] - pts[taken][None, :, :], axis=2),
+                       axis=1)
+        else:
+            d = -np.asarray(rest, float)  # none chosen yet: the first candidate
+        k = rest.pop(int(np.argmax(d)))
+        picked.append(k)
+        taken.append(k)
+    return picked
+
+
+def _score_label(column, objective):
+    """An axis label in words for a group's score column (``score_grip``): the group, the
+    metric families it weighs (from the objective), what the score is, which way is better."""
+    group = column[len("score_"):]
+    families = []
+    if objective is not None and group in objective.groups:
+        for m in objective.groups[group]:
+            words = column_label(m).split()
+            fam = " ".join(words[:-1]) if words[-1] in (*CORNERS, "front", "rear") else \
+                " ".join(words)
+            if fam not in families:
+                families.append(fam)
+    what = f": {', '.join(families)} / baseline" if families else ""
+    return f"{group} score [-]{what}"
+
+
+def _pareto_figure(table, baseline, objective=None):
     """score_grip vs score_platform: all setups, the Pareto front, the best labelled.
 
-    The :data:`N_PARETO_LABELS` best setups are labelled by name at the nearest
+    The :data:`N_PARETO_LABELS` best setups and the setups on the Pareto front (up to
+    :data:`MAX_PARETO_LABELS` labels in all, spread along the front) are labelled by name (``#<rank>``
+    and a key under the plot when a name is longer than :data:`SHORT_LABEL_CHARS`) at the
+    nearest
     place beside their point that touches no marker, no line of the front and no
     other label (:func:`_place_labels`, text measured with the Agg renderer), with a
     leader line when the label sits away from its point; a label with no such place
@@ -835,9 +899,22 @@ def _pareto_figure(table, baseline):
     feasible = (table["feasible"].to_numpy(dtype=bool) if "feasible" in table.columns
                 else np.ones(len(table), dtype=bool))
     front = pareto_front(table, x, y)
-    width_in, height_in = _PARETO_SIZE_IN
-    m = _PARETO_MARGIN_IN
-    fig = Figure(figsize=_PARETO_SIZE_IN)
+    # the labelled setups: the best, then the front's others, the best first
+    order = _best_order(table)
+    finite = np.isfinite(xv) & np.isfinite(yv)
+    best = [k for k in order[:N_PARETO_LABELS] if finite[k]]
+    best += _spread_points(xv, yv, np.flatnonzero(front & finite), best,
+                           MAX_PARETO_LABELS - len(best))
+    position = np.empty(len(table))
+    position[order] = np.arange(1, len(table) + 1)
+    ranks = (table["rank"].to_numpy(dtype=float)[best] if "rank" in table.columns
+             else position[best])
+    names, key = short_labels([str(table.index[k]) for k in best], ranks)
+    key = [key[j] for j in np.argsort(ranks, kind="stable")] if key else key
+    key_in = 0.135 * (len(key) + 1) + 0.15 if key else 0.0  # the key's lines under the axes
+    width_in, height_in = _PARETO_SIZE_IN[0], _PARETO_SIZE_IN[1] + key_in
+    m = dict(_PARETO_MARGIN_IN, bottom=_PARETO_MARGIN_IN["bottom"] + key_in)
+    fig = Figure(figsize=(width_in, height_in))
     FigureCanvasAgg(fig)
     ax = fig.add_axes((m["left"] / width_in, m["bottom"] / height_in,
                        1.0 - (m["left"] + m["right"]) / width_in,
@@ -859,9 +936,10 @@ def _pareto_figure(table, baseline):
         b = table.index.get_loc(baseline)
         ax.scatter([xv[b]], [yv[b]], s=120, marker="*", color="k", zorder=4,
                    label=f"baseline ({baseline})")
-    ax.set_xlabel(f"{x} (lower is better)")
-    ax.set_ylabel(f"{y} (lower is better)")
-    ax.set_title(f"Grip vs platform: {int(front.sum())} setups on the Pareto front")
+    ax.set_xlabel(_score_label(x, objective))
+    ax.set_ylabel(_score_label(y, objective))
+    ax.set_title(f"Grip vs platform (weighted RMS ratios, lower is better): "
+                 f"{int(front.sum())} setups on the Pareto front", fontsize=10)
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     ax.set_xlim(ax.get_xlim())  # freeze the limits: the labels are placed in display space
@@ -887,9 +965,8 @@ def _pareto_figure(table, baseline):
                                  np.maximum(c[:-1], c[1:]) + half_lw])
     bounds = np.asarray(ax.bbox.extents) * pt
 
-    best = [k for k in _best_order(table)[:N_PARETO_LABELS]
-            if np.isfinite(xv[k]) and np.isfinite(yv[k])]
-    names = [str(table.index[k]) for k in best]
+    if key:
+        label_key_text(fig, key, y_in=0.05)
     renderer = fig.canvas.get_renderer()
     sizes = []
     for name in names:
@@ -967,42 +1044,174 @@ def _normalizing_setup(table, objective, baseline):
     return str(table.index[0]) if 0 in hit else str(table.index[hit[0]])
 
 
+def short_labels(names, ranks=None, *, max_chars=SHORT_LABEL_CHARS):
+    """Plot labels of setups: their names, or ``#<rank>`` and a key when a name is long.
+
+    Parameters
+    ----------
+    names : sequence of str
+    ranks : sequence of int, optional
+        Each setup's rank (default: its position, from 1).
+    max_chars : int
+        Names up to this long are shown as they are.
+
+    Returns
+    -------
+    labels : list of str
+    key : list of str
+        ``"#<rank>  <name>"`` per setup when the labels are short ones, else empty.
+
+    Examples
+    --------
+    >>> short_labels(["L28/L28/DF/DF", "B20/B20/B20/B20"])
+    (['L28/L28/DF/DF', 'B20/B20/B20/B20'], [])
+    >>> short_labels(["TTX@ls=6,hs=2/TTX@ls=6,hs=2/TTX@ls=4,hs=2/TTX@ls=4,hs=2"], [3])[0]
+    ['#3']
+    """
+    names = [str(n) for n in names]
+    ranks = list(range(1, len(names) + 1)) if ranks is None else [
+        int(r) if np.isfinite(r) else k + 1 for k, r in enumerate(np.asarray(ranks, float))]
+    if not names or max(len(n) for n in names) <= max_chars:
+        return names, []
+    labels = [f"#{r}" for r in ranks]
+    width = max(len(lab) for lab in labels)
+    return labels, [f"{lab:<{width}}  {_compact_name(n)}" for lab, n in zip(labels, names)]
+
+
+def _compact_name(name):
+    """A setup's name ``LF/RF/LR/RR`` said once per axle where the sides match (``front A,
+    rear B``; ``all A``); other names as they are."""
+    parts = str(name).split("/")
+    if len(parts) != 4:
+        return str(name)
+    if len(set(parts)) == 1:
+        return f"all {parts[0]}"
+    if parts[0] == parts[1] and parts[2] == parts[3]:
+        return f"front {parts[0]}, rear {parts[2]}"
+    return str(name)
+
+
+def label_key_text(fig, key, *, y_in=0.1, size=7, meaning="the rank in ranking.csv"):
+    """Draw the key of short labels (:func:`short_labels`) at the bottom left of a figure.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure or SubFigure
+    key : list of str
+        The key's lines (none: nothing drawn).
+    y_in : float
+        The key's bottom above the figure's [in].
+    size : float
+        Font size [pt].
+    meaning : str
+        What ``#n`` is, the key's first line.
+    """
+    if key:
+        height_in = fig.figure.get_figheight() * fig.bbox.height / fig.figure.bbox.height
+        fig.text(0.01, y_in / height_in, "\n".join([f"#: {meaning}"] + list(key)),
+                 ha="left", va="bottom", fontsize=size, family="monospace")
+
+
 def _top_figure(table, metrics, reference, top):
-    """Grouped bars of key metrics of the best setups, relative to a reference row."""
+    """Key metrics of the best setups as their change from a reference row [%], with the
+    intervals; the axis zoomed to the values (the reference at 0), names in words, long
+    setup names shortened to ``#<rank>`` with a key under the plot."""
     order = _best_order(table)[:top]
     sub = table.iloc[order]
     ref_name = reference if reference is not None else str(sub.index[0])
     ref = table.loc[ref_name]
     n_s, n_m = len(sub), len(metrics)
-    width = 0.8 / n_m
-    fig = _new_figure((max(6.0, 0.9 * n_s + 2.5), 5.2))
-    ax = fig.add_subplot()
-    x = np.arange(n_s)
-    for k, m in enumerate(metrics):
-        base = float(ref[m])
-        scale = 1.0 / base if np.isfinite(base) and base != 0 else np.nan
-        v = sub[m].to_numpy(dtype=float, na_value=np.nan) * scale
-        yerr = None
-        if f"{m}_lo" in sub.columns and f"{m}_hi" in sub.columns:
-            lo = sub[f"{m}_lo"].to_numpy(dtype=float, na_value=np.nan) * scale
-            hi = sub[f"{m}_hi"].to_numpy(dtype=float, na_value=np.nan) * scale
-            yerr = np.vstack([np.clip(v - lo, 0, None), np.clip(hi - v, 0, None)])
-            yerr = np.nan_to_num(yerr)
-        ax.bar(x - 0.4 + (k + 0.5) * width, v, width, yerr=yerr, capsize=2,
-               color=f"C{k % 10}", label=m, error_kw={"lw": 0.8})
-    ax.axhline(1.0, color="k", lw=0.8, ls="--")
-    labels = [str(s) for s in sub.index]
+    ranks = sub["rank"].to_numpy(dtype=float) if "rank" in sub.columns else None
+    labels, key = short_labels(sub.index, ranks)
     if "feasible" in sub.columns:
         labels = [s if f else f"{s}\n(infeasible)" for s, f in
                   zip(labels, sub["feasible"].to_numpy(dtype=bool))]
-    ax.set_xticks(x, labels, rotation=30, ha="right", fontsize=8)
+    key_in = 0.135 * (len(key) + 1) + 0.1 if key else 0.0
+    outer = _new_figure((max(6.0, 0.9 * n_s + 2.5), 5.2 + key_in))
+    if key:  # the plot above, the key of the short labels under it
+        fig, low = outer.subfigures(2, 1, height_ratios=(5.2, key_in))
+        label_key_text(low, key, y_in=0.02)
+    else:
+        fig = outer
+    ax = fig.add_subplot()
+    x = np.arange(n_s)
+    width = 0.8 / n_m
+    widest = []  # each metric's widest interval [% of the reference]
+    for k, m in enumerate(metrics):
+        base = float(ref[m])
+        scale = 100.0 / base if np.isfinite(base) and base != 0 else np.nan
+        v = sub[m].to_numpy(dtype=float, na_value=np.nan) * scale - 100.0
+        yerr = None
+        if f"{m}_lo" in sub.columns and f"{m}_hi" in sub.columns:
+            lo = sub[f"{m}_lo"].to_numpy(dtype=float, na_value=np.nan) * scale - 100.0
+            hi = sub[f"{m}_hi"].to_numpy(dtype=float, na_value=np.nan) * scale - 100.0
+            yerr = np.nan_to_num(np.vstack([np.clip(v - lo, 0, None), np.clip(hi - v, 0, None)]))
+            widest.append(float(np.max(yerr.sum(axis=0), initial=0.0)))
+        ax.errorbar(x - 0.4 + (k + 0.5) * width, v, yerr=yerr, fmt="o", ms=5, capsize=3,
+                    lw=1.0, color=f"C{k % 10}", label=column_label(m))
+    ax.axhline(0.0, color="k", lw=0.8, ls="--")
+    for edge in x[:-1] + 0.5:  # the setups apart
+        ax.axvline(edge, color="0.85", lw=0.6)
+    ax.set_xlim(-0.5, n_s - 0.5)
+    ax.set_xticks(x, labels, rotation=0 if key else 30, ha="center" if key else "right",
+                  fontsize=8)
     what = "baseline" if reference is not None else "best setup"
-    ax.set_ylabel(f"metric / {what} ({ref_name}) [-]")
-    fig.suptitle(f"Top {n_s} setups: key metrics relative to the {what}")
+    ax.set_ylabel(f"change from the {what} ({ref_name}) [%]")
+    lo_y, hi_y = ax.get_ylim()
+    whiskers = "whiskers: the prediction's interval"
+    if widest and max(widest) < 0.02 * (hi_y - lo_y):  # hidden by the markers: say how wide
+        whiskers = f"the intervals, {max(widest):.2g} % wide at most, hide behind the points"
+    fig.suptitle(f"Top {n_s} setups: key metrics against the {what} (lower is lower RMS; "
+                 f"{whiskers})")
     ax.grid(True, axis="y", lw=0.3, alpha=0.5)
-    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", fontsize=7,
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", fontsize=8,
                ncol=min(n_m, 6), frameon=False)
-    return fig
+    return outer
+
+
+# ----------------------------------------------------------------------------------------------
+# the summary sheet and the sections (compute the rows; planner.report.summary lays them out)
+# ----------------------------------------------------------------------------------------------
+
+def _section_header(col):
+    """A sections table's header: ``kerb_score`` -> ``kerb score``; ``score`` -> ``whole
+    drive score``."""
+    if col in ("score", "rank"):
+        return f"whole drive {col}"
+    for end in ("_score", "_rank"):
+        if str(col).endswith(end):
+            return f"{col[:-len(end)]} {end[1:]}"
+    return column_label(col)
+
+
+def _section_frame(sections):
+    """The sections table as written: ``rank, setup``, the shocks, the scores, ``wins``."""
+    t = _check_table(sections, "write_ranking: sections", corners=False)
+    frame = t.reset_index()
+    first = [c for c in ("rank", "setup") if c in frame.columns]
+    return frame[first + [c for c in frame.columns if c not in first]]
+
+
+def _summary_parts(ranked, units, objective, ref, key_metrics, *, sections, run, histograms):
+    """The summary sheet's parts (:func:`planner.report.summary.summary_parts`)."""
+    best = str(ranked.index[0])
+    base = ref if ref is not None else best
+    notes = [f"best of {len(ranked)} setups simulated in the time domain: '{best}'"
+             + (f"; baseline '{base}'" if base != best else " (also the baseline)")
+             + "; scores are ratios to the baseline's metrics, lower is better"]
+    if sections is not None and "wins" in sections.columns:
+        won = [(s, str(n)) for n, v in sections["wins"].items() for s in str(v or "").split()
+               if str(n) != best]
+        notes.append("sections won by another setup than the whole drive's best: "
+                     + ("; ".join(f"{s}: '{w}'" for s, w in won) if won else "none"))
+    used = list((run or {}).items())
+    if objective is not None and not any(k == "objective" for k, _ in used):
+        used.append(("objective", objective.name + (f" ({objective.source})"
+                                                     if objective.source else "")))
+    used.append(("units", units))
+    return summary_parts(ranked, best=best, baseline=base, metrics=key_metrics, units=units,
+                         title="shockplan ranking: summary", notes=notes, used=used,
+                         histograms=histograms)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1010,7 +1219,7 @@ def _top_figure(table, metrics, reference, top):
 # ----------------------------------------------------------------------------------------------
 
 def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, overwrite=False,
-                  top=10):
+                  top=10, sections=None, run=None, histograms=None):
     """Write the ranking of setups as CSV, Excel workbook and plots.
 
     Parameters
@@ -1033,6 +1242,18 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
         Replace existing files.
     top : int
         Number of best setups in ``top_setups.png``.
+    sections : pandas.DataFrame, optional
+        The section table (:attr:`planner.section_ranking.SectionRanking.table`): written as
+        ``sections.csv`` and the workbook's sheet "sections"; the sections won by another
+        setup than the best are named on the summary sheet.
+    run : dict of str to object, optional
+        What the run used, for the summary sheet (``{"model": ..., "drive": ...,
+        "crate": ...}``); the objective's name is added.
+    histograms : pandas.DataFrame, optional
+        Predicted shock-velocity histograms (columns ``setup, corner, velocity_lo,
+        velocity_hi, share`` in `units`): the summary's plot is the best's against the
+        baseline's (:func:`planner.report.summary.summary_figure`); without them, the key
+        metrics' change.
 
     Returns
     -------
@@ -1040,7 +1261,7 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
         ``"csv"``: ``ranking.csv``; ``"xlsx"``: ``ranking.xlsx``;
         ``"pareto"``: ``pareto.png`` (only with columns ``score_grip`` and
         ``score_platform``); ``"top_setups"``: ``top_setups.png`` (only with
-        metric columns).
+        metric columns); ``"sections"``: ``sections.csv`` (only with `sections`).
 
     Raises
     ------
@@ -1060,6 +1281,12 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
     setup, LF, RF, LR, RR``, metrics, further columns. ``ranking.xlsx``, to
     read and to print:
 
+    - sheet "summary", first, on one page (:func:`planner.report.summary.write_summary_sheet`):
+      the best setups (and the baseline) with their verdicts against the best and the
+      baseline (:func:`planner.report.summary.verdicts`: tied where the ranking's
+      ``unresolved`` pairs say the order is not resolved), scores and key metrics in
+      `units`, the sections' winners, what the run used, and the plot of the best against
+      the baseline;
     - sheet "ranking": the key columns first (``rank, setup, LF, RF, LR, RR,
       score, score_<group>, feasible``, the objective's weighted metrics),
       then the other metrics, then the further columns with the long texts
@@ -1096,6 +1323,8 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
         keys.append("pareto")
     if key_metrics:
         keys.append("top_setups")
+    if sections is not None:
+        keys.append("sections")
     paths = {k: out_dir / RANKING_FILES[k] for k in keys}
     for path in paths.values():
         check_can_write(path, overwrite=overwrite)
@@ -1107,11 +1336,17 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
     infeasible = (~ranked["feasible"].to_numpy(dtype=bool) if "feasible" in ranked.columns
                   else np.zeros(len(ranked), dtype=bool))
     about_base = ref if ref is not None else (objective.baseline if objective else None)
+    section_frame = None
+    if sections is not None:
+        section_frame = _section_frame(sections)
+        write_csv(paths["sections"], section_frame, units=units, overwrite=overwrite)
+    summary = _summary_parts(ranked, units, objective, ref, key_metrics, sections=sections,
+                             run=run, histograms=histograms)
     atomic_write_bytes(paths["xlsx"], _workbook_bytes(
-        frame, units=units, objective=objective, baseline=about_base, infeasible=infeasible),
-        overwrite=overwrite)
+        frame, units=units, objective=objective, baseline=about_base, infeasible=infeasible,
+        summary=summary, sections=section_frame), overwrite=overwrite)
     if "pareto" in paths:
-        _save_png(_pareto_figure(table, ref), paths["pareto"], overwrite=overwrite)
+        _save_png(_pareto_figure(table, ref, objective), paths["pareto"], overwrite=overwrite)
     if "top_setups" in paths:
         _save_png(_top_figure(table, key_metrics, ref, int(top)), paths["top_setups"],
                   overwrite=overwrite)

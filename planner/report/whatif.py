@@ -24,18 +24,20 @@ from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.models.vehicle import VEHICLE_KEYS
 from ident.sim.metrics import METRIC_QUANTITY
 from planner.errors import PlannerError
-from planner.report.ranking import ranking_to_units
+from planner.report.ranking import label_key_text, ranking_to_units, short_labels
 from planner.report.sheets import (
     column_label,
     print_setup,
     write_key_values,
     write_table,
 )
+from planner.report.summary import N_SUMMARY_ROWS, summary_figure, write_summary_sheet
 from planner.screen import describe_agreement
 
 __all__ = [
     "WEIGHTED_CHANGE",
     "factor_effects",
+    "robust_verdicts",
     "tornado_figure",
     "rank_stability_figure",
     "write_whatif",
@@ -298,13 +300,18 @@ def rank_stability_figure(result, *, top=10):
     t = result.table[result.table["setup"].isin(names)].copy()
     t["condition"] = t["drive"] + " | " + t["perturbation"]
     piv = t.pivot_table(index="condition", columns="setup", values="rank", sort=False)[names]
-    fig = Figure(figsize=(9.0, 5.0))
+    # long names (click settings): #<nominal rank> on the plot, the key under it
+    short, key = short_labels(names, rob.loc[names, "nominal_rank"].to_numpy(dtype=float))
+    label = dict(zip(names, short))
+    key_in = 0.135 * (len(key) + 1) + 0.1 if key else 0.0
+    fig = Figure(figsize=(9.0, 5.0 + key_in))
+    label_key_text(fig, key, y_in=0.05, meaning="the nominal rank (robust.csv)")
     ax = fig.add_subplot()
     if len(piv) <= 30:
         x = np.arange(len(piv))
         for n in names:
             ax.plot(x, piv[n].to_numpy(), marker="o", ms=3, lw=1.2,
-                    label=f"{n}{' (fragile)' if rob.loc[n, 'fragile'] else ''}")
+                    label=f"{label[n]}{' (fragile)' if rob.loc[n, 'fragile'] else ''}")
         labels = [c.split(" | ", 1)[1] if len(result.settings["drives"]) == 1 else c
                   for c in piv.index]
         ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)
@@ -315,8 +322,8 @@ def rank_stability_figure(result, *, top=10):
         ax.plot(np.arange(1, len(names) + 1), rob.loc[names, "nominal_rank"].to_numpy(), "D",
                 color="#C44E52", ms=5, label="nominal rank")
         ax.set_xticks(np.arange(1, len(names) + 1),
-                      [f"{n}{' *' if rob.loc[n, 'fragile'] else ''}" for n in names],
-                      rotation=45, ha="right", fontsize=7)
+                      [f"{label[n]}{' *' if rob.loc[n, 'fragile'] else ''}" for n in names],
+                      rotation=0 if key else 45, ha="center" if key else "right", fontsize=7)
         # beside the axes, as the lines' legend: inside, it may cover a box or a whisker
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
         ax.set_xlabel("setup (* fragile rank); boxes 25-75 %, whiskers 5-95 % of conditions")
@@ -325,7 +332,7 @@ def rank_stability_figure(result, *, top=10):
     ax.set_ylabel("rank (1 = best)")
     ax.set_title(f"rank stability over {len(piv)} conditions "
                  f"({result.perturbations.design}, {result.settings['method']})", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, key_in / fig.get_figheight(), 1, 1))
     return fig
 
 
@@ -344,17 +351,22 @@ _TIMING_KEYS = ("elapsed_s", "evaluations_per_s", "scheduler", "address", "n_wor
                 "n_tasks")
 
 
-def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
+def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False, run=None):
     """Write a what-if's files into a folder (built aside, moved into place at the end).
 
-    Files: ``whatif.xlsx`` (sheets ``robust``, ``conditions``, ``effects`` and
-    ``table``), ``whatif.csv`` (the long table, metrics in `units`), ``robust.csv``,
+    Files: ``whatif.xlsx`` (first the one-page ``summary``: the robust ranking's best
+    setups, each one's verdict against the robust best, what the run used and the best's
+    scores against the baseline's; then, as the appendix, the sheets ``robust``,
+    ``conditions``, ``effects`` and ``table``), ``whatif.csv`` (the long table, metrics in `units`), ``robust.csv``,
     ``conditions.csv``, ``rank_stability.png`` and ``tornado/<nn>_<setup>.png`` for the
     `top` setups of the robust ranking. With ``click`` or ``fade`` factors also
     ``tolerance.csv`` and the sheet ``tolerance`` (each setup's spread of score, rank
     and metrics over each such factor's levels, :attr:`WhatIf.tolerance`); the table's
     ``clipped`` column says where a click hit the end of an adjuster's range. Each
     CSV's last column is ``units`` (`units` on every row).
+
+    `run` (optional, ``{label: value}``): what the run used (model, drive, crate, what-if
+    file), on the summary sheet.
 
     Returns
     -------
@@ -388,7 +400,8 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False):
             fig.savefig(work / "tornado" / f"{k + 1:02d}_{_safe_name(n)}.png", dpi=110)
         fig = rank_stability_figure(result)
         fig.savefig(work / "rank_stability.png", dpi=110)
-        _write_workbook(result, table, effects, units, work / "whatif.xlsx", tolerance)
+        _write_workbook(result, table, effects, units, work / "whatif.xlsx", tolerance,
+                        run=run)
     for p in sorted(out.rglob("*")):
         if p.is_file():
             files[str(p.relative_to(out))] = p
@@ -412,7 +425,77 @@ def _tolerance_to_units(tol, units):
     return out
 
 
-def _write_workbook(result, table, effects, units, path, tolerance=None):
+def robust_verdicts(robust):
+    """Each setup of a robust ranking against its best (the first row): ``best``, ``tied``
+    where the setup ranks first in some condition (``best_share`` > 0: the conditions do
+    not separate it from the best), else ``worse``; ``infeasible`` where it is feasible in
+    no condition.
+
+    Examples
+    --------
+    >>> r = pd.DataFrame({"best_share": [0.7, 0.3, 0.0], "feasible_share": [1, 1, 0.0]},
+    ...                  index=["a", "b", "c"])
+    >>> robust_verdicts(r).tolist()
+    ['best', 'tied', 'infeasible']
+    """
+    out = []
+    for k, (name, r) in enumerate(robust.iterrows()):
+        if k == 0:
+            out.append("best")
+        elif "feasible_share" in robust.columns and float(r["feasible_share"]) == 0.0:
+            out.append("infeasible")
+        elif float(r.get("best_share", 0.0)) > 0.0:
+            out.append("tied")
+        else:
+            out.append("worse")
+    return pd.Series(out, index=robust.index, name="verdict")
+
+
+def _summary(result, units, run):
+    """The what-if's summary sheet: the robust ranking's head (its first page)."""
+    rob = result.robust
+    head = rob.head(N_SUMMARY_ROWS)
+    frame = pd.DataFrame({"robust rank": np.arange(1, len(head) + 1),
+                          "setup": [str(n) for n in head.index],
+                          "vs robust best": robust_verdicts(rob).loc[head.index].to_numpy()},
+                         index=head.index)
+    keep = [c for c in ("nominal_rank", "mean_score", "worst_score", "nominal_score",
+                        "best_rank", "worst_rank", "best_share", "moved_share",
+                        "feasible_share", "fragile") if c in head.columns]
+    frame = pd.concat([frame, head[keep]], axis=1)
+    formats = {c: "0.0%" for c in keep if c.endswith("_share")}
+    formats.update({c: "0.0000" for c in keep if c.endswith("_score")})
+    n_cond = len(result.conditions)
+    notes = [f"robust ranking of {len(rob)} setups over {n_cond} conditions (by mean score; "
+             "scores are ratios to the baseline's nominal metrics, lower is better); the "
+             "other sheets are the appendix: 'robust' holds every setup",
+             "vs robust best: tied = ranks first in some condition (the conditions do not "
+             "separate it from the best); fragile = its rank moves more than "
+             f"{result.settings.get('rank_tolerance', '?')} place(s) in more than "
+             f"{result.settings.get('fragile_share', '?')} of the conditions"]
+    used = list((run or {}).items())
+    if "model" in result.settings and not any(k == "model" for k, _ in used):
+        used.append(("model", result.settings["model"]))
+    if "drives" in result.settings and not any(k == "drive" for k, _ in used):
+        d = result.settings["drives"]
+        used.append(("drives", ", ".join(map(str, d)) if isinstance(d, (list, tuple)) else d))
+    used += [("objective", result.objective.name), ("baseline", result.baseline),
+             ("units", units)]
+    figure = None
+    best, base = str(rob.index[0]), result.baseline
+    scores = [c for c in ("nominal_score", "mean_score", "worst_score") if c in rob.columns]
+    if base in rob.index and base != best and scores:
+        labels = {c: f"{column_label(c)}: {rob.loc[base, c]:.4f} -> {rob.loc[best, c]:.4f}"
+                  for c in scores}
+        figure = summary_figure(rob[scores], best=best, baseline=base, labels=labels,
+                                title=f"scores: robust best '{best}' against baseline "
+                                      f"'{base}'")
+    return {"title": "shockplan what-if: robust ranking", "table": frame,
+            "headers": [column_label(c) for c in frame.columns], "formats": formats,
+            "notes": notes, "used": used, "figure": figure}
+
+
+def _write_workbook(result, table, effects, units, path, tolerance=None, run=None):
     """``whatif.xlsx``: sheets robust, conditions, effects, table and settings, each laid out
     and set to print with :mod:`planner.report.sheets` (the wide table across pages, the
     drive, condition and setup repeated on each)."""
@@ -490,6 +573,8 @@ def _write_workbook(result, table, effects, units, path, tolerance=None):
     ws = wb.create_sheet("settings")
     last = write_key_values(ws, rows)
     print_setup(ws, units=units, area=f"A1:B{last}", footer=f"{what}: settings")
+    write_summary_sheet(wb, units=units, footer=f"{what}: robust ranking (summary)",
+                        **_summary(result, units, run))
     wb.save(path)
 
 
