@@ -39,7 +39,12 @@ spec's metrics, the normalized tire forces ``tire_force_rms_norm_XX``, and all
 of them with the suffix ``_body`` or ``_wheelhop``; and, where the loop holds the real
 car's elements (:mod:`planner.elements`), ``bump_stop_contact_share_XX``,
 ``tire_liftoff_share_XX`` (shares of time, 0-1) and ``tire_contact_min_XX`` [N]: limit
-lift-off as travel is limited, ``tire_liftoff_share_LR = { max = 0.01 }``. Group names may use
+lift-off as travel is limited, ``tire_liftoff_share_LR = { max = 0.01 }``; where the loop
+counts the shock-velocity histograms (:mod:`planner.histograms`), ``share_low_speed_XX``,
+``bump_rebound_ratio_XX`` and, against a logged histogram, ``histogram_distance_XX``: e.g.
+``bump_rebound_ratio_LF = { max = 1.2 }``, or a weight on ``histogram_distance_XX`` to stay
+near the logged car (the screening scores without them, :func:`time_domain_metrics`). Group
+names may use
 letters, digits, ``_`` and ``-``; a group ``grip`` gives the score column
 ``score_grip``. A group sub-score is not re-normalized: when the groups
 partition the weights, the group scores add up to the score.
@@ -97,6 +102,8 @@ __all__ = [
     "ranking_position",
     "mark_inventory",
     "pareto_front",
+    "TIME_DOMAIN_PREFIXES",
+    "time_domain_metrics",
 ]
 
 logger = logging.getLogger(__name__)
@@ -296,6 +303,27 @@ class Objective:
         """tuple of str: every metric the objective needs (weights, then limits)."""
         return tuple(dict.fromkeys([*self.weights, *self.limits]))
 
+    def without_metrics(self, names):
+        """This objective without the metrics `names` (their weights, group entries and
+        limits): what a stage that cannot predict them scores with (the screening has no
+        shock-velocity histograms, :func:`time_domain_metrics`).
+
+        Returns
+        -------
+        Objective or None
+            `self` when it uses none of them; None when no weight > 0 would remain.
+        """
+        drop = set(names)
+        if not drop & set(self.metrics):
+            return self
+        weights = {m: w for m, w in self.weights.items() if m not in drop}
+        if not any(weights.values()):
+            return None
+        groups = {g: [m for m in ms if m not in drop] for g, ms in self.groups.items()}
+        return Objective(self.name, weights, groups={g: ms for g, ms in groups.items() if ms},
+                         limits={m: dict(v) for m, v in self.limits.items() if m not in drop},
+                         baseline=self.baseline, source=self.source)
+
     @property
     def total_weight(self):
         """float: the sum of the weights, the baseline's score."""
@@ -319,6 +347,22 @@ class Objective:
         if self.limits:
             out["limits"] = {m: dict(spec) for m, spec in self.limits.items()}
         return out
+
+
+#: Metric name prefixes predicted in the time domain only (the shock-velocity histograms'
+#: summaries, :mod:`planner.histograms`): the screening scores without them.
+TIME_DOMAIN_PREFIXES = ("share_low_speed_", "bump_rebound_ratio_", "histogram_distance_")
+
+
+def time_domain_metrics(objective):
+    """The metrics `objective` uses that only the time domain predicts (the histograms'
+    summaries, :data:`TIME_DOMAIN_PREFIXES`), in its order.
+
+    Returns
+    -------
+    tuple of str
+    """
+    return tuple(m for m in objective.metrics if m.startswith(TIME_DOMAIN_PREFIXES))
 
 
 def _objective_from_state(state, source):

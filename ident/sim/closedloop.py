@@ -591,8 +591,7 @@ def histogram_edges(width_m_s, limit_m_s):
         raise ValueError(f"histogram bins: 2 x limit {limit:g} m/s is not a whole number of "
                          f"bins of width {width:g} m/s; make the limit a multiple of half the "
                          "width (e.g. 0.025 m/s bins over +-0.25 m/s)")
-    inner = -limit + width * np.arange(n_inner + 1)
-    inner[np.abs(inner) < 1e-12 * width] = 0.0  # the middle edge of an even count: 0 exactly
+    inner = width * (np.arange(n_inner + 1) - n_inner / 2)  # symmetric, 0 exactly if even
     return np.concatenate([[-np.inf], inner, [np.inf]])
 
 

@@ -6,7 +6,8 @@ from pathlib import Path
 
 from planner.cli.common import (OBJECTIVE_HELP, add_prediction_inputs, add_try_options,
                                 baseline_arg, bump_stop_library, check_out, element_choices,
-                                int_at_least, parse_fixed, read_inputs, show_progress)
+                                histogram_options, int_at_least, parse_fixed, read_inputs,
+                                show_progress)
 
 __all__ = ["add_parser", "run"]
 
@@ -82,7 +83,9 @@ def run(args):
     ranking = rank_setups(model, drive, library, setups=setups, constraints=constraints,
                           objective=objective, baseline=baseline, top=args.simulate,
                           uncertainty=not args.no_uncertainty,
-                          loop=LoopOptions(oversample=args.oversample), elements=elements,
+                          loop=LoopOptions(oversample=args.oversample,
+                                           histograms=histogram_options(args)),
+                          elements=elements,
                           run=RunOptions(scheduler=args.scheduler, n_workers=args.workers),
                           progress=show_progress(args))
     files = write_ranking(ranking.table, out, units=args.units, objective=objective,
@@ -92,6 +95,12 @@ def run(args):
 
     write_predictions_csv(ranking.screening, write_ranking_screening, units=args.units,
                           overwrite=args.overwrite)
+    written = list(files.values()) + [write_ranking_screening]
+    if ranking.histograms is not None:
+        from planner.histograms import HISTOGRAMS_FILE, write_histograms_csv
+
+        written.append(write_histograms_csv(ranking.histograms, out / HISTOGRAMS_FILE,
+                                            units=args.units, overwrite=args.overwrite))
     print(ranking.summary())
-    print("wrote " + ", ".join(str(p) for p in list(files.values()) + [write_ranking_screening]))
+    print("wrote " + ", ".join(str(p) for p in written))
     return 0
