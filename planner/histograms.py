@@ -57,6 +57,7 @@ __all__ = [
     "total_variation",
     "write_histograms_csv",
     "histograms_path",
+    "logged_histograms",
 ]
 
 #: The summary metrics of a histogram in a predictions or ranking table, per corner.
@@ -366,3 +367,36 @@ def histograms_path(predictions_csv):
 
     p = Path(predictions_csv)
     return p.with_name(f"{p.stem}_histograms.csv")
+
+
+def logged_histograms(logs, options, *, name="logged"):
+    """The shock-velocity histogram of track logs (all their samples together).
+
+    Parameters
+    ----------
+    logs : sequence of ident.data.tracklog.TrackLog
+        Or any records with ``channels`` (SI) and ``fs_hz``: each corner's
+        ``shock_velocity_XX`` [m/s], else its ``shock_travel_XX`` [m] differentiated
+        (:func:`numpy.gradient` at the log's rate); a corner with neither has NaN shares.
+    options : planner.options.HistogramOptions
+    name : str
+        The setup name of the row.
+
+    Returns
+    -------
+    ShockHistograms
+        One row (:func:`histograms_of` of the joined samples).
+    """
+    joined = {}
+    for c in CORNERS:
+        parts = []
+        for lg in logs:
+            ch = lg.channels
+            if f"shock_velocity_{c}" in ch:
+                parts.append(np.asarray(ch[f"shock_velocity_{c}"], dtype=float))
+            elif f"shock_travel_{c}" in ch and len(ch[f"shock_travel_{c}"]) > 1:
+                parts.append(np.gradient(np.asarray(ch[f"shock_travel_{c}"], dtype=float))
+                             * float(lg.fs_hz))
+        if parts:
+            joined[f"shock_velocity_{c}"] = np.concatenate(parts)
+    return histograms_of(joined, options, name=name)
