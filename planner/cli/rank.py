@@ -40,6 +40,14 @@ def add_parser(subparsers):
                     "domain (default %(default)s; the baseline and a spread of the "
                     "others are checked besides)")
     add_try_options(sp)
+    sp.add_argument("--log", action="append", metavar="LOG", default=None,
+                    help="track log(s) whose shock-velocity histogram is the target: each "
+                    "setup's distance from it per corner, histogram_distance_XX (total "
+                    "variation, 0-1), which the objective may weight (repeatable; default: "
+                    "none)")
+    sp.add_argument("--log-map", metavar="MAP.toml", default=None,
+                    help="channel map of the --log files (as drive from-track --map; "
+                    "default: their columns are canonical names)")
     sp.add_argument("--no-uncertainty", action="store_true",
                     help="skip the Monte Carlo intervals (default: computed)")
     sp.add_argument("--scheduler", metavar="ADDRESS|local",
@@ -80,11 +88,22 @@ def run(args):
     elements = ElementOptions(use_model=not args.no_elements, bump_stops=stops,
                               **element_choices(args))
     out = Path(args.out)
+    hist = histogram_options(args)
+    target = None
+    if args.log:
+        from ident.data.tracklog import read_track_log
+        from planner.errors import PlannerError
+        from planner.histograms import logged_histograms
+
+        if hist is None:
+            raise PlannerError("rank: --log compares histograms; drop --histogram-bins none")
+        logs = [read_track_log(p, channel_map=args.log_map) for p in args.log]
+        target = logged_histograms(logs, hist, name="logged")
     ranking = rank_setups(model, drive, library, setups=setups, constraints=constraints,
                           objective=objective, baseline=baseline, top=args.simulate,
                           uncertainty=not args.no_uncertainty,
-                          loop=LoopOptions(oversample=args.oversample,
-                                           histograms=histogram_options(args)),
+                          loop=LoopOptions(oversample=args.oversample, histograms=hist),
+                          histogram_target=target,
                           elements=elements,
                           run=RunOptions(scheduler=args.scheduler, n_workers=args.workers),
                           progress=show_progress(args))
