@@ -176,7 +176,8 @@ def test_demo_outputs(demo):
     out, _ = demo
     assert (out / "session" / "session.toml").is_file()
     assert (out / "model.npz").is_file() and any((out / "frf_plots").glob("*.png"))
-    for name in ("ranking.csv", "ranking.xlsx", "pareto.png", "top_setups.png", "screening.csv"):
+    for name in ("ranking.csv", "ranking.xlsx", "pareto.png", "top_setups.png", "screening.csv",
+                 "histograms.csv"):
         assert (out / "ranking" / name).is_file(), name
     for name in ("optimal_shocks.toml", "optimal_setup.csv", "optimize.xlsx", "curves.png",
                  "convergence.csv"):
@@ -188,7 +189,8 @@ def test_demo_outputs(demo):
     # every CSV says the demo's unit system (issue 23): the drive first, read without --units;
     # the header first and the unit system as the last column, on every row (issue 36)
     for csv_file in ("track_drive.csv", "model_summary.csv", "ranking/ranking.csv",
-                     "ranking/screening.csv", "optimize/optimal_setup.csv",
+                     "ranking/screening.csv", "ranking/histograms.csv",
+                     "optimize/optimal_setup.csv",
                      "optimize/convergence.csv", "session/runs/baseline.csv"):
         lines = (out / csv_file).read_text().splitlines()
         assert lines[0].endswith(",units"), csv_file

@@ -470,7 +470,7 @@ def test_cli_rank_scheduler(tmp_path, track_drive, capsys):
                       dashboard_address=None) as cluster:
         assert main(args + ["--scheduler", cluster.scheduler_address,
                             "--out", str(tmp_path / "dask")]) == 0
-    for name in ("ranking.csv", "screening.csv"):
+    for name in ("ranking.csv", "screening.csv", "histograms.csv"):
         assert (tmp_path / "dask" / name).read_bytes() == (tmp_path / "plain" / name).read_bytes()
     capsys.readouterr()
     assert main(args + ["--scheduler", "nonsense", "--out", str(tmp_path / "bad")]) == 2
