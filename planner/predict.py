@@ -294,7 +294,7 @@ def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
     table.index = pd.Index([s.name for s in setups], name="setup")
     histograms = None
     if hist is not None:
-        histograms = ShockHistograms.from_counts(np.concatenate(counts), drive.n_samples,
+        histograms = ShockHistograms.from_counts(np.concatenate(counts), batch.n_samples,
                                                  table.index, hist)
         table = pd.concat([table, histograms.summary().set_axis(table.index)], axis=1)
     if elem is not None:

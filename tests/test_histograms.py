@@ -131,7 +131,8 @@ def test_predictions_carry_histograms_and_write_csv(paper_model, track_drive, de
                           loop=LoopOptions(histograms=HistogramOptions.default("imperial")))
     assert plain.histograms is None
     assert pred.table.columns[:len(plain.table.columns)].tolist() == plain.table.columns.tolist()
-    pd.testing.assert_frame_equal(pred.table[plain.table.columns], plain.table)
+    pd.testing.assert_frame_equal(pred.table[plain.table.columns], plain.table,
+                                  check_exact=True)
     assert pred.table.columns[len(plain.table.columns):].tolist() == list(HISTOGRAM_METRICS)
     h = pred.histograms
     assert h.setups == tuple(s.name for s in setups) and h.shares.shape == (3, 4, 22)
