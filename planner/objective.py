@@ -11,7 +11,8 @@ For setup ``s`` with metric values ``m_s`` and baseline ``b``::
     score(s)         = sum over weighted metrics k of  w_k * m_s[k] / m_b[k]
     score_<group>(s) = the same sum over the group's metrics only
     feasible(s)      = every limit met: m_s[k] <= max_ratio_k * m_b[k] and
-                       m_s[k] <= max_k  (a NaN metric fails its limits)
+                       m_s[k] <= max_k (and m_s[k] >= min_k, histogram summaries)
+                       (a NaN metric fails its limits)
 
 File format (``objective.toml``)::
 
@@ -42,8 +43,9 @@ car's elements (:mod:`planner.elements`), ``bump_stop_contact_share_XX``,
 lift-off as travel is limited, ``tire_liftoff_share_LR = { max = 0.01 }``; where the loop
 counts the shock-velocity histograms (:mod:`planner.histograms`), ``share_low_speed_XX``,
 ``bump_rebound_ratio_XX`` and, against a logged histogram, ``histogram_distance_XX``: e.g.
-``bump_rebound_ratio_LF = { max = 1.2 }``, or a weight on ``histogram_distance_XX`` to stay
-near the logged car (the screening scores without them, :func:`time_domain_metrics`). Group
+``bump_rebound_ratio_LF = { max = 1.2 }``, ``share_low_speed_LF = { min = 0.4 }`` (these
+take a ``min`` too: more time below the knee), or a weight on ``histogram_distance_XX`` to
+stay near the logged car (the screening scores without them, :func:`time_domain_metrics`). Group
 names may use
 letters, digits, ``_`` and ``-``; a group ``grip`` gives the score column
 ``score_grip``. A group sub-score is not re-normalized: when the groups
@@ -103,6 +105,7 @@ __all__ = [
     "mark_inventory",
     "pareto_front",
     "TIME_DOMAIN_PREFIXES",
+    "HISTOGRAM_LIMIT_KEYS",
     "time_domain_metrics",
 ]
 
@@ -112,6 +115,9 @@ logger = logging.getLogger(__name__)
 OBJECTIVE_FORMAT = "objective/1"
 #: Keys of a limit: ``max_ratio`` (relative to the baseline), ``max`` (absolute, SI).
 LIMIT_KEYS = ("max_ratio", "max")
+#: The further key of a limit on a histogram summary (:data:`TIME_DOMAIN_PREFIXES`): ``min``
+#: (absolute), e.g. ``share_low_speed_LF = { min = 0.4 }`` for more time below the knee.
+HISTOGRAM_LIMIT_KEYS = ("min",)
 
 _TOP_KEYS = ("format", "name", "baseline", "weights", "groups", "limits")
 _GROUP_NAME = re.compile(r"^[A-Za-z0-9_-]+$")
@@ -166,7 +172,9 @@ class Objective:
         Group name -> weighted metrics, for sub-scores ``score_<group>``.
     limits : mapping of str to mapping, keyword-only
         Metric name -> ``{"max_ratio": r}`` (value <= r x baseline value) and/or
-        ``{"max": x}`` (value <= x, SI units of the metric); r, x > 0.
+        ``{"max": x}`` (value <= x, SI units of the metric); r, x > 0. A histogram
+        summary (:data:`TIME_DOMAIN_PREFIXES`) also takes ``{"min": x}`` (value >= x),
+        e.g. ``share_low_speed_LF`` at least 0.4: more time below the knee.
     baseline : str or None, keyword-only
         Setup to normalize against; ``None`` is the first setup scored.
     source : str or None, keyword-only
@@ -285,17 +293,19 @@ class Objective:
                 raise PlannerError(f"{where}: [limits]: {metric} is empty; give max_ratio "
                                    "and/or max, or remove the limit")
             checked = {}
+            allowed = LIMIT_KEYS + (HISTOGRAM_LIMIT_KEYS if metric.startswith(
+                TIME_DOMAIN_PREFIXES) else ())
             for key, value in spec.items():
-                if key not in LIMIT_KEYS:
+                if key not in allowed:
                     raise PlannerError(f"{where}: [limits]: {metric} has the unknown key "
-                                       f"{key!r}; a limit takes {list(LIMIT_KEYS)} (max_ratio "
+                                       f"{key!r}; a limit takes {list(allowed)} (max_ratio "
                                        "relative to the baseline, max absolute in SI)")
                 if not _is_number(value) or not math.isfinite(float(value)) or value <= 0:
                     raise PlannerError(f"{where}: [limits]: {metric}.{key} = {value!r} is not "
                                        "a finite number > 0; write a positive number without "
                                        "quotes")
                 checked[key] = float(value)
-            out[metric] = MappingProxyType({k: checked[k] for k in LIMIT_KEYS if k in checked})
+            out[metric] = MappingProxyType({k: checked[k] for k in allowed if k in checked})
         return out
 
     @property
@@ -767,6 +777,12 @@ def score_setups(metrics, objective=None, *, baseline=None):
                 text = np.char.mod("%.4g", r[idx])
                 _join_messages(violations, idx, np.char.add(np.char.add(
                     f"{m} = ", text), f" x baseline > max_ratio {spec['max_ratio']:g}"))
+        if "min" in spec:
+            idx = np.flatnonzero(~nan & ~(v >= spec["min"]))
+            if idx.size:
+                text = np.char.mod("%.4g", v[idx])
+                _join_messages(violations, idx, np.char.add(np.char.add(
+                    f"{m} = ", text), f" < min {spec['min']:.4g}"))
         if "max" in spec:
             idx = np.flatnonzero(~nan & ~(v <= spec["max"]))
             if idx.size:
