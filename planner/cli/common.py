@@ -224,7 +224,9 @@ def add_histogram_option(parser):
     """``--histogram-bins WIDTH,LIMIT[,KNEE] | none``: the shock-velocity histograms."""
     parser.add_argument("--histogram-bins", metavar="WIDTH,LIMIT[,KNEE]|none",
                         help="shock-velocity histograms of every setup simulated in the time "
-                        "domain (histograms.csv): bins WIDTH wide over +-LIMIT with an open "
+                        "domain (histograms.csv; predict: PREDICTIONS_histograms.csv; drive "
+                        "from-track: the logged and the reproduced one in its report): bins "
+                        "WIDTH wide over +-LIMIT with an open "
                         "bin at each end, low speed below KNEE, in the outputs' units "
                         "(default 0.025,0.25,0.025 m/s; 1,10,1 in/s in imperial units); "
                         "'none': no histograms")
