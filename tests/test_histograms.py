@@ -104,20 +104,29 @@ def test_histogram_option_of_the_command_line():
         histogram_options(Namespace(histogram_bins="0.05", units="SI"))
 
 
+#: Static corner loads [N] low enough for the paper car's tires to lift off on the track
+#: drive now and then: the loop with its elements (lift-off) counts too.
+LIFTOFF_LOADS_N = [900.0, 900.0, 800.0, 800.0]
+
+
+@pytest.mark.parametrize("elements", [{}, {"static_corner_load_n": LIFTOFF_LOADS_N}],
+                         ids=["plain", "lift-off"])
 def test_loop_counts_equal_the_responses_and_leave_metrics_alone(paper_model, track_drive,
-                                                                 demo_library):
+                                                                 demo_library, elements):
     """Equivalence: the metrics are the same bits with histograms on and off, and the loop's
-    counts are those of the velocities simulate_batch returns."""
+    counts are those of the velocities simulate_batch returns (plain and with elements)."""
     setups = [[demo_library[i] for i in s.ids()] for s in enumerate_setups(demo_library)[:3]]
     plant = paper_model.loop_plant(np.full(4, 1500.0))
     bins = HistogramOptions().bins
-    off = simulate_batch_metrics(plant, track_drive, setups, oversample=2)
-    on = simulate_batch_metrics(plant, track_drive, setups, oversample=2, histogram_bins=bins)
+    off = simulate_batch_metrics(plant, track_drive, setups, oversample=2, **elements)
+    on = simulate_batch_metrics(plant, track_drive, setups, oversample=2, histogram_bins=bins,
+                                **elements)
     assert off.histogram_counts is None
     assert list(on.metrics.values) == list(off.metrics.values)
+    assert ("tire_liftoff_share_LF" in on.metrics.values) == bool(elements)  # the element loop
     for name, value in off.metrics.values.items():
         np.testing.assert_array_equal(on.metrics.values[name], value, err_msg=name)
-    resp = simulate_batch(plant, track_drive, setups, oversample=2)
+    resp = simulate_batch(plant, track_drive, setups, oversample=2, **elements)
     v = np.stack([resp.channels[f"shock_velocity_{c}"] for c in CORNERS], axis=1)
     np.testing.assert_array_equal(on.histogram_counts, velocity_histogram_counts(v, bins))
     assert on.n_samples == track_drive.n_samples
