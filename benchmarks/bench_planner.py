@@ -6,6 +6,7 @@ Run::
                                        [--ref-screen-setups M] [--accuracy-setups A]
                                        [--memory-setups P] [--sweep-setups W]
                                        [--elements-repeat E] [--elements-only]
+                                       [--histograms-only]
 
 Two models, each reported: the known paper car
 (``ident.models.vehicle.build_full_car(example_vehicle())``) and a model identified from
@@ -84,7 +85,11 @@ at that moment:
    issue's target: at most 1.3x with bump stops; the wall time of a loaded shared machine
    carries the other processes' load) and the contact and lift-off shares over the setups. ``--elements-only`` runs this part
    alone;
-7. ``target: ...: PASS/FAIL`` lines: time-domain >= 200 setups/s (oversample 2,
+7. the shock-velocity histograms (issue 39): the known paper car's symmetric setups through
+   ``simulate_batch_metrics`` without and with ``histogram_bins`` (the default 22 bins),
+   alternating, ``--elements-repeat`` times: setups per second of each (wall) and the ratio
+   of the CPU times. ``--histograms-only`` runs this part alone;
+8. ``target: ...: PASS/FAIL`` lines: time-domain >= 200 setups/s (oversample 2,
    the default; on the symmetric setups, one call per 119 setups, and on the sweep) and screening >= 10,000 setups/s (every-corner-free setups), each
    for each model given as is (the product's path); peak memory < 2 GB (the
    child's ``ru_maxrss``, the larger and all-inclusive figure); time-domain prediction with
@@ -689,6 +694,51 @@ def bench_elements(library, sym, args):
     return ratios
 
 
+def bench_histograms(library, sym, args):
+    """Time-domain prediction with the shock-velocity histograms counted (issue 39) against
+    without, on the paper car and the benchmark's drive; returns the ratio of CPU times."""
+    from planner.options import HistogramOptions
+
+    vehicle = example_vehicle()
+    plant = as_loop_plant(build_full_car(vehicle))
+    drive = _make_drive(vehicle)
+    models = [s.resolve(library) for s in sym]
+    outputs = [o for o in METRIC_OUTPUTS if o in plant.output_names]
+    bins = HistogramOptions().bins
+
+    def run(kw):
+        rig = rig_response(plant, drive, oversample=OVERSAMPLE_DEFAULT, outputs=outputs)
+        return simulate_batch_metrics(plant, drive, models, oversample=OVERSAMPLE_DEFAULT,
+                                      outputs=outputs, rig=rig, **kw)
+
+    t0 = time.perf_counter()
+    run({})
+    run({"histogram_bins": bins})  # warm-up: numba's compile or cache load of both workers
+    t_warm = time.perf_counter() - t0
+    wall = {"without": [], "with": []}
+    cpu = {"without": [], "with": []}
+    for _ in range(args.elements_repeat):
+        for what, kw in (("without", {}), ("with", {"histogram_bins": bins})):
+            gc.collect()
+            c0 = time.process_time()
+            t0 = time.perf_counter()
+            run(kw)
+            wall[what].append(time.perf_counter() - t0)
+            cpu[what].append(time.process_time() - c0)
+    med = {w: statistics.median(t) for w, t in wall.items()}
+    med_cpu = {w: statistics.median(t) for w, t in cpu.items()}
+    ratio = med_cpu["with"] / med_cpu["without"]
+    print(f"histograms [known paper car]: simulate_batch_metrics of {len(models)} symmetric "
+          f"setups, oversample {OVERSAMPLE_DEFAULT}, {DRIVE_S:g} s drive, "
+          f"{HistogramOptions().n_bins} bins; medians of {args.elements_repeat} alternating "
+          f"calls: without {len(models) / med['without']:,.1f} setups/s (wall "
+          f"{med['without']:.3f} s, CPU {med_cpu['without']:.3f} s), with histograms "
+          f"{len(models) / med['with']:,.1f} setups/s (wall {med['with']:.3f} s, CPU "
+          f"{med_cpu['with']:.3f} s): CPU ratio {ratio:.3f}x; {_load()}; warm-up "
+          f"{t_warm:.1f} s")
+    return ratio
+
+
 # ---------------------------------------------------------------------------------------
 # main
 # ---------------------------------------------------------------------------------------
@@ -713,6 +763,9 @@ def main(argv=None):
                         help="timed calls with and without the elements (default 3)")
     parser.add_argument("--elements-only", action="store_true",
                         help="run only the elements' part (bump stops, lift-off)")
+    parser.add_argument("--histograms-only", action="store_true",
+                        help="time only the predictions with and without the shock-velocity "
+                        "histograms (issue 39)")
     parser.add_argument("--memory-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.memory_child:
@@ -731,6 +784,11 @@ def main(argv=None):
             warnings.simplefilter("ignore")
             ratios = bench_elements(library, list(enumerate_setups(library)), args)
         _element_targets(ratios)
+        return
+    if args.histograms_only:
+        library = read_shock_library(LIBRARY_PATH)
+        print(f"engine version: {_engine_version()}; {_load()}")
+        bench_histograms(library, list(enumerate_setups(library)), args)
         return
 
     child = start_memory_child(args.memory_setups)  # before this process grows
@@ -792,6 +850,7 @@ def _main(args, child):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         element_ratios = bench_elements(library, sym, args)
+    bench_histograms(library, sym, args)
 
     mem = run_memory_child(child, identified)
 

@@ -11,7 +11,8 @@ before it):
   applied to a drive), :mod:`~planner.options` (the commands' option objects: the car's
   elements, the loop, the screening, where it runs, the intervals' draws);
 - engines: :mod:`~planner.runner` (tasks in this process or on Dask),
-  :mod:`~planner.plant` (any model to the loop plant),
+  :mod:`~planner.plant` (any model to the loop plant), :mod:`~planner.histograms` (the
+  shock-velocity histograms the loop counts, their summaries and file),
   :mod:`~planner.predict` (the closed loop in the time domain), :mod:`~planner.screen`
   with :mod:`~planner.screen_kernels` and :mod:`~planner.screen_codegen` (the frequency
   domain, stochastic linearization), :mod:`~planner.uncertainty` (intervals from the

@@ -347,6 +347,8 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     from ident.models.library import read_shock_library
     from ident.models.vehicle import example_vehicle, modal_summary
     from planner.optimize import optimize_curves, write_optimum
+    from planner.histograms import HISTOGRAMS_FILE, write_histograms_csv
+    from planner.options import HistogramOptions, LoopOptions
     from planner.rank import rank_setups
     from planner.report import write_predictions_csv, write_ranking
     from planner.setups import resolve_baseline
@@ -399,14 +401,18 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
                 warnings.simplefilter("ignore")
                 log.info("demo: ranking the crate's setups")
                 ranking = rank_setups(model, drive, library, baseline=baseline, top=20,
+                                      loop=LoopOptions(
+                                          histograms=HistogramOptions.default(units)),
                                       progress=progress)
             used = {"model": "model.npz (identified from session/)",
                     "drive": "track_drive.csv", "crate": "crate.toml"}
             files = write_ranking(ranking.table, work / "ranking", units=units,
                                   objective=ranking.objective, baseline=ranking.baseline,
-                                  run=used)
+                                  run=used, histograms=ranking.histograms.table(units))
             write_predictions_csv(ranking.screening, work / "ranking" / "screening.csv",
                                   units=units)
+            write_histograms_csv(ranking.histograms, work / "ranking" / HISTOGRAMS_FILE,
+                                 units=units)
             plots = _start_job(_frf_plots_job, work / "model.npz", vehicle,
                                work / "frf_plots", units)
             _settle_job(steps)  # a failed compile only costs time: the optimizer compiles
@@ -666,6 +672,9 @@ def _warm_predictions():
     library = _demo_library()
     setups = [[library[i] for i in s.ids()] for s in enumerate_setups(library)[:2]]
     simulate_batch_metrics(plant, drive, setups, oversample=1, rig=_zero_rig(plant, drive))
+    # the demo's ranking counts the shock-velocity histograms: the worker's other variant
+    simulate_batch_metrics(plant, drive, setups, oversample=1, rig=_zero_rig(plant, drive),
+                           histogram_bins=(0.025, 0.25, 0.025))
     return True
 
 

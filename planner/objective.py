@@ -11,7 +11,8 @@ For setup ``s`` with metric values ``m_s`` and baseline ``b``::
     score(s)         = sum over weighted metrics k of  w_k * m_s[k] / m_b[k]
     score_<group>(s) = the same sum over the group's metrics only
     feasible(s)      = every limit met: m_s[k] <= max_ratio_k * m_b[k] and
-                       m_s[k] <= max_k  (a NaN metric fails its limits)
+                       m_s[k] <= max_k (and m_s[k] >= min_k, histogram summaries)
+                       (a NaN metric fails its limits)
 
 File format (``objective.toml``)::
 
@@ -39,7 +40,13 @@ spec's metrics, the normalized tire forces ``tire_force_rms_norm_XX``, and all
 of them with the suffix ``_body`` or ``_wheelhop``; and, where the loop holds the real
 car's elements (:mod:`planner.elements`), ``bump_stop_contact_share_XX``,
 ``tire_liftoff_share_XX`` (shares of time, 0-1) and ``tire_contact_min_XX`` [N]: limit
-lift-off as travel is limited, ``tire_liftoff_share_LR = { max = 0.01 }``. Group names may use
+lift-off as travel is limited, ``tire_liftoff_share_LR = { max = 0.01 }``; where the loop
+counts the shock-velocity histograms (:mod:`planner.histograms`), ``share_low_speed_XX``,
+``bump_rebound_ratio_XX`` and, against a logged histogram, ``histogram_distance_XX``: e.g.
+``bump_rebound_ratio_LF = { max = 1.2 }``, ``share_low_speed_LF = { min = 0.4 }`` (these
+take a ``min`` too: more time below the knee), or a weight on ``histogram_distance_XX`` to
+stay near the logged car (the screening scores without them, :func:`time_domain_metrics`). Group
+names may use
 letters, digits, ``_`` and ``-``; a group ``grip`` gives the score column
 ``score_grip``. A group sub-score is not re-normalized: when the groups
 partition the weights, the group scores add up to the score.
@@ -97,6 +104,9 @@ __all__ = [
     "ranking_position",
     "mark_inventory",
     "pareto_front",
+    "TIME_DOMAIN_PREFIXES",
+    "HISTOGRAM_LIMIT_KEYS",
+    "time_domain_metrics",
 ]
 
 logger = logging.getLogger(__name__)
@@ -105,6 +115,9 @@ logger = logging.getLogger(__name__)
 OBJECTIVE_FORMAT = "objective/1"
 #: Keys of a limit: ``max_ratio`` (relative to the baseline), ``max`` (absolute, SI).
 LIMIT_KEYS = ("max_ratio", "max")
+#: The further key of a limit on a histogram summary (:data:`TIME_DOMAIN_PREFIXES`): ``min``
+#: (absolute), e.g. ``share_low_speed_LF = { min = 0.4 }`` for more time below the knee.
+HISTOGRAM_LIMIT_KEYS = ("min",)
 
 _TOP_KEYS = ("format", "name", "baseline", "weights", "groups", "limits")
 _GROUP_NAME = re.compile(r"^[A-Za-z0-9_-]+$")
@@ -159,7 +172,9 @@ class Objective:
         Group name -> weighted metrics, for sub-scores ``score_<group>``.
     limits : mapping of str to mapping, keyword-only
         Metric name -> ``{"max_ratio": r}`` (value <= r x baseline value) and/or
-        ``{"max": x}`` (value <= x, SI units of the metric); r, x > 0.
+        ``{"max": x}`` (value <= x, SI units of the metric); r, x > 0. A histogram
+        summary (:data:`TIME_DOMAIN_PREFIXES`) also takes ``{"min": x}`` (value >= x),
+        e.g. ``share_low_speed_LF`` at least 0.4: more time below the knee.
     baseline : str or None, keyword-only
         Setup to normalize against; ``None`` is the first setup scored.
     source : str or None, keyword-only
@@ -278,23 +293,46 @@ class Objective:
                 raise PlannerError(f"{where}: [limits]: {metric} is empty; give max_ratio "
                                    "and/or max, or remove the limit")
             checked = {}
+            allowed = LIMIT_KEYS + (HISTOGRAM_LIMIT_KEYS if metric.startswith(
+                TIME_DOMAIN_PREFIXES) else ())
             for key, value in spec.items():
-                if key not in LIMIT_KEYS:
+                if key not in allowed:
                     raise PlannerError(f"{where}: [limits]: {metric} has the unknown key "
-                                       f"{key!r}; a limit takes {list(LIMIT_KEYS)} (max_ratio "
+                                       f"{key!r}; a limit takes {list(allowed)} (max_ratio "
                                        "relative to the baseline, max absolute in SI)")
                 if not _is_number(value) or not math.isfinite(float(value)) or value <= 0:
                     raise PlannerError(f"{where}: [limits]: {metric}.{key} = {value!r} is not "
                                        "a finite number > 0; write a positive number without "
                                        "quotes")
                 checked[key] = float(value)
-            out[metric] = MappingProxyType({k: checked[k] for k in LIMIT_KEYS if k in checked})
+            out[metric] = MappingProxyType({k: checked[k] for k in allowed if k in checked})
         return out
 
     @property
     def metrics(self):
         """tuple of str: every metric the objective needs (weights, then limits)."""
         return tuple(dict.fromkeys([*self.weights, *self.limits]))
+
+    def without_metrics(self, names):
+        """This objective without the metrics `names` (their weights, group entries and
+        limits): what a stage that cannot predict them scores with (the screening has no
+        shock-velocity histograms, :func:`time_domain_metrics`).
+
+        Returns
+        -------
+        Objective or None
+            `self` when it uses none of them; None when no weight > 0 would remain.
+        """
+        drop = set(names)
+        if not drop & set(self.metrics):
+            return self
+        weights = {m: w for m, w in self.weights.items() if m not in drop}
+        if not any(weights.values()):
+            return None
+        groups = {g: [m for m in ms if m not in drop] for g, ms in self.groups.items()}
+        return Objective(self.name, weights, groups={g: ms for g, ms in groups.items() if ms},
+                         limits={m: dict(v) for m, v in self.limits.items() if m not in drop},
+                         baseline=self.baseline, source=self.source)
 
     @property
     def total_weight(self):
@@ -319,6 +357,22 @@ class Objective:
         if self.limits:
             out["limits"] = {m: dict(spec) for m, spec in self.limits.items()}
         return out
+
+
+#: Metric name prefixes predicted in the time domain only (the shock-velocity histograms'
+#: summaries, :mod:`planner.histograms`): the screening scores without them.
+TIME_DOMAIN_PREFIXES = ("share_low_speed_", "bump_rebound_ratio_", "histogram_distance_")
+
+
+def time_domain_metrics(objective):
+    """The metrics `objective` uses that only the time domain predicts (the histograms'
+    summaries, :data:`TIME_DOMAIN_PREFIXES`), in its order.
+
+    Returns
+    -------
+    tuple of str
+    """
+    return tuple(m for m in objective.metrics if m.startswith(TIME_DOMAIN_PREFIXES))
 
 
 def _objective_from_state(state, source):
@@ -723,6 +777,12 @@ def score_setups(metrics, objective=None, *, baseline=None):
                 text = np.char.mod("%.4g", r[idx])
                 _join_messages(violations, idx, np.char.add(np.char.add(
                     f"{m} = ", text), f" x baseline > max_ratio {spec['max_ratio']:g}"))
+        if "min" in spec:
+            idx = np.flatnonzero(~nan & ~(v >= spec["min"]))
+            if idx.size:
+                text = np.char.mod("%.4g", v[idx])
+                _join_messages(violations, idx, np.char.add(np.char.add(
+                    f"{m} = ", text), f" < min {spec['min']:.4g}"))
         if "max" in spec:
             idx = np.flatnonzero(~nan & ~(v <= spec["max"]))
             if idx.size:

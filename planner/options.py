@@ -9,7 +9,7 @@ makes, and these keyword-only objects:
 - :class:`ElementOptions`: the car's elements in the loop besides its shocks (bump stops,
   packers, the tires' static loads) and the element choices enumerated as setup columns;
 - :class:`LoopOptions`: the time-domain loop (oversampling, metric band, model reduction,
-  setups per compiled call);
+  setups per compiled call, the shock-velocity histograms: :class:`HistogramOptions`);
 - :class:`ScreenOptions`: the frequency-domain screening (bands, fixed-point iterations);
 - :class:`RunOptions`: where and how the work runs (Dask scheduler, workers, task sizes);
 - :class:`UncertaintyOptions`: the Monte Carlo intervals of the predictions.
@@ -36,8 +36,8 @@ import numpy as np
 from ident.identify.model import LOOP_REDUCE_RTOL
 from ident.models.bumpstops import BumpStopLibrary, CarElements
 
-__all__ = ["ElementOptions", "LoopOptions", "ScreenOptions", "RunOptions", "UncertaintyOptions",
-           "as_options"]
+__all__ = ["ElementOptions", "HistogramOptions", "LoopOptions", "ScreenOptions", "RunOptions",
+           "UncertaintyOptions", "as_options"]
 
 
 def _check_int(value, name, cls, low=1, none=False):
@@ -155,6 +155,79 @@ class ElementOptions:
         return self
 
 
+#: Default shock-velocity histogram per unit system: (bin width, limit of the inner bins,
+#: knee) [m/s]; 1 in/s bins over +-10 in/s with a 1 in/s knee in an imperial project.
+HISTOGRAM_DEFAULTS_M_S = {"SI": (0.025, 0.25, 0.025), "imperial": (0.0254, 0.254, 0.0254)}
+
+
+@dataclass(frozen=True)
+class HistogramOptions:
+    """The shock-velocity histograms the time-domain loop counts (:mod:`planner.histograms`).
+
+    Bins of `width_m_s` from ``-limit_m_s`` to ``+limit_m_s`` and an open bin at each end
+    (every sample beyond the limit); the low-/high-speed split at `knee_m_s`.
+
+    Parameters
+    ----------
+    width_m_s : float
+        Bin width [m/s] (default 0.025 m/s; 1 in/s = 0.0254 m/s in an imperial project).
+    limit_m_s : float
+        The inner bins' extent [m/s] (default 0.25 m/s); ``2 limit / width`` a whole number.
+    knee_m_s : float
+        Low speed is ``|v| < knee`` [m/s] (default 0.025 m/s).
+
+    Raises
+    ------
+    ValueError
+        On a width, limit or knee that is not finite and positive, or a limit that is not
+        a multiple of half the width.
+
+    Examples
+    --------
+    >>> HistogramOptions().n_bins
+    22
+    >>> HistogramOptions.default("imperial").width_m_s
+    0.0254
+    """
+
+    width_m_s: float = 0.025
+    limit_m_s: float = 0.25
+    knee_m_s: float = 0.025
+
+    def __post_init__(self):
+        for name in ("width_m_s", "limit_m_s", "knee_m_s"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) \
+                    or not (np.isfinite(value) and value > 0):
+                raise ValueError(f"HistogramOptions: {name}={value!r} must be a finite number "
+                                 "> 0 [m/s], e.g. HistogramOptions(width_m_s=0.025, "
+                                 "limit_m_s=0.25, knee_m_s=0.025)")
+            object.__setattr__(self, name, float(value))
+        n = 2.0 * self.limit_m_s / self.width_m_s
+        if abs(n - round(n)) > 1e-9 * max(n, 1.0):
+            raise ValueError(f"HistogramOptions: limit_m_s={self.limit_m_s:g} is not a multiple "
+                             f"of half the width ({self.width_m_s:g} m/s); e.g. 0.025 m/s bins "
+                             "over +-0.25 m/s")
+
+    @classmethod
+    def default(cls, units="SI"):
+        """The default histogram of a unit system: 0.025 m/s bins over +-0.25 m/s (SI),
+        1 in/s bins over +-10 in/s (imperial); the knee one bin."""
+        return cls(*HISTOGRAM_DEFAULTS_M_S["imperial" if str(units).lower() == "imperial"
+                                           else "SI"])
+
+    @property
+    def n_bins(self):
+        """Bins, the two open end bins included."""
+        return int(round(2.0 * self.limit_m_s / self.width_m_s)) + 2
+
+    @property
+    def bins(self):
+        """``(width_m_s, limit_m_s, knee_m_s)``: the closed loop's ``histogram_bins``
+        (:func:`ident.sim.closedloop.simulate_batch_metrics`)."""
+        return (self.width_m_s, self.limit_m_s, self.knee_m_s)
+
+
 @dataclass(frozen=True)
 class LoopOptions:
     """The time-domain closed loop of the planner's predictions.
@@ -178,6 +251,10 @@ class LoopOptions:
         (``tire_force_rms_XX / load``, :func:`ident.sim.metrics.compute_metrics`'
         ``static_loads_n``). Not the loop's lift-off loads
         (:attr:`ElementOptions.static_corner_load_n`).
+    histograms : HistogramOptions, optional
+        Count every simulated setup's shock-velocity histogram per corner in the loop
+        (:class:`planner.histograms.ShockHistograms`, the table's ``share_low_speed_XX``
+        and ``bump_rebound_ratio_XX``); None (default): none, at no cost.
 
     Raises
     ------
@@ -190,8 +267,13 @@ class LoopOptions:
     reduce_rtol: float | None = LOOP_REDUCE_RTOL
     chunk_size: int = 64
     metric_loads_n: Mapping | None = None
+    histograms: HistogramOptions | None = None
 
     def __post_init__(self):
+        if self.histograms is not None and not isinstance(self.histograms, HistogramOptions):
+            raise TypeError(f"LoopOptions: histograms must be a planner.options.HistogramOptions "
+                            f"or None, got {type(self.histograms).__name__}; e.g. "
+                            "histograms=HistogramOptions()")
         _check_int(self.oversample, "oversample", "LoopOptions")
         _check_int(self.chunk_size, "chunk_size", "LoopOptions")
         _check_band(self.band_hz, "LoopOptions")

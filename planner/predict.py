@@ -33,6 +33,7 @@ from ident.models.vehicle import build_full_car, example_vehicle, read_vehicle
 from ident.sim.closedloop import rig_response, simulate_batch_metrics
 from planner.elements import ELEMENT_COLUMNS, model_setup_elements
 from planner.errors import PlannerError
+from planner.histograms import ShockHistograms
 from planner.options import ElementOptions, LoopOptions, as_options
 from planner.plant import as_loop_plant
 from planner.setups import Setup
@@ -75,12 +76,17 @@ class Predictions:
         ``band_hz`` and whatever the predictor used.
     diagnostics : dict
         Per-setup arrays (e.g. Newton iterations, screening iterations).
+    histograms : planner.histograms.ShockHistograms or None
+        The setups' shock-velocity histograms per corner (time domain with
+        :attr:`planner.options.LoopOptions.histograms`), in the table's order; None
+        without.
     """
 
     table: pd.DataFrame
     setups: tuple
     settings: dict = field(default_factory=dict)
     diagnostics: dict = field(default_factory=dict)
+    histograms: ShockHistograms | None = None
 
     @property
     def metric_names(self):
@@ -241,8 +247,10 @@ def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
     Predictions
         With bump stops the table adds ``bump_stop_contact_share_XX`` (share of time in
         contact); with static loads ``tire_contact_min_XX`` [N] and
-        ``tire_liftoff_share_XX``; then the setup columns ``bump_stop_XX`` and
-        ``packer_XX`` [m] (after the metrics, as the spec allows).
+        ``tire_liftoff_share_XX``; with ``loop.histograms`` the histograms' summaries
+        ``share_low_speed_XX`` and ``bump_rebound_ratio_XX`` (:mod:`planner.histograms`;
+        the histograms in :attr:`Predictions.histograms`); then the setup columns
+        ``bump_stop_XX`` and ``packer_XX`` [m] (after the metrics, as the spec allows).
     """
     loop = as_options(loop, LoopOptions, "loop", "predict_setups")
     elements = as_options(elements, ElementOptions, "elements", "predict_setups")
@@ -263,7 +271,10 @@ def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
     rig = rig_response(plant, drive, oversample=oversample, outputs=outputs)
     extra = {} if elem is None else {
         "bump_stops": elem.loop_stops(), "static_corner_load_n": elem.static_corner_load_n}
-    rows, iters = [], []
+    hist = loop.histograms
+    if hist is not None:
+        extra["histogram_bins"] = hist.bins
+    rows, iters, counts = [], [], []
     starts = range(0, len(models), chunk_size)
     if progress:
         starts = tqdm(starts, desc="predict", unit="chunk")
@@ -276,10 +287,16 @@ def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
                                        **extra)
         rows.append(pd.DataFrame({k: np.asarray(v) for k, v in batch.metrics.values.items()}))
         iters.append(batch.newton_iterations)
+        counts.append(batch.histogram_counts)
     table = pd.concat(rows, ignore_index=True)
     ids = pd.DataFrame([s.ids() for s in setups], columns=list(CORNERS))
     table = pd.concat([ids, table], axis=1)
     table.index = pd.Index([s.name for s in setups], name="setup")
+    histograms = None
+    if hist is not None:
+        histograms = ShockHistograms.from_counts(np.concatenate(counts), batch.n_samples,
+                                                 table.index, hist)
+        table = pd.concat([table, histograms.summary().set_axis(table.index)], axis=1)
     if elem is not None:
         table = pd.concat([table, elem.columns(table.index)], axis=1)
     _warn_implausible(table, drive)
@@ -288,13 +305,15 @@ def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
                 "reduce_rtol": reduce_rtol, "n_shock_modes": int(plant.shock.n_states)}
     if elem is not None:
         settings["elements"] = elem.settings
+    if histograms is not None:
+        settings["histograms"] = histograms.settings()
     diagnostics = {"newton_iterations": np.concatenate(iters)}
     outside = None if not check_coverage else warn_outside_session(
         model, table, None if elem is None else elem.static_corner_load_n)
     if outside is not None:
         diagnostics["outside_session"] = outside
     return Predictions(table=table, setups=tuple(setups), settings=settings,
-                       diagnostics=diagnostics)
+                       diagnostics=diagnostics, histograms=histograms)
 
 
 def warn_outside_session(model, table, static_corner_load_n=None):

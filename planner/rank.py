@@ -26,9 +26,11 @@ from scipy.stats import spearmanr
 from planner.elements import (distinct_setups, loop_arguments, model_setup_elements,
                               vary_elements)
 from planner.errors import PlannerError
-from planner.options import (ElementOptions, LoopOptions, RunOptions, UncertaintyOptions,
-                             as_options)
-from planner.objective import Objective, default_objective, mark_inventory, score_setups
+from planner.histograms import ShockHistograms, histogram_distance
+from planner.options import (ElementOptions, HistogramOptions, LoopOptions, RunOptions,
+                             UncertaintyOptions, as_options)
+from planner.objective import (Objective, default_objective, mark_inventory, score_setups,
+                               time_domain_metrics)
 from planner.predict import predict_setups
 from planner.screen import describe_agreement, screen_setups
 from planner.click_settings import click_neighbours, click_values
@@ -67,6 +69,9 @@ class Ranking:
     candidates : tuple of planner.setups.Setup
         The setups simulated in the time domain (the rows of `table`), with their elements:
         what :func:`planner.section_ranking.rank_sections` simulates on each section.
+    histograms : planner.histograms.ShockHistograms or None
+        The shock-velocity histograms of the setups simulated in the time domain, in the
+        table's order (with ``loop.histograms``); None without.
     """
 
     table: pd.DataFrame
@@ -76,6 +81,7 @@ class Ranking:
     agreement: dict
     settings: dict = field(default_factory=dict)
     candidates: tuple = ()
+    histograms: object = None
 
     @property
     def best(self):
@@ -155,7 +161,8 @@ def _polish_clicks(td, scores, cand, setups, library, objective, base_name, simu
         if not more:
             break
         extra = simulate(more)
-        td = replace(td, table=pd.concat([td.table, extra.table]))
+        td = replace(td, table=pd.concat([td.table, extra.table]),
+                     histograms=ShockHistograms.concat([td.histograms, extra.histograms]))
         cand = cand + more
         by_name.update((m.name, m) for m in more)
         simulated.update(m.name for m in more)
@@ -175,7 +182,7 @@ def _polish_clicks(td, scores, cand, setups, library, objective, base_name, simu
 def rank_setups(model, drive, library, *, setups=None, constraints=None, objective=None,
                 baseline=None, top=40, n_check=20, uncertainty=UncertaintyOptions(),
                 loop=LoopOptions(), elements=ElementOptions(), run=RunOptions(),
-                progress=False, polish_clicks=True):
+                progress=False, polish_clicks=True, histogram_target=None):
     """Rank shock setups on a model and a drive.
 
     Parameters
@@ -233,6 +240,14 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         (at most :data:`MAX_POLISH_ROUNDS` rounds): screening orders neighbouring
         settings less well than it orders different shocks, so the decision is made in
         the time domain. ``settings["click_polish"]`` says what it simulated.
+    histogram_target : planner.histograms.ShockHistograms, optional
+        A target shock-velocity histogram (one row, e.g. a track log's,
+        :func:`planner.histograms.histograms_of`, counted with ``loop.histograms``' bins):
+        the table gets each setup's distance from it per corner,
+        ``histogram_distance_XX`` (total variation, 0-1), which the objective may weight.
+        The histograms are counted (``loop.histograms``, default bins when None) whenever
+        this is given or the objective uses a histogram metric; the screening scores
+        without those metrics (:func:`planner.objective.time_domain_metrics`).
 
     Returns
     -------
@@ -250,6 +265,24 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     if not isinstance(objective, Objective):
         raise TypeError(f"objective must be a planner.objective.Objective (read one with "
                         f"read_objective), got {type(objective).__name__}")
+    hist_metrics = time_domain_metrics(objective)
+    if (hist_metrics or histogram_target is not None) and loop.histograms is None:
+        loop = replace(loop, histograms=HistogramOptions())
+    if histogram_target is not None and not isinstance(histogram_target, ShockHistograms):
+        raise TypeError(f"rank: histogram_target must be a planner.histograms.ShockHistograms "
+                        f"(planner.histograms.histograms_of a log), got "
+                        f"{type(histogram_target).__name__}")
+    if any(m.startswith("histogram_distance_") for m in hist_metrics) \
+            and histogram_target is None:
+        raise PlannerError(f"rank: objective {objective.name!r} uses "
+                           f"{[m for m in hist_metrics if m.startswith('histogram_distance_')]}"
+                           ", the distance from a target histogram; give the target (rank "
+                           "--log LOG) or remove them from the objective")
+    screen_objective = objective.without_metrics(hist_metrics)
+    if screen_objective is None:
+        raise PlannerError(f"rank: objective {objective.name!r} weights only histogram metrics "
+                           f"({list(hist_metrics)}), which the screening cannot predict; "
+                           "weight at least one RMS metric too (e.g. tire_force_rms_LF)")
     if setups is None:
         setups = enumerate_setups(library, **(constraints or {}))
     elif constraints:
@@ -289,8 +322,8 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     else:
         screened = screen_setups_on(model, drive, setups, library, band_hz=band_hz,
                                     reduce_rtol=loop.reduce_rtol, run=run, progress=progress)
-    sc = mark_inventory(score_setups(screened.table, objective, baseline=base.name).table,
-                         setups, library)
+    sc = mark_inventory(score_setups(screened.table, screen_objective,
+                                     baseline=base.name).table, setups, library)
     screening = pd.concat([screened.table, sc], axis=1)
     # 2. time domain on the best `top` by screening (plus the baseline)
     order = sc.sort_values("rank").index.tolist()
@@ -303,15 +336,22 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         chosen.append(base.name)
     by_name = {s.name: s for s in setups}
     cand = [by_name[n] for n in chosen]
-    td = predict_setups(model, drive, cand, library, loop=loop, elements=ekw,
-                        progress=progress)
+    def simulate(more, show):
+        pred = predict_setups(model, drive, more, library, loop=loop, elements=ekw,
+                              progress=show)
+        if histogram_target is None:
+            return pred
+        dist = histogram_distance(pred.histograms, histogram_target)
+        return replace(pred, table=pd.concat([pred.table, dist.set_axis(pred.table.index)],
+                                             axis=1))
+
+    td = simulate(cand, progress)
     scores = score_setups(td.table, objective, baseline=base.name)
     polish = None
     if polish_clicks and any("@" in sid for c in cand for sid in c.ids()):
         td, scores, cand, polish = _polish_clicks(
             td, scores, cand, setups, library, objective, base.name,
-            lambda more: predict_setups(model, drive, more, library, loop=loop, elements=ekw,
-                                        progress=False))
+            lambda more: simulate(more, False))
     table = pd.concat([td.table, mark_inventory(scores.table, setups, library)], axis=1)
     table["screening_rank"] = sc.loc[table.index, "rank"].to_numpy()
     table["baseline"] = table.index == base.name  # the setup the scores are ratios to
@@ -348,6 +388,9 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         table["unresolved"] = [" ".join(pairs.get(n, [])) for n in table.index]
         settings["uncertainty"] = unc.settings
     table = table.sort_values("rank")
+    histograms = None if td.histograms is None else td.histograms.select(list(table.index))
+    if histograms is not None:
+        settings["histograms"] = histograms.settings()
     return Ranking(table=table, screening=screening.sort_values("rank"), baseline=base.name,
                    objective=objective, agreement=agreement, settings=settings,
-                   candidates=tuple(cand))
+                   candidates=tuple(cand), histograms=histograms)

@@ -82,10 +82,12 @@ from ident.identify.model import LOOP_REDUCE_RTOL
 from ident.sim.closedloop import pack_setups
 from planner.errors import PlannerError
 from planner.objective import (Objective, default_objective, mark_inventory, ranking_order,
-                               ranking_position, score_setups)
+                               ranking_position, score_setups, time_domain_metrics)
 from planner.elements import (ELEMENT_COLUMNS, distinct_setups, model_setup_elements,
                               vary_elements)
-from planner.options import ElementOptions, LoopOptions, RunOptions, ScreenOptions, as_options
+from planner.histograms import ShockHistograms
+from planner.options import (ElementOptions, HistogramOptions, LoopOptions, RunOptions,
+                             ScreenOptions, as_options)
 from planner.plant import as_loop_plant
 from planner.predict import predict_setups, prepare_drive, resolve_setups
 from planner.runner import KERNEL_LOCK, start_runner
@@ -324,9 +326,8 @@ def _simulate_chunk(plant, drive, setups, library, loop, elements):
     the drive's rig response differs in the last bits with the BLAS thread count.
     """
     with KERNEL_LOCK, threadpool_limits(1):
-        table = predict_setups(plant, drive, setups, library, loop=loop,
-                               elements=elements).table
-    return table
+        pred = predict_setups(plant, drive, setups, library, loop=loop, elements=elements)
+    return pred.table, pred.histograms
 
 
 def _element_variants(sim, elements, model):
@@ -398,6 +399,9 @@ class SweepResult:
         ``chunk_size``, ``scheduler`` (kind), ``address``, ``n_workers``,
         ``seconds`` (prepare, screen, simulate), ``screen_setups_per_s`` (setups x cases)
         and ``simulate_setups_per_s`` (setups x cases).
+    histograms : dict of str -> planner.histograms.ShockHistograms
+        Per case label, the simulated setups' shock-velocity histograms in :attr:`table`'s
+        order (with ``loop.histograms``; empty without).
     """
 
     table: pd.DataFrame
@@ -411,6 +415,7 @@ class SweepResult:
     objective: object
     agreement: dict
     settings: dict = field(default_factory=dict)
+    histograms: dict = field(default_factory=dict)
 
     @property
     def best(self):
@@ -662,6 +667,16 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         raise TypeError(f"sweep: objective must be a planner.objective.Objective (read one "
                         f"with read_objective), got {type(objective).__name__}")
     loop = as_options(loop, LoopOptions, "loop", "sweep")
+    hist_metrics = time_domain_metrics(objective)
+    if hist_metrics and loop.histograms is None:
+        loop = replace(loop, histograms=HistogramOptions())
+    screen_objective = objective.without_metrics(hist_metrics)
+    if screen_objective is None or any(m.startswith("histogram_distance_")
+                                       for m in hist_metrics):
+        raise PlannerError(f"sweep: objective {objective.name!r} uses {list(hist_metrics)}; "
+                           "the sweep takes no target histogram, and its screening needs a "
+                           "weighted RMS metric: remove histogram_distance_XX and weight at "
+                           "least one RMS metric")
     screen = as_options(screen, ScreenOptions, "screen", "sweep")
     elements = as_options(elements, ElementOptions, "elements", "sweep")
     run = as_options(run, RunOptions, "run", "sweep")
@@ -701,7 +716,8 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         base_codes = np.array([[code_of[sid] for sid in base.ids()]], dtype=np.intp)
         base_metrics = [_screen_codes(ops, shocks, base_codes, max_iter, tol)[0][0]
                         for _, _, ops in cases]
-        scoring = _scoring(objective, [ops for _, _, ops in cases], base_metrics, combine)
+        scoring = _scoring(screen_objective, [ops for _, _, ops in cases], base_metrics,
+                           combine)
         n_cand = len(space)
         n_top_max = int(top) if top is not None else max(1, math.ceil(top_share * n_cand))
         # every worker imports the engine and loads its kernels before the clock starts
@@ -787,8 +803,12 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     names0 = [s.name for s in sim0]
     case_tables, screen_tables = {}, {}
     metric_names = list(cases[0][2].metric_names)
+    case_hists = {}
     for k, label in enumerate(labels):
-        td = pd.concat(tparts[k * len(groups):(k + 1) * len(groups)])
+        part = tparts[k * len(groups):(k + 1) * len(groups)]
+        td = pd.concat([t for t, _ in part])
+        if loop.histograms is not None:
+            case_hists[label] = ShockHistograms.concat([h for _, h in part])
         sc = score_setups(td, objective, baseline=base.name).table
         case_tables[label] = pd.concat([td, mark_inventory(sc, sim, library)], axis=1)
         rows = np.vstack([top_met[:, k], base_metrics[k][None, :]])[:len(sim0)]
@@ -797,7 +817,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         for c, col in enumerate(CORNERS[1:], start=1):
             st.insert(c, col, [s.ids()[c] for s in sim0])
         screen_tables[label] = pd.concat(
-            [st, score_setups(st, objective, baseline=base.name).table], axis=1)
+            [st, score_setups(st, screen_objective, baseline=base.name).table], axis=1)
     case_scores = [case_tables[lab]["score"].to_numpy(dtype=float) for lab in labels]
     comb = scoring.combined(case_scores)
     feas = np.logical_and.reduce([case_tables[lab]["feasible"].to_numpy(dtype=bool)
@@ -864,7 +884,9 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
                                 "n_simulated": len(sim)}
     log.info("sweep: simulated %d setups x %d case(s) in %.1f s; best %r", len(sim),
              len(cases), t_sim, table.index[0])
+    case_hists = {lab: h.select(list(table.index)) for lab, h in case_hists.items()}
     return SweepResult(table=table, cases=case_tables, screening_top=screen_tables,
                        screening_index=index, screening_score=score,
                        screening_feasible=feasible, space=space, baseline=base.name,
-                       objective=objective, agreement=agreement, settings=settings)
+                       objective=objective, agreement=agreement, settings=settings,
+                       histograms=case_hists)

@@ -725,3 +725,45 @@ def test_rig_simulate_prints_the_sample_count_of_every_run(tmp_path, capsys):
     assert "2 runs, 1000-3000 samples per run (4000 in all) at 100 Hz" in out
     assert main(["-q", "rig", "simulate", "--duration", "10", "--out", str(tmp_path / "d")]) == 0
     assert "runs, 1000 samples each at 100 Hz" in capsys.readouterr().out
+
+
+def test_rank_writes_histograms_and_scores_a_logged_one(tmp_path, capsys, track_drive,
+                                                        paper_vehicle, demo_library):
+    """Issue 39: rank writes histograms.csv (1 in/s bins in an imperial project) and the
+    summaries; with --log each setup's distance from the logged histogram, which the
+    objective weights."""
+    import pandas as pd
+
+    from ident.data.channels import CORNERS
+    from ident.data.tracklog import write_track_log
+    from ident.models.vehicle import build_full_car
+    from ident.sim.virtual_track import log_track_run, make_track_run
+    from planner.objective import default_objective, objective_to_toml, Objective
+    from planner.setups import Setup
+
+    drive = _short_imperial_drive(track_drive, tmp_path / "track.csv")
+    run = make_track_run(duration_s=20.0, fs_hz=100.0, seed=5,
+                         wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,
+                         track_width_m=paper_vehicle.track_front_m)
+    log = log_track_run(build_full_car(paper_vehicle).loop_plant(), run,
+                        Setup("t", {c: "DM" for c in CORNERS}).resolve(demo_library))
+    write_track_log(log, tmp_path / "log.csv", units="imperial")
+    base = default_objective()
+    objective_to_toml(Objective("near the log", {**base.weights, "histogram_distance_LF": 0.5},
+                                groups=dict(base.groups)), tmp_path / "obj.toml")
+    assert main(_rank_argv(drive, tmp_path / "r", "--log", str(tmp_path / "log.csv"),
+                           "--objective", str(tmp_path / "obj.toml"))) == 0
+    assert "histograms.csv" in capsys.readouterr().out
+    ranking = pd.read_csv(tmp_path / "r" / "ranking.csv")
+    for kind in ("share_low_speed", "bump_rebound_ratio", "histogram_distance"):
+        assert ranking[[f"{kind}_{c}" for c in CORNERS]].notna().all().all(), kind
+    assert ranking["histogram_distance_LF"].between(0, 1).all()
+    hist = pd.read_csv(tmp_path / "r" / "histograms.csv")
+    assert hist.setup.drop_duplicates().tolist() == ranking.setup.tolist()
+    lf = hist[(hist.setup == ranking.setup[0]) & (hist.corner == "LF")]
+    assert lf.velocity_hi.iloc[:-1].tolist() == list(np.arange(-10.0, 11.0))
+    assert set(hist.units) == {"imperial"}
+    # --histogram-bins none: no histograms, no summaries
+    assert main(_rank_argv(drive, tmp_path / "n", "--histogram-bins", "none")) == 0
+    assert not (tmp_path / "n" / "histograms.csv").exists()
+    assert "share_low_speed_LF" not in pd.read_csv(tmp_path / "n" / "ranking.csv")

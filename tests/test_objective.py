@@ -501,3 +501,23 @@ def test_mark_inventory_makes_unbuildable_setups_infeasible_and_reranks():
     assert scores["rank"].tolist() == [1, 2]  # the input is left as it was
     buildable = scores.iloc[1:]
     assert mark_inventory(buildable, setups, lib) is buildable  # nothing to mark: unchanged
+
+
+def test_histogram_summaries_take_a_min_limit(tmp_path):
+    """Issue 39: more time below the knee is a ``min`` on ``share_low_speed_XX`` (histogram
+    summaries only); it round-trips through the file and makes a setup below it infeasible."""
+    import pandas as pd
+
+    obj = Objective("knee", {"tire_force_rms_LF": 1.0},
+                    limits={"share_low_speed_LF": {"min": 0.4, "max": 0.9}})
+    assert dict(obj.limits["share_low_speed_LF"]) == {"max": 0.9, "min": 0.4}
+    assert read_objective(objective_to_toml(obj, tmp_path / "knee.toml")) == obj
+    m = pd.DataFrame({"tire_force_rms_LF": [1.0, 0.9, 0.8],
+                      "share_low_speed_LF": [0.5, 0.3, 0.95]}, index=["base", "a", "b"])
+    t = score_setups(m, obj).table
+    assert t["feasible"].tolist() == [True, False, False]
+    assert t.loc["a", "violations"] == "share_low_speed_LF = 0.3 < min 0.4"
+    assert t.loc["b", "violations"] == "share_low_speed_LF = 0.95 > max 0.9"
+    with pytest.raises(PlannerError, match=r"unknown key 'min'; a limit takes \['max_ratio', "
+                                           r"'max'\]"):
+        Objective("x", {"tire_force_rms_LF": 1.0}, limits={"tire_force_rms_LF": {"min": 1.0}})

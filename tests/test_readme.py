@@ -170,13 +170,15 @@ def test_demo_outputs(demo):
     from ident.models.library import read_shock_library
     from ident.sim.metrics import METRIC_NAMES
     from planner.demo import DEMO_LIBRARY_PATH
+    from planner.histograms import HISTOGRAM_METRICS
     from planner.objective import default_objective, ranking_order
     from planner.setups import enumerate_setups, read_setups
 
     out, _ = demo
     assert (out / "session" / "session.toml").is_file()
     assert (out / "model.npz").is_file() and any((out / "frf_plots").glob("*.png"))
-    for name in ("ranking.csv", "ranking.xlsx", "pareto.png", "top_setups.png", "screening.csv"):
+    for name in ("ranking.csv", "ranking.xlsx", "pareto.png", "top_setups.png", "screening.csv",
+                 "histograms.csv"):
         assert (out / "ranking" / name).is_file(), name
     for name in ("optimal_shocks.toml", "optimal_setup.csv", "optimize.xlsx", "curves.png",
                  "convergence.csv"):
@@ -188,18 +190,25 @@ def test_demo_outputs(demo):
     # every CSV says the demo's unit system (issue 23): the drive first, read without --units;
     # the header first and the unit system as the last column, on every row (issue 36)
     for csv_file in ("track_drive.csv", "model_summary.csv", "ranking/ranking.csv",
-                     "ranking/screening.csv", "optimize/optimal_setup.csv",
+                     "ranking/screening.csv", "ranking/histograms.csv",
+                     "optimize/optimal_setup.csv",
                      "optimize/convergence.csv", "session/runs/baseline.csv"):
         lines = (out / csv_file).read_text().splitlines()
         assert lines[0].endswith(",units"), csv_file
         assert all(line.endswith(",imperial") for line in lines[1:]), csv_file
+    # the shock-velocity histograms of the ranked setups, 1 in/s bins (issue 39)
+    hist = pd.read_csv(out / "ranking" / "histograms.csv")
+    assert hist.setup.drop_duplicates().tolist() == pd.read_csv(
+        out / "ranking" / "ranking.csv").setup.tolist()
+    assert hist.groupby(["setup", "corner"]).share.sum().sub(1).abs().max() < 1e-12
     # the ranking: every setup of the crate's left/right-symmetric enumeration screened
     library = read_shock_library(DEMO_LIBRARY_PATH)
     screening = pd.read_csv(out / "ranking" / "screening.csv")
     assert sorted(screening["setup"]) == sorted(s.name for s in enumerate_setups(library))
     ranking = pd.read_csv(out / "ranking" / "ranking.csv", keep_default_na=False)
     assert list(ranking.columns) == [
-        "rank", "setup", *CORNERS, *METRIC_NAMES, "score", "score_grip", "score_platform",
+        "rank", "setup", *CORNERS, *METRIC_NAMES, *HISTOGRAM_METRICS, "score", "score_grip",
+        "score_platform",
         "feasible", "violations", "screening_rank", "baseline", "unresolved",
         *(f"{m}{s}" for m in METRIC_NAMES for s in ("_lo", "_hi")), "units"]
     # its best setup: first by the ranking rule, the known one, the one printed

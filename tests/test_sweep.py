@@ -343,6 +343,37 @@ def test_write_sweep(tmp_path, paper_model, track_drive, demo_library):
     assert write_sweep(res, out, overwrite=True) == written
 
 
+def test_sweep_histograms_are_predict_setups(tmp_path, paper_model, track_drive, demo_library):
+    """Issue 39: the sweep's time-domain stage counts the histograms of predict_setups (a
+    sample on a bin edge aside: the rig response's last bits differ with BLAS's threads),
+    written beside the case file; an objective on a histogram summary screens without it."""
+    from planner.histograms import HISTOGRAM_METRICS
+    from planner.objective import Objective, default_objective
+    from planner.options import HistogramOptions, LoopOptions
+
+    base = default_objective()
+    obj = Objective(base.name, dict(base.weights), groups=dict(base.groups),
+                    limits={"bump_rebound_ratio_LF": {"max": 10.0}})
+    res = sweep_setups({"paper": paper_model}, {"track.csv": track_drive}, demo_library,
+                       constraints={"shocks": ["B20", "L12", "L28", "DS"]}, top=3,
+                       objective=obj, run=RunOptions(scheduler="none"), progress=False)
+    hist = res.histograms["track.csv"]
+    assert hist.setups == tuple(res.table.index)
+    case = res.cases["track.csv"]
+    assert case[list(HISTOGRAM_METRICS)].notna().all().all()
+    setups = [Setup(n, dict(zip(CORNERS, res.table.loc[n, list(CORNERS)])))
+              for n in res.table.index]
+    ref = predict_setups(paper_model, track_drive, setups, demo_library,
+                         loop=LoopOptions(histograms=HistogramOptions())).histograms
+    np.testing.assert_allclose(hist.shares, ref.shares, rtol=0,
+                               atol=2.0 / track_drive.n_samples)
+    written = write_sweep(res, tmp_path / "out")
+    assert [p.name for p in written] == ["ranking.csv", "case-1-track.csv",
+                                         "case-1-track_histograms.csv", "sweep.toml"]
+    frame = pd.read_csv(tmp_path / "out" / "case-1-track_histograms.csv")
+    assert len(frame) == len(res.table) * 4 * 22
+
+
 # ---------------------------------------------------------------- command line
 
 
@@ -357,7 +388,7 @@ def test_cli_sweep_names_case_files_from_stems(tmp_path, track_drive, monkeypatc
                  str(DEMO_LIBRARY_PATH), "--only", "B20,L12", "--simulate", "2", "--scheduler",
                  "none", "--out", "sweep"]) == 0
     assert sorted(p.name for p in (tmp_path / "sweep").iterdir()) == [
-        "case-1-track.csv", "ranking.csv", "sweep.toml"]
+        "case-1-track.csv", "case-1-track_histograms.csv", "ranking.csv", "sweep.toml"]
 
 
 def test_cli_sweep(tmp_path, track_drive, capsys):
@@ -439,7 +470,7 @@ def test_cli_rank_scheduler(tmp_path, track_drive, capsys):
                       dashboard_address=None) as cluster:
         assert main(args + ["--scheduler", cluster.scheduler_address,
                             "--out", str(tmp_path / "dask")]) == 0
-    for name in ("ranking.csv", "screening.csv"):
+    for name in ("ranking.csv", "screening.csv", "histograms.csv"):
         assert (tmp_path / "dask" / name).read_bytes() == (tmp_path / "plain" / name).read_bytes()
     capsys.readouterr()
     assert main(args + ["--scheduler", "nonsense", "--out", str(tmp_path / "bad")]) == 2

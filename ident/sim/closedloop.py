@@ -62,9 +62,10 @@ from ident.data.channels import (CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCI
 from ident.data.drive import FIR_HALF_LENGTH, check_drive_inputs, resample_bandlimited
 from ident.models.lti import (hold_coefficients, join_inputs, lag_coefficients,
                               lag_hold_coefficients)
-from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, Elements, LoopDrive, MetricFilters,
-                                    ModalLoop, RigModes, ShockSetups, loop_batch,
-                                    loop_metrics_worker, loop_serial, rig_kernel)
+from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, HISTOGRAM_COUNTERS, Elements,
+                                    LoopDrive, MetricFilters, ModalLoop, RigModes, ShockSetups,
+                                    histogram_add, loop_batch, loop_metrics_worker, loop_serial,
+                                    rig_kernel)
 from ident.sim.metrics import METRIC_CHANNELS, compute_metrics, metric_plan
 
 __all__ = [
@@ -84,6 +85,8 @@ __all__ = [
     "pack_bump_stops",
     "corner_values",
     "ELEMENT_STATS",
+    "histogram_edges",
+    "velocity_histogram_counts",
 ]
 
 log = logging.getLogger(__name__)
@@ -536,17 +539,108 @@ class BatchMetrics:
     settings : dict
         ``oversample``, ``plant``, ``drive`` (and ``bump_stops``, ``static_corner_load_n``
         when given, as :attr:`BatchResponse.settings`).
+    histogram_counts : ndarray, shape (n_setups, 4, n_bins + 3), or None
+        With ``histogram_bins``: per setup and corner (LF, RF, LR, RR), the output samples
+        of the shock velocity in each bin of :func:`histogram_edges` (the open end bins
+        first and last), then the samples with ``|v| < knee``, ``v > 0`` (bump) and ``v <
+        0`` (rebound) (:func:`velocity_histogram_counts`); None without.
+    n_samples : int
+        Output samples per setup (the counts' total per corner).
     """
 
     metrics: object
     setups: tuple
     newton_iterations: np.ndarray
     settings: dict
+    histogram_counts: np.ndarray | None = None
+    n_samples: int = 0
+
+
+def histogram_edges(width_m_s, limit_m_s):
+    """The edges of a shock-velocity histogram: bins of `width_m_s` from ``-limit_m_s`` to
+    ``+limit_m_s``, and an open bin at each end.
+
+    Parameters
+    ----------
+    width_m_s, limit_m_s : float
+        Bin width and the largest inner edge [m/s]; ``2 limit / width`` must be a whole
+        number (to 1e-9), so that 0 is an edge when it is even.
+
+    Returns
+    -------
+    ndarray, shape (n_bins + 1,)
+        The edges [m/s], ``-inf`` and ``+inf`` first and last (the open bins).
+
+    Raises
+    ------
+    ValueError
+        If the width or limit is not positive and finite or the bins do not fit.
+
+    Examples
+    --------
+    >>> histogram_edges(0.1, 0.2).tolist()
+    [-inf, -0.2, -0.1, 0.0, 0.1, 0.2, inf]
+    """
+    width, limit = float(width_m_s), float(limit_m_s)
+    if not (np.isfinite(width) and np.isfinite(limit) and width > 0 and limit > 0):
+        raise ValueError(f"histogram bins: width {width_m_s!r} and limit {limit_m_s!r} m/s must "
+                         "be finite and > 0 (e.g. 0.025 m/s bins over +-0.25 m/s)")
+    n = 2.0 * limit / width
+    n_inner = int(round(n))
+    if n_inner < 1 or abs(n - n_inner) > 1e-9 * max(n, 1.0):
+        raise ValueError(f"histogram bins: 2 x limit {limit:g} m/s is not a whole number of "
+                         f"bins of width {width:g} m/s; make the limit a multiple of half the "
+                         "width (e.g. 0.025 m/s bins over +-0.25 m/s)")
+    inner = width * (np.arange(n_inner + 1) - n_inner / 2)  # symmetric, 0 exactly if even
+    return np.concatenate([[-np.inf], inner, [np.inf]])
+
+
+def _histogram_spec(histogram_bins_, where):
+    """``(spec, n_bins)`` of the kernels from ``(width_m_s, limit_m_s, knee_m_s)``."""
+    try:
+        width, limit, knee = (float(x) for x in histogram_bins_)
+    except (TypeError, ValueError):
+        raise TypeError(f"{where}: histogram_bins must be (width_m_s, limit_m_s, knee_m_s), "
+                        f"got {histogram_bins_!r}") from None
+    edges = histogram_edges(width, limit)
+    if not (np.isfinite(knee) and knee >= 0):
+        raise ValueError(f"{where}: the histogram's knee {knee!r} m/s must be finite and >= 0")
+    return np.array([-limit, 1.0 / width, knee]), edges.size - 1
+
+
+def velocity_histogram_counts(v_m_s, histogram_bins_):
+    """The counts of :attr:`BatchMetrics.histogram_counts` of given velocity samples.
+
+    Parameters
+    ----------
+    v_m_s : array_like, shape (..., n_samples)
+        Shock velocities [m/s], compression positive.
+    histogram_bins_ : (float, float, float)
+        ``(width_m_s, limit_m_s, knee_m_s)``, as :func:`simulate_batch_metrics`'.
+
+    Returns
+    -------
+    ndarray, shape (..., n_bins + 3)
+        Samples per bin of :func:`histogram_edges` (the open end bins first and last), then
+        the samples with ``|v| < knee``, ``v > 0`` and ``v < 0``: the same arithmetic as
+        the closed loop's (:func:`ident.sim.loop_kernels.histogram_add`), so the same
+        counts for the same samples. NaN samples are left out.
+    """
+    spec, n_bins = _histogram_spec(histogram_bins_, "velocity_histogram_counts")
+    v = np.asarray(v_m_s, dtype=float)
+    out = np.zeros(v.shape[:-1] + (n_bins + HISTOGRAM_COUNTERS,))
+    flat_v = v.reshape(-1, v.shape[-1])
+    flat = out.reshape(-1, out.shape[-1])
+    for i in range(flat_v.shape[0]):
+        row = flat_v[i]
+        histogram_add(np.ascontiguousarray(row[np.isfinite(row)]), spec[0], spec[1], spec[2],
+                      flat[i])
+    return out
 
 
 def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, rig=None,
                            band_hz=(1.0, 20.0), order=4, static_loads_n=None, split_hz=None,
-                           bump_stops=None, static_corner_load_n=None):
+                           bump_stops=None, static_corner_load_n=None, histogram_bins=None):
     """The metrics of several shock setups in closed loop, without keeping their responses.
 
     The numbers of :func:`ident.sim.metrics.compute_metrics` on the channels of
@@ -574,6 +668,12 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
         every corner with a static load. `static_loads_n` (normalized tire forces) and
         `static_corner_load_n` (lift-off) are the same car's numbers, given separately.
         ``None`` (default): today's path, the same numbers.
+    histogram_bins : (float, float, float), optional
+        ``(width_m_s, limit_m_s, knee_m_s)``: also count each setup's shock velocities at
+        the output samples (those the metrics use: the whole record) into a histogram of
+        :func:`histogram_edges` bins and below the knee, in bump and in rebound
+        (:attr:`BatchMetrics.histogram_counts`), in the same pass. The metrics are the
+        same bits with or without (tested). None (default): no histogram, no cost.
 
     Returns
     -------
@@ -585,6 +685,8 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
         As :func:`simulate_batch` and :func:`ident.sim.metrics.compute_metrics`.
     """
     where = "simulate_batch_metrics"
+    hist_spec, n_bins = (None, 0) if histogram_bins is None else _histogram_spec(histogram_bins,
+                                                                                 where)
     loop = _loop_setup(plant, drive, setups, oversample, outputs, rig, where)
     plan = metric_plan(loop.names, loop.rig.fs_hz, band_hz=band_hz, order=order,
                        static_loads_n=static_loads_n, split_hz=split_hz)
@@ -605,8 +707,13 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
                               static_loads_n=static_loads_n, split_hz=split_hz)
         if batch.elements:
             met = replace(met, values={**met.values, **batch.elements})
+        counts = None
+        if hist_spec is not None:
+            v = np.stack([batch.channels[c] for c in SHOCK_VELOCITIES], axis=1)
+            counts = velocity_histogram_counts(v, histogram_bins)
         return BatchMetrics(metrics=met, setups=batch.setups,
-                            newton_iterations=batch.newton_iterations, settings=batch.settings)
+                            newton_iterations=batch.newton_iterations, settings=batch.settings,
+                            histogram_counts=counts, n_samples=N)
     # the metrics' signals as the product's rows: a channel's row of the output matrix,
     # the mean of two rows for a ride height of two corners; the shock velocities are the
     # loop's own (appended after the rows)
@@ -635,12 +742,14 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     iters = np.zeros(S, dtype=np.int64)
     metrics = MetricFilters(ia, sos, zi, int(filters[0][1]))
     drive_args = LoopDrive(loop.rig.v_fine, loop.oversample, y_rig_red, c_red)
+    counts = None if hist_spec is None else np.zeros((S, 4, n_bins + HISTOGRAM_COUNTERS))
     if el is None:
-        _run_workers(S, (loop.plant, loop.shocks, drive_args, metrics, out, iters, None, None))
+        _run_workers(S, (loop.plant, loop.shocks, drive_args, metrics, out, iters, None, None,
+                         hist_spec, counts))
     else:
         stats = np.zeros((S, 3, 4))
         _run_workers(S, (el.plant, loop.shocks, drive_args, metrics, out, iters,
-                         el.kernel_elements(tf_rows), stats))
+                         el.kernel_elements(tf_rows), stats, hist_spec, counts))
     _check_converged(plant, iters)
     rms = {name + suffix: out[:, b, i] for b, suffix in enumerate(plan.bands)
            for i, name in enumerate(plan.names)}
@@ -650,7 +759,8 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
         met = replace(met, values={**met.values, **el.values(stats, N)})
         settings = el.settings(loop, drive)
     return BatchMetrics(metrics=met, setups=tuple(tuple(m) for m in loop.models),
-                        newton_iterations=iters, settings=settings)
+                        newton_iterations=iters, settings=settings, histogram_counts=counts,
+                        n_samples=N)
 
 
 def _run_workers(n_setups, args):

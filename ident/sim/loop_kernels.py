@@ -30,6 +30,8 @@ Public kernels:
   over setups, or one after the other);
 - :func:`loop_metrics_worker`: a thread's share of the setups with their metrics computed
   right after each loop (:func:`ident.sim.metric_kernels.setup_metric_rms`);
+- :func:`histogram_add`: a setup's shock-velocity histogram counts (the worker's, when
+  asked);
 - :func:`solver_state`, :func:`shock_step`: the per-step solve of the 4 shock equations,
   shared with the FIR simulator (:mod:`ident.identify.fir`); :func:`invert_small`, the
   4x4 inverse inside it.
@@ -66,6 +68,8 @@ __all__ = [
     "loop_batch",
     "loop_serial",
     "loop_metrics_worker",
+    "histogram_add",
+    "HISTOGRAM_COUNTERS",
 ]
 
 # ----------------------------------------------------------------------------------------------
@@ -1229,9 +1233,39 @@ def loop_serial(plant, setups, drive, y_out, F_out, iters, elements, stats):
     return
 
 
+#: Counters after the bins in a histogram row of :func:`loop_metrics_worker` (per setup and
+#: corner): output samples with ``|v| < knee``, with ``v > 0`` (bump, compression) and with
+#: ``v < 0`` (rebound).
+HISTOGRAM_COUNTERS = 3
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def histogram_add(v, lo, inv_width, knee, row):
+    """Count the velocity samples `v` (n,) [m/s] into ``row`` (n_bins + 3): bin ``1 +
+    floor((v - lo) * inv_width)`` clipped to the two open end bins 0 and ``n_bins - 1``,
+    then the counters of :data:`HISTOGRAM_COUNTERS`. No branch per sample (the clip is a
+    min/max, the counters add comparisons). Callable from Python too (the logged
+    histograms of :mod:`planner.histograms` count with the same arithmetic)."""
+    nb = row.size - HISTOGRAM_COUNTERS
+    top = nb - 1.0
+    n_low = 0.0
+    n_bump = 0.0
+    n_reb = 0.0
+    for k in range(v.size):
+        x = v[k]
+        b = min(max(np.floor((x - lo) * inv_width) + 1.0, 0.0), top)
+        row[int(b)] += 1.0
+        n_low += 1.0 if abs(x) < knee else 0.0
+        n_bump += 1.0 if x > 0.0 else 0.0
+        n_reb += 1.0 if x < 0.0 else 0.0
+    row[nb] += n_low
+    row[nb + 1] += n_bump
+    row[nb + 2] += n_reb
+
+
 @_nb.njit(cache=True, error_model="numpy", nogil=True)
 def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters, elements,
-                        stats):
+                        stats, hist_spec, hist_out):
     """Worker `w` of `n_workers` of :func:`ident.sim.closedloop.simulate_batch_metrics`:
     the setups ``w, w + n_workers, ...`` (interleaved, so that each worker gets a mix of
     cheap and costly setups), each simulated by :func:`loop_one` and its metrics computed
@@ -1246,6 +1280,12 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
     :func:`loop_batch`. The worker keeps one setup's outputs and the metric's scratch
     (about 2 MB for 12,000 samples): nothing of size (setups x samples) is written. It
     releases the GIL: the workers are threads.
+
+    With `hist_spec` ``(lo, inv_width, knee)`` ([m/s], [s/m], [m/s]) each setup's shock
+    velocities at the output samples (the samples the metrics use) are also counted into
+    ``hist_out`` (n_setups, 4, n_bins + 3) by :func:`histogram_add` (zeroed first);
+    ``None`` for both: no histogram (numba compiles that case apart, without its code).
+    The metrics are the same bits either way (the histogram only reads the velocities).
     """
     p = drive.Cy.shape[1]
     n_out = drive.y_rig.shape[0]
@@ -1272,6 +1312,12 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
         else:
             iters[s] = loop_one(plant, _setup_row(setups, s), drive, y, F, p,
                                 _element_row(elements, s), stats[s])
+        if hist_out is not None:
+            for c in range(4):
+                row = hist_out[s, c]
+                for j in range(row.size):
+                    row[j] = 0.0
+                histogram_add(y[p + c], hist_spec[0], hist_spec[1], hist_spec[2], row)
         for b in range(sos.shape[0]):
             setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack, sums)
     return

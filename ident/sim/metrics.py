@@ -90,6 +90,12 @@ del _suffix
 METRIC_QUANTITY.update({f"bump_stop_contact_share_{c}": "dimensionless" for c in CORNERS})
 METRIC_QUANTITY.update({f"tire_liftoff_share_{c}": "dimensionless" for c in CORNERS})
 METRIC_QUANTITY.update({f"tire_contact_min_{c}": "force" for c in CORNERS})
+#: The shock-velocity histograms' summaries (the planner's ``LoopOptions.histograms``,
+#: :mod:`planner.histograms`; not band-passed): the share of time below the knee, the time
+#: in bump over the time in rebound, the distance from a target (logged) histogram.
+for _kind in ("share_low_speed", "bump_rebound_ratio", "histogram_distance"):
+    METRIC_QUANTITY.update({f"{_kind}_{c}": "dimensionless" for c in CORNERS})
+del _kind
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ __all__ = [
     "Parser", "add_flags_anywhere", "FLAGS_ANYWHERE", "TYPO_CUTOFF", "RENAMED_OPTIONS",
     "unit_system", "int_at_least", "share", "add_units", "add_command_group",
     "run_subcommand", "add_element_options",
-    "add_try_options", "add_prediction_inputs", "check_out", "warn_inventory",
+    "add_try_options", "add_prediction_inputs", "add_histogram_option", "histogram_options", "check_out", "warn_inventory",
     "baseline_arg", "load_vehicle", "load_any_model", "read_inputs", "output_units",
     "bump_stop_library", "parse_fixed", "packer_bounds", "element_choices", "one_line",
     "UNITS_OF_DRIVE", "UNITS_OF_DRIVES", "MODEL_HELP", "OBJECTIVE_HELP", "log",
@@ -217,6 +217,53 @@ def add_prediction_inputs(parser, *, out_help):
     parser.add_argument("--out", required=True, help=out_help)
     parser.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     add_element_options(parser)
+    add_histogram_option(parser)
+
+
+def add_histogram_option(parser):
+    """``--histogram-bins WIDTH,LIMIT[,KNEE] | none``: the shock-velocity histograms."""
+    parser.add_argument("--histogram-bins", metavar="WIDTH,LIMIT[,KNEE]|none",
+                        help="shock-velocity histograms of every setup simulated in the time "
+                        "domain (histograms.csv; predict: PREDICTIONS_histograms.csv; drive "
+                        "from-track: the logged and the reproduced one in its report): bins "
+                        "WIDTH wide over +-LIMIT with an open "
+                        "bin at each end, low speed below KNEE, in the outputs' units "
+                        "(default 0.025,0.25,0.025 m/s; 1,10,1 in/s in imperial units); "
+                        "'none': no histograms")
+
+
+def histogram_options(args):
+    """``--histogram-bins`` as a :class:`planner.options.HistogramOptions` in the outputs'
+    units (``args.units`` resolved first), or None for ``none``.
+
+    Raises
+    ------
+    planner.errors.PlannerError
+        On a malformed value (the message names the option and an example).
+    """
+    from ident.data.units import to_si
+    from planner.errors import PlannerError
+    from planner.options import HistogramOptions
+
+    text = getattr(args, "histogram_bins", None)
+    units = args.units or "SI"
+    if text is None:
+        return HistogramOptions.default(units)
+    if text.strip().lower() in ("none", "off"):
+        return None
+    example = "1,10,1 (in/s)" if units == "imperial" else "0.025,0.25,0.025 (m/s)"
+    try:
+        values = [float(x) for x in text.split(",")]
+        if len(values) not in (2, 3):
+            raise ValueError
+        si = [float(to_si(v, "velocity", units)) for v in values]
+        if len(si) == 2:
+            si.append(si[0])
+        return HistogramOptions(*si)
+    except ValueError as exc:
+        detail = f" ({exc})" if str(exc) else ""
+        raise PlannerError(f"--histogram-bins {text!r}: give WIDTH,LIMIT[,KNEE] in {units} "
+                           f"units, e.g. {example}, or 'none'{detail}") from None
 
 
 # -- what the commands share when they run ---------------------------------------------------

@@ -22,7 +22,8 @@ from pathlib import Path
 
 from ident.data.files import check_output
 from ident.data.units import UNIT_SYSTEMS
-from planner.cli.common import add_command_group, log, run_subcommand, unit_system
+from planner.cli.common import (add_command_group, add_histogram_option, histogram_options, log,
+                                run_subcommand, unit_system)
 
 __all__ = ["add_parser", "run", "run_from_track", "run_iterate", "run_section", "run_resample",
            "report_folder", "section_path", "LOG_FORMATS", "SUBCOMMANDS"]
@@ -103,6 +104,7 @@ def _add_from_track(sub):
                    help="lap-start times [s]: also write each lap as DRIVE_lapN.csv "
                    "(default: none)")
     p.add_argument("--out", required=True, metavar="DRIVE.csv", help="the drive file to write")
+    add_histogram_option(p)
     p.set_defaults(func=run)
     return p
 
@@ -334,9 +336,12 @@ def run_from_track(args):
                                limit_action=args.limit_action, name=out.stem, where=where)
     units = args.units
     section_drives = cut_sections(result.drive, sections, where=where)
+    hist = _track_histograms(args, model, result, logs, setup, library)
     write_drive(result.drive, out, units=units, overwrite=args.overwrite)
-    write_drive_report(result, report, units=units, overwrite=args.overwrite)
+    write_drive_report(result, report, units=units, overwrite=args.overwrite, histograms=hist)
     _print_result(result, units)
+    if hist is not None:
+        print(_histogram_line(hist, units))
     written = [str(out), f"{report}/"]
     for d, (name, _, _) in zip(section_drives, sections):
         path = section_path(out, name)
@@ -344,6 +349,40 @@ def run_from_track(args):
         written.append(str(path))
     print(f"wrote {', '.join(written)} ({units})")
     return 0
+
+
+def _track_histograms(args, model, result, logs, setup, library):
+    """The logged shock-velocity histogram per corner beside the one the drive reproduces on
+    the model with the track setup (:mod:`planner.histograms`): a ShockHistograms of the
+    rows ``logged`` and ``reproduced``, or None (``--histogram-bins none``)."""
+    from planner.histograms import ShockHistograms, logged_histograms
+    from planner.options import LoopOptions
+    from planner.predict import predict_setups
+    from planner.setups import Setup
+
+    opts = histogram_options(args)
+    if opts is None:
+        return None
+    logged = logged_histograms(logs, opts, name="logged")
+    track = Setup("reproduced", dict(setup.shocks), bump_stops=setup.bump_stops,
+                  packers_m=setup.packers_m)
+    again = predict_setups(model, result.drive, [track], library,
+                           loop=LoopOptions(histograms=opts), check_coverage=False)
+    return ShockHistograms.concat([logged, again.histograms])
+
+
+def _histogram_line(hist, units):
+    """The terminal's line of the logged and reproduced histograms."""
+    from ident.data.channels import CORNERS
+    from planner.histograms import histogram_distance
+
+    d = histogram_distance(hist.select(["reproduced"]), hist.select(["logged"])).iloc[0]
+    low = hist.low_speed_share
+    return ("shock-velocity histograms, logged vs reproduced on the model (histograms.csv in "
+            "the report): total-variation distance "
+            + ", ".join(f"{c} {d[f'histogram_distance_{c}']:.3f}" for c in CORNERS)
+            + "; share below the knee "
+            + ", ".join(f"{c} {low[0, j]:.2f}/{low[1, j]:.2f}" for j, c in enumerate(CORNERS)))
 
 
 def _run_of(session, name, where):

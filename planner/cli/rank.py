@@ -6,7 +6,8 @@ from pathlib import Path
 
 from planner.cli.common import (OBJECTIVE_HELP, add_prediction_inputs, add_try_options,
                                 baseline_arg, bump_stop_library, check_out, element_choices,
-                                int_at_least, parse_fixed, read_inputs, show_progress)
+                                histogram_options, int_at_least, parse_fixed, read_inputs,
+                                show_progress)
 
 __all__ = ["add_parser", "run"]
 
@@ -39,6 +40,14 @@ def add_parser(subparsers):
                     "domain (default %(default)s; the baseline and a spread of the "
                     "others are checked besides)")
     add_try_options(sp)
+    sp.add_argument("--log", action="append", metavar="LOG", default=None,
+                    help="track log(s) whose shock-velocity histogram is the target: each "
+                    "setup's distance from it per corner, histogram_distance_XX (total "
+                    "variation, 0-1), which the objective may weight (repeatable; default: "
+                    "none)")
+    sp.add_argument("--log-map", metavar="MAP.toml", default=None,
+                    help="channel map of the --log files (as drive from-track --map; "
+                    "default: their columns are canonical names)")
     sp.add_argument("--no-uncertainty", action="store_true",
                     help="skip the Monte Carlo intervals (default: computed)")
     sp.add_argument("--scheduler", metavar="ADDRESS|local",
@@ -92,10 +101,23 @@ def run(args):
     elements = ElementOptions(use_model=not args.no_elements, bump_stops=stops,
                               **element_choices(args))
     out = Path(args.out)
+    hist = histogram_options(args)
+    target = None
+    if args.log:
+        from ident.data.tracklog import read_track_log
+        from planner.errors import PlannerError
+        from planner.histograms import logged_histograms
+
+        if hist is None:
+            raise PlannerError("rank: --log compares histograms; drop --histogram-bins none")
+        logs = [read_track_log(p, channel_map=args.log_map) for p in args.log]
+        target = logged_histograms(logs, hist, name="logged")
     ranking = rank_setups(model, drive, library, setups=setups, constraints=constraints,
                           objective=objective, baseline=baseline, top=args.simulate,
                           uncertainty=not args.no_uncertainty,
-                          loop=LoopOptions(oversample=args.oversample), elements=elements,
+                          loop=LoopOptions(oversample=args.oversample, histograms=hist),
+                          histogram_target=target,
+                          elements=elements,
                           run=RunOptions(scheduler=args.scheduler, n_workers=args.workers),
                           progress=show_progress(args))
     by_section = None
@@ -109,16 +131,24 @@ def run(args):
             f"at {drive.fs_hz:g} Hz)", "crate": args.shocks}
     files = write_ranking(ranking.table, out, units=args.units, objective=objective,
                           baseline=ranking.baseline, overwrite=args.overwrite,
-                          sections=None if by_section is None else by_section.table, run=used)
+                          sections=None if by_section is None else by_section.table, run=used,
+                          histograms=None if ranking.histograms is None
+                          else ranking.histograms.table(args.units))
     write_ranking_screening = out / "screening.csv"
     from planner.report import write_predictions_csv
 
     write_predictions_csv(ranking.screening, write_ranking_screening, units=args.units,
                           overwrite=args.overwrite)
+    written = list(files.values()) + [write_ranking_screening]
+    if ranking.histograms is not None:
+        from planner.histograms import HISTOGRAMS_FILE, write_histograms_csv
+
+        written.append(write_histograms_csv(ranking.histograms, out / HISTOGRAMS_FILE,
+                                            units=args.units, overwrite=args.overwrite))
     print(ranking.summary())
     if by_section is not None:
         print(by_section.summary())
-    print("wrote " + ", ".join(str(p) for p in list(files.values()) + [write_ranking_screening]))
+    print("wrote " + ", ".join(str(p) for p in written))
     return 0
 
 

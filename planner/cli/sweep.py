@@ -4,9 +4,10 @@ simulate the best share, rank."""
 from __future__ import annotations
 
 from planner.cli.common import (OBJECTIVE_HELP, UNITS_OF_DRIVES, add_element_options,
-                                add_try_options, add_units, baseline_arg, bump_stop_library,
-                                check_out, element_choices, int_at_least, load_any_model,
-                                output_units, parse_fixed, share, show_progress)
+                                add_histogram_option, add_try_options, add_units, baseline_arg,
+                                bump_stop_library, check_out, element_choices,
+                                histogram_options, int_at_least, load_any_model, output_units,
+                                parse_fixed, share, show_progress)
 
 __all__ = ["add_parser", "run"]
 
@@ -61,6 +62,7 @@ def add_parser(subparsers):
                     help="internal steps per sample of the shock loop (default %(default)s)")
     add_element_options(sw)
     add_try_options(sw)
+    add_histogram_option(sw)
     sw.add_argument("--out", required=True, help="output folder")
     sw.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     sw.set_defaults(func=run)
@@ -100,7 +102,8 @@ def run(args):
     result = sweep_setups(models, drives, library, setups=setups, constraints=constraints,
                           objective=objective, baseline=baseline, top_share=args.simulate_share,
                           top=args.simulate, combine=args.combine,
-                          loop=LoopOptions(oversample=args.oversample),
+                          loop=LoopOptions(oversample=args.oversample,
+                                           histograms=histogram_options(args)),
                           elements=ElementOptions(use_model=not args.no_elements,
                                                   bump_stops=bump_stop_library(args, None),
                                                   **element_choices(args)),

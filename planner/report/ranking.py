@@ -650,7 +650,8 @@ def _workbook_bytes(frame, *, units, objective, baseline, infeasible, summary=No
                 about.append(["", metric, spec.get("max_ratio"),
                               None if mx is None else f"{mx:.6g} {UNIT_LABELS['SI'][q]}",
                               None if mx is None else
-                              f"{float(from_si(mx, q, units)):.6g} {UNIT_LABELS[units][q]}"])
+                              f"{float(from_si(mx, q, units)):.6g} {UNIT_LABELS[units][q]}"]
+                             + ([f"min {spec['min']:.6g}"] if "min" in spec else []))
         about.append([])
     metric_cols = [c for c in frame.columns if c in METRIC_QUANTITY]
     if metric_cols:

@@ -23,6 +23,7 @@ import re
 from pathlib import Path
 
 from ident.data.files import atomic_write_toml
+from planner.histograms import histograms_path, write_histograms_csv
 from planner.report.ranking import write_predictions_csv
 
 __all__ = [
@@ -137,7 +138,9 @@ def write_sweep(result, out_dir, *, units="SI", overwrite=False):
     -------
     list of pathlib.Path
         ``ranking.csv`` (:func:`planner.report.ranking.write_predictions_csv` of
-        ``result.table``), a CSV per case (:func:`case_file_names`, the case's table)
+        ``result.table``), a CSV per case (:func:`case_file_names`, the case's table),
+        with the shock-velocity histograms each case's beside it
+        (``case-1-track_histograms.csv``, :func:`planner.histograms.histograms_path`),
         and ``sweep.toml``: ``format``, ``baseline``, ``objective``, ``best``,
         ``cases`` (``label`` and ``file``), ``combine``, ``n_candidates``,
         ``n_screened``, ``n_simulated``, ``top_share``, ``scheduler``, ``n_workers``,
@@ -159,6 +162,10 @@ def write_sweep(result, out_dir, *, units="SI", overwrite=False):
     for label, table in result.cases.items():
         written.append(write_predictions_csv(table, out / files[label], units=units,
                                              overwrite=overwrite))
+        if result.histograms.get(label) is not None:
+            written.append(write_histograms_csv(result.histograms[label],
+                                                histograms_path(out / files[label]),
+                                                units=units, overwrite=overwrite))
     st = result.settings
     summary = {"format": SWEEP_FORMAT, "baseline": result.baseline,
                "objective": result.objective.name, "best": result.best,

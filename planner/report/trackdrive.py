@@ -11,7 +11,10 @@
 - ``target.csv``: the target (each log's dynamic part at the drive's rate, faded at the
   ends), a track log that ``drive iterate`` reads back;
 - ``psd.png``: target and achieved power spectra per channel (:func:`psd_figure`);
-- ``convergence.png``: residual share against iteration (:func:`convergence_figure`).
+- ``convergence.png``: residual share against iteration (:func:`convergence_figure`);
+- ``histograms.csv`` (``drive from-track``): the logged shock-velocity histogram per corner
+  (setup ``logged``) beside the one the drive reproduces on the model with the track setup
+  (``reproduced``), the columns of :mod:`planner.histograms`.
 
 Compute lives in :mod:`planner.trackdrive`; matplotlib is imported where a figure is drawn
 (heavy).
@@ -36,7 +39,7 @@ __all__ = ["DRIVE_REPORT_FILES", "residual_table", "psd_figure", "convergence_fi
 #: The files of a drive report folder.
 DRIVE_REPORT_FILES = {"residuals": "residuals.csv", "reach": "reach.csv",
                       "limits": "limits.csv", "target": "target.csv", "psd": "psd.png",
-                      "convergence": "convergence.png"}
+                      "convergence": "convergence.png", "histograms": "histograms.csv"}
 #: Welch segment of the PSD overlays [s] (0.125 Hz resolution).
 PSD_SEGMENT_S = 8.0
 
@@ -160,7 +163,7 @@ def convergence_figure(result):
     return fig
 
 
-def write_drive_report(result, out, *, units="SI", overwrite=False):
+def write_drive_report(result, out, *, units="SI", overwrite=False, histograms=None):
     """Write a drive's report folder (files in the module docstring), atomically.
 
     Parameters
@@ -170,6 +173,9 @@ def write_drive_report(result, out, *, units="SI", overwrite=False):
         The folder; an existing non-empty one is replaced only with `overwrite`.
     units : {"SI", "imperial"}
     overwrite : bool
+    histograms : planner.histograms.ShockHistograms, optional
+        The logged shock-velocity histogram beside the one the drive reproduces on the model
+        (``drive from-track``): written as ``histograms.csv``.
 
     Returns
     -------
@@ -191,6 +197,9 @@ def write_drive_report(result, out, *, units="SI", overwrite=False):
         if all(quantity_of(c) for c in result.target.channels) and not \
                 result.target.settings.get("derived"):
             write_track_log(target_log(result), work / DRIVE_REPORT_FILES["target"], units=units)
+        if histograms is not None:
+            write_csv(work / DRIVE_REPORT_FILES["histograms"], histograms.table(units),
+                      units=units)
         for key, fig in (("psd", psd_figure(result, units=units)),
                          ("convergence", convergence_figure(result))):
             fig.savefig(work / DRIVE_REPORT_FILES[key], dpi=110)
