@@ -28,6 +28,7 @@ __all__ = [
     "criterion_shares",
     "criterion_curve",
     "run_predictions",
+    "plan_rationale",
 ]
 
 
@@ -227,3 +228,66 @@ def run_predictions(model, ident_model, runs, drives, library, objective):
                 row[f"{m}_hi"] = float(t[f"{m}_hi"].iloc[0])
         rows.append(row)
     return pd.DataFrame(rows).set_index("run")
+
+
+def _numbers(ns):
+    """``"run 3"``, ``"runs 1-4, 6"``: run numbers in ranges."""
+    ns = sorted(ns)
+    parts, k = [], 0
+    while k < len(ns):
+        j = k
+        while j + 1 < len(ns) and ns[j + 1] == ns[j] + 1:
+            j += 1
+        parts.append(f"{ns[k]}" if j == k else f"{ns[k]}-{ns[j]}")
+        k = j + 1
+    return ("run " if len(ns) == 1 else "runs ") + ", ".join(parts)
+
+
+def plan_rationale(runs, base, *, session=False):
+    """Why the plan has the runs it has, in one line per purpose (for its summary and sheet).
+
+    Parameters
+    ----------
+    runs : sequence of PlannedRun
+    base : planner.setups.Setup
+        The baseline.
+    session : bool
+        Whether a recorded session's runs are the prior (corners they vary need no run).
+
+    Returns
+    -------
+    tuple of str
+    """
+    lines = []
+    ident = [r for r in runs if r.purpose == "identification"]
+    val = [r for r in runs if r.purpose == "validation"]
+    rep = [r for r in runs if r.purpose == "baseline repeat"]
+    if ident:
+        varied = {c: [r.number for r in ident if r.setup.shocks[c] != base.shocks[c]]
+                  for c in CORNERS}
+        where = "; ".join(f"{c} in {_numbers(n)}" for c, n in varied.items() if n)
+        missing = [c for c, n in varied.items() if not n]
+        rest = ""
+        if missing:
+            rest = (f"; {'/'.join(missing)} kept, varied by the session's runs" if session
+                    else f"; {'/'.join(missing)} kept")
+        lines.append(
+            f"{_numbers([r.number for r in ident]).capitalize()} identify: they put other "
+            f"shocks (or settings) than the baseline's at the corners ({where}{rest}), so "
+            "that every shock's path is identified (the seed paper's Eqs. 21-24 need shock "
+            "forces that vary apart from the rig inputs, which only runs with different "
+            "shocks give); the criterion chose them for the most information a minute.")
+    if val:
+        ids = {r.setup.ids() for r in val}
+        shared = [r.number for r in ident if r.setup.ids() in ids]
+        change = sum(r.swap_min for r in val)
+        also = (f"; {_numbers(shared)} identify on a validation setup, so its validation run "
+                "needs no swap" if shared else "")
+        lines.append(
+            f"{_numbers([r.number for r in val]).capitalize()} validate the predicted best "
+            f"setups ({', '.join('/'.join(r.setup.ids()) for r in val)}) on the team's drive; "
+            f"their changes ({change:.0f} min) count in the rig time{also}.")
+    if rep:
+        lines.append(f"{_numbers([r.number for r in rep]).capitalize()} repeat the baseline "
+                     "to catch drift.")
+    return tuple(lines)
