@@ -309,14 +309,14 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     cost = np.array([sequence_cost([c], cands, base, rig, tail) - val_min
                      for c in range(len(cands))])  # each run's own rig time, before the tail
     if budget_id - val_min < cost.min() - 1e-9:
-        raise PlannerError(
-            f"the {len(val_setups)} validation run(s) ({val_min:.3g} min with their swaps) and "
-            f"the baseline repeats ({reserve:.3g} min) leave {budget_id - val_min:.3g} min of "
-            f"{budget_min:g} for identification, less than one run; give more time or fewer "
-            "validation runs")
+        if val_setups:
+            _refuse_validation(budget_min, reserve, val_min, cands, base, rig, tail)
+        raise PlannerError(f"the baseline repeats leave {budget_id:.3g} min of {budget_min:g} "
+                           "for identification, less than one run; give more time or repeat "
+                           "the baseline less often")
     groups = np.array_split(np.arange(n_bands), n_design_bands)
-    relaxed, val_relaxed, status, solve_s = relaxed_design(Mc_s, M0_s, cost, budget_id - val_min,
-                                                           criterion, W_s, groups)
+    relaxed, val_relaxed, status, solve_s = relaxed_design(
+        Mc_s, M0_s, cost, budget_id - val_min, criterion, W_s, groups)
     t_greedy = time.perf_counter()
     greedy_ref = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s,
                                tail=tail)
@@ -360,20 +360,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         raise PlannerError(f"a budget of {budget_min:g} min buys no run that adds information; "
                            "give more time")
     if not identifies and val_setups:
-        four = [c for c, cand in enumerate(cands) if len(cand.changed) == 4
-                and cand.duration_s == min(durations_s)]
-        base0 = next((c for c, cand in enumerate(cands) if not cand.changed
-                      and cand.duration_s == min(durations_s)), None)
-        need = reserve + min(sequence_cost([c] if base0 is None else [base0, c], cands, base,
-                                           rig, tail) for c in four) if four else float("nan")
-        raise PlannerError(
-            f"a budget of {budget_min:g} min cannot hold both the {len(val_setups)} validation "
-            f"run(s) ({val_min:.3g} min with their swaps) and identification runs that separate "
-            f"every corner's shock path (Eq. 17: the shock forces must vary apart from the rig "
-            f"inputs, so the identification runs need other shocks than the baseline's at every "
-            f"corner; the validation runs, on the team's drive, do not stand in for them); give "
-            f"--budget-min {math.ceil(need):d} or more (the baseline and a four-corner swap "
-            f"besides the validation runs), or fewer validation runs (--validate)")
+        _refuse_validation(budget_min, reserve, val_min, cands, base, rig, tail)
     _check_plan_identifiable(id_M, budget_min, cands, rig)
     runs, drives_out, infos = schedule_runs(seq, cands, val_setups, base, rig, make, drives[0],
                                             baseline_every, min(durations_s), seed, Mc_s,
@@ -430,6 +417,26 @@ def _check_identifiable(total_s, base, cands, library, plant, f_c):
         f"no plan from this crate can identify the shock inputs (seed paper Eq. 17): {why}; add "
         "to the crate a shock whose damping clearly differs from the baseline's (or a "
         "nonlinear one), or give a session whose runs already swap those corners")
+
+
+def _refuse_validation(budget, reserve, val_min, cands, base, rig, tail):
+    """Refuse a budget that cannot hold both the validation runs and identifying runs."""
+    short = min(c.duration_s for c in cands)
+    base0 = [c for c, cand in enumerate(cands) if not cand.changed and cand.duration_s == short]
+    need = min((sequence_cost(base0[:1] + [c], cands, base, rig, tail) for c, cand
+                in enumerate(cands) if len(cand.changed) == 4 and cand.duration_s == short),
+               default=float("nan")) + reserve
+    more = (f"give a budget of {math.ceil(need - 1e-9):d} min or more (--budget-min: the "
+            "baseline and a four-corner swap besides the validation runs)"
+            if math.isfinite(need) else "give more time")
+    repeats = f" and {reserve:.3g} min of baseline repeats" if reserve else ""
+    raise PlannerError(
+        f"a budget of {budget:g} min cannot hold both the {len(tail)} validation run(s) "
+        f"({val_min:.3g} min with their swaps{repeats}) and identification runs that separate "
+        "every corner's shock path (seed paper Eq. 17: the shock forces must vary apart from "
+        "the rig inputs, so the identification runs need other shocks than the baseline's at "
+        "every corner; the validation runs, on the team's drive, do not stand in for them); "
+        f"{more}, or fewer validation runs (--validate)")
 
 
 def _identifies(M):

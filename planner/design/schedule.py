@@ -244,7 +244,7 @@ def _numbers(ns):
 
 
 def plan_rationale(runs, base, *, session=False):
-    """Why the plan has the runs it has, in one line per purpose (for its summary and sheet).
+    """Why the plan has the runs it has, a line per purpose (for its summary and sheet).
 
     Parameters
     ----------
@@ -257,37 +257,45 @@ def plan_rationale(runs, base, *, session=False):
     Returns
     -------
     tuple of str
+        The identification runs: the runs that change each corner's shock from the
+        baseline's, and why (the seed paper's Eqs. 21-24); the validation runs and their
+        changes' rig time; the baseline repeats.
     """
     lines = []
     ident = [r for r in runs if r.purpose == "identification"]
     val = [r for r in runs if r.purpose == "validation"]
     rep = [r for r in runs if r.purpose == "baseline repeat"]
     if ident:
-        varied = {c: [r.number for r in ident if r.setup.shocks[c] != base.shocks[c]]
-                  for c in CORNERS}
-        where = "; ".join(f"{c} in {_numbers(n)}" for c, n in varied.items() if n)
-        missing = [c for c, n in varied.items() if not n]
-        rest = ""
-        if missing:
-            rest = (f"; {'/'.join(missing)} kept, varied by the session's runs" if session
-                    else f"; {'/'.join(missing)} kept")
+        varied = {}
+        for c in CORNERS:
+            ns = tuple(r.number for r in ident if r.setup.shocks[c] != base.shocks[c])
+            varied.setdefault(ns, []).append(c)
+        where = "; ".join(f"{', '.join(cs)}: {_numbers(ns)}" for ns, cs in varied.items() if ns)
+        kept = varied.get((), [])
+        if kept:
+            where += (f"; {', '.join(kept)} kept (the session's runs vary them)" if session
+                      else f"; {', '.join(kept)} kept")
         lines.append(
-            f"{_numbers([r.number for r in ident]).capitalize()} identify: they put other "
-            f"shocks (or settings) than the baseline's at the corners ({where}{rest}), so "
-            "that every shock's path is identified (the seed paper's Eqs. 21-24 need shock "
-            "forces that vary apart from the rig inputs, which only runs with different "
-            "shocks give); the criterion chose them for the most information a minute.")
+            f"{_numbers([r.number for r in ident]).capitalize()} "
+            f"{'identify: they change' if len(ident) > 1 else 'identifies: it changes'} the "
+            f"shocks (or their settings) from the baseline's ({where}) so that every shock's "
+            "path is identified (seed paper Eqs. 21-24: the shock forces must vary apart from "
+            "the rig inputs, which only different shocks between runs give); the criterion "
+            f"chose {'them' if len(ident) > 1 else 'it'} for the most information a minute.")
     if val:
-        ids = {r.setup.ids() for r in val}
-        shared = [r.number for r in ident if r.setup.ids() in ids]
         change = sum(r.swap_min for r in val)
-        also = (f"; {_numbers(shared)} identify on a validation setup, so its validation run "
-                "needs no swap" if shared else "")
-        lines.append(
-            f"{_numbers([r.number for r in val]).capitalize()} validate the predicted best "
-            f"setups ({', '.join('/'.join(r.setup.ids()) for r in val)}) on the team's drive; "
-            f"their changes ({change:.0f} min) count in the rig time{also}.")
+        setups = ", ".join("/".join(r.setup.ids()) for r in val)
+        many = len(val) > 1
+        line = (f"{_numbers([r.number for r in val]).capitalize()} "
+                f"{'validate' if many else 'validates'} the predicted best setup{'s' * many} "
+                f"({setups}) on the team's drive; {'their' if many else 'its'} changes "
+                f"({change:.0f} min) count in the rig time")
+        free = [r.number for r in val if not r.changed]
+        if free and ident:
+            line += (f"; {_numbers(free)} need{'s' * (len(free) == 1)} no change: the runs "
+                     "before identify on its setup")
+        lines.append(line + ".")
     if rep:
-        lines.append(f"{_numbers([r.number for r in rep]).capitalize()} repeat the baseline "
-                     "to catch drift.")
+        lines.append(f"{_numbers([r.number for r in rep]).capitalize()} "
+                     f"{'repeat' if len(rep) > 1 else 'repeats'} the baseline to catch drift.")
     return tuple(lines)
