@@ -53,6 +53,8 @@ DYNO_SPEEDS = (0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.5)
 VALIDATE_CRATE = ("B20", "L28", "DS", "RB")
 VALIDATE_BUDGET_MIN = 45.0
 VALIDATE_SHORT_BUDGET_MIN = 30.0
+#: A budget whose plan repeats the baseline (after every 3 runs) between swapped runs.
+REPEATS_BUDGET_MIN = 90.0
 VALIDATE_DESIGN = {"candidates": CandidateOptions(kinds=("noise",), durations_s=(60.0,)),
                    "information": InformationOptions(n_bands=24, n_design_bands=4)}
 
@@ -399,6 +401,28 @@ def test_validation_plan_refused_when_the_budget_cannot_hold_both(paper_vehicle,
     plan = _validated(paper_vehicle, validate_crate, team_drive, need)
     ident = [r for r in plan.runs if r.purpose == "identification"]
     assert {c for r in ident for c in CORNERS if r.setup.shocks[c] != "B20"} == set(CORNERS)
+
+
+@pytest.mark.parametrize("every, budget_min, n_validation",
+                         [(3, REPEATS_BUDGET_MIN, 1), (2, 60.0, 0)])
+def test_baseline_repeats_and_their_swaps_fit_the_budget(paper_vehicle, validate_crate,
+                                                         team_drive, every, budget_min,
+                                                         n_validation):
+    """A repeat of the baseline between swapped runs swaps the baseline in and out again:
+    rig time the plan must hold (every 2 runs in 60 min it ran to 469 min), and the runs
+    still vary every corner."""
+    plan = design_experiment(paper_vehicle, validate_crate, budget_min=budget_min,
+                             baseline="B20", drives=[team_drive],
+                             schedule=D.ScheduleOptions(baseline_every=every,
+                                                        n_validation=n_validation),
+                             **VALIDATE_DESIGN)
+    assert plan.total_min <= budget_min + 1e-9
+    purposes = [r.purpose for r in plan.runs]
+    assert "baseline repeat" in purposes
+    assert purposes.count("validation") == n_validation
+    ident = [r for r in plan.runs if r.purpose == "identification"]
+    assert {c for r in ident for c in CORNERS if r.setup.shocks[c] != "B20"} == set(CORNERS)
+    assert plan.rationale[-1].endswith("the baseline to catch drift.")
 
 
 def test_plan_rationale_names_the_runs_and_corners(base):

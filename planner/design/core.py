@@ -60,6 +60,8 @@ log = logging.getLogger(__name__)
 
 #: A band whose scaled total information has an eigenvalue below this is not identifiable.
 _RANK_TOL = 1e-8
+#: Designs on less time when the baseline repeats' swaps overrun the budget, at most.
+_REPEAT_ATTEMPTS = 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -184,7 +186,9 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     schedule : ScheduleOptions
         ``baseline_every`` (repeat the baseline, shortest duration, after every this many
         runs; 0: never, to catch drift), ``n_validation`` (validation runs of the current
-        best setups on the team's drive), ``seed`` (seeds of the planned drives),
+        best setups on the team's drive, at the plan's end: their durations and changes
+        spend the budget, and the identification runs before them must meet Eq. 17 on
+        their own), ``seed`` (seeds of the planned drives),
         ``date`` (for the run sheet's header).
     top : int
         Contenders of the decision criterion.
@@ -198,8 +202,9 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     PlannerError
         On a budget shorter than one run, an unknown criterion, drive kind,
         shock id or baseline, a crate with which no plan meets Eq. 17 (naming
-        the corners and the fix), or a budget too short for any identifying
-        plan.
+        the corners and the fix), a budget too short for any identifying
+        plan, or one that cannot hold both the validation runs and identification runs
+        that meet Eq. 17 (naming the budget that would).
     """
     for value, cls, name in ((candidates, CandidateOptions, "candidates"),
                              (information, InformationOptions, "information"),
@@ -337,34 +342,68 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         log.warning("design: the relaxed problem's status is %r; greedy designs stand in",
                     status)
     val_ids = {s.ids() for s in val_setups}
-    starts += [[c] for c, cand in enumerate(cands)
-               if (len(cand.changed) == 4 or cand.setup.ids() in val_ids)
-               and cand.duration_s == min(durations_s)
-               and sequence_cost([c], cands, base, rig, tail) <= budget_id + 1e-9]
-    best = None
-    for st in starts:
-        seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s, start=st,
-                            tail=tail)
-        # the fill may have left swaps
-        order = swap_order([cands[c].setup for c in seq], base, rig, end)
-        seq = fit_budget([seq[k] for k in order], Mc_s, M0_s, cands, base, rig, budget_id,
-                         criterion, W_s, tail)
-        seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s,
-                            start=seq, tail=tail)
-        M = M0_s + sum((Mc_s[c] for c in seq), np.zeros_like(M0_s))
-        key = (_identifies(M), criterion_value(M, criterion, W_s))
-        if best is None or key > best[0]:
-            best = (key, seq, M)
-    (identifies, _), seq, id_M = best
-    if not seq:
-        raise PlannerError(f"a budget of {budget_min:g} min buys no run that adds information; "
-                           "give more time")
-    if not identifies and val_setups:
-        _refuse_validation(budget_min, reserve, val_min, cands, base, rig, tail)
-    _check_plan_identifiable(id_M, budget_min, cands, rig)
-    runs, drives_out, infos = schedule_runs(seq, cands, val_setups, base, rig, make, drives[0],
-                                            baseline_every, min(durations_s), seed, Mc_s,
-                                            val_info, scale)
+    cores = [c for c, cand in enumerate(cands)
+             if (len(cand.changed) == 4 or cand.setup.ids() in val_ids)
+             and cand.duration_s == min(durations_s)]
+
+    def select(budget_id):
+        """The identifying plan with the best criterion of every start within `budget_id`:
+        (identifies, sequence, its information)."""
+        best = None
+        for st0 in starts + [[c] for c in cores]:
+            st = fit_budget(st0, Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s, tail)
+            if st0 and not st:  # a start that does not fit: the empty one stands for it
+                continue
+            seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s,
+                                start=st, tail=tail)
+            # the fill may have left swaps
+            order = swap_order([cands[c].setup for c in seq], base, rig, end)
+            seq = fit_budget([seq[k] for k in order], Mc_s, M0_s, cands, base, rig, budget_id,
+                             criterion, W_s, tail)
+            seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s,
+                                start=seq, tail=tail)
+            M = M0_s + sum((Mc_s[c] for c in seq), np.zeros_like(M0_s))
+            key = (_identifies(M), criterion_value(M, criterion, W_s))
+            if best is None or key > best[0]:
+                best = (key, seq, M)
+        return best[0][0], best[1], best[2]
+
+    # the baseline repeats go between the identification runs, and going to the baseline and
+    # back is rig time too: when the scheduled plan overruns, the identification budget is
+    # bisected for the most that fits
+    lo, hi, b_id, found = val_min + float(cost.min()), budget_id, budget_id, None
+    for attempt in range(_REPEAT_ATTEMPTS):
+        identifies, seq, id_M = select(b_id)
+        if attempt == 0:
+            if not seq:
+                raise PlannerError(f"a budget of {budget_min:g} min buys no run that adds "
+                                   "information; give more time")
+            if not identifies and val_setups:
+                _refuse_validation(budget_min, reserve, val_min, cands, base, rig, tail)
+            _check_plan_identifiable(id_M, budget_min, cands, rig)
+        scheduled = schedule_runs(seq, cands, val_setups, base, rig, make, drives[0],
+                                  baseline_every, min(durations_s), seed, Mc_s, val_info, scale)
+        end_min = scheduled[0][-1].start_min + scheduled[0][-1].duration_s / 60
+        fits = end_min <= budget_min + 1e-9
+        log.debug("design: %.1f min for identification: %d runs, %s, the schedule ends at "
+                  "%.1f min", b_id, len(seq), "identifying" if identifies else
+                  "not identifying", end_min)
+        if seq and identifies and fits:
+            found = (seq, id_M, scheduled)
+            if attempt == 0:
+                break
+        if fits or not identifies:  # it fits, or needs more time to identify: try more
+            lo = b_id
+        else:
+            hi = b_id
+        b_id = (lo + hi) / 2
+    if found is None:
+        raise PlannerError(
+            f"a budget of {budget_min:g} min cannot hold identification runs that separate "
+            f"every corner's shock path with a baseline repeat after every {baseline_every} "
+            "run(s) (each repeat swaps the baseline in and out again); repeat the baseline "
+            "less often (--baseline-every) or give more time")
+    seq, id_M, (runs, drives_out, infos) = found
     preds = run_predictions(model, ident_model, runs, drives_out, library, objective)
     runs = criterion_shares(runs, infos, M0_s, criterion, W_s)
     curve = criterion_curve(runs, infos, M0_s, criterion, W_s)

@@ -46,7 +46,9 @@ class ScheduleOptions:
         Repeat the baseline (shortest duration) after every this many runs (0: never),
         to catch drift.
     n_validation : int
-        Validation runs of the current best setups on the team's drive.
+        Validation runs of the current best setups on the team's drive, at the plan's end;
+        their durations and changes are rig time in the budget, and the identification
+        runs before them must identify every shock's path on their own.
     seed : int
         Seeds of the planned drives.
     date : str, optional
