@@ -55,6 +55,7 @@ import functools
 import logging
 import math
 import re
+import textwrap
 import zipfile
 from pathlib import Path
 
@@ -163,6 +164,11 @@ def plan_toml(plan, *, units="SI", drive_dir=_DRIVE_DIR, shock_library="shocks.t
               f"{plan.budget_min:g} min, planned {plan.total_min:.1f} min on rig "
               f"'{plan.rig.name}'.\nRun it on the virtual rig with: shockplan rig simulate "
               "--plan plan.toml --out SESSION")
+    if plan.rationale:
+        header += "\nWhy these runs:\n" + "\n".join(
+            textwrap.fill(line, 90, initial_indent="- ", subsequent_indent="  ",
+                          break_on_hyphens=False)
+            for line in plan.rationale)
     return "".join(f"# {line}\n" for line in header.splitlines()) + tomli_w.dumps(doc)
 
 
@@ -428,6 +434,8 @@ def _header_block(ws, plan, units, date, label_col, intervals, clicks=False):
                   f"(predictions{', intervals' if intervals else ''}); write the measured "
                   f"values, each shock's temperature [{_TEMPERATURE_UNIT[units]}] (in the "
                   f"measured row, under the shock) and notes in the white cells. {starts}")
+    if plan.rationale:
+        legend += " Why these runs: " + " ".join(plan.rationale)
     ws.cell(row=7, column=1, value=legend).font = fonts["note"]
     ws.row_dimensions[7].height = 14
     return 9

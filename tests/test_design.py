@@ -46,6 +46,17 @@ CLICK_BUDGET_MIN = 20.0
 CLICK_RIG = RigSpec(swap_min=6.0, click_change_s=20.0)
 #: The dyno's speeds [m/s] of the clicker's sweeps (as tests/test_adjustable.py).
 DYNO_SPEEDS = (0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.5)
+#: Issue 36, plans with validation runs: a small crate and design (one drive kind, 60 s runs,
+#: 24 bands, a 30 s team drive: about 8 s), a budget that holds both the validation runs and
+#: identification runs that swap, and one that cannot (the baseline, a four-corner swap and
+#: the two validation runs take 39 min on the paper car: 1 + 24 + 1 + 0.5 + 12 + 0.5).
+VALIDATE_CRATE = ("B20", "L28", "DS", "RB")
+VALIDATE_BUDGET_MIN = 45.0
+VALIDATE_SHORT_BUDGET_MIN = 30.0
+#: A budget whose plan repeats the baseline (after every 3 runs) between swapped runs.
+REPEATS_BUDGET_MIN = 90.0
+VALIDATE_DESIGN = {"candidates": CandidateOptions(kinds=("noise",), durations_s=(60.0,)),
+                   "information": InformationOptions(n_bands=24, n_design_bands=4)}
 
 
 @pytest.fixture(scope="module")
@@ -300,6 +311,142 @@ def test_an_unidentifiable_plan_within_budget_does_not_blame_the_budget():
     assert "give more time" not in str(exc.value) and "drive" in str(exc.value)
     with pytest.raises(PlannerError, match="cannot buy runs"):
         _check_plan_identifiable(singular, 10.0, cands, rig)
+
+
+# ------------------------------------------------------------------ validation runs (issue 36)
+
+
+@pytest.fixture(scope="module")
+def validate_crate(demo_library):
+    return ShockLibrary([demo_library.entry(s) for s in VALIDATE_CRATE])
+
+
+@pytest.fixture(scope="module")
+def team_drive(paper_vehicle):
+    from ident.data.drive import make_track_drive
+
+    return make_track_drive(duration_s=30.0, fs_hz=100.0, seed=5,
+                            wheelbase_m=paper_vehicle.a_m + paper_vehicle.b_m,
+                            track_width_m=paper_vehicle.track_front_m, name="team track")
+
+
+def _validated(vehicle, crate, drive, budget_min):
+    return design_experiment(vehicle, crate, budget_min=budget_min, baseline="B20",
+                             drives=[drive], schedule=D.ScheduleOptions(n_validation=2),
+                             **VALIDATE_DESIGN)
+
+
+def test_sequence_cost_and_order_count_the_runs_after(base):
+    """The fixed runs after a sequence (the validation runs) spend rig time: their durations
+    and the changes into them; the order that ends where they start changes least."""
+    rig = RigSpec(swap_min=6.0, run_overhead_min=1.0)
+    other = Setup("x", {**base.shocks, "LF": "DS", "RF": "DS"})
+    cands = [D.Candidate("x", other, "noise", 120.0, ("LF", "RF"), 0.0)]
+    tail = [(Setup("v", {**base.shocks, "LF": "DS"}), 60.0)]
+    # base -> x: 2 swaps, 2 min + 1; x -> v: 1 swap, 1 min + 1
+    assert DS.sequence_cost([0], cands, base, rig) == pytest.approx(12 + 3)
+    assert DS.sequence_cost([0], cands, base, rig, tail) == pytest.approx(12 + 3 + 6 + 2)
+    assert DS.sequence_cost([], cands, base, rig, tail) == pytest.approx(6 + 2)
+    # the greedy's insertion before the tail: x's own time, 2 swaps in and 1 out, less the 1
+    # the tail no longer needs from the baseline
+    assert DS._insertion([], 0, cands, base, rig, tail) == (pytest.approx(3 + 12 + 6 - 6), 0)
+    a, b = (Setup(n, dict(zip(CORNERS, i))) for n, i in (("a", "AAAB"), ("b", "BAAA")))
+    start, end = Setup("s", dict.fromkeys(CORNERS, "A")), Setup("e", dict(zip(CORNERS, "BBAA")))
+    # 1 + 2 changes either way; on to the end, a then b (1 change more, not 3), either input
+    assert DS.swap_order([a, b], start, end=end) == [0, 1]
+    assert DS.swap_order([b, a], start, end=end) == [1, 0]
+
+
+def test_validation_plan_identifies_with_its_own_runs(paper_vehicle, validate_crate,
+                                                     team_drive):
+    """Issue 36: with validation runs the identification runs still vary every corner's shock
+    (Eq. 17 without the validation runs' information), the validation runs close the plan and
+    their swaps are rig time in the budget, and the plan says why."""
+    plan = _validated(paper_vehicle, validate_crate, team_drive, VALIDATE_BUDGET_MIN)
+    ident = [r for r in plan.runs if r.purpose == "identification"]
+    val = [r for r in plan.runs if r.purpose == "validation"]
+    assert len(val) == 2 and plan.runs[-2:] == tuple(val)
+    base = plan.baseline
+    varied = {c for r in ident for c in CORNERS if r.setup.shocks[c] != base.shocks[c]}
+    assert varied == set(CORNERS)
+    # rig time: every run's duration, its changes and the overhead, validation runs included
+    rig = plan.rig
+    prev, total = base, 0.0
+    for r in plan.runs:
+        assert r.swap_min == pytest.approx(change_time_min(prev, r.setup, rig))
+        total += r.duration_s / 60 + r.swap_min + rig.run_overhead_min
+        prev = r.setup
+    assert plan.total_min == pytest.approx(total) and total <= VALIDATE_BUDGET_MIN + 1e-9
+    assert sum(r.swap_min for r in val) > 0  # the validation runs swap: counted above
+    # why: one line for the identification runs, one for the validation runs
+    assert len(plan.rationale) == 2
+    first, second = plan.rationale
+    assert first.startswith(f"Runs 1-{ident[-1].number} identify") and "Eqs. 21-24" in first
+    assert all(c in first for c in CORNERS)
+    assert second.startswith(f"Runs {val[0].number}-{val[1].number} validate")
+    assert f"({sum(r.swap_min for r in val):.0f} min) count in the rig time" in second
+
+
+def test_validation_plan_refused_when_the_budget_cannot_hold_both(paper_vehicle,
+                                                                  validate_crate, team_drive):
+    """A budget that holds the validation runs but no identifying runs beside them is refused
+    with the budget that would; that budget plans."""
+    import re
+
+    with pytest.raises(PlannerError, match=r"cannot hold both the 2 validation run.*"
+                                           r"Eq\. 17.*--validate") as exc:
+        _validated(paper_vehicle, validate_crate, team_drive, VALIDATE_SHORT_BUDGET_MIN)
+    need = float(re.search(r"give a budget of (\d+) min or more", str(exc.value)).group(1))
+    assert need > VALIDATE_SHORT_BUDGET_MIN
+    plan = _validated(paper_vehicle, validate_crate, team_drive, need)
+    ident = [r for r in plan.runs if r.purpose == "identification"]
+    assert {c for r in ident for c in CORNERS if r.setup.shocks[c] != "B20"} == set(CORNERS)
+
+
+@pytest.mark.parametrize("every, budget_min, n_validation",
+                         [(3, REPEATS_BUDGET_MIN, 1), (2, 60.0, 0)])
+def test_baseline_repeats_and_their_swaps_fit_the_budget(paper_vehicle, validate_crate,
+                                                         team_drive, every, budget_min,
+                                                         n_validation):
+    """A repeat of the baseline between swapped runs swaps the baseline in and out again:
+    rig time the plan must hold (every 2 runs in 60 min it ran to 469 min), and the runs
+    still vary every corner."""
+    plan = design_experiment(paper_vehicle, validate_crate, budget_min=budget_min,
+                             baseline="B20", drives=[team_drive],
+                             schedule=D.ScheduleOptions(baseline_every=every,
+                                                        n_validation=n_validation),
+                             **VALIDATE_DESIGN)
+    assert plan.total_min <= budget_min + 1e-9
+    purposes = [r.purpose for r in plan.runs]
+    assert "baseline repeat" in purposes
+    assert purposes.count("validation") == n_validation
+    ident = [r for r in plan.runs if r.purpose == "identification"]
+    assert {c for r in ident for c in CORNERS if r.setup.shocks[c] != "B20"} == set(CORNERS)
+    assert plan.rationale[-1].endswith("the baseline to catch drift.")
+
+
+def test_plan_rationale_names_the_runs_and_corners(base):
+    """Known answer: which runs vary which corners, the validation runs' changes, repeats."""
+    from planner.design.schedule import PlannedRun, plan_rationale
+
+    def run(n, purpose, ids, changed=(), swap=0.0):
+        return PlannedRun(n, f"run{n}", Setup(f"s{n}", dict(zip(CORNERS, ids))), purpose,
+                          "d", "noise", 60.0, 0.0, changed, swap, 0.0)
+
+    b20, ds = ("B20",) * 4, ("DS",) * 4
+    runs = [run(1, "identification", b20), run(2, "identification", ("DS", "B20", "B20", "DS")),
+            run(3, "baseline repeat", b20), run(4, "identification", ds),
+            run(5, "validation", ds), run(6, "validation", ("DS", "DS", "L28", "L28"),
+                                          ("LR", "RR"), 12.0)]
+    why = plan_rationale(runs, base)
+    assert why[0].startswith("Runs 1-2, 4 identify: they change the shocks (or their "
+                             "settings) from the baseline's (LF, RR: runs 2, 4; RF, LR: run 4)")
+    assert why[1].startswith("Runs 5-6 validate the predicted best setups (DS/DS/DS/DS, "
+                             "DS/DS/L28/L28) on the team's drive; their changes (12 min) count "
+                             "in the rig time; run 5 needs no change")
+    assert why[2] == "Run 3 repeats the baseline to catch drift."
+    only = plan_rationale(runs[:2], base, session=True)
+    assert len(only) == 1 and "RF, LR kept (the session's runs vary them)" in only[0]
 
 
 # ---------------------------------------------------------------------------- clicks (issue 26)

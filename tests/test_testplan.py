@@ -159,6 +159,10 @@ def test_run_sheet_header_block(plan, tmp_path):
     assert header["criterion"].startswith("D-optimal")
     assert header["baseline"] == "B20/B20/B20/B20"
     assert any("Filled shock" in str(t) for t in texts)
+    # the plan says why it chose its runs (issue 36): the legend ends with it
+    legend = next(str(t) for t in texts if "Filled shock" in str(t))
+    assert legend.endswith("Why these runs: " + " ".join(plan.rationale))
+    assert "Eqs. 21-24" in legend and "validate the predicted best" in legend
     dated = dataclasses.replace(plan, settings={**plan.settings, "date": "2009-04-20"})
     write_run_sheet(dated, tmp_path / "b.xlsx")
     assert read_run_sheet(tmp_path / "b.xlsx").attrs["header"]["date"] == "2009-04-20"
@@ -344,6 +348,10 @@ def test_write_plan_files_and_rig_plan(plan, tmp_path):
 
     rig = read_rig_plan(files["plan"])
     assert rig.units == "imperial"
+    comments = " ".join(line[1:].strip() for line in files["plan"].read_text().splitlines()
+                        if line.startswith("#"))
+    assert "Why these runs:" in comments
+    assert all(line in comments for line in plan.rationale)  # wrapped, every word kept
     assert [r.name for r in rig.runs] == [r.name for r in plan.runs]
     assert [r.setup for r in rig.runs] == [dict(zip(CORNERS, r.setup.ids())) for r in plan.runs]
     for rr, pr in zip(rig.runs, plan.runs):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 from planner.cli.common import (UNITS_OF_DRIVES, add_units, check_out, load_vehicle,
@@ -95,5 +96,8 @@ def run(args):
           f"{plan.solver['solve_s']:.1f} s; {plan.solver['n_candidates']} candidate runs)")
     print(format_table(rows, ["run", "name", "start min", "min", "purpose", "LF/RF/LR/RR",
                             "changed", "share"]))
+    for k, line in enumerate(plan.rationale):
+        print(textwrap.fill(line, 100, initial_indent="why: " if k == 0 else "     ",
+                            subsequent_indent="     ", break_on_hyphens=False))
     print("wrote " + ", ".join(str(p) for p in files.values()))
     return 0

@@ -47,6 +47,16 @@ least is found exactly for up to 9 runs (Held-Karp), by nearest neighbour and
 2-opt above, and runs are dropped (least criterion share first) until the
 ordered plan fits the budget.
 
+Validation runs (``ScheduleOptions.n_validation``: the current best setups on the
+team's drive) close the plan: their durations and their changes from the run before
+spend the budget as the identification runs' do (the greedy's fixed ``tail``); the
+validation setups are identification candidates too (the car is in them anyway, so an
+identification run there costs no swap of its own); and the identification runs must
+meet Eq. 17 on their own, without the validation runs' information (those play the
+team's drive, which does not excite the band as a rig drive does). A budget that cannot
+hold both is refused with the budget that would. ``ExperimentPlan.rationale`` says in a
+line per purpose why the plan chose its runs.
+
 Adjustable shocks (clickers)
 ----------------------------
 The candidates include each adjustable shock of the crate at a few settings

@@ -32,6 +32,7 @@ __all__ = [
     "change_time_min",
     "full_names",
     "candidate_runs",
+    "validation_candidates",
 ]
 
 
@@ -303,5 +304,46 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
                 cost = (T / 60.0 + rig.swap_min * swaps + rig.click_change_min * clicks
                         + rig.run_overhead_min)
                 out.append(Candidate(f"{name} {kind} {T:g}s", setup, kind, float(T),
+                                     changed, cost, clicks))
+    return out
+
+
+def validation_candidates(val_setups, cands, baseline, rig, kinds, durations_s):
+    """Identification candidates on the validation setups that `cands` lacks.
+
+    The validation runs put the car in those setups anyway, so an identification run there
+    (a drive of `kinds`, before the validation run) costs no swap of its own: the design
+    may take one to vary the shock forces at the corners the validation setups change.
+
+    Parameters
+    ----------
+    val_setups : sequence of planner.setups.Setup
+        Named in full (:func:`full_names`).
+    cands : sequence of Candidate
+        The candidates so far (a setup already among them is not added again).
+    baseline : planner.setups.Setup
+    rig : planner.rig_spec.RigSpec
+    kinds : sequence of str
+    durations_s : sequence of float
+
+    Returns
+    -------
+    list of Candidate
+        Named ``"<setup> <kind> <T>s"``, costed from the baseline as :func:`candidate_runs`.
+    """
+    have = {c.setup.ids() for c in cands}
+    base_ids = dict(zip(CORNERS, baseline.ids()))
+    out = []
+    for setup in val_setups:
+        if setup.ids() in have:
+            continue
+        have.add(setup.ids())
+        changed = tuple(c for c in CORNERS if setup.shocks[c] != base_ids[c])
+        swaps, clicks = change_counts(baseline, setup)
+        for kind in kinds:
+            for T in durations_s:
+                cost = (T / 60.0 + rig.swap_min * swaps + rig.click_change_min * clicks
+                        + rig.run_overhead_min)
+                out.append(Candidate(f"{setup.name} {kind} {T:g}s", setup, kind, float(T),
                                      changed, cost, clicks))
     return out

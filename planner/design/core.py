@@ -22,7 +22,8 @@ from planner.objective import default_objective, score_setups
 from planner.rig_spec import RigSpec, default_rig
 from planner.screen import screen_setups
 from planner.setups import enumerate_setups, resolve_baseline
-from planner.design.candidates import CandidateOptions, candidate_runs, change_time_min, full_names
+from planner.design.candidates import (CandidateOptions, candidate_runs, full_names,
+                                       validation_candidates)
 from planner.design.information import (
     CRITERIA,
     InformationOptions,
@@ -44,6 +45,7 @@ from planner.design.schedule import (
     ScheduleOptions,
     criterion_curve,
     criterion_shares,
+    plan_rationale,
     run_predictions,
     schedule_runs,
 )
@@ -58,6 +60,8 @@ log = logging.getLogger(__name__)
 
 #: A band whose scaled total information has an eigenvalue below this is not identifiable.
 _RANK_TOL = 1e-8
+#: Designs on less time when the baseline repeats' swaps overrun the budget, at most.
+_REPEAT_ATTEMPTS = 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,6 +94,9 @@ class ExperimentPlan:
         cvxpy's status, solver, times.
     rig : planner.rig_spec.RigSpec
     settings : dict
+    rationale : tuple of str
+        Why the plan chose its runs, a line per purpose (identification, validation,
+        baseline repeats); the CLI prints it and the run sheet's legend ends with it.
     """
 
     runs: tuple
@@ -106,6 +113,7 @@ class ExperimentPlan:
     solver: dict
     rig: RigSpec
     settings: dict = field(default_factory=dict)
+    rationale: tuple = ()
 
     def table(self):
         """The runs as a DataFrame (one row per run, in rig order); with adjustable shocks
@@ -178,7 +186,9 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     schedule : ScheduleOptions
         ``baseline_every`` (repeat the baseline, shortest duration, after every this many
         runs; 0: never, to catch drift), ``n_validation`` (validation runs of the current
-        best setups on the team's drive), ``seed`` (seeds of the planned drives),
+        best setups on the team's drive, at the plan's end: their durations and changes
+        spend the budget, and the identification runs before them must meet Eq. 17 on
+        their own), ``seed`` (seeds of the planned drives),
         ``date`` (for the run sheet's header).
     top : int
         Contenders of the decision criterion.
@@ -192,8 +202,9 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     PlannerError
         On a budget shorter than one run, an unknown criterion, drive kind,
         shock id or baseline, a crate with which no plan meets Eq. 17 (naming
-        the corners and the fix), or a budget too short for any identifying
-        plan.
+        the corners and the fix), a budget too short for any identifying
+        plan, or one that cannot hold both the validation runs and identification runs
+        that meet Eq. 17 (naming the budget that would).
     """
     for value, cls, name in ((candidates, CandidateOptions, "candidates"),
                              (information, InformationOptions, "information"),
@@ -239,9 +250,21 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     if drives is None:
         drives = [make("track", 120.0, seed + 777, "validation-track")]
     drives = list(drives)
+    # validation runs: the current best setups on the team's drive, at the plan's end
+    val_setups = []
+    if n_validation:
+        pool = list(enumerate_setups(library))
+        sc = screen_setups(plant, drives[0], [base] + [s for s in pool if s != base], library)
+        ranked = score_setups(sc.table, objective, baseline=base.name).table.sort_values("rank")
+        names = [n for n in ranked.index if n != base.name][:n_validation]
+        by = {s.name: s for s in pool}
+        val_setups = [full_names(by[n], library) for n in names]
     cands = candidate_runs(library, base, rig=rig, kinds=kinds, durations_s=durations_s,
                            shocks=shocks, n_shocks=n_shocks, c_bar=plant.cbar_n_s_m,
                            click_levels=click_levels)
+    # the validation setups are identification candidates too: the car is in them anyway,
+    # so an identification run there costs its duration and no swap of its own
+    cands += validation_candidates(val_setups, cands, base, rig, kinds, durations_s)
     cheapest = min(c.cost_min for c in cands)
     if budget_min < cheapest:
         raise PlannerError(f"a budget of {budget_min:g} min is shorter than one run (the "
@@ -257,16 +280,6 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     s_index = {s: i for i, s in enumerate(setups)}
     k_index = {k: j for j, k in enumerate(kinds)}
     Mc = np.stack([c.duration_s * info[s_index[c.setup], k_index[c.kind]] for c in cands])
-
-    # validation runs: the current best setups on the team's drive, planned first
-    val_setups = []
-    if n_validation:
-        pool = list(enumerate_setups(library))
-        sc = screen_setups(plant, drives[0], [base] + [s for s in pool if s != base], library)
-        ranked = score_setups(sc.table, objective, baseline=base.name).table.sort_values("rank")
-        names = [n for n in ranked.index if n != base.name][:n_validation]
-        by = {s.name: s for s in pool}
-        val_setups = [full_names(by[n], library) for n in names]
     val_info = None
     if val_setups:
         vi, _ = candidate_information(plant, val_setups, ["validation"],
@@ -282,6 +295,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         return M * D[..., :, None] * D[..., None, :]
 
     Mc_s, M0_s = scale(Mc), scale(M0)
+    M_val = scale(val_info).sum(axis=0) if val_info is not None else 0.0
     _check_identifiable(scale(total), base, cands, library, plant, f_c)
 
     W_s = None
@@ -289,66 +303,107 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         W_s = scale(decision_weight_matrices(plant, ident_model, library, base, objective,
                                              drives[0], f_c, edges, M0, powers[0], noise,
                                              top))
-    # the budget the identification runs may spend: validation and repeats come out of it
-    reserve = 0.0
-    val_cost = []
-    for s in val_setups:
-        val_cost.append(drives[0].duration_s / 60 + rig.run_overhead_min
-                        + change_time_min(base, s, rig))
-        reserve += val_cost[-1]
+    # the rig time: the validation runs close the plan and their changes from the run before
+    # count (the greedy's `tail`), the baseline repeats are reserved; the identification runs
+    # must identify on their own (Eq. 17), without the validation runs' information
+    tail = [(val_setups[k], drives[0].duration_s) for k in swap_order(val_setups, base, rig)]
     short = min(durations_s) / 60 + rig.run_overhead_min
-    if baseline_every:
-        reserve += short * max(1, int(6 // baseline_every))
+    reserve = short * max(1, int(6 // baseline_every)) if baseline_every else 0.0
     budget_id = budget_min - reserve
-    if budget_id < cheapest:
-        raise PlannerError(f"the validation runs and baseline repeats leave {budget_id:.3g} min "
-                           f"of {budget_min:g} for identification, less than one run; give more "
-                           "time or fewer validation runs")
-    cost = np.array([c.cost_min for c in cands])
+    val_min = sequence_cost([], cands, base, rig, tail)
+    cost = np.array([sequence_cost([c], cands, base, rig, tail) - val_min
+                     for c in range(len(cands))])  # each run's own rig time, before the tail
+    if budget_id - val_min < cost.min() - 1e-9:
+        if val_setups:
+            _refuse_validation(budget_min, reserve, val_min, cands, base, rig, tail)
+        raise PlannerError(f"the baseline repeats leave {budget_id:.3g} min of {budget_min:g} "
+                           "for identification, less than one run; give more time or repeat "
+                           "the baseline less often")
     groups = np.array_split(np.arange(n_bands), n_design_bands)
-    relaxed, val_relaxed, status, solve_s = relaxed_design(Mc_s, M0_s, cost, budget_id, criterion,
-                                                    W_s, groups)
+    relaxed, val_relaxed, status, solve_s = relaxed_design(
+        Mc_s, M0_s, cost, budget_id - val_min, criterion, W_s, groups)
     t_greedy = time.perf_counter()
-    greedy_ref = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s)
+    greedy_ref = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s,
+                               tail=tail)
     greedy_s = time.perf_counter() - t_greedy
     # rounding: the relaxed counts rounded and fitted to the budget, then filled greedily;
     # the greedy is myopic (a two-corner swap can block the all-four one an identifying plan
-    # needs), so it also starts from every one-run core that varies all four corners, and
-    # the identifying plan with the best criterion wins
+    # needs), so it also starts from every one-run core that varies all four corners (or
+    # sets up a validation run), and the identifying plan with the best criterion wins
+    end = tail[0][0] if tail else None
     starts = [[]]
     if relaxed is not None:
         counts = np.floor(relaxed + 0.5).astype(int)
         start = [c for c in np.flatnonzero(counts) for _ in range(counts[c])]
-        order = swap_order([cands[c].setup for c in start], base, rig)
+        order = swap_order([cands[c].setup for c in start], base, rig, end)
         starts.append(fit_budget([start[k] for k in order], Mc_s, M0_s, cands, base, rig,
-                                 budget_id, criterion, W_s))
+                                 budget_id, criterion, W_s, tail))
     else:
         log.warning("design: the relaxed problem's status is %r; greedy designs stand in",
                     status)
-    starts += [[c] for c, cand in enumerate(cands) if len(cand.changed) == 4
-               and cand.duration_s == min(durations_s) and cand.cost_min <= budget_id]
-    best = None
-    for st in starts:
-        seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s, start=st)
-        # the fill may have left swaps
-        order = swap_order([cands[c].setup for c in seq], base, rig)
-        seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s,
-                            start=[seq[k] for k in order])
-        M = M0_s + sum((Mc_s[c] for c in seq), np.zeros_like(M0_s))
-        key = (_identifies(M), criterion_value(M, criterion, W_s))
-        if best is None or key > best[0]:
-            best = (key, seq)
-    seq = best[1]
-    if not seq:
-        raise PlannerError(f"a budget of {budget_min:g} min buys no run that adds information; "
-                           "give more time")
-    plan_M = M0_s + sum(Mc_s[c] for c in seq)
-    if val_info is not None:
-        plan_M = plan_M + scale(val_info).sum(axis=0)
-    _check_plan_identifiable(plan_M, budget_min, cands, rig)
-    runs, drives_out, infos = schedule_runs(seq, cands, val_setups, base, rig, make, drives[0],
-                                            baseline_every, min(durations_s), seed, Mc_s,
-                                            val_info, scale)
+    val_ids = {s.ids() for s in val_setups}
+    cores = [c for c, cand in enumerate(cands)
+             if (len(cand.changed) == 4 or cand.setup.ids() in val_ids)
+             and cand.duration_s == min(durations_s)]
+
+    def select(budget_id):
+        """The identifying plan with the best criterion of every start within `budget_id`:
+        (identifies, sequence, its information)."""
+        best = None
+        for st0 in starts + [[c] for c in cores]:
+            st = fit_budget(st0, Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s, tail)
+            if st0 and not st:  # a start that does not fit: the empty one stands for it
+                continue
+            seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s,
+                                start=st, tail=tail)
+            # the fill may have left swaps
+            order = swap_order([cands[c].setup for c in seq], base, rig, end)
+            seq = fit_budget([seq[k] for k in order], Mc_s, M0_s, cands, base, rig, budget_id,
+                             criterion, W_s, tail)
+            seq = greedy_design(Mc_s, M0_s, cands, base, rig, budget_id, criterion, W_s,
+                                start=seq, tail=tail)
+            M = M0_s + sum((Mc_s[c] for c in seq), np.zeros_like(M0_s))
+            key = (_identifies(M), criterion_value(M, criterion, W_s))
+            if best is None or key > best[0]:
+                best = (key, seq, M)
+        return best[0][0], best[1], best[2]
+
+    # the baseline repeats go between the identification runs, and going to the baseline and
+    # back is rig time too: when the scheduled plan overruns, the identification budget is
+    # bisected for the most that fits
+    lo, hi, b_id, found = val_min + float(cost.min()), budget_id, budget_id, None
+    for attempt in range(_REPEAT_ATTEMPTS):
+        identifies, seq, id_M = select(b_id)
+        if attempt == 0:
+            if not seq:
+                raise PlannerError(f"a budget of {budget_min:g} min buys no run that adds "
+                                   "information; give more time")
+            if not identifies and val_setups:
+                _refuse_validation(budget_min, reserve, val_min, cands, base, rig, tail)
+            _check_plan_identifiable(id_M, budget_min, cands, rig)
+        scheduled = schedule_runs(seq, cands, val_setups, base, rig, make, drives[0],
+                                  baseline_every, min(durations_s), seed, Mc_s, val_info, scale)
+        end_min = scheduled[0][-1].start_min + scheduled[0][-1].duration_s / 60
+        fits = end_min <= budget_min + 1e-9
+        log.debug("design: %.1f min for identification: %d runs, %s, the schedule ends at "
+                  "%.1f min", b_id, len(seq), "identifying" if identifies else
+                  "not identifying", end_min)
+        if seq and identifies and fits:
+            found = (seq, id_M, scheduled)
+            if attempt == 0:
+                break
+        if fits or not identifies:  # it fits, or needs more time to identify: try more
+            lo = b_id
+        else:
+            hi = b_id
+        b_id = (lo + hi) / 2
+    if found is None:
+        raise PlannerError(
+            f"a budget of {budget_min:g} min cannot hold identification runs that separate "
+            f"every corner's shock path with a baseline repeat after every {baseline_every} "
+            "run(s) (each repeat swaps the baseline in and out again); repeat the baseline "
+            "less often (--baseline-every) or give more time")
+    seq, id_M, (runs, drives_out, infos) = found
     preds = run_predictions(model, ident_model, runs, drives_out, library, objective)
     runs = criterion_shares(runs, infos, M0_s, criterion, W_s)
     curve = criterion_curve(runs, infos, M0_s, criterion, W_s)
@@ -357,9 +412,9 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
                                           criterion, W_s) if relaxed is not None else None),
               "relaxed_design_bands": val_relaxed,
               "plan": float(curve["criterion"].iloc[-1]),
-              "greedy": criterion_value(M0_s + sum((Mc_s[c] for c in greedy_ref),
-                                                   np.zeros_like(M0_s)), criterion, W_s),
-              "greedy_min": sequence_cost(greedy_ref, cands, base, rig)}
+              "greedy": criterion_value(M0_s + M_val + sum((Mc_s[c] for c in greedy_ref),
+                                                           np.zeros_like(M0_s)), criterion, W_s),
+              "greedy_min": sequence_cost(greedy_ref, cands, base, rig, tail)}
     chosen = np.bincount(np.asarray(seq, dtype=int), minlength=len(cands))
     relaxed_df = pd.DataFrame({"candidate": [c.name for c in cands],
                                "runs": relaxed if relaxed is not None else np.nan,
@@ -378,7 +433,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
                           criterion=criterion, budget_min=float(budget_min),
                           total_min=float(total_min), values=values, relaxed=relaxed_df,
                           predictions=preds, curve=curve, solver=solver, rig=rig,
-                          settings=settings)
+                          settings=settings,
+                          rationale=plan_rationale(runs, base, session=session is not None))
 
 
 def _check_identifiable(total_s, base, cands, library, plant, f_c):
@@ -400,6 +456,26 @@ def _check_identifiable(total_s, base, cands, library, plant, f_c):
         f"no plan from this crate can identify the shock inputs (seed paper Eq. 17): {why}; add "
         "to the crate a shock whose damping clearly differs from the baseline's (or a "
         "nonlinear one), or give a session whose runs already swap those corners")
+
+
+def _refuse_validation(budget, reserve, val_min, cands, base, rig, tail):
+    """Refuse a budget that cannot hold both the validation runs and identifying runs."""
+    short = min(c.duration_s for c in cands)
+    base0 = [c for c, cand in enumerate(cands) if not cand.changed and cand.duration_s == short]
+    need = min((sequence_cost(base0[:1] + [c], cands, base, rig, tail) for c, cand
+                in enumerate(cands) if len(cand.changed) == 4 and cand.duration_s == short),
+               default=float("nan")) + reserve
+    more = (f"give a budget of {math.ceil(need - 1e-9):d} min or more (--budget-min: the "
+            "baseline and a four-corner swap besides the validation runs)"
+            if math.isfinite(need) else "give more time")
+    repeats = f" and {reserve:.3g} min of baseline repeats" if reserve else ""
+    raise PlannerError(
+        f"a budget of {budget:g} min cannot hold both the {len(tail)} validation run(s) "
+        f"({val_min:.3g} min with their swaps{repeats}) and identification runs that separate "
+        "every corner's shock path (seed paper Eq. 17: the shock forces must vary apart from "
+        "the rig inputs, so the identification runs need other shocks than the baseline's at "
+        "every corner; the validation runs, on the team's drive, do not stand in for them); "
+        f"{more}, or fewer validation runs (--validate)")
 
 
 def _identifies(M):

@@ -28,6 +28,7 @@ __all__ = [
     "criterion_shares",
     "criterion_curve",
     "run_predictions",
+    "plan_rationale",
 ]
 
 
@@ -45,7 +46,9 @@ class ScheduleOptions:
         Repeat the baseline (shortest duration) after every this many runs (0: never),
         to catch drift.
     n_validation : int
-        Validation runs of the current best setups on the team's drive.
+        Validation runs of the current best setups on the team's drive, at the plan's end;
+        their durations and changes are rig time in the budget, and the identification
+        runs before them must identify every shock's path on their own.
     seed : int
         Seeds of the planned drives.
     date : str, optional
@@ -227,3 +230,74 @@ def run_predictions(model, ident_model, runs, drives, library, objective):
                 row[f"{m}_hi"] = float(t[f"{m}_hi"].iloc[0])
         rows.append(row)
     return pd.DataFrame(rows).set_index("run")
+
+
+def _numbers(ns):
+    """``"run 3"``, ``"runs 1-4, 6"``: run numbers in ranges."""
+    ns = sorted(ns)
+    parts, k = [], 0
+    while k < len(ns):
+        j = k
+        while j + 1 < len(ns) and ns[j + 1] == ns[j] + 1:
+            j += 1
+        parts.append(f"{ns[k]}" if j == k else f"{ns[k]}-{ns[j]}")
+        k = j + 1
+    return ("run " if len(ns) == 1 else "runs ") + ", ".join(parts)
+
+
+def plan_rationale(runs, base, *, session=False):
+    """Why the plan has the runs it has, a line per purpose (for its summary and sheet).
+
+    Parameters
+    ----------
+    runs : sequence of PlannedRun
+    base : planner.setups.Setup
+        The baseline.
+    session : bool
+        Whether a recorded session's runs are the prior (corners they vary need no run).
+
+    Returns
+    -------
+    tuple of str
+        The identification runs: the runs that change each corner's shock from the
+        baseline's, and why (the seed paper's Eqs. 21-24); the validation runs and their
+        changes' rig time; the baseline repeats.
+    """
+    lines = []
+    ident = [r for r in runs if r.purpose == "identification"]
+    val = [r for r in runs if r.purpose == "validation"]
+    rep = [r for r in runs if r.purpose == "baseline repeat"]
+    if ident:
+        varied = {}
+        for c in CORNERS:
+            ns = tuple(r.number for r in ident if r.setup.shocks[c] != base.shocks[c])
+            varied.setdefault(ns, []).append(c)
+        where = "; ".join(f"{', '.join(cs)}: {_numbers(ns)}" for ns, cs in varied.items() if ns)
+        kept = varied.get((), [])
+        if kept:
+            where += (f"; {', '.join(kept)} kept (the session's runs vary them)" if session
+                      else f"; {', '.join(kept)} kept")
+        lines.append(
+            f"{_numbers([r.number for r in ident]).capitalize()} "
+            f"{'identify: they change' if len(ident) > 1 else 'identifies: it changes'} the "
+            f"shocks (or their settings) from the baseline's ({where}) so that every shock's "
+            "path is identified (seed paper Eqs. 21-24: the shock forces must vary apart from "
+            "the rig inputs, which only different shocks between runs give); the criterion "
+            f"chose {'them' if len(ident) > 1 else 'it'} for the most information a minute.")
+    if val:
+        change = sum(r.swap_min for r in val)
+        setups = ", ".join("/".join(r.setup.ids()) for r in val)
+        many = len(val) > 1
+        line = (f"{_numbers([r.number for r in val]).capitalize()} "
+                f"{'validate' if many else 'validates'} the predicted best setup{'s' * many} "
+                f"({setups}) on the team's drive; {'their' if many else 'its'} changes "
+                f"({change:.0f} min) count in the rig time")
+        free = [r.number for r in val if not r.changed]
+        if free and ident:
+            line += (f"; {_numbers(free)} need{'s' * (len(free) == 1)} no change: the runs "
+                     "before identify on its setup")
+        lines.append(line + ".")
+    if rep:
+        lines.append(f"{_numbers([r.number for r in rep]).capitalize()} "
+                     f"{'repeat' if len(rep) > 1 else 'repeats'} the baseline to catch drift.")
+    return tuple(lines)

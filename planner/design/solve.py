@@ -55,23 +55,27 @@ def relaxed_design(Mc, M0, cost, budget, criterion, W, groups):
         time.perf_counter() - t0
 
 
-def sequence_cost(seq, cands, base, rig):
-    """Rig time [min] of candidate runs in the order `seq`, from the baseline installed."""
+def sequence_cost(seq, cands, base, rig, tail=()):
+    """Rig time [min] of candidate runs in the order `seq`, from the baseline installed, and
+    of the fixed runs `tail` after them (``(setup, duration_s)`` pairs: the validation runs,
+    whose changes from the last run count as rig time too)."""
     t, prev = 0.0, base
-    for c in seq:
-        swaps, clicks = change_counts(prev, cands[c].setup)
-        t += (cands[c].duration_s / 60 + rig.run_overhead_min + rig.swap_min * swaps
+    runs = [(cands[c].setup, cands[c].duration_s) for c in seq] + list(tail)
+    for setup, duration_s in runs:
+        swaps, clicks = change_counts(prev, setup)
+        t += (duration_s / 60 + rig.run_overhead_min + rig.swap_min * swaps
               + rig.click_change_min * clicks)
-        prev = cands[c].setup
+        prev = setup
     return t
 
 
-def _insertion(seq, c, cands, base, rig):
-    """Cheapest place to insert candidate `c` in `seq`: (extra minutes, position)."""
+def _insertion(seq, c, cands, base, rig, tail=()):
+    """Cheapest place to insert candidate `c` in `seq` (before the fixed runs `tail`): (extra
+    minutes, position)."""
     s = cands[c].setup
     own = cands[c].duration_s / 60 + rig.run_overhead_min
     best = (np.inf, 0)
-    setups = [base] + [cands[i].setup for i in seq]
+    setups = [base] + [cands[i].setup for i in seq] + [t[0] for t in tail[:1]]
     for p in range(len(seq) + 1):
         prev, nxt = setups[p], (setups[p + 1] if p + 1 < len(setups) else None)
         ds, dc = change_counts(prev, s)
@@ -82,7 +86,7 @@ def _insertion(seq, c, cands, base, rig):
     return best
 
 
-def greedy_design(Mc, M0, cands, base, rig, budget, criterion, W=None, start=()):
+def greedy_design(Mc, M0, cands, base, rig, budget, criterion, W=None, start=(), tail=()):
     """Add runs one at a time where they cost least in the sequence, each the best criterion
     gain per minute that still fits the budget.
 
@@ -101,6 +105,9 @@ def greedy_design(Mc, M0, cands, base, rig, budget, criterion, W=None, start=())
     W : ndarray, optional
     start : sequence of int
         Runs already planned, in order.
+    tail : sequence of (Setup, float)
+        Runs fixed at the end of the plan (the validation runs: setup, duration [s]); they
+        add no information here, but their changes and durations spend the budget.
 
     Returns
     -------
@@ -109,12 +116,12 @@ def greedy_design(Mc, M0, cands, base, rig, budget, criterion, W=None, start=())
     """
     seq = list(start)
     M = M0 + sum((Mc[i] for i in seq), np.zeros_like(M0))
-    spent = sequence_cost(seq, cands, base, rig)
+    spent = sequence_cost(seq, cands, base, rig, tail)
     value = criterion_value(M, criterion, W)
     while True:
         best = None
         for c in range(len(cands)):
-            extra, pos = _insertion(seq, c, cands, base, rig)
+            extra, pos = _insertion(seq, c, cands, base, rig, tail)
             if spent + extra > budget + 1e-9:
                 continue
             v = criterion_value(M + Mc[c], criterion, W)
@@ -129,17 +136,18 @@ def greedy_design(Mc, M0, cands, base, rig, budget, criterion, W=None, start=())
         spent += extra
 
 
-def fit_budget(seq, Mc, M0, cands, base, rig, budget, criterion, W):
-    """Drop runs from `seq` (the least criterion per minute saved first) until it fits."""
+def fit_budget(seq, Mc, M0, cands, base, rig, budget, criterion, W, tail=()):
+    """Drop runs from `seq` (the least criterion per minute saved first) until it fits, with
+    the fixed runs `tail` after it (see :func:`greedy_design`)."""
     seq = list(seq)
-    while seq and sequence_cost(seq, cands, base, rig) > budget + 1e-9:
+    while seq and sequence_cost(seq, cands, base, rig, tail) > budget + 1e-9:
         M = M0 + sum(Mc[i] for i in seq)
         full = criterion_value(M, criterion, W)
-        cost = sequence_cost(seq, cands, base, rig)
+        cost = sequence_cost(seq, cands, base, rig, tail)
         best = None
         for k, i in enumerate(seq):
             rest = seq[:k] + seq[k + 1:]
-            saved = cost - sequence_cost(rest, cands, base, rig)
+            saved = cost - sequence_cost(rest, cands, base, rig, tail)
             loss = full - criterion_value(M - Mc[i], criterion, W)
             ratio = loss / max(saved, 1e-9)
             if best is None or ratio < best[0]:
@@ -152,9 +160,10 @@ def _changes(a, b):
     return sum(x != y for x, y in zip(a.ids(), b.ids()))
 
 
-def swap_order(setups, start, rig=None):
-    """Run order (indices) that changes the car least, starting from setup `start`: the
-    fewest corners swapped, a click change counting its time in swaps of `rig`."""
+def swap_order(setups, start, rig=None, end=None):
+    """Run order (indices) that changes the car least, starting from setup `start` (and
+    going on to setup `end`, if given: the first run after these): the fewest corners
+    swapped, a click change counting its time in swaps of `rig`."""
     n = len(setups)
     if n <= 1:
         return list(range(n))
@@ -167,6 +176,7 @@ def swap_order(setups, start, rig=None):
 
     d = np.array([[dist(a, b) for b in setups] for a in setups])
     d0 = np.array([dist(start, s) for s in setups])
+    d_end = (np.zeros(n) if end is None else np.array([dist(s, end) for s in setups]))
     if n <= 9:  # Held-Karp, exact
         best = {}
         for j in range(n):
@@ -179,7 +189,7 @@ def swap_order(setups, start, rig=None):
                     best[(mask, j)] = min((best[(prev, i)][0] + d[i, j], i) for i in subset
                                           if i != j)
         full = (1 << n) - 1
-        j = min(range(n), key=lambda j: best[(full, j)][0])
+        j = min(range(n), key=lambda j: best[(full, j)][0] + d_end[j])
         order, mask = [], full
         while j != -1:
             order.append(j)
@@ -193,7 +203,7 @@ def swap_order(setups, start, rig=None):
         cur = j
 
     def length(o):
-        return d0[o[0]] + sum(d[o[k], o[k + 1]] for k in range(len(o) - 1))
+        return d0[o[0]] + sum(d[o[k], o[k + 1]] for k in range(len(o) - 1)) + d_end[o[-1]]
 
     improved = True
     while improved:
