@@ -815,6 +815,66 @@ def _normalization(f_used, where):
 # ----------------------------------------------------------------------------------------------
 
 
+#: Stages 1-2 of the latest fits (:func:`_sk_stages`), by their inputs: order selection
+#: (:func:`select_order`) runs them at each order, and the pipeline's final output-error fit
+#: at the chosen order runs the very same ones again; they are deterministic, so the second
+#: run is taken from here (the same numbers, bit for bit). Bounded: cleared past
+#: ``_SK_MEMO_SIZE`` entries.
+_SK_MEMO = {}
+_SK_MEMO_SIZE = 16
+
+
+def _sk_stages(prob, s, f_u, h_u, w_u, f0, n_den, n_num, sk_iter, stable):
+    """Stages 1-2 of :func:`fit_tf` (the starts and their Sanathanan-Koerner iterations): the
+    iterate of the lowest output error, as a dict (``cost, quad, lin, flipped, start, hist,
+    stg``; not to be mutated: it may be shared through ``_SK_MEMO``)."""
+    key = (n_den, n_num, bool(stable), sk_iter, f_u.tobytes(), h_u.tobytes(), w_u.tobytes())
+    hit = _SK_MEMO.get(key)
+    if hit is not None:
+        return hit
+    starts = []
+    try:
+        p_levi = _levi(s, prob.y, prob.sw, n_den, n_num)
+        if np.all(np.isfinite(p_levi)):
+            starts.append(("levi", p_levi))
+    except np.linalg.LinAlgError:
+        pass
+    starts.append(("log-spaced", _log_spaced_poles(n_den, f_u[f_u > 0].min() / f0,
+                                                   f_u.max() / f0)))
+    best = None
+    for name, p0 in starts:
+        hist, stg = [], []
+        p = p0
+        for k in range(sk_iter + 1):
+            if k > 0:
+                try:
+                    p = _sk_step(prob, quad, lin)
+                except (np.linalg.LinAlgError, FloatingPointError):
+                    break
+                if not np.all(np.isfinite(p)):
+                    break
+            try:
+                quad, lin = _sections(_clip(p, prob.bound))
+            except FloatingPointError:
+                break
+            flipped = []
+            if stable:
+                quad, lin, flipped = _reflect(quad, lin)
+            cost = prob.cost(quad, lin)
+            hist.append(prob.error(cost))
+            stg.append(name if k == 0 else "sk")
+            if best is None or cost < best["cost"]:
+                best = {"cost": cost, "quad": quad, "lin": lin, "flipped": flipped, "start": name,
+                        "hist": list(hist), "stg": list(stg)}
+            # SK has settled: at the rounding floor, or the output error no longer changes
+            if hist[-1] <= _ERROR_FLOOR or (k > 0 and abs(hist[-2] - hist[-1]) <= 1e-9 * hist[-1]):
+                break
+    if len(_SK_MEMO) >= _SK_MEMO_SIZE:
+        _SK_MEMO.clear()
+    _SK_MEMO[key] = best
+    return best
+
+
 def fit_tf(f_hz, h, *, weight=None, n_den, n_num, method="gauss-newton", max_iter=30, tol=1e-8,
            stable=True, sk_iter=6):
     """Fit ``H(s) = B(s) / A(s)`` to a frequency response (``invfreqs`` with iterations).
@@ -933,45 +993,9 @@ def fit_tf(f_hz, h, *, weight=None, n_den, n_num, method="gauss-newton", max_ite
     prob = _Problem(s, h_u / scale, np.sqrt(w_u), n_num, stable)
 
     # stages 1-2: starts and SK iterations; keep the iterate with the lowest output error
-    starts = []
-    try:
-        p_levi = _levi(s, prob.y, prob.sw, n_den, n_num)
-        if np.all(np.isfinite(p_levi)):
-            starts.append(("levi", p_levi))
-    except np.linalg.LinAlgError:
-        pass
-    starts.append(("log-spaced", _log_spaced_poles(n_den, f_u[f_u > 0].min() / f0,
-                                                   f_u.max() / f0)))
-    best = None
-    for name, p0 in starts:
-        hist, stg = [], []
-        p = p0
-        for k in range(sk_iter + 1):
-            if k > 0:
-                try:
-                    p = _sk_step(prob, quad, lin)
-                except (np.linalg.LinAlgError, FloatingPointError):
-                    break
-                if not np.all(np.isfinite(p)):
-                    break
-            try:
-                quad, lin = _sections(_clip(p, prob.bound))
-            except FloatingPointError:
-                break
-            flipped = []
-            if stable:
-                quad, lin, flipped = _reflect(quad, lin)
-            cost = prob.cost(quad, lin)
-            hist.append(prob.error(cost))
-            stg.append(name if k == 0 else "sk")
-            if best is None or cost < best["cost"]:
-                best = {"cost": cost, "quad": quad, "lin": lin, "flipped": flipped, "start": name,
-                        "hist": list(hist), "stg": list(stg)}
-            # SK has settled: at the rounding floor, or the output error no longer changes
-            if hist[-1] <= _ERROR_FLOOR or (k > 0 and abs(hist[-2] - hist[-1]) <= 1e-9 * hist[-1]):
-                break
+    best = _sk_stages(prob, s, f_u, h_u, w_u, f0, n_den, n_num, sk_iter, stable)
     quad, lin = best["quad"], best["lin"]
-    history, stages = best["hist"], best["stg"]
+    history, stages = list(best["hist"]), list(best["stg"])
     reflected = list(best["flipped"])
 
     # stage 3: output error
