@@ -482,13 +482,14 @@ def _section_polys(quad, lin):
     return np.array(polys).reshape(-1, n), factors
 
 
-def _model_space(s, quad, lin, n_num):
+def _model_space(s, quad, lin, n_num, phi=None):
     """Real-coefficient basis M (n_f, q) of {N/A : deg N <= n_num} and its map T to section coefs.
 
     The section coefficients (n, plus the direct term when n_num == n) are ``T @ x``
-    for model coefficients ``x``.
+    for model coefficients ``x``. phi: the section basis (:func:`_basis`) if computed.
     """
-    phi = _basis(s, quad, lin)
+    if phi is None:
+        phi = _basis(s, quad, lin)
     n = phi.shape[1]
     if n_num == n:
         return np.hstack([phi, np.ones((s.size, 1))]), np.eye(n + 1)
@@ -511,6 +512,19 @@ class _Problem:
         self.bound = _POLE_BOUND * float(np.max(np.abs(s)))
         self.b = _stack(sw * y)
         self.norm2 = float(self.b @ self.b)
+        self._space_key, self._space = None, None
+
+    def space(self, quad, lin):
+        """``(M, T, phi)``: :func:`_model_space` and :func:`_basis` of a denominator, kept for
+        the latest one (a Sanathanan-Koerner iterate's output error and its next step use the
+        same denominator: computed once, the same arrays)."""
+        key = (np.asarray(quad, dtype=float).tobytes(), np.asarray(lin, dtype=float).tobytes(),
+               len(quad))
+        if self._space_key != key:
+            phi = _basis(self.s, quad, lin)
+            M, T = _model_space(self.s, quad, lin, self.n_num, phi)
+            self._space_key, self._space = key, (M, T, phi)
+        return self._space
 
     def project(self, quad, lin):
         """Best numerator for a denominator.
@@ -518,7 +532,7 @@ class _Problem:
         Returns (J, model (n_f,), section coefficients, orthonormal basis of the weighted
         model space (2 n_f, q), weighted real residual (2 n_f,)).
         """
-        M, T = _model_space(self.s, quad, lin, self.n_num)
+        M, T, _ = self.space(quad, lin)
         A = _stack(self.sw[:, None] * M)
         x, U = _lstsq(A, self.b)
         model = M @ x
@@ -527,7 +541,7 @@ class _Problem:
 
     def cost(self, quad, lin):
         """``J`` of the best numerator for a denominator (:meth:`project`'s first value)."""
-        M, _ = _model_space(self.s, quad, lin, self.n_num)
+        M, _, _ = self.space(quad, lin)
         A = _stack(self.sw[:, None] * M)
         r = self.b - A @ _lstsq_x(A, self.b)
         return float(r @ r)
@@ -585,8 +599,7 @@ def _sigma_zeros(quad, lin, c, d=1.0):
 
 def _sk_step(prob, quad, lin):
     """One Sanathanan-Koerner iteration in barycentric form: the new poles."""
-    M, _ = _model_space(prob.s, quad, lin, prob.n_num)
-    phi = _basis(prob.s, quad, lin)
+    M, _, phi = prob.space(quad, lin)
     A = prob.sw[:, None] * np.hstack([M, -prob.y[:, None] * phi])
     x = _lstsq_x(_stack(A), prob.b)
     c = x[M.shape[1]:]
