@@ -59,7 +59,9 @@ at that moment:
    in plain numpy, a Python loop over setups and over frequency bands with one
    4x4 ``numpy.linalg.solve`` per band and iteration, for ``--ref-screen-setups``
    setups; its setup-independent part is computed once and not charged; the ratio
-   engine / reference and the largest relative difference of the metrics;
+   engine / reference and the largest relative difference of the metrics; the same ratio
+   in CPU time (all threads; one more engine call, every corner free, model as given),
+   which a loaded machine distorts less than the wall times;
 5. memory of ranking ``--memory-setups`` (default 100,000) screened setups: in a
    child process started at the beginning, while this one is small (on Linux a
    forked process's ``ru_maxrss`` includes its parent's high-water mark, so a child
@@ -580,14 +582,23 @@ def bench_screening(label, model, plant, drive, sym, free, library, args):
             rate[(what, name)] = _rate_line(f"screening [{label}]: {name}, {what}", len(ss),
                                             times, loads)
     engine = out.table  # prebuilt plant, every corner free
+    # CPU time (all threads) of one more call, model as given: on a loaded machine the wall
+    # time of the 2-thread engine and of the 1-thread reference suffer differently
+    c0 = time.process_time()
+    screen_setups(model, drive, free, library)
+    cpu_engine = time.process_time() - c0
     pre = screening_inputs(plant, drive)
     idx = _spread_idx(len(free), args.ref_screen_setups)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     ref = np.array([screen_reference_one(free[i].resolve(library), pre) for i in idx])
-    el = time.perf_counter() - t0
+    el, cpu_ref = time.perf_counter() - t0, time.process_time() - c0
     ref_rate = len(idx) / el
     print(f"reference [{label}]: numpy screening, {len(idx)} setups one by one, "
           f"{pre['w'].size} bands: {el:.2f} s = {ref_rate:.1f} setups/s ({_load()})")
+    print(f"cpu time [{label}]: screening every corner free (model as given) "
+          f"{1e6 * cpu_engine / len(free):.1f} us per setup, reference "
+          f"{1e6 * cpu_ref / len(idx):,.0f} us per setup: ratio "
+          f"{(cpu_ref / len(idx)) / (cpu_engine / len(free)):,.0f}x")
     got = engine.iloc[idx][pre["names"]].to_numpy(dtype=float)
     diff = float(np.max(np.abs(got - ref) / np.abs(ref)))
     print(f"reference [{label}]: engine vs numpy screening metrics, largest relative "

@@ -194,9 +194,11 @@ def resolve_setups(setups, library):
         if not isinstance(s, Setup):
             raise TypeError(f"setups must be planner.setups.Setup objects, got {type(s).__name__}")
         ids = s.ids()
-        if all(sid in known for sid in ids):
-            out.append(tuple(known[sid] for sid in ids))
+        try:
+            out.append(tuple(map(known.__getitem__, ids)))
             continue
+        except KeyError:
+            pass
         row = s.resolve(library)
         known.update(zip(ids, row))
         out.append(row)

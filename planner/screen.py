@@ -67,6 +67,7 @@ __all__ = [
     "WEAK_AGREEMENT_SPEARMAN",
     "DISAGREE_SCORE_GAP",
     "DriveBands",
+    "F_MIN_HZ",
     "ElementOperands",
     "ScreenOperands",
     "describe_agreement",
@@ -172,6 +173,10 @@ def describe_agreement(agreement, *, what="ranking"):
     return f"screening and the time domain agree: the same best setup, {corr}{tail}"
 
 
+#: Lowest band edge of the screening's bands [Hz] (:func:`drive_spectrum`'s default).
+F_MIN_HZ = 0.2
+
+
 def metric_rows(plant):
     """Linear combinations of plant outputs that the spec's metrics are taken of.
 
@@ -202,7 +207,7 @@ def metric_rows(plant):
     return names, np.array(rows)
 
 
-def drive_spectrum(drive, *, n_bands=96, f_min_hz=0.2, nperseg=None, weight=None):
+def drive_spectrum(drive, *, n_bands=96, f_min_hz=F_MIN_HZ, nperseg=None, weight=None):
     """The drive's cross-spectral matrix aggregated into log-spaced bands.
 
     Parameters
@@ -229,25 +234,35 @@ def drive_spectrum(drive, *, n_bands=96, f_min_hz=0.2, nperseg=None, weight=None
         band's cross-power ``E[conj(U_i) U_j]``... in scipy's convention
         ``csd(x_i, x_j)``.
     """
+    f, Pxy = _line_spectrum(drive, nperseg)
+    return _band_sums(f, Pxy, drive.fs_hz, n_bands, f_min_hz, weight)
+
+
+def _line_spectrum(drive, nperseg):
+    """The drive's cross-spectral matrix line by line: ``(f_hz (n_f,), Pxy (7, 7, n_f))``."""
     u = drive.as_array() - drive.as_array().mean(axis=0)
     fs = drive.fs_hz
     if nperseg is None:
         nperseg = int(min(u.shape[0], 2 ** round(np.log2(10 * fs))))
-    f, Pxy = signal.csd(u.T[:, None, :], u.T[None, :, :], fs=fs, window="hann",
-                        nperseg=nperseg, axis=-1)  # (7, 7, n_f): conj(X_i) X_j
+    return signal.csd(u.T[:, None, :], u.T[None, :, :], fs=fs, window="hann",
+                      nperseg=nperseg, axis=-1)  # (7, 7, n_f): conj(X_i) X_j
+
+
+def _band_sums(f, Pxy, fs, n_bands, f_min_hz, weight):
+    """:func:`drive_spectrum`'s bands from the line spectrum (the lines added in line order)."""
     df = f[1] - f[0]
     edges = np.geomspace(f_min_hz, fs / 2, n_bands + 1)
     band = np.searchsorted(edges, f, side="right") - 1
-    ok = (band >= 0) & (band < n_bands)
+    ok = np.flatnonzero((band >= 0) & (band < n_bands))
     S = np.zeros((n_bands, 7, 7), dtype=complex)
     fc = np.zeros(n_bands)
     wsum = np.zeros(n_bands)
     tot = np.real(np.einsum("iif->f", Pxy))
     wf = np.ones(f.size) if weight is None else np.asarray(weight(f), dtype=float)
-    for k in np.flatnonzero(ok):
-        S[band[k]] += Pxy[:, :, k] * (df * wf[k])
-        fc[band[k]] += f[k] * tot[k]
-        wsum[band[k]] += tot[k]
+    # unbuffered in-place adds in line order: the sums of a loop over the lines, bit for bit
+    np.add.at(S, band[ok], np.moveaxis(Pxy[:, :, ok], -1, 0) * (df * wf[ok])[:, None, None])
+    np.add.at(fc, band[ok], f[ok] * tot[ok])
+    np.add.at(wsum, band[ok], tot[ok])
     empty = wsum <= 0
     fc[~empty] /= wsum[~empty]
     fc[empty] = np.sqrt(edges[:-1] * edges[1:])[empty]
@@ -305,8 +320,9 @@ def drive_bands(drive, *, band_hz=(1.0, 20.0), n_bands=96):
     def b4(f_hz):  # power response of the metric filter applied forward and backward
         return np.abs(signal.sosfreqz(sos, worN=f_hz, fs=drive.fs_hz)[1]) ** 4
 
-    f, S = drive_spectrum(drive, n_bands=n_bands)
-    _, SB = drive_spectrum(drive, n_bands=n_bands, weight=b4)
+    lines = _line_spectrum(drive, None)  # one cross-spectral matrix for both weightings
+    f, S = _band_sums(*lines, drive.fs_hz, n_bands, F_MIN_HZ, None)
+    _, SB = _band_sums(*lines, drive.fs_hz, n_bands, F_MIN_HZ, b4)
     keep = np.any(np.abs(S) > 0, axis=(1, 2))
     return DriveBands(f_hz=f[keep], S=S[keep], SB=SB[keep], fs_hz=float(drive.fs_hz),
                       band_hz=tuple(band_hz), drive_name=drive.name)

@@ -482,13 +482,14 @@ def _section_polys(quad, lin):
     return np.array(polys).reshape(-1, n), factors
 
 
-def _model_space(s, quad, lin, n_num):
+def _model_space(s, quad, lin, n_num, phi=None):
     """Real-coefficient basis M (n_f, q) of {N/A : deg N <= n_num} and its map T to section coefs.
 
     The section coefficients (n, plus the direct term when n_num == n) are ``T @ x``
-    for model coefficients ``x``.
+    for model coefficients ``x``. phi: the section basis (:func:`_basis`) if computed.
     """
-    phi = _basis(s, quad, lin)
+    if phi is None:
+        phi = _basis(s, quad, lin)
     n = phi.shape[1]
     if n_num == n:
         return np.hstack([phi, np.ones((s.size, 1))]), np.eye(n + 1)
@@ -511,6 +512,19 @@ class _Problem:
         self.bound = _POLE_BOUND * float(np.max(np.abs(s)))
         self.b = _stack(sw * y)
         self.norm2 = float(self.b @ self.b)
+        self._space_key, self._space = None, None
+
+    def space(self, quad, lin):
+        """``(M, T, phi)``: :func:`_model_space` and :func:`_basis` of a denominator, kept for
+        the latest one (a Sanathanan-Koerner iterate's output error and its next step use the
+        same denominator: computed once, the same arrays)."""
+        key = (np.asarray(quad, dtype=float).tobytes(), np.asarray(lin, dtype=float).tobytes(),
+               len(quad))
+        if self._space_key != key:
+            phi = _basis(self.s, quad, lin)
+            M, T = _model_space(self.s, quad, lin, self.n_num, phi)
+            self._space_key, self._space = key, (M, T, phi)
+        return self._space
 
     def project(self, quad, lin):
         """Best numerator for a denominator.
@@ -518,7 +532,7 @@ class _Problem:
         Returns (J, model (n_f,), section coefficients, orthonormal basis of the weighted
         model space (2 n_f, q), weighted real residual (2 n_f,)).
         """
-        M, T = _model_space(self.s, quad, lin, self.n_num)
+        M, T, _ = self.space(quad, lin)
         A = _stack(self.sw[:, None] * M)
         x, U = _lstsq(A, self.b)
         model = M @ x
@@ -527,7 +541,7 @@ class _Problem:
 
     def cost(self, quad, lin):
         """``J`` of the best numerator for a denominator (:meth:`project`'s first value)."""
-        M, _ = _model_space(self.s, quad, lin, self.n_num)
+        M, _, _ = self.space(quad, lin)
         A = _stack(self.sw[:, None] * M)
         r = self.b - A @ _lstsq_x(A, self.b)
         return float(r @ r)
@@ -585,8 +599,7 @@ def _sigma_zeros(quad, lin, c, d=1.0):
 
 def _sk_step(prob, quad, lin):
     """One Sanathanan-Koerner iteration in barycentric form: the new poles."""
-    M, _ = _model_space(prob.s, quad, lin, prob.n_num)
-    phi = _basis(prob.s, quad, lin)
+    M, _, phi = prob.space(quad, lin)
     A = prob.sw[:, None] * np.hstack([M, -prob.y[:, None] * phi])
     x = _lstsq_x(_stack(A), prob.b)
     c = x[M.shape[1]:]
@@ -815,6 +828,66 @@ def _normalization(f_used, where):
 # ----------------------------------------------------------------------------------------------
 
 
+#: Stages 1-2 of the latest fits (:func:`_sk_stages`), by their inputs: order selection
+#: (:func:`select_order`) runs them at each order, and the pipeline's final output-error fit
+#: at the chosen order runs the very same ones again; they are deterministic, so the second
+#: run is taken from here (the same numbers, bit for bit). Bounded: cleared past
+#: ``_SK_MEMO_SIZE`` entries.
+_SK_MEMO = {}
+_SK_MEMO_SIZE = 16
+
+
+def _sk_stages(prob, s, f_u, h_u, w_u, f0, n_den, n_num, sk_iter, stable):
+    """Stages 1-2 of :func:`fit_tf` (the starts and their Sanathanan-Koerner iterations): the
+    iterate of the lowest output error, as a dict (``cost, quad, lin, flipped, start, hist,
+    stg``; not to be mutated: it may be shared through ``_SK_MEMO``)."""
+    key = (n_den, n_num, bool(stable), sk_iter, f_u.tobytes(), h_u.tobytes(), w_u.tobytes())
+    hit = _SK_MEMO.get(key)
+    if hit is not None:
+        return hit
+    starts = []
+    try:
+        p_levi = _levi(s, prob.y, prob.sw, n_den, n_num)
+        if np.all(np.isfinite(p_levi)):
+            starts.append(("levi", p_levi))
+    except np.linalg.LinAlgError:
+        pass
+    starts.append(("log-spaced", _log_spaced_poles(n_den, f_u[f_u > 0].min() / f0,
+                                                   f_u.max() / f0)))
+    best = None
+    for name, p0 in starts:
+        hist, stg = [], []
+        p = p0
+        for k in range(sk_iter + 1):
+            if k > 0:
+                try:
+                    p = _sk_step(prob, quad, lin)
+                except (np.linalg.LinAlgError, FloatingPointError):
+                    break
+                if not np.all(np.isfinite(p)):
+                    break
+            try:
+                quad, lin = _sections(_clip(p, prob.bound))
+            except FloatingPointError:
+                break
+            flipped = []
+            if stable:
+                quad, lin, flipped = _reflect(quad, lin)
+            cost = prob.cost(quad, lin)
+            hist.append(prob.error(cost))
+            stg.append(name if k == 0 else "sk")
+            if best is None or cost < best["cost"]:
+                best = {"cost": cost, "quad": quad, "lin": lin, "flipped": flipped, "start": name,
+                        "hist": list(hist), "stg": list(stg)}
+            # SK has settled: at the rounding floor, or the output error no longer changes
+            if hist[-1] <= _ERROR_FLOOR or (k > 0 and abs(hist[-2] - hist[-1]) <= 1e-9 * hist[-1]):
+                break
+    if len(_SK_MEMO) >= _SK_MEMO_SIZE:
+        _SK_MEMO.clear()
+    _SK_MEMO[key] = best
+    return best
+
+
 def fit_tf(f_hz, h, *, weight=None, n_den, n_num, method="gauss-newton", max_iter=30, tol=1e-8,
            stable=True, sk_iter=6):
     """Fit ``H(s) = B(s) / A(s)`` to a frequency response (``invfreqs`` with iterations).
@@ -933,45 +1006,9 @@ def fit_tf(f_hz, h, *, weight=None, n_den, n_num, method="gauss-newton", max_ite
     prob = _Problem(s, h_u / scale, np.sqrt(w_u), n_num, stable)
 
     # stages 1-2: starts and SK iterations; keep the iterate with the lowest output error
-    starts = []
-    try:
-        p_levi = _levi(s, prob.y, prob.sw, n_den, n_num)
-        if np.all(np.isfinite(p_levi)):
-            starts.append(("levi", p_levi))
-    except np.linalg.LinAlgError:
-        pass
-    starts.append(("log-spaced", _log_spaced_poles(n_den, f_u[f_u > 0].min() / f0,
-                                                   f_u.max() / f0)))
-    best = None
-    for name, p0 in starts:
-        hist, stg = [], []
-        p = p0
-        for k in range(sk_iter + 1):
-            if k > 0:
-                try:
-                    p = _sk_step(prob, quad, lin)
-                except (np.linalg.LinAlgError, FloatingPointError):
-                    break
-                if not np.all(np.isfinite(p)):
-                    break
-            try:
-                quad, lin = _sections(_clip(p, prob.bound))
-            except FloatingPointError:
-                break
-            flipped = []
-            if stable:
-                quad, lin, flipped = _reflect(quad, lin)
-            cost = prob.cost(quad, lin)
-            hist.append(prob.error(cost))
-            stg.append(name if k == 0 else "sk")
-            if best is None or cost < best["cost"]:
-                best = {"cost": cost, "quad": quad, "lin": lin, "flipped": flipped, "start": name,
-                        "hist": list(hist), "stg": list(stg)}
-            # SK has settled: at the rounding floor, or the output error no longer changes
-            if hist[-1] <= _ERROR_FLOOR or (k > 0 and abs(hist[-2] - hist[-1]) <= 1e-9 * hist[-1]):
-                break
+    best = _sk_stages(prob, s, f_u, h_u, w_u, f0, n_den, n_num, sk_iter, stable)
     quad, lin = best["quad"], best["lin"]
-    history, stages = best["hist"], best["stg"]
+    history, stages = list(best["hist"]), list(best["stg"])
     reflected = list(best["flipped"])
 
     # stage 3: output error

@@ -350,25 +350,34 @@ def pack_setups(setups, h, *, hold="quadratic"):
         (n_setups, 4).
     """
     S = len(setups)
-    pwls = [[m.to_pwl() for m in models] for models in setups]
-    K = max(p.v_knots_m_s.size for row in pwls for p in row)
-    kv = np.zeros((S, 4, K))
-    kf = np.zeros((S, 4, K))
-    nk = np.zeros((S, 4), dtype=np.int64)
-    slo = np.zeros((S, 4))
-    shi = np.zeros((S, 4))
-    lag = np.zeros((S, 4))
-    for s, (row, models) in enumerate(zip(pwls, setups)):
-        for c, (p, mdl) in enumerate(zip(row, models)):
-            k = p.v_knots_m_s.size
-            kv[s, c, :k] = p.v_knots_m_s
-            kf[s, c, :k] = p.f_knots_n
-            kv[s, c, k:] = p.v_knots_m_s[-1]
-            kf[s, c, k:] = p.f_knots_n[-1]
-            nk[s, c] = k
-            slo[s, c] = p.slope_below
-            shi[s, c] = p.slope_above
-            lag[s, c] = mdl.lag_s
+    # each distinct shock model (by identity: a crate's setups reuse a few models) is packed
+    # once, then gathered per setup and corner (the same arrays as packing every entry)
+    first = {}
+    models = []
+    idx = np.empty((S, 4), dtype=np.int64)
+    for s, row in enumerate(setups):
+        for c, mdl in enumerate(row):
+            j = first.get(id(mdl))
+            if j is None:
+                j = first[id(mdl)] = len(models)
+                models.append(mdl)
+            idx[s, c] = j
+    pwls = [m.to_pwl() for m in models]
+    K = max(p.v_knots_m_s.size for p in pwls)
+    ukv = np.zeros((len(models), K))
+    ukf = np.zeros((len(models), K))
+    unk = np.zeros(len(models), dtype=np.int64)
+    for j, p in enumerate(pwls):
+        k = p.v_knots_m_s.size
+        ukv[j, :k] = p.v_knots_m_s
+        ukf[j, :k] = p.f_knots_n
+        ukv[j, k:] = p.v_knots_m_s[-1]
+        ukf[j, k:] = p.f_knots_n[-1]
+        unk[j] = k
+    kv, kf, nk = ukv[idx], ukf[idx], unk[idx]
+    slo = np.array([p.slope_below for p in pwls], dtype=float)[idx]
+    shi = np.array([p.slope_above for p in pwls], dtype=float)[idx]
+    lag = np.array([m.lag_s for m in models], dtype=float)[idx]
     if hold == "linear":
         return (kv, kf, nk, slo, shi) + tuple(lag_coefficients(lag, h))
     return (kv, kf, nk, slo, shi) + tuple(lag_hold_coefficients(lag, h))
