@@ -131,6 +131,46 @@ def test_write_read_round_trip(session, tmp_path, run_format):
     assert read_session(folder / "session.toml").run_names == back.run_names
 
 
+#: float32's relative precision (half a unit in the last of its 24 bits), plus the
+#: imperial factor's rounding.
+RTOL_FLOAT32 = 2.0 ** -24 + 1e-12
+
+
+@pytest.mark.parametrize("units", ["SI", "imperial"])
+def test_float32_parquet_runs_round_trip_to_float32_precision(session, tmp_path, units):
+    """Parquet runs stored as float32 (the demo's session): time exact (64-bit, so still
+    uniform), every channel within float32's precision, plain pandas reads them, and they
+    are a fraction of the float64 file's size."""
+    import pyarrow.parquet as pq
+
+    single = write_session(session, tmp_path / "f32", run_format="parquet", units=units,
+                           float_dtype="float32")
+    double = write_session(session, tmp_path / "f64", run_format="parquet", units=units)
+    back = read_session(single)
+    for ra, rb in zip(session.runs, back.runs):
+        assert_array_equal(rb.time_s, ra.time_s)
+        for c in ra.channels:
+            assert_allclose(rb.channels[c], ra.channels[c], rtol=RTOL_FLOAT32, atol=0,
+                            err_msg=f"{ra.name}: {c}")
+    path = single / "runs" / "baseline-1.parquet"
+    frame = pd.read_parquet(path)
+    assert frame["time"].dtype == np.float64
+    assert set(frame.dtypes.drop("time").astype(str)) == {"float32"}
+    assert pq.read_metadata(path).metadata[b"units"] == units.encode()
+    assert path.stat().st_size < (double / "runs" / "baseline-1.parquet").stat().st_size
+
+
+def test_float32_is_for_parquet_only(session, tmp_path):
+    with pytest.raises(ValueError, match="float_dtype 'float32' with run_format 'csv'"):
+        write_session(session, tmp_path / "a", float_dtype="float32")
+    with pytest.raises(ValueError, match="float_dtype 'half'"):
+        write_session(session, tmp_path / "b", run_format="parquet", float_dtype="half")
+    with pytest.raises(ValueError, match="float_dtype='float32' is for Parquet files"):
+        write_run_table(tmp_path / "t.csv", np.arange(4) / 8.0, {"aero_heave": np.zeros(4)},
+                        float_dtype="float32")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["library.toml"]  # nothing written
+
+
 def test_manifest_is_the_spec_layout(session_dir):
     doc = tomllib.loads((session_dir / "session.toml").read_text())
     assert doc["format"] == "rig-session/1" and doc["units"] == "SI"

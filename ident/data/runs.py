@@ -597,7 +597,7 @@ def in_memory_columns(time_s, channels, *, where):
     return {_TIME: time_s, **channels}
 
 
-def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
+def write_run_table(path, time_s, channels, *, units="SI", overwrite=False, float_dtype="float64"):
     """Write a table of signals as a CSV or Parquet run file, atomically.
 
     Parameters
@@ -613,6 +613,9 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
         quantity).
     overwrite : bool
         Replace an existing file.
+    float_dtype : {"float64", "float32"}
+        The type a Parquet file stores the channels in (``time`` is always 64-bit;
+        :func:`ident.data.files.write_parquet_frame`); a CSV takes only ``"float64"``.
 
     Notes
     -----
@@ -645,7 +648,8 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
     frame = pd.DataFrame(
         {_TIME: t, **{c: from_si(x, quantity_of(c), units) for c, x in si.items()}}
     )
-    write_table_file(frame, path, kind=kind, units=units, overwrite=overwrite)
+    write_table_file(frame, path, kind=kind, units=units, overwrite=overwrite,
+                     float_dtype=float_dtype)
 
 
 # --------------------------------------------------------------------------------------

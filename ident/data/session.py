@@ -44,7 +44,7 @@ import tomli_w
 
 from ident.data.channels import (CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS, corner_table,
                                  rig_inputs_of)
-from ident.data.files import atomic_write_text, did_you_mean, read_toml
+from ident.data.files import FLOAT_DTYPES, atomic_write_text, did_you_mean, read_toml
 from ident.data.runs import (RTOL_TIME_STEP, check_channel_map, check_columns,
                              check_session_units, frozen_array, in_memory_columns,
                              read_run_table, write_mapped_run_table, write_run_table)
@@ -937,7 +937,8 @@ def _sibling(target, tag):
             continue
 
 
-def write_session(session, path, *, units=None, run_format="csv", overwrite=False):
+def write_session(session, path, *, units=None, run_format="csv", overwrite=False,
+                  float_dtype="float64"):
     """Write a session folder: ``session.toml``, the libraries and ``runs/``.
 
     Parameters
@@ -953,6 +954,11 @@ def write_session(session, path, *, units=None, run_format="csv", overwrite=Fals
         ``.parquet``); characters unsafe in file names become ``_``.
     overwrite : bool
         Replace an existing non-empty folder.
+    float_dtype : {"float64", "float32"}
+        The type Parquet run files store the channels in (``time`` is always 64-bit):
+        ``"float32"`` makes them a sixth of the CSV's size, at a relative precision of
+        6e-8, far finer than a rig sensor's (:func:`ident.data.files.write_parquet_frame`).
+        CSV run files are always written with full precision.
 
     Returns
     -------
@@ -984,6 +990,9 @@ def write_session(session, path, *, units=None, run_format="csv", overwrite=Fals
         raise ValueError(
             f"run_format {run_format!r} is not supported; use 'csv' or 'parquet'"
         )
+    if float_dtype not in FLOAT_DTYPES or (run_format == "csv" and float_dtype != "float64"):
+        raise ValueError(f"float_dtype {float_dtype!r} with run_format {run_format!r} is not "
+                         "supported; use 'float64', or 'float32' with run_format='parquet'")
     target = Path(path)
     _check_target(target, overwrite=overwrite)
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -1004,7 +1013,8 @@ def write_session(session, path, *, units=None, run_format="csv", overwrite=Fals
         if session.bump_stops is not None:
             write_bump_stops(session.bump_stops, tmp / BUMP_STOP_LIBRARY_NAME, units=units)
         for run, file in zip(session.runs, files):
-            write_run_table(tmp / file, run.time_s, run.channels, units=units)
+            write_run_table(tmp / file, run.time_s, run.channels, units=units,
+                            float_dtype=float_dtype)
         atomic_write_text(tmp / MANIFEST_NAME,
                           _manifest_text(session, units=units, files=files))
         _check_target(target, overwrite=overwrite)  # it may have appeared meanwhile
