@@ -67,9 +67,9 @@ DEMO_INPUT_FILES = {
 _SI_UNIT = {q: next(u for u, f in table.items() if f == 1.0) for q, table in UNIT_FACTORS.items()}
 #: Folder of the session's runs as a real rig writes them (:func:`write_demo_rig_files`).
 DEMO_RIG_FILES = "rig_files"
-#: Length of each run in ``rig_files/`` [s]: the first 100 s, which identify a model on
+#: Length of each run in ``rig_files/`` [s]: the first 60 s, which identify a model on
 #: their own (the runs whole are in ``session/``; the folder stays under 100 MB).
-DEMO_RIG_FILES_S = 100.0
+DEMO_RIG_FILES_S = 60.0
 #: Folder of the README's real-car example (:func:`write_real_car_example`).
 REAL_CAR_FOLDER = "real_car"
 #: Folder of the README's adjustable-damper example (:func:`write_clicks_example`).

@@ -643,13 +643,18 @@ def _read_bump_stop_library(doc, folder, *, where):
         raise SessionError(f"{where}: bump_stop_library {bump_file!r}: {exc}") from exc
 
 
-def read_session(path):
+def read_session(path, *, resample_hz=None):
     """Read and check a rig session folder.
 
     Parameters
     ----------
     path : str or os.PathLike
         The session folder, or its ``session.toml``.
+    resample_hz : float, optional
+        Resample every run onto a uniform base at this rate [Hz] (``--resample``: runs
+        logged at different rates, or a rate chosen for the model; band-limited,
+        anti-aliased when going down; :func:`ident.data.runs.read_run_table`), each said
+        in a logged warning. Default: the run files' rate (which must be one).
 
     Returns
     -------
@@ -760,14 +765,16 @@ def read_session(path):
             file_path, units=units, channel_map=channel_map, required=WHEELLOADER_INPUTS,
             where=run_where, units_from=f"the manifest ({where}: units = \"{units}\")",
             units_fix="make them agree: set the manifest's units to the run files' unit "
-            "system, or correct the run file's 'units' column (or '# units:' line)")
+            "system, or correct the run file's 'units' column (or '# units:' line)",
+            resample_hz=resample_hz)
         runs.append(Run(name=e["name"], file=e["file"], setup=setup, role=e["role"],
                         time_s=table.time_s, channels=table.channels,
                         fs_hz=table.fs_hz, bump_stops=stops, packers_m=packers))
     fs_hz = _check_run_set(runs, where=where)
     _check_static_vs_tire(runs, static, units=units,
                           where_run=lambda r: f"{where}: {_run_where(r.name, folder / r.file)}")
-    if stated_rate is not None and abs(stated_rate[1] - fs_hz) > RTOL_TIME_STEP * fs_hz:
+    if (stated_rate is not None and resample_hz is None  # else the files' rate is gone
+            and abs(stated_rate[1] - fs_hz) > RTOL_TIME_STEP * fs_hz):
         raise SessionError(
             f"{where}: {stated_rate[0]} = {stated_rate[1]:g} disagrees with the run files, "
             f"whose 'time' column gives {fs_hz:.9g} Hz; fix or remove {stated_rate[0]} (the "
