@@ -468,6 +468,38 @@ def test_logger_time_stamps_that_jitter_are_resampled(session_dir, caplog):
                     atol=RESAMPLED_SINE_ATOL)
 
 
+#: The 2 Hz sine of the test below resampled to 50 Hz: a 2 s run, every sample within the
+#: anti-aliasing filter's reach (0.4 s) of an end, extended by odd reflection: 1e-5 measured.
+CHOSEN_RATE_SINE_ATOL = 1e-4
+
+
+def test_runs_are_read_at_a_chosen_rate(session_dir, caplog):
+    """``resample_hz`` (``--resample``): every run onto a uniform base at that rate, a jittered
+    one too, each said in one line; a slow signal keeps its values."""
+    rng = np.random.default_rng(361)
+
+    def jitter(frame):
+        n = len(frame)
+        stamps = frame["time"].to_numpy() + rng.uniform(-LOGGER_JITTER, LOGGER_JITTER, n) / FS_HZ
+        frame["time"] = stamps
+        frame["tire_force_LF"] = np.sin(2 * np.pi * 2.0 * stamps)
+        return frame
+
+    _edit_run(jitter)(session_dir)
+    with caplog.at_level("WARNING", logger="ident.data.runs"):
+        session = read_session(session_dir, resample_hz=0.5 * FS_HZ)
+    assert session.fs_hz == 0.5 * FS_HZ
+    lines = [r.getMessage() for r in caplog.records if "as asked" in r.getMessage()]
+    assert len(lines) == len(session.runs), lines
+    said = next(line for line in lines if "swap-LF" in line)
+    assert "jittering" in said and f"uniform {0.5 * FS_HZ:g} Hz" in said
+    run = session.run("swap-LF")
+    assert_allclose(np.diff(run.time_s), 2.0 / FS_HZ, rtol=1e-9)
+    mid = slice(20, -20)  # the ends: odd reflection
+    assert_allclose(run.channels["tire_force_LF"][mid],
+                    np.sin(2 * np.pi * 2.0 * run.time_s[mid]), atol=CHOSEN_RATE_SINE_ATOL)
+
+
 def test_shock_library_error_is_chained(session_dir):
     from ident.errors import ShockModelError
 

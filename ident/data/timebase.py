@@ -60,6 +60,7 @@ __all__ = [
     "FIR_KAISER_BETA",
     "MAX_RATE_DENOMINATOR",
     "RATE_RTOL",
+    "EXACT_RATIO_RTOL",
     "TimeBase",
     "nominal_rate",
     "uniform_time_base",
@@ -89,6 +90,9 @@ MAX_RATE_DENOMINATOR = 1000
 #: Largest relative error of the rate a ratio reaches (:func:`rate_ratio`; one sample in
 #: 10^6, a time-scale error far below any clock's).
 RATE_RTOL = 1e-6
+#: The same, for a record resampled to a chosen rate by a ratio (else by the spline):
+#: rounding only, so that the samples' times are the times they are labelled with.
+EXACT_RATIO_RTOL = 1e-12
 
 
 class TimeRecord:
@@ -155,7 +159,7 @@ class TimeBase:
     jitter: float
     resampled: bool
     native: "TimeBase | None" = None
-    ratio: tuple = (1, 1)
+    ratio: "tuple | None" = (1, 1)
 
     def resample(self, values):
         """Signals sampled at :attr:`raw_time_s`, on :attr:`time_s`.
@@ -174,7 +178,13 @@ class TimeBase:
         if not self.resampled:
             return x
         if self.native is not None:  # uniform at the record's rate, then at the chosen one
-            return resample_uniform(self.native.resample(x), *self.ratio, self.time_s.size)
+            if self.ratio is None and self.fs_hz >= self.native.fs_hz:  # up: one spline
+                return make_interp_spline(self.raw_time_s, x, k=SPLINE_DEGREE,
+                                          axis=0)(self.time_s)
+            x = self.native.resample(x)
+            if self.ratio is not None:
+                return resample_uniform(x, *self.ratio, self.time_s.size)
+            return _spline_onto(x, self.native.fs_hz, self.fs_hz, self.time_s.size)
         return make_interp_spline(self.raw_time_s, x, k=SPLINE_DEGREE, axis=0)(self.time_s)
 
     def describe(self, where):
@@ -218,8 +228,10 @@ def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueErro
     resample_hz : float, optional
         The rate [Hz] of the uniform base to resample onto (``--resample``): the record,
         made uniform at its own rate, is resampled by the ratio of the rates
-        (:func:`rate_ratio`, :func:`resample_uniform`; :attr:`TimeBase.native` is its own
-        base). Default: the record's own rate.
+        (:func:`rate_ratio`, :func:`resample_uniform`), or, where no ratio of small
+        integers gives it, low-passed below the new Nyquist frequency (going down) and
+        interpolated by the B-spline; :attr:`TimeBase.native` is its own base. Default:
+        the record's own rate.
 
     Returns
     -------
@@ -231,7 +243,7 @@ def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueErro
         If there are fewer than 2 samples, time is not strictly increasing, or a step
         differs from the median step by more than `jitter_rtol` (a gap, a repeated
         sample, a changed rate), naming the first such step's time and row, and the fix;
-        or `resample_hz` is not a positive rate a ratio of small integers reaches.
+        or `resample_hz` is not a positive number.
 
     Examples
     --------
@@ -244,12 +256,17 @@ def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueErro
     if resample_hz is not None:
         own = uniform_time_base(time_s, where=where, jitter_rtol=jitter_rtol, error=error,
                                 row_offset=row_offset, row_label=row_label)
-        up, down = rate_ratio(own.fs_hz, resample_hz, where=where, error=error)
-        if up == down:
+        ratio = rate_ratio(own.fs_hz, resample_hz, where=where, error=error,
+                           rtol=EXACT_RATIO_RTOL)
+        if ratio == (1, 1):
             return own
-        n = (own.time_s.size - 1) * up // down + 1  # inside the record: no extrapolation
-        return TimeBase(own.time_s[0] + np.arange(n) / float(resample_hz), float(resample_hz),
-                        own.raw_time_s, own.jitter, True, own, (up, down))
+        fs = float(resample_hz)
+        span = (own.time_s.size - 1) / own.fs_hz
+        n = int(np.floor(span * fs * (1.0 + 1e-12))) + 1  # inside the record: no extrapolation
+        if ratio is not None:
+            n = (own.time_s.size - 1) * ratio[0] // ratio[1] + 1  # the same, exactly
+        return TimeBase(own.time_s[0] + np.arange(n) / fs, fs, own.raw_time_s, own.jitter, True,
+                        own, ratio)
     t = np.asarray(time_s, dtype=float)
     if t.ndim != 1 or t.size < 2:
         raise error(f"{where}: time needs at least 2 samples; export the whole record")
@@ -315,7 +332,7 @@ def nominal_rate(fs_hz):
     return float(fs_hz)
 
 
-def rate_ratio(fs_from_hz, fs_to_hz, *, where, error=ValueError):
+def rate_ratio(fs_from_hz, fs_to_hz, *, where, error=ValueError, rtol=RATE_RTOL):
     """The ratio ``up / down`` of small integers that turns one sample rate into another.
 
     Parameters
@@ -326,23 +343,31 @@ def rate_ratio(fs_from_hz, fs_to_hz, *, where, error=ValueError):
         Prefix of an error message.
     error : type
         The exception raised.
+    rtol : float
+        Largest relative error of the rate reached (default :data:`RATE_RTOL`; a record's
+        values resampled to a chosen rate take :data:`EXACT_RATIO_RTOL`: an error of
+        1e-6 would shift the end of an 800 s record by 0.8 ms).
 
     Returns
     -------
-    (int, int)
+    (int, int) or None
         ``up, down`` (coprime, ``down <= MAX_RATE_DENOMINATOR``), ``(1, 1)`` for rates
-        equal within :data:`RATE_RTOL`.
+        equal within `rtol`; None if no such ratio reaches `fs_to_hz` within `rtol` (a
+        jittered record's estimated rate, an odd rate).
 
     Raises
     ------
     error
-        If `fs_to_hz` is not a positive number, or no such ratio reaches it within
-        :data:`RATE_RTOL` (naming the closest rate reachable).
+        If `fs_to_hz` is not a positive number.
 
     Examples
     --------
     >>> rate_ratio(100.0, 64.0, where="run.csv"), rate_ratio(76.923077, 100.0, where="log")
     ((16, 25), (13, 10))
+    >>> rate_ratio(100.0, 314.159265, where="run.csv")  # within 1e-6: 8.5e-8
+    (355, 113)
+    >>> rate_ratio(100.0, 314.159265, where="run.csv", rtol=EXACT_RATIO_RTOL) is None
+    True
     """
     try:
         fs_to = float(fs_to_hz)
@@ -353,10 +378,8 @@ def rate_ratio(fs_from_hz, fs_to_hz, *, where, error=ValueError):
                     f"{fs_to_hz!r}; give e.g. --resample 100")
     ratio = Fraction(fs_to / fs_from_hz).limit_denominator(MAX_RATE_DENOMINATOR)
     achieved = fs_from_hz * ratio.numerator / ratio.denominator
-    if ratio == 0 or abs(achieved - fs_to) > RATE_RTOL * fs_to:
-        raise error(f"{where}: no ratio up/down with down <= {MAX_RATE_DENOMINATOR} turns the "
-                    f"record's {fs_from_hz:.9g} Hz into {fs_to:.9g} Hz (closest: "
-                    f"{achieved:.9g} Hz); choose a rate with a simpler ratio to the record's")
+    if ratio == 0 or abs(achieved - fs_to) > rtol * fs_to:
+        return None
     return ratio.numerator, ratio.denominator
 
 
@@ -429,3 +452,21 @@ def resample_uniform(x, up, down, n_out):
     y = resample_bandlimited(np.pad(x, pad, mode="reflect", reflect_type="odd"), up, down,
                              axis=0)
     return y[m * up:m * up + n_out]
+
+
+def _spline_onto(x, fs_from_hz, fs_to_hz, n_out):
+    """A uniform record at `fs_from_hz` on `n_out` samples at a lower `fs_to_hz` from its
+    first, for rates of no simple ratio: low-passed below the new Nyquist frequency (zero
+    phase, the FIR of :func:`bandlimited_fir` with the cut-off scaled), then through the
+    B-spline of degree :data:`SPLINE_DEGREE`."""
+    if fs_to_hz < fs_from_hz:
+        r = int(np.ceil(fs_from_hz / fs_to_hz))
+        h = signal.firwin(2 * FIR_HALF_LENGTH * r + 1, fs_to_hz / fs_from_hz,
+                          window=("kaiser", FIR_KAISER_BETA))
+        half = FIR_HALF_LENGTH * r
+        pad = [(half, half)] + [(0, 0)] * (x.ndim - 1)
+        xp = np.pad(x, pad, mode="reflect", reflect_type="odd")
+        x = signal.oaconvolve(xp, h.reshape((-1,) + (1,) * (x.ndim - 1)), mode="valid",
+                              axes=0)
+    t_from = np.arange(x.shape[0]) / fs_from_hz
+    return make_interp_spline(t_from, x, k=SPLINE_DEGREE, axis=0)(np.arange(n_out) / fs_to_hz)

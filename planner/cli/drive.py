@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ident.data.files import check_output
 from ident.data.units import UNIT_SYSTEMS
-from planner.cli.common import add_command_group, log, run_subcommand, unit_system
+from planner.cli.common import add_command_group, add_resample, log, run_subcommand, unit_system
 
 __all__ = ["add_parser", "run", "run_from_track", "run_iterate", "run_section", "run_resample",
            "report_folder", "section_path", "LOG_FORMATS", "SUBCOMMANDS"]
@@ -48,6 +48,7 @@ def _common(p, *, logs_help):
                    help="unit system of canonical-name CSV/Parquet logs and of the outputs: SI "
                    "or imperial, in any case (default: the first log's 'units' column, "
                    "else SI)")
+    add_resample(p, "every track log (logs of different rates)")
     p.add_argument("--rig", metavar="RIG.toml", default=None,
                    help="rig TOML whose [limits] the drive respects (wheelloader displacement, "
                    "velocity, acceleration; aero loads) (default: no limits)")
@@ -214,7 +215,8 @@ def _targets(text):
 def _read_logs(args):
     from ident.data.tracklog import read_track_log
 
-    logs = [read_track_log(p, channel_map=args.map, units=args.units, format=args.format)
+    logs = [read_track_log(p, channel_map=args.map, units=args.units, format=args.format,
+                           resample_hz=args.resample)
             for p in args.logs]
     if args.units is None:
         args.units = logs[0].settings.get("units") or "SI"
