@@ -29,8 +29,11 @@ the logger's), a reader's ``resample_hz`` (``--resample HZ`` on the command line
 record on a uniform base at that rate: the record is first made uniform at its own rate as
 above, then resampled by the rational ratio of the rates with the band-limited polyphase
 filter of :func:`resample_bandlimited` (the one of ``shockplan drive resample``), which
-removes the content above the lower Nyquist frequency when going down (anti-aliasing);
-:meth:`TimeBase.describe` says so in one line.
+removes the content above the lower Nyquist frequency when going down (anti-aliasing).
+Where no ratio of small integers gives the rate exactly (a jittered record's estimated
+rate, an odd rate), the spline takes the stamps straight onto the new base going up, and
+the same filter's low-pass precedes it going down. :meth:`TimeBase.describe` says what
+was done in one line.
 
 The interpolation is a B-spline of degree :data:`SPLINE_DEGREE` (7) through the measured
 samples. As the degree grows, spline interpolation converges to band-limited (sinc)
@@ -43,7 +46,6 @@ interpolation. 20 channels of 160,000 samples take about a second.
 from __future__ import annotations
 
 from dataclasses import dataclass
-
 from fractions import Fraction
 
 import numpy as np
@@ -151,6 +153,13 @@ class TimeBase:
         The largest deviation of a step from the median step, relative to it.
     resampled : bool
         True if the signals must be resampled onto :attr:`time_s` (:meth:`resample`).
+    native : TimeBase or None
+        At a rate chosen by the reader (``resample_hz``), the record's uniform base at its
+        own rate, which the chosen one is resampled from; else None.
+    ratio : (int, int) or None
+        At a chosen rate, ``(up, down)`` of the polyphase resampling from :attr:`native`
+        (:func:`resample_uniform`), or None where no ratio of small integers gives the rate
+        exactly (low-pass and spline); ``(1, 1)`` otherwise.
     """
 
     time_s: np.ndarray
