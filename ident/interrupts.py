@@ -15,7 +15,9 @@ exceptions runs (an IPOPT solve), for the caller to stop it and :func:`check` af
 
 :func:`die_with_parent` is the initializer of forked worker pools: a worker ends when its
 parent process is gone, however the parent died (SIGKILL included), instead of living on
-as an orphan.
+as an orphan. :func:`quiet_worker` does that too, and lets Ctrl-C end a worker at once
+and without a traceback (a terminal sends SIGINT to every process of the command; the
+parent stops and shuts its pool down).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import signal
 import threading
 
 __all__ = ["install", "requested", "check", "reset", "deferred", "die_with_parent",
-           "PARENT_POLL_S"]
+           "quiet_worker", "PARENT_POLL_S"]
 
 #: How often a worker looks for its parent [s] (:func:`die_with_parent`).
 PARENT_POLL_S = 0.5
@@ -121,3 +123,21 @@ def die_with_parent(parent_pid):
         os._exit(1)
     threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True,
                      name="die-with-parent").start()
+
+
+def quiet_worker(parent_pid):
+    """Initializer of a forked worker: Ctrl-C ends it at once and quietly, and it ends with
+    its parent (:func:`die_with_parent`).
+
+    A terminal sends SIGINT to every process of the command. A worker with Python's handler
+    would raise ``KeyboardInterrupt`` and print its traceback (each worker one), or finish
+    its task first if the handler were ignored; with the default action it ends at once,
+    inside C code too, and its parent, interrupted by the same Ctrl-C, stops the pool.
+
+    Parameters
+    ----------
+    parent_pid : int
+        The pool's owner (``os.getpid()`` in the parent, passed as ``initargs``).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    die_with_parent(parent_pid)

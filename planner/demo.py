@@ -67,6 +67,9 @@ DEMO_INPUT_FILES = {
 _SI_UNIT = {q: next(u for u, f in table.items() if f == 1.0) for q, table in UNIT_FACTORS.items()}
 #: Folder of the session's runs as a real rig writes them (:func:`write_demo_rig_files`).
 DEMO_RIG_FILES = "rig_files"
+#: Length of each run in ``rig_files/`` [s]: the first 60 s, which identify a model on
+#: their own (the runs whole are in ``session/``; the folder stays under 100 MB).
+DEMO_RIG_FILES_S = 60.0
 #: Folder of the README's real-car example (:func:`write_real_car_example`).
 REAL_CAR_FOLDER = "real_car"
 #: Folder of the README's adjustable-damper example (:func:`write_clicks_example`).
@@ -369,7 +372,9 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         plan = default_plan()
         units = plan.units
         session = simulate_session(plan, vehicle, progress=progress)
-        write_session(session, work / "session", units=units)
+        # Parquet, float32 (far finer than the sensors): 55 MB against 306 MB of CSV
+        write_session(session, work / "session", units=units, run_format="parquet",
+                      float_dtype="float32")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             model = identify_session(session)
@@ -396,7 +401,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             write_real_car_example(work / REAL_CAR_FOLDER)
             write_clicks_example(work / CLICKS_FOLDER)
             write_track_example(work / TRACK_FOLDER)
-            write_demo_rig_files(work / DEMO_RIG_FILES, session)
+            write_demo_rig_files(work / DEMO_RIG_FILES, session, duration_s=DEMO_RIG_FILES_S)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 log.info("demo: ranking the crate's setups")
@@ -537,7 +542,7 @@ def write_demo_inputs(folder, *, units="imperial", channels=ALL_CHANNELS, overwr
     return paths
 
 
-def write_demo_rig_files(folder, session, *, overwrite=False):
+def write_demo_rig_files(folder, session, *, overwrite=False, duration_s=None):
     """Write a session's runs as a real rig's files: RPC III, one ``<run>.rsp`` a run.
 
     The README's import example reads them back through ``rig_map.toml``
@@ -553,6 +558,9 @@ def write_demo_rig_files(folder, session, *, overwrite=False):
         The session whose runs to write (SI inside).
     overwrite : bool
         Replace existing files.
+    duration_s : float, optional
+        Write each run's first `duration_s` seconds only (default: the whole run); the
+        demo writes :data:`DEMO_RIG_FILES_S`.
 
     Returns
     -------
@@ -561,11 +569,12 @@ def write_demo_rig_files(folder, session, *, overwrite=False):
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    n = None if duration_s is None else max(2, int(round(duration_s * session.fs_hz)))
     paths = {}
     for run in session.runs:
         names = [c for c in ALL_CHANNELS if c in run.channels]
         paths[run.name] = write_rpc3(
-            folder / f"{run.name}.rsp", {c: run.channels[c] for c in names},
+            folder / f"{run.name}.rsp", {c: run.channels[c][:n] for c in names},
             fs_hz=session.fs_hz, units={c: _SI_UNIT[quantity_of(c)] for c in names},
             overwrite=overwrite)
     log.info("demo: wrote %d runs as RPC III files to %s", len(paths), folder)

@@ -241,10 +241,9 @@ def test_aero_loads_are_the_dynamic_part_and_the_mean_a_preload(files, paper_veh
 LOGGER_STAMP_JITTER = 0.015
 
 
-def test_from_track_reads_a_logger_whose_time_stamps_jitter(files, tmp_path, capsys, caplog):
-    """A real logger's CSV (jittered time stamps, the values taken at those instants) gives a
-    drive, said in one line with the jitter measured; the drive is as good as from the clean
-    log."""
+def _jittered_log(files, tmp_path):
+    """The clean log as a real logger writes it: jittered time stamps, the values taken at
+    those instants."""
     from scipy.interpolate import make_interp_spline
 
     frame = pd.read_csv(files / "log.csv")
@@ -260,6 +259,14 @@ def test_from_track_reads_a_logger_whose_time_stamps_jitter(files, tmp_path, cap
     jittered["units"] = units.to_numpy()
     log = tmp_path / "logger.csv"
     log.write_text(jittered.to_csv(index=False))
+    return log
+
+
+def test_from_track_reads_a_logger_whose_time_stamps_jitter(files, tmp_path, capsys, caplog):
+    """A real logger's CSV (jittered time stamps, the values taken at those instants) gives a
+    drive, said in one line with the jitter measured; the drive is as good as from the clean
+    log."""
+    log = _jittered_log(files, tmp_path)
     out = tmp_path / "drive.csv"
     with caplog.at_level("WARNING"):
         code, _, err = _run(capsys, "drive", "from-track", log, "--model", "paper",
@@ -270,6 +277,26 @@ def test_from_track_reads_a_logger_whose_time_stamps_jitter(files, tmp_path, cap
     assert len(said) == 1 and "resampled onto a uniform 200 Hz" in said[0], said
     drive = read_drive(out)
     assert drive.fs_hz == 200.0 and drive.duration_s == pytest.approx(40.0, abs=0.01)
+    res = pd.read_csv(out.with_name("drive_report") / "residuals.csv")
+    assert res[res.channel != "all"].groupby("iteration").residual_share.max().min() \
+        < CLI_RESIDUAL
+
+
+def test_from_track_reads_logs_at_a_chosen_rate(files, tmp_path, capsys, caplog):
+    """``--resample HZ``: the jittered 200 Hz logger read onto a uniform 100 Hz base
+    (anti-aliased), said in one line; the drive is at 100 Hz and reproduces the log."""
+    log = _jittered_log(files, tmp_path)
+    out = tmp_path / "drive.csv"
+    with caplog.at_level("WARNING"):
+        code, _, err = _run(capsys, "drive", "from-track", log, "--model", "paper",
+                            "--shocks", DEMO_LIBRARY_PATH, "--setup", "DM", "--aero",
+                            files / "aero.toml", "--resample", "100", "--out", out)
+    assert code == 0, err
+    said = [r.getMessage() for r in caplog.records if "as asked" in r.getMessage()]
+    assert len(said) == 1 and "resampled from 200 Hz, its time stamps jittering" in said[0]
+    assert "uniform 100 Hz" in said[0] and "anti-aliased" in said[0], said
+    drive = read_drive(out)
+    assert drive.fs_hz == 100.0 and drive.duration_s == pytest.approx(40.0, abs=0.02)
     res = pd.read_csv(out.with_name("drive_report") / "residuals.csv")
     assert res[res.channel != "all"].groupby("iteration").residual_share.max().min() \
         < CLI_RESIDUAL

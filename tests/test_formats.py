@@ -370,6 +370,27 @@ def test_import_reproduces_the_session(case, rig_session, map_path, shocks_path,
                 assert np.max(err) >= MIN_SHARE_OF_HALF_STEP * np.max(bound), c
 
 
+def test_import_at_a_chosen_rate(rig_session, map_path, shocks_path, tmp_path, caplog):
+    """``shockplan import --resample HZ``: a rig file at the session's rate written at half
+    of it (anti-aliased), said in one line; the session reads at that rate."""
+    from planner.cli import main
+
+    run = rig_session.runs[0]
+    file = _write("mdf", tmp_path, run)
+    half = 0.5 * rig_session.fs_hz
+    with caplog.at_level("WARNING"):
+        code = main(["-q", "import", "--format", "mdf", "--map", str(map_path), str(file),
+                     "--setup", ",".join(run.setup[c] for c in CORNERS), "--shocks",
+                     str(shocks_path), "--resample", f"{half:g}", "--out",
+                     str(tmp_path / "session")])
+    assert code == 0
+    said = [r.getMessage() for r in caplog.records if "as asked" in r.getMessage()]
+    assert len(said) == 1 and f"uniform {half:g} Hz" in said[0] and "anti-aliased" in said[0]
+    back = read_session(tmp_path / "session")
+    assert back.fs_hz == pytest.approx(half, rel=1e-12)
+    assert back.runs[0].n_samples == (run.n_samples - 1) // 2 + 1
+
+
 def test_rpc3_short_integer_values_are_exact_steps(rig_session, tmp_path):
     """The float32 values rpc3-file returns are rebuilt as exact integer * SCALE."""
     run = rig_session.runs[0]

@@ -262,6 +262,30 @@ def test_bad_model_files(tmp_path, identified_model):
     assert zipfile.is_zipfile(good)
 
 
+def test_model_files_are_compressed_and_uncompressed_ones_still_read(tmp_path,
+                                                                     identified_model):
+    """Issue 36: the file is deflated (the demo folder's size), every array stored exactly,
+    and a stored (uncompressed) file, as earlier versions wrote, loads to the same model."""
+    import zipfile
+
+    path = identified_model.save(tmp_path / "m.npz")
+    with zipfile.ZipFile(path) as zf:
+        assert {i.compress_type for i in zf.infolist()} == {zipfile.ZIP_DEFLATED}
+    old = _rewrite(path, tmp_path / "stored.npz", lambda meta, data: None)  # np.savez
+    with zipfile.ZipFile(old) as zf:
+        assert {i.compress_type for i in zf.infolist()} == {zipfile.ZIP_STORED}
+    assert path.stat().st_size < old.stat().st_size
+    with np.load(path) as a, np.load(old) as b:
+        assert a.files == b.files
+        for k in a.files:
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    new, back = load_model(path), load_model(old)
+    np.testing.assert_array_equal(new.frf.H, identified_model.frf.H)
+    np.testing.assert_array_equal(back.frf.H, identified_model.frf.H)
+    np.testing.assert_array_equal(back.residues, identified_model.residues)
+    assert back.summary().equals(new.summary())
+
+
 def _rewrite(src, dst, edit):
     """Copy a model file with its meta and arrays edited by ``edit(meta, data)``."""
     import json

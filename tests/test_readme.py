@@ -188,11 +188,11 @@ def test_demo_outputs(demo):
     assert "optimized curves" in text and "better" in text
     assert f"-> {out.name}" in text and ".shockplan-demo." not in text  # the final folder
     # every CSV says the demo's unit system (issue 23): the drive first, read without --units;
-    # the header first and the unit system as the last column, on every row (issue 36)
+    # the header first and the unit system as the last column, on every row (issue 36; the
+    # session's Parquet runs: test_every_demo_csv_reads_with_a_plain_read_csv)
     for csv_file in ("track_drive.csv", "model_summary.csv", "ranking/ranking.csv",
                      "ranking/screening.csv", "ranking/histograms.csv",
-                     "optimize/optimal_setup.csv",
-                     "optimize/convergence.csv", "session/runs/baseline.csv"):
+                     "optimize/optimal_setup.csv", "optimize/convergence.csv"):
         lines = (out / csv_file).read_text().splitlines()
         assert lines[0].endswith(",units"), csv_file
         assert all(line.endswith(",imperial") for line in lines[1:]), csv_file
@@ -267,18 +267,30 @@ VENDOR_CSV = re.compile(r"^clicks/dyno/")
 @pytest.mark.slow
 def test_every_demo_csv_reads_with_a_plain_read_csv(demo):
     """Issue 36: every CSV in a fresh demo folder reads with ``pandas.read_csv(path)`` and
-    no options (the header is its first line) and has the spec's columns: run files
-    ``time`` and the channels, drives the rig inputs, predictions and rankings ``setup``
-    and the corners; each ends with the column ``units``, one unit system on every row."""
+    no options (the header is its first line) and has the spec's columns: drives the rig
+    inputs, predictions and rankings ``setup`` and the corners; each ends with the column
+    ``units``, one unit system on every row. The session's run files are Parquet: a plain
+    ``pandas.read_parquet(path)`` gives ``time`` and the channels, the metadata the units."""
+    import pyarrow.parquet as pq
+
     from ident.data.channels import ALL_CHANNELS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
 
     out, _ = demo
     files = sorted(p for p in out.rglob("*.csv") if not p.name.startswith("."))
     names = [p.relative_to(out).as_posix() for p in files]
     assert {"track_drive.csv", "ranking/ranking.csv", "ranking/screening.csv",
-            "optimize/optimal_setup.csv", "session/runs/baseline.csv",
-            "real_car/track_drive.csv"} <= set(names)
-    seen = set()
+            "optimize/optimal_setup.csv", "real_car/track_drive.csv"} <= set(names)
+    # the session's runs are Parquet (the spec allows it): a plain read_parquet reads them
+    runs = sorted((out / "session" / "runs").iterdir())
+    assert [p.name for p in runs] == [f"{n}.parquet" for n in
+                                      ("baseline", "swap-LF", "swap-LR", "swap-RF", "swap-RR")]
+    for path in runs:
+        frame = pd.read_parquet(path)
+        columns = [str(c) for c in frame.columns]
+        assert len(frame) > 0 and columns[0] == "time", path.name
+        assert set(RIG_INPUTS) <= set(columns) <= {"time", *ALL_CHANNELS}, path.name
+        assert pq.read_metadata(path).metadata[b"units"] == b"imperial", path.name
+    seen = {"run"}
     for path, name in zip(files, names):
         frame = pd.read_csv(path)
         columns = [str(c) for c in frame.columns]
@@ -288,12 +300,7 @@ def test_every_demo_csv_reads_with_a_plain_read_csv(demo):
             continue
         assert columns[-1] == "units" and frame["units"].nunique() == 1, name
         assert frame["units"].iloc[0] in ("SI", "imperial"), name
-        if name.startswith("session/runs/"):
-            assert columns[0] == "time" and set(RIG_INPUTS) <= set(columns), name
-            assert set(columns[1:-1]) <= set(ALL_CHANNELS), name
-            assert frame["units"].iloc[0] == "imperial", name
-            seen.add("run")
-        elif name.endswith("drive.csv"):
+        if name.endswith("drive.csv"):
             assert columns[0] == "time" and set(WHEELLOADER_INPUTS) <= set(columns), name
             assert set(columns[1:-1]) <= set(RIG_INPUTS), name
             seen.add("drive")
@@ -302,3 +309,20 @@ def test_every_demo_csv_reads_with_a_plain_read_csv(demo):
             assert head == ["setup", *CORNERS], name
             seen.add("setups")
     assert seen == {"run", "drive", "setups"}
+
+
+#: Largest size of a fresh demo folder [bytes] (issue 36: it was 363 MB; measured 96.0 MB).
+DEMO_FOLDER_MAX_BYTES = 100e6
+
+
+@pytest.mark.slow
+def test_the_demo_folder_is_under_100_mb(demo):
+    """Issue 36: Parquet float32 runs, a deflated model and 60 s rig files keep a fresh demo
+    folder under 100 MB, with every file a user needs (the README's examples run on it)."""
+    out, _ = demo
+    sizes = {p.relative_to(out).as_posix(): p.stat().st_size for p in out.rglob("*")
+             if p.is_file()}
+    total = sum(sizes.values())
+    biggest = sorted(sizes.items(), key=lambda kv: -kv[1])[:8]
+    assert total < DEMO_FOLDER_MAX_BYTES, f"{total / 1e6:.1f} MB; the largest: {biggest}"
+    assert {"model.npz", "session/session.toml", "rig_files/baseline.rsp"} <= set(sizes)

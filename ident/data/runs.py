@@ -231,7 +231,8 @@ def _seconds(values):
     return values
 
 
-def check_columns(columns, *, where, units, channel_map, required, names=None):
+def check_columns(columns, *, where, units, channel_map, required, names=None,
+                  resample_hz=None):
     """The checking engine: map, check and convert a table of raw columns.
 
     Parameters
@@ -251,6 +252,11 @@ def check_columns(columns, *, where, units, channel_map, required, names=None):
         :data:`ident.data.channels.ALL_CHANNELS`); other columns are ignored (logged at
         debug level). A track log reads its own
         (:data:`ident.data.tracklog.TRACK_LOG_CHANNELS`, ``speed`` among them).
+    resample_hz : float, optional
+        Resample the table onto a uniform base at this rate [Hz] (band-limited,
+        anti-aliased when going down; :func:`ident.data.timebase.uniform_time_base`), said
+        in a logged warning. Default: the file's own rate (jittered time stamps resampled
+        onto it).
 
     Returns
     -------
@@ -312,8 +318,8 @@ def check_columns(columns, *, where, units, channel_map, required, names=None):
             f"{where}: column {_label(_TIME, present[_TIME])} has {int(bad.sum())} "
             f"NaN/inf value(s), the first at data row {i + 1}; fill or cut the run"
         )
-    base = uniform_time_base(t, where=where, error=SessionError)
-    if base.resampled:  # a logger's jittered time stamps
+    base = uniform_time_base(t, where=where, error=SessionError, resample_hz=resample_hz)
+    if base.resampled:  # a logger's jittered time stamps, or a rate asked for
         logger.warning(base.describe(where))
     t = base.time_s
 
@@ -476,7 +482,7 @@ def read_table_columns(path, *, where, kind=None):
 
 
 def read_run_table(path, *, units=None, channel_map=None, required=(), where=None,
-                   units_from="units", units_fix=None):
+                   units_from="units", units_fix=None, resample_hz=None):
     """Read, check and convert one run (or drive) file to SI and canonical names.
 
     Parameters
@@ -506,6 +512,10 @@ def read_run_table(path, *, units=None, channel_map=None, required=(), where=Non
         ``"the manifest's units"``).
     units_fix : str, optional
         The fix that message ends with (default: :func:`ident.data.files.resolve_units`'s).
+    resample_hz : float, optional
+        Resample the run onto a uniform base at this rate [Hz] (``--resample``;
+        band-limited, anti-aliased when going down), said in a logged warning. Default:
+        the file's rate.
 
     Returns
     -------
@@ -548,8 +558,8 @@ def read_run_table(path, *, units=None, channel_map=None, required=(), where=Non
     units = resolve_units(marker, units, where=where, given_as=units_from, fix=units_fix,
                           error=SessionError)
     time_s, channels, fs_hz = check_columns(
-        columns, where=where, units=units, channel_map=channel_map, required=required
-    )
+        columns, where=where, units=units, channel_map=channel_map, required=required,
+        resample_hz=resample_hz)
     return RunTable(time_s=time_s, channels=channels, fs_hz=fs_hz, path=path, units=units,
                     file_units=marker)
 
@@ -597,7 +607,7 @@ def in_memory_columns(time_s, channels, *, where):
     return {_TIME: time_s, **channels}
 
 
-def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
+def write_run_table(path, time_s, channels, *, units="SI", overwrite=False, float_dtype="float64"):
     """Write a table of signals as a CSV or Parquet run file, atomically.
 
     Parameters
@@ -613,6 +623,9 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
         quantity).
     overwrite : bool
         Replace an existing file.
+    float_dtype : {"float64", "float32"}
+        The type a Parquet file stores the channels in (``time`` is always 64-bit;
+        :func:`ident.data.files.write_parquet_frame`); a CSV takes only ``"float64"``.
 
     Notes
     -----
@@ -645,7 +658,8 @@ def write_run_table(path, time_s, channels, *, units="SI", overwrite=False):
     frame = pd.DataFrame(
         {_TIME: t, **{c: from_si(x, quantity_of(c), units) for c, x in si.items()}}
     )
-    write_table_file(frame, path, kind=kind, units=units, overwrite=overwrite)
+    write_table_file(frame, path, kind=kind, units=units, overwrite=overwrite,
+                     float_dtype=float_dtype)
 
 
 # --------------------------------------------------------------------------------------

@@ -24,6 +24,17 @@ each step's deviation from the median step:
 - any step further off: samples were dropped, repeated, or the rate changed. That is not
   jitter, and resampling across it would invent data: refused at its time with the fix.
 
+Where a rate must be chosen (runs logged at different rates, a model at another rate than
+the logger's), a reader's ``resample_hz`` (``--resample HZ`` on the command line) puts the
+record on a uniform base at that rate: the record is first made uniform at its own rate as
+above, then resampled by the rational ratio of the rates with the band-limited polyphase
+filter of :func:`resample_bandlimited` (the one of ``shockplan drive resample``), which
+removes the content above the lower Nyquist frequency when going down (anti-aliasing).
+Where no ratio of small integers gives the rate exactly (a jittered record's estimated
+rate, an odd rate), the spline takes the stamps straight onto the new base going up, and
+the same filter's low-pass precedes it going down. :meth:`TimeBase.describe` says what
+was done in one line.
+
 The interpolation is a B-spline of degree :data:`SPLINE_DEGREE` (7) through the measured
 samples. As the degree grows, spline interpolation converges to band-limited (sinc)
 interpolation; at degree 7 a signal with content up to a quarter of the sample rate is
@@ -35,8 +46,10 @@ interpolation. 20 channels of 160,000 samples take about a second.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
+from scipy import signal
 from scipy.interpolate import make_interp_spline
 
 __all__ = [
@@ -45,9 +58,18 @@ __all__ = [
     "JITTER_RTOL",
     "NOMINAL_RATE_RTOL",
     "SPLINE_DEGREE",
+    "FIR_HALF_LENGTH",
+    "FIR_KAISER_BETA",
+    "MAX_RATE_DENOMINATOR",
+    "RATE_RTOL",
+    "EXACT_RATIO_RTOL",
     "TimeBase",
     "nominal_rate",
     "uniform_time_base",
+    "rate_ratio",
+    "resample_bandlimited",
+    "resample_uniform",
+    "bandlimited_fir",
 ]
 
 #: Largest deviation of a step from the median step, relative to it, of a time base taken
@@ -61,6 +83,18 @@ JITTER_RTOL = 0.05
 NOMINAL_RATE_RTOL = 1e-4
 #: Degree of the interpolating B-spline through jittered samples (see the module docstring).
 SPLINE_DEGREE = 7
+#: Anti-aliasing FIR of :func:`resample_bandlimited`: half length in units of
+#: ``max(up, down)`` and Kaiser window parameter.
+FIR_HALF_LENGTH = 20
+FIR_KAISER_BETA = 8.0
+#: Largest denominator of a rate ratio ``up / down`` (:func:`rate_ratio`).
+MAX_RATE_DENOMINATOR = 1000
+#: Largest relative error of the rate a ratio reaches (:func:`rate_ratio`; one sample in
+#: 10^6, a time-scale error far below any clock's).
+RATE_RTOL = 1e-6
+#: The same, for a record resampled to a chosen rate by a ratio (else by the spline):
+#: rounding only, so that the samples' times are the times they are labelled with.
+EXACT_RATIO_RTOL = 1e-12
 
 
 class TimeRecord:
@@ -119,6 +153,13 @@ class TimeBase:
         The largest deviation of a step from the median step, relative to it.
     resampled : bool
         True if the signals must be resampled onto :attr:`time_s` (:meth:`resample`).
+    native : TimeBase or None
+        At a rate chosen by the reader (``resample_hz``), the record's uniform base at its
+        own rate, which the chosen one is resampled from; else None.
+    ratio : (int, int) or None
+        At a chosen rate, ``(up, down)`` of the polyphase resampling from :attr:`native`
+        (:func:`resample_uniform`), or None where no ratio of small integers gives the rate
+        exactly (low-pass and spline); ``(1, 1)`` otherwise.
     """
 
     time_s: np.ndarray
@@ -126,6 +167,8 @@ class TimeBase:
     raw_time_s: np.ndarray
     jitter: float
     resampled: bool
+    native: "TimeBase | None" = None
+    ratio: "tuple | None" = (1, 1)
 
     def resample(self, values):
         """Signals sampled at :attr:`raw_time_s`, on :attr:`time_s`.
@@ -137,16 +180,33 @@ class TimeBase:
         Returns
         -------
         ndarray
-            The same shape, float; `values` itself (as an array) when the time base is
-            uniform as written.
+            The same shape but the first axis ``time_s.size``, float; `values` itself (as
+            an array) when the time base is uniform as written.
         """
         x = np.asarray(values, dtype=float)
         if not self.resampled:
             return x
+        if self.native is not None:  # uniform at the record's rate, then at the chosen one
+            if self.ratio is None and self.fs_hz >= self.native.fs_hz:  # up: one spline
+                return make_interp_spline(self.raw_time_s, x, k=SPLINE_DEGREE,
+                                          axis=0)(self.time_s)
+            x = self.native.resample(x)
+            if self.ratio is not None:
+                return resample_uniform(x, *self.ratio, self.time_s.size)
+            return _spline_onto(x, self.native.fs_hz, self.fs_hz, self.time_s.size)
         return make_interp_spline(self.raw_time_s, x, k=SPLINE_DEGREE, axis=0)(self.time_s)
 
     def describe(self, where):
         """One line saying what was resampled, with the jitter measured (for the log)."""
+        if self.native is not None:
+            own = self.native
+            how = ("anti-aliased below its Nyquist frequency" if self.fs_hz < own.fs_hz
+                   else "band-limited")
+            jitter = (f", its time stamps jittering by up to {100 * own.jitter:.2g} % of the "
+                      "step" if own.resampled else "")
+            return (f"{where}: resampled from {own.fs_hz:.6g} Hz{jitter} onto a uniform "
+                    f"{self.fs_hz:.6g} Hz time base as asked ({self.time_s.size} samples, "
+                    f"{how})")
         step_ms = 1e3 / self.fs_hz
         return (f"{where}: time stamps jitter by up to {100 * self.jitter:.2g} % of the "
                 f"{step_ms:.4g} ms step: resampled onto a uniform {self.fs_hz:.6g} Hz time "
@@ -154,7 +214,7 @@ class TimeBase:
 
 
 def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueError,
-                      row_offset=2, row_label="data row"):
+                      row_offset=2, row_label="data row", resample_hz=None):
     """Check a record's time stamps and give its uniform time base (see the module docstring).
 
     Parameters
@@ -174,6 +234,13 @@ def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueErro
         data row.
     row_label : str
         What a file's sample is called in messages (``"sample"`` in a binary file).
+    resample_hz : float, optional
+        The rate [Hz] of the uniform base to resample onto (``--resample``): the record,
+        made uniform at its own rate, is resampled by the ratio of the rates
+        (:func:`rate_ratio`, :func:`resample_uniform`), or, where no ratio of small
+        integers gives it, low-passed below the new Nyquist frequency (going down) and
+        interpolated by the B-spline; :attr:`TimeBase.native` is its own base. Default:
+        the record's own rate.
 
     Returns
     -------
@@ -184,7 +251,8 @@ def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueErro
     error
         If there are fewer than 2 samples, time is not strictly increasing, or a step
         differs from the median step by more than `jitter_rtol` (a gap, a repeated
-        sample, a changed rate), naming the first such step's time and row, and the fix.
+        sample, a changed rate), naming the first such step's time and row, and the fix;
+        or `resample_hz` is not a positive number.
 
     Examples
     --------
@@ -194,6 +262,20 @@ def uniform_time_base(time_s, *, where, jitter_rtol=JITTER_RTOL, error=ValueErro
     >>> uniform_time_base([0.0, 0.01, 0.02], where="run.csv").resampled
     False
     """
+    if resample_hz is not None:
+        own = uniform_time_base(time_s, where=where, jitter_rtol=jitter_rtol, error=error,
+                                row_offset=row_offset, row_label=row_label)
+        ratio = rate_ratio(own.fs_hz, resample_hz, where=where, error=error,
+                           rtol=EXACT_RATIO_RTOL)
+        if ratio == (1, 1):
+            return own
+        fs = float(resample_hz)
+        span = (own.time_s.size - 1) / own.fs_hz
+        n = int(np.floor(span * fs * (1.0 + 1e-12))) + 1  # inside the record: no extrapolation
+        if ratio is not None:
+            n = (own.time_s.size - 1) * ratio[0] // ratio[1] + 1  # the same, exactly
+        return TimeBase(own.time_s[0] + np.arange(n) / fs, fs, own.raw_time_s, own.jitter, True,
+                        own, ratio)
     t = np.asarray(time_s, dtype=float)
     if t.ndim != 1 or t.size < 2:
         raise error(f"{where}: time needs at least 2 samples; export the whole record")
@@ -257,3 +339,143 @@ def nominal_rate(fs_hz):
     if abs(whole_us - fs_hz) <= 0.01 * NOMINAL_RATE_RTOL * fs_hz:
         return whole_us
     return float(fs_hz)
+
+
+def rate_ratio(fs_from_hz, fs_to_hz, *, where, error=ValueError, rtol=RATE_RTOL):
+    """The ratio ``up / down`` of small integers that turns one sample rate into another.
+
+    Parameters
+    ----------
+    fs_from_hz, fs_to_hz : float
+        The record's rate and the rate wanted [Hz].
+    where : str
+        Prefix of an error message.
+    error : type
+        The exception raised.
+    rtol : float
+        Largest relative error of the rate reached (default :data:`RATE_RTOL`; a record's
+        values resampled to a chosen rate take :data:`EXACT_RATIO_RTOL`: an error of
+        1e-6 would shift the end of an 800 s record by 0.8 ms).
+
+    Returns
+    -------
+    (int, int) or None
+        ``up, down`` (coprime, ``down <= MAX_RATE_DENOMINATOR``), ``(1, 1)`` for rates
+        equal within `rtol`; None if no such ratio reaches `fs_to_hz` within `rtol` (a
+        jittered record's estimated rate, an odd rate).
+
+    Raises
+    ------
+    error
+        If `fs_to_hz` is not a positive number.
+
+    Examples
+    --------
+    >>> rate_ratio(100.0, 64.0, where="run.csv"), rate_ratio(76.923077, 100.0, where="log")
+    ((16, 25), (13, 10))
+    >>> rate_ratio(100.0, 314.159265, where="run.csv")  # within 1e-6: 8.5e-8
+    (355, 113)
+    >>> rate_ratio(100.0, 314.159265, where="run.csv", rtol=EXACT_RATIO_RTOL) is None
+    True
+    """
+    try:
+        fs_to = float(fs_to_hz)
+    except (TypeError, ValueError):
+        fs_to = float("nan")
+    if not (np.isfinite(fs_to) and fs_to > 0):
+        raise error(f"{where}: the rate to resample to must be a positive number of Hz, got "
+                    f"{fs_to_hz!r}; give e.g. --resample 100")
+    ratio = Fraction(fs_to / fs_from_hz).limit_denominator(MAX_RATE_DENOMINATOR)
+    achieved = fs_from_hz * ratio.numerator / ratio.denominator
+    if ratio == 0 or abs(achieved - fs_to) > rtol * fs_to:
+        return None
+    return ratio.numerator, ratio.denominator
+
+
+def resample_bandlimited(x, up, down=1, *, axis=0):
+    """Polyphase resampling of samples of a band-limited signal by ``up / down``.
+
+    A longer, sharper anti-aliasing filter than ``resample_poly``'s default
+    (which has 0.1 % ripple): a Kaiser-windowed FIR (``beta = 8``, 40 taps per
+    unit of ``max(up, down)`` each side) flat to 1e-5 up to 0.8 of the lower
+    Nyquist frequency and below -80 dB above 1.2 of it. Zero phase: output
+    sample ``k * down`` is input sample ``k * up`` in time. The closed-loop
+    simulator uses it to refine a drive onto its internal grid.
+
+    Parameters
+    ----------
+    x : ndarray
+    up, down : int
+    axis : int
+
+    Returns
+    -------
+    ndarray
+        ``ceil(n * up / down)`` samples along `axis`.
+    """
+    if up == down:
+        return np.array(x, dtype=float, copy=True)
+    return signal.resample_poly(x, up, down, axis=axis, window=bandlimited_fir(max(up, down)))
+
+
+def bandlimited_fir(rate):
+    """The anti-aliasing FIR of :func:`resample_bandlimited` for ``max(up, down) = rate``.
+
+    ``2 * FIR_HALF_LENGTH * rate + 1`` taps, symmetric, gain 1 at 0 Hz.
+    """
+    return signal.firwin(2 * FIR_HALF_LENGTH * rate + 1, 1.0 / rate,
+                         window=("kaiser", FIR_KAISER_BETA))
+
+
+def resample_uniform(x, up, down, n_out):
+    """A uniformly sampled record resampled by ``up / down`` (:func:`resample_bandlimited`)
+    along its first axis, its ends extended by odd reflection about the end samples (the
+    value and slope go on; not zeros, which would pull the ends toward 0).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n, ...)
+    up, down : int
+        Coprime.
+    n_out : int
+        Output samples; sample ``k`` is at input sample ``k * down / up`` in time, so
+        ``(n - 1) * up // down + 1`` keeps them inside the record.
+
+    Returns
+    -------
+    ndarray, shape (n_out, ...)
+
+    Examples
+    --------
+    >>> t = np.arange(200) / 100.0  # 2 s of 3 Hz at 100 Hz, onto 64 Hz
+    >>> y = resample_uniform(np.sin(2 * np.pi * 3 * t + 0.3), 16, 25, 128)
+    >>> err = np.abs(y - np.sin(2 * np.pi * 3 * np.arange(128) / 64.0 + 0.3))
+    >>> bool(err.max() < 1e-3), bool(err[20:-20].max() < 1e-5)  # the ends, the middle
+    (True, True)
+    """
+    x = np.asarray(x, dtype=float)
+    # pad by whole multiples of `down` input samples (the output grid stays on sample 0),
+    # longer than the filter's half length in input samples
+    m = -(-(FIR_HALF_LENGTH * max(up, down) // up + 2) // down)
+    pad = [(m * down, m * down)] + [(0, 0)] * (x.ndim - 1)
+    y = resample_bandlimited(np.pad(x, pad, mode="reflect", reflect_type="odd"), up, down,
+                             axis=0)
+    return y[m * up:m * up + n_out]
+
+
+def _spline_onto(x, fs_from_hz, fs_to_hz, n_out):
+    """A uniform record at `fs_from_hz` on `n_out` samples at a lower `fs_to_hz` from its
+    first, for rates of no simple ratio: low-passed below the new Nyquist frequency (zero
+    phase, the FIR of :func:`bandlimited_fir` with the cut-off scaled), then through the
+    B-spline of degree :data:`SPLINE_DEGREE`."""
+    if fs_to_hz < fs_from_hz:
+        r = int(np.ceil(fs_from_hz / fs_to_hz))
+        h = signal.firwin(2 * FIR_HALF_LENGTH * r + 1, fs_to_hz / fs_from_hz,
+                          window=("kaiser", FIR_KAISER_BETA))
+        half = FIR_HALF_LENGTH * r
+        pad = [(half, half)] + [(0, 0)] * (x.ndim - 1)
+        xp = np.pad(x, pad, mode="reflect", reflect_type="odd")
+        x = signal.oaconvolve(xp, h.reshape((-1,) + (1,) * (x.ndim - 1)), mode="valid",
+                              axes=0)
+    t_from = np.arange(x.shape[0]) / fs_from_hz
+    return make_interp_spline(t_from, x, k=SPLINE_DEGREE, axis=0)(np.arange(n_out) / fs_to_hz)

@@ -344,7 +344,7 @@ def _log_map(channel_map, *, where):
     return cmap
 
 
-def _read_table(path, fmt, cmap, units, *, where):
+def _read_table(path, fmt, cmap, units, *, where, resample_hz=None):
     """Read a CSV or Parquet log: (times [s], SI channels, units read in or None)."""
     columns, marker = read_table_columns(path, where=where, kind=fmt)
     if cmap is None:
@@ -368,7 +368,8 @@ def _read_table(path, fmt, cmap, units, *, where):
         units = resolve_units(marker, units, where=where, given_as="--units",
                               error=TrackLogError)
         t, channels, _ = check_columns(columns, where=where, units=units, channel_map={},
-                                       required=_TRAVELS, names=TRACK_LOG_CHANNELS)
+                                       required=_TRAVELS, names=TRACK_LOG_CHANNELS,
+                                       resample_hz=resample_hz)
         return t, channels, units
 
     time_column = cmap.time or _TIME
@@ -384,7 +385,8 @@ def _read_table(path, fmt, cmap, units, *, where):
                                    noun="column", error=TrackLogError)
     sources = {_TIME: time_column, **cmap.sources}
     t, raw, _ = check_columns(columns, where=where, units="SI", channel_map=sources,
-                              required=tuple(cmap.channels), names=tuple(cmap.channels))
+                              required=tuple(cmap.channels), names=tuple(cmap.channels),
+                              resample_hz=resample_hz)
     channels = {c: mapped_channel_si(spec, raw[c], t, where=where)
                 for c, spec in cmap.channels.items()}
     return t, channels, None
@@ -424,7 +426,7 @@ def _onto(t, typical, tc, x, *, canonical, source, reference, where):
     return y
 
 
-def _read_file(path, fmt, cmap, *, where):
+def _read_file(path, fmt, cmap, *, where, resample_hz=None):
     """Read an MDF, TDMS or RPC III log: (times [s], SI channels, resampled channels)."""
     if cmap is None:
         raise TrackLogError(
@@ -447,7 +449,8 @@ def _read_file(path, fmt, cmap, *, where):
     if t.size < 2:
         raise TrackLogError(f"{where}: has {t.size} sample(s) of {reference!r}; a track log "
                             "needs at least 2")
-    base = check_time_base(t, source=reference, where=where, error=TrackLogError)
+    base = check_time_base(t, source=reference, where=where, error=TrackLogError,
+                           resample_hz=resample_hz)
     typical = float(np.median(np.diff(t)))
 
     channels, resampled = {}, []
@@ -472,7 +475,8 @@ def _read_file(path, fmt, cmap, *, where):
     return base.time_s, channels, resampled
 
 
-def read_track_log(path, *, channel_map=None, units=None, format=None, name=None):
+def read_track_log(path, *, channel_map=None, units=None, format=None, name=None,
+                   resample_hz=None):
     """Read a track log: a data logger's file, as SI canonical channels on one time base.
 
     Parameters
@@ -495,6 +499,12 @@ def read_track_log(path, *, channel_map=None, units=None, format=None, name=None
         first bytes).
     name : str, optional
         The log's name (default: the file name without its suffix).
+    resample_hz : float, optional
+        Resample the log onto a uniform base at this rate [Hz] (``--resample``, e.g. the
+        model's rate; band-limited, anti-aliased when going down:
+        :func:`ident.data.timebase.uniform_time_base`), said in a logged warning; recorded
+        as ``settings["resample_hz"]``. Default: the logger's rate (jittered time stamps
+        resampled onto it).
 
     Returns
     -------
@@ -550,10 +560,12 @@ def read_track_log(path, *, channel_map=None, units=None, format=None, name=None
                 logger.info("%s: units=%r not used: the channel map %s gives every "
                             "channel's unit", where, units, cmap.where)
         if fmt in ("csv", "parquet"):
-            t, channels, units = _read_table(path, fmt, cmap, units, where=where)
+            t, channels, units = _read_table(path, fmt, cmap, units, where=where,
+                                             resample_hz=resample_hz)
             resampled = []
         else:
-            t, channels, resampled = _read_file(path, fmt, cmap, where=where)
+            t, channels, resampled = _read_file(path, fmt, cmap, where=where,
+                                                resample_hz=resample_hz)
             units = None
     except TrackLogError:
         raise
@@ -567,6 +579,9 @@ def read_track_log(path, *, channel_map=None, units=None, format=None, name=None
         map_setting = str(cmap.path) if cmap.path is not None else cmap.name
     settings = {"source": str(path), "format": fmt, "units": units, "map": map_setting,
                 "t0_s": float(t[0]), "resampled": resampled}
+    if resample_hz is not None:
+        fs_hz = float(resample_hz)  # exactly the rate asked for, not its rounded estimate
+        settings["resample_hz"] = fs_hz
     log = TrackLog(name=name or path.stem, fs_hz=fs_hz, channels=channels, settings=settings)
     logger.info("%s: %d channel(s) x %d samples at %.6g Hz (%s)", where, len(log.channels),
                 n, fs_hz, fmt)

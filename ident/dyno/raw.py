@@ -119,7 +119,7 @@ import numpy as np
 
 from ident.data.files import (UNITS_COLUMN, atomic_write_text, check_can_write, csv_preamble,
                               did_you_mean, read_csv_table, read_toml, read_units_marker)
-from ident.data.timebase import nominal_rate
+from ident.data.timebase import nominal_rate, uniform_time_base
 from ident.data.units import TO_SI, UNIT_LABELS, check_units, from_si
 from ident.errors import DynoError
 
@@ -609,7 +609,27 @@ def time_resolution(time_s):
     return 0.0
 
 
-def read_dyno_raw(path, *, dyno_map=None):
+def _on_rate(cols, where, resample_hz):
+    """Checked columns on a uniform base at `resample_hz` [Hz] (``--resample``), said in a
+    warning; as they are without it. The samples are taken on the uniform clock their
+    stamps round (the stamps' least-squares line, at the nominal rate of
+    :func:`ident.data.timebase.nominal_rate`), then resampled
+    (:func:`ident.data.timebase.uniform_time_base`: band-limited, anti-aliased when going
+    down)."""
+    if resample_hz is None:
+        return cols
+    t = cols["time"]
+    i = np.arange(t.size, dtype=float)
+    slope, icpt = np.polyfit(i, t, 1)
+    base = uniform_time_base(icpt + i / nominal_rate(1.0 / slope), where=where, error=DynoError,
+                             resample_hz=resample_hz)
+    if not base.resampled:
+        return cols
+    logger.warning(base.describe(where))
+    return {c: base.time_s if c == "time" else base.resample(x) for c, x in cols.items()}
+
+
+def read_dyno_raw(path, *, dyno_map=None, resample_hz=None):
     """Read a raw dyno file into checked SI columns.
 
     Parameters
@@ -620,6 +640,10 @@ def read_dyno_raw(path, *, dyno_map=None):
         The file's columns, units and signs; without it the file has the canonical
         columns in SI (or in imperial units with a ``units`` column holding
         ``imperial``, or the marker line ``# units: imperial``).
+    resample_hz : float, optional
+        Resample the run onto a uniform base at this rate [Hz] (``--resample``;
+        band-limited, anti-aliased when going down), said in a logged warning. Default:
+        the file's rate.
 
     Returns
     -------
@@ -637,7 +661,7 @@ def read_dyno_raw(path, *, dyno_map=None):
 
     cols, sources, where = _raw_columns(path, dyno_map)
     _check_columns(cols, sources, where)
-    return pd.DataFrame(cols)
+    return pd.DataFrame(_on_rate(cols, where, resample_hz))
 
 
 def parse_settings(text):
@@ -1192,7 +1216,7 @@ def _analyze(cols, sources, where, min_cycles):
 
 
 def import_dyno_runs(paths, *, settings, dyno_map=None, min_cycles=MIN_CYCLES,
-                     temperature_drift_c=TEMPERATURE_DRIFT_C):
+                     temperature_drift_c=TEMPERATURE_DRIFT_C, resample_hz=None):
     """Turn raw dyno files, all at one setting, into dyno-sheet rows.
 
     Parameters
@@ -1208,6 +1232,9 @@ def import_dyno_runs(paths, *, settings, dyno_map=None, min_cycles=MIN_CYCLES,
         Cycles a peak-velocity block needs to count.
     temperature_drift_c : float
         Spread of the runs' mean temperatures [deg C] warned of.
+    resample_hz : float, optional
+        Resample every run onto a uniform base at this rate [Hz] (``--resample``,
+        :func:`read_dyno_raw`). Default: each file's rate.
 
     Returns
     -------
@@ -1239,7 +1266,7 @@ def import_dyno_runs(paths, *, settings, dyno_map=None, min_cycles=MIN_CYCLES,
     for p in paths:
         cols, sources, where = _raw_columns(p, dyno_map)
         _check_columns(cols, sources, where)
-        run = _analyze(cols, sources, where, int(min_cycles))
+        run = _analyze(_on_rate(cols, where, resample_hz), sources, where, int(min_cycles))
         runs.append(_renamed(run, p.name))
     warnings = []
     temps = [(r.source, r.temperature_c) for r in runs if r.temperature_c is not None]

@@ -30,7 +30,7 @@ from scipy import signal, sparse
 from scipy.optimize import lsq_linear
 
 from ident.data.channels import CORNERS
-from ident.interrupts import die_with_parent
+from ident.interrupts import quiet_worker
 from ident.data.session import STATIC_OFFSET_SHARE, make_session
 from ident.errors import FitWarning, LowCoherenceWarning
 from ident.identify import fit as fitmod
@@ -457,10 +457,16 @@ def _map_pairs(func, common, tasks, n_jobs):
     size = max(1, -(-len(tasks) // (4 * n)))  # about 4 batches per process
     batches = [tasks[k:k + size] for k in range(0, len(tasks), size)]
     ctx = multiprocessing.get_context("fork")
-    with concurrent.futures.ProcessPoolExecutor(max_workers=n, mp_context=ctx,
-                                                initializer=die_with_parent,
-                                                initargs=(os.getpid(),)) as pool:
+    # Ctrl-C reaches every process of the command: the workers end at once without a
+    # traceback, and this process stops, cancelling the batches not started; a worker also
+    # ends if this process dies, however it dies (quiet_worker)
+    pool = concurrent.futures.ProcessPoolExecutor(max_workers=n, mp_context=ctx,
+                                                  initializer=quiet_worker,
+                                                  initargs=(os.getpid(),))
+    try:
         parts = list(pool.map(func, [common] * len(batches), batches))
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
     return [r for part in parts for r in part]
 
 

@@ -128,6 +128,18 @@ def int_at_least(low):
     return parse
 
 
+def positive_hz(text):
+    """An argparse type: a sample rate [Hz] > 0 (``--resample``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a rate in Hz, e.g. 100, got {text!r}") from None
+    if not (value > 0.0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive rate in Hz, e.g. 100, got "
+                                         f"{value:g}")
+    return value
+
+
 def share(text):
     """An argparse type: a share in (0, 1] (e.g. 0.01 for the best 1 %)."""
     try:
@@ -147,6 +159,16 @@ def add_units(parser, what, *, default="SI", default_text="SI"):
     parser.add_argument("--units", type=unit_system, choices=list(UNIT_SYSTEMS),
                         default=default, help=f"{what}: SI or imperial, in any case (default: "
                         f"{default_text})")
+
+
+def add_resample(parser, what):
+    """Add ``--resample HZ``: read `what` onto a uniform time base at HZ (band-limited)."""
+    parser.add_argument("--resample", type=positive_hz, default=None, metavar="HZ",
+                        help=f"resample {what} onto a uniform time base at HZ (band-limited, "
+                        "anti-aliased when going down), e.g. files logged at different rates; "
+                        "its ratio to a file's rate must be a fraction up/down with down <= "
+                        "1000 (default: each file's own rate, jittered time stamps resampled "
+                        "onto it)")
 
 
 def add_command_group(subparsers, name, subcommands, *, help, dest, dest_help):

@@ -22,8 +22,8 @@ from pathlib import Path
 
 from ident.data.files import check_output
 from ident.data.units import UNIT_SYSTEMS
-from planner.cli.common import (add_command_group, add_histogram_option, histogram_options, log,
-                                run_subcommand, unit_system)
+from planner.cli.common import (add_command_group, add_histogram_option, add_resample,
+                                histogram_options, log, run_subcommand, unit_system)
 
 __all__ = ["add_parser", "run", "run_from_track", "run_iterate", "run_section", "run_resample",
            "report_folder", "section_path", "LOG_FORMATS", "SUBCOMMANDS"]
@@ -49,6 +49,7 @@ def _common(p, *, logs_help):
                    help="unit system of canonical-name CSV/Parquet logs and of the outputs: SI "
                    "or imperial, in any case (default: the first log's 'units' column, "
                    "else SI)")
+    add_resample(p, "every track log (logs of different rates)")
     p.add_argument("--rig", metavar="RIG.toml", default=None,
                    help="rig TOML whose [limits] the drive respects (wheelloader displacement, "
                    "velocity, acceleration; aero loads) (default: no limits)")
@@ -216,7 +217,8 @@ def _targets(text):
 def _read_logs(args):
     from ident.data.tracklog import read_track_log
 
-    logs = [read_track_log(p, channel_map=args.map, units=args.units, format=args.format)
+    logs = [read_track_log(p, channel_map=args.map, units=args.units, format=args.format,
+                           resample_hz=args.resample)
             for p in args.logs]
     if args.units is None:
         args.units = logs[0].settings.get("units") or "SI"

@@ -20,7 +20,7 @@ import logging
 
 from ident.data.files import check_output
 from ident.data.units import UNIT_LABELS, UNIT_SYSTEMS
-from planner.cli.common import add_command_group, run_subcommand, unit_system
+from planner.cli.common import add_command_group, add_resample, run_subcommand, unit_system
 
 __all__ = ["add_parser", "run", "run_import", "run_table", "run_check", "parse_velocities",
            "SUBCOMMANDS"]
@@ -83,7 +83,8 @@ def run_import(args):
         except DynoError:
             units = None  # a missing sheet: created; write_dyno_sheet names other problems
     units = units or "SI"
-    result = import_dyno_runs(args.raw, settings=settings, dyno_map=args.map)
+    result = import_dyno_runs(args.raw, settings=settings, dyno_map=args.map,
+                              resample_hz=args.resample)
     warnings = write_dyno_sheet(result, args.out, units=units, append=args.append,
                                 overwrite=args.overwrite)
     print(result.report(units=units))
@@ -202,6 +203,7 @@ def _add_import(dyno_sub):
                      help="units of the sheet's velocity and force: SI (m/s, N) or imperial "
                      "(in/s, lbf), in any case (default: the sheet's own when appending, "
                      "else SI)")
+    add_resample(imp, "every raw file")
     imp.add_argument("--overwrite", action="store_true", help="replace an existing sheet")
     imp.set_defaults(func=run)
     return imp

@@ -6,7 +6,7 @@ import logging
 from pathlib import Path
 
 from ident.data.files import atomic_path, check_output
-from planner.cli.common import check_out, int_at_least
+from planner.cli.common import add_resample, check_out, int_at_least
 from planner.text import format_table
 
 __all__ = ["add_parser", "run"]
@@ -46,6 +46,7 @@ def add_parser(subparsers):
     ident_p.add_argument("--no-diagnosis", action="store_true", help="skip the check of the "
                          "session against the model (bump stops, lift-off, the runs "
                          "re-simulated on the model; about 5-8 %% of the time)")
+    add_resample(ident_p, "every run")
     ident_p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     ident_p.set_defaults(func=run)
     return ident_p
@@ -67,7 +68,7 @@ def run(args):
     if args.plots:
         check_output(args.plots, overwrite=True, folder=True, what="--plots")
     out = Path(args.out)
-    session = read_session(args.session)
+    session = read_session(args.session, resample_hz=args.resample)
     diagnose_log = logging.getLogger("ident.identify.diagnose")
     shocks_log = logging.getLogger("ident.identify.shockcheck")
     level, shocks_level = diagnose_log.level, shocks_log.level

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from planner.cli.common import add_units, check_out
+from planner.cli.common import add_resample, add_units, check_out
 
 __all__ = ["add_parser", "run"]
 
@@ -26,6 +26,7 @@ def add_parser(subparsers):
     imp.add_argument("--names", help="run names, comma-separated (default: the file names)")
     add_units(imp, "units of a new session's run files", default=None,
               default_text="SI for a new session, the session's when appending")
+    add_resample(imp, "every file (e.g. to the session's rate)")
     imp.set_defaults(func=run)
     return imp
 
@@ -38,7 +39,7 @@ def run(args):
     names = None if args.names is None else [n.strip() for n in args.names.split(",")]
     session = import_runs(args.out, args.files, format=args.format, channel_map=args.map,
                           setup=args.setup, role=args.role, names=names, shocks=args.shocks,
-                          units=args.units)
+                          units=args.units, resample_hz=args.resample)
     added = len(args.files)
     print(f"imported {added} run(s) into session '{session.name}' at {args.out}: now "
           f"{len(session.runs)} runs at {session.fs_hz:g} Hz ({session.units})")

@@ -246,7 +246,7 @@ def read_mapped_raw(path, *, format, channel_map, where=None):
     return raw
 
 
-def check_time_base(t, *, source, where, error=SessionError):
+def check_time_base(t, *, source, where, error=SessionError, resample_hz=None):
     """Check sample times and give their uniform time base (a logger's jitter resampled).
 
     Parameters
@@ -259,12 +259,16 @@ def check_time_base(t, *, source, where, error=SessionError):
         How to name the file in messages.
     error : type
         The exception raised.
+    resample_hz : float, optional
+        The rate [Hz] of a uniform base to resample onto (``--resample``; band-limited,
+        anti-aliased when going down). Default: the times' own rate.
 
     Returns
     -------
     ident.data.timebase.TimeBase
-        Uniform as written, or the uniform base jittered times are resampled onto
-        (:func:`ident.data.timebase.uniform_time_base`; said in a warning).
+        Uniform as written, or the uniform base jittered times are resampled onto, or
+        the one at `resample_hz` (:func:`ident.data.timebase.uniform_time_base`; said in
+        a warning).
 
     Raises
     ------
@@ -276,7 +280,7 @@ def check_time_base(t, *, source, where, error=SessionError):
     if not np.all(np.isfinite(t)):
         raise error(f"{where}: the time of {source!r} has NaN/inf values; check the export")
     base = uniform_time_base(t, where=f"{where}: the time of {source!r}", error=error,
-                             row_offset=1, row_label="sample")
+                             row_offset=1, row_label="sample", resample_hz=resample_hz)
     if base.resampled:
         logger.warning(base.describe(where))
     return base
@@ -318,7 +322,7 @@ def mapped_channel_si(spec, raw_values, t, *, where):
     return x
 
 
-def read_run(path, *, format, channel_map, required=(), where=None):
+def read_run(path, *, format, channel_map, required=(), where=None, resample_hz=None):
     """Read one rig data file into SI canonical channels, through a channel map.
 
     Parameters
@@ -334,6 +338,10 @@ def read_run(path, *, format, channel_map, required=(), where=None):
         session run); checked before the file is read.
     where : str, optional
         How to name the file in messages (default ``"file <path>"``).
+    resample_hz : float, optional
+        Resample the run onto a uniform base at this rate [Hz] (``--resample``;
+        band-limited, anti-aliased when going down; :func:`check_time_base`), said in
+        a logged warning. Default: the file's rate.
 
     Returns
     -------
@@ -381,8 +389,8 @@ def read_run(path, *, format, channel_map, required=(), where=None):
             )
     if n < 2:
         raise SessionError(f"{where}: has {n} sample(s); a run needs at least 2")
-    base = check_time_base(t, source=t_source, where=where)
-    typical = 1.0 / base.fs_hz
+    base = check_time_base(t, source=t_source, where=where, resample_hz=resample_hz)
+    typical = 1.0 / (base.fs_hz if base.native is None else base.native.fs_hz)
     for canonical, spec in cmap.channels.items():
         tc = raw.time_s.get(spec.source)
         if cmap.time is None and tc is not None and \
@@ -499,7 +507,7 @@ def _check_same_shocks(given, session, setup, *, where):
 
 def import_runs(session_dir, files, *, format, channel_map, setup, role="other",
                 names=None, shocks=None, units=None, session_name=None,
-                run_format="csv"):
+                run_format="csv", resample_hz=None):
     """Import rig data files (RPC III, MDF, TDMS) as runs of a rig session folder.
 
     Every file becomes one run with the same `setup` and `role`. If
@@ -535,6 +543,10 @@ def import_runs(session_dir, files, *, format, channel_map, setup, role="other",
         Name of a new session (default: the folder's name).
     run_format : {"csv", "parquet"}
         File format of the new run files.
+    resample_hz : float, optional
+        Resample every file onto a uniform base at this rate [Hz] before it is written
+        (``--resample``: files logged at another rate than the session's; band-limited,
+        anti-aliased when going down; :func:`read_run`). Default: each file's rate.
 
     Returns
     -------
@@ -626,7 +638,8 @@ def import_runs(session_dir, files, *, format, channel_map, setup, role="other",
                   else WHEELLOADER_INPUTS)
     runs = []
     for name, file in zip(names, files):
-        table = read_run(file, format=fmt, channel_map=cmap, required=rig_inputs)
+        table = read_run(file, format=fmt, channel_map=cmap, required=rig_inputs,
+                         resample_hz=resample_hz)
         runs.append(Run(name=name, file=f"runs/{name}.{run_format}", setup=setup, role=role,
                         time_s=table.time_s, channels=table.channels, fs_hz=table.fs_hz))
 
