@@ -322,9 +322,11 @@ def test_score_and_difference_intervals_and_verdicts(identified_ranking):
 #: intervals hold on the identified paper car. Issue 37 measured the *metric* intervals
 #: covering 73 % of the known car's values on this (noise-free) session, the model's
 #: systematic error being partly outside them; the differences cancel most of that error.
-#: Measured: TRUTH_MEASURED. A loose bound so that a broken difference (e.g. taking the
-#: quadrature sum's width away) fails, not a calibration claim (issue 37, item 1).
-MIN_DIFFERENCE_COVERAGE = 0.7
+#: Measured (20 draws, seed 5): 7 of the 10 differences from the best (errors of the
+#: differences 0.2e-4 to 1.5e-4 of a score, the misses by less than 0.5e-4); against the
+#: baseline 9 of 10; the scores 10 of 11. A loose bound (one miss more passes), so that a
+#: broken difference fails, not a calibration claim (that is issue 37, item 1).
+MIN_DIFFERENCE_COVERAGE = 0.6
 
 
 def test_verdicts_against_the_known_car(identified_ranking, paper_model, track_drive,
