@@ -434,3 +434,28 @@ def test_baseline_setup_named_like_another_setup_is_refused(paper_model, track_d
     with pytest.raises(PlannerError, match="has the name of a listed setup"):
         rank_setups(paper_model, track_drive, demo_library, setups=pool, baseline=other,
                     uncertainty=False)
+
+
+def test_cli_prints_the_best_and_the_setups_tied_with_it(identified_model, track_drive,
+                                                         tmp_path, capsys):
+    """``shockplan rank`` on an identified model prints the best and each setup tied with it,
+    one line each, as ``ranking.csv``'s ``verdict`` says."""
+    from ident.data.drive import write_drive
+    from planner.cli import main
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    model = tmp_path / "model.npz"
+    identified_model.save(model)
+    write_drive(track_drive, tmp_path / "drive.csv")
+    assert main(["-q", "rank", "--model", str(model), "--drive", str(tmp_path / "drive.csv"),
+                 "--shocks", str(DEMO_LIBRARY_PATH), "--only", "B20,L12,L28,DM,DF",
+                 "--baseline", "B20", "--simulate", "4", "--out", str(tmp_path / "r")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    ranked = pd.read_csv(tmp_path / "r" / "ranking.csv", keep_default_na=False)
+    best = ranked["setup"].iloc[0]
+    assert ranked["verdict"].iloc[0] == "best"
+    assert sum(line.startswith(f"best: '{best}', score ") for line in lines) == 1
+    tied = ranked["setup"][ranked["verdict"] == "tied"].tolist()
+    said = [line.split("'")[1] for line in lines if line.startswith("tied with the best: ")]
+    assert said == tied
+    assert tied or any(line.startswith("no other setup is tied") for line in lines)
