@@ -459,3 +459,23 @@ def test_cli_prints_the_best_and_the_setups_tied_with_it(identified_model, track
     said = [line.split("'")[1] for line in lines if line.startswith("tied with the best: ")]
     assert said == tied
     assert tied or any(line.startswith("no other setup is tied") for line in lines)
+
+
+def test_workbook_names_the_best_and_the_tied(identified_ranking, tmp_path):
+    """``ranking.xlsx``: its summary sheet names the best and the setups tied with it, its
+    ranking sheet has the verdicts among the key columns (before the metrics)."""
+    from openpyxl import load_workbook
+
+    from planner.report import write_ranking
+
+    r = identified_ranking
+    files = write_ranking(r.table, tmp_path / "out", objective=r.objective,
+                          baseline=r.baseline)
+    wb = load_workbook(files["xlsx"])
+    text = [str(c.value) for row in wb["summary"].iter_rows() for c in row if c.value]
+    tied = [n for n in r.table.index if r.table.loc[n, "verdict"] == "tied"]
+    assert f"best: '{r.best}'; tied with it: " + (
+        ", ".join(f"'{n}'" for n in tied) if tied else "none") in text
+    header = [c.value for c in next(wb["ranking"].iter_rows(max_row=1))]
+    assert "verdict" in header and "verdict baseline" in header
+    assert header.index("verdict") < header.index("tire force RMS LF [N]")
