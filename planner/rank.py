@@ -110,14 +110,14 @@ class Ranking:
         Returns
         -------
         list of str
-            Empty without intervals (a known model, or none asked).
+            Without intervals (a known model, or none asked) one line: the best, ties not
+            judged.
         """
         t = self.table
-        if "verdict" not in t.columns:
-            return []
-        best = t.index[t["verdict"] == "best"]
+        best = t.index[t["verdict"] == "best"] if "verdict" in t.columns else []
         if not len(best):
-            return []
+            return [f"best: '{self.best}', score {t.loc[self.best, 'score']:.4f}; no "
+                    "intervals (a known model, or none asked): ties with it are not judged"]
         b = best[0]
         q = (self.settings.get("uncertainty") or {}).get("quantiles", (0.025, 0.975))
         level = f"{100 * (q[1] - q[0]):g} %"

@@ -365,7 +365,9 @@ def test_verdict_lines_of_a_ranking():
         "contains 0)"]
     r2 = dataclasses.replace(r, table=t.assign(verdict=["best", "worse", "worse"]))
     assert r2.verdict_lines()[1].startswith("no other setup is tied with the best")
-    assert dataclasses.replace(r, table=t.drop(columns="verdict")).verdict_lines() == []
+    assert dataclasses.replace(r, table=t.drop(columns="verdict")).verdict_lines() == [
+        "best: 'a', score 0.9000; no intervals (a known model, or none asked): ties with it "
+        "are not judged"]
 
 
 # ---------------------------------------------------------------- bad inputs
