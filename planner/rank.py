@@ -128,14 +128,17 @@ class Ranking:
                     f", {_versus(r['verdict_baseline'])} the baseline (difference "
                     f"{r['diff_baseline_lo']:+.4f} to {r['diff_baseline_hi']:+.4f})")]
         tied = t.index[t["verdict"] == "tied"]
-        for name in tied:
+        for name in tied[:MAX_TIED_LINES]:
             r = t.loc[name]
             lines.append(f"tied with the best: '{name}', score {r['score']:.4f} (difference "
                          f"from the best {r['diff_best_lo']:+.4f} to {r['diff_best_hi']:+.4f} "
                          "contains 0)")
+        if len(tied) > MAX_TIED_LINES:
+            lines.append(f"tied with the best: {len(tied) - MAX_TIED_LINES} more (ranking.csv's "
+                         "'verdict')")
         if not len(tied):
-            lines.append(f"no other setup is tied with the best (every difference's {level} "
-                         "interval is above 0)")
+            lines.append(f"no other feasible setup is tied with the best (no difference's "
+                         f"{level} interval from it contains 0)")
         return lines
 
     def summary(self, n=5):
@@ -176,6 +179,10 @@ class Ranking:
             lines.append(f"  {more} more infeasible setup(s) below these; each one's reason is "
                          "in its 'violations' (ranking.csv)")
         return "\n".join(lines)
+
+
+#: At most this many "tied with the best" lines in :meth:`Ranking.summary` (then a count).
+MAX_TIED_LINES = 10
 
 
 def _versus(verdict):

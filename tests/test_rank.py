@@ -315,7 +315,7 @@ def test_score_and_difference_intervals_and_verdicts(identified_ranking):
     said = [line for line in lines if line.startswith("tied with the best: ")]
     assert [line.split("'")[1] for line in said] == [n for n in t.index if n in tied]
     if not tied:
-        assert any(line.startswith("no other setup is tied with the best") for line in lines)
+        assert any(line.startswith("no other feasible setup is tied with the best") for line in lines)
 
 
 #: The truth check's loose bound: the share of the true differences from the best its
@@ -364,7 +364,7 @@ def test_verdict_lines_of_a_ranking():
         "tied with the best: 'b', score 0.9100 (difference from the best -0.0020 to +0.0200 "
         "contains 0)"]
     r2 = dataclasses.replace(r, table=t.assign(verdict=["best", "worse", "worse"]))
-    assert r2.verdict_lines()[1].startswith("no other setup is tied with the best")
+    assert r2.verdict_lines()[1].startswith("no other feasible setup is tied with the best")
     assert dataclasses.replace(r, table=t.drop(columns="verdict")).verdict_lines() == [
         "best: 'a', score 0.9000; no intervals (a known model, or none asked): ties with it "
         "are not judged"]
@@ -460,7 +460,7 @@ def test_cli_prints_the_best_and_the_setups_tied_with_it(identified_model, track
     tied = ranked["setup"][ranked["verdict"] == "tied"].tolist()
     said = [line.split("'")[1] for line in lines if line.startswith("tied with the best: ")]
     assert said == tied
-    assert tied or any(line.startswith("no other setup is tied") for line in lines)
+    assert tied or any(line.startswith("no other feasible setup is tied") for line in lines)
 
 
 def test_workbook_names_the_best_and_the_tied(identified_ranking, tmp_path):
