@@ -240,7 +240,9 @@ def summary_parts(table, *, best, baseline, metrics=(), units="SI", first=("rank
     ----------
     table : pandas.DataFrame
         Indexed by setup name, best first: ``score`` (lower is better), optionally
-        ``score_<group>``, ``feasible``, ``unresolved`` and the metric columns (SI).
+        ``score_<group>``, ``feasible``, ``verdict``/``verdict_baseline``
+        (:func:`planner.uncertainty.score_intervals`: a note then names the best and the
+        setups tied with it), ``unresolved`` and the metric columns (SI).
     best, baseline : str
         The setups the verdicts compare with (:func:`verdicts`) and the plot shows.
     metrics : sequence of str
