@@ -9,8 +9,10 @@
 3. simulates the best `top` of them (and the baseline) in the time domain with
    the nonlinear shocks (:mod:`planner.predict`) and scores those;
 4. reports how well the screening ranks agree with the time-domain ranks
-   (Spearman), and for an identified model gives every metric an interval and
-   flags setup pairs whose order the model does not resolve
+   (Spearman), and for an identified model gives every metric an interval, every
+   setup's score an interval and its difference from the best's and the baseline's
+   one, a verdict (tied with the best or worse, better than the baseline, tied or
+   worse) and flags setup pairs whose order the model does not resolve
    (:mod:`planner.uncertainty`).
 """
 
@@ -37,7 +39,8 @@ from planner.click_settings import click_neighbours, click_values
 from planner.setups import enumerate_setups, resolve_baseline
 from planner.sweep import screen_setups_on
 from planner.text import format_table
-from planner.uncertainty import prediction_uncertainty, unresolved_pairs
+from planner.uncertainty import (prediction_uncertainty, score_errors, score_intervals,
+                                 unresolved_pairs)
 
 __all__ = ["Ranking", "rank_setups"]
 
@@ -54,7 +57,10 @@ class Ranking:
         The setups simulated in the time domain, best first: shock ids, metrics
         (SI), ``<metric>_lo/_hi`` intervals (identified models), ``score``,
         ``score_<group>``, ``feasible``, ``violations``, ``rank``,
-        ``screening_rank``, ``unresolved``.
+        ``screening_rank``, ``unresolved``; with intervals also
+        :data:`planner.uncertainty.SCORE_INTERVAL_COLUMNS` (``score_lo/_hi``,
+        ``diff_best_lo/_hi``, ``diff_baseline_lo/_hi``, ``verdict``,
+        ``verdict_baseline``).
     screening : pandas.DataFrame
         Every setup's screening metrics, scores and ranks.
     baseline : str
@@ -104,6 +110,43 @@ class Ranking:
         return [f"click polish: {polish['simulated']} neighbouring setting(s) simulated in "
                 f"{polish['rounds']} round(s){moved}"]
 
+    def verdict_lines(self):
+        """The best setup and the setups tied with it, one line each (``verdict``).
+
+        Returns
+        -------
+        list of str
+            Without intervals (a known model, or none asked) one line: the best, ties not
+            judged.
+        """
+        t = self.table
+        best = t.index[t["verdict"] == "best"] if "verdict" in t.columns else []
+        if not len(best):
+            return [f"best: '{self.best}', score {t.loc[self.best, 'score']:.4f}; no "
+                    "intervals (a known model, or none asked): ties with it are not judged"]
+        b = best[0]
+        q = (self.settings.get("uncertainty") or {}).get("quantiles", (0.025, 0.975))
+        level = f"{100 * (q[1] - q[0]):g} %"
+        r = t.loc[b]
+        lines = [f"best: '{b}', score {r['score']:.4f} ({level} interval "
+                 f"{r['score_lo']:.4f} to {r['score_hi']:.4f})"
+                 + ("" if b == self.baseline else
+                    f", {_versus(r['verdict_baseline'])} the baseline (difference "
+                    f"{r['diff_baseline_lo']:+.4f} to {r['diff_baseline_hi']:+.4f})")]
+        tied = t.index[t["verdict"] == "tied"]
+        for name in tied[:MAX_TIED_LINES]:
+            r = t.loc[name]
+            lines.append(f"tied with the best: '{name}', score {r['score']:.4f} (difference "
+                         f"from the best {r['diff_best_lo']:+.4f} to {r['diff_best_hi']:+.4f} "
+                         "contains 0)")
+        if len(tied) > MAX_TIED_LINES:
+            lines.append(f"tied with the best: {len(tied) - MAX_TIED_LINES} more (ranking.csv's "
+                         "'verdict')")
+        if not len(tied):
+            lines.append(f"no other feasible setup is tied with the best (no difference's "
+                         f"{level} interval from it contains 0)")
+        return lines
+
     def summary(self, n=5):
         """The ranking for a terminal: what was screened and simulated, how screening and the
         time domain agree, the click polish, the baseline, the best `n` setups and why those
@@ -123,13 +166,17 @@ class Ranking:
                  f"domain; screening vs time-domain Spearman {self.agreement['spearman']:.3f}",
                  describe_agreement(self.agreement, what="ranking"),
                  *self.polish_lines(),
+                 *self.verdict_lines(),
                  f"baseline '{self.baseline}' scores {self.objective.total_weight:.3f}; best:"]
         rows = []
+        judged = "verdict" in t.columns
         for name, r in t.head(n).iterrows():
             rows.append((int(r["rank"]), name, f"{r['score']:.4f}",
                          "yes" if r.get("feasible", True) else "no",
+                         *((r["verdict"],) if judged else ()),
                          r.get("unresolved", "") or "-"))
         lines.append(format_table(rows, ["rank", "setup", "score", "feasible",
+                                         *(("vs best",) if judged else ()),
                                          "not resolved from"]))
         lines += [f"  '{name}' is infeasible: {r.get('violations', '') or 'no reason recorded'}"
                   for name, r in t.head(n).iterrows() if not r.get("feasible", True)]
@@ -138,6 +185,16 @@ class Ranking:
             lines.append(f"  {more} more infeasible setup(s) below these; each one's reason is "
                          "in its 'violations' (ranking.csv)")
         return "\n".join(lines)
+
+
+#: At most this many "tied with the best" lines in :meth:`Ranking.summary` (then a count).
+MAX_TIED_LINES = 10
+
+
+def _versus(verdict):
+    """``better`` -> "better than", ``tied`` -> "tied with", ..."""
+    return {"better": "better than", "worse": "worse than", "tied": "tied with"}.get(
+        verdict, f"{verdict} against")
 
 
 #: Rounds of the click polish at most (each simulates the best's untried neighbours).
@@ -384,8 +441,12 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         unc = prediction_uncertainty(model, drive, cand, library, draws=uncertainty, loop=loop,
                                      elements=ekw, predictions=td)
         table = unc.intervals(table)
-        pairs = unresolved_pairs(td.table, unc, objective, baseline=base.name)
+        errors = score_errors(td.table, unc, objective, baseline=base.name)
+        pairs = unresolved_pairs(td.table, unc, objective, baseline=base.name, errors=errors)
         table["unresolved"] = [" ".join(pairs.get(n, [])) for n in table.index]
+        best = table["rank"].idxmin()
+        table = pd.concat([table, score_intervals(errors, best=best, baseline=base.name)
+                           .loc[table.index]], axis=1)
         settings["uncertainty"] = unc.settings
     table = table.sort_values("rank")
     histograms = None if td.histograms is None else td.histograms.select(list(table.index))

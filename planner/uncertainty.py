@@ -36,8 +36,20 @@ part's half-widths (their signs are estimates, not certainties): the upper
 bound ``hi_r + sqrt(u^2 + sum d^2) - u`` with ``u = max(hi_r - 1, 0)``, the
 lower likewise. The fraction
 of draws in which two setups swap order tells whether the model resolves
-their order (:func:`unresolved_pairs`; the systematic errors of two setups
-are alike and cancel in their order).
+their order (:func:`unresolved_pairs` with ``max_flip``).
+
+**Scores and their differences** (:func:`score_errors`, :func:`score_intervals`,
+:func:`difference_interval`): every draw's metric ratios scale the predicted metrics and
+the objective scores them again, so each setup has a score per draw; two setups predicted
+by the same model share most of its error, so the *per-draw difference* of their scores
+spreads much less than either score. The systematic terms enter a score as its signed
+shift when every setup's metrics move by that term (``S(m (1 + d_k)) - S(m)``), and a
+difference as the difference of the two setups' shifts (alike errors cancel), each term
+added in quadrature to the random half-widths as above. A setup is *tied* with another
+where the interval of their difference contains 0. Only :class:`ScoreErrors` reaches the
+intervals: another error model (e.g. one calibrated on the session's own
+cross-validation) replaces the draws by giving its own per-draw scores and systematic
+shifts.
 
 Measured on the virtual rig (paper's plan with 5 % response and 1.25 % input
 noise, 41 setups on a 120 s track drive): the old intervals (Bendat-Piersol
@@ -70,10 +82,13 @@ __all__ = [
     "MAX_RELATIVE_ERROR",
     "RANDOM_ERROR_SCALE",
     "REFERENCE_RUN_S",
+    "SCORE_INTERVAL_COLUMNS",
     "SYSTEMATIC_TERMS",
     "FrfPlant",  # from planner.plant
+    "ScoreErrors",
     "Uncertainty",
     "combine_terms",
+    "difference_interval",
     "error_correlation",
     "frf_relative_error",
     "interpolate",  # from planner.plant
@@ -81,6 +96,8 @@ __all__ = [
     "prediction_uncertainty",
     "random_error_scale",
     "run_length_scale",
+    "score_errors",
+    "score_intervals",
     "unresolved_pairs",
 ]
 
@@ -128,6 +145,10 @@ LIGHT_MODE_MIN_SHARE = 0.05
 LIGHT_MODE_CLUSTER_HZ = 0.5
 #: The systematic error terms of an interval, in :attr:`Uncertainty.components`.
 SYSTEMATIC_TERMS = ("fit", "reduction", "discretization")
+#: The columns :func:`score_intervals` gives a ranking table (``docs/formats.md``).
+SCORE_INTERVAL_COLUMNS = ("score_lo", "score_hi", "diff_best_lo", "diff_best_hi",
+                          "diff_baseline_lo", "diff_baseline_hi", "verdict",
+                          "verdict_baseline")
 #: The quadratic hold's error falls as h^3: the error at h is 8/7 of (P(h) - P(h/2)).
 _RICHARDSON_H3 = 8.0 / 7.0
 
@@ -510,12 +531,247 @@ def combine_terms(random_lo, random_hi, systematic, *, random_factor=1.0):
     return lo_r - (np.sqrt(down**2 + sys2) - down), hi_r + np.sqrt(up**2 + sys2) - up
 
 
-def unresolved_pairs(scores, uncertainty, objective, *, baseline=None, max_flip=0.05, top=None):
+@dataclass(frozen=True, eq=False)
+class ScoreErrors:
+    """The objective's score of every setup: nominal, per draw, and its systematic shifts.
+
+    What :func:`score_intervals` and :func:`difference_interval` read: any error model that
+    gives per-draw scores (draws of the same error shared by all setups, so that their
+    per-draw differences carry what the setups share) and signed systematic shifts per
+    setup can stand in for the Monte Carlo draws of :func:`prediction_uncertainty`.
+
+    Attributes
+    ----------
+    nominal : pandas.Series
+        The score of every setup (index: setup names), lower is better.
+    draws : pandas.DataFrame
+        Per setup (rows, as `nominal`) the score in every draw (columns), shape
+        (n_setups, n_draws).
+    systematic : pandas.DataFrame
+        Per setup (rows) and systematic term (columns, e.g. :data:`SYSTEMATIC_TERMS`) the
+        signed shift of its score the term estimates (0 where a term is unknown).
+    quantiles : (float, float)
+        The interval's quantiles (default a 95 % interval).
+    feasible : pandas.Series
+        Per setup, whether it meets the objective's limits (nominally).
+    baseline : str
+        The setup the scores are ratios to.
+    """
+
+    nominal: pd.Series
+    draws: pd.DataFrame
+    systematic: pd.DataFrame
+    quantiles: tuple = (0.025, 0.975)
+    feasible: pd.Series = None
+    baseline: str = None
+
+
+def score_errors(scores, uncertainty, objective, *, baseline=None):
+    """Score every setup in every draw of `uncertainty` and by its systematic terms.
+
+    Each draw's metric ratios (:attr:`Uncertainty.draws`) scale the given
+    (time-domain) metrics of every setup, the baseline's included, and the
+    objective scores the draw's table; each systematic term ``d`` of
+    :attr:`Uncertainty.components` (signed relative errors per setup and metric)
+    scales them by ``1 + d`` (NaN: 0) and the shift of each setup's score from
+    the nominal one is that term's systematic score error.
+
+    Parameters
+    ----------
+    scores : pandas.DataFrame
+        Predicted metrics (SI) with the setups as index, including the baseline;
+        every setup must be one of `uncertainty`'s.
+    uncertainty : Uncertainty
+    objective : planner.objective.Objective
+    baseline : str, optional
+        As :func:`planner.objective.score_setups`.
+
+    Returns
+    -------
+    ScoreErrors
+        Rows in the order of `scores`.
+
+    Raises
+    ------
+    KeyError
+        If a setup of `scores` has no draws in `uncertainty`.
+    """
+    nominal = score_setups(scores, objective, baseline=baseline)
+    names = [m for m in uncertainty.metric_names if m in scores.columns]
+    cols = [uncertainty.metric_names.index(m) for m in names]
+    missing = [s for s in scores.index if s not in uncertainty.ratio_lo.index]
+    if missing:
+        raise KeyError(f"score_errors: setups {missing[:5]} have no draws in the uncertainty; "
+                       "compute prediction_uncertainty for the same setups")
+    idx = [uncertainty.ratio_lo.index.get_loc(s) for s in scores.index]
+    values = scores[names].to_numpy(dtype=float)
+    draw_scores = []
+    for d in range(uncertainty.draws.shape[0]):
+        t = scores.copy()
+        t[names] = values * uncertainty.draws[d][idx][:, cols]
+        draw_scores.append(score_setups(t, objective, baseline=baseline).table["score"]
+                           .to_numpy())
+    draws = pd.DataFrame(np.column_stack(draw_scores) if draw_scores else
+                         np.empty((len(scores), 0)), index=scores.index)
+    shifts = {}
+    for k in SYSTEMATIC_TERMS:
+        comp = uncertainty.components.get(k)
+        if comp is None:
+            continue
+        d = np.nan_to_num(comp.reindex(index=scores.index, columns=names).to_numpy(dtype=float))
+        t = scores.copy()
+        t[names] = values * (1.0 + d)
+        shifts[k] = (score_setups(t, objective, baseline=baseline).table["score"]
+                     - nominal.table["score"]).to_numpy()
+    quantiles = tuple((uncertainty.settings or {}).get("quantiles", (0.025, 0.975)))
+    table = nominal.table
+    return ScoreErrors(nominal=table["score"].rename("score"), draws=draws,
+                       systematic=pd.DataFrame(shifts, index=scores.index),
+                       quantiles=quantiles,
+                       feasible=table["feasible"].astype(bool) if "feasible" in table
+                       else pd.Series(True, index=scores.index),
+                       baseline=nominal.baseline)
+
+
+def difference_interval(errors, a, b):
+    """The interval of the score of `a` minus that of `b` (`b`: None, the score itself).
+
+    The random part is the quantiles of the per-draw differences (the error the two
+    setups share cancels); the systematic terms widen it, each as the difference of the
+    two setups' signed shifts (alike errors cancel), added in quadrature to the random
+    half-widths as :func:`combine_terms` does.
+
+    Parameters
+    ----------
+    errors : ScoreErrors
+    a : str or sequence of str
+        Setups (rows of `errors`).
+    b : str or None
+        The setup subtracted; None: the interval of `a`'s score.
+
+    Returns
+    -------
+    lo, hi : ndarray, shape (len(a),) (floats for one name)
+        The bounds; NaN where a score is not finite.
+
+    Examples
+    --------
+    >>> e = ScoreErrors(nominal=pd.Series([1.0, 1.1], index=["a", "b"]),
+    ...                 draws=pd.DataFrame([[0.9, 1.0, 1.1], [1.0, 1.1, 1.2]], index=["a", "b"]),
+    ...                 systematic=pd.DataFrame({"fit": [0.01, 0.01]}, index=["a", "b"]),
+    ...                 quantiles=(0.0, 1.0))
+    >>> [round(float(v), 12) for v in difference_interval(e, "b", "a")]
+    [0.1, 0.1]
+    """
+    one = isinstance(a, str)
+    names = [a] if one else list(a)
+    nom = errors.nominal.loc[names].to_numpy(dtype=float)
+    D = errors.draws.loc[names].to_numpy(dtype=float)
+    sysm = errors.systematic.loc[names].to_numpy(dtype=float)
+    if b is not None:
+        nom = nom - float(errors.nominal.loc[b])
+        D = D - errors.draws.loc[[b]].to_numpy(dtype=float)
+        sysm = sysm - errors.systematic.loc[[b]].to_numpy(dtype=float)
+    q0, q1 = errors.quantiles
+    with np.errstate(invalid="ignore"):
+        if D.shape[1]:
+            lo_r, hi_r = np.nanquantile(D, q0, axis=1), np.nanquantile(D, q1, axis=1)
+        else:
+            lo_r, hi_r = nom.copy(), nom.copy()
+        # combine_terms works on ratios about 1: the bounds as offsets from the nominal
+        lo, hi = combine_terms(1.0 + lo_r - nom, 1.0 + hi_r - nom,
+                               {j: sysm[:, j] for j in range(sysm.shape[1])})
+    lo, hi = lo - 1.0 + nom, hi - 1.0 + nom
+    bad = ~np.isfinite(nom)
+    lo[bad], hi[bad] = np.nan, np.nan
+    return (float(lo[0]), float(hi[0])) if one else (lo, hi)
+
+
+def _verdict(lo, hi, *, same, feasible, names):
+    """better / tied / worse of a difference interval (``same``: the reference's word)."""
+    if same:
+        return names[0]
+    if not feasible:
+        return "infeasible"
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return "tied"
+    if lo > 0:
+        return "worse"
+    if hi < 0:
+        return "better"
+    return "tied"
+
+
+def score_intervals(errors, *, best=None, baseline=None):
+    """The intervals of every setup's score and of its differences from the best and the
+    baseline, and its verdicts.
+
+    Parameters
+    ----------
+    errors : ScoreErrors
+        From :func:`score_errors` (or another error model).
+    best : str, optional
+        The setup the differences are from; default the best feasible setup by nominal
+        score (the lowest score when none is feasible).
+    baseline : str, optional
+        Default ``errors.baseline``; without one the baseline's columns are NaN.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Index as `errors`, columns :data:`SCORE_INTERVAL_COLUMNS`: ``score_lo``,
+        ``score_hi`` (the score's interval), ``diff_best_lo``, ``diff_best_hi`` (of the
+        score minus the best's), ``diff_baseline_lo``, ``diff_baseline_hi`` (minus the
+        baseline's), ``verdict`` (``best`` for the best, ``infeasible`` for a setup outside
+        the limits, ``tied`` where the difference's interval contains 0, ``worse`` above
+        it, ``better`` below it), ``verdict_baseline`` (``baseline``, ``infeasible``,
+        ``better``, ``tied``, ``worse`` likewise against the baseline).
+
+    Examples
+    --------
+    >>> e = ScoreErrors(nominal=pd.Series([0.9, 0.91, 1.0], index=["a", "b", "base"]),
+    ...                 draws=pd.DataFrame([[0.88, 0.92], [0.9, 0.92], [1.0, 1.0]],
+    ...                                    index=["a", "b", "base"]),
+    ...                 systematic=pd.DataFrame(index=["a", "b", "base"]),
+    ...                 quantiles=(0.0, 1.0), baseline="base")
+    >>> score_intervals(e)[["verdict", "verdict_baseline"]].to_numpy().tolist()
+    [['best', 'better'], ['tied', 'better'], ['worse', 'baseline']]
+    """
+    names = list(errors.nominal.index)
+    feasible = (errors.feasible if errors.feasible is not None
+                else pd.Series(True, index=names)).reindex(names).fillna(False).astype(bool)
+    if best is None:
+        pool = errors.nominal[feasible] if feasible.any() else errors.nominal
+        best = pool.astype(float).idxmin()
+    baseline = errors.baseline if baseline is None else baseline
+    out = pd.DataFrame(index=errors.nominal.index)
+    out["score_lo"], out["score_hi"] = difference_interval(errors, names, None)
+    out["diff_best_lo"], out["diff_best_hi"] = difference_interval(errors, names, best)
+    if baseline is not None:
+        out["diff_baseline_lo"], out["diff_baseline_hi"] = difference_interval(
+            errors, names, baseline)
+    else:
+        out["diff_baseline_lo"] = out["diff_baseline_hi"] = np.nan
+    out["verdict"] = [
+        _verdict(lo, hi, same=n == best, feasible=feasible[n], names=("best",))
+        for n, lo, hi in zip(names, out["diff_best_lo"], out["diff_best_hi"])]
+    out["verdict_baseline"] = [
+        "" if baseline is None else
+        _verdict(lo, hi, same=n == baseline, feasible=feasible[n], names=("baseline",))
+        for n, lo, hi in zip(names, out["diff_baseline_lo"], out["diff_baseline_hi"])]
+    return out
+
+
+def unresolved_pairs(scores, uncertainty, objective, *, baseline=None, max_flip=None, top=None,
+                     errors=None):
     """Setup pairs whose objective order the model does not resolve.
 
-    Each draw's metric ratios scale the given (time-domain) metrics; the
-    objective is re-scored per draw, and a pair whose order flips in more than
-    `max_flip` of the draws is unresolved.
+    By default a pair is unresolved where the interval of its score difference
+    (:func:`difference_interval`: the per-draw differences and the difference of
+    the systematic shifts) contains 0. With `max_flip`, the draws' order alone
+    decides: each draw's metric ratios scale the given (time-domain) metrics,
+    the objective is re-scored per draw, and a pair whose order flips in more
+    than `max_flip` of the draws is unresolved (no systematic terms).
 
     Parameters
     ----------
@@ -524,35 +780,38 @@ def unresolved_pairs(scores, uncertainty, objective, *, baseline=None, max_flip=
     uncertainty : Uncertainty
     objective : planner.objective.Objective
     baseline : str, optional
-    max_flip : float
+    max_flip : float, optional
+        Share of the draws (e.g. 0.05); default None: the difference intervals decide.
     top : int, optional
         Only pairs among the `top` best setups.
+    errors : ScoreErrors, optional
+        :func:`score_errors` of the same arguments, if already computed.
 
     Returns
     -------
     dict
         Setup name -> list of setup names it is not resolved from.
     """
+    if errors is None:
+        errors = score_errors(scores, uncertainty, objective, baseline=baseline)
     nominal = score_setups(scores, objective, baseline=baseline).table
     order = nominal.sort_values("rank").index.tolist()
     if top is not None:
         order = order[:top]
-    names = uncertainty.metric_names
-    idx = [uncertainty.ratio_lo.index.get_loc(s) for s in scores.index]
-    draw_scores = []
-    for d in range(uncertainty.draws.shape[0]):
-        t = scores.copy()
-        t[names] = scores[names].to_numpy() * uncertainty.draws[d][idx]
-        draw_scores.append(score_setups(t, objective, baseline=baseline).table["score"])
-    S = pd.concat(draw_scores, axis=1).loc[order].to_numpy()  # (n_top, n_draws)
-    nom = nominal.loc[order, "score"].to_numpy()
+    S = errors.draws.loc[order].to_numpy()  # (n_top, n_draws)
+    nom = errors.nominal.loc[order].to_numpy(dtype=float)
     out = {s: [] for s in order}
     for a in range(len(order)):
-        for b in range(a + 1, len(order)):
+        if max_flip is None and a + 1 < len(order):
+            lo, hi = difference_interval(errors, order[a + 1:], order[a])
+        for j, b in enumerate(range(a + 1, len(order))):
             if not (np.isfinite(nom[a]) and np.isfinite(nom[b])) or nom[a] == nom[b]:
                 continue
-            flips = np.mean(np.sign(S[a] - S[b]) != np.sign(nom[a] - nom[b]))
-            if flips > max_flip:
+            if max_flip is None:
+                unresolved = lo[j] <= 0.0 <= hi[j]
+            else:
+                unresolved = np.mean(np.sign(S[a] - S[b]) != np.sign(nom[a] - nom[b])) > max_flip
+            if unresolved:
                 out[order[a]].append(order[b])
                 out[order[b]].append(order[a])
     return out

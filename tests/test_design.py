@@ -528,3 +528,35 @@ def test_a_crate_without_adjustables_plans_as_before(demo_library, base):
     cands = candidate_runs(demo_library, base, kinds=("noise",), durations_s=(120.0,))
     assert all(c.clicks == 0 and "=" not in c.setup.name for c in cands)
     assert len(cands) == 1 + 4 * 9
+
+
+def test_decision_pairs_are_the_unresolved_ones(identified_model, track_drive, demo_library,
+                                                baseline_setup):
+    """The decision criterion weighs the contender pairs whose score difference's interval
+    contains 0 (:func:`planner.uncertainty.unresolved_pairs`), all of them where the model
+    resolves every pair, and every pair for a known model (before rig day)."""
+    from planner.objective import score_setups
+    from planner.options import UncertaintyOptions
+    from planner.screen import screen_setups
+    from planner.setups import enumerate_setups
+    from planner.uncertainty import prediction_uncertainty, unresolved_pairs
+
+    obj = default_objective()
+    pool = [baseline_setup] + list(enumerate_setups(demo_library)[::6])
+    sc = screen_setups(identified_model, track_drive, pool, demo_library)
+    ranked = score_setups(sc.table, obj, baseline=baseline_setup.name).table.sort_values("rank")
+    by = {s.name: s for s in pool}
+    contenders = [by[n] for n in ranked.index[:6]]
+    every = list(itertools.combinations(range(6), 2))
+    assert DI.decision_pairs(None, track_drive, contenders, baseline_setup, sc.table,
+                             demo_library, obj) == every
+    pairs = DI.decision_pairs(identified_model, track_drive, contenders, baseline_setup,
+                              sc.table, demo_library, obj)
+    setups = [baseline_setup] + [c for c in contenders if c.name != baseline_setup.name]
+    unc = prediction_uncertainty(identified_model, track_drive, setups, demo_library,
+                                 draws=UncertaintyOptions(n_draws=DI.DECISION_DRAWS))
+    open_ = unresolved_pairs(sc.table.loc[[s.name for s in setups]], unc, obj,
+                             baseline=baseline_setup.name)
+    names = [c.name for c in contenders]
+    expected = [(a, b) for a, b in every if names[b] in open_[names[a]]] or every
+    assert pairs == expected

@@ -5,6 +5,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy.stats import spearmanr
@@ -18,6 +19,7 @@ from planner.rank import Ranking, rank_setups
 from planner.screen import describe_agreement, screen_setups
 from planner.setups import Setup, enumerate_setups
 from planner.options import UncertaintyOptions
+from planner.uncertainty import SCORE_INTERVAL_COLUMNS
 
 RTOL_SUM = 1e-14  # a weighted sum of metric ratios, summed in another order: round-off only
 TOP = 5
@@ -257,14 +259,20 @@ def test_too_few_simulated_setups_give_no_spearman(paper_model, track_drive, dem
     assert math.isnan(r.agreement["spearman"])
 
 
-def test_uncertainty_on_an_identified_model(identified_model, track_drive, demo_library,
-                                            baseline_setup):
+@pytest.fixture(scope="module")
+def identified_ranking(identified_model, track_drive, demo_library, baseline_setup):
+    """A ranking on the identified paper car (the virtual rig's session) with intervals: the
+    baseline and every 4th symmetric setup, the best 8 and 2 more simulated, 20 draws."""
+    return rank_setups(identified_model, track_drive, demo_library,
+                       setups=_candidates(demo_library, baseline_setup), top=8, n_check=2,
+                       uncertainty=UncertaintyOptions(n_draws=20, seed=5))
+
+
+def test_uncertainty_on_an_identified_model(identified_ranking, identified_model):
     """An identified model (with its FRF): every metric gets an interval containing the
     time-domain value, the unresolved notes name simulated setups, the settings keep the
     Monte Carlo settings."""
-    r = rank_setups(identified_model, track_drive, demo_library,
-                    setups=[baseline_setup] + list(enumerate_setups(demo_library)[::10]),
-                    top=3, n_check=2, uncertainty=UncertaintyOptions(n_draws=4, seed=5))
+    r = identified_ranking
     t = r.table
     for m in METRIC_NAMES:
         lo, hi = t[f"{m}_lo"].to_numpy(float), t[f"{m}_hi"].to_numpy(float)
@@ -273,8 +281,93 @@ def test_uncertainty_on_an_identified_model(identified_model, track_drive, demo_
     for note in t["unresolved"]:
         assert all(name in t.index for name in note.split())
     unc = r.settings["uncertainty"]
-    assert unc["n_draws"] == 4 and unc["seed"] == 5 and unc["quantiles"] == (0.025, 0.975)
+    assert unc["n_draws"] == 20 and unc["seed"] == 5 and unc["quantiles"] == (0.025, 0.975)
     assert unc["n_averages"] == identified_model.frf.n_averages
+
+
+def test_score_and_difference_intervals_and_verdicts(identified_ranking):
+    """The score's interval holds the score, the difference's holds the nominal difference
+    (0 for the best: the best scores no differently from itself in any draw), the verdicts
+    follow the difference intervals and match the best's unresolved pairs, the summary
+    prints the best and every setup tied with it, one line each."""
+    r = identified_ranking
+    t = r.table
+    assert set(SCORE_INTERVAL_COLUMNS) <= set(t.columns)
+    assert np.all(t["score_lo"] <= t["score"]) and np.all(t["score"] <= t["score_hi"])
+    best = t.index[0]
+    assert t.loc[best, "verdict"] == "best" and (t["verdict"] == "best").sum() == 1
+    assert t.loc[best, ["diff_best_lo", "diff_best_hi"]].tolist() == [0.0, 0.0]
+    d = t["score"] - t.loc[best, "score"]
+    assert np.all(t["diff_best_lo"] <= d + RTOL_SUM) and np.all(d <= t["diff_best_hi"] + RTOL_SUM)
+    feasible = t["feasible"].astype(bool)
+    contains = (t["diff_best_lo"] <= 0) & (t["diff_best_hi"] >= 0)
+    assert (t["verdict"][feasible].drop(best) == np.where(contains[feasible].drop(best),
+                                                          "tied", "worse")).all()
+    tied = set(t.index[t["verdict"] == "tied"])
+    assert tied == set(t.loc[best, "unresolved"].split()) & set(t.index[feasible])
+    # the shared error cancels: the differences are narrower than the scores' intervals
+    others = t.drop(index=[best, r.baseline])
+    assert np.median((others["diff_best_hi"] - others["diff_best_lo"])
+                     / (others["score_hi"] - others["score_lo"])) < 1.0
+    assert t.loc[r.baseline, "verdict_baseline"] == "baseline"
+    lines = r.summary().splitlines()
+    assert sum(line.startswith(f"best: '{best}', score ") for line in lines) == 1
+    said = [line for line in lines if line.startswith("tied with the best: ")]
+    assert [line.split("'")[1] for line in said] == [n for n in t.index if n in tied]
+    if not tied:
+        assert any(line.startswith("no other feasible setup is tied with the best") for line in lines)
+
+
+#: The truth check's loose bound: the share of the true differences from the best its
+#: intervals hold on the identified paper car. Issue 37 measured the *metric* intervals
+#: covering 73 % of the known car's values on this (noise-free) session, the model's
+#: systematic error being partly outside them; the differences cancel most of that error.
+#: Measured (20 draws, seed 5): 7 of the 10 differences from the best (errors of the
+#: differences 0.2e-4 to 1.5e-4 of a score, the misses by less than 0.5e-4); against the
+#: baseline 9 of 10; the scores 10 of 11. A loose bound (one miss more passes), so that a
+#: broken difference fails, not a calibration claim (that is issue 37, item 1).
+MIN_DIFFERENCE_COVERAGE = 0.6
+
+
+def test_verdicts_against_the_known_car(identified_ranking, paper_model, track_drive,
+                                        demo_library):
+    """Truth check: the same setups on the known car (the virtual rig's): its best is among
+    those the identified model calls best or tied, and the intervals of the differences
+    from the best hold most of the true differences (MIN_DIFFERENCE_COVERAGE)."""
+    r = identified_ranking
+    t = r.table
+    truth = predict_setups(paper_model, track_drive, list(r.candidates), demo_library)
+    true = score_setups(truth.table, r.objective, baseline=r.baseline).table.loc[t.index]
+    true_best = true[true["feasible"]]["score"].idxmin()
+    assert t.loc[true_best, "verdict"] in ("best", "tied")
+    d = (true["score"] - true.loc[r.best, "score"]).drop(index=r.best)
+    lo, hi = t["diff_best_lo"].drop(index=r.best), t["diff_best_hi"].drop(index=r.best)
+    assert np.mean((lo <= d) & (d <= hi)) >= MIN_DIFFERENCE_COVERAGE
+
+
+def test_verdict_lines_of_a_ranking():
+    """The summary's lines: the best with its score's interval and its verdict against the
+    baseline, then each tied setup with its difference's interval; none without intervals."""
+    t = pd.DataFrame({"score": [0.9, 0.91, 1.0], "rank": [1, 2, 3],
+                      "score_lo": [0.88, 0.89, 1.0], "score_hi": [0.92, 0.93, 1.0],
+                      "diff_best_lo": [0.0, -0.002, 0.08], "diff_best_hi": [0.0, 0.02, 0.12],
+                      "diff_baseline_lo": [-0.12, -0.11, 0.0],
+                      "diff_baseline_hi": [-0.08, -0.07, 0.0],
+                      "verdict": ["best", "tied", "worse"],
+                      "verdict_baseline": ["better", "better", "baseline"]},
+                     index=["a", "b", "base"])
+    r = Ranking(table=t, screening=t, baseline="base", objective=default_objective(),
+                agreement={}, settings={"uncertainty": {"quantiles": (0.025, 0.975)}})
+    assert r.verdict_lines() == [
+        "best: 'a', score 0.9000 (95 % interval 0.8800 to 0.9200), better than the baseline "
+        "(difference -0.1200 to -0.0800)",
+        "tied with the best: 'b', score 0.9100 (difference from the best -0.0020 to +0.0200 "
+        "contains 0)"]
+    r2 = dataclasses.replace(r, table=t.assign(verdict=["best", "worse", "worse"]))
+    assert r2.verdict_lines()[1].startswith("no other feasible setup is tied with the best")
+    assert dataclasses.replace(r, table=t.drop(columns="verdict")).verdict_lines() == [
+        "best: 'a', score 0.9000; no intervals (a known model, or none asked): ties with it "
+        "are not judged"]
 
 
 # ---------------------------------------------------------------- bad inputs
@@ -343,3 +436,48 @@ def test_baseline_setup_named_like_another_setup_is_refused(paper_model, track_d
     with pytest.raises(PlannerError, match="has the name of a listed setup"):
         rank_setups(paper_model, track_drive, demo_library, setups=pool, baseline=other,
                     uncertainty=False)
+
+
+def test_cli_prints_the_best_and_the_setups_tied_with_it(identified_model, track_drive,
+                                                         tmp_path, capsys):
+    """``shockplan rank`` on an identified model prints the best and each setup tied with it,
+    one line each, as ``ranking.csv``'s ``verdict`` says."""
+    from ident.data.drive import write_drive
+    from planner.cli import main
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    model = tmp_path / "model.npz"
+    identified_model.save(model)
+    write_drive(track_drive, tmp_path / "drive.csv")
+    assert main(["-q", "rank", "--model", str(model), "--drive", str(tmp_path / "drive.csv"),
+                 "--shocks", str(DEMO_LIBRARY_PATH), "--only", "B20,L12,L28,DM,DF",
+                 "--baseline", "B20", "--simulate", "4", "--out", str(tmp_path / "r")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    ranked = pd.read_csv(tmp_path / "r" / "ranking.csv", keep_default_na=False)
+    best = ranked["setup"].iloc[0]
+    assert ranked["verdict"].iloc[0] == "best"
+    assert sum(line.startswith(f"best: '{best}', score ") for line in lines) == 1
+    tied = ranked["setup"][ranked["verdict"] == "tied"].tolist()
+    said = [line.split("'")[1] for line in lines if line.startswith("tied with the best: ")]
+    assert said == tied
+    assert tied or any(line.startswith("no other feasible setup is tied") for line in lines)
+
+
+def test_workbook_names_the_best_and_the_tied(identified_ranking, tmp_path):
+    """``ranking.xlsx``: its summary sheet names the best and the setups tied with it, its
+    ranking sheet has the verdicts among the key columns (before the metrics)."""
+    from openpyxl import load_workbook
+
+    from planner.report import write_ranking
+
+    r = identified_ranking
+    files = write_ranking(r.table, tmp_path / "out", objective=r.objective,
+                          baseline=r.baseline)
+    wb = load_workbook(files["xlsx"])
+    text = [str(c.value) for row in wb["summary"].iter_rows() for c in row if c.value]
+    tied = [n for n in r.table.index if r.table.loc[n, "verdict"] == "tied"]
+    assert f"best: '{r.best}'; tied with it: " + (
+        ", ".join(f"'{n}'" for n in tied) if tied else "none") in text
+    header = [c.value for c in next(wb["ranking"].iter_rows(max_row=1))]
+    assert "verdict" in header and "verdict baseline" in header
+    assert header.index("verdict") < header.index("tire force RMS LF [N]")

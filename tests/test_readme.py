@@ -173,6 +173,7 @@ def test_demo_outputs(demo):
     from planner.histograms import HISTOGRAM_METRICS
     from planner.objective import default_objective, ranking_order
     from planner.setups import enumerate_setups, read_setups
+    from planner.uncertainty import SCORE_INTERVAL_COLUMNS
 
     out, _ = demo
     assert (out / "session" / "session.toml").is_file()
@@ -210,7 +211,8 @@ def test_demo_outputs(demo):
         "rank", "setup", *CORNERS, *METRIC_NAMES, *HISTOGRAM_METRICS, "score", "score_grip",
         "score_platform",
         "feasible", "violations", "screening_rank", "baseline", "unresolved",
-        *(f"{m}{s}" for m in METRIC_NAMES for s in ("_lo", "_hi")), "units"]
+        *(f"{m}{s}" for m in METRIC_NAMES for s in ("_lo", "_hi")),
+        *SCORE_INTERVAL_COLUMNS, "units"]
     # its best setup: first by the ranking rule, the known one, the one printed
     feasible = ranking["feasible"].to_numpy(dtype=bool)
     score = ranking["score"].to_numpy(dtype=float)

@@ -34,6 +34,24 @@ def test_verdicts_against_the_best_and_the_baseline(ranked):
         verdicts(ranked, "nope")
 
 
+def test_verdicts_read_the_interval_verdicts_when_present(ranked):
+    """The ranking's ``verdict`` / ``verdict_baseline`` columns (intervals of the score
+    differences) decide over the ``unresolved`` pairs: here they call 'c' tied with the best
+    and 'b' worse, against the pairs' 'b' tied and 'c' worse; against another setup, or
+    without the columns, the pairs and the scores decide as before."""
+    t = ranked.assign(verdict=["best", "worse", "tied", "worse", "infeasible"],
+                      verdict_baseline=["better", "tied", "better", "baseline", "infeasible"])
+    assert verdicts(t, "a").tolist() == ["reference", "worse", "tied", "worse", "infeasible"]
+    assert verdicts(t, "base", worse="slower", better="faster").tolist() == [
+        "faster", "tied", "faster", "reference", "infeasible"]
+    assert verdicts(t, "c").tolist() == verdicts(ranked, "c").tolist()  # no column for 'c'
+    parts = summary_parts(t, best="a", baseline="base", title="t")
+    assert parts["table"]["vs best"].tolist() == ["best", "worse", "tied", "worse",
+                                                  "infeasible"]
+    assert any("score difference contains 0" in n for n in parts["notes"])
+    assert "best: 'a'; tied with it: 'c'" in parts["notes"]
+
+
 def test_summary_parts_rows_units_and_notes(ranked):
     parts = summary_parts(ranked, best="a", baseline="base", units="imperial",
                           metrics=["tire_force_rms_LF", "ride_height_rms_front"], title="t",

@@ -17,13 +17,18 @@ from planner.uncertainty import (
     LIGHT_DAMPING_ZETA,
     MAX_RELATIVE_ERROR,
     RANDOM_ERROR_SCALE,
+    SCORE_INTERVAL_COLUMNS,
     FrfPlant,
+    ScoreErrors,
     Uncertainty,
     combine_terms,
+    difference_interval,
     frf_relative_error,
     light_modes,
     prediction_uncertainty,
     random_error_scale,
+    score_errors,
+    score_intervals,
     unresolved_pairs,
 )
 from planner.options import LoopOptions, UncertaintyOptions
@@ -564,3 +569,122 @@ def test_intervals_cover_95_percent_on_held_out_cars(held_out_coverage):
     pooled = np.mean(list(held_out_coverage.values()))
     assert HELD_OUT_POOLED[0] <= pooled <= HELD_OUT_POOLED[1], held_out_coverage
     assert min(held_out_coverage.values()) >= HELD_OUT_SINGLE_MIN, held_out_coverage
+
+
+# ---------------------------------------------------------------- intervals of differences
+#: Quantiles (0, 1): the intervals are the draws' extremes, so known answers are exact.
+ALL_DRAWS = (0.0, 1.0)
+# A sum of a few products of exact decimals: round-off only.
+ATOL_KNOWN = 1e-12
+
+
+def _shared_case(n_draws=41):
+    """Baseline 100, a 90, b 91 and c 90.2 (one weighted metric): a and b share one relative
+    error f_d = 0.9..1.1 in every draw; c has f_d and its own +-1 % besides."""
+    names = ["tire_force_rms_LF"]
+    setups = ["baseline", "a", "b", "c"]
+    scores = pd.DataFrame([[100.0], [90.0], [91.0], [90.2]], index=setups, columns=names)
+    f = np.linspace(0.9, 1.1, n_draws)
+    s = np.where(np.arange(n_draws) % 2 == 0, 1.0, -1.0)
+    draws = np.ones((n_draws, 4, 1))
+    draws[:, 1, 0] = draws[:, 2, 0] = f
+    draws[:, 3, 0] = f * (1 + 0.01 * s)
+    ratio = pd.DataFrame(np.ones((4, 1)), index=setups, columns=names)
+    fit = pd.DataFrame([[0.0], [0.01], [0.01], [0.01]], index=setups, columns=names)
+    return scores, ratio, draws, fit
+
+
+def test_difference_intervals_known_answer():
+    """With a shared error the per-draw difference b - a is exactly 0.01 f_d: its interval
+    is [0.009, 0.011] while a's score spans [0.81, 0.99]; alike systematic terms (+1 % on
+    both) enter the difference as their difference (0.0001), the score whole (0.009)."""
+    scores, ratio, draws, fit = _shared_case()
+    unc = Uncertainty(ratio_lo=ratio, ratio_hi=ratio, draws=draws, metric_names=list(ratio),
+                      components={"fit": fit}, settings={"quantiles": ALL_DRAWS})
+    err = score_errors(scores, unc, OBJ_ONE, baseline="baseline")
+    assert_allclose(err.systematic["fit"].to_numpy(), [0.0, 0.009, 0.0091, 0.00902],
+                    atol=ATOL_KNOWN)
+    t = score_intervals(err, baseline="baseline")
+
+    def widen(half, d):
+        return np.sqrt(half**2 + d**2) - half
+
+    assert_allclose(t.loc["a", ["score_lo", "score_hi"]].to_numpy(float),
+                    [0.81 - widen(0.09, 0.009), 0.99 + widen(0.09, 0.009)], atol=ATOL_KNOWN)
+    assert_allclose(t.loc["b", ["diff_best_lo", "diff_best_hi"]].to_numpy(float),
+                    [0.009 - widen(0.001, 0.0001), 0.011 + widen(0.001, 0.0001)],
+                    atol=ATOL_KNOWN)
+    assert_allclose(t.loc["a", ["diff_best_lo", "diff_best_hi"]].to_numpy(float), [0, 0],
+                    atol=ATOL_KNOWN)
+    # against the baseline (no error of its own): a - baseline = 0.9 f_d - 1
+    assert_allclose(t.loc["a", ["diff_baseline_lo", "diff_baseline_hi"]].to_numpy(float),
+                    [-0.19 - widen(0.09, 0.009), -0.01 + widen(0.09, 0.009)], atol=ATOL_KNOWN)
+    assert t["verdict"].tolist() == ["worse", "best", "worse", "tied"]
+    # b - baseline reaches 0.91 * 1.1 - 1 = +0.001, c 0.902 * 1.1 * 1.01 - 1 = +0.002: tied
+    assert t["verdict_baseline"].tolist() == ["baseline", "better", "tied", "tied"]
+    assert list(t.columns) == list(SCORE_INTERVAL_COLUMNS)
+    # the single-pair form and the unresolved pairs agree with the table
+    assert_allclose(difference_interval(err, "b", "a"),
+                    t.loc["b", ["diff_best_lo", "diff_best_hi"]].to_numpy(float))
+    pairs = unresolved_pairs(scores, unc, OBJ_ONE, baseline="baseline", errors=err)
+    # c's own +-1 % (0.9 below b to 0.1 above it) leaves it tied with a, b and the baseline
+    assert {k: set(v) for k, v in pairs.items()} == {
+        "a": {"c"}, "b": {"c", "baseline"}, "c": {"a", "b", "baseline"},
+        "baseline": {"b", "c"}}
+
+
+def test_alike_systematic_errors_cancel_in_the_difference():
+    """Two setups 1 % apart with the same +-3 % systematic error and no random one: their
+    difference's interval stays within 0.05 % of the nominal (resolved), while the
+    quadrature sum of their values' errors would span +-4 % (unresolved)."""
+    names = ["tire_force_rms_LF"]
+    setups = ["baseline", "a", "b"]
+    scores = pd.DataFrame([[100.0], [90.0], [90.9]], index=setups, columns=names)
+    draws = np.ones((5, 3, 1))
+    ratio = pd.DataFrame(np.ones((3, 1)), index=setups, columns=names)
+    fit = pd.DataFrame([[0.0], [0.03], [0.03]], index=setups, columns=names)
+    unc = Uncertainty(ratio_lo=ratio, ratio_hi=ratio, draws=draws, metric_names=names,
+                      components={"fit": fit})
+    t = score_intervals(score_errors(scores, unc, OBJ_ONE, baseline="baseline"))
+    lo, hi = t.loc["b", ["diff_best_lo", "diff_best_hi"]]
+    assert 0.009 - 0.0005 < lo < 0.009 < hi < 0.009 + 0.0005
+    assert t.loc["b", "verdict"] == "worse"
+    assert t.loc["b", "score_hi"] - t.loc["b", "score_lo"] == pytest.approx(2 * 0.03 * 0.909)
+
+
+def test_difference_interval_is_narrower_when_errors_are_shared(rng):
+    """20 setups whose draws share a 3 % error and have 0.5 % of their own: every
+    difference's interval from the best is narrower than the setup's score interval (and
+    than the best's); with independent 3 % errors instead it is wider."""
+    n_draws, n = 200, 20
+    names = ["tire_force_rms_LF"]
+    setups = ["baseline"] + [f"s{k}" for k in range(n)]
+    values = np.r_[100.0, 80.0 + np.arange(n)]
+    scores = pd.DataFrame(values[:, None], index=setups, columns=names)
+    ratio = pd.DataFrame(np.ones((n + 1, 1)), index=setups, columns=names)
+    shared = 1 + 0.03 * rng.standard_normal((n_draws, 1, 1))
+    own = 1 + 0.005 * rng.standard_normal((n_draws, n + 1, 1))
+    for draws, narrower in ((shared * own, True),
+                            (1 + 0.03 * rng.standard_normal((n_draws, n + 1, 1)), False)):
+        draws[:, 0, :] = 1.0
+        unc = Uncertainty(ratio_lo=ratio, ratio_hi=ratio, draws=draws, metric_names=names,
+                          settings={"quantiles": (0.025, 0.975)})
+        t = score_intervals(score_errors(scores, unc, OBJ_ONE, baseline="baseline"))
+        others = t.drop(index=["s0", "baseline"])  # the baseline scores 1 in every draw
+        diff_w = (others["diff_best_hi"] - others["diff_best_lo"]).to_numpy()
+        value_w = (others["score_hi"] - others["score_lo"]).to_numpy()
+        assert np.all((diff_w < value_w) == narrower)
+
+
+def test_score_intervals_best_is_feasible_and_infeasible_setups_say_so():
+    """The best is the best feasible setup; an infeasible one is called so, whatever its
+    interval."""
+    idx = ["a", "b", "base"]
+    err = ScoreErrors(nominal=pd.Series([0.8, 0.9, 1.0], index=idx),
+                      draws=pd.DataFrame([[0.8, 0.8], [0.9, 0.9], [1.0, 1.0]], index=idx),
+                      systematic=pd.DataFrame(index=idx),
+                      feasible=pd.Series([False, True, True], index=idx), baseline="base")
+    t = score_intervals(err)
+    assert t["verdict"].tolist() == ["infeasible", "best", "worse"]
+    assert t["verdict_baseline"].tolist() == ["infeasible", "better", "baseline"]
+    assert t.loc["a", "diff_best_lo"] == pytest.approx(-0.1)

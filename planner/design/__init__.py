@@ -33,7 +33,10 @@ Criteria (all over the bands of ``band_hz``)
   top contenders of the current ranking, ``sum_pairs var(s_a - s_b) /
   (s_a - s_b)^2 = sum_k tr(W_k M_k^-1)``, with ``W_k`` from the scores'
   gradients with respect to the FRF (the screening's linearized loop,
-  differentiated analytically) and the outputs' noise.
+  differentiated analytically) and the outputs' noise. With an identified model the
+  pairs are those it does not resolve (the interval of their score difference contains
+  0: :func:`planner.uncertainty.unresolved_pairs`, :func:`~planner.design.information.
+  decision_pairs`); every pair where it resolves them all, or before rig day.
 
 The relaxed problem (runs as real numbers) is solved with cvxpy (Clarabel) on
 ``n_design_bands`` groups of adjacent bands (a group's information summed:

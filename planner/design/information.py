@@ -8,6 +8,7 @@ criteria (:func:`criterion_value`) and the decision criterion's weights.
 from __future__ import annotations
 
 import itertools
+import logging
 from dataclasses import dataclass
 from types import SimpleNamespace
 
@@ -22,7 +23,9 @@ from ident.sim.virtual_rig import default_plan, make_plan_drive
 from planner.objective import score_setups
 from planner.screen import DriveBands, metric_rows, screen_response, screen_setups
 from planner.setups import enumerate_setups
-from planner.uncertainty import interpolate
+from planner.options import UncertaintyOptions
+from planner.uncertainty import (interpolate, prediction_uncertainty, score_errors,
+                                 unresolved_pairs)
 
 __all__ = [
     "CRITERIA",
@@ -35,7 +38,11 @@ __all__ = [
     "hermitian",
     "criterion_value",
     "decision_weight_matrices",
+    "decision_pairs",
+    "DECISION_DRAWS",
 ]
+
+log = logging.getLogger(__name__)
 
 
 #: The design criteria.
@@ -346,5 +353,57 @@ def decision_weight_matrices(plant, ident_model, library, base, objective, drive
     frf = getattr(ident_model, "frf", None)
     noise_var = _noise_variance(plant, frf, f_c, edges, M0, S_ref, noise)
     s = scores.loc[ranked, "score"].to_numpy()
-    pairs = list(itertools.combinations(range(len(ranked)), 2))
+    pairs = decision_pairs(ident_model, drive, [pool[i] for i in idx], base, sc.table, library,
+                           objective)
     return _decision_weights(grads, s, noise_var, pairs)
+
+
+#: Monte Carlo draws of the decision criterion's difference intervals (screening only).
+DECISION_DRAWS = 20
+
+
+def decision_pairs(ident_model, drive, contenders, base, metrics, library, objective):
+    """The pairs of contenders the decision criterion weighs: those the model does not resolve.
+
+    With an identified model (its FRF), the pairs whose score difference's interval contains
+    0 (:func:`planner.uncertainty.unresolved_pairs` on the screening's metrics,
+    :data:`DECISION_DRAWS` draws); where the model resolves every pair, or for a known
+    model (before rig day: no estimation error to judge), every pair.
+
+    Parameters
+    ----------
+    ident_model : ident.identify.model.VehicleModel or None
+    drive : ident.data.drive.Drive
+    contenders : list of planner.setups.Setup
+        Best first.
+    base : planner.setups.Setup
+        The baseline (a row of `metrics`).
+    metrics : pandas.DataFrame
+        The screening's metrics (SI), indexed by setup name.
+    library : ident.models.library.ShockLibrary
+    objective : planner.objective.Objective
+
+    Returns
+    -------
+    list of (int, int)
+        Index pairs into `contenders`.
+    """
+    every = list(itertools.combinations(range(len(contenders)), 2))
+    if getattr(ident_model, "frf", None) is None or len(contenders) < 2:
+        return every
+    setups = [base] + [c for c in contenders if c.name != base.name]
+    unc = prediction_uncertainty(ident_model, drive, setups, library,
+                                 draws=UncertaintyOptions(n_draws=DECISION_DRAWS))
+    table = metrics.loc[[c.name for c in setups]]
+    errors = score_errors(table, unc, objective, baseline=base.name)
+    open_ = unresolved_pairs(table, unc, objective, baseline=base.name, errors=errors)
+    names = [c.name for c in contenders]
+    pairs = [(a, b) for a, b in every if names[b] in open_.get(names[a], [])]
+    if not pairs:
+        log.info("design: the model resolves every pair of the %d contenders; the decision "
+                 "criterion weighs them all", len(contenders))
+        return every
+    log.info("design: %d of %d contender pairs are not resolved (their score difference's "
+             "interval contains 0); the decision criterion weighs those", len(pairs),
+             len(every))
+    return pairs

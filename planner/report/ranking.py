@@ -385,7 +385,7 @@ def _number_formats(frame):
             if d is None:
                 d = _metric_decimals(frame[col])
             formats[col] = "0." + "0" * d
-        elif col == "score" or str(col).startswith("score_"):
+        elif col == "score" or str(col).startswith(("score_", "diff_best_", "diff_baseline_")):
             formats[col] = SCORE_FORMAT
         elif col in _INT_COLUMNS:
             formats[col] = INTEGER_FORMAT
@@ -424,7 +424,8 @@ def _sheet_columns(frame, objective):
     """The "ranking" sheet's columns (key ones first) and the "intervals" sheet's.
 
     Key columns: ``rank, setup, LF, RF, LR, RR, score, score_<group>,
-    feasible``, the objective's weighted metrics; then the other metrics (file
+    feasible, verdict, verdict_baseline``, the difference intervals
+    (``diff_best_lo/_hi``, ``diff_baseline_lo/_hi``), the objective's weighted metrics; then the other metrics (file
     order), then the further columns, long text last (``unresolved``,
     ``violations``: they wrap in a narrow column at the right edge). The
     intervals go to their own sheet, in the metrics' order.
@@ -435,7 +436,8 @@ def _sheet_columns(frame, objective):
     key += [c for c in cols if c[:3] in {f"{k}_" for k in CORNERS}]  # adjusters: LF_ls
     key += [c for c in ("score",) if c in cols]
     key += [c for c in cols if str(c).startswith("score_")]
-    key += [c for c in ("feasible",) if c in cols]
+    key += [c for c in ("feasible", "verdict", "verdict_baseline") if c in cols]
+    key += [c for c in cols if str(c).startswith(("diff_best_", "diff_baseline_"))]
     if objective is not None:
         key += [m for m, w in objective.weights.items() if w > 0 and m in cols]
     metrics = [c for c in cols if c in METRIC_QUANTITY and c not in key]
@@ -1284,12 +1286,15 @@ def write_ranking(table, out_dir, *, units="SI", objective=None, baseline=None, 
 
     - sheet "summary", first, on one page (:func:`planner.report.summary.write_summary_sheet`):
       the best setups (and the baseline) with their verdicts against the best and the
-      baseline (:func:`planner.report.summary.verdicts`: tied where the ranking's
-      ``unresolved`` pairs say the order is not resolved), scores and key metrics in
+      baseline (:func:`planner.report.summary.verdicts`: the ranking's ``verdict``
+      columns, tied where the interval of the score difference contains 0; else its
+      ``unresolved`` pairs), a line naming the best and the setups tied with it, scores
+      and key metrics in
       `units`, the sections' winners, what the run used, and the plot of the best against
       the baseline;
     - sheet "ranking": the key columns first (``rank, setup, LF, RF, LR, RR,
-      score, score_<group>, feasible``, the objective's weighted metrics),
+      score, score_<group>, feasible, verdict, verdict_baseline``, the difference
+      intervals, the objective's weighted metrics),
       then the other metrics, then the further columns with the long texts
       last (``unresolved``, ``violations``, wrapped); headers are labels
       (:func:`column_label`) with the units of the metrics (``"tire force RMS

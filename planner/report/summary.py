@@ -8,8 +8,10 @@ project's units, what the run used (model, drive, crate, objective) and a small 
 (:func:`summary_figure`). The workbook's other sheets follow as the appendix.
 
 - :func:`verdicts`: better / tied / worse of each setup against a reference one (the best,
-  the baseline) from the uncertainty a ranking has: its ``unresolved`` pairs (the setups
-  whose order the identified model's random error does not resolve);
+  the baseline) from the uncertainty a ranking has: its ``verdict`` columns (the intervals
+  of the score differences, :func:`planner.uncertainty.score_intervals`), else its
+  ``unresolved`` pairs (the setups whose order the identified model's error does not
+  resolve);
 - :func:`summary_figure`: the best against the baseline: the predicted shock-velocity
   histograms per corner when a histogram table is given (columns ``setup, corner,
   velocity_lo, velocity_hi, share``, as ``histograms.csv``), else the key metrics' change;
@@ -68,9 +70,11 @@ def verdicts(table, reference, *, worse="worse", better="better"):
     Parameters
     ----------
     table : pandas.DataFrame
-        Indexed by setup name, with ``score`` (lower is better); optionally ``feasible`` and
-        ``unresolved`` (space-separated names of the setups a setup is not resolved from,
-        :func:`planner.uncertainty.unresolved_pairs`).
+        Indexed by setup name, with ``score`` (lower is better); optionally ``feasible``,
+        the verdicts of :func:`planner.uncertainty.score_intervals` (``verdict`` against the
+        best, ``verdict_baseline`` against the baseline: from the intervals of the score
+        differences) and ``unresolved`` (space-separated names of the setups a setup is not
+        resolved from, :func:`planner.uncertainty.unresolved_pairs`).
     reference : str
         The setup compared with (the best, the baseline).
     worse, better : str
@@ -79,10 +83,14 @@ def verdicts(table, reference, *, worse="worse", better="better"):
     Returns
     -------
     pandas.Series of str
-        ``"reference"`` for `reference` itself, ``"tied"`` where either names the other as
-        not resolved, ``"infeasible"`` for an infeasible setup, else `better` or `worse` by
-        the score (``"tied"`` for an equal one). Without an ``unresolved`` column, or with
-        it empty everywhere (a known model, or no intervals asked), only the scores decide.
+        ``"reference"`` for `reference` itself, ``"infeasible"`` for an infeasible setup;
+        where `reference` is the setup the table's ``verdict`` calls ``best`` (or
+        ``verdict_baseline`` calls ``baseline``), that column's verdict (``tied``: the
+        interval of the score difference contains 0; ``better``/``worse`` as `better`,
+        `worse`); else ``"tied"`` where either names the other as not resolved, else
+        `better` or `worse` by the score (``"tied"`` for an equal one). Without those
+        columns, or with them empty everywhere (a known model, or no intervals asked),
+        only the scores decide.
 
     Examples
     --------
@@ -100,12 +108,19 @@ def verdicts(table, reference, *, worse="worse", better="better"):
                 else pd.Series(True, index=table.index))
     ref_score = float(table.loc[reference, "score"])
     ref_pairs = pairs.get(str(reference), set())
+    judged = None  # the interval verdicts against `reference`, when the table has them
+    for col, word in (("verdict", "best"), ("verdict_baseline", "baseline")):
+        if col in table.columns and str(table.loc[reference, col]) == word:
+            judged = table[col].astype(str).replace({"better": better, "worse": worse})
+            break
     out = []
     for name, score in table["score"].items():
         if name == reference:
             out.append("reference")
         elif not feasible.loc[name]:
             out.append("infeasible")
+        elif judged is not None and judged.loc[name] in (better, worse, "tied"):
+            out.append(judged.loc[name])
         elif str(reference) in pairs.get(str(name), set()) or str(name) in ref_pairs:
             out.append("tied")
         elif float(score) == ref_score:
@@ -225,7 +240,9 @@ def summary_parts(table, *, best, baseline, metrics=(), units="SI", first=("rank
     ----------
     table : pandas.DataFrame
         Indexed by setup name, best first: ``score`` (lower is better), optionally
-        ``score_<group>``, ``feasible``, ``unresolved`` and the metric columns (SI).
+        ``score_<group>``, ``feasible``, ``verdict``/``verdict_baseline``
+        (:func:`planner.uncertainty.score_intervals`: a note then names the best and the
+        setups tied with it), ``unresolved`` and the metric columns (SI).
     best, baseline : str
         The setups the verdicts compare with (:func:`verdicts`) and the plot shows.
     metrics : sequence of str
@@ -260,7 +277,8 @@ def summary_parts(table, *, best, baseline, metrics=(), units="SI", first=("rank
         if baseline in table.index:
             frame["vs baseline"] = verdicts(table, baseline).loc[list(rows)].replace(
                 {"reference": "baseline"})
-        for c in ["score"] + [c for c in shown.columns if str(c).startswith("score_")]:
+        for c in ["score"] + [c for c in shown.columns if str(c).startswith("score_")
+                              and c not in ("score_lo", "score_hi")]:
             frame[c] = shown[c].to_numpy()
     metrics = [m for m in metrics if m in table.columns]
     conv = pd.DataFrame({m: from_si(table[m].to_numpy(dtype=float), METRIC_QUANTITY[m], units)
@@ -278,10 +296,24 @@ def summary_parts(table, *, best, baseline, metrics=(), units="SI", first=("rank
     pairs = ("unresolved" in table.columns
              and table["unresolved"].astype(str).str.strip().astype(bool).any())
     intervals = any(str(c).endswith("_lo") for c in table.columns)
-    why = ("tied: the identified model's random error does not resolve the two setups' order "
-           "(the 'unresolved' pairs, from the intervals)" if intervals or pairs else
-           "by the scores alone (no intervals: a known model, or none asked)")
+    judged = "verdict" in table.columns and (table["verdict"].astype(str) == "best").any()
+    if judged:
+        why = ("tied: the 95 % interval of the two setups' score difference contains 0 (the "
+               "identified model's error shared by both cancels in it); better/worse: the "
+               "interval is below/above 0")
+    elif intervals or pairs:
+        why = ("tied: the identified model's error does not resolve the two setups' order "
+               "(the 'unresolved' pairs, from the intervals)")
+    else:
+        why = "by the scores alone (no intervals: a known model, or none asked)"
     notes = list(notes) + [f"verdicts against the best and the baseline: {why}"]
+    if judged:
+        best_name = table.index[table["verdict"].astype(str) == "best"][0]
+        tied = [str(n) for n in table.index[table["verdict"].astype(str) == "tied"]]
+        more = f" and {len(tied) - N_SUMMARY_ROWS} more" if len(tied) > N_SUMMARY_ROWS else ""
+        notes.append(f"best: '{best_name}'; tied with it: "
+                     + (", ".join(f"'{n}'" for n in tied[:N_SUMMARY_ROWS]) + more
+                        if tied else "none"))
     figure = None
     if histograms is not None:
         figure = summary_figure(best=best, baseline=baseline, histograms=histograms,
