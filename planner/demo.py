@@ -177,14 +177,15 @@ source = "Shock Temp"
 units = "degC"
 """
 _CLICKS_SHOCKS = """\
-# The clicks example's crate (rig-session/1 shock library, SI). TTX's curves at any
-# setting come from its dyno sheet: `shockplan dyno import` writes ttx_dyno.csv.
-units = "SI"
+# The clicks example's crate (rig-session/1 shock library, imperial units, as the demo's
+# project). TTX's curves at any setting come from its dyno sheet: `shockplan dyno import`
+# writes ttx_dyno.csv.
+units = "imperial"
 
 [[shock]]
 id = "B20"
 kind = "linear"
-damping = 3502.5
+damping = 20.0
 
 [[shock]]
 id = "TTX"

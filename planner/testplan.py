@@ -68,7 +68,7 @@ from openpyxl.worksheet.pagebreak import Break
 
 from ident.data.channels import CORNERS
 from ident.data.drive import write_drive
-from ident.data.files import atomic_dir, atomic_path, check_can_write, write_csv
+from ident.data.files import atomic_dir, atomic_path, check_can_write, png_metadata, write_csv
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from ident.models.adjustable import format_shock_name, parse_shock_name
 from ident.models.library import write_shock_library
@@ -1235,5 +1235,6 @@ def write_plan(plan, out_dir, *, units="SI", overwrite=False):
         rows = run_sheet_rows(plan, units=units)
         write_csv(work / names["csv"], rows, units=units, float_format="%.6g")
         write_run_sheet(plan, work / names["xlsx"], units=units)
-        design_figure(plan).savefig(work / names["figure"], dpi=110)
+        fig = design_figure(plan)
+        fig.savefig(work / names["figure"], dpi=110, metadata=png_metadata(fig))
     return {k: out / v for k, v in names.items()}

@@ -40,13 +40,14 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 import tomli_w
 
 from ident import interrupts
-from ident.data.units import check_units
+from ident.data.units import FILE_DIGITS, check_units, round_significant
 
-__all__ = ["read_toml", "write_csv", "write_csv_frame", "write_parquet_frame", "write_table_file",
+__all__ = ["read_toml", "round_file_numbers", "write_csv", "write_csv_frame", "write_parquet_frame", "write_table_file",
            "atomic_write_text", "atomic_write_bytes", "atomic_write_toml", "atomic_path",
            "atomic_dir", "check_can_write", "check_output", "did_you_mean",
            "UNITS_KEY", "UNITS_COLUMN", "units_marker", "csv_preamble", "read_units_marker",
-           "read_csv_table", "read_csv_after", "units_of_column", "resolve_units"]
+           "read_csv_table", "read_csv_after", "units_of_column", "resolve_units",
+           "PNG_TEXT_KEY", "figure_text", "png_metadata"]
 
 #: The key of the unit marker: ``# units: SI`` in a CSV, the Parquet schema metadata key.
 UNITS_KEY = "units"
@@ -221,6 +222,37 @@ def did_you_mean(word, choices, *, cutoff=0.75):
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
+#: The PNG text chunk in which shockplan's figures keep their words (:func:`png_metadata`).
+PNG_TEXT_KEY = "Description"
+
+
+def figure_text(fig):
+    """Every text a reader sees on a matplotlib figure (titles, axis labels, legend entries,
+    annotations, tick labels), one per line, each once, in drawing order.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+
+    Returns
+    -------
+    str
+    """
+    seen = {}
+    for artist in fig.findobj(lambda a: callable(getattr(a, "get_text", None))):
+        text = str(artist.get_text()).strip()
+        if text and getattr(artist, "get_visible", lambda: True)():
+            seen.setdefault(text, None)
+    return "\n".join(seen)
+
+
+def png_metadata(fig):
+    """``savefig``'s `metadata` for a PNG: the figure's words (:func:`figure_text`) in the
+    text chunk :data:`PNG_TEXT_KEY`, so that a test or a search reads a plot's units and
+    labels without looking at it (``PIL.Image.open(path).text``)."""
+    return {PNG_TEXT_KEY: figure_text(fig)}
+
+
 def atomic_write_bytes(path, data, *, overwrite=True):
     """Write `data` to `path` atomically."""
     with atomic_path(path, overwrite=overwrite) as tmp:
@@ -232,9 +264,30 @@ def atomic_write_text(path, text, *, overwrite=True):
     atomic_write_bytes(path, text.encode("utf-8"), overwrite=overwrite)
 
 
+def round_file_numbers(data, digits=FILE_DIGITS):
+    """`data` (nested dicts, lists and tuples) with every float rounded to `digits`
+    significant digits (:func:`ident.data.units.round_significant`): a value converted at the
+    file boundary as a file should hold it (``damping = 28.0``, not ``28.000000000000004``),
+    within 5e-13 of the value (relative) with the default.
+
+    Examples
+    --------
+    >>> round_file_numbers({"damping": 28.000000000000004, "v": [0.1, 1 / 3], "n": 2})
+    {'damping': 28.0, 'v': [0.1, 0.333333333333], 'n': 2}
+    """
+    if isinstance(data, dict):
+        return {k: round_file_numbers(v, digits) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return type(data)(round_file_numbers(v, digits) for v in data)
+    if isinstance(data, float):
+        return round_significant(data, digits)
+    return data
+
+
 def atomic_write_toml(path, data, *, overwrite=True, header=None):
-    """Write a mapping as TOML to `path` atomically, with an optional comment header."""
-    text = tomli_w.dumps(data)
+    """Write a mapping as TOML to `path` atomically, with an optional comment header; floats
+    are written to 12 significant digits (:func:`round_file_numbers`)."""
+    text = tomli_w.dumps(round_file_numbers(data))
     if header:
         text = "".join(f"# {line}\n" for line in header.splitlines()) + text
     atomic_write_text(path, text, overwrite=overwrite)

@@ -19,7 +19,7 @@ from openpyxl import Workbook
 from openpyxl.utils import get_column_letter
 
 from ident.data.channels import CORNERS
-from ident.data.files import atomic_dir, write_csv
+from ident.data.files import atomic_dir, png_metadata, write_csv
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from ident.models.library import ShockLibrary, write_shock_library
 from ident.models.shocks import format_number
@@ -403,7 +403,7 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
         write_setups([optimum.setup] + clicks + closest, work / names["setups"], units=units)
         _write_workbook(optimum, units, work / names["xlsx"])
         fig = curves_figure(optimum, library, units=units)
-        fig.savefig(work / names["curves"], dpi=110)
+        fig.savefig(work / names["curves"], dpi=110, metadata=png_metadata(fig))
         # wall times are logged, not written: a rerun writes the same bytes
         write_csv(work / names["convergence"],
                   optimum.history.drop(columns=["time_s"], errors="ignore"), units=units,
