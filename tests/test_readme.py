@@ -88,6 +88,8 @@ def demo(tmp_path_factory):
 
 #: What the fixture's ``shockplan demo`` printed (one run of the demo serves every test).
 DEMO_STDOUT = []
+#: What each README block printed (stdout and stderr) when it ran as written, by index.
+BLOCK_OUTPUT = {}
 
 
 @pytest.mark.slow
@@ -99,6 +101,7 @@ def test_readme_example_runs_as_written(demo, k):
     done = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", block], cwd=folder, env=env,
                           capture_output=True, text=True, timeout=BLOCK_TIMEOUT_S)
     assert done.returncode == 0, f"README block {k}:\n{block}\nstderr:\n{done.stderr[-3000:]}"
+    BLOCK_OUTPUT[k] = done.stdout + done.stderr
     for argv in commands(block):
         for path in outputs(argv):
             assert (folder / path).exists(), f"README block {k}: {path} not written"
@@ -293,3 +296,117 @@ def test_every_demo_csv_reads_with_a_plain_read_csv(demo):
             assert head == ["setup", *CORNERS], name
             seen.add("setups")
     assert seen == {"run", "drive", "setups"}
+
+
+# ---------------------------------------------------------------------------------------
+# one unit system per project (issue 36, item 5)
+# ---------------------------------------------------------------------------------------
+
+#: An SI unit as shockplan writes one: a number with its unit (``25.5 mm``, ``3503 N``,
+#: ``0.05 m/s``), a unit in brackets (a column header or plot axis: ``[N]``, ``[m/s]``), a
+#: damping's ``N/(m/s)`` anywhere, or a CSV in SI (:func:`output_words`). Hz, s, rad and %
+#: are the same in both systems.
+SI_UNIT = re.compile(
+    r"unit system SI\b|N/\(m/s\)|N\*s/m|\[(?:mm|m|N|kN|kg|m/s|mm/s|m/s\^2|N\*m|N/m|N\*m/rad|kg\*m\^2)\]"
+    r"|(?<![\w.])[-+]?\d[\d.,]*(?:e[-+]?\d+)?\s?"
+    r"(?:mm/s\^2|mm/s|m/s\^2|m/s|mm|kN|kg|N\*m|N/m|N|m)(?![\w/^*(])")
+
+#: Lines of the imperial examples' outputs that may name an SI unit, each with its reason:
+#: (pattern of the line, reason).
+SI_ALLOWED = (
+    (re.compile(r"^format = |^units = \"SI\"|^# .*\bSI\b"),
+     "a file's own declaration of its format (a spec keyword), not a value"),
+)
+
+#: The README blocks whose project is not the demo's imperial one, with the reason: the
+#: real-car example is a GT-like car of its own, its inputs written in SI (real_car/*.toml,
+#: its drive), so its outputs are in SI as the spec says (the outputs in the drive's units).
+SI_PROJECT_BLOCKS = ("real_car/",)
+
+#: Output files read for words: text (CSV header and units column, TOML, Markdown), the
+#: workbooks' text cells and the PNG figures' text chunk (their titles, axes and legends).
+_TEXT_SUFFIXES = (".csv", ".toml", ".md", ".txt")
+
+
+def si_units_in(text, where):
+    """Every SI unit named in `text` outside :data:`SI_ALLOWED`, as ``where: line``."""
+    found = []
+    for line in text.splitlines():
+        if any(pattern.search(line) for pattern, _ in SI_ALLOWED):
+            continue
+        for m in SI_UNIT.finditer(line):
+            found.append(f"{where}: [{m.group(0)}] {line.strip()[:200]}")
+    return found
+
+
+def output_words(path):
+    """The words a reader of the output file `path` sees, as text lines: a CSV's header and
+    its unit system (its units column), a text file whole, a workbook's text cells, a
+    figure's text chunk (:func:`ident.data.files.png_metadata`)."""
+    from ident.data.files import PNG_TEXT_KEY
+
+    if path.suffix == ".csv":
+        frame = pd.read_csv(path, nrows=5)
+        units = sorted(set(frame["units"])) if "units" in frame.columns else []
+        return "\n".join([",".join(map(str, frame.columns)),
+                          *(f"unit system {u}" for u in units if u != "imperial")])
+    if path.suffix in _TEXT_SUFFIXES:
+        return path.read_text(encoding="utf-8", errors="replace")
+    if path.suffix == ".xlsx":
+        from openpyxl import load_workbook
+
+        wb = load_workbook(path, read_only=True)
+        return "\n".join(str(v) for ws in wb.worksheets for row in ws.iter_rows(values_only=True)
+                         for v in row if isinstance(v, str))
+    if path.suffix == ".png":
+        from PIL import Image
+
+        with Image.open(path) as image:
+            text = image.text.get(PNG_TEXT_KEY)
+        assert text, f"{path}: the figure's words are not in its PNG text chunk"
+        return text
+    return ""
+
+
+def test_si_units_are_found_and_imperial_ones_are_not(tmp_path):
+    """The grep finds SI units where shockplan writes them and nothing in imperial lines."""
+    from ident.data.files import write_csv
+
+    si = ["RMS travel 25.5 mm predicted", "c_bar 3503, 3503 N/(m/s)", "at 0.05/0.1 m/s: 300 N",
+          "force [N]", "velocity [m/s] (compression +)", "mass 1200 kg", "gap 4.5mm"]
+    imperial = ["RMS travel 1 in predicted", "c_bar 20 lbf/(in/s)", "at 2/4/10 in/s: 67 lbf",
+                "force [lbf]", "10 Hz, 120 s, 5 %, rank 3", "setup L28/L28/TD/TD", "N8,B20",
+                "mass 2650 lbm", "stiffness 120 lbf/in", "hop_LR 14.4 Hz", "2 min 3 s",
+                'format = "rig-plan/1"', "ride_height_front [in]"]
+    assert all(si_units_in(line, "x") for line in si), [s for s in si if not si_units_in(s, "x")]
+    assert not any(si_units_in(line, "x") for line in imperial), [
+        si_units_in(line, "x") for line in imperial]
+    for units in ("SI", "imperial"):
+        write_csv(tmp_path / "c.csv", pd.DataFrame({"velocity": [1.0], "force": [2.0]}),
+                  units=units, overwrite=True)
+        assert bool(si_units_in(output_words(tmp_path / "c.csv"), "c.csv")) == (units == "SI")
+
+
+@pytest.mark.slow
+@pytest.mark.heavy
+def test_imperial_examples_print_and_write_imperial_units(demo):
+    """Issue 36: in the demo's imperial project, every README example's printed lines
+    (stdout and stderr) and every file it writes (CSV headers and unit systems, TOML,
+    workbook cells, figures' titles, axes and legends) are in imperial units: no SI unit
+    name but those :data:`SI_ALLOWED` allows, with its reason."""
+    folder, _ = demo
+    found = []
+    for k, block in enumerate(BLOCKS):
+        if any(tag in block for tag in SI_PROJECT_BLOCKS):
+            continue
+        if k not in BLOCK_OUTPUT:
+            test_readme_example_runs_as_written(demo, k)
+        found += si_units_in(BLOCK_OUTPUT[k], f"README block {k} printed")
+        for argv in commands(block):
+            for out in outputs(argv):
+                path = folder / out
+                files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() \
+                    else [path]
+                for f in files:
+                    found += si_units_in(output_words(f), f.relative_to(folder).as_posix())
+    assert not found, "\n".join(found[:40])

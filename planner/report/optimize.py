@@ -229,11 +229,12 @@ def click_summary(optimum):
 
 
 def _write_workbook(optimum, units, path):
-    """``optimize.xlsx``: the force tables (SI, imperial), the setups, the solver's report;
-    every sheet laid out and set to print with :mod:`planner.report.sheets`."""
+    """``optimize.xlsx``: the force table in the run's units (one unit system per project),
+    the setups, the solver's report; every sheet laid out and set to print with
+    :mod:`planner.report.sheets`."""
     wb = Workbook()
     what = f"shockplan optimize ({units})"
-    for k, u in enumerate(("SI", "imperial")):
+    for k, u in enumerate((units,)):
         sheet = wb.active if k == 0 else wb.create_sheet()
         sheet.title = f"curves {u}"
         tab = curve_table(optimum, units=u).round(1).reset_index()
@@ -280,7 +281,7 @@ def _write_workbook(optimum, units, path):
             ("units", units)]
     scan = optimum.settings.get("scan")
     if scan:
-        d_unit = "N s/m" if units == "SI" else UNIT_LABELS[units]["damping"]
+        d_unit = UNIT_LABELS[units]["damping"]
 
         def rate(c):
             return f"{from_si(c, 'damping', units):.0f}"
@@ -359,8 +360,8 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False):
 
     Files: ``optimal_shocks.toml`` (the optimal shocks, table kind with lag, and the
     crate's, so the setups file reads against it), ``optimal_setup.csv`` (the optimum,
-    then the crate setups closest to it), ``optimize.xlsx`` (force tables for the shock
-    builder in SI and imperial, the setups side by side, the solver's report),
+    then the crate setups closest to it), ``optimize.xlsx`` (the force table for the shock
+    builder in `units`, the setups side by side, the solver's report),
     ``curves.png`` and ``convergence.csv``; with adjustable shocks in the crate,
     ``clicks.csv`` (:func:`click_table`), the click setups after the optimum in
     ``optimal_setup.csv`` and a ``clicks`` sheet. Each CSV's last column is ``units`` (`units` on
