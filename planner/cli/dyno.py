@@ -83,6 +83,7 @@ def run_import(args):
         except DynoError:
             units = None  # a missing sheet: created; write_dyno_sheet names other problems
     units = units or "SI"
+    set_display_units(units)
     result = import_dyno_runs(args.raw, settings=settings, dyno_map=args.map)
     warnings = write_dyno_sheet(result, args.out, units=units, append=args.append,
                                 overwrite=args.overwrite)
