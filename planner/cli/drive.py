@@ -21,7 +21,7 @@ import difflib
 from pathlib import Path
 
 from ident.data.files import check_output
-from ident.data.units import UNIT_SYSTEMS
+from ident.data.units import UNIT_SYSTEMS, set_display_units
 from planner.cli.common import add_command_group, log, run_subcommand, unit_system
 
 __all__ = ["add_parser", "run", "run_from_track", "run_iterate", "run_section", "run_resample",
@@ -218,6 +218,7 @@ def _read_logs(args):
             for p in args.logs]
     if args.units is None:
         args.units = logs[0].settings.get("units") or "SI"
+    set_display_units(args.units)  # the run's messages, report and plots in them
     return logs
 
 
@@ -416,6 +417,7 @@ def run_section(args):
         raise PlannerError(f"{where}: give --section NAME=START:STOP or --laps T0,T1,...")
     drive = read_drive(args.drive, units=args.units)
     units = args.units or drive.settings.get("units", "SI")
+    set_display_units(units)
     folder = Path(args.out)
     base = folder / f"{Path(args.drive).stem}.csv"     # sections are CSV drives
     paths = [section_path(base, name) for name, _, _ in sections]
@@ -437,6 +439,7 @@ def run_resample(args):
     check_output(out, overwrite=args.overwrite)
     drive = read_drive(args.drive, units=args.units)
     units = args.units or drive.settings.get("units", "SI")
+    set_display_units(units)
     new = resample_drive(drive, args.fs)
     write_drive(new, out, units=units, overwrite=args.overwrite)
     s = new.settings
