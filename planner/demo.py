@@ -288,7 +288,7 @@ levels = ["BS-F2"]
 _CONSTRAINTS = {
     "imperial": {"low": (3.0, 225.0), "high": (0.0, 85.0), "segment": (5.7, 228.0), "ratio_v": 2.0,
                  "max_force": 2250.0, "damping": "lbf/(in/s)", "velocity": "in/s",
-                 "force": "lbf", "reach": "1 m/s (39.4 in/s)"},
+                 "force": "lbf", "reach": "39.4 in/s"},
     "SI": {"low": (500.0, 40000.0), "high": (0.0, 15000.0), "segment": (1000.0, 40000.0),
            "ratio_v": 0.05,
            "max_force": 10000.0, "damping": "N/(m/s)", "velocity": "m/s", "force": "N",

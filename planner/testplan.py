@@ -107,7 +107,7 @@ _CRITERIA = {"d": "D-optimal (sum of log det M)", "a": "A-optimal (- sum of tr M
              "decision": "decision (- variance of the top setups' score differences)"}
 _FONT = "Calibri"
 # the smallest (intervals, row labels) is the font that must print at >= MIN_PRINT_PT
-_DATA_PT, _HEAD_PT, _SMALL_PT, _SHOCK_PT = 10, 9, 9, 11
+_DATA_PT, _HEAD_PT, _SMALL_PT, _SHOCK_PT = 10, 9.5, 9.5, 11
 _PAD = 1.5  # cell padding [Excel width units] (text_width already spares ~10 % on digits)
 # the notes column [Excel width units]: at least (the run's block is 52 pt tall to write
 # in), and at most where the page leaves room; the fit's spare for rounding

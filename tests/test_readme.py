@@ -304,24 +304,37 @@ def test_every_demo_csv_reads_with_a_plain_read_csv(demo):
 
 #: An SI unit as shockplan writes one: a number with its unit (``25.5 mm``, ``3503 N``,
 #: ``0.05 m/s``), a unit in brackets (a column header or plot axis: ``[N]``, ``[m/s]``), a
-#: damping's ``N/(m/s)`` anywhere, or a CSV in SI (:func:`output_words`). Hz, s, rad and %
-#: are the same in both systems.
+#: damping's ``N/(m/s)`` anywhere, or a file in SI (a CSV's units column, a TOML's
+#: ``units = "SI"``). Hz, s, rad and % are the same in both systems.
 SI_UNIT = re.compile(
-    r"unit system SI\b|N/\(m/s\)|N\*s/m|\[(?:mm|m|N|kN|kg|m/s|mm/s|m/s\^2|N\*m|N/m|N\*m/rad|kg\*m\^2)\]"
+    r"unit system SI\b|^units = \"SI\"|N/\(m/s\)|N\*s/m|\[(?:mm|m|N|kN|kg|m/s|mm/s|m/s\^2|N\*m|N/m|N\*m/rad|kg\*m\^2)\]"
     r"|(?<![\w.])[-+]?\d[\d.,]*(?:e[-+]?\d+)?\s?"
     r"(?:mm/s\^2|mm/s|m/s\^2|m/s|mm|kN|kg|N\*m|N/m|N|m)(?![\w/^*(])")
 
 #: Lines of the imperial examples' outputs that may name an SI unit, each with its reason:
 #: (pattern of the line, reason).
 SI_ALLOWED = (
-    (re.compile(r"^format = |^units = \"SI\"|^# .*\bSI\b"),
-     "a file's own declaration of its format (a spec keyword), not a value"),
+    (re.compile(r"^format = "), "a file's format name (a spec keyword), not a value"),
 )
 
 #: The README blocks whose project is not the demo's imperial one, with the reason: the
 #: real-car example is a GT-like car of its own, its inputs written in SI (real_car/*.toml,
 #: its drive), so its outputs are in SI as the spec says (the outputs in the drive's units).
 SI_PROJECT_BLOCKS = ("real_car/",)
+
+#: Files of the demo folder in units of their own, each with its reason (not read for SI
+#: units; everything else the demo writes is).
+DEMO_OWN_UNITS = {
+    "real_car/": "the real-car example's inputs: a GT-like car of its own, an SI project",
+    "rig_map.toml": "a template of a rig's channel map: each channel's units are the rig's "
+                    "(here the canonical channels, SI)",
+    "track/log_map.toml": "the track logger's channel map: the logger's units (mm, km/h)",
+    "track/lap.mf4": "the track logger's own file (mm, km/h)",
+    "track/aero.toml": "the team's aero model as aerodynamicists write it (m, m/s, N; "
+                       "its units stated in the file), an input",
+    "clicks/dyno_map.toml": "the dyno's column map: the dyno's units (ms, lbf, mm)",
+    "clicks/dyno/": "the dyno's own exports (ms, lbf, mm)",
+}
 
 #: Output files read for words: text (CSV header and units column, TOML, Markdown), the
 #: workbooks' text cells and the PNG figures' text chunk (their titles, axes and legends).
@@ -373,11 +386,12 @@ def test_si_units_are_found_and_imperial_ones_are_not(tmp_path):
     from ident.data.files import write_csv
 
     si = ["RMS travel 25.5 mm predicted", "c_bar 3503, 3503 N/(m/s)", "at 0.05/0.1 m/s: 300 N",
-          "force [N]", "velocity [m/s] (compression +)", "mass 1200 kg", "gap 4.5mm"]
+          "force [N]", "velocity [m/s] (compression +)", "mass 1200 kg", "gap 4.5mm",
+          'units = "SI"']
     imperial = ["RMS travel 1 in predicted", "c_bar 20 lbf/(in/s)", "at 2/4/10 in/s: 67 lbf",
                 "force [lbf]", "10 Hz, 120 s, 5 %, rank 3", "setup L28/L28/TD/TD", "N8,B20",
                 "mass 2650 lbm", "stiffness 120 lbf/in", "hop_LR 14.4 Hz", "2 min 3 s",
-                'format = "rig-plan/1"', "ride_height_front [in]"]
+                'format = "rig-plan/1"', "ride_height_front [in]", 'units = "imperial"']
     assert all(si_units_in(line, "x") for line in si), [s for s in si if not si_units_in(s, "x")]
     assert not any(si_units_in(line, "x") for line in imperial), [
         si_units_in(line, "x") for line in imperial]
@@ -390,12 +404,21 @@ def test_si_units_are_found_and_imperial_ones_are_not(tmp_path):
 @pytest.mark.slow
 @pytest.mark.heavy
 def test_imperial_examples_print_and_write_imperial_units(demo):
-    """Issue 36: in the demo's imperial project, every README example's printed lines
-    (stdout and stderr) and every file it writes (CSV headers and unit systems, TOML,
-    workbook cells, figures' titles, axes and legends) are in imperial units: no SI unit
-    name but those :data:`SI_ALLOWED` allows, with its reason."""
+    """Issue 36: in the demo's imperial project, what the demo and every README example
+    print (stdout and stderr) and every file they write (CSV headers and unit systems,
+    TOML, workbook cells, figures' titles, axes and legends) are in imperial units: no SI
+    unit name but in the files of :data:`DEMO_OWN_UNITS` and the lines
+    :data:`SI_ALLOWED` allows, each with its reason."""
     folder, _ = demo
-    found = []
+    found = si_units_in(DEMO_STDOUT[-1], "shockplan demo printed")
+    for f in sorted(p for p in folder.rglob("*") if p.is_file()):  # the demo's own files
+        name = f.relative_to(folder).as_posix()
+        if name.startswith(tuple(DEMO_OWN_UNITS)) or name.startswith("."):
+            continue
+        if name.startswith("session/runs/") and not name.endswith("baseline.csv"):
+            continue  # one run file read is as good as five
+        found += si_units_in(output_words(f), name)
+    demo_files = {p for p in folder.rglob("*") if p.is_file()}
     for k, block in enumerate(BLOCKS):
         if any(tag in block for tag in SI_PROJECT_BLOCKS):
             continue
@@ -408,5 +431,7 @@ def test_imperial_examples_print_and_write_imperial_units(demo):
                 files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() \
                     else [path]
                 for f in files:
-                    found += si_units_in(output_words(f), f.relative_to(folder).as_posix())
+                    if f not in demo_files:  # the demo's own inputs were read above
+                        found += si_units_in(output_words(f),
+                                             f.relative_to(folder).as_posix())
     assert not found, "\n".join(found[:40])
