@@ -124,6 +124,7 @@ _TRACK_PLAN = """# Rig plan (rig-plan/1), written by shockplan demo: the README'
 #   shockplan rig simulate --plan track/plan.toml --vehicle car.toml --out track/session
 format = "rig-plan/1"
 name = "track drive on the rig"
+units = "imperial"                 # the session it writes, as the demo's project
 shock_library = "../crate.toml"
 fs_hz = 100.0
 noise = 0.02

@@ -247,7 +247,7 @@ def _print_result(result, units):
     import numpy as np
 
     from ident.data.channels import CORNERS, quantity_of
-    from ident.data.units import UNIT_LABELS, from_si
+    from ident.data.units import format_quantity
 
     t = result.target
     h = result.history
@@ -266,12 +266,11 @@ def _print_result(result, units):
     preload = t.settings.get("aero_preload") or []
     if preload:
         mean = {k: float(np.mean([p[k] for p in preload])) for k in preload[0]}
-        lab = UNIT_LABELS[units]
         print("aero loads: their mean is the aeroloaders' static preload, set before the drive "
-              f"plays (the drive holds the rest): heave "
-              f"{float(from_si(mean['aero_heave'], 'force', units)):.5g} {lab['force']}, pitch "
-              f"{float(from_si(mean['aero_pitch'], 'moment', units)):.5g} {lab['moment']}, roll "
-              f"{float(from_si(mean['aero_roll'], 'moment', units)):.5g} {lab['moment']}")
+              "plays (the drive holds the rest): heave "
+              f"{format_quantity(mean['aero_heave'], 'force', units, digits=4)}, pitch "
+              f"{format_quantity(mean['aero_pitch'], 'moment', units, digits=4)}, roll "
+              f"{format_quantity(mean['aero_roll'], 'moment', units, digits=4)}")
     reach = result.reach["unreachable_share"]
     rows = []
     for c in per.index:
@@ -279,7 +278,7 @@ def _print_result(result, units):
         rms = h[(h["iteration"] == result.settings["best_iteration"]) &
                 (h["channel"] == c)]["residual_rms"].iloc[0]
         rows.append(f"  {c:<20} residual {100 * per[c]:6.2f} %  "
-                    f"({float(from_si(rms, q, units)):.4g} {UNIT_LABELS[units][q]} RMS), "
+                    f"({format_quantity(rms, q, units, small=True)} RMS), "
                     f"out of reach {100 * reach[c]:5.2f} %")
     print("\n".join(rows))
     lim = result.limits
