@@ -236,7 +236,7 @@ def test_read_csv_table_errors_name_the_file(tmp_path):
 
 def test_toml_files_hold_converted_numbers_rounded(tmp_path):
     """Issue 36: a TOML shockplan writes holds ``damping = 28.0``, not the conversion's
-    ``28.000000000000004``; every float to 12 significant digits, nested ones too, and an
+    ``28.000000000000004``; every float to 13 significant digits, nested ones too, and an
     imperial library read and written again gives its own numbers back."""
     atomic_write_toml(tmp_path / "a.toml", {"damping": 28.000000000000004,
                                             "t": {"v": [0.1 + 0.2, 3]}, "n": 7, "s": "x"})

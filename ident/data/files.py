@@ -273,7 +273,7 @@ def round_file_numbers(data, digits=FILE_DIGITS):
     Examples
     --------
     >>> round_file_numbers({"damping": 28.000000000000004, "v": [0.1, 1 / 3], "n": 2})
-    {'damping': 28.0, 'v': [0.1, 0.333333333333], 'n': 2}
+    {'damping': 28.0, 'v': [0.1, 0.3333333333333], 'n': 2}
     """
     if isinstance(data, dict):
         return {k: round_file_numbers(v, digits) for k, v in data.items()}
@@ -286,7 +286,7 @@ def round_file_numbers(data, digits=FILE_DIGITS):
 
 def atomic_write_toml(path, data, *, overwrite=True, header=None):
     """Write a mapping as TOML to `path` atomically, with an optional comment header; floats
-    are written to 12 significant digits (:func:`round_file_numbers`)."""
+    are written to 13 significant digits (:func:`round_file_numbers`)."""
     text = tomli_w.dumps(round_file_numbers(data))
     if header:
         text = "".join(f"# {line}\n" for line in header.splitlines()) + text

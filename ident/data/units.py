@@ -72,7 +72,7 @@ SMALL_SI_LABELS = {"displacement": ("mm", 1e3), "velocity": ("mm/s", 1e3),
 #: Significant digits of a number converted at the file boundary and written to a TOML or
 #: CSV file (:func:`round_significant`): far below any measurement (5e-13 relative), far
 #: above the round-off of a conversion (``28.000000000000004`` is written ``28.0``).
-FILE_DIGITS = 12
+FILE_DIGITS = 13
 
 #: The unit system of messages, tables and plots of the running command (see
 #: :func:`display_units`).
