@@ -227,8 +227,9 @@ PNG_TEXT_KEY = "Description"
 
 
 def figure_text(fig):
-    """Every text a reader sees on a matplotlib figure (titles, axis labels, legend entries,
-    annotations, tick labels), one per line, each once, in drawing order.
+    """The words a reader sees on a matplotlib figure: its title, each axes' title and axis
+    labels, legend entries and texts placed on it, one per line, each once, in drawing
+    order (tick labels are numbers: left out).
 
     Parameters
     ----------
@@ -238,18 +239,23 @@ def figure_text(fig):
     -------
     str
     """
-    seen = {}
-    for artist in fig.findobj(lambda a: callable(getattr(a, "get_text", None))):
-        text = str(artist.get_text()).strip()
-        if text and getattr(artist, "get_visible", lambda: True)():
-            seen.setdefault(text, None)
-    return "\n".join(seen)
+    texts = [fig.get_suptitle(), *(t.get_text() for t in fig.texts)]
+    for ax in fig.axes:
+        texts += [ax.get_title(loc) for loc in ("left", "center", "right")]
+        texts += [ax.get_xlabel(), ax.get_ylabel(), *(t.get_text() for t in ax.texts)]
+        legend = ax.get_legend()
+        if legend is not None:
+            texts += [t.get_text() for t in legend.get_texts()]
+    for legend in fig.legends:
+        texts += [t.get_text() for t in legend.get_texts()]
+    return "\n".join(dict.fromkeys(t.strip() for t in texts if t and t.strip()))
 
 
 def png_metadata(fig):
     """``savefig``'s `metadata` for a PNG: the figure's words (:func:`figure_text`) in the
     text chunk :data:`PNG_TEXT_KEY`, so that a test or a search reads a plot's units and
-    labels without looking at it (``PIL.Image.open(path).text``)."""
+    labels without looking at it (``PIL.Image.open(path).text``). Call it right before
+    ``savefig``: the words are those the figure has then."""
     return {PNG_TEXT_KEY: figure_text(fig)}
 
 
