@@ -127,6 +127,7 @@ _TRACK_PLAN = """# Rig plan (rig-plan/1), written by shockplan demo: the README'
 #   shockplan rig simulate --plan track/plan.toml --vehicle car.toml --out track/session
 format = "rig-plan/1"
 name = "track drive on the rig"
+units = "imperial"                 # the session it writes, as the demo's project
 shock_library = "../crate.toml"
 fs_hz = 100.0
 noise = 0.02
@@ -180,14 +181,15 @@ source = "Shock Temp"
 units = "degC"
 """
 _CLICKS_SHOCKS = """\
-# The clicks example's crate (rig-session/1 shock library, SI). TTX's curves at any
-# setting come from its dyno sheet: `shockplan dyno import` writes ttx_dyno.csv.
-units = "SI"
+# The clicks example's crate (rig-session/1 shock library, imperial units, as the demo's
+# project). TTX's curves at any setting come from its dyno sheet: `shockplan dyno import`
+# writes ttx_dyno.csv.
+units = "imperial"
 
 [[shock]]
 id = "B20"
 kind = "linear"
-damping = 3502.5
+damping = 20.0
 
 [[shock]]
 id = "TTX"
@@ -290,7 +292,7 @@ levels = ["BS-F2"]
 _CONSTRAINTS = {
     "imperial": {"low": (3.0, 225.0), "high": (0.0, 85.0), "segment": (5.7, 228.0), "ratio_v": 2.0,
                  "max_force": 2250.0, "damping": "lbf/(in/s)", "velocity": "in/s",
-                 "force": "lbf", "reach": "1 m/s (39.4 in/s)"},
+                 "force": "lbf", "reach": "39.4 in/s"},
     "SI": {"low": (500.0, 40000.0), "high": (0.0, 15000.0), "segment": (1000.0, 40000.0),
            "ratio_v": 0.05,
            "max_force": 10000.0, "damping": "N/(m/s)", "velocity": "m/s", "force": "N",

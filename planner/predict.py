@@ -26,6 +26,7 @@ from tqdm.auto import tqdm
 
 from ident.data.channels import CORNERS
 from ident.data.drive import Drive, resample_drive
+from ident.data.units import format_quantity
 from ident.identify.coverage import Coverage, outside_coverage
 from ident.identify.model import LOOP_REDUCE_RTOL, VehicleModel, load_model
 from ident.models.lti import LoopPlant
@@ -348,14 +349,15 @@ def warn_outside_session(model, table, static_corner_load_n=None):
     if len(frame):
         worst = frame.assign(ratio=frame.predicted / frame.covered).sort_values(
             "ratio", ascending=False).iloc[0]
-        unit = {"travel": ("mm", 1e3), "velocity": ("mm/s", 1e3), "contact": ("N", 1.0)}
-        u, f = unit[worst["what"]]
+        quantity = {"travel": "displacement", "velocity": "velocity",
+                    "contact": "force"}[worst["what"]]
         log.warning("%d of %d setups take the car beyond what the session covered (%s); "
-                    "e.g. setup %r at %s: %s %.3g %s predicted, %.3g %s covered. The model "
+                    "e.g. setup %r at %s: %s %s predicted, %s covered. The model "
                     "extrapolates there: check those setups on the rig, or record a run "
                     "that reaches them", frame.setup.nunique(), len(table),
                     ", ".join(sorted(set(frame.what))), worst["setup"], worst["corner"],
                     "RMS " + worst["what"] if worst["what"] != "contact"
-                    else "smallest contact force", worst["predicted"] * f, u,
-                    worst["covered"] * f, u)
+                    else "smallest contact force",
+                    format_quantity(worst["predicted"], quantity, small=True),
+                    format_quantity(worst["covered"], quantity, small=True))
     return frame

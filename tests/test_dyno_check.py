@@ -9,8 +9,8 @@ from ident.models.adjustable import AdjustableShock, DynoPoints
 from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock, TableShock
 from ident.sim.dampers import ClickerDamper
-from planner.dyno.check import (BUILDER_GRID, check_dyno_library, default_velocities,
-                                dyno_curve)
+from planner.dyno.check import (BUILDER_GRID, FORCE_DECIMALS, VELOCITY_DIGITS, check_dyno_library,
+                                default_velocities, dyno_curve)
 from planner.errors import PlannerError
 
 #: The dyno's speeds [m/s], each side.
@@ -88,7 +88,10 @@ def test_table_is_the_model_at_the_setting(library, units):
     model = library.adjustable("TTX").at(s)
     want = from_si(model.force(to_si(np.array(sorted(given)), "velocity", units)), "force",
                    units)
-    np.testing.assert_allclose(curve.force, want, rtol=TABLE_RTOL)
+    np.testing.assert_allclose(curve.force_n, to_si(want, "force", units), rtol=TABLE_RTOL)
+    # the table's forces to 0.1 N or 0.1 lbf: what a dyno's force means (issue 36)
+    np.testing.assert_allclose(curve.force, want, rtol=0, atol=0.5 * 10.0 ** -FORCE_DECIMALS)
+    assert np.all(curve.force == np.round(curve.force, FORCE_DECIMALS))
     assert np.all(curve.force * curve.velocity > 0)
     assert curve.extrapolated.tolist() == [abs(v) > 0.5 + 1e-9 for v in curve.velocity_m_s]
 
@@ -102,8 +105,14 @@ def test_default_grid_is_the_measured_speeds(library):
                                rtol=0.05)   # a held-out setting: the model's 5 % bar
     assert not curve.extrapolated.any()
     imperial = dyno_curve(library, "TTX@ls=3", units="imperial")
-    np.testing.assert_allclose(imperial.velocity, curve.velocity / 0.0254, rtol=1e-12)
-    np.testing.assert_allclose(imperial.force, curve.force / 4.4482216152605, rtol=1e-12)
+    # the measured speeds converted, to VELOCITY_DIGITS significant digits; the forces at
+    # those speeds to 0.1 lbf (issue 36: 0.98425 in/s, not 0.984251968503937)
+    np.testing.assert_allclose(imperial.velocity, curve.velocity / 0.0254,
+                               rtol=0.5 * 10.0 ** (1 - VELOCITY_DIGITS))
+    assert all(len(f"{abs(v):.10g}".replace(".", "").strip("0")) <= VELOCITY_DIGITS
+               for v in imperial.velocity)
+    np.testing.assert_allclose(imperial.force, from_si(imperial.force_n, "force", "imperial"),
+                               rtol=0, atol=0.05 + 1e-9)
     # the id alone is the default setting, named in full
     assert dyno_curve(library, "TTX").shock == "TTX@ls=8,hs=2"
 

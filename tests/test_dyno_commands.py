@@ -9,7 +9,7 @@ from ident.data.files import read_csv_table
 from ident.models.library import read_shock_library
 from ident.sim.dampers import ClickerDamper
 from planner.cli import main
-from planner.dyno.check import dyno_curve
+from planner.dyno.check import FORCE_DECIMALS, dyno_curve
 
 #: The dyno's speeds [m/s], each side.
 DYNO_SPEEDS = (0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.5)
@@ -81,8 +81,10 @@ def test_table_writes_the_model_at_the_setting(tmp_path, capsys, good_lib, units
     np.testing.assert_allclose(frame["force"], want.force, rtol=CSV_RTOL)
     at = lib.adjustable("TTX").at({"ls": 10, "hs": 1.5})
     scale_v, scale_f = (1.0, 1.0) if units == "SI" else (0.0254, 4.4482216152605)
-    np.testing.assert_allclose(frame["force"] * scale_f, at.force(frame["velocity"] * scale_v),
-                               rtol=1e-12)
+    # the model at the written velocities, the force to the 0.1 N or 0.1 lbf written
+    np.testing.assert_allclose(frame["force"], at.force(frame["velocity"] * scale_v) / scale_f,
+                               rtol=0, atol=0.5 * 10.0 ** -FORCE_DECIMALS + 1e-9)
+    assert "0000000" not in path.read_text()  # numbers as they mean (issue 36)
     # refused without --overwrite, replaced with it
     assert main(argv) == 2 and "already exists" in capsys.readouterr().err
     argv[argv.index("TTX@ls=10,hs=1.5")] = "TTX@ls=2"

@@ -11,7 +11,11 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from ident.data.files import (
+    PNG_TEXT_KEY,
+    atomic_write_toml,
     csv_preamble,
+    png_metadata,
+    read_toml,
     read_csv_after,
     read_csv_table,
     read_units_marker,
@@ -22,6 +26,7 @@ from ident.data.files import (
     write_csv_frame,
     write_parquet_frame,
 )
+from ident.models.library import read_shock_library, write_shock_library
 from ident.errors import SessionError
 
 
@@ -227,3 +232,35 @@ def test_read_csv_table_errors_name_the_file(tmp_path):
     (tmp_path / "nope.parquet").write_text("not parquet")
     with pytest.raises(SessionError, match="nope.parquet: cannot read the file"):
         read_units_marker(tmp_path / "nope.parquet", error=SessionError)
+
+
+def test_toml_files_hold_converted_numbers_rounded(tmp_path):
+    """Issue 36: a TOML shockplan writes holds ``damping = 28.0``, not the conversion's
+    ``28.000000000000004``; every float to 13 significant digits, nested ones too, and an
+    imperial library read and written again gives its own numbers back."""
+    atomic_write_toml(tmp_path / "a.toml", {"damping": 28.000000000000004,
+                                            "t": {"v": [0.1 + 0.2, 3]}, "n": 7, "s": "x"})
+    text = (tmp_path / "a.toml").read_text()
+    assert "damping = 28.0\n" in text and "0.3," in text and "0.30000000000000004" not in text
+    assert read_toml(tmp_path / "a.toml")["t"]["v"] == [0.3, 3]
+    (tmp_path / "lib.toml").write_text(
+        'units = "imperial"\n\n[[shock]]\nid = "L28"\nkind = "linear"\ndamping = 28.0\n'
+        '\n[[shock]]\nid = "T"\nkind = "table"\nvelocity = [-10.0, 0.0, 2.5, 10.0]\n'
+        'force = [-120.5, 0.0, 40.25, 95.0]\n')
+    library = read_shock_library(tmp_path / "lib.toml")
+    write_shock_library(library, tmp_path / "again.toml", units="imperial")
+    again = (tmp_path / "again.toml").read_text()
+    assert "damping = 28.0\n" in again and "40.25" in again and "0000000" not in again
+
+
+def test_png_metadata_holds_the_figures_words():
+    """A figure's labels (axes, title, legend) in the PNG text chunk a test reads."""
+    from matplotlib.figure import Figure
+
+    fig = Figure()
+    ax = fig.subplots()
+    ax.plot([0, 1], [0, 1], label="optimum")
+    ax.set(xlabel="shock velocity [in/s]", ylabel="force [lbf]", title="front")
+    ax.legend()
+    words = png_metadata(fig)[PNG_TEXT_KEY].splitlines()
+    assert {"shock velocity [in/s]", "force [lbf]", "front", "optimum"} <= set(words)

@@ -14,6 +14,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.testing import assert_allclose
 
+from ident.data.files import png_metadata
 from ident.identify.frf import DF_INPUTS, MODEL_INPUTS, Frf
 from ident.identify.model import VehicleModel
 from ident.identify.plots import display_scale, frf_plot_data, plot_frf, write_frf_plots
@@ -182,8 +183,8 @@ def test_written_pages_equal_fresh_figures(tmp_path):
     for path in paths:
         output, group = path.stem[len("frf_"):].rsplit("_", 1)
         buf = io.BytesIO()
-        plot_frf(model, output, inputs=group, truth=truth, units="imperial").savefig(
-            buf, format="png", dpi=40)
+        fresh = plot_frf(model, output, inputs=group, truth=truth, units="imperial")
+        fresh.savefig(buf, format="png", dpi=40, metadata=png_metadata(fresh))
         assert path.read_bytes() == buf.getvalue(), path.name
     again = write_frf_plots(model, tmp_path / "again", truth=truth, units="imperial", dpi=40)
     assert [p.read_bytes() for p in again] == [p.read_bytes() for p in paths]  # deterministic

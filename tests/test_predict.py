@@ -294,3 +294,30 @@ def test_noise_report_is_kept_with_the_model(four_post_model, four_post_session,
     assert back.diagnosis is not None and back.shock_check is not None
     with pytest.raises(TypeError, match="new VehicleModel"):
         model.with_results(poles=model.poles)
+
+
+@pytest.mark.parametrize("units, said", [("SI", "RMS travel 25.5 mm predicted, 20 mm covered"),
+                                          ("imperial",
+                                           "RMS travel 1 in predicted, 0.787 in covered")])
+def test_outside_session_warning_is_in_the_projects_units(caplog, units, said):
+    """Issue 36: the warning of predictions beyond the session's coverage spoke mm in an
+    imperial project; it speaks the run's unit system (set by the command line)."""
+    import logging
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from ident.data.units import display_units
+    from ident.identify.coverage import Coverage
+    from planner.predict import warn_outside_session
+
+    cov = Coverage(travel_rms_m=np.full(4, 0.020), velocity_rms_m_s=np.full(4, 1.0),
+                   travel_max_m=np.full(4, 0.05), contact_min_n=None, runs=5)
+    model = SimpleNamespace(settings={"coverage": cov.to_dict()})
+    table = pd.DataFrame({**{f"shock_travel_rms_{c}": [0.010] for c in CORNERS},
+                          **{f"shock_velocity_rms_{c}": [0.1] for c in CORNERS}}, index=["A"])
+    table.loc["A", "shock_travel_rms_LR"] = 0.0255
+    with display_units(units), caplog.at_level(logging.WARNING, logger="planner.predict"):
+        frame = warn_outside_session(model, table)
+    assert frame["what"].tolist() == ["travel"]
+    assert said in caplog.text and "setup 'A' at LR" in caplog.text

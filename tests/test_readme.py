@@ -88,17 +88,33 @@ def demo(tmp_path_factory):
 
 #: What the fixture's ``shockplan demo`` printed (one run of the demo serves every test).
 DEMO_STDOUT = []
+#: What each README block printed (stdout and stderr) when it ran as written, by index.
+BLOCK_OUTPUT = {}
+#: Each README block's exit status and stderr, by index (each block runs once).
+BLOCK_DONE = {}
+
+
+def run_block(demo, k):
+    """Run README block `k` as written in the demo folder, once for every test that needs
+    it (the blocks write their outputs without --overwrite); its exit status and stderr."""
+    if k not in BLOCK_DONE:
+        folder, env = demo
+        done = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", BLOCKS[k]], cwd=folder,
+                              env=env, capture_output=True, text=True,
+                              timeout=BLOCK_TIMEOUT_S)
+        BLOCK_OUTPUT[k] = done.stdout + done.stderr
+        BLOCK_DONE[k] = (done.returncode, done.stderr)
+    return BLOCK_DONE[k]
 
 
 @pytest.mark.slow
 @pytest.mark.heavy
 @pytest.mark.parametrize("k", range(len(BLOCKS)))
 def test_readme_example_runs_as_written(demo, k):
-    folder, env = demo
+    folder, _ = demo
     block = BLOCKS[k]
-    done = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", block], cwd=folder, env=env,
-                          capture_output=True, text=True, timeout=BLOCK_TIMEOUT_S)
-    assert done.returncode == 0, f"README block {k}:\n{block}\nstderr:\n{done.stderr[-3000:]}"
+    code, stderr = run_block(demo, k)
+    assert code == 0, f"README block {k}:\n{block}\nstderr:\n{stderr[-3000:]}"
     for argv in commands(block):
         for path in outputs(argv):
             assert (folder / path).exists(), f"README block {k}: {path} not written"
@@ -328,3 +344,142 @@ def test_the_demo_folder_is_under_100_mb(demo):
     biggest = sorted(sizes.items(), key=lambda kv: -kv[1])[:8]
     assert total < DEMO_FOLDER_MAX_BYTES, f"{total / 1e6:.1f} MB; the largest: {biggest}"
     assert {"model.npz", "session/session.toml", "rig_files/baseline.rsp"} <= set(sizes)
+
+
+# ---------------------------------------------------------------------------------------
+# one unit system per project (issue 36, item 5)
+# ---------------------------------------------------------------------------------------
+
+#: An SI unit as shockplan writes one: a number with its unit (``25.5 mm``, ``3503 N``,
+#: ``0.05 m/s``), a unit in brackets (a column header or plot axis: ``[N]``, ``[m/s]``), a
+#: damping's ``N/(m/s)`` anywhere, or a file in SI (a CSV's units column, a TOML's
+#: ``units = "SI"``). Hz, s, rad and % are the same in both systems.
+SI_UNIT = re.compile(
+    r"unit system SI\b|^units = \"SI\"|N/\(m/s\)|N\*s/m|\[(?:mm|m|N|kN|kg|m/s|mm/s|m/s\^2|N\*m|N/m|N\*m/rad|kg\*m\^2)\]"
+    r"|(?<![\w.])[-+]?\d[\d.,]*(?:e[-+]?\d+)?\s?"
+    r"(?:mm/s\^2|mm/s|m/s\^2|m/s|mm|kN|kg|N\*m|N/m|N|m)(?![\w/^*(])")
+
+#: Lines of the imperial examples' outputs that may name an SI unit, each with its reason:
+#: (pattern of the line, reason).
+SI_ALLOWED = (
+    (re.compile(r"^format = "), "a file's format name (a spec keyword), not a value"),
+)
+
+#: The README blocks whose project is not the demo's imperial one, with the reason: the
+#: real-car example is a GT-like car of its own, its inputs written in SI (real_car/*.toml,
+#: its drive), so its outputs are in SI as the spec says (the outputs in the drive's units).
+SI_PROJECT_BLOCKS = ("real_car/",)
+
+#: Files of the demo folder in units of their own, each with its reason (not read for SI
+#: units; everything else the demo writes is).
+DEMO_OWN_UNITS = {
+    "real_car/": "the real-car example's inputs: a GT-like car of its own, an SI project",
+    "rig_map.toml": "a template of a rig's channel map: each channel's units are the rig's "
+                    "(here the canonical channels, SI)",
+    "track/log_map.toml": "the track logger's channel map: the logger's units (mm, km/h)",
+    "track/lap.mf4": "the track logger's own file (mm, km/h)",
+    "track/aero.toml": "the team's aero model as aerodynamicists write it (m, m/s, N; "
+                       "its units stated in the file), an input",
+    "clicks/dyno_map.toml": "the dyno's column map: the dyno's units (ms, lbf, mm)",
+    "clicks/dyno/": "the dyno's own exports (ms, lbf, mm)",
+}
+
+#: Output files read for words: text (CSV header and units column, TOML, Markdown), the
+#: workbooks' text cells and the PNG figures' text chunk (their titles, axes and legends).
+_TEXT_SUFFIXES = (".csv", ".toml", ".md", ".txt")
+
+
+def si_units_in(text, where):
+    """Every SI unit named in `text` outside :data:`SI_ALLOWED`, as ``where: line``."""
+    found = []
+    for line in text.splitlines():
+        if any(pattern.search(line) for pattern, _ in SI_ALLOWED):
+            continue
+        for m in SI_UNIT.finditer(line):
+            found.append(f"{where}: [{m.group(0)}] {line.strip()[:200]}")
+    return found
+
+
+def output_words(path):
+    """The words a reader of the output file `path` sees, as text lines: a CSV's header and
+    its unit system (its units column), a text file whole, a workbook's text cells, a
+    figure's text chunk (:func:`ident.data.files.png_metadata`)."""
+    from ident.data.files import PNG_TEXT_KEY
+
+    if path.suffix == ".csv":
+        frame = pd.read_csv(path, nrows=5)
+        units = sorted(set(frame["units"])) if "units" in frame.columns else []
+        return "\n".join([",".join(map(str, frame.columns)),
+                          *(f"unit system {u}" for u in units if u != "imperial")])
+    if path.suffix in _TEXT_SUFFIXES:
+        return path.read_text(encoding="utf-8", errors="replace")
+    if path.suffix == ".xlsx":
+        from openpyxl import load_workbook
+
+        wb = load_workbook(path, read_only=True)
+        return "\n".join(str(v) for ws in wb.worksheets for row in ws.iter_rows(values_only=True)
+                         for v in row if isinstance(v, str))
+    if path.suffix == ".png":
+        from PIL import Image
+
+        with Image.open(path) as image:
+            text = image.text.get(PNG_TEXT_KEY)
+        assert text, f"{path}: the figure's words are not in its PNG text chunk"
+        return text
+    return ""
+
+
+def test_si_units_are_found_and_imperial_ones_are_not(tmp_path):
+    """The grep finds SI units where shockplan writes them and nothing in imperial lines."""
+    from ident.data.files import write_csv
+
+    si = ["RMS travel 25.5 mm predicted", "c_bar 3503, 3503 N/(m/s)", "at 0.05/0.1 m/s: 300 N",
+          "force [N]", "velocity [m/s] (compression +)", "mass 1200 kg", "gap 4.5mm",
+          'units = "SI"']
+    imperial = ["RMS travel 1 in predicted", "c_bar 20 lbf/(in/s)", "at 2/4/10 in/s: 67 lbf",
+                "force [lbf]", "10 Hz, 120 s, 5 %, rank 3", "setup L28/L28/TD/TD", "N8,B20",
+                "mass 2650 lbm", "stiffness 120 lbf/in", "hop_LR 14.4 Hz", "2 min 3 s",
+                'format = "rig-plan/1"', "ride_height_front [in]", 'units = "imperial"']
+    assert all(si_units_in(line, "x") for line in si), [s for s in si if not si_units_in(s, "x")]
+    assert not any(si_units_in(line, "x") for line in imperial), [
+        si_units_in(line, "x") for line in imperial]
+    for units in ("SI", "imperial"):
+        write_csv(tmp_path / "c.csv", pd.DataFrame({"velocity": [1.0], "force": [2.0]}),
+                  units=units, overwrite=True)
+        assert bool(si_units_in(output_words(tmp_path / "c.csv"), "c.csv")) == (units == "SI")
+
+
+@pytest.mark.slow
+@pytest.mark.heavy
+def test_imperial_examples_print_and_write_imperial_units(demo):
+    """Issue 36: in the demo's imperial project, what the demo and every README example
+    print (stdout and stderr) and every file they write (CSV headers and unit systems,
+    TOML, workbook cells, figures' titles, axes and legends) are in imperial units: no SI
+    unit name but in the files of :data:`DEMO_OWN_UNITS` and the lines
+    :data:`SI_ALLOWED` allows, each with its reason."""
+    folder, _ = demo
+    found = si_units_in(DEMO_STDOUT[-1], "shockplan demo printed")
+    for f in sorted(p for p in folder.rglob("*") if p.is_file()):  # the demo's own files
+        name = f.relative_to(folder).as_posix()
+        if name.startswith(tuple(DEMO_OWN_UNITS)) or name.startswith("."):
+            continue
+        if name.startswith("session/runs/") and not name.endswith("baseline.csv"):
+            continue  # one run file read is as good as five
+        found += si_units_in(output_words(f), name)
+    demo_files = {p for p in folder.rglob("*") if p.is_file()}
+    for k, block in enumerate(BLOCKS):
+        if any(tag in block for tag in SI_PROJECT_BLOCKS):
+            continue
+        code, stderr = run_block(demo, k)
+        assert code == 0, f"README block {k}: {stderr[-2000:]}"
+        found += si_units_in(BLOCK_OUTPUT[k], f"README block {k} printed")
+        for argv in commands(block):
+            for out in outputs(argv):
+                path = folder / out
+                files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() \
+                    else [path]
+                for f in files:
+                    if f not in demo_files:  # the demo's own inputs were read above
+                        found += si_units_in(output_words(f),
+                                             f.relative_to(folder).as_posix())
+    assert not found, "\n".join(found[:40])

@@ -508,3 +508,87 @@ def test_start_times_note_is_true_to_the_schedule(plan, tmp_path):
     first = run_sheet_rows(late)["start"].iloc[0]
     assert first != "0:00" and f"(run 1 at {first})" in legend
     assert "4 min a run besides its drive" in legend
+
+
+#: The smallest text a printed sheet may have [pt] (issue 23's floor, planner.report.sheets).
+SMALLEST_PRINTED_PT = 7.0
+#: Rounding of the sizes read from LibreOffice's PDF (its text matrices carry 2 decimals).
+PDF_PT_ATOL = 0.015
+
+
+def _estimated_smallest_pt(ws):
+    """The smallest printed text [pt] of a sheet set to one page wide, estimated as
+    :mod:`planner.report.sheets` prints (a width unit = WIDTH_UNIT_PT, whole per cent)."""
+    import math
+
+    from openpyxl.utils.cell import range_boundaries
+
+    from planner.report.sheets import (WIDTH_UNIT_PT, column_widths, printable_size_pt,
+                                       smallest_font_pt)
+
+    area = (ws.print_area if isinstance(ws.print_area, str) else ws.print_area[0])
+    area = area.split("!")[-1].replace("$", "")
+    lo, _, hi, _ = range_boundaries(area)
+    units = "imperial" if int(ws.page_setup.paperSize) == PAPER_SIZE["imperial"] else "SI"
+    room = printable_size_pt(units)[0]
+    scale = min(100, math.floor(100 * room / (WIDTH_UNIT_PT * sum(column_widths(ws, lo, hi)))))
+    return smallest_font_pt(ws, area) * scale / 100
+
+
+def _pdf_text_sizes(path):
+    """Every text size [pt] a PDF draws (LibreOffice's export: Tf size x text matrix x cm)."""
+    import re
+    import zlib
+
+    data = path.read_bytes()
+    op = re.compile(r"q\b|Q\b|([-\d.]+) ([-\d.]+) [-\d.]+ [-\d.]+ [-\d.]+ [-\d.]+ (cm|Tm)\b"
+                    r"|/\S+ ([-\d.]+) Tf|\((?:[^()\\]|\\.)*\)\s*Tj|\[[^\]]*\]\s*TJ"
+                    r"|<[0-9A-Fa-f]+>\s*Tj")
+    sizes = []
+    for m in re.finditer(rb"stream\r?\n(.*?)\r?\nendstream", data, re.S):
+        try:
+            text = zlib.decompress(m.group(1)).decode("latin-1")
+        except zlib.error:
+            continue
+        cm, stack, tm, tf = 1.0, [], 1.0, None
+        for tok in op.finditer(text):
+            s = tok.group(0)
+            if s == "q":
+                stack.append(cm)
+            elif s == "Q":
+                cm = stack.pop() if stack else 1.0
+            elif tok.group(3):
+                scale = float(np.hypot(float(tok.group(1)), float(tok.group(2))))
+                if tok.group(3) == "cm":
+                    cm *= scale
+                else:
+                    tm = scale
+            elif tok.group(4):
+                tf = float(tok.group(4))
+            elif tf is not None:
+                sizes.append(tf * tm * cm)
+    return sizes
+
+
+def test_click_run_sheet_prints_at_7_pt_on_us_letter(click_plan, tmp_path):
+    """Issue 36: the clicks run sheet (a corner's shock and its adjusters' columns) printed on
+    US letter through LibreOffice had text slightly under 7 pt; its smallest text prints at
+    >= 7 pt, estimated as the sheets module does and, where LibreOffice is installed, as it
+    prints (its PDF's text sizes)."""
+    import shutil
+    import subprocess
+
+    path = write_run_sheet(click_plan, tmp_path / "clicks.xlsx", units="imperial")
+    ws = load_workbook(path)["run sheet"]
+    assert int(ws.page_setup.paperSize) == PAPER_SIZE["imperial"]
+    assert _estimated_smallest_pt(ws) >= SMALLEST_PRINTED_PT
+    soffice = shutil.which("soffice") or shutil.which("libreoffice")
+    if soffice is None:
+        pytest.skip("LibreOffice is not installed: the estimate alone is checked")
+    profile = tmp_path / "lo-profile"  # its own profile: no lock shared with a running one
+    subprocess.run([soffice, f"-env:UserInstallation=file://{profile}", "--headless",
+                    "--convert-to", "pdf", "--outdir", str(tmp_path), str(path)],
+                   check=True, capture_output=True, timeout=300)
+    sizes = _pdf_text_sizes(tmp_path / "clicks.pdf")
+    assert len(sizes) > 50
+    assert min(sizes) >= SMALLEST_PRINTED_PT - PDF_PT_ATOL, sorted(sizes)[:5]

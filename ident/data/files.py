@@ -40,14 +40,15 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 import tomli_w
 
 from ident import interrupts
-from ident.data.units import check_units
+from ident.data.units import FILE_DIGITS, check_units, round_significant
 
-__all__ = ["read_toml", "write_csv", "write_csv_frame", "write_parquet_frame", "write_table_file",
+__all__ = ["read_toml", "round_file_numbers", "write_csv", "write_csv_frame", "write_parquet_frame", "write_table_file",
            "atomic_write_text", "atomic_write_bytes", "atomic_write_toml", "atomic_path",
            "atomic_dir", "check_can_write", "check_output", "did_you_mean",
            "FLOAT_DTYPES", "PARQUET_FLOAT32_OPTIONS",
            "UNITS_KEY", "UNITS_COLUMN", "units_marker", "csv_preamble", "read_units_marker",
-           "read_csv_table", "read_csv_after", "units_of_column", "resolve_units"]
+           "read_csv_table", "read_csv_after", "units_of_column", "resolve_units",
+           "PNG_TEXT_KEY", "figure_text", "png_metadata"]
 
 #: The types :func:`write_parquet_frame` stores float columns in.
 FLOAT_DTYPES = ("float64", "float32")
@@ -228,6 +229,43 @@ def did_you_mean(word, choices, *, cutoff=0.75):
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
+#: The PNG text chunk in which shockplan's figures keep their words (:func:`png_metadata`).
+PNG_TEXT_KEY = "Description"
+
+
+def figure_text(fig):
+    """The words a reader sees on a matplotlib figure: its title, each axes' title and axis
+    labels, legend entries and texts placed on it, one per line, each once, in drawing
+    order (tick labels are numbers: left out).
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+
+    Returns
+    -------
+    str
+    """
+    texts = [fig.get_suptitle(), *(t.get_text() for t in fig.texts)]
+    for ax in fig.axes:
+        texts += [ax.get_title(loc) for loc in ("left", "center", "right")]
+        texts += [ax.get_xlabel(), ax.get_ylabel(), *(t.get_text() for t in ax.texts)]
+        legend = ax.get_legend()
+        if legend is not None:
+            texts += [t.get_text() for t in legend.get_texts()]
+    for legend in fig.legends:
+        texts += [t.get_text() for t in legend.get_texts()]
+    return "\n".join(dict.fromkeys(t.strip() for t in texts if t and t.strip()))
+
+
+def png_metadata(fig):
+    """``savefig``'s `metadata` for a PNG: the figure's words (:func:`figure_text`) in the
+    text chunk :data:`PNG_TEXT_KEY`, so that a test or a search reads a plot's units and
+    labels without looking at it (``PIL.Image.open(path).text``). Call it right before
+    ``savefig``: the words are those the figure has then."""
+    return {PNG_TEXT_KEY: figure_text(fig)}
+
+
 def atomic_write_bytes(path, data, *, overwrite=True):
     """Write `data` to `path` atomically."""
     with atomic_path(path, overwrite=overwrite) as tmp:
@@ -239,9 +277,30 @@ def atomic_write_text(path, text, *, overwrite=True):
     atomic_write_bytes(path, text.encode("utf-8"), overwrite=overwrite)
 
 
+def round_file_numbers(data, digits=FILE_DIGITS):
+    """`data` (nested dicts, lists and tuples) with every float rounded to `digits`
+    significant digits (:func:`ident.data.units.round_significant`): a value converted at the
+    file boundary as a file should hold it (``damping = 28.0``, not ``28.000000000000004``),
+    within 5e-13 of the value (relative) with the default.
+
+    Examples
+    --------
+    >>> round_file_numbers({"damping": 28.000000000000004, "v": [0.1, 1 / 3], "n": 2})
+    {'damping': 28.0, 'v': [0.1, 0.3333333333333], 'n': 2}
+    """
+    if isinstance(data, dict):
+        return {k: round_file_numbers(v, digits) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return type(data)(round_file_numbers(v, digits) for v in data)
+    if isinstance(data, float):
+        return round_significant(data, digits)
+    return data
+
+
 def atomic_write_toml(path, data, *, overwrite=True, header=None):
-    """Write a mapping as TOML to `path` atomically, with an optional comment header."""
-    text = tomli_w.dumps(data)
+    """Write a mapping as TOML to `path` atomically, with an optional comment header; floats
+    are written to 13 significant digits (:func:`round_file_numbers`)."""
+    text = tomli_w.dumps(round_file_numbers(data))
     if header:
         text = "".join(f"# {line}\n" for line in header.splitlines()) + text
     atomic_write_text(path, text, overwrite=overwrite)

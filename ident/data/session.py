@@ -44,7 +44,8 @@ import tomli_w
 
 from ident.data.channels import (CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS, corner_table,
                                  rig_inputs_of)
-from ident.data.files import FLOAT_DTYPES, atomic_write_text, did_you_mean, read_toml
+from ident.data.files import (FLOAT_DTYPES, atomic_write_text, did_you_mean, read_toml,
+                              round_file_numbers)
 from ident.data.runs import (RTOL_TIME_STEP, check_channel_map, check_columns,
                              check_session_units, frozen_array, in_memory_columns,
                              read_run_table, write_mapped_run_table, write_run_table)
@@ -872,7 +873,7 @@ def _safe_stem(name):
 
 def _toml_value(value):
     """Render one TOML value (string, number, inline table) via tomli_w."""
-    return tomli_w.dumps({"x": value}).partition("=")[2].strip()
+    return tomli_w.dumps(round_file_numbers({"x": value})).partition("=")[2].strip()
 
 
 def _inline_table(values):
@@ -912,12 +913,12 @@ def _manifest_text(session, *, units, files):
             continue
         extra[key] = value
     if session.static_corner_load_n is None:
-        parts = [tomli_w.dumps({**head, **extra})]
+        parts = [tomli_w.dumps(round_file_numbers({**head, **extra}))]
     else:  # an inline table, as in the spec, before any [table] of the extra keys
         loads = dict(zip(CORNERS, (from_si(float(x), "force", units)
                                    for x in session.static_corner_load_n)))
         parts = [tomli_w.dumps(head), f"static_corner_load = {_inline_table(loads)}\n",
-                 tomli_w.dumps(extra)]
+                 tomli_w.dumps(round_file_numbers(extra))]
     parts.extend(_run_block(run, file, units=units) for run, file in zip(session.runs, files))
     return "".join(parts)
 

@@ -120,7 +120,7 @@ import numpy as np
 from ident.data.files import (UNITS_COLUMN, atomic_write_text, check_can_write, csv_preamble,
                               did_you_mean, read_csv_table, read_toml, read_units_marker)
 from ident.data.timebase import nominal_rate, uniform_time_base
-from ident.data.units import TO_SI, UNIT_LABELS, check_units, from_si
+from ident.data.units import TO_SI, UNIT_LABELS, check_units, format_quantity, from_si
 from ident.errors import DynoError
 
 __all__ = [
@@ -1192,9 +1192,11 @@ def _analyze(cols, sources, where, min_cycles):
         for side, vel, force in (("bump", vb, fb), ("rebound", vr, fr)):
             if force <= 0:
                 raise DynoError(
-                    f"{where}: the {side} force at {_num(vel)} m/s is {_num(-force)} N "
+                    f"{where}: the {side} force at {format_quantity(vel, 'velocity')} is "
+                    f"{format_quantity(-force, 'force')} "
                     f"{'in rebound' if side == 'bump' else 'in compression'} once the gas "
-                    f"force ({_num(gas)} N) is removed: not passive; check the signs of "
+                    f"force ({format_quantity(gas, 'force')}) is removed: not passive; check "
+                    "the signs of "
                     f"{sources['force']!r} and {sources['displacement']!r} (compression "
                     "positive) in the dyno map")
         lv, lf = _loop(v, f - gas, starts[g], ends[g])
@@ -1209,9 +1211,10 @@ def _analyze(cols, sources, where, min_cycles):
                                              "peak_window": PEAK_WINDOW,
                                              "block_rtol": BLOCK_RTOL,
                                              "diff_window_share": DIFF_WINDOW_SHARE}))
-    logger.info("%s: %d cycles, %d blocks %.3g-%.3g m/s, gas %.4g N, lag %.3g s", where,
-                len(cyc), len(blocks), blocks[0].bump_velocity_m_s,
-                blocks[-1].bump_velocity_m_s, gas, lag)
+    logger.info("%s: %d cycles, %d blocks %s-%s, gas %s, lag %.3g s", where,
+                len(cyc), len(blocks), format_quantity(blocks[0].bump_velocity_m_s, "velocity"),
+                format_quantity(blocks[-1].bump_velocity_m_s, "velocity"),
+                format_quantity(gas, "force", digits=4), lag)
     return run
 
 

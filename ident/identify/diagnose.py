@@ -71,6 +71,7 @@ import pandas as pd
 from ident.data.channels import CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
 from ident.data.drive import Drive, decimate_bandlimited
 from ident.data.session import STATIC_OFFSET_SHARE
+from ident.data.units import format_quantity
 from ident.sim.closedloop import refine_input, simulate
 
 __all__ = [
@@ -567,7 +568,7 @@ def _simulate_run(plant, run, session, levels, oversample, failed):
 
 _EFFECTS = {
     "stiffening": (("signs of a bump stop: the wheel's force balance stiffens in compression "
-                   "beyond {value_mm:.1f} mm of travel from rest ({rest}); the identified "
+                   "beyond {travel} of travel from rest ({rest}); the identified "
                    "model is linear and reads the stop as a stiffer car everywhere, so "
                    "predicted metrics are off by up to a few per cent (on the virtual rig: "
                    "0.4 % median, 3 % max with stops touched 2-6 %) and most for setups "
@@ -576,42 +577,42 @@ _EFFECTS = {
                    "session.toml and each run's bump_stops (and packers); or lower the drive "
                    "level so that the stops are not reached")),
     "stiffening_travel": (("signs of a bump stop: the measured travel stays below the "
-                          "model's beyond {value_mm:.1f} mm of its travel from rest ({rest}; "
+                          "model's beyond {travel} of its travel from rest ({rest}; "
                           "without force channels the onset and share are rough); the model "
                           "reads the stop as a stiffer car everywhere, so predicted metrics "
                           "are off by up to a few per cent"),
                           ("declare the bump stops (bump_stop_library and each run's "
                           "bump_stops in session.toml), or lower the drive level")),
-    "stiffening_declared": (("stiffening beyond the declared bump stop from {value_mm:.1f} mm "
+    "stiffening_declared": (("stiffening beyond the declared bump stop from {travel} "
                             "of travel from rest ({rest}): the declared gap or table does not "
                             "match the car, and predictions with it are off where it acts"),
                             ("check the declared bump stop's gap, table and packer against "
                             "the car")),
-    "bump stop contact": (("travel beyond the declared bump stop's contact ({value_mm:.1f} mm "
+    "bump stop contact": (("travel beyond the declared bump stop's contact ({travel} "
                           "from rest, {rest}) {share_pct:.1f} % of the time; the loop solves "
                           "the declared stop, and setups that travel further than the session "
                           "are extrapolated"),
                           ("none needed (declared); for a model that rests less on the "
                           "stop, lower the drive level so that it is touched less")),
     "lift-off": (("contact force near zero (below {near:.0f} % of the static load) "
-                 "{share_pct:.1f} % of the time, smallest {value:.0f} N ({how}); a linear "
+                 "{share_pct:.1f} % of the time, smallest {force} ({how}); a linear "
                  "model lets the tire pull on the pad: without the static loads, predicted "
                  "metrics are off by up to a few per cent (measured 0.2 % median, 2.6 % max "
                  "at 0.5-1.9 % of the time off the pads)"),
                  "{fix_static}lower the drive level so that the tires stay on the pads"),
-    "lift-off floor": (("the tire force sits on a floor at {value:.0f} N {share_pct:.1f} % of "
+    "lift-off floor": (("the tire force sits on a floor at {force} {share_pct:.1f} % of "
                        "the time: the tire leaves its pad there (contact zero, the static "
-                       "load about {load:.0f} N); a linear model lets the tire pull on the "
+                       "load about {load_force}); a linear model lets the tire pull on the "
                        "pad: predicted metrics are off by up to a few per cent (measured "
                        "0.2 % median, 2.6 % max at 0.5-1.9 % of the time off the pads)"),
                        "{fix_static}lower the drive level so that the tires stay on the pads"),
-    "friction": (("a force in phase with the sign of the shock velocity, {value:.0f} N "
+    "friction": (("a force in phase with the sign of the shock velocity, {force} "
                  "beyond the wheel's linear force balance: suspension friction in parallel "
                  "with the shock (bushings, bearings, seals; the shock's load cell does not "
-                 "see it), the shock within its sticking band (|v| < {band_mm_s:.1f} mm/s) "
+                 "see it), the shock within its sticking band (|v| < {band_velocity}) "
                  "{share_pct:.1f} % of the time; the identified model is linear and holds it "
-                 "as an equivalent damping of about {c_eq:.0f} N/(m/s) at this run's shock "
-                 "velocity ({v_rms:.3f} m/s RMS): low-speed damping is over-estimated for "
+                 "as an equivalent damping of about {c_eq_damping} at this run's shock "
+                 "velocity ({v_rms_velocity} RMS): low-speed damping is over-estimated for "
                  "light setups and drives that move the shock faster, under-estimated for "
                  "stiff ones, and predictions near low shock speeds are less certain"),
                  ("friction is not a declarable element of the session: measure its "
@@ -625,7 +626,7 @@ _EFFECTS = {
                  ("declare the bump stops and static loads if the car has them, lower the "
                  "drive level, or check the channel's calibration and sign")),
     "amplitude": (("the residual grows with the drive level: {value:.1f}x from run {low} "
-                  "(level {low_mm:.2f} mm) to this run ({high_mm:.2f} mm): the car is "
+                  "(level {low_level}) to this run ({high_level}): the car is "
                   "nonlinear at these amplitudes, and predictions hold only at the "
                   "session's level"),
                   ("lower the drive level to where the residual stays flat, or declare the "
@@ -881,6 +882,13 @@ def _tire_floor(x):
     return bottom, float(np.median(x[x <= lo + width]))
 
 
+def _shown(value_si, quantity, *, small=False):
+    """A value with its unit in the display units, ``nan`` kept as ``nan``."""
+    if not np.isfinite(value_si):
+        return "nan"
+    return format_quantity(value_si, quantity, small=small)
+
+
 def _finding(run, corner, kind, share, value, *, variant=None, rest="rest", how="",
              given=False, channel="", noise=0.0, low="", low_mm=0.0, high_mm=0.0,
              band=np.nan, v_rms=np.nan):
@@ -897,6 +905,14 @@ def _finding(run, corner, kind, share, value, *, variant=None, rest="rest", how=
               "v_rms": v_rms, "c_eq": (value * np.sqrt(2 / np.pi) / v_rms
                                        if v_rms > 0 else np.nan),
               "load": -value if np.isfinite(value) else np.nan}
+    # the values with their units, in the run's unit system (ident.data.units.display_units)
+    fields.update(travel=_shown(value, "displacement", small=True),
+                  force=_shown(value, "force"), load_force=_shown(fields["load"], "force"),
+                  band_velocity=_shown(band, "velocity", small=True),
+                  c_eq_damping=_shown(fields["c_eq"], "damping"),
+                  v_rms_velocity=_shown(v_rms, "velocity"),
+                  low_level=_shown(low_mm / 1e3, "displacement", small=True),
+                  high_level=_shown(high_mm / 1e3, "displacement", small=True))
     fix = fix.format(**fields)
     if kind == "lift-off" and given:
         fix = ("the static loads are declared (the loop keeps the contact); to identify "

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.data.files import atomic_path
+from ident.data.files import atomic_path, png_metadata
 from ident.data.channels import RIG_INPUTS, quantity_of
 from ident.identify.frf import DF_INPUTS, Frf
 from ident.data.units import UNIT_LABELS, check_units, from_si
@@ -697,7 +697,7 @@ def write_frf_plots(model_or_frf, out_dir, *, outputs=None, truth=None, units="S
         _clear(axes)
         _fill(_select(curves, o, _resolve_inputs(g, in_names), units), axes)
         with atomic_path(path, overwrite=True) as tmp:
-            fig.savefig(tmp, format="png", dpi=dpi)
+            fig.savefig(tmp, format="png", dpi=dpi, metadata=png_metadata(fig))
         written.append(path)
         log.debug("wrote %s", path)
     log.info("wrote %d FRF plots to %s", len(written), out_dir)

@@ -76,7 +76,7 @@ from scipy.interpolate import PchipInterpolator
 from scipy.optimize import lsq_linear
 
 from ident.data.files import did_you_mean, read_csv_table
-from ident.data.units import from_si, to_si
+from ident.data.units import format_quantity, from_si, to_si
 from ident.errors import ShockModelError
 from ident.models.shocks import TableShock, format_number, is_real_number
 
@@ -537,8 +537,8 @@ def check_dyno_points(points, *, shock, adjusters, stiffer, rtol=MONOTONE_RTOL,
     for j in bad:
         out.append(DynoFinding(
             "error", shock, "", setting_name(s[j]), points.rows[j],
-            f"{points.rows[j]}: force {format_number(f[j])} N at velocity "
-            f"{format_number(v[j])} m/s has the wrong sign (compression positive: force takes "
+            f"{points.rows[j]}: force {format_quantity(f[j], 'force', digits=6)} at velocity "
+            f"{format_quantity(v[j], 'velocity', digits=6)} has the wrong sign (compression positive: force takes "
             "the sign of the velocity); fix the digitized value or its sign"))
     for a, name in enumerate(names):
         lo, hi = adjusters[name]
@@ -583,11 +583,13 @@ def check_dyno_points(points, *, shock, adjusters, stiffer, rtol=MONOTONE_RTOL,
                                                        if len(rows) > 4 else "")
                         noise_finding = DynoFinding(
                             "warning", shock, name, setting_name(kh), rows[0],
-                            f"{shown}: at {side} up to {format_number(grid[noise].max())} m/s "
+                            f"{shown}: at {side} up to "
+                            f"{format_quantity(grid[noise].max(), 'velocity', digits=4)} "
                             f"the curve at {setting_name(kh)} crosses the one at "
                             f"{setting_name(ks)} by at most "
-                            f"{format_number(float((fa - fb)[noise].max()))} N, within the "
-                            f"dyno's resolution ({format_number(atol_n)} N): noise, fitted "
+                            f"{format_quantity(float((fa - fb)[noise].max()), 'force')}, within "
+                            f"the dyno's resolution ({format_quantity(atol_n, 'force')}): "
+                            "noise, fitted "
                             "through")
                     drop = np.where(fa - fb > atol_n, drop, 0.0)
                     k = int(np.argmax(drop))
@@ -598,7 +600,8 @@ def check_dyno_points(points, *, shock, adjusters, stiffer, rtol=MONOTONE_RTOL,
                     if drop[k] <= CROSSING_WARN_RTOL:
                         continue
                     near = ib[np.argmin(np.abs(vb - grid[k]))]
-                    msg = (f"{points.rows[near]}: at {side} {format_number(grid[k])} m/s the "
+                    msg = (f"{points.rows[near]}: at {side} "
+                           f"{format_quantity(grid[k], 'velocity', digits=4)} the "
                            f"curve at {setting_name(kh)} is {100 * drop[k]:.1f} % softer than at "
                            f"{setting_name(ks)}, but {name!r} is stiffer towards "
                            f"{stiffer[name]} settings (the curves cross)")

@@ -23,6 +23,7 @@ import logging
 import sys
 
 from ident import interrupts
+from ident.data.units import display_units
 from planner.cli import (demo, drive, dyno, export_drive, identify, optimize, plan, predict,
                          rank, rig, rigfiles, sweep, vehicle, whatif)
 from planner.cli.common import (FLAGS_ANYWHERE, Parser, VersionAction, add_flags_anywhere,
@@ -61,7 +62,8 @@ def main(argv=None):
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:
-        return args.func(args)
+        with display_units("SI"):  # until the command knows the project's unit system
+            return args.func(args)
     except (ValueError, TypeError, FileExistsError, FileNotFoundError) as exc:
         print(f"shockplan: error: {one_line(exc)}", file=sys.stderr)
         return 2

@@ -14,7 +14,7 @@ import re
 import sys
 
 from ident.data.files import check_output
-from ident.data.units import UNIT_SYSTEMS
+from ident.data.units import UNIT_SYSTEMS, set_display_units
 
 __all__ = [
     "Parser", "add_flags_anywhere", "FLAGS_ANYWHERE", "TYPO_CUTOFF", "RENAMED_OPTIONS",
@@ -346,9 +346,11 @@ def read_inputs(args):
 def output_units(args, drives):
     """The unit system of the outputs, set as ``args.units``: ``--units`` if given, else the
     first drive file's (its ``units`` column or ``# units:`` line; the spec: predictions
-    in the drive file's units), else SI."""
+    in the drive file's units), else SI. The run's messages, tables and plots are then in
+    them too (:func:`ident.data.units.set_display_units`)."""
     if args.units is None:
         args.units = drives[0].settings.get("units", "SI") if drives else "SI"
+    set_display_units(args.units)  # the messages, tables and plots of the run in them too
     return args.units
 
 

@@ -21,7 +21,7 @@ import difflib
 from pathlib import Path
 
 from ident.data.files import check_output
-from ident.data.units import UNIT_SYSTEMS
+from ident.data.units import UNIT_SYSTEMS, set_display_units
 from planner.cli.common import (add_command_group, add_histogram_option, add_resample,
                                 histogram_options, log, run_subcommand, unit_system)
 
@@ -222,6 +222,7 @@ def _read_logs(args):
             for p in args.logs]
     if args.units is None:
         args.units = logs[0].settings.get("units") or "SI"
+    set_display_units(args.units)  # the run's messages, report and plots in them
     return logs
 
 
@@ -250,7 +251,7 @@ def _print_result(result, units):
     import numpy as np
 
     from ident.data.channels import CORNERS, quantity_of
-    from ident.data.units import UNIT_LABELS, from_si
+    from ident.data.units import format_quantity
 
     t = result.target
     h = result.history
@@ -269,12 +270,11 @@ def _print_result(result, units):
     preload = t.settings.get("aero_preload") or []
     if preload:
         mean = {k: float(np.mean([p[k] for p in preload])) for k in preload[0]}
-        lab = UNIT_LABELS[units]
         print("aero loads: their mean is the aeroloaders' static preload, set before the drive "
-              f"plays (the drive holds the rest): heave "
-              f"{float(from_si(mean['aero_heave'], 'force', units)):.5g} {lab['force']}, pitch "
-              f"{float(from_si(mean['aero_pitch'], 'moment', units)):.5g} {lab['moment']}, roll "
-              f"{float(from_si(mean['aero_roll'], 'moment', units)):.5g} {lab['moment']}")
+              "plays (the drive holds the rest): heave "
+              f"{format_quantity(mean['aero_heave'], 'force', units, digits=4)}, pitch "
+              f"{format_quantity(mean['aero_pitch'], 'moment', units, digits=4)}, roll "
+              f"{format_quantity(mean['aero_roll'], 'moment', units, digits=4)}")
     reach = result.reach["unreachable_share"]
     rows = []
     for c in per.index:
@@ -282,7 +282,7 @@ def _print_result(result, units):
         rms = h[(h["iteration"] == result.settings["best_iteration"]) &
                 (h["channel"] == c)]["residual_rms"].iloc[0]
         rows.append(f"  {c:<20} residual {100 * per[c]:6.2f} %  "
-                    f"({float(from_si(rms, q, units)):.4g} {UNIT_LABELS[units][q]} RMS), "
+                    f"({format_quantity(rms, q, units, small=True)} RMS), "
                     f"out of reach {100 * reach[c]:5.2f} %")
     print("\n".join(rows))
     lim = result.limits
@@ -457,6 +457,7 @@ def run_section(args):
         raise PlannerError(f"{where}: give --section NAME=START:STOP or --laps T0,T1,...")
     drive = read_drive(args.drive, units=args.units)
     units = args.units or drive.settings.get("units", "SI")
+    set_display_units(units)
     folder = Path(args.out)
     base = folder / f"{Path(args.drive).stem}.csv"     # sections are CSV drives
     paths = [section_path(base, name) for name, _, _ in sections]
@@ -478,6 +479,7 @@ def run_resample(args):
     check_output(out, overwrite=args.overwrite)
     drive = read_drive(args.drive, units=args.units)
     units = args.units or drive.settings.get("units", "SI")
+    set_display_units(units)
     new = resample_drive(drive, args.fs)
     write_drive(new, out, units=units, overwrite=args.overwrite)
     s = new.settings

@@ -19,7 +19,7 @@ import argparse
 import logging
 
 from ident.data.files import check_output
-from ident.data.units import UNIT_LABELS, UNIT_SYSTEMS
+from ident.data.units import UNIT_LABELS, UNIT_SYSTEMS, from_si, set_display_units
 from planner.cli.common import add_command_group, add_resample, run_subcommand, unit_system
 
 __all__ = ["add_parser", "run", "run_import", "run_table", "run_check", "parse_velocities",
@@ -83,6 +83,7 @@ def run_import(args):
         except DynoError:
             units = None  # a missing sheet: created; write_dyno_sheet names other problems
     units = units or "SI"
+    set_display_units(units)
     result = import_dyno_runs(args.raw, settings=settings, dyno_map=args.map,
                               resample_hz=args.resample)
     warnings = write_dyno_sheet(result, args.out, units=units, append=args.append,
@@ -116,6 +117,7 @@ def run_table(args):
 
     check_output(args.out, overwrite=args.overwrite)
     units = args.units or library_units(args.library)
+    set_display_units(units)
     library = read_shock_library(args.library)
     curve = dyno_curve(library, args.shock, velocities=args.velocity, units=units)
     path = write_dyno_curve(curve, args.out, overwrite=args.overwrite)
@@ -127,9 +129,10 @@ def run_table(args):
     if ext.any():
         reb, bump = curve.measured_m_s
         print(f"note: {int(ext.sum())} velocit{'y is' if ext.sum() == 1 else 'ies are'} "
-              f"beyond the dyno's measured speeds (rebound {format_number(reb)}, bump "
-              f"{format_number(bump)} m/s): the curve there is extrapolated with its end "
-              "slopes")
+              f"beyond the dyno's measured speeds (rebound "
+              f"{format_number(from_si(reb, 'velocity', units))}, bump "
+              f"{format_number(from_si(bump, 'velocity', units))} {v_unit}): the curve there "
+              "is extrapolated with its end slopes")
     return 0
 
 
@@ -147,10 +150,14 @@ def run_check(args):
         0 without errors, 1 when any error is found (the files are written either way).
     """
     from ident.models import adjustable
-    from planner.dyno.check import check_dyno_library
+    from planner.dyno.check import check_dyno_library, library_units
     from planner.report.dyno import write_dyno_check
 
     check_output(args.out, overwrite=args.overwrite, folder=True)
+    try:  # the findings in the library's unit system (or --units)
+        set_display_units(args.units or library_units(args.library))
+    except (ValueError, OSError):
+        pass  # a library that cannot be read: the check says why
     # the click model logs its sheets' warnings when built; they are printed below
     quiet = logging.getLogger(adjustable.__name__)
     drop = _DropWarnings()
@@ -160,6 +167,7 @@ def run_check(args):
     finally:
         quiet.removeFilter(drop)
     units = args.units or check.units
+    set_display_units(units)
     files = write_dyno_check(check, args.out, units=units, overwrite=args.overwrite)
     for s in check.shocks:
         if s.worst is not None and not s.worst.empty:

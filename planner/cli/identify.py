@@ -57,6 +57,7 @@ def run(args):
     import warnings
 
     from ident.data.session import read_session
+    from ident.data.units import format_significant, from_si, set_display_units, unit_label
     from ident.identify.model import summary_path, write_model_summary
     from ident.identify.pipeline import identify_session
     from planner.noise import with_noise_report
@@ -69,6 +70,7 @@ def run(args):
         check_output(args.plots, overwrite=True, folder=True, what="--plots")
     out = Path(args.out)
     session = read_session(args.session, resample_hz=args.resample)
+    set_display_units(session.units)  # the session's unit system in every line printed
     diagnose_log = logging.getLogger("ident.identify.diagnose")
     shocks_log = logging.getLogger("ident.identify.shockcheck")
     level, shocks_level = diagnose_log.level, shocks_log.level
@@ -106,9 +108,11 @@ def run(args):
                 for r in worst.itertuples()]
         print("the 12 pairs with the largest fit error (--all-pairs for every pair):")
     print(format_table(rows, ["output", "input", "order", "fit error", "median coh 0.5-20 Hz"]))
+    c_bar = ", ".join(format_significant(from_si(c, "damping", session.units), 3)
+                      for c in model.cbar_n_s_m)
     print(f"median fit error {table.fit_error.median():.4f}, orders "
           f"{int(table.order.min())}..{int(table.order.max())}; c_bar "
-          f"{', '.join(f'{c:.0f}' for c in model.cbar_n_s_m)} N/(m/s)")
+          f"{c_bar} {unit_label('damping', session.units)}")
     print("\n".join(model.noise.lines(table)))
     if model.elements is not None:  # what the session declared: in the loop of predictions
         lift = model.liftoff

@@ -11,12 +11,17 @@ from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES, add
                                 add_units, bump_stop_library, check_out, int_at_least,
                                 load_any_model, output_units, packer_bounds, show_progress)
 
-__all__ = ["add_parser", "run", "cli_wording", "scan_line", "OPTION_NAMES"]
+__all__ = ["add_parser", "run", "cli_wording", "scan_line", "OPTION_NAMES",
+           "REFERENCE_VELOCITIES"]
 
 #: The library's names of optimize's options -> the command's, for the library's messages
 #: printed by the command ("raise max_iter" reads "raise --max-iter").
 OPTION_NAMES = {"max_iter": "--max-iter", "n_starts": "--starts",
                 "click_radius": "--click-radius"}
+
+#: The shock velocities at which the optimal curves' forces are printed, per unit system:
+#: round numbers in the units the project reads (about 0.05, 0.1 and 0.25 m/s).
+REFERENCE_VELOCITIES = {"SI": (0.05, 0.1, 0.25), "imperial": (2.0, 4.0, 10.0)}
 
 
 def cli_wording(message):
@@ -103,7 +108,7 @@ def run(args):
 
     from ident.data.drive import read_drive
     from ident.models.library import read_shock_library
-    from ident.data.units import from_si
+    from ident.data.units import format_quantity, from_si, to_si, unit_label
     from planner.objective import default_objective, read_objective
     from planner.options import ElementOptions, LoopOptions
     from planner.optimize import (
@@ -161,8 +166,7 @@ def run(args):
     if opt.bump_stops is not None:
         lines.append("bump stops in the loop and the verification"
                      + (", packers chosen: " + ", ".join(
-                         f"{g} {from_si(p, 'displacement', args.units):.4g} "
-                         f"{'in' if args.units == 'imperial' else 'm'}"
+                         f"{g} {format_quantity(p, 'displacement', args.units, small=True)}"
                          for g, p in opt.packers_m.items()) if opt.packers_m else ""))
     scan = opt.settings.get("scan")
     if scan:
@@ -188,15 +192,15 @@ def run(args):
         lines.append("stationarity: every knot force moved by +-5 % " + (
             f"worsens the score (by {100 * change:.4f} % at least)" if change >= 0 else
             f"improves the score by at most {-100 * change:.4f} %") + note)
-    ref = (0.05, 0.1, 0.25)  # m/s
+    ref = REFERENCE_VELOCITIES[args.units]  # round numbers in the project's units
     for sid, m in opt.shocks.items():
         vals = ", ".join(
-            f"{from_si(m.force(v), 'force', args.units):.0f}/"
-            f"{from_si(m.force(-v), 'force', args.units):.0f}" for v in ref)
-        unit_v = "m/s" if args.units == "SI" else "in/s"
-        vs = "/".join(f"{from_si(v, 'velocity', args.units):.3g}" for v in ref)
-        lines.append(f"{sid}: bump/rebound force at {vs} {unit_v}: {vals} "
-                     f"{'N' if args.units == 'SI' else 'lbf'}")
+            f"{from_si(m.force(to_si(v, 'velocity', args.units)), 'force', args.units):.0f}/"
+            f"{from_si(m.force(-to_si(v, 'velocity', args.units)), 'force', args.units):.0f}"
+            for v in ref)
+        lines.append(f"{sid}: bump/rebound force at {'/'.join(f'{v:g}' for v in ref)} "
+                     f"{unit_label('velocity', args.units)}: {vals} "
+                     f"{unit_label('force', args.units)}")
     lines += click_summary(opt)
     for w in caught:
         lines.append(f"warning: {cli_wording(w.message)}")

@@ -6,6 +6,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ident.data.channels import RIG_KINDS
+from ident.data.units import set_display_units
 from planner.cli.common import add_units, check_out, load_vehicle, show_progress
 
 __all__ = ["add_parser", "run"]
@@ -66,6 +67,7 @@ def run(args):
         plan = replace(plan, rig=args.rig)
     vehicle = load_vehicle(args.vehicle)
     out = Path(args.out)
+    set_display_units(args.units or plan.units)  # the session's unit system in its messages
     session = simulate_session(plan, vehicle, progress=show_progress(args))
     write_session(session, out, units=args.units or plan.units, run_format=args.format,
                   overwrite=args.overwrite)

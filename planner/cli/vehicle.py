@@ -18,14 +18,14 @@ def add_parser(subparsers):
     modes.add_argument("--damping", type=float, help="linear shock damping of every corner for "
                        "the damped modes [N/(m/s), or lbf/(in/s) with --units imperial] "
                        "(default: the vehicle's own)")
-    add_units(modes, "units of --damping")
+    add_units(modes, "units of --damping and of the damping printed")
     modes.set_defaults(func=run)
     return veh
 
 
 def run(args):
     """``shockplan vehicle modes``: natural frequencies of a vehicle."""
-    from ident.data.units import to_si
+    from ident.data.units import format_quantity, to_si
     from ident.models.vehicle import modal_summary
 
     vehicle = load_vehicle(args.vehicle)
@@ -36,7 +36,8 @@ def run(args):
     rows = [(lab, f"{f0:.3f}", f"{u:.3f}", f"{d:.3f}", f"{z:.3f}")
             for lab, f0, u, d, z in zip(s.labels, s.no_damping_hz, s.natural_hz, s.damped_hz,
                                         s.damping_ratio)]
-    print(f"vehicle '{vehicle.name}', shocks {s.damping_n_s_m[0]:.1f} N/(m/s)")
+    print(f"vehicle '{vehicle.name}', shocks "
+          f"{format_quantity(s.damping_n_s_m[0], 'damping', args.units, digits=4)}")
     print(format_table(rows, ["mode", "no-damping Hz", "natural Hz", "damped Hz", "zeta"]))
     print("no-damping: springs and tires alone (the ride-rate hand calculation); natural and "
           "damped: the modes with these shocks, |s|/2pi and Im(s)/2pi (damped = natural * "

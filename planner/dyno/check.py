@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from ident.data.files import read_toml
-from ident.data.units import check_units, from_si, to_si
+from ident.data.units import check_units, from_si, round_significant, to_si
 from ident.errors import ShockModelError
 from ident.models.adjustable import (MONOTONE_RTOL, AdjustableShock, DynoFinding,
                                      check_dyno_points, format_shock_name,
@@ -39,6 +39,8 @@ from planner.errors import PlannerError
 __all__ = [
     "BUILDER_GRID",
     "MODEL_LINE_POINTS",
+    "FORCE_DECIMALS",
+    "VELOCITY_DIGITS",
     "DynoCurve",
     "SettingCurve",
     "ShockCheck",
@@ -60,6 +62,12 @@ BUILDER_GRID = {
 }
 #: Points per side of a model line in the check's figures.
 MODEL_LINE_POINTS = 60
+#: Decimals of a curve table's forces [N or lbf]: 0.1 N or 0.1 lbf, below any shock dyno's
+#: resolution (a few newtons), so that the table holds what the numbers mean.
+FORCE_DECIMALS = 1
+#: Significant digits of a curve table's velocities taken from measured speeds (table
+#: knots, converted from SI): 4, finer than a dyno's speed control (about 0.5 %).
+VELOCITY_DIGITS = 4
 
 
 # ----------------------------------------------------------------------------
@@ -79,7 +87,9 @@ class DynoCurve:
     units : {"SI", "imperial"}
         The unit system of `velocity` and `force`.
     velocity, force : ndarray, shape (K,)
-        Velocity [m/s or in/s], increasing, and force [N or lbf], compression positive.
+        Velocity [m/s or in/s], increasing (as given, or measured speeds to
+        :data:`VELOCITY_DIGITS` significant digits), and force [N or lbf] to
+        :data:`FORCE_DECIMALS` decimals, compression positive.
     velocity_m_s, force_n : ndarray, shape (K,)
         The same in SI.
     grid : str
@@ -225,6 +235,7 @@ def dyno_curve(library, name, *, velocities=None, units="SI", where="--shock"):
         canonical = model.id
     if velocities is None:
         v, grid = default_velocities(model, units=units)
+        v = np.unique(round_significant(v, VELOCITY_DIGITS))
     else:
         v = np.asarray(velocities, dtype=float).ravel()
         if v.size == 0:
@@ -236,7 +247,7 @@ def dyno_curve(library, name, *, velocities=None, units="SI", where="--shock"):
         v, grid = np.unique(v), "given"
     v_si = np.asarray(to_si(v, "velocity", units), dtype=float)
     f_si = np.asarray(model.force(v_si), dtype=float)
-    f = np.asarray(from_si(f_si, "force", units), dtype=float)
+    f = np.round(np.asarray(from_si(f_si, "force", units), dtype=float), FORCE_DECIMALS) + 0.0
     for arr in (v, f, v_si, f_si):
         arr.flags.writeable = False
     return DynoCurve(canonical, units, v, f, v_si, f_si, grid, measured)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ident.data.files import atomic_dir, write_csv
+from ident.data.files import atomic_dir, png_metadata, write_csv
 from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.models.shocks import format_number
 from planner.errors import PlannerError
@@ -289,7 +289,8 @@ def write_dyno_check(check, out_dir, *, units=None, overwrite=False):
                 names.append(name)
             if s.curves:
                 name = DYNO_CHECK_FILES["curves"].format(id=stem)
-                check_figure(s, units=units).savefig(work / name, dpi=100)
+                fig = check_figure(s, units=units)
+                fig.savefig(work / name, dpi=100, metadata=png_metadata(fig))
                 names.append(name)
             per_shock[s.id] = names
             for name in names:

@@ -19,7 +19,7 @@ from openpyxl import Workbook
 from openpyxl.utils import get_column_letter
 
 from ident.data.channels import CORNERS
-from ident.data.files import atomic_dir, write_csv
+from ident.data.files import atomic_dir, png_metadata, write_csv
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from ident.models.library import ShockLibrary, write_shock_library
 from ident.models.shocks import format_number
@@ -257,11 +257,12 @@ def _summary(optimum, units, run):
 
 
 def _write_workbook(optimum, units, path, run=None):
-    """``optimize.xlsx``: the force tables (SI, imperial), the setups, the solver's report;
-    every sheet laid out and set to print with :mod:`planner.report.sheets`."""
+    """``optimize.xlsx``: a one-page summary, the force table in the run's units (one unit
+    system per project), the setups, the solver's report; every sheet laid out and set to
+    print with :mod:`planner.report.sheets`."""
     wb = Workbook()
     what = f"shockplan optimize ({units})"
-    for k, u in enumerate(("SI", "imperial")):
+    for k, u in enumerate((units,)):
         sheet = wb.active if k == 0 else wb.create_sheet()
         sheet.title = f"curves {u}"
         tab = curve_table(optimum, units=u).round(1).reset_index()
@@ -308,7 +309,7 @@ def _write_workbook(optimum, units, path, run=None):
             ("units", units)]
     scan = optimum.settings.get("scan")
     if scan:
-        d_unit = "N s/m" if units == "SI" else UNIT_LABELS[units]["damping"]
+        d_unit = UNIT_LABELS[units]["damping"]
 
         def rate(c):
             return f"{from_si(c, 'damping', units):.0f}"
@@ -389,8 +390,8 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False, run
 
     Files: ``optimal_shocks.toml`` (the optimal shocks, table kind with lag, and the
     crate's, so the setups file reads against it), ``optimal_setup.csv`` (the optimum,
-    then the crate setups closest to it), ``optimize.xlsx`` (force tables for the shock
-    builder in SI and imperial, the setups side by side, the solver's report),
+    then the crate setups closest to it), ``optimize.xlsx`` (the force table for the shock
+    builder in `units`, the setups side by side, the solver's report),
     ``curves.png`` and ``convergence.csv``; with adjustable shocks in the crate,
     ``clicks.csv`` (:func:`click_table`), the click setups after the optimum in
     ``optimal_setup.csv`` and a ``clicks`` sheet. Each CSV's last column is ``units`` (`units` on
@@ -437,7 +438,7 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False, run
         write_setups([optimum.setup] + clicks + closest, work / names["setups"], units=units)
         _write_workbook(optimum, units, work / names["xlsx"], run=run)
         fig = curves_figure(optimum, library, units=units)
-        fig.savefig(work / names["curves"], dpi=110)
+        fig.savefig(work / names["curves"], dpi=110, metadata=png_metadata(fig))
         # wall times are logged, not written: a rerun writes the same bytes
         write_csv(work / names["convergence"],
                   optimum.history.drop(columns=["time_s"], errors="ignore"), units=units,

@@ -50,7 +50,7 @@ from openpyxl import Workbook
 from openpyxl.styles import Alignment, Border, Font, PatternFill, Side
 from openpyxl.utils import get_column_letter
 
-from ident.data.files import atomic_write_bytes, check_can_write, write_csv
+from ident.data.files import atomic_write_bytes, check_can_write, png_metadata, write_csv
 from ident.data.channels import CORNERS
 from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
@@ -685,7 +685,7 @@ def _new_figure(size):
 
 def _save_png(fig, path, *, overwrite, dpi=110):
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
+    fig.savefig(buf, format="png", dpi=dpi, metadata=png_metadata(fig))
     atomic_write_bytes(path, buf.getvalue(), overwrite=overwrite)
 
 

@@ -29,7 +29,7 @@ import pandas as pd
 from scipy import signal
 
 from ident.data.channels import quantity_of
-from ident.data.files import atomic_dir, write_csv
+from ident.data.files import atomic_dir, png_metadata, write_csv
 from ident.data.tracklog import TrackLog, write_track_log
 from ident.data.units import UNIT_LABELS, check_units, from_si
 
@@ -202,6 +202,6 @@ def write_drive_report(result, out, *, units="SI", overwrite=False, histograms=N
                       units=units)
         for key, fig in (("psd", psd_figure(result, units=units)),
                          ("convergence", convergence_figure(result))):
-            fig.savefig(work / DRIVE_REPORT_FILES[key], dpi=110)
+            fig.savefig(work / DRIVE_REPORT_FILES[key], dpi=110, metadata=png_metadata(fig))
             plt.close(fig)
     return out

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ident.data.files import atomic_dir, write_csv
+from ident.data.files import atomic_dir, png_metadata, write_csv
 from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.models.vehicle import VEHICLE_KEYS
 from ident.sim.metrics import METRIC_QUANTITY
@@ -397,9 +397,10 @@ def write_whatif(result, out_dir, *, units="SI", top=5, overwrite=False, run=Non
             eff = factor_effects(result, n)
             effects.append(eff.reset_index().assign(setup=n))
             fig = tornado_figure(result, n, units=units)
-            fig.savefig(work / "tornado" / f"{k + 1:02d}_{_safe_name(n)}.png", dpi=110)
+            fig.savefig(work / "tornado" / f"{k + 1:02d}_{_safe_name(n)}.png", dpi=110,
+                        metadata=png_metadata(fig))
         fig = rank_stability_figure(result)
-        fig.savefig(work / "rank_stability.png", dpi=110)
+        fig.savefig(work / "rank_stability.png", dpi=110, metadata=png_metadata(fig))
         _write_workbook(result, table, effects, units, work / "whatif.xlsx", tolerance,
                         run=run)
     for p in sorted(out.rglob("*")):
