@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ident.data.channels import AERO_INPUTS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
-from ident.data.files import did_you_mean
+from ident.data.files import did_you_mean, round_file_numbers
 from ident.errors import SessionError
 from ident.data.formats.record import FORMAT_NAMES, FORMATS
 from ident.data.formats.channel_map import ChannelMap, read_channel_map
@@ -497,7 +497,9 @@ def _check_same_shocks(given, session, setup, *, where):
                 f"{where}: shock {sid!r} is not in the session's {session.shock_library_file}; "
                 "a session keeps one shock library: add the shock to it by hand, then import"
             )
-        if given[sid].to_toml_dict() != session.shocks[sid].to_toml_dict():
+        # as the session's file holds them (TOML floats to 13 significant digits)
+        if (round_file_numbers(given[sid].to_toml_dict())
+                != round_file_numbers(session.shocks[sid].to_toml_dict())):
             raise SessionError(
                 f"{where}: shock {sid!r} of the given library differs from the one in the "
                 f"session's {session.shock_library_file}; give the new shock another id and "
