@@ -322,6 +322,9 @@ def test_every_demo_csv_reads_with_a_plain_read_csv(demo):
             assert columns[0] == "time" and set(WHEELLOADER_INPUTS) <= set(columns), name
             assert set(columns[1:-1]) <= set(RIG_INPUTS), name
             seen.add("drive")
+        elif name.endswith("histograms.csv"):  # issue 39: one row per setup, corner and bin
+            assert columns[:-1] == ["setup", "corner", "velocity_lo", "velocity_hi",
+                                    "share"], name
         elif name.startswith(("ranking/", "optimize/optimal_setup")):
             head = columns[columns.index("setup"):columns.index("setup") + 5]
             assert head == ["setup", *CORNERS], name
