@@ -6,7 +6,7 @@ Run::
                                        [--ref-screen-setups M] [--accuracy-setups A]
                                        [--memory-setups P] [--sweep-setups W]
                                        [--elements-repeat E] [--elements-only]
-                                       [--histograms-only]
+                                       [--histograms-only] [--time-domain-only]
 
 Two models, each reported: the known paper car
 (``ident.models.vehicle.build_full_car(example_vehicle())``) and a model identified from
@@ -91,6 +91,7 @@ at that moment:
    ``simulate_batch_metrics`` without and with ``histogram_bins`` (the default 22 bins),
    alternating, ``--elements-repeat`` times: setups per second of each (wall) and the ratio
    of the CPU times. ``--histograms-only`` runs this part alone;
+   ``--time-domain-only`` runs parts 1-3 alone on the identified model (issue 40);
 8. ``target: ...: PASS/FAIL`` lines: time-domain >= 200 setups/s (oversample 2,
    the default; on the symmetric setups, one call per 119 setups, and on the sweep) and screening >= 10,000 setups/s (every-corner-free setups), each
    for each model given as is (the product's path); peak memory < 2 GB (the
@@ -777,6 +778,9 @@ def main(argv=None):
     parser.add_argument("--histograms-only", action="store_true",
                         help="time only the predictions with and without the shock-velocity "
                         "histograms (issue 39)")
+    parser.add_argument("--time-domain-only", action="store_true",
+                        help="run only the time-domain part on the identified model (issue 40): "
+                        "throughput, accuracy against oversample 16, the solve_ivp reference")
     parser.add_argument("--memory-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.memory_child:
@@ -802,6 +806,9 @@ def main(argv=None):
         bench_histograms(library, list(enumerate_setups(library)), args)
         return
 
+    if args.time_domain_only:
+        _time_domain_only(args)
+        return
     child = start_memory_child(args.memory_setups)  # before this process grows
     try:
         _main(args, child)
@@ -882,6 +889,30 @@ def _main(args, child):
           f"tracemalloc peak {_mib(mem['peak']):.0f} MiB; {_load()} at the end): "
           f"{'PASS' if worst < TARGET_MEMORY_BYTES else 'FAIL'}")
     _element_targets(element_ratios)
+
+
+def _time_domain_only(args):
+    """The time-domain part alone, on the identified model (``--time-domain-only``)."""
+    from ident.identify.pipeline import identify_session
+    from ident.sim.virtual_rig import simulate_session
+
+    print(f"engine version: {_engine_version()}; {_load()}")
+    vehicle = example_vehicle()
+    library = read_shock_library(LIBRARY_PATH)
+    drive = _make_drive(vehicle)
+    sym = list(enumerate_setups(library))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        identified = identify_session(simulate_session())
+        t0 = time.perf_counter()
+        predict_setups(identified, drive, sym[:2], library,
+                       loop=LoopOptions(oversample=OVERSAMPLE_DEFAULT))
+        print(f"warm-up: first predict_setups call, 2 setups (numba {_jit_source()}): "
+              f"{time.perf_counter() - t0:.2f} s")
+        rates, _ = bench_time_domain("identified", identified, drive, sym, library, args)
+    print(f"time domain [identified, oversample {OVERSAMPLE_DEFAULT}]: "
+          f"{rates[OVERSAMPLE_DEFAULT]:,.1f} setups/s; sweep {rates['sweep']:,.1f} setups/s "
+          f"({_load()} at the end)")
 
 
 def _element_targets(ratios):

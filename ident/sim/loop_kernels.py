@@ -630,7 +630,7 @@ _OUT_BLOCK = 128
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
-def _fast_solve(vfree, c0, Deff, b0, curves, lines_s, lines_a, st):
+def _fast_solve(vfree, c0, Deff, b0, curves, lines_s, lines_a, bounds, st):
     """The shock loop's common cases (see :func:`loop_one`); returns the iteration count, 0
     when :func:`shock_step` must solve the step. Inlined: the same operations in the same
     order wherever it is used."""
@@ -666,8 +666,18 @@ def _fast_solve(vfree, c0, Deff, b0, curves, lines_s, lines_a, st):
                 acc += Jinv[c, j] * res[j]
             vnew[c] = acc
         for it_ in range(1, _FAST_ITERATIONS + 1):
+            # every shock strictly inside its segment (the common case), tested without a
+            # branch per shock; otherwise each is placed by _segment_of, which decides a
+            # velocity on a knot (so the indices are those of the per-shock test)
+            inside = True
+            for c in range(m):
+                x = vnew[c]
+                sg = seg[c]
+                inside &= (bounds[0, c, sg] < x) & (x < bounds[1, c, sg])
             same = True
             for c in range(m):
+                if inside:
+                    break
                 s2 = _segment_of(vnew[c], kv, c, nk[c], seg[c])
                 if s2 == seg[c]:
                     continue
@@ -917,6 +927,14 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
     bdi = np.zeros(n)
     bpr = np.zeros(n)  # B dF of the step before
     bpi = np.zeros(n)
+    # the corrector folded into the next predictor: x[k] = xp[k] + g1 B dF[k] is never
+    # formed, the predictor propagates xp with h = phi g1 + g0 on B dF[k] (xp is what the
+    # velocity sums and the element rows read); x itself only at the output samples
+    hr = np.empty(n)
+    hi = np.empty(n)
+    for i in range(n):
+        hr[i] = pr[i] * g1r[i] - pi[i] * g1i[i] + g0r[i]
+        hi[i] = pr[i] * g1i[i] + pi[i] * g1r[i] + g0i[i]
     St = np.zeros((_OUT_BLOCK, 2 * n + m + nw))  # output samples' [Re x, Im x, dF (, w)]
     dF_prev = np.zeros(m)
     F_prev = np.zeros(m)
@@ -936,6 +954,12 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
     for c in range(m):
         for sg in range(nk[c] + 1):
             lines_s[c, sg], lines_a[c, sg] = _segment_line(sg, kv, kf, c, nk[c], slo[c], shi[c])
+    # and its open interval (bounds[0], bounds[1]), for _fast_solve's branch-free test
+    bounds = np.empty((2, m, kv.shape[1] + 1))
+    for c in range(m):
+        for sg in range(nk[c] + 1):
+            bounds[0, c, sg] = -np.inf if sg == 0 else kv[c, sg - 1]
+            bounds[1, c, sg] = np.inf if sg == nk[c] else kv[c, sg]
     worst = 0
     failed = False
     col = 0
@@ -948,9 +972,9 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
         a2 = 0.0
         a3 = 0.0
         for i in range(n):
-            tr = (pr[i] * xr[i] - pi[i] * xi[i] + g0r[i] * bdr[i] - g0i[i] * bdi[i]
+            tr = (pr[i] * xr[i] - pi[i] * xi[i] + hr[i] * bdr[i] - hi[i] * bdi[i]
                   + gmr[i] * bpr[i] - gmi[i] * bpi[i])
-            ti = (pr[i] * xi[i] + pi[i] * xr[i] + g0r[i] * bdi[i] + g0i[i] * bdr[i]
+            ti = (pr[i] * xi[i] + pi[i] * xr[i] + hr[i] * bdi[i] + hi[i] * bdr[i]
                   + gmr[i] * bpi[i] + gmi[i] * bpr[i])
             xr[i] = tr
             xi[i] = ti
@@ -991,7 +1015,7 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
         for c in range(m):
             c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
         if elements is None:
-            it = _fast_solve(vfree, c0, Deff, b0, curves, lines_s, lines_a, st)
+            it = _fast_solve(vfree, c0, Deff, b0, curves, lines_s, lines_a, bounds, st)
             if it == 0:
                 it = shock_step(vfree, c0, Deff, cbar, b0, curves, st)
             if it < 0:
@@ -1005,7 +1029,7 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
                 f_prev2[c] = f_prev[c]
                 f_prev[c] = fv[c]
                 dF_prev[c] = F - cbar[c] * v[c]
-            # corrector: complete x[k] with g1 * B dF[k]
+            # corrector: B dF[k] (x[k] = xp[k] + g1 B dF[k] is folded into the predictor)
             d0 = dF_prev[0]
             d1 = dF_prev[1]
             d2 = dF_prev[2]
@@ -1013,12 +1037,10 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
             for i in range(n):
                 ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
                 ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
-                bpr[i] = bdr[i]
-                bpi[i] = bdi[i]
-                bdr[i] = ur
-                bdi[i] = ui
-                xr[i] += g1r[i] * ur - g1i[i] * ui
-                xi[i] += g1r[i] * ui + g1i[i] * ur
+                bpr[i] = ur  # the step before's row, swapped in below
+                bpi[i] = ui
+            bdr, bpr = bpr, bdr
+            bdi, bpi = bpi, bdi
         else:
             # first guesses: the bump-stop forces and pad corrections of the last step
             # (zero out of contact, the common case: one solve, then the check). The
@@ -1056,7 +1078,7 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
                         for j in range(m):
                             acc += Dvw[c, j] * w[j]
                         vf2[c] = acc
-                it = _fast_solve(vf2, c0, Deff, b0, curves, lines_s, lines_a, st)
+                it = _fast_solve(vf2, c0, Deff, b0, curves, lines_s, lines_a, bounds, st)
                 if it == 0:
                     it = shock_step(vf2, c0, Deff, cbar, b0, curves, st)
                 if it < 0:
@@ -1122,7 +1144,7 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
             for c in range(m):
                 if w[c] != 0.0:
                     w_now = True
-            # corrector: complete x[k] with g1 * (B dF[k] + Bw w[k])
+            # corrector: B dF[k] + Bw w[k] (folded into the predictor, as above)
             d0 = dF_prev[0]
             d1 = dF_prev[1]
             d2 = dF_prev[2]
@@ -1130,21 +1152,16 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
             for i in range(n):
                 ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
                 ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
-                bpr[i] = bdr[i]
-                bpi[i] = bdi[i]
-                bdr[i] = ur
-                bdi[i] = ui
+                bpr[i] = ur  # the step before's row, swapped in below
+                bpi[i] = ui
+            bdr, bpr = bpr, bdr
+            bdi, bpi = bpi, bdi
             if w_now:
                 for i in range(n):
                     bdr[i] += (Bwr[0, i] * w[0] + Bwr[1, i] * w[1] + Bwr[2, i] * w[2]
                                + Bwr[3, i] * w[3])
                     bdi[i] += (Bwi[0, i] * w[0] + Bwi[1, i] * w[1] + Bwi[2, i] * w[2]
                                + Bwi[3, i] * w[3])
-            for i in range(n):
-                ur = bdr[i]
-                ui = bdi[i]
-                xr[i] += g1r[i] * ur - g1i[i] * ui
-                xi[i] += g1r[i] * ui + g1i[i] * ur
         # an output sample every r-th step (a counter: no integer division per step)
         if phase == 0:
             kk = k // r
@@ -1154,9 +1171,9 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
             if v_row >= 0:
                 for c in range(m):
                     y_out[v_row + c, kk] = v[c]
-            for i in range(n):
-                St[col, i] = xr[i]
-                St[col, n + i] = xi[i]
+            for i in range(n):  # x[k] = xp[k] + g1 B dF[k]
+                St[col, i] = xr[i] + (g1r[i] * bdr[i] - g1i[i] * bdi[i])
+                St[col, n + i] = xi[i] + (g1r[i] * bdi[i] + g1i[i] * bdr[i])
             if elements is not None:
                 for c in range(nw):
                     St[col, 2 * n + m + c] = w[c]

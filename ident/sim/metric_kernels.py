@@ -54,7 +54,9 @@ def _sosfilt_lanes(sos, buf, z0, z1, start, stop, step, offset, lo, hi):
     ----------
     sos : ndarray of float, shape (n_sections, 6)
     buf : ndarray of float, shape (n, n_lanes)
-        One signal per column.
+        One signal per column; ``n_lanes`` must be :data:`LANES` (the lane loops' trip
+        count is that constant, so they compile into whole vectors with no remainder
+        loop: the metrics' band-pass 1.7x faster, issue 40).
     z0, z1 : ndarray of float, shape (n_sections, n_lanes)
         The transposed direct form II states, holding the initial state on entry
         (``zi * x0`` as ``sosfilt(..., zi=zi * x0)``); left with the final state.
@@ -69,7 +71,7 @@ def _sosfilt_lanes(sos, buf, z0, z1, start, stop, step, offset, lo, hi):
     turns it into vector instructions (it does not for 2-D indexing of the same loop).
     """
     ns = sos.shape[0]
-    n_lanes = buf.shape[1]
+    n_lanes = LANES  # a compile-time trip count: the lane loops unroll into whole vectors
     for k in range(start, stop, step):
         row = buf[k]
         if lo <= k < hi:
