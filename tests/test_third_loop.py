@@ -268,3 +268,27 @@ def test_without_elements_the_plan_runs_as_before(tmp_path):
         assert list(ra.channels) == list(rb.channels)
         for name in ra.channels:
             assert np.array_equal(ra.channels[name], rb.channels[name]), name
+
+
+def test_the_vehicle_may_declare_the_elements(tmp_path):
+    """A plan without ``third_elements`` takes the vehicle TOML's (its geometry); the
+    vehicle file round-trips them and refuses a motion ratio that is not positive."""
+    from ident.errors import VehicleError
+    from ident.models.vehicle import read_vehicle, write_vehicle
+
+    car = example_vehicle().replace(third_elements={"heave_front": 1.0, "roll_front": 0.8})
+    write_vehicle(car, tmp_path / "car.toml")
+    back = read_vehicle(tmp_path / "car.toml")
+    assert back.third_elements == {"heave_front": 1.0, "roll_front": 0.8}
+    text = (tmp_path / "car.toml").read_text().replace("roll_front = 0.8", "roll_front = 0.0")
+    (tmp_path / "bad.toml").write_text(text)
+    with pytest.raises(VehicleError, match=r"bad.toml: third_elements roll_front = 0.0 is not a "
+                                           "motion ratio; give a number > 0"):
+        read_vehicle(tmp_path / "bad.toml")
+    plan = _plan(tmp_path, PLAN.replace(
+        "third_elements = { heave_front = 1.0, roll_front = 0.8 }\n", ""))
+    session = simulate_session(plan, back)
+    assert session.third_elements.motion_ratios == back.third_elements
+    assert "roll_force_front" in session.runs[0].channels
+    with pytest.raises(SessionError, match="does not declare roll_front"):
+        simulate_session(plan, example_vehicle().replace(third_elements={"heave_front": 1.0}))
