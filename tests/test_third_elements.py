@@ -215,3 +215,42 @@ def test_heave_spring_needs_a_declared_heave_element_and_library(shocks, springs
     got = check_run_third({"heave_front": "none"}, {"front": "None"}, None, elements=elements,
                           shocks=shocks, bump_stops=springs, where="run 'a'")
     assert got == RunThird()
+
+
+# --------------------------------------------------------------------------------------
+# setups CSVs
+# --------------------------------------------------------------------------------------
+
+
+def test_setups_csv_third_columns_round_trip(shocks, springs, tmp_path):
+    from planner.setups import Setup
+    from planner.setups.csv_io import read_setups, write_setups
+
+    setups = [Setup("base", dict.fromkeys(CORNERS, "B20")),
+              Setup("soft-heave", dict.fromkeys(CORNERS, "B20"),
+                    third={"heave_front": "R2", "roll_front": "none"},
+                    heave_springs={"front": "HS-F"}),
+              Setup("no-spring", dict.fromkeys(CORNERS, "B20"), heave_springs={"front": None})]
+    path = write_setups(setups, tmp_path / "setups.csv")
+    header = path.read_text().splitlines()[0]
+    assert header == "setup,LF,RF,LR,RR,heave_front,roll_front,heave_spring_front,units"
+    back = read_setups(path, shocks, springs)
+    assert back == tuple(setups)
+    assert back[1].third == {"heave_front": "R2", "roll_front": None}
+    assert back[0].third is None and back[2].heave_springs == {"front": None}
+
+
+@pytest.mark.parametrize("column, value, match", [
+    ("heave_rear", "X9", r"setups.csv: line 2 \(setup 'a'\): column 'heave_rear': unknown "
+                         r"shock id 'X9'"),
+    ("heave_spring_front", "HS-X", r"setups.csv: line 2 \(setup 'a'\): column "
+                                   r"'heave_spring_front'.*HS-X"),
+])
+def test_setups_csv_third_refusals(shocks, springs, tmp_path, column, value, match):
+    from planner.errors import PlannerError
+    from planner.setups.csv_io import read_setups
+
+    path = tmp_path / "setups.csv"
+    path.write_text(f"setup,LF,RF,LR,RR,{column}\na,B20,B20,B20,B20,{value}\n")
+    with pytest.raises(PlannerError, match=match):
+        read_setups(path, shocks, springs)
