@@ -263,78 +263,141 @@ def _spring(t, s0, bx, bf, bn, bslope):
 @_nb.njit(cache=True)
 def _third_kernel(phi, g1, g0, gm, B, C, D, cbar, y_rig, vi, ti, rows, kv, kf, nk, slo, shi,
                   alpha, b0, b1, bm, srows, s0, bx, bf, bn, bslope, max_iter, tol, y, F, S):
+    """The time loop (see the module docstring); returns the most Newton iterations a step
+    took, or -1 if a step did not converge. Plain loops over preallocated buffers (no
+    array temporaries per step)."""
     N, p = y_rig.shape
     n = phi.shape[0]
     nd = rows.shape[0]
     ns = srows.shape[0]
-    Cv = C[vi]
-    Ct = C[ti]
-    Dv = np.real(Cv @ (np.expand_dims(g1, 1) * B)) + D[vi]
-    Dt = np.real(Ct @ (np.expand_dims(g1, 1) * B)) + D[ti]
+    # the same-step responses of the velocities and travels to dF (real, 4 x 4)
+    Dv = np.zeros((4, 4))
+    Dt = np.zeros((4, 4))
+    for a in range(4):
+        for c in range(4):
+            sv = 0.0
+            st = 0.0
+            for m in range(n):
+                gb = g1[m] * B[m, c]
+                sv += (C[vi[a], m] * gb).real
+                st += (C[ti[a], m] * gb).real
+            Dv[a, c] = sv + D[vi[a], c]
+            Dt[a, c] = st + D[ti[a], c]
     x = np.zeros(n, dtype=np.complex128)
+    xf = np.zeros(n, dtype=np.complex128)
+    dF = np.zeros(4)
     dF1 = np.zeros(4)
     dF2 = np.zeros(4)
+    v = np.zeros(4)
+    t = np.zeros(4)
+    vfree = np.zeros(4)
+    tfree = np.zeros(4)
+    G = np.zeros(4)
+    R = np.zeros(4)
+    Jv = np.zeros((4, 4))
+    Jt = np.zeros((4, 4))
+    J = np.zeros((4, 4))
     fprev = np.zeros(nd)  # curve forces f[k-1], f[k-2]
     fprev2 = np.zeros(nd)
     Fprev = np.zeros(nd)
     c0 = np.zeros(nd)
     Fd = np.zeros(nd)
     fd = np.zeros(nd)
-    sd = np.zeros(nd)
     gs = np.zeros(ns)
-    ks = np.zeros(ns)
     worst = 0
     for k in range(N):
-        xf = phi * x + g0 * (B @ dF1.astype(np.complex128)) + gm * (B @ dF2.astype(np.complex128))
-        vfree = y_rig[k, vi] + np.real(Cv @ xf)
-        tfree = y_rig[k, ti] + np.real(Ct @ xf)
+        for m in range(n):
+            u0 = 0.0j
+            um = 0.0j
+            for c in range(4):
+                u0 += B[m, c] * dF1[c]
+                um += B[m, c] * dF2[c]
+            xf[m] = phi[m] * x[m] + g0[m] * u0 + gm[m] * um
+        for a in range(4):
+            sv = y_rig[k, vi[a]]
+            st = y_rig[k, ti[a]]
+            for m in range(n):
+                sv += (C[vi[a], m] * xf[m]).real
+                st += (C[ti[a], m] * xf[m]).real
+            vfree[a] = sv
+            tfree[a] = st
         for d in range(nd):
             c0[d] = alpha[d] * Fprev[d] + b1[d] * fprev[d] + bm[d] * fprev2[d]
-        dF = dF1.copy()
+        for c in range(4):
+            dF[c] = dF1[c]
         it = 0
         while True:
-            v = vfree + Dv @ dF
-            t = tfree + Dt @ dF
-            G = -cbar * v
-            Jv = np.zeros((4, 4))
-            for c in range(4):
-                Jv[c, c] = -cbar[c]
+            for a in range(4):
+                sv = vfree[a]
+                st = tfree[a]
+                for c in range(4):
+                    sv += Dv[a, c] * dF[c]
+                    st += Dt[a, c] * dF[c]
+                v[a] = sv
+                t[a] = st
+                G[a] = -cbar[a] * v[a]
+                for c in range(4):
+                    Jv[a, c] = 0.0
+                    Jt[a, c] = 0.0
+                Jv[a, a] = -cbar[a]
             for d in range(nd):
                 ve = 0.0
                 for c in range(4):
                     ve += rows[d, c] * v[c]
                 f, s = _pwl(ve, kv[d], kf[d], nk[d], slo[d], shi[d])
                 fd[d] = f
-                sd[d] = s
                 Fd[d] = c0[d] + b0[d] * f
-                for c in range(4):
-                    G[c] += rows[d, c] * Fd[d]
-                    for e in range(4):
-                        Jv[c, e] += b0[d] * s * rows[d, c] * rows[d, e]
-            Jt = np.zeros((4, 4))
+                ds = b0[d] * s
+                for a in range(4):
+                    if rows[d, a] != 0.0:
+                        G[a] += rows[d, a] * Fd[d]
+                        for c in range(4):
+                            Jv[a, c] += ds * rows[d, a] * rows[d, c]
             for j in range(ns):
                 te = 0.0
                 for c in range(4):
                     te += srows[j, c] * t[c]
                 g, kk = _spring(te, s0[j], bx[j], bf[j], bn[j], bslope[j])
                 gs[j] = g
-                ks[j] = kk
-                for c in range(4):
-                    G[c] += srows[j, c] * g
-                    for e in range(4):
-                        Jt[c, e] += kk * srows[j, c] * srows[j, e]
-            R = dF - G
-            if np.max(np.abs(R)) <= tol * (1.0 + np.max(np.abs(dF))):
+                for a in range(4):
+                    if srows[j, a] != 0.0:
+                        G[a] += srows[j, a] * g
+                        for c in range(4):
+                            Jt[a, c] += kk * srows[j, a] * srows[j, c]
+            rmax = 0.0
+            fmax = 0.0
+            for a in range(4):
+                R[a] = dF[a] - G[a]
+                rmax = max(rmax, abs(R[a]))
+                fmax = max(fmax, abs(dF[a]))
+            if rmax <= tol * (1.0 + fmax):
                 break
             it += 1
             if it > max_iter:
                 return -1
-            J = np.eye(4) - Jv @ Dv - Jt @ Dt
-            dF = dF - np.linalg.solve(J, R)
+            for a in range(4):
+                for c in range(4):
+                    sj = 0.0
+                    for e in range(4):
+                        sj += Jv[a, e] * Dv[e, c] + Jt[a, e] * Dt[e, c]
+                    J[a, c] = (1.0 if a == c else 0.0) - sj
+            step = np.linalg.solve(J, R)
+            for a in range(4):
+                dF[a] -= step[a]
         if it > worst:
             worst = it
-        x = xf + g1 * (B @ dF.astype(np.complex128))
-        y[k] = y_rig[k] + np.real(C @ x) + D @ dF
+        for m in range(n):
+            u1 = 0.0j
+            for c in range(4):
+                u1 += B[m, c] * dF[c]
+            x[m] = xf[m] + g1[m] * u1
+        for o in range(p):
+            so = y_rig[k, o]
+            for m in range(n):
+                so += (C[o, m] * x[m]).real
+            for c in range(4):
+                so += D[o, c] * dF[c]
+            y[k, o] = so
         for d in range(nd):
             F[k, d] = Fd[d]
             Fprev[d] = Fd[d]
@@ -342,6 +405,7 @@ def _third_kernel(phi, g1, g0, gm, B, C, D, cbar, y_rig, vi, ti, rows, kv, kf, n
             fprev[d] = fd[d]
         for j in range(ns):
             S[k, j] = gs[j]
-        dF2 = dF1
-        dF1 = dF
+        for c in range(4):
+            dF2[c] = dF1[c]
+            dF1[c] = dF[c]
     return worst
