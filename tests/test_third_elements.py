@@ -254,3 +254,17 @@ def test_setups_csv_third_refusals(shocks, springs, tmp_path, column, value, mat
     path.write_text(f"setup,LF,RF,LR,RR,{column}\na,B20,B20,B20,B20,{value}\n")
     with pytest.raises(PlannerError, match=match):
         read_setups(path, shocks, springs)
+
+
+def test_append_runs_keeps_and_checks_the_elements(session, tmp_path):
+    from ident.data.session import append_runs
+
+    folder = write_session(session, tmp_path / "s")
+    rng = np.random.default_rng(7)
+    third = RunThird(dampers={**dict.fromkeys(THIRD_ELEMENTS), "heave_front": "R2"})
+    back = append_runs(folder, [_run(rng, "more", third)])
+    assert back.run("more").third.dampers["heave_front"] == "R2"
+    assert back.third_elements == session.third_elements
+    bad = RunThird(dampers={**dict.fromkeys(THIRD_ELEMENTS), "roll_rear": "R2"})
+    with pytest.raises(SessionError, match="does not declare roll_rear"):
+        append_runs(folder, [_run(rng, "bad", bad)])

@@ -292,3 +292,27 @@ def test_the_vehicle_may_declare_the_elements(tmp_path):
     assert "roll_force_front" in session.runs[0].channels
     with pytest.raises(SessionError, match="does not declare roll_front"):
         simulate_session(plan, example_vehicle().replace(third_elements={"heave_front": 1.0}))
+
+
+def test_a_lagged_table_heave_damper_applies_its_lagged_curve(car, tmp_path):
+    """Dampers of any kind with lag: the element's force is its curve at its own velocity
+    behind the lag ``tau dF/dt + F = f(v)``, discretized as every shock's."""
+    from scipy.signal import lfilter
+
+    from ident.models.library import read_shock_library
+    from ident.models.lti import lag_hold_coefficients
+
+    (tmp_path / "shocks.toml").write_text(SHOCKS)
+    h1 = read_shock_library(tmp_path / "shocks.toml")["H1"]
+    rng = np.random.default_rng(5)
+    drive = _drive(rng)
+    base = [LinearShock("s", 3000.0)] * 4
+    plant = _plant(car, base)
+    got = simulate_third(plant, drive, base, dampers=[
+        ThirdDamper("heave_rear", element_row("heave_rear", 1.2), h1)])
+    v = got.channels["heave_velocity_rear"]
+    alpha, b0, b1, bm = (float(a) for a in lag_hold_coefficients(h1.lag_s, 1.0 / FS_HZ))
+    want = lfilter([b0, b1, bm], [1.0, -alpha], h1.to_pwl().force(v))
+    force = got.channels["heave_force_rear"]
+    assert np.max(np.abs(force - want)) < 1e-9 * np.max(np.abs(want))
+    assert np.max(np.abs(force - h1.to_pwl().force(v))) > 0.01 * np.max(np.abs(want))

@@ -1174,7 +1174,8 @@ def append_runs(path, runs, *, run_format="csv"):
     # the checks of a whole session (setups, roles, rig inputs, one sample rate)
     combined = make_session(existing.name, list(existing.runs) + runs, existing.shocks,
                             units=existing.units, bump_stops=existing.bump_stops,
-                            static_corner_load_n=existing.static_corner_load_n)
+                            static_corner_load_n=existing.static_corner_load_n,
+                            third_elements=existing.third_elements or None)
     new_runs = combined.runs[len(existing.runs):]
 
     runs_dir = folder / "runs"
