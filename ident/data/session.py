@@ -639,7 +639,7 @@ def third_elements_warning(where, key):
 
 
 def _check_session_third(third_elements, entries, shocks, bump_stops, *, where, units,
-                         library, bump_library):
+                         library):
     """The session's elements and each run entry's (``third``, ``heave_springs``,
     ``heave_packers`` in file units): ``(ThirdElements, [RunThird, ...])``, warning once
     when any is declared."""
@@ -652,8 +652,7 @@ def _check_session_third(third_elements, entries, shocks, bump_stops, *, where, 
                        for a, p in packers.items()}
         runs.append(check_run_third(e.get("third"), e.get("heave_springs"), packers,
                                     elements=elements, shocks=shocks, bump_stops=bump_stops,
-                                    where=e["label"], library=library,
-                                    bump_library=bump_library))
+                                    where=e["label"], library=library))
     if elements:
         logger.warning(third_elements_warning(where, "third_elements"))
     elif any(runs):  # pragma: no cover - a run's element needs a declared one
@@ -781,7 +780,7 @@ def read_session(path):
                                           where=e["label"]))
     third_elements, thirds = _check_session_third(
         doc.get("third_elements"), entries, shocks, bump_stops, where=where, units=units,
-        library=library_file, bump_library=bump_file)
+        library=library_file)
     # before reading any run file: a cheap, manifest-only mistake
     _check_unique_names([e["name"] for e in entries], where=where)
 
@@ -881,8 +880,7 @@ def make_session(name, runs, shocks, *, units="SI", bump_stops=None,
         third_elements, [{"label": _run_where(r.name, r.file), "third": r.third.dampers,
                           "heave_springs": r.third.heave_springs,
                           "heave_packers": r.third.heave_packers_m} for r in runs],
-        shocks, bump_stops, where=where, units="SI", library="of the session",
-        bump_library="of the session")
+        shocks, bump_stops, where=where, units="SI", library="of the session")
     checked = []
     for r, third in zip(runs, thirds):
         if not isinstance(r, Run):

@@ -201,7 +201,7 @@ def _id_or_none(value, where):
 
 
 def check_run_third(third, heave_springs, heave_packers_m, *, elements, shocks, bump_stops,
-                    where, library="of the session", bump_library="of the session"):
+                    where, library="of the session"):
     """A run's third elements, checked against the session's elements and libraries.
 
     Parameters
@@ -220,8 +220,8 @@ def check_run_third(third, heave_springs, heave_packers_m, *, elements, shocks, 
         The bump-stop library (None: the session names none).
     where : str
         The run (and file), put first in messages.
-    library, bump_library : str
-        How the messages name the libraries.
+    library : str
+        How the messages name the shock library.
 
     Returns
     -------

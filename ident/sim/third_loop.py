@@ -260,7 +260,7 @@ def _spring(t, s0, bx, bf, bn, bslope):
     return f, k
 
 
-@_nb.njit(cache=True)
+@_nb.njit(cache=True, nogil=True)
 def _third_kernel(phi, g1, g0, gm, B, C, D, cbar, y_rig, vi, ti, rows, kv, kf, nk, slo, shi,
                   alpha, b0, b1, bm, srows, s0, bx, bf, bn, bslope, max_iter, tol, y, F, S):
     """The time loop (see the module docstring); returns the most Newton iterations a step
