@@ -623,6 +623,13 @@ def read_rig_plan(path):
     ``[[run]]``, a run key at the top). ``suspension_friction = { LF = ..., ... }`` (N or
     lbf, a corner left out has none; at the top too): a Coulomb friction in parallel with
     each corner's shock, the car's undeclared truth (not written to the session).
+
+    Third elements (optional; the spec's "Third elements"): ``third_elements = {
+    heave_front = 1.0, roll_front = 0.8 }`` (motion ratios, at the top; without it the
+    vehicle's) and per ``[[run]]`` ``third = { heave_front = "H1", ... }`` (shock-library
+    ids), ``heave_springs = { front = "HS-F" }`` (bump-stop-library ids) and
+    ``heave_packers = { front = 0.001 }`` (m or in). Refused as a session refuses them
+    (:func:`ident.data.third.check_run_third`), and on the wrong level.
     """
     path = Path(path)
     where = str(path)
