@@ -21,6 +21,8 @@ __all__ = [
     "SHOCK_VELOCITIES",
     "SHOCK_FORCES",
     "ALL_CHANNELS",
+    "THIRD_CHANNELS",
+    "THIRD_CHANNEL_QUANTITIES",
     "TRACK_CHANNELS",
     "rig_inputs_of",
     "missing_aero",
@@ -52,6 +54,17 @@ RESPONSE_CHANNELS = tuple(f"{k}_{c}" for k in RESPONSE_KINDS for c in CORNERS)
 SHOCK_VELOCITIES = tuple(f"shock_velocity_{c}" for c in CORNERS)
 SHOCK_FORCES = tuple(f"shock_force_{c}" for c in CORNERS)
 ALL_CHANNELS = RIG_INPUTS + RESPONSE_CHANNELS
+#: Run-file channels of the third elements (the spec's optional section "Third elements":
+#: heave and roll elements per axle), each optional, and their quantities.
+THIRD_CHANNEL_QUANTITIES = {
+    f"{name}_{axle}": quantity
+    for axle in ("front", "rear")
+    for name, quantity in (("heave_velocity", "velocity"), ("heave_travel", "displacement"),
+                           ("heave_force", "force"), ("heave_spring_force", "force"),
+                           ("roll_velocity", "velocity"), ("roll_travel", "displacement"),
+                           ("roll_force", "force"))}
+#: The third elements' run-file channels, in the spec's order.
+THIRD_CHANNELS = tuple(THIRD_CHANNEL_QUANTITIES)
 #: Channels of a track log (:mod:`ident.data.tracklog`) that no rig run has: ``speed``, the
 #: car's speed [m/s]. Not in :data:`ALL_CHANNELS` (session runs and drives never hold them)
 #: and without a response kind (:func:`kind_of` refuses them); :func:`quantity_of` knows them.
@@ -131,6 +144,8 @@ def quantity_of(channel):
         return _INPUT_QUANTITY[channel]
     if channel in _TRACK_QUANTITY:
         return _TRACK_QUANTITY[channel]
+    if channel in THIRD_CHANNEL_QUANTITIES:
+        return THIRD_CHANNEL_QUANTITIES[channel]
     return RESPONSE_KINDS[kind_of(channel)]
 
 

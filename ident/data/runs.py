@@ -34,8 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.data.channels import (ALL_CHANNELS, RIG_INPUTS, WHEELLOADER_INPUTS, missing_aero,
-                                 quantity_of)
+from ident.data.channels import (ALL_CHANNELS, RIG_INPUTS, THIRD_CHANNELS, WHEELLOADER_INPUTS,
+                                 missing_aero, quantity_of)
 from ident.data.files import (UNITS_COLUMN, csv_preamble, read_csv_after, read_units_marker,
                               resolve_units, units_of_column, write_table_file)
 from ident.data.timebase import uniform_time_base
@@ -63,7 +63,8 @@ logger = logging.getLogger(__name__)
 RTOL_TIME_STEP = 1e-6
 
 _TIME = "time"
-_CANONICAL = frozenset(ALL_CHANNELS)
+#: Every channel a run file may hold: the spec's channels and the third elements'.
+_CANONICAL = frozenset(ALL_CHANNELS + THIRD_CHANNELS)
 
 
 # --------------------------------------------------------------------------------------
@@ -272,7 +273,7 @@ def check_columns(columns, *, where, units, channel_map, required, names=None,
         missing required channel, a non-numeric or NaN/inf value, time not
         strictly increasing and uniform, or a value that overflows in SI.
     """
-    names = ALL_CHANNELS if names is None else tuple(names)
+    names = ALL_CHANNELS + THIRD_CHANNELS if names is None else tuple(names)
     source = {c: channel_map.get(c, c) for c in (_TIME,) + names}
     by_column = {col: c for c, col in source.items()}
     present = {}  # canonical -> column

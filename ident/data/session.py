@@ -49,6 +49,7 @@ from ident.data.files import (FLOAT_DTYPES, atomic_write_text, did_you_mean, rea
 from ident.data.runs import (RTOL_TIME_STEP, check_channel_map, check_columns,
                              check_session_units, frozen_array, in_memory_columns,
                              read_run_table, write_mapped_run_table, write_run_table)
+from ident.data.third import RunThird, ThirdElements, check_run_third, check_third_elements
 from ident.data.units import UNIT_LABELS, from_si, to_si
 from ident.errors import BumpStopError, SessionError, ShockModelError
 from ident.models.bumpstops import (BumpStopLibrary, check_packer, parse_bump_stop_id,
@@ -99,13 +100,15 @@ STATIC_LOAD_RTOL = 0.10
 
 _RUN_FORMATS = {"csv": ".csv", "parquet": ".parquet"}
 _MANIFEST_KEYS = ("format", "name", "units", "shock_library", "run", "channels",
-                  "bump_stop_library", "static_corner_load")
-_RUN_KEYS = ("name", "file", "setup", "role", "bump_stops", "packers")
+                  "bump_stop_library", "static_corner_load", "third_elements")
+_RUN_KEYS = ("name", "file", "setup", "role", "bump_stops", "packers", "third", "heave_springs",
+             "heave_packers")
 _MANIFEST_TYPES = {"format": str, "name": str, "units": str, "shock_library": str, "run": list,
-                   "channels": dict, "bump_stop_library": str, "static_corner_load": dict}
+                   "channels": dict, "bump_stop_library": str, "static_corner_load": dict,
+                   "third_elements": dict}
 #: Keys of one run that a manifest may hold only under a [[run]], and the reverse.
-_RUN_ONLY_KEYS = ("bump_stops", "packers")
-_SESSION_ONLY_KEYS = ("bump_stop_library", "static_corner_load")
+_RUN_ONLY_KEYS = ("bump_stops", "packers", "third", "heave_springs", "heave_packers")
+_SESSION_ONLY_KEYS = ("bump_stop_library", "static_corner_load", "third_elements")
 #: Optional manifest keys that state the sample rate [Hz]: checked against the run files
 #: (the rate itself always comes from their ``time`` column).
 _RATE_KEYS = ("fs_hz", "fs", "sample_rate", "sample_rate_hz", "sampling_rate_hz")
@@ -144,6 +147,9 @@ class Run:
     packers_m : dict of str to float
         Corner -> packer thickness [m] (default 0 at every corner). A checked run has
         all four corners.
+    third : ident.data.third.RunThird
+        The third elements fitted on the run (its ``third``, ``heave_springs`` and
+        ``heave_packers``; default none).
 
     Notes
     -----
@@ -160,9 +166,12 @@ class Run:
     fs_hz: float
     bump_stops: dict = field(default_factory=lambda: dict.fromkeys(CORNERS))
     packers_m: dict = field(default_factory=lambda: dict.fromkeys(CORNERS, 0.0))
+    third: RunThird = field(default_factory=RunThird)
 
     def __post_init__(self):
         object.__setattr__(self, "setup", dict(self.setup))
+        if self.third is None:
+            object.__setattr__(self, "third", RunThird())
         object.__setattr__(self, "bump_stops", dict.fromkeys(CORNERS) if self.bump_stops is None
                            else dict(self.bump_stops))
         object.__setattr__(self, "packers_m", dict.fromkeys(CORNERS, 0.0)
@@ -241,6 +250,9 @@ class Session:
         The tires' static loads [N] in corner order ``LF, RF, LR, RR`` (the car at rest
         on the rig, with the aero actuators' static preload; read-only), None when the
         manifest gives none.
+    third_elements : ident.data.third.ThirdElements
+        The car's third elements and their motion ratios (the manifest's
+        ``third_elements``; empty when it declares none).
     """
 
     path: Path | None
@@ -255,9 +267,12 @@ class Session:
     bump_stops: Mapping | None = None
     bump_stop_library_file: str | None = None
     static_corner_load_n: np.ndarray | None = None
+    third_elements: ThirdElements = field(default_factory=ThirdElements)
 
     def __post_init__(self):
         object.__setattr__(self, "runs", tuple(self.runs))
+        if self.third_elements is None:
+            object.__setattr__(self, "third_elements", ThirdElements())
         if self.static_corner_load_n is not None:
             object.__setattr__(self, "static_corner_load_n",
                                frozen_array(self.static_corner_load_n))
@@ -555,8 +570,6 @@ def _parse_run_entries(entries, *, where):
         role = _check_role(entry.get("role", "other"), where=label)
         unknown = [k for k in entry if k not in _RUN_KEYS]
         for key in unknown:
-            if key in THIRD_ELEMENT_KEYS:
-                continue
             if key in _SESSION_ONLY_KEYS:  # written below a [[run]], TOML gives it to the run
                 raise SessionError(
                     f"{label}: {key!r} is a key of the session, not of a run; move it to the "
@@ -567,14 +580,13 @@ def _parse_run_entries(entries, *, where):
                     f"{label}: unknown key {key!r}{hint}; a [[run]] has the keys "
                     f"{', '.join(_RUN_KEYS)}"
                 )
-        for key in [k for k in unknown if k in THIRD_ELEMENT_KEYS]:
-            logger.warning(third_elements_warning(label, key))
-        unknown = [k for k in unknown if k not in THIRD_ELEMENT_KEYS]
         if unknown:
             logger.warning("%s: unknown key(s) %s are ignored", label, unknown)
         parsed.append({"name": name, "file": file, "setup": entry["setup"],
                        "role": role, "label": label, "bump_stops": entry.get("bump_stops"),
-                       "packers": entry.get("packers")})
+                       "packers": entry.get("packers"), "third": entry.get("third"),
+                       "heave_springs": entry.get("heave_springs"),
+                       "heave_packers": entry.get("heave_packers")})
     return parsed
 
 
@@ -585,9 +597,6 @@ def _check_extra_keys(extra, *, where):
     """
     stated = None
     for key, value in extra.items():
-        if key in THIRD_ELEMENT_KEYS:
-            logger.warning(third_elements_warning(where, key))
-            continue
         if key in _RATE_KEYS:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or \
                     not np.isfinite(value) or value <= 0:
@@ -614,17 +623,42 @@ def _check_extra_keys(extra, *, where):
 
 
 #: The keys of the spec's optional section "Third elements" (heave and roll elements per
-#: axle), which this version reads but does not model yet.
+#: axle): read and checked (:mod:`ident.data.third`), not yet modelled by the
+#: identification and the predictions.
 THIRD_ELEMENT_KEYS = ("third_elements", "third", "heave_springs", "heave_packers")
 
 
 def third_elements_warning(where, key):
-    """The one-line warning for a third-element key this version does not model yet."""
+    """The one-line warning for a session that declares third elements: its keys are read
+    and checked, but the identification and the predictions do not model them yet."""
     return (f"{where}: {key!r} declares third elements (heave or roll elements per axle, the "
-            "spec's optional section 'Third elements'); this version does not model them "
-            "yet: the identified model takes their forces as part of the linear car, which "
-            "is wrong where they are nonlinear (a heave spring's gap) or change between "
-            "runs, and predictions cannot vary them")
+            "spec's optional section 'Third elements'); they are read and checked, but the "
+            "identification and the predictions do not model them yet: the identified model "
+            "takes their forces as part of the linear car, which is wrong where they are "
+            "nonlinear (a heave spring's gap) or change between runs, and predictions cannot "
+            "vary them")
+
+
+def _check_session_third(third_elements, entries, shocks, bump_stops, *, where, units,
+                         library):
+    """The session's elements and each run entry's (``third``, ``heave_springs``,
+    ``heave_packers`` in file units): ``(ThirdElements, [RunThird, ...])``, warning once
+    when any is declared."""
+    elements = check_third_elements(third_elements, where)
+    runs = []
+    for e in entries:
+        packers = e.get("heave_packers")
+        if isinstance(packers, dict):
+            packers = {a: to_si(p, "displacement", units) if is_real_number(p) else p
+                       for a, p in packers.items()}
+        runs.append(check_run_third(e.get("third"), e.get("heave_springs"), packers,
+                                    elements=elements, shocks=shocks, bump_stops=bump_stops,
+                                    where=e["label"], library=library))
+    if elements:
+        logger.warning(third_elements_warning(where, "third_elements"))
+    elif any(runs):  # pragma: no cover - a run's element needs a declared one
+        raise SessionError(f"{where}: runs fit third elements the session does not declare")
+    return elements, runs
 
 
 def _read_bump_stop_library(doc, folder, *, where):
@@ -750,11 +784,14 @@ def read_session(path, *, resample_hz=None):
                    for c, p in packers.items()}
         elements.append(_check_bump_stops(e["bump_stops"], packers, bump_stops,
                                           where=e["label"]))
+    third_elements, thirds = _check_session_third(
+        doc.get("third_elements"), entries, shocks, bump_stops, where=where, units=units,
+        library=library_file)
     # before reading any run file: a cheap, manifest-only mistake
     _check_unique_names([e["name"] for e in entries], where=where)
 
     runs = []
-    for e, setup, (stops, packers) in zip(entries, setups, elements):
+    for e, setup, (stops, packers), third in zip(entries, setups, elements, thirds):
         file_path = folder / e["file"]
         run_where = _run_where(e["name"], file_path)
         if not file_path.is_file():
@@ -770,7 +807,8 @@ def read_session(path, *, resample_hz=None):
             resample_hz=resample_hz)
         runs.append(Run(name=e["name"], file=e["file"], setup=setup, role=e["role"],
                         time_s=table.time_s, channels=table.channels,
-                        fs_hz=table.fs_hz, bump_stops=stops, packers_m=packers))
+                        fs_hz=table.fs_hz, bump_stops=stops, packers_m=packers,
+                        third=third))
     fs_hz = _check_run_set(runs, where=where)
     _check_static_vs_tire(runs, static, units=units,
                           where_run=lambda r: f"{where}: {_run_where(r.name, folder / r.file)}")
@@ -786,11 +824,12 @@ def read_session(path, *, resample_hz=None):
     return Session(path=folder, name=name, units=units, runs=tuple(runs), shocks=shocks,
                    shock_library_file=library_file, fs_hz=fs_hz,
                    channel_map=channel_map, extra=extra, bump_stops=bump_stops,
-                   bump_stop_library_file=bump_file, static_corner_load_n=static)
+                   bump_stop_library_file=bump_file, static_corner_load_n=static,
+                   third_elements=third_elements)
 
 
 def make_session(name, runs, shocks, *, units="SI", bump_stops=None,
-                 static_corner_load_n=None):
+                 static_corner_load_n=None, third_elements=None):
     """Build a checked :class:`Session` from in-memory runs.
 
     Parameters
@@ -809,6 +848,9 @@ def make_session(name, runs, shocks, *, units="SI", bump_stops=None,
         name one).
     static_corner_load_n : mapping of str to float, or array_like, shape (4,), optional
         The tires' static loads [N], per corner or in corner order ``LF, RF, LR, RR``.
+    third_elements : ident.data.third.ThirdElements or mapping of str to float, optional
+        The car's third elements and their motion ratios (default none: no run may fit
+        one); each run's :attr:`Run.third` is checked against them and the libraries.
 
     Returns
     -------
@@ -836,8 +878,19 @@ def make_session(name, runs, shocks, *, units="SI", bump_stops=None,
         bump_stops = BumpStopLibrary(bump_stops)
     static = _check_static_loads(static_corner_load_n, where=where,
                                  key="static_corner_load_n", unit="N")
-    checked = []
+    if isinstance(third_elements, ThirdElements):
+        third_elements = dict(third_elements.motion_ratios)
+    runs = list(runs)
     for r in runs:
+        if not isinstance(r, Run):
+            raise SessionError(f"{where}: runs must be Run objects, got {type(r).__name__}")
+    third_elements, thirds = _check_session_third(
+        third_elements, [{"label": _run_where(r.name, r.file), "third": r.third.dampers,
+                          "heave_springs": r.third.heave_springs,
+                          "heave_packers": r.third.heave_packers_m} for r in runs],
+        shocks, bump_stops, where=where, units="SI", library="of the session")
+    checked = []
+    for r, third in zip(runs, thirds):
         if not isinstance(r, Run):
             raise SessionError(f"{where}: runs must be Run objects, got {type(r).__name__}")
         run_where = _run_where(r.name, r.file)
@@ -856,14 +909,15 @@ def make_session(name, runs, shocks, *, units="SI", bump_stops=None,
             )
         checked.append(Run(name=r.name, file=r.file, setup=setup, role=role,
                            time_s=time_s, channels=channels, fs_hz=fs_hz,
-                           bump_stops=stops, packers_m=packers))
+                           bump_stops=stops, packers_m=packers, third=third))
     fs_hz = _check_run_set(checked, where=where)
     _check_static_vs_tire(checked, static, units="SI", key="static_corner_load_n",
                           where_run=lambda r: _run_where(r.name, r.file))
     return Session(path=None, name=name, units=units, runs=tuple(checked), shocks=shocks,
                    shock_library_file="shocks.toml", fs_hz=fs_hz, bump_stops=bump_stops,
                    bump_stop_library_file=None if bump_stops is None
-                   else BUMP_STOP_LIBRARY_NAME, static_corner_load_n=static)
+                   else BUMP_STOP_LIBRARY_NAME, static_corner_load_n=static,
+                   third_elements=third_elements)
 
 
 def _safe_stem(name):
@@ -897,6 +951,16 @@ def _run_block(run, file, *, units):
                if run.packers_m.get(c, 0.0)}
     if packers:
         text += f"packers = {_inline_table(packers)}\n"
+    third = {k: v for k, v in run.third.dampers.items() if v is not None}
+    if third:
+        text += f"third = {_inline_table(third)}\n"
+    springs = {a: v for a, v in run.third.heave_springs.items() if v is not None}
+    if springs:
+        text += f"heave_springs = {_inline_table(springs)}\n"
+    packers = {a: from_si(float(p), "displacement", units)
+               for a, p in run.third.heave_packers_m.items() if p}
+    if packers:
+        text += f"heave_packers = {_inline_table(packers)}\n"
     return text
 
 
@@ -912,7 +976,15 @@ def _manifest_text(session, *, units, files):
                            key)
             continue
         extra[key] = value
-    if session.static_corner_load_n is None:
+    if session.third_elements:  # an inline table, as in the spec
+        head_text = (tomli_w.dumps(round_file_numbers(head)) + "third_elements = "
+                     f"{_inline_table(session.third_elements.motion_ratios)}\n")
+        loads = ("" if session.static_corner_load_n is None else
+                 "static_corner_load = " + _inline_table(dict(zip(CORNERS, (
+                     from_si(float(x), "force", units)
+                     for x in session.static_corner_load_n)))) + "\n")
+        parts = [head_text, loads, tomli_w.dumps(round_file_numbers(extra))]
+    elif session.static_corner_load_n is None:
         parts = [tomli_w.dumps(round_file_numbers({**head, **extra}))]
     else:  # an inline table, as in the spec, before any [table] of the extra keys
         loads = dict(zip(CORNERS, (from_si(float(x), "force", units)
@@ -1118,7 +1190,8 @@ def append_runs(path, runs, *, run_format="csv"):
     # the checks of a whole session (setups, roles, rig inputs, one sample rate)
     combined = make_session(existing.name, list(existing.runs) + runs, existing.shocks,
                             units=existing.units, bump_stops=existing.bump_stops,
-                            static_corner_load_n=existing.static_corner_load_n)
+                            static_corner_load_n=existing.static_corner_load_n,
+                            third_elements=existing.third_elements or None)
     new_runs = combined.runs[len(existing.runs):]
 
     runs_dir = folder / "runs"

@@ -40,8 +40,9 @@ from scipy.optimize import linear_sum_assignment
 
 from ident.data.channels import CORNERS, RIG_INPUTS
 from ident.data.files import atomic_write_toml, read_toml
+from ident.data.third import check_third_elements
 from ident.data.units import check_units, from_si, to_si
-from ident.errors import VehicleError
+from ident.errors import SessionError, VehicleError
 from ident.models.lti import LoopPlant
 
 __all__ = [
@@ -155,6 +156,14 @@ class VehicleParams:
         spring: a viscous tire force on a displacement-driven pad would need
         the pad's velocity, an improper response). Default 100 Hz, well above
         a rig's band.
+    arb_rate_n_m : ndarray, shape (2,) or None
+        Anti-roll bar rates at the wheels, front and rear [N/m].
+    third_elements : dict of str to float or None
+        The car's third elements (heave and roll elements per axle, the rig-session spec's
+        "Third elements") and their motion ratios, ``{"heave_front": 1.0, ...}``
+        (:data:`ident.data.third.THIRD_ELEMENTS`); the geometry only: what is fitted
+        (dampers, heave springs) is a run's choice (:mod:`ident.sim.virtual_rig`). None:
+        none. The linear model (:func:`build_full_car`) does not include them.
     """
 
     name: str
@@ -175,9 +184,19 @@ class VehicleParams:
     tire_damping_n_s_m: np.ndarray | None = None
     tire_damping_corner_hz: float = 100.0
     arb_rate_n_m: np.ndarray | None = None
+    third_elements: dict | None = None
 
     def __post_init__(self):
+        if self.third_elements is not None:
+            try:
+                checked = check_third_elements(dict(self.third_elements),
+                                               f"vehicle {self.name!r}")
+            except (SessionError, TypeError, ValueError) as exc:
+                raise VehicleError(str(exc)) from None
+            object.__setattr__(self, "third_elements", dict(checked.motion_ratios) or None)
         for f in fields(self):
+            if f.name == "third_elements":
+                continue
             val = getattr(self, f.name)
             if f.name in ("tire_damping_n_s_m", "arb_rate_n_m") and val is None:
                 continue
@@ -327,7 +346,8 @@ def vehicle_from_dict(doc, *, where="vehicle"):
     if fmt != "vehicle/1":
         raise VehicleError(f"{where}: format {fmt!r} is not supported; expected \"vehicle/1\"")
     units = check_units(doc.get("units", "SI"), where=f"{where}: 'units'", error=VehicleError)
-    unknown = set(doc) - set(VEHICLE_KEYS) - {"format", "units", "name", "description"}
+    unknown = (set(doc) - set(VEHICLE_KEYS)
+               - {"format", "units", "name", "description", "third_elements"})
     if unknown:
         raise VehicleError(
             f"{where}: unknown key(s) {sorted(unknown)}; known keys are {sorted(VEHICLE_KEYS)}"
@@ -379,7 +399,22 @@ def vehicle_from_dict(doc, *, where="vehicle"):
         tire_damping_corner_hz=v.get("tire_damping_corner", 100.0),
         arb_rate_n_m=(None if "front_arb_rate" not in v and "rear_arb_rate" not in v
                       else [v.get("front_arb_rate", 0.0), v.get("rear_arb_rate", 0.0)]),
+        third_elements=_third_elements_of(doc, where),
     )
+
+
+def _third_elements_of(doc, where):
+    """The file's ``third_elements`` (motion ratios, dimensionless), or None."""
+    value = doc.get("third_elements")
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        raise VehicleError(f"{where}: third_elements must be a table {{ heave_front = 1.0, ... "
+                           f"}} of motion ratios, got {value!r}")
+    try:
+        return dict(check_third_elements(value, where).motion_ratios)
+    except SessionError as exc:
+        raise VehicleError(str(exc)) from None
 
 
 def read_vehicle(path):
@@ -395,7 +430,9 @@ def read_vehicle(path):
         corner), ``front_spring_rate``, ``rear_spring_rate`` (wheel rates),
         ``tire_stiffness`` (or per axle), optional ``damping``,
         ``cg_lateral_offset``, ``torsion_stiffness``, ``torsion_inertia``,
-        ``front_arb_rate``, ``rear_arb_rate`` (anti-roll bars, at the wheels).
+        ``front_arb_rate``, ``rear_arb_rate`` (anti-roll bars, at the wheels),
+        ``third_elements = { heave_front = 1.0, roll_front = 0.8 }`` (the car's heave
+        and roll elements and their motion ratios, dimensionless).
         Masses are mass (lbm in imperial files), not weight.
 
     Returns
@@ -459,6 +496,8 @@ def write_vehicle(params, path, *, units="SI", overwrite=False):
     if p.arb_rate_n_m is not None:
         doc["front_arb_rate"] = c(p.arb_rate_n_m[0], "stiffness")
         doc["rear_arb_rate"] = c(p.arb_rate_n_m[1], "stiffness")
+    if p.third_elements:
+        doc["third_elements"] = dict(p.third_elements)
     atomic_write_toml(path, doc, overwrite=overwrite)
 
 

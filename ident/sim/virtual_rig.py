@@ -31,6 +31,17 @@ parallel with the shock (bushings, bearings, seals), ``F = F_c tanh(v / v0)``
 shock's load cell does not (``shock_force_XX`` stays the shock's own force). It is the
 car's undeclared truth: the session written does not record it (the rig logs it per
 corner), and ``identify`` finds it (:mod:`ident.identify.diagnose`, kind ``friction``).
+
+Third elements (the spec's "Third elements", optional): a plan may declare the car's heave
+and roll elements with their motion ratios (``third_elements = { heave_front = 1.0, ... }``;
+else the vehicle's, :attr:`ident.models.vehicle.VehicleParams.third_elements`) and fit per
+run their dampers (``third``: shock-library ids, any kind, with lag), heave springs
+(``heave_springs``: bump-stop-library ids, with their gap) and packers (``heave_packers``).
+Such a car is simulated by :func:`ident.sim.third_loop.simulate_third` (the same loop with
+the elements coupled through their motion ratios); every run records the declared
+elements' channels (``heave_velocity_front``, ``heave_travel_front``, ``heave_force_front``,
+``heave_spring_force_front``, ``roll_...``: 0 force where an element is not fitted) and the
+session written records the keys. A plan without third elements runs as before, to the bit.
 """
 
 from __future__ import annotations
@@ -45,12 +56,14 @@ import numpy as np
 from scipy.signal import lfilter
 
 from ident.data.channels import (ALL_CHANNELS, CORNERS, RESPONSE_KINDS, RIG_INPUTS, RIG_KINDS,
-                                 WHEELLOADER_INPUTS, corner_table, kind_of)
+                                 THIRD_CHANNELS, WHEELLOADER_INPUTS, corner_table, kind_of)
 from ident.data.drive import (Drive, check_drive_inputs, decimate_bandlimited, make_multisine_drive,
                               make_noise_drive, make_sweep_drive, make_track_drive, read_drive)
 from ident.data.files import read_toml
 from ident.data.session import (STATIC_OFFSET_SHARE, Run, check_static_corner_loads,
                                  make_session)
+from ident.data.third import (HEAVE_ELEMENTS, ThirdElements, check_run_third,
+                              check_third_elements, element_axle)
 from ident.data.units import UNIT_LABELS, check_units, to_si
 from ident.errors import BumpStopError, DriveError, SessionError, ShockModelError
 from ident.models.bumpstops import (BumpStopLibrary, check_packer, contact_tables,
@@ -60,6 +73,7 @@ from ident.models.lti import lag_hold_coefficients
 from ident.models.shocks import PiecewiseLinear, is_real_number
 from ident.models.vehicle import build_full_car, example_vehicle
 from ident.sim.closedloop import refine_input, simulate
+from ident.sim.third_loop import ThirdDamper, ThirdSpring, simulate_third
 
 __all__ = [
     "PlanRun",
@@ -133,6 +147,20 @@ class PlanRun:
     drive: object = None
     bump_stops: dict | None = None
     packers_m: dict | None = None
+    third: dict | None = None
+    heave_springs: dict | None = None
+    heave_packers_m: dict | None = None
+
+    def fitted_third(self, plan, *, where=None):
+        """The run's third elements checked against the plan's: a
+        :class:`ident.data.third.RunThird` (raises :class:`SessionError` as a session
+        would: an element the car does not declare, a damper or heave spring not in the
+        libraries, a packer thicker than the spring's gap)."""
+        return check_run_third(self.third, self.heave_springs, self.heave_packers_m,
+                               elements=plan.car_third_elements, shocks=plan.shocks,
+                               bump_stops=plan.bump_stops,
+                               where=f"run '{self.name}'" if where is None else where,
+                               library="of the plan")
 
     def fitted(self, library=None, *, where=None):
         """The run's bump stops and packers, checked against the library.
@@ -262,6 +290,9 @@ class RigPlan:
         Coulomb friction ``F_c`` per corner [N] (LF, RF, LR, RR; a mapping may leave a
         corner out: 0), in parallel with the shock in every run (:func:`friction_force`);
         stored as a read-only array. None (or all 0): none, the loop of before.
+    third_elements : ident.data.third.ThirdElements, mapping or None
+        The car's third elements and their motion ratios (a mapping is checked into a
+        ``ThirdElements``). None: the vehicle's (``VehicleParams.third_elements``), if any.
     """
 
     name: str
@@ -279,8 +310,19 @@ class RigPlan:
     static_corner_load_n: object = None
     bump_stops: object = None
     suspension_friction_n: object = None
+    third_elements: object = None
+    #: The elements used when `third_elements` is None (set by :func:`simulate_session`
+    #: from the vehicle); not a plan key.
+    car_third_elements: object = field(default=None, repr=False)
 
     def __post_init__(self):
+        if self.third_elements is not None and not isinstance(self.third_elements,
+                                                              ThirdElements):
+            object.__setattr__(self, "third_elements", check_third_elements(
+                dict(self.third_elements), f"rig plan {self.name!r}"))
+        if self.car_third_elements is None:
+            object.__setattr__(self, "car_third_elements", self.third_elements
+                               if self.third_elements is not None else ThirdElements())
         if self.rig not in RIG_KINDS:
             raise SessionError(f"rig plan {self.name!r}: rig {self.rig!r} is not one of "
                                f"{list(RIG_KINDS)}")
@@ -324,6 +366,8 @@ def _noise_group(channel):
     """The `channel_noise` key of a channel's kind: response kind, 'wheelloader' or 'aero'."""
     if channel in RIG_INPUTS:
         return "aero" if channel.startswith("aero_") else "wheelloader"
+    if channel in THIRD_CHANNELS:
+        return channel.rpartition("_")[0]
     return kind_of(channel)
 
 
@@ -331,13 +375,15 @@ def _noise_group(channel):
 #: silently fall back to a default).
 _PLAN_KEYS = ("format", "name", "units", "shock_library", "fs_hz", "duration_s", "oversample",
               "seed", "noise", "input_noise", "channel_noise", "rig", "drive", "run",
-              "bump_stop_library", "static_corner_load", "suspension_friction")
+              "bump_stop_library", "static_corner_load", "suspension_friction",
+              "third_elements")
 _PLAN_RUN_KEYS = ("name", "setup", "role", "seed", "duration_s", "drive", "bump_stops",
-                  "packers")
+                  "packers", "third", "heave_springs", "heave_packers")
 #: Plan keys that a TOML file gives to the table above them when written below one, and
 #: the run keys that belong in a [[run]]: refused with where they go.
-_PLAN_ONLY_KEYS = ("bump_stop_library", "static_corner_load", "suspension_friction")
-_RUN_ONLY_KEYS = ("bump_stops", "packers")
+_PLAN_ONLY_KEYS = ("bump_stop_library", "static_corner_load", "suspension_friction",
+                   "third_elements")
+_RUN_ONLY_KEYS = ("bump_stops", "packers", "third", "heave_springs", "heave_packers")
 
 
 def _check_misplaced(table, where, *, plan_keys, run_keys):
@@ -477,18 +523,19 @@ def _read_plan_bump_stops(doc, folder, where):
         raise SessionError(f"{where}: bump_stop_library {file!r}: {exc}") from exc
 
 
-def _plan_packers(entry, units, where):
-    """A run's ``packers`` table in SI [m] (values in the plan's `units`), or None."""
-    table = entry.get("packers")
+def _plan_packers(entry, units, where, *, key="packers"):
+    """A run's ``packers`` (or ``heave_packers``) table in SI [m] (values in the plan's
+    `units`), or None."""
+    table = entry.get(key)
     if table is None:
         return None
     if not isinstance(table, dict):
-        raise SessionError(f"{where}: packers must be a table {{ LF = ..., RF = ... }} of "
+        raise SessionError(f"{where}: {key} must be a table {{ LF = ..., RF = ... }} of "
                            f"thicknesses ({UNIT_LABELS[units]['displacement']}), got {table!r}")
     out = {}
     for c, p in table.items():
         if not is_real_number(p) or not np.isfinite(p) or p < 0:
-            raise SessionError(f"{where}: packers {c} = {p!r} is not a thickness; give a "
+            raise SessionError(f"{where}: {key} {c} = {p!r} is not a thickness; give a "
                                f"number >= 0 ({UNIT_LABELS[units]['displacement']}, 0 = none)")
         out[c] = float(to_si(float(p), "displacement", units))
     return out
@@ -576,6 +623,13 @@ def read_rig_plan(path):
     ``[[run]]``, a run key at the top). ``suspension_friction = { LF = ..., ... }`` (N or
     lbf, a corner left out has none; at the top too): a Coulomb friction in parallel with
     each corner's shock, the car's undeclared truth (not written to the session).
+
+    Third elements (optional; the spec's "Third elements"): ``third_elements = {
+    heave_front = 1.0, roll_front = 0.8 }`` (motion ratios, at the top; without it the
+    vehicle's) and per ``[[run]]`` ``third = { heave_front = "H1", ... }`` (shock-library
+    ids), ``heave_springs = { front = "HS-F" }`` (bump-stop-library ids) and
+    ``heave_packers = { front = 0.001 }`` (m or in). Refused as a session refuses them
+    (:func:`ident.data.third.check_run_third`), and on the wrong level.
     """
     path = Path(path)
     where = str(path)
@@ -610,6 +664,9 @@ def read_rig_plan(path):
         friction = to_si(check_suspension_friction(friction, where, key="suspension_friction",
                                                    unit=UNIT_LABELS[units]["force"]),
                          "force", units)
+    third_elements = doc.get("third_elements")
+    if third_elements is not None:
+        third_elements = check_third_elements(third_elements, where)
     rig = doc.get("rig", "7-post")
     if rig not in RIG_KINDS:
         close = difflib.get_close_matches(str(rig), RIG_KINDS, n=1)
@@ -660,9 +717,15 @@ def read_rig_plan(path):
                             duration_s=(run_drive.duration_s if run_drive is not None else
                                         _num(entry, "duration_s", w, duration)),
                             drive=run_drive, bump_stops=entry.get("bump_stops"),
-                            packers_m=_plan_packers(entry, units, w)))
+                            packers_m=_plan_packers(entry, units, w),
+                            third=entry.get("third"), heave_springs=entry.get("heave_springs"),
+                            heave_packers_m=_plan_packers(entry, units, w, key="heave_packers")))
         # the ids and packers, against the library; ids as read ("none" -> None)
         stops, _ = runs[-1].fitted(bump_stops, where=w)
+        if third_elements is not None:
+            check_run_third(runs[-1].third, runs[-1].heave_springs, runs[-1].heave_packers_m,
+                            elements=third_elements, shocks=shocks, bump_stops=bump_stops,
+                            where=w, library=str(lib_file))
         if runs[-1].bump_stops is not None:
             runs[-1] = replace(runs[-1], bump_stops=stops)
     names = [r.name for r in runs]
@@ -684,7 +747,7 @@ def read_rig_plan(path):
                    channel_noise=_parse_channel_noise(doc.get("channel_noise", {}),
                                                       f"{where}: [channel_noise]"),
                    rig=rig, static_corner_load_n=static, bump_stops=bump_stops,
-                   suspension_friction_n=friction)
+                   suspension_friction_n=friction, third_elements=third_elements)
 
 
 #: Keys of ``[channel_noise]`` besides the canonical channels.
@@ -931,6 +994,12 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
     """
     plan = default_plan() if plan is None else plan
     vehicle = example_vehicle() if vehicle is None else vehicle
+    elements = _car_third_elements(plan, vehicle)
+    if elements and plan.car_third_elements is not elements:
+        plan = replace(plan, car_third_elements=elements)
+    if elements and plan.static_corner_load_n is not None:
+        raise SessionError(f"rig plan {plan.name!r}: third elements with static_corner_load "
+                           "(tire lift-off) are not simulated yet; remove one of them")
     model = build_full_car(vehicle)
     runs, clean = [], []
     drives, fine_drives = {}, {}
@@ -960,11 +1029,12 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
         models = [plan.shocks[pr.setup[c]] for c in CORNERS]
         # checked here, before any run is simulated
         stops = pr.contact_stops(plan.bump_stops)
+        third = pr.fitted_third(plan) if elements else None
         plant = model.loop_plant(loop_damping(models))
         fine = fine_drives.get(key)
         if fine is None:
             fine = fine_drives[key] = _fine_drive(drive, plan.oversample)
-        jobs.append((pr, drive, plant, fine, models, stops))
+        jobs.append((pr, drive, plant, fine, models, stops, third))
 
     friction = plan.suspension_friction_n
     if friction is not None and not np.any(friction > 0):
@@ -974,11 +1044,15 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
             f"suspension_friction_{c} {f:.4g} N" for c, f in zip(CORNERS, friction)))
 
     def run_one(job):
-        pr, drive, plant, fine, models, stops = job
+        pr, drive, plant, fine, models, stops, third = job
         loop_models = models if friction is None else [
             m if f <= 0 else _ShockWithFriction(m, float(f)) for m, f in zip(models, friction)]
-        resp = simulate(plant, fine, loop_models, oversample=1, stop_tables=stops,
-                        static_corner_load_n=plan.static_corner_load_n)
+        if third is not None:
+            resp = _simulate_with_third(plan, elements, plant, fine, loop_models, stops, third,
+                                        pr.name)
+        else:
+            resp = simulate(plant, fine, loop_models, oversample=1, stop_tables=stops,
+                            static_corner_load_n=plan.static_corner_load_n)
         if resp.elements:
             log.info("run %s: %s", pr.name, ", ".join(f"{k} {v:.4g}"
                                                       for k, v in resp.elements.items()))
@@ -995,21 +1069,21 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
             from tqdm.auto import tqdm
 
             results = tqdm(results, total=len(jobs), desc="virtual rig", unit="run")
-        for (pr, drive, *_), (iters, sampled) in zip(jobs, results):
+        for (pr, drive, *_, third), (iters, sampled) in zip(jobs, results):
             # the rig inputs are recorded as commanded (the drive file's samples: in band
             # the acquisition filter passes them to 1e-5)
             channels = {c: drive.channels[c] for c in drive.rig_inputs}
             channels.update(sampled)
             log.info("run %s: %d samples, Newton iterations <= %d", pr.name, drive.n_samples,
                      iters)
-            clean.append((pr, channels, drive))
+            clean.append((pr, channels, drive, third))
     # sensor noise: a noise floor per channel, the same in every run (a sensor's property),
     # sized as a fraction of the channel's RMS over the whole session
     rms = {}
-    for _, channels, _ in clean:
+    for _, channels, _, _ in clean:
         for name, x in channels.items():
             rms.setdefault(name, []).append(np.mean((x - np.mean(x)) ** 2))
-    for i, (pr, channels, drive) in enumerate(clean):
+    for i, (pr, channels, drive, third) in enumerate(clean):
         rng = np.random.default_rng([pr.seed, i, 7])
         rng_in = np.random.default_rng([pr.seed, i, 8])  # its own stream: inputs, then outputs
         for name in ([c for c in channels if c not in RIG_INPUTS]
@@ -1024,6 +1098,59 @@ def simulate_session(plan=None, vehicle=None, *, progress=False):
         fitted, packers = pr.fitted(plan.bump_stops)
         runs.append(Run(name=pr.name, file=f"runs/{pr.name}.csv", setup=dict(pr.setup),
                         role=pr.role, time_s=drive.time_s, channels=channels, fs_hz=drive.fs_hz,
-                        bump_stops=fitted, packers_m=packers))
+                        bump_stops=fitted, packers_m=packers, third=third))
     return make_session(plan.name, runs, plan.shocks, units=plan.units,
-                        bump_stops=plan.bump_stops, static_corner_load_n=plan.static_corner_load_n)
+                        bump_stops=plan.bump_stops, static_corner_load_n=plan.static_corner_load_n,
+                        third_elements=elements if elements else None)
+
+
+def _car_third_elements(plan, vehicle):
+    """The car's third elements: the plan's, else the vehicle's, else none."""
+    if plan.third_elements is not None:
+        return plan.third_elements
+    declared = getattr(vehicle, "third_elements", None)
+    if declared is None:
+        return ThirdElements()
+    if isinstance(declared, ThirdElements):
+        return declared
+    return check_third_elements(dict(declared), "vehicle")
+
+
+def _simulate_with_third(plan, elements, plant, fine, models, stops, third, name):
+    """One run of a car with third elements (:func:`ident.sim.third_loop.simulate_third`):
+    the plant's outputs, the shocks' own forces and every declared element's channels
+    (its motion from the corners', 0 force where it is not fitted)."""
+    dampers = [ThirdDamper(e, elements.row(e), plan.shocks[sid])
+               for e, sid in third.dampers.items() if sid is not None]
+    springs = []
+    for axle, sid in third.heave_springs.items():
+        if sid is None:
+            continue
+        contact = contact_tables([plan.bump_stops[sid], None, None, None],
+                                 [third.heave_packers_m[axle], 0.0, 0.0, 0.0],
+                                 where=f"run '{name}': heave_springs {axle}",
+                                 error=SessionError)[0]
+        springs.append(ThirdSpring(f"heave_{axle}", elements.row(f"heave_{axle}"), contact))
+    resp = simulate_third(plant, fine, models, dampers=dampers, springs=springs,
+                          stop_tables=stops)
+    channels = {k: v for k, v in resp.channels.items() if not k.startswith("bump_stop_force_")}
+    v = np.column_stack([channels[f"shock_velocity_{c}"] for c in CORNERS])
+    t = np.column_stack([channels[f"shock_travel_{c}"] for c in CORNERS])
+    for e in elements.elements:
+        kind, axle = e.split("_")
+        row = elements.row(e)
+        channels.setdefault(f"{kind}_velocity_{axle}", v @ row)
+        channels.setdefault(f"{kind}_travel_{axle}", t @ row)
+        channels.setdefault(f"{kind}_force_{axle}", np.zeros(v.shape[0]))
+        if e in HEAVE_ELEMENTS:
+            channels.setdefault(f"heave_spring_force_{element_axle(e)}", np.zeros(v.shape[0]))
+    return _ThirdRunResponse(channels=channels, newton_iterations=resp.newton_iterations)
+
+
+@dataclass(frozen=True, eq=False)
+class _ThirdRunResponse:
+    """What :func:`simulate_session` reads of a run's response (as of ``Response``)."""
+
+    channels: dict
+    newton_iterations: int
+    elements: dict = field(default_factory=dict)

@@ -18,6 +18,7 @@ import pandas as pd
 from ident.data.files import (UNITS_COLUMN, check_can_write, csv_preamble, resolve_units,
                               units_of_column, write_csv)
 from ident.data.channels import CORNERS
+from ident.data.third import AXLES, THIRD_ELEMENTS
 from ident.data.units import UNIT_LABELS, from_si, to_si
 from ident.models.bumpstops import NO_BUMP_STOP, BumpStopLibrary, check_packer, parse_bump_stop_id
 from planner.click_settings import canonical_id
@@ -38,6 +39,10 @@ _CORNER_LIKE = re.compile(r"^[A-Za-z]{2}$")
 #: The optional columns of a setups CSV: bump stop and packer per corner.
 _BUMP_COLUMNS = tuple(f"bump_stop_{c}" for c in CORNERS)
 _PACKER_COLUMNS = tuple(f"packer_{c}" for c in CORNERS)
+#: The optional columns of the third elements (the spec's "Third elements"): a damper per
+#: element, a heave spring per axle.
+_THIRD_COLUMNS = THIRD_ELEMENTS
+_HEAVE_SPRING_COLUMNS = tuple(f"heave_spring_{a}" for a in AXLES)
 #: A misspelt one (case, separators, plural, FL for LF), refused; a longer name that
 #: merely starts alike (a metric such as bump_stop_share_LF) is another column.
 _ELEMENT_LIKE = re.compile(r"^(bumpstops?|bumps?|packers?)(lf|rf|lr|rr|fl|fr|rl)$")
@@ -81,8 +86,15 @@ def read_setups(path, library=None, bump_stops=None, *, units=None):
 
     Notes
     -----
-    Columns other than ``setup``, the corners and ``bump_stop_XX`` / ``packer_XX``
-    are ignored (so a predictions CSV reads as a setups file). In ``bump_stop_XX``,
+    Third elements (the spec's "Third elements"): optional columns ``heave_front``,
+    ``heave_rear``, ``roll_front``, ``roll_rear`` (a damper id or setting name, checked
+    against `library`, or ``none``) and ``heave_spring_front``, ``heave_spring_rear`` (a
+    bump-stop id, checked against `bump_stops`, or ``none``) give
+    :attr:`Setup.third` and :attr:`Setup.heave_springs`; an empty cell keeps the baseline
+    run's.
+
+    Columns other than ``setup``, the corners, ``bump_stop_XX`` / ``packer_XX`` and the
+    third elements' are ignored (so a predictions CSV reads as a setups file). In ``bump_stop_XX``,
     ``none`` (any case) is no bump stop; an empty ``bump_stop_XX`` or ``packer_XX``
     cell keeps the baseline run's (:attr:`Setup.bump_stops` and
     :attr:`Setup.packers_m` hold only the corners a row gives). Leading ``#``
@@ -148,7 +160,14 @@ def read_setups(path, library=None, bump_stops=None, *, units=None):
     i_corner = [header.index(c) for c in CORNERS]
     i_stop = {c: header.index(k) for c, k in zip(CORNERS, _BUMP_COLUMNS) if k in header}
     i_packer = {c: header.index(k) for c, k in zip(CORNERS, _PACKER_COLUMNS) if k in header}
+    i_third = {e: header.index(e) for e in _THIRD_COLUMNS if e in header}
+    i_spring = {a: header.index(k) for a, k in zip(AXLES, _HEAVE_SPRING_COLUMNS) if k in header}
     rows = [(n_skip + reader.line_num, cells) for cells in reader]
+    if i_third or i_spring:
+        logger.warning("%s: columns %s give third elements (heave and roll elements per "
+                       "axle); they are read and checked, but the predictions do not vary "
+                       "them yet: every setup is predicted with the model's", path,
+                       [header[i] for i in (*i_third.values(), *i_spring.values())])
     if UNITS_COLUMN in header:  # the unit system, not a setup's column
         i_units = header.index(UNITS_COLUMN)
         marked = units_of_column((cells[i_units] for _, cells in rows if len(cells) > i_units),
@@ -183,13 +202,15 @@ def read_setups(path, library=None, bump_stops=None, *, units=None):
         if library is not None:  # setting names checked and canonical: TTX@ls=6,hs=2
             ids = tuple(canonical_id(library, sid, f"{where}: column {c!r}")
                         for c, sid in zip(CORNERS, ids))
-        if not i_stop and not i_packer:
+        if not i_stop and not i_packer and not i_third and not i_spring:
             out.append(Setup._unchecked(name, ids))
             continue
         stops, packers = _row_elements(cells, i_stop, i_packer, bump_stops, packer_units,
                                        where)
+        third, springs = _row_third(cells, i_third, i_spring, library, bump_stops, where)
         out.append(Setup(name, dict(zip(CORNERS, ids)), bump_stops=stops or None,
-                         packers_m=packers or None))
+                         packers_m=packers or None, third=third or None,
+                         heave_springs=springs or None))
     if not out:
         raise PlannerError(f"{path}: no setups below the header; add one row per setup")
     logger.debug("read %d setup(s) from %s", len(out), path)
@@ -222,6 +243,33 @@ def _row_elements(cells, i_stop, i_packer, bump_stops, units, where):
         if bump_stops is not None and stops.get(c) is not None:
             check_packer(bump_stops[stops[c]], packers[c], col, error=PlannerError)
     return stops, packers
+
+
+def _row_third(cells, i_third, i_spring, library, bump_stops, where):
+    """The third elements' dampers and heave springs a setups CSV row gives (empty cells
+    left out; ``none`` is none)."""
+    third, springs = {}, {}
+    for e, i in i_third.items():
+        if not cells[i]:
+            continue
+        col = f"{where}: column {e!r}"
+        if cells[i].lower() == NO_BUMP_STOP:
+            third[e] = None
+            continue
+        sid = cells[i]
+        if library is not None:
+            if sid not in library:
+                raise unknown_id_error(col, sid, library)
+            sid = canonical_id(library, sid, col)
+        third[e] = sid
+    for a, i in i_spring.items():
+        if not cells[i]:
+            continue
+        col = f"{where}: column 'heave_spring_{a}'"
+        springs[a] = sid = parse_bump_stop_id(cells[i], col, error=PlannerError)
+        if sid is not None and bump_stops is not None and sid not in bump_stops:
+            raise bump_stops.unknown_id_error(sid, where=col, error=PlannerError)
+    return third, springs
 
 
 def read_ranking_baseline(path):
@@ -307,8 +355,12 @@ def write_setups(setups, path, *, units="SI", overwrite=False):
     writer = csv.writer(buf, lineterminator="\n")
     stops = any(s.bump_stops for s in setups)
     packers = any(s.packers_m for s in setups)
+    third = [e for e in THIRD_ELEMENTS if any(s.third and e in s.third for s in setups)]
+    springs = [a for a in AXLES if any(s.heave_springs and a in s.heave_springs
+                                       for s in setups)]
     writer.writerow((_SETUP_COLUMN, *CORNERS, *(_BUMP_COLUMNS if stops else ()),
-                     *(_PACKER_COLUMNS if packers else ())))
+                     *(_PACKER_COLUMNS if packers else ()), *third,
+                     *(f"heave_spring_{a}" for a in springs)))
 
     def cells(values, text):
         return [] if values is None else [text(values[c]) if c in values else ""
@@ -321,6 +373,9 @@ def write_setups(setups, path, *, units="SI", overwrite=False):
         if packers:
             row += cells(s.packers_m or {},
                          lambda v: repr(float(from_si(v, "displacement", units))))
+        for key, given in ((third, s.third or {}), (springs, s.heave_springs or {})):
+            row += [("" if k not in given else NO_BUMP_STOP if given[k] is None else given[k])
+                    for k in key]
         writer.writerow(row)
     write_csv(path, buf.getvalue(), units=units, overwrite=overwrite)
     logger.info("wrote %d setup(s) to %s", len(setups), path)

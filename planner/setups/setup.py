@@ -14,6 +14,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ident.data.channels import CORNERS, corner_table
+from ident.data.third import AXLES, THIRD_ELEMENTS
 from ident.errors import ShockModelError
 from ident.models.bumpstops import parse_bump_stop_id
 from planner.errors import PlannerError
@@ -112,6 +113,32 @@ def _corner_elements(who, bump_stops, packers_m):
     return out
 
 
+def _third_elements(who, third, heave_springs):
+    """A setup's third-element dampers and heave springs, checked: read-only mappings in
+    the spec's order (only the elements given; an empty one becomes None)."""
+    out = []
+    for key, values, known in (("third", third, THIRD_ELEMENTS),
+                               ("heave_springs", heave_springs, AXLES)):
+        if values is None:
+            out.append(None)
+            continue
+        if not isinstance(values, Mapping):
+            raise PlannerError(f"{who}: {key} must be a mapping {known[0]} -> id, got "
+                               f"{values!r}")
+        unknown = [k for k in values if k not in known]
+        if unknown:
+            raise PlannerError(f"{who}: {key} {unknown[0]!r} is not one of {list(known)}")
+        given = {}
+        for k in (k for k in known if k in values):
+            v = values[k]
+            if v is not None:
+                _check_text(v, f"{who}: {key} {k}", 'give a library id or "none"')
+                v = None if v.lower() == "none" else v
+            given[k] = v
+        out.append(MappingProxyType(given) if given else None)
+    return out
+
+
 @dataclass(frozen=True)
 class Setup:
     """One shock id per corner, and optionally bump stops and packers.
@@ -130,6 +157,14 @@ class Setup:
     packers_m : mapping of str to float, optional
         Corner -> packer thickness [m] (>= 0) for the corners the setup sets; the others
         keep the baseline run's. As `bump_stops`.
+    third : mapping of str to (str or None), optional
+        Third element (``heave_front``, ``heave_rear``, ``roll_front``, ``roll_rear``) ->
+        its damper's shock id (a setting name such as ``TTX@ls=6``), or None (or
+        ``"none"``) for none, for the elements the setup sets; the others keep the
+        baseline run's. As `bump_stops`.
+    heave_springs : mapping of str to (str or None), optional
+        Axle (``front``, ``rear``) -> heave spring's bump-stop id, or None for none; as
+        `third`.
 
     Raises
     ------
@@ -160,6 +195,8 @@ class Setup:
     # defaults stay class attributes, so _unchecked's setups read None without a store
     bump_stops: Mapping | None = None
     packers_m: Mapping | None = None
+    third: Mapping | None = None
+    heave_springs: Mapping | None = None
 
     def __post_init__(self):
         _check_text(self.name, "setup name", "give a non-empty name without surrounding "
@@ -180,6 +217,10 @@ class Setup:
             stops, packers = _corner_elements(who, self.bump_stops, self.packers_m)
             object.__setattr__(self, "bump_stops", stops)
             object.__setattr__(self, "packers_m", packers)
+        if self.third is not None or self.heave_springs is not None:
+            third, springs = _third_elements(who, self.third, self.heave_springs)
+            object.__setattr__(self, "third", third)
+            object.__setattr__(self, "heave_springs", springs)
 
     def _set(self, ids):
         object.__setattr__(self, "shocks", MappingProxyType(dict(zip(CORNERS, ids))))
@@ -197,17 +238,23 @@ class Setup:
         return hash((self.name, self._ids))
 
     def _elements(self):
-        """The bump stops and packers as plain dicts (None where not given)."""
-        return tuple(None if m is None else dict(m) for m in (self.bump_stops, self.packers_m))
+        """The bump stops, packers, third elements and heave springs as plain dicts (None
+        where not given)."""
+        return tuple(None if m is None else dict(m) for m in (
+            self.bump_stops, self.packers_m, self.third, self.heave_springs))
 
     def __reduce__(self):  # mappingproxy does not pickle; rebuild from plain values
-        if self.bump_stops is None and self.packers_m is None:
+        elements = self._elements()
+        if all(m is None for m in elements):
             return (Setup, (self.name, dict(self.shocks)))
-        return (Setup, (self.name, dict(self.shocks), *self._elements()))
+        if elements[2:] == (None, None):
+            return (Setup, (self.name, dict(self.shocks), *elements[:2]))
+        return (Setup, (self.name, dict(self.shocks), *elements))
 
     def __repr__(self):
-        more = "".join(f", {k}={v!r}" for k, v in zip(("bump_stops", "packers_m"),
-                                                        self._elements()) if v is not None)
+        more = "".join(f", {k}={v!r}" for k, v in zip(
+            ("bump_stops", "packers_m", "third", "heave_springs"), self._elements())
+            if v is not None)
         return f"Setup(name={self.name!r}, shocks={dict(self.shocks)!r}{more})"
 
     def ids(self):
