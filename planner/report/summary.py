@@ -130,7 +130,7 @@ def verdicts(table, reference, *, worse="worse", better="better"):
     return pd.Series(out, index=table.index, name="verdict")
 
 
-def _histogram_axes(ax, hist, setups, unit):
+def _histogram_axes(ax, hist, setups):
     """Step histograms of `setups` (share per bin) on one axes; open end bins drawn one
     bin wide."""
     for k, (name, style) in enumerate(zip(setups, ("-", "--"))):
@@ -147,7 +147,6 @@ def _histogram_axes(ax, hist, setups, unit):
                   label=name)
     ax.axvline(0.0, color="0.5", lw=0.5)
     ax.tick_params(labelsize=_FIG_PT)
-    ax.set_xlabel(f"shock velocity [{unit}] (bump +)", fontsize=_FIG_PT, labelpad=1)
 
 
 def summary_figure(metrics=None, *, best, baseline, histograms=None, labels=None,
@@ -197,10 +196,13 @@ def summary_figure(metrics=None, *, best, baseline, histograms=None, labels=None
         axes = fig.subplots(1, len(corners), sharey=True, squeeze=False)[0]
         for ax, corner in zip(axes, corners):
             _histogram_axes(ax, histograms[histograms["corner"].astype(str) == corner],
-                            [best, baseline] if best != baseline else [best], velocity_unit)
+                            [best, baseline] if best != baseline else [best])
             ax.set_title(corner, fontsize=_FIG_PT, pad=2)
         axes[0].set_ylabel("time [%]", fontsize=_FIG_PT)
-        axes[-1].legend(fontsize=_FIG_PT, frameon=False, loc="upper right")
+        for ax in axes:  # short labels that do not run into each other; the legend below
+            ax.set_xlabel(f"velocity [{velocity_unit}], bump +", fontsize=_FIG_PT, labelpad=1)
+        fig.legend(*axes[-1].get_legend_handles_labels(), fontsize=_FIG_PT, frameon=False,
+                   loc="outside lower center", ncols=2)
         fig.suptitle(title or f"shock-velocity histogram: best '{best}' against baseline "
                      f"'{baseline}'", fontsize=_FIG_PT + 0.5)
         return fig
