@@ -767,3 +767,17 @@ def test_rank_writes_histograms_and_scores_a_logged_one(tmp_path, capsys, track_
     assert main(_rank_argv(drive, tmp_path / "n", "--histogram-bins", "none")) == 0
     assert not (tmp_path / "n" / "histograms.csv").exists()
     assert "share_low_speed_LF" not in pd.read_csv(tmp_path / "n" / "ranking.csv")
+
+
+def test_plan_without_drives_writes_in_the_crates_units(tmp_path):
+    """Issue 36: a plan with no drive and no --units takes its project's unit system from the
+    crate (an imperial crate: an imperial plan.toml and run sheet), not SI."""
+    from ident.models.library import read_shock_library, write_shock_library
+    from planner.demo import DEMO_LIBRARY_PATH
+
+    crate = tmp_path / "crate.toml"
+    write_shock_library(read_shock_library(DEMO_LIBRARY_PATH), crate, units="imperial")
+    code = main(["plan", "--vehicle", "paper", "--shocks", str(crate), "--budget-min", "30",
+                 "--baseline", "B20", "--out", str(tmp_path / "plan")])
+    assert code == 0
+    assert 'units = "imperial"' in (tmp_path / "plan" / "plan.toml").read_text()

@@ -5,8 +5,8 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
-from planner.cli.common import (UNITS_OF_DRIVES, add_units, check_out, load_vehicle,
-                                output_units)
+from planner.cli.common import (UNITS_OF_DRIVES, add_units, check_out, library_units,
+                                load_vehicle, output_units)
 from planner.text import format_table
 
 __all__ = ["add_parser", "run"]
@@ -44,7 +44,8 @@ def add_parser(subparsers):
                     help="repeat the baseline after every this many runs, for drift (default "
                     "%(default)s: never)")
     add_units(pl, "units of the drive files read and written", default=None,
-              default_text=UNITS_OF_DRIVES + ", SI without --drive")
+              default_text=UNITS_OF_DRIVES + "; without --drive, the session's or else the "
+              "crate's (--shocks)")
     pl.add_argument("--out", required=True, help="output folder")
     pl.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     pl.set_defaults(func=run)
@@ -79,7 +80,9 @@ def run(args):
     library = read_shock_library(args.shocks)
     objective = default_objective() if args.objective is None else read_objective(args.objective)
     drives = [read_drive(d, units=args.units) for d in args.drive] if args.drive else None
-    output_units(args, drives)
+    # without --units and drives: the session's unit system, else the crate's (the project's)
+    output_units(args, drives, fallback=session.units if session is not None
+                 else library_units(args.shocks))
     rig = read_rig(args.rig_costs) if args.rig_costs else None
     plan = design_experiment(model, library, budget_min=args.budget_min,
                              criterion=args.criterion, session=session, objective=objective,
