@@ -347,21 +347,12 @@ def output_units(args, drives, *, fallback="SI"):
     """The unit system of the outputs, set as ``args.units``: ``--units`` if given, else the
     first drive file's (its ``units`` column or ``# units:`` line; the spec: predictions
     in the drive file's units), else `fallback` (a command without drives: its project's
-    other files, e.g. :func:`library_units`). The run's messages, tables and plots are
-    then in them too (:func:`ident.data.units.set_display_units`)."""
+    other files, e.g. :func:`planner.dyno.check.library_units`). The run's messages,
+    tables and plots are then in them too (:func:`ident.data.units.set_display_units`)."""
     if args.units is None:
         args.units = drives[0].settings.get("units", "SI") if drives else fallback
     set_display_units(args.units)  # the messages, tables and plots of the run in them too
     return args.units
-
-
-def library_units(path):
-    """The unit system a shock library TOML is written in (its ``units`` key, SI without):
-    the project's, for a command that reads no drive."""
-    from ident.data.files import read_toml
-    from ident.models.shocks import check_shock_units
-
-    return check_shock_units(read_toml(path).get("units", "SI"), f"{path}: key 'units'")
 
 
 def bump_stop_library(args, model):

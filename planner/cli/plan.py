@@ -5,8 +5,8 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
-from planner.cli.common import (UNITS_OF_DRIVES, add_units, check_out, library_units,
-                                load_vehicle, output_units)
+from planner.cli.common import (UNITS_OF_DRIVES, add_units, check_out, load_vehicle,
+                                output_units)
 from planner.text import format_table
 
 __all__ = ["add_parser", "run"]
@@ -59,6 +59,7 @@ def run(args):
     from ident.data.session import read_session
     from ident.models.library import read_shock_library
     from planner.design import ScheduleOptions, design_experiment
+    from planner.dyno.check import library_units
     from planner.objective import default_objective, read_objective
     from planner.rig_spec import read_rig
     from planner.testplan import write_plan
