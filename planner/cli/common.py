@@ -22,7 +22,7 @@ __all__ = [
     "run_subcommand", "add_element_options",
     "add_try_options", "add_prediction_inputs", "add_histogram_option", "histogram_options", "check_out", "warn_inventory",
     "baseline_arg", "load_vehicle", "load_any_model", "read_inputs", "output_units",
-    "bump_stop_library", "parse_fixed", "packer_bounds", "element_choices", "one_line",
+    "bump_stop_library", "section_windows", "parse_fixed", "packer_bounds", "element_choices", "one_line",
     "UNITS_OF_DRIVE", "UNITS_OF_DRIVES", "MODEL_HELP", "OBJECTIVE_HELP", "log",
     "show_progress", "package_version", "VersionAction",
 ]
@@ -353,6 +353,27 @@ def output_units(args, drives, *, fallback="SI"):
         args.units = drives[0].settings.get("units", "SI") if drives else fallback
     set_display_units(args.units)  # the messages, tables and plots of the run in them too
     return args.units
+
+
+def section_windows(args, where, *, option_prefix=""):
+    """The ``--section`` windows and the ``--laps`` laps of a command, checked (names,
+    order): a list of ``(name, start_s, stop_s)``.
+
+    `where` names the command in a clash of names; `option_prefix` goes before the option
+    names in the other messages (``"rank "``: ``rank --section ...``).
+    """
+    from planner.errors import PlannerError
+    from planner.trackdrive import lap_sections, parse_sections
+
+    sections = parse_sections(args.section, where=f"{option_prefix}--section")
+    if args.laps:
+        laps = lap_sections(str(args.laps).split(","), where=f"{option_prefix}--laps")
+        clash = {n for n, _, _ in laps} & {n for n, _, _ in sections}
+        if clash:
+            raise PlannerError(f"{where}: --section names {sorted(clash)} clash with the laps' "
+                               "names; rename them")
+        sections += laps
+    return sections
 
 
 def bump_stop_library(args, model):

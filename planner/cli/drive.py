@@ -23,7 +23,8 @@ from pathlib import Path
 from ident.data.files import check_output
 from ident.data.units import UNIT_SYSTEMS, set_display_units
 from planner.cli.common import (add_command_group, add_histogram_option, add_resample,
-                                histogram_options, log, run_subcommand, unit_system)
+                                histogram_options, log, run_subcommand, section_windows,
+                                unit_system)
 
 __all__ = ["add_parser", "run", "run_from_track", "run_iterate", "run_section", "run_resample",
            "report_folder", "section_path", "LOG_FORMATS", "SUBCOMMANDS"]
@@ -157,7 +158,7 @@ def _add_resample(sub):
                    "fraction up/down with down <= 1000 (e.g. 200 -> 512 Hz)")
     p.add_argument("--units", type=unit_system, choices=list(UNIT_SYSTEMS), default=None,
                    help="unit system of the drive and the resampled drive: SI or imperial "
-                   "(default: the drive file's '# units:' line, else SI)")
+                   "(default: the drive file's 'units' column, else SI)")
     p.add_argument("--out", required=True, metavar="NEW.csv",
                    help="the resampled drive to write (.csv or .parquet)")
     p.add_argument("--overwrite", action="store_true",
@@ -178,21 +179,6 @@ def section_path(out, name):
     """The file of section `name` of drive file `out`: ``<stem>_<name><suffix>``."""
     out = Path(out)
     return out.with_name(f"{out.stem}_{name}{out.suffix or '.csv'}")
-
-
-def _sections(args, where):
-    from planner.errors import PlannerError
-    from planner.trackdrive import lap_sections, parse_sections
-
-    sections = parse_sections(args.section, where="--section")
-    if args.laps:
-        laps = lap_sections(str(args.laps).split(","), where="--laps")
-        clash = {n for n, _, _ in laps} & {n for n, _, _ in sections}
-        if clash:
-            raise PlannerError(f"{where}: --section names {sorted(clash)} clash with the laps' "
-                               "names; rename them")
-        sections += laps
-    return sections
 
 
 def _band(text):
@@ -314,7 +300,7 @@ def run_from_track(args):
 
     where = "drive from-track"
     out, report = _outputs(args)
-    sections = _sections(args, where)
+    sections = section_windows(args, where)
     for name, _, _ in sections:
         check_output(section_path(out, name), overwrite=args.overwrite,
                      what=f"section {name!r}'s drive")
@@ -452,7 +438,7 @@ def run_section(args):
     from planner.trackdrive import cut_sections
 
     where = "drive section"
-    sections = _sections(args, where)
+    sections = section_windows(args, where)
     if not sections:
         raise PlannerError(f"{where}: give --section NAME=START:STOP or --laps T0,T1,...")
     drive = read_drive(args.drive, units=args.units)

@@ -7,7 +7,7 @@ from pathlib import Path
 from planner.cli.common import (OBJECTIVE_HELP, add_prediction_inputs, add_try_options,
                                 baseline_arg, bump_stop_library, check_out, element_choices,
                                 histogram_options, int_at_least, parse_fixed, read_inputs,
-                                show_progress)
+                                section_windows, show_progress)
 
 __all__ = ["add_parser", "run"]
 
@@ -77,7 +77,7 @@ def run(args):
     from planner.setups import read_setups
 
     check_out(args, folder=True)
-    sections = _sections(args)
+    sections = section_windows(args, "rank", option_prefix="rank ")
     model, drive, library = read_inputs(args)
     if sections:  # a window beyond the drive: said before anything is simulated
         from planner.trackdrive import check_sections
@@ -151,18 +151,3 @@ def run(args):
     print("wrote " + ", ".join(str(p) for p in written))
     return 0
 
-
-def _sections(args):
-    """The ``--section`` windows and the ``--laps`` laps, checked (names, order)."""
-    from planner.errors import PlannerError
-    from planner.trackdrive import lap_sections, parse_sections
-
-    sections = parse_sections(args.section, where="rank --section")
-    if args.laps:
-        laps = lap_sections(str(args.laps).split(","), where="rank --laps")
-        clash = {n for n, _, _ in laps} & {n for n, _, _ in sections}
-        if clash:
-            raise PlannerError(f"rank: --section names {sorted(clash)} clash with the laps' "
-                               "names; rename them")
-        sections += laps
-    return sections
