@@ -37,6 +37,7 @@ __all__ = [
     "THIRD_CHANNEL_QUANTITIES",
     "ThirdElements",
     "RunThird",
+    "CarThird",
     "element_row",
     "element_axle",
     "check_third_elements",
@@ -142,6 +143,76 @@ class RunThird:
     def __bool__(self):
         return any(v is not None for v in self.dampers.values()) or any(
             v is not None for v in self.heave_springs.values())
+
+
+@dataclass(frozen=True)
+class CarThird:
+    """The third elements an identified model carries (``VehicleModel.third``).
+
+    What the session declared of its heave and roll elements, kept with the model so that
+    predictions put the same elements in the loop: the car's elements with their motion
+    ratios and what the model's baseline run fitted (a setup without third-element columns
+    keeps the baseline's). The dampers are ids in the shock library the planner is given;
+    the heave springs ids in the model's bump-stop library
+    (``VehicleModel.elements.bump_stops``).
+
+    Attributes
+    ----------
+    elements : ThirdElements
+        The declared elements and their motion ratios.
+    baseline : RunThird
+        The baseline run's dampers, heave springs and packers.
+
+    Examples
+    --------
+    >>> car = CarThird(ThirdElements({"heave_front": 1.0}),
+    ...                RunThird(dampers={"heave_front": "H1"}))
+    >>> CarThird.from_dict(car.to_dict()) == car
+    True
+    """
+
+    elements: ThirdElements
+    baseline: RunThird = field(default_factory=RunThird)
+
+    def __post_init__(self):
+        if not isinstance(self.elements, ThirdElements):
+            raise TypeError(f"CarThird: elements must be a ThirdElements, got "
+                            f"{type(self.elements).__name__}")
+        if not isinstance(self.baseline, RunThird):
+            raise TypeError(f"CarThird: baseline must be a RunThird, got "
+                            f"{type(self.baseline).__name__}")
+        dampers = dict.fromkeys(THIRD_ELEMENTS)
+        dampers.update(self.baseline.dampers)
+        springs = dict.fromkeys(AXLES)
+        springs.update(self.baseline.heave_springs)
+        packers = dict.fromkeys(AXLES, 0.0)
+        packers.update({a: float(v) for a, v in self.baseline.heave_packers_m.items()})
+        object.__setattr__(self, "baseline", RunThird(dampers, springs, packers))
+
+    def to_dict(self):
+        """JSON-able dict (SI): ``motion_ratios``, ``dampers``, ``heave_springs``,
+        ``heave_packers_m``."""
+        return {"motion_ratios": dict(self.elements.motion_ratios),
+                "dampers": dict(self.baseline.dampers),
+                "heave_springs": dict(self.baseline.heave_springs),
+                "heave_packers_m": {a: float(v) for a, v in
+                                    self.baseline.heave_packers_m.items()}}
+
+    @classmethod
+    def from_dict(cls, d):
+        """The third elements :meth:`to_dict` wrote.
+
+        Raises
+        ------
+        ValueError
+            If `d` is not such a dict.
+        """
+        if not isinstance(d, dict) or "motion_ratios" not in d:
+            raise ValueError(f"CarThird.from_dict: a dict with motion_ratios is needed, got "
+                             f"{d!r}; the model file's third elements are damaged")
+        return cls(ThirdElements({k: float(v) for k, v in d["motion_ratios"].items()}),
+                   RunThird(dict(d.get("dampers") or {}), dict(d.get("heave_springs") or {}),
+                            dict(d.get("heave_packers_m") or {})))
 
 
 def check_third_elements(value, where):

@@ -34,6 +34,7 @@ import numpy as np
 
 from ident.data.channels import RIG_INPUTS
 from ident.data.files import atomic_path, write_csv
+from ident.data.third import CarThird
 from ident.errors import ModelFileError
 from ident.identify.condition import conditioned_standard_error
 from ident.identify.diagnose import Diagnosis
@@ -252,6 +253,14 @@ class VehicleModel:
         None for a model identified without any."""
         doc = self.settings.get("elements")
         return None if doc is None else CarElements.from_dict(doc)
+
+    @property
+    def third(self):
+        """CarThird or None: The heave and roll elements the session declared and the
+        baseline run's fit (``settings["third"]``, written by identification; saved and
+        loaded with the model); None for a car without third elements."""
+        doc = self.settings.get("third")
+        return None if doc is None else CarThird.from_dict(doc)
 
     @property
     def rig_inputs(self):
