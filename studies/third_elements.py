@@ -66,9 +66,11 @@ from ident.sim.third_loop import ThirdDamper, ThirdSpring, simulate_third
 from ident.sim.virtual_rig import (loop_damping, make_plan_drive, read_rig_plan,
                                   simulate_session)
 from planner.demo import PROTO_EXAMPLES, proto_track_drive
-from planner.objective import default_objective, score_setups
+from planner.errors import PlannerError
+from planner.objective import Objective, default_objective, score_setups
 from planner.options import ElementOptions, LoopOptions
 from planner.predict import predict_setups
+from planner.rank import rank_setups
 from planner.setups import Setup, read_setups, write_setups
 
 log = logging.getLogger("studies.third_elements")
@@ -307,11 +309,28 @@ def simulate_truth(car, drive, setups, *, oversample=None, band_hz=None):
     return table
 
 
-def study_objective():
+def study_objective(*, heave=True):
     """The objective the study ranks with: the default (grip and platform, every corner's
-    travel within 1.25 x the baseline's); the heave travel limit is applied by
-    :func:`score_table` (objective files may not name the elements' metrics yet)."""
-    return default_objective()
+    travel within 1.25 x the baseline's) with each heave element's travel RMS limited to
+    :data:`HEAVE_TRAVEL_MAX_RATIO` x the baseline's (`heave`), where the planner knows the
+    heave metrics' names; else the default alone (:func:`score_table` applies the limit
+    itself then).
+
+    Returns
+    -------
+    planner.objective.Objective
+    """
+    base = default_objective()
+    if not heave:
+        return base
+    limits = dict(base.limits)
+    limits.update({f"heave_travel_rms_{a}": {"max_ratio": HEAVE_TRAVEL_MAX_RATIO}
+                   for a in AXLES})
+    try:
+        return Objective(f"{base.name}, heave travel limited", dict(base.weights),
+                         groups=dict(base.groups), limits=limits)
+    except PlannerError:
+        return base
 
 
 def score_table(metrics, *, baseline=BASELINE):
@@ -330,9 +349,10 @@ def score_table(metrics, *, baseline=BASELINE):
         ``score`` (lower is better), ``feasible``, ``rank`` (1 the best feasible),
         ``heave_limit`` (whether the heave limit could be applied).
     """
-    scores = score_setups(metrics, study_objective(), baseline=baseline).table
-    out = pd.DataFrame({"score": scores["score"], "feasible": scores["feasible"]})
     heave = [c for c in (f"heave_travel_rms_{a}" for a in AXLES) if c in metrics]
+    objective = study_objective(heave=len(heave) == len(AXLES))
+    scores = score_setups(metrics, objective, baseline=baseline).table
+    out = pd.DataFrame({"score": scores["score"], "feasible": scores["feasible"]})
     for c in heave:
         out["feasible"] &= metrics[c] <= HEAVE_TRAVEL_MAX_RATIO * metrics.loc[baseline, c]
     order = np.lexsort((out["score"].to_numpy(), ~out["feasible"].to_numpy()))
@@ -410,6 +430,31 @@ def predict_identified(model, drive, setups, car):
         return table, "yes"
     return table, ("ignored: the predictions have no heave metrics (the planner's loop "
                    "has no third elements yet)")
+
+
+def rank_identified(model, drive, setups, car):
+    """``rank`` on the identified model: :func:`planner.rank.rank_setups` over `setups`
+    (every one simulated in the time domain) with :func:`study_objective`, the first setup
+    the baseline.
+
+    Returns
+    -------
+    (str or None, str)
+        The ranking's best setup (None if the planner refused) and a note: ``"ok"`` or the
+        refusal.
+    """
+    heave = getattr(model, "third", None) is not None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ranking = rank_setups(model, drive, car.library, setups=list(setups),
+                                  objective=study_objective(heave=heave),
+                                  baseline=setups[0], top=len(setups),
+                                  n_check=min(20, len(setups)),
+                                  elements=ElementOptions(bump_stops=car.bump_stops))
+    except (ValueError, TypeError, NotImplementedError) as exc:
+        return None, f"refused: {type(exc).__name__}: {exc}"
+    return ranking.best, "ok"
 
 
 def identify(session):
@@ -510,6 +555,9 @@ def main(argv=None):
                        "n_setups": len(setups)}
                 if pred is not None:
                     row.update(compare(pred, truths[label]))
+                    best, note = rank_identified(model, drive, setups, car)
+                    row.update({"rank_best": best, "rank_note": note,
+                                "rank_same_best": best == row["true_best"]})
                     pred.to_csv(out / f"third_elements_predictions_{case}_{label}.csv",
                                 float_format="%.6g")
                 log.info("%s on %s: %s", case, label, row)
