@@ -272,7 +272,8 @@ def simulate_truth(car, drive, setups, *, oversample=None, band_hz=None):
         shocks = [car.library[s.shocks[c]] for c in CORNERS]
         third = setup_third(s, baseline)
         dampers = [ThirdDamper(e, elements.row(e), car.library[sid])
-                   for e, sid in third.dampers.items() if sid is not None and e in elements.elements]
+                   for e, sid in third.dampers.items()
+                   if sid is not None and e in elements.elements]
         springs = []
         for axle, sid in third.heave_springs.items():
             if sid is None or f"heave_{axle}" not in elements.elements:
@@ -544,7 +545,15 @@ def main(argv=None):
                  session.runs[0].n_samples / session.fs_hz, time.perf_counter() - t0)
         for case, sess in (("after", session), ("before", strip_third(session))):
             t0 = time.perf_counter()
-            model = identify(sess)
+            try:
+                model = identify(sess)
+            except (ValueError, TypeError, NotImplementedError) as exc:
+                log.error("%s: identify refused the session: %s", case, exc)
+                rows += [{"case": case, "drive": label,
+                          "session_third": bool(sess.third_elements),
+                          "planner_third": f"identify refused: {type(exc).__name__}: {exc}"}
+                         for label in drives]
+                continue
             identify_s = time.perf_counter() - t0
             for label, drive in drives.items():
                 pred, planner_third = predict_identified(model, drive, setups, car)
