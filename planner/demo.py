@@ -46,7 +46,9 @@ from planner.objective import default_objective, objective_to_toml
 __all__ = ["run_demo", "write_demo_inputs", "write_demo_rig_files", "write_real_car_example",
            "DEMO_LIBRARY_PATH", "DEMO_INPUT_FILES", "DEMO_RIG_FILES", "REAL_CAR_FOLDER",
            "REAL_CAR_FILES", "write_clicks_example", "CLICKS_FOLDER", "CLICKS_FILES",
-           "write_track_example", "TRACK_FOLDER", "TRACK_FILES"]
+           "write_track_example", "TRACK_FOLDER", "TRACK_FILES", "write_proto_example",
+           "PROTO_FOLDER", "PROTO_FILES", "PROTO_EXAMPLES", "proto_speed_trace",
+           "proto_track_drive"]
 
 log = logging.getLogger(__name__)
 
@@ -95,6 +97,26 @@ _TRACK_LOGGER = {
 }
 #: The example's track run: 120 s (two laps of 60 s) at 200 Hz, seed, the car's downforce.
 _TRACK_RUN = {"duration_s": 120.0, "fs_hz": 200.0, "seed": 27}
+#: Folder of the README's third-elements example (:func:`write_proto_example`).
+PROTO_FOLDER = "proto"
+#: Where the prototype-like car's files live in the package (``ident/examples``).
+PROTO_EXAMPLES = Path(EXAMPLE_VEHICLE_PATH).parent
+#: The third-elements example's files (name -> what it is), in README order: copies of
+#: ``ident/examples/proto_*`` and the car's track drive.
+PROTO_FILES = {
+    "proto_car.toml": "a prototype-like car with heave elements front and rear and a front "
+                      "roll damper, soft corner springs (vehicle TOML, third_elements)",
+    "proto_aero.toml": "its downforce, about 1.7 times its weight at 70 m/s (aero model TOML)",
+    "proto_shocks.toml": "corner shocks, heave and roll dampers: linear, table, digressive, "
+                         "with lag (shock library)",
+    "proto_bumpstops.toml": "its heave springs, stiff with a gap (bump-stop library)",
+    "proto_plan.toml": "a 7-post session: baseline, a swap per corner and per third element's "
+                       "damper, 8 runs of 120 s, 2 % noise (rig plan)",
+    "proto_setups.csv": "44 setups varying corner, heave and roll dampers and the front heave "
+                        "spring (setups CSV with third-element columns)",
+    "track_drive.csv": "a 120 s track drive with the car's downforce at a lap's speeds: the "
+                       "heave springs closed at speed (drive)",
+}
 _TRACK_AERO = """# Aero model (shockplan-aero/1), written by shockplan demo: the README's "From track data
 # to a rig drive" example. The paper car's downforce, growing with the square of speed,
 # 45 % on the front axle.
@@ -403,6 +425,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             write_real_car_example(work / REAL_CAR_FOLDER)
             write_clicks_example(work / CLICKS_FOLDER)
             write_track_example(work / TRACK_FOLDER)
+            write_proto_example(work / PROTO_FOLDER)
             write_demo_rig_files(work / DEMO_RIG_FILES, session, duration_s=DEMO_RIG_FILES_S)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -983,4 +1006,106 @@ def write_track_example(folder, *, overwrite=False):
               "the canonical log channels.\n")
     atomic_write_text(paths["log_map.toml"], header + "\n".join(lines))
     log.info("demo: wrote the track-data example to %s", folder)
+    return paths
+
+
+def proto_speed_trace(t_s):
+    """A lap-like speed trace [m/s] at times `t_s` [s]: between about 15 and 81 m/s, slow
+    (below 0.2 Hz: straights, braking zones and corners), the same every call.
+
+    Examples
+    --------
+    >>> round(float(proto_speed_trace(0.0)), 2)
+    55.57
+    """
+    import numpy as np
+
+    t = np.asarray(t_s, dtype=float)
+    return (48.0 + 24.0 * np.sin(2 * np.pi * t / 15.0)
+            + 9.0 * np.sin(2 * np.pi * t / 6.3 + 1.0))
+
+
+def proto_track_drive(vehicle, aero, *, duration_s=120.0, fs_hz=100.0, seed=7, ramp_s=3.0):
+    """The prototype example's track drive: the demo's road with the car's downforce.
+
+    The road is :func:`ident.data.drive.make_track_drive` (the demo's, seed 7); the aero
+    loads are the car's (:meth:`ident.models.aero.AeroModel.loads`) at
+    :func:`proto_speed_trace`'s speeds, mean included (the downforce that closes the heave
+    springs at speed; the car is at rest without it), faded in and out over `ramp_s`.
+
+    Parameters
+    ----------
+    vehicle : ident.models.vehicle.VehicleParams
+        Its wheelbase and front track.
+    aero : ident.models.aero.AeroModel
+        A model of speed alone (``constant`` or ``speed_table``).
+    duration_s, fs_hz : float
+        Length [s] and sample rate [Hz].
+    seed : int
+        The road's seed.
+    ramp_s : float
+        Fade-in and fade-out of the aero loads [s].
+
+    Returns
+    -------
+    ident.data.drive.Drive
+        SI; ``aero_heave`` < 0 is downforce.
+    """
+    import numpy as np
+
+    from ident.data.drive import Drive, make_track_drive
+
+    road = make_track_drive(duration_s=duration_s, fs_hz=fs_hz, seed=seed,
+                            wheelbase_m=vehicle.a_m + vehicle.b_m,
+                            track_width_m=vehicle.track_front_m, name="prototype track")
+    t = road.time_s
+    ramp = np.clip(np.minimum(t, t[-1] - t) / ramp_s, 0.0, 1.0)
+    ramp = 0.5 - 0.5 * np.cos(np.pi * ramp)
+    loads = aero.loads(proto_speed_trace(t))
+    ch = dict(road.channels)
+    for name in ("aero_heave", "aero_roll", "aero_pitch"):
+        ch[name] = ch.get(name, np.zeros_like(t)) + ramp * np.asarray(loads.channels[name])
+    return Drive(name="prototype track with downforce", fs_hz=road.fs_hz, channels=ch)
+
+
+def write_proto_example(folder, *, overwrite=False):
+    """Write the README's third-elements example (:data:`PROTO_FILES`) into `folder`.
+
+    The prototype-like car of ``ident/examples`` (issue 38: heave elements front and rear
+    with gapped heave springs, a front roll damper, downforce), copied as is, and its track
+    drive (:func:`proto_track_drive`, 120 s at 100 Hz, SI).
+
+    Parameters
+    ----------
+    folder : str or Path
+        Created if missing.
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        File name -> written path, in :data:`PROTO_FILES` order.
+
+    Raises
+    ------
+    FileExistsError
+        If one of the files exists and `overwrite` is false (none is written then).
+    """
+    from ident.data.drive import write_drive
+    from ident.models.aero import read_aero_model
+    from ident.models.vehicle import read_vehicle
+
+    folder = Path(folder)
+    paths = {name: folder / name for name in PROTO_FILES}
+    for path in paths.values():
+        check_can_write(path, overwrite=overwrite)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, path in paths.items():
+        if name != "track_drive.csv":
+            atomic_write_bytes(path, (PROTO_EXAMPLES / name).read_bytes())
+    drive = proto_track_drive(read_vehicle(PROTO_EXAMPLES / "proto_car.toml"),
+                              read_aero_model(PROTO_EXAMPLES / "proto_aero.toml"))
+    write_drive(drive, paths["track_drive.csv"], units="SI", overwrite=True)
+    log.info("demo: wrote the third-elements example to %s", folder)
     return paths

@@ -400,3 +400,31 @@ def test_track_drive_study_small(tmp_path):
     # setups are 0.001-0.04 % apart on some tracks)
     assert row["same_best"] == (row["best_built"] == row["best_track"])
     assert row["best_score_gap"] < 1e-3
+
+
+@pytest.mark.heavy
+def test_third_elements_study_small(tmp_path):
+    """The prototype-like car's study at a small size (20 s runs, 30 s drives, 8 setups):
+    it runs end to end, writes its tables, and the identified model with the session's
+    third elements predicts better than the one without, once the planner puts them in its
+    loop (before that, the row says the planner ignored or refused them)."""
+    study = _load("third_elements")
+    table, truths = study.main(["--out", str(tmp_path), "--quick", "--setups", "8"])
+    back = pd.read_csv(tmp_path / "third_elements.csv")
+    assert list(back["case"]) == ["after", "after", "before", "before"]
+    assert list(back["drive"]) == ["track", "rig", "track", "rig"]
+    for drive in ("track", "rig"):
+        truth = pd.read_csv(tmp_path / f"third_elements_truth_{drive}.csv", index_col=0)
+        assert len(truth) == 8 and truth.index[0] == study.BASELINE
+        assert truth["rank"].idxmin() == study.score_table(truths[drive])["rank"].idxmin()
+    for _, row in back.iterrows():
+        assert row["planner_third"] == "yes" or row["planner_third"].startswith(
+            ("ignored", "refused")), row["planner_third"]
+        if not row["planner_third"].startswith("refused"):  # predicted: compared, ranked
+            assert row["rank_note"] == "ok" or row["rank_note"].startswith("refused")
+            assert 0 <= row["median_error_pct"] <= row["max_error_pct"]
+    before = back[back["case"] == "before"].set_index("drive")
+    after = back[back["case"] == "after"].set_index("drive")
+    for drive in ("track", "rig"):
+        if after.loc[drive, "planner_third"] == "yes":
+            assert after.loc[drive, "median_error_pct"] < before.loc[drive, "median_error_pct"]
