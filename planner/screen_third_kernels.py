@@ -1,0 +1,527 @@
+"""Compiled kernel of the screening with third elements: numba, one caller (:mod:`planner.screen`).
+
+The screening's fixed point (:mod:`planner.screen`) with the loop correction no longer
+diagonal: every damper and spring acts through a row ``r`` over the corners (a corner's
+own shock or bump stop: a unit row; a heave or roll element:
+:func:`ident.data.third.element_row`), so with the dampers' equivalent damping ``c_r(w)``
+(lag as a first-order roll-off) and the springs' equivalent stiffness ``k_r``::
+
+    Delta(w) = -diag(c_bar) + sum_r (c_r(w) + k_r / (j w)) r r^T        (4 x 4, dense)
+
+and ``K = (I - H_vs Delta)^-1``. Each row's velocity power is ``r K P K^H r^T`` (its RMS
+the next iterate of its linearization), its travel power the same over ``w^2``; the
+metrics are the linear form of :func:`planner.screen_kernels.metric_form` of the features
+of ``E = Delta K`` (which holds for any E, diagonal or not).
+
+The band work is laid out for vectorization over bands: the operands entry-major
+(``(16, n_bands)``, band innermost), each phase a branch-free loop over bands, the 4x4
+inverse by cofactors (:func:`_inverse_cofactor`: no pivoting, so no branches; the return
+difference ``I - H_vs Delta`` of a stable loop is far from singular, tested against
+``numpy.linalg.inv``), the bands' sums taken in band order afterwards. A car without third
+elements never comes here (the plain kernels, :mod:`planner.screen_kernels`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba as nb
+import numpy as np
+
+from planner.screen_kernels import gaussian_pwl
+
+__all__ = [
+    "ThirdBands",
+    "ThirdOutputs",
+    "screen_batch_third",
+    "inverse_cofactor",
+]
+
+_SQRT2 = math.sqrt(2.0)
+#: Newton iterations on the mean travel and their tolerance [m] (as the plain kernels').
+_MEAN_MAX_ITER = 50
+_MEAN_TOL_M = 1e-12
+#: Features of a band's loop correction the metrics are a linear form of (as
+#: :func:`planner.screen_kernels.metric_form` lays them out).
+_NFEAT = 48
+
+
+class ThirdBands(NamedTuple):
+    """The plant's band data and the rows, entry-major (setup-independent).
+
+    Attributes
+    ----------
+    w : ndarray, shape (n_bands,)
+        Band centres [rad/s].
+    H, P, PB : ndarray of complex, shape (16, n_bands)
+        Entry ``4 a + b`` of ``H_vs``, ``P`` and ``PB`` per band (row-major entries).
+    F : ndarray, shape (n_bands, 48, n_metrics)
+        :func:`planner.screen_kernels.metric_form`.
+    d0 : ndarray, shape (n_bands, n_metrics)
+    cbar : ndarray, shape (4,)
+    rows : ndarray, shape (n_rows, 4)
+        The rows: the 4 corners (unit rows) then the elements.
+    outer : ndarray, shape (n_rows, 16)
+        ``r r^T`` of each row (row-major entries).
+    sig0 : ndarray, shape (n_rows,)
+        Starting velocity RMS per row [m/s].
+    jinv : ndarray, shape (n_bands,)
+        ``-1 / w`` [s/rad].
+    w2inv : ndarray, shape (n_bands,)
+        ``1 / w^2``.
+    gain : ndarray, shape (4, 4)
+        Static corner travel per unit corner force [m/N].
+    static : ndarray, shape (4,)
+        Static corner travel of the drive's mean [m].
+    rms0 : ndarray, shape (n_rows,)
+        Starting travel RMS per row [m].
+    """
+
+    w: np.ndarray
+    H: np.ndarray
+    P: np.ndarray
+    PB: np.ndarray
+    F: np.ndarray
+    d0: np.ndarray
+    cbar: np.ndarray
+    rows: np.ndarray
+    outer: np.ndarray
+    sig0: np.ndarray
+    jinv: np.ndarray
+    w2inv: np.ndarray
+    gain: np.ndarray
+    static: np.ndarray
+    rms0: np.ndarray
+
+
+class ThirdOutputs(NamedTuple):
+    """The kernel's outputs, written in place.
+
+    Attributes
+    ----------
+    metrics : ndarray, shape (n_setups, n_metrics)
+    sigma : ndarray, shape (n_setups, n_rows)
+        Linearized velocity RMS per row [m/s].
+    iterations : ndarray of int, shape (n_setups,)
+    elements : ndarray, shape (n_setups, 6, n_rows)
+        Per row the rows of :data:`planner.screen_kernels.STOP_ROWS` (travel RMS and mean
+        [m], spring k_eq [N/m] and mean force [N], damper c_eq [N s/m] and mean force [N]);
+        the travel rows zero in a setup without any spring.
+    """
+
+    metrics: np.ndarray
+    sigma: np.ndarray
+    iterations: np.ndarray
+    elements: np.ndarray
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _ceq(sig, kv, kf, nk, slo, shi):
+    """Equivalent damping of a PWL curve for a zero-mean Gaussian velocity of RMS sig."""
+    if sig <= 0.0:
+        sig = 1e-9
+    acc = 0.0
+    lo_cdf = 0.0
+    for seg in range(nk + 1):
+        if seg < nk:
+            hi_cdf = 0.5 * (1.0 + math.erf(kv[seg] / (sig * _SQRT2)))
+        else:
+            hi_cdf = 1.0
+        if seg == 0:
+            s = slo
+        elif seg == nk:
+            s = shi
+        else:
+            s = (kf[seg] - kf[seg - 1]) / (kv[seg] - kv[seg - 1])
+        acc += s * (hi_cdf - lo_cdf)
+        lo_cdf = hi_cdf
+    return acc
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _inv4(a00, a01, a02, a03, a10, a11, a12, a13, a20, a21, a22, a23, a30, a31, a32, a33):
+    """The inverse of a 4x4 complex matrix by cofactors (2x2 minors of the row pairs),
+    straight-line: no branches (the reciprocal of the determinant in real arithmetic)."""
+    s0 = a00 * a11 - a10 * a01
+    s1 = a00 * a12 - a10 * a02
+    s2 = a00 * a13 - a10 * a03
+    s3 = a01 * a12 - a11 * a02
+    s4 = a01 * a13 - a11 * a03
+    s5 = a02 * a13 - a12 * a03
+    c5 = a22 * a33 - a32 * a23
+    c4 = a21 * a33 - a31 * a23
+    c3 = a21 * a32 - a31 * a22
+    c2 = a20 * a33 - a30 * a23
+    c1 = a20 * a32 - a30 * a22
+    c0 = a20 * a31 - a30 * a21
+    det = s0 * c5 - s1 * c4 + s2 * c3 + s3 * c2 - s4 * c1 + s5 * c0
+    m2 = det.real * det.real + det.imag * det.imag
+    r = complex(det.real / m2, -det.imag / m2)
+    b00 = (a11 * c5 - a12 * c4 + a13 * c3) * r
+    b01 = (-a01 * c5 + a02 * c4 - a03 * c3) * r
+    b02 = (a31 * s5 - a32 * s4 + a33 * s3) * r
+    b03 = (-a21 * s5 + a22 * s4 - a23 * s3) * r
+    b10 = (-a10 * c5 + a12 * c2 - a13 * c1) * r
+    b11 = (a00 * c5 - a02 * c2 + a03 * c1) * r
+    b12 = (-a30 * s5 + a32 * s2 - a33 * s1) * r
+    b13 = (a20 * s5 - a22 * s2 + a23 * s1) * r
+    b20 = (a10 * c4 - a11 * c2 + a13 * c0) * r
+    b21 = (-a00 * c4 + a01 * c2 - a03 * c0) * r
+    b22 = (a30 * s4 - a31 * s2 + a33 * s0) * r
+    b23 = (-a20 * s4 + a21 * s2 - a23 * s0) * r
+    b30 = (-a10 * c3 + a11 * c1 - a12 * c0) * r
+    b31 = (a00 * c3 - a01 * c1 + a02 * c0) * r
+    b32 = (-a30 * s3 + a31 * s1 - a32 * s0) * r
+    b33 = (a20 * s3 - a21 * s1 + a22 * s0) * r
+    return (b00, b01, b02, b03, b10, b11, b12, b13, b20, b21, b22, b23, b30, b31, b32, b33)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def inverse_cofactor(A):
+    """The kernel's 4x4 inverse of each matrix of A (n, 4, 4) complex (for the tests).
+
+    Returns
+    -------
+    ndarray of complex, shape (n, 4, 4)
+    """
+    out = np.empty_like(A)
+    for i in range(A.shape[0]):
+        b = _inv4(A[i, 0, 0], A[i, 0, 1], A[i, 0, 2], A[i, 0, 3], A[i, 1, 0], A[i, 1, 1],
+                  A[i, 1, 2], A[i, 1, 3], A[i, 2, 0], A[i, 2, 1], A[i, 2, 2], A[i, 2, 3],
+                  A[i, 3, 0], A[i, 3, 1], A[i, 3, 2], A[i, 3, 3])
+        for j in range(16):
+            out[i, j // 4, j % 4] = b[j]
+    return out
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _delta(bd, ceq, keq, rinv, D):
+    """``Delta`` per band into D (16, n_bands): corners on the diagonal, elements by their
+    outer products; rinv (n_rows, n_bands) the roll-offs ``1 / (1 + j w tau)``."""
+    nf = bd.w.size
+    nr = bd.rows.shape[0]
+    cbar, jinv, outer = bd.cbar, bd.jinv, bd.outer
+    for i in range(16):
+        for k in range(nf):
+            D[i, k] = 0.0
+    for c in range(4):
+        i = 5 * c
+        cc, kk, cb = ceq[c], keq[c], cbar[c]
+        for k in range(nf):
+            D[i, k] = cc * rinv[c, k] - cb + complex(0.0, kk * jinv[k])
+    for r in range(4, nr):
+        cc, kk = ceq[r], keq[r]
+        for i in range(16):
+            o = outer[r, i]
+            if o != 0.0:
+                for k in range(nf):
+                    D[i, k] += o * (cc * rinv[r, k] + complex(0.0, kk * jinv[k]))
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _loop(bd, D, K):
+    """K = (I - H_vs Delta)^-1 per band (16, n_bands), vectorized over bands."""
+    H = bd.H
+    nf = bd.w.size
+    for k in range(nf):
+        h00, h01, h02, h03 = H[0, k], H[1, k], H[2, k], H[3, k]
+        h10, h11, h12, h13 = H[4, k], H[5, k], H[6, k], H[7, k]
+        h20, h21, h22, h23 = H[8, k], H[9, k], H[10, k], H[11, k]
+        h30, h31, h32, h33 = H[12, k], H[13, k], H[14, k], H[15, k]
+        d00, d01, d02, d03 = D[0, k], D[1, k], D[2, k], D[3, k]
+        d10, d11, d12, d13 = D[4, k], D[5, k], D[6, k], D[7, k]
+        d20, d21, d22, d23 = D[8, k], D[9, k], D[10, k], D[11, k]
+        d30, d31, d32, d33 = D[12, k], D[13, k], D[14, k], D[15, k]
+        b = _inv4(1.0 - (h00 * d00 + h01 * d10 + h02 * d20 + h03 * d30),
+                  -(h00 * d01 + h01 * d11 + h02 * d21 + h03 * d31),
+                  -(h00 * d02 + h01 * d12 + h02 * d22 + h03 * d32),
+                  -(h00 * d03 + h01 * d13 + h02 * d23 + h03 * d33),
+                  -(h10 * d00 + h11 * d10 + h12 * d20 + h13 * d30),
+                  1.0 - (h10 * d01 + h11 * d11 + h12 * d21 + h13 * d31),
+                  -(h10 * d02 + h11 * d12 + h12 * d22 + h13 * d32),
+                  -(h10 * d03 + h11 * d13 + h12 * d23 + h13 * d33),
+                  -(h20 * d00 + h21 * d10 + h22 * d20 + h23 * d30),
+                  -(h20 * d01 + h21 * d11 + h22 * d21 + h23 * d31),
+                  1.0 - (h20 * d02 + h21 * d12 + h22 * d22 + h23 * d32),
+                  -(h20 * d03 + h21 * d13 + h22 * d23 + h23 * d33),
+                  -(h30 * d00 + h31 * d10 + h32 * d20 + h33 * d30),
+                  -(h30 * d01 + h31 * d11 + h32 * d21 + h33 * d31),
+                  -(h30 * d02 + h31 * d12 + h32 * d22 + h33 * d32),
+                  1.0 - (h30 * d03 + h31 * d13 + h32 * d23 + h33 * d33))
+        for i in range(16):
+            K[i, k] = b[i]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _power(P, K, V, k, t):
+    """``V = K P K^H`` of band k: the real diagonal (V[0..3]) and the upper triangle's real
+    parts (V[4..9], pairs (0,1) (0,2) (0,3) (1,2) (1,3) (2,3)), into V[:, k]; t (16,)
+    complex scratch."""
+    for a in range(4):
+        for b in range(4):
+            acc = 0j
+            for c in range(4):
+                acc += K[4 * a + c, k] * P[4 * c + b, k]
+            t[4 * a + b] = acc
+    q = 4
+    for a in range(4):
+        acc = 0.0
+        for c in range(4):
+            z = K[4 * a + c, k]
+            acc += t[4 * a + c].real * z.real + t[4 * a + c].imag * z.imag
+        V[a, k] = acc
+    for a in range(3):
+        for b in range(a + 1, 4):
+            acc = 0.0
+            for c in range(4):
+                z = K[4 * b + c, k]
+                acc += t[4 * a + c].real * z.real + t[4 * a + c].imag * z.imag
+            V[q, k] = acc
+            q += 1
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _row_power(r, V, k):
+    """``r V r^T`` of band k (r real (4,); V from :func:`_power`)."""
+    acc = (r[0] * r[0] * V[0, k] + r[1] * r[1] * V[1, k] + r[2] * r[2] * V[2, k]
+           + r[3] * r[3] * V[3, k])
+    acc += 2.0 * (r[0] * r[1] * V[4, k] + r[0] * r[2] * V[5, k] + r[0] * r[3] * V[6, k]
+                  + r[1] * r[2] * V[7, k] + r[1] * r[3] * V[8, k] + r[2] * r[3] * V[9, k])
+    return acc
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _secant(sig, new, s_prev, h_prev, c, it):
+    """The fixed point's safeguarded secant step on ``sig[c]`` (as the plain kernels')."""
+    change = abs(new - sig[c]) / max(sig[c], 1e-12)
+    hc = new - sig[c]
+    nxt = new if new > 0 else 0.5 * sig[c]
+    if it > 0:
+        dh = hc - h_prev[c]
+        ds = sig[c] - s_prev[c]
+        if dh != 0.0 and ds != 0.0:
+            cand = sig[c] - hc * ds / dh
+            if 0.5 * sig[c] < cand < 2.0 * sig[c]:
+                nxt = cand
+    s_prev[c] = sig[c]
+    h_prev[c] = hc
+    sig[c] = nxt
+    return change
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
+           ef):
+    """Mean corner travel ``mu`` (4) solving ``mu = static + gain sum_r r (ef_r + eg_r)``
+    (Newton), the springs' ``keq``, ``eg`` at their travel ``N(r mu, sigs^2)`` and the
+    dampers' mean forces ``ef`` at their zero-mean velocity (in place)."""
+    nr = bd.rows.shape[0]
+    rows, gain, static = bd.rows, bd.gain, bd.static
+    for r in range(nr):
+        ef[r] = gaussian_pwl(0.0, sig[r], 0.0, kv[s, r], kf[s, r], nk[s, r], slo[s, r],
+                             shi[s, r])[0]
+    J = np.empty((4, 4))
+    res = np.empty(4)
+    force = np.empty(4)
+    for _ in range(_MEAN_MAX_ITER):
+        for r in range(nr):
+            if on[s, r]:
+                m = rows[r, 0] * mu[0] + rows[r, 1] * mu[1] + rows[r, 2] * mu[2] + \
+                    rows[r, 3] * mu[3]
+                eg[r], keq[r] = gaussian_pwl(m, sigs[r], s0[s, r], bx[s, r], bf[s, r],
+                                             bn[s, r], 0.0, bslope[s, r])
+            else:
+                eg[r] = 0.0
+                keq[r] = 0.0
+        for a in range(4):
+            fa = 0.0
+            for r in range(nr):
+                fa += rows[r, a] * (ef[r] + eg[r])
+            force[a] = fa
+        for a in range(4):
+            acc = static[a]
+            for b in range(4):
+                acc += gain[a, b] * force[b]
+            # J = I - gain sum_r keq_r r r^T
+            for b in range(4):
+                jab = 0.0
+                for c in range(4):
+                    kc = 0.0
+                    for r in range(nr):
+                        kc += keq[r] * rows[r, c] * rows[r, b]
+                    jab += gain[a, c] * kc
+                J[a, b] = -jab
+            J[a, a] += 1.0
+            res[a] = acc - mu[a]
+        step = np.linalg.solve(J, res)
+        big = 0.0
+        for a in range(4):
+            mu[a] += step[a]
+            big = max(big, abs(step[a]))
+        if big < _MEAN_TOL_M:
+            break
+    for r in range(nr):
+        if on[s, r]:
+            m = rows[r, 0] * mu[0] + rows[r, 1] * mu[1] + rows[r, 2] * mu[2] + rows[r, 3] * mu[3]
+            eg[r], keq[r] = gaussian_pwl(m, sigs[r], s0[s, r], bx[s, r], bf[s, r], bn[s, r],
+                                         0.0, bslope[s, r])
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
+    """Screen setup s: the fixed point on every row's velocity (and travel) RMS, then the
+    metrics. Returns the iterations taken."""
+    kv, kf, nk, slo, shi, lag = shocks
+    on, s0, bx, bf, bn, bslope = stops
+    nf = bd.w.size
+    nr = bd.rows.shape[0]
+    w, rows = bd.w, bd.rows
+    rinv = np.empty((nr, nf), dtype=np.complex128)
+    for r in range(nr):
+        for k in range(nf):
+            rinv[r, k] = 1.0 / (1.0 + 1j * w[k] * lag[s, r])
+    D = np.empty((16, nf), dtype=np.complex128)
+    K = np.empty((16, nf), dtype=np.complex128)
+    V = np.empty((10, nf))
+    tmp = np.empty(16, dtype=np.complex128)
+    ceq, keq, eg, ef = np.zeros(nr), np.zeros(nr), np.zeros(nr), np.zeros(nr)
+    sigs = np.zeros(nr)
+    sp, hp, ssp, hsp = np.zeros(nr), np.zeros(nr), np.zeros(nr), np.zeros(nr)
+    svv, sss = np.zeros(nr), np.zeros(nr)
+    mu = np.empty(4)
+    any_spring = False
+    for r in range(nr):
+        sig[r] = bd.sig0[r]
+        sigs[r] = bd.rms0[r]
+        any_spring = any_spring or on[s, r] != 0
+    for a in range(4):
+        mu[a] = bd.static[a]
+    it = 0
+    for it in range(max_iter):
+        for r in range(nr):
+            ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
+        if any_spring:
+            _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu,
+                   keq, eg, ef)
+        _delta(bd, ceq, keq, rinv, D)
+        _loop(bd, D, K)
+        for k in range(nf):
+            _power(bd.P, K, V, k, tmp)
+        for r in range(nr):
+            a1 = 0.0
+            a2 = 0.0
+            for k in range(nf):
+                p = _row_power(rows[r], V, k)
+                a1 += p
+                a2 += p * bd.w2inv[k]
+            svv[r] = a1
+            sss[r] = a2
+        change = 0.0
+        for r in range(nr):
+            change = max(change, _secant(sig, math.sqrt(max(svv[r], 0.0)), sp, hp, r, it))
+        if any_spring:
+            for r in range(nr):
+                change = max(change, _secant(sigs, math.sqrt(max(sss[r], 0.0)), ssp, hsp, r,
+                                             it))
+        if change < tol:
+            break
+    for r in range(nr):
+        ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
+    if any_spring:
+        _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
+               ef)
+    for r in range(nr):
+        m = rows[r, 0] * mu[0] + rows[r, 1] * mu[1] + rows[r, 2] * mu[2] + rows[r, 3] * mu[3]
+        elem[0, r] = sigs[r] if any_spring else 0.0
+        elem[1, r] = m if any_spring else 0.0
+        elem[2, r] = keq[r]
+        elem[3, r] = eg[r]
+        elem[4, r] = ceq[r]
+        elem[5, r] = ef[r] if any_spring else 0.0
+    _delta(bd, ceq, keq, rinv, D)
+    _loop(bd, D, K)
+    _metrics(bd, D, K, out_m)
+    return it + 1
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _metrics(bd, D, K, out):
+    """The metrics from ``E = Delta K`` per band (the features of
+    :func:`planner.screen_kernels.metric_form`)."""
+    F, d0, PB = bd.F, bd.d0, bd.PB
+    nf = bd.w.size
+    p = d0.shape[1]
+    E = np.empty(16, dtype=np.complex128)
+    T = np.empty(16, dtype=np.complex128)
+    v = np.empty(_NFEAT)
+    pw = np.empty(p)
+    for o in range(p):
+        out[o] = 0.0
+    for k in range(nf):
+        for a in range(4):
+            for b in range(4):
+                acc = 0j
+                for c in range(4):
+                    acc += D[4 * a + c, k] * K[4 * c + b, k]
+                E[4 * a + b] = acc
+        for a in range(4):
+            for b in range(4):
+                acc = 0j
+                for c in range(4):
+                    acc += E[4 * a + c] * PB[4 * c + b, k]
+                T[4 * a + b] = acc
+        for a in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += T[4 * a + c].real * E[4 * a + c].real + T[4 * a + c].imag * \
+                    E[4 * a + c].imag
+            v[a] = acc
+        q = 0
+        for a in range(3):
+            for b in range(a + 1, 4):
+                acc = 0j
+                for c in range(4):
+                    acc += T[4 * a + c] * np.conj(E[4 * b + c])
+                v[4 + q] = acc.real
+                v[10 + q] = acc.imag
+                q += 1
+        for i in range(16):
+            v[16 + i] = E[i].real
+            v[32 + i] = E[i].imag
+        for o in range(p):
+            pw[o] = d0[k, o]
+        for j in range(_NFEAT):
+            vj = v[j]
+            for o in range(p):
+                pw[o] += F[k, j, o] * vj
+        for o in range(p):
+            out[o] += pw[o]
+    for o in range(p):
+        out[o] = math.sqrt(max(out[o], 0.0))
+
+
+@nb.njit(cache=True, error_model="numpy", parallel=True)
+def screen_batch_third(bd, shocks, stops, settings, out):
+    """Screen setups with third elements, in parallel over setups.
+
+    Parameters
+    ----------
+    bd : ThirdBands
+    shocks : planner.screen_kernels.ShockTables
+        Per setup and row (n_setups, n_rows, ...): the corners' shocks, then the elements'
+        dampers (a zero curve where an element has none).
+    stops : planner.screen_kernels.StopTables
+        Per setup and row: the corners' bump stops, then the heave springs (off where none).
+    settings : planner.screen_kernels.IterSettings
+    out : ThirdOutputs
+        Written in place.
+    """
+    metrics = out.metrics
+    sigma = out.sigma
+    iters = out.iterations
+    elements = out.elements
+    max_iter, tol = settings
+    for s in nb.prange(shocks.kv.shape[0]):
+        iters[s] = _screen_third_one(bd, shocks, stops, s, max_iter, tol, metrics[s],
+                                     sigma[s], elements[s])
