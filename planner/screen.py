@@ -851,8 +851,8 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), screen=
     dense 4x4; a heave spring is linearized as a bump stop on the element's travel
     ``m @ s`` (mean and RMS from the corners'), adding ``m k_eq m^T / (j w)``. The table
     adds per declared element ``<kind>_travel_rms_<axle>`` and
-    ``<kind>_velocity_rms_<axle>`` (band-passed as the other metrics), the setups'
-    element columns (ids, ``none``) and ``heave_spring_contact_share_<axle>``; the
+    ``<kind>_velocity_rms_<axle>`` (band-passed as the other metrics) and
+    ``heave_spring_contact_share_<axle>`` (where a setup has a heave spring); the
     diagnostics ``third_velocity_rms_linearized`` and ``third_damping_eq`` (n_setups,
     n_elements) and with springs their travel and stiffness. Exact for linear lag-free
     elements, as for the shocks.
@@ -913,9 +913,10 @@ class ThirdChoices:
         travel; :func:`ident.models.bumpstops.contact_tables`) or None (none; always None
         for a roll element).
     columns : dict of str to list, optional
-        Table columns to add per setup (``heave_front`` -> damper ids,
-        ``heave_spring_front`` -> spring ids; ``"none"`` where none), as the setups CSV
-        names them.
+        The setups' choices as the setups CSV names its columns (``heave_front`` -> damper
+        ids, ``heave_spring_front`` -> spring ids; ``"none"`` where none), for a caller's
+        table (the screening's table does not hold them: its columns past the corners'
+        ids are numbers).
     """
 
     elements: tuple
@@ -1012,8 +1013,8 @@ def resolve_third(setups, model, library):
                 continue
             key = (hid, axle)
             if key not in tables:
-                if stops is None or hid not in stops.ids():
-                    known = [] if stops is None else list(stops.ids())
+                if stops is None or hid not in stops.ids:
+                    known = [] if stops is None else list(stops.ids)
                     raise PlannerError(f"setup {s.name!r}: heave spring {axle} {hid!r} is not "
                                        f"in the model's bump-stop library (known: {known}); "
                                        "name a heave spring of the session's bump_stop_library "
@@ -1209,7 +1210,7 @@ def _screen_third(plant, drive, setups, models, bands, H, third, bump_stops,
                                  out.sigma[:, :4], out.iterations, band_hz=band_hz,
                                  n_bands=bands.f_hz.size, max_iter=max_iter, tol=tol)
     table, diag = pred.table, dict(pred.diagnostics)
-    extra = dict(third.columns or {})
+    extra = {}
     on = stops.on.astype(bool)
     if any_spring:
         z = (stops.s0 - elem[:, 1]) / np.maximum(elem[:, 0], 1e-15)
