@@ -927,6 +927,9 @@ class ThirdChoices:
 
     def __post_init__(self):
         n = len(self.elements)
+        if n > _THIRD_SLOTS or len(set(self.elements)) != n:
+            raise ValueError(f"ThirdChoices: elements {list(self.elements)}; give each of "
+                             "heave_front, heave_rear, roll_front, roll_rear at most once")
         rows = np.asarray(self.rows, dtype=float)
         if rows.shape != (n, 4):
             raise ValueError(f"ThirdChoices: rows must have shape ({n}, 4) for elements "
@@ -1031,6 +1034,11 @@ def resolve_third(setups, model, library):
                         springs=tuple(springs), columns=columns)
 
 
+#: The element slots of the third-element kernel: every third element a car may carry
+#: (heave and roll, front and rear); unused slots are zero rows.
+_THIRD_SLOTS = 4
+
+
 def _pack_rows(models, h):
     """:func:`ident.sim.closedloop.pack_setups`'s curves for rows of any length (the corners'
     shocks then the elements' dampers): ``kv, kf, nk, slo, shi, lag``, each distinct model
@@ -1063,21 +1071,22 @@ def _pack_rows(models, h):
 
 def _pack_third(models, third, bump_stops, h):
     """The kernel's per-row tables (:class:`~planner.screen_kernels.ShockTables`,
-    :class:`~planner.screen_kernels.StopTables`, rows: the 4 corners then the elements):
-    the corners' shocks and bump stops, the elements' dampers (a zero curve where none)
-    and heave springs (off where none)."""
-    n, ne = len(models), len(third.elements)
+    :class:`~planner.screen_kernels.StopTables`, rows: the 4 corners then the 4 element
+    slots): the corners' shocks and bump stops, the elements' dampers (a zero curve where
+    none, and in the unused slots) and heave springs (off where none)."""
+    n = len(models)
     zero = LinearShock("none", 0.0)
-    shocks = _pack_rows([tuple(m) + tuple(zero if d is None else d for d in dr)
+    pad = (zero,) * (_THIRD_SLOTS - len(third.elements))
+    shocks = _pack_rows([tuple(m) + tuple(zero if d is None else d for d in dr) + pad
                          for m, dr in zip(models, third.dampers)], h)
     corner = _pack_stops_shared([None] * n if bump_stops is None else list(bump_stops))
-    # the elements' springs packed as 4 "corners" (ne <= 4), then cut to ne
-    spring = pack_bump_stops([tuple(sp) + (None,) * (4 - ne) for sp in third.springs],
+    # the element slots' springs packed as 4 "corners"
+    spring = pack_bump_stops([tuple(sp) + (None,) * (_THIRD_SLOTS - len(sp))
+                              for sp in third.springs],
                              "screen_setups: third elements' heave springs")
     width = max(corner[2].shape[2], spring[2].shape[2])
     stops = []
     for a, b in zip(corner, spring):
-        b = b[:, :ne]
         if a.ndim == 3:
             a, b = _pad_points(a, width), _pad_points(b, width)
         stops.append(np.ascontiguousarray(np.concatenate([a, b], axis=1)))
@@ -1099,8 +1108,8 @@ def third_bands(ops, eops, rows):
     ops : ScreenOperands
     eops : ElementOperands or None
         The travel's operands (None: no spring anywhere, zeros).
-    rows : ndarray, shape (n_rows, 4)
-        The corners' unit rows, then the elements'.
+    rows : ndarray, shape (8, 4)
+        The corners' unit rows, then the 4 element slots' (zero rows where none).
     """
     nf = ops.w.size
 
@@ -1183,7 +1192,7 @@ def _screen_third(plant, drive, setups, models, bands, H, third, bump_stops,
     if any_spring or lo_on.any():
         eops = element_operands(plant, drive, bands, ops, travel=any_spring,
                                 tire=bool(lo_on.any()))
-    rows = np.vstack([np.eye(4), third.rows.reshape(ne, 4)])
+    rows = np.vstack([np.eye(4), third.rows.reshape(ne, 4), np.zeros((_THIRD_SLOTS - ne, 4))])
     bd = third_bands(ops, eops, rows)
     nr = rows.shape[0]
     out = ThirdOutputs(metrics=np.zeros((n, len(ops.metric_names))), sigma=np.zeros((n, nr)),
@@ -1199,6 +1208,12 @@ def _screen_third(plant, drive, setups, models, bands, H, third, bump_stops,
         screen_batch_third(bd, ShockTables(*(np.ascontiguousarray(x[a:b]) for x in shocks)),
                            StopTables(*(np.ascontiguousarray(x[a:b]) for x in stops)),
                            settings, part)
+    out = ThirdOutputs(out.metrics, out.sigma[:, :4 + ne], out.iterations,
+                       out.elements[:, :, :4 + ne])  # the used rows
+    shocks = ShockTables(*(x[:, :4 + ne] for x in shocks))
+    stops = StopTables(*(x[:, :4 + ne] for x in stops))
+    nr = 4 + ne
+    bd = bd._replace(rows=bd.rows[:nr], outer=bd.outer[:nr])
     elem = out.elements
     if lo_on.any():  # the dampers' mean forces where the kernel had no spring
         for i in np.flatnonzero(~stops.on.any(axis=1)):

@@ -60,8 +60,9 @@ class ThirdBands(NamedTuple):
         :func:`planner.screen_kernels.metric_form`.
     d0 : ndarray, shape (n_bands, n_metrics)
     cbar : ndarray, shape (4,)
-    rows : ndarray, shape (n_rows, 4)
-        The rows: the 4 corners (unit rows) then the elements.
+    rows : ndarray, shape (8, 4)
+        The rows: the 4 corners (unit rows) then the 4 element slots (zero rows where no
+        element: a zero row has no velocity, travel or force).
     outer : ndarray, shape (n_rows, 16)
         ``r r^T`` of each row (row-major entries).
     sig0 : ndarray, shape (n_rows,)
@@ -254,6 +255,226 @@ def _loop(bd, D, K):
 
 
 @nb.njit(cache=True, error_model="numpy")
+def _band_power(bd, ceq, keq, rinv, V):
+    """One iteration's band work, fused and written out: per band ``Delta`` (the corners'
+    damping on the diagonal, the 4 element slots by their outer products), ``A = I - H_vs
+    Delta``, ``K = A^-1`` (:func:`_inv4`) and ``V = K P K^H`` (its real diagonal and the real
+    parts of its upper triangle) into V (10, n_bands). Straight-line code on scalars in one
+    loop over bands (no branches, no scratch memory: LLVM vectorizes it over bands); ceq,
+    keq: the dampers' ``c_eq`` and springs' ``k_eq`` over the 8 rows (the 4 corners, the 4
+    element slots: zero rows where no element). Written out by a script (the entries' names
+    say what they are); checked against the general path by the tests."""
+    H, P, jinv, outer, cbar = bd.H, bd.P, bd.jinv, bd.outer, bd.cbar
+    nf = bd.w.size
+    c0 = ceq[0]
+    q0 = keq[0]
+    c1 = ceq[1]
+    q1 = keq[1]
+    c2 = ceq[2]
+    q2 = keq[2]
+    c3 = ceq[3]
+    q3 = keq[3]
+    c4 = ceq[4]
+    q4 = keq[4]
+    c5 = ceq[5]
+    q5 = keq[5]
+    c6 = ceq[6]
+    q6 = keq[6]
+    c7 = ceq[7]
+    q7 = keq[7]
+    cb0 = cbar[0]
+    cb1 = cbar[1]
+    cb2 = cbar[2]
+    cb3 = cbar[3]
+    o0_0 = outer[4, 0]
+    o0_1 = outer[4, 1]
+    o0_2 = outer[4, 2]
+    o0_3 = outer[4, 3]
+    o0_4 = outer[4, 4]
+    o0_5 = outer[4, 5]
+    o0_6 = outer[4, 6]
+    o0_7 = outer[4, 7]
+    o0_8 = outer[4, 8]
+    o0_9 = outer[4, 9]
+    o0_10 = outer[4, 10]
+    o0_11 = outer[4, 11]
+    o0_12 = outer[4, 12]
+    o0_13 = outer[4, 13]
+    o0_14 = outer[4, 14]
+    o0_15 = outer[4, 15]
+    o1_0 = outer[5, 0]
+    o1_1 = outer[5, 1]
+    o1_2 = outer[5, 2]
+    o1_3 = outer[5, 3]
+    o1_4 = outer[5, 4]
+    o1_5 = outer[5, 5]
+    o1_6 = outer[5, 6]
+    o1_7 = outer[5, 7]
+    o1_8 = outer[5, 8]
+    o1_9 = outer[5, 9]
+    o1_10 = outer[5, 10]
+    o1_11 = outer[5, 11]
+    o1_12 = outer[5, 12]
+    o1_13 = outer[5, 13]
+    o1_14 = outer[5, 14]
+    o1_15 = outer[5, 15]
+    o2_0 = outer[6, 0]
+    o2_1 = outer[6, 1]
+    o2_2 = outer[6, 2]
+    o2_3 = outer[6, 3]
+    o2_4 = outer[6, 4]
+    o2_5 = outer[6, 5]
+    o2_6 = outer[6, 6]
+    o2_7 = outer[6, 7]
+    o2_8 = outer[6, 8]
+    o2_9 = outer[6, 9]
+    o2_10 = outer[6, 10]
+    o2_11 = outer[6, 11]
+    o2_12 = outer[6, 12]
+    o2_13 = outer[6, 13]
+    o2_14 = outer[6, 14]
+    o2_15 = outer[6, 15]
+    o3_0 = outer[7, 0]
+    o3_1 = outer[7, 1]
+    o3_2 = outer[7, 2]
+    o3_3 = outer[7, 3]
+    o3_4 = outer[7, 4]
+    o3_5 = outer[7, 5]
+    o3_6 = outer[7, 6]
+    o3_7 = outer[7, 7]
+    o3_8 = outer[7, 8]
+    o3_9 = outer[7, 9]
+    o3_10 = outer[7, 10]
+    o3_11 = outer[7, 11]
+    o3_12 = outer[7, 12]
+    o3_13 = outer[7, 13]
+    o3_14 = outer[7, 14]
+    o3_15 = outer[7, 15]
+    for k in range(nf):
+        jk = jinv[k]
+        g0 = c0 * rinv[0, k] - cb0 + complex(0.0, q0 * jk)
+        g1 = c1 * rinv[1, k] - cb1 + complex(0.0, q1 * jk)
+        g2 = c2 * rinv[2, k] - cb2 + complex(0.0, q2 * jk)
+        g3 = c3 * rinv[3, k] - cb3 + complex(0.0, q3 * jk)
+        e0 = c4 * rinv[4, k] + complex(0.0, q4 * jk)
+        e1 = c5 * rinv[5, k] + complex(0.0, q5 * jk)
+        e2 = c6 * rinv[6, k] + complex(0.0, q6 * jk)
+        e3 = c7 * rinv[7, k] + complex(0.0, q7 * jk)
+        d00 = g0 + o0_0 * e0 + o1_0 * e1 + o2_0 * e2 + o3_0 * e3
+        d01 = o0_1 * e0 + o1_1 * e1 + o2_1 * e2 + o3_1 * e3
+        d02 = o0_2 * e0 + o1_2 * e1 + o2_2 * e2 + o3_2 * e3
+        d03 = o0_3 * e0 + o1_3 * e1 + o2_3 * e2 + o3_3 * e3
+        d10 = o0_4 * e0 + o1_4 * e1 + o2_4 * e2 + o3_4 * e3
+        d11 = g1 + o0_5 * e0 + o1_5 * e1 + o2_5 * e2 + o3_5 * e3
+        d12 = o0_6 * e0 + o1_6 * e1 + o2_6 * e2 + o3_6 * e3
+        d13 = o0_7 * e0 + o1_7 * e1 + o2_7 * e2 + o3_7 * e3
+        d20 = o0_8 * e0 + o1_8 * e1 + o2_8 * e2 + o3_8 * e3
+        d21 = o0_9 * e0 + o1_9 * e1 + o2_9 * e2 + o3_9 * e3
+        d22 = g2 + o0_10 * e0 + o1_10 * e1 + o2_10 * e2 + o3_10 * e3
+        d23 = o0_11 * e0 + o1_11 * e1 + o2_11 * e2 + o3_11 * e3
+        d30 = o0_12 * e0 + o1_12 * e1 + o2_12 * e2 + o3_12 * e3
+        d31 = o0_13 * e0 + o1_13 * e1 + o2_13 * e2 + o3_13 * e3
+        d32 = o0_14 * e0 + o1_14 * e1 + o2_14 * e2 + o3_14 * e3
+        d33 = g3 + o0_15 * e0 + o1_15 * e1 + o2_15 * e2 + o3_15 * e3
+        h00 = H[0, k]
+        h01 = H[1, k]
+        h02 = H[2, k]
+        h03 = H[3, k]
+        h10 = H[4, k]
+        h11 = H[5, k]
+        h12 = H[6, k]
+        h13 = H[7, k]
+        h20 = H[8, k]
+        h21 = H[9, k]
+        h22 = H[10, k]
+        h23 = H[11, k]
+        h30 = H[12, k]
+        h31 = H[13, k]
+        h32 = H[14, k]
+        h33 = H[15, k]
+        a00 = 1.0 - (h00 * d00 + h01 * d10 + h02 * d20 + h03 * d30)
+        a01 = -(h00 * d01 + h01 * d11 + h02 * d21 + h03 * d31)
+        a02 = -(h00 * d02 + h01 * d12 + h02 * d22 + h03 * d32)
+        a03 = -(h00 * d03 + h01 * d13 + h02 * d23 + h03 * d33)
+        a10 = -(h10 * d00 + h11 * d10 + h12 * d20 + h13 * d30)
+        a11 = 1.0 - (h10 * d01 + h11 * d11 + h12 * d21 + h13 * d31)
+        a12 = -(h10 * d02 + h11 * d12 + h12 * d22 + h13 * d32)
+        a13 = -(h10 * d03 + h11 * d13 + h12 * d23 + h13 * d33)
+        a20 = -(h20 * d00 + h21 * d10 + h22 * d20 + h23 * d30)
+        a21 = -(h20 * d01 + h21 * d11 + h22 * d21 + h23 * d31)
+        a22 = 1.0 - (h20 * d02 + h21 * d12 + h22 * d22 + h23 * d32)
+        a23 = -(h20 * d03 + h21 * d13 + h22 * d23 + h23 * d33)
+        a30 = -(h30 * d00 + h31 * d10 + h32 * d20 + h33 * d30)
+        a31 = -(h30 * d01 + h31 * d11 + h32 * d21 + h33 * d31)
+        a32 = -(h30 * d02 + h31 * d12 + h32 * d22 + h33 * d32)
+        a33 = 1.0 - (h30 * d03 + h31 * d13 + h32 * d23 + h33 * d33)
+        (k00, k01, k02, k03, k10, k11, k12, k13, k20, k21, k22, k23, k30, k31, k32, k33) = _inv4(
+            a00, a01, a02, a03, a10, a11, a12, a13, a20, a21, a22, a23, a30, a31, a32, a33)
+        p00 = P[0, k]
+        p01 = P[1, k]
+        p02 = P[2, k]
+        p03 = P[3, k]
+        p10 = P[4, k]
+        p11 = P[5, k]
+        p12 = P[6, k]
+        p13 = P[7, k]
+        p20 = P[8, k]
+        p21 = P[9, k]
+        p22 = P[10, k]
+        p23 = P[11, k]
+        p30 = P[12, k]
+        p31 = P[13, k]
+        p32 = P[14, k]
+        p33 = P[15, k]
+        t00 = k00 * p00 + k01 * p10 + k02 * p20 + k03 * p30
+        t01 = k00 * p01 + k01 * p11 + k02 * p21 + k03 * p31
+        t02 = k00 * p02 + k01 * p12 + k02 * p22 + k03 * p32
+        t03 = k00 * p03 + k01 * p13 + k02 * p23 + k03 * p33
+        t10 = k10 * p00 + k11 * p10 + k12 * p20 + k13 * p30
+        t11 = k10 * p01 + k11 * p11 + k12 * p21 + k13 * p31
+        t12 = k10 * p02 + k11 * p12 + k12 * p22 + k13 * p32
+        t13 = k10 * p03 + k11 * p13 + k12 * p23 + k13 * p33
+        t20 = k20 * p00 + k21 * p10 + k22 * p20 + k23 * p30
+        t21 = k20 * p01 + k21 * p11 + k22 * p21 + k23 * p31
+        t22 = k20 * p02 + k21 * p12 + k22 * p22 + k23 * p32
+        t23 = k20 * p03 + k21 * p13 + k22 * p23 + k23 * p33
+        t30 = k30 * p00 + k31 * p10 + k32 * p20 + k33 * p30
+        t31 = k30 * p01 + k31 * p11 + k32 * p21 + k33 * p31
+        t32 = k30 * p02 + k31 * p12 + k32 * p22 + k33 * p32
+        t33 = k30 * p03 + k31 * p13 + k32 * p23 + k33 * p33
+        V[0, k] = (t00.real * k00.real + t00.imag * k00.imag + t01.real * k01.real
+            + t01.imag * k01.imag + t02.real * k02.real + t02.imag * k02.imag
+            + t03.real * k03.real + t03.imag * k03.imag)
+        V[1, k] = (t10.real * k10.real + t10.imag * k10.imag + t11.real * k11.real
+            + t11.imag * k11.imag + t12.real * k12.real + t12.imag * k12.imag
+            + t13.real * k13.real + t13.imag * k13.imag)
+        V[2, k] = (t20.real * k20.real + t20.imag * k20.imag + t21.real * k21.real
+            + t21.imag * k21.imag + t22.real * k22.real + t22.imag * k22.imag
+            + t23.real * k23.real + t23.imag * k23.imag)
+        V[3, k] = (t30.real * k30.real + t30.imag * k30.imag + t31.real * k31.real
+            + t31.imag * k31.imag + t32.real * k32.real + t32.imag * k32.imag
+            + t33.real * k33.real + t33.imag * k33.imag)
+        V[4, k] = (t00.real * k10.real + t00.imag * k10.imag + t01.real * k11.real
+            + t01.imag * k11.imag + t02.real * k12.real + t02.imag * k12.imag
+            + t03.real * k13.real + t03.imag * k13.imag)
+        V[5, k] = (t00.real * k20.real + t00.imag * k20.imag + t01.real * k21.real
+            + t01.imag * k21.imag + t02.real * k22.real + t02.imag * k22.imag
+            + t03.real * k23.real + t03.imag * k23.imag)
+        V[6, k] = (t00.real * k30.real + t00.imag * k30.imag + t01.real * k31.real
+            + t01.imag * k31.imag + t02.real * k32.real + t02.imag * k32.imag
+            + t03.real * k33.real + t03.imag * k33.imag)
+        V[7, k] = (t10.real * k20.real + t10.imag * k20.imag + t11.real * k21.real
+            + t11.imag * k21.imag + t12.real * k22.real + t12.imag * k22.imag
+            + t13.real * k23.real + t13.imag * k23.imag)
+        V[8, k] = (t10.real * k30.real + t10.imag * k30.imag + t11.real * k31.real
+            + t11.imag * k31.imag + t12.real * k32.real + t12.imag * k32.imag
+            + t13.real * k33.real + t13.imag * k33.imag)
+        V[9, k] = (t20.real * k30.real + t20.imag * k30.imag + t21.real * k31.real
+            + t21.imag * k31.imag + t22.real * k32.real + t22.imag * k32.imag
+            + t23.real * k33.real + t23.imag * k33.imag)
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _power(P, K, V, k, t):
     """``V = K P K^H`` of band k: the real diagonal (V[0..3]) and the upper triangle's real
     parts (V[4..9], pairs (0,1) (0,2) (0,3) (1,2) (1,3) (2,3)), into V[:, k]; t (16,)
@@ -391,7 +612,10 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
     svv, sss = np.zeros(nr), np.zeros(nr)
     mu = np.empty(4)
     any_spring = False
+    live = np.zeros(nr, dtype=np.bool_)  # a zero row (an unused slot) has nothing to iterate
     for r in range(nr):
+        live[r] = rows[r, 0] != 0.0 or rows[r, 1] != 0.0 or rows[r, 2] != 0.0 or \
+            rows[r, 3] != 0.0
         sig[r] = bd.sig0[r]
         sigs[r] = bd.rms0[r]
         any_spring = any_spring or on[s, r] != 0
@@ -404,10 +628,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
         if any_spring:
             _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu,
                    keq, eg, ef)
-        _delta(bd, ceq, keq, rinv, D)
-        _loop(bd, D, K)
-        for k in range(nf):
-            _power(bd.P, K, V, k, tmp)
+        _band_power(bd, ceq, keq, rinv, V)
         for r in range(nr):
             a1 = 0.0
             a2 = 0.0
@@ -419,11 +640,13 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
             sss[r] = a2
         change = 0.0
         for r in range(nr):
-            change = max(change, _secant(sig, math.sqrt(max(svv[r], 0.0)), sp, hp, r, it))
+            if live[r]:
+                change = max(change, _secant(sig, math.sqrt(max(svv[r], 0.0)), sp, hp, r, it))
         if any_spring:
             for r in range(nr):
-                change = max(change, _secant(sigs, math.sqrt(max(sss[r], 0.0)), ssp, hsp, r,
-                                             it))
+                if live[r]:
+                    change = max(change, _secant(sigs, math.sqrt(max(sss[r], 0.0)), ssp, hsp,
+                                                 r, it))
         if change < tol:
             break
     for r in range(nr):
