@@ -63,7 +63,12 @@ from planner.screen_kernels import (
     screen_batch,
     screen_batch_scalar,
 )
-from planner.screen_third_kernels import ThirdBands, ThirdOutputs, screen_batch_third
+from planner.screen_third_kernels import (
+    THIRD_BLOCK_BANDS,
+    ThirdBands,
+    ThirdOutputs,
+    screen_batch_third,
+)
 from planner.setups import unknown_id_error
 
 __all__ = [
@@ -1128,8 +1133,16 @@ def third_bands(ops, eops, rows):
         gain, static = np.zeros((4, 4)), np.zeros(4)
     else:
         gain, static = eops.travel_gain_m_n, eops.travel_static_m
-    return ThirdBands(w=np.array(ops.w, dtype=float), H=entries(ops.Hvs), P=entries(ops.P),
-                      PB=entries(ops.PB), F=np.ascontiguousarray(F),
+    H, P = entries(ops.Hvs), entries(ops.P)
+    bk = THIRD_BLOCK_BANDS
+    nblk = -(-nf // bk)
+    x = np.zeros((65, nblk * bk))
+    x[:16, :nf], x[16:32, :nf] = H.real, H.imag
+    x[32:48, :nf], x[48:64, :nf] = P.real, P.imag
+    x[64, :nf] = -1.0 / ops.w
+    blocks = np.ascontiguousarray(x.reshape(65, nblk, bk).transpose(1, 0, 2)).reshape(-1)
+    return ThirdBands(w=np.array(ops.w, dtype=float), H=H, P=P, PB=entries(ops.PB),
+                      blocks=blocks, F=np.ascontiguousarray(F),
                       d0=np.ascontiguousarray(ops.d0), cbar=np.array(ops.cbar, dtype=float),
                       rows=rows, outer=np.ascontiguousarray(outer), sig0=sig0,
                       jinv=-1.0 / ops.w, w2inv=w2inv, gain=np.array(gain, dtype=float),

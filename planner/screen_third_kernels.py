@@ -32,6 +32,7 @@ import numpy as np
 from planner.screen_kernels import gaussian_pwl
 
 __all__ = [
+    "THIRD_BLOCK_BANDS",
     "ThirdBands",
     "ThirdOutputs",
     "screen_batch_third",
@@ -45,6 +46,12 @@ _MEAN_TOL_M = 1e-12
 #: Features of a band's loop correction the metrics are a linear form of (as
 #: :func:`planner.screen_kernels.metric_form` lays them out).
 _NFEAT = 48
+#: Bands per block of the iteration's band loop (:func:`_band_power`; as the plain kernels').
+THIRD_BLOCK_BANDS = 16
+_BK = THIRD_BLOCK_BANDS
+#: Operand rows per block (:func:`planner.screen.third_bands`): ``H_vs`` real and imaginary
+#: (16 + 16), ``P`` (16 + 16), ``-1 / w``.
+_NOPS = 65
 
 
 class ThirdBands(NamedTuple):
@@ -56,6 +63,11 @@ class ThirdBands(NamedTuple):
         Band centres [rad/s].
     H, P, PB : ndarray of complex, shape (16, n_bands)
         Entry ``4 a + b`` of ``H_vs``, ``P`` and ``PB`` per band (row-major entries).
+    blocks : ndarray, shape (n_blocks * 65 * 16,)
+        ``H_vs``, ``P`` and ``-1 / w`` in blocks of 16 bands for :func:`_band_power`: band
+        ``16 b + j``'s row m at ``(65 b + m) 16 + j`` (rows 0-15 the real parts of ``H_vs``'s
+        entries, 16-31 their imaginary parts, 32-63 the same of ``P``, 64 ``-1 / w``; zero
+        past the last band).
     F : ndarray, shape (n_bands, 48, n_metrics)
         :func:`planner.screen_kernels.metric_form`.
     d0 : ndarray, shape (n_bands, n_metrics)
@@ -83,6 +95,7 @@ class ThirdBands(NamedTuple):
     H: np.ndarray
     P: np.ndarray
     PB: np.ndarray
+    blocks: np.ndarray
     F: np.ndarray
     d0: np.ndarray
     cbar: np.ndarray
@@ -259,13 +272,16 @@ def _band_power(bd, ceq, keq, rinv, V):
     """One iteration's band work, fused and written out: per band ``Delta`` (the corners'
     damping on the diagonal, the 4 element slots by their outer products), ``A = I - H_vs
     Delta``, ``K = A^-1`` (:func:`_inv4`) and ``V = K P K^H`` (its real diagonal and the real
-    parts of its upper triangle) into V (10, n_bands). Straight-line code on scalars in one
-    loop over bands (no branches, no scratch memory: LLVM vectorizes it over bands); ceq,
+    parts of its upper triangle) into V (``10 _BK`` per block of bands: entry q of band
+    ``blk _BK + j`` at ``(10 blk + q) _BK + j``). Straight-line code on scalars in a loop over
+    the bands of a block (no branches, no scratch memory, the operands at constant offsets
+    in two arrays: LLVM vectorizes it over bands, as the plain kernel's band loop); ceq,
     keq: the dampers' ``c_eq`` and springs' ``k_eq`` over the 8 rows (the 4 corners, the 4
-    element slots: zero rows where no element). Written out by a script (the entries' names
-    say what they are); checked against the general path by the tests."""
-    H, P, jinv, outer, cbar = bd.H, bd.P, bd.jinv, bd.outer, bd.cbar
-    nf = bd.w.size
+    element slots: zero rows where no element); rinv: the setup's roll-offs ``1 / (1 + j w
+    tau)`` per row in blocks (:func:`_screen_third_one`). Written out by a script (the
+    entries' names say what they are); checked against the general path by the tests."""
+    ops, outer, cbar = bd.blocks, bd.outer, bd.cbar
+    nblk = (bd.w.size + _BK - 1) // _BK
     c0 = ceq[0]
     q0 = keq[0]
     c1 = ceq[1]
@@ -350,165 +366,146 @@ def _band_power(bd, ceq, keq, rinv, V):
     o3_13 = outer[7, 13]
     o3_14 = outer[7, 14]
     o3_15 = outer[7, 15]
-    for k in range(nf):
-        jk = jinv[k]
-        g0 = c0 * rinv[0, k] - cb0 + complex(0.0, q0 * jk)
-        g1 = c1 * rinv[1, k] - cb1 + complex(0.0, q1 * jk)
-        g2 = c2 * rinv[2, k] - cb2 + complex(0.0, q2 * jk)
-        g3 = c3 * rinv[3, k] - cb3 + complex(0.0, q3 * jk)
-        e0 = c4 * rinv[4, k] + complex(0.0, q4 * jk)
-        e1 = c5 * rinv[5, k] + complex(0.0, q5 * jk)
-        e2 = c6 * rinv[6, k] + complex(0.0, q6 * jk)
-        e3 = c7 * rinv[7, k] + complex(0.0, q7 * jk)
-        d00 = g0 + o0_0 * e0 + o1_0 * e1 + o2_0 * e2 + o3_0 * e3
-        d01 = o0_1 * e0 + o1_1 * e1 + o2_1 * e2 + o3_1 * e3
-        d02 = o0_2 * e0 + o1_2 * e1 + o2_2 * e2 + o3_2 * e3
-        d03 = o0_3 * e0 + o1_3 * e1 + o2_3 * e2 + o3_3 * e3
-        d10 = o0_4 * e0 + o1_4 * e1 + o2_4 * e2 + o3_4 * e3
-        d11 = g1 + o0_5 * e0 + o1_5 * e1 + o2_5 * e2 + o3_5 * e3
-        d12 = o0_6 * e0 + o1_6 * e1 + o2_6 * e2 + o3_6 * e3
-        d13 = o0_7 * e0 + o1_7 * e1 + o2_7 * e2 + o3_7 * e3
-        d20 = o0_8 * e0 + o1_8 * e1 + o2_8 * e2 + o3_8 * e3
-        d21 = o0_9 * e0 + o1_9 * e1 + o2_9 * e2 + o3_9 * e3
-        d22 = g2 + o0_10 * e0 + o1_10 * e1 + o2_10 * e2 + o3_10 * e3
-        d23 = o0_11 * e0 + o1_11 * e1 + o2_11 * e2 + o3_11 * e3
-        d30 = o0_12 * e0 + o1_12 * e1 + o2_12 * e2 + o3_12 * e3
-        d31 = o0_13 * e0 + o1_13 * e1 + o2_13 * e2 + o3_13 * e3
-        d32 = o0_14 * e0 + o1_14 * e1 + o2_14 * e2 + o3_14 * e3
-        d33 = g3 + o0_15 * e0 + o1_15 * e1 + o2_15 * e2 + o3_15 * e3
-        h00 = H[0, k]
-        h01 = H[1, k]
-        h02 = H[2, k]
-        h03 = H[3, k]
-        h10 = H[4, k]
-        h11 = H[5, k]
-        h12 = H[6, k]
-        h13 = H[7, k]
-        h20 = H[8, k]
-        h21 = H[9, k]
-        h22 = H[10, k]
-        h23 = H[11, k]
-        h30 = H[12, k]
-        h31 = H[13, k]
-        h32 = H[14, k]
-        h33 = H[15, k]
-        a00 = 1.0 - (h00 * d00 + h01 * d10 + h02 * d20 + h03 * d30)
-        a01 = -(h00 * d01 + h01 * d11 + h02 * d21 + h03 * d31)
-        a02 = -(h00 * d02 + h01 * d12 + h02 * d22 + h03 * d32)
-        a03 = -(h00 * d03 + h01 * d13 + h02 * d23 + h03 * d33)
-        a10 = -(h10 * d00 + h11 * d10 + h12 * d20 + h13 * d30)
-        a11 = 1.0 - (h10 * d01 + h11 * d11 + h12 * d21 + h13 * d31)
-        a12 = -(h10 * d02 + h11 * d12 + h12 * d22 + h13 * d32)
-        a13 = -(h10 * d03 + h11 * d13 + h12 * d23 + h13 * d33)
-        a20 = -(h20 * d00 + h21 * d10 + h22 * d20 + h23 * d30)
-        a21 = -(h20 * d01 + h21 * d11 + h22 * d21 + h23 * d31)
-        a22 = 1.0 - (h20 * d02 + h21 * d12 + h22 * d22 + h23 * d32)
-        a23 = -(h20 * d03 + h21 * d13 + h22 * d23 + h23 * d33)
-        a30 = -(h30 * d00 + h31 * d10 + h32 * d20 + h33 * d30)
-        a31 = -(h30 * d01 + h31 * d11 + h32 * d21 + h33 * d31)
-        a32 = -(h30 * d02 + h31 * d12 + h32 * d22 + h33 * d32)
-        a33 = 1.0 - (h30 * d03 + h31 * d13 + h32 * d23 + h33 * d33)
-        (k00, k01, k02, k03, k10, k11, k12, k13, k20, k21, k22, k23, k30, k31, k32, k33) = _inv4(
-            a00, a01, a02, a03, a10, a11, a12, a13, a20, a21, a22, a23, a30, a31, a32, a33)
-        p00 = P[0, k]
-        p01 = P[1, k]
-        p02 = P[2, k]
-        p03 = P[3, k]
-        p10 = P[4, k]
-        p11 = P[5, k]
-        p12 = P[6, k]
-        p13 = P[7, k]
-        p20 = P[8, k]
-        p21 = P[9, k]
-        p22 = P[10, k]
-        p23 = P[11, k]
-        p30 = P[12, k]
-        p31 = P[13, k]
-        p32 = P[14, k]
-        p33 = P[15, k]
-        t00 = k00 * p00 + k01 * p10 + k02 * p20 + k03 * p30
-        t01 = k00 * p01 + k01 * p11 + k02 * p21 + k03 * p31
-        t02 = k00 * p02 + k01 * p12 + k02 * p22 + k03 * p32
-        t03 = k00 * p03 + k01 * p13 + k02 * p23 + k03 * p33
-        t10 = k10 * p00 + k11 * p10 + k12 * p20 + k13 * p30
-        t11 = k10 * p01 + k11 * p11 + k12 * p21 + k13 * p31
-        t12 = k10 * p02 + k11 * p12 + k12 * p22 + k13 * p32
-        t13 = k10 * p03 + k11 * p13 + k12 * p23 + k13 * p33
-        t20 = k20 * p00 + k21 * p10 + k22 * p20 + k23 * p30
-        t21 = k20 * p01 + k21 * p11 + k22 * p21 + k23 * p31
-        t22 = k20 * p02 + k21 * p12 + k22 * p22 + k23 * p32
-        t23 = k20 * p03 + k21 * p13 + k22 * p23 + k23 * p33
-        t30 = k30 * p00 + k31 * p10 + k32 * p20 + k33 * p30
-        t31 = k30 * p01 + k31 * p11 + k32 * p21 + k33 * p31
-        t32 = k30 * p02 + k31 * p12 + k32 * p22 + k33 * p32
-        t33 = k30 * p03 + k31 * p13 + k32 * p23 + k33 * p33
-        V[0, k] = (t00.real * k00.real + t00.imag * k00.imag + t01.real * k01.real
-            + t01.imag * k01.imag + t02.real * k02.real + t02.imag * k02.imag
-            + t03.real * k03.real + t03.imag * k03.imag)
-        V[1, k] = (t10.real * k10.real + t10.imag * k10.imag + t11.real * k11.real
-            + t11.imag * k11.imag + t12.real * k12.real + t12.imag * k12.imag
-            + t13.real * k13.real + t13.imag * k13.imag)
-        V[2, k] = (t20.real * k20.real + t20.imag * k20.imag + t21.real * k21.real
-            + t21.imag * k21.imag + t22.real * k22.real + t22.imag * k22.imag
-            + t23.real * k23.real + t23.imag * k23.imag)
-        V[3, k] = (t30.real * k30.real + t30.imag * k30.imag + t31.real * k31.real
-            + t31.imag * k31.imag + t32.real * k32.real + t32.imag * k32.imag
-            + t33.real * k33.real + t33.imag * k33.imag)
-        V[4, k] = (t00.real * k10.real + t00.imag * k10.imag + t01.real * k11.real
-            + t01.imag * k11.imag + t02.real * k12.real + t02.imag * k12.imag
-            + t03.real * k13.real + t03.imag * k13.imag)
-        V[5, k] = (t00.real * k20.real + t00.imag * k20.imag + t01.real * k21.real
-            + t01.imag * k21.imag + t02.real * k22.real + t02.imag * k22.imag
-            + t03.real * k23.real + t03.imag * k23.imag)
-        V[6, k] = (t00.real * k30.real + t00.imag * k30.imag + t01.real * k31.real
-            + t01.imag * k31.imag + t02.real * k32.real + t02.imag * k32.imag
-            + t03.real * k33.real + t03.imag * k33.imag)
-        V[7, k] = (t10.real * k20.real + t10.imag * k20.imag + t11.real * k21.real
-            + t11.imag * k21.imag + t12.real * k22.real + t12.imag * k22.imag
-            + t13.real * k23.real + t13.imag * k23.imag)
-        V[8, k] = (t10.real * k30.real + t10.imag * k30.imag + t11.real * k31.real
-            + t11.imag * k31.imag + t12.real * k32.real + t12.imag * k32.imag
-            + t13.real * k33.real + t13.imag * k33.imag)
-        V[9, k] = (t20.real * k30.real + t20.imag * k30.imag + t21.real * k31.real
-            + t21.imag * k31.imag + t22.real * k32.real + t22.imag * k32.imag
-            + t23.real * k33.real + t23.imag * k33.imag)
+    for blk in range(nblk):
+        ob = blk * _NOPS * _BK
+        rb = blk * 16 * _BK
+        vb = blk * 10 * _BK
+        for j in range(_BK):
+            o = ob + j
+            r = rb + j
+            jk = ops[o + 64 * _BK]
+            g0 = c0 * complex(rinv[r + 0 * _BK], rinv[r + 8 * _BK]) - cb0 + complex(0.0, q0 * jk)
+            g1 = c1 * complex(rinv[r + 1 * _BK], rinv[r + 9 * _BK]) - cb1 + complex(0.0, q1 * jk)
+            g2 = c2 * complex(rinv[r + 2 * _BK], rinv[r + 10 * _BK]) - cb2 + complex(0.0, q2 * jk)
+            g3 = c3 * complex(rinv[r + 3 * _BK], rinv[r + 11 * _BK]) - cb3 + complex(0.0, q3 * jk)
+            e0 = c4 * complex(rinv[r + 4 * _BK], rinv[r + 12 * _BK]) + complex(0.0, q4 * jk)
+            e1 = c5 * complex(rinv[r + 5 * _BK], rinv[r + 13 * _BK]) + complex(0.0, q5 * jk)
+            e2 = c6 * complex(rinv[r + 6 * _BK], rinv[r + 14 * _BK]) + complex(0.0, q6 * jk)
+            e3 = c7 * complex(rinv[r + 7 * _BK], rinv[r + 15 * _BK]) + complex(0.0, q7 * jk)
+            d00 = g0 + o0_0 * e0 + o1_0 * e1 + o2_0 * e2 + o3_0 * e3
+            d01 = o0_1 * e0 + o1_1 * e1 + o2_1 * e2 + o3_1 * e3
+            d02 = o0_2 * e0 + o1_2 * e1 + o2_2 * e2 + o3_2 * e3
+            d03 = o0_3 * e0 + o1_3 * e1 + o2_3 * e2 + o3_3 * e3
+            d10 = o0_4 * e0 + o1_4 * e1 + o2_4 * e2 + o3_4 * e3
+            d11 = g1 + o0_5 * e0 + o1_5 * e1 + o2_5 * e2 + o3_5 * e3
+            d12 = o0_6 * e0 + o1_6 * e1 + o2_6 * e2 + o3_6 * e3
+            d13 = o0_7 * e0 + o1_7 * e1 + o2_7 * e2 + o3_7 * e3
+            d20 = o0_8 * e0 + o1_8 * e1 + o2_8 * e2 + o3_8 * e3
+            d21 = o0_9 * e0 + o1_9 * e1 + o2_9 * e2 + o3_9 * e3
+            d22 = g2 + o0_10 * e0 + o1_10 * e1 + o2_10 * e2 + o3_10 * e3
+            d23 = o0_11 * e0 + o1_11 * e1 + o2_11 * e2 + o3_11 * e3
+            d30 = o0_12 * e0 + o1_12 * e1 + o2_12 * e2 + o3_12 * e3
+            d31 = o0_13 * e0 + o1_13 * e1 + o2_13 * e2 + o3_13 * e3
+            d32 = o0_14 * e0 + o1_14 * e1 + o2_14 * e2 + o3_14 * e3
+            d33 = g3 + o0_15 * e0 + o1_15 * e1 + o2_15 * e2 + o3_15 * e3
+            h00 = complex(ops[o + 0 * _BK], ops[o + 16 * _BK])
+            h01 = complex(ops[o + 1 * _BK], ops[o + 17 * _BK])
+            h02 = complex(ops[o + 2 * _BK], ops[o + 18 * _BK])
+            h03 = complex(ops[o + 3 * _BK], ops[o + 19 * _BK])
+            h10 = complex(ops[o + 4 * _BK], ops[o + 20 * _BK])
+            h11 = complex(ops[o + 5 * _BK], ops[o + 21 * _BK])
+            h12 = complex(ops[o + 6 * _BK], ops[o + 22 * _BK])
+            h13 = complex(ops[o + 7 * _BK], ops[o + 23 * _BK])
+            h20 = complex(ops[o + 8 * _BK], ops[o + 24 * _BK])
+            h21 = complex(ops[o + 9 * _BK], ops[o + 25 * _BK])
+            h22 = complex(ops[o + 10 * _BK], ops[o + 26 * _BK])
+            h23 = complex(ops[o + 11 * _BK], ops[o + 27 * _BK])
+            h30 = complex(ops[o + 12 * _BK], ops[o + 28 * _BK])
+            h31 = complex(ops[o + 13 * _BK], ops[o + 29 * _BK])
+            h32 = complex(ops[o + 14 * _BK], ops[o + 30 * _BK])
+            h33 = complex(ops[o + 15 * _BK], ops[o + 31 * _BK])
+            a00 = 1.0 - (h00 * d00 + h01 * d10 + h02 * d20 + h03 * d30)
+            a01 = -(h00 * d01 + h01 * d11 + h02 * d21 + h03 * d31)
+            a02 = -(h00 * d02 + h01 * d12 + h02 * d22 + h03 * d32)
+            a03 = -(h00 * d03 + h01 * d13 + h02 * d23 + h03 * d33)
+            a10 = -(h10 * d00 + h11 * d10 + h12 * d20 + h13 * d30)
+            a11 = 1.0 - (h10 * d01 + h11 * d11 + h12 * d21 + h13 * d31)
+            a12 = -(h10 * d02 + h11 * d12 + h12 * d22 + h13 * d32)
+            a13 = -(h10 * d03 + h11 * d13 + h12 * d23 + h13 * d33)
+            a20 = -(h20 * d00 + h21 * d10 + h22 * d20 + h23 * d30)
+            a21 = -(h20 * d01 + h21 * d11 + h22 * d21 + h23 * d31)
+            a22 = 1.0 - (h20 * d02 + h21 * d12 + h22 * d22 + h23 * d32)
+            a23 = -(h20 * d03 + h21 * d13 + h22 * d23 + h23 * d33)
+            a30 = -(h30 * d00 + h31 * d10 + h32 * d20 + h33 * d30)
+            a31 = -(h30 * d01 + h31 * d11 + h32 * d21 + h33 * d31)
+            a32 = -(h30 * d02 + h31 * d12 + h32 * d22 + h33 * d32)
+            a33 = 1.0 - (h30 * d03 + h31 * d13 + h32 * d23 + h33 * d33)
+            (k00, k01, k02, k03, k10, k11, k12, k13, k20, k21, k22, k23, k30, k31, k32, k33) = \
+                _inv4(a00, a01, a02, a03, a10, a11, a12, a13,
+                      a20, a21, a22, a23, a30, a31, a32, a33)
+            p00 = complex(ops[o + 32 * _BK], ops[o + 48 * _BK])
+            p01 = complex(ops[o + 33 * _BK], ops[o + 49 * _BK])
+            p02 = complex(ops[o + 34 * _BK], ops[o + 50 * _BK])
+            p03 = complex(ops[o + 35 * _BK], ops[o + 51 * _BK])
+            p10 = complex(ops[o + 36 * _BK], ops[o + 52 * _BK])
+            p11 = complex(ops[o + 37 * _BK], ops[o + 53 * _BK])
+            p12 = complex(ops[o + 38 * _BK], ops[o + 54 * _BK])
+            p13 = complex(ops[o + 39 * _BK], ops[o + 55 * _BK])
+            p20 = complex(ops[o + 40 * _BK], ops[o + 56 * _BK])
+            p21 = complex(ops[o + 41 * _BK], ops[o + 57 * _BK])
+            p22 = complex(ops[o + 42 * _BK], ops[o + 58 * _BK])
+            p23 = complex(ops[o + 43 * _BK], ops[o + 59 * _BK])
+            p30 = complex(ops[o + 44 * _BK], ops[o + 60 * _BK])
+            p31 = complex(ops[o + 45 * _BK], ops[o + 61 * _BK])
+            p32 = complex(ops[o + 46 * _BK], ops[o + 62 * _BK])
+            p33 = complex(ops[o + 47 * _BK], ops[o + 63 * _BK])
+            t00 = k00 * p00 + k01 * p10 + k02 * p20 + k03 * p30
+            t01 = k00 * p01 + k01 * p11 + k02 * p21 + k03 * p31
+            t02 = k00 * p02 + k01 * p12 + k02 * p22 + k03 * p32
+            t03 = k00 * p03 + k01 * p13 + k02 * p23 + k03 * p33
+            t10 = k10 * p00 + k11 * p10 + k12 * p20 + k13 * p30
+            t11 = k10 * p01 + k11 * p11 + k12 * p21 + k13 * p31
+            t12 = k10 * p02 + k11 * p12 + k12 * p22 + k13 * p32
+            t13 = k10 * p03 + k11 * p13 + k12 * p23 + k13 * p33
+            t20 = k20 * p00 + k21 * p10 + k22 * p20 + k23 * p30
+            t21 = k20 * p01 + k21 * p11 + k22 * p21 + k23 * p31
+            t22 = k20 * p02 + k21 * p12 + k22 * p22 + k23 * p32
+            t23 = k20 * p03 + k21 * p13 + k22 * p23 + k23 * p33
+            t30 = k30 * p00 + k31 * p10 + k32 * p20 + k33 * p30
+            t31 = k30 * p01 + k31 * p11 + k32 * p21 + k33 * p31
+            t32 = k30 * p02 + k31 * p12 + k32 * p22 + k33 * p32
+            t33 = k30 * p03 + k31 * p13 + k32 * p23 + k33 * p33
+            V[vb + j + 0 * _BK] = (t00.real * k00.real + t00.imag * k00.imag + t01.real * k01.real
+                + t01.imag * k01.imag + t02.real * k02.real + t02.imag * k02.imag
+                + t03.real * k03.real + t03.imag * k03.imag)
+            V[vb + j + 1 * _BK] = (t10.real * k10.real + t10.imag * k10.imag + t11.real * k11.real
+                + t11.imag * k11.imag + t12.real * k12.real + t12.imag * k12.imag
+                + t13.real * k13.real + t13.imag * k13.imag)
+            V[vb + j + 2 * _BK] = (t20.real * k20.real + t20.imag * k20.imag + t21.real * k21.real
+                + t21.imag * k21.imag + t22.real * k22.real + t22.imag * k22.imag
+                + t23.real * k23.real + t23.imag * k23.imag)
+            V[vb + j + 3 * _BK] = (t30.real * k30.real + t30.imag * k30.imag + t31.real * k31.real
+                + t31.imag * k31.imag + t32.real * k32.real + t32.imag * k32.imag
+                + t33.real * k33.real + t33.imag * k33.imag)
+            V[vb + j + 4 * _BK] = (t00.real * k10.real + t00.imag * k10.imag + t01.real * k11.real
+                + t01.imag * k11.imag + t02.real * k12.real + t02.imag * k12.imag
+                + t03.real * k13.real + t03.imag * k13.imag)
+            V[vb + j + 5 * _BK] = (t00.real * k20.real + t00.imag * k20.imag + t01.real * k21.real
+                + t01.imag * k21.imag + t02.real * k22.real + t02.imag * k22.imag
+                + t03.real * k23.real + t03.imag * k23.imag)
+            V[vb + j + 6 * _BK] = (t00.real * k30.real + t00.imag * k30.imag + t01.real * k31.real
+                + t01.imag * k31.imag + t02.real * k32.real + t02.imag * k32.imag
+                + t03.real * k33.real + t03.imag * k33.imag)
+            V[vb + j + 7 * _BK] = (t10.real * k20.real + t10.imag * k20.imag + t11.real * k21.real
+                + t11.imag * k21.imag + t12.real * k22.real + t12.imag * k22.imag
+                + t13.real * k23.real + t13.imag * k23.imag)
+            V[vb + j + 8 * _BK] = (t10.real * k30.real + t10.imag * k30.imag + t11.real * k31.real
+                + t11.imag * k31.imag + t12.real * k32.real + t12.imag * k32.imag
+                + t13.real * k33.real + t13.imag * k33.imag)
+            V[vb + j + 9 * _BK] = (t20.real * k30.real + t20.imag * k30.imag + t21.real * k31.real
+                + t21.imag * k31.imag + t22.real * k32.real + t22.imag * k32.imag
+                + t23.real * k33.real + t23.imag * k33.imag)
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _power(P, K, V, k, t):
-    """``V = K P K^H`` of band k: the real diagonal (V[0..3]) and the upper triangle's real
-    parts (V[4..9], pairs (0,1) (0,2) (0,3) (1,2) (1,3) (2,3)), into V[:, k]; t (16,)
-    complex scratch."""
-    for a in range(4):
-        for b in range(4):
-            acc = 0j
-            for c in range(4):
-                acc += K[4 * a + c, k] * P[4 * c + b, k]
-            t[4 * a + b] = acc
-    q = 4
-    for a in range(4):
-        acc = 0.0
-        for c in range(4):
-            z = K[4 * a + c, k]
-            acc += t[4 * a + c].real * z.real + t[4 * a + c].imag * z.imag
-        V[a, k] = acc
-    for a in range(3):
-        for b in range(a + 1, 4):
-            acc = 0.0
-            for c in range(4):
-                z = K[4 * b + c, k]
-                acc += t[4 * a + c].real * z.real + t[4 * a + c].imag * z.imag
-            V[q, k] = acc
-            q += 1
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _row_power(r, V, k):
-    """``r V r^T`` of band k (r real (4,); V from :func:`_power`)."""
-    acc = (r[0] * r[0] * V[0, k] + r[1] * r[1] * V[1, k] + r[2] * r[2] * V[2, k]
-           + r[3] * r[3] * V[3, k])
-    acc += 2.0 * (r[0] * r[1] * V[4, k] + r[0] * r[2] * V[5, k] + r[0] * r[3] * V[6, k]
-                  + r[1] * r[2] * V[7, k] + r[1] * r[3] * V[8, k] + r[2] * r[3] * V[9, k])
+def _row_power(r, V, o):
+    """``r V r^T`` of a band (r real (4,); V from :func:`_band_power`, the band's entries at
+    ``o + q _BK``)."""
+    acc = (r[0] * r[0] * V[o] + r[1] * r[1] * V[o + _BK] + r[2] * r[2] * V[o + 2 * _BK]
+           + r[3] * r[3] * V[o + 3 * _BK])
+    acc += 2.0 * (r[0] * r[1] * V[o + 4 * _BK] + r[0] * r[2] * V[o + 5 * _BK]
+                  + r[0] * r[3] * V[o + 6 * _BK] + r[1] * r[2] * V[o + 7 * _BK]
+                  + r[1] * r[3] * V[o + 8 * _BK] + r[2] * r[3] * V[o + 9 * _BK])
     return acc
 
 
@@ -598,14 +595,19 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
     nf = bd.w.size
     nr = bd.rows.shape[0]
     w, rows = bd.w, bd.rows
+    nblk = (nf + _BK - 1) // _BK
     rinv = np.empty((nr, nf), dtype=np.complex128)
+    rblk = np.zeros(nblk * 16 * _BK)  # the same in blocks: rows r (real), 8 + r (imaginary)
     for r in range(nr):
         for k in range(nf):
-            rinv[r, k] = 1.0 / (1.0 + 1j * w[k] * lag[s, r])
+            z = 1.0 / (1.0 + 1j * w[k] * lag[s, r])
+            rinv[r, k] = z
+            o = (k // _BK) * 16 * _BK + k % _BK
+            rblk[o + r * _BK] = z.real
+            rblk[o + (8 + r) * _BK] = z.imag
     D = np.empty((16, nf), dtype=np.complex128)
     K = np.empty((16, nf), dtype=np.complex128)
-    V = np.empty((10, nf))
-    tmp = np.empty(16, dtype=np.complex128)
+    V = np.zeros(nblk * 10 * _BK)
     ceq, keq, eg, ef = np.zeros(nr), np.zeros(nr), np.zeros(nr), np.zeros(nr)
     sigs = np.zeros(nr)
     sp, hp, ssp, hsp = np.zeros(nr), np.zeros(nr), np.zeros(nr), np.zeros(nr)
@@ -628,12 +630,12 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
         if any_spring:
             _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu,
                    keq, eg, ef)
-        _band_power(bd, ceq, keq, rinv, V)
+        _band_power(bd, ceq, keq, rblk, V)
         for r in range(nr):
             a1 = 0.0
             a2 = 0.0
             for k in range(nf):
-                p = _row_power(rows[r], V, k)
+                p = _row_power(rows[r], V, (k // _BK) * 10 * _BK + k % _BK)
                 a1 += p
                 a2 += p * bd.w2inv[k]
             svv[r] = a1
