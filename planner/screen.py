@@ -1136,12 +1136,14 @@ def third_bands(ops, eops, rows):
     H, P = entries(ops.Hvs), entries(ops.P)
     bk = THIRD_BLOCK_BANDS
     nblk = -(-nf // bk)
-    x = np.zeros((65, nblk * bk))
+    PB = entries(ops.PB)
+    x = np.zeros((97, nblk * bk))
     x[:16, :nf], x[16:32, :nf] = H.real, H.imag
     x[32:48, :nf], x[48:64, :nf] = P.real, P.imag
     x[64, :nf] = -1.0 / ops.w
-    blocks = np.ascontiguousarray(x.reshape(65, nblk, bk).transpose(1, 0, 2)).reshape(-1)
-    return ThirdBands(w=np.array(ops.w, dtype=float), H=H, P=P, PB=entries(ops.PB),
+    x[65:81, :nf], x[81:, :nf] = PB.real, PB.imag
+    blocks = np.ascontiguousarray(x.reshape(97, nblk, bk).transpose(1, 0, 2)).reshape(-1)
+    return ThirdBands(w=np.array(ops.w, dtype=float), H=H, P=P, PB=PB,
                       blocks=blocks, F=np.ascontiguousarray(F),
                       d0=np.ascontiguousarray(ops.d0), cbar=np.array(ops.cbar, dtype=float),
                       rows=rows, outer=np.ascontiguousarray(outer), sig0=sig0,

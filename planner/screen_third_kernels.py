@@ -50,8 +50,8 @@ _NFEAT = 48
 THIRD_BLOCK_BANDS = 16
 _BK = THIRD_BLOCK_BANDS
 #: Operand rows per block (:func:`planner.screen.third_bands`): ``H_vs`` real and imaginary
-#: (16 + 16), ``P`` (16 + 16), ``-1 / w``.
-_NOPS = 65
+#: (16 + 16), ``P`` (16 + 16), ``-1 / w``, ``PB`` (16 + 16).
+_NOPS = 97
 
 
 class ThirdBands(NamedTuple):
@@ -63,11 +63,11 @@ class ThirdBands(NamedTuple):
         Band centres [rad/s].
     H, P, PB : ndarray of complex, shape (16, n_bands)
         Entry ``4 a + b`` of ``H_vs``, ``P`` and ``PB`` per band (row-major entries).
-    blocks : ndarray, shape (n_blocks * 65 * 16,)
-        ``H_vs``, ``P`` and ``-1 / w`` in blocks of 16 bands for :func:`_band_power`: band
-        ``16 b + j``'s row m at ``(65 b + m) 16 + j`` (rows 0-15 the real parts of ``H_vs``'s
-        entries, 16-31 their imaginary parts, 32-63 the same of ``P``, 64 ``-1 / w``; zero
-        past the last band).
+    blocks : ndarray, shape (n_blocks * 97 * 16,)
+        ``H_vs``, ``P``, ``-1 / w`` and ``PB`` in blocks of 16 bands for :func:`_band_power`
+        and :func:`_band_features`: band ``16 b + j``'s row m at ``(97 b + m) 16 + j`` (rows
+        0-15 the real parts of ``H_vs``'s entries, 16-31 their imaginary parts, 32-63 the
+        same of ``P``, 64 ``-1 / w``, 65-96 ``PB``'s; zero past the last band).
     F : ndarray, shape (n_bands, 48, n_metrics)
         :func:`planner.screen_kernels.metric_form`.
     d0 : ndarray, shape (n_bands, n_metrics)
@@ -207,64 +207,6 @@ def inverse_cofactor(A):
         for j in range(16):
             out[i, j // 4, j % 4] = b[j]
     return out
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _delta(bd, ceq, keq, rinv, D):
-    """``Delta`` per band into D (16, n_bands): corners on the diagonal, elements by their
-    outer products; rinv (n_rows, n_bands) the roll-offs ``1 / (1 + j w tau)``."""
-    nf = bd.w.size
-    nr = bd.rows.shape[0]
-    cbar, jinv, outer = bd.cbar, bd.jinv, bd.outer
-    for i in range(16):
-        for k in range(nf):
-            D[i, k] = 0.0
-    for c in range(4):
-        i = 5 * c
-        cc, kk, cb = ceq[c], keq[c], cbar[c]
-        for k in range(nf):
-            D[i, k] = cc * rinv[c, k] - cb + complex(0.0, kk * jinv[k])
-    for r in range(4, nr):
-        cc, kk = ceq[r], keq[r]
-        for i in range(16):
-            o = outer[r, i]
-            if o != 0.0:
-                for k in range(nf):
-                    D[i, k] += o * (cc * rinv[r, k] + complex(0.0, kk * jinv[k]))
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _loop(bd, D, K):
-    """K = (I - H_vs Delta)^-1 per band (16, n_bands), vectorized over bands."""
-    H = bd.H
-    nf = bd.w.size
-    for k in range(nf):
-        h00, h01, h02, h03 = H[0, k], H[1, k], H[2, k], H[3, k]
-        h10, h11, h12, h13 = H[4, k], H[5, k], H[6, k], H[7, k]
-        h20, h21, h22, h23 = H[8, k], H[9, k], H[10, k], H[11, k]
-        h30, h31, h32, h33 = H[12, k], H[13, k], H[14, k], H[15, k]
-        d00, d01, d02, d03 = D[0, k], D[1, k], D[2, k], D[3, k]
-        d10, d11, d12, d13 = D[4, k], D[5, k], D[6, k], D[7, k]
-        d20, d21, d22, d23 = D[8, k], D[9, k], D[10, k], D[11, k]
-        d30, d31, d32, d33 = D[12, k], D[13, k], D[14, k], D[15, k]
-        b = _inv4(1.0 - (h00 * d00 + h01 * d10 + h02 * d20 + h03 * d30),
-                  -(h00 * d01 + h01 * d11 + h02 * d21 + h03 * d31),
-                  -(h00 * d02 + h01 * d12 + h02 * d22 + h03 * d32),
-                  -(h00 * d03 + h01 * d13 + h02 * d23 + h03 * d33),
-                  -(h10 * d00 + h11 * d10 + h12 * d20 + h13 * d30),
-                  1.0 - (h10 * d01 + h11 * d11 + h12 * d21 + h13 * d31),
-                  -(h10 * d02 + h11 * d12 + h12 * d22 + h13 * d32),
-                  -(h10 * d03 + h11 * d13 + h12 * d23 + h13 * d33),
-                  -(h20 * d00 + h21 * d10 + h22 * d20 + h23 * d30),
-                  -(h20 * d01 + h21 * d11 + h22 * d21 + h23 * d31),
-                  1.0 - (h20 * d02 + h21 * d12 + h22 * d22 + h23 * d32),
-                  -(h20 * d03 + h21 * d13 + h22 * d23 + h23 * d33),
-                  -(h30 * d00 + h31 * d10 + h32 * d20 + h33 * d30),
-                  -(h30 * d01 + h31 * d11 + h32 * d21 + h33 * d31),
-                  -(h30 * d02 + h31 * d12 + h32 * d22 + h33 * d32),
-                  1.0 - (h30 * d03 + h31 * d13 + h32 * d23 + h33 * d33))
-        for i in range(16):
-            K[i, k] = b[i]
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -498,6 +440,279 @@ def _band_power(bd, ceq, keq, rinv, V):
 
 
 @nb.njit(cache=True, error_model="numpy")
+def _band_features(bd, ceq, keq, rinv, V):
+    """The final pass's band work, fused and written out: per band ``Delta``, ``K`` as in
+    :func:`_band_power`, then ``E = Delta K`` and the 48 features of ``E`` and ``R = E PB
+    E^H`` (the diagonal of R, the real and imaginary parts of its upper triangle and of E,
+    as :func:`planner.screen_kernels.metric_form` orders them) into V (``_NFEAT _BK`` per
+    block: feature i of band ``blk _BK + j`` at ``(_NFEAT blk + i) _BK + j``). Straight-line,
+    vectorized over bands as :func:`_band_power`. Written out by a script."""
+    ops, outer, cbar = bd.blocks, bd.outer, bd.cbar
+    nblk = (bd.w.size + _BK - 1) // _BK
+    c0 = ceq[0]
+    q0 = keq[0]
+    c1 = ceq[1]
+    q1 = keq[1]
+    c2 = ceq[2]
+    q2 = keq[2]
+    c3 = ceq[3]
+    q3 = keq[3]
+    c4 = ceq[4]
+    q4 = keq[4]
+    c5 = ceq[5]
+    q5 = keq[5]
+    c6 = ceq[6]
+    q6 = keq[6]
+    c7 = ceq[7]
+    q7 = keq[7]
+    cb0 = cbar[0]
+    cb1 = cbar[1]
+    cb2 = cbar[2]
+    cb3 = cbar[3]
+    o0_0 = outer[4, 0]
+    o0_1 = outer[4, 1]
+    o0_2 = outer[4, 2]
+    o0_3 = outer[4, 3]
+    o0_4 = outer[4, 4]
+    o0_5 = outer[4, 5]
+    o0_6 = outer[4, 6]
+    o0_7 = outer[4, 7]
+    o0_8 = outer[4, 8]
+    o0_9 = outer[4, 9]
+    o0_10 = outer[4, 10]
+    o0_11 = outer[4, 11]
+    o0_12 = outer[4, 12]
+    o0_13 = outer[4, 13]
+    o0_14 = outer[4, 14]
+    o0_15 = outer[4, 15]
+    o1_0 = outer[5, 0]
+    o1_1 = outer[5, 1]
+    o1_2 = outer[5, 2]
+    o1_3 = outer[5, 3]
+    o1_4 = outer[5, 4]
+    o1_5 = outer[5, 5]
+    o1_6 = outer[5, 6]
+    o1_7 = outer[5, 7]
+    o1_8 = outer[5, 8]
+    o1_9 = outer[5, 9]
+    o1_10 = outer[5, 10]
+    o1_11 = outer[5, 11]
+    o1_12 = outer[5, 12]
+    o1_13 = outer[5, 13]
+    o1_14 = outer[5, 14]
+    o1_15 = outer[5, 15]
+    o2_0 = outer[6, 0]
+    o2_1 = outer[6, 1]
+    o2_2 = outer[6, 2]
+    o2_3 = outer[6, 3]
+    o2_4 = outer[6, 4]
+    o2_5 = outer[6, 5]
+    o2_6 = outer[6, 6]
+    o2_7 = outer[6, 7]
+    o2_8 = outer[6, 8]
+    o2_9 = outer[6, 9]
+    o2_10 = outer[6, 10]
+    o2_11 = outer[6, 11]
+    o2_12 = outer[6, 12]
+    o2_13 = outer[6, 13]
+    o2_14 = outer[6, 14]
+    o2_15 = outer[6, 15]
+    o3_0 = outer[7, 0]
+    o3_1 = outer[7, 1]
+    o3_2 = outer[7, 2]
+    o3_3 = outer[7, 3]
+    o3_4 = outer[7, 4]
+    o3_5 = outer[7, 5]
+    o3_6 = outer[7, 6]
+    o3_7 = outer[7, 7]
+    o3_8 = outer[7, 8]
+    o3_9 = outer[7, 9]
+    o3_10 = outer[7, 10]
+    o3_11 = outer[7, 11]
+    o3_12 = outer[7, 12]
+    o3_13 = outer[7, 13]
+    o3_14 = outer[7, 14]
+    o3_15 = outer[7, 15]
+    for blk in range(nblk):
+        ob = blk * _NOPS * _BK
+        rb = blk * 16 * _BK
+        vb = blk * _NFEAT * _BK
+        for j in range(_BK):
+            o = ob + j
+            r = rb + j
+            jk = ops[o + 64 * _BK]
+            g0 = c0 * complex(rinv[r + 0 * _BK], rinv[r + 8 * _BK]) - cb0 + complex(0.0, q0 * jk)
+            g1 = c1 * complex(rinv[r + 1 * _BK], rinv[r + 9 * _BK]) - cb1 + complex(0.0, q1 * jk)
+            g2 = c2 * complex(rinv[r + 2 * _BK], rinv[r + 10 * _BK]) - cb2 + complex(0.0, q2 * jk)
+            g3 = c3 * complex(rinv[r + 3 * _BK], rinv[r + 11 * _BK]) - cb3 + complex(0.0, q3 * jk)
+            e0 = c4 * complex(rinv[r + 4 * _BK], rinv[r + 12 * _BK]) + complex(0.0, q4 * jk)
+            e1 = c5 * complex(rinv[r + 5 * _BK], rinv[r + 13 * _BK]) + complex(0.0, q5 * jk)
+            e2 = c6 * complex(rinv[r + 6 * _BK], rinv[r + 14 * _BK]) + complex(0.0, q6 * jk)
+            e3 = c7 * complex(rinv[r + 7 * _BK], rinv[r + 15 * _BK]) + complex(0.0, q7 * jk)
+            d00 = g0 + o0_0 * e0 + o1_0 * e1 + o2_0 * e2 + o3_0 * e3
+            d01 = o0_1 * e0 + o1_1 * e1 + o2_1 * e2 + o3_1 * e3
+            d02 = o0_2 * e0 + o1_2 * e1 + o2_2 * e2 + o3_2 * e3
+            d03 = o0_3 * e0 + o1_3 * e1 + o2_3 * e2 + o3_3 * e3
+            d10 = o0_4 * e0 + o1_4 * e1 + o2_4 * e2 + o3_4 * e3
+            d11 = g1 + o0_5 * e0 + o1_5 * e1 + o2_5 * e2 + o3_5 * e3
+            d12 = o0_6 * e0 + o1_6 * e1 + o2_6 * e2 + o3_6 * e3
+            d13 = o0_7 * e0 + o1_7 * e1 + o2_7 * e2 + o3_7 * e3
+            d20 = o0_8 * e0 + o1_8 * e1 + o2_8 * e2 + o3_8 * e3
+            d21 = o0_9 * e0 + o1_9 * e1 + o2_9 * e2 + o3_9 * e3
+            d22 = g2 + o0_10 * e0 + o1_10 * e1 + o2_10 * e2 + o3_10 * e3
+            d23 = o0_11 * e0 + o1_11 * e1 + o2_11 * e2 + o3_11 * e3
+            d30 = o0_12 * e0 + o1_12 * e1 + o2_12 * e2 + o3_12 * e3
+            d31 = o0_13 * e0 + o1_13 * e1 + o2_13 * e2 + o3_13 * e3
+            d32 = o0_14 * e0 + o1_14 * e1 + o2_14 * e2 + o3_14 * e3
+            d33 = g3 + o0_15 * e0 + o1_15 * e1 + o2_15 * e2 + o3_15 * e3
+            h00 = complex(ops[o + 0 * _BK], ops[o + 16 * _BK])
+            h01 = complex(ops[o + 1 * _BK], ops[o + 17 * _BK])
+            h02 = complex(ops[o + 2 * _BK], ops[o + 18 * _BK])
+            h03 = complex(ops[o + 3 * _BK], ops[o + 19 * _BK])
+            h10 = complex(ops[o + 4 * _BK], ops[o + 20 * _BK])
+            h11 = complex(ops[o + 5 * _BK], ops[o + 21 * _BK])
+            h12 = complex(ops[o + 6 * _BK], ops[o + 22 * _BK])
+            h13 = complex(ops[o + 7 * _BK], ops[o + 23 * _BK])
+            h20 = complex(ops[o + 8 * _BK], ops[o + 24 * _BK])
+            h21 = complex(ops[o + 9 * _BK], ops[o + 25 * _BK])
+            h22 = complex(ops[o + 10 * _BK], ops[o + 26 * _BK])
+            h23 = complex(ops[o + 11 * _BK], ops[o + 27 * _BK])
+            h30 = complex(ops[o + 12 * _BK], ops[o + 28 * _BK])
+            h31 = complex(ops[o + 13 * _BK], ops[o + 29 * _BK])
+            h32 = complex(ops[o + 14 * _BK], ops[o + 30 * _BK])
+            h33 = complex(ops[o + 15 * _BK], ops[o + 31 * _BK])
+            a00 = 1.0 - (h00 * d00 + h01 * d10 + h02 * d20 + h03 * d30)
+            a01 = -(h00 * d01 + h01 * d11 + h02 * d21 + h03 * d31)
+            a02 = -(h00 * d02 + h01 * d12 + h02 * d22 + h03 * d32)
+            a03 = -(h00 * d03 + h01 * d13 + h02 * d23 + h03 * d33)
+            a10 = -(h10 * d00 + h11 * d10 + h12 * d20 + h13 * d30)
+            a11 = 1.0 - (h10 * d01 + h11 * d11 + h12 * d21 + h13 * d31)
+            a12 = -(h10 * d02 + h11 * d12 + h12 * d22 + h13 * d32)
+            a13 = -(h10 * d03 + h11 * d13 + h12 * d23 + h13 * d33)
+            a20 = -(h20 * d00 + h21 * d10 + h22 * d20 + h23 * d30)
+            a21 = -(h20 * d01 + h21 * d11 + h22 * d21 + h23 * d31)
+            a22 = 1.0 - (h20 * d02 + h21 * d12 + h22 * d22 + h23 * d32)
+            a23 = -(h20 * d03 + h21 * d13 + h22 * d23 + h23 * d33)
+            a30 = -(h30 * d00 + h31 * d10 + h32 * d20 + h33 * d30)
+            a31 = -(h30 * d01 + h31 * d11 + h32 * d21 + h33 * d31)
+            a32 = -(h30 * d02 + h31 * d12 + h32 * d22 + h33 * d32)
+            a33 = 1.0 - (h30 * d03 + h31 * d13 + h32 * d23 + h33 * d33)
+            (k00, k01, k02, k03, k10, k11, k12, k13, k20, k21, k22, k23, k30, k31, k32, k33) = \
+                _inv4(a00, a01, a02, a03, a10, a11, a12, a13,
+                      a20, a21, a22, a23, a30, a31, a32, a33)
+            pb00 = complex(ops[o + 65 * _BK], ops[o + 81 * _BK])
+            pb01 = complex(ops[o + 66 * _BK], ops[o + 82 * _BK])
+            pb02 = complex(ops[o + 67 * _BK], ops[o + 83 * _BK])
+            pb03 = complex(ops[o + 68 * _BK], ops[o + 84 * _BK])
+            pb10 = complex(ops[o + 69 * _BK], ops[o + 85 * _BK])
+            pb11 = complex(ops[o + 70 * _BK], ops[o + 86 * _BK])
+            pb12 = complex(ops[o + 71 * _BK], ops[o + 87 * _BK])
+            pb13 = complex(ops[o + 72 * _BK], ops[o + 88 * _BK])
+            pb20 = complex(ops[o + 73 * _BK], ops[o + 89 * _BK])
+            pb21 = complex(ops[o + 74 * _BK], ops[o + 90 * _BK])
+            pb22 = complex(ops[o + 75 * _BK], ops[o + 91 * _BK])
+            pb23 = complex(ops[o + 76 * _BK], ops[o + 92 * _BK])
+            pb30 = complex(ops[o + 77 * _BK], ops[o + 93 * _BK])
+            pb31 = complex(ops[o + 78 * _BK], ops[o + 94 * _BK])
+            pb32 = complex(ops[o + 79 * _BK], ops[o + 95 * _BK])
+            pb33 = complex(ops[o + 80 * _BK], ops[o + 96 * _BK])
+            x00 = d00 * k00 + d01 * k10 + d02 * k20 + d03 * k30
+            x01 = d00 * k01 + d01 * k11 + d02 * k21 + d03 * k31
+            x02 = d00 * k02 + d01 * k12 + d02 * k22 + d03 * k32
+            x03 = d00 * k03 + d01 * k13 + d02 * k23 + d03 * k33
+            x10 = d10 * k00 + d11 * k10 + d12 * k20 + d13 * k30
+            x11 = d10 * k01 + d11 * k11 + d12 * k21 + d13 * k31
+            x12 = d10 * k02 + d11 * k12 + d12 * k22 + d13 * k32
+            x13 = d10 * k03 + d11 * k13 + d12 * k23 + d13 * k33
+            x20 = d20 * k00 + d21 * k10 + d22 * k20 + d23 * k30
+            x21 = d20 * k01 + d21 * k11 + d22 * k21 + d23 * k31
+            x22 = d20 * k02 + d21 * k12 + d22 * k22 + d23 * k32
+            x23 = d20 * k03 + d21 * k13 + d22 * k23 + d23 * k33
+            x30 = d30 * k00 + d31 * k10 + d32 * k20 + d33 * k30
+            x31 = d30 * k01 + d31 * k11 + d32 * k21 + d33 * k31
+            x32 = d30 * k02 + d31 * k12 + d32 * k22 + d33 * k32
+            x33 = d30 * k03 + d31 * k13 + d32 * k23 + d33 * k33
+            t00 = x00 * pb00 + x01 * pb10 + x02 * pb20 + x03 * pb30
+            t01 = x00 * pb01 + x01 * pb11 + x02 * pb21 + x03 * pb31
+            t02 = x00 * pb02 + x01 * pb12 + x02 * pb22 + x03 * pb32
+            t03 = x00 * pb03 + x01 * pb13 + x02 * pb23 + x03 * pb33
+            t10 = x10 * pb00 + x11 * pb10 + x12 * pb20 + x13 * pb30
+            t11 = x10 * pb01 + x11 * pb11 + x12 * pb21 + x13 * pb31
+            t12 = x10 * pb02 + x11 * pb12 + x12 * pb22 + x13 * pb32
+            t13 = x10 * pb03 + x11 * pb13 + x12 * pb23 + x13 * pb33
+            t20 = x20 * pb00 + x21 * pb10 + x22 * pb20 + x23 * pb30
+            t21 = x20 * pb01 + x21 * pb11 + x22 * pb21 + x23 * pb31
+            t22 = x20 * pb02 + x21 * pb12 + x22 * pb22 + x23 * pb32
+            t23 = x20 * pb03 + x21 * pb13 + x22 * pb23 + x23 * pb33
+            t30 = x30 * pb00 + x31 * pb10 + x32 * pb20 + x33 * pb30
+            t31 = x30 * pb01 + x31 * pb11 + x32 * pb21 + x33 * pb31
+            t32 = x30 * pb02 + x31 * pb12 + x32 * pb22 + x33 * pb32
+            t33 = x30 * pb03 + x31 * pb13 + x32 * pb23 + x33 * pb33
+            V[vb + j + 0 * _BK] = (t00.real * x00.real + t00.imag * x00.imag + t01.real * x01.real
+                + t01.imag * x01.imag + t02.real * x02.real + t02.imag * x02.imag
+                + t03.real * x03.real + t03.imag * x03.imag)
+            V[vb + j + 1 * _BK] = (t10.real * x10.real + t10.imag * x10.imag + t11.real * x11.real
+                + t11.imag * x11.imag + t12.real * x12.real + t12.imag * x12.imag
+                + t13.real * x13.real + t13.imag * x13.imag)
+            V[vb + j + 2 * _BK] = (t20.real * x20.real + t20.imag * x20.imag + t21.real * x21.real
+                + t21.imag * x21.imag + t22.real * x22.real + t22.imag * x22.imag
+                + t23.real * x23.real + t23.imag * x23.imag)
+            V[vb + j + 3 * _BK] = (t30.real * x30.real + t30.imag * x30.imag + t31.real * x31.real
+                + t31.imag * x31.imag + t32.real * x32.real + t32.imag * x32.imag
+                + t33.real * x33.real + t33.imag * x33.imag)
+            z0 = t00 * np.conj(x10) + t01 * np.conj(x11) + t02 * np.conj(x12) + t03 * np.conj(x13)
+            z1 = t00 * np.conj(x20) + t01 * np.conj(x21) + t02 * np.conj(x22) + t03 * np.conj(x23)
+            z2 = t00 * np.conj(x30) + t01 * np.conj(x31) + t02 * np.conj(x32) + t03 * np.conj(x33)
+            z3 = t10 * np.conj(x20) + t11 * np.conj(x21) + t12 * np.conj(x22) + t13 * np.conj(x23)
+            z4 = t10 * np.conj(x30) + t11 * np.conj(x31) + t12 * np.conj(x32) + t13 * np.conj(x33)
+            z5 = t20 * np.conj(x30) + t21 * np.conj(x31) + t22 * np.conj(x32) + t23 * np.conj(x33)
+            V[vb + j + 4 * _BK] = z0.real
+            V[vb + j + 10 * _BK] = z0.imag
+            V[vb + j + 5 * _BK] = z1.real
+            V[vb + j + 11 * _BK] = z1.imag
+            V[vb + j + 6 * _BK] = z2.real
+            V[vb + j + 12 * _BK] = z2.imag
+            V[vb + j + 7 * _BK] = z3.real
+            V[vb + j + 13 * _BK] = z3.imag
+            V[vb + j + 8 * _BK] = z4.real
+            V[vb + j + 14 * _BK] = z4.imag
+            V[vb + j + 9 * _BK] = z5.real
+            V[vb + j + 15 * _BK] = z5.imag
+            V[vb + j + 16 * _BK] = x00.real
+            V[vb + j + 32 * _BK] = x00.imag
+            V[vb + j + 17 * _BK] = x01.real
+            V[vb + j + 33 * _BK] = x01.imag
+            V[vb + j + 18 * _BK] = x02.real
+            V[vb + j + 34 * _BK] = x02.imag
+            V[vb + j + 19 * _BK] = x03.real
+            V[vb + j + 35 * _BK] = x03.imag
+            V[vb + j + 20 * _BK] = x10.real
+            V[vb + j + 36 * _BK] = x10.imag
+            V[vb + j + 21 * _BK] = x11.real
+            V[vb + j + 37 * _BK] = x11.imag
+            V[vb + j + 22 * _BK] = x12.real
+            V[vb + j + 38 * _BK] = x12.imag
+            V[vb + j + 23 * _BK] = x13.real
+            V[vb + j + 39 * _BK] = x13.imag
+            V[vb + j + 24 * _BK] = x20.real
+            V[vb + j + 40 * _BK] = x20.imag
+            V[vb + j + 25 * _BK] = x21.real
+            V[vb + j + 41 * _BK] = x21.imag
+            V[vb + j + 26 * _BK] = x22.real
+            V[vb + j + 42 * _BK] = x22.imag
+            V[vb + j + 27 * _BK] = x23.real
+            V[vb + j + 43 * _BK] = x23.imag
+            V[vb + j + 28 * _BK] = x30.real
+            V[vb + j + 44 * _BK] = x30.imag
+            V[vb + j + 29 * _BK] = x31.real
+            V[vb + j + 45 * _BK] = x31.imag
+            V[vb + j + 30 * _BK] = x32.real
+            V[vb + j + 46 * _BK] = x32.imag
+            V[vb + j + 31 * _BK] = x33.real
+            V[vb + j + 47 * _BK] = x33.imag
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _row_power(r, V, o):
     """``r V r^T`` of a band (r real (4,); V from :func:`_band_power`, the band's entries at
     ``o + q _BK``)."""
@@ -529,19 +744,46 @@ def _secant(sig, new, s_prev, h_prev, c, it):
 
 
 @nb.njit(cache=True, error_model="numpy")
+def _solve4(J, r):
+    """r <- J^-1 r (4x4 real, Gauss elimination with partial pivoting; J destroyed)."""
+    for c in range(4):
+        p = c
+        for i in range(c + 1, 4):
+            if abs(J[i, c]) > abs(J[p, c]):
+                p = i
+        if p != c:
+            for j in range(4):
+                t = J[c, j]
+                J[c, j] = J[p, j]
+                J[p, j] = t
+            t = r[c]
+            r[c] = r[p]
+            r[p] = t
+        for i in range(c + 1, 4):
+            m = J[i, c] / J[c, c]
+            for j in range(c, 4):
+                J[i, j] -= m * J[c, j]
+            r[i] -= m * r[c]
+    for c in range(3, -1, -1):
+        acc = r[c]
+        for j in range(c + 1, 4):
+            acc -= J[c, j] * r[j]
+        r[c] = acc / J[c, c]
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
-           ef):
+           ef, scratch):
     """Mean corner travel ``mu`` (4) solving ``mu = static + gain sum_r r (ef_r + eg_r)``
     (Newton), the springs' ``keq``, ``eg`` at their travel ``N(r mu, sigs^2)`` and the
-    dampers' mean forces ``ef`` at their zero-mean velocity (in place)."""
+    dampers' mean forces ``ef`` at their zero-mean velocity (in place); scratch: ``(J (4, 4),
+    res (4,), force (4,))``."""
     nr = bd.rows.shape[0]
     rows, gain, static = bd.rows, bd.gain, bd.static
     for r in range(nr):
         ef[r] = gaussian_pwl(0.0, sig[r], 0.0, kv[s, r], kf[s, r], nk[s, r], slo[s, r],
                              shi[s, r])[0]
-    J = np.empty((4, 4))
-    res = np.empty(4)
-    force = np.empty(4)
+    J, res, force = scratch
     for _ in range(_MEAN_MAX_ITER):
         for r in range(nr):
             if on[s, r]:
@@ -572,11 +814,11 @@ def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, m
                 J[a, b] = -jab
             J[a, a] += 1.0
             res[a] = acc - mu[a]
-        step = np.linalg.solve(J, res)
+        _solve4(J, res)
         big = 0.0
         for a in range(4):
-            mu[a] += step[a]
-            big = max(big, abs(step[a]))
+            mu[a] += res[a]
+            big = max(big, abs(res[a]))
         if big < _MEAN_TOL_M:
             break
     for r in range(nr):
@@ -596,23 +838,21 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
     nr = bd.rows.shape[0]
     w, rows = bd.w, bd.rows
     nblk = (nf + _BK - 1) // _BK
-    rinv = np.empty((nr, nf), dtype=np.complex128)
-    rblk = np.zeros(nblk * 16 * _BK)  # the same in blocks: rows r (real), 8 + r (imaginary)
+    # the roll-offs 1 / (1 + j w tau) in blocks: rows r (real), 8 + r (imaginary)
+    rblk = np.zeros(nblk * 16 * _BK)
     for r in range(nr):
         for k in range(nf):
             z = 1.0 / (1.0 + 1j * w[k] * lag[s, r])
-            rinv[r, k] = z
             o = (k // _BK) * 16 * _BK + k % _BK
             rblk[o + r * _BK] = z.real
             rblk[o + (8 + r) * _BK] = z.imag
-    D = np.empty((16, nf), dtype=np.complex128)
-    K = np.empty((16, nf), dtype=np.complex128)
-    V = np.zeros(nblk * 10 * _BK)
+    V = np.zeros(nblk * _NFEAT * _BK)
     ceq, keq, eg, ef = np.zeros(nr), np.zeros(nr), np.zeros(nr), np.zeros(nr)
     sigs = np.zeros(nr)
     sp, hp, ssp, hsp = np.zeros(nr), np.zeros(nr), np.zeros(nr), np.zeros(nr)
     svv, sss = np.zeros(nr), np.zeros(nr)
     mu = np.empty(4)
+    scratch = (np.empty((4, 4)), np.empty(4), np.empty(4))
     any_spring = False
     live = np.zeros(nr, dtype=np.bool_)  # a zero row (an unused slot) has nothing to iterate
     for r in range(nr):
@@ -629,7 +869,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
             ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
         if any_spring:
             _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu,
-                   keq, eg, ef)
+                   keq, eg, ef, scratch)
         _band_power(bd, ceq, keq, rblk, V)
         for r in range(nr):
             a1 = 0.0
@@ -655,7 +895,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
         ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
     if any_spring:
         _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
-               ef)
+               ef, scratch)
     for r in range(nr):
         m = rows[r, 0] * mu[0] + rows[r, 1] * mu[1] + rows[r, 2] * mu[2] + rows[r, 3] * mu[3]
         elem[0, r] = sigs[r] if any_spring else 0.0
@@ -664,62 +904,29 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
         elem[3, r] = eg[r]
         elem[4, r] = ceq[r]
         elem[5, r] = ef[r] if any_spring else 0.0
-    _delta(bd, ceq, keq, rinv, D)
-    _loop(bd, D, K)
-    _metrics(bd, D, K, out_m)
+    _band_features(bd, ceq, keq, rblk, V)
+    _metrics_of(bd, V, out_m)
     return it + 1
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _metrics(bd, D, K, out):
-    """The metrics from ``E = Delta K`` per band (the features of
-    :func:`planner.screen_kernels.metric_form`)."""
-    F, d0, PB = bd.F, bd.d0, bd.PB
+def _metrics_of(bd, V, out):
+    """The metrics from the band features (:func:`_band_features`): each metric's band power
+    is ``d0`` plus the linear form F of the band's features, summed over bands."""
+    F, d0 = bd.F, bd.d0
     nf = bd.w.size
     p = d0.shape[1]
-    E = np.empty(16, dtype=np.complex128)
-    T = np.empty(16, dtype=np.complex128)
-    v = np.empty(_NFEAT)
     pw = np.empty(p)
     for o in range(p):
         out[o] = 0.0
     for k in range(nf):
-        for a in range(4):
-            for b in range(4):
-                acc = 0j
-                for c in range(4):
-                    acc += D[4 * a + c, k] * K[4 * c + b, k]
-                E[4 * a + b] = acc
-        for a in range(4):
-            for b in range(4):
-                acc = 0j
-                for c in range(4):
-                    acc += E[4 * a + c] * PB[4 * c + b, k]
-                T[4 * a + b] = acc
-        for a in range(4):
-            acc = 0.0
-            for c in range(4):
-                acc += T[4 * a + c].real * E[4 * a + c].real + T[4 * a + c].imag * \
-                    E[4 * a + c].imag
-            v[a] = acc
-        q = 0
-        for a in range(3):
-            for b in range(a + 1, 4):
-                acc = 0j
-                for c in range(4):
-                    acc += T[4 * a + c] * np.conj(E[4 * b + c])
-                v[4 + q] = acc.real
-                v[10 + q] = acc.imag
-                q += 1
-        for i in range(16):
-            v[16 + i] = E[i].real
-            v[32 + i] = E[i].imag
+        vb = (k // _BK) * _NFEAT * _BK + k % _BK
         for o in range(p):
             pw[o] = d0[k, o]
-        for j in range(_NFEAT):
-            vj = v[j]
+        for i in range(_NFEAT):
+            vi = V[vb + i * _BK]
             for o in range(p):
-                pw[o] += F[k, j, o] * vj
+                pw[o] += F[k, i, o] * vi
         for o in range(p):
             out[o] += pw[o]
     for o in range(p):
