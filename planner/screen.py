@@ -1086,9 +1086,17 @@ def _pack_third(models, third, bump_stops, h):
                          for m, dr in zip(models, third.dampers)], h)
     corner = _pack_stops_shared([None] * n if bump_stops is None else list(bump_stops))
     # the element slots' springs packed as 4 "corners"
-    spring = pack_bump_stops([tuple(sp) + (None,) * (_THIRD_SLOTS - len(sp))
-                              for sp in third.springs],
-                             "screen_setups: third elements' heave springs")
+    first, unique = {}, []  # each distinct set of springs packed once (as the corners')
+    index = np.empty(n, dtype=np.int64)
+    for i, sp in enumerate(third.springs):
+        key = tuple(map(id, sp))
+        j = first.get(key)
+        if j is None:
+            j = first[key] = len(unique)
+            unique.append(tuple(sp) + (None,) * (_THIRD_SLOTS - len(sp)))
+        index[i] = j
+    spring = tuple(a[index] for a in pack_bump_stops(
+        unique, "screen_setups: third elements' heave springs"))
     width = max(corner[2].shape[2], spring[2].shape[2])
     stops = []
     for a, b in zip(corner, spring):

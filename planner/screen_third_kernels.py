@@ -773,7 +773,7 @@ def _solve4(J, r):
 
 @nb.njit(cache=True, error_model="numpy")
 def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
-           ef, scratch):
+           ef, live, scratch):
     """Mean corner travel ``mu`` (4) solving ``mu = static + gain sum_r r (ef_r + eg_r)``
     (Newton), the springs' ``keq``, ``eg`` at their travel ``N(r mu, sigs^2)`` and the
     dampers' mean forces ``ef`` at their zero-mean velocity (in place); scratch: ``(J (4, 4),
@@ -781,8 +781,9 @@ def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, m
     nr = bd.rows.shape[0]
     rows, gain, static = bd.rows, bd.gain, bd.static
     for r in range(nr):
-        ef[r] = gaussian_pwl(0.0, sig[r], 0.0, kv[s, r], kf[s, r], nk[s, r], slo[s, r],
-                             shi[s, r])[0]
+        if live[r]:
+            ef[r] = gaussian_pwl(0.0, sig[r], 0.0, kv[s, r], kf[s, r], nk[s, r], slo[s, r],
+                                 shi[s, r])[0]
     J, res, force = scratch
     for _ in range(_MEAN_MAX_ITER):
         for r in range(nr):
@@ -841,6 +842,9 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
     # the roll-offs 1 / (1 + j w tau) in blocks: rows r (real), 8 + r (imaginary)
     rblk = np.zeros(nblk * 16 * _BK)
     for r in range(nr):
+        if not (rows[r, 0] != 0.0 or rows[r, 1] != 0.0 or rows[r, 2] != 0.0
+                or rows[r, 3] != 0.0):
+            continue  # an unused slot: its damping is zero
         for k in range(nf):
             z = 1.0 / (1.0 + 1j * w[k] * lag[s, r])
             o = (k // _BK) * 16 * _BK + k % _BK
@@ -866,10 +870,11 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
     it = 0
     for it in range(max_iter):
         for r in range(nr):
-            ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
+            if live[r]:
+                ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
         if any_spring:
             _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu,
-                   keq, eg, ef, scratch)
+                   keq, eg, ef, live, scratch)
         _band_power(bd, ceq, keq, rblk, V)
         for r in range(nr):
             a1 = 0.0
@@ -892,10 +897,11 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
         if change < tol:
             break
     for r in range(nr):
-        ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
+        if live[r]:
+            ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
     if any_spring:
         _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
-               ef, scratch)
+               ef, live, scratch)
     for r in range(nr):
         m = rows[r, 0] * mu[0] + rows[r, 1] * mu[1] + rows[r, 2] * mu[2] + rows[r, 3] * mu[3]
         elem[0, r] = sigs[r] if any_spring else 0.0
