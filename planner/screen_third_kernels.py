@@ -772,19 +772,31 @@ def _solve4(J, r):
 
 
 @nb.njit(cache=True, error_model="numpy")
+def _dampers(shocks, s, sig, live, means, ceq, ef):
+    """The dampers' equivalent damping ``ceq`` at their velocity RMS (and with ``means`` their
+    mean force ``ef``: both from one pass, :func:`planner.screen_kernels.gaussian_pwl`'s
+    ``E[f(v)]`` and ``E[f'(v)]``, which is the Gaussian equivalent damping), in place."""
+    kv, kf, nk, slo, shi = shocks.kv, shocks.kf, shocks.nk, shocks.slo, shocks.shi
+    for r in range(sig.size):
+        if not live[r]:
+            continue
+        if means:
+            ef[r], ceq[r] = gaussian_pwl(0.0, sig[r], 0.0, kv[s, r], kf[s, r], nk[s, r],
+                                         slo[s, r], shi[s, r])
+        else:
+            ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
            ef, live, scratch):
     """Mean corner travel ``mu`` (4) solving ``mu = static + gain sum_r r (ef_r + eg_r)``
-    (Newton), the springs' ``keq``, ``eg`` at their travel ``N(r mu, sigs^2)`` and the
-    dampers' mean forces ``ef`` at their zero-mean velocity (in place); scratch: ``(J (4, 4),
-    res (4,), force (4,))``."""
+    (Newton), the springs' ``keq``, ``eg`` at their travel ``N(r mu, sigs^2)`` (in place),
+    given the dampers' mean forces ``ef`` at their zero-mean velocity (:func:`_dampers`);
+    scratch: ``(J (4, 4), res (4,), force (4,), Ks (4, 4))``."""
     nr = bd.rows.shape[0]
     rows, gain, static = bd.rows, bd.gain, bd.static
-    for r in range(nr):
-        if live[r]:
-            ef[r] = gaussian_pwl(0.0, sig[r], 0.0, kv[s, r], kf[s, r], nk[s, r], slo[s, r],
-                                 shi[s, r])[0]
-    J, res, force = scratch
+    J, res, force, Ks = scratch
     for _ in range(_MEAN_MAX_ITER):
         for r in range(nr):
             if on[s, r]:
@@ -800,18 +812,20 @@ def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, m
             for r in range(nr):
                 fa += rows[r, a] * (ef[r] + eg[r])
             force[a] = fa
+        for c in range(4):  # the springs' stiffness at the corners, sum_r keq_r r r^T
+            for b in range(4):
+                kc = 0.0
+                for r in range(nr):
+                    kc += keq[r] * rows[r, c] * rows[r, b]
+                Ks[c, b] = kc
         for a in range(4):
             acc = static[a]
             for b in range(4):
                 acc += gain[a, b] * force[b]
-            # J = I - gain sum_r keq_r r r^T
-            for b in range(4):
+            for b in range(4):  # J = I - gain Ks
                 jab = 0.0
                 for c in range(4):
-                    kc = 0.0
-                    for r in range(nr):
-                        kc += keq[r] * rows[r, c] * rows[r, b]
-                    jab += gain[a, c] * kc
+                    jab += gain[a, c] * Ks[c, b]
                 J[a, b] = -jab
             J[a, a] += 1.0
             res[a] = acc - mu[a]
@@ -856,7 +870,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
     sp, hp, ssp, hsp = np.zeros(nr), np.zeros(nr), np.zeros(nr), np.zeros(nr)
     svv, sss = np.zeros(nr), np.zeros(nr)
     mu = np.empty(4)
-    scratch = (np.empty((4, 4)), np.empty(4), np.empty(4))
+    scratch = (np.empty((4, 4)), np.empty(4), np.empty(4), np.empty((4, 4)))
     any_spring = False
     live = np.zeros(nr, dtype=np.bool_)  # a zero row (an unused slot) has nothing to iterate
     for r in range(nr):
@@ -869,9 +883,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
         mu[a] = bd.static[a]
     it = 0
     for it in range(max_iter):
-        for r in range(nr):
-            if live[r]:
-                ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
+        _dampers(shocks, s, sig, live, any_spring, ceq, ef)
         if any_spring:
             _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu,
                    keq, eg, ef, live, scratch)
@@ -896,9 +908,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
                                                  r, it))
         if change < tol:
             break
-    for r in range(nr):
-        if live[r]:
-            ceq[r] = _ceq(sig[r], kv[s, r], kf[s, r], nk[s, r], slo[s, r], shi[s, r])
+    _dampers(shocks, s, sig, live, any_spring, ceq, ef)
     if any_spring:
         _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
                ef, live, scratch)
