@@ -1230,7 +1230,7 @@ def _screen_third(plant, drive, setups, models, bands, H, third, bump_stops,
         part = ThirdOutputs(*(x[a:b] for x in out))
         screen_batch_third(bd, ShockTables(*(np.ascontiguousarray(x[a:b]) for x in shocks)),
                            StopTables(*(np.ascontiguousarray(x[a:b]) for x in stops)),
-                           settings, part)
+                           settings, part, max(1, min(b - a, 4 * nb.get_num_threads())))
     out = ThirdOutputs(out.metrics, out.sigma[:, :4 + ne], out.iterations,
                        out.elements[:, :, :4 + ne])  # the used rows
     shocks = ShockTables(*(x[:, :4 + ne] for x in shocks))

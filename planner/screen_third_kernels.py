@@ -844,38 +844,31 @@ def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, m
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
+def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem, scratch):
     """Screen setup s: the fixed point on every row's velocity (and travel) RMS, then the
-    metrics. Returns the iterations taken."""
+    metrics. Returns the iterations taken. scratch: :func:`_scratch`'s (one per chunk of
+    setups: allocating per setup costs more than a setup's band work)."""
     kv, kf, nk, slo, shi, lag = shocks
     on, s0, bx, bf, bn, bslope = stops
+    rblk, V, st, live, solve = scratch
     nf = bd.w.size
     nr = bd.rows.shape[0]
     w, rows = bd.w, bd.rows
-    nblk = (nf + _BK - 1) // _BK
-    # the roll-offs 1 / (1 + j w tau) in blocks: rows r (real), 8 + r (imaginary)
-    rblk = np.zeros(nblk * 16 * _BK)
+    # the roll-offs 1 / (1 + j w tau) in blocks: rows r (real), 8 + r (imaginary); an unused
+    # slot's stay zero (its damping is zero)
     for r in range(nr):
-        if not (rows[r, 0] != 0.0 or rows[r, 1] != 0.0 or rows[r, 2] != 0.0
-                or rows[r, 3] != 0.0):
-            continue  # an unused slot: its damping is zero
+        if not live[r]:
+            continue
         for k in range(nf):
             z = 1.0 / (1.0 + 1j * w[k] * lag[s, r])
             o = (k // _BK) * 16 * _BK + k % _BK
             rblk[o + r * _BK] = z.real
             rblk[o + (8 + r) * _BK] = z.imag
-    V = np.zeros(nblk * _NFEAT * _BK)
-    ceq, keq, eg, ef = np.zeros(nr), np.zeros(nr), np.zeros(nr), np.zeros(nr)
-    sigs = np.zeros(nr)
-    sp, hp, ssp, hsp = np.zeros(nr), np.zeros(nr), np.zeros(nr), np.zeros(nr)
-    svv, sss = np.zeros(nr), np.zeros(nr)
-    mu = np.empty(4)
-    scratch = (np.empty((4, 4)), np.empty(4), np.empty(4), np.empty((4, 4)))
+    st[:, :] = 0.0
+    ceq, keq, eg, ef, sigs, sp, hp, ssp, hsp, svv, sss, mu = (
+        st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], st[8], st[9], st[10], st[11])
     any_spring = False
-    live = np.zeros(nr, dtype=np.bool_)  # a zero row (an unused slot) has nothing to iterate
     for r in range(nr):
-        live[r] = rows[r, 0] != 0.0 or rows[r, 1] != 0.0 or rows[r, 2] != 0.0 or \
-            rows[r, 3] != 0.0
         sig[r] = bd.sig0[r]
         sigs[r] = bd.rms0[r]
         any_spring = any_spring or on[s, r] != 0
@@ -886,7 +879,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
         _dampers(shocks, s, sig, live, any_spring, ceq, ef)
         if any_spring:
             _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu,
-                   keq, eg, ef, live, scratch)
+                   keq, eg, ef, live, solve)
         _band_power(bd, ceq, keq, rblk, V)
         for r in range(nr):
             a1 = 0.0
@@ -911,7 +904,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem):
     _dampers(shocks, s, sig, live, any_spring, ceq, ef)
     if any_spring:
         _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
-               ef, live, scratch)
+               ef, live, solve)
     for r in range(nr):
         m = rows[r, 0] * mu[0] + rows[r, 1] * mu[1] + rows[r, 2] * mu[2] + rows[r, 3] * mu[3]
         elem[0, r] = sigs[r] if any_spring else 0.0
@@ -950,7 +943,7 @@ def _metrics_of(bd, V, out):
 
 
 @nb.njit(cache=True, error_model="numpy", parallel=True)
-def screen_batch_third(bd, shocks, stops, settings, out):
+def screen_batch_third(bd, shocks, stops, settings, out, n_chunks):
     """Screen setups with third elements, in parallel over setups.
 
     Parameters
@@ -964,12 +957,35 @@ def screen_batch_third(bd, shocks, stops, settings, out):
     settings : planner.screen_kernels.IterSettings
     out : ThirdOutputs
         Written in place.
+    n_chunks : int
+        Chunks of setups run in parallel (scratch allocated once per chunk).
     """
     metrics = out.metrics
     sigma = out.sigma
     iters = out.iterations
     elements = out.elements
     max_iter, tol = settings
-    for s in nb.prange(shocks.kv.shape[0]):
-        iters[s] = _screen_third_one(bd, shocks, stops, s, max_iter, tol, metrics[s],
-                                     sigma[s], elements[s])
+    n = shocks.kv.shape[0]
+    for ch in nb.prange(n_chunks):
+        scratch = _scratch(bd)
+        for s in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
+            iters[s] = _screen_third_one(bd, shocks, stops, s, max_iter, tol, metrics[s],
+                                         sigma[s], elements[s], scratch)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _scratch(bd):
+    """A chunk's scratch for :func:`_screen_third_one`: the roll-offs in blocks, the band
+    features, the state (rows: ceq, keq, eg, ef, travel RMS, the two secants' states, the
+    band sums, the mean travel), the rows' liveness (a zero row: an unused slot) and the
+    mean travel's Newton scratch."""
+    nf = bd.w.size
+    nr = bd.rows.shape[0]
+    nblk = (nf + _BK - 1) // _BK
+    live = np.zeros(nr, dtype=np.bool_)
+    for r in range(nr):
+        live[r] = (bd.rows[r, 0] != 0.0 or bd.rows[r, 1] != 0.0 or bd.rows[r, 2] != 0.0
+                   or bd.rows[r, 3] != 0.0)
+    return (np.zeros(nblk * 16 * _BK), np.zeros(nblk * _NFEAT * _BK),
+            np.zeros((12, max(nr, 4))), live,
+            (np.empty((4, 4)), np.empty(4), np.empty(4), np.empty((4, 4))))
