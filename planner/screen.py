@@ -38,7 +38,7 @@ from tqdm.auto import tqdm
 
 from ident.data.channels import CORNERS, RIG_INPUTS, SHOCK_VELOCITIES
 from ident.data.drive import check_drive_inputs
-from ident.data.third import element_axle
+from ident.data.third import THIRD_ELEMENTS, element_axle
 from ident.models.bumpstops import contact_tables
 from ident.models.shocks import LinearShock
 from ident.identify.model import LOOP_REDUCE_RTOL
@@ -932,14 +932,20 @@ class ThirdChoices:
 
     def __post_init__(self):
         n = len(self.elements)
-        if n > _THIRD_SLOTS or len(set(self.elements)) != n:
+        if len(set(self.elements)) != n or not set(self.elements) <= set(THIRD_ELEMENTS):
             raise ValueError(f"ThirdChoices: elements {list(self.elements)}; give each of "
-                             "heave_front, heave_rear, roll_front, roll_rear at most once")
+                             f"{list(THIRD_ELEMENTS)} at most once")
         rows = np.asarray(self.rows, dtype=float)
         if rows.shape != (n, 4):
             raise ValueError(f"ThirdChoices: rows must have shape ({n}, 4) for elements "
                              f"{list(self.elements)}, got {rows.shape}; give each element's "
                              "element_row")
+        for e, row in zip(self.elements, rows):
+            other = (2, 3) if element_axle(e) == "front" else (0, 1)
+            if np.any(row[list(other)] != 0.0):
+                raise ValueError(f"ThirdChoices: the row of {e} {row.tolist()} reaches the "
+                                 "other axle's corners; an element acts on its own axle "
+                                 "(give ident.data.third.element_row)")
         object.__setattr__(self, "rows", rows)
         if len(self.dampers) != len(self.springs):
             raise ValueError(f"ThirdChoices: {len(self.dampers)} setups of dampers but "
@@ -1039,9 +1045,22 @@ def resolve_third(setups, model, library):
                         springs=tuple(springs), columns=columns)
 
 
-#: The element slots of the third-element kernel: every third element a car may carry
-#: (heave and roll, front and rear); unused slots are zero rows.
-_THIRD_SLOTS = 4
+#: The element slots of the third-element kernel: every third element a car may carry, in
+#: :data:`ident.data.third.THIRD_ELEMENTS` order (heave front, heave rear, roll front, roll
+#: rear: the kernel knows each slot's axle); unused slots are zero rows.
+_THIRD_SLOTS = len(THIRD_ELEMENTS)
+
+
+def _slots(third):
+    """The kernel's slot of each of the choices' elements (ndarray of int, (n_elements,))."""
+    return np.array([THIRD_ELEMENTS.index(e) for e in third.elements], dtype=np.int64)
+
+
+def _slot_rows(third):
+    """The 4 slots' rows (4, 4): each element's row in its slot, zero rows elsewhere."""
+    rows = np.zeros((_THIRD_SLOTS, 4))
+    rows[_slots(third)] = third.rows
+    return rows
 
 
 def _pack_rows(models, h):
@@ -1081,9 +1100,16 @@ def _pack_third(models, third, bump_stops, h):
     none, and in the unused slots) and heave springs (off where none)."""
     n = len(models)
     zero = LinearShock("none", 0.0)
-    pad = (zero,) * (_THIRD_SLOTS - len(third.elements))
-    shocks = _pack_rows([tuple(m) + tuple(zero if d is None else d for d in dr) + pad
-                         for m, dr in zip(models, third.dampers)], h)
+    slots = _slots(third)
+
+    def in_slots(entries, empty):
+        out = [empty] * _THIRD_SLOTS
+        for k, x in zip(slots, entries):
+            out[k] = empty if x is None else x
+        return tuple(out)
+
+    shocks = _pack_rows([tuple(m) + in_slots(dr, zero) for m, dr in zip(models, third.dampers)],
+                        h)
     corner = _pack_stops_shared([None] * n if bump_stops is None else list(bump_stops))
     # the element slots' springs packed as 4 "corners"
     first, unique = {}, []  # each distinct set of springs packed once (as the corners')
@@ -1093,7 +1119,7 @@ def _pack_third(models, third, bump_stops, h):
         j = first.get(key)
         if j is None:
             j = first[key] = len(unique)
-            unique.append(tuple(sp) + (None,) * (_THIRD_SLOTS - len(sp)))
+            unique.append(in_slots(sp, None))
         index[i] = j
     spring = tuple(a[index] for a in pack_bump_stops(
         unique, "screen_setups: third elements' heave springs"))
@@ -1215,7 +1241,7 @@ def _screen_third(plant, drive, setups, models, bands, H, third, bump_stops,
     if any_spring or lo_on.any():
         eops = element_operands(plant, drive, bands, ops, travel=any_spring,
                                 tire=bool(lo_on.any()))
-    rows = np.vstack([np.eye(4), third.rows.reshape(ne, 4), np.zeros((_THIRD_SLOTS - ne, 4))])
+    rows = np.vstack([np.eye(4), _slot_rows(third)])
     bd = third_bands(ops, eops, rows)
     nr = rows.shape[0]
     out = ThirdOutputs(metrics=np.zeros((n, len(ops.metric_names))), sigma=np.zeros((n, nr)),
@@ -1231,12 +1257,13 @@ def _screen_third(plant, drive, setups, models, bands, H, third, bump_stops,
         screen_batch_third(bd, ShockTables(*(np.ascontiguousarray(x[a:b]) for x in shocks)),
                            StopTables(*(np.ascontiguousarray(x[a:b]) for x in stops)),
                            settings, part, max(1, min(b - a, 4 * nb.get_num_threads())))
-    out = ThirdOutputs(out.metrics, out.sigma[:, :4 + ne], out.iterations,
-                       out.elements[:, :, :4 + ne])  # the used rows
-    shocks = ShockTables(*(x[:, :4 + ne] for x in shocks))
-    stops = StopTables(*(x[:, :4 + ne] for x in stops))
+    used = np.r_[0:4, 4 + _slots(third)]  # the corners, then the elements in their order
+    out = ThirdOutputs(out.metrics, out.sigma[:, used], out.iterations,
+                       out.elements[:, :, used])
+    shocks = ShockTables(*(x[:, used] for x in shocks))
+    stops = StopTables(*(x[:, used] for x in stops))
     nr = 4 + ne
-    bd = bd._replace(rows=bd.rows[:nr], outer=bd.outer[:nr])
+    bd = bd._replace(rows=bd.rows[used], outer=bd.outer[used])
     elem = out.elements
     if lo_on.any():  # the dampers' mean forces where the kernel had no spring
         for i in np.flatnonzero(~stops.on.any(axis=1)):

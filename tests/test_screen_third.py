@@ -35,7 +35,7 @@ from planner.setups import Setup
 
 FS_HZ = 800.0  # the virtual rig's internal grid: the truth simulator of stiff lagged elements needs it
 MR = 1.2
-ELEMENTS = ("heave_front", "heave_rear", "roll_front")
+ELEMENTS = ("heave_front", "roll_front", "heave_rear")  # any order: the kernel's slots
 ROWS = np.array([element_row(e, MR) for e in ELEMENTS])
 
 # Linear lag-free shocks and elements, screening vs the truth simulator on a 60 s drive: both
@@ -142,12 +142,12 @@ def test_linear_elements_match_the_truth_simulator(plant, drive):
     lib = ShockLibrary.from_models([LinearShock("C3", 3000.0), LinearShock("C2", 2000.0)])
     setups = [_setup("a", "C3", "C3"), _setup("b", "C2", "C3"), _setup("c", "C3", "C2")]
     h4, h8, r2 = LinearShock("H4", 4000.0), LinearShock("H8", 8000.0), LinearShock("R2", 2000.0)
-    third = _choices([(h4, h4, None), (h8, None, r2), (None, h8, r2)])
+    third = _choices([(h4, None, h4), (h8, r2, None), (None, r2, h8)])
     pred = screen_setups(plant, drive, setups, lib, third=third)
     names = pred.metric_names
     assert names == list(METRIC_NAMES) + [
-        "heave_travel_rms_front", "heave_velocity_rms_front", "heave_travel_rms_rear",
-        "heave_velocity_rms_rear", "roll_travel_rms_front", "roll_velocity_rms_front"]
+        "heave_travel_rms_front", "heave_velocity_rms_front", "roll_travel_rms_front",
+        "roll_velocity_rms_front", "heave_travel_rms_rear", "heave_velocity_rms_rear"]
     A, B = _table(pred, _truth(plant, drive, setups, lib, third))
     assert np.abs(A / B - 1).max() < RTOL_LINEAR_MAX
     ratio = np.abs((A / A[0]) / (B / B[0]) - 1)
@@ -157,7 +157,7 @@ def test_linear_elements_match_the_truth_simulator(plant, drive):
     j = names.index("heave_velocity_rms_front")
     assert abs(B[2, j] / B[0, j] - 1) > 5 * RTOL_LINEAR_RATIO_MAX
     assert pred.diagnostics["iterations"].max() <= 2
-    assert_allclose(pred.diagnostics["third_damping_eq"][0], [4000.0, 4000.0, 0.0])
+    assert_allclose(pred.diagnostics["third_damping_eq"][0], [4000.0, 0.0, 4000.0])
     assert pred.settings["third_elements"] == list(ELEMENTS)
 
 
@@ -243,7 +243,7 @@ def test_ranking_agrees_with_the_time_domain(plant, drive):
     heaves = [_heave("HA", 1.0), _heave("HB", 2.5), _heave("HC", 0.4, lag_s=0.008)]
     roll = _heave("R1", 0.6)
     setups = [_setup(f"s{i}", f, r) for i, (f, r) in enumerate(pairs)]
-    third = _choices([(heaves[i % 3], heaves[(i + 1) % 3], roll if i % 2 else None)
+    third = _choices([(heaves[i % 3], roll if i % 2 else None, heaves[(i + 1) % 3])
                       for i in range(len(setups))])
     pred = screen_setups(plant, drive, setups, lib, third=third)
     A, B = _table(pred, _truth(plant, drive, setups, lib, third))
@@ -273,9 +273,9 @@ def test_heave_spring_linearized_follows_the_time_domain(plant, drive):
     setups = [_setup("a", "G10", "G10"), _setup("b", "G07", "G14"), _setup("c", "G14", "G07")]
     h = _heave("HA", 1.0)
     spring = (0.002, np.array([0.0, 0.004, 0.01]), np.array([0.0, 2000.0, 9000.0]))
-    springs = [(spring, None, None), (spring, spring, None), (None, spring, None)]
-    third = _choices([(h, h, None)] * 3, springs)
-    bare = _choices([(h, h, None)] * 3)
+    springs = [(spring, None, None), (spring, None, spring), (None, None, spring)]
+    third = _choices([(h, None, h)] * 3, springs)
+    bare = _choices([(h, None, h)] * 3)
     lin = screen_setups(plant, drive, setups, lib, third=third)
     ign = screen_setups(plant, drive, setups, lib, third=bare)
     responses = []
@@ -349,6 +349,11 @@ def test_bad_third_inputs(plant, drive):
     setups = [_setup("a", "G10", "G10")]
     with pytest.raises(ValueError, match="rows must have shape"):
         ThirdChoices(ELEMENTS, ROWS[:2], dampers=((None,) * 3,), springs=((None,) * 3,))
+    with pytest.raises(ValueError, match="reaches the other axle"):
+        ThirdChoices(("heave_front",), [[0.6, 0.6, 0.1, 0.0]], dampers=((None,),),
+                     springs=((None,),))
+    with pytest.raises(ValueError, match="at most once"):
+        ThirdChoices(("heave_front", "heave_front"), ROWS[:2], dampers=(), springs=())
     with pytest.raises(ValueError, match="one per element"):
         ThirdChoices(ELEMENTS, ROWS, dampers=((None,) * 2,), springs=((None,) * 3,))
     with pytest.raises(PlannerError, match="third has 2 setups for 1"):
