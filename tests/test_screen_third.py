@@ -200,6 +200,21 @@ def test_no_element_is_the_plain_screening(plant, drive):
                         rtol=RTOL_SAME_FIXED_POINT)
 
 
+def test_static_loads_without_elements_are_the_plain_screening(plant, drive):
+    """The lift-off estimates with the dense loop correction (no element fitted) are the
+    plain screening's, with and without corner bump stops."""
+    lib = _nonlinear_library()
+    setups = [_setup("a", "G10", "G10"), _setup("b", "G07", "G14")]
+    stops = [None, {c: (0.003, [0.0, 0.005, 0.01], [0.0, 800.0, 4000.0]) for c in CORNERS}]
+    kw = dict(screen=TIGHT, bump_stops=stops, static_corner_load_n=[2500.0, 2500.0, None, 3000.0])
+    plain = screen_setups(plant, drive, setups, lib, **kw)
+    got = screen_setups(plant, drive, setups, lib, third=_choices([(None,) * 3] * 2), **kw)
+    cols = [c for c in plain.table.columns if c.startswith(("tire_liftoff", "tire_contact"))]
+    assert len(cols) == 6
+    assert_allclose(got.table[cols].to_numpy(float), plain.table[cols].to_numpy(float),
+                    rtol=RTOL_SAME_FIXED_POINT, atol=1e-12)
+
+
 def test_linear_heave_damper_is_the_plant_with_it_closed_around(plant, drive):
     """Equivalence: screening with a linear lag-free heave damper ``c`` (row ``m``) equals the
     plain screening of the plant whose loop has ``m c m^T`` closed around it (nonlinear
