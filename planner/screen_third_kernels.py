@@ -13,12 +13,19 @@ the next iterate of its linearization), its travel power the same over ``w^2``; 
 metrics are the linear form of :func:`planner.screen_kernels.metric_form` of the features
 of ``E = Delta K`` (which holds for any E, diagonal or not).
 
-The band work is laid out for vectorization over bands: the operands entry-major
-(``(16, n_bands)``, band innermost), each phase a branch-free loop over bands, the 4x4
-inverse by cofactors (:func:`_inverse_cofactor`: no pivoting, so no branches; the return
-difference ``I - H_vs Delta`` of a stable loop is far from singular, tested against
-``numpy.linalg.inv``), the bands' sums taken in band order afterwards. A car without third
-elements never comes here (the plain kernels, :mod:`planner.screen_kernels`).
+The elements sit in four fixed slots (heave front, heave rear, roll front, roll rear), each
+acting within its axle, so ``Delta`` is block diagonal. The band work of an iteration
+(:func:`_band_power`: ``Delta``, ``K`` and ``V = K P K^H``) and of the final pass
+(:func:`_band_features`: the 48 features of ``E = Delta K``) is straight-line code on
+scalars in a loop over the bands of a block of 16, the operands at constant offsets in two
+arrays (:class:`ThirdBands` ``blocks`` and the setup's roll-offs), so that LLVM vectorizes
+it over bands as the plain kernel's; the 4x4 inverse by cofactors (:func:`inverse_cofactor`:
+no pivoting, so no branches; the return difference ``I - H_vs Delta`` of a stable loop is
+far from singular, tested against ``numpy.linalg.inv``); the bands' sums taken in band
+order afterwards. The two band loops are generated code
+(:func:`planner.screen_codegen.third_band_source`; ``python -m planner.screen_codegen
+--write``). A car without third elements never comes here (the plain kernels,
+:mod:`planner.screen_kernels`).
 """
 
 from __future__ import annotations
@@ -209,21 +216,21 @@ def inverse_cofactor(A):
     return out
 
 
+# BEGIN GENERATED CODE by planner.screen_codegen (third elements)
 @nb.njit(cache=True, error_model="numpy")
 def _band_power(bd, ceq, keq, rinv, V):
     """One iteration's band work, fused and written out: per band ``Delta`` (the corners'
     damping on the diagonal, the 4 element slots by their outer products: heave front, heave
     rear, roll front, roll rear, each within its axle, so Delta is block diagonal and the
-    cross-axle terms are left out), ``A = I - H_vs
-    Delta``, ``K = A^-1`` (:func:`_inv4`) and ``V = K P K^H`` (its real diagonal and the real
-    parts of its upper triangle) into V (``10 _BK`` per block of bands: entry q of band
-    ``blk _BK + j`` at ``(10 blk + q) _BK + j``). Straight-line code on scalars in a loop over
-    the bands of a block (no branches, no scratch memory, the operands at constant offsets
-    in two arrays: LLVM vectorizes it over bands, as the plain kernel's band loop); ceq,
-    keq: the dampers' ``c_eq`` and springs' ``k_eq`` over the 8 rows (the 4 corners, the 4
-    element slots: zero rows where no element); rinv: the setup's roll-offs ``1 / (1 + j w
-    tau)`` per row in blocks (:func:`_screen_third_one`). Written out by a script (the
-    entries' names say what they are); checked against the general path by the tests."""
+    cross-axle terms are left out), ``A = I - H_vs Delta``, ``K = A^-1`` (:func:`_inv4`) and
+    ``V = K P K^H`` (its real diagonal and the real parts of its upper triangle) into V
+    (``10 _BK`` per block of bands: entry q of band ``blk _BK + j`` at ``(10 blk + q) _BK +
+    j``). Straight-line code on scalars in a loop over the bands of a block (no branches, no
+    scratch memory, the operands at constant offsets in two arrays: LLVM vectorizes it over
+    bands, as the plain kernel's band loop); ceq, keq: the dampers' ``c_eq`` and springs'
+    ``k_eq`` over the 8 rows (the 4 corners, the 4 element slots: zero rows where no
+    element); rinv: the setup's roll-offs ``1 / (1 + j w tau)`` per row in blocks
+    (:func:`_screen_third_one`). Generated code (:mod:`planner.screen_codegen`)."""
     ops, outer, cbar = bd.blocks, bd.outer, bd.cbar
     nblk = (bd.w.size + _BK - 1) // _BK
     c0 = ceq[0]
@@ -392,7 +399,8 @@ def _band_features(bd, ceq, keq, rinv, V):
     E^H`` (the diagonal of R, the real and imaginary parts of its upper triangle and of E,
     as :func:`planner.screen_kernels.metric_form` orders them) into V (``_NFEAT _BK`` per
     block: feature i of band ``blk _BK + j`` at ``(_NFEAT blk + i) _BK + j``). Straight-line,
-    vectorized over bands as :func:`_band_power`. Written out by a script."""
+    vectorized over bands as :func:`_band_power`. Generated code
+    (:mod:`planner.screen_codegen`)."""
     ops, outer, cbar = bd.blocks, bd.outer, bd.cbar
     nblk = (bd.w.size + _BK - 1) // _BK
     c0 = ceq[0]
@@ -600,6 +608,7 @@ def _band_features(bd, ceq, keq, rinv, V):
             V[vb + j + 46 * _BK] = x32.imag
             V[vb + j + 31 * _BK] = x33.real
             V[vb + j + 47 * _BK] = x33.imag
+# END GENERATED CODE by planner.screen_codegen (third elements)
 
 
 @nb.njit(cache=True, error_model="numpy")
