@@ -21,6 +21,14 @@ velocities are ``v = K H_vr u`` with ``K = (I - H_vs Delta_c)^-1``, and an outpu
 ``y = H_yr u + H_ys Delta_c K H_vr u``. With ``W = H_ys Delta_c K`` the output
 power in a band is ``diag(H_yr S H_yr^H) + 2 Re diag(W Q) + diag(W P W^H)`` with
 ``P = H_vr S H_vr^H`` and ``Q = H_vr S H_yr^H``.
+
+Third elements (heave and roll elements per axle, issue 38): each element's damper is
+linearized as a shock at its own velocity RMS and adds ``m c(w) m^T`` (``m`` its row over
+the corners) to ``Delta_c``, which becomes a (block-diagonal) dense 4x4; a heave spring is
+linearized as a bump stop on the element's travel. The same formulas hold with ``W = H_ys
+Delta_c K``; a separate kernel runs them (:mod:`planner.screen_third_kernels`), and a car
+without third elements keeps the plain kernels and their numbers
+(:func:`screen_setups`' ``third``, :func:`resolve_third`, :class:`ThirdChoices`).
 """
 
 from __future__ import annotations
