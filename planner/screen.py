@@ -21,6 +21,14 @@ velocities are ``v = K H_vr u`` with ``K = (I - H_vs Delta_c)^-1``, and an outpu
 ``y = H_yr u + H_ys Delta_c K H_vr u``. With ``W = H_ys Delta_c K`` the output
 power in a band is ``diag(H_yr S H_yr^H) + 2 Re diag(W Q) + diag(W P W^H)`` with
 ``P = H_vr S H_vr^H`` and ``Q = H_vr S H_yr^H``.
+
+Third elements (heave and roll elements per axle, issue 38): each element's damper is
+linearized as a shock at its own velocity RMS and adds ``m c(w) m^T`` (``m`` its row over
+the corners) to ``Delta_c``, which becomes a (block-diagonal) dense 4x4; a heave spring is
+linearized as a bump stop on the element's travel. The same formulas hold with ``W = H_ys
+Delta_c K``; a separate kernel runs them (:mod:`planner.screen_third_kernels`), and a car
+without third elements keeps the plain kernels and their numbers
+(:func:`screen_setups`' ``third``, :func:`resolve_third`, :class:`ThirdChoices`).
 """
 
 from __future__ import annotations
@@ -38,6 +46,9 @@ from tqdm.auto import tqdm
 
 from ident.data.channels import CORNERS, RIG_INPUTS, SHOCK_VELOCITIES
 from ident.data.drive import check_drive_inputs
+from ident.data.third import THIRD_ELEMENTS, element_axle
+from ident.models.bumpstops import contact_tables
+from ident.models.shocks import LinearShock
 from ident.identify.model import LOOP_REDUCE_RTOL
 from ident.sim.closedloop import corner_values, pack_bump_stops, pack_setups
 from ident.sim.metrics import METRIC_NAMES
@@ -60,6 +71,13 @@ from planner.screen_kernels import (
     screen_batch,
     screen_batch_scalar,
 )
+from planner.screen_third_kernels import (
+    THIRD_BLOCK_BANDS,
+    ThirdBands,
+    ThirdOutputs,
+    screen_batch_third,
+)
+from planner.setups import unknown_id_error
 
 __all__ = [
     "LIFTOFF_LINEAR_LIMIT",
@@ -70,16 +88,20 @@ __all__ = [
     "F_MIN_HZ",
     "ElementOperands",
     "ScreenOperands",
+    "ThirdChoices",
     "describe_agreement",
     "drive_bands",
     "drive_spectrum",
+    "element_metric_rows",
     "element_operands",
     "metric_rows",
+    "resolve_third",
     "screen_operands",
     "screen_packed",
     "screen_packed_elements",
     "screen_response",
     "screen_setups",
+    "third_bands",
     "tire_force_statistics",
 ]
 
@@ -369,7 +391,47 @@ class ScreenOperands:
     metric_names: tuple
 
 
-def screen_operands(H, output_names, cbar_n_s_m, bands):
+def element_metric_rows(output_names, elements):
+    """The third elements' metrics as linear combinations of plant outputs.
+
+    An element's travel (velocity) is its row over the corners' shock travels
+    (velocities), so its band-passed RMS is a metric like the others.
+
+    Parameters
+    ----------
+    output_names : sequence of str
+        Must hold ``shock_travel_XX`` and ``shock_velocity_XX``.
+    elements : mapping of str to array_like, shape (4,)
+        Declared element (``heave_front`` ...) -> its row
+        (:func:`ident.data.third.element_row`).
+
+    Returns
+    -------
+    names : list of str
+        Per element ``<kind>_travel_rms_<axle>`` then ``<kind>_velocity_rms_<axle>``
+        (``heave_travel_rms_front``, ...), in the order of `elements`.
+    L : ndarray, shape (n_metrics, n_outputs)
+
+    Raises
+    ------
+    PlannerError
+        If the outputs lack the corners' shock travels or velocities.
+    """
+    outs = list(output_names)
+    ti = _corner_rows(outs, "shock_travel", "third elements")
+    vi = _corner_rows(outs, "shock_velocity", "third elements")
+    names, rows = [], []
+    for e, row in elements.items():
+        kind, axle = e.split("_")
+        for what, idx in (("travel", ti), ("velocity", vi)):
+            r = np.zeros(len(outs))
+            r[idx] = np.asarray(row, dtype=float)
+            names.append(f"{kind}_{what}_rms_{axle}")
+            rows.append(r)
+    return names, np.array(rows).reshape(len(rows), len(outs))
+
+
+def screen_operands(H, output_names, cbar_n_s_m, bands, *, elements=None):
     """The setup-independent operands of the screening (see :class:`ScreenOperands`).
 
     Parameters
@@ -380,6 +442,9 @@ def screen_operands(H, output_names, cbar_n_s_m, bands):
         Must hold the 4 shock velocities.
     cbar_n_s_m : ndarray, shape (4,)
     bands : DriveBands
+    elements : mapping of str to array_like, optional
+        Third elements (name -> row): their metrics (:func:`element_metric_rows`) follow
+        the spec's. None (default): the spec's metrics only.
 
     Returns
     -------
@@ -388,6 +453,9 @@ def screen_operands(H, output_names, cbar_n_s_m, bands):
     outs = list(output_names)
     vi = np.array([outs.index(v) for v in SHOCK_VELOCITIES])
     names, L = metric_rows(SimpleNamespace(output_names=outs))
+    if elements:
+        more, L_more = element_metric_rows(outs, elements)
+        names, L = list(names) + more, np.vstack([L, L_more])
     w = 2 * np.pi * bands.f_hz
     Hvr = np.transpose(H[vi, :7], (2, 0, 1))  # (nf, 4, 7)
     Hvs = np.ascontiguousarray(np.transpose(H[vi, 7:], (2, 0, 1)))  # (nf, 4, 4)
@@ -717,7 +785,7 @@ def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, 
 
 def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), screen=ScreenOptions(),
                   reduce_rtol=LOOP_REDUCE_RTOL, progress=False, bump_stops=None,
-                  static_corner_load_n=None):
+                  static_corner_load_n=None, third=None):
     """Predict setups' metrics fast, with each shock linearized (see the module docstring).
 
     Parameters
@@ -746,6 +814,11 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), screen=
         Static tire load per corner [N] (a corner left out or None: none): adds the
         Gaussian lift-off estimates (see Notes). The metrics are not changed by it. Needs
         the model's ``tire_force_XX``.
+    third : ThirdChoices, optional
+        The setups' third elements (heave and roll elements per axle), each linearized
+        with the shocks (see Notes). None (default): the model's own
+        (:func:`resolve_third` of ``model.third``), and for a car without third elements
+        (or a plant) none: today's screening, the same numbers.
 
     Returns
     -------
@@ -783,6 +856,20 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), screen=
     for a physical model; an identified model's own travel rows (which the time domain
     uses, and the travel metrics here) differ from it by its fit error.
 
+    Third elements (issue 38): every damper and spring acts through a row ``m`` over the
+    corners (a corner's own: a unit row; a heave or roll element:
+    :func:`ident.data.third.element_row`). Each element's damper is linearized as a
+    corner shock is, at its own velocity RMS ``sqrt(m P_v m^T)`` (``P_v`` the corners'
+    velocity power), and adds ``m c(w) m^T`` to the loop correction, which becomes a
+    dense 4x4; a heave spring is linearized as a bump stop on the element's travel
+    ``m @ s`` (mean and RMS from the corners'), adding ``m k_eq m^T / (j w)``. The table
+    adds per declared element ``<kind>_travel_rms_<axle>`` and
+    ``<kind>_velocity_rms_<axle>`` (band-passed as the other metrics) and
+    ``heave_spring_contact_share_<axle>`` (where a setup has a heave spring); the
+    diagnostics ``third_velocity_rms_linearized`` and ``third_damping_eq`` (n_setups,
+    n_elements) and with springs their travel and stiffness. Exact for linear lag-free
+    elements, as for the shocks.
+
     Lift-off has no useful linearization (a one-sided clip of the contact force): the
     metrics stay linear and, with static loads, ``tire_liftoff_share_XX`` is the Gaussian
     ``P(static + tire_force < 0)`` (mean and RMS of the tire force over the drive's whole
@@ -798,8 +885,14 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), screen=
     drive = prepare_drive(drive, getattr(model, "fs_hz", None))
     check_drive_inputs(drive, getattr(plant, "rig_inputs", RIG_INPUTS), model=plant.name)
     models = resolve_setups(setups, library)
+    if third is None:
+        third = resolve_third(setups, model, library)
     bands = drive_bands(drive, band_hz=band_hz, n_bands=n_bands)
     H = plant.frequency_response(bands.f_hz)  # (p_all, 11, nf)
+    if third is not None:
+        return _screen_third(plant, drive, setups, models, bands, H, third, bump_stops,
+                             static_corner_load_n, band_hz=band_hz, max_iter=max_iter,
+                             tol=tol, chunk_size=chunk_size, progress=progress)
     if bump_stops is None and static_corner_load_n is None:
         names, out, sig, iters = screen_response(H, plant.output_names, plant.cbar_n_s_m,
                                                  bands, models, max_iter=max_iter, tol=tol,
@@ -810,6 +903,426 @@ def screen_setups(model, drive, setups, library, *, band_hz=(1.0, 20.0), screen=
     return _screen_elements(plant, drive, setups, models, bands, H, bump_stops,
                             static_corner_load_n, band_hz=band_hz, max_iter=max_iter, tol=tol,
                             chunk_size=chunk_size, progress=progress)
+
+
+@dataclass(frozen=True, eq=False)
+class ThirdChoices:
+    """The third elements (heave and roll elements per axle) of a list of setups, resolved
+    for the screening (:func:`resolve_third`, or built by hand for a plant).
+
+    Attributes
+    ----------
+    elements : tuple of str
+        The car's declared elements (:data:`ident.data.third.THIRD_ELEMENTS` order): each
+        gets its metrics (:func:`element_metric_rows`), fitted or not.
+    rows : ndarray, shape (n_elements, 4)
+        Their rows over the corners (:func:`ident.data.third.element_row`).
+    dampers : tuple
+        Per setup, a tuple over `elements` of the damper's shock model (in the element's
+        own velocity and force) or None (none fitted).
+    springs : tuple
+        Per setup, a tuple over `elements` of the heave spring's contact table
+        ``(contact_travel_m, travel_m, force_n)`` (gap less packer, on the element's
+        travel; :func:`ident.models.bumpstops.contact_tables`) or None (none; always None
+        for a roll element).
+    columns : dict of str to list, optional
+        The setups' choices as the setups CSV names its columns (``heave_front`` -> damper
+        ids, ``heave_spring_front`` -> spring ids; ``"none"`` where none), for a caller's
+        table (the screening's table does not hold them: its columns past the corners'
+        ids are numbers).
+    """
+
+    elements: tuple
+    rows: np.ndarray
+    dampers: tuple
+    springs: tuple
+    columns: dict | None = None
+
+    def __post_init__(self):
+        n = len(self.elements)
+        if len(set(self.elements)) != n or not set(self.elements) <= set(THIRD_ELEMENTS):
+            raise ValueError(f"ThirdChoices: elements {list(self.elements)}; give each of "
+                             f"{list(THIRD_ELEMENTS)} at most once")
+        rows = np.asarray(self.rows, dtype=float)
+        if rows.shape != (n, 4):
+            raise ValueError(f"ThirdChoices: rows must have shape ({n}, 4) for elements "
+                             f"{list(self.elements)}, got {rows.shape}; give each element's "
+                             "element_row")
+        for e, row in zip(self.elements, rows):
+            other = (2, 3) if element_axle(e) == "front" else (0, 1)
+            if np.any(row[list(other)] != 0.0):
+                raise ValueError(f"ThirdChoices: the row of {e} {row.tolist()} reaches the "
+                                 "other axle's corners; an element acts on its own axle "
+                                 "(give ident.data.third.element_row)")
+        object.__setattr__(self, "rows", rows)
+        if len(self.dampers) != len(self.springs):
+            raise ValueError(f"ThirdChoices: {len(self.dampers)} setups of dampers but "
+                             f"{len(self.springs)} of springs; give one entry per setup in each")
+        for what, per_setup in (("dampers", self.dampers), ("springs", self.springs)):
+            for i, entry in enumerate(per_setup):
+                if len(entry) != n:
+                    raise ValueError(f"ThirdChoices: {what}[{i}] has {len(entry)} entries for "
+                                     f"{n} elements {list(self.elements)}; give one per "
+                                     "element (None: none)")
+
+
+def resolve_third(setups, model, library):
+    """The third elements of setups on a model that carries them, for the screening.
+
+    A setup's ``third`` (element -> damper id or None) and ``heave_springs`` (axle ->
+    heave spring id or None) choose; an element or axle the setup does not name keeps the
+    model's baseline (``model.third.baseline``, with its packers).
+
+    Parameters
+    ----------
+    setups : sequence of planner.setups.Setup
+    model : VehicleModel or any
+        ``model.third`` (:class:`ident.data.third.CarThird`) declares the elements; the
+        heave springs are ids in ``model.elements.bump_stops``.
+    library : ShockLibrary or mapping
+        The shocks: the corners' and the third elements' dampers.
+
+    Returns
+    -------
+    ThirdChoices or None
+        None for a model without third elements (no ``third``, or none declared).
+
+    Raises
+    ------
+    PlannerError
+        On a damper id not in the library or a heave spring id not in the model's
+        bump-stop library (naming the setup and the element), or a packer thicker than
+        its spring's gap.
+    """
+    car = getattr(model, "third", None)
+    if car is None or not car.elements:
+        return None
+    names = tuple(car.elements.elements)
+    rows = np.array([car.elements.row(e) for e in names])
+    elems = getattr(model, "elements", None)
+    stops = getattr(elems, "bump_stops", None)
+    dampers, springs = [], []
+    columns = {e: [] for e in names}
+    heave = [e for e in names if e.startswith("heave")]
+    columns.update({f"heave_spring_{element_axle(e)}": [] for e in heave})
+    shocks, tables = {}, {}
+    for s in setups:
+        chosen = dict(car.baseline.dampers)
+        chosen.update(s.third or {})
+        spring_ids = dict(car.baseline.heave_springs)
+        spring_ids.update(s.heave_springs or {})
+        drow, srow = [], []
+        for e in names:
+            sid = chosen.get(e)
+            columns[e].append("none" if sid is None else sid)
+            if sid is None:
+                drow.append(None)
+            else:
+                if sid not in shocks:
+                    if sid not in library:
+                        raise unknown_id_error(f"setup {s.name!r}: third element {e}", sid,
+                                               library)
+                    shocks[sid] = library[sid]
+                drow.append(shocks[sid])
+            if not e.startswith("heave"):
+                srow.append(None)
+                continue
+            axle = element_axle(e)
+            hid = spring_ids.get(axle)
+            columns[f"heave_spring_{axle}"].append("none" if hid is None else hid)
+            if hid is None:
+                srow.append(None)
+                continue
+            key = (hid, axle)
+            if key not in tables:
+                if stops is None or hid not in stops.ids:
+                    known = [] if stops is None else list(stops.ids)
+                    raise PlannerError(f"setup {s.name!r}: heave spring {axle} {hid!r} is not "
+                                       f"in the model's bump-stop library (known: {known}); "
+                                       "name a heave spring of the session's bump_stop_library "
+                                       "or 'none'")
+                packer = float(car.baseline.heave_packers_m.get(axle) or 0.0)
+                tables[key] = contact_tables([stops[hid], None, None, None],
+                                             [packer, 0.0, 0.0, 0.0],
+                                             where=f"setup {s.name!r}: heave spring {axle}",
+                                             error=PlannerError)[0]
+            srow.append(tables[key])
+        dampers.append(tuple(drow))
+        springs.append(tuple(srow))
+    return ThirdChoices(elements=names, rows=rows, dampers=tuple(dampers),
+                        springs=tuple(springs), columns=columns)
+
+
+#: The element slots of the third-element kernel: every third element a car may carry, in
+#: :data:`ident.data.third.THIRD_ELEMENTS` order (heave front, heave rear, roll front, roll
+#: rear: the kernel knows each slot's axle); unused slots are zero rows.
+_THIRD_SLOTS = len(THIRD_ELEMENTS)
+
+
+def _slots(third):
+    """The kernel's slot of each of the choices' elements (ndarray of int, (n_elements,))."""
+    return np.array([THIRD_ELEMENTS.index(e) for e in third.elements], dtype=np.int64)
+
+
+def _slot_rows(third):
+    """The 4 slots' rows (4, 4): each element's row in its slot, zero rows elsewhere."""
+    rows = np.zeros((_THIRD_SLOTS, 4))
+    rows[_slots(third)] = third.rows
+    return rows
+
+
+def _pack_rows(models, h):
+    """:func:`ident.sim.closedloop.pack_setups`'s curves for rows of any length (the corners'
+    shocks then the elements' dampers): ``kv, kf, nk, slo, shi, lag``, each distinct model
+    packed once."""
+    del h  # the screening uses no lag discretization
+    n, nr = len(models), len(models[0])
+    first, uniq = {}, []
+    idx = np.empty((n, nr), dtype=np.int64)
+    for s, row in enumerate(models):
+        for r, mdl in enumerate(row):
+            j = first.get(id(mdl))
+            if j is None:
+                j = first[id(mdl)] = len(uniq)
+                uniq.append(mdl)
+            idx[s, r] = j
+    pwls = [m.to_pwl() for m in uniq]
+    K = max(p.v_knots_m_s.size for p in pwls)
+    ukv, ukf = np.zeros((len(uniq), K)), np.zeros((len(uniq), K))
+    unk = np.zeros(len(uniq), dtype=np.int64)
+    for j, p in enumerate(pwls):
+        k = p.v_knots_m_s.size
+        ukv[j, :k], ukf[j, :k] = p.v_knots_m_s, p.f_knots_n
+        ukv[j, k:], ukf[j, k:] = p.v_knots_m_s[-1], p.f_knots_n[-1]
+        unk[j] = k
+    uslo = np.array([p.slope_below for p in pwls])
+    ushi = np.array([p.slope_above for p in pwls])
+    ulag = np.array([float(m.lag_s) for m in uniq])
+    return ShockTables(ukv[idx], ukf[idx], unk[idx], uslo[idx], ushi[idx], ulag[idx])
+
+
+def _pack_third(models, third, bump_stops, h):
+    """The kernel's per-row tables (:class:`~planner.screen_kernels.ShockTables`,
+    :class:`~planner.screen_kernels.StopTables`, rows: the 4 corners then the 4 element
+    slots): the corners' shocks and bump stops, the elements' dampers (a zero curve where
+    none, and in the unused slots) and heave springs (off where none)."""
+    n = len(models)
+    zero = LinearShock("none", 0.0)
+    slots = _slots(third)
+
+    def in_slots(entries, empty):
+        out = [empty] * _THIRD_SLOTS
+        for k, x in zip(slots, entries):
+            out[k] = empty if x is None else x
+        return tuple(out)
+
+    shocks = _pack_rows([tuple(m) + in_slots(dr, zero) for m, dr in zip(models, third.dampers)],
+                        h)
+    corner = _pack_stops_shared([None] * n if bump_stops is None else list(bump_stops))
+    # the element slots' springs packed as 4 "corners"
+    first, unique = {}, []  # each distinct set of springs packed once (as the corners')
+    index = np.empty(n, dtype=np.int64)
+    for i, sp in enumerate(third.springs):
+        key = tuple(map(id, sp))
+        j = first.get(key)
+        if j is None:
+            j = first[key] = len(unique)
+            unique.append(in_slots(sp, None))
+        index[i] = j
+    spring = tuple(a[index] for a in pack_bump_stops(
+        unique, "screen_setups: third elements' heave springs"))
+    width = max(corner[2].shape[2], spring[2].shape[2])
+    stops = []
+    for a, b in zip(corner, spring):
+        if a.ndim == 3:
+            a, b = _pad_points(a, width), _pad_points(b, width)
+        stops.append(np.ascontiguousarray(np.concatenate([a, b], axis=1)))
+    return shocks, StopTables(*stops)
+
+
+def _pad_points(x, width):
+    """A stop table (n, rows, k) padded with its last point to ``width`` points."""
+    if x.shape[2] == width:
+        return x
+    return np.concatenate([x, np.repeat(x[:, :, -1:], width - x.shape[2], axis=2)], axis=2)
+
+
+def third_bands(ops, eops, rows):
+    """The third kernel's band data (:class:`~planner.screen_third_kernels.ThirdBands`).
+
+    Parameters
+    ----------
+    ops : ScreenOperands
+    eops : ElementOperands or None
+        The travel's operands (None: no spring anywhere, zeros).
+    rows : ndarray, shape (8, 4)
+        The corners' unit rows, then the 4 element slots' (zero rows where none).
+    """
+    nf = ops.w.size
+
+    def entries(A):
+        return np.ascontiguousarray(A.reshape(nf, 16).T)
+
+    F = metric_form(ops)
+    rows = np.ascontiguousarray(rows, dtype=float)
+    outer = np.einsum("ra,rb->rab", rows, rows).reshape(-1, 16)
+    Ptot = np.real(ops.P.sum(axis=0))
+    sig0 = np.sqrt(np.maximum(np.einsum("ra,ab,rb->r", rows, Ptot, rows), 1e-18))
+    w2inv = 1.0 / ops.w ** 2
+    Pw = np.real(np.einsum("fab,f->ab", ops.P, w2inv))
+    rms0 = np.sqrt(np.maximum(np.einsum("ra,ab,rb->r", rows, Pw, rows), 1e-18))
+    if eops is None:
+        gain, static = np.zeros((4, 4)), np.zeros(4)
+    else:
+        gain, static = eops.travel_gain_m_n, eops.travel_static_m
+    H, P = entries(ops.Hvs), entries(ops.P)
+    bk = THIRD_BLOCK_BANDS
+    nblk = -(-nf // bk)
+    PB = entries(ops.PB)
+    x = np.zeros((97, nblk * bk))
+    x[:16, :nf], x[16:32, :nf] = H.real, H.imag
+    x[32:48, :nf], x[48:64, :nf] = P.real, P.imag
+    x[64, :nf] = -1.0 / ops.w
+    x[65:81, :nf], x[81:, :nf] = PB.real, PB.imag
+    blocks = np.ascontiguousarray(x.reshape(97, nblk, bk).transpose(1, 0, 2)).reshape(-1)
+    return ThirdBands(w=np.array(ops.w, dtype=float), H=H, P=P, PB=PB,
+                      blocks=blocks, F=np.ascontiguousarray(F),
+                      d0=np.ascontiguousarray(ops.d0), cbar=np.array(ops.cbar, dtype=float),
+                      rows=rows, outer=np.ascontiguousarray(outer), sig0=sig0,
+                      jinv=-1.0 / ops.w, w2inv=w2inv, gain=np.array(gain, dtype=float),
+                      static=np.array(static, dtype=float), rms0=rms0)
+
+
+def _third_delta(ops, bd, shocks, elem, sl):
+    """Delta per setup and band (n, n_bands, 4, 4) at the linearization (the kernel's)."""
+    w = ops.w
+    ceq, keq = elem[sl, 4], elem[sl, 2]  # (n, rows)
+    g = (ceq[:, None, :] / (1.0 + 1j * w[None, :, None] * shocks.lag[sl, None, :])
+         + 1j * keq[:, None, :] * bd.jinv[None, :, None])  # (n, nf, rows)
+    D = np.einsum("nfr,rab->nfab", g, bd.outer.reshape(-1, 4, 4))
+    D -= np.diag(bd.cbar)[None, None]
+    return D
+
+
+def _third_tire_statistics(ops, eops, bd, shocks, elem):
+    """:func:`tire_force_statistics` with the loop correction dense (third elements)."""
+    gain, static, Hts, Qt, d0t = eops.tire
+    n = elem.shape[0]
+    forces = (elem[:, 5] + elem[:, 3]) @ bd.rows  # (n, 4): the corners' mean forces
+    mean = static[None, :] + forces @ gain.T
+    var = np.zeros_like(mean)
+    eye = np.eye(4)
+    for a in range(0, n, 256):
+        sl = slice(a, a + 256)
+        D = _third_delta(ops, bd, shocks, elem, sl)
+        K = np.linalg.inv(eye - ops.Hvs[None] @ D)
+        W = Hts[None] @ (D @ K)
+        pw = (d0t[None] + 2.0 * np.real(np.einsum("nfab,fba->nfa", W, Qt))
+              + np.real(np.einsum("nfab,fbc,nfac->nfa", W, ops.P, np.conj(W))))
+        var[sl] = pw.sum(axis=1)
+    return mean, np.sqrt(np.maximum(var, 0.0))
+
+
+def _screen_third(plant, drive, setups, models, bands, H, third, bump_stops,
+                  static_corner_load_n, *, band_hz, max_iter, tol, chunk_size, progress):
+    """:func:`screen_setups` with third elements (the corners' bump stops and static loads
+    as :func:`_screen_elements` takes them)."""
+    n = len(models)
+    if not isinstance(third, ThirdChoices):
+        raise TypeError(f"screen_setups: third must be a planner.screen.ThirdChoices (see "
+                        f"resolve_third), got {type(third).__name__}")
+    if len(third.dampers) != n:
+        raise PlannerError(f"screen_setups: third has {len(third.dampers)} setups for {n} "
+                           "setups; resolve it from the same setups (resolve_third)")
+    if bump_stops is not None and len(bump_stops) != n:
+        raise PlannerError(f"screen_setups: bump_stops has {len(bump_stops)} entries for {n} "
+                           "setups; give one per setup (None: none)")
+    lo_on, static = (np.zeros(4, bool), np.zeros(4)) if static_corner_load_n is None else \
+        _static_loads(static_corner_load_n)
+    ne = len(third.elements)
+    ops = screen_operands(H, plant.output_names, plant.cbar_n_s_m, bands,
+                          elements=dict(zip(third.elements, third.rows)))
+    h = 1.0 / bands.fs_hz
+    shocks, stops = _pack_third(models, third, bump_stops, h)
+    any_spring = bool(stops.on.any())
+    eops = None
+    if any_spring or lo_on.any():
+        eops = element_operands(plant, drive, bands, ops, travel=any_spring,
+                                tire=bool(lo_on.any()))
+    rows = np.vstack([np.eye(4), _slot_rows(third)])
+    bd = third_bands(ops, eops, rows)
+    nr = rows.shape[0]
+    out = ThirdOutputs(metrics=np.zeros((n, len(ops.metric_names))), sigma=np.zeros((n, nr)),
+                       iterations=np.zeros(n, dtype=np.int64),
+                       elements=np.zeros((n, len(STOP_ROWS), nr)))
+    settings = IterSettings(max_iter=int(max_iter), tol=float(tol))
+    starts = range(0, n, chunk_size)
+    if progress:
+        starts = tqdm(starts, desc="screen", unit="chunk")
+    for a in starts:
+        b = min(a + chunk_size, n)
+        part = ThirdOutputs(*(x[a:b] for x in out))
+        screen_batch_third(bd, ShockTables(*(np.ascontiguousarray(x[a:b]) for x in shocks)),
+                           StopTables(*(np.ascontiguousarray(x[a:b]) for x in stops)),
+                           settings, part, max(1, min(b - a, 4 * nb.get_num_threads())))
+    used = np.r_[0:4, 4 + _slots(third)]  # the corners, then the elements in their order
+    out = ThirdOutputs(out.metrics, out.sigma[:, used], out.iterations,
+                       out.elements[:, :, used])
+    shocks = ShockTables(*(x[:, used] for x in shocks))
+    stops = StopTables(*(x[:, used] for x in stops))
+    nr = 4 + ne
+    bd = bd._replace(rows=bd.rows[used], outer=bd.outer[used])
+    elem = out.elements
+    if lo_on.any():  # the dampers' mean forces where the kernel had no spring
+        for i in np.flatnonzero(~stops.on.any(axis=1)):
+            for r in range(nr):
+                elem[i, 5, r] = gaussian_pwl(0.0, out.sigma[i, r], 0.0, shocks.kv[i, r],
+                                             shocks.kf[i, r], shocks.nk[i, r],
+                                             shocks.slo[i, r], shocks.shi[i, r])[0]
+    pred = screening_predictions(plant, drive, setups, list(ops.metric_names), out.metrics,
+                                 out.sigma[:, :4], out.iterations, band_hz=band_hz,
+                                 n_bands=bands.f_hz.size, max_iter=max_iter, tol=tol)
+    table, diag = pred.table, dict(pred.diagnostics)
+    extra = {}
+    on = stops.on.astype(bool)
+    if any_spring:
+        z = (stops.s0 - elem[:, 1]) / np.maximum(elem[:, 0], 1e-15)
+        share = np.where(on, 0.5 * erfc(z / np.sqrt(2.0)), 0.0)
+        for c, corner in enumerate(CORNERS):
+            if on[:, c].any():
+                extra[f"bump_stop_contact_share_{corner}"] = share[:, c]
+        for j, e in enumerate(third.elements):
+            if on[:, 4 + j].any():
+                extra[f"heave_spring_contact_share_{element_axle(e)}"] = share[:, 4 + j]
+        diag.update(shock_travel_rms_linearized=elem[:, 0, :4], shock_travel_mean=elem[:, 1, :4],
+                    bump_stop_stiffness_eq=elem[:, 2, :4], bump_stop_force_mean=elem[:, 3, :4],
+                    third_travel_rms_linearized=elem[:, 0, 4:], third_travel_mean=elem[:, 1, 4:],
+                    heave_spring_stiffness_eq=elem[:, 2, 4:],
+                    heave_spring_force_mean=elem[:, 3, 4:])
+    diag.update(third_elements=tuple(third.elements),
+                third_velocity_rms_linearized=out.sigma[:, 4:],
+                third_damping_eq=elem[:, 4, 4:])
+    if lo_on.any():
+        mean, std = _third_tire_statistics(ops, eops, bd, shocks, elem)
+        contact = static[None, :] + mean
+        lift = 0.5 * erfc(contact / np.maximum(std, 1e-12) / np.sqrt(2.0))
+        cmin = np.maximum(contact - TIRE_CONTACT_MIN_SIGMAS * std, 0.0)
+        for c, corner in enumerate(CORNERS):
+            if lo_on[c]:
+                extra[f"tire_liftoff_share_{corner}"] = lift[:, c]
+                extra[f"tire_contact_min_{corner}"] = cmin[:, c]
+        worst = float(np.max(lift[:, lo_on]))
+        if worst > LIFTOFF_LINEAR_LIMIT:
+            log.warning("screening: a Gaussian lift-off share of %.1f %% (above %.0f %%): "
+                        "lift-off changes the metrics there, which the screening leaves "
+                        "linear; predict those setups in the time domain", 100 * worst,
+                        100 * LIFTOFF_LINEAR_LIMIT)
+    if extra:
+        table = pd.concat([table, pd.DataFrame(extra, index=table.index)], axis=1)
+    settings = dict(pred.settings, bump_stops=bool(on[:, :4].any()),
+                    static_corner_load_n=static.tolist() if lo_on.any() else None,
+                    third_elements=list(third.elements))
+    return Predictions(table=table, setups=pred.setups, settings=settings, diagnostics=diag)
 
 
 def _static_loads(static_corner_load_n):

@@ -8,7 +8,10 @@ scratch memory and LLVM vectorizes it over bands. Its operations are those of
 :func:`planner.screen_kernels._loop_inverse`, in the same order (the screening's
 fixed point amplifies any round-off change, so the two must agree bit for bit).
 
-Writing 300 such lines by hand invites a slip; this module writes them.
+Writing 300 such lines by hand invites a slip; this module writes them, and also the
+third-element kernel's fused band loops (:func:`third_band_source`:
+``_band_power`` and ``_band_features`` of :mod:`planner.screen_third_kernels`, between
+:data:`THIRD_BEGIN` and :data:`THIRD_END`; ``tests/test_screen_third.py`` compares).
 :func:`band_inverse_source` returns the function's source text exactly as it
 stands in ``planner/screen_kernels.py`` between the markers :data:`BEGIN` and
 :data:`END`; ``tests/test_screen.py`` regenerates it and compares. After a
@@ -31,7 +34,8 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["BEGIN", "END", "KERNEL_PATH", "band_inverse_source", "committed_source", "main"]
+__all__ = ["BEGIN", "END", "KERNEL_PATH", "THIRD_BEGIN", "THIRD_END", "THIRD_KERNEL_PATH",
+           "band_inverse_source", "committed_source", "main", "third_band_source"]
 
 #: The kernel module holding the generated block.
 KERNEL_PATH = Path(__file__).with_name("screen_kernels.py")
@@ -126,13 +130,172 @@ def band_inverse_source():
     return "\n".join(lines) + "\n"
 
 
-def committed_source(text=None):
+
+# ---------------------------------------------------------------- third elements' band loops
+
+#: The third-element kernel module holding the second generated block.
+THIRD_KERNEL_PATH = Path(__file__).with_name("screen_third_kernels.py")
+#: The comment lines around the third-element kernel's generated block.
+THIRD_BEGIN = "# BEGIN GENERATED CODE by planner.screen_codegen (third elements)"
+THIRD_END = "# END GENERATED CODE by planner.screen_codegen (third elements)"
+
+_POWER_DOC = '''\
+    """One iteration's band work, fused and written out: per band ``Delta`` (the corners'
+    damping on the diagonal, the 4 element slots by their outer products: heave front, heave
+    rear, roll front, roll rear, each within its axle, so Delta is block diagonal and the
+    cross-axle terms are left out), ``A = I - H_vs Delta``, ``K = A^-1`` (:func:`_inv4`) and
+    ``V = K P K^H`` (its real diagonal and the real parts of its upper triangle) into V
+    (``10 _BK`` per block of bands: entry q of band ``blk _BK + j`` at ``(10 blk + q) _BK +
+    j``). Straight-line code on scalars in a loop over the bands of a block (no branches, no
+    scratch memory, the operands at constant offsets in two arrays: LLVM vectorizes it over
+    bands, as the plain kernel's band loop); ceq, keq: the dampers' ``c_eq`` and springs'
+    ``k_eq`` over the 8 rows (the 4 corners, the 4 element slots: zero rows where no
+    element); rinv: the setup's roll-offs ``1 / (1 + j w tau)`` per row in blocks
+    (:func:`_screen_third_one`). Generated code (:mod:`planner.screen_codegen`)."""'''
+_FEATURES_DOC = '''\
+    """The final pass's band work, fused and written out: per band ``Delta``, ``K`` as in
+    :func:`_band_power`, then ``E = Delta K`` and the 48 features of ``E`` and ``R = E PB
+    E^H`` (the diagonal of R, the real and imaginary parts of its upper triangle and of E,
+    as :func:`planner.screen_kernels.metric_form` orders them) into V (``_NFEAT _BK`` per
+    block: feature i of band ``blk _BK + j`` at ``(_NFEAT blk + i) _BK + j``). Straight-line,
+    vectorized over bands as :func:`_band_power`. Generated code
+    (:mod:`planner.screen_codegen`)."""'''
+#: The element slots of each axle's block (heave, roll): front 0, 2; rear 1, 3.
+_AXLE_SLOTS = {0: (0, 2), 1: (1, 3)}
+
+
+def _emit(lines, text, indent):
+    """Append ``indent`` levels of ``text``, an assignment's sum wrapped under 100 columns."""
+    pre = "    " * indent
+    if len(pre + text) <= 99 or " = " not in text:
+        lines.append(pre + text)
+        return
+    lhs, rhs = text.split(" = ", 1)
+    terms = rhs.split(" + ")
+    cur = pre + lhs + " = (" + terms[0]
+    for t in terms[1:]:
+        if len(cur) + len(t) + 3 > 98:
+            lines.append(cur)
+            cur = pre + "    + " + t
+        else:
+            cur += " + " + t
+    lines.append(cur + ")")
+
+
+def _third_head(name, doc, out_rows):
+    """The common part: the loads, ``Delta``, ``A = I - H Delta`` and ``K = A^-1``."""
+    L = ['@nb.njit(cache=True, error_model="numpy")',
+         f"def {name}(bd, ceq, keq, rinv, V):", doc]
+    L.append("    ops, outer, cbar = bd.blocks, bd.outer, bd.cbar")
+    L.append("    nblk = (bd.w.size + _BK - 1) // _BK")
+    for r in range(8):
+        L.append(f"    c{r} = ceq[{r}]")
+        L.append(f"    q{r} = keq[{r}]")
+    for c in range(4):
+        L.append(f"    cb{c} = cbar[{c}]")
+    for e in range(4):
+        for i in range(16):
+            if (i // 4) // 2 == (i % 4) // 2 == e % 2:
+                L.append(f"    o{e}_{i} = outer[{4 + e}, {i}]")
+    L += ["    for blk in range(nblk):", "        ob = blk * _NOPS * _BK",
+          "        rb = blk * 16 * _BK", f"        vb = blk * {out_rows} * _BK",
+          "        for j in range(_BK):", "            o = ob + j", "            r = rb + j",
+          "            jk = ops[o + 64 * _BK]"]
+    for c in range(4):
+        _emit(L, f"g{c} = c{c} * complex(rinv[r + {c} * _BK], rinv[r + {8 + c} * _BK]) - cb{c}"
+              f" + complex(0.0, q{c} * jk)", 3)
+    for e in range(4):
+        _emit(L, f"e{e} = c{4 + e} * complex(rinv[r + {4 + e} * _BK], rinv[r + {12 + e} * _BK])"
+              f" + complex(0.0, q{4 + e} * jk)", 3)
+    for i in range(4):
+        for j in range(4):
+            if i // 2 != j // 2:
+                continue  # the elements act within an axle: Delta is block diagonal
+            terms = " + ".join(f"o{e}_{4 * i + j} * e{e}" for e in _AXLE_SLOTS[i // 2])
+            _emit(L, f"d{i}{j} = " + (f"g{i} + " if i == j else "") + terms, 3)
+    for i in range(16):
+        _emit(L, f"h{i // 4}{i % 4} = complex(ops[o + {i} * _BK], ops[o + {16 + i} * _BK])", 3)
+    for i in range(4):
+        for j in range(4):
+            s = " + ".join(f"h{i}{m} * d{m}{j}" for m in range(4) if m // 2 == j // 2)
+            _emit(L, f"a{i}{j} = " + (f"1.0 - ({s})" if i == j else f"-({s})"), 3)
+    L.append("            (" + ", ".join(f"k{i}{j}" for i in range(4) for j in range(4))
+             + ") = \\")
+    L.append("                _inv4(" + ", ".join(f"a{i}{j}" for i in range(2) for j in range(4))
+             + ",")
+    L.append("                      " + ", ".join(f"a{i}{j}" for i in range(2, 4)
+                                                  for j in range(4)) + ")")
+    return L
+
+
+def _dot_re(t, x, a, b):
+    """``Re sum_c t_ac conj(x_bc)`` written out."""
+    return " + ".join(f"{t}{a}{c}.real * {x}{b}{c}.real + {t}{a}{c}.imag * {x}{b}{c}.imag"
+                      for c in range(4))
+
+
+def third_band_source():
+    """The third-element kernel's fused band loops, ``_band_power`` and ``_band_features``
+    (:mod:`planner.screen_third_kernels`), as they stand between :data:`THIRD_BEGIN` and
+    :data:`THIRD_END`.
+
+    Returns
+    -------
+    str
+    """
+    L = _third_head("_band_power", _POWER_DOC, 10)
+    for i in range(16):
+        _emit(L, f"p{i // 4}{i % 4} = complex(ops[o + {32 + i} * _BK], ops[o + {48 + i} * _BK])",
+              3)
+    for a in range(4):
+        for b in range(4):
+            _emit(L, f"t{a}{b} = " + " + ".join(f"k{a}{c} * p{c}{b}" for c in range(4)), 3)
+    for a in range(4):
+        _emit(L, f"V[vb + j + {a} * _BK] = " + _dot_re("t", "k", a, a), 3)
+    q = 4
+    for a in range(3):
+        for b in range(a + 1, 4):
+            _emit(L, f"V[vb + j + {q} * _BK] = " + _dot_re("t", "k", a, b), 3)
+            q += 1
+    L += ["", ""]
+    L += _third_head("_band_features", _FEATURES_DOC, "_NFEAT")
+    for i in range(16):
+        _emit(L, f"pb{i // 4}{i % 4} = complex(ops[o + {65 + i} * _BK], "
+              f"ops[o + {81 + i} * _BK])", 3)
+    for a in range(4):
+        for b in range(4):
+            _emit(L, f"x{a}{b} = " + " + ".join(f"d{a}{c} * k{c}{b}" for c in range(4)
+                                                 if c // 2 == a // 2), 3)
+    for a in range(4):
+        for b in range(4):
+            _emit(L, f"t{a}{b} = " + " + ".join(f"x{a}{c} * pb{c}{b}" for c in range(4)), 3)
+    for a in range(4):
+        _emit(L, f"V[vb + j + {a} * _BK] = " + _dot_re("t", "x", a, a), 3)
+    q = 0
+    for a in range(3):
+        for b in range(a + 1, 4):
+            _emit(L, f"z{q} = " + " + ".join(f"t{a}{c} * np.conj(x{b}{c})" for c in range(4)), 3)
+            q += 1
+    for q in range(6):
+        L.append(f"            V[vb + j + {4 + q} * _BK] = z{q}.real")
+        L.append(f"            V[vb + j + {10 + q} * _BK] = z{q}.imag")
+    for a in range(4):
+        for b in range(4):
+            L.append(f"            V[vb + j + {16 + 4 * a + b} * _BK] = x{a}{b}.real")
+            L.append(f"            V[vb + j + {32 + 4 * a + b} * _BK] = x{a}{b}.imag")
+    return "\n".join(L) + "\n"
+
+
+def committed_source(text=None, *, third=False):
     """The generated block as committed in the kernel module, between the markers.
 
     Parameters
     ----------
     text : str, optional
-        The module's source; default read from :data:`KERNEL_PATH`.
+        The module's source; default read from :data:`KERNEL_PATH` (with `third`:
+        :data:`THIRD_KERNEL_PATH`).
+    third : bool
+        The third-element kernel's block (:data:`THIRD_BEGIN` ... :data:`THIRD_END`).
 
     Returns
     -------
@@ -143,13 +306,15 @@ def committed_source(text=None):
     ValueError
         If the markers are missing or out of order.
     """
+    path, begin, end = ((THIRD_KERNEL_PATH, THIRD_BEGIN, THIRD_END) if third else
+                        (KERNEL_PATH, BEGIN, END))
     if text is None:
-        text = KERNEL_PATH.read_text(encoding="utf-8")
-    head, sep, rest = text.partition(BEGIN + "\n")
-    block, sep2, _ = rest.partition(END + "\n")
+        text = path.read_text(encoding="utf-8")
+    head, sep, rest = text.partition(begin + "\n")
+    block, sep2, _ = rest.partition(end + "\n")
     if not sep or not sep2:
-        raise ValueError(f"{KERNEL_PATH}: the generated block's markers ({BEGIN!r} ... {END!r}) "
-                         "are missing; restore them around _band_inverse")
+        raise ValueError(f"{path}: the generated block's markers ({begin!r} ... {end!r}) "
+                         "are missing; restore them around the generated functions")
     return block
 
 
@@ -158,16 +323,19 @@ def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m planner.screen_codegen",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--write", action="store_true",
-                        help=f"rewrite the generated block in {KERNEL_PATH.name}")
+                        help=f"rewrite the generated blocks in {KERNEL_PATH.name} and "
+                        f"{THIRD_KERNEL_PATH.name}")
     args = parser.parse_args(argv)
-    src = band_inverse_source()
+    blocks = ((KERNEL_PATH, BEGIN, END, band_inverse_source(), False),
+              (THIRD_KERNEL_PATH, THIRD_BEGIN, THIRD_END, third_band_source(), True))
     if not args.write:
-        sys.stdout.write(src)
+        sys.stdout.write("\n\n".join(b[3] for b in blocks))
         return 0
-    text = KERNEL_PATH.read_text(encoding="utf-8")
-    old = committed_source(text)
-    KERNEL_PATH.write_text(text.replace(BEGIN + "\n" + old + END + "\n",
-                                        BEGIN + "\n" + src + END + "\n", 1), encoding="utf-8")
+    for path, begin, end, src, third in blocks:
+        text = path.read_text(encoding="utf-8")
+        old = committed_source(text, third=third)
+        path.write_text(text.replace(begin + "\n" + old + end + "\n",
+                                     begin + "\n" + src + end + "\n", 1), encoding="utf-8")
     return 0
 
 
