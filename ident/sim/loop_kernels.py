@@ -832,6 +832,9 @@ THIRD_SEGMENT_PASSES = 12
 THIRD_NEWTON_TOL = 1e-7
 #: Newton iterations of the fallback before the step is reported as failed.
 THIRD_NEWTON_MAX = 60
+#: Segment passes with rank-1 updates of the cached inverse inside the time loop, before
+#: :func:`_third_solve` (the full rebuild) takes the step.
+THIRD_FAST_PASSES = 6
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1334,6 +1337,10 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
         fp3 = np.zeros(nd3)
         fpp3 = np.zeros(nd3)
         n_sp = np.zeros(ns3)
+        u3 = np.zeros(m)
+        w3 = np.zeros(m)
+        z3 = np.zeros(m)
+        y3 = np.zeros(m)
     xr = np.zeros(n)
     xi = np.zeros(n)
     bdr = np.zeros(n)  # B dF of the last step
@@ -1438,10 +1445,139 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
         if third is not None:
             for d in range(nd3):
                 c03[d] = alphaA[d] * Fp3[d] + b1A[d] * fp3[d] + bmA[d] * fpp3[d]
-            it = _third_solve(vfree, tfree, c03, Deff, Dt3, cbar, drowsA, kvA, kfA, nkA, sloA,
-                              shiA, b0A, srows3, s03, bx3, bf3, bn3, bslope3, dseg, sseg, ds3,
-                              da3, sk3, sa3, Mv3, Mt3, J3, Jinv3, valid3, rhs3, ve3, te3, dF3, v,
-                              t3, fd3, gs3)
+            # the common cases inline (as _fast_solve's): every element on its segment, or
+            # segment changes by rank-1 updates of the cached inverse (a change of damper d
+            # is J' = J - dw m_d (Dv^T m_d)^T, of spring j J' = J - dk q_j (Dt^T q_j)^T);
+            # the rest (no valid inverse, cycling, a singular update) in _third_solve
+            it = 0
+            if valid3[0] >= 1:
+                for it_ in range(1, THIRD_FAST_PASSES + 1):
+                    for a in range(m):
+                        acc = 0.0
+                        for c in range(m):
+                            acc += Mv3[a, c] * vfree[c] + Mt3[a, c] * tfree[c]
+                        rhs3[a] = acc
+                    for d in range(nd3):
+                        q = c03[d] + b0A[d] * da3[d]
+                        for a in range(m):
+                            rhs3[a] += drowsA[d, a] * q
+                    for j in range(ns3):
+                        if sseg[j] >= 0:
+                            for a in range(m):
+                                rhs3[a] += srows3[j, a] * sa3[j]
+                    for a in range(m):
+                        acc = 0.0
+                        for c in range(m):
+                            acc += Jinv3[a, c] * rhs3[c]
+                        dF3[a] = acc
+                    for a in range(m):
+                        acc_v = vfree[a]
+                        acc_t = tfree[a]
+                        for c in range(m):
+                            acc_v += Deff[a, c] * dF3[c]
+                            acc_t += Dt3[a, c] * dF3[c]
+                        v[a] = acc_v
+                        t3[a] = acc_t
+                    same = True
+                    for d in range(nd3):
+                        x = 0.0
+                        for c in range(m):
+                            x += drowsA[d, c] * v[c]
+                        ve3[d] = x
+                        s2 = _segment_of(x, kvA, d, nkA[d], dseg[d])
+                        if s2 == dseg[d]:
+                            continue
+                        same = False
+                        dseg[d] = s2
+                        sl2, a2 = _segment_line(s2, kvA, kfA, d, nkA[d], sloA[d], shiA[d])
+                        dw = b0A[d] * (sl2 - ds3[d])
+                        ds3[d] = sl2
+                        da3[d] = a2
+                        if dw != 0.0 and valid3[0] >= 1:
+                            for a in range(m):
+                                u3[a] = dw * drowsA[d, a]
+                                acc = 0.0
+                                for c in range(m):
+                                    acc += drowsA[d, c] * Deff[c, a]
+                                w3[a] = acc
+                                for c in range(m):
+                                    Mv3[a, c] += dw * drowsA[d, a] * drowsA[d, c]
+                            den = 1.0
+                            for a in range(m):
+                                acc = 0.0
+                                acc2 = 0.0
+                                for c in range(m):
+                                    acc += Jinv3[a, c] * u3[c]
+                                    acc2 += w3[c] * Jinv3[c, a]
+                                z3[a] = acc
+                                y3[a] = acc2
+                            for a in range(m):
+                                den -= w3[a] * z3[a]
+                            if abs(den) < 1e-8:
+                                valid3[0] = 0
+                            else:
+                                for a in range(m):
+                                    for c in range(m):
+                                        Jinv3[a, c] += z3[a] * y3[c] / den
+                                valid3[0] += 1
+                    for j in range(ns3):
+                        x = 0.0
+                        for c in range(m):
+                            x += srows3[j, c] * t3[c]
+                        te3[j] = x
+                        s2 = _spring_seg(x, j, s03, bx3, bn3)
+                        if s2 == sseg[j]:
+                            continue
+                        same = False
+                        sseg[j] = s2
+                        k2, a2 = _spring_line(s2, j, s03, bx3, bf3, bn3, bslope3)
+                        dk = k2 - sk3[j]
+                        sk3[j] = k2
+                        sa3[j] = a2
+                        if dk != 0.0 and valid3[0] >= 1:
+                            for a in range(m):
+                                u3[a] = dk * srows3[j, a]
+                                acc = 0.0
+                                for c in range(m):
+                                    acc += srows3[j, c] * Dt3[c, a]
+                                w3[a] = acc
+                                for c in range(m):
+                                    Mt3[a, c] += dk * srows3[j, a] * srows3[j, c]
+                            den = 1.0
+                            for a in range(m):
+                                acc = 0.0
+                                acc2 = 0.0
+                                for c in range(m):
+                                    acc += Jinv3[a, c] * u3[c]
+                                    acc2 += w3[c] * Jinv3[c, a]
+                                z3[a] = acc
+                                y3[a] = acc2
+                            for a in range(m):
+                                den -= w3[a] * z3[a]
+                            if abs(den) < 1e-8:
+                                valid3[0] = 0
+                            else:
+                                for a in range(m):
+                                    for c in range(m):
+                                        Jinv3[a, c] += z3[a] * y3[c] / den
+                                valid3[0] += 1
+                    if same:
+                        for d in range(nd3):
+                            fd3[d] = da3[d] + ds3[d] * ve3[d]
+                        for j in range(ns3):
+                            gs3[j] = sa3[j] + sk3[j] * te3[j]
+                        it = it_
+                        if valid3[0] > _MAX_RANK1_UPDATES:
+                            valid3[0] = 0
+                        break
+                    if valid3[0] == 0 or valid3[0] > _MAX_RANK1_UPDATES:
+                        valid3[0] = 0
+                        break
+            if it == 0:
+                it = _third_solve(vfree, tfree, c03, Deff, Dt3, cbar, drowsA, kvA, kfA, nkA,
+                                  sloA, shiA, b0A, srows3, s03, bx3, bf3, bn3, bslope3, dseg,
+                                  sseg, ds3, da3, sk3, sa3, Mv3, Mt3, J3, Jinv3, valid3, rhs3,
+                                  ve3, te3, dF3, v, t3, fd3, gs3)
             if it < 0:
                 failed = True
                 it = 80
