@@ -825,7 +825,7 @@ def _stop_force(s, c, s0, bx, bf, bn, bslope):
 # ----------------------------------------------------------------------------------------------
 
 #: Segment passes of the third elements' solve before Newton's method with a residual test
-#: (:func:`third_newton`) takes over (segments cycling at a kink).
+#: (:func:`_third_newton`) takes over (segments cycling at a kink).
 THIRD_SEGMENT_PASSES = 12
 #: Newton's tolerance of that fallback on the corner forces [N], relative to ``1 + |dF|``
 #: (:data:`ident.sim.third_loop.THIRD_TOL_N`'s value: the virtual rig's truth solves to it).
@@ -908,7 +908,7 @@ def _third_assemble(Dv, Dt, cbar, drows, srows, b0, ds, sk, Mv, Mt, J, Jinv):
 
 
 @_nb.njit(cache=True, error_model="numpy")
-def third_newton(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0, srows, s0,
+def _third_newton(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0, srows, s0,
                  bx, bf, bn, bslope, dF, v, t, fd, gs, J, Jinv):
     """Newton's method on the corner forces of a step with third elements (the fallback of
     the segment passes, and :func:`ident.sim.third_loop.simulate_third`'s iteration): from
@@ -1000,7 +1000,7 @@ def _third_solve(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0
     ``J dF = A + Mv vfree + Mt tfree`` (:func:`_third_assemble`); the last step's segments
     are assumed, solved with the cached inverse and accepted when every element stays on
     its segment (exact), else moved and solved again (a Newton step). After
-    :data:`THIRD_SEGMENT_PASSES` passes (cycling at a kink) :func:`third_newton` solves the
+    :data:`THIRD_SEGMENT_PASSES` passes (cycling at a kink) :func:`_third_newton` solves the
     step. Returns the passes (-1: failed)."""
     nd = drows.shape[0]
     ns = srows.shape[0]
@@ -1069,7 +1069,7 @@ def _third_solve(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0
         if it >= THIRD_SEGMENT_PASSES:
             break
     # cycling at a kink: Newton with a residual test from the last solution
-    itn = third_newton(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0, srows,
+    itn = _third_newton(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0, srows,
                        s0, bx, bf, bn, bslope, dF, v, t, fd, gs, J, Jinv)
     if itn < 0:
         return -1
