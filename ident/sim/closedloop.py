@@ -1266,7 +1266,8 @@ def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, wher
     F = np.empty((S, N, 4))
     iters = np.zeros(S, dtype=np.int64)
     stats = np.zeros((S, 3, 4))
-    _run_loop(el.plant, loop, el.cout, (y, F, iters, el.kernel_elements(tf_rows), stats))
+    _run_loop(el.plant, loop, el.cout, (y, F, iters, el.kernel_elements(tf_rows), stats, None,
+                                        None))
     _check_converged(plant, iters)
     channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
     for c, name in enumerate(SHOCK_FORCES):
