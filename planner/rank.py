@@ -356,6 +356,11 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
                                library=elements.library(model), where="rank: the bump-stop "
                                "and packer choices (--try-bump-stops, --try-packers)")
     if elements.vary_third:
+        if elements.car_third(model) is None:
+            raise PlannerError("rank: third-element choices (--try-heave, --try-roll, "
+                               "--try-heave-spring) on a model without third elements; drop "
+                               "them, or use a model identified from a session that declares "
+                               "third_elements")
         setups = vary_third(setups, elements.vary_third, car=elements.car_third(model),
                             where="rank: the third-element choices (--try-heave, --try-roll, "
                             "--try-heave-spring)")

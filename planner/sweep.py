@@ -345,6 +345,11 @@ def _element_variants(sim, elements, model, library):
                             where="sweep: the bump-stop and packer choices "
                             "(--try-bump-stops, --try-packers)")
         if elements.vary_third:
+            if elements.car_third(model) is None:
+                raise PlannerError("sweep: third-element choices (--try-heave, --try-roll, "
+                                   "--try-heave-spring) on a model without third elements; "
+                                   "drop them, or use a model identified from a session that "
+                                   "declares third_elements")
             got = vary_third(got, elements.vary_third, car=elements.car_third(model),
                              where="sweep: the third-element choices (--try-heave, "
                              "--try-roll, --try-heave-spring)")

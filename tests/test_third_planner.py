@@ -146,3 +146,7 @@ def test_rank_picks_among_heave_dampers(plant, drive):
     assert sorted(r.table["heave_front"]) == ["H1", "H2", "none"]  # H1 is the baseline's
     assert r.agreement["spearman"] == pytest.approx(1.0)
     assert r.settings["third"]["screening"] == "time domain"
+    with pytest.raises(PlannerError, match="on a model without third elements"):
+        rank_setups(plant, drive, LIB, setups=[_setup("base")], loop=LoopOptions(oversample=1),
+                    elements=ElementOptions(use_model=False, vary_third={"heave_front": ["H1"]}),
+                    top=1, baseline="base")
