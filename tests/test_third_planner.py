@@ -25,7 +25,9 @@ from planner.errors import PlannerError
 from planner.options import ElementOptions, LoopOptions
 from planner.predict import predict_setups
 from planner.rank import rank_setups
+from planner.report.ranking import write_predictions_csv
 from planner.setups import Setup
+from planner.setups.csv_io import read_setups
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_third_loop import _drive  # noqa: E402  (the truth tests' drive)
@@ -101,7 +103,7 @@ def test_vary_third_and_the_cli_choices():
         element_choices(argparse.Namespace(try_heave=["middle=H1"], units="SI"))
 
 
-def test_prediction_equals_the_truth_simulators_metrics(plant, drive):
+def test_prediction_equals_the_truth_simulators_metrics(plant, drive, tmp_path):
     setups = [_setup("base"), _setup("h2", third={"heave_front": "H2", "roll_front": None})]
     pred = predict_setups(plant, drive, setups, LIB, loop=LoopOptions(oversample=1),
                           elements=ELEMENTS)
@@ -129,6 +131,11 @@ def test_prediction_equals_the_truth_simulators_metrics(plant, drive):
     assert pred.table["roll_velocity_rms_front"].iloc[0] > 0
     assert "heave_travel_rms_front" in pred.metric_names
     assert "heave_front" not in pred.metric_names
+    # the predictions CSV reads back as a setups file: the same third elements
+    path = write_predictions_csv(pred.table, tmp_path / "predictions.csv", units="imperial")
+    back = read_setups(path, LIB, SPRINGS)
+    a, b = (setup_third(x, CAR, LIB, bump_stops=SPRINGS) for x in (setups, back))
+    assert a.damper_ids == b.damper_ids and a.spring_ids == b.spring_ids
     # the plain car (use_model=False): no third elements, and third columns refused
     plain = predict_setups(plant, drive, [_setup("base")], LIB, loop=LoopOptions(oversample=1),
                            elements=ElementOptions(use_model=False))
