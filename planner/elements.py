@@ -11,6 +11,14 @@ the planner's commands (predict, rank, sweep, what-if) meet the elements.
 setup with every choice, per axle or corner group), as :func:`planner.setups.enumerate_setups`
 enumerates shocks.
 
+Third elements (heave and roll elements per axle, issue 38): :func:`setup_third` resolves
+each setup's dampers (``Setup.third``: ids in the shock library) and heave springs
+(``Setup.heave_springs``: ids in the bump-stop library) against the car's
+(``model.third``, a :class:`ident.data.third.CarThird`; a key a setup leaves out keeps the
+baseline run's) into the loop's ``third=`` entries
+(:func:`ident.sim.closedloop.simulate_batch`); :func:`vary_third` enumerates their choices
+as setup columns.
+
 Where the model came from a session that declared elements, the identified
 :class:`ident.identify.model.VehicleModel` carries them (``model.elements``, a
 :class:`ident.models.bumpstops.CarElements`); a library given here (``--bump-stops``)
@@ -27,11 +35,14 @@ import numpy as np
 import pandas as pd
 
 from ident.data.channels import CORNERS
+from ident.data.third import AXLES, HEAVE_ELEMENTS, THIRD_ELEMENTS
 from ident.models.bumpstops import (BumpStopLibrary, check_packer, contact_tables,
                                     resolve_corner_stops)
 from planner.errors import PlannerError
 from planner.options import ElementOptions, as_options
+from ident.sim.loop_third import ThirdDamper, ThirdSpring
 from planner.setups import Setup
+from planner.setups.setup import unknown_id_error
 
 __all__ = [
     "SetupElements",
@@ -44,6 +55,11 @@ __all__ = [
     "vary_elements",
     "distinct_setups",
     "parse_length",
+    "THIRD_COLUMNS",
+    "SetupThird",
+    "setup_third",
+    "model_setup_third",
+    "vary_third",
 ]
 
 log = logging.getLogger(__name__)
@@ -372,15 +388,22 @@ def vary_elements(setups, *, bump_stops=None, packers_m=None, library=None,
     return out
 
 
-def distinct_setups(setups, elements):
-    """The setups without repeats: a variant whose shocks, bump stops and packers (resolved)
-    equal an earlier setup's is dropped (:func:`vary_elements` may make them).
+def _copy(mapping):
+    return None if mapping is None else dict(mapping)
+
+
+def distinct_setups(setups, elements, third=None):
+    """The setups without repeats: a variant whose shocks, bump stops and packers (resolved),
+    and third elements (`third`, a :class:`SetupThird`), equal an earlier setup's is dropped
+    (:func:`vary_elements` and :func:`vary_third` may make them).
 
     Parameters
     ----------
     setups : sequence of planner.setups.Setup
     elements : SetupElements or None
         The setups' resolved elements (:func:`setup_elements`), same order.
+    third : SetupThird, optional
+        Their third elements (:func:`setup_third`), same order.
 
     Returns
     -------
@@ -392,6 +415,8 @@ def distinct_setups(setups, elements):
     for k, s in enumerate(setups):
         key = (s.ids(),) if elements is None else (
             s.ids(), elements.stop_ids[k], tuple(np.round(elements.packers_m[k], 12)))
+        if third is not None:
+            key = key + third.key(k)
         if key in seen:
             continue
         seen.add(key)
@@ -404,3 +429,247 @@ def _word(kind, group, value):
     if kind == "stop":
         return f"{tag}={value or 'none'}" if tag else f"stops={value or 'none'}"
     return f"p{tag}={value * 1e3:g}mm"
+
+
+# ----------------------------------------------------------------------------------------------
+# third elements (issue 38)
+# ----------------------------------------------------------------------------------------------
+
+#: The setup columns of the third elements (the spec's setups-CSV columns), in the order
+#: written after the metrics: a damper per element, a heave spring per axle.
+THIRD_COLUMNS = THIRD_ELEMENTS + tuple(f"heave_spring_{a}" for a in AXLES)
+
+
+@dataclass(frozen=True, eq=False)
+class SetupThird:
+    """The third elements of a list of setups, resolved (:func:`setup_third`).
+
+    Attributes
+    ----------
+    car : ident.data.third.CarThird
+        The car's elements (motion ratios) and baseline.
+    damper_ids : tuple of dict
+        Per setup, declared element -> damper id (None: not fitted).
+    spring_ids : tuple of dict
+        Per setup, axle of a declared heave element -> heave-spring id (None: none).
+    entries : tuple
+        Per setup, the loop's ``(dampers, springs)``
+        (:class:`ident.sim.loop_third.ThirdDamper`, :class:`~ident.sim.loop_third.ThirdSpring`;
+        every declared element, a damper's ``model`` None where it is not fitted).
+    """
+
+    car: object
+    damper_ids: tuple
+    spring_ids: tuple
+    entries: tuple
+
+    def loop_third(self, index=slice(None)):
+        """The loop's ``third=`` for the setups at `index` (a list)."""
+        picked = self.entries[index]
+        return list(picked) if isinstance(picked, tuple) else [picked]
+
+    def key(self, k):
+        """Setup `k`'s third choices as a hashable key (:func:`distinct_setups`)."""
+        return (tuple(sorted(self.damper_ids[k].items())),
+                tuple(sorted(self.spring_ids[k].items())))
+
+    def columns(self, names):
+        """The setup columns ``heave_front``, ... (damper id or ``none``) and
+        ``heave_spring_<axle>`` (id or ``none``) of the declared elements.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Indexed by `names` (the table's index).
+        """
+        data = {}
+        for e in THIRD_ELEMENTS:
+            if e in self.damper_ids[0]:
+                data[e] = [d[e] or "none" for d in self.damper_ids]
+        for a in AXLES:
+            if a in self.spring_ids[0]:
+                data[f"heave_spring_{a}"] = [d[a] or "none" for d in self.spring_ids]
+        return pd.DataFrame(data, index=pd.Index(list(names), name="setup"))
+
+
+def _third_keys_text(s):
+    keys = [k for k in (s.third or {})] + [f"heave_spring_{a}" for a in (s.heave_springs or {})]
+    return ", ".join(keys)
+
+
+def setup_third(setups, car, library, *, bump_stops=None, where="setups"):
+    """Resolve the third elements (heave and roll dampers, heave springs) of setups.
+
+    Parameters
+    ----------
+    setups : sequence of planner.setups.Setup
+    car : ident.data.third.CarThird or None
+        The car's third elements (``model.third``): the declared elements with their motion
+        ratios, the baseline run's dampers, heave springs and packers (what a setup that
+        leaves a key out keeps).
+    library : ShockLibrary or mapping of str to ShockModel
+        The shock library the dampers' ids are read from (the corner shocks' library).
+    bump_stops : ident.models.bumpstops.BumpStopLibrary, optional
+        The library the heave springs' ids are read from (the model's bump stops, or a
+        given one).
+    where : str
+        Who asks, put first in messages.
+
+    Returns
+    -------
+    SetupThird or None
+        None for a car without third elements (the loop without them, today's numbers).
+
+    Raises
+    ------
+    PlannerError
+        A setup giving third elements on a car without them, or an element the car does
+        not declare; an unknown damper or heave-spring id; a packer thicker than a heave
+        spring's gap (each naming the setup, the column and the fix).
+    """
+    if car is None:
+        for s in setups:
+            if s.third or s.heave_springs:
+                raise PlannerError(
+                    f"{where}: setup {s.name!r} gives third elements ({_third_keys_text(s)}) "
+                    "but the model has none; drop the columns heave_*, roll_* and "
+                    "heave_spring_* from the setups file, or use a model identified from a "
+                    "session that declares third_elements")
+        return None
+    declared = car.elements.elements
+    heave_axles = [e.rpartition("_")[2] for e in declared if e in HEAVE_ELEMENTS]
+    damper_ids, spring_ids, entries = [], [], []
+    models, stops = {}, {}
+    for s in setups:
+        if not isinstance(s, Setup):
+            raise TypeError(f"{where}: setups must be planner.setups.Setup objects, got "
+                            f"{type(s).__name__}")
+        d = {e: car.baseline.dampers.get(e) for e in declared}
+        for e, sid in (s.third or {}).items():
+            if e not in declared:
+                raise PlannerError(f"{where}: setup {s.name!r}: column {e!r} names a third "
+                                   f"element the car does not declare (it has "
+                                   f"{list(declared)}); leave the column empty or drop it")
+            d[e] = sid
+        sp = {a: car.baseline.heave_springs.get(a) for a in heave_axles}
+        for a, sid in (s.heave_springs or {}).items():
+            if a not in heave_axles:
+                raise PlannerError(f"{where}: setup {s.name!r}: column 'heave_spring_{a}' "
+                                   f"names a heave spring where the car declares no heave "
+                                   f"element (heave_{a}); leave the column empty or drop it")
+            sp[a] = sid
+        dampers = []
+        for e in declared:
+            sid = d[e]
+            if sid is not None and sid not in models:
+                col = f"{where}: setup {s.name!r}: column {e!r}"
+                if sid not in library:
+                    raise unknown_id_error(col, sid, library)
+                try:
+                    models[sid] = library[sid]
+                except ValueError as exc:  # a setting name out of range, unknown adjuster
+                    raise PlannerError(f"{col}: {exc}") from None
+            dampers.append(ThirdDamper(e, car.elements.row(e),
+                                       None if sid is None else models[sid]))
+        springs = []
+        for a in heave_axles:
+            sid = sp[a]
+            packer = float(car.baseline.heave_packers_m.get(a, 0.0) or 0.0)
+            col = f"{where}: setup {s.name!r}: column 'heave_spring_{a}'"
+            contact = None
+            if sid is not None:
+                if bump_stops is None:
+                    raise PlannerError(f"{col}: heave spring {sid!r} but no bump-stop library "
+                                       "is known; pass the session's bumpstops.toml "
+                                       "(--bump-stops FILE)")
+                if sid not in bump_stops:
+                    raise bump_stops.unknown_id_error(sid, where=col, error=PlannerError)
+                key = (sid, packer)
+                if key not in stops:
+                    stops[key] = contact_tables([bump_stops[sid], None, None, None],
+                                                [packer, 0.0, 0.0, 0.0], where=col,
+                                                error=PlannerError)[0]
+                contact = stops[key]
+            springs.append(ThirdSpring(f"heave_{a}", car.elements.row(f"heave_{a}"), contact))
+        damper_ids.append(d)
+        spring_ids.append(sp)
+        entries.append((tuple(dampers), tuple(springs)))
+    return SetupThird(car=car, damper_ids=tuple(damper_ids), spring_ids=tuple(spring_ids),
+                      entries=tuple(entries))
+
+
+def model_setup_third(setups, model, library, elements=None, *, where="setups"):
+    """:func:`setup_third` of setups on a model, with the planner's element options
+    (:meth:`planner.options.ElementOptions.car_third`: the model's ``third`` or the given
+    one; the heave springs from :meth:`~planner.options.ElementOptions.library`)."""
+    elements = as_options(elements, ElementOptions, "elements", where)
+    return setup_third(setups, elements.car_third(model), library,
+                       bump_stops=elements.library(model), where=where)
+
+
+def vary_third(setups, choices, *, car=None, name_format="{name} {what}", where="vary_third"):
+    """Every setup with every third-element choice (setup columns enumerated).
+
+    Parameters
+    ----------
+    setups : sequence of planner.setups.Setup
+    choices : mapping of str to sequence of (str or None)
+        A third column (:data:`THIRD_COLUMNS`: ``heave_front`` ... a damper id;
+        ``heave_spring_front`` ... a heave-spring id) -> the ids to try (None or ``"none"``:
+        not fitted), e.g. ``{"heave_front": ["H1", "H2"]}``.
+    car : ident.data.third.CarThird, optional
+        Checks the columns against the declared elements.
+    name_format : str
+        The new setups' names: ``{name}`` the setup's, ``{what}`` the choices
+        (``"heave_front=H2"``).
+
+    Returns
+    -------
+    list of planner.setups.Setup
+        Each setup as given, then its variants (one per combination), setup by setup.
+
+    Raises
+    ------
+    PlannerError
+        An unknown column, a column of an element the car does not declare, no choice.
+
+    Examples
+    --------
+    >>> s = Setup("base", dict.fromkeys(CORNERS, "B20"))
+    >>> [v.name for v in vary_third([s], {"heave_front": ["H1", "none"]})]
+    ['base', 'base heave_front=H1', 'base heave_front=none']
+    """
+    axes = []
+    for col, vals in (choices or {}).items():
+        if col not in THIRD_COLUMNS:
+            raise PlannerError(f"{where}: {col!r} is not a third-element column; one of "
+                               f"{list(THIRD_COLUMNS)}")
+        element = col.replace("heave_spring_", "heave_")
+        if car is not None and element not in car.elements.elements:
+            raise PlannerError(f"{where}: {col!r}: the car declares no {element} (it has "
+                               f"{list(car.elements.elements)}); choose among those")
+        vals = tuple(None if v is None or str(v).strip().lower() == "none" else str(v).strip()
+                     for v in vals)
+        if not vals:
+            raise PlannerError(f"{where}: {col}: give at least one choice")
+        axes.append((col, vals))
+    if not axes:
+        return list(setups)
+    out = []
+    for s in setups:
+        out.append(s)
+        for combo in itertools.product(*(v for _, v in axes)):
+            third = dict(s.third or {})
+            springs = dict(s.heave_springs or {})
+            words = []
+            for (col, _), value in zip(axes, combo):
+                if col.startswith("heave_spring_"):
+                    springs[col.rpartition("_")[2]] = value
+                else:
+                    third[col] = value
+                words.append(f"{col}={value or 'none'}")
+            out.append(Setup(name_format.format(name=s.name, what=" ".join(words)),
+                             dict(s.shocks), bump_stops=_copy(s.bump_stops),
+                             packers_m=_copy(s.packers_m), third=third or None,
+                             heave_springs=springs or None))
+    return out

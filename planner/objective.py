@@ -45,7 +45,10 @@ counts the shock-velocity histograms (:mod:`planner.histograms`), ``share_low_sp
 ``bump_rebound_ratio_XX`` and, against a logged histogram, ``histogram_distance_XX``: e.g.
 ``bump_rebound_ratio_LF = { max = 1.2 }``, ``share_low_speed_LF = { min = 0.4 }`` (these
 take a ``min`` too: more time below the knee), or a weight on ``histogram_distance_XX`` to
-stay near the logged car (the screening scores without them, :func:`time_domain_metrics`). Group
+stay near the logged car (the screening scores without them, :func:`time_domain_metrics`). A
+car with third elements (issue 38) adds per declared element ``heave_travel_rms_front``,
+``heave_velocity_rms_front``, ``roll_travel_rms_front``, ... (SI: m, m/s): a heave travel
+limit protects the floor, ``heave_travel_rms_front = { max_ratio = 1.1 }``. Group
 names may use
 letters, digits, ``_`` and ``-``; a group ``grip`` gives the score column
 ``score_grip``. A group sub-score is not re-normalized: when the groups
@@ -86,7 +89,8 @@ import pandas as pd
 
 from ident.data.files import atomic_write_toml, check_can_write, read_toml
 from ident.data.channels import CORNERS
-from ident.sim.metrics import BAND_SUFFIXES, METRIC_NAMES, METRIC_QUANTITY
+from ident.sim.metrics import (BAND_SUFFIXES, METRIC_NAMES, METRIC_QUANTITY,
+                               THIRD_METRIC_NAMES)
 from planner.errors import PlannerError
 from planner.setups import inventory_shortfall
 
@@ -121,7 +125,8 @@ HISTOGRAM_LIMIT_KEYS = ("min",)
 
 _TOP_KEYS = ("format", "name", "baseline", "weights", "groups", "limits")
 _GROUP_NAME = re.compile(r"^[A-Za-z0-9_-]+$")
-_BASE_NAMES = METRIC_NAMES + tuple(f"tire_force_rms_norm_{c}" for c in CORNERS)
+_BASE_NAMES = METRIC_NAMES + tuple(f"tire_force_rms_norm_{c}" for c in CORNERS) \
+    + THIRD_METRIC_NAMES
 
 
 def _is_number(x):

@@ -33,6 +33,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ident.data.third import CarThird
 from ident.identify.model import LOOP_REDUCE_RTOL
 from ident.models.bumpstops import BumpStopLibrary, CarElements
 
@@ -84,6 +85,15 @@ class ElementOptions:
         (rank and sweep: every setup is ranked with each combination too).
     vary_packers_m : mapping of str to sequence of float, optional
         Packer choices [m] per corner group, e.g. ``{"front": [0, 0.002, 0.004]}``.
+    third : ident.data.third.CarThird, optional
+        The car's third elements (heave and roll elements per axle, issue 38) for a model
+        given as a plant, or replacing the model's (``model.third``); None (default): the
+        model's. With ``use_model=False`` none.
+    vary_third : mapping of str to sequence of (str or None), optional
+        Third-element choices enumerated as setup columns
+        (:func:`planner.elements.vary_third`): a setups-CSV column (``heave_front``,
+        ``roll_rear``: damper ids; ``heave_spring_front``: heave-spring ids) -> the ids to
+        try (None or ``"none"``: not fitted), e.g. ``{"heave_front": ["H1", "H2"]}``.
 
     Raises
     ------
@@ -99,6 +109,8 @@ class ElementOptions:
     static_corner_load_n: object = None
     vary_bump_stops: Mapping | None = None
     vary_packers_m: Mapping | None = None
+    third: CarThird | None = None
+    vary_third: Mapping | None = None
 
     def __post_init__(self):
         if not isinstance(self.use_model, (bool, CarElements)):
@@ -113,7 +125,10 @@ class ElementOptions:
                 and np.size(self.static_corner_load_n) != 4:
             raise ValueError(f"ElementOptions: static_corner_load_n must be 4 loads [N] "
                              f"(LF, RF, LR, RR), got {self.static_corner_load_n!r}")
-        for name in ("vary_bump_stops", "vary_packers_m"):
+        if self.third is not None and not isinstance(self.third, CarThird):
+            raise TypeError(f"ElementOptions: third must be an ident.data.third.CarThird, got "
+                            f"{type(self.third).__name__}")
+        for name in ("vary_bump_stops", "vary_packers_m", "vary_third"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, Mapping):
                 raise TypeError(f"ElementOptions: {name} must be a mapping group -> choices, "
@@ -122,13 +137,23 @@ class ElementOptions:
     @property
     def has_choices(self):
         """True if bump-stop or packer choices are to be enumerated."""
-        return bool(self.vary_bump_stops or self.vary_packers_m)
+        return bool(self.vary_bump_stops or self.vary_packers_m or self.vary_third)
 
     def without_choices(self):
         """These options without the choices (the elements of setups already enumerated)."""
-        if self.vary_bump_stops is None and self.vary_packers_m is None:
+        if self.vary_bump_stops is None and self.vary_packers_m is None \
+                and self.vary_third is None:
             return self
-        return replace(self, vary_bump_stops=None, vary_packers_m=None)
+        return replace(self, vary_bump_stops=None, vary_packers_m=None, vary_third=None)
+
+    def car_third(self, model):
+        """The car's third elements for `model`: `third`, else ``model.third``; None with
+        ``use_model=False`` or a model without them."""
+        if self.use_model is False:
+            return None
+        if self.third is not None:
+            return self.third
+        return getattr(model, "third", None)
 
     def car(self, model):
         """The car's elements for `model`: ``model.elements`` (``use_model=True``), the
@@ -150,9 +175,13 @@ class ElementOptions:
         """These options with the model's elements fixed (``use_model`` the model's
         ``CarElements`` when it has them): what a worker given only a plant needs."""
         car = self.car(model)
+        out = self
         if self.use_model is True and car is not None:
-            return replace(self, use_model=car)
-        return self
+            out = replace(out, use_model=car)
+        third = self.car_third(model)
+        if third is not None and self.third is None:
+            out = replace(out, third=third)
+        return out
 
 
 #: Default shock-velocity histogram per unit system: (bin width, limit of the inner bins,

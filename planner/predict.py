@@ -32,7 +32,8 @@ from ident.identify.model import LOOP_REDUCE_RTOL, VehicleModel, load_model
 from ident.models.lti import LoopPlant
 from ident.models.vehicle import build_full_car, example_vehicle, read_vehicle
 from ident.sim.closedloop import rig_response, simulate_batch_metrics
-from planner.elements import ELEMENT_COLUMNS, model_setup_elements
+from planner.elements import (ELEMENT_COLUMNS, THIRD_COLUMNS, model_setup_elements,
+                              model_setup_third)
 from planner.errors import PlannerError
 from planner.histograms import ShockHistograms
 from planner.options import ElementOptions, LoopOptions, as_options
@@ -92,7 +93,8 @@ class Predictions:
     @property
     def metric_names(self):
         """The metric columns of the table."""
-        return [c for c in self.table.columns if c not in CORNERS and c not in ELEMENT_COLUMNS]
+        return [c for c in self.table.columns if c not in CORNERS and c not in ELEMENT_COLUMNS
+                and c not in THIRD_COLUMNS]
 
     def element_lines(self):
         """What the loop held besides the shocks (``settings["elements"]``), and the largest
@@ -254,6 +256,13 @@ def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
         ``share_low_speed_XX`` and ``bump_rebound_ratio_XX`` (:mod:`planner.histograms`;
         the histograms in :attr:`Predictions.histograms`); then the setup columns
         ``bump_stop_XX`` and ``packer_XX`` [m] (after the metrics, as the spec allows).
+        With third elements (``model.third`` or ``elements.third``; issue 38) each
+        setup's dampers and heave springs (``Setup.third``, ``Setup.heave_springs``; a key
+        left out keeps the baseline run's) are in the loop: the table adds per declared
+        element ``<kind>_travel_rms_<axle>`` and ``<kind>_velocity_rms_<axle>``, per heave
+        spring ``heave_spring_contact_share_<axle>``, and the setup columns
+        ``heave_front``, ..., ``heave_spring_<axle>`` (ids or ``none``; a ranking reads
+        back as a setups file).
     """
     loop = as_options(loop, LoopOptions, "loop", "predict_setups")
     elements = as_options(elements, ElementOptions, "elements", "predict_setups")
@@ -270,10 +279,13 @@ def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
     drive = prepare_drive(drive, _model_fs(model))
     models = resolve_setups(setups, library)
     elem = model_setup_elements(setups, model, elements)
+    third = model_setup_third(setups, model, library, elements, where="predict")
     outputs = [o for o in METRIC_OUTPUTS if o in plant.output_names]
     rig = rig_response(plant, drive, oversample=oversample, outputs=outputs)
     extra = {} if elem is None else {
         "bump_stops": elem.loop_stops(), "static_corner_load_n": elem.static_corner_load_n}
+    if third is not None:
+        extra["third"] = third.loop_third()
     hist = loop.histograms
     if hist is not None:
         extra["histogram_bins"] = hist.bins
@@ -284,6 +296,8 @@ def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
     for a in starts:
         if extra.get("bump_stops") is not None:
             extra["bump_stops"] = elem.loop_stops(slice(a, a + chunk_size))
+        if third is not None:
+            extra["third"] = third.loop_third(slice(a, a + chunk_size))
         batch = simulate_batch_metrics(plant, drive, models[a:a + chunk_size],
                                        oversample=oversample, outputs=outputs, rig=rig,
                                        band_hz=band_hz, static_loads_n=loop.metric_loads_n,
@@ -302,12 +316,16 @@ def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
         table = pd.concat([table, histograms.summary().set_axis(table.index)], axis=1)
     if elem is not None:
         table = pd.concat([table, elem.columns(table.index)], axis=1)
+    if third is not None:
+        table = pd.concat([table, third.columns(table.index)], axis=1)
     _warn_implausible(table, drive)
     settings = {"kind": "time", "model": getattr(plant, "name", None), "drive": drive.name,
                 "oversample": oversample, "band_hz": tuple(band_hz), "fs_hz": drive.fs_hz,
                 "reduce_rtol": reduce_rtol, "n_shock_modes": int(plant.shock.n_states)}
     if elem is not None:
         settings["elements"] = elem.settings
+    if third is not None:
+        settings["third"] = third.car.to_dict()
     if histograms is not None:
         settings["histograms"] = histograms.settings()
     diagnostics = {"newton_iterations": np.concatenate(iters)}

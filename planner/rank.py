@@ -26,7 +26,7 @@ import pandas as pd
 from scipy.stats import spearmanr
 
 from planner.elements import (distinct_setups, loop_arguments, model_setup_elements,
-                              vary_elements)
+                              model_setup_third, vary_elements, vary_third)
 from planner.errors import PlannerError
 from planner.histograms import ShockHistograms, histogram_distance
 from planner.options import (ElementOptions, HistogramOptions, LoopOptions, RunOptions,
@@ -350,21 +350,40 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     base = resolve_baseline(baseline, library, setups=setups, default=objective.baseline)
     if base.name not in {s.name for s in setups}:
         setups = [base] + setups
-    if elements.has_choices:
+    if elements.vary_bump_stops or elements.vary_packers_m:
         setups = vary_elements(setups, bump_stops=elements.vary_bump_stops,
                                packers_m=elements.vary_packers_m,
                                library=elements.library(model), where="rank: the bump-stop "
                                "and packer choices (--try-bump-stops, --try-packers)")
+    if elements.vary_third:
+        if elements.car_third(model) is None:
+            raise PlannerError("rank: third-element choices (--try-heave, --try-roll, "
+                               "--try-heave-spring) on a model without third elements; drop "
+                               "them, or use a model identified from a session that declares "
+                               "third_elements")
+        setups = vary_third(setups, elements.vary_third, car=elements.car_third(model),
+                            where="rank: the third-element choices (--try-heave, --try-roll, "
+                            "--try-heave-spring)")
     ekw = elements.without_choices()  # the setups' elements, once enumerated
     elem = model_setup_elements(setups, model, ekw)
-    if elem is not None:
-        setups, keep = distinct_setups(setups, elem)
-        if len(keep) < len(elem.tables):
+    third = model_setup_third(setups, model, library, ekw, where="rank")
+    if elem is not None or third is not None:
+        n_enumerated = len(setups)
+        setups, keep = distinct_setups(setups, elem, third)
+        if len(keep) < n_enumerated:
             elem = model_setup_elements(setups, model, ekw)
+            third = model_setup_third(setups, model, library, ekw, where="rank")
     if top < 1:
         raise PlannerError(f"top must be at least 1, got {top}")
     # 1. screening of everything
-    if elem is not None:  # the stops linearized with the shocks, in this process
+    if third is not None:
+        # the screening with third elements is planner.screen's (issue 38); until it takes
+        # them, every setup is simulated in the time domain (exact, slower)
+        log.info("rank: %d setups with third elements simulated in the time domain (no "
+                 "screening with third elements yet)", len(setups))
+        screened = predict_setups(model, drive, setups, library, loop=loop, elements=ekw,
+                                  progress=progress)
+    elif elem is not None:  # the stops linearized with the shocks, in this process
         if scheduler is not None and str(scheduler).strip().lower() != "none":
             log.info("rank: screening with bump stops or static loads runs in this process "
                      "(not on %s)", scheduler)
@@ -436,6 +455,9 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         settings["elements"] = dict(elem.settings, n_variants=len(setups),
                                     vary_bump_stops=elements.vary_bump_stops,
                                     vary_packers_m=elements.vary_packers_m)
+    if third is not None:
+        settings["third"] = dict(third.car.to_dict(), vary_third=elements.vary_third,
+                                 screening="time domain")
     table["unresolved"] = ""
     if uncertainty and getattr(model, "frf", None) is not None:
         unc = prediction_uncertainty(model, drive, cand, library, draws=uncertainty, loop=loop,

@@ -83,8 +83,9 @@ from ident.sim.closedloop import pack_setups
 from planner.errors import PlannerError
 from planner.objective import (Objective, default_objective, mark_inventory, ranking_order,
                                ranking_position, score_setups, time_domain_metrics)
-from planner.elements import (ELEMENT_COLUMNS, distinct_setups, model_setup_elements,
-                              vary_elements)
+from planner.elements import (ELEMENT_COLUMNS, THIRD_COLUMNS, distinct_setups,
+                              model_setup_elements, model_setup_third, vary_elements,
+                              vary_third)
 from planner.histograms import ShockHistograms
 from planner.options import (ElementOptions, HistogramOptions, LoopOptions, RunOptions,
                              ScreenOptions, as_options)
@@ -330,10 +331,10 @@ def _simulate_chunk(plant, drive, setups, library, loop, elements):
     return pred.table, pred.histograms
 
 
-def _element_variants(sim, elements, model):
-    """The simulated setups with every bump-stop and packer choice of `elements` (an
-    ElementOptions), and each one's parent (the index of its shock setup in `sim`); the
-    same setups without choices."""
+def _element_variants(sim, elements, model, library):
+    """The simulated setups with every bump-stop, packer and third-element choice of
+    `elements` (an ElementOptions), and each one's parent (the index of its shock setup in
+    `sim`); the same setups without choices."""
     if not elements.has_choices:
         return sim, np.arange(len(sim))
     lib = elements.library(model)
@@ -343,11 +344,22 @@ def _element_variants(sim, elements, model):
                             packers_m=elements.vary_packers_m, library=lib,
                             where="sweep: the bump-stop and packer choices "
                             "(--try-bump-stops, --try-packers)")
+        if elements.vary_third:
+            if elements.car_third(model) is None:
+                raise PlannerError("sweep: third-element choices (--try-heave, --try-roll, "
+                                   "--try-heave-spring) on a model without third elements; "
+                                   "drop them, or use a model identified from a session that "
+                                   "declares third_elements")
+            got = vary_third(got, elements.vary_third, car=elements.car_third(model),
+                             where="sweep: the third-element choices (--try-heave, "
+                             "--try-roll, --try-heave-spring)")
         out += got
         parent += [i] * len(got)
-    elem = model_setup_elements(out, model, elements)
-    if elem is not None:
-        out, keep = distinct_setups(out, elem)
+    plain = elements.without_choices()
+    elem = model_setup_elements(out, model, plain)
+    third = model_setup_third(out, model, library, plain, where="sweep")
+    if elem is not None or third is not None:
+        out, keep = distinct_setups(out, elem, third)
         parent = [parent[k] for k in keep]
     return out, np.asarray(parent, dtype=np.intp)
 
@@ -784,7 +796,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
                                    "setup with other shocks; rename the baseline")
             sim.append(base)
         sim0 = sim
-        sim, parent = _element_variants(sim0, elements, model_list[0][1])
+        sim, parent = _element_variants(sim0, elements, model_list[0][1], library)
         plant_refs = [runner.scatter(p) for p, _, _ in cases]
         drive_refs = [runner.scatter(d) for _, d, _ in cases]
         lib_ref = runner.scatter(library)
@@ -845,7 +857,8 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     scr_rank = np.asarray(scr_rank, dtype=np.int64)[parent]
     table = pd.DataFrame({c: [s.ids()[j] for s in sim] for j, c in enumerate(CORNERS)},
                          index=pd.Index(names, name="setup"))
-    elem_cols = [c for c in ELEMENT_COLUMNS if c in case_tables[labels[0]].columns]
+    elem_cols = [c for c in ELEMENT_COLUMNS + THIRD_COLUMNS
+                 if c in case_tables[labels[0]].columns]
     for c in elem_cols:
         table[c] = case_tables[labels[0]][c].to_numpy()
     table["score"] = comb
@@ -881,6 +894,7 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     if elements.has_choices:
         settings["elements"] = {"vary_bump_stops": elements.vary_bump_stops,
                                 "vary_packers_m": elements.vary_packers_m,
+                                "vary_third": elements.vary_third,
                                 "n_simulated": len(sim)}
     log.info("sweep: simulated %d setups x %d case(s) in %.1f s; best %r", len(sim),
              len(cases), t_sim, table.index[0])

@@ -64,8 +64,9 @@ from ident.models.lti import (hold_coefficients, join_inputs, lag_coefficients,
                               lag_hold_coefficients)
 from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, HISTOGRAM_COUNTERS, Elements,
                                     LoopDrive, MetricFilters, ModalLoop, RigModes, ShockSetups,
-                                    histogram_add, loop_batch, loop_metrics_worker, loop_serial,
-                                    rig_kernel)
+                                    ThirdLoop, histogram_add, loop_batch, loop_metrics_worker,
+                                    loop_serial, rig_kernel)
+from ident.sim.loop_third import UNREACHED_CONTACT_M, pack_third, third_channel
 from ident.sim.metrics import METRIC_CHANNELS, compute_metrics, metric_plan
 
 __all__ = [
@@ -457,7 +458,7 @@ class Response:
 
 
 def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None,
-                   bump_stops=None, static_corner_load_n=None):
+                   bump_stops=None, static_corner_load_n=None, third=None):
     """Simulate several shock setups on one plant and drive, in closed loop.
 
     Parameters
@@ -488,6 +489,17 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
         ``None`` has no lift-off): the contact force ``static + tire_force`` is kept at
         or above zero, the pad following the tire while it is off (lift-off). Needs the
         plant's ``tire_force_XX``. ``None`` (default): today's loop.
+    third : sequence, optional
+        One entry per setup: its third elements ``(dampers, springs)`` (sequences of
+        :class:`ident.sim.loop_third.ThirdDamper` and
+        :class:`~ident.sim.loop_third.ThirdSpring`) or ``None`` (issue 38). The channels
+        then also hold, per element of the batch, ``<kind>_velocity_<axle>`` and
+        ``<kind>_travel_<axle>`` (its motion, ``m @ v`` and ``m @ x``), per damper
+        ``<kind>_force_<axle>`` (its own force), per heave spring
+        ``heave_spring_force_<axle>`` and per corner bump stop ``bump_stop_force_XX``; the
+        elements' values ``heave_spring_contact_share_<axle>`` (and the corners'
+        ``bump_stop_contact_share_XX``). Needs the plant's ``shock_travel_XX``; not with
+        `static_corner_load_n`. ``None`` (default): today's loop, the same numbers.
 
     Returns
     -------
@@ -511,6 +523,9 @@ def simulate_batch(plant, drive, setups, *, oversample=4, outputs=None, rig=None
     pad, do not take its direct feedthrough.
     """
     loop = _loop_setup(plant, drive, setups, oversample, outputs, rig, "simulate_batch")
+    if third is not None:
+        return _third_response(plant, drive, loop, bump_stops, static_corner_load_n, third,
+                               "simulate_batch")
     if bump_stops is None and static_corner_load_n is None:
         return _batch_response(plant, drive, loop)
     return _element_response(plant, drive, loop, bump_stops, static_corner_load_n,
@@ -523,7 +538,7 @@ def _batch_response(plant, drive, loop):
     y = np.empty((S, len(loop.names), N))
     F = np.empty((S, N, 4))  # (setup, sample, corner): written per sample in the kernel
     iters = np.zeros(S, dtype=np.int64)
-    _run_loop(loop.plant, loop, loop.cout, (y, F, iters, None, None))
+    _run_loop(loop.plant, loop, loop.cout, (y, F, iters, None, None, None, None))
     _check_converged(plant, iters)
     channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
     for c, name in enumerate(SHOCK_FORCES):
@@ -649,7 +664,8 @@ def velocity_histogram_counts(v_m_s, histogram_bins_):
 
 def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, rig=None,
                            band_hz=(1.0, 20.0), order=4, static_loads_n=None, split_hz=None,
-                           bump_stops=None, static_corner_load_n=None, histogram_bins=None):
+                           bump_stops=None, static_corner_load_n=None, histogram_bins=None,
+                           third=None):
     """The metrics of several shock setups in closed loop, without keeping their responses.
 
     The numbers of :func:`ident.sim.metrics.compute_metrics` on the channels of
@@ -683,6 +699,11 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
         :func:`histogram_edges` bins and below the knee, in bump and in rebound
         (:attr:`BatchMetrics.histogram_counts`), in the same pass. The metrics are the
         same bits with or without (tested). None (default): no histogram, no cost.
+    third : sequence, optional
+        As :func:`simulate_batch` (one entry per setup). The metrics then also hold, per
+        element of the batch, ``<kind>_travel_rms_<axle>`` and ``<kind>_velocity_rms_<axle>``
+        (band-passed as the others) and ``heave_spring_contact_share_<axle>`` per heave
+        spring. ``None`` (default): today's path, the same numbers.
 
     Returns
     -------
@@ -697,17 +718,24 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     hist_spec, n_bins = (None, 0) if histogram_bins is None else _histogram_spec(histogram_bins,
                                                                                  where)
     loop = _loop_setup(plant, drive, setups, oversample, outputs, rig, where)
+    th = None
+    if third is not None:
+        th = _third_args(plant, loop, bump_stops, static_corner_load_n, third, where)
+        loop = replace(loop, names=th.names, cout=th.cout, y_rig=th.y_rig)
     plan = metric_plan(loop.names, loop.rig.fs_hz, band_hz=band_hz, order=order,
                        static_loads_n=static_loads_n, split_hz=split_hz)
     el = None
-    if bump_stops is not None or static_corner_load_n is not None:
+    if th is None and (bump_stops is not None or static_corner_load_n is not None):
         el = _element_args(plant, loop, bump_stops, static_corner_load_n, where)
     filters = [plan.filter(b) for b in plan.bands.values()]
     S, N = len(loop.models), loop.rig.n_samples
     if not plan.names or N <= filters[0][1]:
         # no metric, or a record too short for the filter: the two steps (the second
         # raises the filter's error, naming the channel)
-        if el is None:
+        if th is not None:
+            batch = _third_response(plant, drive, loop, bump_stops, static_corner_load_n,
+                                    third, where, th=th)
+        elif el is None:
             batch = _batch_response(plant, drive, loop)
         else:
             batch = _element_response(plant, drive, loop, bump_stops, static_corner_load_n,
@@ -738,7 +766,7 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
         cols.append(Cout[:, idx].mean(axis=1))
         rig_cols.append(y_rig[:, idx].mean(axis=1))
         lanes.append(len(cols) - 1)
-        if len(chans) == 1 and kind_of(chans[0]) == "tire_force":
+        if len(chans) == 1 and chans[0].startswith("tire_force_"):
             tf_rows[CORNERS.index(chans[0][-2:])] = len(cols) - 1
     p_red = len(cols)
     ia = np.array([i if i >= 0 else p_red + (-1 - i) for i in lanes], dtype=np.int64)
@@ -752,13 +780,17 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     metrics = MetricFilters(ia, sos, zi, int(filters[0][1]))
     drive_args = LoopDrive(loop.rig.v_fine, loop.oversample, y_rig_red, c_red)
     counts = None if hist_spec is None else np.zeros((S, 4, n_bins + HISTOGRAM_COUNTERS))
-    if el is None:
+    if th is not None:
+        tstats = np.zeros((S, th.n_springs))
         _run_workers(S, (loop.plant, loop.shocks, drive_args, metrics, out, iters, None, None,
-                         hist_spec, counts))
+                         hist_spec, counts, th.kernel, tstats))
+    elif el is None:
+        _run_workers(S, (loop.plant, loop.shocks, drive_args, metrics, out, iters, None, None,
+                         hist_spec, counts, None, None))
     else:
         stats = np.zeros((S, 3, 4))
         _run_workers(S, (el.plant, loop.shocks, drive_args, metrics, out, iters,
-                         el.kernel_elements(tf_rows), stats, hist_spec, counts))
+                         el.kernel_elements(tf_rows), stats, hist_spec, counts, None, None))
     _check_converged(plant, iters)
     rms = {name + suffix: out[:, b, i] for b, suffix in enumerate(plan.bands)
            for i, name in enumerate(plan.names)}
@@ -767,6 +799,9 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     if el is not None:
         met = replace(met, values={**met.values, **el.values(stats, N)})
         settings = el.settings(loop, drive)
+    if th is not None:
+        met = replace(met, values={**met.values, **th.values(tstats, N)})
+        settings = th.settings(loop, drive)
     return BatchMetrics(metrics=met, setups=tuple(tuple(m) for m in loop.models),
                         newton_iterations=iters, settings=settings, histogram_counts=counts,
                         n_samples=N)
@@ -845,7 +880,7 @@ def _loop_setup(plant, drive, setups, oversample, outputs, rig, where):
 def _run_loop(kernel_plant, loop, cout, tail):
     """Run the batch loop (one setup: :func:`ident.sim.loop_kernels.loop_serial`, else
     :func:`ident.sim.loop_kernels.loop_batch`) of `loop` with the plant `kernel_plant`, the
-    output rows `cout` and ``tail = (y_out, F_out, iters, elements, stats)``."""
+    output rows `cout` and ``tail = (y_out, F_out, iters, elements, stats, third, tstats)``."""
     args = (kernel_plant, loop.shocks, LoopDrive(loop.rig.v_fine, loop.oversample, loop.y_rig,
                                                  cout)) + tuple(tail)
     if len(loop.models) == 1:
@@ -949,16 +984,18 @@ def _check_converged(plant, iters):
 
 
 def simulate(plant, drive, setup, *, oversample=4, outputs=None, rig=None, stop_tables=None,
-             static_corner_load_n=None):
+             static_corner_load_n=None, third=None):
     """Simulate one shock setup on a plant and a drive in closed loop.
 
     Same as :func:`simulate_batch` with one setup; returns a :class:`Response`.
     `stop_tables` is the setup's bump stops in the loop's form (a mapping corner -> stop
-    or 4 stops: :func:`simulate_batch`'s ``bump_stops`` entry of one setup), not a list.
+    or 4 stops: :func:`simulate_batch`'s ``bump_stops`` entry of one setup), not a list;
+    `third` the setup's ``(dampers, springs)`` (:func:`simulate_batch`'s ``third`` entry).
     """
     return simulate_batch(plant, drive, [setup], oversample=oversample, outputs=outputs,
                           rig=rig, bump_stops=None if stop_tables is None else [stop_tables],
-                          static_corner_load_n=static_corner_load_n).response(0)
+                          static_corner_load_n=static_corner_load_n,
+                          third=None if third is None else [third]).response(0)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1229,7 +1266,8 @@ def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, wher
     F = np.empty((S, N, 4))
     iters = np.zeros(S, dtype=np.int64)
     stats = np.zeros((S, 3, 4))
-    _run_loop(el.plant, loop, el.cout, (y, F, iters, el.kernel_elements(tf_rows), stats))
+    _run_loop(el.plant, loop, el.cout, (y, F, iters, el.kernel_elements(tf_rows), stats, None,
+                                        None))
     _check_converged(plant, iters)
     channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
     for c, name in enumerate(SHOCK_FORCES):
@@ -1243,3 +1281,158 @@ def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, wher
 #: the travel extrapolated from the state (one solve per step): kept to measure the
 #: difference (tests and the issue-25 notes), not an option.
 _ELEMENT_IMPLICIT = True
+
+
+# ----------------------------------------------------------------------------------------------
+# third elements: heave and roll dampers, heave springs (issue 38)
+# ----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class _Third:
+    """The third elements' kernel arguments for a batch (:func:`_third_args`): the kernels'
+    :class:`~ident.sim.loop_kernels.ThirdLoop` and the outputs with the elements' motions
+    appended (``names``, ``cout``, ``y_rig``)."""
+
+    kernel: ThirdLoop
+    names: list
+    cout: np.ndarray
+    y_rig: np.ndarray
+    dampers: tuple
+    spring_names: tuple  # the F_out columns after the dampers': heave springs, corner stops
+
+    @property
+    def n_springs(self):
+        return len(self.spring_names)
+
+    def settings(self, loop, drive):
+        return dict(loop.settings(drive), third=True,
+                    bump_stops=any(n.startswith("bump_stop") for n in self.spring_names))
+
+    def values(self, tstats, n_samples):
+        """The springs' contact shares from the kernels' counts (n_setups, ns)."""
+        out = {}
+        for j, name in enumerate(self.spring_names):
+            key = name.replace("_force_", "_contact_share_")
+            out[key] = tstats[:, j] / max(n_samples, 1)
+        return out
+
+    def force_channels(self):
+        """The names of ``F_out``'s columns after the 4 shocks'."""
+        return [third_channel(e, "force") for e in self.dampers] + list(self.spring_names)
+
+
+def _third_args(plant, loop, bump_stops, static_corner_load_n, third, where):
+    """Check the setups' third elements (one entry per setup) and the corners' bump stops and
+    build the kernels' arguments for the batch `loop` (:func:`_loop_setup`): a
+    :class:`_Third`. The corners' bump stops become springs on unit rows."""
+    S = len(loop.models)
+    third = list(third)
+    if len(third) != S:
+        raise ValueError(f"{where}: third has {len(third)} entries for {S} setups; give one "
+                         "per setup (None: none)")
+    if static_corner_load_n is not None:
+        raise ValueError(f"{where}: tire lift-off (static_corner_load_n) is not solved together "
+                         "with third elements; leave static_corner_load_n out for a car with "
+                         "third elements")
+    h = 1.0 / (loop.rig.fs_hz * loop.oversample)
+    pack = pack_third(third, h, where=f"{where}: third")
+    ti = _corner_rows(plant, "shock_travel", where, "third elements")
+    vi = list(plant.velocity_idx)
+    # the springs: heave springs, then the corners' bump stops on unit rows
+    on, s0c, bxc, bfc, bnc, bslc = pack_bump_stops(
+        [None] * S if bump_stops is None else list(bump_stops), f"{where}: bump_stops")
+    if len(on) != S:
+        raise ValueError(f"{where}: bump_stops has {len(on)} entries for {S} setups; give one "
+                         "per setup (None: none)")
+    corners = [c for c in range(4) if on[:, c].any()]
+    spring_names = tuple(third_channel(e, "spring_force") for e in pack.springs) + tuple(
+        f"bump_stop_force_{CORNERS[c]}" for c in corners)
+    ns = len(spring_names)
+    tables = []
+    for i in range(S):
+        row = []
+        for e, ct in zip(pack.springs, pack.spring_contacts[i]):
+            row.append(None if ct is None else _check_stop(ct, f"{where}: third: setup {i} "
+                                                               f"{e} spring"))
+        for c in corners:
+            row.append((s0c[i, c], bxc[i, c, :bnc[i, c]], bfc[i, c, :bnc[i, c]]) if on[i, c]
+                       else None)
+        tables.append(row)
+    P = max([2] + [t[1].size for row in tables for t in row if t is not None])
+    s0 = np.full((S, ns), UNREACHED_CONTACT_M)
+    bx = np.zeros((S, ns, P))
+    bf = np.zeros((S, ns, P))
+    bn = np.full((S, ns), 2, dtype=np.int64)
+    bx[:, :, 1:] = 1.0
+    bslope = np.zeros((S, ns))
+    for i, row in enumerate(tables):
+        for j, t in enumerate(row):
+            if t is None:
+                continue
+            a, x, f = t
+            s0[i, j] = a
+            bx[i, j, :x.size], bx[i, j, x.size:] = x, x[-1]
+            bf[i, j, :x.size], bf[i, j, x.size:] = f, f[-1]
+            bn[i, j] = x.size
+            bslope[i, j] = (f[-1] - f[-2]) / (x[-1] - x[-2])
+    srows = np.concatenate([pack.spring_rows, np.eye(4)[corners]]).reshape(ns, 4)
+    scorner = np.array([-1] * len(pack.springs) + corners, dtype=np.int64)
+    # the travel rows (padded as the modes), their same-step response and rig part
+    erows = np.array(ti + ti, dtype=int)
+    oi = np.array([plant.output_names.index(o) for o in loop.names], dtype=int)
+    _, _, extra = _modal_args(plant.shock, vi, oi, h, erows=erows)
+    extra = _physical_same_step(extra)
+    _, _, Cer, Cei, Dt = extra[:5]
+    key = tuple(int(i) for i in erows)
+    e_rig = loop.rig.element_rows.get(key)
+    if e_rig is None:
+        mr = plant.rig.select(outputs=np.concatenate([vi, erows])).pruned()
+        _, e_y = _rig_outputs(mr, h, loop.rig.u_fine, 1)
+        e_rig = loop.rig.element_rows[key] = np.ascontiguousarray(e_y.T)
+    t_rig = np.ascontiguousarray(e_rig[:, :4])
+    drows, kv, kf, nk, slo, shi, alpha, b0, b1, bm = pack.damper_args
+    kernel = ThirdLoop(np.ascontiguousarray(Cer[:4].T), np.ascontiguousarray(Cei[:4].T), t_rig,
+                       np.ascontiguousarray(Dt), drows, np.ascontiguousarray(srows), scorner,
+                       kv, kf, nk, slo, shi, alpha, b0, b1, bm, s0, bx, bf, bn, bslope)
+    # the elements' motions as outputs: their rows over the velocity and travel outputs
+    _, Cvt, _ = _modal_args(plant.shock, vi, np.array(vi + ti, dtype=int), h)
+    r = loop.oversample
+    v_rig_out = loop.rig.v_fine[::r][:loop.y_rig.shape[0]]
+    t_rig_out = t_rig[::r][:loop.y_rig.shape[0]]
+    names, cols, rig_cols = list(loop.names), [], []
+    for e, row in zip(pack.elements, pack.rows):
+        for what, C_, y_ in (("velocity", Cvt[:, :4], v_rig_out), ("travel", Cvt[:, 4:],
+                                                                   t_rig_out)):
+            name = third_channel(e, what)
+            if name in names:
+                continue
+            names.append(name)
+            cols.append(C_ @ row)
+            rig_cols.append(y_ @ row)
+    cout = np.ascontiguousarray(np.concatenate([loop.cout, np.stack(cols, axis=1)], axis=1)
+                                if cols else loop.cout)
+    y_rig = np.ascontiguousarray(np.concatenate([loop.y_rig, np.stack(rig_cols, axis=1)], axis=1)
+                                 if cols else loop.y_rig)
+    return _Third(kernel=kernel, names=names, cout=cout, y_rig=y_rig, dampers=pack.dampers,
+                  spring_names=spring_names)
+
+
+def _third_response(plant, drive, loop, bump_stops, static_corner_load_n, third, where, th=None):
+    """:func:`simulate_batch` with third elements (the kernels' third path)."""
+    if th is None:
+        th = _third_args(plant, loop, bump_stops, static_corner_load_n, third, where)
+        loop = replace(loop, names=th.names, cout=th.cout, y_rig=th.y_rig)
+    S, N = len(loop.models), loop.rig.n_samples
+    nF = 4 + len(th.dampers) + th.n_springs
+    y = np.empty((S, len(loop.names), N))
+    F = np.empty((S, N, nF))
+    iters = np.zeros(S, dtype=np.int64)
+    tstats = np.zeros((S, th.n_springs))
+    _run_loop(loop.plant, loop, loop.cout, (y, F, iters, None, None, th.kernel, tstats))
+    _check_converged(plant, iters)
+    channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
+    for c, name in enumerate(list(SHOCK_FORCES) + th.force_channels()):
+        channels[name] = F[:, :, c]
+    return BatchResponse(channels=channels, fs_hz=loop.rig.fs_hz,
+                         setups=tuple(tuple(m) for m in loop.models), newton_iterations=iters,
+                         settings=th.settings(loop, drive), elements=th.values(tstats, N))

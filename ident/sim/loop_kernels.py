@@ -16,6 +16,8 @@ function per argument type and reads a named tuple's fields at no cost):
   coefficients;
 - :class:`Elements`: bump stops and tire lift-off (issue 25), or ``None`` for a loop
   without them;
+- :class:`ThirdLoop`: third elements (heave and roll dampers, heave springs: issue 38; the
+  corner bump stops then among its springs), or ``None`` for a car without them;
 - :class:`MetricFilters`: the fused metrics' channels and band-pass filters;
 - :class:`SolverState`: the per-setup state and scratch of :func:`shock_step`.
 
@@ -58,6 +60,7 @@ __all__ = [
     "ShockSetups",
     "LoopDrive",
     "Elements",
+    "ThirdLoop",
     "MetricFilters",
     "SolverState",
     "rig_kernel",
@@ -213,6 +216,50 @@ lo_on : ndarray of int64, shape (4,)
     1 where a corner has a static load (lift-off solved).
 static : ndarray, shape (4,)
     Static tire loads [N].
+"""
+
+ThirdLoop = namedtuple("ThirdLoop", ["CtTr", "CtTi", "t_rig", "Dt", "drows", "srows", "scorner",
+                                     "kv", "kf", "nk", "slo", "shi", "alpha", "b0", "b1", "bm",
+                                     "s0", "bx", "bf", "bn", "bslope"])
+ThirdLoop.__doc__ = """Third elements in the loop (:func:`loop_one`; issue 38): dampers and springs
+acting through rows over the corners.
+
+A damper ``d`` has the row ``drows[d]`` (:func:`ident.data.third.element_row`): its velocity
+is ``drows[d] @ v`` of the corners' shock velocities and its force ``F_d`` (a
+piecewise-linear curve behind a first-order lag, as a shock's) acts at the corners as
+``drows[d] * F_d``. A spring ``j`` (a heave spring, or a corner's bump stop: a unit row) has
+the row ``srows[j]``: its force is the table from its contact travel ``s0[j]`` on, at the
+travel ``srows[j] @ x``. The fields from ``kv`` on are setup choices: one row per setup in
+the batch kernels (a leading axis of S), one setup's rows in :func:`loop_one`. A damper not
+fitted in a setup has a flat zero curve; a spring not fitted a contact travel out of reach.
+
+Attributes
+----------
+CtTr, CtTi : ndarray, shape (n, 4)
+    ``Re(Ct).T`` and ``Im(Ct).T`` of the shock travels' rows of ``C`` [m per state], mode-major.
+t_rig : ndarray, shape (N, 4)
+    The shock travels' rig-input part on the internal grid [m].
+Dt : ndarray, shape (4, 4)
+    Same-step response of the travels to ``dF`` [m/N].
+drows : ndarray, shape (ne, 4)
+    The third dampers' rows.
+srows : ndarray, shape (ns, 4)
+    The springs' rows.
+scorner : ndarray of int64, shape (ns,)
+    The corner of a corner bump stop, -1 for a heave spring.
+kv, kf : ndarray, shape (ne, n_knots)
+    The dampers' knot velocities [m/s] and forces [N] in the element's own motion, padded.
+nk : ndarray of int64, shape (ne,)
+slo, shi : ndarray, shape (ne,)
+alpha, b0, b1, bm : ndarray, shape (ne,)
+    The dampers' lag coefficients (as :class:`ShockSetups`').
+s0 : ndarray, shape (ns,)
+    Contact travels [m] (gap less packer).
+bx, bf : ndarray, shape (ns, n_points)
+    Tables: travel beyond contact [m] and force [N], padded with the last point.
+bn : ndarray of int64, shape (ns,)
+bslope : ndarray, shape (ns,)
+    Slope beyond the table [N/m].
 """
 
 MetricFilters = namedtuple("MetricFilters", ["ia", "sos", "zi", "padlen"])
@@ -774,6 +821,273 @@ def _stop_force(s, c, s0, bx, bf, bn, bslope):
 
 
 # ----------------------------------------------------------------------------------------------
+# the loop with third elements (issue 38): dampers and springs through rows over the corners
+# ----------------------------------------------------------------------------------------------
+
+#: Segment passes of the third elements' solve before Newton's method with a residual test
+#: (:func:`_third_newton`) takes over (segments cycling at a kink).
+THIRD_SEGMENT_PASSES = 12
+#: Newton's tolerance of that fallback on the corner forces [N], relative to ``1 + |dF|``
+#: (:data:`ident.sim.third_loop.THIRD_TOL_N`'s value: the virtual rig's truth solves to it).
+THIRD_NEWTON_TOL = 1e-7
+#: Newton iterations of the fallback before the step is reported as failed.
+THIRD_NEWTON_MAX = 60
+#: Segment passes with rank-1 updates of the cached inverse inside the time loop, before
+#: :func:`_third_solve` (the full rebuild) takes the step.
+THIRD_FAST_PASSES = 6
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _spring_seg(te, j, s0, bx, bn):
+    """Segment of spring `j` at its travel `te`: -1 before contact, ``i`` on the table's
+    segment from point i, ``bn - 1`` beyond the table."""
+    x = te - s0[j]
+    if x <= 0.0:
+        return -1
+    nb = bn[j]
+    if x >= bx[j, nb - 1]:
+        return nb - 1
+    lo = 0
+    hi = nb - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if bx[j, mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _spring_line(seg, j, s0, bx, bf, bn, bslope):
+    """Stiffness and intercept of spring `j` on segment `seg` in its own travel: g = a + k te."""
+    if seg < 0:
+        return 0.0, 0.0
+    nb = bn[j]
+    if seg >= nb - 1:
+        k = bslope[j]
+        return k, bf[j, nb - 1] - k * (s0[j] + bx[j, nb - 1])
+    k = (bf[j, seg + 1] - bf[j, seg]) / (bx[j, seg + 1] - bx[j, seg])
+    return k, bf[j, seg] - k * (s0[j] + bx[j, seg])
+
+
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _third_assemble(Dv, Dt, cbar, drows, srows, b0, ds, sk, Mv, Mt, J, Jinv):
+    """``Mv = sum_d b0_d s_d m_d m_d^T - diag(cbar)``, ``Mt = sum_j k_j q_j q_j^T`` and the
+    inverse of ``J = I - Mv Dv - Mt Dt`` on the current segments."""
+    nd = drows.shape[0]
+    ns = srows.shape[0]
+    for a in range(4):
+        for c in range(4):
+            Mv[a, c] = 0.0
+            Mt[a, c] = 0.0
+        Mv[a, a] = -cbar[a]
+    for d in range(nd):
+        wd = b0[d] * ds[d]
+        if wd != 0.0:
+            for a in range(4):
+                ra = drows[d, a] * wd
+                if ra != 0.0:
+                    for c in range(4):
+                        Mv[a, c] += ra * drows[d, c]
+    for j in range(ns):
+        kj = sk[j]
+        if kj != 0.0:
+            for a in range(4):
+                ra = srows[j, a] * kj
+                if ra != 0.0:
+                    for c in range(4):
+                        Mt[a, c] += ra * srows[j, c]
+    for a in range(4):
+        for c in range(4):
+            acc = 0.0
+            for e in range(4):
+                acc += Mv[a, e] * Dv[e, c] + Mt[a, e] * Dt[e, c]
+            J[a, c] = (1.0 if a == c else 0.0) - acc
+    invert_small(J, Jinv, 4)
+
+
+@_nb.njit(cache=True, error_model="numpy")
+def _third_newton(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0, srows, s0,
+                 bx, bf, bn, bslope, dF, v, t, fd, gs, J, Jinv):
+    """Newton's method on the corner forces of a step with third elements (the fallback of
+    the segment passes, and :func:`ident.sim.third_loop.simulate_third`'s iteration): from
+    ``dF`` (the last step's) to ``|dF - G(dF)| <= tol (1 + |dF|)``. Leaves the solution in
+    `dF`, `v`, `t`, the dampers' curve forces in `fd` and the springs' in `gs`; returns the
+    iteration count (-1: no convergence)."""
+    nd = drows.shape[0]
+    ns = srows.shape[0]
+    G = np.empty(4)
+    R = np.empty(4)
+    Jv = np.empty((4, 4))
+    Jt = np.empty((4, 4))
+    it = 0
+    while True:
+        for a in range(4):
+            sv_ = vfree[a]
+            st_ = tfree[a]
+            for c in range(4):
+                sv_ += Dv[a, c] * dF[c]
+                st_ += Dt[a, c] * dF[c]
+            v[a] = sv_
+            t[a] = st_
+            G[a] = -cbar[a] * sv_
+            for c in range(4):
+                Jv[a, c] = 0.0
+                Jt[a, c] = 0.0
+            Jv[a, a] = -cbar[a]
+        for d in range(nd):
+            ve = 0.0
+            for c in range(4):
+                ve += drows[d, c] * v[c]
+            f, s, sg = _pwl(ve, kv, kf, d, nk[d], slo[d], shi[d])
+            fd[d] = f
+            Fd = c0[d] + b0[d] * f
+            ds = b0[d] * s
+            for a in range(4):
+                if drows[d, a] != 0.0:
+                    G[a] += drows[d, a] * Fd
+                    for c in range(4):
+                        Jv[a, c] += ds * drows[d, a] * drows[d, c]
+        for j in range(ns):
+            te = 0.0
+            for c in range(4):
+                te += srows[j, c] * t[c]
+            sg = _spring_seg(te, j, s0, bx, bn)
+            k, a0 = _spring_line(sg, j, s0, bx, bf, bn, bslope)
+            g = a0 + k * te
+            gs[j] = g
+            for a in range(4):
+                if srows[j, a] != 0.0:
+                    G[a] += srows[j, a] * g
+                    for c in range(4):
+                        Jt[a, c] += k * srows[j, a] * srows[j, c]
+        rmax = 0.0
+        fmax = 0.0
+        for a in range(4):
+            R[a] = dF[a] - G[a]
+            rmax = max(rmax, abs(R[a]))
+            fmax = max(fmax, abs(dF[a]))
+        if rmax <= THIRD_NEWTON_TOL * (1.0 + fmax):
+            return it
+        it += 1
+        if it > THIRD_NEWTON_MAX:
+            return -1
+        for a in range(4):
+            for c in range(4):
+                acc = 0.0
+                for e in range(4):
+                    acc += Jv[a, e] * Dv[e, c] + Jt[a, e] * Dt[e, c]
+                J[a, c] = (1.0 if a == c else 0.0) - acc
+        invert_small(J, Jinv, 4)
+        for a in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += Jinv[a, c] * R[c]
+            G[a] = acc
+        for a in range(4):
+            dF[a] -= G[a]
+
+
+@_nb.njit(cache=True, error_model="numpy")
+def _third_solve(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0, srows, s0, bx,
+                 bf, bn, bslope, dseg, sseg, ds, da, sk, sa, Mv, Mt, J, Jinv, valid, rhs, ve,
+                 te, dF, v, t, fd, gs):
+    """One step of the loop with third elements: the corner force deviations ``dF`` with
+    ``dF = sum_d m_d (c0_d + b0_d f_d(m_d v)) + sum_j q_j g_j(q_j t) - cbar v``, ``v = vfree
+    + Dv dF``, ``t = tfree + Dt dF`` (the dampers ``d`` include the 4 corner shocks as unit
+    rows). Every curve and table is piecewise linear, so on fixed segments this is linear:
+    ``J dF = A + Mv vfree + Mt tfree`` (:func:`_third_assemble`); the last step's segments
+    are assumed, solved with the cached inverse and accepted when every element stays on
+    its segment (exact), else moved and solved again (a Newton step). After
+    :data:`THIRD_SEGMENT_PASSES` passes (cycling at a kink) :func:`_third_newton` solves the
+    step. Returns the passes (-1: failed)."""
+    nd = drows.shape[0]
+    ns = srows.shape[0]
+    it = 0
+    while True:
+        if valid[0] == 0:
+            for d in range(nd):
+                ds[d], da[d] = _segment_line(dseg[d], kv, kf, d, nk[d], slo[d], shi[d])
+            for j in range(ns):
+                sk[j], sa[j] = _spring_line(sseg[j], j, s0, bx, bf, bn, bslope)
+            _third_assemble(Dv, Dt, cbar, drows, srows, b0, ds, sk, Mv, Mt, J, Jinv)
+            valid[0] = 1
+        for a in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += Mv[a, c] * vfree[c] + Mt[a, c] * tfree[c]
+            rhs[a] = acc
+        for d in range(nd):
+            q = c0[d] + b0[d] * da[d]
+            for a in range(4):
+                rhs[a] += drows[d, a] * q
+        for j in range(ns):
+            if sseg[j] >= 0:
+                for a in range(4):
+                    rhs[a] += srows[j, a] * sa[j]
+        for a in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += Jinv[a, c] * rhs[c]
+            dF[a] = acc
+        for a in range(4):
+            acc_v = vfree[a]
+            acc_t = tfree[a]
+            for c in range(4):
+                acc_v += Dv[a, c] * dF[c]
+                acc_t += Dt[a, c] * dF[c]
+            v[a] = acc_v
+            t[a] = acc_t
+        same = True
+        for d in range(nd):
+            x = 0.0
+            for c in range(4):
+                x += drows[d, c] * v[c]
+            ve[d] = x
+            s2 = _segment_of(x, kv, d, nk[d], dseg[d])
+            if s2 != dseg[d]:
+                same = False
+                dseg[d] = s2
+        for j in range(ns):
+            x = 0.0
+            for c in range(4):
+                x += srows[j, c] * t[c]
+            te[j] = x
+            s2 = _spring_seg(x, j, s0, bx, bn)
+            if s2 != sseg[j]:
+                same = False
+                sseg[j] = s2
+        it += 1
+        if same:
+            for d in range(nd):
+                fd[d] = da[d] + ds[d] * ve[d]
+            for j in range(ns):
+                gs[j] = sa[j] + sk[j] * te[j]
+            return it
+        valid[0] = 0
+        if it >= THIRD_SEGMENT_PASSES:
+            break
+    # cycling at a kink: Newton with a residual test from the last solution
+    itn = _third_newton(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0, srows,
+                       s0, bx, bf, bn, bslope, dF, v, t, fd, gs, J, Jinv)
+    if itn < 0:
+        return -1
+    for d in range(nd):
+        x = 0.0
+        for c in range(4):
+            x += drows[d, c] * v[c]
+        dseg[d] = _segment_of(x, kv, d, nk[d], dseg[d])
+    for j in range(ns):
+        x = 0.0
+        for c in range(4):
+            x += srows[j, c] * t[c]
+        sseg[j] = _spring_seg(x, j, s0, bx, bn)
+    valid[0] = 0
+    return it + itn
+
+
+# ----------------------------------------------------------------------------------------------
 # the time loops
 # ----------------------------------------------------------------------------------------------
 
@@ -792,8 +1106,16 @@ def _element_row(el, s):
                     el.bn[s], el.bslope[s], el.lo_on[s], el.static[s])
 
 
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _third_row(th, s):
+    """Setup `s`'s rows of the batch :class:`ThirdLoop` `th` (the setup choices' fields)."""
+    return ThirdLoop(th.CtTr, th.CtTi, th.t_rig, th.Dt, th.drows, th.srows, th.scorner, th.kv[s],
+                     th.kf[s], th.nk[s], th.slo[s], th.shi[s], th.alpha[s], th.b0[s], th.b1[s],
+                     th.bm[s], th.s0[s], th.bx[s], th.bf[s], th.bn[s], th.bslope[s])
+
+
 @_nb.njit(cache=True, error_model="numpy")
-def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
+def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, tstats):
     """Time loop of one setup on the internal grid; returns the largest Newton iteration
     count (-1: no convergence).
 
@@ -816,9 +1138,22 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
     stats : ndarray, shape (3, 4), or None (with ``elements=None``)
         Output samples in bump-stop contact, output samples lifted off, smallest contact
         force [N].
+    third : ThirdLoop or None
+        One setup's rows; ``None``: no third elements (numba compiles that case apart and
+        drops their code: the plain loop's numbers and speed). With third elements
+        `elements` is ``None`` (corner bump stops are among the third's springs; lift-off
+        is not combined with them), ``F_out`` has ``4 + ne + ns`` columns (the third
+        dampers' forces, then the springs'), and ``tstats`` (ns,) gets each spring's output
+        samples in contact.
+    tstats : ndarray, shape (ns,), or None (with ``third=None``)
 
     Notes
     -----
+    With third elements the step is :func:`_third_solve`: the corner shocks and the third
+    dampers (rows over the corners, each with its curve and lag) and the springs (heave
+    springs and corner bump stops on their rows' travel) in one solve on the corner forces
+    ``dF``, the travels' free part ``t_free`` from the predictor as the velocities'.
+
     The modal states are held as separate real and imaginary arrays (the mode loops
     vectorize). At every r-th step (an output sample) the states and ``dF`` (and ``w``
     with lift-off) are buffered as rows ``[Re x, Im x, dF (, w)]``; every
@@ -921,6 +1256,91 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
         n_bs = np.zeros(m)
         n_lo = np.zeros(m)
         c_min = np.full(m, np.inf)
+    if third is not None:
+        CtTr = third.CtTr
+        CtTi = third.CtTi
+        t_rig = third.t_rig
+        Dt3 = third.Dt
+        srows3 = third.srows
+        s03 = third.s0
+        bx3 = third.bx
+        bf3 = third.bf
+        bn3 = third.bn
+        bslope3 = third.bslope
+        ne3 = third.drows.shape[0]
+        ns3 = srows3.shape[0]
+        nd3 = m + ne3
+        # the corner shocks (unit rows) and the third dampers as one set of curves
+        K1 = kv.shape[1]
+        K2 = third.kv.shape[1]
+        K3 = max(K1, K2)
+        kvA = np.empty((nd3, K3))
+        kfA = np.empty((nd3, K3))
+        nkA = np.empty(nd3, dtype=np.int64)
+        sloA = np.empty(nd3)
+        shiA = np.empty(nd3)
+        alphaA = np.empty(nd3)
+        b0A = np.empty(nd3)
+        b1A = np.empty(nd3)
+        bmA = np.empty(nd3)
+        drowsA = np.zeros((nd3, m))
+        for c in range(m):
+            for q in range(K3):
+                kvA[c, q] = kv[c, min(q, K1 - 1)]
+                kfA[c, q] = kf[c, min(q, K1 - 1)]
+            nkA[c] = nk[c]
+            sloA[c] = slo[c]
+            shiA[c] = shi[c]
+            alphaA[c] = alpha[c]
+            b0A[c] = b0[c]
+            b1A[c] = b1[c]
+            bmA[c] = bm[c]
+            drowsA[c, c] = 1.0
+        for d in range(ne3):
+            for q in range(K3):
+                kvA[m + d, q] = third.kv[d, min(q, K2 - 1)]
+                kfA[m + d, q] = third.kf[d, min(q, K2 - 1)]
+            nkA[m + d] = third.nk[d]
+            sloA[m + d] = third.slo[d]
+            shiA[m + d] = third.shi[d]
+            alphaA[m + d] = third.alpha[d]
+            b0A[m + d] = third.b0[d]
+            b1A[m + d] = third.b1[d]
+            bmA[m + d] = third.bm[d]
+            for c in range(m):
+                drowsA[m + d, c] = third.drows[d, c]
+        dseg = np.empty(nd3, dtype=np.int64)
+        for d in range(nd3):
+            dseg[d] = _segment_of(0.0, kvA, d, nkA[d], 0)
+        sseg = np.empty(ns3, dtype=np.int64)
+        for j in range(ns3):
+            sseg[j] = _spring_seg(0.0, j, s03, bx3, bn3)
+        tfree = np.zeros(m)
+        ds3 = np.zeros(nd3)
+        da3 = np.zeros(nd3)
+        sk3 = np.zeros(ns3)
+        sa3 = np.zeros(ns3)
+        Mv3 = np.zeros((m, m))
+        Mt3 = np.zeros((m, m))
+        J3 = np.zeros((m, m))
+        Jinv3 = np.zeros((m, m))
+        valid3 = np.zeros(1, dtype=np.int64)
+        rhs3 = np.zeros(m)
+        ve3 = np.zeros(nd3)
+        te3 = np.zeros(ns3)
+        dF3 = np.zeros(m)
+        t3 = np.zeros(m)
+        fd3 = np.zeros(nd3)
+        gs3 = np.zeros(ns3)
+        c03 = np.zeros(nd3)
+        Fp3 = np.zeros(nd3)
+        fp3 = np.zeros(nd3)
+        fpp3 = np.zeros(nd3)
+        n_sp = np.zeros(ns3)
+        u3 = np.zeros(m)
+        w3 = np.zeros(m)
+        z3 = np.zeros(m)
+        y3 = np.zeros(m)
     xr = np.zeros(n)
     xi = np.zeros(n)
     bdr = np.zeros(n)  # B dF of the last step
@@ -999,6 +1419,14 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
                     ti = xi[i]
                     for c in range(m):
                         sfree[c] += CeTr[i, c] * tr - CeTi[i, c] * ti
+        if third is not None:
+            for c in range(m):
+                tfree[c] = t_rig[k, c]
+            for i in range(n):
+                tr = xr[i]
+                ti = xi[i]
+                for c in range(m):
+                    tfree[c] += CtTr[i, c] * tr - CtTi[i, c] * ti
         vfree[0] = v_rig[k, 0] + a0
         vfree[1] = v_rig[k, 1] + a1
         vfree[2] = v_rig[k, 2] + a2
@@ -1014,7 +1442,167 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
                         cfree[c] += CeTr[i, 4 + c] * tr - CeTi[i, 4 + c] * ti
         for c in range(m):
             c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
-        if elements is None:
+        if third is not None:
+            for d in range(nd3):
+                c03[d] = alphaA[d] * Fp3[d] + b1A[d] * fp3[d] + bmA[d] * fpp3[d]
+            # the common cases inline (as _fast_solve's): every element on its segment, or
+            # segment changes by rank-1 updates of the cached inverse (a change of damper d
+            # is J' = J - dw m_d (Dv^T m_d)^T, of spring j J' = J - dk q_j (Dt^T q_j)^T);
+            # the rest (no valid inverse, cycling, a singular update) in _third_solve
+            it = 0
+            if valid3[0] >= 1:
+                for it_ in range(1, THIRD_FAST_PASSES + 1):
+                    for a in range(m):
+                        acc = 0.0
+                        for c in range(m):
+                            acc += Mv3[a, c] * vfree[c] + Mt3[a, c] * tfree[c]
+                        rhs3[a] = acc
+                    for d in range(nd3):
+                        q = c03[d] + b0A[d] * da3[d]
+                        for a in range(m):
+                            rhs3[a] += drowsA[d, a] * q
+                    for j in range(ns3):
+                        if sseg[j] >= 0:
+                            for a in range(m):
+                                rhs3[a] += srows3[j, a] * sa3[j]
+                    for a in range(m):
+                        acc = 0.0
+                        for c in range(m):
+                            acc += Jinv3[a, c] * rhs3[c]
+                        dF3[a] = acc
+                    for a in range(m):
+                        acc_v = vfree[a]
+                        acc_t = tfree[a]
+                        for c in range(m):
+                            acc_v += Deff[a, c] * dF3[c]
+                            acc_t += Dt3[a, c] * dF3[c]
+                        v[a] = acc_v
+                        t3[a] = acc_t
+                    same = True
+                    for d in range(nd3):
+                        x = 0.0
+                        for c in range(m):
+                            x += drowsA[d, c] * v[c]
+                        ve3[d] = x
+                        s2 = _segment_of(x, kvA, d, nkA[d], dseg[d])
+                        if s2 == dseg[d]:
+                            continue
+                        same = False
+                        dseg[d] = s2
+                        sl2, a2 = _segment_line(s2, kvA, kfA, d, nkA[d], sloA[d], shiA[d])
+                        dw = b0A[d] * (sl2 - ds3[d])
+                        ds3[d] = sl2
+                        da3[d] = a2
+                        if dw != 0.0 and valid3[0] >= 1:
+                            for a in range(m):
+                                u3[a] = dw * drowsA[d, a]
+                                acc = 0.0
+                                for c in range(m):
+                                    acc += drowsA[d, c] * Deff[c, a]
+                                w3[a] = acc
+                                for c in range(m):
+                                    Mv3[a, c] += dw * drowsA[d, a] * drowsA[d, c]
+                            den = 1.0
+                            for a in range(m):
+                                acc = 0.0
+                                acc2 = 0.0
+                                for c in range(m):
+                                    acc += Jinv3[a, c] * u3[c]
+                                    acc2 += w3[c] * Jinv3[c, a]
+                                z3[a] = acc
+                                y3[a] = acc2
+                            for a in range(m):
+                                den -= w3[a] * z3[a]
+                            if abs(den) < 1e-8:
+                                valid3[0] = 0
+                            else:
+                                for a in range(m):
+                                    for c in range(m):
+                                        Jinv3[a, c] += z3[a] * y3[c] / den
+                                valid3[0] += 1
+                    for j in range(ns3):
+                        x = 0.0
+                        for c in range(m):
+                            x += srows3[j, c] * t3[c]
+                        te3[j] = x
+                        s2 = _spring_seg(x, j, s03, bx3, bn3)
+                        if s2 == sseg[j]:
+                            continue
+                        same = False
+                        sseg[j] = s2
+                        k2, a2 = _spring_line(s2, j, s03, bx3, bf3, bn3, bslope3)
+                        dk = k2 - sk3[j]
+                        sk3[j] = k2
+                        sa3[j] = a2
+                        if dk != 0.0 and valid3[0] >= 1:
+                            for a in range(m):
+                                u3[a] = dk * srows3[j, a]
+                                acc = 0.0
+                                for c in range(m):
+                                    acc += srows3[j, c] * Dt3[c, a]
+                                w3[a] = acc
+                                for c in range(m):
+                                    Mt3[a, c] += dk * srows3[j, a] * srows3[j, c]
+                            den = 1.0
+                            for a in range(m):
+                                acc = 0.0
+                                acc2 = 0.0
+                                for c in range(m):
+                                    acc += Jinv3[a, c] * u3[c]
+                                    acc2 += w3[c] * Jinv3[c, a]
+                                z3[a] = acc
+                                y3[a] = acc2
+                            for a in range(m):
+                                den -= w3[a] * z3[a]
+                            if abs(den) < 1e-8:
+                                valid3[0] = 0
+                            else:
+                                for a in range(m):
+                                    for c in range(m):
+                                        Jinv3[a, c] += z3[a] * y3[c] / den
+                                valid3[0] += 1
+                    if same:
+                        for d in range(nd3):
+                            fd3[d] = da3[d] + ds3[d] * ve3[d]
+                        for j in range(ns3):
+                            gs3[j] = sa3[j] + sk3[j] * te3[j]
+                        it = it_
+                        if valid3[0] > _MAX_RANK1_UPDATES:
+                            valid3[0] = 0
+                        break
+                    if valid3[0] == 0 or valid3[0] > _MAX_RANK1_UPDATES:
+                        valid3[0] = 0
+                        break
+            if it == 0:
+                it = _third_solve(vfree, tfree, c03, Deff, Dt3, cbar, drowsA, kvA, kfA, nkA,
+                                  sloA, shiA, b0A, srows3, s03, bx3, bf3, bn3, bslope3, dseg,
+                                  sseg, ds3, da3, sk3, sa3, Mv3, Mt3, J3, Jinv3, valid3, rhs3,
+                                  ve3, te3, dF3, v, t3, fd3, gs3)
+            if it < 0:
+                failed = True
+                it = 80
+            if it > worst:
+                worst = it
+            for d in range(nd3):
+                F = c03[d] + b0A[d] * fd3[d]
+                Fp3[d] = F
+                fpp3[d] = fp3[d]
+                fp3[d] = fd3[d]
+            for c in range(m):
+                F_prev[c] = Fp3[c]
+                dF_prev[c] = dF3[c]
+            d0 = dF_prev[0]
+            d1 = dF_prev[1]
+            d2 = dF_prev[2]
+            d3 = dF_prev[3]
+            for i in range(n):
+                ur = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
+                ui = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
+                bpr[i] = ur  # the step before's row, swapped in below
+                bpi[i] = ui
+            bdr, bpr = bpr, bdr
+            bdi, bpi = bpi, bdi
+        elif elements is None:
             it = _fast_solve(vfree, c0, Deff, b0, curves, lines_s, lines_a, bounds, st)
             if it == 0:
                 it = shock_step(vfree, c0, Deff, cbar, b0, curves, st)
@@ -1168,6 +1756,13 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
             for c in range(m):
                 F_out[kk, c] = F_prev[c]
                 St[col, 2 * n + c] = dF_prev[c]
+            if third is not None:
+                for d in range(ne3):
+                    F_out[kk, m + d] = Fp3[m + d]
+                for j in range(ns3):
+                    F_out[kk, m + ne3 + j] = gs3[j]
+                    if sseg[j] >= 0:
+                        n_sp[j] += 1.0
             if v_row >= 0:
                 for c in range(m):
                     y_out[v_row + c, kk] = v[c]
@@ -1209,29 +1804,38 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats):
             stats[0, c] = n_bs[c]
             stats[1, c] = n_lo[c]
             stats[2, c] = c_min[c]
+    if third is not None:
+        for j in range(ns3):
+            tstats[j] = n_sp[j]
     return -1 if failed else worst
 
 
 @_nb.njit(cache=True, error_model="numpy", parallel=True)
-def loop_batch(plant, setups, drive, y_out, F_out, iters, elements, stats):
+def loop_batch(plant, setups, drive, y_out, F_out, iters, elements, stats, third, tstats):
     """The closed loop of every setup (`setups` a :class:`ShockSetups` with one row per
     setup), in parallel over the setups, each by :func:`loop_one`: outputs into ``y_out``
     (n_setups, p, n_out), applied shock forces into ``F_out`` (n_setups, n_out, 4), Newton
     iteration counts into ``iters`` (-1: no convergence). `elements`: ``None`` or an
     :class:`Elements` with one row per setup of its setup fields, the element counts then
-    into ``stats`` (n_setups, 3, 4) (``None`` without)."""
+    into ``stats`` (n_setups, 3, 4) (``None`` without). `third`: ``None`` or a
+    :class:`ThirdLoop` with one row per setup of its setup fields (`elements` then
+    ``None``), the springs' contact counts into ``tstats`` (n_setups, ns), ``F_out`` with
+    ``4 + ne + ns`` columns (:func:`loop_one`)."""
     for s in _nb.prange(setups.b0.shape[0]):
-        if elements is None:
+        if third is not None:
             iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
-                                None, None)
+                                None, None, _third_row(third, s), tstats[s])
+        elif elements is None:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
+                                None, None, None, None)
         else:
             iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
-                                _element_row(elements, s), stats[s])
+                                _element_row(elements, s), stats[s], None, None)
     return
 
 
 @_nb.njit(cache=True, error_model="numpy", nogil=True)
-def loop_serial(plant, setups, drive, y_out, F_out, iters, elements, stats):
+def loop_serial(plant, setups, drive, y_out, F_out, iters, elements, stats, third, tstats):
     """:func:`loop_batch` one setup after the other (the same `loop_one`, the same numbers).
 
     A single setup gains nothing from the parallel loop, and this kernel compiles in about
@@ -1241,12 +1845,15 @@ def loop_serial(plant, setups, drive, y_out, F_out, iters, elements, stats):
     does): the virtual rig runs its runs on threads.
     """
     for s in range(setups.b0.shape[0]):
-        if elements is None:
+        if third is not None:
             iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
-                                None, None)
+                                None, None, _third_row(third, s), tstats[s])
+        elif elements is None:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
+                                None, None, None, None)
         else:
             iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
-                                _element_row(elements, s), stats[s])
+                                _element_row(elements, s), stats[s], None, None)
     return
 
 
@@ -1282,7 +1889,7 @@ def histogram_add(v, lo, inv_width, knee, row):
 
 @_nb.njit(cache=True, error_model="numpy", nogil=True)
 def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters, elements,
-                        stats, hist_spec, hist_out):
+                        stats, hist_spec, hist_out, third, tstats):
     """Worker `w` of `n_workers` of :func:`ident.sim.closedloop.simulate_batch_metrics`:
     the setups ``w, w + n_workers, ...`` (interleaved, so that each worker gets a mix of
     cheap and costly setups), each simulated by :func:`loop_one` and its metrics computed
@@ -1303,6 +1910,8 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
     ``hist_out`` (n_setups, 4, n_bins + 3) by :func:`histogram_add` (zeroed first);
     ``None`` for both: no histogram (numba compiles that case apart, without its code).
     The metrics are the same bits either way (the histogram only reads the velocities).
+    `third` and `tstats` as :func:`loop_batch` (the third elements' motions are metric
+    rows of ``drive.Cy`` as any output's).
     """
     p = drive.Cy.shape[1]
     n_out = drive.y_rig.shape[0]
@@ -1317,18 +1926,25 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
     # loop kernel is then the one-setup loop's compiled code (sample-major rows were about
     # 4 % faster but compile the loop once more, 4 s on a fresh machine's first demo)
     y = np.empty((p + 4, n_out))
-    F = np.empty((n_out, 4))
+    nF = 4
+    if third is not None:
+        nF = 4 + third.drows.shape[0] + third.srows.shape[0]
+    F = np.empty((n_out, nF))
     buf = np.empty((n_out + 2 * padlen, L))
     z0 = np.empty((ns, L))
     z1 = np.empty((ns, L))
     stack = np.empty((METRIC_PW_LEVELS, 10, L))
     sums = np.empty(L)
     for s in range(w, S, n_workers):
-        if elements is None:
-            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y, F, p, None, None)
+        if third is not None:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y, F, p, None, None,
+                                _third_row(third, s), tstats[s])
+        elif elements is None:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y, F, p, None, None, None,
+                                None)
         else:
             iters[s] = loop_one(plant, _setup_row(setups, s), drive, y, F, p,
-                                _element_row(elements, s), stats[s])
+                                _element_row(elements, s), stats[s], None, None)
         if hist_out is not None:
             for c in range(4):
                 row = hist_out[s, c]

@@ -46,6 +46,7 @@ from ident.sim.metric_kernels import metric_rms_rows, sosfiltfilt_rows
 __all__ = [
     "METRIC_NAMES",
     "METRIC_CHANNELS",
+    "THIRD_METRIC_NAMES",
     "METRIC_QUANTITY",
     "BAND_SUFFIXES",
     "Metrics",
@@ -71,6 +72,16 @@ METRIC_CHANNELS.update({f"shock_velocity_rms_{c}": (f"shock_velocity_{c}",)
 #: front/rear, shock travel x4, shock velocity x4).
 METRIC_NAMES = tuple(METRIC_CHANNELS)
 
+#: The third elements' motion metrics (the spec's section "Third elements"; issue 38): per
+#: element (heave or roll, front or rear) the RMS of its travel and of its velocity, band-passed
+#: as the others, present when the element's channels are (a closed loop with the element, or
+#: a run that recorded them). Not among :data:`METRIC_NAMES` (the 14 every prediction has).
+THIRD_METRIC_CHANNELS = {f"{kind}_{what}_rms_{axle}": (f"{kind}_{what}_{axle}",)
+                         for kind in ("heave", "roll") for axle in ("front", "rear")
+                         for what in ("travel", "velocity")}
+THIRD_METRIC_NAMES = tuple(THIRD_METRIC_CHANNELS)
+METRIC_CHANNELS.update(THIRD_METRIC_CHANNELS)
+
 _NORM_NAMES = tuple(f"tire_force_rms_norm_{c}" for c in CORNERS)
 
 #: Name suffixes of the body band and wheel-hop band metrics (``split_hz``).
@@ -90,6 +101,9 @@ del _suffix
 METRIC_QUANTITY.update({f"bump_stop_contact_share_{c}": "dimensionless" for c in CORNERS})
 METRIC_QUANTITY.update({f"tire_liftoff_share_{c}": "dimensionless" for c in CORNERS})
 METRIC_QUANTITY.update({f"tire_contact_min_{c}": "force" for c in CORNERS})
+#: The heave springs' contact share in the closed loop with third elements (issue 38).
+METRIC_QUANTITY.update({f"heave_spring_contact_share_{a}": "dimensionless"
+                        for a in ("front", "rear")})
 #: The shock-velocity histograms' summaries (the planner's ``LoopOptions.histograms``,
 #: :mod:`planner.histograms`; not band-passed): the share of time below the knee, the time
 #: in bump over the time in rebound, the distance from a target (logged) histogram.

@@ -32,6 +32,7 @@ import numpy as np
 from ident.data.channels import CORNERS, SHOCK_FORCES
 from ident.models.lti import hold_coefficients, lag_hold_coefficients
 from ident.sim.closedloop import check_oversample, rig_response
+from ident.sim.loop_third import ThirdDamper, ThirdSpring
 
 __all__ = [
     "ThirdDamper",
@@ -48,45 +49,6 @@ THIRD_TOL_N = 1e-7
 #: Newton iterations per step before the loop is declared ill-posed (piecewise-linear
 #: curves converge in a few; a segment change costs one more).
 THIRD_MAX_ITERATIONS = 60
-
-
-@dataclass(frozen=True)
-class ThirdDamper:
-    """A damper acting through a row over the corners.
-
-    Attributes
-    ----------
-    name : str
-        ``heave_front``, ``roll_rear``, ... (a channel's prefix).
-    row : ndarray, shape (4,)
-        :func:`ident.data.third.element_row`.
-    model : shock model
-        :mod:`ident.models.shocks` (``to_pwl``, ``lag_s``), in the element's own travel and
-        force.
-    """
-
-    name: str
-    row: np.ndarray
-    model: object
-
-
-@dataclass(frozen=True)
-class ThirdSpring:
-    """A spring with a gap acting through a row over the corners (a heave spring).
-
-    Attributes
-    ----------
-    name : str
-        ``heave_front`` or ``heave_rear``.
-    row : ndarray, shape (4,)
-    contact : tuple
-        ``(gap - packer [m], travel_table_m, force_table_n)`` as
-        :func:`ident.models.bumpstops.contact_tables` gives a corner's.
-    """
-
-    name: str
-    row: np.ndarray
-    contact: tuple
 
 
 @dataclass(frozen=True, eq=False)

@@ -215,7 +215,8 @@ def add_element_options(parser):
 
 
 def add_try_options(parser):
-    """``--try-bump-stops`` and ``--try-packers`` (bump stops and packers as setup columns)."""
+    """``--try-bump-stops`` and ``--try-packers`` (bump stops and packers as setup columns),
+    ``--try-heave``, ``--try-roll``, ``--try-heave-spring`` (third elements)."""
     parser.add_argument("--try-bump-stops", action="append", metavar="GROUP=ID,ID",
                         help="rank every setup with each of these bump stops at GROUP "
                         "(front, rear, all or a corner; 'none' for none); repeatable "
@@ -224,6 +225,14 @@ def add_try_options(parser):
                         help="rank every setup with each of these packers at GROUP, in "
                         "the drive's units or with a unit (0,2mm,4mm); repeatable "
                         "(default: the setups' own)")
+    parser.add_argument("--try-heave", action="append", metavar="AXLE=ID,ID",
+                        help="rank every setup with each of these heave dampers at AXLE (front "
+                        "or rear; shock-library ids, 'none' for none); repeatable (a car with "
+                        "third elements; default: the setups' own, else the baseline's)")
+    parser.add_argument("--try-roll", action="append", metavar="AXLE=ID,ID",
+                        help="as --try-heave, for the roll dampers")
+    parser.add_argument("--try-heave-spring", action="append", metavar="AXLE=ID,ID",
+                        help="as --try-heave, for the heave springs (bump-stop-library ids)")
 
 
 def add_prediction_inputs(parser, *, out_help):
@@ -417,7 +426,9 @@ def packer_bounds(args):
 
 def element_choices(args):
     """``--try-bump-stops GROUP=ID,ID`` and ``--try-packers GROUP=L,L`` as
-    :func:`planner.elements.vary_elements`' arguments."""
+    :func:`planner.elements.vary_elements`' arguments; ``--try-heave AXLE=ID,ID``,
+    ``--try-roll`` and ``--try-heave-spring`` as ``vary_third``
+    (:func:`planner.elements.vary_third`)."""
     from planner.elements import parse_length
 
     out = {}
@@ -435,6 +446,16 @@ def element_choices(args):
             if key == "vary_packers_m":
                 vals = [parse_length(v, units=args.units or "SI", where=flag) for v in vals]
             out.setdefault(key, {})[group.strip()] = vals
+    for opt, column in (("try_heave", "heave_{}"), ("try_roll", "roll_{}"),
+                        ("try_heave_spring", "heave_spring_{}")):
+        flag = "--" + opt.replace("_", "-")
+        for item in getattr(args, opt, None) or ():
+            axle, sep, values = item.partition("=")
+            vals = [v.strip() for v in values.split(",") if v.strip()]
+            if not sep or axle.strip() not in ("front", "rear") or not vals:
+                raise ValueError(f"{flag} {item!r}: write AXLE=A,B with AXLE front or rear, "
+                                 f"e.g. {flag} front=H1,H2")
+            out.setdefault("vary_third", {})[column.format(axle.strip())] = vals
     return out
 
 

@@ -163,11 +163,6 @@ def read_setups(path, library=None, bump_stops=None, *, units=None):
     i_third = {e: header.index(e) for e in _THIRD_COLUMNS if e in header}
     i_spring = {a: header.index(k) for a, k in zip(AXLES, _HEAVE_SPRING_COLUMNS) if k in header}
     rows = [(n_skip + reader.line_num, cells) for cells in reader]
-    if i_third or i_spring:
-        logger.warning("%s: columns %s give third elements (heave and roll elements per "
-                       "axle); they are read and checked, but the predictions do not vary "
-                       "them yet: every setup is predicted with the model's", path,
-                       [header[i] for i in (*i_third.values(), *i_spring.values())])
     if UNITS_COLUMN in header:  # the unit system, not a setup's column
         i_units = header.index(UNITS_COLUMN)
         marked = units_of_column((cells[i_units] for _, cells in rows if len(cells) > i_units),

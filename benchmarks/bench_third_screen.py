@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/bench_third.py [--n N] [--repeat R] [--small S]
+    python benchmarks/bench_third_screen.py [--n N] [--repeat R] [--small S]
 
 The known paper car's loop plant (``build_full_car(example_vehicle())``), a 120 s track
 drive at 100 Hz (seed 1), the built-in crate (``planner/examples/library.toml``); the first

@@ -1,0 +1,152 @@
+"""Tests of the closed loop with third elements (ident.sim.closedloop ``third=``,
+ident.sim.loop_kernels.ThirdLoop, ident.sim.loop_third): equivalence with the virtual
+rig's truth simulator (ident.sim.third_loop.simulate_third) for setups with lagged heave
+and roll dampers, a gapped heave spring in contact and a corner bump stop; a batch equals
+its setups one by one; the fused metrics equal the metrics of the full outputs; refusals."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ident.data.third import element_row
+from ident.models.bumpstops import BumpStop
+from ident.models.shocks import DigressiveShock, LinearShock
+from ident.models.vehicle import build_full_car, example_vehicle
+from ident.sim.closedloop import simulate, simulate_batch, simulate_batch_metrics
+from ident.sim.loop_third import ThirdDamper, ThirdSpring, pack_third
+from ident.sim.metrics import THIRD_METRIC_NAMES, compute_metrics
+from ident.sim.third_loop import simulate_third
+
+sys.path.insert(0, str(Path(__file__).parent))
+from test_third_loop import _drive  # noqa: E402  (the truth tests' drive)
+
+#: The fast loop and the truth simulator have the same discretization and solve every step
+#: to the same root (the fast loop exactly on the final segments, the truth by Newton to
+#: 1e-7 N): the same numbers to rounding (measured 2e-14 of a channel's RMS at most).
+RTOL_TRUTH = 1e-9
+#: The fused metrics against compute_metrics on the full outputs: the same sums in another
+#: order (the metric rows are products of averaged coefficients), rounding only.
+RTOL_FUSED = 1e-10
+
+
+@pytest.fixture(scope="module")
+def car():
+    return build_full_car(example_vehicle())
+
+
+def _plant(car, models):
+    return car.loop_plant(np.array([m.equivalent_damping(0.1) for m in models]))
+
+
+def _rel(a, b):
+    return np.max(np.abs(a - b)) / max(np.sqrt(np.mean(b ** 2)), 1e-30)
+
+
+def _digressive(name, scale=1.0, lag_s=0.0):
+    return DigressiveShock(name, bump_low_n_s_m=6000.0 * scale, bump_knee_m_s=0.03,
+                           bump_high_n_s_m=1500.0 * scale, rebound_low_n_s_m=9000.0 * scale,
+                           rebound_knee_m_s=0.04, rebound_high_n_s_m=2500.0 * scale,
+                           lag_s=lag_s)
+
+
+HS = BumpStop(id="HS", gap_m=0.004, travel_m=[0.0, 0.005, 0.01], force_n=[0.0, 2000.0, 6000.0])
+
+
+def _setups():
+    """Setups ``(shocks, dampers, springs, stop_tables)``: lagged heave and roll dampers with
+    a gapped heave spring in contact; digressive dampers front and rear with a packed heave
+    spring and a corner bump stop; a heave spring alone."""
+    hf, rf, hr = (element_row("heave_front", 1.0), element_row("roll_front", 0.8),
+                  element_row("heave_rear", 1.2))
+    base = [LinearShock("s", 3000.0), LinearShock("s2", 2800.0, lag_s=0.003),
+            LinearShock("s", 3000.0), LinearShock("s", 3200.0)]
+    dig = [_digressive("d"), _digressive("d", 1.1, lag_s=0.002), _digressive("d", 0.9),
+           _digressive("d")]
+    stop = (0.006, np.array([0.0, 0.004, 0.008]), np.array([0.0, 800.0, 4000.0]))
+    return [
+        (base, [ThirdDamper("heave_front", hf, LinearShock("h", 8000.0, lag_s=0.004)),
+                ThirdDamper("roll_front", rf, LinearShock("r", 3000.0, lag_s=0.002))],
+         [ThirdSpring("heave_front", hf, (0.003, HS.travel_m, HS.force_n))], None),
+        (dig, [ThirdDamper("heave_front", hf, _digressive("h", 2.0, lag_s=0.003)),
+               ThirdDamper("heave_rear", hr, _digressive("hr", 1.5))],
+         [ThirdSpring("heave_front", hf, (0.002, HS.travel_m, HS.force_n)),
+          ThirdSpring("heave_rear", hr, (0.0, HS.travel_m, HS.force_n))],
+         [stop, None, None, stop]),
+        (base, [], [ThirdSpring("heave_front", hf, (0.001, HS.travel_m, HS.force_n))], None),
+    ]
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return _drive(np.random.default_rng(4), aero=True)
+
+
+@pytest.mark.parametrize("k", [0, 1, 2])
+def test_equals_the_truth_simulator(car, drive, k):
+    shocks, dampers, springs, stops = _setups()[k]
+    plant = _plant(car, shocks)
+    want = simulate_third(plant, drive, shocks, dampers=dampers, springs=springs,
+                          stop_tables=stops)
+    got = simulate(plant, drive, shocks, oversample=1, stop_tables=stops,
+                   third=(dampers, springs))
+    for name, x in want.channels.items():
+        assert _rel(got.channels[name], x) < RTOL_TRUTH, name
+    # the heave springs are in contact at times, not always (the gap matters)
+    for s in springs:
+        share = got.elements[f"heave_spring_contact_share_{s.name.split('_')[1]}"]
+        assert 0.0 < share < 1.0
+        force = got.channels[f"heave_spring_force_{s.name.split('_')[1]}"]
+        assert np.all((force > 0) | (force == 0))
+
+
+def test_batch_is_its_setups_and_fused_metrics_are_the_outputs_metrics(car, drive):
+    cases = _setups()
+    shocks = [c[0] for c in cases] + [cases[0][0]]
+    third = [(c[1], c[2]) for c in cases] + [None]
+    stops = [c[3] for c in cases] + [None]
+    plant = _plant(car, cases[0][0])
+    batch = simulate_batch(plant, drive, shocks, oversample=1, bump_stops=stops, third=third)
+    for i in (1, 3):
+        one = simulate(plant, drive, shocks[i], oversample=1, stop_tables=stops[i],
+                       third=third[i])
+        for name, x in one.channels.items():
+            # the same loop; the output product has the batch's element columns (another
+            # width, another BLAS blocking): rounding
+            assert _rel(batch.channels[name][i], x) < RTOL_FUSED, name
+    # a setup without third elements: the plain loop's numbers (its stops none either)
+    plain = simulate(plant, drive, shocks[3], oversample=1)
+    for name, x in plain.channels.items():
+        assert _rel(batch.channels[name][3], x) < RTOL_TRUTH, name
+    assert np.all(batch.channels["roll_force_front"][3] == 0.0)
+    fused = simulate_batch_metrics(plant, drive, shocks, oversample=1, bump_stops=stops,
+                                   third=third)
+    full = compute_metrics(batch.channels, fs=batch.fs_hz)
+    names = set(fused.metrics.values) & set(THIRD_METRIC_NAMES)
+    assert names == {"heave_travel_rms_front", "heave_velocity_rms_front",
+                     "heave_travel_rms_rear", "heave_velocity_rms_rear",
+                     "roll_travel_rms_front", "roll_velocity_rms_front"}
+    for name, x in full.values.items():
+        np.testing.assert_allclose(fused.metrics.values[name], x, rtol=RTOL_FUSED,
+                                   err_msg=name)
+    for name, x in batch.elements.items():
+        np.testing.assert_array_equal(fused.metrics.values[name], x, err_msg=name)
+    assert np.all(fused.metrics.values["bump_stop_contact_share_LF"][1] > 0)
+
+
+def test_refusals(car, drive):
+    shocks, dampers, springs, _ = _setups()[0]
+    plant = _plant(car, shocks)
+    with pytest.raises(ValueError, match="static_corner_load_n"):
+        simulate(plant, drive, shocks, oversample=1, third=(dampers, springs),
+                 static_corner_load_n=[3000.0] * 4)
+    moved = [ThirdDamper("heave_front", element_row("heave_front", 1.1), dampers[0].model)]
+    with pytest.raises(ValueError, match="another row"):
+        pack_third([(dampers, springs), (moved, [])], 1e-3)
+    with pytest.raises(ValueError, match="unknown third spring"):
+        pack_third([([], [ThirdSpring("roll_front", element_row("roll_front", 1.0), None)])],
+                   1e-3)
+    bad = [ThirdSpring("heave_front", element_row("heave_front", 1.0), (-0.001, [0, 1], [0, 1]))]
+    with pytest.raises(ValueError, match="contact travel"):
+        simulate(plant, drive, shocks, oversample=1, third=([], bad))
