@@ -34,7 +34,7 @@ from planner.options import (ElementOptions, HistogramOptions, LoopOptions, RunO
 from planner.objective import (Objective, default_objective, mark_inventory, score_setups,
                                time_domain_metrics)
 from planner.predict import predict_setups
-from planner.screen import describe_agreement, screen_setups
+from planner.screen import describe_agreement, screen_setups, third_choices
 from planner.click_settings import click_neighbours, click_values
 from planner.setups import enumerate_setups, resolve_baseline
 from planner.sweep import screen_setups_on
@@ -376,13 +376,16 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
     if top < 1:
         raise PlannerError(f"top must be at least 1, got {top}")
     # 1. screening of everything
-    if third is not None:
-        # the screening with third elements is planner.screen's (issue 38); until it takes
-        # them, every setup is simulated in the time domain (exact, slower)
-        log.info("rank: %d setups with third elements simulated in the time domain (no "
-                 "screening with third elements yet)", len(setups))
-        screened = predict_setups(model, drive, setups, library, loop=loop, elements=ekw,
-                                  progress=progress)
+    if third is not None:  # the third elements (and any stops) linearized with the shocks
+        if scheduler is not None and str(scheduler).strip().lower() != "none":
+            log.info("rank: screening with third elements runs in this process (not on %s)",
+                     scheduler)
+        screened = screen_setups(model, drive, setups, library, band_hz=band_hz,
+                                 reduce_rtol=loop.reduce_rtol, progress=progress,
+                                 third=third_choices(third), **loop_arguments(elem))
+        if elem is not None:
+            screened = replace(screened, table=pd.concat(
+                [screened.table, elem.columns(screened.table.index)], axis=1))
     elif elem is not None:  # the stops linearized with the shocks, in this process
         if scheduler is not None and str(scheduler).strip().lower() != "none":
             log.info("rank: screening with bump stops or static loads runs in this process "
@@ -457,7 +460,7 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
                                     vary_packers_m=elements.vary_packers_m)
     if third is not None:
         settings["third"] = dict(third.car.to_dict(), vary_third=elements.vary_third,
-                                 screening="time domain")
+                                 screening="linearized")
     table["unresolved"] = ""
     if uncertainty and getattr(model, "frf", None) is not None:
         unc = prediction_uncertainty(model, drive, cand, library, draws=uncertainty, loop=loop,

@@ -47,13 +47,13 @@ from tqdm.auto import tqdm
 from ident.data.channels import CORNERS, RIG_INPUTS, SHOCK_VELOCITIES
 from ident.data.drive import check_drive_inputs
 from ident.data.third import THIRD_ELEMENTS, element_axle
-from ident.models.bumpstops import contact_tables
 from ident.models.shocks import LinearShock
 from ident.identify.model import LOOP_REDUCE_RTOL
 from ident.sim.closedloop import corner_values, pack_bump_stops, pack_setups
 from ident.sim.metrics import METRIC_NAMES
 from planner.errors import PlannerError
-from planner.options import ScreenOptions, as_options
+from planner.elements import model_setup_third
+from planner.options import ElementOptions, ScreenOptions, as_options
 from planner.plant import as_loop_plant
 from planner.predict import Predictions, prepare_drive, resolve_setups
 from planner.screen_kernels import (
@@ -77,7 +77,6 @@ from planner.screen_third_kernels import (
     ThirdOutputs,
     screen_batch_third,
 )
-from planner.setups import unknown_id_error
 
 __all__ = [
     "LIFTOFF_LINEAR_LIMIT",
@@ -994,68 +993,41 @@ def resolve_third(setups, model, library):
         bump-stop library (naming the setup and the element), or a packer thicker than
         its spring's gap.
     """
-    car = getattr(model, "third", None)
-    if car is None or not car.elements:
+    if getattr(model, "third", None) is None or not model.third.elements:
         return None
-    names = tuple(car.elements.elements)
-    rows = np.array([car.elements.row(e) for e in names])
-    elems = getattr(model, "elements", None)
-    stops = getattr(elems, "bump_stops", None)
+    return third_choices(model_setup_third(setups, model, library, ElementOptions(),
+                                           where="screening"))
+
+
+def third_choices(resolved):
+    """The screening's form of third elements resolved for the loop.
+
+    Parameters
+    ----------
+    resolved : planner.elements.SetupThird or None
+        :func:`planner.elements.setup_third` (or :func:`~planner.elements.model_setup_third`)
+        of the setups: one resolution of ids serves the time domain and the screening.
+
+    Returns
+    -------
+    ThirdChoices or None
+        None for None.
+    """
+    if resolved is None:
+        return None
+    names = tuple(resolved.car.elements.elements)
+    rows = np.array([resolved.car.elements.row(e) for e in names])
     dampers, springs = [], []
-    columns = {e: [] for e in names}
-    heave = [e for e in names if e.startswith("heave")]
-    columns.update({f"heave_spring_{element_axle(e)}": [] for e in heave})
-    shocks, tables = {}, {}
-    for s in setups:
-        chosen = dict(car.baseline.dampers)
-        chosen.update(s.third or {})
-        spring_ids = dict(car.baseline.heave_springs)
-        spring_ids.update(s.heave_springs or {})
-        drow, srow = [], []
-        for e in names:
-            sid = chosen.get(e)
-            columns[e].append("none" if sid is None else sid)
-            if sid is None:
-                drow.append(None)
-            else:
-                if sid not in shocks:
-                    if sid not in library:
-                        raise unknown_id_error(f"setup {s.name!r}: third element {e}", sid,
-                                               library)
-                    shocks[sid] = library[sid]
-                drow.append(shocks[sid])
-            if not e.startswith("heave"):
-                srow.append(None)
-                continue
-            axle = element_axle(e)
-            hid = spring_ids.get(axle)
-            columns[f"heave_spring_{axle}"].append("none" if hid is None else hid)
-            if hid is None:
-                srow.append(None)
-                continue
-            key = (hid, axle)
-            if key not in tables:
-                if stops is None or hid not in stops.ids:
-                    known = [] if stops is None else list(stops.ids)
-                    raise PlannerError(f"setup {s.name!r}: heave spring {axle} {hid!r} is not "
-                                       f"in the model's bump-stop library (known: {known}); "
-                                       "name a heave spring of the session's bump_stop_library "
-                                       "or 'none'")
-                packer = float(car.baseline.heave_packers_m.get(axle) or 0.0)
-                tables[key] = contact_tables([stops[hid], None, None, None],
-                                             [packer, 0.0, 0.0, 0.0],
-                                             where=f"setup {s.name!r}: heave spring {axle}",
-                                             error=PlannerError)[0]
-            srow.append(tables[key])
-        dampers.append(tuple(drow))
-        springs.append(tuple(srow))
-    return ThirdChoices(elements=names, rows=rows, dampers=tuple(dampers),
-                        springs=tuple(springs), columns=columns)
+    for d_list, s_list in resolved.entries:
+        dm = {d.name: d.model for d in d_list}
+        sp = {sp.name: sp.contact for sp in s_list}
+        dampers.append(tuple(dm.get(e) for e in names))
+        springs.append(tuple(sp.get(e) if e.startswith("heave") else None for e in names))
+    table = resolved.columns(list(range(len(resolved.entries))))
+    return ThirdChoices(names, rows, tuple(dampers), tuple(springs),
+                        columns={c: table[c].tolist() for c in table.columns})
 
 
-#: The element slots of the third-element kernel: every third element a car may carry, in
-#: :data:`ident.data.third.THIRD_ELEMENTS` order (heave front, heave rear, roll front, roll
-#: rear: the kernel knows each slot's axle); unused slots are zero rows.
 _THIRD_SLOTS = len(THIRD_ELEMENTS)
 
 

@@ -355,10 +355,10 @@ def test_resolve_third_refuses_unknown_ids():
     lib = _nonlinear_library()
     model = _model()
     bad = Setup("bad", {c: "G10" for c in CORNERS}, third={"heave_front": "X9"})
-    with pytest.raises(PlannerError, match="third element heave_front.*X9"):
+    with pytest.raises(PlannerError, match="setup 'bad'.*heave_front.*'X9'"):
         resolve_third([bad], model, lib)
     bad = Setup("bad", {c: "G10" for c in CORNERS}, heave_springs={"front": "ZZ"})
-    with pytest.raises(PlannerError, match="heave spring front 'ZZ'.*bump-stop library"):
+    with pytest.raises(PlannerError, match="setup 'bad'.*heave_spring_front.*'ZZ'.*bump-stop library"):
         resolve_third([bad], model, lib)
 
 

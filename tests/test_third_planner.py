@@ -151,8 +151,11 @@ def test_rank_picks_among_heave_dampers(plant, drive):
     r = rank_setups(plant, drive, LIB, setups=[_setup("base")], loop=LoopOptions(oversample=1),
                     elements=el, top=3, baseline="base")
     assert sorted(r.table["heave_front"]) == ["H1", "H2", "none"]  # H1 is the baseline's
-    assert r.agreement["spearman"] == pytest.approx(1.0)
-    assert r.settings["third"]["screening"] == "time domain"
+    # the screening (heave damper linearized) agrees on the best; the other two are within
+    # 0.5 % of each other in the time domain, closer than the screening's error on this
+    # 8 s drive, so their order is not asked of it
+    assert r.agreement["same_best"] and np.isfinite(r.agreement["spearman"])
+    assert r.settings["third"]["screening"] == "linearized"
     with pytest.raises(PlannerError, match="on a model without third elements"):
         rank_setups(plant, drive, LIB, setups=[_setup("base")], loop=LoopOptions(oversample=1),
                     elements=ElementOptions(use_model=False, vary_third={"heave_front": ["H1"]}),

@@ -27,7 +27,8 @@ from ident.data.drive import Drive
 from ident.models.library import ShockLibrary
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
-from planner.elements import ELEMENT_COLUMNS, loop_arguments, model_setup_elements
+from planner.elements import (ELEMENT_COLUMNS, THIRD_COLUMNS, loop_arguments,
+                              model_setup_elements)
 from planner.options import ElementOptions, LoopOptions, RunOptions, as_options
 from planner.plant import as_loop_plant
 from planner.predict import predict_setups, prepare_drive
@@ -563,7 +564,7 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     table = pd.concat(tables).sort_values("_order", kind="stable").drop(columns="_order")
     table = table.reset_index(drop=True)
     metrics = [c for c in table.columns if c not in ("drive", "perturbation", "setup") + CORNERS
-               and c not in ELEMENT_COLUMNS]
+               and c not in ELEMENT_COLUMNS and c not in THIRD_COLUMNS]
     n_clipped = 0
     if any(f.kind == "click" for f in perturbations.factors):
         # the clicks clipped at a range end, per (perturbation, setup), said in the table
