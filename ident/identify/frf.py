@@ -98,6 +98,7 @@ from ident.data.channels import (CORNERS, RESPONSE_CHANNELS, RIG_INPUTS, SHOCK_F
                             rig_inputs_of)
 from ident.errors import IdentificationError, LowCoherenceWarning
 from ident.identify.diagnose import rest_levels
+from ident.identify.elements import third_element_force
 from ident.models.lti import lag_coefficients
 from ident.models.shocks import LinearShock
 
@@ -842,16 +843,31 @@ def bump_stop_force(run, library):
 
 
 def _stop_deviations(session, runs):
-    """Per run the dynamic part (mean removed) of the declared stops' force, or None, and
-    the settings that record how it was computed (empty without stops)."""
+    """Per run the dynamic part (mean removed) of the declared stops' and third elements'
+    force at the corners, or None, and the settings that record how it was computed (empty
+    without stops and elements)."""
     library = getattr(session, "bump_stops", None)
-    out, info = [], {}
+    elements = getattr(session, "third_elements", None)
+    out, info, third_info = [], {}, {}
     for run in runs:
         G, inf = bump_stop_force(run, library)
+        T, tinf = (None, None) if not elements or not run.third else third_element_force(
+            run, elements, session.shocks, library, levels=rest_levels(run)[0],
+            where=_run_file(session, run))
+        if T is not None:
+            G = T if G is None else G + T
+            third_info[run.name] = tinf
         out.append(None if G is None else G - G.mean(axis=1, keepdims=True))
         if inf is not None:
             info[run.name] = inf
-    return out, ({"bump_stop_force": info} if info else {})
+    settings = {"bump_stop_force": info} if info else {}
+    if third_info:
+        settings["third_element_force"] = third_info
+    return out, settings
+
+
+def _run_file(session, run):
+    return run.file if session.path is None else str(Path(session.path) / run.file)
 
 
 def _is_cbar_linear(model, cbar):
