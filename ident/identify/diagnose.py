@@ -73,7 +73,7 @@ from ident.data.drive import Drive, decimate_bandlimited
 from ident.data.session import STATIC_OFFSET_SHARE
 from ident.data.third import AXLES
 from ident.data.units import format_quantity
-from ident.identify.elements import third_element_force
+from ident.identify.thirdforce import third_element_force
 from ident.models.bumpstops import contact_tables
 from ident.sim.closedloop import refine_input, simulate
 from ident.sim.third_loop import ThirdDamper, ThirdSpring, simulate_third

@@ -98,7 +98,7 @@ from ident.data.channels import (CORNERS, RESPONSE_CHANNELS, RIG_INPUTS, SHOCK_F
                             rig_inputs_of)
 from ident.errors import IdentificationError, LowCoherenceWarning
 from ident.identify.diagnose import rest_levels
-from ident.identify.elements import third_element_force
+from ident.identify.thirdforce import third_element_force
 from ident.models.lti import lag_coefficients
 from ident.models.shocks import LinearShock
 

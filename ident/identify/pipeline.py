@@ -45,7 +45,7 @@ from ident.identify.frf import (
     estimate_frf,
     shock_force_deviation,
 )
-from ident.identify.elements import third_element_force
+from ident.identify.thirdforce import third_element_force
 from ident.identify.model import VehicleModel, has_feedthrough
 from ident.identify.shockcheck import check_shock_library
 from ident.models.bumpstops import CarElements

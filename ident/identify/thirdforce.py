@@ -23,7 +23,7 @@ from ident.data.drive import decimate_bandlimited
 from ident.models.lti import lag_hold_coefficients
 from ident.sim.closedloop import refine_input
 
-__all__ = ["third_element_force", "element_channel", "DAMPER_REFINE"]
+__all__ = ["third_element_force", "element_channel", "describe_third", "DAMPER_REFINE"]
 
 log = logging.getLogger(__name__)
 
@@ -165,3 +165,37 @@ def third_element_force(run, elements, shocks, bump_stops=None, *, levels, where
     log.info("run %s: third elements' force in the corners' inputs (%s)", run.name,
              ", ".join(f"{k} {v}" for k, v in info.items()))
     return G, info
+
+
+def describe_third(third):
+    """One line for a model's summary: the third elements declared and the baseline's fit.
+
+    Parameters
+    ----------
+    third : ident.data.third.CarThird
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> from ident.data.third import CarThird, RunThird, ThirdElements
+    >>> describe_third(CarThird(ThirdElements({"heave_front": 1.0, "roll_front": 0.8}),
+    ...                         RunThird(dampers={"heave_front": "H1"},
+    ...                                  heave_springs={"front": "HS-F"},
+    ...                                  heave_packers_m={"front": 0.002})))
+    'third elements heave_front (motion ratio 1), roll_front (motion ratio 0.8) declared; baseline: heave_front H1, roll_front none, heave spring front HS-F (packer 2 mm (0.07874 in))'
+    """
+    mr = third.elements.motion_ratios
+    declared = ", ".join(f"{e} (motion ratio {m:.4g})" for e, m in mr.items())
+    base = third.baseline
+    fitted = [f"{e} {base.dampers.get(e) or 'none'}" for e in mr]
+    for axle, sid in base.heave_springs.items():
+        if sid is None:
+            continue
+        packer = float(base.heave_packers_m.get(axle, 0.0))
+        fitted.append(f"heave spring {axle} {sid}"
+                      + (f" (packer {packer * 1e3:.4g} mm ({packer / 0.0254:.4g} in))"
+                         if packer else ""))
+    return f"third elements {declared} declared; baseline: {', '.join(fitted)}"
