@@ -24,6 +24,18 @@ The checks, per run and corner:
     (:data:`STIFFENING_FORCE_SHARE`). Without those channels the same hinge is fitted to
     the validation residual of the travel (measured less than the model's;
     :data:`STIFFENING_TRAVEL_SHARE`), a weaker check.
+``heave stiffening`` (the signs of an undeclared heave element; per axle)
+    The two wheels' balance residuals of an axle fitted with one hinge common to both
+    against the axle's heave travel (the mean of the two shock travels from rest), and with
+    a hinge per corner against its own travel: a heave spring with a gap (a third element,
+    the spec's "Third elements") pushes both wheels alike as the axle's heave travel passes
+    its gap. Reported, naming the axle (``front``, ``rear`` in the findings' ``corner``),
+    when the common hinge is significant and large (as ``stiffening``) and explains at least
+    :data:`HEAVE_PREFERENCE` times what the corners' own hinges explain; the axle's corners
+    are then not reported for ``stiffening`` besides. The declared third elements' force
+    (:func:`ident.identify.thirdforce.third_element_force`) is taken out of every balance
+    first, and the runs are re-simulated with them
+    (:func:`ident.sim.third_loop.simulate_third`).
 ``friction``
     Suspension friction (bushings, bearings, seals, in parallel with the shock): the same
     balance regressed on its linear part, the shock velocity and the sign of the shock

@@ -113,6 +113,7 @@ __all__ = [
     "frf_from_arrays",
     "shock_force_deviation",
     "bump_stop_force",
+    "third_force_deviation",
     "baseline_damping",
     "default_nperseg",
     "ESTIMATORS",
@@ -842,6 +843,33 @@ def bump_stop_force(run, library):
     return G, info
 
 
+def third_force_deviation(session, run):
+    """The dynamic part (mean removed) of a run's third elements' force at the corners.
+
+    :func:`ident.identify.thirdforce.third_element_force` with the session's elements and
+    libraries, the heave springs' travel from the run's rest
+    (:func:`ident.identify.diagnose.rest_levels`): what :func:`estimate_frf` adds to the
+    corners' ``dF`` (beside the bump stops').
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+    run : ident.data.session.Run
+
+    Returns
+    -------
+    ndarray, shape (4, n_samples), or None
+        None when the session declares no third elements or the run fits none.
+    """
+    elements = getattr(session, "third_elements", None)
+    if not elements or not run.third:
+        return None
+    G, _ = third_element_force(run, elements, session.shocks,
+                               getattr(session, "bump_stops", None),
+                               levels=rest_levels(run)[0], where=_run_file(session, run))
+    return None if G is None else G - G.mean(axis=1, keepdims=True)
+
+
 def _stop_deviations(session, runs):
     """Per run the dynamic part (mean removed) of the declared stops' and third elements'
     force at the corners, or None, and the settings that record how it was computed (empty
@@ -1011,7 +1039,10 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
         (:func:`bump_stop_force`: the table at the travel measured from the car at rest),
         so that the estimate is of the car without them; ``settings["bump_stop_force"]``
         then says per run where the rest was taken, the rest less the mean travel and
-        the share of time in contact.
+        the share of time in contact. A session that declares third elements has their
+        force at the corners in the ``dF`` too (:func:`third_force_deviation`), and
+        ``settings["third_element_force"]`` says per run and element whether it was
+        measured or computed from its curve.
 
     Raises
     ------

@@ -577,6 +577,12 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         lost the tire (:func:`pad_corrected_session`, :data:`LIFTOFF_PASSES` times, each on
         a model of the tire forces fitted to the session as corrected so far), and the
         model's ``liftoff`` records the lifted samples and corrections per run.
+        A session that declares third elements (heave and roll elements per axle) has
+        their force in the corners' force inputs too
+        (:func:`ident.identify.thirdforce.third_element_force`: measured, or from their
+        curves and heave springs), so the model is the car without them, and
+        ``settings["third"]`` (:attr:`VehicleModel.third`) holds what it declared
+        (:func:`session_third`).
     """
     cond = {} if smooth_domain is None else {"smooth_domain": smooth_domain}
     measured = session

@@ -17,9 +17,9 @@ import numpy as np
 from scipy import signal
 
 from ident.data.channels import CORNERS
+from ident.data.drive import decimate_bandlimited
 from ident.data.third import HEAVE_ELEMENTS, element_axle
 from ident.errors import IdentificationError
-from ident.data.drive import decimate_bandlimited
 from ident.models.lti import lag_hold_coefficients
 from ident.sim.closedloop import refine_input
 
