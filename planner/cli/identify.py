@@ -115,7 +115,10 @@ def run(args):
           f"{int(table.order.min())}..{int(table.order.max())}; c_bar "
           f"{c_bar} {unit_label('damping', session.units)}")
     print("\n".join(model.noise.lines(table)))
-    if model.elements is not None:  # what the session declared: in the loop of predictions
+    corner_elements = model.elements is not None and (
+        model.third is None or model.elements.static_corner_load_n is not None
+        or any(v is not None for v in model.elements.baseline_stops.values()))
+    if corner_elements:  # what the session declared: in the loop of predictions
         lift = model.liftoff
         print(f"real car: {model.elements.describe()}; the bump stops' force is in the "
               "corners' force inputs (the linear model is free of it), and predictions put "
@@ -124,7 +127,8 @@ def run(args):
                  "(pad corrections, settings['liftoff'])"))
     if model.third is not None:  # heave and roll elements: out of the linear model
         print(f"{describe_third(model.third)}; their force is in the corners' force inputs "
-              "(the linear model is free of them); the model keeps them (VehicleModel.third)")
+              "(the linear model is free of them; heave springs are entries of the bump-stop "
+              "library); the model keeps them (VehicleModel.third)")
     print("diagnosis: skipped (--no-diagnosis)" if model.diagnosis is None else
           "\n".join(model.diagnosis.summary_lines()))
     if model.shock_check is not None:  # the session's shock forces against the library
