@@ -76,9 +76,10 @@ def test_lifted_samples_and_the_pad_correction(rng):
 #: The identified model's FRFs (every rig input and dF to every output, 0.5-20 Hz) against
 #: the known car's linear plant without its third elements: the median over the pairs of
 #: the relative RMS error. The same plan and noise on the car without elements (a plain
-#: car): 1.0 %; with them, forces measured: 1.6 %; from their curves: 1.8 %; the elements
-#: left in the linear car (before issue 38): 43 %.
-THIRD_FRF_MEDIAN = 0.025
+#: car): 1.0 %; with them, forces measured: 1.1 % (1.6 % with the elements' whole force in
+#: dF, not written around their linear part); from their curves: 1.3 %; the elements left
+#: in the linear car (before issue 38): 43 %.
+THIRD_FRF_MEDIAN = 0.02
 
 
 def _frf_error(model, vehicle):
@@ -120,6 +121,9 @@ def test_third_elements_truth_round_trip(prototype_case, prototype_identified):
                                "roll_front": "measured"}
     err = _frf_error(model, vehicle)
     assert np.median(err) < THIRD_FRF_MEDIAN
+    # written around the heave and roll dampers' linear part at the baseline, brought back
+    damping = np.array(model.frf.settings["third_linear_damping_n_s_m"])
+    assert damping[0, 1] > 0 and damping[0, 1] != damping[0, 0] and not damping[:2, 2:].any()
     assert len(model.diagnosis) == 0, model.diagnosis.lines()
 
 
