@@ -96,13 +96,14 @@ def _frf_error(model, vehicle):
     return np.sqrt(np.mean(np.abs(H - Ht) ** 2, -1) / np.mean(np.abs(Ht) ** 2, -1))
 
 
-def test_third_elements_truth_round_trip(prototype_case, prototype_identified):
+def test_third_elements_truth_round_trip(prototype_case, prototype_identified, tmp_path):
     """A prototype-like car (heave elements with gapped springs front and rear, a front
     roll damper; runs changing corner, heave and roll dampers; 2 % noise): the elements'
     measured forces in the corners' inputs, the identified linear car is the known car
     without them; the model keeps the declared elements and the baseline's fit, and its
     diagnosis (the runs re-simulated with the elements) finds nothing."""
     from ident.data.third import CarThird
+    from ident.identify.model import load_model
 
     vehicle, session = prototype_case
     model = prototype_identified
@@ -113,6 +114,8 @@ def test_third_elements_truth_round_trip(prototype_case, prototype_identified):
         "heave_springs": {"front": "HS-F", "rear": "HS-R"},
         "heave_packers_m": {"front": 0.0, "rear": 0.0}}
     assert model.third == CarThird(session.third_elements, session.run("baseline").third)
+    model.save(tmp_path / "m.npz")
+    assert load_model(tmp_path / "m.npz").third == model.third  # kept in the model file
     assert set(model.elements.bump_stops.ids) == {"HS-F", "HS-R"}  # the heave springs
     how = model.frf.settings["third_element_force"]
     assert set(how) == {r.name for r in session.runs}
