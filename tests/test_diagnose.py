@@ -183,6 +183,8 @@ def test_undeclared_bump_stops_are_found_with_their_corner_and_share(real_car):
     assert "bump stop" in stiff.message.iloc[0] and "declare the bump stops" in stiff.fix.iloc[0]
     # the re-simulation misses the car at every corner (stops at the front, lift-off all round)
     assert set(_found(diag, "residual").corner) == set(CORNERS)
+    # corner stops, not a heave element: each corner's own travel explains its stiffening
+    assert len(_found(diag, "heave stiffening")) == 0
 
 
 def test_warnings_name_corner_kind_and_share(real_car, caplog):
@@ -325,3 +327,37 @@ def test_identify_warns_of_friction_bump_stops_and_lift_off(friction_session):
     lifted = [g for g in diag.groups() if g["kind"] == "lift-off"]
     assert lifted and all(0 < g["share_max"] < 0.1 for g in lifted)
     assert all("floor" in line for line in diag.lines() if "lift-off" in line.split(":")[1])
+
+
+def test_undeclared_heave_element_is_warned_naming_the_axle(prototype_case,
+                                                           prototype_identified, caplog):
+    """The prototype's session with its third elements stripped (no ``third_elements``, no
+    run's ``third`` or ``heave_springs``, no third channels): its gapped heave springs show
+    as a stiffening common to each axle's two wheels, against the axle's heave travel, in
+    every run; one warning per axle names it, with the onset in the project's units, and
+    the corners' own stiffening is not reported besides. Declared (the identified model's
+    own diagnosis), nothing is found (tests/test_pipeline.py)."""
+    from ident.data.channels import THIRD_CHANNELS
+    from ident.data.third import RunThird
+
+    _, session = prototype_case
+    runs = [dataclasses.replace(r, third=RunThird(), channels={
+        k: x for k, x in r.channels.items() if k not in THIRD_CHANNELS}) for r in session.runs]
+    bare = make_session(session.name, runs, session.shocks)
+    with caplog.at_level(logging.WARNING, logger="ident.identify.diagnose"):
+        diag = diagnose_session(bare, prototype_identified, residual=False)
+    heave = _found(diag, "heave stiffening")
+    assert sorted(set(heave.corner)) == ["front", "rear"]
+    assert len(heave) == 2 * len(session.runs)
+    assert len(_found(diag, "stiffening")) == 0
+    # the onset: the heave travel (mean of the two shock travels) at which the spring
+    # closes, gap / motion ratio (3 mm front, 3.3 mm rear), found 0.5-1 mm late
+    front = heave[heave.corner == "front"].value
+    assert ((front > 0.003) & (front < 0.0045)).all(), front
+    text = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len([t for t in text if t.startswith("front: heave stiffening")]) == 1
+    assert len([t for t in text if t.startswith("rear: heave stiffening")]) == 1
+    line = next(t for t in text if t.startswith("front"))
+    assert re.search(r"undeclared heave element at the front axle.* \d\.\d+ mm of the "
+                     r"axle's heave travel", line), line
+    assert "third_elements = { heave_front = <motion ratio> }" in line

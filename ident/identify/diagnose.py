@@ -24,6 +24,18 @@ The checks, per run and corner:
     (:data:`STIFFENING_FORCE_SHARE`). Without those channels the same hinge is fitted to
     the validation residual of the travel (measured less than the model's;
     :data:`STIFFENING_TRAVEL_SHARE`), a weaker check.
+``heave stiffening`` (the signs of an undeclared heave element; per axle)
+    The two wheels' balance residuals of an axle fitted with one hinge common to both
+    against the axle's heave travel (the mean of the two shock travels from rest), and with
+    a hinge per corner against its own travel: a heave spring with a gap (a third element,
+    the spec's "Third elements") pushes both wheels alike as the axle's heave travel passes
+    its gap. Reported, naming the axle (``front``, ``rear`` in the findings' ``corner``),
+    when the common hinge is significant and large (as ``stiffening``) and explains at least
+    :data:`HEAVE_PREFERENCE` times what the corners' own hinges explain; the axle's corners
+    are then not reported for ``stiffening`` besides. The declared third elements' force
+    (:func:`ident.identify.thirdforce.third_element_force`) is taken out of every balance
+    first, and the runs are re-simulated with them
+    (:func:`ident.sim.third_loop.simulate_third`).
 ``friction``
     Suspension friction (bushings, bearings, seals, in parallel with the shock): the same
     balance regressed on its linear part, the shock velocity and the sign of the shock
@@ -71,8 +83,12 @@ import pandas as pd
 from ident.data.channels import CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
 from ident.data.drive import Drive, decimate_bandlimited
 from ident.data.session import STATIC_OFFSET_SHARE
+from ident.data.third import AXLES
 from ident.data.units import format_quantity
+from ident.identify.thirdforce import third_element_force
+from ident.models.bumpstops import contact_tables
 from ident.sim.closedloop import refine_input, simulate
+from ident.sim.third_loop import ThirdDamper, ThirdSpring, simulate_third
 
 __all__ = [
     "AMPLITUDE_GROWTH",
@@ -84,6 +100,7 @@ __all__ = [
     "FRICTION_FORCE_SHARE",
     "FRICTION_REFINE",
     "FRICTION_Z",
+    "HEAVE_PREFERENCE",
     "KINDS",
     "LIFTOFF_SHARE_MIN",
     "NEAR_ZERO_CONTACT",
@@ -107,7 +124,8 @@ log = logging.getLogger(__name__)
 #: Columns of :attr:`Diagnosis.findings`.
 FINDING_COLUMNS = ("run", "corner", "kind", "share", "value", "message", "fix")
 #: The kinds of finding.
-KINDS = ("bump stop contact", "stiffening", "lift-off", "friction", "residual", "amplitude")
+KINDS = ("bump stop contact", "stiffening", "heave stiffening", "lift-off", "friction",
+         "residual", "amplitude")
 
 #: Length of the start and end windows that give a channel's rest level [s]: the drives
 #: fade in and out over 1 s (raised cosine), whose first 0.1 s is below 2.5 % of full level.
@@ -137,6 +155,15 @@ STIFFENING_FORCE_SHARE = 0.2
 #: cars: at most 0.041; stops touched 5-9 %: 0.23-0.68 at the front, but lift-off alone
 #: gives 0.22 at a rear corner, and the onsets scatter (shares 2-50 %): a weaker check.
 STIFFENING_TRAVEL_SHARE = 0.3
+#: An axle's stiffening is read as an undeclared heave element (``heave stiffening``) when
+#: one hinge on the axle's heave travel, common to its two wheels, explains at least this
+#: many times the force that the two corners' own hinges on their own travels explain
+#: together (it is also significant, :data:`STIFFENING_Z`, and large,
+#: :data:`STIFFENING_FORCE_SHARE`; a common hinge has half the parameters). Measured at 2 %
+#: noise, 100 s runs: gapped heave springs front and rear (prototype-like car, springs
+#: closed 25-31 % of the time) 2.0-2.8; undeclared corner stops at the front (GT-like car,
+#: touched 5-9 %) 0.28-0.34.
+HEAVE_PREFERENCE = 1.0
 #: The sticking band of the suspension friction [m/s]: the friction changes sign within
 #: +-this shock velocity (or within the velocity's measured noise, where larger: the data
 #: cannot place the reversal closer). 5 mm/s: the virtual rig's smoothing
@@ -243,7 +270,7 @@ class Diagnosis:
             largest share, or value): corners in ``LF, RF, LR, RR, all`` order.
         """
         out = []
-        order = {c: i for i, c in enumerate((*CORNERS, "all"))}
+        order = {c: i for i, c in enumerate((*CORNERS, *AXLES, "all"))}
         kinds = {k: i for i, k in enumerate(KINDS)}
         keys = sorted({(f.corner, f.kind) for f in self.findings.itertuples()},
                       key=lambda k: (order.get(k[0], 9), kinds.get(k[1], 9)))
@@ -453,6 +480,65 @@ def _balance_residual(run, corner, levels, declared_force):
     return r, float(np.std(r[low]))
 
 
+def _heave_stiffening(run, levels, declared, tire_rms):
+    """Per axle, a stiffening common to its two wheels against their heave travel.
+
+    The two wheels' force-balance residuals (:func:`_balance_residual`, the declared
+    elements taken out) are fitted with one hinge on the axle's heave travel (the mean of
+    the two corners' shock travel from rest), common to both (:func:`_hinge` of their mean),
+    and with a hinge per corner on its own travel. Returns ``{axle: (z, onset_m, share,
+    force_share, ratio)}`` for the axles with both wheels' channels: `ratio` is the force
+    the common hinge explains over what the two corners' hinges explain together.
+    """
+    out = {}
+    for axle, (left, right) in zip(AXLES, (("LF", "RF"), ("LR", "RR"))):
+        parts = []
+        for c in (left, right):
+            bal = _balance_residual(run, c, levels, declared.get(c))
+            if bal is None:
+                break
+            x = run.channels[f"shock_travel_{c}"] - levels[f"shock_travel_{c}"]
+            parts.append((x,) + bal)
+        if len(parts) < 2:
+            continue
+        (xl, rl, sl), (xr, rr, sr) = parts
+        xh = (xl + xr) / 2
+        z, s0, p, k = _hinge(xh, (rl + rr) / 2, float(np.hypot(sl, sr)) / 2)
+        if not z > 0:
+            continue
+        common = 2 * k ** 2 * float(np.sum(np.maximum(xh - s0, 0.0) ** (2 * p)))
+        own = 0.0
+        for x, r, sig in parts:
+            zc, sc, pc, kc = _hinge(x, r, sig)
+            if zc > 0:
+                own += kc ** 2 * float(np.sum(np.maximum(x - sc, 0.0) ** (2 * pc)))
+        force = k * max(np.quantile(xh, 0.999) - s0, 0.0) ** p
+        rms = np.nanmean([tire_rms.get(left, np.nan), tire_rms.get(right, np.nan)])
+        out[axle] = (z, s0, float(np.mean(xh > s0)), force / rms if rms > 0 else np.inf,
+                     common / own if own > 0 else np.inf)
+    return out
+
+
+def _third_loop(session, run):
+    """The run's fitted third elements as :func:`ident.sim.third_loop.simulate_third` takes
+    them: ``(dampers, springs)``, or None when the run fits none."""
+    elements = getattr(session, "third_elements", None)
+    if not elements or not run.third:
+        return None
+    dampers = [ThirdDamper(e, elements.row(e),
+                           session.shocks.get(sid, where=f"run '{run.name}' third {e}"))
+               for e, sid in run.third.dampers.items() if sid is not None]
+    springs = []
+    for axle, sid in run.third.heave_springs.items():
+        if sid is None:
+            continue
+        contact = contact_tables([session.bump_stops[sid], None, None, None],
+                                 [run.third.heave_packers_m.get(axle, 0.0), 0.0, 0.0, 0.0],
+                                 where=f"run '{run.name}': heave_springs {axle}")[0]
+        springs.append(ThirdSpring(f"heave_{axle}", elements.row(f"heave_{axle}"), contact))
+    return dampers, springs
+
+
 def shock_velocity(run, corner):
     """A corner's shock velocity [m/s]: the channel, else the travel differentiated.
 
@@ -544,6 +630,25 @@ def _simulate_run(plant, run, session, levels, oversample, failed):
     static = session.static_corner_load_n
     if static is not None and not all(f"tire_force_{c}" in names for c in CORNERS):
         static = None
+    third = _third_loop(session, run) if all(
+        f"shock_travel_{c}" in names for c in CORNERS) else None
+    if third is not None and "third" not in failed:
+        # the car with its third elements: the coupled loop, on the refined drive
+        r = max(int(oversample), 1)
+        u = refine_input(drive.as_array(), r)
+        fine = Drive(name=drive.name, fs_hz=drive.fs_hz * r,
+                     channels={c: u[:, j] for j, c in enumerate(RIG_INPUTS)
+                               if c in drive.rig_inputs})
+        try:
+            resp = simulate_third(plant, fine, models, dampers=third[0], springs=third[1],
+                                  stop_tables=None if stops is None else
+                                  [stops.get(c) for c in CORNERS])
+        except ValueError as exc:
+            failed.add("third")
+            log.info("run %s: re-simulation with the third elements failed (%s)", run.name,
+                     exc)
+        else:
+            return _Resampled({k: v[::r] for k, v in resp.channels.items()}), ""
     tries = [("full", stops, static, "")]
     if static is not None:
         tries.append(("stops", stops, None, ("without the static loads (the lift-off loop did "
@@ -552,6 +657,9 @@ def _simulate_run(plant, run, session, levels, oversample, failed):
         tries.append(("plain", None, None, ("without the bump stops and static loads (the loop "
                                            "did not converge with them on this model)")))
     tries = [t for t in tries if t[0] not in failed]
+    if third is not None:
+        tries = [(key, st, sl, note or "without the third elements (the loop did not "
+                  "converge with them on this model)") for key, st, sl, note in tries]
     for k, (key, st, sl, note) in enumerate(tries):
         try:
             resp = simulate(plant, drive, models, oversample=oversample, stop_tables=st,
@@ -566,6 +674,13 @@ def _simulate_run(plant, run, session, levels, oversample, failed):
         return resp, note
 
 
+@dataclass(frozen=True)
+class _Resampled:
+    """A re-simulated run's channels at the run's samples (as a ``Response`` has them)."""
+
+    channels: dict
+
+
 _EFFECTS = {
     "stiffening": (("signs of a bump stop: the wheel's force balance stiffens in compression "
                    "beyond {travel} of travel from rest ({rest}); the identified "
@@ -576,6 +691,18 @@ _EFFECTS = {
                    ("declare the bump stops: bump_stop_library = \"bumpstops.toml\" in "
                    "session.toml and each run's bump_stops (and packers); or lower the drive "
                    "level so that the stops are not reached")),
+    "heave stiffening": (("signs of an undeclared heave element at the {axle} axle: the "
+                         "{pair} wheels' force balances stiffen together in compression "
+                         "beyond {travel} of the axle's heave travel (the mean of their shock "
+                         "travels from rest, {rest}), more than either corner's own travel "
+                         "explains: a heave spring with a gap (a third element) or a heave "
+                         "bump stop; the identified model is linear and reads it as a stiffer "
+                         "car everywhere, so predicted metrics are off where it acts"),
+                         ("declare the third element: third_elements = {{ heave_{axle} = "
+                          "<motion ratio> }} in session.toml, and each run's third and "
+                          "heave_springs (the heave spring's gap and table in the bump-stop "
+                          "library); or lower the drive level or the aero load so that it is "
+                          "not reached")),
     "stiffening_travel": (("signs of a bump stop: the measured travel stays below the "
                           "model's beyond {travel} of its travel from rest ({rest}; "
                           "without force channels the onset and share are rough); the model "
@@ -684,6 +811,33 @@ def diagnose_session(session, model, *, oversample=2, residual=True, plant=None)
         if residual:
             resp, note = _simulate_run(plant, run, session, levels, oversample, failed)
             sim = resp.channels
+        # the declared third elements' force at the corners, out of the wheels' balance
+        third_force = None
+        if getattr(session, "third_elements", None) and run.third:
+            third_force = third_element_force(run, session.third_elements, session.shocks,
+                                              session.bump_stops, levels=levels)[0]
+        declared = {}
+        for ci, c in enumerate(CORNERS):
+            sid = run.bump_stops.get(c)
+            stop = None if sid is None or session.bump_stops is None else session.bump_stops[sid]
+            if stop is not None and f"shock_travel_{c}" in run.channels:
+                declared[c] = stop.force(run.channels[f"shock_travel_{c}"]
+                                         - levels[f"shock_travel_{c}"], run.packers_m.get(c, 0.0))
+            if third_force is not None and np.any(third_force[ci]):
+                declared[c] = third_force[ci] + declared.get(c, 0.0)
+        # an undeclared heave element: a stiffening common to both wheels of an axle
+        tire_rms = {c: float(np.std(run.channels[f"tire_force_{c}"])) for c in CORNERS
+                    if f"tire_force_{c}" in run.channels}
+        heave = {}
+        for axle, (z, s0, share, force_share, ratio) in _heave_stiffening(
+                run, levels, declared, tire_rms).items():
+            log.debug("run %s, %s axle: heave stiffening z %.3g, onset %.4g m, force share "
+                      "%.3g, common/own %.3g", run.name, axle, z, s0, force_share, ratio)
+            if (z >= STIFFENING_Z and force_share >= STIFFENING_FORCE_SHARE
+                    and ratio >= HEAVE_PREFERENCE):
+                heave[axle] = True
+                findings.append(_finding(run.name, axle, "heave stiffening", share, s0,
+                                         rest=rest_word, axle=axle))
         for ci, c in enumerate(CORNERS):
             row = {"run": run.name, "corner": c, "drive_level_m": level_by_run[run.name]}
             if sim is not None:
@@ -698,13 +852,12 @@ def diagnose_session(session, model, *, oversample=2, residual=True, plant=None)
             # declared bump stop: share beyond contact
             sid = run.bump_stops.get(c)
             stop = None if sid is None or session.bump_stops is None else session.bump_stops[sid]
-            declared_force = None
+            declared_force = declared.get(c)
             if stop is not None and travel is not None:
                 packer = run.packers_m.get(c, 0.0)
                 s0 = stop.contact_travel_m(packer)
                 share = float(np.mean(travel > s0))
                 row["contact_share"] = share
-                declared_force = stop.force(travel, packer)
                 if share >= CONTACT_SHARE_MIN:
                     findings.append(_finding(run.name, c, "bump stop contact", share, s0,
                                              rest=rest_word))
@@ -739,7 +892,8 @@ def diagnose_session(session, model, *, oversample=2, residual=True, plant=None)
                                stiffening_force_share=force_share)
                     limit = (STIFFENING_TRAVEL_SHARE if variant == "stiffening_travel"
                              else STIFFENING_FORCE_SHARE)
-                    if z >= STIFFENING_Z and force_share >= limit:
+                    if (z >= STIFFENING_Z and force_share >= limit
+                            and ("front" if ci < 2 else "rear") not in heave):
                         findings.append(_finding(run.name, c, "stiffening", share, s0,
                                                  variant=variant, rest=rest_word))
             # suspension friction: a force in phase with the sign of the shock velocity
@@ -891,7 +1045,7 @@ def _shown(value_si, quantity, *, small=False):
 
 def _finding(run, corner, kind, share, value, *, variant=None, rest="rest", how="",
              given=False, channel="", noise=0.0, low="", low_mm=0.0, high_mm=0.0,
-             band=np.nan, v_rms=np.nan):
+             band=np.nan, v_rms=np.nan, axle=""):
     message, fix = _EFFECTS[variant or kind]
     fields = {"value_mm": 1e3 * value if np.isfinite(value) else np.nan, "value": value,
               "rest": rest, "share_pct": 100 * share if np.isfinite(share) else np.nan,
@@ -904,7 +1058,8 @@ def _finding(run, corner, kind, share, value, *, variant=None, rest="rest", how=
               "low_mm": low_mm, "high_mm": high_mm, "band_mm_s": 1e3 * band,
               "v_rms": v_rms, "c_eq": (value * np.sqrt(2 / np.pi) / v_rms
                                        if v_rms > 0 else np.nan),
-              "load": -value if np.isfinite(value) else np.nan}
+              "load": -value if np.isfinite(value) else np.nan, "axle": axle,
+              "pair": {"front": "LF and RF", "rear": "LR and RR"}.get(axle, "")}
     # the values with their units, in the run's unit system (ident.data.units.display_units)
     fields.update(travel=_shown(value, "displacement", small=True),
                   force=_shown(value, "force"), load_force=_shown(fields["load"], "force"),

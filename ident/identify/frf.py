@@ -98,6 +98,7 @@ from ident.data.channels import (CORNERS, RESPONSE_CHANNELS, RIG_INPUTS, SHOCK_F
                             rig_inputs_of)
 from ident.errors import IdentificationError, LowCoherenceWarning
 from ident.identify.diagnose import rest_levels
+from ident.identify.thirdforce import third_element_force
 from ident.models.lti import lag_coefficients
 from ident.models.shocks import LinearShock
 
@@ -112,6 +113,8 @@ __all__ = [
     "frf_from_arrays",
     "shock_force_deviation",
     "bump_stop_force",
+    "third_force_deviation",
+    "third_linear_damping",
     "baseline_damping",
     "default_nperseg",
     "ESTIMATORS",
@@ -841,17 +844,137 @@ def bump_stop_force(run, library):
     return G, info
 
 
-def _stop_deviations(session, runs):
-    """Per run the dynamic part (mean removed) of the declared stops' force, or None, and
-    the settings that record how it was computed (empty without stops)."""
+def third_linear_damping(session):
+    """The third elements' linear part at the baseline: the corners' damping matrix they add.
+
+    ``sum_e c_e m_e m_e^T`` over the elements with a damper in the baseline runs (those of
+    :func:`baseline_damping`), ``c_e`` the damper's equivalent linear damping at the
+    element's velocity RMS there (``m_e @ v``; stochastic linearization, as ``c_bar``).
+    :func:`estimate_frf` writes the corners' inputs around ``diag(c_bar)`` plus this matrix
+    (the elements' force less their linear part is then small and independent of the rig
+    inputs, as a corner shock's ``F - c_bar v``), and brings the estimate back to
+    ``diag(c_bar)`` (:func:`_around_corner_damping`): the model is the car without the
+    elements. On the prototype-like car of the tests the linear car's metric error falls
+    from 3.0 % median to 1.1 % (the same plan without elements: 0.8 %).
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+
+    Returns
+    -------
+    ndarray, shape (4, 4), or None
+        [N/(m/s)]; None without a damper fitted in the baseline runs.
+    """
+    elements = getattr(session, "third_elements", None)
+    if not elements:
+        return None
+    runs = list(session.runs)
+    base = [r for r in runs if r.role == "baseline"]
+    if not base:
+        setups = [tuple(r.setup[c] for c in CORNERS) for r in runs]
+        common = max(set(setups), key=setups.count)
+        base = [r for r, s in zip(runs, setups) if s == common]
+    C = np.zeros((4, 4))
+    for e in elements.elements:
+        row = elements.row(e)
+        ids = {r.third.dampers.get(e) for r in base} - {None}
+        if not ids:
+            continue
+        v_rms = np.sqrt(np.mean([np.mean((row @ np.vstack([r.dynamic(c) for c in
+                                                          SHOCK_VELOCITIES])) ** 2)
+                                 for r in base]))
+        c = np.mean([float(session.shocks.get(i).equivalent_damping(max(v_rms, 1e-6)))
+                     for i in ids])
+        C += c * np.outer(row, row)
+    return C if np.any(C) else None
+
+
+def _around_corner_damping(frf, damping, outputs):
+    """An estimate around ``diag(c_bar) + damping`` brought back to ``diag(c_bar)``.
+
+    With ``dF' = dF - D v`` (``D`` = `damping`) the estimate is ``y = H_r u + H_s dF'``;
+    with ``v = H_vr u + H_vs dF'`` (the shock-velocity rows), ``v = M (H_vr u + H_vs dF)``,
+    ``M = (I + H_vs D)^-1``, so ``y = (H_r - H_s D M H_vr) u + (H_s - H_s D M H_vs) dF``.
+    The coherences and independent fractions stay those of the estimate (its quality); the
+    rows are then cut to `outputs`.
+    """
+    outs = list(frf.output_names)
+    vi = [outs.index(v) for v in SHOCK_VELOCITIES]
+    nr = len(frf.input_names) - len(DF_INPUTS)
+    H = np.moveaxis(frf.H, -1, 0)  # (f, out, in)
+    Hr, Hs = H[:, :, :nr], H[:, :, nr:]
+    D = np.asarray(damping, dtype=float)[None]
+    K = D @ np.linalg.inv(np.eye(4)[None] + Hs[:, vi] @ D)
+    H = np.concatenate([Hr - Hs @ K @ Hr[:, vi], Hs - Hs @ K @ Hs[:, vi]], axis=2)
+    keep = [outs.index(o) for o in outputs]
+    settings = dict(frf.settings, third_linear_damping_n_s_m=np.asarray(damping).tolist())
+    return Frf(f_hz=frf.f_hz, H=np.moveaxis(H, 0, -1)[keep], input_names=frf.input_names,
+               output_names=tuple(outputs), multiple_coherence=frf.multiple_coherence[keep],
+               partial_coherence=frf.partial_coherence[keep],
+               input_condition=frf.input_condition,
+               independent_fraction=frf.independent_fraction, flagged=frf.flagged,
+               n_averages=frf.n_averages, cbar_n_s_m=frf.cbar_n_s_m, fs_hz=frf.fs_hz,
+               settings=settings)
+
+
+def third_force_deviation(session, run):
+    """The dynamic part (mean removed) of a run's third elements' force at the corners.
+
+    :func:`ident.identify.thirdforce.third_element_force` with the session's elements and
+    libraries, the heave springs' travel from the run's rest
+    (:func:`ident.identify.diagnose.rest_levels`): what :func:`estimate_frf` adds to the
+    corners' ``dF`` (beside the bump stops').
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+    run : ident.data.session.Run
+
+    Returns
+    -------
+    ndarray, shape (4, n_samples), or None
+        None when the session declares no third elements or the run fits none.
+    """
+    elements = getattr(session, "third_elements", None)
+    if not elements or not run.third:
+        return None
+    G, _ = third_element_force(run, elements, session.shocks,
+                               getattr(session, "bump_stops", None),
+                               levels=rest_levels(run)[0], where=_run_file(session, run))
+    return None if G is None else G - G.mean(axis=1, keepdims=True)
+
+
+def _stop_deviations(session, runs, damping=None):
+    """Per run the dynamic part (mean removed) of the declared stops' and third elements'
+    force at the corners, or None, and the settings that record how it was computed (empty
+    without stops and elements). `damping` (4, 4): the third elements' linear part
+    (:func:`third_linear_damping`), taken off at the measured shock velocities."""
     library = getattr(session, "bump_stops", None)
-    out, info = [], {}
+    elements = getattr(session, "third_elements", None)
+    out, info, third_info = [], {}, {}
     for run in runs:
         G, inf = bump_stop_force(run, library)
+        T, tinf = (None, None) if not elements or not run.third else third_element_force(
+            run, elements, session.shocks, library, levels=rest_levels(run)[0],
+            where=_run_file(session, run))
+        if T is not None:
+            G = T if G is None else G + T
+            third_info[run.name] = tinf
+        if damping is not None:
+            lin = damping @ np.vstack([run.channels[c] for c in SHOCK_VELOCITIES])
+            G = -lin if G is None else G - lin
         out.append(None if G is None else G - G.mean(axis=1, keepdims=True))
         if inf is not None:
             info[run.name] = inf
-    return out, ({"bump_stop_force": info} if info else {})
+    settings = {"bump_stop_force": info} if info else {}
+    if third_info:
+        settings["third_element_force"] = third_info
+    return out, settings
+
+
+def _run_file(session, run):
+    return run.file if session.path is None else str(Path(session.path) / run.file)
 
 
 def _is_cbar_linear(model, cbar):
@@ -995,7 +1118,10 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
         (:func:`bump_stop_force`: the table at the travel measured from the car at rest),
         so that the estimate is of the car without them; ``settings["bump_stop_force"]``
         then says per run where the rest was taken, the rest less the mean travel and
-        the share of time in contact.
+        the share of time in contact. A session that declares third elements has their
+        force at the corners in the ``dF`` too (:func:`third_force_deviation`), and
+        ``settings["third_element_force"]`` says per run and element whether it was
+        measured or computed from its curve.
 
     Raises
     ------
@@ -1016,6 +1142,10 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     outs = _output_channels(session, outputs)
     cbar = baseline_damping(session) if cbar_n_s_m is None else np.broadcast_to(
         np.asarray(cbar_n_s_m, dtype=float), (4,)).copy()
+    damping = third_linear_damping(session)
+    if damping is not None:  # the velocities are needed to bring the estimate back
+        wanted = outs
+        outs = outs + tuple(v for v in SHOCK_VELOCITIES if v not in outs)
     fs = session.fs_hz
     n_min = min(r.n_samples for r in session.runs)
     if nperseg is None:
@@ -1040,10 +1170,11 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     rig = inputs[:-len(DF_INPUTS)]
     m = len(inputs)
     if estimator == "lpm":
-        return _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, lpm_degree, lpm_half_width,
-                                 lpm_coherence_dof, exact_linear)
+        frf = _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, lpm_degree,
+                                lpm_half_width, lpm_coherence_dof, exact_linear, damping)
+        return frf if damping is None else _around_corner_damping(frf, damping, wanted)
     per_run = []
-    stop_dev, stop_settings = _stop_deviations(session, session.runs)
+    stop_dev, stop_settings = _stop_deviations(session, session.runs, damping)
     for run, G in zip(session.runs, stop_dev):
         _, dF = shock_force_deviation(run, session.shocks, cbar, exact_linear=exact_linear)
         if G is not None:
@@ -1076,10 +1207,11 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     mult = mult.T  # (n_out, n_f)
     flagged = indep.T < FLAG_INDEPENDENT_FRACTION
     _warn_flagged(session, flagged, band, band_hz, stacklevel=2)
-    return Frf(f_hz=f, H=H, input_names=inputs, output_names=outs,
-               multiple_coherence=mult,
-               partial_coherence=partial, input_condition=cond, independent_fraction=indep.T,
-               flagged=flagged, n_averages=n_avg, cbar_n_s_m=cbar, fs_hz=fs, settings=settings)
+    frf = Frf(f_hz=f, H=H, input_names=inputs, output_names=outs,
+              multiple_coherence=mult,
+              partial_coherence=partial, input_condition=cond, independent_fraction=indep.T,
+              flagged=flagged, n_averages=n_avg, cbar_n_s_m=cbar, fs_hz=fs, settings=settings)
+    return frf if damping is None else _around_corner_damping(frf, damping, wanted)
 
 
 def _warn_flagged(session, flagged, band, band_hz, *, stacklevel):
@@ -1095,7 +1227,7 @@ def _warn_flagged(session, flagged, band, band_hz, *, stacklevel):
 
 
 def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width, coherence_dof,
-                      exact_linear):
+                      exact_linear, damping=None):
     """The ``estimator="lpm"`` branch of :func:`estimate_frf` (arguments checked there)."""
     fs = session.fs_hz
     inputs = model_inputs(session)
@@ -1104,7 +1236,7 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
     runs = list(session.runs)
     n_samples = [r.n_samples for r in runs]
     records, dF_pow = [], []
-    stop_dev, stop_settings = _stop_deviations(session, runs)
+    stop_dev, stop_settings = _stop_deviations(session, runs, damping)
     for run, G in zip(runs, stop_dev):
         _, dF = shock_force_deviation(run, session.shocks, cbar, exact_linear=exact_linear)
         if G is not None:

@@ -32,6 +32,7 @@ from scipy.optimize import lsq_linear
 from ident.data.channels import CORNERS
 from ident.interrupts import quiet_worker
 from ident.data.session import STATIC_OFFSET_SHARE, make_session
+from ident.data.third import CarThird
 from ident.errors import FitWarning, LowCoherenceWarning
 from ident.identify import fit as fitmod
 from ident.identify.condition import condition_frf, conditioned_standard_error
@@ -44,6 +45,7 @@ from ident.identify.frf import (
     estimate_frf,
     shock_force_deviation,
 )
+from ident.identify.thirdforce import third_element_force
 from ident.identify.model import VehicleModel, has_feedthrough
 from ident.identify.shockcheck import check_shock_library
 from ident.models.bumpstops import CarElements
@@ -54,6 +56,7 @@ __all__ = [
     "liftoff_samples",
     "pad_corrected_session",
     "session_elements",
+    "session_third",
     "LIFTOFF_PASSES",
     "PAD_RESPONSE_S",
     "pair_noise_level",
@@ -574,6 +577,12 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         lost the tire (:func:`pad_corrected_session`, :data:`LIFTOFF_PASSES` times, each on
         a model of the tire forces fitted to the session as corrected so far), and the
         model's ``liftoff`` records the lifted samples and corrections per run.
+        A session that declares third elements (heave and roll elements per axle) has
+        their force in the corners' force inputs too
+        (:func:`ident.identify.thirdforce.third_element_force`: measured, or from their
+        curves and heave springs), so the model is the car without them, and
+        ``settings["third"]`` (:attr:`VehicleModel.third`) holds what it declared
+        (:func:`session_third`).
     """
     cond = {} if smooth_domain is None else {"smooth_domain": smooth_domain}
     measured = session
@@ -613,6 +622,9 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
     elements = session_elements(session)
     if elements is not None:
         settings["elements"] = elements.to_dict()
+    third = session_third(session)
+    if third is not None:
+        settings["third"] = third.to_dict()
     model = model.with_results(settings=settings, liftoff=liftoff)
     if diagnose:
         model = model.with_results(diagnosis=diagnose_session(session, model))
@@ -644,15 +656,42 @@ def session_elements(session):
     static = getattr(session, "static_corner_load_n", None)
     if library is None and static is None:
         return None
+    run = _baseline_run(session)
+    return CarElements(library, dict(run.bump_stops) if library is not None else {},
+                       dict(run.packers_m) if library is not None else {}, static)
+
+
+def _baseline_run(session):
+    """The first run with role ``baseline``, else the first of the most common setup."""
     runs = list(session.runs)
     base = [r for r in runs if r.role == "baseline"]
     if not base:
         setups = [tuple(r.setup[c] for c in CORNERS) for r in runs]
         common = max(set(setups), key=setups.count)
         base = [r for r, s in zip(runs, setups) if s == common]
-    run = base[0]
-    return CarElements(library, dict(run.bump_stops) if library is not None else {},
-                       dict(run.packers_m) if library is not None else {}, static)
+    return base[0]
+
+
+def session_third(session):
+    """The third elements a session declares, as a model keeps them (``VehicleModel.third``).
+
+    The baseline's dampers, heave springs and packers are those of the baseline run picked
+    as :func:`session_elements` picks it (the first run with role ``baseline``, else the
+    first run of the most common corner setup).
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+
+    Returns
+    -------
+    ident.data.third.CarThird or None
+        None when the session declares no third elements (``third_elements``).
+    """
+    elements = getattr(session, "third_elements", None)
+    if not elements:
+        return None
+    return CarThird(elements, _baseline_run(session).third)
 
 
 #: Passes of the lift-off correction (:func:`identify_session`): each fits a model of the
@@ -752,6 +791,12 @@ def pad_corrected_session(session, tire_model, lifted):
         n = run.n_samples
         _, dF = shock_force_deviation(run, session.shocks, cbar)
         G, _ = bump_stop_force(run, getattr(session, "bump_stops", None))
+        third = getattr(session, "third_elements", None)
+        T = None if not third or not run.third else third_element_force(
+            run, third, session.shocks, getattr(session, "bump_stops", None),
+            levels=rest_levels(run)[0])[0]
+        if T is not None:
+            G = T if G is None else G + T
         if G is not None:
             dF = dF + G - G.mean(axis=1, keepdims=True)
         X = np.vstack([np.vstack([run.dynamic(c) for c in rig]), dF])
@@ -799,5 +844,6 @@ def pad_corrected_session(session, tire_model, lifted):
                  {c: round(v * 1e3, 2) for c, v in entry["pad_correction_max_m"].items()})
     corrected = make_session(session.name, runs, session.shocks, units=session.units,
                              bump_stops=getattr(session, "bump_stops", None),
-                             static_corner_load_n=session.static_corner_load_n)
+                             static_corner_load_n=session.static_corner_load_n,
+                             third_elements=getattr(session, "third_elements", None) or None)
     return corrected, info

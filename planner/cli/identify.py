@@ -58,6 +58,7 @@ def run(args):
 
     from ident.data.session import read_session
     from ident.data.units import format_significant, from_si, set_display_units, unit_label
+    from ident.identify.thirdforce import describe_third
     from ident.identify.model import summary_path, write_model_summary
     from ident.identify.pipeline import identify_session
     from planner.noise import with_noise_report
@@ -114,13 +115,20 @@ def run(args):
           f"{int(table.order.min())}..{int(table.order.max())}; c_bar "
           f"{c_bar} {unit_label('damping', session.units)}")
     print("\n".join(model.noise.lines(table)))
-    if model.elements is not None:  # what the session declared: in the loop of predictions
+    corner_elements = model.elements is not None and (
+        model.third is None or model.elements.static_corner_load_n is not None
+        or any(v is not None for v in model.elements.baseline_stops.values()))
+    if corner_elements:  # what the session declared: in the loop of predictions
         lift = model.liftoff
         print(f"real car: {model.elements.describe()}; the bump stops' force is in the "
               "corners' force inputs (the linear model is free of it), and predictions put "
               "the stops and static loads in the loop"
               + ("" if not lift else "; samples where a tire left its pad were corrected "
                  "(pad corrections, settings['liftoff'])"))
+    if model.third is not None:  # heave and roll elements: out of the linear model
+        print(f"{describe_third(model.third)}; their force is in the corners' force inputs "
+              "(the linear model is free of them; heave springs are entries of the bump-stop "
+              "library); the model keeps them (VehicleModel.third)")
     print("diagnosis: skipped (--no-diagnosis)" if model.diagnosis is None else
           "\n".join(model.diagnosis.summary_lines()))
     if model.shock_check is not None:  # the session's shock forces against the library

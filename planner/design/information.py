@@ -18,7 +18,7 @@ from scipy import signal
 from ident.data import drive as drv
 from ident.data.channels import CORNERS, RIG_INPUTS
 from ident.identify.condition import frf_standard_error
-from ident.identify.frf import shock_force_deviation
+from ident.identify.frf import shock_force_deviation, third_force_deviation
 from ident.sim.virtual_rig import default_plan, make_plan_drive
 from planner.objective import score_setups
 from planner.screen import DriveBands, metric_rows, screen_response, screen_setups
@@ -179,11 +179,15 @@ def candidate_information(plant, setups, kinds, drive_of, library, edges, f_c):
 
 def session_information(session, cbar, edges):
     """The recorded runs' own information: sum over runs of ``T * S_xx`` of their measured
-    ``[u_rig, dF]``, shape (n_b, 11, 11)."""
+    ``[u_rig, dF]`` (with the third elements' force, as the FRF estimate has it), shape
+    (n_b, 11, 11)."""
     nb = edges.size - 1
     M = np.zeros((nb, 11, 11), dtype=complex)
     for run in session.runs:
         _, dF = shock_force_deviation(run, session.shocks, cbar)
+        third = third_force_deviation(session, run)
+        if third is not None:  # the third elements' force: part of the corners' inputs
+            dF = dF + third
         x = np.vstack([np.vstack([run.dynamic(c) for c in RIG_INPUTS]), dF])
         _, S = _band_power(x, session.fs_hz, edges)
         M += run.n_samples / session.fs_hz * np.transpose(S, (0, 2, 1))
