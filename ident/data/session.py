@@ -60,7 +60,7 @@ from ident.models.shocks import is_real_number
 __all__ = [
     "SESSION_FORMAT",
     "THIRD_ELEMENT_KEYS",
-    "third_elements_warning",
+    "third_elements_note",
     "MANIFEST_NAME",
     "RUN_ROLES",
     "BUMP_STOP_LIBRARY_NAME",
@@ -628,15 +628,13 @@ def _check_extra_keys(extra, *, where):
 THIRD_ELEMENT_KEYS = ("third_elements", "third", "heave_springs", "heave_packers")
 
 
-def third_elements_warning(where, key):
-    """The one-line warning for a session that declares third elements: its keys are read
-    and checked, but the identification and the predictions do not model them yet."""
-    return (f"{where}: {key!r} declares third elements (heave or roll elements per axle, the "
-            "spec's optional section 'Third elements'); they are read and checked, but the "
-            "identification and the predictions do not model them yet: the identified model "
-            "takes their forces as part of the linear car, which is wrong where they are "
-            "nonlinear (a heave spring's gap) or change between runs, and predictions cannot "
-            "vary them")
+def third_elements_note(where, key, elements):
+    """The one line logged (info) for a session that declares third elements: which, and
+    what shockplan does with them."""
+    return (f"{where}: {key!r} declares third elements {', '.join(elements)} (heave or roll "
+            "elements per axle, the spec's optional section 'Third elements'): the "
+            "identification takes their forces out of the linear car and predictions put "
+            "them in the loop")
 
 
 def _check_session_third(third_elements, entries, shocks, bump_stops, *, where, units,
@@ -655,7 +653,7 @@ def _check_session_third(third_elements, entries, shocks, bump_stops, *, where, 
                                     elements=elements, shocks=shocks, bump_stops=bump_stops,
                                     where=e["label"], library=library))
     if elements:
-        logger.warning(third_elements_warning(where, "third_elements"))
+        logger.info(third_elements_note(where, "third_elements", elements.elements))
     elif any(runs):  # pragma: no cover - a run's element needs a declared one
         raise SessionError(f"{where}: runs fit third elements the session does not declare")
     return elements, runs
