@@ -60,6 +60,7 @@ __all__ = [
     "setup_third",
     "model_setup_third",
     "vary_third",
+    "corner_shock_ids",
 ]
 
 log = logging.getLogger(__name__)
@@ -605,6 +606,41 @@ def model_setup_third(setups, model, library, elements=None, *, where="setups"):
     elements = as_options(elements, ElementOptions, "elements", where)
     return setup_third(setups, elements.car_third(model), library,
                        bump_stops=elements.library(model), where=where)
+
+
+def corner_shock_ids(library, car, choices=None):
+    """The library's ids an enumeration puts at the corners of a car with third elements.
+
+    A damper the car fits as a third element (its baseline's) or that a third-element
+    choice tries is a heave or roll damper, in the element's own travel and force: it is
+    not enumerated at the corners (a user who wants it there names it, e.g. ``--only``).
+
+    Parameters
+    ----------
+    library : ShockLibrary or mapping
+    car : ident.data.third.CarThird or None
+    choices : mapping of str to sequence, optional
+        :func:`vary_third`'s choices (``heave_front`` -> ids, ...).
+
+    Returns
+    -------
+    list of str or None
+        The ids in library order; None for a car without third elements (every id).
+
+    Examples
+    --------
+    >>> from ident.data.third import CarThird, RunThird, ThirdElements
+    >>> car = CarThird(ThirdElements({"heave_front": 1.0}), RunThird({"heave_front": "H0"}))
+    >>> corner_shock_ids(["C1", "C2", "H0", "H1"], car, {"heave_front": ["H0", "H1"]})
+    ['C1', 'C2']
+    """
+    if car is None or not car.elements:
+        return None
+    third = {sid for sid in car.baseline.dampers.values() if sid is not None}
+    for column, ids in (choices or {}).items():
+        if column in THIRD_ELEMENTS:
+            third.update(str(i) for i in ids if i is not None and str(i).lower() != "none")
+    return [sid for sid in library if sid not in third]
 
 
 def vary_third(setups, choices, *, car=None, name_format="{name} {what}", where="vary_third"):

@@ -25,8 +25,9 @@ import numpy as np
 import pandas as pd
 from scipy.stats import spearmanr
 
-from planner.elements import (distinct_setups, loop_arguments, model_setup_elements,
-                              model_setup_third, vary_elements, vary_third)
+from planner.elements import (corner_shock_ids, distinct_setups, loop_arguments,
+                              model_setup_elements, model_setup_third, vary_elements,
+                              vary_third)
 from planner.errors import PlannerError
 from planner.histograms import ShockHistograms, histogram_distance
 from planner.options import (ElementOptions, HistogramOptions, LoopOptions, RunOptions,
@@ -253,7 +254,8 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
         Keyword arguments of :func:`planner.setups.enumerate_setups`
         (``symmetry``, ``axles``, ``fixed``, ``shocks``, ``respect_inventory``,
         ``max_setups``, ``clicks``: the settings of adjustable shocks, ``"all"`` or a step
-        per adjuster).
+        per adjuster). On a car with third elements, ``shocks`` defaults to the ids that
+        are not its heave or roll dampers (:func:`planner.elements.corner_shock_ids`).
     objective : planner.objective.Objective, optional
         Default :func:`planner.objective.default_objective`.
     baseline : Setup or str, optional
@@ -341,7 +343,12 @@ def rank_setups(model, drive, library, *, setups=None, constraints=None, objecti
                            f"({list(hist_metrics)}), which the screening cannot predict; "
                            "weight at least one RMS metric too (e.g. tire_force_rms_LF)")
     if setups is None:
-        setups = enumerate_setups(library, **(constraints or {}))
+        constraints = dict(constraints or {})
+        if constraints.get("shocks") is None:  # a car's heave and roll dampers stay off its corners
+            corner = corner_shock_ids(library, elements.car_third(model), elements.vary_third)
+            if corner is not None:
+                constraints["shocks"] = corner
+        setups = enumerate_setups(library, **constraints)
     elif constraints:
         raise PlannerError("give either setups or constraints, not both")
     setups = list(setups)

@@ -160,3 +160,15 @@ def test_rank_picks_among_heave_dampers(plant, drive):
         rank_setups(plant, drive, LIB, setups=[_setup("base")], loop=LoopOptions(oversample=1),
                     elements=ElementOptions(use_model=False, vary_third={"heave_front": ["H1"]}),
                     top=1, baseline="base")
+
+
+def test_rank_keeps_heave_dampers_off_the_corners(plant, drive):
+    # H1 and R1 are the baseline's heave and roll dampers, H2 a choice: none is enumerated
+    # at a corner, only the corner shock S is
+    el = ElementOptions(use_model=CarElements(SPRINGS, {}, {}), third=CAR,
+                        vary_third={"heave_front": ["H1", "H2"]})
+    r = rank_setups(plant, drive, LIB, loop=LoopOptions(oversample=1), elements=el, top=2,
+                    baseline="S", constraints=None)
+    corners = set(r.screening[list(CORNERS)].to_numpy().ravel())
+    assert corners == {"S"}
+    assert set(r.table["heave_front"]) == {"H1", "H2"}
