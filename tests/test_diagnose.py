@@ -325,3 +325,40 @@ def test_identify_warns_of_friction_bump_stops_and_lift_off(friction_session):
     lifted = [g for g in diag.groups() if g["kind"] == "lift-off"]
     assert lifted and all(0 < g["share_max"] < 0.1 for g in lifted)
     assert all("floor" in line for line in diag.lines() if "lift-off" in line.split(":")[1])
+
+
+def _hinge_reference(x, r, sigma, shares):
+    """The stiffening hinge written out with a full-length mask per onset (the sums over the
+    samples above the onset, in time order)."""
+    best = (0.0, np.nan, 1, 0.0)
+    for s0 in np.unique(np.quantile(x, 1 - shares)):
+        above = x > s0
+        if above.sum() < 5:
+            continue
+        d = x[above] - s0
+        for p in (1, 2):
+            h = d**p
+            hh = float(h @ h)
+            if hh <= 0:
+                continue
+            k = float(h @ r[above]) / hh
+            z = k * np.sqrt(hh) / sigma
+            if z > best[0]:
+                best = (z, float(s0), p, k)
+    return best
+
+
+@pytest.mark.parametrize("ties", [False, True])
+def test_hinge_equals_the_masked_sums(rng, ties):
+    """The hinge's onsets from one sort: the same samples in the same order as a mask per
+    onset, so the same fit bit for bit (ties in the travel included)."""
+    import ident.identify.diagnose as diagnose_module
+
+    x = rng.standard_normal(20000)
+    if ties:
+        x = np.round(x, 2)
+    r = 0.3 * np.maximum(x - 1.0, 0.0) ** 2 + rng.standard_normal(x.size)
+    got = diagnose_module._hinge(x, r, 1.0)
+    want = _hinge_reference(x, r, 1.0, diagnose_module._HINGE_SHARES)
+    assert got == want
+    assert got[0] > STIFFENING_Z  # the known hinge is found
