@@ -159,7 +159,6 @@ def main(argv=None):
                     print(f"shockplan demo ({name}, {label} caches): {wall:.1f} s wall, "
                           f"{cpu:.1f} s CPU ({_load()})")
 
-    scale = max(1.0, TARGET_PROBE_S / probe_s) if probe_s else 1.0
     scale = (TARGET_PROBE_S / probe_s) if probe_s and probe_s > TARGET_PROBE_S else 1.0
     ident = results[("lib", "this")]
     print(f"target: identify_session < {TARGET_IDENTIFY_S:g} s: {ident:.2f} s measured, "

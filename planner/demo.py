@@ -27,6 +27,7 @@ formats.
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import warnings
@@ -382,7 +383,6 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             model = identify_session(session)
         log.info("demo: identified the session")
         model.save(work / "model.npz")
-        _settle_job(warm)
         log.info("demo: saved the model")
         drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
                                  wheelbase_m=vehicle.a_m + vehicle.b_m,
@@ -404,6 +404,9 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             write_clicks_example(work / CLICKS_FOLDER)
             write_track_example(work / TRACK_FOLDER)
             write_demo_rig_files(work / DEMO_RIG_FILES, session, duration_s=DEMO_RIG_FILES_S)
+            # the ranking needs the kernels the warm-up worker compiles: on a fresh machine
+            # it may still be compiling them while this process wrote the files above
+            _settle_job(warm)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 log.info("demo: ranking the crate's setups")
@@ -432,6 +435,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
                           run={k: used[k] for k in ("model", "crate")})
             modes = modal_summary(vehicle).table()
         except BaseException:
+            _settle_job(warm)
             _settle_job(steps)
             _settle_job(plots)  # nothing may write into the folder once it is rolled back
             raise
@@ -707,8 +711,10 @@ def _zero_rig(plant, drive):
                        plant_name=plant.name, output_names=tuple(plant.output_names))
 
 
+@functools.lru_cache(maxsize=1)
 def _warm_plant_and_drive():
-    """The paper car's loop plant and a short track drive, for the warm-up jobs."""
+    """The paper car's loop plant and a short track drive, for the warm-up jobs (built once
+    per process: a worker forked after this process built them inherits them; read only)."""
     from ident.data.drive import make_track_drive
     from ident.models.vehicle import build_full_car, example_vehicle
 
