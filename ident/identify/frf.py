@@ -216,8 +216,10 @@ LPM_RCOND = 1e-10
 LPM_GRID_HZ = 0.1
 #: Target frequencies per batched LPM solve (memory ~ chunk x rows x columns).
 _LPM_CHUNK = 256
-#: Threads of the LPM solve (None: one per core); the result does not depend on it.
+#: Threads of the LPM solve and the runs' DFTs (None: one per core, at most 4, each holding
+#: one chunk's arrays, some 30 MB on the paper session); the result does not depend on it.
 _LPM_THREADS = None
+_LPM_MAX_THREADS = 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -495,6 +497,12 @@ def _check_lpm_args(degree, half_width, coherence_dof, inputs, names):
     return degree, half_width, int(coherence_dof)
 
 
+def _lpm_threads(n_tasks):
+    """Threads for `n_tasks` independent parts of the LPM (:data:`_LPM_THREADS`)."""
+    n = _LPM_THREADS or min(os.cpu_count() or 1, _LPM_MAX_THREADS)
+    return max(1, min(n, n_tasks))
+
+
 def _lpm_solve(spectra, n_samples, n_in, f_hz, fs, degree, half_width, coherence_dof):
     """Local polynomial method over several runs (see the module notes).
 
@@ -594,7 +602,7 @@ def _lpm_solve(spectra, n_samples, n_in, f_hz, fs, degree, half_width, coherence
     # the chunks are independent: numpy's batched SVDs and products release the GIL, so a
     # thread per core solves them side by side (each chunk the same arithmetic: the same
     # numbers, bit for bit, whatever the number of threads)
-    n_threads = max(1, min(_LPM_THREADS or (os.cpu_count() or 1), len(starts)))
+    n_threads = _lpm_threads(len(starts))
     with threadpool_limits(1):  # many tiny LAPACK calls: threads only contend
         if n_threads == 1:
             for a in starts:
@@ -1132,7 +1140,7 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
     degree, half_width, coherence_dof = _check_lpm_args(
         degree, half_width, coherence_dof, [x[:m] for x in records], [r.name for r in runs])
     # the runs' DFTs side by side (numpy's FFT releases the GIL; the same numbers)
-    n_threads = max(1, min(_LPM_THREADS or (os.cpu_count() or 1), len(records)))
+    n_threads = _lpm_threads(len(records))
     with concurrent.futures.ThreadPoolExecutor(n_threads) as pool:
         spectra = list(pool.map(lambda x: np.fft.rfft(x, axis=-1), records))
     del records
