@@ -398,18 +398,12 @@ def _hinge(x, r, sigma):
     best = (0.0, np.nan, 1, 0.0)
     if sigma <= 0 or x.size < 100:
         return best
-    # the samples above an onset are the top of x's sort order: their indices, sorted back
-    # into time order, select the same values in the same order as the mask ``x > s0``
-    # (the same sums, bit for bit) at a fraction of 60 full-length masks
-    order = np.argsort(x, kind="stable")
-    xs = x[order]
     for s0 in np.unique(np.quantile(x, 1 - _HINGE_SHARES)):
-        first = int(np.searchsorted(xs, s0, side="right"))
-        if x.size - first < 5 or not s0 == s0:  # also a nan onset (as the mask: nothing above)
+        above = x > s0
+        if above.sum() < 5:
             continue
-        idx = np.sort(order[first:])
-        d = x[idx] - s0
-        ra = r[idx]
+        d = x[above] - s0
+        ra = r[above]
         for p in (1, 2):
             h = d ** p
             hh = float(h @ h)
