@@ -216,8 +216,9 @@ LPM_RCOND = 1e-10
 LPM_GRID_HZ = 0.1
 #: Target frequencies per batched LPM solve (memory ~ chunk x rows x columns).
 _LPM_CHUNK = 256
-#: Threads of the LPM solve and the runs' DFTs (None: one per core, at most 4, each holding
-#: one chunk's arrays, some 30 MB on the paper session); the result does not depend on it.
+#: Threads of the LPM solve and the runs' DFTs (None: one per free core, at most 4, each
+#: holding one chunk's arrays, some 30 MB on the paper session; see _lpm_threads); the
+#: result does not depend on it.
 _LPM_THREADS = None
 _LPM_MAX_THREADS = 4
 
@@ -498,8 +499,23 @@ def _check_lpm_args(degree, half_width, coherence_dof, inputs, names):
 
 
 def _lpm_threads(n_tasks):
-    """Threads for `n_tasks` independent parts of the LPM (:data:`_LPM_THREADS`)."""
-    n = _LPM_THREADS or min(os.cpu_count() or 1, _LPM_MAX_THREADS)
+    """Threads for `n_tasks` independent parts of the LPM (:data:`_LPM_THREADS`).
+
+    By default one per core that is free: the cores less the 1-minute load average, this
+    process's own core counted free (threads cost about 20 % more CPU time than one
+    thread, allocating a chunk's arrays each: worth it only on idle cores; on a loaded
+    machine, or in the demo while a worker compiles, one thread). The numbers do not
+    depend on it.
+    """
+    if _LPM_THREADS:
+        n = _LPM_THREADS
+    else:
+        cores = os.cpu_count() or 1
+        try:
+            load = os.getloadavg()[0]
+        except (AttributeError, OSError):  # not POSIX: no load figure
+            load = 0.0
+        n = min(cores, _LPM_MAX_THREADS, int(cores - load + 1.0))
     return max(1, min(n, n_tasks))
 
 
@@ -600,7 +616,7 @@ def _lpm_solve(spectra, n_samples, n_in, f_hz, fs, degree, half_width, coherence
 
     starts = range(0, n_f, _LPM_CHUNK)
     # the chunks are independent: numpy's batched SVDs and products release the GIL, so a
-    # thread per core solves them side by side (each chunk the same arithmetic: the same
+    # thread per free core solves them side by side (each chunk the same arithmetic: the same
     # numbers, bit for bit, whatever the number of threads)
     n_threads = _lpm_threads(len(starts))
     with threadpool_limits(1):  # many tiny LAPACK calls: threads only contend
