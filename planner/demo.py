@@ -27,6 +27,7 @@ formats.
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import warnings
@@ -386,12 +387,16 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         # compile side by side (the rig response's in a worker, the one-setup loop's here);
         # then a worker compiles the predictions' kernel and the screening kernels into
         # numba's cache while the virtual rig runs here. Otherwise these are cache loads.
-        rig_kernel = _start_job(_warm_rig_response)
+        # One worker, forked before this process uses any kernel, takes both jobs in turn:
+        # the rig response's kernel (the virtual rig needs it), then the predictions' and
+        # screening kernels, starting as soon as the first is done rather than when this
+        # process is done with the one-setup loop (about twice the rig kernel's compile):
+        # no core idles while the other compiles.
+        rig_kernel, warm = _start_jobs(_warm_rig_response, _warm_kernels)
         _warm_one_setup_loop()
         # a warm-up that fails only costs time (e.g. a forked worker cannot use numba's
         # OpenMP threads once this process has): the kernels then compile here on first use
         _settle_job(rig_kernel)
-        warm = _start_job(_warm_kernels)
         vehicle = example_vehicle()
         plan = default_plan()
         units = plan.units
@@ -404,7 +409,6 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             model = identify_session(session)
         log.info("demo: identified the session")
         model.save(work / "model.npz")
-        _settle_job(warm)
         log.info("demo: saved the model")
         drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
                                  wheelbase_m=vehicle.a_m + vehicle.b_m,
@@ -427,6 +431,9 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
             write_track_example(work / TRACK_FOLDER)
             write_proto_example(work / PROTO_FOLDER)
             write_demo_rig_files(work / DEMO_RIG_FILES, session, duration_s=DEMO_RIG_FILES_S)
+            # the ranking needs the kernels the warm-up worker compiles: on a fresh machine
+            # it may still be compiling them while this process wrote the files above
+            _settle_job(warm)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 log.info("demo: ranking the crate's setups")
@@ -455,6 +462,7 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
                           run={k: used[k] for k in ("model", "crate")})
             modes = modal_summary(vehicle).table()
         except BaseException:
+            _settle_job(warm)
             _settle_job(steps)
             _settle_job(plots)  # nothing may write into the folder once it is rolled back
             raise
@@ -697,8 +705,7 @@ def _warm_screening():
 def _warm_predictions():
     """Compile (into numba's cache) the predictions' kernel (the setup-parallel loop with
     each setup's metrics) on a small problem with a zero rig response; the demo's process
-    then loads it. Runs in a worker process forked after this one compiled the one-setup
-    loop (inherited, not compiled again)."""
+    then loads it. Runs in the warm-up worker after the rig response's kernel."""
     from ident.sim.closedloop import simulate_batch_metrics
     from planner.setups import enumerate_setups
 
@@ -730,8 +737,10 @@ def _zero_rig(plant, drive):
                        plant_name=plant.name, output_names=tuple(plant.output_names))
 
 
+@functools.lru_cache(maxsize=1)
 def _warm_plant_and_drive():
-    """The paper car's loop plant and a short track drive, for the warm-up jobs."""
+    """The paper car's loop plant and a short track drive, for the warm-up jobs (built once
+    per process: a worker forked after this process built them inherits them; read only)."""
     from ident.data.drive import make_track_drive
     from ident.models.vehicle import build_full_car, example_vehicle
 
@@ -780,6 +789,27 @@ def _start_job(func, *args, method="fork"):
     future = pool.submit(func, *args)
     pool.shutdown(wait=False)
     return future
+
+
+def _start_jobs(*funcs):
+    """Start ``func()`` for each of `funcs`, one after the other on one forked worker process
+    (or run them here where fork is not available).
+
+    Returns their futures (None for one that already ran in this process).
+    """
+    import concurrent.futures
+    import multiprocessing
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        for func in funcs:
+            func()
+        return [None] * len(funcs)
+    pool = concurrent.futures.ProcessPoolExecutor(
+        max_workers=1, mp_context=multiprocessing.get_context("fork"),
+        initializer=die_with_parent, initargs=(os.getpid(),))
+    futures = [pool.submit(func) for func in funcs]
+    pool.shutdown(wait=False)
+    return futures
 
 
 def _finish_job(future):

@@ -123,6 +123,24 @@ def test_single_run_equals_list_of_one(rng):
     np.testing.assert_allclose(a.H[0], np.broadcast_to([[1.0], [-0.5]], a.H[0].shape), atol=1e-10)
 
 
+def test_threads_do_not_change_the_estimate(rng, monkeypatch):
+    """The LPM solve's chunks on one thread or several (and the runs' DFTs): the same numbers,
+    bit for bit (each chunk is the same arithmetic on disjoint target lines)."""
+    import ident.identify.frf as frf_module
+
+    num = _system(rng)
+    us = [rng.standard_normal((8000, 3)), rng.standard_normal((6000, 3))]
+    ys = [_response(num, u) for u in us]
+    monkeypatch.setattr(frf_module, "_LPM_CHUNK", 16)  # many chunks
+    got = {}
+    for threads in (1, 3):
+        monkeypatch.setattr(frf_module, "_LPM_THREADS", threads)
+        got[threads] = frf_from_arrays(us, ys, fs=FS, nperseg=512, estimator="lpm")
+    for name in ("H", "multiple_coherence", "partial_coherence", "input_condition",
+                 "independent_fraction"):
+        np.testing.assert_array_equal(getattr(got[1], name), getattr(got[3], name), err_msg=name)
+
+
 def _session(paper_plan, setups, duration_s, shocks=None):
     from ident.sim.virtual_rig import PlanRun, simulate_session
 

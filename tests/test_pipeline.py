@@ -148,3 +148,18 @@ def test_third_elements_from_their_curves(prototype_case):
         model = identify_session(bare, diagnose=False)
     assert set(model.frf.settings["third_element_force"]["heave-front"].values()) == {"curve"}
     assert np.median(_frf_error(model, vehicle)) < THIRD_FRF_MEDIAN
+
+
+def _pair_task(common, tasks):
+    """A stand-in for the pair fits: each task's result depends on the task alone."""
+    return [(common * t, t % 7) for t in tasks]
+
+
+def test_map_pairs_returns_the_tasks_in_order_whatever_the_processes():
+    """The pair fits in batches on several processes come back in the tasks' order, equal to
+    the one-process result (the model does not depend on the number of processes)."""
+    from ident.identify import pipeline
+
+    tasks = list(range(101))
+    serial = pipeline._map_pairs(_pair_task, 3, tasks, 1)
+    assert pipeline._map_pairs(_pair_task, 3, tasks, 2) == serial == _pair_task(3, tasks)

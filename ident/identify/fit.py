@@ -372,9 +372,16 @@ def _stack(z):
     return np.concatenate([z.real, z.imag], axis=0)
 
 
+def _column_norms(A):
+    """Euclidean norms of a real matrix's columns: ``np.linalg.norm(A, axis=0)``'s own
+    arithmetic (the same numbers, bit for bit) without its checks, a few microseconds a call
+    over some 10^5 calls per identification."""
+    return np.sqrt(np.add.reduce(A * A, axis=0))
+
+
 def _lstsq(A, b, rcond=_RCOND):
     """Column-scaled SVD least squares; returns x and an orthonormal basis of range(A)."""
-    norms = np.linalg.norm(A, axis=0)
+    norms = _column_norms(A)
     norms = np.where(norms > 0, norms, 1.0)
     U, sv, Vt = np.linalg.svd(A / norms, full_matrices=False)
     keep = sv > rcond * sv[0] if sv.size and sv[0] > 0 else np.zeros(sv.size, bool)
@@ -387,7 +394,7 @@ def _lstsq(A, b, rcond=_RCOND):
 def _lstsq_x(A, b, rcond=_RCOND):
     """:func:`_lstsq`'s solution alone, by LAPACK's ``gelsd`` (no range basis: about 1.3x
     faster). The same column scaling and relative singular-value cut-off."""
-    norms = np.linalg.norm(A, axis=0)
+    norms = _column_norms(A)
     norms = np.where(norms > 0, norms, 1.0)
     x = np.linalg.lstsq(A / norms, b, rcond=rcond)[0]
     return x / (norms if b.ndim == 1 else norms[:, None])
@@ -665,7 +672,7 @@ def _output_error(prob, quad, lin, *, method, max_iter, tol, history, stages):
                 t *= 0.5
             lam = 1e-3
         if trial is None:
-            norms = np.linalg.norm(J, axis=0)
+            norms = _column_norms(J)
             norms = np.where(norms > 0, norms, 1.0)
             Jr = np.concatenate([r, np.zeros(theta.size)])
             while lam <= _MAX_DAMPING:

@@ -86,7 +86,9 @@ on where it stopped compensating, with the median unchanged (docs/DESIGN.md).
 
 from __future__ import annotations
 
+import concurrent.futures
 import logging
+import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -217,6 +219,11 @@ LPM_RCOND = 1e-10
 LPM_GRID_HZ = 0.1
 #: Target frequencies per batched LPM solve (memory ~ chunk x rows x columns).
 _LPM_CHUNK = 256
+#: Threads of the LPM solve and the runs' DFTs (None: one per free core, at most 4, each
+#: holding one chunk's arrays, some 30 MB on the paper session; see _lpm_threads); the
+#: result does not depend on it.
+_LPM_THREADS = None
+_LPM_MAX_THREADS = 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -494,6 +501,27 @@ def _check_lpm_args(degree, half_width, coherence_dof, inputs, names):
     return degree, half_width, int(coherence_dof)
 
 
+def _lpm_threads(n_tasks):
+    """Threads for `n_tasks` independent parts of the LPM (:data:`_LPM_THREADS`).
+
+    By default one per core that is free: the cores less the 1-minute load average, this
+    process's own core counted free (threads cost about 20 % more CPU time than one
+    thread, allocating a chunk's arrays each: worth it only on idle cores; on a loaded
+    machine, or in the demo while a worker compiles, one thread). The numbers do not
+    depend on it.
+    """
+    if _LPM_THREADS:
+        n = _LPM_THREADS
+    else:
+        cores = os.cpu_count() or 1
+        try:
+            load = os.getloadavg()[0]
+        except (AttributeError, OSError):  # not POSIX: no load figure
+            load = 0.0
+        n = min(cores, _LPM_MAX_THREADS, int(cores - load + 1.0))
+    return max(1, min(n, n_tasks))
+
+
 def _lpm_solve(spectra, n_samples, n_in, f_hz, fs, degree, half_width, coherence_dof):
     """Local polynomial method over several runs (see the module notes).
 
@@ -551,43 +579,56 @@ def _lpm_solve(spectra, n_samples, n_in, f_hz, fs, degree, half_width, coherence
     cond = np.empty(n_f)
     indep = np.empty((n_f, m))
     col0 = np.arange(m) * nd
+
+    def solve_chunk(a):  # target lines a .. a + _LPM_CHUNK: disjoint slices of the outputs
+        sl = slice(a, min(a + _LPM_CHUNK, n_f))
+        t = sl.stop - sl.start
+        A = np.empty((t, n_runs, lines, m, nd), dtype=complex)
+        B = np.empty((t, n_runs, lines, p), dtype=complex)
+        for r, X in enumerate(spectra):
+            W = np.moveaxis(X[:, idx[r][sl]], 0, -1)  # (t, lines, m + p)
+            A[:, r] = W[..., :m, None] * xpow[r][sl][:, :, None, :]
+            B[:, r] = W[..., m:]
+        ypow = np.sum(np.abs(B) ** 2, axis=(1, 2))  # (t, p)
+        A = (proj @ A.reshape(t, n_runs, lines, ncol)).reshape(t, n_runs * lines, ncol)
+        B = (proj @ B).reshape(t, n_runs * lines, p)
+        sc = np.sqrt(np.sum(np.abs(A) ** 2, axis=1))  # (t, ncol)
+        sc = np.where(sc > 0, sc, 1.0)
+        As = A / sc[:, None, :]
+        U, sv, Vh = np.linalg.svd(As, full_matrices=False)
+        keep = sv > LPM_RCOND * sv[:, :1]
+        floor = LPM_RCOND * sv[:, :1]
+        inv_s = np.where(keep, 1.0 / np.where(keep, sv, 1.0), 0.0)
+        V = np.conj(np.swapaxes(Vh, 1, 2))
+        th = V @ (inv_s[..., None] * (np.conj(np.swapaxes(U, 1, 2)) @ B))  # (t, ncol, p)
+        sse = np.sum(np.abs(B - As @ th) ** 2, axis=1)  # (t, p)
+        # diag of (As^H As)^-1; undetermined directions count with the floor (~infinite)
+        inv_s2 = 1.0 / np.maximum(sv, np.maximum(floor, 1e-300)) ** 2
+        cdiag = np.einsum("tkc,tk->tc", np.abs(Vh) ** 2, inv_s2)[:, col0]  # (t, m)
+        h = th[:, col0, :] / sc[:, col0, None]  # (t, m, p)
+        H[sl] = h
+        # var(H) = SSE / dof * C_ii, C_ii = cdiag / sc_i^2 in unscaled units
+        var = sse[:, None, :] / dof * (cdiag / sc[:, col0] ** 2)[:, :, None]
+        num = np.abs(h) ** 2
+        den = num + coherence_dof * var
+        partial[sl] = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+        mult[sl] = np.clip(1.0 - sse / np.where(ypow > 0, ypow, 1.0), 0.0, 1.0) * (ypow > 0)
+        indep[sl] = np.clip(1.0 / cdiag, 0.0, 1.0)
+        smin = sv[:, -1]
+        cond[sl] = np.where(smin > 0, (sv[:, 0] / np.where(smin > 0, smin, 1.0)) ** 2, np.inf)
+
+    starts = range(0, n_f, _LPM_CHUNK)
+    # the chunks are independent: numpy's batched SVDs and products release the GIL, so a
+    # thread per free core solves them side by side (each chunk the same arithmetic: the same
+    # numbers, bit for bit, whatever the number of threads)
+    n_threads = _lpm_threads(len(starts))
     with threadpool_limits(1):  # many tiny LAPACK calls: threads only contend
-        for a in range(0, n_f, _LPM_CHUNK):
-            sl = slice(a, min(a + _LPM_CHUNK, n_f))
-            t = sl.stop - sl.start
-            A = np.empty((t, n_runs, lines, m, nd), dtype=complex)
-            B = np.empty((t, n_runs, lines, p), dtype=complex)
-            for r, X in enumerate(spectra):
-                W = np.moveaxis(X[:, idx[r][sl]], 0, -1)  # (t, lines, m + p)
-                A[:, r] = W[..., :m, None] * xpow[r][sl][:, :, None, :]
-                B[:, r] = W[..., m:]
-            ypow = np.sum(np.abs(B) ** 2, axis=(1, 2))  # (t, p)
-            A = (proj @ A.reshape(t, n_runs, lines, ncol)).reshape(t, n_runs * lines, ncol)
-            B = (proj @ B).reshape(t, n_runs * lines, p)
-            sc = np.sqrt(np.sum(np.abs(A) ** 2, axis=1))  # (t, ncol)
-            sc = np.where(sc > 0, sc, 1.0)
-            As = A / sc[:, None, :]
-            U, sv, Vh = np.linalg.svd(As, full_matrices=False)
-            keep = sv > LPM_RCOND * sv[:, :1]
-            floor = LPM_RCOND * sv[:, :1]
-            inv_s = np.where(keep, 1.0 / np.where(keep, sv, 1.0), 0.0)
-            V = np.conj(np.swapaxes(Vh, 1, 2))
-            th = V @ (inv_s[..., None] * (np.conj(np.swapaxes(U, 1, 2)) @ B))  # (t, ncol, p)
-            sse = np.sum(np.abs(B - As @ th) ** 2, axis=1)  # (t, p)
-            # diag of (As^H As)^-1; undetermined directions count with the floor (~infinite)
-            inv_s2 = 1.0 / np.maximum(sv, np.maximum(floor, 1e-300)) ** 2
-            cdiag = np.einsum("tkc,tk->tc", np.abs(Vh) ** 2, inv_s2)[:, col0]  # (t, m)
-            h = th[:, col0, :] / sc[:, col0, None]  # (t, m, p)
-            H[sl] = h
-            # var(H) = SSE / dof * C_ii, C_ii = cdiag / sc_i^2 in unscaled units
-            var = sse[:, None, :] / dof * (cdiag / sc[:, col0] ** 2)[:, :, None]
-            num = np.abs(h) ** 2
-            den = num + coherence_dof * var
-            partial[sl] = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
-            mult[sl] = np.clip(1.0 - sse / np.where(ypow > 0, ypow, 1.0), 0.0, 1.0) * (ypow > 0)
-            indep[sl] = np.clip(1.0 / cdiag, 0.0, 1.0)
-            smin = sv[:, -1]
-            cond[sl] = np.where(smin > 0, (sv[:, 0] / np.where(smin > 0, smin, 1.0)) ** 2, np.inf)
+        if n_threads == 1:
+            for a in starts:
+                solve_chunk(a)
+        else:
+            with concurrent.futures.ThreadPoolExecutor(n_threads) as pool:
+                list(pool.map(solve_chunk, starts))
     return (np.transpose(H, (2, 1, 0)), mult.T, np.transpose(partial, (2, 1, 0)), cond,
             indep.T, dof)
 
@@ -1246,7 +1287,10 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
         dF_pow.append(np.mean(dF**2, axis=1))
     degree, half_width, coherence_dof = _check_lpm_args(
         degree, half_width, coherence_dof, [x[:m] for x in records], [r.name for r in runs])
-    spectra = [np.fft.rfft(x, axis=-1) for x in records]
+    # the runs' DFTs side by side (numpy's FFT releases the GIL; the same numbers)
+    n_threads = _lpm_threads(len(records))
+    with concurrent.futures.ThreadPoolExecutor(n_threads) as pool:
+        spectra = list(pool.map(lambda x: np.fft.rfft(x, axis=-1), records))
     del records
     f = np.fft.rfftfreq(nperseg, 1.0 / fs)
     band = (f >= band_hz[0]) & (f <= band_hz[1])

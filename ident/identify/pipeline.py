@@ -444,6 +444,11 @@ def _fit_pairs(common, tasks):
     return out
 
 
+#: Batches of pair fits per worker process in :func:`_map_pairs` (the model does not depend
+#: on it; more batches balance the load better at a little pickling cost per batch).
+_BATCHES_PER_PROCESS = 16
+
+
 def _map_pairs(func, common, tasks, n_jobs):
     """``func(common, batch)`` over batches of `tasks`, on up to `n_jobs` processes.
 
@@ -457,7 +462,9 @@ def _map_pairs(func, common, tasks, n_jobs):
     n = max(1, min(n, len(tasks)))
     if n == 1 or "fork" not in multiprocessing.get_all_start_methods():
         return func(common, tasks)
-    size = max(1, -(-len(tasks) // (4 * n)))  # about 4 batches per process
+    # about _BATCHES_PER_PROCESS batches per process: the pairs' costs differ by 10x, and
+    # small batches handed out in turn keep both cores busy to the end
+    size = max(1, -(-len(tasks) // (_BATCHES_PER_PROCESS * n)))
     batches = [tasks[k:k + size] for k in range(0, len(tasks), size)]
     ctx = multiprocessing.get_context("fork")
     # Ctrl-C reaches every process of the command: the workers end at once without a
