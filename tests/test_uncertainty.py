@@ -1,6 +1,7 @@
 """Tests of planner.uncertainty: the Bendat-Piersol random error, the FRF plant, Monte Carlo
 intervals on an FRF of known coherence, and unresolved setup pairs."""
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -22,6 +23,8 @@ from planner.uncertainty import (
     ScoreErrors,
     Uncertainty,
     combine_terms,
+    cross_validated_scale,
+    cross_validation_deviations,
     difference_interval,
     frf_relative_error,
     light_modes,
@@ -353,6 +356,58 @@ def test_random_scale_option_and_its_default(known_plant, track_drive, demo_libr
         with pytest.raises(ValueError, match="random_scale must be a finite number >= 0"):
             prediction_uncertainty(model, track_drive, few_setups, demo_library,
                                    draws=UncertaintyOptions(n_draws=2, random_scale=bad))
+
+
+def _cv_frf(frf, deviation):
+    """`frf` with a cross-validation of constant relative `deviation` per block (shape (K,)
+    broadcast over pairs) on a 0.1-50 Hz grid."""
+    grid = np.geomspace(0.1, 50.0, 40)
+    dev = (np.asarray(deviation, dtype=complex)[:, None, None, None]
+           * np.ones(frf.H.shape[:2] + (grid.size,))).astype(np.complex64)
+    return replace(frf, cv_deviation=dev, settings=dict(
+        frf.settings, cross_validation={"blocks": dev.shape[0], "f_hz": grid.tolist()}))
+
+
+def test_random_part_sized_by_the_cross_validation(known_plant, track_drive, demo_library,
+                                                   few_setups):
+    """A model with the session's cross-validation takes the random part's size from it
+    (recorded as random_error "cross-validation"): twice the blocks' deviations, twice the
+    random half-widths and the scale; without it (an older model file) the formula; a given
+    random_scale wins over both; a cross-validation of the wrong shape falls back to the
+    formula."""
+    frf = _frf(known_plant, 0.99)
+    opts = UncertaintyOptions(n_draws=20)
+
+    def unc(f, draws=opts):
+        return prediction_uncertainty(SimpleNamespace(frf=f), track_drive, few_setups,
+                                      demo_library, draws=draws)
+
+    u1 = unc(_cv_frf(frf, [0.01, -0.01]))
+    u2 = unc(_cv_frf(frf, [0.02, -0.02]))
+    assert u1.settings["random_error"] == "cross-validation"
+    assert u2.settings["random_scale"] == pytest.approx(2 * u1.settings["random_scale"],
+                                                        rel=RTOL_WIDTH_SCALING_SMALL)
+    w1 = (u1.ratio_hi - u1.ratio_lo).to_numpy()
+    w2 = (u2.ratio_hi - u2.ratio_lo).to_numpy()
+    assert_allclose(w2 / w1, 2.0, rtol=RTOL_WIDTH_SCALING_SMALL)
+    old = unc(frf)
+    assert old.settings["random_error"] == "formula"
+    assert old.settings["random_scale"] == random_error_scale(frf)
+    given = unc(_cv_frf(frf, [0.01, -0.01]), UncertaintyOptions(n_draws=20, random_scale=1.0))
+    assert given.settings["random_error"] == "given" and given.settings["random_scale"] == 1.0
+    bad = _cv_frf(frf, [0.01, -0.01])
+    bad = replace(bad, cv_deviation=bad.cv_deviation[:, :1])
+    assert cross_validation_deviations(bad, [1.0, 2.0]) is None
+    assert cross_validation_deviations(frf, [1.0, 2.0]) is None
+
+
+def test_cross_validated_scale_pools_metrics_and_skips_silent_ones():
+    """Per metric mean square ratio, then the root of their mean: metrics with ratios 1 and 9
+    give sqrt(5); a metric whose draws do not spread does not count."""
+    cv = np.array([[[0.01, 0.03, 0.5]], [[-0.01, -0.03, 0.5]]])
+    d = np.array([[[0.01, 0.01, 0.0]], [[-0.01, -0.01, 0.0]]])
+    assert cross_validated_scale(cv, d) == pytest.approx(np.sqrt(5.0), rel=RTOL_EXACT)
+    assert np.isnan(cross_validated_scale(cv[..., 2:], d[..., 2:]))
 
 
 def _modal_model(zeta, f_hz=13.0, n_out=4, light_pairs=None):
