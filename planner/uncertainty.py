@@ -42,8 +42,9 @@ session itself (:mod:`ident.identify.crossval`): the FRF of each time block of e
 estimate (``Frf.cv_deviation``). Here the model's response is perturbed by each
 deviation and every setup screened (:func:`cross_validation_deviations`); the draws'
 spread about the nominal is then scaled so that its mean square per metric matches the
-cross-validation's (:func:`cross_validated_scale`, recorded as ``random_scale`` with
-``random_error = "cross-validation"``). The draws keep their shape (their correlation
+cross-validation's (:func:`cross_validated_scale`), times :data:`CV_LENGTH_FACTOR` (the
+halves' error is between sqrt(2) and 1 times the full data's), recorded as
+``random_scale`` with ``random_error = "cross-validation"``. The draws keep their shape (their correlation
 over frequency, shared by all setups), the cross-validation sets their size, with its
 own correlations between pairs and over frequency. A model without it (an older model
 file) gets the formula, and says so in the log.
@@ -96,6 +97,7 @@ from planner.predict import predict_setups, prepare_drive, resolve_setups
 from planner.screen import drive_bands, screen_response
 
 __all__ = [
+    "CV_LENGTH_FACTOR",
     "LIGHT_DAMPING_ZETA",
     "MAX_RELATIVE_ERROR",
     "RANDOM_ERROR_SCALE",
@@ -163,6 +165,15 @@ LIGHT_MODE_MIN_PEAK = 0.1
 LIGHT_MODE_MIN_SHARE = 0.05
 #: Poles closer than this [Hz] are one mode.
 LIGHT_MODE_CLUSTER_HZ = 0.5
+#: The cross-validation measures the error of an estimate from half the data; the full
+#: estimate's error lies between that over 2 (an error that falls as 1 / T: noise) and
+#: the same (one that does not fall: the swap runs' nonlinear residual, the drive's
+#: transients; issue 24 found the metric errors stop falling beyond 150-300 s). Neither
+#: is known for a session, so the variance is taken at the geometric middle: the half
+#: data's over sqrt(2), the random part's width 2^(1/4) times the jackknife's. A 95 %
+#: interval then covers 98 % at one extreme and 90 % at the other (1.96 standard
+#: deviations times 2^(+-1/4)).
+CV_LENGTH_FACTOR = 2.0 ** 0.25
 #: The systematic error terms of an interval, in :attr:`Uncertainty.components`.
 SYSTEMATIC_TERMS = ("fit", "reduction", "discretization")
 #: The columns :func:`score_intervals` gives a ranking table (``docs/formats.md``).
@@ -481,7 +492,7 @@ def prediction_uncertainty(model, drive, setups, library, *, draws=UncertaintyOp
             draws[d] = screen(H_nom * (1 + e) * norm) / base
         if cv is not None:
             cv_dev = np.stack([screen(H_nom * (1 + e)) / base - 1 for e in cv])
-            kappa = cross_validated_scale(cv_dev, draws - 1)
+            kappa = CV_LENGTH_FACTOR * cross_validated_scale(cv_dev, draws - 1)
             if np.isfinite(kappa):
                 draws = 1 + kappa * (draws - 1)
                 scale = kappa

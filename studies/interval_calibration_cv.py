@@ -23,8 +23,10 @@ objective), and the known car's metrics (``build_full_car(car).loop_plant``).
 cars of ``studies/interval_calibration.py``); ``HELD_OUT`` was run once, at the end.
 
 Writes into ``--out``: ``cv_cases.csv`` (one row per identification), ``cv_cars.csv``
-(per car, the mean over its identifications), and ``cases/*.npz`` (the arrays of each
-identification; reused when present, so that an interrupted run resumes).
+(per car, the mean over its identifications), ``cases/*.npz`` (the arrays of each
+identification; reused when present, so that an interrupted run resumes) and
+``cases/*_model.npz`` (the identified models: delete the arrays to compute the intervals
+anew on the same identifications).
 
     python studies/interval_calibration_cv.py --out DIR [--family held-out] [--seeds 2]
 """
@@ -43,6 +45,7 @@ import numpy as np
 import pandas as pd
 
 from ident.data.drive import make_track_drive
+from ident.identify.model import load_model
 from ident.identify.pipeline import identify_session
 from ident.models.library import read_shock_library
 from ident.models.vehicle import build_full_car, example_gt_vehicle, example_vehicle
@@ -153,13 +156,20 @@ def run_case(name, spec, k, *, drive_s, n_setups, cache, cross_validate=True):
             return {key: z[key] for key in z.files}
     library = read_shock_library(DEMO_LIBRARY_PATH)
     vehicle = spec["vehicle"]
+    model_path = path.with_name(path.stem + "_model.npz")
     t0 = time.perf_counter()
-    session = simulate_session(study_plan(spec, SEED0 + k), vehicle)
-    t1 = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        model = identify_session(session, cross_validate=cross_validate)
-    t2 = time.perf_counter()
+    if model_path.is_file():  # the identification of an earlier run (the intervals anew)
+        model = load_model(model_path)
+        t1 = t2 = time.perf_counter()
+    else:
+        session = simulate_session(study_plan(spec, SEED0 + k), vehicle)
+        t1 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = identify_session(session, cross_validate=cross_validate)
+        t2 = time.perf_counter()
+        model_path.parent.mkdir(parents=True, exist_ok=True)
+        model.save(model_path)
     drive = make_track_drive(duration_s=drive_s, fs_hz=100.0, seed=24,
                              speed_m_s=spec["speed_m_s"], wheelbase_m=vehicle.a_m + vehicle.b_m,
                              track_width_m=vehicle.track_front_m,
