@@ -263,6 +263,8 @@ def main(argv=None):
     p.add_argument("--family", choices=("development", "held-out", "all"), default="held-out")
     p.add_argument("--cars", nargs="+", default=None, help="car names (default the family's)")
     p.add_argument("--seeds", type=int, default=2, help="identifications per car")
+    p.add_argument("--first-seed", type=int, default=0,
+                   help="index of the first identification (its runs' seed is 301 + it)")
     p.add_argument("--drive-s", type=float, default=60.0, help="validation drive [s]")
     p.add_argument("--setups", type=int, default=19, help="setups besides the baseline")
     p.add_argument("--formula", action="store_true",
@@ -282,7 +284,7 @@ def main(argv=None):
     rows = []
     rng = np.random.default_rng(37)
     for n in names:
-        for k in range(args.seeds):
+        for k in range(args.first_seed, args.first_seed + args.seeds):
             t0 = time.perf_counter()
             case = run_case(n, family[n], k, drive_s=args.drive_s, n_setups=args.setups,
                             cache=out / "cases", cross_validate=not args.formula)
