@@ -42,9 +42,10 @@ session itself (:mod:`ident.identify.crossval`): the FRF of each time block of e
 estimate (``Frf.cv_deviation``). Here the model's response is perturbed by each
 deviation and every setup screened (:func:`cross_validation_deviations`); the draws'
 spread about the nominal is then scaled so that its mean square per metric matches the
-cross-validation's (:func:`cross_validated_scale`), times :data:`CV_LENGTH_FACTOR` (the
-halves' error is between sqrt(2) and 1 times the full data's), recorded as
-``random_scale`` with ``random_error = "cross-validation"``. The draws keep their shape (their correlation
+cross-validation's (:func:`cross_validated_scale`; one realization per metric, so not
+below the measured-over-stated ratio of the FRF's lines, ``ratio_all``), times
+:data:`CV_LENGTH_FACTOR` (the halves' error is between sqrt(2) and 1 times the full
+data's), recorded as ``random_scale`` with ``random_error = "cross-validation"``. The draws keep their shape (their correlation
 over frequency, shared by all setups), the cross-validation sets their size, with its
 own correlations between pairs and over frequency. A model without it (an older model
 file) gets the formula, and says so in the log.
@@ -492,7 +493,12 @@ def prediction_uncertainty(model, drive, setups, library, *, draws=UncertaintyOp
             draws[d] = screen(H_nom * (1 + e) * norm) / base
         if cv is not None:
             cv_dev = np.stack([screen(H_nom * (1 + e)) / base - 1 for e in cv])
-            kappa = CV_LENGTH_FACTOR * cross_validated_scale(cv_dev, draws - 1)
+            # one realization per metric can fall low by chance: not below the ratio the
+            # FRF's lines measure (thousands of them), the same error at the line level
+            line = float(((frf.settings or {}).get("cross_validation") or {})
+                         .get("ratio_all", 0.0) or 0.0)
+            kappa = CV_LENGTH_FACTOR * np.nanmax([cross_validated_scale(cv_dev, draws - 1),
+                                                  line])
             if np.isfinite(kappa):
                 draws = 1 + kappa * (draws - 1)
                 scale = kappa

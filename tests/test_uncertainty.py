@@ -373,7 +373,7 @@ def test_random_part_sized_by_the_cross_validation(known_plant, track_drive, dem
                                                    few_setups):
     """A model with the session's cross-validation takes the random part's size from it
     (recorded as random_error "cross-validation"): twice the blocks' deviations, twice the
-    random half-widths and the scale; without it (an older model file) the formula; a given
+    random half-widths and the scale; never below the FRF lines' measured ratio; without it (an older model file) the formula; a given
     random_scale wins over both; a cross-validation of the wrong shape falls back to the
     formula."""
     frf = _frf(known_plant, 0.99)
@@ -391,6 +391,11 @@ def test_random_part_sized_by_the_cross_validation(known_plant, track_drive, dem
     w1 = (u1.ratio_hi - u1.ratio_lo).to_numpy()
     w2 = (u2.ratio_hi - u2.ratio_lo).to_numpy()
     assert_allclose(w2 / w1, 2.0, rtol=RTOL_WIDTH_SCALING_SMALL)
+    floor = _cv_frf(frf, [0.01, -0.01])
+    floor = replace(floor, settings=dict(floor.settings, cross_validation=dict(
+        floor.settings["cross_validation"], ratio_all=50.0)))
+    assert unc(floor).settings["random_scale"] == pytest.approx(50.0 * CV_LENGTH_FACTOR,
+                                                                rel=RTOL_EXACT)
     old = unc(frf)
     assert old.settings["random_error"] == "formula"
     assert old.settings["random_scale"] == random_error_scale(frf)
