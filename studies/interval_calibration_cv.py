@@ -55,10 +55,12 @@ from planner.demo import DEMO_LIBRARY_PATH
 from planner.objective import default_objective, score_setups
 from planner.predict import predict_setups
 from planner.setups import Setup, enumerate_setups
+from planner.options import UncertaintyOptions
 from planner.uncertainty import (
     SYSTEMATIC_TERMS,
     ScoreErrors,
     prediction_uncertainty,
+    random_error_scale,
     score_errors,
     score_intervals,
 )
@@ -147,16 +149,17 @@ def study_setups(library, n):
             + [pool[i] for i in idx])
 
 
-def run_case(name, spec, k, *, drive_s, n_setups, cache, cross_validate=True):
-    """Identify car `name` with seed index `k`; the arrays of its intervals and truth."""
-    tag = "" if cross_validate else "_formula"
-    path = cache / f"{name.replace(' ', '_').replace('%', 'pct')}_seed{SEED0 + k}{tag}.npz"
+def run_case(name, spec, k, *, drive_s, n_setups, cache, formula=False):
+    """Identify car `name` with seed index `k`; the arrays of its intervals and truth
+    (`formula`: the intervals of before, ``random_error_scale``, on the same model)."""
+    stem = f"{name.replace(' ', '_').replace('%', 'pct')}_seed{SEED0 + k}"
+    path = cache / f"{stem}{'_formula' if formula else ''}.npz"
     if path.is_file():
         with np.load(path, allow_pickle=False) as z:
             return {key: z[key] for key in z.files}
     library = read_shock_library(DEMO_LIBRARY_PATH)
     vehicle = spec["vehicle"]
-    model_path = path.with_name(path.stem + "_model.npz")
+    model_path = cache / f"{stem}_model.npz"
     t0 = time.perf_counter()
     if model_path.is_file():  # the identification of an earlier run (the intervals anew)
         model = load_model(model_path)
@@ -166,7 +169,7 @@ def run_case(name, spec, k, *, drive_s, n_setups, cache, cross_validate=True):
         t1 = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            model = identify_session(session, cross_validate=cross_validate)
+            model = identify_session(session)
         t2 = time.perf_counter()
         model_path.parent.mkdir(parents=True, exist_ok=True)
         model.save(model_path)
@@ -176,7 +179,9 @@ def run_case(name, spec, k, *, drive_s, n_setups, cache, cross_validate=True):
                              name=f"track {spec['speed_m_s']:g} m/s")
     setups = study_setups(library, n_setups)
     pred = predict_setups(model, drive, setups, library)
-    unc = prediction_uncertainty(model, drive, setups, library, predictions=pred)
+    draws = (UncertaintyOptions(random_scale=random_error_scale(model.frf)) if formula
+             else UncertaintyOptions())
+    unc = prediction_uncertainty(model, drive, setups, library, predictions=pred, draws=draws)
     t3 = time.perf_counter()
     truth = predict_setups(build_full_car(vehicle).loop_plant(model.cbar_n_s_m), drive, setups,
                            library).table
@@ -268,7 +273,8 @@ def main(argv=None):
     p.add_argument("--drive-s", type=float, default=60.0, help="validation drive [s]")
     p.add_argument("--setups", type=int, default=19, help="setups besides the baseline")
     p.add_argument("--formula", action="store_true",
-                   help="identify without cross-validation (the intervals of before, for A/B)")
+                   help="the intervals of before (random_error_scale's formula) on the same "
+                        "identifications, for A/B")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     for noisy in ("planner", "ident"):
@@ -287,7 +293,7 @@ def main(argv=None):
         for k in range(args.first_seed, args.first_seed + args.seeds):
             t0 = time.perf_counter()
             case = run_case(n, family[n], k, drive_s=args.drive_s, n_setups=args.setups,
-                            cache=out / "cases", cross_validate=not args.formula)
+                            cache=out / "cases", formula=args.formula)
             spec = family[n]
             row = {"car": n, "seed": SEED0 + k, "role": spec["role"], "noise": spec["noise"],
                    "run_s": spec["run_s"], "runs": spec["runs"], "fs_hz": spec["fs_hz"],
