@@ -236,7 +236,8 @@ def test_intervals_seed_quantiles_and_settings(known_plant, track_drive, demo_li
     assert u.settings == {"n_draws": 6, "seed": 1, "quantiles": (0.0, 1.0),
                           "n_averages": N_AVERAGES, "smooth_width_hz": 0.6,
                           "terms": ["random"], "oversample": None,
-                          "random_scale": RANDOM_ERROR_SCALE, "light_modes": []}
+                          "random_scale": RANDOM_ERROR_SCALE, "random_error": "formula",
+                          "light_modes": []}
     assert set(u.components) == {"random_lo", "random_hi"}
     pred = screen_setups(known_plant, track_drive, few_setups, demo_library).table.iloc[::-1]
     t = u.intervals(pred)
