@@ -651,36 +651,51 @@ CV_CAR_MAX_WIDTH_RATIO = 8.0
 CV_CAR_MIN_DIFFERENCE_COVERAGE = 0.75
 
 
-def test_cross_validated_intervals_cover_a_held_out_car(demo_library):
-    """Issue 37: on a car held out of any choice of the method, identified with the defaults
-    (cross-validation on), rank's 95 % intervals cover the known car's metrics, are not
-    wider than the error calls for, hold most true differences from the best, and the true
-    best is called best or tied."""
+def _held_out_car(name):
+    """Cars of ``studies/interval_calibration_cv.py``'s held-out family: (vehicle, noise, run
+    length [s], sample rate [Hz], track speed [m/s])."""
+    from ident.models.vehicle import example_vehicle
+
+    p = example_vehicle()
+
+    def car(label, mass_kg, springs_n_m, torsion=None, tire_damping=None):
+        r = mass_kg / p.sprung_mass_kg
+        return p.replace(name=label, sprung_mass_kg=mass_kg,
+                         roll_inertia_kg_m2=p.roll_inertia_kg_m2 * r,
+                         pitch_inertia_kg_m2=p.pitch_inertia_kg_m2 * r,
+                         spring_rate_n_m=np.repeat(np.asarray(springs_n_m, dtype=float), 2),
+                         torsion_stiffness_n_m_rad=torsion,
+                         tire_damping_n_s_m=None if tire_damping is None
+                         else np.full(4, tire_damping))
+
+    return {"light 100 s": (car("light", 900.0, (120e3, 110e3)), 0.03, 100.0, 100.0, 40.0),
+            "heavy twist 200 Hz": (car("heavy twist", 1450.0, (280e3, 250e3), 2.0e5, 900.0),
+                                   0.01, 250.0, 200.0, 60.0)}[name]
+
+
+def _check_held_out_car(name, demo_library):
+    """Identify a held-out car with the defaults (seed 301), predict 20 setups on a 60 s
+    track, and check its intervals against the known car (the CV_CAR_* bounds)."""
     import warnings
     from dataclasses import replace as dc_replace
 
     from ident.data.drive import make_track_drive
     from ident.identify.pipeline import identify_session
-    from ident.models.vehicle import build_full_car, example_vehicle
+    from ident.models.vehicle import build_full_car
     from ident.sim.metrics import METRIC_NAMES
     from ident.sim.virtual_rig import default_plan, simulate_session
     from planner.objective import default_objective, score_setups
     from planner.predict import predict_setups
     from planner.setups import Setup
 
-    p = example_vehicle()
-    car = p.replace(name="light", sprung_mass_kg=900.0,
-                    roll_inertia_kg_m2=p.roll_inertia_kg_m2 * 900.0 / p.sprung_mass_kg,
-                    pitch_inertia_kg_m2=p.pitch_inertia_kg_m2 * 900.0 / p.sprung_mass_kg,
-                    spring_rate_n_m=np.repeat([120e3, 110e3], 2), torsion_stiffness_n_m_rad=None,
-                    tire_damping_n_s_m=None)
+    car, noise, run_s, fs_hz, speed = _held_out_car(name)
     plan = default_plan()
-    plan = dc_replace(plan, noise=0.03, input_noise=0.03 / 4,
-                      runs=tuple(dc_replace(r, duration_s=100.0, seed=301) for r in plan.runs))
+    plan = dc_replace(plan, noise=noise, input_noise=noise / 4, fs_hz=fs_hz,
+                      runs=tuple(dc_replace(r, duration_s=run_s, seed=301) for r in plan.runs))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = identify_session(simulate_session(plan, car), diagnose=False, check_shocks=False)
-    drive = make_track_drive(duration_s=60.0, fs_hz=100.0, seed=24, speed_m_s=40.0,
+    drive = make_track_drive(duration_s=60.0, fs_hz=100.0, seed=24, speed_m_s=speed,
                              wheelbase_m=car.a_m + car.b_m, track_width_m=car.track_front_m)
     pool = enumerate_setups(demo_library)
     idx = np.unique(np.linspace(0, len(pool) - 1, 19).round().astype(int))
@@ -698,14 +713,29 @@ def test_cross_validated_intervals_cover_a_held_out_car(demo_library):
     assert 0 < half <= CV_CAR_MAX_WIDTH_RATIO * np.median(np.abs(P / K - 1))
     obj = default_objective()
     table = score_intervals(score_errors(pred.table, unc, obj, baseline="baseline"))
-    true = score_setups(known, obj, baseline="baseline").table["score"]
+    true = score_setups(known, obj, baseline="baseline").table
     best = table.index[table["verdict"] == "best"][0]
-    d = (true - true[best]).drop(index=best)
+    d = (true["score"] - true.loc[best, "score"]).drop(index=best)
     t = table.drop(index=best)
     assert np.mean((t["diff_best_lo"] <= d) & (d <= t["diff_best_hi"])) >= \
         CV_CAR_MIN_DIFFERENCE_COVERAGE
-    true_feasible = score_setups(known, obj, baseline="baseline").table["feasible"]
-    assert table.loc[true[true_feasible].idxmin(), "verdict"] in ("best", "tied")
+    assert table.loc[true["score"][true["feasible"]].idxmin(), "verdict"] in ("best", "tied")
+
+
+def test_cross_validated_intervals_cover_a_held_out_car(demo_library):
+    """Issue 37: on a car held out of any choice of the method, identified with the defaults
+    (cross-validation on), rank's 95 % intervals cover the known car's metrics, are not
+    wider than the error calls for, hold most true differences from the best, and the true
+    best is called best or tied (the light car: 5 runs of 100 s; measured 91.8 %)."""
+    _check_held_out_car("light 100 s", demo_library)
+
+
+@pytest.mark.slow
+@pytest.mark.heavy
+def test_cross_validated_intervals_cover_a_second_held_out_car(demo_library):
+    """The same on the heavy car with a chassis twist, 200 Hz, 5 runs of 250 s (measured
+    91.4 %; about a minute of CPU)."""
+    _check_held_out_car("heavy twist 200 Hz", demo_library)
 
 
 # ---------------------------------------------------------------- intervals of differences
