@@ -38,7 +38,7 @@ independent lines, a linear car) whose mismatch depends on the car and the sessi
 factor fitted to a family of cars (:func:`random_error_scale`) covered 68-73 % on the
 paper's car and 99.8 % on a GT car. Identification now measures the error on the
 session itself (:mod:`ident.identify.crossval`): the FRF of each time block of every run
-(four quarters), each block's deviation from the blocks' mean scaled to the full
+(its two halves), each half's deviation from the blocks' mean scaled to the full
 estimate (``Frf.cv_deviation``). Here the model's response is perturbed by each
 deviation and every setup screened (:func:`cross_validation_deviations`); the draws'
 spread about the nominal is then scaled so that its mean square per metric matches the
