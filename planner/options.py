@@ -401,9 +401,10 @@ class UncertaintyOptions:
     quantiles : (float, float)
         Interval bounds (default a 95 % interval).
     random_scale : float, optional
-        Factor on the FRF's standard errors in the random part; default
-        :func:`planner.uncertainty.random_error_scale` of the model's FRF (the calibrated
-        value).
+        Factor on the FRF's standard errors in the random part; default the session's
+        cross-validation (:func:`planner.uncertainty.cross_validated_scale`) where the
+        model has one, else :func:`planner.uncertainty.random_error_scale` of the model's
+        FRF (the formula fitted to a family of cars).
 
     Raises
     ------

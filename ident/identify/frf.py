@@ -271,6 +271,11 @@ class Frf:
         Standard error of each line of ``H`` (complex, ``E|H - H_true|^2 =
         sigma^2``), (n_out, n_in, n_f); set by conditioning
         (:func:`ident.identify.condition.conditioned_standard_error`).
+    cv_deviation : ndarray or None
+        The session's cross-validation (:mod:`ident.identify.crossval`): each time
+        block's relative deviation from the blocks' mean, scaled to the full estimate's
+        error, complex64 (n_blocks, n_out, n_in, n_grid) on the frequencies
+        ``settings["cross_validation"]["f_hz"]``; set by identification.
     """
 
     f_hz: np.ndarray
@@ -289,6 +294,7 @@ class Frf:
     H_raw: np.ndarray | None = None
     replaced: np.ndarray | None = None
     sigma: np.ndarray | None = None
+    cv_deviation: np.ndarray | None = None
 
     def index(self, output, input):
         """Return ``(output index, input index)`` of a pair, with a clear error."""

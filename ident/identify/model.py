@@ -653,6 +653,8 @@ class VehicleModel:
                 arrays["frf_replaced"] = fr.replaced
             if fr.sigma is not None:
                 arrays["frf_sigma"] = fr.sigma
+            if fr.cv_deviation is not None:
+                arrays["frf_cv_deviation"] = fr.cv_deviation
             meta["frf"] = {"input_names": list(fr.input_names),
                            "output_names": list(fr.output_names), "n_averages": fr.n_averages,
                            "settings": _jsonable(fr.settings)}
@@ -763,7 +765,8 @@ def load_model(path):
                       flagged=data["frf_flagged"], n_averages=int(fm["n_averages"]),
                       cbar_n_s_m=data["cbar_n_s_m"], fs_hz=float(meta["fs_hz"]),
                       settings=fm["settings"], H_raw=data.get("frf_H_raw"),
-                      replaced=data.get("frf_replaced"), sigma=data.get("frf_sigma"))
+                      replaced=data.get("frf_replaced"), sigma=data.get("frf_sigma"),
+                      cv_deviation=data.get("frf_cv_deviation"))
         settings = dict(meta.get("settings", {}))
         docs = {k: settings.pop(k, None) for k in RESULT_KEYS}
         model = VehicleModel(name=meta["name"], input_names=tuple(meta["input_names"]),

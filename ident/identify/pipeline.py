@@ -37,6 +37,7 @@ from ident.errors import FitWarning, LowCoherenceWarning
 from ident.identify import fit as fitmod
 from ident.identify.condition import condition_frf, conditioned_standard_error
 from ident.identify.coverage import session_coverage
+from ident.identify.crossval import cross_validate_frf
 from ident.identify.diagnose import NEAR_ZERO_CONTACT, diagnose_session, rest_levels
 from ident.identify.frf import (
     DF_INPUTS,
@@ -536,7 +537,7 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
                      coherence_min=0.9, smooth_width_hz=None, smooth_domain=None,
                      fit_method="invfreqs",
                      orders="auto", weighting="paper", band_hz=(0.5, 20.0), max_order=10,
-                     diagnose=True, check_shocks=True):
+                     diagnose=True, check_shocks=True, cross_validate=True):
     """Identify a vehicle model from a rig session: estimate, condition, fit, check.
 
     Parameters
@@ -568,6 +569,13 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         as the model's ``shock_check`` (:class:`~ident.identify.shockcheck.
         ShockLibraryCheck` without the per-run rows). The model's numbers do not
         depend on it. False, or a session without the force channels: None.
+    cross_validate : bool
+        Measure the FRF estimate's error on the session's own time blocks
+        (:func:`ident.identify.crossval.cross_validate_frf`: the FRF of each time block
+        of every run, their scatter) and keep it with the FRF
+        (``model.frf.cv_deviation`` and ``settings["cross_validation"]``): the planner's
+        intervals take their random part's size from it. The model's numbers do not
+        depend on it.
 
     Returns
     -------
@@ -618,6 +626,8 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
                        estimator=estimator)
     frf = condition_frf(frf, coherence_min=coherence_min, smooth_width_hz=smooth_width_hz,
                         **cond)
+    if cross_validate:
+        frf = cross_validate_frf(session, frf)
     session = measured
     model = fit_model(frf, method=fit_method, orders=orders, weighting=weighting,
                       band_hz=band_hz, max_order=max_order, name=session.name,

@@ -46,6 +46,10 @@ def add_parser(subparsers):
     ident_p.add_argument("--no-diagnosis", action="store_true", help="skip the check of the "
                          "session against the model (bump stops, lift-off, the runs "
                          "re-simulated on the model; about 5-8 %% of the time)")
+    ident_p.add_argument("--no-cross-validation", action="store_true", help="skip the FRF "
+                         "estimates on the two halves of every run (about 15 %% of the time): "
+                         "rank's intervals then take the older formula instead of the "
+                         "session's own error")
     add_resample(ident_p, "every run")
     ident_p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     ident_p.set_defaults(func=run)
@@ -83,7 +87,8 @@ def run(args):
             model = identify_session(session, estimator=args.estimator,
                                      frf_method=args.frf_method, nperseg=args.nperseg,
                                      coherence_min=args.coherence_min, fit_method=args.method,
-                                     max_order=args.max_order, diagnose=not args.no_diagnosis)
+                                     max_order=args.max_order, diagnose=not args.no_diagnosis,
+                                     cross_validate=not args.no_cross_validation)
     finally:
         diagnose_log.setLevel(level)
         shocks_log.setLevel(shocks_level)
