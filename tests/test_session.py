@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import shutil
 import tomllib
 from pathlib import Path
@@ -1064,18 +1065,19 @@ def test_check_static_corner_loads():
         check_static_corner_loads({"LF": 1.0}, "plan")
 
 
-def test_third_element_keys_are_read_and_said_not_modelled(session_dir, caplog):
+def test_third_element_keys_are_read_and_said_modelled(session_dir, caplog):
     """The spec's optional third elements (heave/roll per axle) are read and checked
-    (tests/test_third_elements.py), and said once not to be modelled by the identification
-    and the predictions yet, instead of "not part of the format"."""
+    (tests/test_third_elements.py), and said once (info) what shockplan does with them,
+    never "not part of the format"."""
     def declare(doc):
         doc["third_elements"] = {"heave_front": 1.0}
         doc["run"][0]["third"] = {"heave_front": "D8"}
     _edit_manifest(declare)(session_dir)
-    with caplog.at_level("WARNING", logger="ident.data.session"):
+    with caplog.at_level("INFO", logger="ident.data.session"):
         s = read_session(session_dir)
     assert s.runs[0].third.dampers["heave_front"] == "D8"
     said = [r.getMessage() for r in caplog.records if "third elements" in r.getMessage()]
-    assert len(said) == 1 and all("do not model them yet" in m for m in said)
+    assert len(said) == 1 and all("predictions put them in the loop" in m for m in said)
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
     assert not any("not part of the rig-session format" in r.getMessage()
                    for r in caplog.records)

@@ -230,9 +230,11 @@ def add_try_options(parser):
                         "or rear; shock-library ids, 'none' for none); repeatable (a car with "
                         "third elements; default: the setups' own, else the baseline's)")
     parser.add_argument("--try-roll", action="append", metavar="AXLE=ID,ID",
-                        help="as --try-heave, for the roll dampers")
+                        help="as --try-heave, for the roll dampers (default: the setups' own, "
+                        "else the baseline's)")
     parser.add_argument("--try-heave-spring", action="append", metavar="AXLE=ID,ID",
-                        help="as --try-heave, for the heave springs (bump-stop-library ids)")
+                        help="as --try-heave, for the heave springs (bump-stop-library ids; "
+                        "default: the setups' own, else the baseline's)")
 
 
 def add_prediction_inputs(parser, *, out_help):
