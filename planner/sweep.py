@@ -83,9 +83,9 @@ from ident.sim.closedloop import pack_setups
 from planner.errors import PlannerError
 from planner.objective import (Objective, default_objective, mark_inventory, ranking_order,
                                ranking_position, score_setups, time_domain_metrics)
-from planner.elements import (ELEMENT_COLUMNS, THIRD_COLUMNS, distinct_setups,
-                              model_setup_elements, model_setup_third, vary_elements,
-                              vary_third)
+from planner.elements import (ELEMENT_COLUMNS, THIRD_COLUMNS, corner_shock_ids,
+                              distinct_setups, model_setup_elements, model_setup_third,
+                              vary_elements, vary_third)
 from planner.histograms import ShockHistograms
 from planner.options import (ElementOptions, HistogramOptions, LoopOptions, RunOptions,
                              ScreenOptions, as_options)
@@ -707,7 +707,20 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
                            "as vary_bump_stops / vary_packers_m (shockplan sweep "
                            "--try-bump-stops, --try-packers), or rank these setups with "
                            "shockplan rank --setups")
-    space = setup_space(library, setups=setups, **(constraints or {}), where="sweep")
+    constraints = dict(constraints or {})
+    thirds = [c for c in (elements.car_third(m) for _, m in _as_list(models, "models"))
+              if c is not None and c.elements]
+    if thirds:
+        # a car's heave and roll dampers stay off its corners; its screening is without
+        # them (the packed screening of shock codes has no third elements), the top share
+        # simulated with them
+        log.warning("sweep: the model carries third elements (%s); the sweep's screening "
+                    "leaves them out and only its simulated top share has them: for a car "
+                    "with third elements, shockplan rank screens them too",
+                    ", ".join(thirds[0].elements.elements))
+        if setups is None and constraints.get("shocks") is None:
+            constraints["shocks"] = corner_shock_ids(library, thirds[0], elements.vary_third)
+    space = setup_space(library, setups=setups, **constraints, where="sweep")
     model_list = _as_list(models, "models")
     drive_list = _as_list(drives, "drives", Drive)
     model_names, drive_names = _names(model_list, "model"), _names(drive_list, "drive")

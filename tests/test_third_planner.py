@@ -28,6 +28,7 @@ from planner.rank import rank_setups
 from planner.report.ranking import write_predictions_csv
 from planner.setups import Setup
 from planner.setups.csv_io import read_setups
+from planner.sweep import sweep_setups
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_third_loop import _drive  # noqa: E402  (the truth tests' drive)
@@ -172,3 +173,16 @@ def test_rank_keeps_heave_dampers_off_the_corners(plant, drive):
     corners = set(r.screening[list(CORNERS)].to_numpy().ravel())
     assert corners == {"S"}
     assert set(r.table["heave_front"]) == {"H1", "H2"}
+
+
+def test_sweep_says_its_screening_leaves_third_elements_out(plant, drive, caplog):
+    """The sweep's packed screening has no third elements: it says so, keeps the car's heave
+    and roll dampers off the corners, and simulates its top share with them."""
+    el = ElementOptions(use_model=CarElements(SPRINGS, {}, {}), third=CAR)
+    with caplog.at_level("WARNING", logger="planner.sweep"):
+        r = sweep_setups(plant, drive, LIB, elements=el, top=1, baseline="S",
+                         loop=LoopOptions(oversample=1))
+    assert any("leaves them out" in m.getMessage() for m in caplog.records)
+    table = r.table
+    assert set(table[list(CORNERS)].to_numpy().ravel()) == {"S"}
+    assert table.loc["S/S/S/S", "heave_front"] == "H1"  # simulated with the baseline's
