@@ -560,3 +560,44 @@ def test_decision_pairs_are_the_unresolved_ones(identified_model, track_drive, d
     names = [c.name for c in contenders]
     expected = [(a, b) for a, b in every if names[b] in open_[names[a]]] or every
     assert pairs == expected
+
+
+def test_heave_and_roll_damper_swaps_add_one_direction_each():
+    """Eq. 17 with third elements (issue 38): the corner inputs carry the third dampers'
+    force at the corners (``sum_e m_e F_e``), so a run that swaps only the heave damper adds
+    one direction (``m_heave``) to the baseline's rank 7, a roll damper swap another, and a
+    corner swap the rest; the baseline alone has rank 7 as without elements."""
+    from ident.models.vehicle import build_full_car, example_vehicle
+    from planner.design.information import candidate_information as _candidate_information
+    from planner.design.information import drive_maker as _drive_maker
+    from planner.elements import setup_third
+    from test_third_planner import CAR, LIB, SPRINGS
+
+    params = example_vehicle()
+    plant = build_full_car(params).loop_plant(np.full(4, 3000.0))  # S at c_bar: dF 0
+    edges = np.geomspace(0.5, 20, 9)
+    f_c = np.sqrt(edges[:-1] * edges[1:])
+    S = dict.fromkeys(CORNERS, "S")
+    setups = [Setup("base", S), Setup("heave", S, third={"heave_front": "H2"}),
+              Setup("roll", S, third={"roll_front": None}),
+              Setup("corner", {**S, "LR": "H2", "RR": "R1"})]
+    third = setup_third(setups, CAR, LIB, bump_stops=SPRINGS)
+    make = _drive_maker(params, None)
+    info, _ = _candidate_information(plant, setups, ["noise"],
+                                     {"noise": make("noise", 60.0, 1, "n")}, LIB, edges, f_c,
+                                     third=third)
+    M = info[:, 0, 3]
+    every = DI.hermitian(M.sum(axis=0))
+    d = 1 / np.sqrt(np.real(np.diag(every)))
+
+    def rank(*k):
+        return np.linalg.matrix_rank(d[:, None] * DI.hermitian(M[list(k)].sum(axis=0))
+                                     * d[None, :], tol=1e-8)
+
+    assert [rank(k) for k in range(4)] == [7, 7, 7, 7]
+    assert rank(0, 1) == 8 and rank(0, 2) == 8 and rank(0, 1, 2) == 9
+    assert rank(0, 1, 2, 3) == 11
+    # without the third elements the heave swap is the baseline: nothing to separate
+    plain, _ = _candidate_information(plant, setups[:2], ["noise"],
+                                      {"noise": make("noise", 60.0, 1, "n")}, LIB, edges, f_c)
+    assert np.allclose(plain[0], plain[1])
