@@ -601,3 +601,14 @@ def test_heave_and_roll_damper_swaps_add_one_direction_each():
     plain, _ = _candidate_information(plant, setups[:2], ["noise"],
                                       {"noise": make("noise", 60.0, 1, "n")}, LIB, edges, f_c)
     assert np.allclose(plain[0], plain[1])
+
+
+def test_a_third_damper_swap_costs_a_swap():
+    S = dict.fromkeys(CORNERS, "S")
+    base, heave = Setup("b", S), Setup("h", S, third={"heave_front": "H2"})
+    rig = RigSpec(swap_min=6.0)
+    assert change_time_min(base, heave, rig) == 6.0
+    assert change_time_min(heave, Setup("h2", S, third={"heave_front": "H2"}), rig) == 0.0
+    both = Setup("hr", S, third={"heave_front": "H1", "roll_front": None},
+                 heave_springs={"front": "HS"})
+    assert change_time_min(heave, both, rig) == 18.0

@@ -187,10 +187,28 @@ def _id_change_counts(ids_a, ids_b):
     return swaps, clicks
 
 
+def _third_swaps(a, b):
+    """Third-element dampers and heave springs that differ from setup `a` to setup `b` (a
+    key a setup leaves out keeps the baseline's: differs from any id given)."""
+    n = 0
+    for x, y in ((a.third, b.third), (a.heave_springs, b.heave_springs)):
+        if x or y:
+            x, y = x or {}, y or {}
+            n += sum(x.get(k, _BASE) != y.get(k, _BASE) for k in set(x) | set(y))
+    return n
+
+
+_BASE = object()  # a third key a setup leaves out: the baseline's
+
+
 def change_counts(a, b):
     """Swaps and click changes from setup `a` to setup `b` (the greedy asks for the same
-    pairs again and again: cached on the ids)."""
-    return _id_change_counts(a.ids(), b.ids())
+    pairs again and again: cached on the ids); a third element's damper or heave spring
+    swapped (``Setup.third``, ``Setup.heave_springs``, issue 38) is a swap too."""
+    swaps, clicks = _id_change_counts(a.ids(), b.ids())
+    if a.third or b.third or a.heave_springs or b.heave_springs:
+        swaps += _third_swaps(a, b)
+    return swaps, clicks
 
 
 def change_time_min(before, after, rig=None):
