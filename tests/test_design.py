@@ -612,3 +612,47 @@ def test_a_third_damper_swap_costs_a_swap():
     both = Setup("hr", S, third={"heave_front": "H1", "roll_front": None},
                  heave_springs={"front": "HS"})
     assert change_time_min(heave, both, rig) == 18.0
+
+
+def test_a_plan_on_a_car_with_third_elements_may_swap_its_heave_damper(paper_vehicle,
+                                                                       demo_library):
+    """Issue 38: candidate runs swap the heave damper as they swap corner shocks (the
+    crate's third dampers stay off the corners), the design's information carries the
+    third dampers' force in the corner inputs, and the rig plan writes each run's third."""
+    import tomllib
+
+    from ident.data.third import CarThird, RunThird, ThirdElements
+    from planner.testplan import plan_toml
+
+    lib = ShockLibrary(demo_library.entries() + [
+        LinearShock("HD1", 8000.0, lag_s=0.004), LinearShock("HD2", 20000.0),
+        LinearShock("RD1", 3000.0)])
+    car = CarThird(ThirdElements({"heave_front": 1.0, "roll_front": 0.8}),
+                   RunThird(dampers={"heave_front": "HD1", "roll_front": "RD1"}))
+    opts = CandidateOptions(durations_s=(60.0, 120.0), third=car,
+                            third_dampers={"heave_front": ["HD1", "HD2"]})
+    cands = D.candidate_runs(lib, Setup("b", dict.fromkeys(CORNERS, "B20")), kinds=("noise",),
+                             durations_s=(60.0,), third=car,
+                             third_dampers={"heave_front": ["HD1", "HD2"]})
+    names = {c.name.split()[0] for c in cands}
+    assert "HD2@heave_front" in names and "HD1@heave_front" not in names
+    assert not any(n.startswith(("HD", "RD")) and "@heave" not in n for n in names)
+    heave = next(c for c in cands if c.name.startswith("HD2@heave_front"))
+    assert heave.changed == ("heave_front",) and heave.setup.ids() == ("B20",) * 4
+    with pytest.raises(PlannerError, match="declares"):
+        D.candidate_runs(lib, Setup("b", dict.fromkeys(CORNERS, "B20")), third=car,
+                         third_dampers={"heave_rear": ["HD2"]})
+    plan = design_experiment(paper_vehicle, lib, budget_min=40.0, baseline="B20",
+                             candidates=opts)
+    assert plan.third is car
+    doc = tomllib.loads(plan_toml(plan))
+    assert doc["third_elements"] == {"heave_front": 1.0, "roll_front": 0.8}
+    for run, r in zip(doc["run"], plan.runs):
+        want = {"heave_front": (r.setup.third or {}).get("heave_front", "HD1"),
+                "roll_front": "RD1"}
+        assert run["third"] == want
+        assert not set(run["setup"].values()) & {"HD1", "HD2", "RD1"}
+    swaps = [r for r in plan.runs if (r.setup.third or {}).get("heave_front") == "HD2"]
+    for r in swaps:
+        assert r.setup.ids() == ("B20",) * 4 or "heave_front" in r.changed
+    assert plan.relaxed.index.str.startswith("HD2@heave_front").any()
