@@ -615,7 +615,7 @@ def test_a_third_damper_swap_costs_a_swap():
 
 
 def test_a_plan_on_a_car_with_third_elements_may_swap_its_heave_damper(paper_vehicle,
-                                                                       demo_library):
+                                                                       demo_library, tmp_path):
     """Issue 38: candidate runs swap the heave damper as they swap corner shocks (the
     crate's third dampers stay off the corners), the design's information carries the
     third dampers' force in the corner inputs, and the rig plan writes each run's third."""
@@ -656,3 +656,10 @@ def test_a_plan_on_a_car_with_third_elements_may_swap_its_heave_damper(paper_veh
     for r in swaps:
         assert r.setup.ids() == ("B20",) * 4 or "heave_front" in r.changed
     assert plan.relaxed.index.str.startswith("HD2@heave_front").any()
+    # the virtual rig reads the plan back: every run fits the third dampers written
+    from ident.sim.virtual_rig import read_rig_plan
+    from planner.testplan import write_plan
+
+    files = write_plan(plan, tmp_path / "plan")
+    back = read_rig_plan(files["plan"])
+    assert [dict(r.third) for r in back.runs] == [run["third"] for run in doc["run"]]
