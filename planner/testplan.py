@@ -76,6 +76,7 @@ from ident.models.library import write_shock_library
 from ident.models.shocks import format_number
 from ident.sim.metrics import METRIC_QUANTITY
 from planner.design import ExperimentPlan
+from planner.design.candidates import setup_key
 from planner.errors import PlannerError
 from planner.report.sheets import (column_label, fit_column_width, fit_width_units,
                                    print_setup, printable_size_pt, text_width, wrap_lines)
@@ -156,12 +157,18 @@ def plan_toml(plan, *, units="SI", drive_dir=_DRIVE_DIR, shock_library="shocks.t
     fs = next(iter(plan.drives.values())).fs_hz
     runs = []
     for r in plan.runs:
-        role = "baseline" if r.setup.ids() == plan.baseline.ids() else _ROLE[r.purpose]
+        role = ("baseline" if setup_key(r.setup) == setup_key(plan.baseline)
+                else _ROLE[r.purpose])
         runs.append({"name": r.name, "setup": dict(zip(CORNERS, r.setup.ids())),
                      "role": role, "drive": f"{drive_dir}/{r.drive}.csv"})
+        if getattr(plan, "third", None) is not None:
+            runs[-1].update(_run_third(plan.third, r.setup, units))
     doc = {"format": "rig-plan/1", "name": f"{plan.settings.get('car')} design "
                                             f"({plan.criterion}, {plan.budget_min:g} min)",
-           "units": units, "shock_library": shock_library, "fs_hz": float(fs), "run": runs}
+           "units": units, "shock_library": shock_library, "fs_hz": float(fs)}
+    if getattr(plan, "third", None) is not None:
+        doc["third_elements"] = dict(plan.third.elements.motion_ratios)
+    doc["run"] = runs
     header = (f"Experiment plan by shockplan plan: criterion {plan.criterion}, budget "
               f"{plan.budget_min:g} min, planned {plan.total_min:.1f} min on rig "
               f"'{plan.rig.name}'.\nRun it on the virtual rig with: shockplan rig simulate "
@@ -172,6 +179,23 @@ def plan_toml(plan, *, units="SI", drive_dir=_DRIVE_DIR, shock_library="shocks.t
                           break_on_hyphens=False)
             for line in plan.rationale)
     return "".join(f"# {line}\n" for line in header.splitlines()) + tomli_w.dumps(doc)
+
+
+def _run_third(car, setup, units):
+    """A rig-plan run's ``third``, ``heave_springs`` and ``heave_packers`` (issue 38): the
+    dampers fitted (the setup's, else the baseline's; an element not fitted left out, as
+    the spec reads it) and the baseline's heave springs and packers (file units)."""
+    fitted = {e: (setup.third or {}).get(e, car.baseline.dampers.get(e))
+              for e in car.elements.motion_ratios}
+    out = {"third": {e: sid for e, sid in fitted.items() if sid is not None}}
+    springs = {a: sid for a, sid in car.baseline.heave_springs.items() if sid is not None}
+    if springs:
+        out["heave_springs"] = springs
+    packers = {a: float(from_si(v, "displacement", units))
+               for a, v in car.baseline.heave_packers_m.items() if v}
+    if packers:
+        out["heave_packers"] = packers
+    return out
 
 
 def _shock_settings(library, sid):

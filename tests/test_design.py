@@ -560,3 +560,106 @@ def test_decision_pairs_are_the_unresolved_ones(identified_model, track_drive, d
     names = [c.name for c in contenders]
     expected = [(a, b) for a, b in every if names[b] in open_[names[a]]] or every
     assert pairs == expected
+
+
+def test_heave_and_roll_damper_swaps_add_one_direction_each():
+    """Eq. 17 with third elements (issue 38): the corner inputs carry the third dampers'
+    force at the corners (``sum_e m_e F_e``), so a run that swaps only the heave damper adds
+    one direction (``m_heave``) to the baseline's rank 7, a roll damper swap another, and a
+    corner swap the rest; the baseline alone has rank 7 as without elements."""
+    from ident.models.vehicle import build_full_car, example_vehicle
+    from planner.design.information import candidate_information as _candidate_information
+    from planner.design.information import drive_maker as _drive_maker
+    from planner.elements import setup_third
+    from test_third_planner import CAR, LIB, SPRINGS
+
+    params = example_vehicle()
+    plant = build_full_car(params).loop_plant(np.full(4, 3000.0))  # S at c_bar: dF 0
+    edges = np.geomspace(0.5, 20, 9)
+    f_c = np.sqrt(edges[:-1] * edges[1:])
+    S = dict.fromkeys(CORNERS, "S")
+    setups = [Setup("base", S), Setup("heave", S, third={"heave_front": "H2"}),
+              Setup("roll", S, third={"roll_front": None}),
+              Setup("corner", {**S, "LR": "H2", "RR": "R1"})]
+    third = setup_third(setups, CAR, LIB, bump_stops=SPRINGS)
+    make = _drive_maker(params, None)
+    info, _ = _candidate_information(plant, setups, ["noise"],
+                                     {"noise": make("noise", 60.0, 1, "n")}, LIB, edges, f_c,
+                                     third=third)
+    M = info[:, 0, 3]
+    every = DI.hermitian(M.sum(axis=0))
+    d = 1 / np.sqrt(np.real(np.diag(every)))
+
+    def rank(*k):
+        return np.linalg.matrix_rank(d[:, None] * DI.hermitian(M[list(k)].sum(axis=0))
+                                     * d[None, :], tol=1e-8)
+
+    assert [rank(k) for k in range(4)] == [7, 7, 7, 7]
+    assert rank(0, 1) == 8 and rank(0, 2) == 8 and rank(0, 1, 2) == 9
+    assert rank(0, 1, 2, 3) == 11
+    # without the third elements the heave swap is the baseline: nothing to separate
+    plain, _ = _candidate_information(plant, setups[:2], ["noise"],
+                                      {"noise": make("noise", 60.0, 1, "n")}, LIB, edges, f_c)
+    assert np.allclose(plain[0], plain[1])
+
+
+def test_a_third_damper_swap_costs_a_swap():
+    S = dict.fromkeys(CORNERS, "S")
+    base, heave = Setup("b", S), Setup("h", S, third={"heave_front": "H2"})
+    rig = RigSpec(swap_min=6.0)
+    assert change_time_min(base, heave, rig) == 6.0
+    assert change_time_min(heave, Setup("h2", S, third={"heave_front": "H2"}), rig) == 0.0
+    both = Setup("hr", S, third={"heave_front": "H1", "roll_front": None},
+                 heave_springs={"front": "HS"})
+    assert change_time_min(heave, both, rig) == 18.0
+
+
+def test_a_plan_on_a_car_with_third_elements_may_swap_its_heave_damper(paper_vehicle,
+                                                                       demo_library, tmp_path):
+    """Issue 38: candidate runs swap the heave damper as they swap corner shocks (the
+    crate's third dampers stay off the corners), the design's information carries the
+    third dampers' force in the corner inputs, and the rig plan writes each run's third."""
+    import tomllib
+
+    from ident.data.third import CarThird, RunThird, ThirdElements
+    from planner.testplan import plan_toml
+
+    lib = ShockLibrary(demo_library.entries() + [
+        LinearShock("HD1", 8000.0, lag_s=0.004), LinearShock("HD2", 20000.0),
+        LinearShock("RD1", 3000.0)])
+    car = CarThird(ThirdElements({"heave_front": 1.0, "roll_front": 0.8}),
+                   RunThird(dampers={"heave_front": "HD1", "roll_front": "RD1"}))
+    opts = CandidateOptions(durations_s=(60.0,), third=car,
+                            third_dampers={"heave_front": ["HD1", "HD2"]})
+    cands = D.candidate_runs(lib, Setup("b", dict.fromkeys(CORNERS, "B20")), kinds=("noise",),
+                             durations_s=(60.0,), third=car,
+                             third_dampers={"heave_front": ["HD1", "HD2"]})
+    names = {c.name.split()[0] for c in cands}
+    assert "HD2@heave_front" in names and "HD1@heave_front" not in names
+    assert not any(n.startswith(("HD", "RD")) and "@heave" not in n for n in names)
+    heave = next(c for c in cands if c.name.startswith("HD2@heave_front"))
+    assert heave.changed == ("heave_front",) and heave.setup.ids() == ("B20",) * 4
+    with pytest.raises(PlannerError, match="declares"):
+        D.candidate_runs(lib, Setup("b", dict.fromkeys(CORNERS, "B20")), third=car,
+                         third_dampers={"heave_rear": ["HD2"]})
+    plan = design_experiment(paper_vehicle, lib, budget_min=40.0, baseline="B20",
+                             candidates=opts)
+    assert plan.third is car
+    doc = tomllib.loads(plan_toml(plan))
+    assert doc["third_elements"] == {"heave_front": 1.0, "roll_front": 0.8}
+    for run, r in zip(doc["run"], plan.runs):
+        want = {"heave_front": (r.setup.third or {}).get("heave_front", "HD1"),
+                "roll_front": "RD1"}
+        assert run["third"] == want
+        assert not set(run["setup"].values()) & {"HD1", "HD2", "RD1"}
+    swaps = [r for r in plan.runs if (r.setup.third or {}).get("heave_front") == "HD2"]
+    for r in swaps:
+        assert r.setup.ids() == ("B20",) * 4 or "heave_front" in r.changed
+    assert plan.relaxed.index.str.startswith("HD2@heave_front").any()
+    # the virtual rig reads the plan back: every run fits the third dampers written
+    from ident.sim.virtual_rig import read_rig_plan
+    from planner.testplan import write_plan
+
+    files = write_plan(plan, tmp_path / "plan")
+    back = read_rig_plan(files["plan"])
+    assert [dict(r.third) for r in back.runs] == [run["third"] for run in doc["run"]]

@@ -5,8 +5,8 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
-from planner.cli.common import (UNITS_OF_DRIVES, add_units, check_out, load_vehicle,
-                                output_units)
+from planner.cli.common import (UNITS_OF_DRIVES, add_units, check_out, element_choices,
+                                load_vehicle, output_units)
 from planner.text import format_table
 
 __all__ = ["add_parser", "run"]
@@ -46,6 +46,12 @@ def add_parser(subparsers):
     add_units(pl, "units of the drive files read and written", default=None,
               default_text=UNITS_OF_DRIVES + "; without --drive, the session's or else the "
               "crate's (--shocks)")
+    pl.add_argument("--try-heave", action="append", metavar="AXLE=ID,ID",
+                    help="candidate runs swap the heave damper at AXLE (front or rear) for "
+                    "each of these crate ids ('none' for none); repeatable (a model with "
+                    "third elements, --model)")
+    pl.add_argument("--try-roll", action="append", metavar="AXLE=ID,ID",
+                    help="as --try-heave, for the roll dampers")
     pl.add_argument("--out", required=True, help="output folder")
     pl.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     pl.set_defaults(func=run)
@@ -58,7 +64,7 @@ def run(args):
     from ident.identify.model import load_model
     from ident.data.session import read_session
     from ident.models.library import read_shock_library
-    from planner.design import ScheduleOptions, design_experiment
+    from planner.design import CandidateOptions, ScheduleOptions, design_experiment
     from planner.dyno.check import library_units
     from planner.objective import default_objective, read_objective
     from planner.rig_spec import read_rig
@@ -85,9 +91,15 @@ def run(args):
     output_units(args, drives, fallback=session.units if session is not None
                  else library_units(args.shocks))
     rig = read_rig(args.rig_costs) if args.rig_costs else None
+    third_dampers = element_choices(args).get("vary_third")
+    if third_dampers and getattr(model, "third", None) is None:
+        raise ValueError("--try-heave/--try-roll need a model with third elements: plan between "
+                         "runs with --model (identified from a session that declares "
+                         "third_elements) and --session")
     plan = design_experiment(model, library, budget_min=args.budget_min,
                              criterion=args.criterion, session=session, objective=objective,
                              baseline=args.baseline, drives=drives, rig=rig,
+                             candidates=CandidateOptions(third_dampers=third_dampers),
                              schedule=ScheduleOptions(baseline_every=args.baseline_every,
                                                       n_validation=args.validate))
     files = write_plan(plan, out, units=args.units, overwrite=args.overwrite)

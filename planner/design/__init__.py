@@ -73,6 +73,21 @@ baseline the design can thus vary a corner's damping for seconds of rig time;
 the criterion decides which settings inform. A crate without adjustable shocks
 plans exactly as before.
 
+Third elements (issue 38)
+-------------------------
+On a car with heave and roll elements (the identified model's ``third``, or
+``CandidateOptions.third`` for a known vehicle) the candidates also swap an element's
+damper (``CandidateOptions.third_dampers``: element -> crate ids; a run
+``"<id>@heave_front"`` costs one swap), and the crate's third dampers are not swapped in at
+the corners. The identification puts the elements' force at the corners (``sum_e m_e
+F_e``) into the corner inputs, so the corners' damping deviation of a candidate is a full
+matrix: ``diag(c - c_bar) + sum_e c_e m_e m_e^T / (1 + j w lag_e)``, each third damper
+linearized at its element's velocity RMS; a heave or roll damper swap varies the corner
+inputs along ``m_e``, one direction of Eq. 17's rank. The heave springs' contact is left
+out. Runs are the same car when :func:`~planner.design.candidates.setup_key` (corners and
+third elements) is; the rig plan writes ``third_elements`` and each run's ``third``,
+``heave_springs`` and ``heave_packers``.
+
 Modules
 -------
 - :mod:`~planner.design.candidates`: the candidate runs and their costs on a rig;

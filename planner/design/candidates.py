@@ -16,6 +16,7 @@ import numpy as np
 
 from ident.data.channels import CORNERS
 from ident.models.adjustable import parse_shock_name
+from planner.elements import corner_shock_ids
 from planner.errors import PlannerError
 from planner.rig_spec import default_rig
 from planner.setups import Setup, unknown_id_error
@@ -30,6 +31,8 @@ __all__ = [
     "corner_change",
     "change_counts",
     "change_time_min",
+    "setup_key",
+    "third_changed",
     "full_names",
     "candidate_runs",
     "validation_candidates",
@@ -59,6 +62,12 @@ class CandidateOptions:
         Shocks chosen from the crate when `shocks` is not given.
     click_levels : int
         Settings per adjuster tried across its range (ends included).
+    third : ident.data.third.CarThird, optional
+        The car's third elements (issue 38) for a model without them (a known vehicle);
+        default the identified model's (``model.third``).
+    third_dampers : mapping of str to sequence of str, optional
+        Element (``heave_front``, ...) -> crate ids the candidates swap in there
+        (``"none"``: the element's damper taken off).
 
     Raises
     ------
@@ -71,6 +80,8 @@ class CandidateOptions:
     shocks: tuple | None = None
     n_shocks: int = 4
     click_levels: int = DEFAULT_CLICK_LEVELS
+    third: object = None
+    third_dampers: object = None
 
 
 @dataclass(frozen=True)
@@ -187,10 +198,50 @@ def _id_change_counts(ids_a, ids_b):
     return swaps, clicks
 
 
+def third_changed(a, b):
+    """The third elements' columns (``heave_front``, ``heave_spring_front``, ...) whose damper
+    or heave spring differs from setup `a` to setup `b` (a key a setup leaves out keeps the
+    baseline's: it differs from any id given), in column order."""
+    out = []
+    for x, y, pre in ((a.third, b.third, ""), (a.heave_springs, b.heave_springs,
+                                                 "heave_spring_")):
+        if x or y:
+            x, y = x or {}, y or {}
+            out += [pre + k for k in sorted(set(x) | set(y)) if x.get(k, _BASE) != y.get(k, _BASE)]
+    return tuple(out)
+
+
+def _third_swaps(a, b):
+    return len(third_changed(a, b))
+
+
+_BASE = object()  # a third key a setup leaves out: the baseline's
+
+
 def change_counts(a, b):
     """Swaps and click changes from setup `a` to setup `b` (the greedy asks for the same
-    pairs again and again: cached on the ids)."""
-    return _id_change_counts(a.ids(), b.ids())
+    pairs again and again: cached on the ids); a third element's damper or heave spring
+    swapped (``Setup.third``, ``Setup.heave_springs``, issue 38) is a swap too."""
+    swaps, clicks = _id_change_counts(a.ids(), b.ids())
+    if a.third or b.third or a.heave_springs or b.heave_springs:
+        swaps += _third_swaps(a, b)
+    return swaps, clicks
+
+
+def setup_key(setup):
+    """What makes two setups the same car on the rig: the corners' shock names and the third
+    elements' dampers and heave springs a setup gives (issue 38), hashable.
+
+    Examples
+    --------
+    >>> a = Setup("a", dict.fromkeys(CORNERS, "S"))
+    >>> setup_key(a) == setup_key(Setup("b", dict.fromkeys(CORNERS, "S")))
+    True
+    >>> setup_key(a) == setup_key(Setup("h", a.shocks, third={"heave_front": "H2"}))
+    False
+    """
+    return (setup.ids(), tuple(sorted((setup.third or {}).items())),
+            tuple(sorted((setup.heave_springs or {}).items())))
 
 
 def change_time_min(before, after, rig=None):
@@ -241,12 +292,14 @@ def full_names(setup, library):
     ids = tuple(_full_name(library, sid) for sid in setup.ids())
     if ids == setup.ids():
         return setup
-    return Setup(setup.name, dict(zip(CORNERS, ids)), setup.bump_stops, setup.packers_m)
+    return Setup(setup.name, dict(zip(CORNERS, ids)), setup.bump_stops, setup.packers_m,
+                 setup.third, setup.heave_springs)
 
 
 def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
                    durations_s=(120.0, 300.0, 600.0), shocks=None, n_shocks=4, c_bar=None,
-                   v_rms_m_s=0.1, click_levels=DEFAULT_CLICK_LEVELS):
+                   v_rms_m_s=0.1, click_levels=DEFAULT_CLICK_LEVELS, third=None,
+                   third_dampers=None):
     """The runs a design chooses from.
 
     The baseline, and the baseline with shocks swapped in at one corner, at a
@@ -259,6 +312,12 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
     shock is that adjustable shock changes clicks, not its shock: the run costs
     ``click_change_s`` an adjuster turned, not ``swap_min``.
 
+    On a car with third elements (`third`, a :class:`ident.data.third.CarThird`; issue 38)
+    the crate's third dampers (the baseline's and those of `third_dampers`, element ->
+    ids) are not swapped in at the corners (:func:`planner.elements.corner_shock_ids`);
+    each damper of `third_dampers` other than the baseline's is swapped in at its element
+    (a candidate ``"<id>@heave_front"``, one swap, ``changed`` names the element).
+
     Returns
     -------
     list of Candidate
@@ -270,7 +329,9 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
     if shocks is None:
         cb = np.mean(c_bar) if c_bar is not None else np.mean(
             [library[s].equivalent_damping(v_rms_m_s) for s in base_ids])
-        others = [s for s in library.ids if s not in base_ids and s not in adjustable]
+        corner_ids = corner_shock_ids(library.ids, third, third_dampers)
+        others = [s for s in library.ids if s not in base_ids and s not in adjustable
+                  and (corner_ids is None or s in corner_ids)]
         ceq = {s: float(library[s].equivalent_damping(v_rms_m_s)) for s in others}
         soft = sorted([s for s in others if ceq[s] < cb], key=lambda s: ceq[s])
         firm = sorted([s for s in others if ceq[s] >= cb], key=lambda s: -ceq[s])
@@ -294,6 +355,25 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
                 setups.append((f"{sid}@{tag}", Setup(f"{sid}@{tag}", ids),
                                tuple(c for c in CORNERS if ids[c] != dict(zip(CORNERS,
                                                                              base_ids))[c])))
+    if third_dampers:
+        if third is None or not third.elements:
+            raise PlannerError("candidate third dampers on a car without third elements; "
+                               "drop them, or give the car's third elements (CarThird)")
+        for element, ids in third_dampers.items():
+            if element not in third.elements.elements:
+                raise PlannerError(f"candidate third dampers: {element!r} is not an element "
+                                   f"the car declares ({list(third.elements.elements)}); "
+                                   "choose among those")
+            for sid in ids:
+                if sid is not None and str(sid).lower() == "none":
+                    sid = None
+                if sid is not None and sid not in library:
+                    raise unknown_id_error(f"candidate third dampers ({element})", sid, library)
+                if sid == third.baseline.dampers.get(element):
+                    continue
+                name = f"{sid or 'none'}@{element}"
+                setups.append((name, Setup(name, dict(baseline.shocks),
+                                           third={element: sid}), (element,)))
     out = []
     for name, setup, changed in setups:
         swaps, clicks = change_counts(baseline, setup)
@@ -331,13 +411,13 @@ def validation_candidates(val_setups, cands, baseline, rig, kinds, durations_s):
     list of Candidate
         Named ``"<setup> <kind> <T>s"``, costed from the baseline as :func:`candidate_runs`.
     """
-    have = {c.setup.ids() for c in cands}
+    have = {setup_key(c.setup) for c in cands}
     base_ids = dict(zip(CORNERS, baseline.ids()))
     out = []
     for setup in val_setups:
-        if setup.ids() in have:
+        if setup_key(setup) in have:
             continue
-        have.add(setup.ids())
+        have.add(setup_key(setup))
         changed = tuple(c for c in CORNERS if setup.shocks[c] != base_ids[c])
         swaps, clicks = change_counts(baseline, setup)
         for kind in kinds:

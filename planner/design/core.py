@@ -14,15 +14,18 @@ import numpy as np
 import pandas as pd
 
 from ident.data.channels import CORNERS, RIG_INPUTS
+from ident.data.third import CarThird, RunThird
 from ident.identify.model import VehicleModel
 from ident.models.vehicle import FullCarModel, VehicleParams, build_full_car
 from ident.sim.virtual_rig import loop_damping
+from planner.elements import corner_shock_ids, setup_third
 from planner.errors import PlannerError
+from planner.options import ElementOptions
 from planner.objective import default_objective, score_setups
 from planner.rig_spec import RigSpec, default_rig
 from planner.screen import screen_setups
-from planner.setups import enumerate_setups, resolve_baseline
-from planner.design.candidates import (CandidateOptions, candidate_runs, full_names,
+from planner.setups import Setup, enumerate_setups, resolve_baseline
+from planner.design.candidates import (CandidateOptions, candidate_runs, full_names, setup_key,
                                        validation_candidates)
 from planner.design.information import (
     CRITERIA,
@@ -97,6 +100,9 @@ class ExperimentPlan:
     rationale : tuple of str
         Why the plan chose its runs, a line per purpose (identification, validation,
         baseline repeats); the CLI prints it and the run sheet's legend ends with it.
+    third : ident.data.third.CarThird or None
+        The car's third elements (issue 38): the runs' ``Setup.third`` keys change the
+        baseline's dampers; the rig plan writes each run's ``third``.
     """
 
     runs: tuple
@@ -114,6 +120,7 @@ class ExperimentPlan:
     rig: RigSpec
     settings: dict = field(default_factory=dict)
     rationale: tuple = ()
+    third: object = None
 
     def table(self):
         """The runs as a DataFrame (one row per run, in rig order); with adjustable shocks
@@ -143,6 +150,17 @@ def _plant_and_vehicle(model, baseline, library):
         return model.loop_plant(cbar), model.params, None
     raise TypeError(f"model must be an identified VehicleModel (with the session), a "
                     f"VehicleParams or a FullCarModel, got {type(model).__name__}")
+
+
+def _third_dampers(setups, car, library):
+    """The setups' third dampers (:func:`planner.elements.setup_third` without the heave
+    springs, which the design's linearized information leaves out), or None."""
+    if car is None:
+        return None
+    dampers = CarThird(car.elements, RunThird(dampers=dict(car.baseline.dampers)))
+    bare = [s if not s.heave_springs else Setup(s.name, dict(s.shocks), third=s.third)
+            for s in setups]
+    return setup_third(bare, dampers, library, where="design")
 
 
 def design_experiment(model, library, *, budget_min, criterion="d", session=None,
@@ -250,10 +268,13 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     if drives is None:
         drives = [make("track", 120.0, seed + 777, "validation-track")]
     drives = list(drives)
+    car3 = candidates.third if candidates.third is not None else getattr(model, "third", None)
+    car3 = car3 if car3 is not None and car3.elements else None
     # validation runs: the current best setups on the team's drive, at the plan's end
     val_setups = []
     if n_validation:
-        pool = list(enumerate_setups(library))
+        pool = list(enumerate_setups(library, **({} if car3 is None else {
+            "shocks": corner_shock_ids(library.ids, car3, candidates.third_dampers)})))
         sc = screen_setups(plant, drives[0], [base] + [s for s in pool if s != base], library)
         ranked = score_setups(sc.table, objective, baseline=base.name).table.sort_values("rank")
         names = [n for n in ranked.index if n != base.name][:n_validation]
@@ -261,7 +282,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
         val_setups = [full_names(by[n], library) for n in names]
     cands = candidate_runs(library, base, rig=rig, kinds=kinds, durations_s=durations_s,
                            shocks=shocks, n_shocks=n_shocks, c_bar=plant.cbar_n_s_m,
-                           click_levels=click_levels)
+                           click_levels=click_levels, third=car3,
+                           third_dampers=candidates.third_dampers)
     # the validation setups are identification candidates too: the car is in them anyway,
     # so an identification run there costs its duration and no swap of its own
     cands += validation_candidates(val_setups, cands, base, rig, kinds, durations_s)
@@ -274,7 +296,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     ref_drives = {k: make(k, 120.0, seed + 1000 + j, f"reference {k}")
                   for j, k in enumerate(kinds)}
     info, powers = candidate_information(plant, setups, list(kinds), ref_drives, library,
-                                         edges, f_c)
+                                         edges, f_c, third=_third_dampers(setups, car3, library))
     M0 = (session_information(session, plant.cbar_n_s_m, edges) if session is not None
           else np.zeros((n_bands, 11, 11), dtype=complex))
     s_index = {s: i for i, s in enumerate(setups)}
@@ -283,7 +305,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     val_info = None
     if val_setups:
         vi, _ = candidate_information(plant, val_setups, ["validation"],
-                                      {"validation": drives[0]}, library, edges, f_c)
+                                      {"validation": drives[0]}, library, edges, f_c,
+                                      third=_third_dampers(val_setups, car3, library))
         val_info = drives[0].duration_s * vi[:, 0]
 
     # scaling: unit diagonal of the whole candidate set's information per band
@@ -341,9 +364,9 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     else:
         log.warning("design: the relaxed problem's status is %r; greedy designs stand in",
                     status)
-    val_ids = {s.ids() for s in val_setups}
+    val_ids = {setup_key(s) for s in val_setups}
     cores = [c for c, cand in enumerate(cands)
-             if (len(cand.changed) == 4 or cand.setup.ids() in val_ids)
+             if (len(cand.changed) == 4 or setup_key(cand.setup) in val_ids)
              and cand.duration_s == min(durations_s)]
 
     def select(budget_id):
@@ -404,7 +427,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
             "run(s) (each repeat swaps the baseline in and out again); repeat the baseline "
             "less often (--baseline-every) or give more time")
     seq, id_M, (runs, drives_out, infos) = found
-    preds = run_predictions(model, ident_model, runs, drives_out, library, objective)
+    preds = run_predictions(model, ident_model, runs, drives_out, library, objective,
+                            None if car3 is None else ElementOptions(third=car3))
     runs = criterion_shares(runs, infos, M0_s, criterion, W_s)
     curve = criterion_curve(runs, infos, M0_s, criterion, W_s)
     values = {"prior": criterion_value(M0_s, criterion, W_s) if session is not None else None,
@@ -434,7 +458,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
                           total_min=float(total_min), values=values, relaxed=relaxed_df,
                           predictions=preds, curve=curve, solver=solver, rig=rig,
                           settings=settings,
-                          rationale=plan_rationale(runs, base, session=session is not None))
+                          rationale=plan_rationale(runs, base, session=session is not None),
+                          third=car3)
 
 
 def _check_identifiable(total_s, base, cands, library, plant, f_c):

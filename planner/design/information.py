@@ -145,9 +145,44 @@ def _linearized(plant, bands_fb, S_b, models):
     return sig
 
 
-def candidate_information(plant, setups, kinds, drive_of, library, edges, f_c):
+def _third_damping(entries, Hvs, Hvr, S, Dc, w):
+    """The corners' damping matrix of a setup's third dampers, linearized (nb, 4, 4).
+
+    Each damper ``e`` (row ``m_e``, :class:`ident.sim.loop_third.ThirdDamper`) adds
+    ``c_e m_e m_e^T / (1 + j w lag_e)`` (its force ``m_e F_e`` at the corners, as the
+    identification puts it into the corner inputs), ``c_e`` its equivalent damping at the
+    element's velocity RMS (``m_e @ v``, ``v`` through the loop of the corner shocks
+    alone: a stochastic linearization as :mod:`planner.screen`'s).
+    """
+    nb = Dc.shape[0]
+    out = np.zeros((nb, 4, 4), dtype=complex)
+    dampers = [d for d in entries if d.model is not None]
+    if not dampers:
+        return out
+    V = np.linalg.inv(np.eye(4)[None] - Hvs * Dc[:, None, :]) @ Hvr  # (nb, 4, 7)
+    # scipy's S[i, j] = E[conj(U_i) U_j]: v v^H is V S^T V^H
+    Svv = V @ np.transpose(S, (0, 2, 1)) @ np.conj(np.transpose(V, (0, 2, 1)))
+    for d in dampers:
+        m = np.asarray(d.row, dtype=float)
+        sig = float(np.sqrt(max(np.real(np.einsum("i,kij,j->", m, Svv, m)), 0.0)))
+        ceq = float(d.model.equivalent_damping(sig))
+        out += (ceq / (1 + 1j * w * d.model.lag_s))[:, None, None] * np.outer(m, m)[None]
+    return out
+
+
+def candidate_information(plant, setups, kinds, drive_of, library, edges, f_c, third=None,
+                          third_reference=None):
     """Information per second of every (setup, kind): (n_setups, n_kinds, n_b, 11, 11), the
-    drives' band power (n_kinds, n_b, 7, 7) and the linearized damping."""
+    drives' band power (n_kinds, n_b, 7, 7) and the linearized damping.
+
+    With third elements (`third`: :class:`planner.elements.SetupThird` of `setups`, issue
+    38) the corner inputs' force deviation is the shocks' and the third dampers' at the
+    corners (``sum_e m_e F_e``, as :func:`ident.identify.frf.third_force_deviation` puts it
+    in), less `third_reference` (4, 4) [N s/m] (the linear part the identification takes
+    off: :func:`ident.identify.frf.third_linear_damping`; default none): the corners'
+    damping deviation is then a full matrix, and a run that changes a heave damper varies
+    the corner inputs along ``m_e`` (one direction of Eq. 17's rank). The heave springs'
+    contact is left out (a gap the car rests clear of)."""
     nb = edges.size - 1
     H = plant.frequency_response(f_c)  # (p, 11, nb)
     vi = plant.velocity_idx
@@ -169,8 +204,16 @@ def candidate_information(plant, setups, kinds, drive_of, library, edges, f_c):
             ceq = np.array([m.equivalent_damping(sig[i, c]) for c, m in enumerate(mods)])
             lag = np.array([m.lag_s for m in mods])
             Dc = ceq[None, :] / (1 + 1j * w[:, None] * lag[None, :]) - cbar[None, :]  # (nb, 4)
-            K = np.linalg.inv(np.eye(4)[None] - Hvs * Dc[:, None, :])
-            A = Dc[:, :, None] * (K @ Hvr)  # (nb, 4, 7)
+            if third is None:
+                K = np.linalg.inv(np.eye(4)[None] - Hvs * Dc[:, None, :])
+                A = Dc[:, :, None] * (K @ Hvr)  # (nb, 4, 7)
+            else:  # the corners' damping deviation, a full matrix with the third dampers
+                D = np.eye(4)[None] * Dc[:, None, :] + _third_damping(
+                    third.entries[i][0], Hvs, Hvr, S, Dc, w)
+                K = np.linalg.inv(np.eye(4)[None] - Hvs @ D)
+                if third_reference is not None:
+                    D = D - np.asarray(third_reference, dtype=float)[None]
+                A = D @ (K @ Hvr)
             G = np.concatenate([np.broadcast_to(np.eye(7), (nb, 7, 7)), A], axis=1)  # (nb,11,7)
             # scipy's S[i, j] = E[conj(U_i) U_j]; the regressors' x x^H is G S^T G^H
             info[i, j] = G @ np.transpose(S, (0, 2, 1)) @ np.conj(np.transpose(G, (0, 2, 1)))

@@ -16,7 +16,7 @@ from ident.data.channels import CORNERS
 from planner.options import UncertaintyOptions
 from planner.predict import predict_setups
 from planner.uncertainty import prediction_uncertainty
-from planner.design.candidates import corner_change, named_settings
+from planner.design.candidates import corner_change, named_settings, setup_key, third_changed
 from planner.design.information import criterion_value
 from planner.design.solve import swap_order
 
@@ -81,7 +81,8 @@ class PlannedRun:
         Planned start, minutes from the plan's start (swaps before it included).
     changed : tuple of str
         Corners changed before this run: a shock swapped, or an adjustable shock's
-        setting changed.
+        setting changed; then the third elements' columns swapped (``heave_front``,
+        ``heave_spring_front``, ...; issue 38).
     swap_min : float
         Time of those changes [min], swaps and click changes.
     share : float
@@ -123,12 +124,12 @@ def schedule_runs(seq, cands, val_setups, base, rig, make, val_drive, baseline_e
     """The planned runs in rig order: the identification sequence with baseline repeats
     every `baseline_every` runs, then the validation runs (fewest swaps); their drives and
     scaled information."""
-    base_cand = {c.kind: i for i, c in enumerate(cands) if c.setup.ids() == base.ids()
+    base_cand = {c.kind: i for i, c in enumerate(cands) if setup_key(c.setup) == setup_key(base)
                  and c.duration_s == short_s}
     long_s = max(c.duration_s for c in cands)
     blocks = []
     for c in seq:                       # runs of one setup in a row, by drive kind
-        if blocks and cands[blocks[-1][0]].setup.ids() == cands[c].setup.ids():
+        if blocks and setup_key(cands[blocks[-1][0]].setup) == setup_key(cands[c].setup):
             blocks[-1].append(c)
         else:
             blocks.append([c])
@@ -138,7 +139,7 @@ def schedule_runs(seq, cands, val_setups, base, rig, make, val_drive, baseline_e
         # consecutive runs of one setup and drive kind play as one longer run (up to the
         # longest candidate duration): the same information, fewer starts on the rig
         g = groups[-1] if groups else None
-        if (g is not None and cands[g[0]].setup.ids() == cands[c].setup.ids()
+        if (g is not None and setup_key(cands[g[0]].setup) == setup_key(cands[c].setup)
                 and cands[g[0]].kind == cands[c].kind
                 and sum(cands[i].duration_s for i in g) + cands[c].duration_s <= long_s):
             g.append(c)
@@ -160,18 +161,20 @@ def schedule_runs(seq, cands, val_setups, base, rig, make, val_drive, baseline_e
         dur = (sum(cands[i].duration_s for i in g) if c is not None
                else val_drive.duration_s)
         changed = tuple(k for k, a, b in zip(CORNERS, prev.ids(), setup.ids()) if a != b)
+        third = third_changed(prev, setup)  # heave and roll dampers, heave springs swapped
         clicks = []
         for k, a, b in zip(CORNERS, prev.ids(), setup.ids()):
             if a != b and corner_change(a, b)[0] == 0:
                 da, db = dict(named_settings(a)[1]), dict(named_settings(b)[1])
                 clicks += [(k, adj) for adj in da if da[adj] != db[adj]]
-        swap = rig.swap_min * (len(changed) - len({k for k, _ in clicks}))
+        swap = rig.swap_min * (len(changed) + len(third) - len({k for k, _ in clicks}))
+        changed += third
         if clicks:
             swap += rig.click_change_min * len(clicks)
         start = t + swap + rig.run_overhead_min
         t, prev = start + dur / 60.0, setup
         if c is not None:
-            label = "baseline" if setup.ids() == base.ids() else setup.name
+            label = "baseline" if setup_key(setup) == setup_key(base) else setup.name
             dname = f"run{n:02d}-{cands[c].kind}"
             drives[dname] = make(cands[c].kind, dur, seed + n, dname)
             kind = cands[c].kind
@@ -210,13 +213,16 @@ def criterion_curve(runs, infos, M0_s, criterion, W_s):
     return pd.DataFrame(rows)
 
 
-def run_predictions(model, ident_model, runs, drives, library, objective):
-    """The key metrics predicted for every run on its own drive, with intervals (identified)."""
+def run_predictions(model, ident_model, runs, drives, library, objective, elements=None):
+    """The key metrics predicted for every run on its own drive, with intervals (identified);
+    `elements` (:class:`planner.options.ElementOptions`) as
+    :func:`planner.predict.predict_setups` takes them (the car's third elements)."""
     keys = [m for m in objective.weights if objective.weights[m] > 0]
     rows = []
     for r in runs:
         setup = r.setup
-        pred = predict_setups(model, drives[r.drive], [setup], library)
+        pred = predict_setups(model, drives[r.drive], [setup], library,
+                              **({} if elements is None else {"elements": elements}))
         t = pred.table
         if ident_model is not None:
             unc = prediction_uncertainty(ident_model, drives[r.drive], [setup], library,

@@ -46,6 +46,19 @@ Perturbations
     Adjustable shocks warmed up: a fractional force loss of the whole curve or, with
     ``part = "low-speed"``, mostly of its low-speed part; fixed shocks untouched.
 
+``third_scale`` / ``third_lag``
+    Force multiplier / lag change [s] of the dampers of some third elements
+    (``elements = ["heave_front", "roll_front"]``, issue 38): each setup's damper there
+    (its own or the baseline run's) is replaced by its scaled copy
+    (:meth:`ident.models.shocks.ShockModel.scaled`), simulated with the third elements
+    by :func:`planner.predict.predict_setups`; a setup without that damper is unchanged.
+``heave_spring_rate`` / ``heave_packer``
+    Force multiplier / packer change [m] (a thicker packer closes the gap) of the heave
+    spring of some axles (``axles = ["front"]``): the setup's heave spring is replaced
+    by the scaled or moved copy. Third-element factors need a car with third elements
+    (the model's ``third`` or ``ElementOptions.third``) declaring the element, and the
+    time domain (``method = "time"``; the what-if's screening leaves them out).
+
 ``shock_scale`` and ``shock_lag`` act on setting names too: ``shocks = ["TTX"]`` names
 every setting of an adjustable shock, ``shocks = ["TTX@ls=6,hs=2"]`` one setting. With
 click or fade factors, :attr:`WhatIf.tolerance` gives each setup's spread and worst case

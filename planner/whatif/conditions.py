@@ -89,6 +89,18 @@ class ConditionEffect:
     stop_set: tuple = (None,) * 4  # per corner: None (unchanged), an id or "none"
     click: tuple = ()              # ((corner or "id:<name>", adjusters, steps), ...)
     fade: tuple = ()               # ((corner or "id:<name>", part, loss), ...)
+    third_scale: dict = field(default_factory=dict)  # third element -> damper force scale
+    third_lag: dict = field(default_factory=dict)    # third element -> damper lag added [s]
+    heave_packer_add: dict = field(default_factory=dict)  # axle -> heave packer added [m]
+    heave_rate_scale: dict = field(default_factory=dict)  # axle -> heave spring force scale
+
+    @property
+    def changes_third(self):
+        """True if the condition changes a third element's damper or a heave spring."""
+        return (any(v != 1.0 for v in self.third_scale.values())
+                or any(v != 0.0 for v in self.third_lag.values())
+                or any(v != 0.0 for v in self.heave_packer_add.values())
+                or any(v != 1.0 for v in self.heave_rate_scale.values()))
 
     @property
     def changes_adjustables(self):
@@ -117,7 +129,8 @@ def condition_effect(perturbation, factors):
     e = dict(corner_scale=np.ones(4), id_scale={}, corner_lag=np.zeros(4), id_lag={},
              spring_add=np.zeros(4), spring_scale=np.ones(4), arb_add=np.zeros(2),
              arb_scale=np.ones(2), vehicle=[], channel_scale=np.ones(7), window=None, drive=None,
-             packer_add=np.zeros(4), stop_set=[None] * 4, click=[], fade=[])
+             packer_add=np.zeros(4), stop_set=[None] * 4, click=[], fade=[], third_scale={},
+             third_lag={}, heave_packer_add={}, heave_rate_scale={})
     for f in factors:
         vals = perturbation.values.get(f.name)
         if vals is None:
@@ -164,6 +177,12 @@ def condition_effect(perturbation, factors):
                 e["packer_add"][CORNERS.index(t)] += v
             elif f.kind == "bump_stop" and v is not None:
                 e["stop_set"][CORNERS.index(t)] = v
+            elif f.kind in ("third_scale", "heave_spring_rate"):
+                d = e["third_scale" if f.kind == "third_scale" else "heave_rate_scale"]
+                d[t] = d.get(t, 1.0) * v
+            elif f.kind in ("third_lag", "heave_packer"):
+                d = e["third_lag" if f.kind == "third_lag" else "heave_packer_add"]
+                d[t] = d.get(t, 0.0) + v
             elif f.kind == "click" and v:
                 e["click"].append((t, f.adjusters, float(v)))
             elif f.kind == "fade" and v:
@@ -479,7 +498,7 @@ class ShockVariants:
                             source=self.library.source)
 
 
-def condition_setups(setups, e, variants, tag, elements=None, stop_variants=None):
+def condition_setups(setups, e, variants, tag, elements=None, stop_variants=None, third=None):
     """The setups under a condition: their shocks scaled or lagged, their bump stops swapped
     and packers changed, names tagged.
 
@@ -495,7 +514,12 @@ def condition_setups(setups, e, variants, tag, elements=None, stop_variants=None
         The setups' bump stops and packers, resolved (needed when the condition changes
         them: a swap replaces a stop, a packer change moves its contact).
     stop_variants : StopVariants, optional
-        Makes (once) and names the moved stops of packer changes.
+        Makes (once) and names the moved stops of packer changes (and the scaled or moved
+        heave springs of heave-spring factors).
+    third : planner.elements.SetupThird, optional
+        The setups' third elements, resolved (needed when the condition changes a third
+        element's damper or a heave spring: the variant replaces the damper or spring the
+        setup fits, its own or the baseline's).
 
     Returns
     -------
@@ -511,13 +535,56 @@ def condition_setups(setups, e, variants, tag, elements=None, stop_variants=None
     """
     out = []
     for k, s in enumerate(setups):
+        kw = _third_setup(s, k, e, variants, third, stop_variants)
         if e.changes_elements:
-            out.append(_element_setup(s, k, e, variants, tag, elements, stop_variants))
+            out.append(_element_setup(s, k, e, variants, tag, elements, stop_variants, kw))
             continue
         ids = {c: variants.corner_shock(sid, i, e)[0]
                for i, (c, sid) in enumerate(zip(CORNERS, s.ids()))}
-        out.append(Setup(f"{s.name}\x1f{tag}", ids))
+        out.append(Setup(f"{s.name}\x1f{tag}", ids, **kw))
     return out
+
+
+def _third_setup(s, k, e, variants, third, stop_variants):
+    """A setup's ``third`` and ``heave_springs`` under a condition (Setup keywords).
+
+    The setup's own keys are kept; a condition that changes a third element's damper
+    names its scaled or lagged variant (:meth:`ShockVariants.model_id`, the setup's
+    damper or the baseline's it keeps), one that changes a heave spring its scaled or
+    moved variant (:meth:`StopVariants.scaled_id`, :meth:`StopVariants.stop_id`).
+    """
+    kw = {"third": dict(s.third) if s.third else None,
+          "heave_springs": dict(s.heave_springs) if s.heave_springs else None}
+    if not e.changes_third:
+        return kw
+    if third is None:
+        raise PlannerError("what-if: a third-element factor on a car without third elements; "
+                           "remove the factor, or use a model identified from a session that "
+                           "declares third_elements")
+    dampers = dict(kw["third"] or {})
+    for element in sorted(set(e.third_scale) | set(e.third_lag)):
+        sid = third.damper_ids[k].get(element)
+        if sid is None:  # not fitted in this setup: nothing to scale or lag
+            continue
+        dampers[element] = variants.model_id(sid, e.third_scale.get(element, 1.0),
+                                             e.third_lag.get(element, 0.0))
+    springs = dict(kw["heave_springs"] or {})
+    for axle in sorted(set(e.heave_packer_add) | set(e.heave_rate_scale)):
+        scale = e.heave_rate_scale.get(axle, 1.0)
+        change = e.heave_packer_add.get(axle, 0.0)
+        if scale == 1.0 and change == 0.0:
+            continue
+        sid = third.spring_ids[k].get(axle)
+        where = f"setup {s.name!r} column 'heave_spring_{axle}'"
+        if sid is None:
+            raise PlannerError(f"{where}: a heave spring factor on the {axle} axle, where the "
+                               "setup has no heave spring; give it one or leave the axle out "
+                               "of the factor's axles")
+        sid = stop_variants.scaled_id(sid, scale, where)
+        springs[axle] = stop_variants.stop_id(sid, change, where)
+    kw["third"] = dampers or None
+    kw["heave_springs"] = springs or None
+    return kw
 
 
 def condition_notes(setups, e, variants):
@@ -566,12 +633,12 @@ class StopVariants:
         """The id of `stop_id` with its contact moved by `change_m` [m] (made once)."""
         if not change_m:
             return stop_id
-        if self.library is None or stop_id not in self.library:
+        if stop_id not in self.extra and (self.library is None or stop_id not in self.library):
             raise PlannerError(f"{where}: bump stop {stop_id!r} is not in the bump-stop "
                                "library; give the library (--bump-stops FILE)")
         new_id = f"{stop_id}~p{change_m * 1e3:+g}mm"
         if new_id not in self.extra:
-            base = self.library[stop_id]
+            base = self.extra.get(stop_id) or self.library[stop_id]
             gap = base.gap_m - change_m
             if gap < 0:
                 raise PlannerError(f"{where}: the packer change {change_m * 1e3:+g} mm is more "
@@ -581,6 +648,21 @@ class StopVariants:
             self.extra[new_id] = BumpStop(new_id, gap, base.travel_m, base.force_n)
         return new_id
 
+    def scaled_id(self, stop_id, scale, where):
+        """The id of `stop_id` with its force table times `scale` (made once): a heave
+        spring's rate tolerance (``"<id>~x<scale>"``)."""
+        if scale == 1.0:
+            return stop_id
+        if self.library is None or stop_id not in self.library:
+            raise PlannerError(f"{where}: heave spring {stop_id!r} is not in the bump-stop "
+                               "library; give the library (--bump-stops FILE)")
+        new_id = f"{stop_id}~x{scale:.12g}"
+        if new_id not in self.extra:
+            base = self.library[stop_id]
+            self.extra[new_id] = BumpStop(new_id, base.gap_m, base.travel_m,
+                                          np.asarray(base.force_n, float) * scale)
+        return new_id
+
     def full_library(self):
         """The library and the moved stops in one library (None without a library)."""
         if self.library is None:
@@ -588,7 +670,7 @@ class StopVariants:
         return BumpStopLibrary(list(self.library.values()) + list(self.extra.values()))
 
 
-def _element_setup(s, k, e, variants, tag, elements, stop_variants):
+def _element_setup(s, k, e, variants, tag, elements, stop_variants, kw):
     """One setup under a condition that changes its bump stops or packers."""
     ids = {c: variants.corner_shock(sid, i, e)[0]
            for i, (c, sid) in enumerate(zip(CORNERS, s.ids()))}
@@ -614,4 +696,4 @@ def _element_setup(s, k, e, variants, tag, elements, stop_variants):
                                "of its bump stop: the stop would press on the car at rest; "
                                "use a smaller change")
     return Setup(f"{s.name}\x1f{tag}", ids, bump_stops=dict(zip(CORNERS, stops)),
-                 packers_m={c: float(p) for c, p in zip(CORNERS, packers)})
+                 packers_m={c: float(p) for c, p in zip(CORNERS, packers)}, **kw)

@@ -28,7 +28,7 @@ from ident.models.library import ShockLibrary
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
 from planner.elements import (ELEMENT_COLUMNS, THIRD_COLUMNS, loop_arguments,
-                              model_setup_elements)
+                              model_setup_elements, model_setup_third)
 from planner.options import ElementOptions, LoopOptions, RunOptions, as_options
 from planner.plant import as_loop_plant
 from planner.predict import predict_setups, prepare_drive
@@ -50,7 +50,7 @@ from planner.whatif.conditions import (
     plant_key,
 )
 from planner.whatif.robust import FRAGILE_SHARE, RANK_TOLERANCE, robust_table
-from planner.whatif.spec import PerturbationSet
+from planner.whatif.spec import THIRD_FACTOR_KINDS, PerturbationSet
 
 __all__ = [
     "TASKS_PER_THREAD",
@@ -233,16 +233,39 @@ def _nominal_agreement(plant, drive, setups, library, objective, baseline, nomin
             "score_gap": float(td_score[screening_best] / td_score[time_best] - 1.0)}
 
 
-def _group_setups(setups, members, effects, variants, resolved=None, stop_variants=None):
+def _group_setups(setups, members, effects, variants, resolved=None, stop_variants=None,
+                  third=None):
     """The setups of a condition group: every setup under every member condition."""
     cond_setups = []
     for (dj, pj) in members:
         cond_setups += condition_setups(setups, effects[pj], variants, f"{dj}:{pj}", resolved,
-                                        stop_variants)
+                                        stop_variants, third)
     return cond_setups
 
 
-def _group_table(pred_table, by_name, drives, perturbations):
+def _check_third_factors(factors, car, method, src):
+    """Refuse third-element factors the car or the method cannot take (one line each)."""
+    for f in factors:
+        if f.kind not in THIRD_FACTOR_KINDS:
+            continue
+        where = f"{src}: factor {f.name!r} (kind {f.kind!r})"
+        if car is None or not car.elements:
+            raise PlannerError(f"{where} changes a third element but the model has none; "
+                               "remove the factor, or use a model identified from a session "
+                               "that declares third_elements (or give ElementOptions.third)")
+        declared = car.elements.elements
+        for t in f.targets:
+            element = t if f.kind in ("third_scale", "third_lag") else f"heave_{t}"
+            if element not in declared:
+                key = "elements" if f.kind in ("third_scale", "third_lag") else "axles"
+                raise PlannerError(f"{where}: key {key!r} names {t!r} but the car declares no "
+                                   f"{element} (it has {list(declared)}); choose among those")
+        if method != "time":
+            raise PlannerError(f"{where}: the what-if's screening leaves third elements out; "
+                               "use method = 'time' (--method time)")
+
+
+def _group_table(pred_table, by_name, drives, perturbations, third_columns=None):
     """A group's rows of the what-if table from its metrics table (names carry the tags)."""
     t = pred_table.copy()
     t.insert(0, "setup", [n.split("\x1f")[0] for n in t.index])
@@ -253,6 +276,10 @@ def _group_table(pred_table, by_name, drives, perturbations):
     # the table's shock ids: the setup's own (the variants are internal)
     for i, c in enumerate(CORNERS):
         t[c] = [by_name[n].ids()[i] for n in t["setup"]]
+    if third_columns is not None:  # the third elements' too (a scaled damper is a variant)
+        for c in third_columns.columns:
+            if c in t.columns:
+                t[c] = third_columns.loc[t["setup"], c].to_numpy()
     t["_order"] = [int(x.split(":")[0]) * 10**7 + int(x.split(":")[1]) for x in tag]
     return t
 
@@ -453,6 +480,11 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     if base.name not in {s.name for s in setups}:
         setups = [base] + setups
     resolved = model_setup_elements(setups, model, elements)
+    src = perturbations.settings.get("source") or "what-if"
+    _check_third_factors(perturbations.factors, elements.car_third(model), method, src)
+    third = (model_setup_third(setups, model, library, elements, where="whatif")
+             if any(f.kind in THIRD_FACTOR_KINDS for f in perturbations.factors) else None)
+    third_columns = None if third is None else third.columns([s.name for s in setups])
     ekw = elements.for_model(model)  # the workers get the condition's plant only
     names = [s.name for s in setups]
     if len(set(names)) != len(names):
@@ -466,7 +498,6 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
     if not _is_serial(scheduler, client):
         runner = start_runner(scheduler, client, run.n_workers, run.processes, "whatif")
     try:
-        src = perturbations.settings.get("source") or "what-if"
         fs = getattr(model, "fs_hz", None)
         drives = [prepare_drive(d, fs, where=f"drive {d.name!r}") for d in drives]
         base_plant = as_loop_plant(model)
@@ -509,12 +540,13 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                 plant, e0, where = condition(pkey, members)
                 drive = condition_drive(drives[di], e0, where)
                 cond_setups = _group_setups(setups, members, effects, variants, resolved,
-                                            stop_variants)
+                                            stop_variants, third)
                 lib = variants.full_library()
                 pred_table = _evaluate_group(plant, drive, cond_setups, lib, method,
                                              loop, group_ekw())
                 n_eval += len(cond_setups)
-                tables.append(_group_table(pred_table, by_name, drives, perturbations))
+                tables.append(_group_table(pred_table, by_name, drives, perturbations,
+                                           third_columns))
             kind, address, workers, n_tasks = "none", None, 1, len(groups)
         else:
             keys = list(groups)
@@ -536,10 +568,12 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                 if current.get("g") != g:
                     current.clear()
                     current.update(g=g, setups=_group_setups(setups, members, effects,
-                                                             variants, resolved, stop_variants))
+                                                             variants, resolved, stop_variants,
+                                                             third))
                 chunk_setups = current["setups"][a:b]
                 extra = list({sid: variants.extra[sid] for s in chunk_setups
-                              for sid in s.ids() if sid in variants.extra}.values())
+                              for sid in (*s.ids(), *(s.third or {}).values())
+                              if sid in variants.extra}.values())
                 return (plant, drive_refs[di], e0, where, chunk_setups, lib_ref, extra,
                         method, loop_w, blas, group_ekw())
 
@@ -554,7 +588,8 @@ def evaluate_whatif(model, drives, setups, library, perturbations, *, objective=
                 got = [parts[j] for j, spec in enumerate(specs) if spec[0] == g]
                 pred_table = got[0] if len(got) == 1 else pd.concat(got)
                 n_eval += len(pred_table)
-                tables.append(_group_table(pred_table, by_name, drives, perturbations))
+                tables.append(_group_table(pred_table, by_name, drives, perturbations,
+                                           third_columns))
             parts = None
             kind, address, workers, n_tasks = (runner.kind, runner.address, runner.n_workers,
                                                len(specs))

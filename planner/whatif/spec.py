@@ -23,6 +23,7 @@ import pandas as pd
 from ident.data.channels import AERO_INPUTS, CORNERS, RIG_INPUTS, WHEELLOADER_INPUTS
 from ident.data.drive import read_drive
 from ident.data.files import read_toml
+from ident.data.third import THIRD_ELEMENTS
 from ident.data.units import check_units, to_si
 from ident.models.vehicle import VEHICLE_KEYS
 from planner.errors import PlannerError
@@ -34,6 +35,7 @@ __all__ = [
     "MAX_CONDITIONS",
     "CHANNEL_GROUPS",
     "AXLE_CORNERS",
+    "THIRD_FACTOR_KINDS",
     "Factor",
     "Perturbation",
     "PerturbationSet",
@@ -45,7 +47,11 @@ __all__ = [
 FACTOR_KINDS = {"shock_scale": "scale", "shock_lag": "add", "spring_rate": "scale",
                 "arb_rate": "add", "drive_scale": "scale", "drive_window": "set",
                 "drive_file": "set", "vehicle": "scale", "packer": "add", "bump_stop": "set",
-                "click": "add", "fade": "add"}
+                "click": "add", "fade": "add", "third_scale": "scale", "third_lag": "add",
+                "heave_packer": "add", "heave_spring_rate": "scale"}
+#: Factor kinds acting on the car's third elements (issue 38): a damper's force scale and
+#: lag per element, a heave spring's packer change and rate scale per axle.
+THIRD_FACTOR_KINDS = ("third_scale", "third_lag", "heave_packer", "heave_spring_rate")
 #: Where a ``fade`` factor acts (:mod:`planner.whatif.click_factors`).
 FADE_PARTS = ("all", "low-speed")
 #: Designs of a perturbation set.
@@ -58,7 +64,8 @@ CHANNEL_GROUPS = {"wheel": WHEELLOADER_INPUTS, "aero": AERO_INPUTS}
 AXLE_CORNERS = {"front": (0, 1), "rear": (2, 3)}
 _TOP_KEYS = {"format", "units", "design", "n_draws", "seed", "factor", "name"}
 _FACTOR_KEYS = {"name", "kind", "corners", "shocks", "axles", "channels", "parameter", "change",
-                "levels", "distribution", "independent", "baseline_rate", "adjusters", "part"}
+                "levels", "distribution", "independent", "baseline_rate", "adjusters", "part",
+                "elements"}
 _DIST_KEYS = {"uniform": ("low", "high"), "normal": ("mean", "sd")}
 _FORMAT = "shockplan-whatif/1"
 
@@ -78,8 +85,10 @@ class Factor:
         One of :data:`FACTOR_KINDS`.
     targets : tuple
         Corners (``shock_scale``, ``shock_lag``, ``spring_rate``), ``("id:<shock>", ...)``
-        for shock ids, axles (``arb_rate``), rig inputs (``drive_scale``), the vehicle
-        key (``vehicle``); empty for ``drive_window`` and ``drive_file``.
+        for shock ids, axles (``arb_rate``, ``heave_packer``, ``heave_spring_rate``), third
+        elements (``third_scale``, ``third_lag``: ``"heave_front"``, ...), rig inputs
+        (``drive_scale``), the vehicle key (``vehicle``); empty for ``drive_window`` and
+        ``drive_file``.
     change : {"scale", "add", "set"}, optional
         How a value acts: multiply, add (SI: N/m, s, the key's SI unit), or replace;
         default the kind's (:data:`FACTOR_KINDS`).
@@ -353,7 +362,9 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
     allowed = {"shock_scale": ("scale",), "shock_lag": ("add",), "spring_rate": ("scale", "add"),
                "arb_rate": ("add", "scale"), "drive_scale": ("scale",), "drive_window": ("set",),
                "drive_file": ("set",), "vehicle": ("scale", "add"), "packer": ("add",),
-               "bump_stop": ("set",), "click": ("add",), "fade": ("add",)}[kind]
+               "bump_stop": ("set",), "click": ("add",), "fade": ("add",),
+               "third_scale": ("scale",), "third_lag": ("add",), "heave_packer": ("add",),
+               "heave_spring_rate": ("scale",)}[kind]
     if change not in allowed:
         raise _fail(where, "change", f"= {change!r} does not apply to a {kind} factor",
                     f"use {' or '.join(repr(a) for a in allowed)}")
@@ -362,8 +373,11 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
                   "spring_rate": ("corners",), "arb_rate": ("axles",),
                   "drive_scale": ("channels",), "vehicle": ("parameter",),
                   "packer": ("corners",), "bump_stop": ("corners",),
-                  "click": ("corners", "shocks"), "fade": ("corners", "shocks")}.get(kind, ())
-    given = [k for k in ("corners", "shocks", "axles", "channels", "parameter") if k in t]
+                  "click": ("corners", "shocks"), "fade": ("corners", "shocks"),
+                  "third_scale": ("elements",), "third_lag": ("elements",),
+                  "heave_packer": ("axles",), "heave_spring_rate": ("axles",)}.get(kind, ())
+    given = [k for k in ("corners", "shocks", "axles", "channels", "parameter", "elements")
+             if k in t]
     wrong = [k for k in given if k not in target_key]
     if wrong:
         raise _fail(where, wrong[0], f"does not apply to a {kind} factor",
@@ -397,6 +411,12 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
                 targets = tuple(raw)
             elif key == "shocks":
                 targets = tuple(f"id:{s}" for s in raw)
+            elif key == "elements":
+                bad = [x for x in raw if x not in THIRD_ELEMENTS]
+                if bad:
+                    raise _fail(where, key, f"has unknown third element(s) {bad}",
+                                f"use {list(THIRD_ELEMENTS)}")
+                targets = tuple(raw)
             elif key == "axles":
                 bad = [a for a in raw if a not in AXLE_CORNERS]
                 if bad:
@@ -418,7 +438,7 @@ def _parse_factor(t, units, where, base_dir, *, stated_units=True):
     # unit of "add" values
     if change == "add":
         qty = {"shock_lag": None, "spring_rate": "stiffness", "arb_rate": "stiffness",
-               "packer": "displacement"}.get(kind, qty)
+               "packer": "displacement", "heave_packer": "displacement"}.get(kind, qty)
 
     def value(x, key):
         v = _number(where, key, x)
