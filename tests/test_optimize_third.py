@@ -16,7 +16,7 @@ from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock
 from ident.models.vehicle import build_full_car, example_vehicle
 from planner.errors import PlannerError
-from planner.objective import default_objective, score_setups
+from planner.objective import Objective, default_objective, score_setups
 from planner.optimize import CurveOptions, OptimizeWarning, SolverOptions, optimize_curves
 from planner.options import ElementOptions
 from planner.predict import predict_setups, prepare_drive
@@ -107,3 +107,35 @@ def test_refusals_with_third_elements(plant, drive):
     with pytest.raises(PlannerError, match="static_corner_load_n.*third elements"):
         optimize_curves(plant, drive, LIB, baseline="S", **FAST,
                         elements=replace(ELEMENTS, static_corner_load_n=[3000.0] * 4))
+
+
+@pytest.mark.slow
+def test_a_heave_travel_limit_is_held_in_the_verification(plant, drive):
+    """A limit on the front heave element's travel (10 % below the baseline's): IPOPT's loop
+    does not see it, the verification holds it: every verified row's feasibility is the
+    limit's, and the optimum meets it."""
+    limit = 0.9
+    base = default_objective()
+    objective = Objective("floor", dict(base.weights),
+                          limits={"heave_travel_rms_front": {"max_ratio": limit}})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OptimizeWarning)
+        opt = optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS,
+                              objective=objective, **FAST)
+    travel = opt.metrics["gt"]["heave_travel_rms_front"]
+    ok = travel <= limit * travel[opt.baseline.name]
+    assert (opt.table["feasible"] == ok.loc[opt.table.index]).all()
+    assert bool(opt.table.loc[opt.setup.name, "feasible"])
+    assert not bool(opt.table.loc[opt.baseline.name, "feasible"])
+
+
+def test_third_metric_objectives_are_checked(plant, drive):
+    rear = Objective("rear", dict(default_objective().weights),
+                     limits={"heave_travel_rms_rear": {"max_ratio": 1.0}})
+    with pytest.raises(PlannerError, match=r"heave_travel_rms_rear.*does not declare"):
+        optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS, objective=rear,
+                        **FAST)
+    weighted = Objective("w", {"heave_travel_rms_front": 1.0})
+    with pytest.raises(PlannerError, match="only as limits"):
+        optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS,
+                        objective=weighted, **FAST)

@@ -33,7 +33,7 @@ from ident.data.drive import Drive
 from ident.models.bumpstops import BumpStop, check_packer
 from ident.models.library import ShockLibrary
 from ident.sim.closedloop import corner_values, simulate
-from ident.sim.metrics import METRIC_NAMES
+from ident.sim.metrics import METRIC_NAMES, THIRD_METRIC_NAMES
 from planner.elements import corner_shock_ids, model_setup_elements, setup_third
 from planner.options import ElementOptions, LoopOptions, as_options
 from planner.errors import PlannerError
@@ -406,13 +406,16 @@ def _check_objective(objective):
     if not isinstance(objective, Objective):
         raise TypeError(f"objective must be a planner.objective.Objective, got "
                         f"{type(objective).__name__}")
-    # element statistics (lift-off, contact) as limits only: held in the verification
+    # element statistics (lift-off, contact) and third elements' motions as limits only: held
+    # in the verification
     other = [m for m in objective.metrics if m not in METRIC_NAMES
-             and not (is_element_metric(m) and m not in objective.weights)]
+             and not ((is_element_metric(m) or m in THIRD_METRIC_NAMES)
+                      and m not in objective.weights)]
     if other:
         raise PlannerError(f"objective {objective.name!r}: optimize works on the spec's metrics "
                            f"{list(METRIC_NAMES)}; {other} are not among them (normalized and "
-                           "band-split metrics are for ranking)")
+                           "band-split metrics are for ranking; element statistics and third "
+                           "elements' motions only as limits)")
     return objective
 
 
@@ -812,7 +815,16 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
                         linear=linear, lag_s=lag_s, v_range_m_s=velocity_range(speeds))
     names_all, L_all = metric_rows(plant)
     need = [m for m in objective.metrics if m in names_all]
-    missing = [m for m in objective.metrics if m not in names_all and not is_element_metric(m)]
+    missing = [m for m in objective.metrics if m not in names_all and not is_element_metric(m)
+               and m not in THIRD_METRIC_NAMES]
+    declared = () if third is None else third.names
+    undeclared = [m for m in objective.limits if m in THIRD_METRIC_NAMES
+                  and f"{m.split('_')[0]}_{m.rpartition('_')[2]}" not in declared]
+    if undeclared:
+        raise PlannerError(f"optimize: objective {objective.name!r} limits {undeclared}, the "
+                           f"motion of third elements the car does not declare (it has "
+                           f"{list(declared)}); drop the limits from the objective file, or "
+                           "give the car's third elements (model.third, ElementOptions.third)")
     if missing:
         raise PlannerError(f"the model has no outputs for {missing}; its outputs are "
                            f"{list(plant.output_names)}")

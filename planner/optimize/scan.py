@@ -42,7 +42,7 @@ from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock
 from ident.sim.closedloop import ELEMENT_STATS, rig_response, simulate_batch
-from ident.sim.metrics import compute_metrics
+from ident.sim.metrics import THIRD_METRIC_NAMES, compute_metrics
 from planner.objective import score_setups
 from planner.optimize.constraints import MAX_FORCE_VELOCITY_M_S
 from planner.options import ElementOptions, LoopOptions
@@ -181,13 +181,17 @@ def is_element_metric(name):
 
 
 def linear_objective(objective):
-    """The objective without its limits on element statistics (:func:`is_element_metric`):
-    the one the screening (frequency domain, no elements) ranks by; the objective itself
-    when it has none."""
-    if not any(is_element_metric(m) for m in objective.limits):
+    """The objective without its limits on element statistics (:func:`is_element_metric`)
+    and on third elements' motions (``heave_travel_rms_front``, ...,
+    :data:`ident.sim.metrics.THIRD_METRIC_NAMES`): the one the screening (frequency domain,
+    no elements) ranks by; the objective itself when it has none."""
+    def verified_only(m):
+        return is_element_metric(m) or m in THIRD_METRIC_NAMES
+
+    if not any(verified_only(m) for m in objective.limits):
         return objective
     return replace(objective, limits={m: dict(v) for m, v in objective.limits.items()
-                                      if not is_element_metric(m)})
+                                      if not verified_only(m)})
 
 
 def element_predictions(model, drive, setups, library, bump_stops, *, oversample=2,
