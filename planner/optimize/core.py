@@ -323,8 +323,8 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
     if third is not None and static_corner_load_n is not None:
         raise PlannerError(f"{where}: tire lift-off (static_corner_load_n) is not simulated "
                            f"together with third elements ({', '.join(third.names)}); leave "
-                           "ElementOptions.static_corner_load_n out for a car with third "
-                           "elements")
+                           "static_corner_load_n out (ElementOptions, or the CarElements "
+                           "given as ElementOptions.use_model) for a car with third elements")
     stops = None
     if bump_stops is not None:
         vals = corner_values(bump_stops, f"{where}: stop_tables", "bump stops")
