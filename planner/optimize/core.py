@@ -1001,14 +1001,15 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     sym, axles = {"left-right": ("left-right", "independent"), "all": ("left-right", "same"),
                   "none": ("none", "independent")}[space.symmetry]
     # (a car's heave and roll dampers stay off its corners)
-    corner_ids = list(library.ids) if elements.third is None else \
-        elements.third.corner_ids(library)
+    corner_ids = None if elements.third is None else elements.third.corner_ids(library)
     crate = list(enumerate_setups(library, symmetry=sym, axles=axles, shocks=corner_ids))
     if base.name not in {s.name for s in crate}:
         crate.append(base)
     opt_pwl = {c: space.curves(x_opt)[space.group_of(c)] for c in CORNERS}
+    listed_ids = list(library.ids) if corner_ids is None else \
+        list(dict.fromkeys(corner_ids + list(base.ids())))
     dist_id = {(c, sid): curve_distance(library[sid].to_pwl(), opt_pwl[c], vel[c])
-               for c in CORNERS for sid in set(corner_ids) | set(base.ids())}
+               for c in CORNERS for sid in listed_ids}
     dist = np.array([math.sqrt(np.mean([dist_id[(c, s.shocks[c])] ** 2 for c in CORNERS]))
                      for s in crate])
     order = np.argsort(dist, kind="stable")
