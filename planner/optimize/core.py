@@ -33,8 +33,8 @@ from ident.data.drive import Drive
 from ident.models.bumpstops import BumpStop, check_packer
 from ident.models.library import ShockLibrary
 from ident.sim.closedloop import corner_values, simulate
-from ident.sim.metrics import METRIC_NAMES
-from planner.elements import model_setup_elements
+from ident.sim.metrics import METRIC_NAMES, THIRD_METRIC_NAMES
+from planner.elements import corner_shock_ids, model_setup_elements, setup_third
 from planner.options import ElementOptions, LoopOptions, as_options
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
@@ -67,7 +67,7 @@ from planner.optimize.solve import Evaluator, OptimizeWarning, solve_problem
 from planner.optimize.space import CurveSpace, curve_space, symmetry_groups
 from planner.plant import as_loop_plant
 from planner.predict import predict_setups, prepare_drive
-from planner.screen import metric_rows, screen_setups
+from planner.screen import metric_rows, screen_setups, third_choices
 from planner.setups import Setup, enumerate_setups, resolve_baseline
 from planner.uncertainty import prediction_uncertainty
 
@@ -210,20 +210,66 @@ class CurveOptimum:
 
 
 @dataclass(frozen=True, eq=False)
+class _Third:
+    """The car's third elements in an optimization (issue 38): the car
+    (:class:`ident.data.third.CarThird`), the heave springs' library and the baseline's
+    resolved elements, the loop's ``(dampers, springs)`` entry every setup is verified with."""
+
+    car: object
+    springs: object
+    entry: tuple
+
+    @property
+    def names(self):
+        return tuple(self.car.elements.elements)
+
+    def screening(self, setups, library):
+        """The screening's third elements of `setups` (each keeps the car's baseline)."""
+        return third_choices(setup_third(setups, self.car, library, bump_stops=self.springs,
+                                         where="optimize"))
+
+    def corner_ids(self, library):
+        """The library's ids the crate puts at the corners (not the third elements')."""
+        return corner_shock_ids(library, self.car)
+
+
+def _car_third(model, base, library, elements):
+    """The car's third elements of an optimization (:class:`_Third`), or None: the
+    baseline's heave and roll dampers and heave springs, kept in every verification."""
+    car = elements.car_third(model)
+    if car is None or not car.elements.elements:
+        return None
+    if base.third or base.heave_springs:
+        raise PlannerError(f"optimize: baseline {base.name!r} names third elements; the "
+                           "optimizer keeps the car's baseline ones (model.third or "
+                           "ElementOptions.third): give the baseline's corner shocks only")
+    springs = elements.library(model)
+    resolved = setup_third([base], car, library, bump_stops=springs, where="optimize: baseline")
+    return _Third(car=car, springs=springs, entry=resolved.entries[0])
+
+
+@dataclass(frozen=True, eq=False)
 class _Elements:
     """The car's elements of an optimization (checked): its stops in the loop's form, the
-    packer variables (groups, bounds [m], per corner the variable's index) and the static
-    loads. Inactive (all None): the optimization without elements, unchanged."""
+    packer variables (groups, bounds [m], per corner the variable's index), the static
+    loads and the third elements (:class:`_Third`, the baseline's, every verification's).
+    Inactive (all None): the optimization without elements, unchanged."""
 
     stops: list | None = None
     groups: tuple = ()
     bounds: tuple = ()
     index: list | None = None
     static: list | None = None
+    third: _Third | None = None
 
     @property
     def active(self):
-        return self.stops is not None or self.static is not None
+        return self.stops is not None or self.static is not None or self.third is not None
+
+    @property
+    def loop_third(self):
+        """The loop's ``(dampers, springs)`` of the car's third elements, or None."""
+        return None if self.third is None else self.third.entry
 
     @property
     def n_packers(self):
@@ -268,12 +314,17 @@ class _Elements:
             return {}
         own = None if self.stops is None else {n: self.stops_at(p) for n in names}
         return {"bump_stops": self.stops, "setup_stops": own,
-                "static_corner_load_n": self.static}
+                "static_corner_load_n": self.static, "third": self.loop_third}
 
 
-def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective):
+def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective, third=None):
     """The checked elements of :func:`optimize_curves` (:class:`_Elements`)."""
     where = "optimize"
+    if third is not None and static_corner_load_n is not None:
+        raise PlannerError(f"{where}: tire lift-off (static_corner_load_n) is not simulated "
+                           f"together with third elements ({', '.join(third.names)}); leave "
+                           "static_corner_load_n out (ElementOptions, or the CarElements "
+                           "given as ElementOptions.use_model) for a car with third elements")
     stops = None
     if bump_stops is not None:
         vals = corner_values(bump_stops, f"{where}: stop_tables", "bump stops")
@@ -347,7 +398,7 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
                            "elements gives; give static_corner_load_n (lift-off, contact) "
                            "or stop_tables (contact share)")
     return _Elements(stops=stops, groups=tuple(groups), bounds=tuple(bounds), index=index,
-                     static=static)
+                     static=static, third=third)
 
 
 def _check_objective(objective):
@@ -355,13 +406,16 @@ def _check_objective(objective):
     if not isinstance(objective, Objective):
         raise TypeError(f"objective must be a planner.objective.Objective, got "
                         f"{type(objective).__name__}")
-    # element statistics (lift-off, contact) as limits only: held in the verification
+    # element statistics (lift-off, contact) and third elements' motions as limits only: held
+    # in the verification
     other = [m for m in objective.metrics if m not in METRIC_NAMES
-             and not (is_element_metric(m) and m not in objective.weights)]
+             and not ((is_element_metric(m) or m in THIRD_METRIC_NAMES)
+                      and m not in objective.weights)]
     if other:
         raise PlannerError(f"objective {objective.name!r}: optimize works on the spec's metrics "
                            f"{list(METRIC_NAMES)}; {other} are not among them (normalized and "
-                           "band-split metrics are for ranking)")
+                           "band-split metrics are for ranking; element statistics and third "
+                           "elements' motions only as limits)")
     return objective
 
 
@@ -517,8 +571,9 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
                                          and click_radius >= 1):
         raise PlannerError(f"click_radius must be an integer >= 1 (clicks per move) or None, "
                            f"got {click_radius!r}")
-    plant, drives, base, space, rows = _problem(model, drives, library, objective, baseline,
-                                                symmetry, knots_m_s, linear, lag_s, oversample)
+    plant, drives, base, space, rows, third = _problem(model, drives, library, objective,
+                                                       baseline, symmetry, knots_m_s, linear,
+                                                       lag_s, oversample, elements=elements)
     need = rows[0]
     weights = _weights(drive_weights, drives)
     constraints = _check_constraints_arg(constraints)
@@ -527,12 +582,19 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         own = model_setup_elements([base], model, elements, where="optimize")
         if own is not None:
             stops, static = own.tables[0], own.static_corner_load_n
-    elements = _elements(plant, space, stops, packers, static, objective)
+    elements = _elements(plant, space, stops, packers, static, objective, third)
+    if third is not None:
+        warnings.warn(f"optimize: the car's third elements ({', '.join(third.names)}) are not in "
+                      "IPOPT's loop nor in the scan's screening: the corner curves are searched "
+                      "on the car without them; every candidate, the baseline and the crate are "
+                      "verified in the time domain with the baseline's third elements, and the "
+                      "best verified is returned", OptimizeWarning, stacklevel=2)
     # the baseline's (verified) values per drive of the metrics the objective needs
     if elements.active:
         m_base = [element_predictions(model, d, [base], library, [elements.stops],
                                       oversample=oversample,
-                                      static_corner_load_n=elements.static).loc[
+                                      static_corner_load_n=elements.static,
+                                      third=elements.loop_third).loc[
             base.name, need].to_numpy(float) for d in drives]
     else:
         m_base = [predict_setups(model, d, [base], library,
@@ -673,9 +735,9 @@ def _start(model, plant, drives, library, space, constraints, base, objective, w
     """
     A_lin, b_lin = _linear_rows(space, constraints, library)
     # the scan's candidates verified with the packers' start (the stops as given)
-    el = {} if not elements.active else {
-        "stop_tables": elements.stops_at(elements.start),
-        "static_corner_load_n": elements.static}
+    el = {} if not elements.active else {"elements": {
+        "bump_stops": elements.stops_at(elements.start),
+        "static_corner_load_n": elements.static, "third": elements.loop_third}}
     scan = scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin, base,
                        objective, weights, aggregate, oversample=oversample, **el)
     log = {"baseline_knots_m_s": _bump_knots(space),
@@ -684,7 +746,8 @@ def _start(model, plant, drives, library, space, constraints, base, objective, w
     if scan is not None and quantile_knots and not space.linear:
         shocks = space.shocks(scan.x, prefix="SCANBEST")
         lib = ShockLibrary(list(shocks.values()) + list(library.values()))
-        speeds = shock_speeds(plant, drives, space.setup(shocks), lib, oversample=oversample)
+        speeds = shock_speeds(plant, drives, space.setup(shocks), lib, oversample=oversample,
+                              third=elements.loop_third)
         bump, reb = velocity_knots(speeds)
         rng = velocity_range(speeds)
         old = np.concatenate([_bump_knots(space), _bump_knots(space, -1), space.v_range_m_s])
@@ -724,14 +787,16 @@ def _bump_knots(space, side=1):
 
 
 def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, linear, lag_s,
-             oversample=2):
-    """The loop plant, drives, baseline setup, curve space and metric rows (names, rows of
-    the plant's outputs) of an optimization, checked (see :func:`optimize_curves`)."""
+             oversample=2, elements=None):
+    """The loop plant, drives, baseline setup, curve space, metric rows (names, rows of
+    the plant's outputs) and the car's third elements (:class:`_Third` or None, with
+    `elements`) of an optimization, checked (see :func:`optimize_curves`)."""
     plant = as_loop_plant(model)
     drives = _drive_list(drives, getattr(model, "fs_hz", None))
     # the commands' one baseline syntax; none given: the crate's first shock at every corner
     base = resolve_baseline(library.ids[0] if baseline is None else baseline, library)
     base_models = base.resolve(library)
+    third = None if elements is None else _car_third(model, base, library, elements)
     groups = symmetry_groups(symmetry)
     if lag_s is None:
         lag_s = [float(np.mean([base_models[CORNERS.index(c)].lag_s for c in corners]))
@@ -741,7 +806,8 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
                            f"the baseline's shock speeds), got {knots_m_s!r}")
     # the baseline's shock speeds: the velocity range the buildable constraints hold in, and
     # the knots on their quantiles
-    speeds = shock_speeds(plant, drives, base, library, oversample=oversample)
+    speeds = shock_speeds(plant, drives, base, library, oversample=oversample,
+                          third=None if third is None else third.entry)
     rebound_knots = None
     if _quantile_knots(knots_m_s):
         knots_m_s, rebound_knots = velocity_knots(speeds)
@@ -749,11 +815,20 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
                         linear=linear, lag_s=lag_s, v_range_m_s=velocity_range(speeds))
     names_all, L_all = metric_rows(plant)
     need = [m for m in objective.metrics if m in names_all]
-    missing = [m for m in objective.metrics if m not in names_all and not is_element_metric(m)]
+    missing = [m for m in objective.metrics if m not in names_all and not is_element_metric(m)
+               and m not in THIRD_METRIC_NAMES]
+    declared = () if third is None else third.names
+    undeclared = [m for m in objective.limits if m in THIRD_METRIC_NAMES
+                  and f"{m.split('_')[0]}_{m.rpartition('_')[2]}" not in declared]
+    if undeclared:
+        raise PlannerError(f"optimize: objective {objective.name!r} limits {undeclared}, the "
+                           f"motion of third elements the car does not declare (it has "
+                           f"{list(declared)}); drop the limits from the objective file, or "
+                           "give the car's third elements (model.third, ElementOptions.third)")
     if missing:
         raise PlannerError(f"the model has no outputs for {missing}; its outputs are "
                            f"{list(plant.output_names)}")
-    return plant, drives, base, space, (need, L_all[[names_all.index(m) for m in need]])
+    return plant, drives, base, space, (need, L_all[[names_all.index(m) for m in need]]), third
 
 
 def compile_curves(model, drives, library, *, objective=None, baseline=None,
@@ -793,7 +868,7 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     objective = _check_objective(objective)
     curves = as_options(curves, CurveOptions, "curves", "compile_curves")
     oversample = as_options(loop, LoopOptions, "loop", "compile_curves").oversample
-    plant, drives, _, space, rows = _problem(model, drives, library, objective, baseline,
+    plant, drives, _, space, rows, _ = _problem(model, drives, library, objective, baseline,
                                              curves.symmetry, curves.knots_m_s, curves.linear,
                                              curves.lag_s, oversample)
     elements = _elements(plant, space, stop_tables, packers, None, objective)
@@ -919,24 +994,30 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
 
     # the optimum's shock velocities (first drive): the distribution the crate is compared over
     resp = simulate(plant, drives[0], setup.resolve(lib), oversample=oversample,
-                    stop_tables=stops_opt, static_corner_load_n=elements.static)
+                    stop_tables=stops_opt, static_corner_load_n=elements.static,
+                    third=elements.loop_third)
     vel = {c: np.asarray(resp.channels[f"shock_velocity_{c}"]) for c in CORNERS}
     # the crate: every setup of the same symmetry, by distance to the optimal curves
     sym, axles = {"left-right": ("left-right", "independent"), "all": ("left-right", "same"),
                   "none": ("none", "independent")}[space.symmetry]
-    crate = list(enumerate_setups(library, symmetry=sym, axles=axles))
+    # (a car's heave and roll dampers stay off its corners)
+    corner_ids = None if elements.third is None else elements.third.corner_ids(library)
+    crate = list(enumerate_setups(library, symmetry=sym, axles=axles, shocks=corner_ids))
     if base.name not in {s.name for s in crate}:
         crate.append(base)
     opt_pwl = {c: space.curves(x_opt)[space.group_of(c)] for c in CORNERS}
+    listed_ids = list(library.ids) if corner_ids is None else \
+        list(dict.fromkeys(corner_ids + list(base.ids())))
     dist_id = {(c, sid): curve_distance(library[sid].to_pwl(), opt_pwl[c], vel[c])
-               for c in CORNERS for sid in library.ids}
+               for c in CORNERS for sid in listed_ids}
     dist = np.array([math.sqrt(np.mean([dist_id[(c, s.shocks[c])] ** 2 for c in CORNERS]))
                      for s in crate])
     order = np.argsort(dist, kind="stable")
     closest = [crate[i] for i in order[:n_closest]]
     best_name, crate_scores = _crate_best(model, drives, library, crate, objective, base,
                                           weights, oversample, aggregate,
-                                          elements=elements.verify(p_opt, ()))
+                                          elements=elements.verify(p_opt, ()),
+                                          third=elements.third)
     by_name = {s.name: s for s in crate}
     searches, skipped, t_clicks = [], {}, time.perf_counter()
     if click_radius is not None and library.adjustable_ids:
@@ -988,6 +1069,8 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     if not space.linear:
         lo, hi = constraint_envelope(space, constraints, library)
         settings["envelope_n"] = {"lo": lo.tolist(), "hi": hi.tolist()}
+    if elements.third is not None:
+        settings["third"] = elements.third.car.to_dict()
     if elements.active:
         settings.update(bump_stops=elements.stops is not None,
                         packers={g: list(b) for g, b in zip(elements.groups, elements.bounds)},
@@ -1021,13 +1104,15 @@ def _click_search(model, drives, library, space, objective, base, weights, overs
 
 
 def _crate_best(model, drives, library, crate, objective, base, weights, oversample, aggregate,
-                top=20, elements=None):
-    """The crate's best feasible setup: screened on every drive, the best `top` verified
-    (with the car's `elements`, ``time_domain_scores``' arguments, if any)."""
+                top=20, elements=None, third=None):
+    """The crate's best feasible setup: screened on every drive (with the car's third
+    elements, :class:`_Third`, if any), the best `top` verified (with the car's `elements`,
+    ``time_domain_scores``' arguments, if any)."""
     total = None
     screen_obj = linear_objective(objective)
+    screen_third = None if third is None else third.screening(crate, library)
     for w, d in zip(weights, drives):
-        sc = screen_setups(model, d, crate, library).table
+        sc = screen_setups(model, d, crate, library, third=screen_third).table
         s = score_setups(sc, screen_obj, baseline=base.name).table
         v = s["score"].where(s["feasible"], np.inf)
         total = w * v if total is None else (total + w * v if aggregate == "sum"

@@ -68,7 +68,7 @@ def spread_knots(knots_m_s, *, min_m_s=MIN_KNOT_M_S, min_gap_m_s=MIN_KNOT_GAP_M_
     return out
 
 
-def shock_speeds(plant, drives, setup, library, *, oversample=2):
+def shock_speeds(plant, drives, setup, library, *, oversample=2, third=None):
     """A setup's shock velocities over drives, every corner pooled.
 
     Parameters
@@ -81,6 +81,8 @@ def shock_speeds(plant, drives, setup, library, *, oversample=2):
     library : ident.models.library.ShockLibrary
         Holds the setup's shocks.
     oversample : int
+    third : tuple, optional
+        The car's third elements, the setup's ``(dampers, springs)`` (issue 38).
 
     Returns
     -------
@@ -90,7 +92,7 @@ def shock_speeds(plant, drives, setup, library, *, oversample=2):
     """
     out = []
     for d in drives:
-        resp = simulate(plant, d, setup.resolve(library), oversample=oversample)
+        resp = simulate(plant, d, setup.resolve(library), oversample=oversample, third=third)
         out += [np.asarray(resp.channels[f"shock_velocity_{c}"], dtype=float) for c in CORNERS]
     v = np.concatenate(out)
     return v[np.isfinite(v)]

@@ -42,7 +42,7 @@ from ident.data.units import UNIT_LABELS, check_units, from_si
 from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock
 from ident.sim.closedloop import ELEMENT_STATS, rig_response, simulate_batch
-from ident.sim.metrics import compute_metrics
+from ident.sim.metrics import THIRD_METRIC_NAMES, compute_metrics
 from planner.objective import score_setups
 from planner.optimize.constraints import MAX_FORCE_VELOCITY_M_S
 from planner.options import ElementOptions, LoopOptions
@@ -181,17 +181,21 @@ def is_element_metric(name):
 
 
 def linear_objective(objective):
-    """The objective without its limits on element statistics (:func:`is_element_metric`):
-    the one the screening (frequency domain, no elements) ranks by; the objective itself
-    when it has none."""
-    if not any(is_element_metric(m) for m in objective.limits):
+    """The objective without its limits on element statistics (:func:`is_element_metric`)
+    and on third elements' motions (``heave_travel_rms_front``, ...,
+    :data:`ident.sim.metrics.THIRD_METRIC_NAMES`): the one the screening (frequency domain,
+    no elements) ranks by; the objective itself when it has none."""
+    def verified_only(m):
+        return is_element_metric(m) or m in THIRD_METRIC_NAMES
+
+    if not any(verified_only(m) for m in objective.limits):
         return objective
     return replace(objective, limits={m: dict(v) for m, v in objective.limits.items()
-                                      if not is_element_metric(m)})
+                                      if not verified_only(m)})
 
 
 def element_predictions(model, drive, setups, library, bump_stops, *, oversample=2,
-                        static_corner_load_n=None, chunk_size=32):
+                        static_corner_load_n=None, chunk_size=32, third=None):
     """The spec's metrics of setups with the car's elements, in the time domain.
 
     :func:`ident.sim.closedloop.simulate_batch` with ``bump_stops=`` and
@@ -215,6 +219,11 @@ def element_predictions(model, drive, setups, library, bump_stops, *, oversample
         Static tire loads [N]: lift-off in the loop.
     chunk_size : int
         Setups per simulated batch (their responses are kept until their metrics are).
+    third : tuple, optional
+        The car's third elements (issue 38) for every setup: one ``(dampers, springs)``
+        entry (:meth:`planner.elements.SetupThird.loop_third`); the table then adds the
+        elements' motion metrics (``heave_travel_rms_front``, ...,
+        :data:`ident.sim.metrics.THIRD_METRIC_NAMES`).
 
     Returns
     -------
@@ -230,7 +239,9 @@ def element_predictions(model, drive, setups, library, bump_stops, *, oversample
         batch = simulate_batch(plant, drive, models[a:a + chunk_size], oversample=oversample,
                                outputs=outputs, rig=rig,
                                bump_stops=list(bump_stops[a:a + chunk_size]),
-                               static_corner_load_n=static_corner_load_n)
+                               static_corner_load_n=static_corner_load_n,
+                               third=None if third is None
+                               else [third] * len(models[a:a + chunk_size]))
         met = compute_metrics(batch.channels, fs=batch.fs_hz)
         cols = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in met.values.items()}
         cols.update({k: np.asarray(v, dtype=float) for k, v in batch.elements.items()})
@@ -244,7 +255,7 @@ def element_predictions(model, drive, setups, library, bump_stops, *, oversample
 
 def time_domain_scores(model, drives, setups, library, objective, baseline, weights,
                        oversample, aggregate, *, bump_stops=None, setup_stops=None,
-                       static_corner_load_n=None):
+                       static_corner_load_n=None, third=None):
     """Verified scores of setups: :func:`planner.predict.predict_setups` per drive, scored
     against the baseline, aggregated over the drives.
 
@@ -272,6 +283,9 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
         A setup's own stops by its name (e.g. the optimum with its chosen packers).
     static_corner_load_n : array_like, shape (4,), optional
         Static tire loads [N]: lift-off in the loop.
+    third : tuple, optional
+        The car's third elements, one ``(dampers, springs)`` entry every setup is simulated
+        with (:func:`element_predictions`).
 
     Returns
     -------
@@ -282,14 +296,16 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
     """
     cand = [baseline] + [s for s in setups if s.name != baseline.name]
     per, metrics, feasible = [], {}, None
-    elements = bump_stops is not None or setup_stops or static_corner_load_n is not None
+    elements = (bump_stops is not None or setup_stops or static_corner_load_n is not None
+                or third is not None)
     own = dict(setup_stops or {})
     for d in drives:
         if elements:
             table = element_predictions(model, d, cand, library,
                                         [own.get(s.name, bump_stops) for s in cand],
                                         oversample=oversample,
-                                        static_corner_load_n=static_corner_load_n)
+                                        static_corner_load_n=static_corner_load_n,
+                                        third=third)
         else:
             table = predict_setups(model, d, cand, library,
                                    loop=LoopOptions(oversample=oversample),
@@ -309,7 +325,7 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
 
 def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin, baseline,
                 objective, weights, aggregate, *, scan=ScanOptions(), oversample=2,
-                stop_tables=None, static_corner_load_n=None):
+                elements=None):
     """The best linear and two-slope curves per corner group: screened, verified.
 
     Parameters
@@ -339,12 +355,13 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
         The grid (``grid_n_s_m``), the candidates verified (``n_verify``), whether
         two-slope curves are scanned (``two_slope``).
     oversample : int
-    stop_tables, static_corner_load_n : optional
-        The car's elements, as :func:`time_domain_scores` takes them (`stop_tables` as
-        its ``bump_stops``: the car's stops in the loop's form): the verification
-        simulates with them; the screening (frequency domain) sees the car without them
-        and ranks by the objective without its limits on element statistics
-        (:func:`linear_objective`).
+    elements : mapping, optional
+        The car's elements, :func:`time_domain_scores`' keyword arguments ``bump_stops``
+        (the car's stops in the loop's form), ``static_corner_load_n`` and ``third`` (the
+        car's third elements, one ``(dampers, springs)`` entry, the baseline's): the
+        verification simulates every candidate with them; the screening (frequency domain)
+        sees the car without them and ranks by the objective without its limits on
+        element statistics (:func:`linear_objective`).
 
     Returns
     -------
@@ -469,8 +486,7 @@ def scan_curves(model, plant, drives, library, space, constraints, A_lin, b_lin,
     lib = ShockLibrary(lib_models + [m for m in library.values()
                                      if m.id not in {s.id for s in lib_models}])
     table, _ = time_domain_scores(model, drives, setups, lib, objective, baseline, weights,
-                                  oversample, aggregate, bump_stops=stop_tables,
-                                  static_corner_load_n=static_corner_load_n)
+                                  oversample, aggregate, **dict(elements or {}))
     table = table.loc[[s.name for s in setups]]
     for g, (name, _) in reversed(list(enumerate(space.groups))):
         table.insert(0, f"curve_{name}", [curve_words(c[g]) for c in order])
