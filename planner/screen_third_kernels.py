@@ -50,6 +50,9 @@ _SQRT2 = math.sqrt(2.0)
 #: Newton iterations on the mean travel and their tolerance [m] (as the plain kernels').
 _MEAN_MAX_ITER = 50
 _MEAN_TOL_M = 1e-12
+#: Depth of the Anderson acceleration of the fixed point (:func:`_anderson`): the last
+#: differences of iterates and residuals it fits.
+_AA_DEPTH = 3
 #: Features of a band's loop correction the metrics are a linear form of (as
 #: :func:`planner.screen_kernels.metric_form` lays them out).
 _NFEAT = 48
@@ -643,6 +646,121 @@ def _secant(sig, new, s_prev, h_prev, c, it):
 
 
 @nb.njit(cache=True, error_model="numpy")
+def _record(sig, sigs, svv, sss, live, any_spring, hist, it):
+    """Store iteration ``it``'s iterate and residual in log space (``y = log sigma``,
+    ``f = log g(sigma) - y`` over the velocity RMS rows then the travel RMS rows; zero where a
+    row is dead) into hist's ring (rows ``2 (it % (D + 1))`` and the next, D = _AA_DEPTH).
+    Returns False when a residual is not finite (a zero power): no acceleration then, and
+    the history restarts (hist's last row counts the stored iterates)."""
+    nr = sig.size
+    slot = 2 * (it % (_AA_DEPTH + 1))
+    y, f = hist[slot], hist[slot + 1]
+    for r in range(nr):
+        y[r] = 0.0
+        f[r] = 0.0
+        y[nr + r] = 0.0
+        f[nr + r] = 0.0
+        if not live[r]:
+            continue
+        if svv[r] <= 0.0 or sig[r] <= 0.0:
+            hist[-1, 0] = 0.0
+            return False
+        y[r] = math.log(sig[r])
+        f[r] = 0.5 * math.log(svv[r]) - y[r]
+        if any_spring:
+            if sss[r] <= 0.0 or sigs[r] <= 0.0:
+                hist[-1, 0] = 0.0
+                return False
+            y[nr + r] = math.log(sigs[r])
+            f[nr + r] = 0.5 * math.log(sss[r]) - y[nr + r]
+    hist[-1, 0] = min(hist[-1, 0] + 1.0, _AA_DEPTH + 1.0) if it > 0 else 1.0
+    return True
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _anderson(sig, sigs, live, any_spring, hist, it, lsq):
+    """Anderson acceleration of the fixed point over all the rows together (the rows are
+    coupled through the elements, which the per-row secant does not see): with the last
+    ``m <= _AA_DEPTH`` differences of the log iterates ``dY`` and residuals ``dF``
+    (:func:`_record`), ``gamma = argmin |f_k - dF gamma|`` (normal equations, lsq: scratch
+    (D, D + 1)) and ``y = y_k + f_k - (dY + dF) gamma``. Replaces the secant's next iterate
+    (sig, sigs) only where every row stays within a factor 2 of the current one (as the
+    secant's safeguard); otherwise the secant's stands."""
+    nr = sig.size
+    npt = int(hist[-1, 0])
+    m = npt - 1
+    if m < 1:
+        return
+    d1 = _AA_DEPTH + 1
+    k = 2 * (it % d1)
+    yk, fk = hist[k], hist[k + 1]
+    n = 2 * nr
+    # normal equations of dF (columns i: f_{it-i} - f_{it-i-1}, i = 0..m-1)
+    for i in range(m):
+        a = 2 * ((it - i) % d1)
+        b = 2 * ((it - i - 1) % d1)
+        for j in range(i, m):
+            c = 2 * ((it - j) % d1)
+            e = 2 * ((it - j - 1) % d1)
+            acc = 0.0
+            for q in range(n):
+                acc += (hist[a + 1, q] - hist[b + 1, q]) * (hist[c + 1, q] - hist[e + 1, q])
+            lsq[i, j] = acc
+            lsq[j, i] = acc
+        acc = 0.0
+        for q in range(n):
+            acc += (hist[a + 1, q] - hist[b + 1, q]) * fk[q]
+        lsq[i, m] = acc
+    # Cholesky-free Gauss elimination with a relative ridge (m <= 3, symmetric PSD)
+    ridge = 0.0
+    for i in range(m):
+        ridge += lsq[i, i]
+    if ridge <= 0.0:
+        return
+    ridge *= 1e-10
+    for i in range(m):
+        lsq[i, i] += ridge
+    for c in range(m):
+        piv = lsq[c, c]
+        if piv <= 0.0:
+            return
+        for i in range(c + 1, m):
+            t = lsq[i, c] / piv
+            for j in range(c, m + 1):
+                lsq[i, j] -= t * lsq[c, j]
+    for c in range(m - 1, -1, -1):
+        acc = lsq[c, m]
+        for j in range(c + 1, m):
+            acc -= lsq[c, j] * lsq[j, m]
+        lsq[c, m] = acc / lsq[c, c]
+    lim = math.log(2.0)
+    for q in range(n):
+        r = q % nr
+        if not live[r] or (q >= nr and not any_spring):
+            continue
+        yn = yk[q] + fk[q]
+        for i in range(m):
+            a = 2 * ((it - i) % d1)
+            b = 2 * ((it - i - 1) % d1)
+            yn -= lsq[i, m] * (hist[a, q] - hist[b, q] + hist[a + 1, q] - hist[b + 1, q])
+        if not abs(yn - yk[q]) < lim:
+            return
+    for q in range(n):
+        r = q % nr
+        if not live[r] or (q >= nr and not any_spring):
+            continue
+        yn = yk[q] + fk[q]
+        for i in range(m):
+            a = 2 * ((it - i) % d1)
+            b = 2 * ((it - i - 1) % d1)
+            yn -= lsq[i, m] * (hist[a, q] - hist[b, q] + hist[a + 1, q] - hist[b + 1, q])
+        if q < nr:
+            sig[r] = math.exp(yn)
+        else:
+            sigs[r] = math.exp(yn)
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _solve4(J, r):
     """r <- J^-1 r (4x4 real, Gauss elimination with partial pivoting; J destroyed)."""
     for c in range(4):
@@ -749,7 +867,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem, scr
     setups: allocating per setup costs more than a setup's band work)."""
     kv, kf, nk, slo, shi, lag = shocks
     on, s0, bx, bf, bn, bslope = stops
-    rblk, V, st, live, solve = scratch
+    rblk, V, st, live, solve, hist, lsq = scratch
     nf = bd.w.size
     nr = bd.rows.shape[0]
     w, rows = bd.w, bd.rows
@@ -789,6 +907,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem, scr
                 a2 += p * bd.w2inv[k]
             svv[r] = a1
             sss[r] = a2
+        ok = _record(sig, sigs, svv, sss, live, any_spring, hist, it)
         change = 0.0
         for r in range(nr):
             if live[r]:
@@ -800,6 +919,8 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem, scr
                                                  r, it))
         if change < tol:
             break
+        if ok:
+            _anderson(sig, sigs, live, any_spring, hist, it, lsq)
     _dampers(shocks, s, sig, live, any_spring, ceq, ef)
     if any_spring:
         _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
@@ -887,4 +1008,5 @@ def _scratch(bd):
                    or bd.rows[r, 3] != 0.0)
     return (np.zeros(nblk * 16 * _BK), np.zeros(nblk * _NFEAT * _BK),
             np.zeros((12, max(nr, 4))), live,
-            (np.empty((4, 4)), np.empty(4), np.empty(4), np.empty((4, 4))))
+            (np.empty((4, 4)), np.empty(4), np.empty(4), np.empty((4, 4))),
+            np.zeros((2 * (_AA_DEPTH + 1) + 1, 2 * nr)), np.zeros((_AA_DEPTH, _AA_DEPTH + 1)))
