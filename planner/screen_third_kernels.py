@@ -615,14 +615,40 @@ def _band_features(bd, ceq, keq, rinv, V):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _row_power(r, V, o):
+def _row_powers(rows, V, w2inv, vsum, svv, sss):
+    """Every row's velocity and travel power summed over the bands, ``r (sum_k V_k) r^T`` and
+    ``r (sum_k V_k / w_k^2) r^T`` (the row's form is linear in V: the bands' sums of V's 10
+    entries first, in band order, then one quadratic form per row); vsum: scratch (20,)."""
+    nf = w2inv.size
+    for q in range(20):
+        vsum[q] = 0.0
+    nblk = (nf + _BK - 1) // _BK
+    for blk in range(nblk):
+        vb = blk * 10 * _BK
+        nj = min(_BK, nf - blk * _BK)
+        for q in range(10):
+            a1 = 0.0
+            a2 = 0.0
+            for j in range(nj):
+                v = V[vb + q * _BK + j]
+                a1 += v
+                a2 += v * w2inv[blk * _BK + j]
+            vsum[q] += a1
+            vsum[10 + q] += a2
+    for r in range(rows.shape[0]):
+        svv[r] = _row_power(rows[r], vsum, 0, 1)
+        sss[r] = _row_power(rows[r], vsum, 10, 1)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _row_power(r, V, o, step):
     """``r V r^T`` of a band (r real (4,); V from :func:`_band_power`, the band's entries at
-    ``o + q _BK``)."""
-    acc = (r[0] * r[0] * V[o] + r[1] * r[1] * V[o + _BK] + r[2] * r[2] * V[o + 2 * _BK]
-           + r[3] * r[3] * V[o + 3 * _BK])
-    acc += 2.0 * (r[0] * r[1] * V[o + 4 * _BK] + r[0] * r[2] * V[o + 5 * _BK]
-                  + r[0] * r[3] * V[o + 6 * _BK] + r[1] * r[2] * V[o + 7 * _BK]
-                  + r[1] * r[3] * V[o + 8 * _BK] + r[2] * r[3] * V[o + 9 * _BK])
+    ``o + q step``)."""
+    acc = (r[0] * r[0] * V[o] + r[1] * r[1] * V[o + step] + r[2] * r[2] * V[o + 2 * step]
+           + r[3] * r[3] * V[o + 3 * step])
+    acc += 2.0 * (r[0] * r[1] * V[o + 4 * step] + r[0] * r[2] * V[o + 5 * step]
+                  + r[0] * r[3] * V[o + 6 * step] + r[1] * r[2] * V[o + 7 * step]
+                  + r[1] * r[3] * V[o + 8 * step] + r[2] * r[3] * V[o + 9 * step])
     return acc
 
 
@@ -867,7 +893,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem, scr
     setups: allocating per setup costs more than a setup's band work)."""
     kv, kf, nk, slo, shi, lag = shocks
     on, s0, bx, bf, bn, bslope = stops
-    rblk, V, st, live, solve, hist, lsq = scratch
+    rblk, V, st, live, solve, hist, lsq, vsum = scratch
     nf = bd.w.size
     nr = bd.rows.shape[0]
     w, rows = bd.w, bd.rows
@@ -898,15 +924,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem, scr
             _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu,
                    keq, eg, ef, live, solve)
         _band_power(bd, ceq, keq, rblk, V)
-        for r in range(nr):
-            a1 = 0.0
-            a2 = 0.0
-            for k in range(nf):
-                p = _row_power(rows[r], V, (k // _BK) * 10 * _BK + k % _BK)
-                a1 += p
-                a2 += p * bd.w2inv[k]
-            svv[r] = a1
-            sss[r] = a2
+        _row_powers(rows, V, bd.w2inv, vsum, svv, sss)
         ok = _record(sig, sigs, svv, sss, live, any_spring, hist, it)
         change = 0.0
         for r in range(nr):
@@ -1009,4 +1027,4 @@ def _scratch(bd):
     return (np.zeros(nblk * 16 * _BK), np.zeros(nblk * _NFEAT * _BK),
             np.zeros((12, max(nr, 4))), live,
             (np.empty((4, 4)), np.empty(4), np.empty(4), np.empty((4, 4))),
-            np.zeros((2 * (_AA_DEPTH + 1) + 1, 2 * nr)), np.zeros((_AA_DEPTH, _AA_DEPTH + 1)))
+            np.zeros((2 * (_AA_DEPTH + 1) + 1, 2 * nr)), np.zeros((_AA_DEPTH, _AA_DEPTH + 1)), np.zeros(20))
