@@ -50,6 +50,9 @@ _SQRT2 = math.sqrt(2.0)
 #: Newton iterations on the mean travel and their tolerance [m] (as the plain kernels').
 _MEAN_MAX_ITER = 50
 _MEAN_TOL_M = 1e-12
+#: Newton steps on the mean travel per iteration of the fixed point (the mean travel
+#: converges along with the RMS; after the loop the full Newton, :data:`_MEAN_MAX_ITER`).
+_MEAN_LOOP_ITER = 2
 #: Depth of the Anderson acceleration of the fixed point (:func:`_anderson`): the last
 #: differences of iterates and residuals it fits.
 _AA_DEPTH = 3
@@ -832,7 +835,7 @@ def _dampers(shocks, s, sig, live, means, ceq, ef):
 
 @nb.njit(cache=True, error_model="numpy")
 def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
-           ef, live, scratch):
+           ef, live, scratch, max_newton):
     """Mean corner travel ``mu`` (4) solving ``mu = static + gain sum_r r (ef_r + eg_r)``
     (Newton), the springs' ``keq``, ``eg`` at their travel ``N(r mu, sigs^2)`` (in place),
     given the dampers' mean forces ``ef`` at their zero-mean velocity (:func:`_dampers`);
@@ -840,7 +843,7 @@ def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, m
     nr = bd.rows.shape[0]
     rows, gain, static = bd.rows, bd.gain, bd.static
     J, res, force, Ks = scratch
-    for _ in range(_MEAN_MAX_ITER):
+    for _ in range(max_newton):
         for r in range(nr):
             if on[s, r]:
                 m = rows[r, 0] * mu[0] + rows[r, 1] * mu[1] + rows[r, 2] * mu[2] + \
@@ -922,7 +925,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem, scr
         _dampers(shocks, s, sig, live, any_spring, ceq, ef)
         if any_spring:
             _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu,
-                   keq, eg, ef, live, solve)
+                   keq, eg, ef, live, solve, _MEAN_LOOP_ITER)
         _band_power(bd, ceq, keq, rblk, V)
         _row_powers(rows, V, bd.w2inv, vsum, svv, sss)
         ok = _record(sig, sigs, svv, sss, live, any_spring, hist, it)
@@ -942,7 +945,7 @@ def _screen_third_one(bd, shocks, stops, s, max_iter, tol, out_m, sig, elem, scr
     _dampers(shocks, s, sig, live, any_spring, ceq, ef)
     if any_spring:
         _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, mu, keq, eg,
-               ef, live, solve)
+               ef, live, solve, _MEAN_MAX_ITER)
     for r in range(nr):
         m = rows[r, 0] * mu[0] + rows[r, 1] * mu[1] + rows[r, 2] * mu[2] + rows[r, 3] * mu[3]
         elem[0, r] = sigs[r] if any_spring else 0.0
