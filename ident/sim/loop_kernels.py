@@ -262,7 +262,7 @@ bslope : ndarray, shape (ns,)
     Slope beyond the table [N/m].
 """
 
-MetricFilters = namedtuple("MetricFilters", ["ia", "sos", "zi", "padlen"])
+MetricFilters = namedtuple("MetricFilters", ["ia", "sos", "zi", "padlen", "dmap", "dw"])
 MetricFilters.__doc__ = """The fused metrics' channels and filters (:func:`loop_metrics_worker`).
 
 Attributes
@@ -275,6 +275,9 @@ zi : ndarray, shape (n_bands, n_sections, 2)
     Their steady-state initial conditions (:func:`scipy.signal.sosfilt_zi`).
 padlen : int
     Odd-extension length of the zero-phase filter [samples].
+dmap, dw : ndarray of int64, shape (n_derived, 7), and ndarray, shape (n_derived, 4)
+    The derived metrics after the ``ia.size`` filtered ones (combinations of their
+    band-passed signals: :func:`ident.sim.metric_kernels.derived_metric_map`).
 """
 
 SolverState = namedtuple("SolverState", ["v", "vfree", "c0", "fv", "sv", "seg", "av", "vnew",
@@ -1919,6 +1922,8 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
     sos = metrics.sos
     zi = metrics.zi
     padlen = metrics.padlen
+    dmap = metrics.dmap
+    dw = metrics.dw
     L = METRIC_LANES
     ns = sos.shape[1]
     S = setups.b0.shape[0]
@@ -1952,5 +1957,6 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
                     row[j] = 0.0
                 histogram_add(y[p + c], hist_spec[0], hist_spec[1], hist_spec[2], row)
         for b in range(sos.shape[0]):
-            setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack, sums)
+            setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack, sums,
+                             dmap, dw)
     return
