@@ -1312,6 +1312,21 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
             bmA[m + d] = third.bm[d]
             for c in range(m):
                 drowsA[m + d, c] = third.drows[d, c]
+        # each segment's open interval (bnd3[0], bnd3[1]) in the element's motion: dampers'
+        # segments 0 .. nk, springs' (beyond contact) -1 .. bn - 1 at index + 1
+        bnd3 = np.empty((2, nd3, K3 + 1))
+        for d in range(nd3):
+            for sg in range(nkA[d] + 1):
+                bnd3[0, d, sg] = -np.inf if sg == 0 else kvA[d, sg - 1]
+                bnd3[1, d, sg] = np.inf if sg == nkA[d] else kvA[d, sg]
+        sbnd3 = np.empty((2, ns3, bx3.shape[1] + 1))
+        for j in range(ns3):
+            nbj = bn3[j]
+            sbnd3[0, j, 0] = -np.inf
+            sbnd3[1, j, 0] = 0.0
+            for sg in range(nbj):
+                sbnd3[0, j, sg + 1] = bx3[j, sg]
+                sbnd3[1, j, sg + 1] = np.inf if sg == nbj - 1 else bx3[j, sg + 1]
         dseg = np.empty(nd3, dtype=np.int64)
         for d in range(nd3):
             dseg[d] = _segment_of(0.0, kvA, d, nkA[d], 0)
@@ -1481,12 +1496,37 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                             acc_t += Dt3[a, c] * dF3[c]
                         v[a] = acc_v
                         t3[a] = acc_t
-                    same = True
+                    # every element strictly inside its segment (the common case), tested
+                    # without a branch per element (as _fast_solve); otherwise each is placed
+                    # by _segment_of / _spring_seg, which decide a motion on a knot
+                    inside = True
                     for d in range(nd3):
                         x = 0.0
                         for c in range(m):
                             x += drowsA[d, c] * v[c]
                         ve3[d] = x
+                        sg = dseg[d]
+                        inside &= (bnd3[0, d, sg] < x) & (x < bnd3[1, d, sg])
+                    for j in range(ns3):
+                        x = 0.0
+                        for c in range(m):
+                            x += srows3[j, c] * t3[c]
+                        te3[j] = x
+                        xs = x - s03[j]
+                        sg = sseg[j] + 1
+                        inside &= (sbnd3[0, j, sg] < xs) & (xs < sbnd3[1, j, sg])
+                    if inside:
+                        for d in range(nd3):
+                            fd3[d] = da3[d] + ds3[d] * ve3[d]
+                        for j in range(ns3):
+                            gs3[j] = sa3[j] + sk3[j] * te3[j]
+                        it = it_
+                        if valid3[0] > _MAX_RANK1_UPDATES:
+                            valid3[0] = 0
+                        break
+                    same = True
+                    for d in range(nd3):
+                        x = ve3[d]
                         s2 = _segment_of(x, kvA, d, nkA[d], dseg[d])
                         if s2 == dseg[d]:
                             continue
@@ -1524,10 +1564,7 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                                         Jinv3[a, c] += z3[a] * y3[c] / den
                                 valid3[0] += 1
                     for j in range(ns3):
-                        x = 0.0
-                        for c in range(m):
-                            x += srows3[j, c] * t3[c]
-                        te3[j] = x
+                        x = te3[j]
                         s2 = _spring_seg(x, j, s03, bx3, bn3)
                         if s2 == sseg[j]:
                             continue
