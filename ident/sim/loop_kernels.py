@@ -1475,7 +1475,11 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                         for c in range(m):
                             acc += Mv3[a, c] * vfree[c] + Mt3[a, c] * tfree[c]
                         rhs3[a] = acc
-                    for d in range(nd3):
+                    # the corner shocks' unit rows directly (the same sums without their
+                    # zero terms), then the third dampers' rows
+                    for d in range(m):
+                        rhs3[d] += c03[d] + b0A[d] * da3[d]
+                    for d in range(m, nd3):
                         q = c03[d] + b0A[d] * da3[d]
                         for a in range(m):
                             rhs3[a] += drowsA[d, a] * q
@@ -1500,7 +1504,12 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                     # without a branch per element (as _fast_solve); otherwise each is placed
                     # by _segment_of / _spring_seg, which decide a motion on a knot
                     inside = True
-                    for d in range(nd3):
+                    for d in range(m):
+                        x = v[d]
+                        ve3[d] = x
+                        sg = dseg[d]
+                        inside &= (bnd3[0, d, sg] < x) & (x < bnd3[1, d, sg])
+                    for d in range(m, nd3):
                         x = 0.0
                         for c in range(m):
                             x += drowsA[d, c] * v[c]
