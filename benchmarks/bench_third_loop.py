@@ -8,8 +8,9 @@ with a gap that closes on the drive. Each timed through
 ``ident.sim.closedloop.simulate_batch_metrics`` (the predictions' fused loop and metrics),
 the median of ``--repeat`` calls after a warm-up call (compilation or cache load). The
 figure: the time per setup with third elements over the plain loop's (issue 38's target:
-at most 1.3x), with the six motion metrics and without them (the loop's own cost: each
-motion metric is a band-passed lane as a tire force's).
+at most 1.3x), with the six motion metrics and without them (the loop's own cost; the
+motion metrics are formed from the corners' band-passed travels and velocities, no filter
+lanes of their own).
 
 Run::
 
@@ -104,8 +105,8 @@ def main(argv=None):
             ("third, the plain metric set", {"third": third}, True))
     for label, kw, same_metrics in runs:
         if same_metrics:
-            # the loop's own cost: the six motion metrics (band-passed lanes of their own)
-            # left out for this run, restored after
+            # the loop's own cost: the six motion metrics left out for this run, restored
+            # after
             saved = {m: METRIC_CHANNELS.pop(m) for m in THIRD_METRIC_NAMES}
         t0 = time.perf_counter()
         out = simulate_batch_metrics(plant, drive, setups, oversample=OVERSAMPLE, rig=rig, **kw)

@@ -150,3 +150,24 @@ def test_refusals(car, drive):
     bad = [ThirdSpring("heave_front", element_row("heave_front", 1.0), (-0.001, [0, 1], [0, 1]))]
     with pytest.raises(ValueError, match="contact travel"):
         simulate(plant, drive, shocks, oversample=1, third=([], bad))
+
+
+def test_fused_motion_metrics_without_the_corners_metrics(car, drive):
+    # an element's motion metrics are formed from the corners' band-passed travels and
+    # velocities when those are metrics too (the front heave travel here), and are filtered
+    # lanes of their own otherwise (the velocities and the rear: their corners not output)
+    cases = _setups()
+    shocks = [c[0] for c in cases[:2]]
+    third = [(c[1], c[2]) for c in cases[:2]]
+    stops = [c[3] for c in cases[:2]]
+    plant = _plant(car, cases[0][0])
+    outputs = ["tire_force_LF", "shock_travel_LF", "shock_travel_RF"]
+    batch = simulate_batch(plant, drive, shocks, oversample=1, bump_stops=stops, third=third,
+                           outputs=outputs)
+    fused = simulate_batch_metrics(plant, drive, shocks, oversample=1, bump_stops=stops,
+                                   third=third, outputs=outputs)
+    full = compute_metrics(batch.channels, fs=batch.fs_hz)
+    assert {"heave_travel_rms_front", "heave_velocity_rms_rear"} <= set(full.values)
+    for name, x in full.values.items():
+        np.testing.assert_allclose(fused.metrics.values[name], x, rtol=RTOL_FUSED,
+                                   err_msg=name)

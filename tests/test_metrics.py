@@ -416,3 +416,31 @@ def test_fused_metric_equals_its_steps(rng):
     assert np.isnan(got.values["ride_height_rms_front"][7])
     assert np.isfinite(np.delete(got.values["ride_height_rms_front"], 7)).all()
     assert np.isfinite(got.values["tire_force_rms_LF"]).all()
+
+
+def test_derived_metric_map_places_combinations_in_free_lanes():
+    from ident.sim.metric_kernels import LANES as _LANES
+    from ident.sim.metric_kernels import derived_metric_map
+
+    # 14 filtered metrics (one block): heave and roll of corners 6, 7 (travel) and 10, 11
+    # (velocity); a combination across blocks (16 + 1 sources over 2 blocks) is left out
+    n_base = _LANES + 2
+    sources = [[6, 7], [6, 7], [10, 11], [3, _LANES + 1]]
+    weights = [[0.5, 0.5], [0.4, -0.4], [0.5, 0.5], [1.0, 1.0]]
+    dmap, dw, kept = derived_metric_map(sources, weights, n_base)
+    assert kept == [0, 1, 2]
+    assert dmap.shape == (3, 7) and dw.shape == (3, 4)
+    assert np.all(dmap[:, 0] == 0) and np.all(dmap[:, 1] == 0)
+    lanes = dmap[:, 2].tolist()
+    # distinct lanes, none a source of the block's combinations
+    assert len(set(lanes)) == 3 and not set(lanes) & {6, 7, 10, 11}
+    assert dmap[1, 3:].tolist() == [6, 7, -1, -1]
+    assert dw[1].tolist() == [0.4, -0.4, 0.0, 0.0]
+    # more combinations than free lanes: groups of lanes
+    many = [[0, 1]] * (_LANES - 2 + 3)
+    dmap, dw, kept = derived_metric_map(many, [[1.0, 1.0]] * len(many), 2)
+    assert len(kept) == len(many)
+    assert dmap[:, 1].tolist() == [0] * (_LANES - 2) + [1] * 3
+    for g in (0, 1):
+        lanes = dmap[dmap[:, 1] == g, 2]
+        assert len(set(lanes.tolist())) == lanes.size and not set(lanes.tolist()) & {0, 1}

@@ -67,6 +67,7 @@ from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, HISTOGRAM_COUNTERS, 
                                     ThirdLoop, histogram_add, loop_batch, loop_metrics_worker,
                                     loop_serial, rig_kernel)
 from ident.sim.loop_third import UNREACHED_CONTACT_M, pack_third, third_channel
+from ident.sim.metric_kernels import derived_metric_map
 from ident.sim.metrics import METRIC_CHANNELS, compute_metrics, metric_plan
 
 __all__ = [
@@ -755,9 +756,10 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     # the mean of two rows for a ride height of two corners; the shock velocities are the
     # loop's own (appended after the rows)
     Cout, y_rig = (loop.cout if el is None else el.cout), loop.y_rig
+    names, derived, dmap, dw = _derived_metrics(plan.names, th)
     cols, rig_cols, lanes = [], [], []
     tf_rows = np.full(4, -1, dtype=np.int64)
-    for name in plan.names:
+    for name in names:
         chans = METRIC_CHANNELS[name]
         if len(chans) == 1 and chans[0] in SHOCK_VELOCITIES:
             lanes.append(-1 - SHOCK_VELOCITIES.index(chans[0]))
@@ -775,9 +777,9 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
                                      else np.zeros((N, 0)))
     sos = np.ascontiguousarray(np.stack([f[0] for f in filters]), dtype=float)
     zi = np.ascontiguousarray(np.stack([f[2] for f in filters]), dtype=float)
-    out = np.empty((S, len(filters), len(plan.names)))
+    out = np.empty((S, len(filters), len(names) + len(derived)))
     iters = np.zeros(S, dtype=np.int64)
-    metrics = MetricFilters(ia, sos, zi, int(filters[0][1]))
+    metrics = MetricFilters(ia, sos, zi, int(filters[0][1]), dmap, dw)
     drive_args = LoopDrive(loop.rig.v_fine, loop.oversample, y_rig_red, c_red)
     counts = None if hist_spec is None else np.zeros((S, 4, n_bins + HISTOGRAM_COUNTERS))
     if th is not None:
@@ -793,7 +795,7 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
                          el.kernel_elements(tf_rows), stats, hist_spec, counts, None, None))
     _check_converged(plant, iters)
     rms = {name + suffix: out[:, b, i] for b, suffix in enumerate(plan.bands)
-           for i, name in enumerate(plan.names)}
+           for i, name in enumerate(names + derived)}
     met = plan.assemble(rms)
     settings = loop.settings(drive)
     if el is not None:
@@ -805,6 +807,37 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
     return BatchMetrics(metrics=met, setups=tuple(tuple(m) for m in loop.models),
                         newton_iterations=iters, settings=settings, histogram_counts=counts,
                         n_samples=N)
+
+
+def _derived_metrics(names, th):
+    """Split the fused metrics `names` into filtered ones and derived ones (issue 38): a third
+    element's travel (velocity) is ``m @ x`` of the corners' shock travels (velocities), so
+    with those corners' metrics filtered its band-passed signal is the same combination of
+    theirs (the band-pass is linear): its metric is formed from them
+    (:func:`ident.sim.metric_kernels.setup_metric_rms`) instead of a lane of the filter of
+    its own. Returns ``(filtered names, derived names, dmap, dw)``."""
+    none = (list(names), [], np.zeros((0, 7), dtype=np.int64), np.zeros((0, 4)))
+    if th is None or not th.motions:
+        return none
+    parts = {}
+    for name in names:
+        chans = METRIC_CHANNELS[name]
+        if len(chans) != 1 or chans[0] not in th.motions:
+            continue
+        what, row = th.motions[chans[0]]
+        src = [f"shock_{what}_rms_{CORNERS[c]}" for c in range(4) if row[c] != 0.0]
+        if src and all(m in names for m in src):
+            parts[name] = (src, [float(row[c]) for c in range(4) if row[c] != 0.0])
+    derived = list(parts)
+    while True:  # until every derived metric's sources share a block of the final order
+        base = [n for n in names if n not in derived]
+        dmap, dw, kept = derived_metric_map(
+            [[base.index(m) for m in parts[d][0]] for d in derived],
+            [parts[d][1] for d in derived], len(base))
+        if len(kept) == len(derived):
+            break
+        derived = [derived[i] for i in kept]
+    return base, derived, dmap, dw
 
 
 def _run_workers(n_setups, args):
@@ -1299,6 +1332,7 @@ class _Third:
     y_rig: np.ndarray
     dampers: tuple
     spring_names: tuple  # the F_out columns after the dampers': heave springs, corner stops
+    motions: dict = field(default_factory=dict)  # element channel -> ("travel"|"velocity", row)
 
     @property
     def n_springs(self):
@@ -1399,7 +1433,7 @@ def _third_args(plant, loop, bump_stops, static_corner_load_n, third, where):
     r = loop.oversample
     v_rig_out = loop.rig.v_fine[::r][:loop.y_rig.shape[0]]
     t_rig_out = t_rig[::r][:loop.y_rig.shape[0]]
-    names, cols, rig_cols = list(loop.names), [], []
+    names, cols, rig_cols, motions = list(loop.names), [], [], {}
     for e, row in zip(pack.elements, pack.rows):
         for what, C_, y_ in (("velocity", Cvt[:, :4], v_rig_out), ("travel", Cvt[:, 4:],
                                                                    t_rig_out)):
@@ -1407,6 +1441,7 @@ def _third_args(plant, loop, bump_stops, static_corner_load_n, third, where):
             if name in names:
                 continue
             names.append(name)
+            motions[name] = (what, np.asarray(row, dtype=float))
             cols.append(C_ @ row)
             rig_cols.append(y_ @ row)
     cout = np.ascontiguousarray(np.concatenate([loop.cout, np.stack(cols, axis=1)], axis=1)
@@ -1414,7 +1449,7 @@ def _third_args(plant, loop, bump_stops, static_corner_load_n, third, where):
     y_rig = np.ascontiguousarray(np.concatenate([loop.y_rig, np.stack(rig_cols, axis=1)], axis=1)
                                  if cols else loop.y_rig)
     return _Third(kernel=kernel, names=names, cout=cout, y_rig=y_rig, dampers=pack.dampers,
-                  spring_names=spring_names)
+                  spring_names=spring_names, motions=motions)
 
 
 def _third_response(plant, drive, loop, bump_stops, static_corner_load_n, third, where, th=None):

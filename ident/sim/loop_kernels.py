@@ -262,7 +262,7 @@ bslope : ndarray, shape (ns,)
     Slope beyond the table [N/m].
 """
 
-MetricFilters = namedtuple("MetricFilters", ["ia", "sos", "zi", "padlen"])
+MetricFilters = namedtuple("MetricFilters", ["ia", "sos", "zi", "padlen", "dmap", "dw"])
 MetricFilters.__doc__ = """The fused metrics' channels and filters (:func:`loop_metrics_worker`).
 
 Attributes
@@ -275,6 +275,9 @@ zi : ndarray, shape (n_bands, n_sections, 2)
     Their steady-state initial conditions (:func:`scipy.signal.sosfilt_zi`).
 padlen : int
     Odd-extension length of the zero-phase filter [samples].
+dmap, dw : ndarray of int64, shape (n_derived, 7), and ndarray, shape (n_derived, 4)
+    The derived metrics after the ``ia.size`` filtered ones (combinations of their
+    band-passed signals: :func:`ident.sim.metric_kernels.derived_metric_map`).
 """
 
 SolverState = namedtuple("SolverState", ["v", "vfree", "c0", "fv", "sv", "seg", "av", "vnew",
@@ -1309,6 +1312,21 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
             bmA[m + d] = third.bm[d]
             for c in range(m):
                 drowsA[m + d, c] = third.drows[d, c]
+        # each segment's open interval (bnd3[0], bnd3[1]) in the element's motion: dampers'
+        # segments 0 .. nk, springs' (beyond contact) -1 .. bn - 1 at index + 1
+        bnd3 = np.empty((2, nd3, K3 + 1))
+        for d in range(nd3):
+            for sg in range(nkA[d] + 1):
+                bnd3[0, d, sg] = -np.inf if sg == 0 else kvA[d, sg - 1]
+                bnd3[1, d, sg] = np.inf if sg == nkA[d] else kvA[d, sg]
+        sbnd3 = np.empty((2, ns3, bx3.shape[1] + 1))
+        for j in range(ns3):
+            nbj = bn3[j]
+            sbnd3[0, j, 0] = -np.inf
+            sbnd3[1, j, 0] = 0.0
+            for sg in range(nbj):
+                sbnd3[0, j, sg + 1] = bx3[j, sg]
+                sbnd3[1, j, sg + 1] = np.inf if sg == nbj - 1 else bx3[j, sg + 1]
         dseg = np.empty(nd3, dtype=np.int64)
         for d in range(nd3):
             dseg[d] = _segment_of(0.0, kvA, d, nkA[d], 0)
@@ -1457,7 +1475,11 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                         for c in range(m):
                             acc += Mv3[a, c] * vfree[c] + Mt3[a, c] * tfree[c]
                         rhs3[a] = acc
-                    for d in range(nd3):
+                    # the corner shocks' unit rows directly (the same sums without their
+                    # zero terms), then the third dampers' rows
+                    for d in range(m):
+                        rhs3[d] += c03[d] + b0A[d] * da3[d]
+                    for d in range(m, nd3):
                         q = c03[d] + b0A[d] * da3[d]
                         for a in range(m):
                             rhs3[a] += drowsA[d, a] * q
@@ -1478,12 +1500,42 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                             acc_t += Dt3[a, c] * dF3[c]
                         v[a] = acc_v
                         t3[a] = acc_t
-                    same = True
-                    for d in range(nd3):
+                    # every element strictly inside its segment (the common case), tested
+                    # without a branch per element (as _fast_solve); otherwise each is placed
+                    # by _segment_of / _spring_seg, which decide a motion on a knot
+                    inside = True
+                    for d in range(m):
+                        x = v[d]
+                        ve3[d] = x
+                        sg = dseg[d]
+                        inside &= (bnd3[0, d, sg] < x) & (x < bnd3[1, d, sg])
+                    for d in range(m, nd3):
                         x = 0.0
                         for c in range(m):
                             x += drowsA[d, c] * v[c]
                         ve3[d] = x
+                        sg = dseg[d]
+                        inside &= (bnd3[0, d, sg] < x) & (x < bnd3[1, d, sg])
+                    for j in range(ns3):
+                        x = 0.0
+                        for c in range(m):
+                            x += srows3[j, c] * t3[c]
+                        te3[j] = x
+                        xs = x - s03[j]
+                        sg = sseg[j] + 1
+                        inside &= (sbnd3[0, j, sg] < xs) & (xs < sbnd3[1, j, sg])
+                    if inside:
+                        for d in range(nd3):
+                            fd3[d] = da3[d] + ds3[d] * ve3[d]
+                        for j in range(ns3):
+                            gs3[j] = sa3[j] + sk3[j] * te3[j]
+                        it = it_
+                        if valid3[0] > _MAX_RANK1_UPDATES:
+                            valid3[0] = 0
+                        break
+                    same = True
+                    for d in range(nd3):
+                        x = ve3[d]
                         s2 = _segment_of(x, kvA, d, nkA[d], dseg[d])
                         if s2 == dseg[d]:
                             continue
@@ -1521,10 +1573,7 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                                         Jinv3[a, c] += z3[a] * y3[c] / den
                                 valid3[0] += 1
                     for j in range(ns3):
-                        x = 0.0
-                        for c in range(m):
-                            x += srows3[j, c] * t3[c]
-                        te3[j] = x
+                        x = te3[j]
                         s2 = _spring_seg(x, j, s03, bx3, bn3)
                         if s2 == sseg[j]:
                             continue
@@ -1919,6 +1968,8 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
     sos = metrics.sos
     zi = metrics.zi
     padlen = metrics.padlen
+    dmap = metrics.dmap
+    dw = metrics.dw
     L = METRIC_LANES
     ns = sos.shape[1]
     S = setups.b0.shape[0]
@@ -1952,5 +2003,6 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
                     row[j] = 0.0
                 histogram_add(y[p + c], hist_spec[0], hist_spec[1], hist_spec[2], row)
         for b in range(sos.shape[0]):
-            setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack, sums)
+            setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack, sums,
+                             dmap, dw)
     return

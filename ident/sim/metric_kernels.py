@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["LANES", "PW_LEVELS", "sosfiltfilt_rows", "metric_rms_rows", "setup_metric_rms"]
+__all__ = ["LANES", "PW_LEVELS", "sosfiltfilt_rows", "metric_rms_rows", "setup_metric_rms",
+           "derived_metric_map"]
 
 
 def _sosfilt_inplace(sos, zi0, x0, buf, n):
@@ -380,7 +381,7 @@ def _metric_block(buf, n, padlen, sos, zi, z0, z1, stack, sums):
         sums[j] = np.sqrt(sums[j] / n)
 
 
-def setup_metric_rms(y, ia, sos, zi, padlen, out, buf, z0, z1, stack, sums):
+def setup_metric_rms(y, ia, sos, zi, padlen, out, buf, z0, z1, stack, sums, dmap, dw):
     """The metrics of one simulated setup, in blocks of :data:`LANES` metrics: metric `i`
     is the RMS metric of channel ``y[ia[i]]`` (a ride height of two corners comes as one
     channel of averaged output coefficients), into ``out[i]``.
@@ -397,16 +398,29 @@ def setup_metric_rms(y, ia, sos, zi, padlen, out, buf, z0, z1, stack, sums):
         Scratch of :func:`_metric_block`: shapes (n + 2 padlen, L), (n_sections, L) twice,
         (:data:`PW_LEVELS`, 10, L) and (L,) with L = :data:`LANES` (a caller running
         many setups keeps one set per thread).
+    dmap : ndarray of int64, shape (n_derived, 3 + 4)
+        Derived metrics (:func:`derived_metric_map`): the RMS of a combination of up to 4
+        metrics' band-passed signals, into ``out[ia.size + d]``. Row ``d``: the first
+        metric of the block holding its sources, its group, its lane, and the sources'
+        lanes in that block (-1: none). Shape (0, 7): none.
+    dw : ndarray of float, shape (n_derived, 4)
+        The sources' weights.
 
     Notes
     -----
     Compiled into the closed loop's kernel (:mod:`ident.sim.loop_kernels`), which computes each
     setup's metrics as soon as its outputs are simulated, while they are in the cache.
     Each lane gets :func:`_metric_rms_rows_py`'s operations: the same numbers to the last
-    bit as :func:`ident.sim.metrics.compute_metrics` on the channels.
+    bit as :func:`ident.sim.metrics.compute_metrics` on the channels. A derived metric's
+    signal is its combination of the band-passed sources (the mean removal, odd extension
+    and zero-phase band-pass are linear: the band-passed combination to rounding), formed
+    in lanes of the sources' block that no derived metric reads, then its RMS: a third
+    element's travel and velocity from the corners' (issue 38) at one pass of squares
+    instead of a block of the filter of their own.
     """
     n = y.shape[1]
     n_metrics = ia.size
+    nd = dmap.shape[0]
     for i0 in range(0, n_metrics, LANES):
         n_rows = min(LANES, n_metrics - i0)
         for k in range(n):  # the pad rows are written by _metric_block's odd extension
@@ -418,6 +432,72 @@ def setup_metric_rms(y, ia, sos, zi, padlen, out, buf, z0, z1, stack, sums):
         _metric_block(buf, n, padlen, sos, zi, z0, z1, stack, sums)
         for j in range(n_rows):
             out[i0 + j] = sums[j]
+        d = 0
+        while d < nd:  # the derived metrics of this block, a group of lanes at a time
+            if dmap[d, 0] != i0:
+                d += 1
+                continue
+            e = d + 1
+            while e < nd and dmap[e, 0] == i0 and dmap[e, 1] == dmap[d, 1]:
+                e += 1
+            for k in range(padlen, padlen + n):
+                row = buf[k]
+                for q in range(d, e):
+                    acc = 0.0
+                    for c in range(4):
+                        src = dmap[q, 3 + c]
+                        if src >= 0:
+                            acc += dw[q, c] * row[src]
+                    row[dmap[q, 2]] = acc
+            _pairwise_sum_lanes(buf, padlen, n, True, sums, stack)
+            for q in range(d, e):
+                out[n_metrics + q] = np.sqrt(sums[dmap[q, 2]] / n)
+            d = e
+
+
+def derived_metric_map(sources, weights, n_base):
+    """The derived metrics' map of :func:`setup_metric_rms`: each metric's sources' block,
+    group and lane.
+
+    Parameters
+    ----------
+    sources : list of list of int
+        Per derived metric, the indices (among the ``n_base`` filtered metrics) of its
+        sources (at most 4).
+    weights : list of list of float
+        Their weights, as `sources`.
+    n_base : int
+        The filtered metrics.
+
+    Returns
+    -------
+    (dmap, dw, kept) : ndarray (n_kept, 7) of int64, ndarray (n_kept, 4), list of int
+        The map and weights of the derived metrics whose sources lie in one block of
+        :data:`LANES` metrics (ordered by block, then group), and their positions in
+        `sources`; the others (``not in kept``) must be filtered metrics of their own.
+    """
+    rows = []
+    by_block = {}
+    for i, src in enumerate(sources):
+        blocks = {s // LANES for s in src}
+        if len(src) == 0 or len(src) > 4 or len(blocks) != 1 or min(src) < 0 \
+                or max(src) >= n_base:
+            continue
+        by_block.setdefault(blocks.pop(), []).append(i)
+    kept = []
+    for blk in sorted(by_block):
+        i0 = blk * LANES
+        used = {s - i0 for i in by_block[blk] for s in sources[i]}
+        free = [j for j in range(LANES) if j not in used]
+        for g, i in enumerate(by_block[blk]):
+            lane = free[g % len(free)]
+            src = [s - i0 for s in sources[i]] + [-1] * (4 - len(sources[i]))
+            rows.append(([i0, g // len(free), lane] + src,
+                         list(weights[i]) + [0.0] * (4 - len(weights[i]))))
+            kept.append(i)
+    dmap = np.array([r[0] for r in rows], dtype=np.int64).reshape(len(rows), 7)
+    dw = np.array([r[1] for r in rows], dtype=float).reshape(len(rows), 4)
+    return dmap, dw, kept
 
 
 try:  # numba is a dependency; keep the module importable without it for tooling
