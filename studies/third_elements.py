@@ -430,6 +430,7 @@ def predict_identified(model, drive, setups, car):
         metrics; else ``"ignored: ..."`` (the setups' third columns had no effect) or
         ``"refused: ..."`` (the planner raised; the table is None).
     """
+    setups, stripped = corner_only(model, setups)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -441,8 +442,18 @@ def predict_identified(model, drive, setups, car):
     if any(f"{e.split('_')[0]}_travel_rms_{e.split('_')[1]}" in table
            for e in HEAVE_ELEMENTS):
         return table, "yes"
-    return table, ("ignored: the predictions have no heave metrics (the planner's loop "
-                   "has no third elements yet)")
+    return table, ("ignored: the model has no third elements, so the setups' third columns "
+                   "were dropped (what shockplan did before issue 38)" if stripped else
+                   "ignored: the predictions have no heave metrics")
+
+
+def corner_only(model, setups):
+    """The setups without their third-element columns when the model has no third elements
+    (the planner refuses such columns on such a model; shockplan before issue 38 ignored
+    them: the "before" case), else as given; and whether they were dropped."""
+    if getattr(model, "third", None) is not None:
+        return list(setups), False
+    return [replace(s, third=None, heave_springs=None) for s in setups], True
 
 
 def rank_identified(model, drive, setups, car):
@@ -457,6 +468,7 @@ def rank_identified(model, drive, setups, car):
         refusal.
     """
     heave = getattr(model, "third", None) is not None
+    setups, _ = corner_only(model, setups)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

@@ -370,13 +370,16 @@ SI_ALLOWED = (
 
 #: The README blocks whose project is not the demo's imperial one, with the reason: the
 #: real-car example is a GT-like car of its own, its inputs written in SI (real_car/*.toml,
-#: its drive), so its outputs are in SI as the spec says (the outputs in the drive's units).
-SI_PROJECT_BLOCKS = ("real_car/",)
+#: its drive), so its outputs are in SI as the spec says (the outputs in the drive's units);
+#: the third-elements example (proto/) likewise, a prototype-like car of its own in SI.
+SI_PROJECT_BLOCKS = ("real_car/", "proto/")
 
 #: Files of the demo folder in units of their own, each with its reason (not read for SI
 #: units; everything else the demo writes is).
 DEMO_OWN_UNITS = {
     "real_car/": "the real-car example's inputs: a GT-like car of its own, an SI project",
+    "proto/": "the third-elements example's inputs: a prototype-like car of its own, an SI "
+              "project",
     "rig_map.toml": "a template of a rig's channel map: each channel's units are the rig's "
                     "(here the canonical channels, SI)",
     "track/log_map.toml": "the track logger's channel map: the logger's units (mm, km/h)",

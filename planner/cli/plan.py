@@ -49,9 +49,10 @@ def add_parser(subparsers):
     pl.add_argument("--try-heave", action="append", metavar="AXLE=ID,ID",
                     help="candidate runs swap the heave damper at AXLE (front or rear) for "
                     "each of these crate ids ('none' for none); repeatable (a model with "
-                    "third elements, --model)")
+                    "third elements, --model; default: no heave damper swaps)")
     pl.add_argument("--try-roll", action="append", metavar="AXLE=ID,ID",
-                    help="as --try-heave, for the roll dampers")
+                    help="as --try-heave, for the roll dampers (default: no roll damper "
+                    "swaps)")
     pl.add_argument("--out", required=True, help="output folder")
     pl.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     pl.set_defaults(func=run)
