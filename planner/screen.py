@@ -1276,19 +1276,7 @@ def _screen_third(plant, drive, setups, models, bands, H, third, bump_stops,
                 third_damping_eq=elem[:, 4, 4:])
     if lo_on.any():
         mean, std = _third_tire_statistics(ops, eops, bd, shocks, elem)
-        contact = static[None, :] + mean
-        lift = 0.5 * erfc(contact / np.maximum(std, 1e-12) / np.sqrt(2.0))
-        cmin = np.maximum(contact - TIRE_CONTACT_MIN_SIGMAS * std, 0.0)
-        for c, corner in enumerate(CORNERS):
-            if lo_on[c]:
-                extra[f"tire_liftoff_share_{corner}"] = lift[:, c]
-                extra[f"tire_contact_min_{corner}"] = cmin[:, c]
-        worst = float(np.max(lift[:, lo_on]))
-        if worst > LIFTOFF_LINEAR_LIMIT:
-            log.warning("screening: a Gaussian lift-off share of %.1f %% (above %.0f %%): "
-                        "lift-off changes the metrics there, which the screening leaves "
-                        "linear; predict those setups in the time domain", 100 * worst,
-                        100 * LIFTOFF_LINEAR_LIMIT)
+        extra.update(_liftoff_columns(static, mean, std, lo_on))
     if extra:
         table = pd.concat([table, pd.DataFrame(extra, index=table.index)], axis=1)
     settings = dict(pred.settings, bump_stops=bool(on[:, :4].any()),
@@ -1383,24 +1371,33 @@ def _screen_elements(plant, drive, setups, models, bands, H, bump_stops, static_
                     bump_stop_stiffness_eq=trav[:, 2], bump_stop_force_mean=trav[:, 3])
     if lo_on.any():
         mean, std = tire_force_statistics(ops, eops, lag, trav)
-        contact = static[None, :] + mean
-        lift = 0.5 * erfc(contact / np.maximum(std, 1e-12) / np.sqrt(2.0))
-        cmin = np.maximum(contact - TIRE_CONTACT_MIN_SIGMAS * std, 0.0)
-        for c, corner in enumerate(CORNERS):
-            if lo_on[c]:
-                extra[f"tire_liftoff_share_{corner}"] = lift[:, c]
-                extra[f"tire_contact_min_{corner}"] = cmin[:, c]
-        worst = float(np.max(lift[:, lo_on]))
-        if worst > LIFTOFF_LINEAR_LIMIT:
-            log.warning("screening: a Gaussian lift-off share of %.1f %% (above %.0f %%): "
-                        "lift-off changes the metrics there, which the screening leaves "
-                        "linear; predict those setups in the time domain", 100 * worst,
-                        100 * LIFTOFF_LINEAR_LIMIT)
+        extra.update(_liftoff_columns(static, mean, std, lo_on))
     if extra:
         table = pd.concat([table, pd.DataFrame(extra, index=table.index)], axis=1)
     settings = dict(pred.settings, bump_stops=any_stop,
                     static_corner_load_n=static.tolist() if lo_on.any() else None)
     return Predictions(table=table, setups=pred.setups, settings=settings, diagnostics=diag)
+
+
+def _liftoff_columns(static, mean, std, lo_on):
+    """The Gaussian lift-off estimates' columns (``tire_liftoff_share_XX``,
+    ``tire_contact_min_XX``) of the corners with a static load, from the tire forces' mean
+    and standard deviation per setup [N], shape (S, 4); warns where lift-off is large."""
+    contact = static[None, :] + mean
+    lift = 0.5 * erfc(contact / np.maximum(std, 1e-12) / np.sqrt(2.0))
+    cmin = np.maximum(contact - TIRE_CONTACT_MIN_SIGMAS * std, 0.0)
+    columns = {}
+    for c, corner in enumerate(CORNERS):
+        if lo_on[c]:
+            columns[f"tire_liftoff_share_{corner}"] = lift[:, c]
+            columns[f"tire_contact_min_{corner}"] = cmin[:, c]
+    worst = float(np.max(lift[:, lo_on]))
+    if worst > LIFTOFF_LINEAR_LIMIT:
+        log.warning("screening: a Gaussian lift-off share of %.1f %% (above %.0f %%): "
+                    "lift-off changes the metrics there, which the screening leaves "
+                    "linear; predict those setups in the time domain", 100 * worst,
+                    100 * LIFTOFF_LINEAR_LIMIT)
+    return columns
 
 
 def screening_predictions(plant, drive, setups, names, out, sig, iters, *, band_hz, n_bands,
