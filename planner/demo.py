@@ -491,6 +491,17 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     return "\n".join(lines)
 
 
+def _example_paths(folder, names, overwrite):
+    """An example's folder (created) and its files' paths, after checking that none of them
+    exists unless `overwrite` (so that nothing is written when one would be refused)."""
+    folder = Path(folder)
+    paths = {name: folder / name for name in names}
+    for path in paths.values():
+        check_can_write(path, overwrite=overwrite)
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder, paths
+
+
 def write_demo_inputs(folder, *, units="imperial", channels=ALL_CHANNELS, overwrite=False):
     """Write the inputs the README's examples need into `folder`, each atomically.
 
@@ -552,11 +563,7 @@ def write_demo_inputs(folder, *, units="imperial", channels=ALL_CHANNELS, overwr
     if not channels or bad:
         raise ValueError(f"write_demo_inputs: channels {bad or '(none)'} are not canonical "
                          "channels; give names of ident.data.channels.ALL_CHANNELS")
-    folder = Path(folder)
-    paths = {name: folder / name for name in DEMO_INPUT_FILES}
-    for path in paths.values():
-        check_can_write(path, overwrite=overwrite)
-    folder.mkdir(parents=True, exist_ok=True)
+    folder, paths = _example_paths(folder, DEMO_INPUT_FILES, overwrite)
     write_shock_library(_demo_library(), paths["crate.toml"], units=units, overwrite=True)
     atomic_write_bytes(paths["car.toml"], EXAMPLE_VEHICLE_PATH.read_bytes())
     objective_to_toml(default_objective(), paths["objective.toml"], overwrite=True)
@@ -858,11 +865,7 @@ def write_real_car_example(folder, *, overwrite=False):
     from ident.models.shocks import DigressiveShock
     from ident.models.vehicle import example_gt_vehicle, write_vehicle
 
-    folder = Path(folder)
-    paths = {name: folder / name for name in REAL_CAR_FILES}
-    for path in paths.values():
-        check_can_write(path, overwrite=overwrite)
-    folder.mkdir(parents=True, exist_ok=True)
+    folder, paths = _example_paths(folder, REAL_CAR_FILES, overwrite)
     car = example_gt_vehicle()
     write_vehicle(car, paths["car.toml"], overwrite=True)
     crate = ShockLibrary.from_models([
@@ -930,10 +933,7 @@ def write_clicks_example(folder, *, overwrite=False):
     from ident.sim.dampers import ClickerDamper
     from ident.dyno.virtual import simulate_dyno_run
 
-    folder = Path(folder)
-    paths = {name: folder / name for name in CLICKS_FILES}
-    for path in paths.values():
-        check_can_write(path, overwrite=overwrite)
+    folder, paths = _example_paths(folder, CLICKS_FILES, overwrite)
     (folder / "dyno").mkdir(parents=True, exist_ok=True)
     truth = ClickerDamper()
     rng = np.random.default_rng(26)
@@ -991,11 +991,7 @@ def write_track_example(folder, *, overwrite=False):
     from ident.models.vehicle import build_full_car, example_vehicle
     from ident.sim.virtual_track import POT_OFFSET_M, log_track_run, make_track_run
 
-    folder = Path(folder)
-    paths = {name: folder / name for name in TRACK_FILES}
-    for path in paths.values():
-        check_can_write(path, overwrite=overwrite)
-    folder.mkdir(parents=True, exist_ok=True)
+    folder, paths = _example_paths(folder, TRACK_FILES, overwrite)
     atomic_write_text(paths["aero.toml"], _TRACK_AERO)
     atomic_write_text(paths["rig.toml"], _TRACK_RIG)
     atomic_write_text(paths["plan.toml"], _TRACK_PLAN)
@@ -1126,11 +1122,7 @@ def write_proto_example(folder, *, overwrite=False):
     from ident.models.aero import read_aero_model
     from ident.models.vehicle import read_vehicle
 
-    folder = Path(folder)
-    paths = {name: folder / name for name in PROTO_FILES}
-    for path in paths.values():
-        check_can_write(path, overwrite=overwrite)
-    folder.mkdir(parents=True, exist_ok=True)
+    folder, paths = _example_paths(folder, PROTO_FILES, overwrite)
     for name, path in paths.items():
         if name != "track_drive.csv":
             atomic_write_bytes(path, (PROTO_EXAMPLES / name).read_bytes())
