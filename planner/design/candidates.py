@@ -68,6 +68,9 @@ class CandidateOptions:
     third_dampers : mapping of str to sequence of str, optional
         Element (``heave_front``, ...) -> crate ids the candidates swap in there
         (``"none"``: the element's damper taken off).
+    bump_stops : ident.models.bumpstops.BumpStopLibrary, optional
+        The library of `third`'s heave springs for a model without one (a known vehicle;
+        the runs' predictions put them in the loop); default the identified model's.
 
     Raises
     ------
@@ -82,6 +85,7 @@ class CandidateOptions:
     click_levels: int = DEFAULT_CLICK_LEVELS
     third: object = None
     third_dampers: object = None
+    bump_stops: object = None
 
 
 @dataclass(frozen=True)
