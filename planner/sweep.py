@@ -889,11 +889,14 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     if any(has_third) and not all(has_third):
         raise PlannerError("sweep: some models carry third elements and some do not; sweep "
                            "the cars with third elements and the others separately")
-    if all(has_third):
-        # a car's heave and roll dampers stay off its corners; its screening is rank's:
-        # every shock setup with each element choice, the elements linearized with the shocks
-        if setups is None and constraints.get("shocks") is None:
-            constraints["shocks"] = corner_shock_ids(library, thirds[0], elements.vary_third)
+    if setups is None and constraints.get("shocks") is None:
+        # a car's heave and roll dampers (and those the crate marks) stay off its corners;
+        # with third elements its screening is rank's: every shock setup with each element
+        # choice, the elements linearized with the shocks
+        corner = corner_shock_ids(library, thirds[0] if all(has_third) else None,
+                                  elements.vary_third)
+        if corner is not None:
+            constraints["shocks"] = corner
     space = setup_space(library, setups=setups, **constraints, where="sweep")
     drive_list = _as_list(drives, "drives", Drive)
     model_names, drive_names = _names(model_list, "model"), _names(drive_list, "drive")

@@ -176,6 +176,24 @@ def test_rank_keeps_heave_dampers_off_the_corners(plant, drive):
     assert set(r.table["heave_front"]) == {"H1", "H2"}
 
 
+def test_dampers_marked_heave_or_roll_stay_off_the_corners(plant, drive):
+    """A damper the library marks ``fits = "heave"``/``"roll"`` is not enumerated at the
+    corners even when the car neither fits it nor tries it (R2 here), on a car without
+    third elements too; an unmarked library keeps every id on a plain car (None)."""
+    from planner.elements import corner_shock_ids
+
+    marked = ShockLibrary([LinearShock("S", 3000.0), LinearShock("S2", 4000.0, fits="corner"),
+                           LinearShock("H1", 8000.0, fits="heave"),
+                           LinearShock("H2", 15000.0, fits="heave"),
+                           LinearShock("R1", 3000.0), LinearShock("R2", 2000.0, fits="roll")])
+    assert corner_shock_ids(marked, CAR) == ["S", "S2"]  # R1: the car's; R2, H2: marked
+    assert corner_shock_ids(marked, None) == ["S", "S2", "R1"]
+    assert corner_shock_ids(LIB, None) is None
+    r = rank_setups(plant, drive, marked, loop=LoopOptions(oversample=1), elements=ELEMENTS,
+                    top=1, n_check=0, baseline="S", uncertainty=False)
+    assert set(r.screening[list(CORNERS)].to_numpy().ravel()) == {"S", "S2"}
+
+
 def test_sweep_screens_with_third_elements(plant, drive, caplog):
     """The sweep screens a car with third elements with them (no warning), keeps the car's
     heave and roll dampers off the corners, screens each --try-heave choice as a candidate,

@@ -333,7 +333,7 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
     if shocks is None:
         cb = np.mean(c_bar) if c_bar is not None else np.mean(
             [library[s].equivalent_damping(v_rms_m_s) for s in base_ids])
-        corner_ids = corner_shock_ids(library.ids, third, third_dampers)
+        corner_ids = corner_shock_ids(library, third, third_dampers)
         others = [s for s in library.ids if s not in base_ids and s not in adjustable
                   and (corner_ids is None or s in corner_ids)]
         ceq = {s: float(library[s].equivalent_damping(v_rms_m_s)) for s in others}

@@ -287,8 +287,9 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     # validation runs: the current best setups on the team's drive, at the plan's end
     val_setups = []
     if n_validation:
-        pool = list(enumerate_setups(library, **({} if car3 is None else {
-            "shocks": corner_shock_ids(library.ids, car3, candidates.third_dampers)})))
+        corner = corner_shock_ids(library, car3, candidates.third_dampers)
+        pool = list(enumerate_setups(library, **({} if corner is None else {
+            "shocks": corner})))
         sc = screen_setups(plant, drives[0], [base] + [s for s in pool if s != base], library)
         ranked = score_setups(sc.table, objective, baseline=base.name).table.sort_values("rank")
         names = [n for n in ranked.index if n != base.name][:n_validation]
