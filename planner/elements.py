@@ -609,11 +609,13 @@ def model_setup_third(setups, model, library, elements=None, *, where="setups"):
 
 
 def corner_shock_ids(library, car, choices=None):
-    """The library's ids an enumeration puts at the corners of a car with third elements.
+    """The library's ids an enumeration puts at the corners of a car.
 
-    A damper the car fits as a third element (its baseline's) or that a third-element
-    choice tries is a heave or roll damper, in the element's own travel and force: it is
-    not enumerated at the corners (a user who wants it there names it, e.g. ``--only``).
+    A damper the library marks as a heave or roll damper (its ``fits``,
+    :data:`ident.models.shocks.SHOCK_FITS`), and on a car with third elements a damper the
+    car fits as a third element (its baseline's) or that a third-element choice tries, is
+    in an element's own travel and force: it is not enumerated at the corners (a user who
+    wants it there names it, e.g. ``--only``).
 
     Parameters
     ----------
@@ -625,7 +627,8 @@ def corner_shock_ids(library, car, choices=None):
     Returns
     -------
     list of str or None
-        The ids in library order; None for a car without third elements (every id).
+        The ids in library order; None when every id is (a car without third elements and
+        a library that marks no damper as a heave or roll damper).
 
     Examples
     --------
@@ -634,13 +637,21 @@ def corner_shock_ids(library, car, choices=None):
     >>> corner_shock_ids(["C1", "C2", "H0", "H1"], car, {"heave_front": ["H0", "H1"]})
     ['C1', 'C2']
     """
+    marked = {sid for sid in library if _fits(library, sid) in ("heave", "roll")}
     if car is None or not car.elements:
-        return None
-    third = {sid for sid in car.baseline.dampers.values() if sid is not None}
+        return [sid for sid in library if sid not in marked] if marked else None
+    third = marked | {sid for sid in car.baseline.dampers.values() if sid is not None}
     for column, ids in (choices or {}).items():
         if column in THIRD_ELEMENTS:
             third.update(str(i) for i in ids if i is not None and str(i).lower() != "none")
     return [sid for sid in library if sid not in third]
+
+
+def _fits(library, sid):
+    """The library's ``fits`` of `sid` (None for a list of ids or an unmarked damper)."""
+    if isinstance(library, (list, tuple)):
+        return None
+    return getattr(library[sid], "fits", None)
 
 
 def vary_third(setups, choices, *, car=None, name_format="{name} {what}", where="vary_third"):

@@ -50,6 +50,10 @@ order in which chunks finish, bit for bit:
 The sweep's screening scores agree with ``rank_setups``' (``score_setups``) to round-off
 (:data:`RTOL_SCORE_ROUNDOFF`), not bit for bit: ``score_setups`` sums with a matrix product.
 
+A car with third elements (issue 38) is screened as ``rank_setups`` screens it: each chunk's
+setups, with every element choice (:class:`VariantSpace`), decoded and screened by
+:func:`planner.screen.screen_setups` with the car's elements; the rest is the same.
+
 Examples
 --------
 >>> from ident.models.library import ShockLibrary
@@ -84,8 +88,8 @@ from planner.errors import PlannerError
 from planner.objective import (Objective, default_objective, mark_inventory, ranking_order,
                                ranking_position, score_setups, time_domain_metrics)
 from planner.elements import (ELEMENT_COLUMNS, THIRD_COLUMNS, corner_shock_ids,
-                              distinct_setups, model_setup_elements, model_setup_third,
-                              vary_elements, vary_third)
+                              distinct_setups, loop_arguments, model_setup_elements,
+                              model_setup_third, vary_elements, vary_third)
 from planner.histograms import ShockHistograms
 from planner.options import (ElementOptions, HistogramOptions, LoopOptions, RunOptions,
                              ScreenOptions, as_options)
@@ -93,15 +97,16 @@ from planner.plant import as_loop_plant
 from planner.predict import predict_setups, prepare_drive, resolve_setups
 from planner.runner import KERNEL_LOCK, start_runner
 from planner.screen import (describe_agreement, drive_bands, screen_operands, screen_packed,
-                            screening_predictions)
+                            screen_setups, screening_predictions, third_choices)
 from planner.click_settings import base_id
-from planner.setups import SetupSpace, resolve_baseline, setup_space
+from planner.setups import Setup, SetupSpace, resolve_baseline, setup_space
 from planner.text import format_table
 
 __all__ = [
     "COMBINE_MODES",
     "RTOL_SCORE_ROUNDOFF",
     "SweepResult",
+    "VariantSpace",
     "sweep_setups",
     "screen_setups_on",
 ]
@@ -248,6 +253,161 @@ def _screen_chunk(ops_list, shocks, space, scoring, start, stop, n_top, max_iter
             "not_converged": not_converged}
 
 
+@dataclass(frozen=True, eq=False)
+class VariantSpace:
+    """A :class:`~planner.setups.SetupSpace` whose every setup comes with each of a list of
+    element variants (bump stops, packers, third elements), as :func:`planner.rank.rank_setups`
+    enumerates them: candidate ``i * n + v`` is the space's setup ``i`` with variant ``v``
+    (variant 0: the setup as it is, the car's own elements), the order of
+    :func:`planner.elements.vary_elements` then :func:`planner.elements.vary_third`.
+
+    Attributes
+    ----------
+    base : SetupSpace
+        The shock setups.
+    variants : tuple of planner.setups.Setup
+        The variants as setups named ``"T"`` plus the choices (``"T heave_front=H2"``): a
+        candidate's name is its shock setup's followed by that suffix, its elements the
+        variant's; variants that resolve to the same elements are dropped before.
+    """
+
+    base: SetupSpace
+    variants: tuple
+
+    @property
+    def n_variants(self):
+        """Variants per shock setup."""
+        return len(self.variants)
+
+    @property
+    def shock_ids(self):
+        """Code ``j`` is ``shock_ids[j]`` (the base space's)."""
+        return self.base.shock_ids
+
+    @property
+    def listed_names(self):
+        """None: the names are generated (a base space from a list names its shock setups)."""
+        return None
+
+    def __len__(self):
+        """Number of candidates: the base space's times the variants."""
+        return len(self.base) * self.n_variants
+
+    def chunk(self, start, stop):
+        """Decode candidates ``start <= i < stop``: ``(index, codes)`` as
+        :meth:`SetupSpace.chunk` (the codes of each candidate's shocks)."""
+        n = self.n_variants
+        start, stop = max(int(start), 0), min(int(stop), len(self))
+        bidx, codes = self.base.chunk(start // n, -(-stop // n))
+        idx = (bidx[:, None] * n + np.arange(n)).ravel()
+        codes = np.repeat(codes, n, axis=0)
+        keep = (idx >= start) & (idx < stop)
+        return idx[keep], codes[keep]
+
+    def first(self, *, chunk_size=20_000):
+        """The first candidate the inventory keeps (None if none)."""
+        first = self.base.first(chunk_size=chunk_size)
+        return None if first is None else first * self.n_variants
+
+    def ids(self, index):
+        """Shock ids of candidates (list of tuples ``LF RF LR RR``)."""
+        return self.base.ids(np.asarray(index, dtype=np.int64) // self.n_variants)
+
+    def find(self, ids):
+        """The candidate index of shock ids with the car's own elements (variant 0)."""
+        idx = self.base.find(ids)
+        return None if idx is None else idx * self.n_variants
+
+    def names(self, index):
+        """Names of candidates: the shock setup's, then the variant's choices."""
+        return [s.name for s in self.setups(index)]
+
+    def setups(self, index):
+        """The :class:`~planner.setups.Setup` objects of candidates, with their elements."""
+        index = np.asarray(index, dtype=np.int64)
+        out = []
+        for s, v in zip(self.base.setups(index // self.n_variants), index % self.n_variants):
+            t = self.variants[int(v)]
+            out.append(s if v == 0 else Setup(s.name + t.name[1:], dict(s.shocks),
+                                              bump_stops=t.bump_stops, packers_m=t.packers_m,
+                                              third=t.third, heave_springs=t.heave_springs))
+        return tuple(out)
+
+
+def _variant_templates(base, elements, model, library):
+    """The element variants (:class:`VariantSpace`'s) of `elements`' choices on `model`: the
+    choices enumerated on one setup as rank does, repeats dropped."""
+    lib = elements.library(model)
+    t = Setup("T", dict(base.shocks))
+    got = vary_elements([t], bump_stops=elements.vary_bump_stops,
+                        packers_m=elements.vary_packers_m, library=lib,
+                        where="sweep: the bump-stop and packer choices "
+                        "(--try-bump-stops, --try-packers)")
+    if elements.vary_third:
+        got = vary_third(got, elements.vary_third, car=elements.car_third(model),
+                         where="sweep: the third-element choices (--try-heave, --try-roll, "
+                         "--try-heave-spring)")
+    plain = elements.without_choices()
+    elem = model_setup_elements(got, model, plain, where="sweep")
+    third = model_setup_third(got, model, library, plain, where="sweep")
+    return tuple(distinct_setups(got, elem, third)[0])
+
+
+@dataclass(frozen=True, eq=False)
+class _ThirdCase:
+    """A case of a car with third elements: what :func:`planner.screen.screen_setups` needs to
+    screen setups with the car's elements, as rank does (shipped to the workers)."""
+
+    plant: object
+    drive: Drive
+    elements: ElementOptions  # the model's fixed (for_model), no choices
+    band_hz: tuple
+    screen: ScreenOptions
+    reduce_rtol: object
+    metric_names: tuple = ()
+
+
+def _screen_third_setups(case, setups, library):
+    """Screening metrics (n, n_metrics) in ``case.metric_names`` order and iteration counts
+    of setups on a case with third elements (rank's screening: the setups' bump stops, static
+    loads and third elements linearized with the shocks)."""
+    elem = model_setup_elements(setups, case.plant, case.elements, where="sweep")
+    third = model_setup_third(setups, case.plant, library, case.elements, where="sweep")
+    with KERNEL_LOCK:
+        pred = screen_setups(case.plant, case.drive, setups, library, band_hz=case.band_hz,
+                             screen=case.screen, reduce_rtol=case.reduce_rtol,
+                             third=third_choices(third), **loop_arguments(elem))
+    names = list(case.metric_names) or [c for c in pred.table.columns if c not in CORNERS]
+    return (pred.table[names].to_numpy(dtype=float), names,
+            np.asarray(pred.diagnostics["iterations"]))
+
+
+def _screen_third_chunk(cases, shocks, space, scoring, library, start, stop, n_top, max_iter):
+    """:func:`_screen_chunk` for cases with third elements (a task)."""
+    index, codes = space.chunk(start, stop)
+    metrics, case_scores = [], []
+    feasible = shocks.buildable(codes)
+    not_converged = 0
+    setups = space.setups(index) if index.size else ()
+    for k, case in enumerate(cases):
+        if index.size:
+            M, _, iters = _screen_third_setups(case, setups, library)
+        else:
+            M, iters = np.zeros((0, len(case.metric_names))), np.zeros(0, dtype=np.int64)
+        not_converged += int(np.sum(iters >= max_iter))
+        s, ok = scoring.case_scores(k, M)
+        metrics.append(M)
+        case_scores.append(s)
+        feasible &= ok
+    score = scoring.combined(case_scores) if index.size else np.zeros(0)
+    best = ranking_order(feasible, score, index)[:n_top]
+    top_metrics = np.stack([M[best] for M in metrics], axis=1) if index.size \
+        else np.zeros((0, len(cases), len(cases[0].metric_names)))
+    return {"start": start, "index": index, "score": score, "feasible": feasible,
+            "top_index": index[best], "top_metrics": top_metrics,
+            "not_converged": not_converged}
+
+
 def _screen_packed_chunk(ops, packed, max_iter, tol):
     """Screen a packed chunk of setups (a task of :func:`screen_setups_on`)."""
     with KERNEL_LOCK:
@@ -317,6 +477,12 @@ def screen_setups_on(model, drive, setups, library, *, band_hz=(1.0, 20.0),
 def _warm(ops, shocks, codes, plant, drive, setups, library, loop, elements):
     """Import the engine and load both compiled kernels (from numba's cache) on a worker."""
     _screen_codes(ops, shocks, codes, 30, 1e-5)
+    _simulate_chunk(plant, drive, setups, library, loop, elements)
+
+
+def _warm_third(case, setups, library, plant, drive, loop, elements):
+    """:func:`_warm` for cases with third elements."""
+    _screen_third_setups(case, setups, library)
     _simulate_chunk(plant, drive, setups, library, loop, elements)
 
 
@@ -393,8 +559,9 @@ class SweepResult:
     screening_score : ndarray, shape (n_screened,)
         Every screened setup's sweep screening score.
     screening_feasible : ndarray of bool, shape (n_screened,)
-    space : SetupSpace
-        Names and shock ids of any candidate index.
+    space : SetupSpace or VariantSpace
+        Names and shock ids of any candidate index (a :class:`VariantSpace` for a car with
+        third elements: every setup with each element choice).
     baseline : str
     objective : planner.objective.Objective
     agreement : dict
@@ -640,7 +807,13 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         choices ``vary_bump_stops``, ``vary_packers_m`` (per group,
         :func:`planner.elements.vary_elements`): every simulated setup (the screening's
         best and the baseline) is simulated with each combination too, and ranked with
-        them; a variant's screening score is its shocks'.
+        them; a variant's screening score is its shocks'. A car with third elements
+        (``model.third`` or ``third``) is screened as :func:`planner.rank.rank_setups`
+        screens it: every shock setup with each combination of the choices (also
+        ``vary_third``: ``--try-heave``, ...) is a candidate (:class:`VariantSpace`),
+        screened with the car's elements linearized
+        (:func:`planner.screen.screen_setups`, ``third=``); its heave and roll dampers are
+        not enumerated at the corners (:func:`planner.elements.corner_shock_ids`).
     run : planner.options.RunOptions
         Where it runs: ``scheduler`` ``"local"`` (default): a new
         :class:`dask.distributed.LocalCluster` (``n_workers``, default one per core,
@@ -700,32 +873,42 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     if setups is not None and constraints:
         raise PlannerError("sweep: give either setups or constraints, not both")
     named = [st.name for st in setups or () if st.bump_stops is not None
-             or st.packers_m is not None]
+             or st.packers_m is not None or st.third is not None
+             or st.heave_springs is not None]
     if named:
-        raise PlannerError(f"sweep: setup {named[0]!r} names bump stops or packers; the sweep "
-                           "enumerates shocks (its setups are shock codes): give the choices "
-                           "as vary_bump_stops / vary_packers_m (shockplan sweep "
-                           "--try-bump-stops, --try-packers), or rank these setups with "
-                           "shockplan rank --setups")
+        raise PlannerError(f"sweep: setup {named[0]!r} names bump stops, packers or third "
+                           "elements; the sweep enumerates shocks (its setups are shock "
+                           "codes): give the choices as vary_bump_stops / vary_packers_m / "
+                           "vary_third (shockplan sweep --try-bump-stops, --try-packers, "
+                           "--try-heave, ...), or rank these setups with shockplan rank "
+                           "--setups")
     constraints = dict(constraints or {})
-    thirds = [c for c in (elements.car_third(m) for _, m in _as_list(models, "models"))
-              if c is not None and c.elements]
-    if thirds:
-        # a car's heave and roll dampers stay off its corners; its screening is without
-        # them (the packed screening of shock codes has no third elements), the top share
-        # simulated with them
-        log.warning("sweep: the model carries third elements (%s); the sweep's screening "
-                    "leaves them out and only its simulated top share has them: for a car "
-                    "with third elements, shockplan rank screens them too",
-                    ", ".join(thirds[0].elements.elements))
-        if setups is None and constraints.get("shocks") is None:
-            constraints["shocks"] = corner_shock_ids(library, thirds[0], elements.vary_third)
-    space = setup_space(library, setups=setups, **constraints, where="sweep")
     model_list = _as_list(models, "models")
+    thirds = [elements.car_third(m) for _, m in model_list]
+    has_third = [c is not None and bool(c.elements) for c in thirds]
+    if any(has_third) and not all(has_third):
+        raise PlannerError("sweep: some models carry third elements and some do not; sweep "
+                           "the cars with third elements and the others separately")
+    if setups is None and constraints.get("shocks") is None:
+        # a car's heave and roll dampers (and those the crate marks) stay off its corners;
+        # with third elements its screening is rank's: every shock setup with each element
+        # choice, the elements linearized with the shocks
+        corner = corner_shock_ids(library, thirds[0] if all(has_third) else None,
+                                  elements.vary_third)
+        if corner is not None:
+            constraints["shocks"] = corner
+    space = setup_space(library, setups=setups, **constraints, where="sweep")
     drive_list = _as_list(drives, "drives", Drive)
     model_names, drive_names = _names(model_list, "model"), _names(drive_list, "drive")
     labels = _case_labels(model_names, drive_names)
     base, base_idx = _baseline_setup(space, library, objective, baseline)
+    third_cases = None
+    if all(has_third):  # every setup with each variant; rank's screening, per case
+        space = VariantSpace(space, _variant_templates(base, elements, model_list[0][1],
+                                                       library))
+        base_idx = None if base_idx is None else base_idx * space.n_variants
+        screen_opts = ScreenOptions(n_bands=n_bands, max_iter=max_iter, tol=tol)
+        third_cases = []
     # the scheduler first: a wrong address fails before any work
     runner = start_runner(run.scheduler, run.client, run.n_workers, run.processes)
     try:
@@ -735,14 +918,29 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         for _, model in model_list:
             for _, drive in drive_list:
                 cases.append(_prepare_case(labels[k], model, drive, band_hz, n_bands, reduce_rtol))
+                if third_cases is not None:
+                    third_cases.append(_ThirdCase(
+                        cases[-1][0], cases[-1][1], elements.without_choices().for_model(model),
+                        tuple(band_hz), screen_opts, reduce_rtol))
                 k += 1
         shocks = _ShockTable.of(library, space.shock_ids)
         code_of = {sid: j for j, sid in enumerate(space.shock_ids)}
         base_codes = np.array([[code_of[sid] for sid in base.ids()]], dtype=np.intp)
-        base_metrics = [_screen_codes(ops, shocks, base_codes, max_iter, tol)[0][0]
-                        for _, _, ops in cases]
-        scoring = _scoring(screen_objective, [ops for _, _, ops in cases], base_metrics,
-                           combine)
+        if third_cases is None:
+            base_metrics = [_screen_codes(ops, shocks, base_codes, max_iter, tol)[0][0]
+                            for _, _, ops in cases]
+            metric_names = list(cases[0][2].metric_names)
+            scoring = _scoring(screen_objective, [ops for _, _, ops in cases], base_metrics,
+                               combine)
+        else:
+            base_metrics = []
+            for j, case in enumerate(third_cases):
+                M, names, _ = _screen_third_setups(case, [base], library)
+                base_metrics.append(M[0])
+                third_cases[j] = replace(case, metric_names=tuple(names))
+            metric_names = list(third_cases[0].metric_names)
+            scoring = _scoring(screen_objective, [c for c in third_cases], base_metrics,
+                               combine)
         n_cand = len(space)
         n_top_max = int(top) if top is not None else max(1, math.ceil(top_share * n_cand))
         # every worker imports the engine and loads its kernels before the clock starts
@@ -751,28 +949,41 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
         ekws = [elements.without_choices().for_model(model)
                 for _, model in model_list for _ in drive_list]
         loop_w = replace(loop, band_hz=tuple(band_hz))
-        runner.everywhere(_warm, ops0, shocks, base_codes, plant0, drive0, [base], library,
-                          loop_w, ekws[0])
+        if third_cases is None:
+            runner.everywhere(_warm, ops0, shocks, base_codes, plant0, drive0, [base], library,
+                              loop_w, ekws[0])
+        else:
+            runner.everywhere(_warm_third, third_cases[0], [base], library, plant0, drive0,
+                              loop_w, ekws[0])
         t_prep = time.perf_counter() - t0
         # 2. screening, chunk by chunk
         t1 = time.perf_counter()
-        ops_ref = runner.scatter([ops for _, _, ops in cases])
+        if third_cases is None:
+            ops_ref = runner.scatter([ops for _, _, ops in cases])
+        else:
+            ops_ref, lib_ref = runner.scatter(third_cases), runner.scatter(library)
         shocks_ref, space_ref, scoring_ref = (runner.scatter(x) for x in (shocks, space, scoring))
         # at least TASKS_PER_THREAD tasks a worker thread, so that none idles at the end
         chunk = int(min(chunk_size, max(MIN_CHUNK_SIZE, math.ceil(
             n_cand / (TASKS_PER_THREAD * runner.n_threads)))))
         starts = list(range(0, n_cand, chunk))
-        args = [(ops_ref, shocks_ref, space_ref, scoring_ref, a, min(a + chunk, n_cand),
-                 n_top_max, max_iter, tol) for a in starts]
+        if third_cases is None:
+            task = _screen_chunk
+            args = [(ops_ref, shocks_ref, space_ref, scoring_ref, a, min(a + chunk, n_cand),
+                     n_top_max, max_iter, tol) for a in starts]
+        else:
+            task = _screen_third_chunk
+            args = [(ops_ref, shocks_ref, space_ref, scoring_ref, lib_ref, a,
+                     min(a + chunk, n_cand), n_top_max, max_iter) for a in starts]
         log.info("sweep: screening %d candidate setups x %d case(s) in %d chunks (%s)",
                  n_cand, len(cases), len(starts), runner.kind)
         parts = [None] * len(starts)
         top_idx = np.zeros(0, dtype=np.int64)
-        top_met = np.zeros((0, len(cases), len(cases[0][2].metric_names)))
+        top_met = np.zeros((0, len(cases), len(metric_names)))
         top_score = np.zeros(0)
         top_feas = np.zeros(0, dtype=bool)
         not_converged = 0
-        for j, res in runner.map_unordered(_screen_chunk, args, progress, "sweep: screen"):
+        for j, res in runner.map_unordered(task, args, progress, "sweep: screen"):
             parts[j] = (res["index"], res["score"], res["feasible"])
             not_converged += res["not_converged"]
             pos = np.searchsorted(res["index"], res["top_index"])
@@ -809,7 +1020,10 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
                                    "setup with other shocks; rename the baseline")
             sim.append(base)
         sim0 = sim
-        sim, parent = _element_variants(sim0, elements, model_list[0][1], library)
+        if third_cases is None:
+            sim, parent = _element_variants(sim0, elements, model_list[0][1], library)
+        else:  # the variants were screened as candidates
+            parent = np.arange(len(sim0))
         plant_refs = [runner.scatter(p) for p, _, _ in cases]
         drive_refs = [runner.scatter(d) for _, d, _ in cases]
         lib_ref = runner.scatter(library)
@@ -827,7 +1041,6 @@ def sweep_setups(models, drives, library, *, setups=None, constraints=None, obje
     names = [s.name for s in sim]
     names0 = [s.name for s in sim0]
     case_tables, screen_tables = {}, {}
-    metric_names = list(cases[0][2].metric_names)
     case_hists = {}
     for k, label in enumerate(labels):
         part = tparts[k * len(groups):(k + 1) * len(groups)]

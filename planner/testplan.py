@@ -7,7 +7,8 @@ place:
   runs play the drive files below, so ``shockplan rig simulate --plan`` runs it
   as is; a real rig's session of the same runs is what ``shockplan identify``
   expects next;
-- ``shocks.toml``: the crate (the plan's shock library);
+- ``shocks.toml``: the crate (the plan's shock library); ``bumpstops.toml``: the heave
+  springs' library (``bump_stop_library``) when the car's baseline fits heave springs;
 - ``drives/<run drive>.csv``: every drive the runs play (a last column ``units``);
 - ``test_plan.xlsx``: the run sheet (:func:`write_run_sheet`), to print and
   fill in on rig day, and to read back (:func:`read_run_sheet`);
@@ -72,6 +73,7 @@ from ident.data.drive import write_drive
 from ident.data.files import atomic_dir, atomic_path, check_can_write, png_metadata, write_csv
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from ident.models.adjustable import format_shock_name, parse_shock_name
+from ident.models.bumpstops import write_bump_stops
 from ident.models.library import write_shock_library
 from ident.models.shocks import format_number
 from ident.sim.metrics import METRIC_QUANTITY
@@ -135,6 +137,8 @@ _CLICK_HEAD = {"swap_min": "change [min]"}
 _METRICS_GROUP = "key metrics"
 _TEMPS_GROUP = "shock temperature"
 _DRIVE_DIR = "drives"
+#: The heave springs' bump-stop library written beside a plan whose baseline fits them.
+BUMP_STOP_FILE = "bumpstops.toml"
 
 
 def plan_toml(plan, *, units="SI", drive_dir=_DRIVE_DIR, shock_library="shocks.toml"):
@@ -166,6 +170,8 @@ def plan_toml(plan, *, units="SI", drive_dir=_DRIVE_DIR, shock_library="shocks.t
     doc = {"format": "rig-plan/1", "name": f"{plan.settings.get('car')} design "
                                             f"({plan.criterion}, {plan.budget_min:g} min)",
            "units": units, "shock_library": shock_library, "fs_hz": float(fs)}
+    if getattr(plan, "bump_stops", None) is not None:  # the heave springs' library
+        doc["bump_stop_library"] = BUMP_STOP_FILE
     if getattr(plan, "third", None) is not None:
         doc["third_elements"] = dict(plan.third.elements.motion_ratios)
     doc["run"] = runs
@@ -1300,6 +1306,9 @@ def write_plan(plan, out_dir, *, units="SI", overwrite=False):
         for name, drive in plan.drives.items():
             write_drive(drive, work / _DRIVE_DIR / f"{name}.csv", units=units)
         write_shock_library(plan.library, work / names["shocks"], units=units)
+        if getattr(plan, "bump_stops", None) is not None:
+            names["bump_stops"] = BUMP_STOP_FILE
+            write_bump_stops(plan.bump_stops, work / BUMP_STOP_FILE, units=units)
         (work / names["plan"]).write_text(plan_toml(plan, units=units), encoding="utf-8")
         rows = run_sheet_rows(plan, units=units)
         write_csv(work / names["csv"], rows, units=units, float_format="%.6g")

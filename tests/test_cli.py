@@ -781,3 +781,69 @@ def test_plan_without_drives_writes_in_the_crates_units(tmp_path):
                  "--baseline", "B20", "--out", str(tmp_path / "plan")])
     assert code == 0
     assert 'units = "imperial"' in (tmp_path / "plan" / "plan.toml").read_text()
+
+
+PROTO = Path(__file__).resolve().parents[1] / "ident" / "examples"
+
+
+@pytest.mark.parametrize("extra, match", [
+    ([], r"proto_car.toml: third_elements declares heave_front, heave_rear, roll_front but "
+         r"the baseline's dampers of heave_front, heave_rear, roll_front are not given; name "
+         r"each with --third"),
+    (["--third", "heave_front=H0,heave_rear=H0"], "dampers of roll_front are not given"),
+    (["--third", "heave_front=H0,heave_rear=H0,roll_front=R0", "--third", "roll_rear=R1"],
+     "--third roll_rear: .*proto_car.toml does not declare roll_rear in third_elements"),
+    (["--third", "heave_front=H0,heave_rear=HX,roll_front=R0"],
+     "third heave_rear = 'HX' is not in the shock library --shocks .*proto_shocks.toml"),
+    (["--third", "heave_front=H0,heave_rear=H0,roll_front=R0", "--heave-springs",
+      "front=HS-F"], "--heave-springs: .* give the bump-stop library TOML with --bump-stops"),
+    (["--third", "heave_front=H0,heave_rear=H0,roll_front=R0", "--heave-springs",
+      "front=HS-X", "--bump-stops", str(PROTO / "proto_bumpstops.toml")], "HS-X"),
+    (["--third", "heave_front"], "--third 'heave_front': write KEY=VALUE pairs"),
+])
+def test_plan_vehicle_with_third_elements_refusals(tmp_path, capsys, extra, match):
+    """plan --vehicle on a vehicle TOML declaring third_elements: the baseline's dampers are
+    given with --third (each declared element), the heave springs with --heave-springs and
+    --bump-stops; anything else is refused in one line naming the file, field and fix."""
+    code = main(["plan", "--vehicle", str(PROTO / "proto_car.toml"), "--shocks",
+                 str(PROTO / "proto_shocks.toml"), "--budget-min", "30", "--baseline", "C2",
+                 "--out", str(tmp_path / "plan"), *extra])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and len(err) == 1 and re.search(match, err[0]), err
+    assert not (tmp_path / "plan").exists()
+
+
+def test_plan_third_options_need_a_vehicle_with_third_elements(tmp_path, capsys):
+    code = main(["plan", "--vehicle", "paper", "--shocks", str(PROTO / "proto_shocks.toml"),
+                 "--budget-min", "30", "--baseline", "C2", "--third", "heave_front=H0",
+                 "--out", str(tmp_path / "plan")])
+    assert code != 0
+    assert "the paper car: no third_elements; --third" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_plan_vehicle_with_third_elements(tmp_path):
+    """plan --vehicle with the baseline's third elements: the rig plan declares them, every
+    run fits them (a --try-heave swap its own), the heave springs' library is written beside
+    it, and the virtual rig reads the plan back."""
+    import tomllib
+
+    from ident.sim.virtual_rig import read_rig_plan
+
+    out = tmp_path / "plan"
+    code = main(["plan", "--vehicle", str(PROTO / "proto_car.toml"), "--shocks",
+                 str(PROTO / "proto_shocks.toml"), "--budget-min", "30", "--baseline", "C2",
+                 "--third", "heave_front=H0,heave_rear=H0", "--third", "roll_front=R0",
+                 "--heave-springs", "front=HS-F,rear=HS-R", "--heave-packers", "front=1mm",
+                 "--bump-stops", str(PROTO / "proto_bumpstops.toml"),
+                 "--out", str(out)])
+    assert code == 0
+    doc = tomllib.loads((out / "plan.toml").read_text())
+    assert doc["third_elements"] == {"heave_front": 1.0, "heave_rear": 1.1, "roll_front": 0.8}
+    assert doc["bump_stop_library"] == "bumpstops.toml" and (out / "bumpstops.toml").exists()
+    for run in doc["run"]:
+        assert run["third"] == {"heave_front": "H0", "heave_rear": "H0", "roll_front": "R0"}
+        assert run["heave_springs"] == {"front": "HS-F", "rear": "HS-R"}
+        assert run["heave_packers"] == {"front": pytest.approx(0.001)}
+    back = read_rig_plan(out / "plan.toml")
+    assert all(dict(r.heave_springs) == {"front": "HS-F", "rear": "HS-R"} for r in back.runs)

@@ -139,3 +139,29 @@ def test_third_metric_objectives_are_checked(plant, drive):
     with pytest.raises(PlannerError, match="only as limits"):
         optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS,
                         objective=weighted, **FAST)
+
+
+@pytest.mark.slow
+def test_write_optimum_tables_the_third_elements(optimum, tmp_path):
+    """optimal_setup.csv and the workbook's setups sheet carry the setups' third-element
+    columns (the car's baseline's, which the verification fitted); the CSV reads back."""
+    from openpyxl import load_workbook
+
+    from planner.report.optimize import write_optimum
+    from planner.setups.csv_io import read_setups
+
+    opt, _ = optimum
+    files = write_optimum(opt, LIB, tmp_path / "opt")
+    header = files["setups"].read_text().splitlines()[0].split(",")
+    assert header[:5] == ["setup", *CORNERS]
+    assert header[5:] == ["heave_front", "roll_front", "heave_spring_front", "units"]
+    back = read_setups(files["setups"])
+    assert back[0].name == opt.setup.name
+    assert all(dict(s.third) == {"heave_front": "H1", "roll_front": "R1"}
+               and dict(s.heave_springs) == {"front": "HS"} for s in back)
+    sheet = load_workbook(files["xlsx"])["setups"]
+    heads = [c.value for c in sheet[1]]
+    at = heads.index("RR")
+    assert heads[at + 1:at + 4] == ["heave front", "roll front", "heave spring front"]
+    assert {sheet.cell(row=2, column=at + 2).value, sheet.cell(row=2, column=at + 3).value} \
+        == {"H1", "R1"}

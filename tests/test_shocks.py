@@ -233,6 +233,26 @@ def test_count_inventory_round_trip_and_default(tmp_path):
     assert isinstance(LinearShock("B", 1.0, count=np.int64(3)).count, int)
 
 
+def test_fits_round_trip_default_and_refusal(tmp_path):
+    """A damper's use (``fits``, optional): kept through write and read, copies keep it,
+    absent is any use (None), an unknown use refused naming the file, shock and key."""
+    assert LinearShock("B20", 3502.5).fits is None
+    models = [LinearShock("H1", 8000.0, fits="heave"), _d8(),
+              TableShock("R1", [-0.1, 0.0, 0.1], [-10.0, 0.0, 10.0], fits="roll")]
+    assert models[0].to_toml_dict()["fits"] == "heave"
+    assert "fits" not in models[1].to_toml_dict()
+    assert models[0].scaled(2.0).fits == "heave"
+    back = read_shock_library(write_shock_library(models, tmp_path / "s.toml"))
+    assert [back[i].fits for i in ("H1", "D8", "R1")] == ["heave", None, "roll"]
+    with pytest.raises(ShockModelError, match="fits"):
+        LinearShock("H", 1.0, fits="axle")
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[[shock]]\nid = "H2"\nkind = "linear"\ndamping = 1.0\nfits = "heav"\n')
+    with pytest.raises(ShockModelError, match=r"bad.toml: \[\[shock\]\] #1 \('H2'\): key "
+                       r"'fits' is 'heav', not a use; write one of \['corner', 'heave', 'roll'\]"):
+        read_shock_library(bad)
+
+
 def _values(model):
     return [(key, getattr(model, attr)) for key, (attr, _, _) in model.TOML_FIELDS.items()]
 

@@ -90,6 +90,29 @@ def test_summary_figure_takes_the_histogram_table():
     assert HISTOGRAM_COLUMNS == ("setup", "corner", "velocity_lo", "velocity_hi", "share")
 
 
+@pytest.mark.parametrize("best", ["L28/L28/L28/L28",
+                                  "C2/C2/R1/R1 heave_front=H0 heave_rear=HD",
+                                  "C2/C2/R1/R1_heave_front=H0_heave_rear=HD_HS-F2_spring"])
+@pytest.mark.parametrize("kind", ["histograms", "metrics"])
+def test_summary_figure_title_stays_inside_the_figure(ranked, best, kind):
+    """A long setup name (third-element columns in it) wraps the title instead of running
+    past the figure's edges (the summary page cut it at the left); a short one keeps it on
+    one line."""
+    edges = np.linspace(-0.25, 0.25, 11)
+    hist = pd.DataFrame([{"setup": s, "corner": c, "velocity_lo": a, "velocity_hi": b,
+                          "share": 0.1} for s in (best, "B20/B20/B20/B20") for c in CORNERS
+                         for a, b in zip(edges[:-1], edges[1:])])
+    metrics = ranked.iloc[:2, 3:].set_axis([best, "B20/B20/B20/B20"])
+    fig = summary_figure(None if kind == "histograms" else metrics, best=best,
+                         baseline="B20/B20/B20/B20",
+                         histograms=hist if kind == "histograms" else None)
+    fig.canvas.draw()
+    title = fig._suptitle
+    box = title.get_window_extent()
+    assert box.x0 >= 0 and box.x1 <= fig.bbox.width
+    assert ("\n" in title.get_text()) == (len(best) > 20)
+
+
 @pytest.mark.parametrize("units", ["SI", "imperial"])
 def test_summary_sheet_is_first_and_set_to_one_page(ranked, units):
     wb = Workbook()

@@ -477,3 +477,35 @@ def test_cli_rank_scheduler(tmp_path, track_drive, capsys):
     err = capsys.readouterr().err
     assert err.startswith("shockplan: error: rank: scheduler 'nonsense'") and "Traceback" not in err
     assert not (tmp_path / "bad").exists()
+
+
+def test_sweep_with_third_elements_ranks_as_rank(prototype_case, prototype_identified,
+                                                  track_drive):
+    """A car with third elements (the prototype, identified): the sweep screens every
+    setup with each --try-heave choice and the car's heave and roll elements linearized, as
+    rank does: the same candidates, the same screening scores (to round-off) and ranks, in
+    chunks that split a setup's variants; the same simulated best and scores."""
+    from planner.options import ElementOptions, LoopOptions
+
+    library = prototype_case[1].shocks
+    el = ElementOptions(vary_third={"heave_front": ["H1", "H2"]})
+    loop = LoopOptions(oversample=1)
+    res = sweep_setups(prototype_identified, track_drive, library, elements=el, loop=loop,
+                       top=4, baseline="B20", progress=False,
+                       run=RunOptions(scheduler="none", chunk_size=5))
+    ranking = rank_setups(prototype_identified, track_drive, library, elements=el, loop=loop,
+                          top=4, n_check=0, baseline="B20", uncertainty=False)
+    names = res.space.names(res.screening_index)
+    scr = ranking.screening
+    assert sorted(names) == sorted(scr.index)  # heave dampers off the corners, H1 once
+    assert any(n.endswith("heave_front=H2") for n in names)
+    assert_allclose(res.screening_score, scr.loc[names, "score"].to_numpy(),
+                    rtol=RTOL_SCORE_ROUNDOFF)
+    order = [names[k] for k in np.argsort(res.screening_score, kind="stable")]
+    assert order == scr.sort_values("score", kind="stable").index.tolist()
+    assert res.best == ranking.best
+    common = ranking.table.index.intersection(res.table.index)
+    assert len(common) >= 4
+    assert_allclose(res.table.loc[common, "score"], ranking.table.loc[common, "score"],
+                    rtol=RTOL_BLAS_THREADS)
+    assert set(res.table["heave_front"]) <= {"H1", "H2"}

@@ -5,6 +5,7 @@ the CLI's choices, and the refusals (third columns on a car without them, an unk
 an undeclared element)."""
 
 import argparse
+import copy
 import sys
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from ident.sim.third_loop import ThirdDamper, ThirdSpring, simulate_third
 from planner.cli.common import element_choices
 from planner.elements import THIRD_COLUMNS, setup_third, vary_third
 from planner.errors import PlannerError
-from planner.options import ElementOptions, LoopOptions
+from planner.options import ElementOptions, LoopOptions, RunOptions
 from planner.predict import predict_setups
 from planner.rank import rank_setups
 from planner.report.ranking import write_predictions_csv
@@ -175,14 +176,47 @@ def test_rank_keeps_heave_dampers_off_the_corners(plant, drive):
     assert set(r.table["heave_front"]) == {"H1", "H2"}
 
 
-def test_sweep_says_its_screening_leaves_third_elements_out(plant, drive, caplog):
-    """The sweep's packed screening has no third elements: it says so, keeps the car's heave
-    and roll dampers off the corners, and simulates its top share with them."""
-    el = ElementOptions(use_model=CarElements(SPRINGS, {}, {}), third=CAR)
+def test_dampers_marked_heave_or_roll_stay_off_the_corners(plant, drive):
+    """A damper the library marks ``fits = "heave"``/``"roll"`` is not enumerated at the
+    corners even when the car neither fits it nor tries it (R2 here), on a car without
+    third elements too; an unmarked library keeps every id on a plain car (None)."""
+    from planner.elements import corner_shock_ids
+
+    marked = ShockLibrary([LinearShock("S", 3000.0), LinearShock("S2", 4000.0, fits="corner"),
+                           LinearShock("H1", 8000.0, fits="heave"),
+                           LinearShock("H2", 15000.0, fits="heave"),
+                           LinearShock("R1", 3000.0), LinearShock("R2", 2000.0, fits="roll")])
+    assert corner_shock_ids(marked, CAR) == ["S", "S2"]  # R1: the car's; R2, H2: marked
+    assert corner_shock_ids(marked, None) == ["S", "S2", "R1"]
+    assert corner_shock_ids(LIB, None) is None
+    r = rank_setups(plant, drive, marked, loop=LoopOptions(oversample=1), elements=ELEMENTS,
+                    top=1, n_check=0, baseline="S", uncertainty=False)
+    assert set(r.screening[list(CORNERS)].to_numpy().ravel()) == {"S", "S2"}
+
+
+def test_sweep_screens_with_third_elements(plant, drive, caplog):
+    """The sweep screens a car with third elements with them (no warning), keeps the car's
+    heave and roll dampers off the corners, screens each --try-heave choice as a candidate,
+    and refuses setups naming third elements (its setups are shock codes) and a mix of cars
+    with and without them."""
+    el = ElementOptions(use_model=CarElements(SPRINGS, {}, {}), third=CAR,
+                        vary_third={"heave_front": ["H1", "H2"]})
     with caplog.at_level("WARNING", logger="planner.sweep"):
-        r = sweep_setups(plant, drive, LIB, elements=el, top=1, baseline="S",
-                         loop=LoopOptions(oversample=1))
-    assert any("leaves them out" in m.getMessage() for m in caplog.records)
+        r = sweep_setups(plant, drive, LIB, elements=el, top=2, baseline="S",
+                         loop=LoopOptions(oversample=1), run=RunOptions(scheduler="none"),
+                         progress=False)
+    assert not [m for m in caplog.records if "third" in m.getMessage()]
     table = r.table
     assert set(table[list(CORNERS)].to_numpy().ravel()) == {"S"}
-    assert table.loc["S/S/S/S", "heave_front"] == "H1"  # simulated with the baseline's
+    assert table.loc["S/S/S/S", "heave_front"] == "H1"  # the baseline's
+    assert table.loc["S/S/S/S heave_front=H2", "heave_front"] == "H2"
+    assert r.space.names(r.screening_index) == ["S/S/S/S", "S/S/S/S heave_front=H2"]
+    with pytest.raises(PlannerError, match="third elements; the sweep enumerates shocks"):
+        sweep_setups(plant, drive, LIB, setups=[_setup("x", third={"heave_front": "H2"})],
+                     elements=el, top=1, run=RunOptions(scheduler="none"), progress=False)
+    with_third = copy.copy(plant)
+    object.__setattr__(with_third, "third", CAR)  # a model that carries them
+    with pytest.raises(PlannerError, match="some models carry third elements"):
+        sweep_setups({"a": plant, "b": with_third}, drive, LIB, top=1, progress=False,
+                     elements=ElementOptions(use_model=CarElements(SPRINGS, {}, {})),
+                     run=RunOptions(scheduler="none"))

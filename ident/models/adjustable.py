@@ -78,7 +78,7 @@ from scipy.optimize import lsq_linear
 from ident.data.files import did_you_mean, read_csv_table
 from ident.data.units import format_quantity, from_si, to_si
 from ident.errors import ShockModelError
-from ident.models.shocks import TableShock, format_number, is_real_number
+from ident.models.shocks import SHOCK_FITS, TableShock, format_number, is_real_number
 
 __all__ = [
     "MONOTONE_RTOL",
@@ -646,7 +646,7 @@ class AdjustableShock:
         Each adjuster's resolution (1 click, 0.25 turn). Given, a setting must lie on
         ``lo + n step``; absent, any value in range is allowed and
         :meth:`settings_grid` steps by 1.
-    lag_s, description, count, dyno_files, sheet_units
+    lag_s, description, count, fits, dyno_files, sheet_units
         As for every shock (``dyno_files``: the sheet paths as written in the
         library, relative to it; ``sheet_units``: their unit system).
     force_resolution_n : float, keyword-only, optional
@@ -671,6 +671,7 @@ class AdjustableShock:
     lag_s: float = field(default=0.0, kw_only=True)
     description: str = field(default="", kw_only=True)
     count: int | None = field(default=None, kw_only=True)
+    fits: str | None = field(default=None, kw_only=True)
     dyno_files: tuple = field(default=(), kw_only=True)
     sheet_units: str = field(default="SI", kw_only=True)
     force_resolution_n: float | None = field(default=None, kw_only=True)
@@ -742,6 +743,9 @@ class AdjustableShock:
                                        or isinstance(self.count, bool) or self.count < 0):
             raise _err(f"{who}: count {self.count!r} must be an integer >= 0 (the units the "
                        "team has), or left out for unlimited")
+        if self.fits is not None and self.fits not in SHOCK_FITS:
+            raise _err(f"{who}: fits {self.fits!r} is not a use; give one of "
+                       f"{list(SHOCK_FITS)}, or leave it out for any use")
         object.__setattr__(self, "dyno_files", tuple(str(p) for p in self.dyno_files))
         res = self.force_resolution_n
         if res is not None and (not is_real_number(res) or not 0 < float(res) < math.inf):
@@ -1000,7 +1004,7 @@ class AdjustableShock:
         if hit is None:
             v, f = self.curve(s)
             hit = TableShock(format_shock_name(self.id, s, self.names), v, f,
-                             lag_s=self.lag_s, count=self.count,
+                             lag_s=self.lag_s, count=self.count, fits=self.fits,
                              description=self.description)
             self._cache[key] = hit
         return hit
@@ -1011,7 +1015,7 @@ class AdjustableShock:
         if hit is None:
             v, f = self.curve(None)
             hit = TableShock(self.id, v, f, lag_s=self.lag_s, count=self.count,
-                             description=self.description)
+                             fits=self.fits, description=self.description)
             self._cache["__default__"] = hit
         return hit
 
@@ -1062,6 +1066,8 @@ class AdjustableShock:
             out["lag"] = float(self.lag_s)
         if self.count is not None:
             out["count"] = int(self.count)
+        if self.fits is not None:
+            out["fits"] = self.fits
         if self.force_resolution_n is not None:
             out["force_resolution"] = float(from_si(self.force_resolution_n, "force", units))
         return out

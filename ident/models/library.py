@@ -32,7 +32,8 @@ from ident.data.units import UNIT_LABELS, from_si, to_si
 from ident.errors import ShockModelError
 from ident.models.adjustable import (AdjustableShock, format_shock_name, parse_shock_name,
                                      read_dyno_sheets)
-from ident.models.shocks import SHOCK_KINDS, ShockModel, check_shock_units, is_real_number
+from ident.models.shocks import (SHOCK_FITS, SHOCK_KINDS, ShockModel, check_shock_units,
+                                  is_real_number)
 
 __all__ = [
     "ShockLibrary",
@@ -300,7 +301,7 @@ def _model_from_toml(table, units, where, index):
         raise _fail(label, "kind", f"is {kind!r}, an unknown kind",
                     f"use one of {[*SHOCK_KINDS, AdjustableShock.kind]}")
     cls = SHOCK_KINDS[kind]
-    allowed = {"id", "kind", "lag", "description", "count", *cls.TOML_FIELDS}
+    allowed = {"id", "kind", "lag", "description", "count", "fits", *cls.TOML_FIELDS}
     extra = [k for k in table if k not in allowed]
     if extra:
         raise _fail(label, extra[0], f"is not a key of a {kind!r} shock",
@@ -326,8 +327,10 @@ def _model_from_toml(table, units, where, index):
                         "write a whole number without quotes or decimal point, or omit it "
                         "for unlimited")
         kwargs["count"] = table["count"]
+    if "fits" in table:
+        kwargs["fits"] = _fits(label, table["fits"])
     keys = {attr: key for key, (attr, _, _) in cls.TOML_FIELDS.items()}
-    keys.update(lag_s="lag", id="id", description="description", count="count")
+    keys.update(lag_s="lag", id="id", description="description", count="count", fits="fits")
     try:
         return cls(raw_id, **kwargs)
     except ShockModelError as exc:
@@ -340,7 +343,16 @@ def _model_from_toml(table, units, where, index):
 
 
 ADJUSTABLE_KEYS = ("id", "kind", "adjusters", "default", "stiffer", "step", "dyno", "lag",
-                   "description", "count", "force_resolution")
+                   "description", "count", "fits", "force_resolution")
+
+
+def _fits(label, value):
+    """A ``fits`` value checked (:data:`ident.models.shocks.SHOCK_FITS`)."""
+    if value not in SHOCK_FITS:
+        raise _fail(label, "fits", f"is {value!r}, not a use",
+                    f"write one of {[f for f in SHOCK_FITS]} in quotes (a third element's "
+                    "damper: \"heave\" or \"roll\"), or leave it out for any use")
+    return value
 
 
 def _adjustable_from_toml(table, units, where, label, raw_id):
@@ -390,6 +402,8 @@ def _adjustable_from_toml(table, units, where, label, raw_id):
             raise _fail(label, "count", f"must be an integer, got {table['count']!r}",
                         "write a whole number, or omit it for unlimited")
         kwargs["count"] = table["count"]
+    if "fits" in table:
+        kwargs["fits"] = _fits(label, table["fits"])
     if "force_resolution" in table:
         kwargs["force_resolution_n"] = to_si(
             _toml_number(label, "force_resolution", table["force_resolution"]), "force", units)
@@ -413,8 +427,9 @@ def read_shock_library(path):
         ``damping``; "table": ``velocity``, ``force``; "digressive":
         ``bump_low``, ``bump_knee``, ``bump_high``, ``rebound_low``,
         ``rebound_knee``, ``rebound_high``), optional ``lag`` [s],
-        ``description`` and ``count`` (inventory, integer >= 0; omitted =
-        unlimited).
+        ``description``, ``count`` (inventory, integer >= 0; omitted =
+        unlimited) and ``fits`` (``"corner"``, ``"heave"`` or ``"roll"``: what the damper
+        is for; omitted = any use).
 
     Returns
     -------

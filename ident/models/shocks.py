@@ -25,6 +25,9 @@ Kinds (``kind`` in ``shocks.toml``, :data:`SHOCK_KINDS`):
 Every ``[[shock]]`` table may also give ``count``, an integer >= 0: how many
 of that shock the team has (its inventory, used by the planner to skip setups
 that need more units than exist). Omitted means unlimited (``count=None``).
+It may give ``fits``, what the damper is for (:data:`SHOCK_FITS`): ``"corner"``,
+``"heave"`` or ``"roll"`` (a third element's damper, in the element's own travel and
+force: enumerations do not put it at the corners). Omitted means any use (``fits=None``).
 
 :func:`is_real_number`, :func:`format_number` and :func:`check_shock_units` are the
 input checks and message formatting shared with the library and the dyno fits.
@@ -55,6 +58,7 @@ from ident.errors import ShockModelError
 
 __all__ = [
     "PASSIVITY_RTOL",
+    "SHOCK_FITS",
     "SHOCK_KINDS",
     "PiecewiseLinear",
     "ShockModel",
@@ -69,6 +73,9 @@ __all__ = [
 #: Relative tolerance (to the largest |force| of a table) within which a curve
 #: counts as passing through (0, 0). Covers round-off of unit conversions.
 PASSIVITY_RTOL = 1e-9
+#: A damper's uses (the library's optional ``fits``): at a corner, or as an axle's heave or
+#: roll element's damper (in the element's own travel and force).
+SHOCK_FITS = ("corner", "heave", "roll")
 
 
 # ----------------------------------------------------------------------------
@@ -403,6 +410,9 @@ class ShockModel:
     count : int or None, keyword-only
         How many of this shock the team has (inventory), an integer >= 0;
         ``None`` (the default) is unlimited. TOML key ``count``.
+    fits : {"corner", "heave", "roll"} or None, keyword-only
+        What the damper is for (:data:`SHOCK_FITS`); None (the default): any use. TOML
+        key ``fits``.
 
     Notes
     -----
@@ -420,6 +430,7 @@ class ShockModel:
     lag_s: float = field(default=0.0, kw_only=True)
     description: str = field(default="", kw_only=True)
     count: int | None = field(default=None, kw_only=True)
+    fits: str | None = field(default=None, kw_only=True)
 
     def __post_init__(self):
         if not isinstance(self.id, str) or not self.id.strip() or self.id != self.id.strip():
@@ -441,6 +452,9 @@ class ShockModel:
                 raise _model_error(self._who, "count", f"= {self.count} is not >= 0",
                                    "give the number of units the team has (0 or more)")
             object.__setattr__(self, "count", int(self.count))
+        if self.fits is not None and self.fits not in SHOCK_FITS:
+            raise _model_error(self._who, "fits", f"= {self.fits!r} is not a use",
+                               f"give one of {list(SHOCK_FITS)}, or leave it out for any use")
         self._validate()
         pwl = self._build_pwl()
         problem = _passivity_problem(pwl)
@@ -580,7 +594,7 @@ class ShockModel:
         -------
         dict
             Keys ``id``, ``kind``, ``description`` (if not empty), the kind's
-            keys, ``lag`` (if not 0), ``count`` (if not None).
+            keys, ``lag`` (if not 0), ``count`` and ``fits`` (if not None).
 
         Raises
         ------
@@ -599,6 +613,8 @@ class ShockModel:
             out["lag"] = float(self.lag_s)
         if self.count is not None:
             out["count"] = int(self.count)
+        if self.fits is not None:
+            out["fits"] = self.fits
         return out
 
 

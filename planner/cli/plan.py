@@ -9,7 +9,7 @@ from planner.cli.common import (UNITS_OF_DRIVES, add_units, check_out, element_c
                                 load_vehicle, output_units)
 from planner.text import format_table
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "run", "vehicle_third"]
 
 
 def add_parser(subparsers):
@@ -53,6 +53,22 @@ def add_parser(subparsers):
     pl.add_argument("--try-roll", action="append", metavar="AXLE=ID,ID",
                     help="as --try-heave, for the roll dampers (default: no roll damper "
                     "swaps)")
+    pl.add_argument("--third", action="append", metavar="ELEMENT=ID",
+                    help="with --vehicle: the baseline's third-element dampers, as a session "
+                    "run's third (ELEMENT heave_front, heave_rear, roll_front or roll_rear, "
+                    "each the vehicle TOML's third_elements declares; ID a crate id or "
+                    "'none'); repeatable or comma-separated (default: none; needed when the "
+                    "vehicle declares third_elements)")
+    pl.add_argument("--heave-springs", action="append", metavar="AXLE=ID",
+                    help="with --vehicle: the baseline's heave springs, as a run's "
+                    "heave_springs (AXLE front or rear; ID in --bump-stops or 'none'); "
+                    "repeatable or comma-separated (default: none)")
+    pl.add_argument("--heave-packers", action="append", metavar="AXLE=LENGTH",
+                    help="with --vehicle: packers at the heave springs, as a run's "
+                    "heave_packers (e.g. front=2mm; a bare number in --units); repeatable "
+                    "(default: none)")
+    pl.add_argument("--bump-stops", help="with --heave-springs: the bump-stop library TOML "
+                    "holding the heave springs (default: none)")
     pl.add_argument("--out", required=True, help="output folder")
     pl.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     pl.set_defaults(func=run)
@@ -92,15 +108,18 @@ def run(args):
     output_units(args, drives, fallback=session.units if session is not None
                  else library_units(args.shocks))
     rig = read_rig(args.rig_costs) if args.rig_costs else None
+    car3, bump_stops = vehicle_third(args, model, library)
     third_dampers = element_choices(args).get("vary_third")
-    if third_dampers and getattr(model, "third", None) is None:
-        raise ValueError("--try-heave/--try-roll need a model with third elements: plan between "
+    if third_dampers and getattr(model, "third", None) is None and car3 is None:
+        raise ValueError("--try-heave/--try-roll need a car with third elements: plan between "
                          "runs with --model (identified from a session that declares "
-                         "third_elements) and --session")
+                         "third_elements) and --session, or with --vehicle (a vehicle TOML "
+                         "declaring third_elements) and --third")
     plan = design_experiment(model, library, budget_min=args.budget_min,
                              criterion=args.criterion, session=session, objective=objective,
                              baseline=args.baseline, drives=drives, rig=rig,
-                             candidates=CandidateOptions(third_dampers=third_dampers),
+                             candidates=CandidateOptions(third=car3, bump_stops=bump_stops,
+                                                         third_dampers=third_dampers),
                              schedule=ScheduleOptions(baseline_every=args.baseline_every,
                                                       n_validation=args.validate))
     files = write_plan(plan, out, units=args.units, overwrite=args.overwrite)
@@ -118,3 +137,88 @@ def run(args):
                             subsequent_indent="     ", break_on_hyphens=False))
     print("wrote " + ", ".join(str(p) for p in files.values()))
     return 0
+
+
+def _pairs(items, flag, example):
+    """``KEY=VALUE`` pairs of a repeatable, comma-separated option, as a dict."""
+    out = {}
+    for item in items or ():
+        for part in item.split(","):
+            key, sep, value = part.partition("=")
+            if not sep or not key.strip() or not value.strip():
+                raise ValueError(f"{flag} {item!r}: write KEY=VALUE pairs, e.g. {flag} {example}")
+            out[key.strip()] = value.strip()
+    return out
+
+
+def vehicle_third(args, model, library):
+    """The baseline's third elements of ``plan --vehicle`` (``--third``, ``--heave-springs``,
+    ``--heave-packers``, ``--bump-stops``) on the vehicle TOML's ``third_elements``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+    model : object
+        The model read: a ``VehicleParams`` (``--vehicle``) or an identified model.
+    library : ShockLibrary
+        The crate (``--shocks``): the dampers' ids.
+
+    Returns
+    -------
+    car : ident.data.third.CarThird or None
+        None for ``--model`` or a vehicle without third elements.
+    bump_stops : ident.models.bumpstops.BumpStopLibrary or None
+
+    Raises
+    ------
+    ValueError
+        The options with ``--model``, on a vehicle without ``third_elements``, a vehicle with
+        them but no ``--third``, an element left out or not declared, a damper not in the
+        crate, a heave spring without ``--bump-stops`` or not in it (the file, the field and
+        the fix named).
+    """
+    from ident.data.third import CarThird, ThirdElements, check_run_third
+    from ident.models.bumpstops import read_bump_stops
+    from planner.elements import parse_length
+
+    given = any(getattr(args, k, None) for k in ("third", "heave_springs", "heave_packers",
+                                                 "bump_stops"))
+    if getattr(args, "vehicle", None) is None:
+        if given:
+            raise ValueError("--third/--heave-springs/--heave-packers/--bump-stops are the "
+                             "baseline's third elements of a --vehicle; with --model they come "
+                             "from the session's baseline run: drop them")
+        return None, None
+    where = "the paper car" if args.vehicle == "paper" else args.vehicle
+    declared = dict(getattr(model, "third_elements", None) or {})
+    third = _pairs(args.third, "--third", "heave_front=H1,roll_front=R1")
+    springs = _pairs(args.heave_springs, "--heave-springs", "front=HS-F")
+    packers = {a: parse_length(v, units=args.units or "SI", where=f"--heave-packers {a}")
+               for a, v in _pairs(args.heave_packers, "--heave-packers", "front=2mm").items()}
+    if not declared:
+        if given:
+            raise ValueError(f"{where}: no third_elements; --third, --heave-springs and "
+                             "--heave-packers need the car's elements: add third_elements = "
+                             "{ heave_front = 1.0, ... } (motion ratios) to the vehicle TOML, or "
+                             "drop the options")
+        return None, None
+    missing = [e for e in declared if e not in third]
+    if missing:
+        example = ",".join(f"{e}=ID" for e in declared)
+        raise ValueError(f"{where}: third_elements declares {', '.join(declared)} but the "
+                         f"baseline's dampers of {', '.join(missing)} are not given; name each "
+                         f"with --third {example} (a crate id of --shocks, or 'none')")
+    undeclared = [e for e in third if e not in declared]
+    if undeclared:
+        raise ValueError(f"--third {undeclared[0]}: {where} does not declare {undeclared[0]} "
+                         f"in third_elements (it declares {', '.join(declared)}); drop it or "
+                         "add the element with its motion ratio to the vehicle TOML")
+    if springs and not args.bump_stops:
+        raise ValueError("--heave-springs: the heave springs' library is not known; give the "
+                         "bump-stop library TOML with --bump-stops FILE")
+    bump_stops = read_bump_stops(args.bump_stops) if args.bump_stops else None
+    run = check_run_third(third, springs, packers, elements=ThirdElements(declared),
+                          shocks=library, bump_stops=bump_stops,
+                          where=f"plan --vehicle {where}: --third/--heave-springs",
+                          library=f"--shocks {args.shocks}")
+    return CarThird(ThirdElements(declared), run), bump_stops

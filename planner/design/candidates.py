@@ -68,6 +68,9 @@ class CandidateOptions:
     third_dampers : mapping of str to sequence of str, optional
         Element (``heave_front``, ...) -> crate ids the candidates swap in there
         (``"none"``: the element's damper taken off).
+    bump_stops : ident.models.bumpstops.BumpStopLibrary, optional
+        The library of `third`'s heave springs for a model without one (a known vehicle;
+        the runs' predictions put them in the loop); default the identified model's.
 
     Raises
     ------
@@ -82,6 +85,7 @@ class CandidateOptions:
     click_levels: int = DEFAULT_CLICK_LEVELS
     third: object = None
     third_dampers: object = None
+    bump_stops: object = None
 
 
 @dataclass(frozen=True)
@@ -329,7 +333,7 @@ def candidate_runs(library, baseline, *, rig=None, kinds=("noise", "multisine"),
     if shocks is None:
         cb = np.mean(c_bar) if c_bar is not None else np.mean(
             [library[s].equivalent_damping(v_rms_m_s) for s in base_ids])
-        corner_ids = corner_shock_ids(library.ids, third, third_dampers)
+        corner_ids = corner_shock_ids(library, third, third_dampers)
         others = [s for s in library.ids if s not in base_ids and s not in adjustable
                   and (corner_ids is None or s in corner_ids)]
         ceq = {s: float(library[s].equivalent_damping(v_rms_m_s)) for s in others}

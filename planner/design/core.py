@@ -103,6 +103,9 @@ class ExperimentPlan:
     third : ident.data.third.CarThird or None
         The car's third elements (issue 38): the runs' ``Setup.third`` keys change the
         baseline's dampers; the rig plan writes each run's ``third``.
+    bump_stops : ident.models.bumpstops.BumpStopLibrary or None
+        The library of the third elements' heave springs (when the baseline fits any): the
+        rig plan's ``bump_stop_library``, written with it.
     """
 
     runs: tuple
@@ -121,6 +124,7 @@ class ExperimentPlan:
     settings: dict = field(default_factory=dict)
     rationale: tuple = ()
     third: object = None
+    bump_stops: object = None
 
     def table(self):
         """The runs as a DataFrame (one row per run, in rig order); with adjustable shocks
@@ -150,6 +154,16 @@ def _plant_and_vehicle(model, baseline, library):
         return model.loop_plant(cbar), model.params, None
     raise TypeError(f"model must be an identified VehicleModel (with the session), a "
                     f"VehicleParams or a FullCarModel, got {type(model).__name__}")
+
+
+def _heave_spring_library(car, candidates, model):
+    """The library of the car's baseline heave springs (`candidates`' or the model's), or
+    None when it fits none."""
+    if car is None or not any(car.baseline.heave_springs.values()):
+        return None
+    if candidates.bump_stops is not None:
+        return candidates.bump_stops
+    return getattr(getattr(model, "elements", None), "bump_stops", None)
 
 
 def _third_dampers(setups, car, library):
@@ -273,8 +287,9 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
     # validation runs: the current best setups on the team's drive, at the plan's end
     val_setups = []
     if n_validation:
-        pool = list(enumerate_setups(library, **({} if car3 is None else {
-            "shocks": corner_shock_ids(library.ids, car3, candidates.third_dampers)})))
+        corner = corner_shock_ids(library, car3, candidates.third_dampers)
+        pool = list(enumerate_setups(library, **({} if corner is None else {
+            "shocks": corner})))
         sc = screen_setups(plant, drives[0], [base] + [s for s in pool if s != base], library)
         ranked = score_setups(sc.table, objective, baseline=base.name).table.sort_values("rank")
         names = [n for n in ranked.index if n != base.name][:n_validation]
@@ -428,7 +443,8 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
             "less often (--baseline-every) or give more time")
     seq, id_M, (runs, drives_out, infos) = found
     preds = run_predictions(model, ident_model, runs, drives_out, library, objective,
-                            None if car3 is None else ElementOptions(third=car3))
+                            None if car3 is None else ElementOptions(
+                                third=car3, bump_stops=candidates.bump_stops))
     runs = criterion_shares(runs, infos, M0_s, criterion, W_s)
     curve = criterion_curve(runs, infos, M0_s, criterion, W_s)
     values = {"prior": criterion_value(M0_s, criterion, W_s) if session is not None else None,
@@ -459,7 +475,7 @@ def design_experiment(model, library, *, budget_min, criterion="d", session=None
                           predictions=preds, curve=curve, solver=solver, rig=rig,
                           settings=settings,
                           rationale=plan_rationale(runs, base, session=session is not None),
-                          third=car3)
+                          third=car3, bump_stops=_heave_spring_library(car3, candidates, model))
 
 
 def _check_identifiable(total_s, base, cands, library, plant, f_c):

@@ -19,11 +19,13 @@ from openpyxl import Workbook
 from openpyxl.utils import get_column_letter
 
 from ident.data.channels import CORNERS
+from ident.data.third import AXLES, THIRD_ELEMENTS
 from ident.data.files import atomic_dir, png_metadata, write_csv
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from ident.models.library import ShockLibrary, write_shock_library
 from ident.models.shocks import format_number
 from ident.sim.metrics import METRIC_NAMES, METRIC_QUANTITY
+from planner.elements import THIRD_COLUMNS
 from planner.errors import PlannerError
 from planner.report.ranking import ranking_to_units
 from planner.report.sheets import (
@@ -167,11 +169,34 @@ def curves_figure(optimum, library, *, units="SI"):
     return fig
 
 
+def _third_columns(optimum):
+    """The setups' third-element columns (``heave_front``, ... ``heave_spring_<axle>``; damper
+    and heave-spring ids, ``none`` where none): those the metrics carry, else the car's
+    baseline's (``settings["third"]``), which every verification fitted; indexed as
+    ``optimum.table``, no columns for a car without third elements."""
+    index = optimum.table.index
+    met = optimum.metrics[next(iter(optimum.metrics))]
+    cols = [c for c in THIRD_COLUMNS if c in met.columns]
+    if cols:
+        return met.loc[index, cols]
+    car = optimum.settings.get("third") or {}
+    declared = car.get("motion_ratios") or {}
+    data = {e: (car.get("dampers") or {}).get(e) or "none"
+            for e in THIRD_ELEMENTS if e in declared}
+    data.update({f"heave_spring_{a}": (car.get("heave_springs") or {}).get(a) or "none"
+                 for a in AXLES if f"heave_{a}" in declared})
+    return pd.DataFrame({c: [v] * len(index) for c, v in data.items()}, index=index)
+
+
 def _setups_sheet(optimum, units):
     first = next(iter(optimum.metrics))
     met = optimum.metrics[first].loc[optimum.table.index]
     metric_cols = [c for c in met.columns if c in METRIC_NAMES]
     t = optimum.table.copy()
+    third = _third_columns(optimum)
+    at = max((t.columns.get_loc(c) + 1 for c in CORNERS if c in t.columns), default=0)
+    for j, c in enumerate(third.columns):  # setup columns, after the corners' shocks
+        t.insert(at + j, c, third[c].to_numpy())
     t = pd.concat([t, ranking_to_units(met[metric_cols], units)], axis=1)
     return t.reset_index()
 
@@ -396,6 +421,10 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False, run
     ``clicks.csv`` (:func:`click_table`), the click setups after the optimum in
     ``optimal_setup.csv`` and a ``clicks`` sheet. Each CSV's last column is ``units`` (`units` on
     every row).
+    On a car with third elements, ``optimal_setup.csv`` and the ``setups`` sheet add the
+    setups' third-element columns as predictions carry them (``heave_front``, ...,
+    ``heave_spring_<axle>``: the ids the verification fitted, the car's baseline's); a
+    car without them writes the same files as before.
 
     Parameters
     ----------
@@ -435,7 +464,8 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False, run
         clicks = [s for s in setups if optimum.table.loc[s.name, "kind"] == "clicks"]
         closest = [s for s in setups if s.name != optimum.setup.name
                    and optimum.table.loc[s.name, "kind"] == "closest"]
-        write_setups([optimum.setup] + clicks + closest, work / names["setups"], units=units)
+        optimal = _with_third(optimum.setup, _third_columns(optimum))
+        write_setups([optimal] + clicks + closest, work / names["setups"], units=units)
         _write_workbook(optimum, units, work / names["xlsx"], run=run)
         fig = curves_figure(optimum, library, units=units)
         fig.savefig(work / names["curves"], dpi=110, metadata=png_metadata(fig))
@@ -451,5 +481,27 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False, run
 
 
 def _table_setups(optimum):
-    return [Setup(n, dict(zip(CORNERS, (optimum.table.loc[n, c] for c in CORNERS))))
-            for n in optimum.table.index]
+    third = _third_columns(optimum)
+    return [Setup(n, dict(zip(CORNERS, (optimum.table.loc[n, c] for c in CORNERS))),
+                  **_third_keys(third, n)) for n in optimum.table.index]
+
+
+def _third_keys(third, name):
+    """A setup's ``third`` and ``heave_springs`` keywords from its third-element columns
+    (none without them)."""
+    if not len(third.columns):
+        return {}
+    row = third.loc[name]
+    dampers = {c: row[c] for c in third.columns if not c.startswith("heave_spring_")}
+    springs = {c.rpartition("_")[2]: row[c] for c in third.columns
+               if c.startswith("heave_spring_")}
+    return {"third": dampers or None, "heave_springs": springs or None}
+
+
+def _with_third(setup, third):
+    """`setup` with the third-element columns of its row (itself without them)."""
+    keys = _third_keys(third, setup.name) if setup.name in third.index else {}
+    if not keys:
+        return setup
+    return Setup(setup.name, dict(setup.shocks), bump_stops=setup.bump_stops,
+                 packers_m=setup.packers_m, **keys)

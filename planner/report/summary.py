@@ -27,6 +27,7 @@ from __future__ import annotations
 import io
 import logging
 import math
+import textwrap
 
 import numpy as np
 import pandas as pd
@@ -149,6 +150,18 @@ def _histogram_axes(ax, hist, setups):
     ax.tick_params(labelsize=_FIG_PT)
 
 
+#: Width of a character of the summary figure's title, in units of its font size (a
+#: generous mean for DejaVu Sans, so that a wrapped line never runs past the figure's edge).
+_TITLE_CHAR_EM = 0.62
+
+
+def _fit_title(text):
+    """The summary figure's title wrapped to the figure's width (long setup names,
+    ``C2/C2/R1/R1 heave_front=H0 heave_rear=HD``, would run past both edges)."""
+    width = int(SUMMARY_FIGURE_IN[0] * 72.0 / ((_FIG_PT + 0.5) * _TITLE_CHAR_EM))
+    return textwrap.fill(text, width, break_long_words=True, break_on_hyphens=False)
+
+
 def summary_figure(metrics=None, *, best, baseline, histograms=None, labels=None,
                    velocity_unit="m/s", title=None):
     """The summary's small plot: the best setup against the baseline.
@@ -203,8 +216,8 @@ def summary_figure(metrics=None, *, best, baseline, histograms=None, labels=None
             ax.set_xlabel(f"velocity [{velocity_unit}], bump +", fontsize=_FIG_PT, labelpad=1)
         fig.legend(*axes[-1].get_legend_handles_labels(), fontsize=_FIG_PT, frameon=False,
                    loc="outside lower center", ncols=2)
-        fig.suptitle(title or f"shock-velocity histogram: best '{best}' against baseline "
-                     f"'{baseline}'", fontsize=_FIG_PT + 0.5)
+        fig.suptitle(_fit_title(title or f"shock-velocity histogram: best '{best}' against "
+                                f"baseline '{baseline}'"), fontsize=_FIG_PT + 0.5)
         return fig
     if metrics is None or len(metrics.columns) == 0:
         raise ValueError("summary_figure: give the key metrics or a histogram table")
@@ -229,8 +242,8 @@ def summary_figure(metrics=None, *, best, baseline, histograms=None, labels=None
                     fontsize=_FIG_PT)
     ax.set_xlabel("change from the baseline [%]", fontsize=_FIG_PT)
     ax.grid(True, axis="x", lw=0.3, alpha=0.5)
-    fig.suptitle(title or f"key metrics: best '{best}' against baseline '{baseline}'",
-                 fontsize=_FIG_PT + 0.5)
+    fig.suptitle(_fit_title(title or f"key metrics: best '{best}' against baseline "
+                            f"'{baseline}'"), fontsize=_FIG_PT + 0.5)
     return fig
 
 
