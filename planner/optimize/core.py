@@ -41,6 +41,8 @@ from planner.objective import Objective, default_objective, score_setups
 from planner.optimize.cache import jit_available
 from planner.optimize.click_search import ClickResult, curve_distance, search_clicks
 from planner.optimize.constraints import (
+    ENVELOPE_FACTOR,
+    MAX_FORCE_VELOCITY_M_S,
     CurveConstraints,
     check_constraints,
     constraint_envelope,
@@ -73,6 +75,7 @@ from planner.uncertainty import prediction_uncertainty
 
 __all__ = [
     "KNOT_UPDATE_RTOL",
+    "THIRD_ENVELOPE",
     "MULTI_START_ITER",
     "PACKER_SCALE_M",
     "CurveOptimum",
@@ -166,6 +169,10 @@ class CurveOptimum:
         in the time domain, :func:`planner.optimize.click_search.search_clicks`), the gain over
         the crate's best fixed setup and the gap to the optimum; their setups are rows of
         `table` of kind ``"clicks"``. None without adjustables (or ``click_radius=None``).
+    third_curves : dict of str -> PiecewiseLinear
+        The optimal curve of every free third damper (``CurveOptions.free_third``, in the
+        element's own velocity and force; its shock ``OPT-<element>`` in `shocks`, named by
+        the optimum's ``third``); empty without.
     """
 
     x: np.ndarray
@@ -188,6 +195,7 @@ class CurveOptimum:
     packers_m: dict = field(default_factory=dict)
     bump_stops: tuple | None = None
     clicks: ClickResult | None = None
+    third_curves: dict = field(default_factory=dict)
 
     @property
     def score(self):
@@ -261,6 +269,13 @@ class _Elements:
     index: list | None = None
     static: list | None = None
     third: _Third | None = None
+    # free third dampers (issue 38): their curve space (groups without corners, the corner
+    # curves' knots), start and linear constraints; their variables come after the corner
+    # curves', before the packers
+    third_space: CurveSpace | None = None
+    third_start: np.ndarray | None = None
+    third_A: np.ndarray | None = None
+    third_b: np.ndarray | None = None
 
     @property
     def active(self):
@@ -272,6 +287,16 @@ class _Elements:
         return None if self.third is None else self.third.entry
 
     @property
+    def free_third(self):
+        """tuple of str: the third dampers whose curves are free."""
+        return () if self.third_space is None else tuple(n for n, _ in self.third_space.groups)
+
+    @property
+    def n_third(self):
+        """int: the free third dampers' decision variables."""
+        return 0 if self.third_space is None else self.third_space.n_vars
+
+    @property
     def n_packers(self):
         return len(self.groups)
 
@@ -281,15 +306,22 @@ class _Elements:
         return np.array([min(max(0.0, lo), hi) for lo, hi in self.bounds])
 
     def stops_at(self, p):
-        """The stops with packers `p` [m] (shape (n_packers,)) in the loop's form."""
+        """The stops with the tail `p` (free third dampers' variables, then packers [m]) in
+        the loop's form."""
         if self.stops is None or not self.n_packers:
             return self.stops
+        p = np.asarray(p, dtype=float)[self.n_third:]
         return [None if st is None else
                 (st[0] - (float(p[self.index[c]]) if self.index[c] is not None else 0.0),
                  st[1], st[2]) for c, st in enumerate(self.stops)]
 
     def rows(self, A, b):
-        """The linear constraints `A`, `b` of the curves with the packers' bounds."""
+        """The linear constraints `A`, `b` of the curves with the free third dampers' and
+        the packers' bounds."""
+        if self.n_third:
+            A = np.block([[A, np.zeros((A.shape[0], self.n_third))],
+                          [np.zeros((self.third_A.shape[0], A.shape[1])), self.third_A]])
+            b = np.concatenate([b, self.third_b])
         k = self.n_packers
         if not k:
             return A, b
@@ -301,20 +333,124 @@ class _Elements:
         return A2, np.concatenate([b, hi, -lo])
 
     def extend(self, x):
-        """A curve vector with the packers' start appended."""
+        """A curve vector with the free third dampers' start (the baseline's curves) and the
+        packers' start appended."""
+        if self.n_third:
+            x = np.concatenate([x, self.third_start])
         return np.concatenate([x, self.start]) if self.n_packers else x
 
     def clip(self, p):
-        return np.array([min(max(float(v), lo), hi) for v, (lo, hi) in zip(p, self.bounds)])
+        """The tail `p` made valid: the free third curves' (:meth:`CurveSpace.valid`), the
+        packers within their bounds."""
+        p = np.asarray(p, dtype=float)
+        head = self.third_space.valid(p[:self.n_third]) if self.n_third else p[:0]
+        return np.concatenate([head, [min(max(float(v), lo), hi) for v, (lo, hi)
+                                      in zip(p[self.n_third:], self.bounds)]])
+
+    def third_shocks(self, p):
+        """The free third dampers' shocks of tail `p` (ids ``OPT-<element>``), or None."""
+        if not self.n_third:
+            return None
+        return self.third_space.shocks(np.asarray(p, dtype=float)[:self.n_third])
+
+    def third_at(self, p):
+        """The loop's ``(dampers, springs)`` with the free third dampers' curves of tail
+        `p`; the car's baseline entry without free dampers."""
+        if not self.n_third:
+            return self.loop_third
+        shocks = self.third_shocks(p)
+        models = {e: shocks[f"OPT-{e}"] for e in self.free_third}
+        dampers, springs = self.third.entry
+        return (tuple(replace(d, model=models[d.name]) if d.name in models else d
+                      for d in dampers), springs)
+
+    def setup_with_third(self, setup, p):
+        """`setup` naming the free third dampers' shocks (its ``third`` column)."""
+        if not self.n_third:
+            return setup
+        return Setup(setup.name, setup.shocks, third={e: f"OPT-{e}" for e in self.free_third})
+
+    def loop_args(self):
+        """:class:`LoopModel`'s element arguments."""
+        return {"bump_stops": self.stops, "packer_index": self.index,
+                "third": self.loop_third, "free_third": self.free_third}
 
     def verify(self, p, names):
-        """``time_domain_scores``' element arguments: setups `names` with packers `p`, the
-        others with the car's stops."""
+        """``time_domain_scores``' element arguments: setups `names` with the tail `p` (free
+        third dampers' curves, packers), the others with the car's stops and baseline."""
         if not self.active:
             return {}
         own = None if self.stops is None else {n: self.stops_at(p) for n in names}
-        return {"bump_stops": self.stops, "setup_stops": own,
-                "static_corner_load_n": self.static, "third": self.loop_third}
+        out = {"bump_stops": self.stops, "setup_stops": own,
+               "static_corner_load_n": self.static, "third": self.loop_third}
+        if self.n_third:
+            entry = self.third_at(p)
+            out["setup_third"] = {n: entry for n in names}
+        return out
+
+
+#: The free third dampers' curves (issue 38): passive and increasing, their forces at the
+#: knots in the velocity range within these factors of the baseline damper's (the crate
+#: envelope's factors, :data:`planner.optimize.constraints.ENVELOPE_FACTOR`, around the
+#: one damper the car fits there), and at most the upper factor times its largest force at
+#: 1 m/s everywhere (the corner constraints' slopes and caps are a corner shock's, not a
+#: heave damper's).
+THIRD_ENVELOPE = ENVELOPE_FACTOR
+
+
+def _values(shocks):
+    return [] if shocks is None else list(shocks.values())
+
+
+def _check_free_third(free_third, third):
+    """The free third dampers, checked against the car's (:class:`_Third`)."""
+    free = tuple(free_third or ())
+    if not free:
+        return ()
+    if third is None:
+        raise PlannerError(f"optimize: free_third {list(free)} but the car has no third "
+                           "elements; leave free_third out, or give the car's third elements "
+                           "(model.third, ElementOptions.third)")
+    fitted = [e for e in third.names if third.car.baseline.dampers.get(e) is not None]
+    bad = [e for e in free if e not in fitted]
+    if bad or len(set(free)) < len(free):
+        raise PlannerError(f"optimize: free_third {list(free)}: {bad or 'an element twice'} "
+                           f"is not a third damper the car's baseline fits (it fits "
+                           f"{fitted}); free each of those at most once")
+    return tuple(e for e in third.names if e in free)
+
+
+def _with_free_third(elements, space, free):
+    """`elements` with the free third dampers' curve space (the corner curves' knots and
+    velocity range), start (the baseline dampers' curves) and constraints
+    (:data:`THIRD_ENVELOPE`)."""
+    dampers = {d.name: d.model for d in elements.third.entry[0]}
+    tspace = CurveSpace(groups=tuple((e, ()) for e in free), v_knots_m_s=space.v_knots_m_s,
+                        linear=space.linear,
+                        lag_s=tuple(float(getattr(dampers[e], "lag_s", 0.0) or 0.0)
+                                    for e in free),
+                        symmetry=space.symmetry, v_range_m_s=space.v_range_m_s)
+    start = tspace.from_curves([dampers[e].to_pwl() for e in free])
+    blocks, bs = [], []
+    for e in free:
+        one = CurveSpace(groups=((e, ()),), v_knots_m_s=space.v_knots_m_s, linear=space.linear,
+                         lag_s=(0.0,), symmetry=space.symmetry, v_range_m_s=space.v_range_m_s)
+        own = ShockLibrary([dampers[e]])
+        f1 = np.abs(np.asarray(dampers[e].to_pwl().force(
+            np.array([-MAX_FORCE_VELOCITY_M_S, MAX_FORCE_VELOCITY_M_S])), dtype=float))
+        cons = CurveConstraints(envelope_factor=THIRD_ENVELOPE,
+                                max_force_n=float(THIRD_ENVELOPE[1] * max(f1.max(), 1.0)))
+        A, b = _linear_rows(one, cons, own)
+        blocks.append(A)
+        bs.append(b)
+    nv = tspace.n_group_vars
+    A3 = np.zeros((sum(a.shape[0] for a in blocks), nv * len(free)))
+    r = 0
+    for k, a in enumerate(blocks):
+        A3[r:r + a.shape[0], k * nv:(k + 1) * nv] = a
+        r += a.shape[0]
+    return replace(elements, third_space=tspace, third_start=start, third_A=A3,
+                   third_b=np.concatenate(bs))
 
 
 def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective, third=None):
@@ -583,12 +719,7 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         if own is not None:
             stops, static = own.tables[0], own.static_corner_load_n
     elements = _elements(plant, space, stops, packers, static, objective, third)
-    if third is not None:
-        warnings.warn(f"optimize: the car's third elements ({', '.join(third.names)}) are not in "
-                      "IPOPT's loop nor in the scan's screening: the corner curves are searched "
-                      "on the car without them; every candidate, the baseline and the crate are "
-                      "verified in the time domain with the baseline's third elements, and the "
-                      "best verified is returned", OptimizeWarning, stacklevel=2)
+    free_third = _check_free_third(curves.free_third, third)
     # the baseline's (verified) values per drive of the metrics the objective needs
     if elements.active:
         m_base = [element_predictions(model, d, [base], library, [elements.stops],
@@ -606,6 +737,8 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     space, A_lin, b_lin, scan, x0, knot_log = _start(
         model, plant, drives, library, space, constraints, base, objective, weights, aggregate,
         oversample, _quantile_knots(knots_m_s), elements)
+    if free_third:
+        elements = _with_free_third(elements, space, free_third)
 
     # scaling of the decision variables: forces by c_bar |v|, slopes by c_bar
     cbar = float(np.mean(plant.cbar_n_s_m))
@@ -623,10 +756,16 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         tight = _robust_factors(model, drives, library, space, x0, base, need)
     C, kinds = score_rows(objective, need, m_base, tight)
     t_build = time.perf_counter()
-    models_cl = [LoopModel(plant, d, space, rows, oversample, jit, bump_stops=elements.stops,
-                           packer_index=elements.index) for d in drives]
+    models_cl = [LoopModel(plant, d, space, rows, oversample, jit, **elements.loop_args())
+                 for d in drives]
     T = space.expansion()
     A_opt, b_opt = elements.rows(A_lin, b_lin)
+    if elements.n_third:  # the free third dampers' variables after the corner curves'
+        T3 = elements.third_space.expansion()
+        T = np.block([[T, np.zeros((T.shape[0], T3.shape[1]))],
+                      [np.zeros((T3.shape[0], T.shape[1])), T3]])
+        scale = np.concatenate([scale, np.tile(scale[:space.n_group_vars],
+                                               len(elements.free_third))])
     if elements.n_packers:  # the packers after the curves' variables
         k = elements.n_packers
         T = np.block([[T, np.zeros((T.shape[0], k))], [np.zeros((k, T.shape[1])), np.eye(k)]])
@@ -961,11 +1100,12 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     verified = []
     for k, x in enumerate(cands):
         shocks = space.shocks(x[:n])
-        lib = ShockLibrary(list(shocks.values()) + list(library.values()))
-        setup = space.setup(shocks)
+        tail = elements.clip(x[n:])
+        lib = ShockLibrary(list(shocks.values()) + _values(elements.third_shocks(tail))
+                           + list(library.values()))
+        setup = elements.setup_with_third(space.setup(shocks), tail)
         sc, _ = time_domain_scores(model, drives, [setup], lib, objective, base, weights,
-                                    oversample, aggregate,
-                                    **elements.verify(elements.clip(x[n:]), [setup.name]))
+                                    oversample, aggregate, **elements.verify(tail, [setup.name]))
         verified.append((float(sc.loc["optimum", "score"]), bool(sc.loc["optimum", "feasible"]),
                          k))
     ok = [v for v in verified if v[1]] or verified
@@ -976,9 +1116,11 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     p_opt = elements.clip(cands[best_k][n:])
     stops_opt = elements.stops_at(p_opt)
     shocks = space.shocks(x_opt)
+    setup = elements.setup_with_third(space.setup(shocks), p_opt)
+    # the optimal shocks: the corner groups', then the free third dampers'
+    shocks = ShockLibrary(list(shocks.values()) + _values(elements.third_shocks(p_opt)))
     # (the crate's entries: its adjustables keep their settings; its fixed shocks as values)
     lib = ShockLibrary(list(shocks.values()) + library.entries())
-    setup = space.setup(shocks)
     if not solver["success"]:
         warnings.warn(f"optimize: IPOPT stopped with status {solver['status']!r} after "
                       f"{solver['iterations']} iterations; the best verified iterate is "
@@ -995,7 +1137,7 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     # the optimum's shock velocities (first drive): the distribution the crate is compared over
     resp = simulate(plant, drives[0], setup.resolve(lib), oversample=oversample,
                     stop_tables=stops_opt, static_corner_load_n=elements.static,
-                    third=elements.loop_third)
+                    third=elements.third_at(p_opt))
     vel = {c: np.asarray(resp.channels[f"shock_velocity_{c}"]) for c in CORNERS}
     # the crate: every setup of the same symmetry, by distance to the optimal curves
     sym, axles = {"left-right": ("left-right", "independent"), "all": ("left-right", "same"),
@@ -1043,6 +1185,10 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
         kinds.setdefault(s.name, "closest")
     table.insert(0, "kind", [kinds[n] for n in table.index])
     ids = pd.DataFrame([s.ids() for s in uniq], columns=list(CORNERS), index=table.index)
+    if elements.third is not None:  # the third dampers' ids (the baseline's but the optimum's)
+        car = elements.third.car
+        for e in car.elements.elements:
+            ids[e] = [(s.third or {}).get(e, car.baseline.dampers.get(e)) for s in uniq]
     table = pd.concat([table.iloc[:, :1], ids, table.iloc[:, 1:]], axis=1)
     dmap = dict(zip([s.name for s in crate], dist))
     table["distance"] = [0.0 if n == setup.name else dmap.get(n, np.nan) for n in table.index]
@@ -1071,17 +1217,22 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
         settings["envelope_n"] = {"lo": lo.tolist(), "hi": hi.tolist()}
     if elements.third is not None:
         settings["third"] = elements.third.car.to_dict()
+        settings["free_third"] = list(elements.free_third)
     if elements.active:
         settings.update(bump_stops=elements.stops is not None,
                         packers={g: list(b) for g, b in zip(elements.groups, elements.bounds)},
                         static_corner_load_n=elements.static)
     settings["total_s"] = time.perf_counter() - t_start
     return CurveOptimum(x=np.asarray(x_opt), curves=space.curves(x_opt), shocks=shocks,
+                        third_curves=({} if not elements.n_third else dict(zip(
+                            elements.free_third,
+                            elements.third_space.curves(p_opt[:elements.n_third])))),
                         setup=setup, table=table, metrics=metrics, crate_best=best_name,
                         gap=float(gap), velocity_m_s=vel, stationarity=stat, history=history,
                         solver=solver, space=space, constraints=constraints,
                         objective=objective, baseline=base, settings=settings,
-                        packers_m={g: float(v) for g, v in zip(elements.groups, p_opt)},
+                        packers_m={g: float(v) for g, v in
+                                   zip(elements.groups, p_opt[elements.n_third:])},
                         bump_stops=None if stops_opt is None else tuple(stops_opt),
                         clicks=clicks)
 
