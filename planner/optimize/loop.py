@@ -238,7 +238,7 @@ class LoopModel:
         v = vfree
         if third is not None:
             fv, F, dF, tail, extra_in = _third_substep(
-                S[2 * n + 20:], vfree, c0, xpr, xpi, ms, ti if has_trav else None, g1, B,
+                S[2 * n + 20:], dF1, vfree, c0, xpr, xpi, ms, ti if has_trav else None, g1, B,
                 De, b0, cbar, pg, grp, vk, stops, pidx, Pc, (G + G3) * npar, G * npar, npar,
                 td, tsp, h)
         elif stops is None:
@@ -431,10 +431,10 @@ def _third_key(td, tsp):
     return out
 
 
-def _third_substep(St, vfree, c0, xpr, xpi, ms, ti, g1, B, De, b0, cbar, pg, grp, vk, stops,
+def _third_substep(St, dF1, vfree, c0, xpr, xpi, ms, ti, g1, B, De, b0, cbar, pg, grp, vk, stops,
                    pidx, Pc, pack0, third0, npar, td, tsp, h):
-    """The sub-step's solve with the car's third elements (see :class:`LoopModel`): the shock
-    velocities (and, with springs or stops, the travels) by Newton's method, the third
+    """The sub-step's solve with the car's third elements (see :class:`LoopModel`): the
+    corners' force deviations by Newton's method (velocities and travels follow them), the third
     dampers' lags stepped as the shocks'.
 
     Returns
@@ -502,17 +502,20 @@ def _third_substep(St, vfree, c0, xpr, xpi, ms, ti, g1, B, De, b0, cbar, pg, grp
                 Ag = Ag + dg * ca.DM(np.outer(row, row))
         return fv, dF, Av, Ag, fe, Fe
 
+    # Newton on the 4 corner force deviations (as the truth, ident.sim.third_loop), from the
+    # previous step's: the velocities and travels follow them through the hold's same-step
+    # weights, so the system stays 4 x 4 with springs (8 x 8 on velocities and travels
+    # compiled several times slower)
     I4 = ca.DM.eye(4)
-    v, trav = vfree, sfree
+    x = dF1
     for _ in range(THIRD_NEWTON_ITERATIONS):
-        _, dF, Av, Ag, _, _ = forces(v, trav)
-        if has_trav:
-            res = ca.vertcat(v - vfree - De @ dF, trav - sfree - Dte @ dF)
-            J = ca.blockcat([[I4 - De @ Av, -De @ Ag], [-Dte @ Av, I4 - Dte @ Ag]])
-            d = ca.solve(J, res)
-            v, trav = v - d[:4], trav - d[4:]
-        else:
-            v = v - ca.solve(I4 - De @ Av, v - vfree - De @ dF)
+        v = vfree + De @ x
+        trav = sfree + Dte @ x if has_trav else None
+        _, G, Av, Ag, _, _ = forces(v, trav)
+        J = I4 - Av @ De - (Ag @ Dte if has_trav else 0)
+        x = x - ca.solve(J, x - G)
+    v = vfree + De @ x
+    trav = sfree + Dte @ x if has_trav else None
     fv, dF, _, _, fe, Fe = forces(v, trav)
     tail = [ca.vertcat(*Fe), ca.vertcat(*fe), fe1] if nd else []
     return fv, c0 + b0 * fv, dF, tail, extra_in
