@@ -16,6 +16,7 @@ import pytest
 from scipy import signal
 
 from ident.data.channels import CORNERS
+from ident.data.third import CarThird, RunThird
 from ident.models.library import ShockLibrary
 from ident.models.shocks import LinearShock
 from ident.models.vehicle import build_full_car, example_vehicle
@@ -208,22 +209,31 @@ def test_casadi_loop_with_third_elements_matches_the_simulator(plant, drive):
 
 @pytest.mark.slow
 def test_a_free_heave_damper_is_optimized_with_the_corner_curves(plant, drive, optimum):
-    """free_third=heave_front: the optimum names its own heave damper (OPT-heave_front, in
-    its shocks and table), its verified metrics are predict_setups' with that damper, it is
-    no worse than the scan's best (the baseline heave damper) and beats the crate's best."""
+    """free_third=heave_front and the heave spring's packer free: the optimum names its own
+    heave damper (OPT-heave_front, in its shocks and table), its verified metrics are
+    predict_setups' with that damper and packer, it is no worse than the scan's best (the
+    baseline heave damper) and beats the crate's best."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS,
                               curves=CurveOptions(symmetry="all", linear=True,
                                                   free_third=("heave_front",)),
-                              solver=FAST["solver"])
+                              packers={"heave_front": (0.0, 0.002)}, solver=FAST["solver"])
     assert opt.setup.third == {"heave_front": "OPT-heave_front"}
     assert "OPT-heave_front" in opt.shocks and set(opt.third_curves) == {"heave_front"}
     assert opt.table.loc["optimum", "heave_front"] == "OPT-heave_front"
     assert opt.table.loc[opt.baseline.name, "heave_front"] == "H1"
     assert opt.settings["free_third"] == ["heave_front"]
+    packer = opt.packers_m["heave_front"]
+    assert -1e-6 <= packer <= 0.002 + 1e-6
     lib = ShockLibrary(list(opt.shocks.values()) + list(LIB.values()))
-    pred = predict_setups(plant, drive, [opt.baseline, opt.setup], lib, elements=ELEMENTS).table
+    # (the chosen packer on top of the baseline's)
+    car = CarThird(CAR.elements, RunThird(dict(CAR.baseline.dampers),
+                                          dict(CAR.baseline.heave_springs),
+                                          {"front": CAR.baseline.heave_packers_m["front"]
+                                           + packer}))
+    pred = predict_setups(plant, drive, [opt.baseline, opt.setup], lib,
+                          elements=replace(ELEMENTS, third=car)).table
     cols = [c for c in pred.columns if c.startswith(("tire_force_rms", "shock_travel_rms"))]
     np.testing.assert_allclose(opt.metrics["gt"].loc["optimum", cols].to_numpy(float),
                                pred.loc["optimum", cols].to_numpy(float), rtol=RTOL_SAME_LOOP)
@@ -240,6 +250,12 @@ def test_free_third_refusals(plant, drive):
     with pytest.raises(PlannerError, match="free_third.*heave_rear.*is not a third damper"):
         optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS,
                         curves=CurveOptions(free_third=("heave_rear",)), solver=FAST["solver"])
+    with pytest.raises(PlannerError, match=r"packers\['heave_front'\].*gap left"):
+        optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS,
+                        packers={"heave_front": (0.0, 0.01)}, solver=FAST["solver"])
+    with pytest.raises(PlannerError, match=r"packers\['heave_rear'\].*no heave spring"):
+        optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS,
+                        packers={"heave_rear": (0.0, 0.001)}, solver=FAST["solver"])
     with pytest.raises(PlannerError, match="free_third.*no third elements"):
         optimize_curves(plant, drive, LIB, baseline="S",
                         elements=ElementOptions(use_model=False),

@@ -30,6 +30,7 @@ from scipy import optimize as sopt
 
 from ident.data.channels import CORNERS
 from ident.data.drive import Drive
+from ident.data.third import HEAVE_ELEMENTS
 from ident.models.bumpstops import BumpStop, check_packer
 from ident.models.library import ShockLibrary
 from ident.sim.closedloop import corner_values, simulate
@@ -43,6 +44,7 @@ from planner.optimize.click_search import ClickResult, curve_distance, search_cl
 from planner.optimize.constraints import (
     ENVELOPE_FACTOR,
     MAX_FORCE_VELOCITY_M_S,
+    MIN_SLOPE_RATIO,
     CurveConstraints,
     check_constraints,
     constraint_envelope,
@@ -276,6 +278,8 @@ class _Elements:
     third_start: np.ndarray | None = None
     third_A: np.ndarray | None = None
     third_b: np.ndarray | None = None
+    # per heave spring of the car's entry, the index of its packer variable (or None)
+    third_index: list | None = None
 
     @property
     def active(self):
@@ -353,16 +357,28 @@ class _Elements:
             return None
         return self.third_space.shocks(np.asarray(p, dtype=float)[:self.n_third])
 
+    @property
+    def own_third(self):
+        """bool: the optimum's third elements differ from the baseline's (free dampers or
+        heave packers)."""
+        return bool(self.n_third) or any(k is not None for k in self.third_index or ())
+
     def third_at(self, p):
-        """The loop's ``(dampers, springs)`` with the free third dampers' curves of tail
-        `p`; the car's baseline entry without free dampers."""
-        if not self.n_third:
+        """The loop's ``(dampers, springs)`` with the free third dampers' curves and the
+        heave packers of tail `p`; the car's baseline entry without them."""
+        if not self.own_third:
             return self.loop_third
-        shocks = self.third_shocks(p)
-        models = {e: shocks[f"OPT-{e}"] for e in self.free_third}
         dampers, springs = self.third.entry
-        return (tuple(replace(d, model=models[d.name]) if d.name in models else d
-                      for d in dampers), springs)
+        if self.n_third:
+            shocks = self.third_shocks(p)
+            models = {e: shocks[f"OPT-{e}"] for e in self.free_third}
+            dampers = tuple(replace(d, model=models[d.name]) if d.name in models else d
+                            for d in dampers)
+        pk = np.asarray(p, dtype=float)[self.n_third:]
+        springs = tuple(sp if k is None else replace(sp, contact=(
+            sp.contact[0] - float(pk[k]), sp.contact[1], sp.contact[2]))
+            for sp, k in zip(springs, self.third_index or [None] * len(springs)))
+        return dampers, springs
 
     def setup_with_third(self, setup, p):
         """`setup` naming the free third dampers' shocks (its ``third`` column)."""
@@ -373,7 +389,8 @@ class _Elements:
     def loop_args(self):
         """:class:`LoopModel`'s element arguments."""
         return {"bump_stops": self.stops, "packer_index": self.index,
-                "third": self.loop_third, "free_third": self.free_third}
+                "third": self.loop_third, "free_third": self.free_third,
+                "third_packer_index": self.third_index}
 
     def verify(self, p, names):
         """``time_domain_scores``' element arguments: setups `names` with the tail `p` (free
@@ -383,18 +400,19 @@ class _Elements:
         own = None if self.stops is None else {n: self.stops_at(p) for n in names}
         out = {"bump_stops": self.stops, "setup_stops": own,
                "static_corner_load_n": self.static, "third": self.loop_third}
-        if self.n_third:
+        if self.own_third:
             entry = self.third_at(p)
             out["setup_third"] = {n: entry for n in names}
         return out
 
 
-#: The free third dampers' curves (issue 38): passive and increasing, their forces at the
-#: knots in the velocity range within these factors of the baseline damper's (the crate
-#: envelope's factors, :data:`planner.optimize.constraints.ENVELOPE_FACTOR`, around the
-#: one damper the car fits there), and at most the upper factor times its largest force at
-#: 1 m/s everywhere (the corner constraints' slopes and caps are a corner shock's, not a
-#: heave damper's).
+#: The free third dampers' curves (issue 38): passive, increasing, digressive, no segment in
+#: the velocity range flatter than :data:`planner.optimize.constraints.MIN_SLOPE_RATIO` times
+#: its side's first (the corner defaults' shape), their forces at the knots in the velocity
+#: range within these factors of the baseline damper's (the crate envelope's factors,
+#: :data:`planner.optimize.constraints.ENVELOPE_FACTOR`, around the one damper the car fits
+#: there), and at most the upper factor times its largest force at 1 m/s everywhere (the
+#: corner defaults' slopes and force cap are a corner shock's, not a heave damper's).
 THIRD_ENVELOPE = ENVELOPE_FACTOR
 
 
@@ -438,7 +456,8 @@ def _with_free_third(elements, space, free):
         own = ShockLibrary([dampers[e]])
         f1 = np.abs(np.asarray(dampers[e].to_pwl().force(
             np.array([-MAX_FORCE_VELOCITY_M_S, MAX_FORCE_VELOCITY_M_S])), dtype=float))
-        cons = CurveConstraints(envelope_factor=THIRD_ENVELOPE,
+        cons = CurveConstraints(envelope_factor=THIRD_ENVELOPE, digressive=True,
+                                min_slope_ratio=MIN_SLOPE_RATIO,
                                 max_force_n=float(THIRD_ENVELOPE[1] * max(f1.max(), 1.0)))
         A, b = _linear_rows(one, cons, own)
         blocks.append(A)
@@ -488,6 +507,8 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
                                    f"model {plant.name!r} has none of them: identify it with "
                                    "the shock travel channels, or leave bump_stops out")
     groups, bounds, index = [], [], None
+    packers = dict(packers or {})
+    heave = {k: packers.pop(k) for k in list(packers) if k in HEAVE_ELEMENTS}
     if packers:
         if stops is None:
             raise PlannerError(f"{where}: packers {dict(packers)} given without bump stops; "
@@ -519,6 +540,9 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
                 index[k] = len(groups)
             groups.append(name)
             bounds.append((lo, hi))
+    third_index = None
+    if heave:
+        third_index = _heave_packers(heave, third, groups, bounds, where)
     static = None
     if static_corner_load_n is not None:
         vals = corner_values(static_corner_load_n, f"{where}: static_corner_load_n",
@@ -534,7 +558,44 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
                            "elements gives; give static_corner_load_n (lift-off, contact) "
                            "or stop_tables (contact share)")
     return _Elements(stops=stops, groups=tuple(groups), bounds=tuple(bounds), index=index,
-                     static=static, third=third)
+                     static=static, third=third, third_index=third_index)
+
+
+def _packer_bounds(name, bound, where):
+    try:
+        lo, hi = (float(v) for v in bound)
+    except (TypeError, ValueError):
+        raise PlannerError(f"{where}: packers[{name!r}] = {bound!r}; give the bounds "
+                           "(min_m, max_m), e.g. (0.0, 0.006)") from None
+    if not lo <= hi:
+        raise PlannerError(f"{where}: packers[{name!r}]: the lower bound {lo!r} m is above the "
+                           f"upper {hi!r} m")
+    return lo, hi
+
+
+def _heave_packers(heave, third, groups, bounds, where):
+    """The heave springs' packer variables (``packers["heave_front"]``, ...): appended to
+    `groups` and `bounds`; returns per heave spring of the car's entry its variable's index
+    (or None)."""
+    springs = () if third is None else third.entry[1]
+    fitted = {sp.name: sp for sp in springs if sp.contact is not None}
+    index = [None] * len(springs)
+    for name, bound in heave.items():
+        if name not in fitted:
+            raise PlannerError(f"{where}: packers[{name!r}]: the car's baseline fits no heave "
+                               f"spring there (it fits {sorted(fitted) or 'none'}); give the "
+                               "car's heave springs (model.third, ElementOptions.third), or "
+                               "leave that packer out")
+        lo, hi = _packer_bounds(name, bound, where)
+        gap = float(fitted[name].contact[0])
+        if lo < 0 or hi > gap:
+            raise PlannerError(f"{where}: packers[{name!r}] = ({lo:g}, {hi:g}) m: a heave "
+                               f"packer is 0 .. the spring's gap left ({gap:g} m, the baseline's "
+                               "packer in); narrow the bounds")
+        index[[sp.name for sp in springs].index(name)] = len(groups)
+        groups.append(name)
+        bounds.append((lo, hi))
+    return index
 
 
 def _check_objective(objective):
