@@ -15,6 +15,10 @@ and in every verification, packers as decision variables per corner group
 (IPOPT's variables after the curves', bounded), and static loads for lift-off
 in the verification (the objective's limits on ``tire_liftoff_share_XX`` and
 ``tire_contact_min_XX`` are held there; IPOPT's loop has no lift-off).
+
+With third elements (issue 38): the car's heave and roll dampers and heave springs in
+IPOPT's loop and every verification; free third dampers (``CurveOptions.free_third``) as
+curve groups after the corner curves' variables, heave packers among the packers.
 """
 
 from __future__ import annotations
@@ -672,7 +676,12 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         range of the constraints, the baseline's 99 % speeds, in
         ``settings["v_range_m_s"]``), ``linear`` (one damping rate per group: the
         known-answer case), ``lag_s`` (the optimal shocks' lag [s]; default per group the
-        mean lag of the baseline's shocks at its corners).
+        mean lag of the baseline's shocks at its corners), ``free_third`` (a car with third
+        elements: the third dampers whose curves are optimized too, e.g.
+        ``("heave_front", "heave_rear")``: a curve each on the corner curves' knots in the
+        element's own velocity and force, the baseline damper's lag, bounded by
+        :data:`THIRD_ENVELOPE`; ``OPT-<element>`` in the result's shocks, named by the
+        optimum's ``third``, :attr:`CurveOptimum.third_curves`).
     constraints : CurveConstraints, optional
         Default :func:`default_constraints`.
     drive_weights : sequence of float, optional
@@ -724,7 +733,10 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         of a packer that shortens the contact travel of the stops at the group's
         corners (``s0 - packer``). IPOPT starts from the stops as given (0, within the
         bounds); the chosen packers are ``packers_m`` of the result and the optimum is
-        verified with them (the baseline and the crate with the stops as given).
+        verified with them (the baseline and the crate with the stops as given). A car with
+        heave springs: ``"heave_front"`` / ``"heave_rear"`` bound a packer added to the
+        baseline's at that heave spring (0 .. the gap left), in IPOPT's loop and the
+        optimum's verification alike.
     progress : bool
 
     Returns
@@ -1165,11 +1177,22 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
         lib = ShockLibrary(list(shocks.values()) + _values(elements.third_shocks(tail))
                            + list(library.values()))
         setup = elements.setup_with_third(space.setup(shocks), tail)
-        sc, _ = time_domain_scores(model, drives, [setup], lib, objective, base, weights,
-                                    oversample, aggregate, **elements.verify(tail, [setup.name]))
+        try:
+            sc, _ = time_domain_scores(model, drives, [setup], lib, objective, base, weights,
+                                        oversample, aggregate,
+                                        **elements.verify(tail, [setup.name]))
+        except ValueError as exc:
+            # the time-domain loop cannot solve this candidate's steps (Newton's method did
+            # not converge: IPOPT's loop, a fixed number of iterations, does not see it): it
+            # is not a result
+            if not any(v[0] < np.inf for v in verified) and k == len(cands) - 1:
+                raise
+            solver.setdefault("unverifiable", {})[sources[k]] = str(exc)
+            verified.append((np.inf, False, k))
+            continue
         verified.append((float(sc.loc["optimum", "score"]), bool(sc.loc["optimum", "feasible"]),
                          k))
-    ok = [v for v in verified if v[1]] or verified
+    ok = [v for v in verified if v[1]] or [v for v in verified if v[0] < np.inf]
     best_k = min(ok)[2]
     solver["source"] = sources[best_k]
     solver["candidates"] = {src: v[0] for src, v in zip(sources, verified)}
@@ -1193,6 +1216,13 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
                       f"({solver['reason']}); the best verified of its results, its best "
                       f"iterate and the scan's best curve is returned ({sources[best_k]}, "
                       f"score {min(ok)[0]:.4f}): check the curves, or raise max_iter",
+                      OptimizeWarning, stacklevel=3)
+    if solver.get("unverifiable"):
+        warnings.warn(f"optimize: the time-domain loop could not simulate "
+                      f"{', '.join(solver['unverifiable'])} (Newton's method did not converge "
+                      f"at oversample {oversample}: curves too steep for the loop's step); the "
+                      f"best verified of the others is returned ({sources[best_k]}): raise "
+                      "--oversample, or bound the curves' slopes (curve constraints)",
                       OptimizeWarning, stacklevel=3)
 
     # the optimum's shock velocities (first drive): the distribution the crate is compared over
