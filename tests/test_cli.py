@@ -781,3 +781,14 @@ def test_plan_without_drives_writes_in_the_crates_units(tmp_path):
                  "--baseline", "B20", "--out", str(tmp_path / "plan")])
     assert code == 0
     assert 'units = "imperial"' in (tmp_path / "plan" / "plan.toml").read_text()
+
+
+def test_free_third_option_is_read_and_checked():
+    """``optimize --free-third``: element names, comma-separated; an unknown one refused in
+    one line naming the option and the elements."""
+    from planner.cli.optimize import free_third_arg
+
+    assert free_third_arg(None) == ()
+    assert free_third_arg("heave_front, heave_rear") == ("heave_front", "heave_rear")
+    with pytest.raises(ValueError, match=r"--free-third 'heave_middle'.*heave_front"):
+        free_third_arg("heave_middle")
