@@ -188,6 +188,14 @@ def run(args):
                      + (", packers chosen: " + ", ".join(
                          f"{g} {format_quantity(p, 'displacement', args.units, small=True)}"
                          for g, p in opt.packers_m.items()) if opt.packers_m else ""))
+    if opt.third_curves:
+        lines.append("third dampers optimized with the corner curves: "
+                     + ", ".join(f"{e} (OPT-{e})" for e in opt.third_curves))
+    heave_packers = {g: p for g, p in opt.packers_m.items() if g.startswith("heave_")}
+    if heave_packers and opt.bump_stops is None:
+        lines.append("heave packers chosen (on the baseline's): " + ", ".join(
+            f"{g} {format_quantity(p, 'displacement', args.units, small=True)}"
+            for g, p in heave_packers.items()))
     scan = opt.settings.get("scan")
     if scan:
         source = {"scan": "the scan's best curve",
