@@ -208,7 +208,7 @@ def test_casadi_loop_with_third_elements_matches_the_simulator(plant, drive):
 
 
 @pytest.mark.slow
-def test_a_free_heave_damper_is_optimized_with_the_corner_curves(plant, drive, optimum):
+def test_a_free_heave_damper_is_optimized_with_the_corner_curves(plant, drive):
     """free_third=heave_front and the heave spring's packer free: the optimum names its own
     heave damper (OPT-heave_front, in its shocks and table), its verified metrics are
     predict_setups' with that damper and packer, it is no worse than the scan's best (the
