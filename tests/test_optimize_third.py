@@ -133,8 +133,8 @@ def test_refusals_with_third_elements(plant, drive):
 @pytest.mark.slow
 def test_a_heave_travel_limit_is_held_in_the_verification(plant, drive):
     """A limit on the front heave element's travel (10 % below the baseline's): IPOPT's loop
-    does not see it, the verification holds it: every verified row's feasibility is the
-    limit's, and the optimum meets it."""
+    holds it (a metric row over the shock travels), the verification holds it: every verified
+    row's feasibility is the limit's, and the optimum meets it."""
     limit = 0.9
     base = default_objective()
     objective = Objective("floor", dict(base.weights),

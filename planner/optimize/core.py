@@ -1026,6 +1026,8 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
     space = curve_space(symmetry=symmetry, knots_m_s=knots_m_s, rebound_knots_m_s=rebound_knots,
                         linear=linear, lag_s=lag_s, v_range_m_s=velocity_range(speeds))
     names_all, L_all = metric_rows(plant)
+    if third is not None:  # the limited motions of the car's third elements: rows too
+        names_all, L_all = _third_metric_rows(plant, third, objective, names_all, L_all)
     need = [m for m in objective.metrics if m in names_all]
     missing = [m for m in objective.metrics if m not in names_all and not is_element_metric(m)
                and m not in THIRD_METRIC_NAMES]
@@ -1041,6 +1043,28 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
         raise PlannerError(f"the model has no outputs for {missing}; its outputs are "
                            f"{list(plant.output_names)}")
     return plant, drives, base, space, (need, L_all[[names_all.index(m) for m in need]]), third
+
+
+def _third_metric_rows(plant, third, objective, names, L):
+    """`names`, `L` with a row per limited motion of a declared third element
+    (``heave_travel_rms_front`` ...: the element's row over the plant's ``shock_travel_XX`` or
+    ``shock_velocity_XX``, as the time domain forms its channel), so IPOPT's loop holds the
+    limit too; unchanged without such limits or without those outputs."""
+    names, rows = list(names), [L]
+    outs = list(plant.output_names)
+    for m in objective.limits:
+        if m not in THIRD_METRIC_NAMES:
+            continue
+        kind, what, _, axle = m.split("_")
+        element = f"{kind}_{axle}"
+        chans = [f"shock_{what}_{c}" for c in CORNERS]
+        if element not in third.names or not all(c in outs for c in chans):
+            continue
+        row = np.zeros((1, len(outs)))
+        row[0, [outs.index(c) for c in chans]] = third.car.elements.row(element)
+        names.append(m)
+        rows.append(row)
+    return names, np.vstack(rows)
 
 
 def compile_curves(model, drives, library, *, objective=None, baseline=None,
