@@ -847,3 +847,14 @@ def test_plan_vehicle_with_third_elements(tmp_path):
         assert run["heave_packers"] == {"front": pytest.approx(0.001)}
     back = read_rig_plan(out / "plan.toml")
     assert all(dict(r.heave_springs) == {"front": "HS-F", "rear": "HS-R"} for r in back.runs)
+
+
+def test_free_third_option_is_read_and_checked():
+    """``optimize --free-third``: element names, comma-separated; an unknown one refused in
+    one line naming the option and the elements."""
+    from planner.cli.optimize import free_third_arg
+
+    assert free_third_arg(None) == ()
+    assert free_third_arg("heave_front, heave_rear") == ("heave_front", "heave_rear")
+    with pytest.raises(ValueError, match=r"--free-third 'heave_middle'.*heave_front"):
+        free_third_arg("heave_middle")

@@ -93,6 +93,11 @@ def add_parser(subparsers):
                      "drive's units or with a unit: front=0:4mm); needs bump stops (the "
                      "model's, or --bump-stops); repeatable (default: packers as the "
                      "baseline's)")
+    opt.add_argument("--free-third", metavar="ELEMENT[,ELEMENT]",
+                     help="a car with third elements: optimize these third dampers' curves "
+                     "with the corner curves, e.g. heave_front,heave_rear (each within 1/3 "
+                     "to 3 times the baseline damper's forces; written as OPT-<element>) "
+                     "(default: none, the car's baseline third dampers)")
     opt.add_argument("--click-radius", type=int_at_least(1), default=2, metavar="K",
                      help="adjustable shocks: the click search moves one adjuster by 1..K "
                      "steps (default %(default)s)")
@@ -100,6 +105,20 @@ def add_parser(subparsers):
     opt.add_argument("--overwrite", action="store_true", help="replace an existing folder")
     opt.set_defaults(func=run)
     return opt
+
+
+def free_third_arg(value):
+    """``--free-third heave_front,heave_rear`` as a tuple of element names (checked)."""
+    from ident.data.third import THIRD_ELEMENTS
+
+    if not value:
+        return ()
+    names = tuple(v.strip() for v in value.split(",") if v.strip())
+    bad = [n for n in names if n not in THIRD_ELEMENTS]
+    if bad or not names:
+        raise ValueError(f"--free-third {value!r}: {bad or 'no element'} is not a third "
+                         f"element; give some of {', '.join(THIRD_ELEMENTS)}, comma-separated")
+    return names
 
 
 def run(args):
@@ -144,7 +163,8 @@ def run(args):
                               curves=CurveOptions(symmetry=args.symmetry,
                                                   knots_m_s=(QUANTILE_KNOTS
                                                              if args.knots == "quantiles"
-                                                             else DEFAULT_KNOTS_M_S)),
+                                                             else DEFAULT_KNOTS_M_S),
+                                                  free_third=free_third_arg(args.free_third)),
                               constraints=constraints, drive_weights=weights,
                               aggregate="worst" if args.worst_case else "sum",
                               robust=args.robust, loop=LoopOptions(oversample=args.oversample),
@@ -168,6 +188,14 @@ def run(args):
                      + (", packers chosen: " + ", ".join(
                          f"{g} {format_quantity(p, 'displacement', args.units, small=True)}"
                          for g, p in opt.packers_m.items()) if opt.packers_m else ""))
+    if opt.third_curves:
+        lines.append("third dampers optimized with the corner curves: "
+                     + ", ".join(f"{e} (OPT-{e})" for e in opt.third_curves))
+    heave_packers = {g: p for g, p in opt.packers_m.items() if g.startswith("heave_")}
+    if heave_packers and opt.bump_stops is None:
+        lines.append("heave packers chosen (on the baseline's): " + ", ".join(
+            f"{g} {format_quantity(p, 'displacement', args.units, small=True)}"
+            for g, p in heave_packers.items()))
     scan = opt.settings.get("scan")
     if scan:
         source = {"scan": "the scan's best curve",

@@ -15,6 +15,10 @@ and in every verification, packers as decision variables per corner group
 (IPOPT's variables after the curves', bounded), and static loads for lift-off
 in the verification (the objective's limits on ``tire_liftoff_share_XX`` and
 ``tire_contact_min_XX`` are held there; IPOPT's loop has no lift-off).
+
+With third elements (issue 38): the car's heave and roll dampers and heave springs in
+IPOPT's loop and every verification; free third dampers (``CurveOptions.free_third``) as
+curve groups after the corner curves' variables, heave packers among the packers.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from scipy import optimize as sopt
 
 from ident.data.channels import CORNERS
 from ident.data.drive import Drive
+from ident.data.third import HEAVE_ELEMENTS
 from ident.models.bumpstops import BumpStop, check_packer
 from ident.models.library import ShockLibrary
 from ident.sim.closedloop import corner_values, simulate
@@ -41,6 +46,9 @@ from planner.objective import Objective, default_objective, score_setups
 from planner.optimize.cache import jit_available
 from planner.optimize.click_search import ClickResult, curve_distance, search_clicks
 from planner.optimize.constraints import (
+    ENVELOPE_FACTOR,
+    MAX_FORCE_VELOCITY_M_S,
+    MIN_SLOPE_RATIO,
     CurveConstraints,
     check_constraints,
     constraint_envelope,
@@ -73,6 +81,7 @@ from planner.uncertainty import prediction_uncertainty
 
 __all__ = [
     "KNOT_UPDATE_RTOL",
+    "THIRD_ENVELOPE",
     "MULTI_START_ITER",
     "PACKER_SCALE_M",
     "CurveOptimum",
@@ -166,6 +175,10 @@ class CurveOptimum:
         in the time domain, :func:`planner.optimize.click_search.search_clicks`), the gain over
         the crate's best fixed setup and the gap to the optimum; their setups are rows of
         `table` of kind ``"clicks"``. None without adjustables (or ``click_radius=None``).
+    third_curves : dict of str -> PiecewiseLinear
+        The optimal curve of every free third damper (``CurveOptions.free_third``, in the
+        element's own velocity and force; its shock ``OPT-<element>`` in `shocks`, named by
+        the optimum's ``third``); empty without.
     """
 
     x: np.ndarray
@@ -188,6 +201,7 @@ class CurveOptimum:
     packers_m: dict = field(default_factory=dict)
     bump_stops: tuple | None = None
     clicks: ClickResult | None = None
+    third_curves: dict = field(default_factory=dict)
 
     @property
     def score(self):
@@ -261,6 +275,15 @@ class _Elements:
     index: list | None = None
     static: list | None = None
     third: _Third | None = None
+    # free third dampers (issue 38): their curve space (groups without corners, the corner
+    # curves' knots), start and linear constraints; their variables come after the corner
+    # curves', before the packers
+    third_space: CurveSpace | None = None
+    third_start: np.ndarray | None = None
+    third_A: np.ndarray | None = None
+    third_b: np.ndarray | None = None
+    # per heave spring of the car's entry, the index of its packer variable (or None)
+    third_index: list | None = None
 
     @property
     def active(self):
@@ -272,6 +295,16 @@ class _Elements:
         return None if self.third is None else self.third.entry
 
     @property
+    def free_third(self):
+        """tuple of str: the third dampers whose curves are free."""
+        return () if self.third_space is None else tuple(n for n, _ in self.third_space.groups)
+
+    @property
+    def n_third(self):
+        """int: the free third dampers' decision variables."""
+        return 0 if self.third_space is None else self.third_space.n_vars
+
+    @property
     def n_packers(self):
         return len(self.groups)
 
@@ -281,15 +314,22 @@ class _Elements:
         return np.array([min(max(0.0, lo), hi) for lo, hi in self.bounds])
 
     def stops_at(self, p):
-        """The stops with packers `p` [m] (shape (n_packers,)) in the loop's form."""
+        """The stops with the tail `p` (free third dampers' variables, then packers [m]) in
+        the loop's form."""
         if self.stops is None or not self.n_packers:
             return self.stops
+        p = np.asarray(p, dtype=float)[self.n_third:]
         return [None if st is None else
                 (st[0] - (float(p[self.index[c]]) if self.index[c] is not None else 0.0),
                  st[1], st[2]) for c, st in enumerate(self.stops)]
 
     def rows(self, A, b):
-        """The linear constraints `A`, `b` of the curves with the packers' bounds."""
+        """The linear constraints `A`, `b` of the curves with the free third dampers' and
+        the packers' bounds."""
+        if self.n_third:
+            A = np.block([[A, np.zeros((A.shape[0], self.n_third))],
+                          [np.zeros((self.third_A.shape[0], A.shape[1])), self.third_A]])
+            b = np.concatenate([b, self.third_b])
         k = self.n_packers
         if not k:
             return A, b
@@ -301,20 +341,139 @@ class _Elements:
         return A2, np.concatenate([b, hi, -lo])
 
     def extend(self, x):
-        """A curve vector with the packers' start appended."""
+        """A curve vector with the free third dampers' start (the baseline's curves) and the
+        packers' start appended."""
+        if self.n_third:
+            x = np.concatenate([x, self.third_start])
         return np.concatenate([x, self.start]) if self.n_packers else x
 
     def clip(self, p):
-        return np.array([min(max(float(v), lo), hi) for v, (lo, hi) in zip(p, self.bounds)])
+        """The tail `p` made valid: the free third curves' (:meth:`CurveSpace.valid`), the
+        packers within their bounds."""
+        p = np.asarray(p, dtype=float)
+        head = self.third_space.valid(p[:self.n_third]) if self.n_third else p[:0]
+        return np.concatenate([head, [min(max(float(v), lo), hi) for v, (lo, hi)
+                                      in zip(p[self.n_third:], self.bounds)]])
+
+    def third_shocks(self, p):
+        """The free third dampers' shocks of tail `p` (ids ``OPT-<element>``), or None."""
+        if not self.n_third:
+            return None
+        return self.third_space.shocks(np.asarray(p, dtype=float)[:self.n_third])
+
+    @property
+    def own_third(self):
+        """bool: the optimum's third elements differ from the baseline's (free dampers or
+        heave packers)."""
+        return bool(self.n_third) or any(k is not None for k in self.third_index or ())
+
+    def third_at(self, p):
+        """The loop's ``(dampers, springs)`` with the free third dampers' curves and the
+        heave packers of tail `p`; the car's baseline entry without them."""
+        if not self.own_third:
+            return self.loop_third
+        dampers, springs = self.third.entry
+        if self.n_third:
+            shocks = self.third_shocks(p)
+            models = {e: shocks[f"OPT-{e}"] for e in self.free_third}
+            dampers = tuple(replace(d, model=models[d.name]) if d.name in models else d
+                            for d in dampers)
+        pk = np.asarray(p, dtype=float)[self.n_third:]
+        springs = tuple(sp if k is None else replace(sp, contact=(
+            sp.contact[0] - float(pk[k]), sp.contact[1], sp.contact[2]))
+            for sp, k in zip(springs, self.third_index or [None] * len(springs)))
+        return dampers, springs
+
+    def setup_with_third(self, setup, p):
+        """`setup` naming the free third dampers' shocks (its ``third`` column)."""
+        if not self.n_third:
+            return setup
+        return Setup(setup.name, setup.shocks, third={e: f"OPT-{e}" for e in self.free_third})
+
+    def loop_args(self):
+        """:class:`LoopModel`'s element arguments."""
+        return {"bump_stops": self.stops, "packer_index": self.index,
+                "third": self.loop_third, "free_third": self.free_third,
+                "third_packer_index": self.third_index}
 
     def verify(self, p, names):
-        """``time_domain_scores``' element arguments: setups `names` with packers `p`, the
-        others with the car's stops."""
+        """``time_domain_scores``' element arguments: setups `names` with the tail `p` (free
+        third dampers' curves, packers), the others with the car's stops and baseline."""
         if not self.active:
             return {}
         own = None if self.stops is None else {n: self.stops_at(p) for n in names}
-        return {"bump_stops": self.stops, "setup_stops": own,
-                "static_corner_load_n": self.static, "third": self.loop_third}
+        out = {"bump_stops": self.stops, "setup_stops": own,
+               "static_corner_load_n": self.static, "third": self.loop_third}
+        if self.own_third:
+            entry = self.third_at(p)
+            out["setup_third"] = {n: entry for n in names}
+        return out
+
+
+#: The free third dampers' curves (issue 38): passive, increasing, digressive, no segment in
+#: the velocity range flatter than :data:`planner.optimize.constraints.MIN_SLOPE_RATIO` times
+#: its side's first (the corner defaults' shape), their forces at the knots in the velocity
+#: range within these factors of the baseline damper's (the crate envelope's factors,
+#: :data:`planner.optimize.constraints.ENVELOPE_FACTOR`, around the one damper the car fits
+#: there), and at most the upper factor times its largest force at 1 m/s everywhere (the
+#: corner defaults' slopes and force cap are a corner shock's, not a heave damper's).
+THIRD_ENVELOPE = ENVELOPE_FACTOR
+
+
+def _values(shocks):
+    return [] if shocks is None else list(shocks.values())
+
+
+def _check_free_third(free_third, third):
+    """The free third dampers, checked against the car's (:class:`_Third`)."""
+    free = tuple(free_third or ())
+    if not free:
+        return ()
+    if third is None:
+        raise PlannerError(f"optimize: free_third {list(free)} but the car has no third "
+                           "elements; leave free_third out, or give the car's third elements "
+                           "(model.third, ElementOptions.third)")
+    fitted = [e for e in third.names if third.car.baseline.dampers.get(e) is not None]
+    bad = [e for e in free if e not in fitted]
+    if bad or len(set(free)) < len(free):
+        raise PlannerError(f"optimize: free_third {list(free)}: {bad or 'an element twice'} "
+                           f"is not a third damper the car's baseline fits (it fits "
+                           f"{fitted}); free each of those at most once")
+    return tuple(e for e in third.names if e in free)
+
+
+def _with_free_third(elements, space, free):
+    """`elements` with the free third dampers' curve space (the corner curves' knots and
+    velocity range), start (the baseline dampers' curves) and constraints
+    (:data:`THIRD_ENVELOPE`)."""
+    dampers = {d.name: d.model for d in elements.third.entry[0]}
+    tspace = CurveSpace(groups=tuple((e, ()) for e in free), v_knots_m_s=space.v_knots_m_s,
+                        linear=space.linear,
+                        lag_s=tuple(float(getattr(dampers[e], "lag_s", 0.0) or 0.0)
+                                    for e in free),
+                        symmetry=space.symmetry, v_range_m_s=space.v_range_m_s)
+    start = tspace.from_curves([dampers[e].to_pwl() for e in free])
+    blocks, bs = [], []
+    for e in free:
+        one = CurveSpace(groups=((e, ()),), v_knots_m_s=space.v_knots_m_s, linear=space.linear,
+                         lag_s=(0.0,), symmetry=space.symmetry, v_range_m_s=space.v_range_m_s)
+        own = ShockLibrary([dampers[e]])
+        f1 = np.abs(np.asarray(dampers[e].to_pwl().force(
+            np.array([-MAX_FORCE_VELOCITY_M_S, MAX_FORCE_VELOCITY_M_S])), dtype=float))
+        cons = CurveConstraints(envelope_factor=THIRD_ENVELOPE, digressive=True,
+                                min_slope_ratio=MIN_SLOPE_RATIO,
+                                max_force_n=float(THIRD_ENVELOPE[1] * max(f1.max(), 1.0)))
+        A, b = _linear_rows(one, cons, own)
+        blocks.append(A)
+        bs.append(b)
+    nv = tspace.n_group_vars
+    A3 = np.zeros((sum(a.shape[0] for a in blocks), nv * len(free)))
+    r = 0
+    for k, a in enumerate(blocks):
+        A3[r:r + a.shape[0], k * nv:(k + 1) * nv] = a
+        r += a.shape[0]
+    return replace(elements, third_space=tspace, third_start=start, third_A=A3,
+                   third_b=np.concatenate(bs))
 
 
 def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective, third=None):
@@ -352,6 +511,8 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
                                    f"model {plant.name!r} has none of them: identify it with "
                                    "the shock travel channels, or leave bump_stops out")
     groups, bounds, index = [], [], None
+    packers = dict(packers or {})
+    heave = {k: packers.pop(k) for k in list(packers) if k in HEAVE_ELEMENTS}
     if packers:
         if stops is None:
             raise PlannerError(f"{where}: packers {dict(packers)} given without bump stops; "
@@ -383,6 +544,9 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
                 index[k] = len(groups)
             groups.append(name)
             bounds.append((lo, hi))
+    third_index = None
+    if heave:
+        third_index = _heave_packers(heave, third, groups, bounds, where)
     static = None
     if static_corner_load_n is not None:
         vals = corner_values(static_corner_load_n, f"{where}: static_corner_load_n",
@@ -398,7 +562,44 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
                            "elements gives; give static_corner_load_n (lift-off, contact) "
                            "or stop_tables (contact share)")
     return _Elements(stops=stops, groups=tuple(groups), bounds=tuple(bounds), index=index,
-                     static=static, third=third)
+                     static=static, third=third, third_index=third_index)
+
+
+def _packer_bounds(name, bound, where):
+    try:
+        lo, hi = (float(v) for v in bound)
+    except (TypeError, ValueError):
+        raise PlannerError(f"{where}: packers[{name!r}] = {bound!r}; give the bounds "
+                           "(min_m, max_m), e.g. (0.0, 0.006)") from None
+    if not lo <= hi:
+        raise PlannerError(f"{where}: packers[{name!r}]: the lower bound {lo!r} m is above the "
+                           f"upper {hi!r} m")
+    return lo, hi
+
+
+def _heave_packers(heave, third, groups, bounds, where):
+    """The heave springs' packer variables (``packers["heave_front"]``, ...): appended to
+    `groups` and `bounds`; returns per heave spring of the car's entry its variable's index
+    (or None)."""
+    springs = () if third is None else third.entry[1]
+    fitted = {sp.name: sp for sp in springs if sp.contact is not None}
+    index = [None] * len(springs)
+    for name, bound in heave.items():
+        if name not in fitted:
+            raise PlannerError(f"{where}: packers[{name!r}]: the car's baseline fits no heave "
+                               f"spring there (it fits {sorted(fitted) or 'none'}); give the "
+                               "car's heave springs (model.third, ElementOptions.third), or "
+                               "leave that packer out")
+        lo, hi = _packer_bounds(name, bound, where)
+        gap = float(fitted[name].contact[0])
+        if lo < 0 or hi > gap:
+            raise PlannerError(f"{where}: packers[{name!r}] = ({lo:g}, {hi:g}) m: a heave "
+                               f"packer is 0 .. the spring's gap left ({gap:g} m, the baseline's "
+                               "packer in); narrow the bounds")
+        index[[sp.name for sp in springs].index(name)] = len(groups)
+        groups.append(name)
+        bounds.append((lo, hi))
+    return index
 
 
 def _check_objective(objective):
@@ -475,7 +676,12 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         range of the constraints, the baseline's 99 % speeds, in
         ``settings["v_range_m_s"]``), ``linear`` (one damping rate per group: the
         known-answer case), ``lag_s`` (the optimal shocks' lag [s]; default per group the
-        mean lag of the baseline's shocks at its corners).
+        mean lag of the baseline's shocks at its corners), ``free_third`` (a car with third
+        elements: the third dampers whose curves are optimized too, e.g.
+        ``("heave_front", "heave_rear")``: a curve each on the corner curves' knots in the
+        element's own velocity and force, the baseline damper's lag, bounded by
+        :data:`THIRD_ENVELOPE`; ``OPT-<element>`` in the result's shocks, named by the
+        optimum's ``third``, :attr:`CurveOptimum.third_curves`).
     constraints : CurveConstraints, optional
         Default :func:`default_constraints`.
     drive_weights : sequence of float, optional
@@ -527,7 +733,10 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         of a packer that shortens the contact travel of the stops at the group's
         corners (``s0 - packer``). IPOPT starts from the stops as given (0, within the
         bounds); the chosen packers are ``packers_m`` of the result and the optimum is
-        verified with them (the baseline and the crate with the stops as given).
+        verified with them (the baseline and the crate with the stops as given). A car with
+        heave springs: ``"heave_front"`` / ``"heave_rear"`` bound a packer added to the
+        baseline's at that heave spring (0 .. the gap left), in IPOPT's loop and the
+        optimum's verification alike.
     progress : bool
 
     Returns
@@ -583,12 +792,7 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         if own is not None:
             stops, static = own.tables[0], own.static_corner_load_n
     elements = _elements(plant, space, stops, packers, static, objective, third)
-    if third is not None:
-        warnings.warn(f"optimize: the car's third elements ({', '.join(third.names)}) are not in "
-                      "IPOPT's loop nor in the scan's screening: the corner curves are searched "
-                      "on the car without them; every candidate, the baseline and the crate are "
-                      "verified in the time domain with the baseline's third elements, and the "
-                      "best verified is returned", OptimizeWarning, stacklevel=2)
+    free_third = _check_free_third(curves.free_third, third)
     # the baseline's (verified) values per drive of the metrics the objective needs
     if elements.active:
         m_base = [element_predictions(model, d, [base], library, [elements.stops],
@@ -606,6 +810,8 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     space, A_lin, b_lin, scan, x0, knot_log = _start(
         model, plant, drives, library, space, constraints, base, objective, weights, aggregate,
         oversample, _quantile_knots(knots_m_s), elements)
+    if free_third:
+        elements = _with_free_third(elements, space, free_third)
 
     # scaling of the decision variables: forces by c_bar |v|, slopes by c_bar
     cbar = float(np.mean(plant.cbar_n_s_m))
@@ -623,10 +829,16 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         tight = _robust_factors(model, drives, library, space, x0, base, need)
     C, kinds = score_rows(objective, need, m_base, tight)
     t_build = time.perf_counter()
-    models_cl = [LoopModel(plant, d, space, rows, oversample, jit, bump_stops=elements.stops,
-                           packer_index=elements.index) for d in drives]
+    models_cl = [LoopModel(plant, d, space, rows, oversample, jit, **elements.loop_args())
+                 for d in drives]
     T = space.expansion()
     A_opt, b_opt = elements.rows(A_lin, b_lin)
+    if elements.n_third:  # the free third dampers' variables after the corner curves'
+        T3 = elements.third_space.expansion()
+        T = np.block([[T, np.zeros((T.shape[0], T3.shape[1]))],
+                      [np.zeros((T3.shape[0], T.shape[1])), T3]])
+        scale = np.concatenate([scale, np.tile(scale[:space.n_group_vars],
+                                               len(elements.free_third))])
     if elements.n_packers:  # the packers after the curves' variables
         k = elements.n_packers
         T = np.block([[T, np.zeros((T.shape[0], k))], [np.zeros((k, T.shape[1])), np.eye(k)]])
@@ -814,6 +1026,8 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
     space = curve_space(symmetry=symmetry, knots_m_s=knots_m_s, rebound_knots_m_s=rebound_knots,
                         linear=linear, lag_s=lag_s, v_range_m_s=velocity_range(speeds))
     names_all, L_all = metric_rows(plant)
+    if third is not None:  # the limited motions of the car's third elements: rows too
+        names_all, L_all = _third_metric_rows(plant, third, objective, names_all, L_all)
     need = [m for m in objective.metrics if m in names_all]
     missing = [m for m in objective.metrics if m not in names_all and not is_element_metric(m)
                and m not in THIRD_METRIC_NAMES]
@@ -829,6 +1043,28 @@ def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, l
         raise PlannerError(f"the model has no outputs for {missing}; its outputs are "
                            f"{list(plant.output_names)}")
     return plant, drives, base, space, (need, L_all[[names_all.index(m) for m in need]]), third
+
+
+def _third_metric_rows(plant, third, objective, names, L):
+    """`names`, `L` with a row per limited motion of a declared third element
+    (``heave_travel_rms_front`` ...: the element's row over the plant's ``shock_travel_XX`` or
+    ``shock_velocity_XX``, as the time domain forms its channel), so IPOPT's loop holds the
+    limit too; unchanged without such limits or without those outputs."""
+    names, rows = list(names), [L]
+    outs = list(plant.output_names)
+    for m in objective.limits:
+        if m not in THIRD_METRIC_NAMES:
+            continue
+        kind, what, _, axle = m.split("_")
+        element = f"{kind}_{axle}"
+        chans = [f"shock_{what}_{c}" for c in CORNERS]
+        if element not in third.names or not all(c in outs for c in chans):
+            continue
+        row = np.zeros((1, len(outs)))
+        row[0, [outs.index(c) for c in chans]] = third.car.elements.row(element)
+        names.append(m)
+        rows.append(row)
+    return names, np.vstack(rows)
 
 
 def compile_curves(model, drives, library, *, objective=None, baseline=None,
@@ -961,14 +1197,26 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     verified = []
     for k, x in enumerate(cands):
         shocks = space.shocks(x[:n])
-        lib = ShockLibrary(list(shocks.values()) + list(library.values()))
-        setup = space.setup(shocks)
-        sc, _ = time_domain_scores(model, drives, [setup], lib, objective, base, weights,
-                                    oversample, aggregate,
-                                    **elements.verify(elements.clip(x[n:]), [setup.name]))
+        tail = elements.clip(x[n:])
+        lib = ShockLibrary(list(shocks.values()) + _values(elements.third_shocks(tail))
+                           + list(library.values()))
+        setup = elements.setup_with_third(space.setup(shocks), tail)
+        try:
+            sc, _ = time_domain_scores(model, drives, [setup], lib, objective, base, weights,
+                                        oversample, aggregate,
+                                        **elements.verify(tail, [setup.name]))
+        except ValueError as exc:
+            # the time-domain loop cannot solve this candidate's steps (Newton's method did
+            # not converge: IPOPT's loop, a fixed number of iterations, does not see it): it
+            # is not a result
+            if not any(v[0] < np.inf for v in verified) and k == len(cands) - 1:
+                raise
+            solver.setdefault("unverifiable", {})[sources[k]] = str(exc)
+            verified.append((np.inf, False, k))
+            continue
         verified.append((float(sc.loc["optimum", "score"]), bool(sc.loc["optimum", "feasible"]),
                          k))
-    ok = [v for v in verified if v[1]] or verified
+    ok = [v for v in verified if v[1]] or [v for v in verified if v[0] < np.inf]
     best_k = min(ok)[2]
     solver["source"] = sources[best_k]
     solver["candidates"] = {src: v[0] for src, v in zip(sources, verified)}
@@ -976,9 +1224,11 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     p_opt = elements.clip(cands[best_k][n:])
     stops_opt = elements.stops_at(p_opt)
     shocks = space.shocks(x_opt)
+    setup = elements.setup_with_third(space.setup(shocks), p_opt)
+    # the optimal shocks: the corner groups', then the free third dampers'
+    shocks = ShockLibrary(list(shocks.values()) + _values(elements.third_shocks(p_opt)))
     # (the crate's entries: its adjustables keep their settings; its fixed shocks as values)
     lib = ShockLibrary(list(shocks.values()) + library.entries())
-    setup = space.setup(shocks)
     if not solver["success"]:
         warnings.warn(f"optimize: IPOPT stopped with status {solver['status']!r} after "
                       f"{solver['iterations']} iterations; the best verified iterate is "
@@ -991,11 +1241,18 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
                       f"iterate and the scan's best curve is returned ({sources[best_k]}, "
                       f"score {min(ok)[0]:.4f}): check the curves, or raise max_iter",
                       OptimizeWarning, stacklevel=3)
+    if solver.get("unverifiable"):
+        warnings.warn(f"optimize: the time-domain loop could not simulate "
+                      f"{', '.join(solver['unverifiable'])} (Newton's method did not converge "
+                      f"at oversample {oversample}: curves too steep for the loop's step); the "
+                      f"best verified of the others is returned ({sources[best_k]}): raise "
+                      "--oversample, or bound the curves' slopes (curve constraints)",
+                      OptimizeWarning, stacklevel=3)
 
     # the optimum's shock velocities (first drive): the distribution the crate is compared over
     resp = simulate(plant, drives[0], setup.resolve(lib), oversample=oversample,
                     stop_tables=stops_opt, static_corner_load_n=elements.static,
-                    third=elements.loop_third)
+                    third=elements.third_at(p_opt))
     vel = {c: np.asarray(resp.channels[f"shock_velocity_{c}"]) for c in CORNERS}
     # the crate: every setup of the same symmetry, by distance to the optimal curves
     sym, axles = {"left-right": ("left-right", "independent"), "all": ("left-right", "same"),
@@ -1043,6 +1300,10 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
         kinds.setdefault(s.name, "closest")
     table.insert(0, "kind", [kinds[n] for n in table.index])
     ids = pd.DataFrame([s.ids() for s in uniq], columns=list(CORNERS), index=table.index)
+    if elements.third is not None:  # the third dampers' ids (the baseline's but the optimum's)
+        car = elements.third.car
+        for e in car.elements.elements:
+            ids[e] = [(s.third or {}).get(e, car.baseline.dampers.get(e)) for s in uniq]
     table = pd.concat([table.iloc[:, :1], ids, table.iloc[:, 1:]], axis=1)
     dmap = dict(zip([s.name for s in crate], dist))
     table["distance"] = [0.0 if n == setup.name else dmap.get(n, np.nan) for n in table.index]
@@ -1071,17 +1332,22 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
         settings["envelope_n"] = {"lo": lo.tolist(), "hi": hi.tolist()}
     if elements.third is not None:
         settings["third"] = elements.third.car.to_dict()
+        settings["free_third"] = list(elements.free_third)
     if elements.active:
         settings.update(bump_stops=elements.stops is not None,
                         packers={g: list(b) for g, b in zip(elements.groups, elements.bounds)},
                         static_corner_load_n=elements.static)
     settings["total_s"] = time.perf_counter() - t_start
     return CurveOptimum(x=np.asarray(x_opt), curves=space.curves(x_opt), shocks=shocks,
+                        third_curves=({} if not elements.n_third else dict(zip(
+                            elements.free_third,
+                            elements.third_space.curves(p_opt[:elements.n_third])))),
                         setup=setup, table=table, metrics=metrics, crate_best=best_name,
                         gap=float(gap), velocity_m_s=vel, stationarity=stat, history=history,
                         solver=solver, space=space, constraints=constraints,
                         objective=objective, baseline=base, settings=settings,
-                        packers_m={g: float(v) for g, v in zip(elements.groups, p_opt)},
+                        packers_m={g: float(v) for g, v in
+                                   zip(elements.groups, p_opt[elements.n_third:])},
                         bump_stops=None if stops_opt is None else tuple(stops_opt),
                         clicks=clicks)
 

@@ -54,6 +54,7 @@ __all__ = [
     "NEWTON_ITERATIONS",
     "STOP_NEWTON_ITERATIONS",
     "STOP_SMOOTHING_M",
+    "THIRD_NEWTON_ITERATIONS",
     "FOLD_BASE",
     "stop_force_sx",
 ]
@@ -71,6 +72,11 @@ STOP_NEWTON_ITERATIONS = 3
 #: table's exactly beyond a half-width from every kink; at a kink it is off by its slope
 #: change times a quarter of the half-width (15 N for a 600 kN/m stop at contact).
 STOP_SMOOTHING_M = 1e-4
+#: Newton iterations per sub-step with third elements (shock velocities, with heave springs
+#: or stops also the travels): a heave element couples an axle's corners and a stiff heave
+#: spring moves the travel more than a corner stop, so one more than the stops' (measured
+#: against :func:`ident.sim.closedloop.simulate_batch`, tests/test_optimize_third.py).
+THIRD_NEWTON_ITERATIONS = 4
 
 
 def stop_force_sx(z, x_m, f_n, width_m=None):
@@ -134,7 +140,8 @@ class LoopModel:
     """The closed loop of one plant and drive as a casadi recursion (module notes)."""
 
     def __init__(self, plant, drive, space, metric_rows, oversample, jit, *, inputs=True,
-                 bump_stops=None, packer_index=None):
+                 bump_stops=None, packer_index=None, third=None, free_third=(),
+                 third_packer_index=None):
         """`inputs` False: build (and compile) the step functions only, for the drive's
         sample rate; the rig response and the recursion's inputs are left out.
 
@@ -143,7 +150,18 @@ class LoopModel:
         :func:`stop_force_sx`) at the model's ``shock_travel_XX`` added to the corner's
         force input and solved with the shocks within the sub-step (implicit);
         `packer_index`: per corner the index of its packer among the parameters after the
-        curves' (``s0`` then is the contact travel less that parameter), or None."""
+        curves' (``s0`` then is the contact travel less that parameter), or None.
+
+        `third`: the car's third elements, the loop's ``(dampers, springs)`` entry
+        (:class:`ident.sim.loop_third.ThirdDamper`, :class:`~ident.sim.loop_third.ThirdSpring`,
+        as :func:`ident.sim.closedloop.simulate_batch` takes one): each damper's force
+        ``F_e`` (its curve at ``m_e @ v`` behind its lag) acts at the corners as ``m_e F_e``,
+        each heave spring's ``g(m_e @ s - s0)`` (kinks smoothed as the stops') as ``m_e g``,
+        solved with the shocks within the sub-step (:data:`THIRD_NEWTON_ITERATIONS`);
+        `free_third`: the dampers (element names) whose curve is a parameter group after the
+        corner groups' (in that order; their lag the entry's damper's);
+        `third_packer_index`: per heave spring the index of its packer among the parameters
+        after the curves' (as `packer_index`), or None. ``third=None``: the loop as before."""
         self.space = space
         r = int(oversample)
         names, L = metric_rows
@@ -169,7 +187,7 @@ class LoopModel:
         G, npar = len(space.groups), space.n_params
         vk = space.v_knots_m_s
         grp = [space.group_of(c) for c in CORNERS]
-        stops = None
+        stops, pidx = None, [None] * 4
         if bump_stops is not None and any(st is not None for st in bump_stops):
             stops = [None if st is None else (float(st[0]), np.asarray(st[1], dtype=float),
                                               np.asarray(st[2], dtype=float))
@@ -178,15 +196,27 @@ class LoopModel:
             ti = _travel_rows(plant)
         n_pack = 0 if stops is None else 1 + max([i for i in pidx if i is not None],
                                                  default=-1)
+        # the car's third elements (issue 38): dampers (a fixed curve or a free group after
+        # the corner groups) and heave springs (a packer parameter or none)
+        td, tsp, G3 = [], [], 0
+        if third is not None:
+            td, tsp, tpidx = _third_parts(third, free_third, third_packer_index)
+            G3 = len(tuple(free_third))
+            n_pack = 1 + max([i for i in (pidx if stops is not None else []) + tpidx
+                              if i is not None], default=-1)
+            if stops is None and tsp:
+                ti = _travel_rows(plant)
+        has_trav = stops is not None or bool(tsp)
+        nd = len(td)
 
         # state: modes (re, im), dF[k-1], dF[k-2], F[k-1], f[k-1], f[k-2] (the loop part),
         # filter states, sums (z^2, z s, y) per metric, then the curve parameters (carried,
         # constant). A step is an MX function calling two SX functions: the loop's sub-step
         # (r times) and the metrics' outputs, filters and sums (once)
-        n_loop = 2 * n + 20
+        n_loop = 2 * n + 20 + 3 * nd  # (third dampers: F[k-1], f[k-1], f[k-2] each)
         nx = n_loop + 2 * ns * nm + 3 * nm
         S = ca.SX.sym("s", n_loop)
-        Pc = ca.SX.sym("p", G * npar + n_pack)
+        Pc = ca.SX.sym("p", (G + G3) * npar + n_pack)
         xr, xi = S[:n], S[n:2 * n]
         dF1, dF2, F1, f1, f2 = (S[2 * n + 4 * k:2 * n + 4 * k + 4] for k in range(5))
         Br, Bi = ca.DM(B.real), ca.DM(B.imag)
@@ -206,7 +236,12 @@ class LoopModel:
         vfree = vr + Cvr @ xpr - Cvi @ xpi
         c0 = alpha * F1 + b1 * f1 + bm * f2
         v = vfree
-        if stops is None:
+        if third is not None:
+            fv, F, dF, tail, extra_in = _third_substep(
+                S[2 * n + 20:], dF1, vfree, c0, xpr, xpi, ms, ti if has_trav else None, g1, B,
+                De, b0, cbar, pg, grp, vk, stops, pidx, Pc, (G + G3) * npar, G * npar, npar,
+                td, tsp, h)
+        elif stops is None:
             for _ in range(NEWTON_ITERATIONS):
                 fs = [_pwl_sx(v[c], pg[grp[c]], vk) for c in range(4)]
                 fv = ca.vertcat(*[a for a, _ in fs])
@@ -256,8 +291,10 @@ class LoopModel:
             dF = F - cbar * v + stop_at(trav if _STOP_IMPLICIT else sfree)[0]
             extra_in = [sr]
         t0r, t0i = cmul(g1.real, g1.imag, Br @ dF, Bi @ dF)
+        if third is None:
+            tail = []
         substep = ca.Function("substep", [S, vr, *extra_in, Pc],
-                              [ca.vertcat(xpr + t0r, xpi + t0i, dF, dF1, F, fv, f1)])
+                              [ca.vertcat(xpr + t0r, xpi + t0i, dF, dF1, F, fv, f1, *tail)])
 
         # the metrics' part: (loop state, filter states, sums, the rig part's metric rows and
         # the filter's step response) -> (filter states, sums)
@@ -278,14 +315,14 @@ class LoopModel:
 
         # inputs per sample: the r fine shock velocities of the rig part (with stops: then its
         # r fine travels), its metric rows, the filter's step response
-        n_fine = 4 * r if stops is None else 8 * r
-        XP, U = ca.MX.sym("x", nx + G * npar + n_pack), ca.MX.sym("u", n_fine + nm + 1)
+        n_fine = 8 * r if has_trav else 4 * r
+        XP, U = ca.MX.sym("x", nx + (G + G3) * npar + n_pack), ca.MX.sym("u", n_fine + nm + 1)
         P = XP[nx:]
 
         def body(nsub):
             s = XP[:n_loop]
             for k in range(nsub):
-                more = [] if stops is None else [U[4 * r + 4 * k:4 * r + 4 * k + 4]]
+                more = [U[4 * r + 4 * k:4 * r + 4 * k + 4]] if has_trav else []
                 s = substep(s, U[4 * k:4 * k + 4], *more, P)
             rest = outputs(s, XP[n_loop:n_loop + 2 * ns * nm], XP[n_loop + 2 * ns * nm:nx],
                            U[n_fine:])
@@ -296,6 +333,9 @@ class LoopModel:
             key_parts += (repr([None if st is None else (st[0], st[1].tolist(), st[2].tolist())
                                 for st in stops]), repr(pidx), ti, STOP_SMOOTHING_M,
                           _STOP_IMPLICIT)
+        if third is not None:
+            key_parts += (repr(_third_key(td, tsp)), G3, n_pack, THIRD_NEWTON_ITERATIONS,
+                          ti if has_trav else ())
         key = _step_key(*key_parts)
         if key not in _STEP_CACHE:
             first, step = body(1), body(r)
@@ -318,7 +358,7 @@ class LoopModel:
         v_fine = rig.v_fine
         Uin = np.zeros((n_fine + nm + 1, N))
         fine = [v_fine]
-        if stops is not None:
+        if has_trav:
             fine.append(_rig_fine_rows(plant, ti, rig.u_fine, h))
         for j, a in enumerate(fine):
             Uin[4 * r * j:4 * r * j + 4, 0] = a[0]
@@ -329,6 +369,7 @@ class LoopModel:
         self.N, self.nm, self.names = N, nm, list(names)
         self._first, self._step, self._U = first, step, Uin
         self._nx, self._G, self._npar = nx, G, npar
+        self.n_params = (G + G3) * npar + n_pack
 
     def metrics(self, P):
         """Symbolic metrics (MX, shape (nm,)) of curve parameters `P` (MX)."""
@@ -342,6 +383,142 @@ class LoopModel:
         ss = float(np.sum(self._U[-1] ** 2))
         power = (zz - 2 * mean * zs + mean**2 * ss) / N
         return ca.sqrt(ca.fmax(power, 1e-300))
+
+
+def _third_parts(third, free_third, packer_index):
+    """The loop's third elements: dampers ``(row, curve, lag_s)`` (``curve`` the index of a
+    free group, or the fitted damper's PiecewiseLinear), the fitted heave springs ``(row,
+    contact_travel_m, x_m, f_n, packer)`` and the springs' packer indices."""
+    try:
+        dampers, springs = third
+    except (TypeError, ValueError):
+        raise PlannerError("optimize: third must be the loop's (dampers, springs) entry "
+                           "(planner.elements.SetupThird.entries)") from None
+    free = tuple(free_third)
+    names = [d.name for d in dampers]
+    unknown = [e for e in free if e not in names]
+    if unknown:
+        raise PlannerError(f"optimize: free third dampers {unknown} are not among the car's "
+                           f"third elements {names}; free only a declared damper")
+    td = []
+    for d in dampers:
+        lag = 0.0 if d.model is None else float(getattr(d.model, "lag_s", 0.0) or 0.0)
+        row = np.asarray(d.row, dtype=float)
+        if d.name in free:
+            td.append((row, free.index(d.name), lag))
+        elif d.model is not None:
+            td.append((row, d.model.to_pwl(), lag))
+    pidx = list(packer_index) if packer_index is not None else [None] * len(springs)
+    if len(pidx) != len(springs):
+        raise PlannerError(f"optimize: third_packer_index has {len(pidx)} entries for "
+                           f"{len(springs)} heave springs; give one per spring (or None)")
+    tsp = [(np.asarray(sp.row, dtype=float), float(sp.contact[0]),
+            np.asarray(sp.contact[1], dtype=float), np.asarray(sp.contact[2], dtype=float), k)
+           for sp, k in zip(springs, pidx) if sp.contact is not None]
+    return td, tsp, [k for sp, k in zip(springs, pidx) if sp.contact is not None]
+
+
+def _third_key(td, tsp):
+    """A repr-able summary of the loop's third elements (the step cache's key)."""
+    out = []
+    for row, curve, lag in td:
+        c = curve if isinstance(curve, int) else (
+            np.asarray(curve.v_knots_m_s, float).tolist(),
+            np.asarray(curve.f_knots_n, float).tolist(), float(curve.slope_below),
+            float(curve.slope_above))
+        out.append((row.tolist(), c, lag))
+    out += [(row.tolist(), s0, x.tolist(), f.tolist(), k) for row, s0, x, f, k in tsp]
+    return out
+
+
+def _third_substep(St, dF1, vfree, c0, xpr, xpi, ms, ti, g1, B, De, b0, cbar, pg, grp, vk, stops,
+                   pidx, Pc, pack0, third0, npar, td, tsp, h):
+    """The sub-step's solve with the car's third elements (see :class:`LoopModel`): the
+    corners' force deviations by Newton's method (velocities and travels follow them), the third
+    dampers' lags stepped as the shocks'.
+
+    Returns
+    -------
+    fv, F, dF : casadi.SX
+        The corner curves' forces, the shocks' forces, the corners' force deviations.
+    tail : list of casadi.SX
+        The third dampers' next loop state (``F``, ``f``, ``f[k-1]``).
+    extra_in : list of casadi.SX
+        The rig part's travels (an input) when the travels are unknowns.
+    """
+    nd = len(td)
+    Fe1, fe1, fe2 = St[:nd], St[nd:2 * nd], St[2 * nd:3 * nd]
+    ce, e0 = [], []
+    if nd:
+        al, b0e, b1e, bme = (np.atleast_1d(np.asarray(a, dtype=float)) for a in
+                             lag_hold_coefficients(np.array([lag for _, _, lag in td]), h))
+        ce = [float(al[i]) * Fe1[i] + float(b1e[i]) * fe1[i] + float(bme[i]) * fe2[i]
+              for i in range(nd)]
+        e0 = [float(b) for b in b0e]
+    params = []
+    for _, curve, _ in td:
+        if isinstance(curve, int):
+            params.append((Pc[third0 + curve * npar:third0 + (curve + 1) * npar], vk))
+        else:
+            params.append(([float(a) for a in curve.f_knots_n]
+                           + [float(curve.slope_below), float(curve.slope_above)],
+                           np.asarray(curve.v_knots_m_s, dtype=float)))
+    has_trav = ti is not None
+    extra_in, sfree, Dte = [], None, None
+    if has_trav:
+        Ct = ms.C[ti]
+        Dte = ca.DM(np.real(Ct @ (g1[:, None] * B)) + ms.D[ti])
+        sr = ca.SX.sym("sr", 4)
+        sfree = sr + ca.DM(Ct.real) @ xpr - ca.DM(Ct.imag) @ xpi
+        extra_in = [sr]
+    s0c = None if stops is None else [
+        None if st is None else (st[0] - Pc[pack0 + pidx[c]] if pidx[c] is not None else st[0])
+        for c, st in enumerate(stops)]
+    s0t = [s0 - Pc[pack0 + k] if k is not None else s0 for _, s0, _, _, k in tsp]
+
+    def forces(v, trav):
+        fs = [_pwl_sx(v[c], pg[grp[c]], vk) for c in range(4)]
+        fv = ca.vertcat(*[a for a, _ in fs])
+        sl = ca.vertcat(*[s for _, s in fs])
+        dF = c0 + b0 * fv - cbar * v
+        Av = ca.diag(b0 * sl - cbar)
+        fe, Fe = [], []
+        for i, (row, _, _) in enumerate(td):
+            f, s = _pwl_sx(ca.dot(ca.DM(row), v), *params[i])
+            Fi = ce[i] + e0[i] * f
+            dF = dF + ca.DM(row) * Fi
+            Av = Av + (e0[i] * s) * ca.DM(np.outer(row, row))
+            fe.append(f)
+            Fe.append(Fi)
+        Ag = None
+        if has_trav:
+            gd = [(0, 0) if s0c is None or s0c[c] is None else
+                  stop_force_sx(trav[c] - s0c[c], stops[c][1], stops[c][2]) for c in range(4)]
+            dF = dF + ca.vertcat(*[a for a, _ in gd])
+            Ag = ca.diag(ca.vertcat(*[b for _, b in gd]))
+            for j, (row, _, x, f, _) in enumerate(tsp):
+                g, dg = stop_force_sx(ca.dot(ca.DM(row), trav) - s0t[j], x, f)
+                dF = dF + ca.DM(row) * g
+                Ag = Ag + dg * ca.DM(np.outer(row, row))
+        return fv, dF, Av, Ag, fe, Fe
+
+    # Newton on the 4 corner force deviations (as the truth, ident.sim.third_loop), from the
+    # previous step's: the velocities and travels follow them through the hold's same-step
+    # weights, so the system stays 4 x 4 with springs (8 x 8 on velocities and travels
+    # compiled several times slower)
+    I4 = ca.DM.eye(4)
+    x = dF1
+    for _ in range(THIRD_NEWTON_ITERATIONS):
+        v = vfree + De @ x
+        trav = sfree + Dte @ x if has_trav else None
+        _, G, Av, Ag, _, _ = forces(v, trav)
+        J = I4 - Av @ De - (Ag @ Dte if has_trav else 0)
+        x = x - ca.solve(J, x - G)
+    v = vfree + De @ x
+    trav = sfree + Dte @ x if has_trav else None
+    fv, dF, _, _, fe, Fe = forces(v, trav)
+    tail = [ca.vertcat(*Fe), ca.vertcat(*fe), fe1] if nd else []
+    return fv, c0 + b0 * fv, dF, tail, extra_in
 
 
 #: Bump stops solved within the sub-step (True); False evaluates each stop at the travel

@@ -44,6 +44,12 @@ class CurveOptions:
     lag_s : float or sequence of float, optional
         The optimal shocks' lag [s]; default per group the mean lag of the baseline's
         shocks at its corners.
+    free_third : sequence of str
+        Third dampers (``heave_front``, ``heave_rear``, ``roll_front``, ``roll_rear``) of a
+        car with third elements whose curves are optimized with the corner curves (issue
+        38): a curve per element on the corner curves' knots, in the element's own velocity
+        and force, its lag the baseline damper's (:data:`planner.optimize.core.THIRD_ENVELOPE`
+        bounds it). Default none: the car's baseline third dampers, fixed.
 
     Notes
     -----
@@ -55,6 +61,7 @@ class CurveOptions:
     knots_m_s: object = QUANTILE_KNOTS
     linear: bool = False
     lag_s: object = None
+    free_third: tuple = ()
 
 
 @dataclass(frozen=True)

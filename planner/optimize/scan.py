@@ -195,7 +195,8 @@ def linear_objective(objective):
 
 
 def element_predictions(model, drive, setups, library, bump_stops, *, oversample=2,
-                        static_corner_load_n=None, chunk_size=32, third=None):
+                        static_corner_load_n=None, chunk_size=32, third=None,
+                        setup_third=None):
     """The spec's metrics of setups with the car's elements, in the time domain.
 
     :func:`ident.sim.closedloop.simulate_batch` with ``bump_stops=`` and
@@ -224,6 +225,9 @@ def element_predictions(model, drive, setups, library, bump_stops, *, oversample
         entry (:meth:`planner.elements.SetupThird.loop_third`); the table then adds the
         elements' motion metrics (``heave_travel_rms_front``, ...,
         :data:`ident.sim.metrics.THIRD_METRIC_NAMES`).
+    setup_third : list, optional
+        Per setup its own ``(dampers, springs)`` entry, or None for `third` (e.g. the
+        optimum with its free third dampers' curves).
 
     Returns
     -------
@@ -241,7 +245,8 @@ def element_predictions(model, drive, setups, library, bump_stops, *, oversample
                                bump_stops=list(bump_stops[a:a + chunk_size]),
                                static_corner_load_n=static_corner_load_n,
                                third=None if third is None
-                               else [third] * len(models[a:a + chunk_size]))
+                               else [third if own is None else own for own in
+                                     (setup_third or [None] * len(models))[a:a + chunk_size]])
         met = compute_metrics(batch.channels, fs=batch.fs_hz)
         cols = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in met.values.items()}
         cols.update({k: np.asarray(v, dtype=float) for k, v in batch.elements.items()})
@@ -255,7 +260,7 @@ def element_predictions(model, drive, setups, library, bump_stops, *, oversample
 
 def time_domain_scores(model, drives, setups, library, objective, baseline, weights,
                        oversample, aggregate, *, bump_stops=None, setup_stops=None,
-                       static_corner_load_n=None, third=None):
+                       static_corner_load_n=None, third=None, setup_third=None):
     """Verified scores of setups: :func:`planner.predict.predict_setups` per drive, scored
     against the baseline, aggregated over the drives.
 
@@ -286,6 +291,8 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
     third : tuple, optional
         The car's third elements, one ``(dampers, springs)`` entry every setup is simulated
         with (:func:`element_predictions`).
+    setup_third : dict of str -> tuple, optional
+        A setup's own third elements by its name (the optimum with its free third dampers).
 
     Returns
     -------
@@ -305,7 +312,9 @@ def time_domain_scores(model, drives, setups, library, objective, baseline, weig
                                         [own.get(s.name, bump_stops) for s in cand],
                                         oversample=oversample,
                                         static_corner_load_n=static_corner_load_n,
-                                        third=third)
+                                        third=third,
+                                        setup_third=None if not setup_third else
+                                        [setup_third.get(s.name) for s in cand])
         else:
             table = predict_setups(model, d, cand, library,
                                    loop=LoopOptions(oversample=oversample),

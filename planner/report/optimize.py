@@ -19,8 +19,8 @@ from openpyxl import Workbook
 from openpyxl.utils import get_column_letter
 
 from ident.data.channels import CORNERS
-from ident.data.third import AXLES, THIRD_ELEMENTS
 from ident.data.files import atomic_dir, png_metadata, write_csv
+from ident.data.third import AXLES, THIRD_ELEMENTS, element_row
 from ident.data.units import UNIT_LABELS, check_units, from_si, to_si
 from ident.models.library import ShockLibrary, write_shock_library
 from ident.models.shocks import format_number
@@ -110,8 +110,9 @@ def curves_figure(optimum, library, *, units="SI"):
     v_unit, f_unit = UNIT_LABELS[units]["velocity"], UNIT_LABELS[units]["force"]
     v_max = CURVE_V_MAX[units]
     G = len(optimum.space.groups)
-    fig = Figure(figsize=(5.5 * G, 4.6), layout="constrained")
-    axes = fig.subplots(1, G, squeeze=False)[0]
+    n_panels = G + len(optimum.third_curves)
+    fig = Figure(figsize=(5.5 * n_panels, 4.6), layout="constrained")
+    axes = fig.subplots(1, n_panels, squeeze=False)[0]
     v = np.linspace(-v_max, v_max, 241)  # display units
     v_si = to_si(v, "velocity", units)
 
@@ -163,6 +164,8 @@ def curves_figure(optimum, library, *, units="SI"):
                title=f"{name}: {', '.join(corners)}", xlim=(-v_max, v_max))
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8, loc="upper left")
+    for ax, (name, pwl) in zip(axes[G:], optimum.third_curves.items()):
+        _third_panel(ax, optimum, library, name, pwl, v, v_si, units, force)
     fig.suptitle(f"optimal curves (score {optimum.score:.4f}) and the crate; blue histogram: "
                  "the optimum's shock velocities; green: the forces the constraints allow at "
                  "the knots", fontsize=10)
@@ -186,6 +189,36 @@ def _third_columns(optimum):
     data.update({f"heave_spring_{a}": (car.get("heave_springs") or {}).get(a) or "none"
                  for a in AXLES if f"heave_{a}" in declared})
     return pd.DataFrame({c: [v] * len(index) for c, v in data.items()}, index=index)
+
+
+def _third_panel(ax, optimum, library, name, pwl, v, v_si, units, force):
+    """A free third damper's panel of :func:`curves_figure`: the optimum's curve against the
+    baseline's damper, over the element's velocity histogram (``m_e @ v``)."""
+    v_unit, f_unit = UNIT_LABELS[units]["velocity"], UNIT_LABELS[units]["force"]
+    mr = (optimum.settings.get("third") or {}).get("motion_ratios", {}).get(name)
+    if mr is not None:
+        row = element_row(name, mr)
+        ve = sum(row[k] * np.asarray(optimum.velocity_m_s[c]) for k, c in enumerate(CORNERS))
+        hist = ax.twinx()
+        hist.hist(from_si(ve, "velocity", units), bins=np.linspace(v[0], v[-1], 61),
+                  color="#d9e6f2", density=True)
+        hist.set_yticks([])
+        ax.set_zorder(hist.get_zorder() + 1)
+        ax.patch.set_visible(False)
+    base = optimum.table.loc[optimum.baseline.name].get(name)
+    if isinstance(base, str) and base in library:
+        ax.plot(v, force(library[base], v_si), color="tab:orange", lw=1.6,
+                label=f"baseline ({base})")
+    ax.plot(v, force(pwl, v_si), color="tab:blue", lw=2.2, label=f"optimum ({name})")
+    ax.plot(from_si(pwl.v_knots_m_s, "velocity", units), from_si(pwl.f_knots_n, "force", units),
+            "o", color="tab:blue", ms=4)
+    ax.axhline(0, color="0.5", lw=0.6)
+    ax.axvline(0, color="0.5", lw=0.6)
+    ax.set(xlabel=f"element velocity [{v_unit}] (compression +)",
+           ylabel=f"element force [{f_unit}]", title=f"{name} (third element)",
+           xlim=(v[0], v[-1]))
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
 
 
 def _setups_sheet(optimum, units):
