@@ -174,21 +174,24 @@ def curves_figure(optimum, library, *, units="SI"):
 
 def _third_columns(optimum):
     """The setups' third-element columns (``heave_front``, ... ``heave_spring_<axle>``; damper
-    and heave-spring ids, ``none`` where none): those the metrics carry, else the car's
-    baseline's (``settings["third"]``), which every verification fitted; indexed as
-    ``optimum.table``, no columns for a car without third elements."""
+    and heave-spring ids, ``none`` where none), indexed as ``optimum.table``: the optimizer's
+    table's own where it has them (a free third damper's optimum), else those the metrics
+    carry, else the car's baseline's (``settings["third"]``), which every verification
+    fitted; no columns for a car without third elements."""
     index = optimum.table.index
-    met = optimum.metrics[next(iter(optimum.metrics))]
-    cols = [c for c in THIRD_COLUMNS if c in met.columns]
-    if cols:
-        return met.loc[index, cols]
     car = optimum.settings.get("third") or {}
     declared = car.get("motion_ratios") or {}
     data = {e: (car.get("dampers") or {}).get(e) or "none"
             for e in THIRD_ELEMENTS if e in declared}
     data.update({f"heave_spring_{a}": (car.get("heave_springs") or {}).get(a) or "none"
                  for a in AXLES if f"heave_{a}" in declared})
-    return pd.DataFrame({c: [v] * len(index) for c, v in data.items()}, index=index)
+    out = pd.DataFrame({c: [v] * len(index) for c, v in data.items()}, index=index)
+    met = optimum.metrics[next(iter(optimum.metrics))]
+    for source in (met.loc[index], optimum.table):
+        for c in THIRD_COLUMNS:
+            if c in source.columns:
+                out[c] = source[c].to_numpy()
+    return out[[c for c in THIRD_COLUMNS if c in out.columns]]
 
 
 def _third_panel(ax, optimum, library, name, pwl, v, v_si, units, force):
@@ -225,8 +228,8 @@ def _setups_sheet(optimum, units):
     first = next(iter(optimum.metrics))
     met = optimum.metrics[first].loc[optimum.table.index]
     metric_cols = [c for c in met.columns if c in METRIC_NAMES]
-    t = optimum.table.copy()
     third = _third_columns(optimum)
+    t = optimum.table.drop(columns=list(third.columns), errors="ignore")
     at = max((t.columns.get_loc(c) + 1 for c in CORNERS if c in t.columns), default=0)
     for j, c in enumerate(third.columns):  # setup columns, after the corners' shocks
         t.insert(at + j, c, third[c].to_numpy())
