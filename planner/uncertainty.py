@@ -116,6 +116,7 @@ __all__ = [
     "frf_relative_error",
     "interpolate",  # from planner.plant
     "light_modes",
+    "noise_bias_deviation",
     "prediction_uncertainty",
     "random_error_scale",
     "run_length_scale",
@@ -176,7 +177,7 @@ LIGHT_MODE_CLUSTER_HZ = 0.5
 #: deviations times 2^(+-1/4)).
 CV_LENGTH_FACTOR = 2.0 ** 0.25
 #: The systematic error terms of an interval, in :attr:`Uncertainty.components`.
-SYSTEMATIC_TERMS = ("fit", "reduction", "discretization")
+SYSTEMATIC_TERMS = ("fit", "reduction", "discretization", "input_noise")
 #: The columns :func:`score_intervals` gives a ranking table (``docs/formats.md``).
 SCORE_INTERVAL_COLUMNS = ("score_lo", "score_hi", "diff_best_lo", "diff_best_hi",
                           "diff_baseline_lo", "diff_baseline_hi", "verdict",
@@ -239,6 +240,38 @@ def cross_validation_deviations(frf, f_hz):
         return None
     f = np.clip(np.asarray(f_hz, dtype=float), grid[0], grid[-1])  # the end values beyond
     return embed_inputs(interpolate(grid, dev.astype(complex), f), frf.input_names, axis=2)
+
+
+def noise_bias_deviation(frf, f_hz):
+    """The FRF's measured bias from the noise on its shock-force inputs at `f_hz`, or None.
+
+    ``frf.noise_bias`` (written by identification, :func:`ident.identify.crossval.
+    noise_bias`): the relative bias ``b`` of the estimate (``H = H_true (1 + b)``),
+    interpolated at `f_hz` and embedded in the 11 inputs of the screening.
+
+    Parameters
+    ----------
+    frf : ident.identify.frf.Frf
+    f_hz : ndarray, shape (n,)
+        Frequencies [Hz].
+
+    Returns
+    -------
+    ndarray of complex, shape (n_out, 11, n), or None
+        None where the FRF has none (a model file from before it, a session without
+        measured shock forces, or identified with ``cross_validate=False``).
+    """
+    b = getattr(frf, "noise_bias", None)
+    cv = (getattr(frf, "settings", None) or {}).get("cross_validation") or {}
+    if b is None or "f_hz" not in cv:
+        return None
+    grid = np.asarray(cv["f_hz"], dtype=float)
+    if b.shape[:2] != frf.H.shape[:2] or b.shape[-1] != grid.size:
+        log.warning("the model's noise bias does not match its FRF (%s against %s); "
+                    "the intervals leave it out", b.shape, frf.H.shape)
+        return None
+    f = np.clip(np.asarray(f_hz, dtype=float), grid[0], grid[-1])
+    return embed_inputs(interpolate(grid, b.astype(complex), f), frf.input_names)
 
 
 def cross_validated_scale(cv_deviations, draw_deviations):
@@ -516,6 +549,13 @@ def prediction_uncertainty(model, drive, setups, library, *, draws=UncertaintyOp
         with np.errstate(divide="ignore", invalid="ignore"):
             components["fit"] = frame(base / measured - 1)
             components["reduction"] = frame(red / base - 1)
+    bias = noise_bias_deviation(frf, fb)
+    if bias is not None:
+        # the estimate's bias from the noise on its dF inputs (errors in variables: the
+        # same in every time block, so not in the cross-validation): the model against
+        # the same model with the bias taken out, H (1 - b) ~ H / (1 + b)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            components["input_noise"] = frame(base / screen(H_nom * (1 - bias)) - 1)
     if predictions is not None:
         finer = predict_setups(model, drive, setups, library,
                                loop=replace(loop, oversample=2 * loop.oversample),

@@ -26,7 +26,8 @@ Writes into ``--out``: ``cv_cases.csv`` (one row per identification), ``cv_cars.
 (per car, the mean over its identifications), ``cases/*.npz`` (the arrays of each
 identification; reused when present, so that an interrupted run resumes) and
 ``cases/*_model.npz`` (the identified models: delete the arrays to compute the intervals
-anew on the same identifications).
+anew on the same identifications; a model identified before the noise bias was measured
+gets it measured on its session, simulated again, and is saved with it).
 
     python studies/interval_calibration_cv.py --out DIR [--family held-out] [--seeds 2]
 """
@@ -45,6 +46,7 @@ import numpy as np
 import pandas as pd
 
 from ident.data.drive import make_track_drive
+from ident.identify.crossval import noise_bias
 from ident.identify.model import load_model
 from ident.identify.pipeline import identify_session
 from ident.models.library import read_shock_library
@@ -164,6 +166,17 @@ def run_case(name, spec, k, *, drive_s, n_setups, cache, formula=False):
     if model_path.is_file():  # the identification of an earlier run (the intervals anew)
         model = load_model(model_path)
         t1 = t2 = time.perf_counter()
+        if model.frf.noise_bias is None and model.frf.cv_deviation is not None:
+            # identified before the noise bias was measured: measure it on the same session
+            # (seeded: simulated again) as identification now does, and keep it
+            session = simulate_session(study_plan(spec, SEED0 + k), vehicle)
+            t1 = time.perf_counter()
+            grid = np.asarray(model.frf.settings["cross_validation"]["f_hz"], dtype=float)
+            frf = replace(model.frf, noise_bias=noise_bias(session, model.frf, grid))
+            frf.settings["cross_validation"]["noise_bias"] = frf.noise_bias is not None
+            model = replace(model, frf=frf)
+            t2 = time.perf_counter()
+            model.save(model_path, overwrite=True)
     else:
         session = simulate_session(study_plan(spec, SEED0 + k), vehicle)
         t1 = time.perf_counter()

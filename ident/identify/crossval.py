@@ -56,8 +56,9 @@ import warnings
 
 import numpy as np
 
+from ident.data.channels import CORNERS
 from ident.identify.condition import condition_frf
-from ident.identify.frf import estimate_frf
+from ident.identify.frf import estimate_frf, shock_force_deviation
 
 __all__ = [
     "CV_BLOCKS",
@@ -67,11 +68,17 @@ __all__ = [
     "block_frfs",
     "cross_validate_frf",
     "cross_validation_ratio",
+    "noise_bias",
+    "noise_records",
+    "noisier_sessions",
     "split_session",
 ]
 
 log = logging.getLogger(__name__)
 
+#: A noise record below this fraction of the corner's force (RMS) is round-off: a session
+#: without sensor noise, which has no noise bias to measure.
+ROUND_OFF = 1e-9
 #: Time blocks of the cross-validation: two halves of every run (the two estimates together
 #: cost about one full estimate). Shorter blocks estimate differently, not only noisier: the
 #: LPM's local window is a number of lines, so it is ``K`` times wider in Hz on a block of
@@ -146,6 +153,11 @@ def block_frfs(session, frf, *, blocks=CV_BLOCKS):
     ndarray of complex, shape (blocks, n_out, n_in, n_f)
         ``H_k`` on ``frf.f_hz``.
     """
+    return np.stack([_estimate_like(sub, frf) for sub in split_session(session, blocks)])
+
+
+def _estimate_like(session, frf):
+    """The conditioned FRF of `session` with `frf`'s settings, on ``frf.f_hz``."""
     s = frf.settings or {}
     cond = dict(s.get("conditioning") or {})
     cond.pop("poor_pairs", None)
@@ -156,13 +168,10 @@ def block_frfs(session, frf, *, blocks=CV_BLOCKS):
                                                          "lpm_coherence_dof")):
             if s.get(key) is not None:
                 est[name] = s[key]
-    out = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for sub in split_session(session, blocks):
-            fk = condition_frf(estimate_frf(sub, **est), **cond)
-            out.append(_on_grid(fk.f_hz, fk.H, frf.f_hz))
-    return np.stack(out)
+        fk = condition_frf(estimate_frf(session, **est), **cond)
+    return _on_grid(fk.f_hz, fk.H, frf.f_hz)
 
 
 def block_deviations(frf, H_blocks, f_hz):
@@ -195,7 +204,7 @@ def block_deviations(frf, H_blocks, f_hz):
                      for ek in e]).astype(np.complex64)
 
 
-def cross_validate_frf(session, frf, *, blocks=CV_BLOCKS):
+def cross_validate_frf(session, frf, *, blocks=CV_BLOCKS, noise=True):
     """The session's cross-validation of its conditioned FRF, kept with the FRF.
 
     Parameters
@@ -205,13 +214,18 @@ def cross_validate_frf(session, frf, *, blocks=CV_BLOCKS):
     frf : ident.identify.frf.Frf
         Conditioned.
     blocks : int
+    noise : bool
+        Also measure the bias from the noise on the shock-force inputs
+        (:func:`noise_bias`, two more estimates of the FRF), which no time block sees.
 
     Returns
     -------
     ident.identify.frf.Frf
         `frf` with ``cv_deviation`` (:func:`block_deviations` on ``CV_GRID``
-        log-spaced frequencies) and ``settings["cross_validation"]``
-        (:func:`cross_validation_ratio`, plus ``f_hz``: the deviations' frequencies).
+        log-spaced frequencies), ``noise_bias`` (:func:`noise_bias` on the same
+        frequencies, or None) and ``settings["cross_validation"]``
+        (:func:`cross_validation_ratio`, plus ``f_hz``: the deviations' frequencies, and
+        ``noise_bias``: whether it was measured).
     """
     H_blocks = block_frfs(session, frf, blocks=blocks)
     hi = min(CV_GRID_HZ[1], float(frf.f_hz[-1]))
@@ -219,8 +233,11 @@ def cross_validate_frf(session, frf, *, blocks=CV_BLOCKS):
     grid = np.geomspace(lo, hi, CV_GRID)
     doc = cross_validation_ratio(frf, H_blocks)
     doc["f_hz"] = [float(f) for f in np.round(grid, 6)]
+    bias = noise_bias(session, frf, grid) if noise else None
+    doc["noise_bias"] = bias is not None
     return dataclasses.replace(frf, settings=dict(frf.settings, cross_validation=doc),
-                               cv_deviation=block_deviations(frf, H_blocks, grid))
+                               cv_deviation=block_deviations(frf, H_blocks, grid),
+                               noise_bias=bias)
 
 
 def _pooled(num, den, axis):
@@ -285,3 +302,125 @@ def cross_validation_ratio(frf, H_blocks, *, band_edges_hz=CV_BAND_EDGES_HZ):
             "ratio": np.round(ratio, 4).tolist(), "ratio_all": round(r_all, 4),
             "ratio_pair": np.round(r_pair, 4).tolist(),
             "ratio_band": np.round(r_band, 4).tolist()}
+
+
+def noise_records(session, cbar_n_s_m):
+    """Per corner, a record of the noise on its shock-force deviation ``dF``.
+
+    Where a run's shock at a corner is linear at ``c_bar`` (the baseline's), ``dF`` is
+    exactly 0 (:func:`ident.identify.frf.shock_force_deviation`) and the measured
+    ``F - c_bar v`` is what the sensors add to it (their noise, and the real shock's
+    departure from its nominal curve): the error the ``dF`` inputs carry where the
+    shock is swapped, measured on the session itself.
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+    cbar_n_s_m : array_like, shape (4,)
+
+    Returns
+    -------
+    dict
+        Corner -> ndarray (n,) [N], the runs' records end to end (means removed); a
+        corner is missing where no run has its force measured (``shock_force_XX``) at a
+        ``c_bar``-linear shock.
+    """
+    cbar = np.asarray(cbar_n_s_m, dtype=float)
+    rec = {c: [] for c in CORNERS}
+    for run in session.runs:
+        _, dF = shock_force_deviation(run, session.shocks, cbar)
+        for i, c in enumerate(CORNERS):
+            if f"shock_force_{c}" in run.channels and not np.any(dF[i]):
+                rec[c].append(run.dynamic(f"shock_force_{c}")
+                              - cbar[i] * run.dynamic(f"shock_velocity_{c}"))
+    return {c: np.concatenate(r) for c, r in rec.items() if r}
+
+
+def noisier_sessions(session, cbar_n_s_m):
+    """Two copies of `session` whose swapped corners' forces carry the noise once more.
+
+    At every corner of a run whose ``dF`` is not 0 and whose force is measured,
+    ``shock_force_XX`` gets ``+n`` in the first copy and ``-n`` in the second, ``n`` the
+    next stretch of the corner's :func:`noise_records` (taken in turn, cyclically).
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+    cbar_n_s_m : array_like, shape (4,)
+
+    Returns
+    -------
+    tuple of two ident.data.session.Session, or None
+        None where no corner can be given any (no record, no swapped corner with a
+        measured force, or records that are all zero: noise-free sensors).
+    """
+    cbar = np.asarray(cbar_n_s_m, dtype=float)
+    records = {}
+    for c, r in noise_records(session, cbar).items():
+        F = np.concatenate([run.dynamic(f"shock_force_{c}") for run in session.runs
+                            if f"shock_force_{c}" in run.channels])
+        if np.std(r) > ROUND_OFF * np.std(F):  # else noise-free sensors: nothing to add
+            records[c] = r
+    plus, minus, added, offset = [], [], 0, {c: 0 for c in CORNERS}
+    for run in session.runs:
+        _, dF = shock_force_deviation(run, session.shocks, cbar)
+        ch_p, ch_m = dict(run.channels), dict(run.channels)
+        for i, c in enumerate(CORNERS):
+            name = f"shock_force_{c}"
+            if not np.any(dF[i]) or name not in run.channels or c not in records:
+                continue
+            r = records[c]
+            idx = (offset[c] + np.arange(run.n_samples)) % r.size  # the next stretch
+            offset[c] = int(idx[-1] + 1) % r.size
+            ch_p[name] = run.channels[name] + r[idx]
+            ch_m[name] = run.channels[name] - r[idx]
+            added += 1
+        plus.append(dataclasses.replace(run, channels=ch_p))
+        minus.append(dataclasses.replace(run, channels=ch_m))
+    if not added:
+        return None
+    return (dataclasses.replace(session, runs=tuple(plus)),
+            dataclasses.replace(session, runs=tuple(minus)))
+
+
+def noise_bias(session, frf, f_hz):
+    """The bias of the FRF from the noise on its shock-force inputs, measured by adding it.
+
+    The ``dF`` inputs are computed from measured forces and velocities, so their sensors'
+    noise is noise on *inputs* (errors in variables): it biases the estimate (toward
+    zero, and through whatever the regression shares with them) the same way in every
+    time block, which the cross-validation cannot see. Its size is measured as in
+    simulation-extrapolation: the FRF is estimated again (with `frf`'s settings) with the
+    swapped corners' forces carrying the noise once more, ``+n`` and ``-n``
+    (:func:`noise_records`: the session's own ``F - c_bar v`` where ``dF`` is 0). To first
+    order the bias grows with the noise's variance, so the mean of the two estimates less
+    ``H`` is the bias of ``H`` itself, and the terms odd in the added noise (its random
+    error) cancel between ``+n`` and ``-n``.
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+        The session `frf` was estimated from.
+    frf : ident.identify.frf.Frf
+        Conditioned.
+    f_hz : ndarray, shape (n,)
+        Frequencies to keep it at [Hz].
+
+    Returns
+    -------
+    ndarray of complex64, shape (n_out, n_in, n) or None
+        ``(mean(H+, H-) - H) / H``: the relative bias of the estimate (0 where ``H`` is
+        0); None where the session has no measured force at a ``c_bar``-linear shock
+        (nothing to measure the noise by) or no swapped corner with a measured force.
+    """
+    pair = noisier_sessions(session, frf.cbar_n_s_m)
+    if pair is None:
+        log.info("noise bias: no measured shock force at a c_bar-linear shock, no swapped "
+                 "corner with one, or no noise on them: not measured")
+        return None
+    H2 = 0.5 * (_estimate_like(pair[0], frf) + _estimate_like(pair[1], frf))
+    H = frf.H
+    with np.errstate(invalid="ignore", divide="ignore"):
+        b = np.where(np.abs(H) > 0, (H2 - H) / np.where(np.abs(H) > 0, H, 1.0), 0.0)
+    b = np.where(np.isfinite(b), b, 0.0)
+    return _on_grid(frf.f_hz, b, np.asarray(f_hz, dtype=float)).astype(np.complex64)
