@@ -104,6 +104,7 @@ __all__ = [
     "RANDOM_ERROR_SCALE",
     "REFERENCE_RUN_S",
     "SCORE_INTERVAL_COLUMNS",
+    "SIGNED_TERMS",
     "SYSTEMATIC_TERMS",
     "FrfPlant",  # from planner.plant
     "ScoreErrors",
@@ -178,6 +179,10 @@ LIGHT_MODE_CLUSTER_HZ = 0.5
 CV_LENGTH_FACTOR = 2.0 ** 0.25
 #: The systematic error terms of an interval, in :attr:`Uncertainty.components`.
 SYSTEMATIC_TERMS = ("fit", "reduction", "discretization", "input_noise")
+#: Systematic terms that are measured biases, sign included (the same in repeated
+#: identifications): an interval extends toward them linearly (it holds the prediction's
+#: interval and the same interval with the bias taken out) instead of in quadrature.
+SIGNED_TERMS = ("input_noise",)
 #: The columns :func:`score_intervals` gives a ranking table (``docs/formats.md``).
 SCORE_INTERVAL_COLUMNS = ("score_lo", "score_hi", "diff_best_lo", "diff_best_hi",
                           "diff_baseline_lo", "diff_baseline_hi", "verdict",
@@ -565,7 +570,9 @@ def prediction_uncertainty(model, drive, setups, library, *, draws=UncertaintyOp
         with np.errstate(divide="ignore", invalid="ignore"):
             components["discretization"] = frame(_RICHARDSON_H3 * (p1 - p2) / p1)
     lo, hi = combine_terms(lo_r, hi_r, {k: components[k].to_numpy() for k in SYSTEMATIC_TERMS
-                                        if k in components})
+                                        if k in components and k not in SIGNED_TERMS},
+                           signed={k: components[k].to_numpy() for k in SIGNED_TERMS
+                                   if k in components})
     light = light_modes(model, band_hz=band_hz)
     if len(light):
         log.warning("%s has lightly damped modes in the metric band (%s): its FRF is biased "
@@ -652,7 +659,7 @@ def light_modes(model, *, band_hz=(1.0, 20.0), max_zeta=LIGHT_DAMPING_ZETA,
     return pd.DataFrame(rows) if rows else empty
 
 
-def combine_terms(random_lo, random_hi, systematic, *, random_factor=1.0):
+def combine_terms(random_lo, random_hi, systematic, *, random_factor=1.0, signed=None):
     """An interval's bounds from its random part and its systematic terms.
 
     The random part's bounds (ratios to the prediction) are first stretched
@@ -674,6 +681,11 @@ def combine_terms(random_lo, random_hi, systematic, *, random_factor=1.0):
         the random part at ``f`` times the FRF's errors (a draw's metric is
         linear in its FRF error to first order); :mod:`studies.interval_calibration`
         fits the calibrated scale this way.
+    signed : mapping of str to array_like, shape (...), optional
+        Measured biases ``d`` (the prediction over the truth, less 1; NaN counts as 0):
+        the interval is widened toward the truth they point to, linearly, after the
+        quadrature: ``lo - max(d, 0)`` and ``hi - min(d, 0)`` (it holds the interval
+        and the same interval with the biases taken out).
 
     Returns
     -------
@@ -692,7 +704,12 @@ def combine_terms(random_lo, random_hi, systematic, *, random_factor=1.0):
     sys2 = sum((np.nan_to_num(np.asarray(d, dtype=float)) ** 2 for d in systematic.values()),
                np.zeros(np.broadcast(lo_r, hi_r).shape))
     up, down = np.maximum(hi_r - 1.0, 0.0), np.maximum(1.0 - lo_r, 0.0)
-    return lo_r - (np.sqrt(down**2 + sys2) - down), hi_r + np.sqrt(up**2 + sys2) - up
+    lo, hi = lo_r - (np.sqrt(down**2 + sys2) - down), hi_r + np.sqrt(up**2 + sys2) - up
+    if signed:
+        bias = sum((np.nan_to_num(np.asarray(d, dtype=float)) for d in signed.values()),
+                   np.zeros(lo.shape))
+        lo, hi = lo - np.maximum(bias, 0.0), hi - np.minimum(bias, 0.0)
+    return lo, hi
 
 
 @dataclass(frozen=True, eq=False)
@@ -843,8 +860,12 @@ def difference_interval(errors, a, b):
         else:
             lo_r, hi_r = nom.copy(), nom.copy()
         # combine_terms works on ratios about 1: the bounds as offsets from the nominal
+        cols = list(errors.systematic.columns)
         lo, hi = combine_terms(1.0 + lo_r - nom, 1.0 + hi_r - nom,
-                               {j: sysm[:, j] for j in range(sysm.shape[1])})
+                               {k: sysm[:, j] for j, k in enumerate(cols)
+                                if k not in SIGNED_TERMS},
+                               signed={k: sysm[:, j] for j, k in enumerate(cols)
+                                       if k in SIGNED_TERMS})
     lo, hi = lo - 1.0 + nom, hi - 1.0 + nom
     bad = ~np.isfinite(nom)
     lo[bad], hi[bad] = np.nan, np.nan

@@ -59,8 +59,10 @@ from planner.predict import predict_setups
 from planner.setups import Setup, enumerate_setups
 from planner.options import UncertaintyOptions
 from planner.uncertainty import (
+    SIGNED_TERMS,
     SYSTEMATIC_TERMS,
     ScoreErrors,
+    combine_terms,
     prediction_uncertainty,
     random_error_scale,
     score_errors,
@@ -230,9 +232,11 @@ def case_errors(case):
     """The case's :class:`planner.uncertainty.ScoreErrors` (setup names s0, s1, ...)."""
     n = case["score"].size
     names = [f"s{i}" for i in range(n)]
+    terms = [t for t in SYSTEMATIC_TERMS if t in case]  # score_errors' order of the shifts
     return ScoreErrors(nominal=pd.Series(case["score"], index=names),
                        draws=pd.DataFrame(case["score_draws"], index=names),
-                       systematic=pd.DataFrame(case["score_systematic"], index=names),
+                       systematic=pd.DataFrame(case["score_systematic"], index=names,
+                                               columns=terms),
                        quantiles=tuple(case["quantiles"]),
                        feasible=pd.Series(case["feasible"].astype(bool), index=names),
                        baseline="s0")
@@ -240,7 +244,12 @@ def case_errors(case):
 
 def evaluate(case, rng):
     """One identification's row: coverages, widths, errors, the verdict's record."""
-    P, K, lo, hi = case["P"], case["K"], case["lo"], case["hi"]
+    P, K = case["P"], case["K"]
+    # the bounds from the stored parts, as prediction_uncertainty combines them
+    lo, hi = combine_terms(case["random_lo"], case["random_hi"],
+                           {t: case[t] for t in SYSTEMATIC_TERMS
+                            if t in case and t not in SIGNED_TERMS},
+                           signed={t: case[t] for t in SIGNED_TERMS if t in case})
     inside = (K >= P * lo) & (K <= P * hi)
     errors = case_errors(case)
     names = list(errors.nominal.index)

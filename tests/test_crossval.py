@@ -25,6 +25,16 @@ RTOL_RATIO = 0.05
 #: Run length of the noisy 4-post session [s] (short: the test's cost; the bias from the
 #: noise on the dF inputs does not shrink with the record, its random error does).
 NOISY_RUN_S = 100.0
+#: Sensor noise of the noisy session (a fraction of each channel's RMS).
+NOISE = 0.02
+#: Known sensor noise added to a noise-free session: velocity [m/s] and force [N].
+SIGMA_V_M_S, SIGMA_F_N = 0.01, 25.0
+#: The sensors' noise measured from F - c_bar v: 4 runs of 100 s at c_bar per corner. The
+#: velocity's comes from the covariance of that noise with the measured velocity, whose
+#: signal is much larger than its noise: measured 0 to 12 % off.
+RTOL_SENSOR_NOISE = 0.2
+#: The variance of F - c_bar v itself (tens of thousands of samples): about 1 %.
+RTOL_DF_NOISE = 0.03
 #: Band where the paper car's body modes put most of the metrics' weight [Hz].
 BODY_BAND_HZ = (2.0, 4.0)
 #: The measured noise bias against the estimate's error in the body band, the dF columns
@@ -128,8 +138,8 @@ def noisy_four_post(paper_plan):
     from ident.sim.virtual_rig import simulate_session
 
     runs = tuple(replace(r, duration_s=NOISY_RUN_S) for r in paper_plan.runs)
-    session = simulate_session(replace(paper_plan, rig="4-post", runs=runs, noise=0.02,
-                                       input_noise=0.005))
+    session = simulate_session(replace(paper_plan, rig="4-post", runs=runs, noise=NOISE,
+                                       input_noise=NOISE / 4))
     frf = condition_frf(estimate_frf(session))
     return session, frf
 
@@ -161,28 +171,59 @@ def test_noise_records_are_the_force_noise_where_df_is_zero(noisy_four_post, fou
     assert noisier_sessions(four_post_session, frf.cbar_n_s_m) is None
 
 
+def test_sensor_noise_known_answer(four_post_session, rng):
+    """White noise of known size added to every velocity and force of a noise-free
+    session is what sensor_noise measures (from F - c_bar v where dF is 0)."""
+    from ident.identify.crossval import sensor_noise
+    from ident.identify.frf import baseline_damping
+
+    sizes = {"shock_velocity": SIGMA_V_M_S, "shock_force": SIGMA_F_N}
+    runs = []
+    for run in four_post_session.runs:
+        ch = dict(run.channels)
+        for name in ch:
+            kind = name.rpartition("_")[0]
+            if kind in sizes:
+                ch[name] = ch[name] + sizes[kind] * rng.standard_normal(run.n_samples)
+        runs.append(replace(run, channels=ch))
+    noisy = replace(four_post_session, runs=tuple(runs))
+    cbar = baseline_damping(noisy)
+    sigma = sensor_noise(noisy, cbar)
+    assert set(sigma) == {"LF", "RF", "LR", "RR"}
+    for (c, (s_v, s_f)), cb in zip(sigma.items(), cbar):
+        assert s_v == pytest.approx(SIGMA_V_M_S, rel=RTOL_SENSOR_NOISE), c
+        # the noise of dF, F - c_bar v, is measured whole; the force's share inherits the
+        # velocity's error times c_bar^2
+        assert s_f**2 + (cb * s_v) ** 2 == pytest.approx(
+            SIGMA_F_N**2 + (cb * SIGMA_V_M_S) ** 2, rel=RTOL_DF_NOISE), c
+        assert s_f == pytest.approx(SIGMA_F_N, rel=RTOL_SENSOR_NOISE), c
+
+
 def test_noisier_sessions_add_the_noise_at_swapped_corners_only(noisy_four_post):
-    """+n and -n on the forces of swapped corners; every other channel as measured."""
-    from ident.identify.crossval import noisier_sessions
+    """+n and -n on the velocity and the force of swapped corners, of the sensors' size;
+    every other channel as measured."""
+    from ident.identify.crossval import noisier_sessions, sensor_noise
     from ident.identify.frf import shock_force_deviation
 
     session, frf = noisy_four_post
+    sigma = sensor_noise(session, frf.cbar_n_s_m)
     plus, minus = noisier_sessions(session, frf.cbar_n_s_m)
     changed = 0
     for run, p, m in zip(session.runs, plus.runs, minus.runs):
         _, dF = shock_force_deviation(run, session.shocks, frf.cbar_n_s_m)
         for name, x in run.channels.items():
-            corner = name.rpartition("_")[2]
-            swapped = (name.startswith("shock_force_")
+            kind, _, corner = name.rpartition("_")
+            swapped = (kind in ("shock_force", "shock_velocity")
                        and np.any(dF[("LF", "RF", "LR", "RR").index(corner)]))
             if swapped:
                 n = p.channels[name] - x
                 assert_allclose(m.channels[name] - x, -n, atol=1e-9)
-                assert np.std(n) > 0
+                size = sigma[corner][0 if kind == "shock_velocity" else 1]
+                assert np.std(n) == pytest.approx(size, rel=RTOL_SENSOR_NOISE)
                 changed += 1
             else:
                 assert np.array_equal(p.channels[name], x) and np.array_equal(m.channels[name], x)
-    assert changed >= 4  # the four swap runs
+    assert changed >= 8  # the four swap runs' velocity and force
 
 
 def test_noise_bias_against_the_known_car(noisy_four_post, paper_vehicle):

@@ -29,6 +29,7 @@ from planner.uncertainty import (
     difference_interval,
     frf_relative_error,
     light_modes,
+    noise_bias_deviation,
     prediction_uncertainty,
     random_error_scale,
     score_errors,
@@ -406,6 +407,37 @@ def test_random_part_sized_by_the_cross_validation(known_plant, track_drive, dem
     bad = replace(bad, cv_deviation=bad.cv_deviation[:, :1])
     assert cross_validation_deviations(bad, [1.0, 2.0]) is None
     assert cross_validation_deviations(frf, [1.0, 2.0]) is None
+
+
+def test_noise_bias_is_a_signed_systematic_term(known_plant, track_drive, demo_library,
+                                                few_setups):
+    """A model whose FRF carries its measured noise bias gets the systematic term
+    input_noise: zero for a zero bias; for an estimate biased low on every pair (b < 0:
+    the bias-corrected response is larger) the model's metrics are below the corrected
+    ones in every setup (the term is negative) and the interval wider than without it; a
+    bias of the wrong shape is left out."""
+    frf = _cv_frf(_frf(known_plant, 0.99), [0.01, -0.01])
+    grid = np.asarray(frf.settings["cross_validation"]["f_hz"])
+    opts = UncertaintyOptions(n_draws=8)
+
+    def unc(b):
+        f = replace(frf, noise_bias=None if b is None else
+                    (b * np.ones(frf.H.shape[:2] + (grid.size,))).astype(np.complex64))
+        return prediction_uncertainty(SimpleNamespace(frf=f), track_drive, few_setups,
+                                      demo_library, draws=opts)
+
+    none, zero, low = unc(None), unc(0.0), unc(-0.02)
+    assert "input_noise" not in none.components and "input_noise" not in none.settings["terms"]
+    assert zero.settings["terms"][-1] == "input_noise"
+    assert_allclose(zero.components["input_noise"].to_numpy(), 0.0, atol=RTOL_EXACT)
+    assert_allclose(zero.ratio_hi.to_numpy(), none.ratio_hi.to_numpy(), rtol=RTOL_EXACT)
+    term = low.components["input_noise"].to_numpy()
+    assert np.all(term < 0)
+    assert np.all((low.ratio_hi - low.ratio_lo).to_numpy() > (none.ratio_hi
+                                                              - none.ratio_lo).to_numpy())
+    bad = replace(frf, noise_bias=np.zeros((1, 1, grid.size), np.complex64))
+    assert noise_bias_deviation(bad, [1.0, 2.0]) is None
+    assert noise_bias_deviation(frf, [1.0, 2.0]) is None
 
 
 def test_cross_validated_scale_pools_metrics_and_skips_silent_ones():

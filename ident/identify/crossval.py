@@ -71,6 +71,7 @@ __all__ = [
     "noise_bias",
     "noise_records",
     "noisier_sessions",
+    "sensor_noise",
     "split_session",
 ]
 
@@ -79,6 +80,8 @@ log = logging.getLogger(__name__)
 #: A noise record below this fraction of the corner's force (RMS) is round-off: a session
 #: without sensor noise, which has no noise bias to measure.
 ROUND_OFF = 1e-9
+#: Seed of the noise added to measure the noise bias (:func:`noisier_sessions`).
+NOISE_SEED = 20240
 #: Time blocks of the cross-validation: two halves of every run (the two estimates together
 #: cost about one full estimate). Shorter blocks estimate differently, not only noisier: the
 #: LPM's local window is a number of lines, so it is ``K`` times wider in Hz on a block of
@@ -336,12 +339,15 @@ def noise_records(session, cbar_n_s_m):
     return {c: np.concatenate(r) for c, r in rec.items() if r}
 
 
-def noisier_sessions(session, cbar_n_s_m):
-    """Two copies of `session` whose swapped corners' forces carry the noise once more.
+def sensor_noise(session, cbar_n_s_m):
+    """Per corner, the white noise of its shock velocity and force sensors.
 
-    At every corner of a run whose ``dF`` is not 0 and whose force is measured,
-    ``shock_force_XX`` gets ``+n`` in the first copy and ``-n`` in the second, ``n`` the
-    next stretch of the corner's :func:`noise_records` (taken in turn, cyclically).
+    Where ``dF`` is 0 (the shock is the baseline's, linear at ``c_bar``) the measured
+    ``e = F - c_bar v`` is the sensors' noise, ``n_F - c_bar n_v``
+    (:func:`noise_records`), and the measured velocity holds ``n_v``: so
+    ``E[e v] = -c_bar var(n_v)`` and ``var(e) = var(n_F) + c_bar^2 var(n_v)``, taken on
+    first differences (white noise assumed: a sensor's floor; the signal, mostly at low
+    frequencies, then scatters the covariance much less).
 
     Parameters
     ----------
@@ -350,30 +356,75 @@ def noisier_sessions(session, cbar_n_s_m):
 
     Returns
     -------
-    tuple of two ident.data.session.Session, or None
-        None where no corner can be given any (no record, no swapped corner with a
-        measured force, or records that are all zero: noise-free sensors).
+    dict
+        Corner -> ``(sigma_v_m_s, sigma_f_n)``, standard deviations of the velocity's and
+        the force's noise per sample [m/s], [N]; a corner is missing where no run has its
+        force measured at a ``c_bar``-linear shock.
     """
     cbar = np.asarray(cbar_n_s_m, dtype=float)
-    records = {}
-    for c, r in noise_records(session, cbar).items():
-        F = np.concatenate([run.dynamic(f"shock_force_{c}") for run in session.runs
-                            if f"shock_force_{c}" in run.channels])
-        if np.std(r) > ROUND_OFF * np.std(F):  # else noise-free sensors: nothing to add
-            records[c] = r
-    plus, minus, added, offset = [], [], 0, {c: 0 for c in CORNERS}
+    ev = {c: [0.0, 0.0, 0] for c in CORNERS}  # sum e v, sum e^2, samples
+    for run in session.runs:
+        _, dF = shock_force_deviation(run, session.shocks, cbar)
+        for i, c in enumerate(CORNERS):
+            if f"shock_force_{c}" in run.channels and not np.any(dF[i]):
+                # first differences: white noise keeps its variance (twice it), the
+                # drive's low-frequency signal mostly goes (its scatter in e v with it)
+                v = np.diff(run.dynamic(f"shock_velocity_{c}"))
+                e = np.diff(run.dynamic(f"shock_force_{c}")) - cbar[i] * v
+                ev[c][0] += float(e @ v) / 2
+                ev[c][1] += float(e @ e) / 2
+                ev[c][2] += e.size
+    out = {}
+    for i, c in enumerate(CORNERS):
+        sev, see, n = ev[c]
+        if n:
+            var_v = max(-sev / n / cbar[i], 0.0)
+            var_f = max(see / n - cbar[i] ** 2 * var_v, 0.0)
+            out[c] = (float(np.sqrt(var_v)), float(np.sqrt(var_f)))
+    return out
+
+
+def noisier_sessions(session, cbar_n_s_m, *, seed=NOISE_SEED):
+    """Two copies of `session` whose swapped corners' sensors carry their noise once more.
+
+    At every corner of a run whose ``dF`` is not 0 and whose force is measured, the
+    velocity and the force (``shock_velocity_XX``, ``shock_force_XX``) get white Gaussian
+    noise of the sensors' own size (:func:`sensor_noise`): ``+n`` in the first copy and
+    ``-n`` in the second. The velocity's noise enters both an output of the FRF and its
+    ``dF`` input (``-c_bar n_v``), as the sensor's own noise does.
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+    cbar_n_s_m : array_like, shape (4,)
+    seed : int
+        Of the added noise.
+
+    Returns
+    -------
+    tuple of two ident.data.session.Session, or None
+        None where no corner can be given any (no measured force at a ``c_bar``-linear
+        shock, no swapped corner with a measured force, or noise-free sensors).
+    """
+    cbar = np.asarray(cbar_n_s_m, dtype=float)
+    sigma = sensor_noise(session, cbar)
+    rng = np.random.default_rng(seed)
+    plus, minus, added = [], [], 0
     for run in session.runs:
         _, dF = shock_force_deviation(run, session.shocks, cbar)
         ch_p, ch_m = dict(run.channels), dict(run.channels)
         for i, c in enumerate(CORNERS):
-            name = f"shock_force_{c}"
-            if not np.any(dF[i]) or name not in run.channels or c not in records:
+            fname, vname = f"shock_force_{c}", f"shock_velocity_{c}"
+            if not np.any(dF[i]) or fname not in run.channels or c not in sigma:
                 continue
-            r = records[c]
-            idx = (offset[c] + np.arange(run.n_samples)) % r.size  # the next stretch
-            offset[c] = int(idx[-1] + 1) % r.size
-            ch_p[name] = run.channels[name] + r[idx]
-            ch_m[name] = run.channels[name] - r[idx]
+            s_v, s_f = sigma[c]
+            F = run.dynamic(fname)
+            if s_v + s_f <= ROUND_OFF * (np.std(F) + cbar[i] * np.std(run.dynamic(vname))):
+                continue  # noise-free sensors: nothing to add
+            for name, s in ((vname, s_v), (fname, s_f)):
+                n = s * rng.standard_normal(run.n_samples)
+                ch_p[name] = run.channels[name] + n
+                ch_m[name] = run.channels[name] - n
             added += 1
         plus.append(dataclasses.replace(run, channels=ch_p))
         minus.append(dataclasses.replace(run, channels=ch_m))
