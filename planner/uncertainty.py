@@ -1,7 +1,7 @@
 """Uncertainty of predicted metrics: the identification's random error and the model's
 systematic errors.
 
-An identified model's prediction departs from the truth for four reasons, each
+An identified model's prediction departs from the truth for five reasons, each
 estimated here and combined into one interval per setup and metric:
 
 1. **Random error of the FRF estimate** (sensor noise, finite records, what the
@@ -50,11 +50,19 @@ over frequency, shared by all setups), the cross-validation sets their size, wit
 own correlations between pairs and over frequency. A model without it (an older model
 file) gets the formula, and says so in the log.
 
+5. **The estimate's bias from the noise on its dF inputs** (errors in variables: ``dF``
+   is computed from the measured force and velocity), the same in every time block so
+   not in the cross-validation, measured at identification by adding the sensors' noise
+   once more (:func:`ident.identify.crossval.noise_bias`, ``Frf.noise_bias``): the term
+   ``input_noise``, the model's screening against that of the model with the bias taken
+   out.
+
 The systematic parts (2-4) are signed relative errors per setup and metric;
 each widens the interval on both sides, added in quadrature to the random
 part's half-widths (their signs are estimates, not certainties): the upper
 bound ``hi_r + sqrt(u^2 + sum d^2) - u`` with ``u = max(hi_r - 1, 0)``, the
-lower likewise. The fraction
+lower likewise. A measured bias (5, :data:`SIGNED_TERMS`) keeps its sign: the interval
+then extends toward it linearly (it holds the interval with the bias taken out). The fraction
 of draws in which two setups swap order tells whether the model resolves
 their order (:func:`unresolved_pairs` with ``max_flip``).
 

@@ -45,7 +45,11 @@ the LPM's does), the blocks' errors are independent (blocks much longer than
 the car's impulse response: seconds against tens of milliseconds), and the
 error that is common to all blocks (a bias of the estimator, the same in each
 block) is not seen here: :mod:`planner.uncertainty` carries the fit's and the
-smoothing's bias as systematic terms.
+smoothing's bias as systematic terms, and one such bias is measured here too: that of
+the noise on the shock-force inputs (:func:`noise_bias`: the ``dF`` inputs are computed
+from the measured force and velocity, so their sensors' noise is noise on inputs, which
+biases the estimate; measured by adding that noise once more, as simulation-extrapolation
+does).
 """
 
 from __future__ import annotations
