@@ -38,9 +38,8 @@ RTOL_DF_NOISE = 0.03
 #: Band where the paper car's body modes put most of the metrics' weight [Hz].
 BODY_BAND_HZ = (2.0, 4.0)
 #: The measured noise bias against the estimate's error in the body band, the dF columns
-#: pooled (measured -0.82 %, error -0.97 %): the error holds a random part too (100 s runs;
-#: one column's: -0.2 to -1.5 %) and the correlation of the velocity sensor's noise with
-#: the dF inputs', which adding independent noise does not double.
+#: pooled (measured -0.84 %, error -0.92 %): the error holds a random part too (100 s runs;
+#: one column's: -0.2 to -1.5 %).
 BIAS_FACTOR = 2.0
 
 
