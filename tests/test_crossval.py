@@ -40,7 +40,7 @@ BODY_BAND_HZ = (2.0, 4.0)
 #: The measured noise bias against the estimate's error in the body band, the dF columns
 #: pooled (measured -0.84 %, error -0.92 %): the error holds a random part too (100 s runs;
 #: one column's: -0.2 to -1.5 %).
-BIAS_FACTOR = 2.0
+BIAS_FACTOR = 1.5
 
 
 def _frf(H, sigma, f):
