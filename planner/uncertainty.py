@@ -1,7 +1,7 @@
 """Uncertainty of predicted metrics: the identification's random error and the model's
 systematic errors.
 
-An identified model's prediction departs from the truth for four reasons, each
+An identified model's prediction departs from the truth for five reasons, each
 estimated here and combined into one interval per setup and metric:
 
 1. **Random error of the FRF estimate** (sensor noise, finite records, what the
@@ -50,11 +50,19 @@ over frequency, shared by all setups), the cross-validation sets their size, wit
 own correlations between pairs and over frequency. A model without it (an older model
 file) gets the formula, and says so in the log.
 
+5. **The estimate's bias from the noise on its dF inputs** (errors in variables: ``dF``
+   is computed from the measured force and velocity), the same in every time block so
+   not in the cross-validation, measured at identification by adding the sensors' noise
+   once more (:func:`ident.identify.crossval.noise_bias`, ``Frf.noise_bias``): the term
+   ``input_noise``, the model's screening against that of the model with the bias taken
+   out.
+
 The systematic parts (2-4) are signed relative errors per setup and metric;
 each widens the interval on both sides, added in quadrature to the random
 part's half-widths (their signs are estimates, not certainties): the upper
 bound ``hi_r + sqrt(u^2 + sum d^2) - u`` with ``u = max(hi_r - 1, 0)``, the
-lower likewise. The fraction
+lower likewise. A measured bias (5, :data:`SIGNED_TERMS`) keeps its sign: the interval
+then extends toward it linearly (it holds the interval with the bias taken out). The fraction
 of draws in which two setups swap order tells whether the model resolves
 their order (:func:`unresolved_pairs` with ``max_flip``).
 
@@ -104,6 +112,7 @@ __all__ = [
     "RANDOM_ERROR_SCALE",
     "REFERENCE_RUN_S",
     "SCORE_INTERVAL_COLUMNS",
+    "SIGNED_TERMS",
     "SYSTEMATIC_TERMS",
     "FrfPlant",  # from planner.plant
     "ScoreErrors",
@@ -116,6 +125,7 @@ __all__ = [
     "frf_relative_error",
     "interpolate",  # from planner.plant
     "light_modes",
+    "noise_bias_deviation",
     "prediction_uncertainty",
     "random_error_scale",
     "run_length_scale",
@@ -176,7 +186,11 @@ LIGHT_MODE_CLUSTER_HZ = 0.5
 #: deviations times 2^(+-1/4)).
 CV_LENGTH_FACTOR = 2.0 ** 0.25
 #: The systematic error terms of an interval, in :attr:`Uncertainty.components`.
-SYSTEMATIC_TERMS = ("fit", "reduction", "discretization")
+SYSTEMATIC_TERMS = ("fit", "reduction", "discretization", "input_noise")
+#: Systematic terms that are measured biases, sign included (the same in repeated
+#: identifications): an interval extends toward them linearly (it holds the prediction's
+#: interval and the same interval with the bias taken out) instead of in quadrature.
+SIGNED_TERMS = ("input_noise",)
 #: The columns :func:`score_intervals` gives a ranking table (``docs/formats.md``).
 SCORE_INTERVAL_COLUMNS = ("score_lo", "score_hi", "diff_best_lo", "diff_best_hi",
                           "diff_baseline_lo", "diff_baseline_hi", "verdict",
@@ -239,6 +253,38 @@ def cross_validation_deviations(frf, f_hz):
         return None
     f = np.clip(np.asarray(f_hz, dtype=float), grid[0], grid[-1])  # the end values beyond
     return embed_inputs(interpolate(grid, dev.astype(complex), f), frf.input_names, axis=2)
+
+
+def noise_bias_deviation(frf, f_hz):
+    """The FRF's measured bias from the noise on its shock-force inputs at `f_hz`, or None.
+
+    ``frf.noise_bias`` (written by identification, :func:`ident.identify.crossval.
+    noise_bias`): the relative bias ``b`` of the estimate (``H = H_true (1 + b)``),
+    interpolated at `f_hz` and embedded in the 11 inputs of the screening.
+
+    Parameters
+    ----------
+    frf : ident.identify.frf.Frf
+    f_hz : ndarray, shape (n,)
+        Frequencies [Hz].
+
+    Returns
+    -------
+    ndarray of complex, shape (n_out, 11, n), or None
+        None where the FRF has none (a model file from before it, a session without
+        measured shock forces, or identified with ``cross_validate=False``).
+    """
+    b = getattr(frf, "noise_bias", None)
+    cv = (getattr(frf, "settings", None) or {}).get("cross_validation") or {}
+    if b is None or "f_hz" not in cv:
+        return None
+    grid = np.asarray(cv["f_hz"], dtype=float)
+    if b.shape[:2] != frf.H.shape[:2] or b.shape[-1] != grid.size:
+        log.warning("the model's noise bias does not match its FRF (%s against %s); "
+                    "the intervals leave it out", b.shape, frf.H.shape)
+        return None
+    f = np.clip(np.asarray(f_hz, dtype=float), grid[0], grid[-1])
+    return embed_inputs(interpolate(grid, b.astype(complex), f), frf.input_names)
 
 
 def cross_validated_scale(cv_deviations, draw_deviations):
@@ -516,6 +562,13 @@ def prediction_uncertainty(model, drive, setups, library, *, draws=UncertaintyOp
         with np.errstate(divide="ignore", invalid="ignore"):
             components["fit"] = frame(base / measured - 1)
             components["reduction"] = frame(red / base - 1)
+    bias = noise_bias_deviation(frf, fb)
+    if bias is not None:
+        # the estimate's bias from the noise on its dF inputs (errors in variables: the
+        # same in every time block, so not in the cross-validation): the model against
+        # the same model with the bias taken out, H (1 - b) ~ H / (1 + b)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            components["input_noise"] = frame(base / screen(H_nom * (1 - bias)) - 1)
     if predictions is not None:
         finer = predict_setups(model, drive, setups, library,
                                loop=replace(loop, oversample=2 * loop.oversample),
@@ -525,7 +578,9 @@ def prediction_uncertainty(model, drive, setups, library, *, draws=UncertaintyOp
         with np.errstate(divide="ignore", invalid="ignore"):
             components["discretization"] = frame(_RICHARDSON_H3 * (p1 - p2) / p1)
     lo, hi = combine_terms(lo_r, hi_r, {k: components[k].to_numpy() for k in SYSTEMATIC_TERMS
-                                        if k in components})
+                                        if k in components and k not in SIGNED_TERMS},
+                           signed={k: components[k].to_numpy() for k in SIGNED_TERMS
+                                   if k in components})
     light = light_modes(model, band_hz=band_hz)
     if len(light):
         log.warning("%s has lightly damped modes in the metric band (%s): its FRF is biased "
@@ -612,7 +667,7 @@ def light_modes(model, *, band_hz=(1.0, 20.0), max_zeta=LIGHT_DAMPING_ZETA,
     return pd.DataFrame(rows) if rows else empty
 
 
-def combine_terms(random_lo, random_hi, systematic, *, random_factor=1.0):
+def combine_terms(random_lo, random_hi, systematic, *, random_factor=1.0, signed=None):
     """An interval's bounds from its random part and its systematic terms.
 
     The random part's bounds (ratios to the prediction) are first stretched
@@ -634,6 +689,11 @@ def combine_terms(random_lo, random_hi, systematic, *, random_factor=1.0):
         the random part at ``f`` times the FRF's errors (a draw's metric is
         linear in its FRF error to first order); :mod:`studies.interval_calibration`
         fits the calibrated scale this way.
+    signed : mapping of str to array_like, shape (...), optional
+        Measured biases ``d`` (the prediction over the truth, less 1; NaN counts as 0):
+        the interval is widened toward the truth they point to, linearly, after the
+        quadrature: ``lo - max(d, 0)`` and ``hi - min(d, 0)`` (it holds the interval
+        and the same interval with the biases taken out).
 
     Returns
     -------
@@ -652,7 +712,12 @@ def combine_terms(random_lo, random_hi, systematic, *, random_factor=1.0):
     sys2 = sum((np.nan_to_num(np.asarray(d, dtype=float)) ** 2 for d in systematic.values()),
                np.zeros(np.broadcast(lo_r, hi_r).shape))
     up, down = np.maximum(hi_r - 1.0, 0.0), np.maximum(1.0 - lo_r, 0.0)
-    return lo_r - (np.sqrt(down**2 + sys2) - down), hi_r + np.sqrt(up**2 + sys2) - up
+    lo, hi = lo_r - (np.sqrt(down**2 + sys2) - down), hi_r + np.sqrt(up**2 + sys2) - up
+    if signed:
+        bias = sum((np.nan_to_num(np.asarray(d, dtype=float)) for d in signed.values()),
+                   np.zeros(lo.shape))
+        lo, hi = lo - np.maximum(bias, 0.0), hi - np.minimum(bias, 0.0)
+    return lo, hi
 
 
 @dataclass(frozen=True, eq=False)
@@ -803,8 +868,12 @@ def difference_interval(errors, a, b):
         else:
             lo_r, hi_r = nom.copy(), nom.copy()
         # combine_terms works on ratios about 1: the bounds as offsets from the nominal
+        cols = list(errors.systematic.columns)
         lo, hi = combine_terms(1.0 + lo_r - nom, 1.0 + hi_r - nom,
-                               {j: sysm[:, j] for j in range(sysm.shape[1])})
+                               {k: sysm[:, j] for j, k in enumerate(cols)
+                                if k not in SIGNED_TERMS},
+                               signed={k: sysm[:, j] for j, k in enumerate(cols)
+                                       if k in SIGNED_TERMS})
     lo, hi = lo - 1.0 + nom, hi - 1.0 + nom
     bad = ~np.isfinite(nom)
     lo[bad], hi[bad] = np.nan, np.nan

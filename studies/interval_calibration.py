@@ -68,6 +68,7 @@ from planner.predict import predict_setups
 from planner.setups import Setup, enumerate_setups
 from planner.uncertainty import (
     REFERENCE_RUN_S,
+    SIGNED_TERMS,
     SYSTEMATIC_TERMS,
     combine_terms,
     light_modes,
@@ -221,7 +222,8 @@ def run_case(name, spec, k, *, run_s, drive_s, n_setups, cache):
            "light_modes": len(light_modes(model)),
            "identify_s": t1 - t0, "intervals_s": t2 - t1, "run_s": run_s}
     for term in SYSTEMATIC_TERMS:
-        out[term] = unc.components[term].loc[idx, names].to_numpy()
+        if term in unc.components:  # input_noise: only where the session measured it
+            out[term] = unc.components[term].loc[idx, names].to_numpy()
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, **out)
     return out
@@ -230,7 +232,9 @@ def run_case(name, spec, k, *, run_s, drive_s, n_setups, cache):
 def coverage(case, scale):
     """Share of the known metrics inside the intervals with the random part at `scale`."""
     lo, hi = combine_terms(case["random_lo"], case["random_hi"],
-                           {t: case[t] for t in SYSTEMATIC_TERMS}, random_factor=scale)
+                           {t: case[t] for t in SYSTEMATIC_TERMS
+                            if t in case and t not in SIGNED_TERMS}, random_factor=scale,
+                           signed={t: case[t] for t in SIGNED_TERMS if t in case})
     P, K = case["P"], case["K"]
     return float(np.mean((K >= P * lo) & (K <= P * hi)))
 
@@ -251,7 +255,9 @@ def describe(case, scale, package_scale):
     part at `scale` (fitted) and `package_scale` (the package's)."""
     P, K = case["P"], case["K"]
     lo, hi = combine_terms(case["random_lo"], case["random_hi"],
-                           {t: case[t] for t in SYSTEMATIC_TERMS}, random_factor=scale)
+                           {t: case[t] for t in SYSTEMATIC_TERMS
+                            if t in case and t not in SIGNED_TERMS}, random_factor=scale,
+                           signed={t: case[t] for t in SIGNED_TERMS if t in case})
     row = {"coverage_package": coverage(case, package_scale),
            "coverage_fitted": coverage(case, scale), "scale_fitted": scale,
            "scale_package": package_scale,
@@ -262,7 +268,8 @@ def describe(case, scale, package_scale):
            "random_half_width_pct": 100 * scale * float(np.median(
                (case["random_hi"] - case["random_lo"]) / 2))}
     for term in SYSTEMATIC_TERMS:
-        row[f"{term}_pct"] = 100 * float(np.median(np.abs(np.nan_to_num(case[term]))))
+        if term in case:
+            row[f"{term}_pct"] = 100 * float(np.median(np.abs(np.nan_to_num(case[term]))))
     for key in ("grid_df_hz", "light_modes", "identify_s", "intervals_s"):
         row[key] = float(case[key])
     return row

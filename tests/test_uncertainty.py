@@ -29,6 +29,7 @@ from planner.uncertainty import (
     difference_interval,
     frf_relative_error,
     light_modes,
+    noise_bias_deviation,
     prediction_uncertainty,
     random_error_scale,
     score_errors,
@@ -408,6 +409,37 @@ def test_random_part_sized_by_the_cross_validation(known_plant, track_drive, dem
     assert cross_validation_deviations(frf, [1.0, 2.0]) is None
 
 
+def test_noise_bias_is_a_signed_systematic_term(known_plant, track_drive, demo_library,
+                                                few_setups):
+    """A model whose FRF carries its measured noise bias gets the systematic term
+    input_noise: zero for a zero bias; for an estimate biased low on every pair (b < 0:
+    the bias-corrected response is larger) the model's metrics are below the corrected
+    ones in every setup (the term is negative) and the interval wider than without it; a
+    bias of the wrong shape is left out."""
+    frf = _cv_frf(_frf(known_plant, 0.99), [0.01, -0.01])
+    grid = np.asarray(frf.settings["cross_validation"]["f_hz"])
+    opts = UncertaintyOptions(n_draws=8)
+
+    def unc(b):
+        f = replace(frf, noise_bias=None if b is None else
+                    (b * np.ones(frf.H.shape[:2] + (grid.size,))).astype(np.complex64))
+        return prediction_uncertainty(SimpleNamespace(frf=f), track_drive, few_setups,
+                                      demo_library, draws=opts)
+
+    none, zero, low = unc(None), unc(0.0), unc(-0.02)
+    assert "input_noise" not in none.components and "input_noise" not in none.settings["terms"]
+    assert zero.settings["terms"][-1] == "input_noise"
+    assert_allclose(zero.components["input_noise"].to_numpy(), 0.0, atol=RTOL_EXACT)
+    assert_allclose(zero.ratio_hi.to_numpy(), none.ratio_hi.to_numpy(), rtol=RTOL_EXACT)
+    term = low.components["input_noise"].to_numpy()
+    assert np.all(term < 0)
+    assert np.all((low.ratio_hi - low.ratio_lo).to_numpy() > (none.ratio_hi
+                                                              - none.ratio_lo).to_numpy())
+    bad = replace(frf, noise_bias=np.zeros((1, 1, grid.size), np.complex64))
+    assert noise_bias_deviation(bad, [1.0, 2.0]) is None
+    assert noise_bias_deviation(frf, [1.0, 2.0]) is None
+
+
 def test_cross_validated_scale_pools_metrics_and_skips_silent_ones():
     """Per metric mean square ratio, then the root of their mean: metrics with ratios 1 and 9
     give sqrt(5); a metric whose draws do not spread does not count."""
@@ -685,7 +717,7 @@ def _check_held_out_car(name, demo_library):
     from ident.sim.metrics import METRIC_NAMES
     from ident.sim.virtual_rig import default_plan, simulate_session
     from planner.objective import default_objective, score_setups
-    from planner.predict import predict_setups
+    from planner.predict import predict_setups, prepare_drive
     from planner.setups import Setup
 
     car, noise, run_s, fs_hz, speed = _held_out_car(name)
@@ -703,7 +735,9 @@ def _check_held_out_car(name, demo_library):
     pred = predict_setups(model, drive, setups, demo_library)
     unc = prediction_uncertainty(model, drive, setups, demo_library, predictions=pred)
     assert unc.settings["random_error"] == "cross-validation"
-    known = predict_setups(build_full_car(car).loop_plant(model.cbar_n_s_m), drive, setups,
+    # the known car on the drive the model predicts on (resampled to a 200 Hz model's rate)
+    known = predict_setups(build_full_car(car).loop_plant(model.cbar_n_s_m),
+                           prepare_drive(drive, model.fs_hz), setups,
                            demo_library).table.loc[pred.table.index]
     names = [m for m in METRIC_NAMES if m in pred.table]
     P, K = pred.table[names].to_numpy(), known[names].to_numpy()
@@ -732,6 +766,10 @@ def test_cross_validated_intervals_cover_a_held_out_car(demo_library):
 
 @pytest.mark.slow
 @pytest.mark.heavy
+@pytest.mark.xfail(strict=True, reason="issue 37, open: against the known car on the drive the "
+                   "200 Hz model predicts on, the errors are 0.05 % and the intervals 0.8 % "
+                   "wide (the cross-validation's metric-level factor overstates 200 Hz "
+                   "sessions); docs/DESIGN.md, Uncertainty")
 def test_cross_validated_intervals_cover_a_second_held_out_car(demo_library):
     """The same on the heavy car with a chassis twist, 200 Hz, 5 runs of 250 s (measured
     91.4 %; about a minute of CPU)."""

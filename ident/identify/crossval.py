@@ -45,7 +45,11 @@ the LPM's does), the blocks' errors are independent (blocks much longer than
 the car's impulse response: seconds against tens of milliseconds), and the
 error that is common to all blocks (a bias of the estimator, the same in each
 block) is not seen here: :mod:`planner.uncertainty` carries the fit's and the
-smoothing's bias as systematic terms.
+smoothing's bias as systematic terms, and one such bias is measured here too: that of
+the noise on the shock-force inputs (:func:`noise_bias`: the ``dF`` inputs are computed
+from the measured force and velocity, so their sensors' noise is noise on inputs, which
+biases the estimate; measured by adding that noise once more, as simulation-extrapolation
+does).
 """
 
 from __future__ import annotations
@@ -56,8 +60,9 @@ import warnings
 
 import numpy as np
 
+from ident.data.channels import CORNERS
 from ident.identify.condition import condition_frf
-from ident.identify.frf import estimate_frf
+from ident.identify.frf import estimate_frf, shock_force_deviation
 
 __all__ = [
     "CV_BLOCKS",
@@ -67,11 +72,20 @@ __all__ = [
     "block_frfs",
     "cross_validate_frf",
     "cross_validation_ratio",
+    "noise_bias",
+    "noise_records",
+    "noisier_sessions",
+    "sensor_noise",
     "split_session",
 ]
 
 log = logging.getLogger(__name__)
 
+#: A noise record below this fraction of the corner's force (RMS) is round-off: a session
+#: without sensor noise, which has no noise bias to measure.
+ROUND_OFF = 1e-9
+#: Seed of the noise added to measure the noise bias (:func:`noisier_sessions`).
+NOISE_SEED = 20240
 #: Time blocks of the cross-validation: two halves of every run (the two estimates together
 #: cost about one full estimate). Shorter blocks estimate differently, not only noisier: the
 #: LPM's local window is a number of lines, so it is ``K`` times wider in Hz on a block of
@@ -146,6 +160,11 @@ def block_frfs(session, frf, *, blocks=CV_BLOCKS):
     ndarray of complex, shape (blocks, n_out, n_in, n_f)
         ``H_k`` on ``frf.f_hz``.
     """
+    return np.stack([_estimate_like(sub, frf) for sub in split_session(session, blocks)])
+
+
+def _estimate_like(session, frf):
+    """The conditioned FRF of `session` with `frf`'s settings, on ``frf.f_hz``."""
     s = frf.settings or {}
     cond = dict(s.get("conditioning") or {})
     cond.pop("poor_pairs", None)
@@ -156,13 +175,10 @@ def block_frfs(session, frf, *, blocks=CV_BLOCKS):
                                                          "lpm_coherence_dof")):
             if s.get(key) is not None:
                 est[name] = s[key]
-    out = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for sub in split_session(session, blocks):
-            fk = condition_frf(estimate_frf(sub, **est), **cond)
-            out.append(_on_grid(fk.f_hz, fk.H, frf.f_hz))
-    return np.stack(out)
+        fk = condition_frf(estimate_frf(session, **est), **cond)
+    return _on_grid(fk.f_hz, fk.H, frf.f_hz)
 
 
 def block_deviations(frf, H_blocks, f_hz):
@@ -195,7 +211,7 @@ def block_deviations(frf, H_blocks, f_hz):
                      for ek in e]).astype(np.complex64)
 
 
-def cross_validate_frf(session, frf, *, blocks=CV_BLOCKS):
+def cross_validate_frf(session, frf, *, blocks=CV_BLOCKS, noise=True):
     """The session's cross-validation of its conditioned FRF, kept with the FRF.
 
     Parameters
@@ -205,13 +221,18 @@ def cross_validate_frf(session, frf, *, blocks=CV_BLOCKS):
     frf : ident.identify.frf.Frf
         Conditioned.
     blocks : int
+    noise : bool
+        Also measure the bias from the noise on the shock-force inputs
+        (:func:`noise_bias`, two more estimates of the FRF), which no time block sees.
 
     Returns
     -------
     ident.identify.frf.Frf
         `frf` with ``cv_deviation`` (:func:`block_deviations` on ``CV_GRID``
-        log-spaced frequencies) and ``settings["cross_validation"]``
-        (:func:`cross_validation_ratio`, plus ``f_hz``: the deviations' frequencies).
+        log-spaced frequencies), ``noise_bias`` (:func:`noise_bias` on the same
+        frequencies, or None) and ``settings["cross_validation"]``
+        (:func:`cross_validation_ratio`, plus ``f_hz``: the deviations' frequencies, and
+        ``noise_bias``: whether it was measured).
     """
     H_blocks = block_frfs(session, frf, blocks=blocks)
     hi = min(CV_GRID_HZ[1], float(frf.f_hz[-1]))
@@ -219,8 +240,11 @@ def cross_validate_frf(session, frf, *, blocks=CV_BLOCKS):
     grid = np.geomspace(lo, hi, CV_GRID)
     doc = cross_validation_ratio(frf, H_blocks)
     doc["f_hz"] = [float(f) for f in np.round(grid, 6)]
+    bias = noise_bias(session, frf, grid) if noise else None
+    doc["noise_bias"] = bias is not None
     return dataclasses.replace(frf, settings=dict(frf.settings, cross_validation=doc),
-                               cv_deviation=block_deviations(frf, H_blocks, grid))
+                               cv_deviation=block_deviations(frf, H_blocks, grid),
+                               noise_bias=bias)
 
 
 def _pooled(num, den, axis):
@@ -285,3 +309,173 @@ def cross_validation_ratio(frf, H_blocks, *, band_edges_hz=CV_BAND_EDGES_HZ):
             "ratio": np.round(ratio, 4).tolist(), "ratio_all": round(r_all, 4),
             "ratio_pair": np.round(r_pair, 4).tolist(),
             "ratio_band": np.round(r_band, 4).tolist()}
+
+
+def noise_records(session, cbar_n_s_m):
+    """Per corner, a record of the noise on its shock-force deviation ``dF``.
+
+    Where a run's shock at a corner is linear at ``c_bar`` (the baseline's), ``dF`` is
+    exactly 0 (:func:`ident.identify.frf.shock_force_deviation`) and the measured
+    ``F - c_bar v`` is what the sensors add to it (their noise, and the real shock's
+    departure from its nominal curve): the error the ``dF`` inputs carry where the
+    shock is swapped, measured on the session itself.
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+    cbar_n_s_m : array_like, shape (4,)
+
+    Returns
+    -------
+    dict
+        Corner -> ndarray (n,) [N], the runs' records end to end (means removed); a
+        corner is missing where no run has its force measured (``shock_force_XX``) at a
+        ``c_bar``-linear shock.
+    """
+    cbar = np.asarray(cbar_n_s_m, dtype=float)
+    rec = {c: [] for c in CORNERS}
+    for run in session.runs:
+        _, dF = shock_force_deviation(run, session.shocks, cbar)
+        for i, c in enumerate(CORNERS):
+            if f"shock_force_{c}" in run.channels and not np.any(dF[i]):
+                rec[c].append(run.dynamic(f"shock_force_{c}")
+                              - cbar[i] * run.dynamic(f"shock_velocity_{c}"))
+    return {c: np.concatenate(r) for c, r in rec.items() if r}
+
+
+def sensor_noise(session, cbar_n_s_m):
+    """Per corner, the white noise of its shock velocity and force sensors.
+
+    Where ``dF`` is 0 (the shock is the baseline's, linear at ``c_bar``) the measured
+    ``e = F - c_bar v`` is the sensors' noise, ``n_F - c_bar n_v``
+    (:func:`noise_records`), and the measured velocity holds ``n_v``: so
+    ``E[e v] = -c_bar var(n_v)`` and ``var(e) = var(n_F) + c_bar^2 var(n_v)``, taken on
+    first differences (white noise assumed: a sensor's floor; the signal, mostly at low
+    frequencies, then scatters the covariance much less).
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+    cbar_n_s_m : array_like, shape (4,)
+
+    Returns
+    -------
+    dict
+        Corner -> ``(sigma_v_m_s, sigma_f_n)``, standard deviations of the velocity's and
+        the force's noise per sample [m/s], [N]; a corner is missing where no run has its
+        force measured at a ``c_bar``-linear shock.
+    """
+    cbar = np.asarray(cbar_n_s_m, dtype=float)
+    ev = {c: [0.0, 0.0, 0] for c in CORNERS}  # sum e v, sum e^2, samples
+    for run in session.runs:
+        _, dF = shock_force_deviation(run, session.shocks, cbar)
+        for i, c in enumerate(CORNERS):
+            if f"shock_force_{c}" in run.channels and not np.any(dF[i]):
+                # first differences: white noise keeps its variance (twice it), the
+                # drive's low-frequency signal mostly goes (its scatter in e v with it)
+                v = np.diff(run.dynamic(f"shock_velocity_{c}"))
+                e = np.diff(run.dynamic(f"shock_force_{c}")) - cbar[i] * v
+                ev[c][0] += float(e @ v) / 2
+                ev[c][1] += float(e @ e) / 2
+                ev[c][2] += e.size
+    out = {}
+    for i, c in enumerate(CORNERS):
+        sev, see, n = ev[c]
+        if n:
+            var_v = max(-sev / n / cbar[i], 0.0)
+            var_f = max(see / n - cbar[i] ** 2 * var_v, 0.0)
+            out[c] = (float(np.sqrt(var_v)), float(np.sqrt(var_f)))
+    return out
+
+
+def noisier_sessions(session, cbar_n_s_m, *, seed=NOISE_SEED):
+    """Two copies of `session` whose swapped corners' sensors carry their noise once more.
+
+    At every corner of a run whose ``dF`` is not 0 and whose force is measured, the
+    velocity and the force (``shock_velocity_XX``, ``shock_force_XX``) get white Gaussian
+    noise of the sensors' own size (:func:`sensor_noise`): ``+n`` in the first copy and
+    ``-n`` in the second. The velocity's noise enters both an output of the FRF and its
+    ``dF`` input (``-c_bar n_v``), as the sensor's own noise does.
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+    cbar_n_s_m : array_like, shape (4,)
+    seed : int
+        Of the added noise.
+
+    Returns
+    -------
+    tuple of two ident.data.session.Session, or None
+        None where no corner can be given any (no measured force at a ``c_bar``-linear
+        shock, no swapped corner with a measured force, or noise-free sensors).
+    """
+    cbar = np.asarray(cbar_n_s_m, dtype=float)
+    sigma = sensor_noise(session, cbar)
+    rng = np.random.default_rng(seed)
+    plus, minus, added = [], [], 0
+    for run in session.runs:
+        _, dF = shock_force_deviation(run, session.shocks, cbar)
+        ch_p, ch_m = dict(run.channels), dict(run.channels)
+        for i, c in enumerate(CORNERS):
+            fname, vname = f"shock_force_{c}", f"shock_velocity_{c}"
+            if not np.any(dF[i]) or fname not in run.channels or c not in sigma:
+                continue
+            s_v, s_f = sigma[c]
+            F = run.dynamic(fname)
+            if s_v + s_f <= ROUND_OFF * (np.std(F) + cbar[i] * np.std(run.dynamic(vname))):
+                continue  # noise-free sensors: nothing to add
+            for name, s in ((vname, s_v), (fname, s_f)):
+                n = s * rng.standard_normal(run.n_samples)
+                ch_p[name] = run.channels[name] + n
+                ch_m[name] = run.channels[name] - n
+            added += 1
+        plus.append(dataclasses.replace(run, channels=ch_p))
+        minus.append(dataclasses.replace(run, channels=ch_m))
+    if not added:
+        return None
+    return (dataclasses.replace(session, runs=tuple(plus)),
+            dataclasses.replace(session, runs=tuple(minus)))
+
+
+def noise_bias(session, frf, f_hz):
+    """The bias of the FRF from the noise on its shock-force inputs, measured by adding it.
+
+    The ``dF`` inputs are computed from measured forces and velocities, so their sensors'
+    noise is noise on *inputs* (errors in variables): it biases the estimate (toward
+    zero, and through whatever the regression shares with them) the same way in every
+    time block, which the cross-validation cannot see. Its size is measured as in
+    simulation-extrapolation: the FRF is estimated again (with `frf`'s settings) with the
+    swapped corners' forces carrying the noise once more, ``+n`` and ``-n``
+    (:func:`noise_records`: the session's own ``F - c_bar v`` where ``dF`` is 0). To first
+    order the bias grows with the noise's variance, so the mean of the two estimates less
+    ``H`` is the bias of ``H`` itself, and the terms odd in the added noise (its random
+    error) cancel between ``+n`` and ``-n``.
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+        The session `frf` was estimated from.
+    frf : ident.identify.frf.Frf
+        Conditioned.
+    f_hz : ndarray, shape (n,)
+        Frequencies to keep it at [Hz].
+
+    Returns
+    -------
+    ndarray of complex64, shape (n_out, n_in, n) or None
+        ``(mean(H+, H-) - H) / H``: the relative bias of the estimate (0 where ``H`` is
+        0); None where the session has no measured force at a ``c_bar``-linear shock
+        (nothing to measure the noise by) or no swapped corner with a measured force.
+    """
+    pair = noisier_sessions(session, frf.cbar_n_s_m)
+    if pair is None:
+        log.info("noise bias: no measured shock force at a c_bar-linear shock, no swapped "
+                 "corner with one, or no noise on them: not measured")
+        return None
+    H2 = 0.5 * (_estimate_like(pair[0], frf) + _estimate_like(pair[1], frf))
+    H = frf.H
+    with np.errstate(invalid="ignore", divide="ignore"):
+        b = np.where(np.abs(H) > 0, (H2 - H) / np.where(np.abs(H) > 0, H, 1.0), 0.0)
+    b = np.where(np.isfinite(b), b, 0.0)
+    return _on_grid(frf.f_hz, b, np.asarray(f_hz, dtype=float)).astype(np.complex64)

@@ -276,6 +276,11 @@ class Frf:
         block's relative deviation from the blocks' mean, scaled to the full estimate's
         error, complex64 (n_blocks, n_out, n_in, n_grid) on the frequencies
         ``settings["cross_validation"]["f_hz"]``; set by identification.
+    noise_bias : ndarray or None
+        The estimate's bias from the noise on its shock-force inputs, measured on the
+        session (:func:`ident.identify.crossval.noise_bias`): relative, complex64
+        (n_out, n_in, n_grid) on the cross-validation's frequencies; set by
+        identification where the session measures shock forces.
     """
 
     f_hz: np.ndarray
@@ -295,6 +300,7 @@ class Frf:
     replaced: np.ndarray | None = None
     sigma: np.ndarray | None = None
     cv_deviation: np.ndarray | None = None
+    noise_bias: np.ndarray | None = None
 
     def index(self, output, input):
         """Return ``(output index, input index)`` of a pair, with a clear error."""

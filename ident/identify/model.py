@@ -655,6 +655,8 @@ class VehicleModel:
                 arrays["frf_sigma"] = fr.sigma
             if fr.cv_deviation is not None:
                 arrays["frf_cv_deviation"] = fr.cv_deviation
+            if fr.noise_bias is not None:
+                arrays["frf_noise_bias"] = fr.noise_bias
             meta["frf"] = {"input_names": list(fr.input_names),
                            "output_names": list(fr.output_names), "n_averages": fr.n_averages,
                            "settings": _jsonable(fr.settings)}
@@ -766,7 +768,8 @@ def load_model(path):
                       cbar_n_s_m=data["cbar_n_s_m"], fs_hz=float(meta["fs_hz"]),
                       settings=fm["settings"], H_raw=data.get("frf_H_raw"),
                       replaced=data.get("frf_replaced"), sigma=data.get("frf_sigma"),
-                      cv_deviation=data.get("frf_cv_deviation"))
+                      cv_deviation=data.get("frf_cv_deviation"),
+                      noise_bias=data.get("frf_noise_bias"))
         settings = dict(meta.get("settings", {}))
         docs = {k: settings.pop(k, None) for k in RESULT_KEYS}
         model = VehicleModel(name=meta["name"], input_names=tuple(meta["input_names"]),
