@@ -1090,6 +1090,52 @@ def _third_solve(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0
     return it + itn
 
 
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _third_change(Jinv, M, rows, W, e, dw, dfc, dF, z, y, valid):
+    """A segment change of element `e` in the time loop's fast path (:func:`loop_one`): a
+    damper (``M = Mv``, `rows` the dampers' rows, ``W = rows Dv``) or a spring (``M = Mt``,
+    the springs' rows, ``W = rows Dt``) whose slope changes by `dw` (``J' = J - dw r_e
+    W_e^T``) and whose force at its present motion by `dfc`. Moves the solution `dF` (by
+    ``J'^-1 r_e dfc``), the cached inverse `Jinv` and `M` (Sherman-Morrison, `z` and `y`
+    scratch) and counts the update in ``valid[0]``; returns False (``valid[0] = 0``) when
+    the update is singular. One helper for dampers and springs; inlined."""
+    m = 4
+    for a in range(m):
+        acc = 0.0
+        for c in range(m):
+            acc += Jinv[a, c] * rows[e, c]
+        z[a] = acc
+    wz = 0.0
+    for a in range(m):
+        wz += W[e, a] * z[a]
+    den = 1.0 - dw * wz
+    if abs(den) < 1e-8:
+        valid[0] = 0
+        return False
+    # J'^-1 r_e = z / den
+    g = dfc / den
+    for a in range(m):
+        dF[a] += z[a] * g
+    if dw != 0.0:
+        for a in range(m):
+            acc = 0.0
+            for c in range(m):
+                acc += W[e, c] * Jinv[c, a]
+            y[a] = acc
+        q = dw / den
+        for a in range(m):
+            za = z[a] * q
+            for c in range(m):
+                Jinv[a, c] += za * y[c]
+        for a in range(m):
+            ra = dw * rows[e, a]
+            if ra != 0.0:
+                for c in range(m):
+                    M[a, c] += ra * rows[e, c]
+        valid[0] += 1
+    return True
+
+
 # ----------------------------------------------------------------------------------------------
 # the time loops
 # ----------------------------------------------------------------------------------------------
@@ -1333,6 +1379,39 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
         sseg = np.empty(ns3, dtype=np.int64)
         for j in range(ns3):
             sseg[j] = _spring_seg(0.0, j, s03, bx3, bn3)
+        # the elements' rows' same-step response to dF (wd3 = drowsA Dv, ws3 = srows Dt),
+        # the dampers' lines per segment, the velocity and travel rows as 8 mode-major lanes
+        wd3 = np.zeros((nd3, m))
+        for d in range(nd3):
+            for a in range(m):
+                acc = 0.0
+                for c in range(m):
+                    acc += drowsA[d, c] * Deff[c, a]
+                wd3[d, a] = acc
+        ws3 = np.zeros((ns3, m))
+        for j in range(ns3):
+            for a in range(m):
+                acc = 0.0
+                for c in range(m):
+                    acc += srows3[j, c] * Dt3[c, a]
+                ws3[j, a] = acc
+        dls3 = np.empty((nd3, K3 + 1))
+        dla3 = np.empty((nd3, K3 + 1))
+        for d in range(nd3):
+            for sg in range(nkA[d] + 1):
+                dls3[d, sg], dla3[d, sg] = _segment_line(sg, kvA, kfA, d, nkA[d], sloA[d],
+                                                         shiA[d])
+        CvtTr = np.empty((n, 8))
+        CvtTi = np.empty((n, 8))
+        for i in range(n):
+            for c in range(m):
+                CvtTr[i, c] = Cvr[c, i]
+                CvtTi[i, c] = Cvi[c, i]
+                CvtTr[i, m + c] = CtTr[i, c]
+                CvtTi[i, m + c] = CtTi[i, c]
+        vt3 = np.zeros(8)
+        vef3 = np.zeros(nd3)
+        tef3 = np.zeros(ns3)
         tfree = np.zeros(m)
         ds3 = np.zeros(nd3)
         da3 = np.zeros(nd3)
@@ -1355,8 +1434,6 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
         fp3 = np.zeros(nd3)
         fpp3 = np.zeros(nd3)
         n_sp = np.zeros(ns3)
-        u3 = np.zeros(m)
-        w3 = np.zeros(m)
         z3 = np.zeros(m)
         y3 = np.zeros(m)
     xr = np.zeros(n)
@@ -1419,13 +1496,30 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
         # the velocities in a loop of their own: the update above has no loop-carried
         # chain and vectorizes; fused with these sums (strict FP order) it ran scalar.
         # Same sums in the same order as before, so the same rounding.
-        for i in range(n):
-            tr = xr[i]
-            ti = xi[i]
-            a0 += Cvr[0, i] * tr - Cvi[0, i] * ti
-            a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
-            a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
-            a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
+        if third is None:
+            for i in range(n):
+                tr = xr[i]
+                ti = xi[i]
+                a0 += Cvr[0, i] * tr - Cvi[0, i] * ti
+                a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
+                a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
+                a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
+        else:
+            # the velocities and the travels as 8 lanes of one loop (two vectors): the
+            # travels' chains run beside the velocities' instead of after them
+            for c in range(8):
+                vt3[c] = 0.0
+            for i in range(n):
+                tr = xr[i]
+                ti = xi[i]
+                for c in range(8):
+                    vt3[c] += CvtTr[i, c] * tr - CvtTi[i, c] * ti
+            a0 = vt3[0]
+            a1 = vt3[1]
+            a2 = vt3[2]
+            a3 = vt3[3]
+            for c in range(m):
+                tfree[c] = t_rig[k, c] + vt3[4 + c]
         if elements is not None:
             if any_bs:
                 # the travel rows (Ce rows 0-3, held mode-major: CeTr[i, c]), the 4 corners
@@ -1437,14 +1531,6 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                     ti = xi[i]
                     for c in range(m):
                         sfree[c] += CeTr[i, c] * tr - CeTi[i, c] * ti
-        if third is not None:
-            for c in range(m):
-                tfree[c] = t_rig[k, c]
-            for i in range(n):
-                tr = xr[i]
-                ti = xi[i]
-                for c in range(m):
-                    tfree[c] += CtTr[i, c] * tr - CtTi[i, c] * ti
         vfree[0] = v_rig[k, 0] + a0
         vfree[1] = v_rig[k, 1] + a1
         vfree[2] = v_rig[k, 2] + a2
@@ -1463,165 +1549,126 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
         if third is not None:
             for d in range(nd3):
                 c03[d] = alphaA[d] * Fp3[d] + b1A[d] * fp3[d] + bmA[d] * fpp3[d]
-            # the common cases inline (as _fast_solve's): every element on its segment, or
-            # segment changes by rank-1 updates of the cached inverse (a change of damper d
-            # is J' = J - dw m_d (Dv^T m_d)^T, of spring j J' = J - dk q_j (Dt^T q_j)^T);
-            # the rest (no valid inverse, cycling, a singular update) in _third_solve
+            # the common cases inline (as _fast_solve's): every element strictly inside its
+            # segment, or segment changes by rank-1 updates of the cached inverse and of the
+            # solution (_third_change); the rest (no valid inverse, cycling, a singular
+            # update) in _third_solve. The elements' motions are their free parts plus their
+            # rows' same-step response (wd3, ws3) to dF: no corner travel is formed.
             it = 0
             if valid3[0] >= 1:
-                for it_ in range(1, THIRD_FAST_PASSES + 1):
+                for d in range(m):
+                    vef3[d] = vfree[d]
+                for d in range(m, nd3):
+                    x = 0.0
+                    for c in range(m):
+                        x += drowsA[d, c] * vfree[c]
+                    vef3[d] = x
+                for j in range(ns3):
+                    x = 0.0
+                    for c in range(m):
+                        x += srows3[j, c] * tfree[c]
+                    tef3[j] = x
+                for a in range(m):
+                    acc = 0.0
+                    for c in range(m):
+                        acc += Mv3[a, c] * vfree[c]
+                    rhs3[a] = acc
+                # the corner shocks' unit rows directly (the same sums without their zero
+                # terms), then the third dampers' rows; a spring's term only in contact
+                # (out of contact its line is zero)
+                for d in range(m):
+                    rhs3[d] += c03[d] + b0A[d] * da3[d]
+                for d in range(m, nd3):
+                    q = c03[d] + b0A[d] * da3[d]
                     for a in range(m):
-                        acc = 0.0
-                        for c in range(m):
-                            acc += Mv3[a, c] * vfree[c] + Mt3[a, c] * tfree[c]
-                        rhs3[a] = acc
-                    # the corner shocks' unit rows directly (the same sums without their
-                    # zero terms), then the third dampers' rows
-                    for d in range(m):
-                        rhs3[d] += c03[d] + b0A[d] * da3[d]
-                    for d in range(m, nd3):
-                        q = c03[d] + b0A[d] * da3[d]
+                        rhs3[a] += drowsA[d, a] * q
+                for j in range(ns3):
+                    if sseg[j] >= 0:
+                        q = sa3[j] + sk3[j] * tef3[j]
                         for a in range(m):
-                            rhs3[a] += drowsA[d, a] * q
-                    for j in range(ns3):
-                        if sseg[j] >= 0:
-                            for a in range(m):
-                                rhs3[a] += srows3[j, a] * sa3[j]
-                    for a in range(m):
-                        acc = 0.0
-                        for c in range(m):
-                            acc += Jinv3[a, c] * rhs3[c]
-                        dF3[a] = acc
-                    for a in range(m):
-                        acc_v = vfree[a]
-                        acc_t = tfree[a]
-                        for c in range(m):
-                            acc_v += Deff[a, c] * dF3[c]
-                            acc_t += Dt3[a, c] * dF3[c]
-                        v[a] = acc_v
-                        t3[a] = acc_t
+                            rhs3[a] += srows3[j, a] * q
+                for a in range(m):
+                    acc = 0.0
+                    for c in range(m):
+                        acc += Jinv3[a, c] * rhs3[c]
+                    dF3[a] = acc
+                for it_ in range(1, THIRD_FAST_PASSES + 1):
                     # every element strictly inside its segment (the common case), tested
                     # without a branch per element (as _fast_solve); otherwise each is placed
                     # by _segment_of / _spring_seg, which decide a motion on a knot
                     inside = True
-                    for d in range(m):
-                        x = v[d]
-                        ve3[d] = x
-                        sg = dseg[d]
-                        inside &= (bnd3[0, d, sg] < x) & (x < bnd3[1, d, sg])
-                    for d in range(m, nd3):
-                        x = 0.0
+                    for d in range(nd3):
+                        x = vef3[d]
                         for c in range(m):
-                            x += drowsA[d, c] * v[c]
+                            x += wd3[d, c] * dF3[c]
                         ve3[d] = x
                         sg = dseg[d]
                         inside &= (bnd3[0, d, sg] < x) & (x < bnd3[1, d, sg])
                     for j in range(ns3):
-                        x = 0.0
+                        x = tef3[j]
                         for c in range(m):
-                            x += srows3[j, c] * t3[c]
+                            x += ws3[j, c] * dF3[c]
                         te3[j] = x
                         xs = x - s03[j]
                         sg = sseg[j] + 1
                         inside &= (sbnd3[0, j, sg] < xs) & (xs < sbnd3[1, j, sg])
-                    if inside:
+                    if not inside:
+                        # each element in turn at its motion on the solution so far; a
+                        # change moves the solution and the cached inverse (Sherman-Morrison)
+                        same = True
                         for d in range(nd3):
-                            fd3[d] = da3[d] + ds3[d] * ve3[d]
-                        for j in range(ns3):
-                            gs3[j] = sa3[j] + sk3[j] * te3[j]
-                        it = it_
-                        if valid3[0] > _MAX_RANK1_UPDATES:
+                            x = vef3[d]
+                            for c in range(m):
+                                x += wd3[d, c] * dF3[c]
+                            ve3[d] = x
+                            s2 = _segment_of(x, kvA, d, nkA[d], dseg[d])
+                            if s2 == dseg[d]:
+                                continue
+                            same = False
+                            sl2 = dls3[d, s2]
+                            a2 = dla3[d, s2]
+                            dsl = sl2 - ds3[d]
+                            dfc = b0A[d] * ((a2 - da3[d]) + dsl * x)
+                            dseg[d] = s2
+                            ds3[d] = sl2
+                            da3[d] = a2
+                            if not _third_change(Jinv3, Mv3, drowsA, wd3, d, b0A[d] * dsl, dfc,
+                                                 dF3, z3, y3, valid3):
+                                break
+                        if valid3[0] >= 1:
+                            for j in range(ns3):
+                                x = tef3[j]
+                                for c in range(m):
+                                    x += ws3[j, c] * dF3[c]
+                                te3[j] = x
+                                s2 = _spring_seg(x, j, s03, bx3, bn3)
+                                if s2 == sseg[j]:
+                                    continue
+                                same = False
+                                k2, a2 = _spring_line(s2, j, s03, bx3, bf3, bn3, bslope3)
+                                dk = k2 - sk3[j]
+                                dfc = (a2 - sa3[j]) + dk * x
+                                sseg[j] = s2
+                                sk3[j] = k2
+                                sa3[j] = a2
+                                if not _third_change(Jinv3, Mt3, srows3, ws3, j, dk, dfc, dF3,
+                                                     z3, y3, valid3):
+                                    break
+                        if valid3[0] == 0 or valid3[0] > _MAX_RANK1_UPDATES:
                             valid3[0] = 0
-                        break
-                    same = True
+                            break
+                        if not same:
+                            continue
                     for d in range(nd3):
-                        x = ve3[d]
-                        s2 = _segment_of(x, kvA, d, nkA[d], dseg[d])
-                        if s2 == dseg[d]:
-                            continue
-                        same = False
-                        dseg[d] = s2
-                        sl2, a2 = _segment_line(s2, kvA, kfA, d, nkA[d], sloA[d], shiA[d])
-                        dw = b0A[d] * (sl2 - ds3[d])
-                        ds3[d] = sl2
-                        da3[d] = a2
-                        if dw != 0.0 and valid3[0] >= 1:
-                            for a in range(m):
-                                u3[a] = dw * drowsA[d, a]
-                                acc = 0.0
-                                for c in range(m):
-                                    acc += drowsA[d, c] * Deff[c, a]
-                                w3[a] = acc
-                                for c in range(m):
-                                    Mv3[a, c] += dw * drowsA[d, a] * drowsA[d, c]
-                            den = 1.0
-                            for a in range(m):
-                                acc = 0.0
-                                acc2 = 0.0
-                                for c in range(m):
-                                    acc += Jinv3[a, c] * u3[c]
-                                    acc2 += w3[c] * Jinv3[c, a]
-                                z3[a] = acc
-                                y3[a] = acc2
-                            for a in range(m):
-                                den -= w3[a] * z3[a]
-                            if abs(den) < 1e-8:
-                                valid3[0] = 0
-                            else:
-                                for a in range(m):
-                                    for c in range(m):
-                                        Jinv3[a, c] += z3[a] * y3[c] / den
-                                valid3[0] += 1
+                        fd3[d] = da3[d] + ds3[d] * ve3[d]
                     for j in range(ns3):
-                        x = te3[j]
-                        s2 = _spring_seg(x, j, s03, bx3, bn3)
-                        if s2 == sseg[j]:
-                            continue
-                        same = False
-                        sseg[j] = s2
-                        k2, a2 = _spring_line(s2, j, s03, bx3, bf3, bn3, bslope3)
-                        dk = k2 - sk3[j]
-                        sk3[j] = k2
-                        sa3[j] = a2
-                        if dk != 0.0 and valid3[0] >= 1:
-                            for a in range(m):
-                                u3[a] = dk * srows3[j, a]
-                                acc = 0.0
-                                for c in range(m):
-                                    acc += srows3[j, c] * Dt3[c, a]
-                                w3[a] = acc
-                                for c in range(m):
-                                    Mt3[a, c] += dk * srows3[j, a] * srows3[j, c]
-                            den = 1.0
-                            for a in range(m):
-                                acc = 0.0
-                                acc2 = 0.0
-                                for c in range(m):
-                                    acc += Jinv3[a, c] * u3[c]
-                                    acc2 += w3[c] * Jinv3[c, a]
-                                z3[a] = acc
-                                y3[a] = acc2
-                            for a in range(m):
-                                den -= w3[a] * z3[a]
-                            if abs(den) < 1e-8:
-                                valid3[0] = 0
-                            else:
-                                for a in range(m):
-                                    for c in range(m):
-                                        Jinv3[a, c] += z3[a] * y3[c] / den
-                                valid3[0] += 1
-                    if same:
-                        for d in range(nd3):
-                            fd3[d] = da3[d] + ds3[d] * ve3[d]
-                        for j in range(ns3):
-                            gs3[j] = sa3[j] + sk3[j] * te3[j]
-                        it = it_
-                        if valid3[0] > _MAX_RANK1_UPDATES:
-                            valid3[0] = 0
-                        break
-                    if valid3[0] == 0 or valid3[0] > _MAX_RANK1_UPDATES:
+                        gs3[j] = sa3[j] + sk3[j] * te3[j]
+                    for c in range(m):
+                        v[c] = ve3[c]
+                    it = it_
+                    if valid3[0] > _MAX_RANK1_UPDATES:
                         valid3[0] = 0
-                        break
+                    break
             if it == 0:
                 it = _third_solve(vfree, tfree, c03, Deff, Dt3, cbar, drowsA, kvA, kfA, nkA,
                                   sloA, shiA, b0A, srows3, s03, bx3, bf3, bn3, bslope3, dseg,
