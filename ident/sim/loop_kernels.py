@@ -1091,14 +1091,14 @@ def _third_solve(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0
 
 
 @_nb.njit(cache=True, error_model="numpy", inline="always")
-def _third_change(Jinv, M, rows, W, e, dw, dfc, dF, z, y, valid):
+def _third_change(Jinv, rows, W, e, dw, dfc, dF, z, y, valid):
     """A segment change of element `e` in the time loop's fast path (:func:`loop_one`): a
-    damper (``M = Mv``, `rows` the dampers' rows, ``W = rows Dv``) or a spring (``M = Mt``,
-    the springs' rows, ``W = rows Dt``) whose slope changes by `dw` (``J' = J - dw r_e
-    W_e^T``) and whose force at its present motion by `dfc`. Moves the solution `dF` (by
-    ``J'^-1 r_e dfc``), the cached inverse `Jinv` and `M` (Sherman-Morrison, `z` and `y`
-    scratch) and counts the update in ``valid[0]``; returns False (``valid[0] = 0``) when
-    the update is singular. One helper for dampers and springs; inlined."""
+    damper (`rows` the dampers' rows, ``W = rows Dv``) or a spring (the springs' rows, ``W =
+    rows Dt``) whose slope changes by `dw` (``J' = J - dw r_e W_e^T``) and whose force at its
+    present motion by `dfc`. Moves the solution `dF` (by ``J'^-1 r_e dfc``) and the cached
+    inverse `Jinv` (Sherman-Morrison; `z`, `y` scratch) and counts the update in
+    ``valid[0]``; returns False (``valid[0] = 0``) when the update is singular. One helper
+    for dampers and springs; inlined."""
     m = 4
     for a in range(m):
         acc = 0.0
@@ -1127,11 +1127,6 @@ def _third_change(Jinv, M, rows, W, e, dw, dfc, dF, z, y, valid):
             za = z[a] * q
             for c in range(m):
                 Jinv[a, c] += za * y[c]
-        for a in range(m):
-            ra = dw * rows[e, a]
-            if ra != 0.0:
-                for c in range(m):
-                    M[a, c] += ra * rows[e, c]
         valid[0] += 1
     return True
 
@@ -1432,7 +1427,6 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
         c03 = np.zeros(nd3)
         Fp3 = np.zeros(nd3)
         fp3 = np.zeros(nd3)
-        fpp3 = np.zeros(nd3)
         n_sp = np.zeros(ns3)
         z3 = np.zeros(m)
         y3 = np.zeros(m)
@@ -1544,11 +1538,12 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                     ti = xi[i]
                     for c in range(m):
                         cfree[c] += CeTr[i, 4 + c] * tr - CeTi[i, 4 + c] * ti
-        for c in range(m):
-            c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
+        if third is None:
+            for c in range(m):
+                c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
         if third is not None:
-            for d in range(nd3):
-                c03[d] = alphaA[d] * Fp3[d] + b1A[d] * fp3[d] + bmA[d] * fpp3[d]
+            # (c03, the lags' known part of every element's force, was formed at the end of
+            # the last step)
             # the common cases inline (as _fast_solve's): every element strictly inside its
             # segment, or segment changes by rank-1 updates of the cached inverse and of the
             # solution (_third_change); the rest (no valid inverse, cycling, a singular
@@ -1556,32 +1551,27 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
             # rows' same-step response (wd3, ws3) to dF: no corner travel is formed.
             it = 0
             if valid3[0] >= 1:
+                # J dF = sum_d m_d (c0_d + b0_d (a_d + s_d m_d vfree)) - cbar vfree + sum_j
+                # q_j (a_j + k_j q_j tfree): each element's line at its free motion (the
+                # corner shocks' unit rows directly), a spring's term only in contact (out
+                # of contact its line is zero)
                 for d in range(m):
-                    vef3[d] = vfree[d]
+                    x = vfree[d]
+                    vef3[d] = x
+                    rhs3[d] = c03[d] + b0A[d] * (da3[d] + ds3[d] * x) - cbar[d] * x
                 for d in range(m, nd3):
                     x = 0.0
                     for c in range(m):
                         x += drowsA[d, c] * vfree[c]
                     vef3[d] = x
+                    q = c03[d] + b0A[d] * (da3[d] + ds3[d] * x)
+                    for a in range(m):
+                        rhs3[a] += drowsA[d, a] * q
                 for j in range(ns3):
                     x = 0.0
                     for c in range(m):
                         x += srows3[j, c] * tfree[c]
                     tef3[j] = x
-                for a in range(m):
-                    acc = 0.0
-                    for c in range(m):
-                        acc += Mv3[a, c] * vfree[c]
-                    rhs3[a] = acc
-                # the corner shocks' unit rows directly (the same sums without their zero
-                # terms), then the third dampers' rows; a spring's term only in contact
-                # (out of contact its line is zero)
-                for d in range(m):
-                    rhs3[d] += c03[d] + b0A[d] * da3[d]
-                for d in range(m, nd3):
-                    q = c03[d] + b0A[d] * da3[d]
-                    for a in range(m):
-                        rhs3[a] += drowsA[d, a] * q
                 for j in range(ns3):
                     if sseg[j] >= 0:
                         q = sa3[j] + sk3[j] * tef3[j]
@@ -1632,8 +1622,8 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                             dseg[d] = s2
                             ds3[d] = sl2
                             da3[d] = a2
-                            if not _third_change(Jinv3, Mv3, drowsA, wd3, d, b0A[d] * dsl, dfc,
-                                                 dF3, z3, y3, valid3):
+                            if not _third_change(Jinv3, drowsA, wd3, d, b0A[d] * dsl, dfc, dF3,
+                                                 z3, y3, valid3):
                                 break
                         if valid3[0] >= 1:
                             for j in range(ns3):
@@ -1651,8 +1641,8 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                                 sseg[j] = s2
                                 sk3[j] = k2
                                 sa3[j] = a2
-                                if not _third_change(Jinv3, Mt3, srows3, ws3, j, dk, dfc, dF3,
-                                                     z3, y3, valid3):
+                                if not _third_change(Jinv3, srows3, ws3, j, dk, dfc, dF3, z3, y3,
+                                                     valid3):
                                     break
                         if valid3[0] == 0 or valid3[0] > _MAX_RANK1_UPDATES:
                             valid3[0] = 0
@@ -1670,6 +1660,8 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                         valid3[0] = 0
                     break
             if it == 0:
+                # from the segments (the fast path keeps the inverse, not Mv and Mt)
+                valid3[0] = 0
                 it = _third_solve(vfree, tfree, c03, Deff, Dt3, cbar, drowsA, kvA, kfA, nkA,
                                   sloA, shiA, b0A, srows3, s03, bx3, bf3, bn3, bslope3, dseg,
                                   sseg, ds3, da3, sk3, sa3, Mv3, Mt3, J3, Jinv3, valid3, rhs3,
@@ -1680,10 +1672,12 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
             if it > worst:
                 worst = it
             for d in range(nd3):
-                F = c03[d] + b0A[d] * fd3[d]
+                f = fd3[d]
+                F = c03[d] + b0A[d] * f
                 Fp3[d] = F
-                fpp3[d] = fp3[d]
-                fp3[d] = fd3[d]
+                # the next step's known part of the force: alpha F[k] + b1 f[k] + bm f[k-1]
+                c03[d] = alphaA[d] * F + b1A[d] * f + bmA[d] * fp3[d]
+                fp3[d] = f
             for c in range(m):
                 F_prev[c] = Fp3[c]
                 dF_prev[c] = dF3[c]
