@@ -1404,7 +1404,6 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                 CvtTi[i, c] = Cvi[c, i]
                 CvtTr[i, m + c] = CtTr[i, c]
                 CvtTi[i, m + c] = CtTi[i, c]
-        vt3 = np.zeros(8)
         vef3 = np.zeros(nd3)
         tef3 = np.zeros(ns3)
         tfree = np.zeros(m)
@@ -1499,21 +1498,27 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                 a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
                 a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
         else:
-            # the velocities and the travels as 8 lanes of one loop (two vectors): the
-            # travels' chains run beside the velocities' instead of after them
-            for c in range(8):
-                vt3[c] = 0.0
+            # the velocities and the travels as 8 scalar sums of one loop (registers, no
+            # store per mode): the travels' chains run beside the velocities'
+            t0 = 0.0
+            t1 = 0.0
+            t2 = 0.0
+            t3_ = 0.0
             for i in range(n):
                 tr = xr[i]
                 ti = xi[i]
-                for c in range(8):
-                    vt3[c] += CvtTr[i, c] * tr - CvtTi[i, c] * ti
-            a0 = vt3[0]
-            a1 = vt3[1]
-            a2 = vt3[2]
-            a3 = vt3[3]
-            for c in range(m):
-                tfree[c] = t_rig[k, c] + vt3[4 + c]
+                a0 += CvtTr[i, 0] * tr - CvtTi[i, 0] * ti
+                a1 += CvtTr[i, 1] * tr - CvtTi[i, 1] * ti
+                a2 += CvtTr[i, 2] * tr - CvtTi[i, 2] * ti
+                a3 += CvtTr[i, 3] * tr - CvtTi[i, 3] * ti
+                t0 += CvtTr[i, 4] * tr - CvtTi[i, 4] * ti
+                t1 += CvtTr[i, 5] * tr - CvtTi[i, 5] * ti
+                t2 += CvtTr[i, 6] * tr - CvtTi[i, 6] * ti
+                t3_ += CvtTr[i, 7] * tr - CvtTi[i, 7] * ti
+            tfree[0] = t_rig[k, 0] + t0
+            tfree[1] = t_rig[k, 1] + t1
+            tfree[2] = t_rig[k, 2] + t2
+            tfree[3] = t_rig[k, 3] + t3_
         if elements is not None:
             if any_bs:
                 # the travel rows (Ce rows 0-3, held mode-major: CeTr[i, c]), the 4 corners
