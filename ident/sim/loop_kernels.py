@@ -1193,10 +1193,12 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
 
     Notes
     -----
-    With third elements the step is :func:`_third_solve`: the corner shocks and the third
-    dampers (rows over the corners, each with its curve and lag) and the springs (heave
-    springs and corner bump stops on their rows' travel) in one solve on the corner forces
-    ``dF``, the travels' free part ``t_free`` from the predictor as the velocities'.
+    With third elements the step is one solve on the corner forces ``dF`` of the corner
+    shocks and the third dampers (rows over the corners, each with its curve and lag) and
+    the springs (heave springs and corner bump stops on their rows' travel), the travels'
+    free part ``t_free`` from the predictor as the velocities': inline for the common cases
+    (every element inside its segment; segment changes by :func:`_third_change`, which
+    moves the solution and the cached inverse), :func:`_third_solve` for the rest.
 
     The modal states are held as separate real and imaginary arrays (the mode loops
     vectorize). At every r-th step (an output sample) the states and ``dF`` (and ``w``
