@@ -689,11 +689,14 @@ def _compile_optimizer_job(model, drive, library, baseline):
 
 
 def _warm_kernels():
-    """The predictions' kernel, then the screening kernels (:func:`_warm_predictions`,
-    :func:`_warm_screening`), one after the other in one worker: a second worker would
-    compete with the identification for the two cores."""
-    _warm_predictions()
+    """The screening kernels, then the predictions' kernel (:func:`_warm_screening`,
+    :func:`_warm_predictions`), one after the other in one worker: a second worker would
+    compete with the identification for the two cores. Screening first: the predictions'
+    kernel calls the one-setup loop's `loop_one` (one compiled version for every caller),
+    which the demo's process compiles meanwhile (:func:`_warm_one_setup_loop`); started
+    later, this worker loads it from numba's cache instead of compiling it a second time."""
     _warm_screening()
+    _warm_predictions()
     return True
 
 
