@@ -388,10 +388,11 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         # then a worker compiles the predictions' kernel and the screening kernels into
         # numba's cache while the virtual rig runs here. Otherwise these are cache loads.
         # One worker, forked before this process uses any kernel, takes both jobs in turn:
-        # the rig response's kernel (the virtual rig needs it), then the predictions' and
-        # screening kernels, starting as soon as the first is done rather than when this
+        # the rig response's kernel (the virtual rig needs it), then the screening and
+        # predictions' kernels, starting as soon as the first is done rather than when this
         # process is done with the one-setup loop (about twice the rig kernel's compile):
-        # no core idles while the other compiles.
+        # no core idles while the other compiles, and by the predictions' kernel the
+        # one-setup loop's `loop_one` (which it calls) is in numba's cache.
         rig_kernel, warm = _start_jobs(_warm_rig_response, _warm_kernels)
         _warm_one_setup_loop()
         # a warm-up that fails only costs time (e.g. a forked worker cannot use numba's
