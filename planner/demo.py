@@ -388,10 +388,11 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         # then a worker compiles the predictions' kernel and the screening kernels into
         # numba's cache while the virtual rig runs here. Otherwise these are cache loads.
         # One worker, forked before this process uses any kernel, takes both jobs in turn:
-        # the rig response's kernel (the virtual rig needs it), then the predictions' and
-        # screening kernels, starting as soon as the first is done rather than when this
+        # the rig response's kernel (the virtual rig needs it), then the screening and
+        # predictions' kernels, starting as soon as the first is done rather than when this
         # process is done with the one-setup loop (about twice the rig kernel's compile):
-        # no core idles while the other compiles.
+        # no core idles while the other compiles, and by the predictions' kernel the
+        # one-setup loop's `loop_one` (which it calls) is in numba's cache.
         rig_kernel, warm = _start_jobs(_warm_rig_response, _warm_kernels)
         _warm_one_setup_loop()
         # a warm-up that fails only costs time (e.g. a forked worker cannot use numba's
@@ -689,11 +690,14 @@ def _compile_optimizer_job(model, drive, library, baseline):
 
 
 def _warm_kernels():
-    """The predictions' kernel, then the screening kernels (:func:`_warm_predictions`,
-    :func:`_warm_screening`), one after the other in one worker: a second worker would
-    compete with the identification for the two cores."""
-    _warm_predictions()
+    """The screening kernels, then the predictions' kernel (:func:`_warm_screening`,
+    :func:`_warm_predictions`), one after the other in one worker: a second worker would
+    compete with the identification for the two cores. Screening first: the predictions'
+    kernel calls the one-setup loop's `loop_one` (one compiled version for every caller),
+    which the demo's process compiles meanwhile (:func:`_warm_one_setup_loop`); started
+    later, this worker loads it from numba's cache instead of compiling it a second time."""
     _warm_screening()
+    _warm_predictions()
     return True
 
 
@@ -719,8 +723,7 @@ def _warm_predictions():
     plant, drive = _warm_plant_and_drive()
     library = _demo_library()
     setups = [[library[i] for i in s.ids()] for s in enumerate_setups(library)[:2]]
-    simulate_batch_metrics(plant, drive, setups, oversample=1, rig=_zero_rig(plant, drive))
-    # the demo's ranking counts the shock-velocity histograms: the worker's other variant
+    # the predictions always run the kernel's histogram variant (planner.predict)
     simulate_batch_metrics(plant, drive, setups, oversample=1, rig=_zero_rig(plant, drive),
                            histogram_bins=(0.025, 0.25, 0.025))
     return True

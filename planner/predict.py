@@ -36,7 +36,7 @@ from planner.elements import (ELEMENT_COLUMNS, THIRD_COLUMNS, model_setup_elemen
                               model_setup_third)
 from planner.errors import PlannerError
 from planner.histograms import ShockHistograms
-from planner.options import ElementOptions, LoopOptions, as_options
+from planner.options import ElementOptions, HistogramOptions, LoopOptions, as_options
 from planner.plant import as_loop_plant
 from planner.setups import Setup
 
@@ -287,8 +287,10 @@ def predict_setups(model, drive, setups, library, *, loop=LoopOptions(),
     if third is not None:
         extra["third"] = third.loop_third()
     hist = loop.histograms
-    if hist is not None:
-        extra["histogram_bins"] = hist.bins
+    # the kernel's histogram variant runs either way (its counts dropped when no histogram
+    # is asked for: the metrics are the same bits, the counting ~1 % of the loop), so every
+    # prediction uses one compiled kernel: a fresh machine compiles it once (issue 40)
+    extra["histogram_bins"] = (HistogramOptions() if hist is None else hist).bins
     rows, iters, counts = [], [], []
     starts = range(0, len(models), chunk_size)
     if progress:

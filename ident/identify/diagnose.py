@@ -85,6 +85,7 @@ from ident.data.drive import Drive, decimate_bandlimited
 from ident.data.session import STATIC_OFFSET_SHARE
 from ident.data.third import AXLES
 from ident.data.units import format_quantity
+from ident.identify.serialdot import serial_dots
 from ident.identify.thirdforce import third_element_force
 from ident.models.bumpstops import contact_tables
 from ident.sim.closedloop import refine_input, simulate
@@ -425,21 +426,24 @@ def _hinge(x, r, sigma):
     best = (0.0, np.nan, 1, 0.0)
     if sigma <= 0 or x.size < 100:
         return best
-    for s0 in np.unique(np.quantile(x, 1 - _HINGE_SHARES)):
-        above = x > s0
-        if above.sum() < 5:
-            continue
-        d = x[above] - s0
-        ra = r[above]
-        for p in (1, 2):
-            h = d ** p
-            hh = float(h @ h)
-            if hh <= 0:
+    # the products on one BLAS thread with the multithreaded products' bits: 240 products of
+    # 10^4-10^5 samples per call, each of which woke OpenBLAS's second thread (issue 40)
+    with serial_dots() as dot:
+        for s0 in np.unique(np.quantile(x, 1 - _HINGE_SHARES)):
+            above = x > s0
+            if above.sum() < 5:
                 continue
-            k = float(h @ ra) / hh
-            z = k * np.sqrt(hh) / sigma
-            if z > best[0]:
-                best = (z, float(s0), p, k)
+            d = x[above] - s0
+            ra = r[above]
+            for p in (1, 2):
+                h = d ** p
+                hh = dot(h, h)
+                if hh <= 0:
+                    continue
+                k = dot(h, ra) / hh
+                z = k * np.sqrt(hh) / sigma
+                if z > best[0]:
+                    best = (z, float(s0), p, k)
     return best
 
 

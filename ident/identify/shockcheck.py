@@ -92,6 +92,7 @@ from scipy import signal
 from ident.data.channels import CORNERS
 from ident.data.drive import decimate_bandlimited
 from ident.identify.diagnose import channel_noise, rest_levels
+from ident.identify.serialdot import serial_dots
 from ident.models.lti import lag_hold_coefficients
 from ident.models.shocks import LinearShock
 from ident.sim.closedloop import refine_input
@@ -250,11 +251,14 @@ def _series(run, corner, model, *, refine, instrument, mask):
     # the instrument: the library force at the travel's velocity (noise of its own), or L
     Zd = dyn(library_force(model, travel_velocity(travel, fs), fs, refine=refine)
              ) if how == "travel" else Ld
-    szl, szf, sff, sll = float(Zd @ Ld), float(Zd @ Fd), float(Fd @ Fd), float(Ld @ Ld)
-    if not (szl > 0 and sll > 0):
-        return None
-    a = szf / szl
-    r = np.where(used, Fd - a * Ld, 0.0)
+    # the long products on one BLAS thread, with the multithreaded products' bits (issue 40)
+    with serial_dots() as dot:
+        szl, szf, sff, sll = dot(Zd, Ld), dot(Zd, Fd), dot(Fd, Fd), dot(Ld, Ld)
+        if not (szl > 0 and sll > 0):
+            return None
+        a = szf / szl
+        r = np.where(used, Fd - a * Ld, 0.0)
+        slf, srr = dot(Ld, Fd), dot(r, r)
     nw = max(_newey_west(Zd * r, round(SE_WINDOW_S * fs)), 0.0)
     iid = float(np.sum((Zd * r) ** 2))
     noise = channel_noise(r, fs)  # the residual's white part: what the noise explains
@@ -263,12 +267,12 @@ def _series(run, corner, model, *, refine, instrument, mask):
     return {"shock": model.id, "run": run.name, "corner": corner, "n_samples": n,
             "contact_share": 1.0 - n / v.size, "instrument": how, "scale": a,
             "se": np.sqrt(nw) / szl, "n_eff": n * iid / nw if nw > 0 else float(n),
-            "ols_scale": float(Ld @ Fd) / sll,
+            "ols_scale": slf / sll,
             "gap_pct": 100 * np.sqrt(sdd / sff) if sff > 0 else np.nan,
-            "residual_pct": 100 * np.sqrt(float(r @ r) / sff) if sff > 0 else np.nan,
+            "residual_pct": 100 * np.sqrt(srr / sff) if sff > 0 else np.nan,
             "noise_pct": 100 * noise / rms_f if rms_f > 0 else np.nan,
             "_den": szl, "_num": szf, "_nw": nw, "_sff": sff, "_sdd": sdd,
-            "_srr": float(r @ r), "_snn": n * noise ** 2}
+            "_srr": srr, "_snn": n * noise ** 2}
 
 
 def _contact_mask(session, run, corner):

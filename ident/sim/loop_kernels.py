@@ -1920,14 +1920,14 @@ def loop_batch(plant, setups, drive, y_out, F_out, iters, elements, stats, third
     ``4 + ne + ns`` columns (:func:`loop_one`)."""
     for s in _nb.prange(setups.b0.shape[0]):
         if third is not None:
-            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
-                                None, None, _third_row(third, s), tstats[s])
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s],
+                                np.int64(-1), None, None, _third_row(third, s), tstats[s])
         elif elements is None:
-            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
-                                None, None, None, None)
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s],
+                                np.int64(-1), None, None, None, None)
         else:
-            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
-                                _element_row(elements, s), stats[s], None, None)
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s],
+                                np.int64(-1), _element_row(elements, s), stats[s], None, None)
     return
 
 
@@ -1943,14 +1943,14 @@ def loop_serial(plant, setups, drive, y_out, F_out, iters, elements, stats, thir
     """
     for s in range(setups.b0.shape[0]):
         if third is not None:
-            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
-                                None, None, _third_row(third, s), tstats[s])
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s],
+                                np.int64(-1), None, None, _third_row(third, s), tstats[s])
         elif elements is None:
-            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
-                                None, None, None, None)
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s],
+                                np.int64(-1), None, None, None, None)
         else:
-            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s], -1,
-                                _element_row(elements, s), stats[s], None, None)
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y_out[s], F_out[s],
+                                np.int64(-1), _element_row(elements, s), stats[s], None, None)
     return
 
 

@@ -109,7 +109,8 @@ def _filtfilt_lanes(sos, zi, buf, z0, z1, offset, lo, hi):
         if step == 1:
             _sosfilt_lanes(sos, buf, z0, z1, first, stop, step, offset, lo, hi)
         else:
-            _sosfilt_lanes(sos, buf, z0, z1, first, stop, step, offset, 0, 0)
+            _sosfilt_lanes(sos, buf, z0, z1, first, stop, step, offset, np.int64(0),
+                           np.int64(0))
 
 
 def _sosfiltfilt_rows_py(x, sos, zi, padlen, out):
@@ -359,7 +360,7 @@ def _metric_block(buf, n, padlen, sos, zi, z0, z1, stack, sums):
     `z0`, `z1` (n_sections, n_lanes) and `stack` (:data:`PW_LEVELS`, 10, n_lanes) are
     scratch; `buf` is overwritten.
     """
-    _pairwise_sum_lanes(buf, padlen, n, False, sums, stack)
+    _pairwise_sum_lanes(buf, padlen, n, np.bool_(False), sums, stack)
     L = buf.shape[1]
     for j in range(L):
         sums[j] = sums[j] / n  # the means
@@ -376,7 +377,7 @@ def _metric_block(buf, n, padlen, sos, zi, z0, z1, stack, sums):
             lo[j] = 2 * (first[j] - sums[j]) - (lo_src[j] - sums[j])
             hi[j] = 2 * (last[j] - sums[j]) - (hi_src[j] - sums[j])
     _filtfilt_lanes(sos, zi, buf, z0, z1, sums, padlen, padlen + n)
-    _pairwise_sum_lanes(buf, padlen, n, True, sums, stack)
+    _pairwise_sum_lanes(buf, padlen, n, np.bool_(True), sums, stack)
     for j in range(L):
         sums[j] = np.sqrt(sums[j] / n)
 
@@ -449,7 +450,7 @@ def setup_metric_rms(y, ia, sos, zi, padlen, out, buf, z0, z1, stack, sums, dmap
                         if src >= 0:
                             acc += dw[q, c] * row[src]
                     row[dmap[q, 2]] = acc
-            _pairwise_sum_lanes(buf, padlen, n, True, sums, stack)
+            _pairwise_sum_lanes(buf, padlen, n, np.bool_(True), sums, stack)
             for q in range(d, e):
                 out[n_metrics + q] = np.sqrt(sums[dmap[q, 2]] / n)
             d = e
