@@ -31,12 +31,53 @@ import numpy as np
 
 from ident.data.channels import CORNERS
 from ident.data.third import THIRD_CHANNELS
+from ident.errors import IdentificationError
 
-__all__ = ["travel_velocity", "travel_run", "travel_rows", "iv_lpm_solve", "travel_from_velocity",
+__all__ = ["session_instruments", "travel_velocity", "travel_run", "travel_rows", "iv_lpm_solve", "travel_from_velocity",
            "TRAVELS"]
 
 #: The corner travel channels the instruments are derived from.
 TRAVELS = tuple(f"shock_travel_{c}" for c in CORNERS)
+
+
+def session_instruments(session, instruments=None, *, estimator="lpm"):
+    """Whether a session is estimated with the travel-derived instruments.
+
+    Parameters
+    ----------
+    session : ident.data.session.Session
+    instruments : bool or None
+        None ("auto"): on for a session that declares third elements and records
+        ``shock_travel_XX`` at every corner in every run, with the LPM; off otherwise (a
+        plain session identifies as before). True: on (refused without the travels or
+        with the Welch estimator); False: off.
+    estimator : str
+
+    Returns
+    -------
+    bool
+
+    Raises
+    ------
+    IdentificationError
+        True for a session without every corner's travel, or with ``estimator="welch"``.
+    """
+    has_travel = all(t in r.channels for r in session.runs for t in TRAVELS)
+    if instruments is None:
+        return bool(getattr(session, "third_elements", None)) and has_travel \
+            and estimator == "lpm"
+    if not instruments:
+        return False
+    if estimator != "lpm":
+        raise IdentificationError(
+            f"instruments=True needs estimator='lpm' (got {estimator!r}): use the LPM or "
+            "instruments=False (shockplan identify: --instruments off)")
+    if not has_travel:
+        raise IdentificationError(
+            f"session '{session.name}': instruments=True derives the instruments from the "
+            f"shock travels, but not every run records {', '.join(TRAVELS)}: record them, "
+            "or use instruments=False (shockplan identify: --instruments off)")
+    return True
 
 
 def travel_velocity(x, fs_hz):

@@ -46,6 +46,7 @@ from ident.identify.frf import (
     estimate_frf,
     shock_force_deviation,
 )
+from ident.identify.instruments import session_instruments
 from ident.identify.thirdforce import third_element_force
 from ident.identify.model import VehicleModel, has_feedthrough
 from ident.identify.shockcheck import check_shock_library
@@ -537,7 +538,7 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
                      coherence_min=0.9, smooth_width_hz=None, smooth_domain=None,
                      fit_method="invfreqs",
                      orders="auto", weighting="paper", band_hz=(0.5, 20.0), max_order=10,
-                     diagnose=True, check_shocks=True, cross_validate=True):
+                     diagnose=True, check_shocks=True, cross_validate=True, instruments=None):
     """Identify a vehicle model from a rig session: estimate, condition, fit, check.
 
     Parameters
@@ -576,6 +577,15 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         (``model.frf.cv_deviation`` and ``settings["cross_validation"]``): the planner's
         intervals take their random part's size from it. The model's numbers do not
         depend on it.
+    instruments : bool or None
+        Estimate the FRF with instrumental variables
+        (:mod:`ident.identify.instruments`: the shock-force inputs again from the shock
+        travels, free of the velocity and force sensors' noise), which removes the
+        errors-in-variables bias of the noisy ``dF`` inputs at the price of more scatter.
+        None (default, "auto"): on for sessions that declare third elements and record
+        every corner's shock travel (their elements' linear part puts the velocity
+        sensors' noise in every run's inputs), off otherwise, so a plain session
+        identifies as before (:func:`ident.identify.instruments.session_instruments`).
 
     Returns
     -------
@@ -600,6 +610,7 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         (:func:`session_third`).
     """
     cond = {} if smooth_domain is None else {"smooth_domain": smooth_domain}
+    iv = session_instruments(session, instruments, estimator=estimator)
     measured = session
     lifted = liftoff_samples(session)
     liftoff = None
@@ -610,7 +621,8 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         passes = []
         for _ in range(LIFTOFF_PASSES):
             pre = estimate_frf(session, method=frf_method, cbar_n_s_m=cbar_n_s_m,
-                               nperseg=nperseg, estimator=estimator, outputs=tires)
+                               nperseg=nperseg, estimator=estimator, outputs=tires,
+                               instruments=iv)
             pre = condition_frf(pre, coherence_min=coherence_min,
                                 smooth_width_hz=smooth_width_hz, **cond)
             with warnings.catch_warnings():
@@ -623,7 +635,7 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         liftoff = {"passes": LIFTOFF_PASSES, "near_zero_contact": NEAR_ZERO_CONTACT,
                    "pad_response_s": PAD_RESPONSE_S, "runs": passes[-1]}
     frf = estimate_frf(session, method=frf_method, cbar_n_s_m=cbar_n_s_m, nperseg=nperseg,
-                       estimator=estimator)
+                       estimator=estimator, instruments=iv)
     frf = condition_frf(frf, coherence_min=coherence_min, smooth_width_hz=smooth_width_hz,
                         **cond)
     if cross_validate:

@@ -34,6 +34,12 @@ def add_parser(subparsers):
     ident_p.add_argument("--coherence-min", type=float, default=0.9,
                          help="coherence (0 to 1) below which band ends are replaced "
                          "(default %(default)s)")
+    ident_p.add_argument("--instruments", choices=["auto", "on", "off"], default="auto",
+                         help="estimate with instrumental variables (the shock-force inputs "
+                         "again from the shock travels: no errors-in-variables bias from the "
+                         "velocity and force sensors' noise, more scatter); auto (default): on "
+                         "for sessions that declare third elements and record every corner's "
+                         "shock travel, off otherwise")
     ident_p.add_argument("--max-order", type=int_at_least(2), default=10, metavar="N",
                          help="highest denominator order (poles) a pair's fit may take "
                          "(default %(default)s; raise it when identify warns that a pair "
@@ -88,7 +94,9 @@ def run(args):
                                      frf_method=args.frf_method, nperseg=args.nperseg,
                                      coherence_min=args.coherence_min, fit_method=args.method,
                                      max_order=args.max_order, diagnose=not args.no_diagnosis,
-                                     cross_validate=not args.no_cross_validation)
+                                     cross_validate=not args.no_cross_validation,
+                                     instruments={"auto": None, "on": True,
+                                                  "off": False}[args.instruments])
     finally:
         diagnose_log.setLevel(level)
         shocks_log.setLevel(shocks_level)
