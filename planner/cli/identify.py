@@ -31,9 +31,9 @@ def add_parser(subparsers):
                          "block, and the frequency grid fs/nperseg of both estimators "
                          "(default: the power of two nearest the shortest run's samples / 20, "
                          "4096 for 800 s at 100 Hz)")
-    ident_p.add_argument("--coherence-min", type=float, default=0.9,
+    ident_p.add_argument("--coherence-min", type=float, default=None,
                          help="coherence (0 to 1) below which band ends are replaced "
-                         "(default %(default)s)")
+                         "(default 0.9, or 0.01 with the instruments on: --instruments)")
     ident_p.add_argument("--instruments", choices=["auto", "on", "off"], default="auto",
                          help="estimate with instrumental variables (the shock-force inputs "
                          "again from the shock travels: no errors-in-variables bias from the "
