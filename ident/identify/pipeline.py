@@ -71,9 +71,36 @@ __all__ = [
     "VF_ORDER_MARGIN",
     "COHERENCE_MIN",
     "IV_COHERENCE_MIN",
+    "FrfOptions",
 ]
 
 log = logging.getLogger(__name__)
+
+@dataclasses.dataclass(frozen=True)
+class FrfOptions:
+    """Options of :func:`identify_session`'s non-parametric stage (the FRF and its
+    conditioning) that travel together.
+
+    Attributes
+    ----------
+    instruments : bool or None
+        Estimate the FRF with instrumental variables (:mod:`ident.identify.instruments`:
+        the shock-force inputs again from the shock travels, free of the velocity and force
+        sensors' noise), which removes the errors-in-variables bias of the noisy ``dF``
+        inputs at the price of more scatter. None (default, "auto"): on for sessions that
+        declare third elements and record every corner's shock travel (the elements'
+        linear part puts the velocity sensors' noise in every run's inputs), off otherwise,
+        so a plain session identifies as before
+        (:func:`ident.identify.instruments.session_instruments`). ``shockplan identify
+        --instruments auto|on|off``.
+    smooth_width_hz, smooth_domain : optional
+        :func:`ident.identify.condition.condition_frf`'s smoothing (None: its defaults).
+    """
+
+    instruments: bool | None = None
+    smooth_width_hz: float | None = None
+    smooth_domain: str | None = None
+
 
 #: Default ``coherence_min`` of :func:`identify_session` (the paper's band-end gate).
 COHERENCE_MIN = 0.9
@@ -548,10 +575,10 @@ def _fit_vf(fitmod, fb, Hb, W, frf, n_poles_vf, max_order):
 
 def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_m=None,
                      nperseg=None,
-                     coherence_min=None, smooth_width_hz=None, smooth_domain=None,
+                     coherence_min=None, frf_options=None,
                      fit_method="invfreqs",
                      orders="auto", weighting="paper", band_hz=(0.5, 20.0), max_order=10,
-                     diagnose=True, check_shocks=True, cross_validate=True, instruments=None):
+                     diagnose=True, check_shocks=True, cross_validate=True):
     """Identify a vehicle model from a rig session: estimate, condition, fit, check.
 
     Parameters
@@ -568,9 +595,10 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
     coherence_min : float, optional
         :func:`ident.identify.condition.condition_frf`'s band-end gate; default
         :data:`COHERENCE_MIN` (0.9, the paper's), or :data:`IV_COHERENCE_MIN` with the
-        instruments on (`instruments`).
-    smooth_width_hz, smooth_domain
-        :func:`ident.identify.condition.condition_frf` (``smooth_domain`` None: its default).
+        instruments on (``frf_options.instruments``).
+    frf_options : FrfOptions, optional
+        The FRF estimate's instruments and the conditioning's smoothing (default
+        ``FrfOptions()``: instruments "auto", the smoothing's defaults).
     fit_method, orders, weighting, band_hz, max_order
         :func:`fit_model`.
     diagnose : bool
@@ -594,16 +622,6 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         (``model.frf.cv_deviation`` and ``settings["cross_validation"]``): the planner's
         intervals take their random part's size from it. The model's numbers do not
         depend on it.
-    instruments : bool or None
-        Estimate the FRF with instrumental variables
-        (:mod:`ident.identify.instruments`: the shock-force inputs again from the shock
-        travels, free of the velocity and force sensors' noise), which removes the
-        errors-in-variables bias of the noisy ``dF`` inputs at the price of more scatter.
-        None (default, "auto"): on for sessions that declare third elements and record
-        every corner's shock travel (their elements' linear part puts the velocity
-        sensors' noise in every run's inputs), off otherwise, so a plain session
-        identifies as before (:func:`ident.identify.instruments.session_instruments`).
-
     Returns
     -------
     VehicleModel
@@ -626,8 +644,13 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
         ``settings["third"]`` (:attr:`VehicleModel.third`) holds what it declared
         (:func:`session_third`).
     """
-    cond = {} if smooth_domain is None else {"smooth_domain": smooth_domain}
-    iv = session_instruments(session, instruments, estimator=estimator)
+    opts = FrfOptions() if frf_options is None else frf_options
+    if not isinstance(opts, FrfOptions):
+        raise TypeError(f"frf_options must be an ident.identify.pipeline.FrfOptions, got "
+                        f"{type(opts).__name__}: build one, e.g. FrfOptions(instruments=False)")
+    smooth_width_hz = opts.smooth_width_hz
+    cond = {} if opts.smooth_domain is None else {"smooth_domain": opts.smooth_domain}
+    iv = session_instruments(session, opts.instruments, estimator=estimator)
     if coherence_min is None:
         coherence_min = IV_COHERENCE_MIN if iv else COHERENCE_MIN
     measured = session

@@ -70,7 +70,7 @@ def run(args):
     from ident.data.units import format_significant, from_si, set_display_units, unit_label
     from ident.identify.thirdforce import describe_third
     from ident.identify.model import summary_path, write_model_summary
-    from ident.identify.pipeline import identify_session
+    from ident.identify.pipeline import FrfOptions, identify_session
     from planner.noise import with_noise_report
 
     check_out(args)
@@ -95,8 +95,9 @@ def run(args):
                                      coherence_min=args.coherence_min, fit_method=args.method,
                                      max_order=args.max_order, diagnose=not args.no_diagnosis,
                                      cross_validate=not args.no_cross_validation,
-                                     instruments={"auto": None, "on": True,
-                                                  "off": False}[args.instruments])
+                                     frf_options=FrfOptions(instruments={
+                                         "auto": None, "on": True,
+                                         "off": False}[args.instruments]))
     finally:
         diagnose_log.setLevel(level)
         shocks_log.setLevel(shocks_level)
