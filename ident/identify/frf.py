@@ -82,6 +82,9 @@ bias-compensated solve with the noise spectra measured at the linear
 ``c_bar`` corners (where ``F - c_bar v`` is pure noise) was tried and left out:
 on one realization it moved the worst error from 1.5 % to 0.8-2.9 % depending
 on where it stopped compensating, with the median unchanged (docs/DESIGN.md).
+``instruments=True`` removes the bias instead with instrumental variables: the same
+inputs computed again from the shock travels (:mod:`ident.identify.instruments`), on by
+default for sessions with third elements (:func:`ident.identify.pipeline.identify_session`).
 """
 
 from __future__ import annotations
@@ -1152,6 +1155,12 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     exact_linear : bool
         :func:`shock_force_deviation`: ``dF = 0`` exactly at corners whose
         shock is linear at ``c_bar`` without lag (default).
+    instruments : bool
+        LPM only: instrumental variables (:func:`ident.identify.instruments.iv_lpm_solve`)
+        with the inputs computed again from the shock travels
+        (:func:`ident.identify.instruments.travel_run`) as instruments, and the shock-travel
+        rows taken from the velocity rows; needs ``shock_travel_XX`` in every run. Default
+        False (least squares); ``settings["instruments"]`` says ``"travel"`` when on.
 
     Returns
     -------
@@ -1187,6 +1196,9 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     if estimator == "lpm" and method != "global":
         raise ValueError(f"estimator='lpm' solves all runs jointly (method='global'); got "
                          f"method={method!r}; use method='global' or estimator='welch'")
+    if instruments and estimator != "lpm":
+        raise ValueError("instruments=True is an LPM estimate (estimator='lpm'); got "
+                         f"estimator={estimator!r}: use the LPM or instruments=False")
     _check_session(session)
     outs = _output_channels(session, outputs)
     cbar = baseline_damping(session) if cbar_n_s_m is None else np.broadcast_to(
