@@ -124,6 +124,12 @@ def test_third_elements_truth_round_trip(prototype_case, prototype_identified, t
                                "roll_front": "measured"}
     err = _frf_error(model, vehicle)
     assert np.median(err) < THIRD_FRF_MEDIAN
+    # instrumental variables by default for a session with third elements, the band-end
+    # gate relaxed with them (ident.identify.instruments; pipeline.IV_COHERENCE_MIN)
+    from ident.identify.pipeline import IV_COHERENCE_MIN
+
+    assert model.frf.settings["instruments"] == "travel"
+    assert model.frf.settings["conditioning"]["coherence_min"] == IV_COHERENCE_MIN
     # written around the heave and roll dampers' linear part at the baseline, brought back
     damping = np.array(model.frf.settings["third_linear_damping_n_s_m"])
     assert damping[0, 1] > 0 and damping[0, 1] != damping[0, 0] and not damping[:2, 2:].any()
