@@ -169,3 +169,12 @@ def test_map_pairs_returns_the_tasks_in_order_whatever_the_processes():
     tasks = list(range(101))
     serial = pipeline._map_pairs(_pair_task, 3, tasks, 1)
     assert pipeline._map_pairs(_pair_task, 3, tasks, 2) == serial == _pair_task(3, tasks)
+
+
+def test_frf_options_must_be_the_options_object(prototype_case):
+    """identify_session's frf_options is an FrfOptions; anything else is refused naming the
+    class and the fix, before any work."""
+    from ident.identify.pipeline import identify_session
+
+    with pytest.raises(TypeError, match="FrfOptions"):
+        identify_session(prototype_case[1], frf_options={"instruments": False})
