@@ -124,6 +124,12 @@ def test_third_elements_truth_round_trip(prototype_case, prototype_identified, t
                                "roll_front": "measured"}
     err = _frf_error(model, vehicle)
     assert np.median(err) < THIRD_FRF_MEDIAN
+    # instrumental variables by default for a session with third elements, the band-end
+    # gate relaxed with them (ident.identify.instruments; pipeline.IV_COHERENCE_MIN)
+    from ident.identify.pipeline import IV_COHERENCE_MIN
+
+    assert model.frf.settings["instruments"] == "travel"
+    assert model.frf.settings["conditioning"]["coherence_min"] == IV_COHERENCE_MIN
     # written around the heave and roll dampers' linear part at the baseline, brought back
     damping = np.array(model.frf.settings["third_linear_damping_n_s_m"])
     assert damping[0, 1] > 0 and damping[0, 1] != damping[0, 0] and not damping[:2, 2:].any()
@@ -163,3 +169,12 @@ def test_map_pairs_returns_the_tasks_in_order_whatever_the_processes():
     tasks = list(range(101))
     serial = pipeline._map_pairs(_pair_task, 3, tasks, 1)
     assert pipeline._map_pairs(_pair_task, 3, tasks, 2) == serial == _pair_task(3, tasks)
+
+
+def test_frf_options_must_be_the_options_object(prototype_case):
+    """identify_session's frf_options is an FrfOptions; anything else is refused naming the
+    class and the fix, before any work."""
+    from ident.identify.pipeline import identify_session
+
+    with pytest.raises(TypeError, match="FrfOptions"):
+        identify_session(prototype_case[1], frf_options={"instruments": False})

@@ -170,6 +170,8 @@ def _estimate_like(session, frf):
     cond.pop("poor_pairs", None)
     est = {"estimator": s.get("estimator", "lpm"), "method": s.get("method", "global"),
            "cbar_n_s_m": frf.cbar_n_s_m, "outputs": list(frf.output_names)}
+    if s.get("instruments"):
+        est["instruments"] = True
     if est["estimator"] == "lpm":
         for key, name in (("lpm_degree", "lpm_degree"), ("lpm_coherence_dof",
                                                          "lpm_coherence_dof")):

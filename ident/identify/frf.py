@@ -82,6 +82,9 @@ bias-compensated solve with the noise spectra measured at the linear
 ``c_bar`` corners (where ``F - c_bar v`` is pure noise) was tried and left out:
 on one realization it moved the worst error from 1.5 % to 0.8-2.9 % depending
 on where it stopped compensating, with the median unchanged (docs/DESIGN.md).
+``instruments=True`` removes the bias instead with instrumental variables: the same
+inputs computed again from the shock travels (:mod:`ident.identify.instruments`), on by
+default for sessions with third elements (:func:`ident.identify.pipeline.identify_session`).
 """
 
 from __future__ import annotations
@@ -100,6 +103,8 @@ from ident.data.channels import (CORNERS, RESPONSE_CHANNELS, RIG_INPUTS, SHOCK_F
                             rig_inputs_of)
 from ident.errors import IdentificationError, LowCoherenceWarning
 from ident.identify.diagnose import rest_levels
+from ident.identify.instruments import (iv_lpm_solve, travel_from_velocity, travel_rows,
+                                        travel_run)
 from ident.identify.thirdforce import third_element_force
 from ident.models.lti import lag_coefficients
 from ident.models.shocks import LinearShock
@@ -1107,7 +1112,7 @@ def _check_session(session):
 def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, window="hamming",
                  nperseg=None, noverlap=None, band_hz=(0.5, 20.0), estimator="lpm",
                  lpm_degree=LPM_DEGREE, lpm_half_width=None,
-                 lpm_coherence_dof=LPM_COHERENCE_DOF, exact_linear=True):
+                 lpm_coherence_dof=LPM_COHERENCE_DOF, exact_linear=True, instruments=False):
     """Estimate the closed-loop multi-input FRF of a rig session (Eqs. 18-28).
 
     Parameters
@@ -1156,6 +1161,12 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     exact_linear : bool
         :func:`shock_force_deviation`: ``dF = 0`` exactly at corners whose
         shock is linear at ``c_bar`` without lag (default).
+    instruments : bool
+        LPM only: instrumental variables (:func:`ident.identify.instruments.iv_lpm_solve`)
+        with the inputs computed again from the shock travels
+        (:func:`ident.identify.instruments.travel_run`) as instruments, and the shock-travel
+        rows taken from the velocity rows; needs ``shock_travel_XX`` in every run. Default
+        False (least squares); ``settings["instruments"]`` says ``"travel"`` when on.
 
     Returns
     -------
@@ -1191,6 +1202,9 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     if estimator == "lpm" and method != "global":
         raise ValueError(f"estimator='lpm' solves all runs jointly (method='global'); got "
                          f"method={method!r}; use method='global' or estimator='welch'")
+    if instruments and estimator != "lpm":
+        raise ValueError("instruments=True is an LPM estimate (estimator='lpm'); got "
+                         f"estimator={estimator!r}: use the LPM or instruments=False")
     _check_session(session)
     outs = _output_channels(session, outputs)
     cbar = baseline_damping(session) if cbar_n_s_m is None else np.broadcast_to(
@@ -1224,7 +1238,8 @@ def estimate_frf(session, *, method="global", cbar_n_s_m=None, outputs=None, win
     m = len(inputs)
     if estimator == "lpm":
         frf = _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, lpm_degree,
-                                lpm_half_width, lpm_coherence_dof, exact_linear, damping)
+                                lpm_half_width, lpm_coherence_dof, exact_linear, damping,
+                                instruments)
         return frf if damping is None else _around_corner_damping(frf, damping, wanted)
     per_run = []
     stop_dev, stop_settings = _stop_deviations(session, session.runs, damping)
@@ -1280,7 +1295,7 @@ def _warn_flagged(session, flagged, band, band_hz, *, stacklevel):
 
 
 def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width, coherence_dof,
-                      exact_linear, damping=None):
+                      exact_linear, damping=None, instruments=False):
     """The ``estimator="lpm"`` branch of :func:`estimate_frf` (arguments checked there)."""
     fs = session.fs_hz
     inputs = model_inputs(session)
@@ -1297,6 +1312,11 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
         records.append(np.vstack([np.vstack([run.dynamic(c) for c in rig]), dF,
                                   np.vstack([run.dynamic(o) for o in outs])]))
         dF_pow.append(np.mean(dF**2, axis=1))
+    if instruments:  # the inputs again from the travels: ident.identify.instruments
+        zruns = [travel_run(r) for r in runs]
+        for k, (zr, G) in enumerate(zip(zruns, _stop_deviations(session, zruns, damping)[0])):
+            dF = shock_force_deviation(zr, session.shocks, cbar, exact_linear=exact_linear)[1]
+            records[k] = np.vstack([records[k], dF if G is None else dF + G])
     degree, half_width, coherence_dof = _check_lpm_args(
         degree, half_width, coherence_dof, [x[:m] for x in records], [r.name for r in runs])
     # the runs' DFTs side by side (numpy's FFT releases the GIL; the same numbers)
@@ -1308,14 +1328,22 @@ def _estimate_frf_lpm(session, outs, cbar, nperseg, band_hz, degree, half_width,
     band = (f >= band_hz[0]) & (f <= band_hz[1])
     # dF = 0 everywhere is refused before the solve (the solve would not fail, only be useless)
     _check_identifiable(session, runs, dF_pow, band, cbar)
-    H, mult, partial, cond, indep, dof = _lpm_solve(spectra, n_samples, m, f, float(fs), degree,
-                                                    half_width, coherence_dof)
+    if instruments:
+        H, mult, partial, cond, indep, dof = iv_lpm_solve(
+            spectra, n_samples, m, len(outs), f, float(fs), degree, half_width, coherence_dof,
+            travel_rows(outs), rcond=LPM_RCOND, chunk=_LPM_CHUNK)
+        H, partial, mult = travel_from_velocity(H, partial, mult, outs, f)
+    else:
+        H, mult, partial, cond, indep, dof = _lpm_solve(spectra, n_samples, m, f, float(fs),
+                                                        degree, half_width, coherence_dof)
     _check_identifiable(session, runs, dF_pow, band, cbar, indep=indep.T)
     flagged = indep < FLAG_INDEPENDENT_FRACTION
     _warn_flagged(session, flagged, band, band_hz, stacklevel=3)
     settings = _lpm_settings(nperseg, fs, degree, half_width, dof, coherence_dof, n_samples, m)
     settings.update(method="global", runs=[r.name for r in runs], band_hz=tuple(band_hz),
                     exact_linear=bool(exact_linear), **stop_settings)
+    if instruments:
+        settings["instruments"] = "travel"
     return Frf(f_hz=f, H=H, input_names=inputs, output_names=outs,
                multiple_coherence=mult, partial_coherence=partial, input_condition=cond,
                independent_fraction=indep, flagged=flagged, n_averages=coherence_dof + m,

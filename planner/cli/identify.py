@@ -31,9 +31,15 @@ def add_parser(subparsers):
                          "block, and the frequency grid fs/nperseg of both estimators "
                          "(default: the power of two nearest the shortest run's samples / 20, "
                          "4096 for 800 s at 100 Hz)")
-    ident_p.add_argument("--coherence-min", type=float, default=0.9,
+    ident_p.add_argument("--coherence-min", type=float, default=None,
                          help="coherence (0 to 1) below which band ends are replaced "
-                         "(default %(default)s)")
+                         "(default 0.9, or 0.01 with the instruments on: --instruments)")
+    ident_p.add_argument("--instruments", choices=["auto", "on", "off"], default="auto",
+                         help="estimate with instrumental variables (the shock-force inputs "
+                         "again from the shock travels: no errors-in-variables bias from the "
+                         "velocity and force sensors' noise, more scatter); auto (default): on "
+                         "for sessions that declare third elements and record every corner's "
+                         "shock travel, off otherwise")
     ident_p.add_argument("--max-order", type=int_at_least(2), default=10, metavar="N",
                          help="highest denominator order (poles) a pair's fit may take "
                          "(default %(default)s; raise it when identify warns that a pair "
@@ -64,7 +70,7 @@ def run(args):
     from ident.data.units import format_significant, from_si, set_display_units, unit_label
     from ident.identify.thirdforce import describe_third
     from ident.identify.model import summary_path, write_model_summary
-    from ident.identify.pipeline import identify_session
+    from ident.identify.pipeline import FrfOptions, identify_session
     from planner.noise import with_noise_report
 
     check_out(args)
@@ -88,7 +94,10 @@ def run(args):
                                      frf_method=args.frf_method, nperseg=args.nperseg,
                                      coherence_min=args.coherence_min, fit_method=args.method,
                                      max_order=args.max_order, diagnose=not args.no_diagnosis,
-                                     cross_validate=not args.no_cross_validation)
+                                     cross_validate=not args.no_cross_validation,
+                                     frf_options=FrfOptions(instruments={
+                                         "auto": None, "on": True,
+                                         "off": False}[args.instruments]))
     finally:
         diagnose_log.setLevel(level)
         shocks_log.setLevel(shocks_level)
