@@ -6,11 +6,12 @@ drive (``make_track_drive``, 120 s at 100 Hz, oversample 2) and the same corner 
 heave damper (digressive, lagged), a front roll damper and front and rear heave springs
 with a gap that closes on the drive. Each timed through
 ``ident.sim.closedloop.simulate_batch_metrics`` (the predictions' fused loop and metrics),
-the median of ``--repeat`` calls after a warm-up call (compilation or cache load). The
-figure: the time per setup with third elements over the plain loop's (issue 38's target:
-at most 1.3x), with the six motion metrics and without them (the loop's own cost; the
-motion metrics are formed from the corners' band-passed travels and velocities, no filter
-lanes of their own).
+``--repeat`` calls of each after a warm-up call (compilation or cache load), the three
+runs alternating in each repetition; wall and CPU time (the process's, all threads), the
+median and the best. The figure: the time per setup with third elements over the plain
+loop's (issue 38's target: at most 1.3x), with the six motion metrics and without them (the
+loop's own cost; the motion metrics are formed from the corners' band-passed travels and
+velocities, no filter lanes of their own).
 
 Run::
 
@@ -100,40 +101,60 @@ def main(argv=None):
           f"{os.environ.get('NUMBA_NUM_THREADS')}")
     print(f"GT car, track drive {DRIVE_S:g} s at {FS_HZ:g} Hz, oversample {OVERSAMPLE}, "
           f"{args.setups} setups")
-    res = {}
     runs = (("plain", {}, False), ("third", {"third": third}, False),
             ("third, the plain metric set", {"third": third}, True))
-    for label, kw, same_metrics in runs:
+
+    def call(kw, same_metrics):
+        saved = {}
         if same_metrics:
             # the loop's own cost: the six motion metrics left out for this run, restored
             # after
             saved = {m: METRIC_CHANNELS.pop(m) for m in THIRD_METRIC_NAMES}
-        t0 = time.perf_counter()
-        out = simulate_batch_metrics(plant, drive, setups, oversample=OVERSAMPLE, rig=rig, **kw)
-        warm = time.perf_counter() - t0
-        times = []
-        for _ in range(args.repeat):
-            t0 = time.perf_counter()
+        try:
+            c0, t0 = time.process_time(), time.perf_counter()
             out = simulate_batch_metrics(plant, drive, setups, oversample=OVERSAMPLE, rig=rig,
                                          **kw)
-            times.append(time.perf_counter() - t0)
-        med = statistics.median(times)
-        res[label] = med
-        if same_metrics:
+            return out, time.perf_counter() - t0, time.process_time() - c0
+        finally:
             METRIC_CHANNELS.update(saved)
-        print(f"{label}: {1e3 * med / args.setups:7.2f} ms per setup (median of "
-              f"{args.repeat}, min {1e3 * min(times) / args.setups:.2f}); first call "
-              f"{warm:.1f} s ({jit_source()}); Newton iterations max "
-              f"{int(out.newton_iterations.max())}; {load()}")
+
+    warm = {}
+    for label, kw, same_metrics in runs:
+        warm[label] = call(kw, same_metrics)[1]
+    # the runs alternate within each repetition (a load change hits all of them alike); CPU
+    # time is the process's (all threads: the loop runs in a worker thread)
+    wall = {label: [] for label, _, _ in runs}
+    cpu = {label: [] for label, _, _ in runs}
+    outs = {}
+    for _ in range(args.repeat):
+        for label, kw, same_metrics in runs:
+            outs[label], w, c = call(kw, same_metrics)
+            wall[label].append(w)
+            cpu[label].append(c)
+    ms = 1e3 / args.setups
+    for label, _, _ in runs:
+        out = outs[label]
+        print(f"{label}: {ms * statistics.median(wall[label]):7.2f} ms per setup (median of "
+              f"{args.repeat}, min {ms * min(wall[label]):.2f}), CPU "
+              f"{ms * statistics.median(cpu[label]):.2f} (min {ms * min(cpu[label]):.2f}); "
+              f"first call {warm[label]:.1f} s ({jit_source()}); Newton iterations max "
+              f"{int(out.newton_iterations.max())}")
         if label == "third":
             share = out.metrics.values["heave_spring_contact_share_front"]
             print(f"        heave spring front in contact {100 * share.min():.1f}-"
                   f"{100 * share.max():.1f} % of the time; metrics "
                   f"{[m for m in THIRD_METRIC_NAMES if m in out.metrics.values]}")
-    print(f"third elements / plain loop, time per setup: {res['third'] / res['plain']:.2f}x "
-          "(target <= 1.3x); the loop alone (the same metrics): "
-          f"{res['third, the plain metric set'] / res['plain']:.2f}x")
+    print(load())
 
+    def ratio(d, label, f):
+        return f(d[label]) / f(d["plain"])
+
+    for label, what in (("third", "third elements / plain loop, time per setup"),
+                        ("third, the plain metric set", "the loop alone (the same metrics)")):
+        print(f"{what}: wall {ratio(wall, label, statistics.median):.2f}x median, "
+              f"{ratio(wall, label, min):.2f}x best; CPU "
+              f"{ratio(cpu, label, statistics.median):.2f}x median, "
+              f"{ratio(cpu, label, min):.2f}x best (target <= 1.3x)")
 
 if __name__ == "__main__":
     main()

@@ -1090,6 +1090,47 @@ def _third_solve(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0
     return it + itn
 
 
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _third_change(Jinv, rows, W, e, dw, dfc, dF, z, y, valid):
+    """A segment change of element `e` in the time loop's fast path (:func:`loop_one`): a
+    damper (`rows` the dampers' rows, ``W = rows Dv``) or a spring (the springs' rows, ``W =
+    rows Dt``) whose slope changes by `dw` (``J' = J - dw r_e W_e^T``) and whose force at its
+    present motion by `dfc`. Moves the solution `dF` (by ``J'^-1 r_e dfc``) and the cached
+    inverse `Jinv` (Sherman-Morrison; `z`, `y` scratch) and counts the update in
+    ``valid[0]``; returns False (``valid[0] = 0``) when the update is singular. One helper
+    for dampers and springs; inlined."""
+    m = 4
+    for a in range(m):
+        acc = 0.0
+        for c in range(m):
+            acc += Jinv[a, c] * rows[e, c]
+        z[a] = acc
+    wz = 0.0
+    for a in range(m):
+        wz += W[e, a] * z[a]
+    den = 1.0 - dw * wz
+    if abs(den) < 1e-8:
+        valid[0] = 0
+        return False
+    # J'^-1 r_e = z / den
+    g = dfc / den
+    for a in range(m):
+        dF[a] += z[a] * g
+    if dw != 0.0:
+        for a in range(m):
+            acc = 0.0
+            for c in range(m):
+                acc += W[e, c] * Jinv[c, a]
+            y[a] = acc
+        q = dw / den
+        for a in range(m):
+            za = z[a] * q
+            for c in range(m):
+                Jinv[a, c] += za * y[c]
+        valid[0] += 1
+    return True
+
+
 # ----------------------------------------------------------------------------------------------
 # the time loops
 # ----------------------------------------------------------------------------------------------
@@ -1152,10 +1193,12 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
 
     Notes
     -----
-    With third elements the step is :func:`_third_solve`: the corner shocks and the third
-    dampers (rows over the corners, each with its curve and lag) and the springs (heave
-    springs and corner bump stops on their rows' travel) in one solve on the corner forces
-    ``dF``, the travels' free part ``t_free`` from the predictor as the velocities'.
+    With third elements the step is one solve on the corner forces ``dF`` of the corner
+    shocks and the third dampers (rows over the corners, each with its curve and lag) and
+    the springs (heave springs and corner bump stops on their rows' travel), the travels'
+    free part ``t_free`` from the predictor as the velocities': inline for the common cases
+    (every element inside its segment; segment changes by :func:`_third_change`, which
+    moves the solution and the cached inverse), :func:`_third_solve` for the rest.
 
     The modal states are held as separate real and imaginary arrays (the mode loops
     vectorize). At every r-th step (an output sample) the states and ``dF`` (and ``w``
@@ -1333,6 +1376,38 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
         sseg = np.empty(ns3, dtype=np.int64)
         for j in range(ns3):
             sseg[j] = _spring_seg(0.0, j, s03, bx3, bn3)
+        # the elements' rows' same-step response to dF (wd3 = drowsA Dv, ws3 = srows Dt),
+        # the dampers' lines per segment, the velocity and travel rows as 8 mode-major lanes
+        wd3 = np.zeros((nd3, m))
+        for d in range(nd3):
+            for a in range(m):
+                acc = 0.0
+                for c in range(m):
+                    acc += drowsA[d, c] * Deff[c, a]
+                wd3[d, a] = acc
+        ws3 = np.zeros((ns3, m))
+        for j in range(ns3):
+            for a in range(m):
+                acc = 0.0
+                for c in range(m):
+                    acc += srows3[j, c] * Dt3[c, a]
+                ws3[j, a] = acc
+        dls3 = np.empty((nd3, K3 + 1))
+        dla3 = np.empty((nd3, K3 + 1))
+        for d in range(nd3):
+            for sg in range(nkA[d] + 1):
+                dls3[d, sg], dla3[d, sg] = _segment_line(sg, kvA, kfA, d, nkA[d], sloA[d],
+                                                         shiA[d])
+        CvtTr = np.empty((n, 8))
+        CvtTi = np.empty((n, 8))
+        for i in range(n):
+            for c in range(m):
+                CvtTr[i, c] = Cvr[c, i]
+                CvtTi[i, c] = Cvi[c, i]
+                CvtTr[i, m + c] = CtTr[i, c]
+                CvtTi[i, m + c] = CtTi[i, c]
+        vef3 = np.zeros(nd3)
+        tef3 = np.zeros(ns3)
         tfree = np.zeros(m)
         ds3 = np.zeros(nd3)
         da3 = np.zeros(nd3)
@@ -1353,10 +1428,7 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
         c03 = np.zeros(nd3)
         Fp3 = np.zeros(nd3)
         fp3 = np.zeros(nd3)
-        fpp3 = np.zeros(nd3)
         n_sp = np.zeros(ns3)
-        u3 = np.zeros(m)
-        w3 = np.zeros(m)
         z3 = np.zeros(m)
         y3 = np.zeros(m)
     xr = np.zeros(n)
@@ -1419,13 +1491,36 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
         # the velocities in a loop of their own: the update above has no loop-carried
         # chain and vectorizes; fused with these sums (strict FP order) it ran scalar.
         # Same sums in the same order as before, so the same rounding.
-        for i in range(n):
-            tr = xr[i]
-            ti = xi[i]
-            a0 += Cvr[0, i] * tr - Cvi[0, i] * ti
-            a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
-            a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
-            a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
+        if third is None:
+            for i in range(n):
+                tr = xr[i]
+                ti = xi[i]
+                a0 += Cvr[0, i] * tr - Cvi[0, i] * ti
+                a1 += Cvr[1, i] * tr - Cvi[1, i] * ti
+                a2 += Cvr[2, i] * tr - Cvi[2, i] * ti
+                a3 += Cvr[3, i] * tr - Cvi[3, i] * ti
+        else:
+            # the velocities and the travels as 8 scalar sums of one loop (registers, no
+            # store per mode): the travels' chains run beside the velocities'
+            t0 = 0.0
+            t1 = 0.0
+            t2 = 0.0
+            t3_ = 0.0
+            for i in range(n):
+                tr = xr[i]
+                ti = xi[i]
+                a0 += CvtTr[i, 0] * tr - CvtTi[i, 0] * ti
+                a1 += CvtTr[i, 1] * tr - CvtTi[i, 1] * ti
+                a2 += CvtTr[i, 2] * tr - CvtTi[i, 2] * ti
+                a3 += CvtTr[i, 3] * tr - CvtTi[i, 3] * ti
+                t0 += CvtTr[i, 4] * tr - CvtTi[i, 4] * ti
+                t1 += CvtTr[i, 5] * tr - CvtTi[i, 5] * ti
+                t2 += CvtTr[i, 6] * tr - CvtTi[i, 6] * ti
+                t3_ += CvtTr[i, 7] * tr - CvtTi[i, 7] * ti
+            tfree[0] = t_rig[k, 0] + t0
+            tfree[1] = t_rig[k, 1] + t1
+            tfree[2] = t_rig[k, 2] + t2
+            tfree[3] = t_rig[k, 3] + t3_
         if elements is not None:
             if any_bs:
                 # the travel rows (Ce rows 0-3, held mode-major: CeTr[i, c]), the 4 corners
@@ -1437,14 +1532,6 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                     ti = xi[i]
                     for c in range(m):
                         sfree[c] += CeTr[i, c] * tr - CeTi[i, c] * ti
-        if third is not None:
-            for c in range(m):
-                tfree[c] = t_rig[k, c]
-            for i in range(n):
-                tr = xr[i]
-                ti = xi[i]
-                for c in range(m):
-                    tfree[c] += CtTr[i, c] * tr - CtTi[i, c] * ti
         vfree[0] = v_rig[k, 0] + a0
         vfree[1] = v_rig[k, 1] + a1
         vfree[2] = v_rig[k, 2] + a2
@@ -1458,171 +1545,130 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
                     ti = xi[i]
                     for c in range(m):
                         cfree[c] += CeTr[i, 4 + c] * tr - CeTi[i, 4 + c] * ti
-        for c in range(m):
-            c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
+        if third is None:
+            for c in range(m):
+                c0[c] = alpha[c] * F_prev[c] + b1[c] * f_prev[c] + bm[c] * f_prev2[c]
         if third is not None:
-            for d in range(nd3):
-                c03[d] = alphaA[d] * Fp3[d] + b1A[d] * fp3[d] + bmA[d] * fpp3[d]
-            # the common cases inline (as _fast_solve's): every element on its segment, or
-            # segment changes by rank-1 updates of the cached inverse (a change of damper d
-            # is J' = J - dw m_d (Dv^T m_d)^T, of spring j J' = J - dk q_j (Dt^T q_j)^T);
-            # the rest (no valid inverse, cycling, a singular update) in _third_solve
+            # (c03, the lags' known part of every element's force, was formed at the end of
+            # the last step)
+            # the common cases inline (as _fast_solve's): every element strictly inside its
+            # segment, or segment changes by rank-1 updates of the cached inverse and of the
+            # solution (_third_change); the rest (no valid inverse, cycling, a singular
+            # update) in _third_solve. The elements' motions are their free parts plus their
+            # rows' same-step response (wd3, ws3) to dF: no corner travel is formed.
             it = 0
             if valid3[0] >= 1:
-                for it_ in range(1, THIRD_FAST_PASSES + 1):
+                # J dF = sum_d m_d (c0_d + b0_d (a_d + s_d m_d vfree)) - cbar vfree + sum_j
+                # q_j (a_j + k_j q_j tfree): each element's line at its free motion (the
+                # corner shocks' unit rows directly), a spring's term only in contact (out
+                # of contact its line is zero)
+                for d in range(m):
+                    x = vfree[d]
+                    vef3[d] = x
+                    rhs3[d] = c03[d] + b0A[d] * (da3[d] + ds3[d] * x) - cbar[d] * x
+                for d in range(m, nd3):
+                    x = 0.0
+                    for c in range(m):
+                        x += drowsA[d, c] * vfree[c]
+                    vef3[d] = x
+                    q = c03[d] + b0A[d] * (da3[d] + ds3[d] * x)
                     for a in range(m):
-                        acc = 0.0
-                        for c in range(m):
-                            acc += Mv3[a, c] * vfree[c] + Mt3[a, c] * tfree[c]
-                        rhs3[a] = acc
-                    # the corner shocks' unit rows directly (the same sums without their
-                    # zero terms), then the third dampers' rows
-                    for d in range(m):
-                        rhs3[d] += c03[d] + b0A[d] * da3[d]
-                    for d in range(m, nd3):
-                        q = c03[d] + b0A[d] * da3[d]
+                        rhs3[a] += drowsA[d, a] * q
+                for j in range(ns3):
+                    x = 0.0
+                    for c in range(m):
+                        x += srows3[j, c] * tfree[c]
+                    tef3[j] = x
+                for j in range(ns3):
+                    if sseg[j] >= 0:
+                        q = sa3[j] + sk3[j] * tef3[j]
                         for a in range(m):
-                            rhs3[a] += drowsA[d, a] * q
-                    for j in range(ns3):
-                        if sseg[j] >= 0:
-                            for a in range(m):
-                                rhs3[a] += srows3[j, a] * sa3[j]
-                    for a in range(m):
-                        acc = 0.0
-                        for c in range(m):
-                            acc += Jinv3[a, c] * rhs3[c]
-                        dF3[a] = acc
-                    for a in range(m):
-                        acc_v = vfree[a]
-                        acc_t = tfree[a]
-                        for c in range(m):
-                            acc_v += Deff[a, c] * dF3[c]
-                            acc_t += Dt3[a, c] * dF3[c]
-                        v[a] = acc_v
-                        t3[a] = acc_t
+                            rhs3[a] += srows3[j, a] * q
+                for a in range(m):
+                    acc = 0.0
+                    for c in range(m):
+                        acc += Jinv3[a, c] * rhs3[c]
+                    dF3[a] = acc
+                for it_ in range(1, THIRD_FAST_PASSES + 1):
                     # every element strictly inside its segment (the common case), tested
                     # without a branch per element (as _fast_solve); otherwise each is placed
                     # by _segment_of / _spring_seg, which decide a motion on a knot
                     inside = True
-                    for d in range(m):
-                        x = v[d]
-                        ve3[d] = x
-                        sg = dseg[d]
-                        inside &= (bnd3[0, d, sg] < x) & (x < bnd3[1, d, sg])
-                    for d in range(m, nd3):
-                        x = 0.0
+                    for d in range(nd3):
+                        x = vef3[d]
                         for c in range(m):
-                            x += drowsA[d, c] * v[c]
+                            x += wd3[d, c] * dF3[c]
                         ve3[d] = x
                         sg = dseg[d]
                         inside &= (bnd3[0, d, sg] < x) & (x < bnd3[1, d, sg])
                     for j in range(ns3):
-                        x = 0.0
+                        x = tef3[j]
                         for c in range(m):
-                            x += srows3[j, c] * t3[c]
+                            x += ws3[j, c] * dF3[c]
                         te3[j] = x
                         xs = x - s03[j]
                         sg = sseg[j] + 1
                         inside &= (sbnd3[0, j, sg] < xs) & (xs < sbnd3[1, j, sg])
-                    if inside:
+                    if not inside:
+                        # each element in turn at its motion on the solution so far; a
+                        # change moves the solution and the cached inverse (Sherman-Morrison)
+                        same = True
                         for d in range(nd3):
-                            fd3[d] = da3[d] + ds3[d] * ve3[d]
-                        for j in range(ns3):
-                            gs3[j] = sa3[j] + sk3[j] * te3[j]
-                        it = it_
-                        if valid3[0] > _MAX_RANK1_UPDATES:
+                            x = vef3[d]
+                            for c in range(m):
+                                x += wd3[d, c] * dF3[c]
+                            ve3[d] = x
+                            s2 = _segment_of(x, kvA, d, nkA[d], dseg[d])
+                            if s2 == dseg[d]:
+                                continue
+                            same = False
+                            sl2 = dls3[d, s2]
+                            a2 = dla3[d, s2]
+                            dsl = sl2 - ds3[d]
+                            dfc = b0A[d] * ((a2 - da3[d]) + dsl * x)
+                            dseg[d] = s2
+                            ds3[d] = sl2
+                            da3[d] = a2
+                            if not _third_change(Jinv3, drowsA, wd3, d, b0A[d] * dsl, dfc, dF3,
+                                                 z3, y3, valid3):
+                                break
+                        if valid3[0] >= 1:
+                            for j in range(ns3):
+                                x = tef3[j]
+                                for c in range(m):
+                                    x += ws3[j, c] * dF3[c]
+                                te3[j] = x
+                                s2 = _spring_seg(x, j, s03, bx3, bn3)
+                                if s2 == sseg[j]:
+                                    continue
+                                same = False
+                                k2, a2 = _spring_line(s2, j, s03, bx3, bf3, bn3, bslope3)
+                                dk = k2 - sk3[j]
+                                dfc = (a2 - sa3[j]) + dk * x
+                                sseg[j] = s2
+                                sk3[j] = k2
+                                sa3[j] = a2
+                                if not _third_change(Jinv3, srows3, ws3, j, dk, dfc, dF3, z3, y3,
+                                                     valid3):
+                                    break
+                        if valid3[0] == 0 or valid3[0] > _MAX_RANK1_UPDATES:
                             valid3[0] = 0
-                        break
-                    same = True
+                            break
+                        if not same:
+                            continue
                     for d in range(nd3):
-                        x = ve3[d]
-                        s2 = _segment_of(x, kvA, d, nkA[d], dseg[d])
-                        if s2 == dseg[d]:
-                            continue
-                        same = False
-                        dseg[d] = s2
-                        sl2, a2 = _segment_line(s2, kvA, kfA, d, nkA[d], sloA[d], shiA[d])
-                        dw = b0A[d] * (sl2 - ds3[d])
-                        ds3[d] = sl2
-                        da3[d] = a2
-                        if dw != 0.0 and valid3[0] >= 1:
-                            for a in range(m):
-                                u3[a] = dw * drowsA[d, a]
-                                acc = 0.0
-                                for c in range(m):
-                                    acc += drowsA[d, c] * Deff[c, a]
-                                w3[a] = acc
-                                for c in range(m):
-                                    Mv3[a, c] += dw * drowsA[d, a] * drowsA[d, c]
-                            den = 1.0
-                            for a in range(m):
-                                acc = 0.0
-                                acc2 = 0.0
-                                for c in range(m):
-                                    acc += Jinv3[a, c] * u3[c]
-                                    acc2 += w3[c] * Jinv3[c, a]
-                                z3[a] = acc
-                                y3[a] = acc2
-                            for a in range(m):
-                                den -= w3[a] * z3[a]
-                            if abs(den) < 1e-8:
-                                valid3[0] = 0
-                            else:
-                                for a in range(m):
-                                    for c in range(m):
-                                        Jinv3[a, c] += z3[a] * y3[c] / den
-                                valid3[0] += 1
+                        fd3[d] = da3[d] + ds3[d] * ve3[d]
                     for j in range(ns3):
-                        x = te3[j]
-                        s2 = _spring_seg(x, j, s03, bx3, bn3)
-                        if s2 == sseg[j]:
-                            continue
-                        same = False
-                        sseg[j] = s2
-                        k2, a2 = _spring_line(s2, j, s03, bx3, bf3, bn3, bslope3)
-                        dk = k2 - sk3[j]
-                        sk3[j] = k2
-                        sa3[j] = a2
-                        if dk != 0.0 and valid3[0] >= 1:
-                            for a in range(m):
-                                u3[a] = dk * srows3[j, a]
-                                acc = 0.0
-                                for c in range(m):
-                                    acc += srows3[j, c] * Dt3[c, a]
-                                w3[a] = acc
-                                for c in range(m):
-                                    Mt3[a, c] += dk * srows3[j, a] * srows3[j, c]
-                            den = 1.0
-                            for a in range(m):
-                                acc = 0.0
-                                acc2 = 0.0
-                                for c in range(m):
-                                    acc += Jinv3[a, c] * u3[c]
-                                    acc2 += w3[c] * Jinv3[c, a]
-                                z3[a] = acc
-                                y3[a] = acc2
-                            for a in range(m):
-                                den -= w3[a] * z3[a]
-                            if abs(den) < 1e-8:
-                                valid3[0] = 0
-                            else:
-                                for a in range(m):
-                                    for c in range(m):
-                                        Jinv3[a, c] += z3[a] * y3[c] / den
-                                valid3[0] += 1
-                    if same:
-                        for d in range(nd3):
-                            fd3[d] = da3[d] + ds3[d] * ve3[d]
-                        for j in range(ns3):
-                            gs3[j] = sa3[j] + sk3[j] * te3[j]
-                        it = it_
-                        if valid3[0] > _MAX_RANK1_UPDATES:
-                            valid3[0] = 0
-                        break
-                    if valid3[0] == 0 or valid3[0] > _MAX_RANK1_UPDATES:
+                        gs3[j] = sa3[j] + sk3[j] * te3[j]
+                    for c in range(m):
+                        v[c] = ve3[c]
+                    it = it_
+                    if valid3[0] > _MAX_RANK1_UPDATES:
                         valid3[0] = 0
-                        break
+                    break
             if it == 0:
+                # from the segments (the fast path keeps the inverse, not Mv and Mt)
+                valid3[0] = 0
                 it = _third_solve(vfree, tfree, c03, Deff, Dt3, cbar, drowsA, kvA, kfA, nkA,
                                   sloA, shiA, b0A, srows3, s03, bx3, bf3, bn3, bslope3, dseg,
                                   sseg, ds3, da3, sk3, sa3, Mv3, Mt3, J3, Jinv3, valid3, rhs3,
@@ -1633,10 +1679,12 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
             if it > worst:
                 worst = it
             for d in range(nd3):
-                F = c03[d] + b0A[d] * fd3[d]
+                f = fd3[d]
+                F = c03[d] + b0A[d] * f
                 Fp3[d] = F
-                fpp3[d] = fp3[d]
-                fp3[d] = fd3[d]
+                # the next step's known part of the force: alpha F[k] + b1 f[k] + bm f[k-1]
+                c03[d] = alphaA[d] * F + b1A[d] * f + bmA[d] * fp3[d]
+                fp3[d] = f
             for c in range(m):
                 F_prev[c] = Fp3[c]
                 dF_prev[c] = dF3[c]
