@@ -235,9 +235,12 @@ def _spring(t, s0, bx, bf, bn, bslope):
 
 @_nb.njit(cache=True, nogil=True)
 def _third_kernel(phi, g1, g0, gm, B, C, D, cbar, y_rig, vi, ti, rows, kv, kf, nk, slo, shi,
-                  alpha, b0, b1, bm, srows, s0, bx, bf, bn, bslope, max_iter, tol, armijo, min_step, y, F, S):
+                  alpha, b0, b1, bm, srows, s0, bx, bf, bn, bslope, max_iter, tol, armijo,
+                  min_step, y, F, S):
     """The time loop (see the module docstring); returns the most Newton iterations a step
-    took, or -1 if a step did not converge. Plain loops over preallocated buffers (no
+    took, or -1 if a step did not converge. Newton's steps are globalized by backtracking
+    on ``|R|^2`` (Armijo's test with `armijo`, halved down to `min_step`, then taken), as
+    :mod:`ident.sim.loop_kernels`' fallback is. Plain loops over preallocated buffers (no
     array temporaries per step)."""
     N, p = y_rig.shape
     n = phi.shape[0]
