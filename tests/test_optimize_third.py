@@ -295,8 +295,8 @@ def test_free_heave_dampers_beat_the_crate_on_the_known_prototype():
     elements), a 20 s track drive with its downforce: the optimum with both heave dampers
     free beats the best of the 44 crate setups (corner, heave and roll dampers, heave
     springs; time domain with the third elements, scored against the same baseline).
-    Oversample 4: at 2 the time-domain loop's Newton does not converge on IPOPT's curves
-    (the optimizer then falls back on the scan's best; docs/DESIGN.md)."""
+    Oversample 4, the figures of docs/DESIGN.md (at 2 the time-domain loop's Newton did not
+    converge on IPOPT's curves before its backtracking; it does now)."""
     import importlib.util
 
     from ident.models.bumpstops import CarElements

@@ -833,8 +833,16 @@ THIRD_SEGMENT_PASSES = 12
 #: Newton's tolerance of that fallback on the corner forces [N], relative to ``1 + |dF|``
 #: (:data:`ident.sim.third_loop.THIRD_TOL_N`'s value: the virtual rig's truth solves to it).
 THIRD_NEWTON_TOL = 1e-7
-#: Newton iterations of the fallback before the step is reported as failed.
-THIRD_NEWTON_MAX = 60
+#: Residual evaluations of the fallback (Newton steps and their halvings) before the step
+#: is reported as failed.
+THIRD_NEWTON_MAX = 200
+#: Armijo's fraction of the fallback's backtracking: a step of length ``lam`` is accepted
+#: when it lowers ``|R|^2`` to ``(1 - THIRD_ARMIJO lam)`` of the last accepted point's.
+THIRD_ARMIJO = 1e-4
+#: Smallest step fraction of the backtracking; a step at it is taken whatever its residual
+#: (at a kink the descent of the near side's Newton step ends at the kink: the far side's
+#: Jacobian takes over from just beyond it).
+THIRD_MIN_STEP = 2.0 ** -20
 #: Segment passes with rank-1 updates of the cached inverse inside the time loop, before
 #: :func:`_third_solve` (the full rebuild) takes the step.
 THIRD_FAST_PASSES = 6
@@ -910,72 +918,101 @@ def _third_assemble(Dv, Dt, cbar, drows, srows, b0, ds, sk, Mv, Mt, J, Jinv):
     invert_small(J, Jinv, 4)
 
 
+@_nb.njit(cache=True, error_model="numpy", inline="always")
+def _third_residual(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0, srows, s0,
+                    bx, bf, bn, bslope, dF, v, t, fd, gs, R, Jv, Jt):
+    """Residual ``R = dF - G(dF)`` of a step with third elements at `dF` (:func:`_third_newton`)
+    with the motions `v`, `t`, the curve forces `fd`, `gs` and the slopes' parts `Jv`, `Jt` of
+    its Jacobian there; returns ``max |R|``, ``max |dF|`` and ``|R|^2``."""
+    nd = drows.shape[0]
+    ns = srows.shape[0]
+    for a in range(4):
+        sv_ = vfree[a]
+        st_ = tfree[a]
+        for c in range(4):
+            sv_ += Dv[a, c] * dF[c]
+            st_ += Dt[a, c] * dF[c]
+        v[a] = sv_
+        t[a] = st_
+        R[a] = -cbar[a] * sv_
+        for c in range(4):
+            Jv[a, c] = 0.0
+            Jt[a, c] = 0.0
+        Jv[a, a] = -cbar[a]
+    for d in range(nd):
+        ve = 0.0
+        for c in range(4):
+            ve += drows[d, c] * v[c]
+        f, s, sg = _pwl(ve, kv, kf, d, nk[d], slo[d], shi[d])
+        fd[d] = f
+        Fd = c0[d] + b0[d] * f
+        ds = b0[d] * s
+        for a in range(4):
+            if drows[d, a] != 0.0:
+                R[a] += drows[d, a] * Fd
+                for c in range(4):
+                    Jv[a, c] += ds * drows[d, a] * drows[d, c]
+    for j in range(ns):
+        te = 0.0
+        for c in range(4):
+            te += srows[j, c] * t[c]
+        sg = _spring_seg(te, j, s0, bx, bn)
+        k, a0 = _spring_line(sg, j, s0, bx, bf, bn, bslope)
+        g = a0 + k * te
+        gs[j] = g
+        for a in range(4):
+            if srows[j, a] != 0.0:
+                R[a] += srows[j, a] * g
+                for c in range(4):
+                    Jt[a, c] += k * srows[j, a] * srows[j, c]
+    rmax = 0.0
+    fmax = 0.0
+    r2 = 0.0
+    for a in range(4):
+        R[a] = dF[a] - R[a]  # G(dF) summed first: the truth's order
+        rmax = max(rmax, abs(R[a]))
+        fmax = max(fmax, abs(dF[a]))
+        r2 += R[a] * R[a]
+    return rmax, fmax, r2
+
+
 @_nb.njit(cache=True, error_model="numpy")
 def _third_newton(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b0, srows, s0,
                  bx, bf, bn, bslope, dF, v, t, fd, gs, J, Jinv):
     """Newton's method on the corner forces of a step with third elements (the fallback of
-    the segment passes, and :func:`ident.sim.third_loop.simulate_third`'s iteration): from
-    ``dF`` (the last step's) to ``|dF - G(dF)| <= tol (1 + |dF|)``. Leaves the solution in
-    `dF`, `v`, `t`, the dampers' curve forces in `fd` and the springs' in `gs`; returns the
-    iteration count (-1: no convergence)."""
-    nd = drows.shape[0]
-    ns = srows.shape[0]
-    G = np.empty(4)
+    the segment passes), globalized by backtracking: from ``dF`` (the last pass's) to ``|dF -
+    G(dF)| <= tol (1 + |dF|)``. A Newton step is accepted when it lowers ``|R|^2`` by
+    Armijo's test, else halved (down to :data:`THIRD_MIN_STEP`, then taken: a kink's far
+    side); a full step on the final segments is exact, so a converged step equals
+    :func:`ident.sim.third_loop.simulate_third`'s (the same iteration) to rounding. Leaves
+    the solution in `dF`, `v`, `t`, the dampers' curve forces in `fd` and the springs' in
+    `gs`; returns the residual evaluations (-1: no convergence in
+    :data:`THIRD_NEWTON_MAX`)."""
     R = np.empty(4)
+    P = np.empty(4)
+    base = np.empty(4)
     Jv = np.empty((4, 4))
     Jt = np.empty((4, 4))
     it = 0
+    lam = 1.0
+    r2base = 0.0
     while True:
-        for a in range(4):
-            sv_ = vfree[a]
-            st_ = tfree[a]
-            for c in range(4):
-                sv_ += Dv[a, c] * dF[c]
-                st_ += Dt[a, c] * dF[c]
-            v[a] = sv_
-            t[a] = st_
-            G[a] = -cbar[a] * sv_
-            for c in range(4):
-                Jv[a, c] = 0.0
-                Jt[a, c] = 0.0
-            Jv[a, a] = -cbar[a]
-        for d in range(nd):
-            ve = 0.0
-            for c in range(4):
-                ve += drows[d, c] * v[c]
-            f, s, sg = _pwl(ve, kv, kf, d, nk[d], slo[d], shi[d])
-            fd[d] = f
-            Fd = c0[d] + b0[d] * f
-            ds = b0[d] * s
-            for a in range(4):
-                if drows[d, a] != 0.0:
-                    G[a] += drows[d, a] * Fd
-                    for c in range(4):
-                        Jv[a, c] += ds * drows[d, a] * drows[d, c]
-        for j in range(ns):
-            te = 0.0
-            for c in range(4):
-                te += srows[j, c] * t[c]
-            sg = _spring_seg(te, j, s0, bx, bn)
-            k, a0 = _spring_line(sg, j, s0, bx, bf, bn, bslope)
-            g = a0 + k * te
-            gs[j] = g
-            for a in range(4):
-                if srows[j, a] != 0.0:
-                    G[a] += srows[j, a] * g
-                    for c in range(4):
-                        Jt[a, c] += k * srows[j, a] * srows[j, c]
-        rmax = 0.0
-        fmax = 0.0
-        for a in range(4):
-            R[a] = dF[a] - G[a]
-            rmax = max(rmax, abs(R[a]))
-            fmax = max(fmax, abs(dF[a]))
+        rmax, fmax, r2 = _third_residual(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo,
+                                         shi, b0, srows, s0, bx, bf, bn, bslope, dF, v, t, fd,
+                                         gs, R, Jv, Jt)
         if rmax <= THIRD_NEWTON_TOL * (1.0 + fmax):
             return it
         it += 1
         if it > THIRD_NEWTON_MAX:
             return -1
+        if it > 1 and r2 > (1.0 - THIRD_ARMIJO * lam) * r2base and lam > THIRD_MIN_STEP:
+            # not enough descent: half the step from the last accepted point
+            lam *= 0.5
+            for a in range(4):
+                dF[a] = base[a] - lam * P[a]
+            continue
+        # accepted: a Newton step from here
+        r2base = r2
         for a in range(4):
             for c in range(4):
                 acc = 0.0
@@ -987,9 +1024,11 @@ def _third_newton(vfree, tfree, c0, Dv, Dt, cbar, drows, kv, kf, nk, slo, shi, b
             acc = 0.0
             for c in range(4):
                 acc += Jinv[a, c] * R[c]
-            G[a] = acc
+            P[a] = acc
+        lam = 1.0
         for a in range(4):
-            dF[a] -= G[a]
+            base[a] = dF[a]
+            dF[a] -= P[a]
 
 
 @_nb.njit(cache=True, error_model="numpy")

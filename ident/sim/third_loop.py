@@ -41,14 +41,24 @@ __all__ = [
     "simulate_third",
     "THIRD_TOL_N",
     "THIRD_MAX_ITERATIONS",
+    "THIRD_ARMIJO",
+    "THIRD_MIN_STEP",
 ]
 
 #: Newton's tolerance on the step's corner forces [N]: far below a load cell's resolution
 #: (~1 N), well above rounding on forces of kN.
 THIRD_TOL_N = 1e-7
-#: Newton iterations per step before the loop is declared ill-posed (piecewise-linear
-#: curves converge in a few; a segment change costs one more).
-THIRD_MAX_ITERATIONS = 60
+#: Newton iterations (steps and their halvings) per step before the loop is declared
+#: ill-posed (piecewise-linear curves converge in a few; a segment change costs one more;
+#: a stiff element cycling at a kink takes halvings).
+THIRD_MAX_ITERATIONS = 200
+#: Armijo's fraction of Newton's backtracking: a step of length ``lam`` is accepted when it
+#: lowers ``|R|^2`` to ``(1 - THIRD_ARMIJO lam)`` of the last accepted point's (else halved;
+#: a full step is always tried first, so a step that converged without it is unchanged).
+THIRD_ARMIJO = 1e-4
+#: Smallest step fraction of the backtracking; a step at it is taken whatever its residual
+#: (the near side's descent ends at a kink: the far side's Jacobian takes over beyond it).
+THIRD_MIN_STEP = 2.0 ** -20
 
 
 @dataclass(frozen=True, eq=False)
@@ -172,7 +182,8 @@ def simulate_third(plant, drive, shocks, *, dampers=(), springs=(), stop_tables=
                           y_rig, np.array(vi, dtype=np.int64), np.array(ti, dtype=np.int64),
                           rows, kv, kf, nk, slo, shi, alpha, b0, b1, bm,
                           np.ascontiguousarray(srows), s0, bx, bf, bn, bslope,
-                          THIRD_MAX_ITERATIONS, THIRD_TOL_N, y, F, S)
+                          THIRD_MAX_ITERATIONS, THIRD_TOL_N, THIRD_ARMIJO,
+                          THIRD_MIN_STEP, y, F, S)
     if iters < 0:
         raise ValueError(f"closed loop of plant {plant.name!r} with third elements: Newton's "
                          "method did not converge; check the elements' curves and springs, "
@@ -224,9 +235,12 @@ def _spring(t, s0, bx, bf, bn, bslope):
 
 @_nb.njit(cache=True, nogil=True)
 def _third_kernel(phi, g1, g0, gm, B, C, D, cbar, y_rig, vi, ti, rows, kv, kf, nk, slo, shi,
-                  alpha, b0, b1, bm, srows, s0, bx, bf, bn, bslope, max_iter, tol, y, F, S):
+                  alpha, b0, b1, bm, srows, s0, bx, bf, bn, bslope, max_iter, tol, armijo,
+                  min_step, y, F, S):
     """The time loop (see the module docstring); returns the most Newton iterations a step
-    took, or -1 if a step did not converge. Plain loops over preallocated buffers (no
+    took, or -1 if a step did not converge. Newton's steps are globalized by backtracking
+    on ``|R|^2`` (Armijo's test with `armijo`, halved down to `min_step`, then taken), as
+    :mod:`ident.sim.loop_kernels`' fallback is. Plain loops over preallocated buffers (no
     array temporaries per step)."""
     N, p = y_rig.shape
     n = phi.shape[0]
@@ -256,6 +270,8 @@ def _third_kernel(phi, g1, g0, gm, B, C, D, cbar, y_rig, vi, ti, rows, kv, kf, n
     tfree = np.zeros(4)
     G = np.zeros(4)
     R = np.zeros(4)
+    base = np.zeros(4)
+    step = np.zeros(4)
     Jv = np.zeros((4, 4))
     Jt = np.zeros((4, 4))
     J = np.zeros((4, 4))
@@ -288,6 +304,8 @@ def _third_kernel(phi, g1, g0, gm, B, C, D, cbar, y_rig, vi, ti, rows, kv, kf, n
         for c in range(4):
             dF[c] = dF1[c]
         it = 0
+        lam = 1.0
+        r2base = 0.0
         while True:
             for a in range(4):
                 sv = vfree[a]
@@ -328,15 +346,25 @@ def _third_kernel(phi, g1, g0, gm, B, C, D, cbar, y_rig, vi, ti, rows, kv, kf, n
                             Jt[a, c] += kk * srows[j, a] * srows[j, c]
             rmax = 0.0
             fmax = 0.0
+            r2 = 0.0
             for a in range(4):
                 R[a] = dF[a] - G[a]
                 rmax = max(rmax, abs(R[a]))
                 fmax = max(fmax, abs(dF[a]))
+                r2 += R[a] * R[a]
             if rmax <= tol * (1.0 + fmax):
                 break
             it += 1
             if it > max_iter:
                 return -1
+            if it > 1 and r2 > (1.0 - armijo * lam) * r2base and lam > min_step:
+                # not enough descent (cycling at a kink): half the step from the last
+                # accepted point
+                lam *= 0.5
+                for a in range(4):
+                    dF[a] = base[a] - lam * step[a]
+                continue
+            r2base = r2
             for a in range(4):
                 for c in range(4):
                     sj = 0.0
@@ -344,7 +372,9 @@ def _third_kernel(phi, g1, g0, gm, B, C, D, cbar, y_rig, vi, ti, rows, kv, kf, n
                         sj += Jv[a, e] * Dv[e, c] + Jt[a, e] * Dt[e, c]
                     J[a, c] = (1.0 if a == c else 0.0) - sj
             step = np.linalg.solve(J, R)
+            lam = 1.0
             for a in range(4):
+                base[a] = dF[a]
                 dF[a] -= step[a]
         if it > worst:
             worst = it
