@@ -244,13 +244,8 @@ def _screen_chunk(ops_list, shocks, space, scoring, start, stop, n_top, max_iter
         metrics.append(M)
         case_scores.append(s)
         feasible &= ok
-    score = scoring.combined(case_scores) if index.size else np.zeros(0)
-    best = ranking_order(feasible, score, index)[:n_top]
-    top_metrics = np.stack([M[best] for M in metrics], axis=1) if index.size \
-        else np.zeros((0, len(ops_list), len(ops_list[0].metric_names)))
-    return {"start": start, "index": index, "score": score, "feasible": feasible,
-            "top_index": index[best], "top_metrics": top_metrics,
-            "not_converged": not_converged}
+    return _chunk_result(start, index, metrics, case_scores, feasible, not_converged, scoring,
+                         n_top, len(ops_list[0].metric_names))
 
 
 @dataclass(frozen=True, eq=False)
@@ -399,10 +394,18 @@ def _screen_third_chunk(cases, shocks, space, scoring, library, start, stop, n_t
         metrics.append(M)
         case_scores.append(s)
         feasible &= ok
+    return _chunk_result(start, index, metrics, case_scores, feasible, not_converged, scoring,
+                         n_top, len(cases[0].metric_names))
+
+
+def _chunk_result(start, index, metrics, case_scores, feasible, not_converged, scoring, n_top,
+                  n_metrics):
+    """A screened chunk's summary: its scores and feasibility, its best `n_top` candidates'
+    indices and metrics (``(n_top, n_cases, n_metrics)``) and the count not converged."""
     score = scoring.combined(case_scores) if index.size else np.zeros(0)
     best = ranking_order(feasible, score, index)[:n_top]
     top_metrics = np.stack([M[best] for M in metrics], axis=1) if index.size \
-        else np.zeros((0, len(cases), len(cases[0].metric_names)))
+        else np.zeros((0, len(metrics), n_metrics))
     return {"start": start, "index": index, "score": score, "feasible": feasible,
             "top_index": index[best], "top_metrics": top_metrics,
             "not_converged": not_converged}

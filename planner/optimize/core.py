@@ -523,14 +523,7 @@ def _elements(plant, space, bump_stops, packers, static_corner_load_n, objective
             if name not in known:
                 raise PlannerError(f"{where}: packers: unknown group {name!r}; with symmetry "
                                    f"{space.symmetry!r} the groups are {list(known)}")
-            try:
-                lo, hi = (float(v) for v in bound)
-            except (TypeError, ValueError):
-                raise PlannerError(f"{where}: packers[{name!r}] = {bound!r}; give the bounds "
-                                   "(min_m, max_m), e.g. (0.0, 0.006)") from None
-            if not lo <= hi:
-                raise PlannerError(f"{where}: packers[{name!r}]: the lower bound {lo!r} m "
-                                   f"is above the upper {hi!r} m")
+            lo, hi = _packer_bounds(name, bound, where)
             for c in known[name]:
                 k = CORNERS.index(c)
                 if stops[k] is None:
