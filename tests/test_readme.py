@@ -109,6 +109,17 @@ def run_block(demo, k):
 
 @pytest.mark.slow
 @pytest.mark.heavy
+def test_readme_third_elements_identify_says_it_used_instruments(demo):
+    """The third-elements example's identify (as written) prints that its estimate used
+    instrumental variables (its session declares third elements: --instruments auto)."""
+    k = next(i for i, b in enumerate(BLOCKS) if "shockplan identify proto/session" in b)
+    code, stderr = run_block(demo, k)
+    assert code == 0, stderr[-3000:]
+    assert "instrumental variables: dF from the shock travels" in BLOCK_OUTPUT[k]
+
+
+@pytest.mark.slow
+@pytest.mark.heavy
 @pytest.mark.parametrize("k", range(len(BLOCKS)))
 def test_readme_example_runs_as_written(demo, k):
     folder, _ = demo

@@ -112,8 +112,10 @@ def run(args):
         model.save(tmp_model, overwrite=True)
         write_model_summary(model, tmp_summary, units=session.units, overwrite=True)
     table = model.summary()
+    iv = (", instrumental variables: dF from the shock travels"
+          if model.frf.settings.get("instruments") else "")
     print(f"identified '{session.name}' ({len(session.runs)} runs, {session.fs_hz:g} Hz, "
-          f"estimator {model.frf.settings.get('estimator')}) with {args.method}: "
+          f"estimator {model.frf.settings.get('estimator')}{iv}) with {args.method}: "
           f"{len(table)} pairs")
     rows = [(r.output, r.input, r.order, f"{r.fit_error:.4f}", f"{r.median_coherence:.3f}")
             for r in table.itertuples()]
