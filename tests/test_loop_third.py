@@ -185,6 +185,27 @@ def test_a_stiff_heave_damper_converges_and_equals_the_truth(car):
         assert abs(rms2 / rms4 - 1.0) < RTOL_OVERSAMPLE_RMS, name
 
 
+def test_a_diverging_loop_is_refused_naming_the_setup(car):
+    # a linear heave damper of 300 kN s/m makes the discretization unstable at a 200 Hz step
+    # (every step's solve converges; the response grows without bound): refused with the fix,
+    # in the full response and the fused metrics alike; 100 kN s/m at that step is bounded
+    shocks = [LinearShock("s", 3000.0)] * 4
+    plant = _plant(car, shocks)
+    coarse = _drive_at(100.0)
+
+    def heave(c):
+        return ([ThirdDamper("heave_front", element_row("heave_front", 1.0),
+                             LinearShock("h", c))], [])
+
+    ok = simulate(plant, coarse, shocks, oversample=2, third=heave(1e5))
+    assert np.all(np.isfinite(ok.channels["heave_force_front"]))
+    with pytest.raises(ValueError, match=r"diverged for setups \[0\].*raise oversample"):
+        simulate(plant, coarse, shocks, oversample=2, third=heave(3e5))
+    with pytest.raises(ValueError, match=r"diverged for setups \[1\]"):
+        simulate_batch_metrics(plant, coarse, [shocks, shocks], oversample=2,
+                               third=[heave(1e5), heave(3e5)])
+
+
 def test_refusals(car, drive):
     shocks, dampers, springs, _ = _setups()[0]
     plant = _plant(car, shocks)

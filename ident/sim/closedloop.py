@@ -87,11 +87,18 @@ __all__ = [
     "pack_bump_stops",
     "corner_values",
     "ELEMENT_STATS",
+    "DIVERGED_VALUE",
     "histogram_edges",
     "velocity_histogram_counts",
 ]
 
 log = logging.getLogger(__name__)
+
+#: A simulated setup's shock forces [N] or metrics (SI) beyond this, or not finite, mean the
+#: loop diverged (refused, naming the setups): no car's shock force or metric comes near
+#: it (tire forces and shock forces are 1e2-1e5 N), while an unstable discretization (a
+#: very stiff damper at a coarse step) grows past it within a fraction of a drive.
+DIVERGED_VALUE = 1e9
 
 
 @dataclass(frozen=True, eq=False)
@@ -540,7 +547,7 @@ def _batch_response(plant, drive, loop):
     F = np.empty((S, N, 4))  # (setup, sample, corner): written per sample in the kernel
     iters = np.zeros(S, dtype=np.int64)
     _run_loop(loop.plant, loop, loop.cout, (y, F, iters, None, None, None, None))
-    _check_converged(plant, iters)
+    _check_converged(plant, iters, F)
     channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
     for c, name in enumerate(SHOCK_FORCES):
         channels[name] = F[:, :, c]
@@ -793,7 +800,7 @@ def simulate_batch_metrics(plant, drive, setups, *, oversample=4, outputs=None, 
         stats = np.zeros((S, 3, 4))
         _run_workers(S, (el.plant, loop.shocks, drive_args, metrics, out, iters,
                          el.kernel_elements(tf_rows), stats, hist_spec, counts, None, None))
-    _check_converged(plant, iters)
+    _check_converged(plant, iters, out)
     rms = {name + suffix: out[:, b, i] for b, suffix in enumerate(plan.bands)
            for i, name in enumerate(names + derived)}
     met = plan.assemble(rms)
@@ -1008,12 +1015,27 @@ def _run_parallel(kernel, *args):
         _nb.set_parallel_chunksize(old_chunk)
 
 
-def _check_converged(plant, iters):
+def _check_converged(plant, iters, values=None):
+    """Refuse setups whose step solve failed (``iters < 0``) or whose response diverged:
+    `values` (setup first: forces or metrics, SI) not finite or beyond
+    :data:`DIVERGED_VALUE`, as an unstable discretization gives with every step's solve
+    converged (a very stiff damper at a coarse step)."""
     if np.any(iters < 0):
         bad = np.flatnonzero(iters < 0).tolist()
         raise ValueError(f"closed loop of plant {plant.name!r}: Newton's method did not converge "
                          f"for setups {bad}; the shock loop is ill-posed (check the shock curves "
                          "and the model's stability, or raise oversample)")
+    if values is None:
+        return
+    v = np.reshape(values, (len(iters), -1))
+    ok = np.all(np.isfinite(v), axis=1) & (np.max(np.abs(v), axis=1, initial=0.0)
+                                           < DIVERGED_VALUE)
+    if not np.all(ok):
+        bad = np.flatnonzero(~ok).tolist()
+        raise ValueError(f"closed loop of plant {plant.name!r}: the response diverged for setups "
+                         f"{bad} (forces or metrics not finite or beyond {DIVERGED_VALUE:g} in SI "
+                         "units): the loop's time step is too coarse for their shocks (a very "
+                         "stiff damper); raise oversample")
 
 
 def simulate(plant, drive, setup, *, oversample=4, outputs=None, rig=None, stop_tables=None,
@@ -1301,7 +1323,7 @@ def _element_response(plant, drive, loop, bump_stops, static_corner_load_n, wher
     stats = np.zeros((S, 3, 4))
     _run_loop(el.plant, loop, el.cout, (y, F, iters, el.kernel_elements(tf_rows), stats, None,
                                         None))
-    _check_converged(plant, iters)
+    _check_converged(plant, iters, F)
     channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
     for c, name in enumerate(SHOCK_FORCES):
         channels[name] = F[:, :, c]
@@ -1464,7 +1486,7 @@ def _third_response(plant, drive, loop, bump_stops, static_corner_load_n, third,
     iters = np.zeros(S, dtype=np.int64)
     tstats = np.zeros((S, th.n_springs))
     _run_loop(loop.plant, loop, loop.cout, (y, F, iters, None, None, th.kernel, tstats))
-    _check_converged(plant, iters)
+    _check_converged(plant, iters, F)
     channels = {name: y[:, j, :] for j, name in enumerate(loop.names)}
     for c, name in enumerate(list(SHOCK_FORCES) + th.force_channels()):
         channels[name] = F[:, :, c]
