@@ -47,6 +47,7 @@ __all__ = [
     "metric_form",
     "padded_bands",
     "screen_batch",
+    "solve4",
     "screen_batch_scalar",
 ]
 
@@ -236,6 +237,42 @@ class ScreenOutputs(NamedTuple):
 
 
 @nb.njit(cache=True, error_model="numpy")
+def solve4(J, r):
+    """r <- J^-1 r (4x4 real, Gauss elimination with partial pivoting; J destroyed).
+
+    Parameters
+    ----------
+    J : ndarray, shape (4, 4)
+        The matrix; overwritten.
+    r : ndarray, shape (4,)
+        The right-hand side; overwritten with the solution.
+    """
+    for c in range(4):
+        p = c
+        for i in range(c + 1, 4):
+            if abs(J[i, c]) > abs(J[p, c]):
+                p = i
+        if p != c:
+            for j in range(4):
+                t = J[c, j]
+                J[c, j] = J[p, j]
+                J[p, j] = t
+            t = r[c]
+            r[c] = r[p]
+            r[p] = t
+        for i in range(c + 1, 4):
+            m = J[i, c] / J[c, c]
+            for j in range(c, 4):
+                J[i, j] -= m * J[c, j]
+            r[i] -= m * r[c]
+    for c in range(3, -1, -1):
+        acc = r[c]
+        for j in range(c + 1, 4):
+            acc -= J[c, j] * r[j]
+        r[c] = acc / J[c, c]
+
+
+@nb.njit(cache=True, error_model="numpy")
 def gaussian_pwl(mu, sig, x0, x, f, n, slo, shi):
     """Gaussian expectations of a piecewise-linear function and of its slope, in closed form.
 
@@ -325,30 +362,7 @@ def _stop_means(st, shock, stop, travel, J):
                 J[a, b] = -Hs0[a, b] * keq[b]
             J[a, a] += 1.0
             r[a] = acc - mu[a]  # mu_new - mu = J^-1 r
-        # Gauss elimination with partial pivoting, r <- J^-1 r
-        for c in range(4):
-            p = c
-            for i in range(c + 1, 4):
-                if abs(J[i, c]) > abs(J[p, c]):
-                    p = i
-            if p != c:
-                for j in range(4):
-                    t = J[c, j]
-                    J[c, j] = J[p, j]
-                    J[p, j] = t
-                t = r[c]
-                r[c] = r[p]
-                r[p] = t
-            for i in range(c + 1, 4):
-                m = J[i, c] / J[c, c]
-                for j in range(c, 4):
-                    J[i, j] -= m * J[c, j]
-                r[i] -= m * r[c]
-        for c in range(3, -1, -1):
-            acc = r[c]
-            for j in range(c + 1, 4):
-                acc -= J[c, j] * r[j]
-            r[c] = acc / J[c, c]
+        solve4(J, r)  # r <- J^-1 r
         for c in range(4):
             mu[c] += r[c]
             step = max(step, abs(r[c]))

@@ -46,7 +46,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from planner.screen_kernels import gaussian_pwl
+from planner.screen_kernels import gaussian_pwl, solve4
 
 __all__ = [
     "THIRD_BLOCK_BANDS",
@@ -800,34 +800,6 @@ def _anderson(sig, sigs, live, any_spring, hist, it, lsq):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _solve4(J, r):
-    """r <- J^-1 r (4x4 real, Gauss elimination with partial pivoting; J destroyed)."""
-    for c in range(4):
-        p = c
-        for i in range(c + 1, 4):
-            if abs(J[i, c]) > abs(J[p, c]):
-                p = i
-        if p != c:
-            for j in range(4):
-                t = J[c, j]
-                J[c, j] = J[p, j]
-                J[p, j] = t
-            t = r[c]
-            r[c] = r[p]
-            r[p] = t
-        for i in range(c + 1, 4):
-            m = J[i, c] / J[c, c]
-            for j in range(c, 4):
-                J[i, j] -= m * J[c, j]
-            r[i] -= m * r[c]
-    for c in range(3, -1, -1):
-        acc = r[c]
-        for j in range(c + 1, 4):
-            acc -= J[c, j] * r[j]
-        r[c] = acc / J[c, c]
-
-
-@nb.njit(cache=True, error_model="numpy")
 def _dampers(shocks, s, sig, live, means, ceq, ef):
     """The dampers' equivalent damping ``ceq`` at their velocity RMS (and with ``means`` their
     mean force ``ef``: both from one pass, :func:`planner.screen_kernels.gaussian_pwl`'s
@@ -885,7 +857,7 @@ def _means(bd, s, kv, kf, nk, slo, shi, on, s0, bx, bf, bn, bslope, sig, sigs, m
                 J[a, b] = -jab
             J[a, a] += 1.0
             res[a] = acc - mu[a]
-        _solve4(J, res)
+        solve4(J, res)
         big = 0.0
         for a in range(4):
             mu[a] += res[a]
