@@ -173,6 +173,16 @@ def test_the_crate_best_is_searched_over_the_heave_choices(plant, drive, optimum
     solver = {r[0].value: r[1].value for r in load_workbook(files["xlsx"])["solver"].iter_rows()}
     assert solver["crate best"] == opt.crate_best
     assert solver["crate searched with the third-element choices"] == "heave_front: H1, H2, H3"
+    # a free heave damper's panel of curves.png draws the crate best's heave damper too
+    import matplotlib.pyplot as plt
+
+    from planner.report.optimize import curves_figure
+
+    fig = curves_figure(replace(opt, third_curves={"heave_front": LIB["H1"].to_pwl()}), lib)
+    labels = [t.get_text() for ax in fig.axes if ax.get_legend() is not None
+              for t in ax.get_legend().get_texts()]
+    plt.close(fig)
+    assert ("baseline (H1)" in labels) and ((f"crate best ({heave})" in labels) == (heave != "H1"))
 
 
 def test_refusals_with_third_elements(plant, drive):

@@ -212,6 +212,12 @@ def _third_panel(ax, optimum, library, name, pwl, v, v_si, units, force):
     if isinstance(base, str) and base in library:
         ax.plot(v, force(library[base], v_si), color="tab:orange", lw=1.6,
                 label=f"baseline ({base})")
+    # (a crate searched over third-element choices: its best's damper here, if another)
+    best = optimum.table.loc[optimum.crate_best].get(name)
+    if optimum.settings.get("crate_third") and isinstance(best, str) and best != base \
+            and best in library:
+        ax.plot(v, force(library[best], v_si), color="tab:green", lw=1.6, ls="--",
+                label=f"crate best ({best})")
     ax.plot(v, force(pwl, v_si), color="tab:blue", lw=2.2, label=f"optimum ({name})")
     ax.plot(from_si(pwl.v_knots_m_s, "velocity", units), from_si(pwl.f_knots_n, "force", units),
             "o", color="tab:blue", ms=4)
