@@ -858,3 +858,16 @@ def test_free_third_option_is_read_and_checked():
     assert free_third_arg("heave_front, heave_rear") == ("heave_front", "heave_rear")
     with pytest.raises(ValueError, match=r"--free-third 'heave_middle'.*heave_front"):
         free_third_arg("heave_middle")
+
+
+def test_optimize_reads_the_third_element_choices():
+    """``optimize --try-heave front=H1,H2 --try-roll front=none``: the crate's third-element
+    choices, read as rank reads them (``vary_third``)."""
+    from planner.cli import build_parser
+    from planner.cli.common import element_choices
+
+    args = build_parser().parse_args(
+        ["optimize", "--model", "m.npz", "--drive", "d.csv", "--shocks", "s.toml",
+         "--out", "o", "--try-heave", "front=H1,H2", "--try-roll", "front=none"])
+    assert element_choices(args) == {"vary_third": {"heave_front": ["H1", "H2"],
+                                                    "roll_front": ["none"]}}

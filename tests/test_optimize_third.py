@@ -57,6 +57,8 @@ MIN_THIRD_EFFECT = 0.01
 LIB = ShockLibrary([LinearShock("S", 3000.0), LinearShock("S2", 4500.0),
                     LinearShock("H1", 8000.0, lag_s=0.004), LinearShock("R1", 3000.0,
                                                                       lag_s=0.002)])
+#: The crate's heave dampers besides the car's (its ``fits``: never at a corner).
+HEAVE_CRATE = [LinearShock("H2", 15000.0, fits="heave"), LinearShock("H3", 4000.0, fits="heave")]
 FAST = dict(curves=CurveOptions(symmetry="all", linear=True),
             solver=SolverOptions(max_iter=5, n_starts=1, stationarity=False, n_closest=1))
 
@@ -120,6 +122,69 @@ def test_optimum_is_verified_with_the_cars_third_elements(plant, drive, optimum)
     assert crate and all(set(n.split("/")) <= {"S", "S2"} for n in crate)
 
 
+@pytest.fixture(scope="module")
+def crate_choices(plant, drive):
+    """The optimum with the crate's best searched over heave damper choices."""
+    lib = ShockLibrary(list(LIB.values()) + HEAVE_CRATE)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OptimizeWarning)
+        opt = optimize_curves(plant, drive, lib, baseline="S", **FAST,
+                              elements=replace(ELEMENTS,
+                                               vary_third={"heave_front": ["H1", "H2", "H3"]}))
+    return opt, lib
+
+
+@pytest.mark.slow
+def test_the_crate_best_is_searched_over_the_heave_choices(plant, drive, optimum,
+                                                            crate_choices, tmp_path):
+    """vary_third (--try-heave front=H1,H2,H3): the crate's setups are screened and verified
+    with each heave damper (none of them at a corner); its best is at least as good as the
+    crate's best with the car's own heave damper, its verified metrics are predict_setups'
+    with its heave damper, and the table, optimal_setup.csv and the workbook name it."""
+    from openpyxl import load_workbook
+
+    from planner.report.optimize import write_optimum
+    from planner.setups.csv_io import read_setups
+
+    plain, _ = optimum
+    opt, lib = crate_choices
+    assert opt.settings["crate_third"] == {"heave_front": ["H1", "H2", "H3"]}
+    verified = list(opt.settings["crate_scores"])
+    assert {n.rpartition("=")[2] for n in verified if "heave_front=" in n} == {"H2", "H3"}
+    assert not any(n.endswith("heave_front=H1") for n in verified)  # (the car's own: a repeat)
+    assert not set(opt.table[list(CORNERS)].to_numpy().ravel()) & {"H1", "H2", "H3", "R1"}
+    best = float(opt.table.loc[opt.crate_best, "score"])
+    assert best <= float(plain.table.loc[plain.crate_best, "score"]) * (1 + RTOL_SAME_LOOP)
+    heave = opt.table.loc[opt.crate_best, "heave_front"]
+    assert opt.table.loc[opt.crate_best, "kind"] == "crate best"
+    assert (heave == "H1") == ("heave_front=" not in opt.crate_best)
+    setup = Setup(opt.crate_best, dict(zip(CORNERS, opt.table.loc[opt.crate_best, list(CORNERS)])),
+                  third={"heave_front": heave})
+    pred = predict_setups(plant, drive, [opt.baseline, setup], lib, elements=ELEMENTS).table
+    met = opt.metrics["gt"]
+    cols = [c for c in met.columns if c.startswith(("tire_force_rms", "shock_travel_rms",
+                                                    "heave_travel_rms"))]
+    np.testing.assert_allclose(met.loc[opt.crate_best, cols].to_numpy(float),
+                               pred.loc[opt.crate_best, cols].to_numpy(float),
+                               rtol=RTOL_SAME_LOOP)
+    files = write_optimum(opt, lib, tmp_path / "opt")
+    back = read_setups(files["setups"])
+    assert back[1].name == opt.crate_best and back[1].third["heave_front"] == heave
+    solver = {r[0].value: r[1].value for r in load_workbook(files["xlsx"])["solver"].iter_rows()}
+    assert solver["crate best"] == opt.crate_best
+    assert solver["crate searched with the third-element choices"] == "heave_front: H1, H2, H3"
+    # a free heave damper's panel of curves.png draws the crate best's heave damper too
+    import matplotlib.pyplot as plt
+
+    from planner.report.optimize import curves_figure
+
+    fig = curves_figure(replace(opt, third_curves={"heave_front": LIB["H1"].to_pwl()}), lib)
+    labels = [t.get_text() for ax in fig.axes if ax.get_legend() is not None
+              for t in ax.get_legend().get_texts()]
+    plt.close(fig)
+    assert ("baseline (H1)" in labels) and ((f"crate best ({heave})" in labels) == (heave != "H1"))
+
+
 def test_refusals_with_third_elements(plant, drive):
     with pytest.raises(PlannerError, match="baseline 'b' names third elements"):
         optimize_curves(plant, drive, LIB, elements=ELEMENTS, **FAST,
@@ -128,6 +193,13 @@ def test_refusals_with_third_elements(plant, drive):
     with pytest.raises(PlannerError, match="static_corner_load_n.*third elements"):
         optimize_curves(plant, drive, LIB, baseline="S", **FAST,
                         elements=replace(ELEMENTS, static_corner_load_n=[3000.0] * 4))
+    with pytest.raises(PlannerError, match="vary_bump_stops.*not searched.*--packers"):
+        optimize_curves(plant, drive, LIB, baseline="S", **FAST,
+                        elements=replace(ELEMENTS, vary_packers_m={"front": [0.0, 0.002]}))
+    with pytest.raises(PlannerError, match="choices.*no third elements"):
+        optimize_curves(plant, drive, LIB, baseline="S", **FAST,
+                        elements=ElementOptions(use_model=False,
+                                                vary_third={"heave_front": ["H1"]}))
 
 
 @pytest.mark.slow
@@ -240,12 +312,16 @@ def test_a_free_heave_damper_is_optimized_with_the_corner_curves(plant, drive):
     heave damper (OPT-heave_front, in its shocks and table), its verified metrics are
     predict_setups' with that damper and packer, it is no worse than the scan's best (the
     baseline heave damper) and beats the crate's best."""
+    crate = ShockLibrary(list(LIB.values()) + HEAVE_CRATE[:1])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
-        opt = optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS,
+        opt = optimize_curves(plant, drive, crate, baseline="S", elements=ELEMENTS,
                               curves=CurveOptions(symmetry="all", linear=True,
                                                   free_third=("heave_front",)),
                               packers={"heave_front": (0.0, 0.002)}, solver=FAST["solver"])
+    # (the crate's best searched over its heave dampers too: the fair comparison)
+    assert opt.settings["crate_third"] == {"heave_front": ["H2"]}
+    assert any(n.endswith("heave_front=H2") for n in opt.settings["crate_scores"])
     assert opt.setup.third == {"heave_front": "OPT-heave_front"}
     assert "OPT-heave_front" in opt.shocks and set(opt.third_curves) == {"heave_front"}
     assert opt.table.loc["optimum", "heave_front"] == "OPT-heave_front"
@@ -253,7 +329,7 @@ def test_a_free_heave_damper_is_optimized_with_the_corner_curves(plant, drive):
     assert opt.settings["free_third"] == ["heave_front"]
     packer = opt.packers_m["heave_front"]
     assert -1e-6 <= packer <= 0.002 + 1e-6
-    lib = ShockLibrary(list(opt.shocks.values()) + list(LIB.values()))
+    lib = ShockLibrary(list(opt.shocks.values()) + list(crate.values()))
     # (the chosen packer on top of the baseline's)
     car = CarThird(CAR.elements, RunThird(dict(CAR.baseline.dampers),
                                           dict(CAR.baseline.heave_springs),
@@ -294,7 +370,8 @@ def test_free_heave_dampers_beat_the_crate_on_the_known_prototype():
     """On the known example car (ident/examples/proto_*, its plant and baseline third
     elements), a 20 s track drive with its downforce: the optimum with both heave dampers
     free beats the best of the 44 crate setups (corner, heave and roll dampers, heave
-    springs; time domain with the third elements, scored against the same baseline).
+    springs; time domain with the third elements, scored against the same baseline), and
+    the best of its own crate mapping, searched over the crate's heave dampers too.
     Oversample 4, the figures of docs/DESIGN.md (at 2 the time-domain loop's Newton did not
     converge on IPOPT's curves before its backtracking; it does now)."""
     import importlib.util
@@ -335,3 +412,48 @@ def test_free_heave_dampers_beat_the_crate_on_the_known_prototype():
     assert opt.setup.third == {"heave_front": "OPT-heave_front", "heave_rear": "OPT-heave_rear"}
     assert bool(scores.loc["optimum", "feasible"])
     assert scores.loc["optimum", "score"] < best
+    # and the optimizer's own crate, searched over the crate's heave dampers too (fits =
+    # "heave"): the optimum beats its best
+    assert set(opt.settings["crate_third"]) == {"heave_front", "heave_rear"}
+    assert opt.gap > 0
+
+
+@pytest.mark.slow
+def test_compile_curves_compiles_the_loop_with_third_elements(plant, drive, tmp_path,
+                                                               monkeypatch):
+    """compile_curves on a car with third elements compiles the loop optimize_curves builds
+    (the car's heave and roll dampers and heave spring, a free heave damper's curve group):
+    the optimization with the same arguments then loads it without running the compiler;
+    and it refuses what optimize refuses (lift-off with third elements)."""
+    import subprocess
+
+    import planner.optimize.cache as po
+    import planner.optimize.loop as pl
+    from planner.optimize import compile_curves
+
+    with pytest.raises(PlannerError, match="static_corner_load_n.*third elements"):
+        compile_curves(plant, drive, LIB, baseline="S",
+                       elements=replace(ELEMENTS, static_corner_load_n=[3000.0] * 4))
+    if not po.jit_available():
+        pytest.skip("no C compiler: compile_curves compiles nothing")
+    monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(pl, "_STEP_CACHE", {})
+    curves = CurveOptions(symmetry="all", linear=True, free_third=("heave_front",))
+    assert compile_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS,
+                          curves=curves) is True
+    libs = list(po.jit_cache_dir().glob("steps-*.so"))
+    assert len(libs) == 1
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("the compiler ran although compile_curves compiled the steps")
+
+    monkeypatch.setattr(pl, "_STEP_CACHE", {})  # as in another process
+    monkeypatch.setattr(subprocess, "Popen", no_compiler)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OptimizeWarning)
+        opt = optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS, curves=curves,
+                              solver=SolverOptions(max_iter=2, n_starts=1, n_closest=1,
+                                                   stationarity=False))
+    assert opt.solver["jit"] and opt.solver["n_grad"] > 0
+    assert opt.setup.third == {"heave_front": "OPT-heave_front"}
+    assert list(po.jit_cache_dir().glob("steps-*.so")) == libs

@@ -20,7 +20,7 @@ __all__ = [
     "Parser", "add_flags_anywhere", "FLAGS_ANYWHERE", "TYPO_CUTOFF", "RENAMED_OPTIONS",
     "unit_system", "int_at_least", "share", "add_units", "add_command_group",
     "run_subcommand", "add_element_options",
-    "add_try_options", "add_prediction_inputs", "add_histogram_option", "histogram_options", "check_out", "warn_inventory",
+    "add_try_options", "add_third_try_options", "add_prediction_inputs", "add_histogram_option", "histogram_options", "check_out", "warn_inventory",
     "baseline_arg", "load_vehicle", "load_any_model", "read_inputs", "output_units",
     "bump_stop_library", "section_windows", "parse_fixed", "packer_bounds", "element_choices", "one_line",
     "UNITS_OF_DRIVE", "UNITS_OF_DRIVES", "MODEL_HELP", "OBJECTIVE_HELP", "log",
@@ -225,16 +225,27 @@ def add_try_options(parser):
                         help="rank every setup with each of these packers at GROUP, in "
                         "the drive's units or with a unit (0,2mm,4mm); repeatable "
                         "(default: the setups' own)")
+    add_third_try_options(parser)
+
+
+def add_third_try_options(parser, *, crate=False):
+    """``--try-heave``, ``--try-roll``, ``--try-heave-spring`` (third-element choices);
+    `crate`: optimize's wording (the crate's best is searched over them)."""
+    if crate:
+        what = "search the crate's best with each of these heave dampers at AXLE"
+        default = "the baseline's, or with --free-third the crate's dampers that fit it"
+    else:
+        what = "rank every setup with each of these heave dampers at AXLE"
+        default = "the setups' own, else the baseline's"
     parser.add_argument("--try-heave", action="append", metavar="AXLE=ID,ID",
-                        help="rank every setup with each of these heave dampers at AXLE (front "
+                        help=f"{what} (front "
                         "or rear; shock-library ids, 'none' for none); repeatable (a car with "
-                        "third elements; default: the setups' own, else the baseline's)")
+                        f"third elements; default: {default})")
     parser.add_argument("--try-roll", action="append", metavar="AXLE=ID,ID",
-                        help="as --try-heave, for the roll dampers (default: the setups' own, "
-                        "else the baseline's)")
+                        help=f"as --try-heave, for the roll dampers (default: {default})")
     parser.add_argument("--try-heave-spring", action="append", metavar="AXLE=ID,ID",
                         help="as --try-heave, for the heave springs (bump-stop-library ids; "
-                        "default: the setups' own, else the baseline's)")
+                        f"default: {default})")
 
 
 def add_prediction_inputs(parser, *, out_help):

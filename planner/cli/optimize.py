@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from planner.cli.common import (MODEL_HELP, OBJECTIVE_HELP, UNITS_OF_DRIVES, add_element_options,
-                                add_units, bump_stop_library, check_out, int_at_least,
-                                load_any_model, output_units, packer_bounds, show_progress)
+                                add_third_try_options, add_units, bump_stop_library, check_out,
+                                element_choices, int_at_least, load_any_model, output_units,
+                                packer_bounds, show_progress)
 
 __all__ = ["add_parser", "run", "cli_wording", "scan_line", "OPTION_NAMES",
            "REFERENCE_VELOCITIES"]
@@ -98,6 +99,7 @@ def add_parser(subparsers):
                      "with the corner curves, e.g. heave_front,heave_rear (each within 1/3 "
                      "to 3 times the baseline damper's forces; written as OPT-<element>) "
                      "(default: none, the car's baseline third dampers)")
+    add_third_try_options(opt, crate=True)
     opt.add_argument("--click-radius", type=int_at_least(1), default=2, metavar="K",
                      help="adjustable shocks: the click search moves one adjuster by 1..K "
                      "steps (default %(default)s)")
@@ -172,7 +174,8 @@ def run(args):
                                                    click_radius=args.click_radius),
                               elements=ElementOptions(
                                   use_model=not args.no_elements,
-                                  bump_stops=bump_stop_library(args, model)),
+                                  bump_stops=bump_stop_library(args, model),
+                                  **element_choices(args)),
                               packers=packer_bounds(args), progress=show_progress(args))
     files = write_optimum(opt, library, out, units=args.units, overwrite=args.overwrite,
                           run={"model": args.model, "crate": args.shocks})
@@ -202,6 +205,13 @@ def run(args):
                   "iterate": "IPOPT's best feasible iterate"}.get(s.get("source"),
                                                                    "IPOPT's solution")
         lines.append(scan_line(scan, source))
+    crate_third = opt.settings.get("crate_third")
+    if crate_third:
+        third = [c for c in t.columns if c.startswith(("heave_", "roll_"))]
+        lines.append("the crate's best searched with the third-element choices "
+                     + ", ".join(f"{k}={','.join(v)}" for k, v in crate_third.items())
+                     + f": {opt.crate_best} ("
+                     + ", ".join(f"{c} {t.loc[opt.crate_best, c]}" for c in third) + ")")
     close = t[t["kind"] == "closest"]
     if len(close):
         lines.append("closest crate setups: " + ", ".join(

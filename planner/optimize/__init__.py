@@ -61,6 +61,8 @@ Modules
 - :mod:`~planner.optimize.solve`: the metrics' evaluator and IPOPT;
 - :mod:`~planner.optimize.click_search`: the click search of the crate's adjustable
   shocks (:func:`search_clicks`) and :func:`curve_distance`;
+- :mod:`~planner.optimize.third`: a car's third elements in the optimization (the
+  baseline's, the free third dampers' check, the crate's third-element choices);
 - :mod:`~planner.optimize.options`: the optimizer's option objects (:class:`CurveOptions`,
   :class:`SolverOptions`);
 - :mod:`~planner.optimize.core`: :func:`optimize_curves` and

@@ -39,7 +39,7 @@ from ident.models.bumpstops import BumpStop, check_packer
 from ident.models.library import ShockLibrary
 from ident.sim.closedloop import corner_values, simulate
 from ident.sim.metrics import METRIC_NAMES, THIRD_METRIC_NAMES
-from planner.elements import corner_shock_ids, model_setup_elements, setup_third
+from planner.elements import model_setup_elements
 from planner.options import ElementOptions, LoopOptions, as_options
 from planner.errors import PlannerError
 from planner.objective import Objective, default_objective, score_setups
@@ -72,10 +72,11 @@ from planner.optimize.scan import (
     time_domain_scores,
 )
 from planner.optimize.solve import Evaluator, OptimizeWarning, solve_problem
+from planner.optimize.third import check_free_third, crate_choices, optimize_third
 from planner.optimize.space import CurveSpace, curve_space, symmetry_groups
 from planner.plant import as_loop_plant
 from planner.predict import predict_setups, prepare_drive
-from planner.screen import metric_rows, screen_setups, third_choices
+from planner.screen import metric_rows, screen_setups
 from planner.setups import Setup, enumerate_setups, resolve_baseline
 from planner.uncertainty import prediction_uncertainty
 
@@ -224,49 +225,10 @@ class CurveOptimum:
 
 
 @dataclass(frozen=True, eq=False)
-class _Third:
-    """The car's third elements in an optimization (issue 38): the car
-    (:class:`ident.data.third.CarThird`), the heave springs' library and the baseline's
-    resolved elements, the loop's ``(dampers, springs)`` entry every setup is verified with."""
-
-    car: object
-    springs: object
-    entry: tuple
-
-    @property
-    def names(self):
-        return tuple(self.car.elements.elements)
-
-    def screening(self, setups, library):
-        """The screening's third elements of `setups` (each keeps the car's baseline)."""
-        return third_choices(setup_third(setups, self.car, library, bump_stops=self.springs,
-                                         where="optimize"))
-
-    def corner_ids(self, library):
-        """The library's ids the crate puts at the corners (not the third elements')."""
-        return corner_shock_ids(library, self.car)
-
-
-def _car_third(model, base, library, elements):
-    """The car's third elements of an optimization (:class:`_Third`), or None: the
-    baseline's heave and roll dampers and heave springs, kept in every verification."""
-    car = elements.car_third(model)
-    if car is None or not car.elements.elements:
-        return None
-    if base.third or base.heave_springs:
-        raise PlannerError(f"optimize: baseline {base.name!r} names third elements; the "
-                           "optimizer keeps the car's baseline ones (model.third or "
-                           "ElementOptions.third): give the baseline's corner shocks only")
-    springs = elements.library(model)
-    resolved = setup_third([base], car, library, bump_stops=springs, where="optimize: baseline")
-    return _Third(car=car, springs=springs, entry=resolved.entries[0])
-
-
-@dataclass(frozen=True, eq=False)
 class _Elements:
     """The car's elements of an optimization (checked): its stops in the loop's form, the
     packer variables (groups, bounds [m], per corner the variable's index), the static
-    loads and the third elements (:class:`_Third`, the baseline's, every verification's).
+    loads and the third elements (:class:`OptimizeThird`, the baseline's, every verification's).
     Inactive (all None): the optimization without elements, unchanged."""
 
     stops: list | None = None
@@ -274,7 +236,7 @@ class _Elements:
     bounds: tuple = ()
     index: list | None = None
     static: list | None = None
-    third: _Third | None = None
+    third: OptimizeThird | None = None
     # free third dampers (issue 38): their curve space (groups without corners, the corner
     # curves' knots), start and linear constraints; their variables come after the corner
     # curves', before the packers
@@ -422,24 +384,6 @@ THIRD_ENVELOPE = ENVELOPE_FACTOR
 
 def _values(shocks):
     return [] if shocks is None else list(shocks.values())
-
-
-def _check_free_third(free_third, third):
-    """The free third dampers, checked against the car's (:class:`_Third`)."""
-    free = tuple(free_third or ())
-    if not free:
-        return ()
-    if third is None:
-        raise PlannerError(f"optimize: free_third {list(free)} but the car has no third "
-                           "elements; leave free_third out, or give the car's third elements "
-                           "(model.third, ElementOptions.third)")
-    fitted = [e for e in third.names if third.car.baseline.dampers.get(e) is not None]
-    bad = [e for e in free if e not in fitted]
-    if bad or len(set(free)) < len(free):
-        raise PlannerError(f"optimize: free_third {list(free)}: {bad or 'an element twice'} "
-                           f"is not a third damper the car's baseline fits (it fits "
-                           f"{fitted}); free each of those at most once")
-    return tuple(e for e in third.names if e in free)
 
 
 def _with_free_third(elements, space, free):
@@ -784,8 +728,16 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
         own = model_setup_elements([base], model, elements, where="optimize")
         if own is not None:
             stops, static = own.tables[0], own.static_corner_load_n
+    free_third = check_free_third(curves.free_third, third)
+    if elements.vary_bump_stops or elements.vary_packers_m:
+        raise PlannerError("optimize: bump-stop and packer choices (vary_bump_stops, "
+                           "vary_packers_m) are not searched; free the packers instead "
+                           "(packers=..., --packers GROUP=LO:HI), or rank the choices "
+                           "(shockplan rank --try-bump-stops / --try-packers)")
+    choices = crate_choices(third, library, elements.vary_third, free_third)
+    if choices:
+        third = replace(third, choices=choices)
     elements = _elements(plant, space, stops, packers, static, objective, third)
-    free_third = _check_free_third(curves.free_third, third)
     # the baseline's (verified) values per drive of the metrics the objective needs
     if elements.active:
         m_base = [element_predictions(model, d, [base], library, [elements.stops],
@@ -994,14 +946,14 @@ def _bump_knots(space, side=1):
 def _problem(model, drives, library, objective, baseline, symmetry, knots_m_s, linear, lag_s,
              oversample=2, elements=None):
     """The loop plant, drives, baseline setup, curve space, metric rows (names, rows of
-    the plant's outputs) and the car's third elements (:class:`_Third` or None, with
+    the plant's outputs) and the car's third elements (:class:`OptimizeThird` or None, with
     `elements`) of an optimization, checked (see :func:`optimize_curves`)."""
     plant = as_loop_plant(model)
     drives = _drive_list(drives, getattr(model, "fs_hz", None))
     # the commands' one baseline syntax; none given: the crate's first shock at every corner
     base = resolve_baseline(library.ids[0] if baseline is None else baseline, library)
     base_models = base.resolve(library)
-    third = None if elements is None else _car_third(model, base, library, elements)
+    third = None if elements is None else optimize_third(model, base, library, elements)
     groups = symmetry_groups(symmetry)
     if lag_s is None:
         lag_s = [float(np.mean([base_models[CORNERS.index(c)].lag_s for c in corners]))
@@ -1061,7 +1013,8 @@ def _third_metric_rows(plant, third, objective, names, L):
 
 
 def compile_curves(model, drives, library, *, objective=None, baseline=None,
-                   curves=CurveOptions(), loop=LoopOptions(), stop_tables=None, packers=None):
+                   curves=CurveOptions(), loop=LoopOptions(), elements=ElementOptions(),
+                   stop_tables=None, packers=None):
     """Compile the optimizer's step functions of a problem ahead of :func:`optimize_curves`.
 
     The C compile of the closed loop's step and its adjoint (10-30 s on a
@@ -1079,9 +1032,16 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     Parameters
     ----------
     model, drives, library, objective, baseline, curves, loop
-        As :func:`optimize_curves`.
+        As :func:`optimize_curves` (``curves.free_third``: the free third dampers' curve
+        groups are compiled in).
+    elements : planner.options.ElementOptions
+        As :func:`optimize_curves`: the car's elements (the model's own by default); a car
+        with third elements has them compiled in (its heave and roll dampers and heave
+        springs, the baseline's, as the optimization's loop holds them; the knots on the
+        baseline's shock speeds with them).
     stop_tables, packers
-        As :func:`optimize_curves` (the stops and packer variables are compiled in).
+        As :func:`optimize_curves` (the stops and packer variables, the heave packers'
+        too, are compiled in; without `stop_tables` the model's stops, as `elements` says).
 
     Returns
     -------
@@ -1097,15 +1057,27 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     objective = _check_objective(objective)
     curves = as_options(curves, CurveOptions, "curves", "compile_curves")
     oversample = as_options(loop, LoopOptions, "loop", "compile_curves").oversample
-    plant, drives, _, space, rows, _ = _problem(model, drives, library, objective, baseline,
-                                             curves.symmetry, curves.knots_m_s, curves.linear,
-                                             curves.lag_s, oversample)
-    elements = _elements(plant, space, stop_tables, packers, None, objective)
+    elements = as_options(elements, ElementOptions, "elements", "compile_curves")
+    plant, drives, base, space, rows, third = _problem(model, drives, library, objective,
+                                                       baseline, curves.symmetry,
+                                                       curves.knots_m_s, curves.linear,
+                                                       curves.lag_s, oversample,
+                                                       elements=elements)
+    # the car's elements as optimize_curves takes them (its refusals too); the static loads
+    # only to refuse what it refuses (IPOPT's loop has no lift-off)
+    stops, static = stop_tables, elements.static_corner_load_n
+    if elements.use_model is not False and stops is None and static is None:
+        own = model_setup_elements([base], model, elements, where="compile_curves")
+        if own is not None:
+            stops, static = own.tables[0], own.static_corner_load_n
+    free_third = check_free_third(curves.free_third, third)
+    elem = _elements(plant, space, stops, packers, static, objective, third)
+    if free_third:
+        elem = _with_free_third(elem, space, free_third)
     if not jit_available():
         return False
     for d in drives:
-        LoopModel(plant, d, space, rows, oversample, True, inputs=False,
-                  bump_stops=elements.stops, packer_index=elements.index)
+        LoopModel(plant, d, space, rows, oversample, True, inputs=False, **elem.loop_args())
     return True
 
 
@@ -1264,10 +1236,18 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
                      for s in crate])
     order = np.argsort(dist, kind="stable")
     closest = [crate[i] for i in order[:n_closest]]
+    # (with third-element choices, every crate setup with each: the crate's best is searched
+    # over them too; a variant's distance is its corners')
+    crate_own, plain = {}, None
+    if elements.third is not None and elements.third.choices:
+        plain = {s.name for s in crate}
+        crate, crate_own, parent = elements.third.crate(crate, library)
+        dist = dist[parent]
     best_name, crate_scores = _crate_best(model, drives, library, crate, objective, base,
                                           weights, oversample, aggregate,
-                                          elements=elements.verify(p_opt, ()),
-                                          third=elements.third)
+                                          elements=_with_own_third(elements.verify(p_opt, ()),
+                                                                   crate_own),
+                                          third=elements.third, plain=plain)
     by_name = {s.name: s for s in crate}
     searches, skipped, t_clicks = [], {}, time.perf_counter()
     if click_radius is not None and library.adjustable_ids:
@@ -1283,7 +1263,8 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
             seen.add(s.name)
     table, metrics = time_domain_scores(model, drives, uniq, lib, objective, base, weights,
                                          oversample, aggregate,
-                                         **elements.verify(p_opt, [setup.name]))
+                                         **_with_own_third(elements.verify(p_opt, [setup.name]),
+                                                           crate_own))
     table = table.loc[[s.name for s in uniq]]
     kinds = {setup.name: "optimum", base.name: "baseline"}
     kinds.setdefault(best_name, "crate best")
@@ -1293,10 +1274,20 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
         kinds.setdefault(s.name, "closest")
     table.insert(0, "kind", [kinds[n] for n in table.index])
     ids = pd.DataFrame([s.ids() for s in uniq], columns=list(CORNERS), index=table.index)
-    if elements.third is not None:  # the third dampers' ids (the baseline's but the optimum's)
-        car = elements.third.car
+    if elements.third is not None:  # the third dampers' ids (the baseline's but the optimum's
+        car = elements.third.car  # and a crate variant's)
         for e in car.elements.elements:
             ids[e] = [(s.third or {}).get(e, car.baseline.dampers.get(e)) for s in uniq]
+            if crate_own:
+                ids[e] = [v if v is not None or e not in (s.third or {}) else "none"
+                          for v, s in zip(ids[e], uniq)]
+        if any(s.heave_springs for s in uniq):  # a crate variant's heave springs
+            for e in car.elements.elements:
+                if e in HEAVE_ELEMENTS:
+                    a = e.rpartition("_")[2]
+                    ids[f"heave_spring_{a}"] = [
+                        (s.heave_springs or {}).get(a, car.baseline.heave_springs.get(a))
+                        or "none" for s in uniq]
     table = pd.concat([table.iloc[:, :1], ids, table.iloc[:, 1:]], axis=1)
     dmap = dict(zip([s.name for s in crate], dist))
     table["distance"] = [0.0 if n == setup.name else dmap.get(n, np.nan) for n in table.index]
@@ -1326,6 +1317,9 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
     if elements.third is not None:
         settings["third"] = elements.third.car.to_dict()
         settings["free_third"] = list(elements.free_third)
+        if elements.third.choices:
+            settings["crate_third"] = {k: [v or "none" for v in vals]
+                                       for k, vals in elements.third.choices.items()}
     if elements.active:
         settings.update(bump_stops=elements.stops is not None,
                         packers={g: list(b) for g, b in zip(elements.groups, elements.bounds)},
@@ -1343,6 +1337,14 @@ def _finish(model, plant, drives, library, space, constraints, objective, base, 
                                    zip(elements.groups, p_opt[elements.n_third:])},
                         bump_stops=None if stops_opt is None else tuple(stops_opt),
                         clicks=clicks)
+
+
+def _with_own_third(args, own):
+    """``time_domain_scores``' element arguments `args` with the crate setups' own third
+    elements `own` (name -> ``(dampers, springs)``) added to ``setup_third``."""
+    if not own:
+        return args
+    return dict(args, setup_third={**own, **(args.get("setup_third") or {})})
 
 
 def _click_search(model, drives, library, space, objective, base, weights, oversample,
@@ -1363,10 +1365,12 @@ def _click_search(model, drives, library, space, objective, base, weights, overs
 
 
 def _crate_best(model, drives, library, crate, objective, base, weights, oversample, aggregate,
-                top=20, elements=None, third=None):
+                top=20, elements=None, third=None, plain=None):
     """The crate's best feasible setup: screened on every drive (with the car's third
-    elements, :class:`_Third`, if any), the best `top` verified (with the car's `elements`,
-    ``time_domain_scores``' arguments, if any)."""
+    elements, :class:`OptimizeThird`, if any), the best `top` verified (with the car's `elements`,
+    ``time_domain_scores``' arguments, if any). `plain`: the names of the crate's setups
+    with the car's own third elements (a crate with third-element variants): their best
+    `top` are verified too, so the variants' best is never worse than theirs."""
     total = None
     screen_obj = linear_objective(objective)
     screen_third = None if third is None else third.screening(crate, library)
@@ -1377,7 +1381,10 @@ def _crate_best(model, drives, library, crate, objective, base, weights, oversam
         total = w * v if total is None else (total + w * v if aggregate == "sum"
                                              else np.maximum(total, v))
     order = total.sort_values(kind="stable").index.tolist()
-    cand = [s for s in crate if s.name in set(order[:top])]
+    pick = set(order[:top])
+    if plain is not None:
+        pick |= set([n for n in order if n in plain][:top])
+    cand = [s for s in crate if s.name in pick]
     table, _ = time_domain_scores(model, drives, cand, library, objective, base, weights,
                                    oversample, aggregate, **(elements or {}))
     feas = table[table["feasible"]]

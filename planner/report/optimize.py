@@ -212,6 +212,12 @@ def _third_panel(ax, optimum, library, name, pwl, v, v_si, units, force):
     if isinstance(base, str) and base in library:
         ax.plot(v, force(library[base], v_si), color="tab:orange", lw=1.6,
                 label=f"baseline ({base})")
+    # (a crate searched over third-element choices: its best's damper here, if another)
+    best = optimum.table.loc[optimum.crate_best].get(name)
+    if optimum.settings.get("crate_third") and isinstance(best, str) and best != base \
+            and best in library:
+        ax.plot(v, force(library[best], v_si), color="tab:green", lw=1.6, ls="--",
+                label=f"crate best ({best})")
     ax.plot(v, force(pwl, v_si), color="tab:blue", lw=2.2, label=f"optimum ({name})")
     ax.plot(from_si(pwl.v_knots_m_s, "velocity", units), from_si(pwl.f_knots_n, "force", units),
             "o", color="tab:blue", ms=4)
@@ -366,6 +372,9 @@ def _write_workbook(optimum, units, path, run=None):
             ("symmetry", optimum.space.symmetry),
             ("objective", optimum.objective.name),
             ("baseline", "/".join(optimum.baseline.ids())),
+            *([("crate searched with the third-element choices", "; ".join(
+                f"{k}: {', '.join(v)}" for k, v in optimum.settings["crate_third"].items()))]
+              if optimum.settings.get("crate_third") else []),
             ("drives", ", ".join(optimum.settings["drives"])),
             ("units", units)]
     scan = optimum.settings.get("scan")
@@ -460,7 +469,10 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False, run
     On a car with third elements, ``optimal_setup.csv`` and the ``setups`` sheet add the
     setups' third-element columns as predictions carry them (``heave_front``, ...,
     ``heave_spring_<axle>``: the ids the verification fitted, the car's baseline's); a
-    car without them writes the same files as before.
+    car without them writes the same files as before. A crate searched over third-element
+    choices (``settings["crate_third"]``: ``--try-heave``, ``--free-third``) adds its best
+    setup, with its own third elements, after the optimum in ``optimal_setup.csv``, and the
+    choices to the solver sheet.
 
     Parameters
     ----------
@@ -501,7 +513,11 @@ def write_optimum(optimum, library, out_dir, *, units="SI", overwrite=False, run
         closest = [s for s in setups if s.name != optimum.setup.name
                    and optimum.table.loc[s.name, "kind"] == "closest"]
         optimal = _with_third(optimum.setup, _third_columns(optimum))
-        write_setups([optimal] + clicks + closest, work / names["setups"], units=units)
+        # (a crate searched over third-element choices: its best, with its own, after the
+        # optimum)
+        best = [s for s in setups if s.name == optimum.crate_best != optimum.setup.name
+                and optimum.settings.get("crate_third")]
+        write_setups([optimal] + best + clicks + closest, work / names["setups"], units=units)
         _write_workbook(optimum, units, work / names["xlsx"], run=run)
         fig = curves_figure(optimum, library, units=units)
         fig.savefig(work / names["curves"], dpi=110, metadata=png_metadata(fig))
