@@ -387,53 +387,55 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         # compile side by side (the rig response's in a worker, the one-setup loop's here);
         # then a worker compiles the predictions' kernel and the screening kernels into
         # numba's cache while the virtual rig runs here. Otherwise these are cache loads.
-        # One worker, forked before this process uses any kernel, takes both jobs in turn:
+        # One worker, forked before this process uses any kernel, takes the jobs in turn:
         # the rig response's kernel (the virtual rig needs it), then the screening and
         # predictions' kernels, starting as soon as the first is done rather than when this
         # process is done with the one-setup loop (about twice the rig kernel's compile):
         # no core idles while the other compiles, and by the predictions' kernel the
-        # one-setup loop's `loop_one` (which it calls) is in numba's cache.
-        rig_kernel, warm = _start_jobs(_warm_rig_response, _warm_kernels)
-        _warm_one_setup_loop()
-        # a warm-up that fails only costs time (e.g. a forked worker cannot use numba's
-        # OpenMP threads once this process has): the kernels then compile here on first use
-        _settle_job(rig_kernel)
-        vehicle = example_vehicle()
-        plan = default_plan()
-        units = plan.units
-        session = simulate_session(plan, vehicle, progress=progress)
-        # Parquet, float32 (far finer than the sensors): 55 MB against 306 MB of CSV
-        write_session(session, work / "session", units=units, run_format="parquet",
-                      float_dtype="float32")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            model = identify_session(session)
-        log.info("demo: identified the session")
-        model.save(work / "model.npz")
-        log.info("demo: saved the model")
-        drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
-                                 wheelbase_m=vehicle.a_m + vehicle.b_m,
-                                 track_width_m=vehicle.track_front_m, name="demo track")
-        library = read_shock_library(DEMO_LIBRARY_PATH)
-        baseline = resolve_baseline("B20", library)  # B20 at every corner, named "baseline"
-        # the optimizer's C compile (once per machine) needs only the model: a worker does it
-        # while this process ranks; the FRF plots (one core) are drawn by a worker while
-        # this process optimizes (one core)
-        # spawned: the compile simulates the baseline (the knots sit on its shock speeds)
-        steps = _start_job(_compile_optimizer_job, model, drive, library, baseline,
-                           method="spawn")
-        plots = None
+        # one-setup loop's `loop_one` (which it calls) is in numba's cache. Last, the
+        # README's examples (which need none of this process's results) are written by
+        # that worker while this process identifies (whose last steps run on one core).
+        rig_kernel, warm, examples = _start_jobs(
+            _warm_rig_response, _warm_kernels, functools.partial(_write_examples_job, work))
+        steps = plots = None
         try:
+            _warm_one_setup_loop()
+            # a warm-up that fails only costs time (e.g. a forked worker cannot use numba's
+            # OpenMP threads once this process has): the kernels then compile here on first
+            # use
+            _settle_job(rig_kernel)
+            vehicle = example_vehicle()
+            plan = default_plan()
+            units = plan.units
+            session = simulate_session(plan, vehicle, progress=progress)
+            # Parquet, float32 (far finer than the sensors): 55 MB against 306 MB of CSV
+            write_session(session, work / "session", units=units, run_format="parquet",
+                          float_dtype="float32")
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                model = identify_session(session)
+            log.info("demo: identified the session")
+            model.save(work / "model.npz")
+            log.info("demo: saved the model")
+            drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
+                                     wheelbase_m=vehicle.a_m + vehicle.b_m,
+                                     track_width_m=vehicle.track_front_m, name="demo track")
+            library = read_shock_library(DEMO_LIBRARY_PATH)
+            baseline = resolve_baseline("B20", library)  # B20 at every corner, "baseline"
+            # the optimizer's C compile (once per machine) needs only the model: a worker
+            # runs the optimization's global stage and compiles the problem it ends on while
+            # this process ranks; the optimization here, reaching that problem, waits for
+            # the compile (planner.optimize.cache) rather than compiling it again. The FRF
+            # plots (one core) are drawn by a worker while this process optimizes (one core).
+            # spawned: the global stage screens (numba's OpenMP pool)
+            steps = _start_job(_compile_optimizer_job, model, drive, library, baseline,
+                               method="spawn")
             write_csv(work / "model_summary.csv", model.summary(), units=units)
             write_drive(drive, work / "track_drive.csv", units=units)
             write_demo_inputs(work, units=units, channels=session.runs[0].channels)
-            write_real_car_example(work / REAL_CAR_FOLDER)
-            write_clicks_example(work / CLICKS_FOLDER)
-            write_track_example(work / TRACK_FOLDER)
-            write_proto_example(work / PROTO_FOLDER)
             write_demo_rig_files(work / DEMO_RIG_FILES, session, duration_s=DEMO_RIG_FILES_S)
             # the ranking needs the kernels the warm-up worker compiles: on a fresh machine
-            # it may still be compiling them while this process wrote the files above
+            # it may still be compiling them while this process identified
             _settle_job(warm)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -453,21 +455,22 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
                                  units=units)
             plots = _start_job(_frf_plots_job, work / "model.npz", vehicle,
                                work / "frf_plots", units)
-            _settle_job(steps)  # a failed compile only costs time: the optimizer compiles
             log.info("demo: optimizing the curves")
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 optimum = optimize_curves(model, drive, library, baseline=baseline,
                                           progress=progress)
+            _settle_job(steps)  # a failed compile only cost time: the optimizer compiled
             write_optimum(optimum, library, work / "optimize", units=units,
                           run={k: used[k] for k in ("model", "crate")})
             modes = modal_summary(vehicle).table()
+            _finish_job(examples)
+            _finish_job(plots)
         except BaseException:
-            _settle_job(warm)
-            _settle_job(steps)
-            _settle_job(plots)  # nothing may write into the folder once it is rolled back
+            # nothing may write into the folder once it is rolled back
+            for job in (rig_kernel, warm, examples, steps, plots):
+                _settle_job(job)
             raise
-        _finish_job(plots)
     best = ranking.table.iloc[0]
     lines = [
         f"shockplan demo -> {out}",
@@ -687,6 +690,16 @@ def _compile_optimizer_job(model, drive, library, baseline):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return compile_curves(model, drive, library, baseline=baseline)
+
+
+def _write_examples_job(work):
+    """Write the README's examples (real car, clicks, track data, third elements) into the
+    demo's folder `work`. Runs in the warm-up worker (their kernels are its own)."""
+    write_real_car_example(work / REAL_CAR_FOLDER)
+    write_clicks_example(work / CLICKS_FOLDER)
+    write_track_example(work / TRACK_FOLDER)
+    write_proto_example(work / PROTO_FOLDER)
+    return True
 
 
 def _warm_kernels():

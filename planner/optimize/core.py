@@ -1061,7 +1061,9 @@ def _third_metric_rows(plant, third, objective, names, L):
 
 
 def compile_curves(model, drives, library, *, objective=None, baseline=None,
-                   curves=CurveOptions(), loop=LoopOptions(), stop_tables=None, packers=None):
+                   curves=CurveOptions(), constraints=None, drive_weights=None,
+                   aggregate="sum", loop=LoopOptions(), elements=ElementOptions(),
+                   stop_tables=None, packers=None):
     """Compile the optimizer's step functions of a problem ahead of :func:`optimize_curves`.
 
     The C compile of the closed loop's step and its adjoint (10-30 s on a
@@ -1071,14 +1073,19 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     sample rate and, with ``knots_m_s="quantiles"``, by the baseline's shock
     speeds on it), e.g. in a worker while other work runs, it leaves the
     library in :func:`jit_cache_dir`, where the optimization then finds it.
-    It compiles the problem on the baseline's knots: when the optimization
-    moves them onto its scan's best curve (``settings["knot_update"]``), it
-    compiles that problem itself. It runs no screening (no OpenMP pool: it
-    may run in a process forked from one that used one).
+    With knots on the quantiles (the default) it runs the optimization's global
+    stage as :func:`optimize_curves` does (the scan, and the knots moved onto
+    its best curve's speeds, ``settings["knot_update"]``) and compiles the
+    problem on the knots the optimization will use; that stage screens
+    (numba's OpenMP pool), so run it in a spawned process, not one forked from
+    a process that used the pool. With given knots it compiles at once and
+    runs no screening.
 
     Parameters
     ----------
-    model, drives, library, objective, baseline, curves, loop
+    model, drives, library, objective, baseline, curves, constraints, drive_weights
+        As :func:`optimize_curves`.
+    aggregate, loop, elements
         As :func:`optimize_curves`.
     stop_tables, packers
         As :func:`optimize_curves` (the stops and packer variables are compiled in).
@@ -1097,15 +1104,34 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     objective = _check_objective(objective)
     curves = as_options(curves, CurveOptions, "curves", "compile_curves")
     oversample = as_options(loop, LoopOptions, "loop", "compile_curves").oversample
-    plant, drives, _, space, rows, _ = _problem(model, drives, library, objective, baseline,
-                                             curves.symmetry, curves.knots_m_s, curves.linear,
-                                             curves.lag_s, oversample)
-    elements = _elements(plant, space, stop_tables, packers, None, objective)
+    elements = as_options(elements, ElementOptions, "elements", "compile_curves")
+    if aggregate not in ("sum", "worst"):
+        raise PlannerError(f"aggregate must be 'sum' or 'worst', got {aggregate!r}")
+    # the problem as optimize_curves builds it (keep the two in step: the compiled code's
+    # hash must be the optimization's)
+    plant, drives, base, space, rows, third = _problem(
+        model, drives, library, objective, baseline, curves.symmetry, curves.knots_m_s,
+        curves.linear, curves.lag_s, oversample, elements=elements)
+    stops, static = stop_tables, elements.static_corner_load_n
+    if elements.use_model is not False and stops is None and static is None:
+        own = model_setup_elements([base], model, elements, where="compile_curves")
+        if own is not None:
+            stops, static = own.tables[0], own.static_corner_load_n
+    elements = _elements(plant, space, stops, packers, static, objective, third)
+    free_third = _check_free_third(curves.free_third, third)
     if not jit_available():
         return False
+    if _quantile_knots(curves.knots_m_s) and not space.linear:
+        # the knots the optimization compiles on come out of its global stage
+        space = _start(model, plant, drives, library, space,
+                       _check_constraints_arg(constraints), base, objective,
+                       _weights(drive_weights, drives), aggregate, oversample, True,
+                       elements)[0]
+    if free_third:
+        elements = _with_free_third(elements, space, free_third)
     for d in drives:
         LoopModel(plant, d, space, rows, oversample, True, inputs=False,
-                  bump_stops=elements.stops, packer_index=elements.index)
+                  **elements.loop_args())
     return True
 
 
