@@ -375,10 +375,8 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
     from ident.models.library import read_shock_library
     from ident.models.vehicle import example_vehicle, modal_summary
     from planner.optimize import optimize_curves, write_optimum
-    from planner.histograms import HISTOGRAMS_FILE, write_histograms_csv
     from planner.options import HistogramOptions, LoopOptions
     from planner.rank import rank_setups
-    from planner.report import write_predictions_csv, write_ranking
     from planner.setups import resolve_baseline
 
     out = Path(out)
@@ -387,53 +385,57 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
         # compile side by side (the rig response's in a worker, the one-setup loop's here);
         # then a worker compiles the predictions' kernel and the screening kernels into
         # numba's cache while the virtual rig runs here. Otherwise these are cache loads.
-        # One worker, forked before this process uses any kernel, takes both jobs in turn:
+        # One worker, forked before this process uses any kernel, takes the jobs in turn:
         # the rig response's kernel (the virtual rig needs it), then the screening and
         # predictions' kernels, starting as soon as the first is done rather than when this
         # process is done with the one-setup loop (about twice the rig kernel's compile):
         # no core idles while the other compiles, and by the predictions' kernel the
-        # one-setup loop's `loop_one` (which it calls) is in numba's cache.
-        rig_kernel, warm = _start_jobs(_warm_rig_response, _warm_kernels)
-        _warm_one_setup_loop()
-        # a warm-up that fails only costs time (e.g. a forked worker cannot use numba's
-        # OpenMP threads once this process has): the kernels then compile here on first use
-        _settle_job(rig_kernel)
-        vehicle = example_vehicle()
-        plan = default_plan()
-        units = plan.units
-        session = simulate_session(plan, vehicle, progress=progress)
-        # Parquet, float32 (far finer than the sensors): 55 MB against 306 MB of CSV
-        write_session(session, work / "session", units=units, run_format="parquet",
-                      float_dtype="float32")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            model = identify_session(session)
-        log.info("demo: identified the session")
-        model.save(work / "model.npz")
-        log.info("demo: saved the model")
-        drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
-                                 wheelbase_m=vehicle.a_m + vehicle.b_m,
-                                 track_width_m=vehicle.track_front_m, name="demo track")
-        library = read_shock_library(DEMO_LIBRARY_PATH)
-        baseline = resolve_baseline("B20", library)  # B20 at every corner, named "baseline"
-        # the optimizer's C compile (once per machine) needs only the model: a worker does it
-        # while this process ranks; the FRF plots (one core) are drawn by a worker while
-        # this process optimizes (one core)
-        # spawned: the compile simulates the baseline (the knots sit on its shock speeds)
-        steps = _start_job(_compile_optimizer_job, model, drive, library, baseline,
-                           method="spawn")
-        plots = None
+        # one-setup loop's `loop_one` (which it calls) is in numba's cache. Last, the
+        # README's examples (which need none of this process's results) are written by
+        # that worker while this process identifies (whose last steps run on one core).
+        rig_kernel, warm, examples = _start_jobs(
+            _warm_rig_response, _warm_kernels, functools.partial(_write_examples_job, work))
+        compiler = steps = plots = None
         try:
+            _warm_one_setup_loop()
+            # a warm-up that fails only costs time (e.g. a forked worker cannot use numba's
+            # OpenMP threads once this process has): the kernels then compile here on first
+            # use
+            _settle_job(rig_kernel)
+            vehicle = example_vehicle()
+            plan = default_plan()
+            units = plan.units
+            session = simulate_session(plan, vehicle, progress=progress)
+            # the optimizer's compile worker (below) is spawned now: its interpreter starts
+            # and imports while this process identifies, not once the model is there
+            compiler = _spawn_worker(_import_optimizer)
+            # Parquet, float32 (far finer than the sensors): 55 MB against 306 MB of CSV
+            write_session(session, work / "session", units=units, run_format="parquet",
+                          float_dtype="float32")
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                model = identify_session(session)
+            log.info("demo: identified the session")
+            model.save(work / "model.npz")
+            log.info("demo: saved the model")
+            drive = make_track_drive(duration_s=drive_s, fs_hz=plan.fs_hz, seed=7,
+                                     wheelbase_m=vehicle.a_m + vehicle.b_m,
+                                     track_width_m=vehicle.track_front_m, name="demo track")
+            library = read_shock_library(DEMO_LIBRARY_PATH)
+            baseline = resolve_baseline("B20", library)  # B20 at every corner, "baseline"
+            # the optimizer's C compile (once per machine) needs only the model: a worker
+            # runs the optimization's global stage and compiles the problem it ends on while
+            # this process ranks; the optimization here, reaching that problem, waits for
+            # the compile (planner.optimize.cache) rather than compiling it again. The FRF
+            # plots (one core) are drawn by a worker while this process optimizes (one core).
+            # spawned: the global stage screens (numba's OpenMP pool)
+            steps = _submit(compiler, _compile_optimizer_job, model, drive, library, baseline)
             write_csv(work / "model_summary.csv", model.summary(), units=units)
             write_drive(drive, work / "track_drive.csv", units=units)
             write_demo_inputs(work, units=units, channels=session.runs[0].channels)
-            write_real_car_example(work / REAL_CAR_FOLDER)
-            write_clicks_example(work / CLICKS_FOLDER)
-            write_track_example(work / TRACK_FOLDER)
-            write_proto_example(work / PROTO_FOLDER)
             write_demo_rig_files(work / DEMO_RIG_FILES, session, duration_s=DEMO_RIG_FILES_S)
             # the ranking needs the kernels the warm-up worker compiles: on a fresh machine
-            # it may still be compiling them while this process wrote the files above
+            # it may still be compiling them while this process identified
             _settle_job(warm)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -444,30 +446,27 @@ def run_demo(out, *, overwrite=False, progress=True, drive_s=120.0):
                                       progress=progress)
             used = {"model": "model.npz (identified from session/)",
                     "drive": "track_drive.csv", "crate": "crate.toml"}
-            files = write_ranking(ranking.table, work / "ranking", units=units,
-                                  objective=ranking.objective, baseline=ranking.baseline,
-                                  run=used, histograms=ranking.histograms.table(units))
-            write_predictions_csv(ranking.screening, work / "ranking" / "screening.csv",
-                                  units=units)
-            write_histograms_csv(ranking.histograms, work / "ranking" / HISTOGRAMS_FILE,
-                                 units=units)
-            plots = _start_job(_frf_plots_job, work / "model.npz", vehicle,
-                               work / "frf_plots", units)
-            _settle_job(steps)  # a failed compile only costs time: the optimizer compiles
+            # the ranking's files (CSV, XLSX, plots) and the FRF plots, one core, are written
+            # by a worker while this process optimizes (one core)
+            plots = _start_job(_reports_job, work, ranking, used, vehicle, units)
             log.info("demo: optimizing the curves")
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 optimum = optimize_curves(model, drive, library, baseline=baseline,
                                           progress=progress)
+            _settle_job(steps)  # a failed compile only cost time: the optimizer compiled
             write_optimum(optimum, library, work / "optimize", units=units,
                           run={k: used[k] for k in ("model", "crate")})
             modes = modal_summary(vehicle).table()
+            _finish_job(examples)
+            files = plots.result()  # the worker's errors are raised here
         except BaseException:
-            _settle_job(warm)
-            _settle_job(steps)
-            _settle_job(plots)  # nothing may write into the folder once it is rolled back
+            # nothing may write into the folder once it is rolled back
+            for job in (rig_kernel, warm, examples, steps, plots):
+                _settle_job(job)
+            if compiler is not None:
+                compiler.shutdown(wait=True, cancel_futures=True)
             raise
-        _finish_job(plots)
     best = ranking.table.iloc[0]
     lines = [
         f"shockplan demo -> {out}",
@@ -661,6 +660,24 @@ def _constraints_toml(units):
     ])
 
 
+def _reports_job(work, ranking, used, vehicle, units):
+    """Write the ranking's files (:func:`planner.report.write_ranking`, the screening's
+    predictions, the histograms) into ``work / "ranking"``, then the FRF plots
+    (:func:`_frf_plots_job`). Runs in a worker while the demo's process optimizes.
+
+    Returns the ranking's files (name -> path), as :func:`planner.report.write_ranking`."""
+    from planner.histograms import HISTOGRAMS_FILE, write_histograms_csv
+    from planner.report import write_predictions_csv, write_ranking
+
+    files = write_ranking(ranking.table, work / "ranking", units=units,
+                          objective=ranking.objective, baseline=ranking.baseline,
+                          run=used, histograms=ranking.histograms.table(units))
+    write_predictions_csv(ranking.screening, work / "ranking" / "screening.csv", units=units)
+    write_histograms_csv(ranking.histograms, work / "ranking" / HISTOGRAMS_FILE, units=units)
+    _frf_plots_job(work / "model.npz", vehicle, work / "frf_plots", units)
+    return files
+
+
 def _frf_plots_job(model_path, vehicle, folder, units):
     """Write the demo's FRF plots: estimate, conditioned estimate, fit and the known car's
     closed-loop FRF around the model's c_bar (the ideal). Runs in a worker process."""
@@ -687,6 +704,16 @@ def _compile_optimizer_job(model, drive, library, baseline):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return compile_curves(model, drive, library, baseline=baseline)
+
+
+def _write_examples_job(work):
+    """Write the README's examples (real car, clicks, track data, third elements) into the
+    demo's folder `work`. Runs in the warm-up worker (their kernels are its own)."""
+    write_real_car_example(work / REAL_CAR_FOLDER)
+    write_clicks_example(work / CLICKS_FOLDER)
+    write_track_example(work / TRACK_FOLDER)
+    write_proto_example(work / PROTO_FOLDER)
+    return True
 
 
 def _warm_kernels():
@@ -785,20 +812,57 @@ def _start_job(func, *args, method="fork"):
     ``spawn``, a fresh interpreter, for a job that runs a numba parallel kernel: a process
     forked after one used its OpenMP pool cannot use it), or run it here.
 
-    Returns the future, or None when it already ran in this process.
+    Returns the future (done, when it ran in this process).
     """
     import concurrent.futures
     import multiprocessing
 
     if method not in multiprocessing.get_all_start_methods():
-        func(*args)
-        return None
+        future = concurrent.futures.Future()
+        future.set_result(func(*args))
+        return future
     pool = concurrent.futures.ProcessPoolExecutor(
         max_workers=1, mp_context=multiprocessing.get_context(method),
         initializer=die_with_parent, initargs=(os.getpid(),))
     future = pool.submit(func, *args)
     pool.shutdown(wait=False)
     return future
+
+
+def _spawn_worker(func):
+    """A worker process started by ``spawn`` (a fresh interpreter: it may use numba's OpenMP
+    pool), running ``func()`` first (e.g. its imports); None where spawn is not available.
+    Give it jobs with :func:`_submit`."""
+    import concurrent.futures
+    import multiprocessing
+
+    if "spawn" not in multiprocessing.get_all_start_methods():
+        return None
+    pool = concurrent.futures.ProcessPoolExecutor(
+        max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+        initializer=die_with_parent, initargs=(os.getpid(),))
+    pool.submit(func)
+    return pool
+
+
+def _submit(pool, func, *args):
+    """Run ``func(*args)`` on the worker `pool` (:func:`_spawn_worker`), its last job (the
+    worker ends when it is done), or here when `pool` is None. Returns the future, or None
+    when it already ran in this process."""
+    if pool is None:
+        func(*args)
+        return None
+    future = pool.submit(func, *args)
+    pool.shutdown(wait=False)
+    return future
+
+
+def _import_optimizer():
+    """The compile worker's first job: the optimizer's imports (casadi, the screening)."""
+    import planner.optimize  # noqa: F401 - imported for its cost, ahead of the compile
+    import planner.screen  # noqa: F401
+
+    return True
 
 
 def _start_jobs(*funcs):

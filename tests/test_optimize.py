@@ -700,6 +700,84 @@ def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive
                        curves=CurveOptions(symmetry="diagonal"))
 
 
+@pytest.mark.skipif(not __import__("planner.optimize.cache").optimize.cache._compiler(),
+                    reason="no C compiler")
+@pytest.mark.heavy  # two global stages (scans and verifications) and a C compile
+def test_compile_curves_ahead_on_quantile_knots_compiles_the_moved_problem(
+        paper_model, short_drive, demo_library, tmp_path, monkeypatch):
+    """With knots on the quantiles (the default), the optimization moves them onto its
+    scan's best curve before it compiles: compile_curves runs the same global stage, so the
+    library it leaves is the one the optimization loads (it compiles nothing itself)."""
+    import subprocess
+
+    import planner.optimize.cache as po
+    import planner.optimize.loop as pl
+    from planner.optimize import compile_curves
+
+    monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(pl, "_STEP_CACHE", {})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OptimizeWarning)
+        assert compile_curves(paper_model, short_drive, demo_library, baseline="B20") is True
+    libs = list(po.jit_cache_dir().glob("steps-*.so"))
+    assert len(libs) == 1
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("the compiler ran although compile_curves compiled the steps")
+
+    monkeypatch.setattr(pl, "_STEP_CACHE", {})  # as in another process
+    monkeypatch.setattr(subprocess, "Popen", no_compiler)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OptimizeWarning)
+        opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
+                              solver=SolverOptions(max_iter=2, n_closest=1, stationarity=False))
+    assert opt.settings["knot_update"]["updated"]  # the case the global stage is for
+    assert opt.solver["jit"] and opt.solver["n_grad"] > 0
+    assert list(po.jit_cache_dir().glob("steps-*.so")) == libs
+
+
+@pytest.mark.skipif(not __import__("planner.optimize.cache").optimize.cache._compiler(),
+                    reason="no C compiler")
+def test_compiled_steps_waits_for_a_concurrent_compile(tmp_path, monkeypatch):
+    """Two processes (here threads) needing the same library: the second waits for the
+    first's compile and loads its library instead of compiling it again."""
+    import subprocess
+    import threading
+    import time
+
+    import casadi as ca
+
+    import planner.optimize.cache as po
+
+    monkeypatch.setenv("SHOCKPLAN_CACHE_DIR", str(tmp_path))
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("f_lock_test", [x], [ca.sin(x) * x[0]])
+    popen, calls = subprocess.Popen, []
+
+    def slow_popen(cmd, *args, **kwargs):
+        calls.append(cmd)
+        if len(calls) == 1:
+            time.sleep(1.0)  # widen the race: the other thread looks for the library now
+        return popen(cmd, *args, **kwargs)
+
+    monkeypatch.setattr(subprocess, "Popen", slow_popen)
+    out = [None, None]
+
+    def build(k):
+        out[k] = po.compiled_steps((f,))
+
+    threads = [threading.Thread(target=build, args=(k,)) for k in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    # one compile: the step and its adjoint, then the link
+    assert len(calls) == 3
+    assert len(list(po.jit_cache_dir().glob("steps-*.so"))) == 1
+    for fns in out:
+        assert float(fns[0]([0.5, 1.0])[1]) == pytest.approx(np.sin(1.0) * 0.5)
+
+
 def test_quantile_knots_sit_on_the_baselines_shock_speeds(paper_model, short_drive,
                                                           demo_library):
     """``knots_m_s="quantiles"``: the knots are the quantiles of the baseline's pooled shock

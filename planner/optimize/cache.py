@@ -13,6 +13,7 @@ fails, the functions run uncompiled in casadi's virtual machine.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import hashlib
 import logging
 import os
@@ -125,6 +126,34 @@ def compiled_steps(fns):
                  "folder", folder)
         folder = Path(_jit_dir())
     lib = folder / name
+    with _compile_lock(folder / f".{name}.lock"):
+        return _load_or_compile(fns, sources, cc, folder, name, lib)
+
+
+@contextlib.contextmanager
+def _compile_lock(path):
+    """Hold an exclusive lock on `path` (POSIX ``flock``): a process that needs the library
+    another process is compiling waits for it rather than compiling it a second time. The
+    lock ends with its process however it ends; without ``flock`` (or on a folder where the
+    lock file cannot be made) there is no lock and a process compiles as before."""
+    try:
+        import fcntl
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except (ImportError, OSError):
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:  # e.g. a file system without locks: compile as before
+            pass
+        yield
+    finally:
+        os.close(fd)  # releases the lock; the (empty) lock file stays for the next process
+
+
+def _load_or_compile(fns, sources, cc, folder, name, lib):
+    """The library `lib` of `fns` (C `sources`), compiled from them if not in `folder`."""
     if lib.exists():
         try:
             os.utime(lib)  # least recently used goes first
@@ -146,7 +175,7 @@ def compiled_steps(fns):
             os.replace(tmp_so, lib)
         except (OSError, TypeError) as exc:
             warnings.warn(f"compiling the optimizer's step functions failed ({exc}); they run "
-                          "uncompiled (slower, same results)", RuntimeWarning, stacklevel=3)
+                          "uncompiled (slower, same results)", RuntimeWarning, stacklevel=4)
             return tuple(fns)
         finally:
             for t in (*files_c, *files_o, tmp_so):
@@ -181,5 +210,6 @@ def _prune_cache(folder):
         libs = sorted(folder.glob("steps-*.so"), key=lambda p: p.stat().st_mtime)
         for old in libs[:max(0, len(libs) - JIT_CACHE_MAX_FILES)]:
             old.unlink(missing_ok=True)
+            (folder / f".{old.name}.lock").unlink(missing_ok=True)
     except OSError:
         pass

@@ -1013,7 +1013,8 @@ def _third_metric_rows(plant, third, objective, names, L):
 
 
 def compile_curves(model, drives, library, *, objective=None, baseline=None,
-                   curves=CurveOptions(), loop=LoopOptions(), elements=ElementOptions(),
+                   curves=CurveOptions(), constraints=None, drive_weights=None,
+                   aggregate="sum", loop=LoopOptions(), elements=ElementOptions(),
                    stop_tables=None, packers=None):
     """Compile the optimizer's step functions of a problem ahead of :func:`optimize_curves`.
 
@@ -1024,16 +1025,21 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     sample rate and, with ``knots_m_s="quantiles"``, by the baseline's shock
     speeds on it), e.g. in a worker while other work runs, it leaves the
     library in :func:`jit_cache_dir`, where the optimization then finds it.
-    It compiles the problem on the baseline's knots: when the optimization
-    moves them onto its scan's best curve (``settings["knot_update"]``), it
-    compiles that problem itself. It runs no screening (no OpenMP pool: it
-    may run in a process forked from one that used one).
+    With knots on the quantiles (the default) it runs the optimization's global
+    stage as :func:`optimize_curves` does (the scan, and the knots moved onto
+    its best curve's speeds, ``settings["knot_update"]``) and compiles the
+    problem on the knots the optimization will use; that stage screens
+    (numba's OpenMP pool), so run it in a spawned process, not one forked from
+    a process that used the pool. With given knots it compiles at once and
+    runs no screening.
 
     Parameters
     ----------
-    model, drives, library, objective, baseline, curves, loop
+    model, drives, library, objective, baseline, curves, constraints, drive_weights
         As :func:`optimize_curves` (``curves.free_third``: the free third dampers' curve
         groups are compiled in).
+    aggregate, loop
+        As :func:`optimize_curves`.
     elements : planner.options.ElementOptions
         As :func:`optimize_curves`: the car's elements (the model's own by default); a car
         with third elements has them compiled in (its heave and roll dampers and heave
@@ -1058,26 +1064,38 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     curves = as_options(curves, CurveOptions, "curves", "compile_curves")
     oversample = as_options(loop, LoopOptions, "loop", "compile_curves").oversample
     elements = as_options(elements, ElementOptions, "elements", "compile_curves")
-    plant, drives, base, space, rows, third = _problem(model, drives, library, objective,
-                                                       baseline, curves.symmetry,
-                                                       curves.knots_m_s, curves.linear,
-                                                       curves.lag_s, oversample,
-                                                       elements=elements)
-    # the car's elements as optimize_curves takes them (its refusals too); the static loads
-    # only to refuse what it refuses (IPOPT's loop has no lift-off)
+    if aggregate not in ("sum", "worst"):
+        raise PlannerError(f"aggregate must be 'sum' or 'worst', got {aggregate!r}")
+    # the problem as optimize_curves builds it (keep the two in step: the compiled code's
+    # hash must be the optimization's); the car's elements as optimize_curves takes them
+    # (its refusals too); the static loads only to refuse what it refuses (IPOPT's loop
+    # has no lift-off)
+    plant, drives, base, space, rows, third = _problem(
+        model, drives, library, objective, baseline, curves.symmetry, curves.knots_m_s,
+        curves.linear, curves.lag_s, oversample, elements=elements)
     stops, static = stop_tables, elements.static_corner_load_n
     if elements.use_model is not False and stops is None and static is None:
         own = model_setup_elements([base], model, elements, where="compile_curves")
         if own is not None:
             stops, static = own.tables[0], own.static_corner_load_n
     free_third = check_free_third(curves.free_third, third)
-    elem = _elements(plant, space, stops, packers, static, objective, third)
-    if free_third:
-        elem = _with_free_third(elem, space, free_third)
+    choices = crate_choices(third, library, elements.vary_third, free_third)
+    if choices:
+        third = replace(third, choices=choices)
+    elements = _elements(plant, space, stops, packers, static, objective, third)
     if not jit_available():
         return False
+    if _quantile_knots(curves.knots_m_s) and not space.linear:
+        # the knots the optimization compiles on come out of its global stage
+        space = _start(model, plant, drives, library, space,
+                       _check_constraints_arg(constraints), base, objective,
+                       _weights(drive_weights, drives), aggregate, oversample, True,
+                       elements)[0]
+    if free_third:
+        elements = _with_free_third(elements, space, free_third)
     for d in drives:
-        LoopModel(plant, d, space, rows, oversample, True, inputs=False, **elem.loop_args())
+        LoopModel(plant, d, space, rows, oversample, True, inputs=False,
+                  **elements.loop_args())
     return True
 
 
