@@ -2011,14 +2011,17 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
     N = v_rig.shape[0]
     n_out = y_out.shape[2]
     K = setups.kv.shape[2]
-    # the lanes' setup coefficients, lane-minor
+    # the lanes' setup coefficients, lane-minor; the curves' tables with the row
+    # ``l * 4 + c`` for lane l's corner c (indexed in place: no view in the time loop)
     alpha = np.empty((m, L))
     b0 = np.empty((m, L))
     b1 = np.empty((m, L))
     bm = np.empty((m, L))
-    lines_s = np.empty((L, m, K + 1))
-    lines_a = np.empty((L, m, K + 1))
-    bounds = np.empty((L, 2, m, K + 1))
+    kvF = np.empty((L * m, K))
+    nkF = np.empty(L * m, dtype=np.int64)
+    lines_s = np.empty((L * m, K + 1))
+    lines_a = np.empty((L * m, K + 1))
+    bounds = np.empty((2, L * m, K + 1))
     seg = np.zeros((m, L), dtype=np.int64)
     for l in range(L):
         s = idx[l]
@@ -2026,16 +2029,20 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
         kf = setups.kf[s]
         nk = setups.nk[s]
         for c in range(m):
+            lc = l * m + c
             alpha[c, l] = setups.alpha[s, c]
             b0[c, l] = setups.b0[s, c]
             b1[c, l] = setups.b1[s, c]
             bm[c, l] = setups.bm[s, c]
             seg[c, l] = _segment_of(0.0, kv, c, nk[c], 0)
+            nkF[lc] = nk[c]
+            for q in range(K):
+                kvF[lc, q] = kv[c, q]
             for sg in range(nk[c] + 1):
-                lines_s[l, c, sg], lines_a[l, c, sg] = _segment_line(
+                lines_s[lc, sg], lines_a[lc, sg] = _segment_line(
                     sg, kv, kf, c, nk[c], setups.slo[s, c], setups.shi[s, c])
-                bounds[l, 0, c, sg] = -np.inf if sg == 0 else kv[c, sg - 1]
-                bounds[l, 1, c, sg] = np.inf if sg == nk[c] else kv[c, sg]
+                bounds[0, lc, sg] = -np.inf if sg == 0 else kv[c, sg - 1]
+                bounds[1, lc, sg] = np.inf if sg == nk[c] else kv[c, sg]
     # the solver's state per lane (SolverState's fields, lane-minor), and one setup's
     # SolverState the lanes with a segment change are solved in
     v = np.zeros((m, L))
@@ -2051,6 +2058,8 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
     st = solver_state(ShockCurves(setups.kv[idx[0]], setups.kf[idx[0]], setups.nk[idx[0]],
                                   setups.slo[idx[0]], setups.shi[idx[0]]))
     b0l = np.empty(m)
+    u = np.empty(m)
+    wq = np.empty(m)
     xr = np.zeros((n, L))
     xi = np.zeros((n, L))
     bdr = np.zeros((n, L))  # B dF of the last step
@@ -2118,7 +2127,7 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
             for c in range(m):
                 x = vnew[c, l]
                 sg = seg[c, l]
-                inside &= (bounds[l, 0, c, sg] < x) & (x < bounds[l, 1, c, sg])
+                inside &= (bounds[0, l * m + c, sg] < x) & (x < bounds[1, l * m + c, sg])
             ok[l] = inside
             all_ok &= inside
         if all_ok:
@@ -2140,40 +2149,100 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
                     if worst[l] < 1:
                         worst[l] = 1
                     continue
-                # this lane alone, as loop_one solves it, on a copy of its state
-                s = idx[l]
-                curves = ShockCurves(setups.kv[s], setups.kf[s], setups.nk[s], setups.slo[s],
-                                     setups.shi[s])
-                for c in range(m):
-                    st.v[c] = v[c, l]
-                    st.vfree[c] = vfree[c, l]
-                    st.c0[c] = c0[c, l]
-                    st.fv[c] = fv[c, l]
-                    st.sv[c] = sv[c, l]
-                    st.seg[c] = seg[c, l]
-                    st.av[c] = av[c, l]
-                    b0l[c] = b0[c, l]
-                    for j in range(m):
-                        st.Jinv[c, j] = Jinv[c, j, l]
-                st.state[0] = state[l]
-                it = _fast_solve(st.vfree, st.c0, Deff, b0l, curves, lines_s[l], lines_a[l],
-                                 bounds[l], st)
+                # this lane's segment changes: _fast_solve's passes after its first (the
+                # same operations in the same order, on the lane's state in place)
+                it = 0
+                if state[l] >= 1:
+                    for it_ in range(1, _FAST_ITERATIONS + 1):
+                        inside = True
+                        for c in range(m):
+                            x = vnew[c, l]
+                            sg = seg[c, l]
+                            inside &= ((bounds[0, l * m + c, sg] < x)
+                                       & (x < bounds[1, l * m + c, sg]))
+                        same = True
+                        for c in range(m):
+                            if inside:
+                                break
+                            lc = l * m + c
+                            s2 = _segment_of(vnew[c, l], kvF, lc, nkF[lc], seg[c, l])
+                            if s2 == seg[c, l]:
+                                continue
+                            same = False
+                            sl2 = lines_s[lc, s2]
+                            a2 = lines_a[lc, s2]
+                            dsl = sl2 - sv[c, l]
+                            dfc = b0[c, l] * ((a2 - av[c, l]) + dsl * vnew[c, l])
+                            for r_ in range(m):  # u = Jinv Deff[:, c]
+                                a = 0.0
+                                for j in range(m):
+                                    a += Jinv[r_, j, l] * Deff[j, c]
+                                u[r_] = a
+                            dsc = b0[c, l] * dsl
+                            den = 1.0 - dsc * u[c]
+                            if abs(den) < 1e-8:
+                                seg[c, l] = s2
+                                av[c, l] = a2
+                                state[l] = 0
+                                break
+                            g = dfc / den
+                            for r_ in range(m):
+                                vnew[r_, l] += u[r_] * g
+                            seg[c, l] = s2
+                            av[c, l] = a2
+                            if dsl != 0.0:
+                                q = dsc / den
+                                for j in range(m):
+                                    wq[j] = Jinv[c, j, l] * q
+                                for r_ in range(m):
+                                    for j in range(m):
+                                        Jinv[r_, j, l] += u[r_] * wq[j]
+                                sv[c, l] = sl2
+                                state[l] += 1
+                        if same:
+                            for c in range(m):
+                                v[c, l] = vnew[c, l]
+                                fv[c, l] = av[c, l] + sv[c, l] * vnew[c, l]
+                            it = it_
+                            if state[l] > _MAX_RANK1_UPDATES:
+                                state[l] = 0
+                            break
+                        if state[l] == 0 or state[l] > _MAX_RANK1_UPDATES:
+                            state[l] = 0
+                            break
                 if it == 0:
+                    # the rest (no valid inverse, cycling, a singular update): shock_step
+                    # on a copy of the lane's state, as loop_one calls it
+                    s = idx[l]
+                    curves = ShockCurves(setups.kv[s], setups.kf[s], setups.nk[s],
+                                         setups.slo[s], setups.shi[s])
+                    for c in range(m):
+                        st.v[c] = v[c, l]
+                        st.vfree[c] = vfree[c, l]
+                        st.c0[c] = c0[c, l]
+                        st.fv[c] = fv[c, l]
+                        st.sv[c] = sv[c, l]
+                        st.seg[c] = seg[c, l]
+                        st.av[c] = av[c, l]
+                        b0l[c] = b0[c, l]
+                        for j in range(m):
+                            st.Jinv[c, j] = Jinv[c, j, l]
+                    st.state[0] = state[l]
                     it = shock_step(st.vfree, st.c0, Deff, cbar, b0l, curves, st)
+                    for c in range(m):
+                        v[c, l] = st.v[c]
+                        fv[c, l] = st.fv[c]
+                        sv[c, l] = st.sv[c]
+                        seg[c, l] = st.seg[c]
+                        av[c, l] = st.av[c]
+                        for j in range(m):
+                            Jinv[c, j, l] = st.Jinv[c, j]
+                    state[l] = st.state[0]
                 if it < 0:
                     failed[l] = True
                     it = 80
                 if it > worst[l]:
                     worst[l] = it
-                for c in range(m):
-                    v[c, l] = st.v[c]
-                    fv[c, l] = st.fv[c]
-                    sv[c, l] = st.sv[c]
-                    seg[c, l] = st.seg[c]
-                    av[c, l] = st.av[c]
-                    for j in range(m):
-                        Jinv[c, j, l] = st.Jinv[c, j]
-                state[l] = st.state[0]
         for c in range(m):
             cb = cbar[c]
             for l in range(L):
