@@ -1977,7 +1977,7 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
 
     Notes
     -----
-    The states are held lane-minor (``xr[i, l]``): the mode loops' inner loop runs over the
+    The states are held lane-minor (``xr[i * L + l]``): the mode loops' inner loop runs over the
     lanes, whose operations are independent (each lane's sums keep their order), so the
     compiler vectorizes across the setups; the velocity sums' chains run side by side
     instead of one after the other. The shock solve's common case (every shock strictly
@@ -2060,17 +2060,32 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
     b0l = np.empty(m)
     u = np.empty(m)
     wq = np.empty(m)
-    xr = np.zeros((n, L))
-    xi = np.zeros((n, L))
-    bdr = np.zeros((n, L))  # B dF of the last step
-    bdi = np.zeros((n, L))
-    bpr = np.zeros((n, L))  # B dF of the step before
-    bpi = np.zeros((n, L))
+    xr = np.zeros(n * L)
+    xi = np.zeros(n * L)
+    bdr = np.zeros(n * L)  # B dF of the last step
+    bdi = np.zeros(n * L)
+    bpr = np.zeros(n * L)  # B dF of the step before
+    bpi = np.zeros(n * L)
     hr = np.empty(n)
     hi = np.empty(n)
     for i in range(n):
         hr[i] = pr[i] * g1r[i] - pi[i] * g1i[i] + g0r[i]
         hi[i] = pr[i] * g1i[i] + pi[i] * g1r[i] + g0i[i]
+    # the modes' coefficients once per lane, for the predictor's loop over i L + l
+    prR = np.empty(n * L)
+    piR = np.empty(n * L)
+    hrR = np.empty(n * L)
+    hiR = np.empty(n * L)
+    gmrR = np.empty(n * L)
+    gmiR = np.empty(n * L)
+    for i in range(n):
+        for l in range(L):
+            prR[i * L + l] = pr[i]
+            piR[i * L + l] = pi[i]
+            hrR[i * L + l] = hr[i]
+            hiR[i * L + l] = hi[i]
+            gmrR[i * L + l] = gmr[i]
+            gmiR[i * L + l] = gmi[i]
     St = np.zeros((L, _OUT_BLOCK, 2 * n + m))  # each lane's output samples' [Re x, Im x, dF]
     dF_prev = np.zeros((m, L))
     F_prev = np.zeros((m, L))
@@ -2084,15 +2099,15 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
     kk0 = 0
     phase = 0  # k % r
     for k in range(N):
-        # predictor (as loop_one's, lane by lane in the inner loop)
-        for i in range(n):
-            for l in range(L):
-                tr = (pr[i] * xr[i, l] - pi[i] * xi[i, l] + hr[i] * bdr[i, l]
-                      - hi[i] * bdi[i, l] + gmr[i] * bpr[i, l] - gmi[i] * bpi[i, l])
-                ti = (pr[i] * xi[i, l] + pi[i] * xr[i, l] + hr[i] * bdi[i, l]
-                      + hi[i] * bdr[i, l] + gmr[i] * bpi[i, l] + gmi[i] * bpr[i, l])
-                xr[i, l] = tr
-                xi[i, l] = ti
+        # predictor (as loop_one's): one loop over the modes' lanes (q = i L + l), which
+        # the compiler vectorizes as loop_one's loop over the modes
+        for q in range(n * L):
+            tr = (prR[q] * xr[q] - piR[q] * xi[q] + hrR[q] * bdr[q] - hiR[q] * bdi[q]
+                  + gmrR[q] * bpr[q] - gmiR[q] * bpi[q])
+            ti = (prR[q] * xi[q] + piR[q] * xr[q] + hrR[q] * bdi[q] + hiR[q] * bdr[q]
+                  + gmrR[q] * bpi[q] + gmiR[q] * bpr[q])
+            xr[q] = tr
+            xi[q] = ti
         for c in range(m):
             for l in range(L):
                 acc[c, l] = 0.0
@@ -2101,7 +2116,7 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
                 cr = Cvr[c, i]
                 ci = Cvi[c, i]
                 for l in range(L):
-                    acc[c, l] += cr * xr[i, l] - ci * xi[i, l]
+                    acc[c, l] += cr * xr[i * L + l] - ci * xi[i * L + l]
         for c in range(m):
             vr = v_rig[k, c]
             for l in range(L):
@@ -2258,8 +2273,8 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
                 d1 = dF_prev[1, l]
                 d2 = dF_prev[2, l]
                 d3 = dF_prev[3, l]
-                bpr[i, l] = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
-                bpi[i, l] = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
+                bpr[i * L + l] = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
+                bpi[i * L + l] = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
         bdr, bpr = bpr, bdr
         bdi, bpi = bpi, bdi
         if phase == 0:
@@ -2272,8 +2287,8 @@ def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
                     for c in range(m):
                         y_out[l, v_row + c, kk] = v[c, l]
                 for i in range(n):  # x[k] = xp[k] + g1 B dF[k]
-                    St[l, col, i] = xr[i, l] + (g1r[i] * bdr[i, l] - g1i[i] * bdi[i, l])
-                    St[l, col, n + i] = xi[i, l] + (g1r[i] * bdi[i, l] + g1i[i] * bdr[i, l])
+                    St[l, col, i] = xr[i * L + l] + (g1r[i] * bdr[i * L + l] - g1i[i] * bdi[i * L + l])
+                    St[l, col, n + i] = xi[i * L + l] + (g1r[i] * bdi[i * L + l] + g1i[i] * bdr[i * L + l])
             col += 1
             if col == _OUT_BLOCK or kk == n_out - 1:
                 for l in range(L):
