@@ -28,6 +28,9 @@ Public kernels:
 - :func:`loop_one`: the time loop of one setup, with the elements or without
   (``elements=None``: numba compiles that case on its own and drops the elements' code
   from it at compile time, so the plain loop runs as fast as a loop without them);
+- :func:`loop_lanes`: the plain loop (no elements, no third elements) of
+  :data:`LOOP_LANES` setups in lockstep, each lane :func:`loop_one`'s numbers to the last
+  bit (the fused metrics worker's plain case);
 - :func:`loop_batch`, :func:`loop_serial`: the closed loop of a batch of setups (parallel
   over setups, or one after the other);
 - :func:`loop_metrics_worker`: a thread's share of the setups with their metrics computed
@@ -68,6 +71,8 @@ __all__ = [
     "invert_small",
     "shock_step",
     "loop_one",
+    "loop_lanes",
+    "LOOP_LANES",
     "loop_batch",
     "loop_serial",
     "loop_metrics_worker",
@@ -2388,7 +2393,9 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
                         stats, hist_spec, hist_out, third, tstats):
     """Worker `w` of `n_workers` of :func:`ident.sim.closedloop.simulate_batch_metrics`:
     the setups ``w, w + n_workers, ...`` (interleaved, so that each worker gets a mix of
-    cheap and costly setups), each simulated by :func:`loop_one` and its metrics computed
+    cheap and costly setups; in the plain case the groups of :data:`LOOP_LANES` setups
+    ``w, w + n_workers, ...``, each run by :func:`loop_lanes`), each simulated by
+    :func:`loop_one` and its metrics computed
     right after (:func:`ident.sim.metric_kernels.setup_metric_rms`, per band of the
     :class:`MetricFilters` `metrics`) into ``out`` (n_setups, n_bands, n_metrics).
 
