@@ -11,8 +11,9 @@ fixed point amplifies any round-off change, so the two must agree bit for bit).
 Writing 300 such lines by hand invites a slip; this module writes them, the metrics'
 pass ``_metrics_of`` of the same module (:func:`metric_pass_source`: each metric's band
 power written out over the 48 features, between :data:`METRICS_BEGIN` and
-:data:`METRICS_END`), and also the third-element kernel's fused band loops (:func:`third_band_source`:
-``_band_power`` and ``_band_features`` of :mod:`planner.screen_third_kernels`, between
+:data:`METRICS_END`), and also the third-element kernel's fused band loops
+(:func:`third_band_source`: ``_band_power`` and ``_band_features`` of
+:mod:`planner.screen_third_kernels`, between
 :data:`THIRD_BEGIN` and :data:`THIRD_END`; ``tests/test_screen_third.py`` compares).
 :func:`band_inverse_source` returns the function's source text exactly as it
 stands in ``planner/screen_kernels.py`` between the markers :data:`BEGIN` and

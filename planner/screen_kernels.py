@@ -10,7 +10,8 @@ those features. Two kernels give the same numbers bit for bit:
 - :func:`screen_batch_scalar`, one band after the other, which compiles in a
   fraction of the time, for small ones.
 
-:func:`metric_form` builds the setup-independent linear form both apply. Both kernels take
+:func:`metric_form` builds the setup-independent linear form both apply (:func:`metric_blocks`
+lays it out for the vectorized kernel's metrics pass, generated code). Both kernels take
 their arguments grouped in named tuples, packed by :mod:`planner.screen`:
 :class:`BandData` (the plant's band data), :class:`ShockTables` and :class:`StopTables`
 (the setups' shocks and bump stops), :class:`TravelData` (the stops' setup-independent
