@@ -7,6 +7,7 @@ Run::
                                        [--memory-setups P] [--sweep-setups W]
                                        [--elements-repeat E] [--elements-only]
                                        [--histograms-only] [--time-domain-only]
+                                       [--screening-only]
 
 Two models, each reported: the known paper car
 (``ident.models.vehicle.build_full_car(example_vehicle())``) and a model identified from
@@ -92,6 +93,7 @@ at that moment:
    alternating, ``--elements-repeat`` times: setups per second of each (wall) and the ratio
    of the CPU times. ``--histograms-only`` runs this part alone;
    ``--time-domain-only`` runs parts 1-3 alone on the identified model (issue 40);
+   ``--screening-only`` part 4 alone on the identified model (issue 40);
 8. ``target: ...: PASS/FAIL`` lines: time-domain >= 200 setups/s (oversample 2,
    the default; on the symmetric setups, one call per 119 setups, and on the sweep) and screening >= 10,000 setups/s (every-corner-free setups), each
    for each model given as is (the product's path); peak memory < 2 GB (the
@@ -781,6 +783,9 @@ def main(argv=None):
     parser.add_argument("--time-domain-only", action="store_true",
                         help="run only the time-domain part on the identified model (issue 40): "
                         "throughput, accuracy against oversample 16, the solve_ivp reference")
+    parser.add_argument("--screening-only", action="store_true",
+                        help="run only the screening part on the identified model (issue 40 "
+                        "item 2): throughput and the numpy reference")
     parser.add_argument("--memory-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.memory_child:
@@ -808,6 +813,9 @@ def main(argv=None):
 
     if args.time_domain_only:
         _time_domain_only(args)
+        return
+    if args.screening_only:
+        _screening_only(args)
         return
     child = start_memory_child(args.memory_setups)  # before this process grows
     try:
@@ -913,6 +921,31 @@ def _time_domain_only(args):
     print(f"time domain [identified, oversample {OVERSAMPLE_DEFAULT}]: "
           f"{rates[OVERSAMPLE_DEFAULT]:,.1f} setups/s; sweep {rates['sweep']:,.1f} setups/s "
           f"({_load()} at the end)")
+
+
+def _screening_only(args):
+    """The screening part alone, on the identified model (``--screening-only``)."""
+    from ident.identify.pipeline import identify_session
+    from ident.sim.virtual_rig import simulate_session
+
+    print(f"engine version: {_engine_version()}; {_load()}")
+    vehicle = example_vehicle()
+    library = read_shock_library(LIBRARY_PATH)
+    drive = _make_drive(vehicle)
+    sym = list(enumerate_setups(library))
+    free = list(enumerate_setups(library, symmetry="none", max_setups=None))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        identified = identify_session(simulate_session())
+        t0 = time.perf_counter()
+        screen_setups(identified, drive, free[:2], library)
+        screen_setups(identified, drive, free, library)
+        print(f"warm-up: first screen_setups calls, 2 and {len(free):,} setups (numba cache "
+              f"load or compile): {time.perf_counter() - t0:.2f} s")
+        rate = bench_screening("identified", identified, as_loop_plant(identified), drive, sym,
+                               free, library, args)
+    print(f"screening [identified, every corner free]: {rate:,.0f} setups/s ({_load()} at the "
+          "end)")
 
 
 def _element_targets(ratios):

@@ -49,7 +49,7 @@ from ident.data.drive import check_drive_inputs
 from ident.data.third import THIRD_ELEMENTS, element_axle
 from ident.models.shocks import LinearShock
 from ident.identify.model import LOOP_REDUCE_RTOL
-from ident.sim.closedloop import corner_values, pack_bump_stops, pack_setups
+from ident.sim.closedloop import corner_values, pack_bump_stops
 from ident.sim.metrics import METRIC_NAMES
 from planner.errors import PlannerError
 from planner.elements import model_setup_third
@@ -66,6 +66,7 @@ from planner.screen_kernels import (
     TravelData,
     band_operands,
     gaussian_pwl,
+    metric_blocks,
     metric_form,
     padded_bands,
     screen_batch,
@@ -728,8 +729,10 @@ def _run_packed(ops, eops, shocks, stops, max_iter, tol):
     Fp[:, :, :F.shape[2]] = F
     # writable copies: a read-only array (a frozen plant's c_bar) is another numba type,
     # which would compile the kernel a second time
+    Fq, d0q = metric_blocks(F, ops.d0)
     plant = BandData(w=ops.w, Hvs=ops.Hvs, P=ops.P, PB=ops.PB, blocks=band_operands(ops), F=Fp,
-                     d0=ops.d0, cbar=np.array(ops.cbar, dtype=float), sig0=ops.sig0)
+                     d0=ops.d0, cbar=np.array(ops.cbar, dtype=float), sig0=ops.sig0, Fq=Fq,
+                     d0q=d0q, wpad=padded_bands(ops.w))
     if n < _VECTOR_MIN_SETUPS:
         screen_batch_scalar(plant, shocks, stops, travel, settings, out)
     else:
@@ -774,8 +777,8 @@ def screen_response(H, output_names, cbar_n_s_m, bands, models, *, max_iter=30, 
         starts = tqdm(starts, desc="screen", unit="chunk")
     for a in starts:
         chunk = models[a:a + chunk_size]
-        kv, kf, nk, slo, shi, *_ = pack_setups(chunk, h)
-        lag = np.array([[m.lag_s for m in row] for row in chunk])
+        # each distinct shock packed once, no lag discretization (the screening uses none)
+        kv, kf, nk, slo, shi, lag = _pack_rows(chunk, h)
         b = a + len(chunk)
         out[a:b], sig[a:b], iters[a:b] = screen_packed(ops, kv, kf, nk, slo, shi, lag,
                                                        max_iter=max_iter, tol=tol)
@@ -1342,8 +1345,7 @@ def _screen_elements(plant, drive, setups, models, bands, H, bump_stops, static_
     for a in starts:
         chunk = models[a:a + chunk_size]
         b = a + len(chunk)
-        kv, kf, nk, slo, shi, *_ = pack_setups(chunk, h)
-        lag[a:b] = np.array([[m.lag_s for m in row] for row in chunk])
+        kv, kf, nk, slo, shi, lag[a:b] = _pack_rows(chunk, h)
         out[a:b], sig[a:b], iters[a:b], trav[a:b] = _run_packed(
             ops, eops, ShockTables(kv, kf, nk, slo, shi, lag[a:b]),
             tuple(x[a:b] for x in stops), max_iter, tol)

@@ -8,9 +8,12 @@ scratch memory and LLVM vectorizes it over bands. Its operations are those of
 :func:`planner.screen_kernels._loop_inverse`, in the same order (the screening's
 fixed point amplifies any round-off change, so the two must agree bit for bit).
 
-Writing 300 such lines by hand invites a slip; this module writes them, and also the
-third-element kernel's fused band loops (:func:`third_band_source`:
-``_band_power`` and ``_band_features`` of :mod:`planner.screen_third_kernels`, between
+Writing 300 such lines by hand invites a slip; this module writes them, the metrics'
+pass ``_metrics_of`` of the same module (:func:`metric_pass_source`: each metric's band
+power written out over the 48 features, between :data:`METRICS_BEGIN` and
+:data:`METRICS_END`), and also the third-element kernel's fused band loops
+(:func:`third_band_source`: ``_band_power`` and ``_band_features`` of
+:mod:`planner.screen_third_kernels`, between
 :data:`THIRD_BEGIN` and :data:`THIRD_END`; ``tests/test_screen_third.py`` compares).
 :func:`band_inverse_source` returns the function's source text exactly as it
 stands in ``planner/screen_kernels.py`` between the markers :data:`BEGIN` and
@@ -34,8 +37,9 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["BEGIN", "END", "KERNEL_PATH", "THIRD_BEGIN", "THIRD_END", "THIRD_KERNEL_PATH",
-           "band_inverse_source", "committed_source", "main", "third_band_source"]
+__all__ = ["BEGIN", "END", "KERNEL_PATH", "METRICS_BEGIN", "METRICS_END", "THIRD_BEGIN",
+           "THIRD_END", "THIRD_KERNEL_PATH", "band_inverse_source", "committed_source", "main",
+           "metric_pass_source", "third_band_source"]
 
 #: The kernel module holding the generated block.
 KERNEL_PATH = Path(__file__).with_name("screen_kernels.py")
@@ -44,6 +48,27 @@ BEGIN = ("# BEGIN GENERATED CODE by planner.screen_codegen "
          "(python -m planner.screen_codegen --write)")
 #: The comment line after the generated block.
 END = "# END GENERATED CODE by planner.screen_codegen"
+#: The markers around the metrics' pass (:func:`metric_pass_source`) in the same module.
+METRICS_BEGIN = ("# BEGIN GENERATED METRICS by planner.screen_codegen "
+                 "(python -m planner.screen_codegen --write)")
+METRICS_END = "# END GENERATED METRICS by planner.screen_codegen"
+#: Features of a band and metrics per pass of :func:`metric_pass_source` (the kernel's
+#: ``_NFEAT`` and ``_MQ``): three accumulators of 48 terms each is what LLVM's loop
+#: vectorizer still takes on (four are too many memory accesses for its dependence analysis).
+_NFEAT = 48
+_MQ = 3
+_METRICS_DOC = '''\
+    """The metrics of G setups from their band features V[g] (:func:`_screen_one`).
+
+    Each metric's band power is d0 plus a fixed linear form of the band's features (F, from
+    the operands), summed over bands, in the reference's order per setup: ``pw = d0[k]``,
+    ``pw += F[k, i] v_i`` for i in order, then the band powers added in band order. Laid
+    out by :func:`metric_blocks` (Fq, d0q: ``_MQ`` metrics per group, bands in blocks of
+    ``_BK`` as V), each group's band powers are straight-line code over the 48 features in
+    a loop over the bands of a block that LLVM vectorizes over bands (the ``_MQ`` sums held
+    in registers, no fastmath); a block's coefficients (18 kB) are shared by the G setups
+    while in cache. PW (G, n_blocks * _MQ * _BK) is scratch; nf the bands in use.
+    Generated code (:mod:`planner.screen_codegen`)."""'''
 
 _N = 4  # the loop has four shocks
 _DOCSTRING = '''\
@@ -286,7 +311,56 @@ def third_band_source():
     return "\n".join(L) + "\n"
 
 
-def committed_source(text=None, *, third=False):
+def metric_pass_source():
+    """The metrics' pass ``_metrics_of`` of :mod:`planner.screen_kernels` as it stands between
+    :data:`METRICS_BEGIN` and :data:`METRICS_END`: per group of ``_MQ`` metrics and block of
+    bands, each metric's band power written out over the 48 features."""
+    L = ['@nb.njit(cache=True, error_model="numpy")',
+         "def _metrics_of(Fq, d0q, V, G, out, PW, nf):", _METRICS_DOC,
+         "    nblk = PW.shape[1] // (_MQ * _BK)",
+         "    p = out.shape[1]",
+         "    for q in range(Fq.shape[0]):",
+         "        fq = Fq[q]",
+         "        dq = d0q[q]",
+         "        for blk in range(nblk):",
+         "            fb = blk * _NFEAT * _MQ * _BK",
+         "            vb = blk * _NFEAT * _BK",
+         "            db = blk * _MQ * _BK",
+         "            for g in range(G):",
+         "                v = V[g]",
+         "                pw = PW[g]",
+         "                for j in range(_BK):  # vectorized over bands"]
+    for r in range(_MQ):
+        L.append(f"                    a{r} = dq[db + {r} * _BK + j]" if r else
+                 "                    a0 = dq[db + j]")
+    L += ["                    x = fb + j", "                    y = vb + j"]
+    for i in range(_NFEAT):
+        L.append("                    " + (f"u = v[y + {i} * _BK]" if i else "u = v[y]"))
+        for r in range(_MQ):
+            c = _MQ * i + r
+            L.append(f"                    a{r} += fq[x + {c} * _BK] * u" if c else
+                     "                    a0 += fq[x] * u")
+    for r in range(_MQ):
+        L.append(f"                    pw[db + {r} * _BK + j] = a{r}" if r else
+                 "                    pw[db + j] = a0")
+    L += ["        for g in range(G):  # each metric's band powers added in band order",
+          "            pw = PW[g]"]
+    L += [f"            t{r} = 0.0" for r in range(_MQ)]
+    L += ["            for k in range(nf):",
+          "                x = (k // _BK) * _MQ * _BK + k % _BK"]
+    L += [f"                t{r} += pw[x + {r} * _BK]" if r else "                t0 += pw[x]"
+          for r in range(_MQ)]
+    L.append("            o = _MQ * q")
+    for r in range(_MQ):
+        if r:
+            L.append(f"            if o + {r} < p:")
+            L.append(f"                out[g, o + {r}] = math.sqrt(max(t{r}, 0.0))")
+        else:
+            L.append("            out[g, o] = math.sqrt(max(t0, 0.0))")
+    return "\n".join(L) + "\n"
+
+
+def committed_source(text=None, *, third=False, metrics=False):
     """The generated block as committed in the kernel module, between the markers.
 
     Parameters
@@ -296,6 +370,9 @@ def committed_source(text=None, *, third=False):
         :data:`THIRD_KERNEL_PATH`).
     third : bool
         The third-element kernel's block (:data:`THIRD_BEGIN` ... :data:`THIRD_END`).
+    metrics : bool
+        The metrics' pass (:data:`METRICS_BEGIN` ... :data:`METRICS_END`, in
+        :data:`KERNEL_PATH`).
 
     Returns
     -------
@@ -307,6 +384,7 @@ def committed_source(text=None, *, third=False):
         If the markers are missing or out of order.
     """
     path, begin, end = ((THIRD_KERNEL_PATH, THIRD_BEGIN, THIRD_END) if third else
+                        (KERNEL_PATH, METRICS_BEGIN, METRICS_END) if metrics else
                         (KERNEL_PATH, BEGIN, END))
     if text is None:
         text = path.read_text(encoding="utf-8")
@@ -326,14 +404,15 @@ def main(argv=None):
                         help=f"rewrite the generated blocks in {KERNEL_PATH.name} and "
                         f"{THIRD_KERNEL_PATH.name}")
     args = parser.parse_args(argv)
-    blocks = ((KERNEL_PATH, BEGIN, END, band_inverse_source(), False),
-              (THIRD_KERNEL_PATH, THIRD_BEGIN, THIRD_END, third_band_source(), True))
+    blocks = ((KERNEL_PATH, BEGIN, END, band_inverse_source(), {}),
+              (KERNEL_PATH, METRICS_BEGIN, METRICS_END, metric_pass_source(), {"metrics": True}),
+              (THIRD_KERNEL_PATH, THIRD_BEGIN, THIRD_END, third_band_source(), {"third": True}))
     if not args.write:
         sys.stdout.write("\n\n".join(b[3] for b in blocks))
         return 0
-    for path, begin, end, src, third in blocks:
+    for path, begin, end, src, which in blocks:
         text = path.read_text(encoding="utf-8")
-        old = committed_source(text, third=third)
+        old = committed_source(text, **which)
         path.write_text(text.replace(begin + "\n" + old + end + "\n",
                                      begin + "\n" + src + end + "\n", 1), encoding="utf-8")
     return 0

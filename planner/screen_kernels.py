@@ -10,7 +10,8 @@ those features. Two kernels give the same numbers bit for bit:
 - :func:`screen_batch_scalar`, one band after the other, which compiles in a
   fraction of the time, for small ones.
 
-:func:`metric_form` builds the setup-independent linear form both apply. Both kernels take
+:func:`metric_form` builds the setup-independent linear form both apply (:func:`metric_blocks`
+lays it out for the vectorized kernel's metrics pass, generated code). Both kernels take
 their arguments grouped in named tuples, packed by :mod:`planner.screen`:
 :class:`BandData` (the plant's band data), :class:`ShockTables` and :class:`StopTables`
 (the setups' shocks and bump stops), :class:`TravelData` (the stops' setup-independent
@@ -44,6 +45,7 @@ __all__ = [
     "TravelData",
     "band_operands",
     "gaussian_pwl",
+    "metric_blocks",
     "metric_form",
     "padded_bands",
     "screen_batch",
@@ -101,6 +103,11 @@ class BandData(NamedTuple):
     d0 : ndarray, shape (n_bands, n_metrics)
         Weighted metric power with the shock loop open (dF = 0) [SI unit of the metric,
         squared].
+    Fq, d0q : ndarray, shape (n_groups, n_blocks * 48 * 3 * 16) and (n_groups, n_blocks * 3 * 16)
+        ``F`` and ``d0`` in the layout of :func:`screen_batch`'s metrics pass
+        (:func:`metric_blocks`).
+    wpad : ndarray, shape (n_blocks * 16,)
+        ``w`` padded with zeros to whole blocks (:func:`padded_bands`).
     cbar : ndarray, shape (4,)
         The plant's built-in damping [N s/m] (writable: a read-only array is another numba
         type, which would compile the kernels again).
@@ -117,6 +124,9 @@ class BandData(NamedTuple):
     d0: np.ndarray
     cbar: np.ndarray
     sig0: np.ndarray
+    Fq: np.ndarray
+    d0q: np.ndarray
+    wpad: np.ndarray
 
 
 class ShockTables(NamedTuple):
@@ -432,6 +442,8 @@ _NFEAT = 48
 _BK = 16
 #: Setups whose metrics are taken together (:func:`_metrics_of`: one pass over F per group).
 _GROUP = 8
+#: Metrics per group of the metrics' pass (:func:`_metrics_of`, :func:`metric_blocks`).
+_MQ = 3
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1136,28 +1148,26 @@ def _screen_one(plant, shock, stop, travel, settings, sig_out, trav_out, V, scra
     # complex division's branch and divisor parts (numba's, CPython's algorithm) once per
     # setup, by block: rows c (branch), 4 + c (ratio), 8 + c (denominator); padding bands
     # get a harmless 1
+    # (``1.0 + 1j * w * tau`` is exactly ``complex(1.0, w * tau)``; both branches computed
+    # and one selected, so that LLVM vectorizes the loop over bands; ``wpad`` is w padded
+    # with zeros, giving the padding's harmless 1)
+    wpad = plant.wpad
     for blk in range(nblk):
         for c in range(4):
             r = blk * 12 * _BK + c * _BK
+            lc = lag[c]
             for j in range(_BK):
-                k = blk * _BK + j
-                if k < nf:
-                    rl = 1.0 + 1j * w[k] * lag[c]
-                    br = rl.real
-                    bi = rl.imag
-                else:
-                    br = 1.0
-                    bi = 0.0
-                if abs(br) >= abs(bi):
-                    ratio = bi / br
-                    roll[r + j] = 1.0
-                    roll[r + 4 * _BK + j] = ratio
-                    roll[r + 8 * _BK + j] = br + bi * ratio
-                else:
-                    ratio = br / bi
-                    roll[r + j] = 0.0
-                    roll[r + 4 * _BK + j] = ratio
-                    roll[r + 8 * _BK + j] = br * ratio + bi
+                br = 1.0
+                bi = wpad[blk * _BK + j] * lc
+                cond = abs(br) >= abs(bi)
+                num = bi if cond else br
+                den = br if cond else bi
+                ratio = num / den
+                dn1 = br + bi * ratio
+                dn2 = br * ratio + bi
+                roll[r + j] = 1.0 if cond else 0.0
+                roll[r + 4 * _BK + j] = ratio
+                roll[r + 8 * _BK + j] = dn1 if cond else dn2
     cb0, cb1, cb2, cb3 = cbar[0], cbar[1], cbar[2], cbar[3]
     ceq, svv, keq, sss = st[_ST_CEQ], st[_ST_SVV], st[_ST_KEQ], st[_ST_SSS]
     any_stop = _start(st, plant.sig0, stop, travel)
@@ -1356,37 +1366,250 @@ def _screen_one(plant, shock, stop, travel, settings, sig_out, trav_out, V, scra
     return it + 1
 
 
+# BEGIN GENERATED METRICS by planner.screen_codegen (python -m planner.screen_codegen --write)
 @nb.njit(cache=True, error_model="numpy")
-def _metrics_of(F, d0, V, G, out, pw):
+def _metrics_of(Fq, d0q, V, G, out, PW, nf):
     """The metrics of G setups from their band features V[g] (:func:`_screen_one`).
 
     Each metric's band power is d0 plus a fixed linear form of the band's features (F, from
     the operands), summed over bands, in the reference's order per setup: ``pw = d0[k]``,
-    ``pw += F[k, i] v_i`` for i in order, ``out += pw`` band by band. The G setups share
-    each row of F (read once per group, not once per setup: F is a few hundred kB); the loop
-    over metrics innermost, contiguous in F (padded to a multiple of 4)."""
-    nf = d0.shape[0]
-    p = d0.shape[1]
-    pp = F.shape[2]
-    for g in range(G):
-        for o in range(p):
-            out[g, o] = 0.0
-    for k in range(nf):
-        vb = (k // _BK) * _NFEAT * _BK + k % _BK
-        for g in range(G):
-            for o in range(p):
-                pw[g, o] = d0[k, o]
-        for i in range(_NFEAT):
+    ``pw += F[k, i] v_i`` for i in order, then the band powers added in band order. Laid
+    out by :func:`metric_blocks` (Fq, d0q: ``_MQ`` metrics per group, bands in blocks of
+    ``_BK`` as V), each group's band powers are straight-line code over the 48 features in
+    a loop over the bands of a block that LLVM vectorizes over bands (the ``_MQ`` sums held
+    in registers, no fastmath); a block's coefficients (18 kB) are shared by the G setups
+    while in cache. PW (G, n_blocks * _MQ * _BK) is scratch; nf the bands in use.
+    Generated code (:mod:`planner.screen_codegen`)."""
+    nblk = PW.shape[1] // (_MQ * _BK)
+    p = out.shape[1]
+    for q in range(Fq.shape[0]):
+        fq = Fq[q]
+        dq = d0q[q]
+        for blk in range(nblk):
+            fb = blk * _NFEAT * _MQ * _BK
+            vb = blk * _NFEAT * _BK
+            db = blk * _MQ * _BK
             for g in range(G):
-                vi = V[g, vb + i * _BK]
-                for o in range(pp):
-                    pw[g, o] += F[k, i, o] * vi
-        for g in range(G):
-            for o in range(p):
-                out[g, o] += pw[g, o]
-    for g in range(G):
-        for o in range(p):
-            out[g, o] = math.sqrt(max(out[g, o], 0.0))
+                v = V[g]
+                pw = PW[g]
+                for j in range(_BK):  # vectorized over bands
+                    a0 = dq[db + j]
+                    a1 = dq[db + 1 * _BK + j]
+                    a2 = dq[db + 2 * _BK + j]
+                    x = fb + j
+                    y = vb + j
+                    u = v[y]
+                    a0 += fq[x] * u
+                    a1 += fq[x + 1 * _BK] * u
+                    a2 += fq[x + 2 * _BK] * u
+                    u = v[y + 1 * _BK]
+                    a0 += fq[x + 3 * _BK] * u
+                    a1 += fq[x + 4 * _BK] * u
+                    a2 += fq[x + 5 * _BK] * u
+                    u = v[y + 2 * _BK]
+                    a0 += fq[x + 6 * _BK] * u
+                    a1 += fq[x + 7 * _BK] * u
+                    a2 += fq[x + 8 * _BK] * u
+                    u = v[y + 3 * _BK]
+                    a0 += fq[x + 9 * _BK] * u
+                    a1 += fq[x + 10 * _BK] * u
+                    a2 += fq[x + 11 * _BK] * u
+                    u = v[y + 4 * _BK]
+                    a0 += fq[x + 12 * _BK] * u
+                    a1 += fq[x + 13 * _BK] * u
+                    a2 += fq[x + 14 * _BK] * u
+                    u = v[y + 5 * _BK]
+                    a0 += fq[x + 15 * _BK] * u
+                    a1 += fq[x + 16 * _BK] * u
+                    a2 += fq[x + 17 * _BK] * u
+                    u = v[y + 6 * _BK]
+                    a0 += fq[x + 18 * _BK] * u
+                    a1 += fq[x + 19 * _BK] * u
+                    a2 += fq[x + 20 * _BK] * u
+                    u = v[y + 7 * _BK]
+                    a0 += fq[x + 21 * _BK] * u
+                    a1 += fq[x + 22 * _BK] * u
+                    a2 += fq[x + 23 * _BK] * u
+                    u = v[y + 8 * _BK]
+                    a0 += fq[x + 24 * _BK] * u
+                    a1 += fq[x + 25 * _BK] * u
+                    a2 += fq[x + 26 * _BK] * u
+                    u = v[y + 9 * _BK]
+                    a0 += fq[x + 27 * _BK] * u
+                    a1 += fq[x + 28 * _BK] * u
+                    a2 += fq[x + 29 * _BK] * u
+                    u = v[y + 10 * _BK]
+                    a0 += fq[x + 30 * _BK] * u
+                    a1 += fq[x + 31 * _BK] * u
+                    a2 += fq[x + 32 * _BK] * u
+                    u = v[y + 11 * _BK]
+                    a0 += fq[x + 33 * _BK] * u
+                    a1 += fq[x + 34 * _BK] * u
+                    a2 += fq[x + 35 * _BK] * u
+                    u = v[y + 12 * _BK]
+                    a0 += fq[x + 36 * _BK] * u
+                    a1 += fq[x + 37 * _BK] * u
+                    a2 += fq[x + 38 * _BK] * u
+                    u = v[y + 13 * _BK]
+                    a0 += fq[x + 39 * _BK] * u
+                    a1 += fq[x + 40 * _BK] * u
+                    a2 += fq[x + 41 * _BK] * u
+                    u = v[y + 14 * _BK]
+                    a0 += fq[x + 42 * _BK] * u
+                    a1 += fq[x + 43 * _BK] * u
+                    a2 += fq[x + 44 * _BK] * u
+                    u = v[y + 15 * _BK]
+                    a0 += fq[x + 45 * _BK] * u
+                    a1 += fq[x + 46 * _BK] * u
+                    a2 += fq[x + 47 * _BK] * u
+                    u = v[y + 16 * _BK]
+                    a0 += fq[x + 48 * _BK] * u
+                    a1 += fq[x + 49 * _BK] * u
+                    a2 += fq[x + 50 * _BK] * u
+                    u = v[y + 17 * _BK]
+                    a0 += fq[x + 51 * _BK] * u
+                    a1 += fq[x + 52 * _BK] * u
+                    a2 += fq[x + 53 * _BK] * u
+                    u = v[y + 18 * _BK]
+                    a0 += fq[x + 54 * _BK] * u
+                    a1 += fq[x + 55 * _BK] * u
+                    a2 += fq[x + 56 * _BK] * u
+                    u = v[y + 19 * _BK]
+                    a0 += fq[x + 57 * _BK] * u
+                    a1 += fq[x + 58 * _BK] * u
+                    a2 += fq[x + 59 * _BK] * u
+                    u = v[y + 20 * _BK]
+                    a0 += fq[x + 60 * _BK] * u
+                    a1 += fq[x + 61 * _BK] * u
+                    a2 += fq[x + 62 * _BK] * u
+                    u = v[y + 21 * _BK]
+                    a0 += fq[x + 63 * _BK] * u
+                    a1 += fq[x + 64 * _BK] * u
+                    a2 += fq[x + 65 * _BK] * u
+                    u = v[y + 22 * _BK]
+                    a0 += fq[x + 66 * _BK] * u
+                    a1 += fq[x + 67 * _BK] * u
+                    a2 += fq[x + 68 * _BK] * u
+                    u = v[y + 23 * _BK]
+                    a0 += fq[x + 69 * _BK] * u
+                    a1 += fq[x + 70 * _BK] * u
+                    a2 += fq[x + 71 * _BK] * u
+                    u = v[y + 24 * _BK]
+                    a0 += fq[x + 72 * _BK] * u
+                    a1 += fq[x + 73 * _BK] * u
+                    a2 += fq[x + 74 * _BK] * u
+                    u = v[y + 25 * _BK]
+                    a0 += fq[x + 75 * _BK] * u
+                    a1 += fq[x + 76 * _BK] * u
+                    a2 += fq[x + 77 * _BK] * u
+                    u = v[y + 26 * _BK]
+                    a0 += fq[x + 78 * _BK] * u
+                    a1 += fq[x + 79 * _BK] * u
+                    a2 += fq[x + 80 * _BK] * u
+                    u = v[y + 27 * _BK]
+                    a0 += fq[x + 81 * _BK] * u
+                    a1 += fq[x + 82 * _BK] * u
+                    a2 += fq[x + 83 * _BK] * u
+                    u = v[y + 28 * _BK]
+                    a0 += fq[x + 84 * _BK] * u
+                    a1 += fq[x + 85 * _BK] * u
+                    a2 += fq[x + 86 * _BK] * u
+                    u = v[y + 29 * _BK]
+                    a0 += fq[x + 87 * _BK] * u
+                    a1 += fq[x + 88 * _BK] * u
+                    a2 += fq[x + 89 * _BK] * u
+                    u = v[y + 30 * _BK]
+                    a0 += fq[x + 90 * _BK] * u
+                    a1 += fq[x + 91 * _BK] * u
+                    a2 += fq[x + 92 * _BK] * u
+                    u = v[y + 31 * _BK]
+                    a0 += fq[x + 93 * _BK] * u
+                    a1 += fq[x + 94 * _BK] * u
+                    a2 += fq[x + 95 * _BK] * u
+                    u = v[y + 32 * _BK]
+                    a0 += fq[x + 96 * _BK] * u
+                    a1 += fq[x + 97 * _BK] * u
+                    a2 += fq[x + 98 * _BK] * u
+                    u = v[y + 33 * _BK]
+                    a0 += fq[x + 99 * _BK] * u
+                    a1 += fq[x + 100 * _BK] * u
+                    a2 += fq[x + 101 * _BK] * u
+                    u = v[y + 34 * _BK]
+                    a0 += fq[x + 102 * _BK] * u
+                    a1 += fq[x + 103 * _BK] * u
+                    a2 += fq[x + 104 * _BK] * u
+                    u = v[y + 35 * _BK]
+                    a0 += fq[x + 105 * _BK] * u
+                    a1 += fq[x + 106 * _BK] * u
+                    a2 += fq[x + 107 * _BK] * u
+                    u = v[y + 36 * _BK]
+                    a0 += fq[x + 108 * _BK] * u
+                    a1 += fq[x + 109 * _BK] * u
+                    a2 += fq[x + 110 * _BK] * u
+                    u = v[y + 37 * _BK]
+                    a0 += fq[x + 111 * _BK] * u
+                    a1 += fq[x + 112 * _BK] * u
+                    a2 += fq[x + 113 * _BK] * u
+                    u = v[y + 38 * _BK]
+                    a0 += fq[x + 114 * _BK] * u
+                    a1 += fq[x + 115 * _BK] * u
+                    a2 += fq[x + 116 * _BK] * u
+                    u = v[y + 39 * _BK]
+                    a0 += fq[x + 117 * _BK] * u
+                    a1 += fq[x + 118 * _BK] * u
+                    a2 += fq[x + 119 * _BK] * u
+                    u = v[y + 40 * _BK]
+                    a0 += fq[x + 120 * _BK] * u
+                    a1 += fq[x + 121 * _BK] * u
+                    a2 += fq[x + 122 * _BK] * u
+                    u = v[y + 41 * _BK]
+                    a0 += fq[x + 123 * _BK] * u
+                    a1 += fq[x + 124 * _BK] * u
+                    a2 += fq[x + 125 * _BK] * u
+                    u = v[y + 42 * _BK]
+                    a0 += fq[x + 126 * _BK] * u
+                    a1 += fq[x + 127 * _BK] * u
+                    a2 += fq[x + 128 * _BK] * u
+                    u = v[y + 43 * _BK]
+                    a0 += fq[x + 129 * _BK] * u
+                    a1 += fq[x + 130 * _BK] * u
+                    a2 += fq[x + 131 * _BK] * u
+                    u = v[y + 44 * _BK]
+                    a0 += fq[x + 132 * _BK] * u
+                    a1 += fq[x + 133 * _BK] * u
+                    a2 += fq[x + 134 * _BK] * u
+                    u = v[y + 45 * _BK]
+                    a0 += fq[x + 135 * _BK] * u
+                    a1 += fq[x + 136 * _BK] * u
+                    a2 += fq[x + 137 * _BK] * u
+                    u = v[y + 46 * _BK]
+                    a0 += fq[x + 138 * _BK] * u
+                    a1 += fq[x + 139 * _BK] * u
+                    a2 += fq[x + 140 * _BK] * u
+                    u = v[y + 47 * _BK]
+                    a0 += fq[x + 141 * _BK] * u
+                    a1 += fq[x + 142 * _BK] * u
+                    a2 += fq[x + 143 * _BK] * u
+                    pw[db + j] = a0
+                    pw[db + 1 * _BK + j] = a1
+                    pw[db + 2 * _BK + j] = a2
+        for g in range(G):  # each metric's band powers added in band order
+            pw = PW[g]
+            t0 = 0.0
+            t1 = 0.0
+            t2 = 0.0
+            for k in range(nf):
+                x = (k // _BK) * _MQ * _BK + k % _BK
+                t0 += pw[x]
+                t1 += pw[x + 1 * _BK]
+                t2 += pw[x + 2 * _BK]
+            o = _MQ * q
+            out[g, o] = math.sqrt(max(t0, 0.0))
+            if o + 1 < p:
+                out[g, o + 1] = math.sqrt(max(t1, 0.0))
+            if o + 2 < p:
+                out[g, o + 2] = math.sqrt(max(t2, 0.0))
+# END GENERATED METRICS by planner.screen_codegen
 
 
 @nb.njit(cache=True, error_model="numpy", parallel=True)
@@ -1412,7 +1635,7 @@ def screen_batch(plant, shocks, stops, travel, settings, out, n_chunks):
     n = shocks.kv.shape[0]
     nf = plant.w.size
     nblk = (nf + _BK - 1) // _BK
-    F, d0 = plant.F, plant.d0
+    Fq, d0q = plant.Fq, plant.d0q
     # the outputs one name per statement, outside the prange body: numba 0.68's parallel
     # loops silently drop the stores ``out.iterations[s] = ...`` in the body and
     # ``iters[s] = ...`` after ``metrics, sigma, iters, elements = out`` or after
@@ -1426,7 +1649,7 @@ def screen_batch(plant, shocks, stops, travel, settings, out, n_chunks):
         roll = np.empty(nblk * 12 * _BK)
         acc = np.empty(nblk * 4 * _BK)
         V = np.empty((_GROUP, nblk * _NFEAT * _BK))
-        pw = np.zeros((_GROUP, F.shape[2]))
+        PW = np.empty((_GROUP, nblk * _MQ * _BK))
         st = np.empty((_NST, 4))
         Jm = np.empty((4, 4))
         scratch = (roll, acc, st, Jm)
@@ -1437,7 +1660,7 @@ def screen_batch(plant, shocks, stops, travel, settings, out, n_chunks):
                 s = first + g
                 iters[s] = _screen_one(plant, _shock_row(shocks, s), _stop_row(stops, s), travel,
                                        settings, sigma[s], elements[s], V[g], scratch)
-            _metrics_of(F, d0, V, G, metrics[first:first + G], pw)
+            _metrics_of(Fq, d0q, V, G, metrics[first:first + G], PW, nf)
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -1579,8 +1802,11 @@ def screen_batch_scalar(plant, shocks, stops, travel, settings, out):
     iters = out.iterations
     elements = out.elements
     for s in nb.prange(shocks.kv.shape[0]):
-        iters[s] = _screen_one_scalar(plant, _shock_row(shocks, s), _stop_row(stops, s), travel,
-                                      settings, metrics[s], sigma[s], elements[s])
+        # prange's index is unsigned: an int64 row index, as screen_batch's, so that
+        # _shock_row and _stop_row compile (and are cached) once, not once per index type
+        i = np.int64(s)
+        iters[i] = _screen_one_scalar(plant, _shock_row(shocks, i), _stop_row(stops, i), travel,
+                                      settings, metrics[i], sigma[i], elements[i])
 
 
 def band_operands(ops):
@@ -1649,3 +1875,34 @@ def metric_form(ops):
     F[:, 16:32] = y.real.reshape(nf, 16, p)
     F[:, 32:48] = -y.imag.reshape(nf, 16, p)
     return F
+
+
+def metric_blocks(F, d0):
+    """The metrics' linear form in the layout of :func:`screen_batch`'s metrics pass.
+
+    Parameters
+    ----------
+    F : ndarray, shape (n_bands, 48, >= n_metrics)
+        :func:`metric_form` (columns past ``n_metrics`` ignored).
+    d0 : ndarray, shape (n_bands, n_metrics)
+        Weighted metric power with the shock loop open.
+
+    Returns
+    -------
+    Fq : ndarray, shape (n_groups, n_blocks * 48 * _MQ * _BK)
+        Metric ``_MQ q + r``'s coefficient of feature i in band ``blk _BK + j`` at
+        ``[q, ((blk 48 + i) _MQ + r) _BK + j]``: a group of ``_MQ`` metrics, bands in blocks
+        of ``_BK`` as the features V (:func:`_screen_one`). Zero past the last metric and band.
+    d0q : ndarray, shape (n_groups, n_blocks * _MQ * _BK)
+        ``d0`` likewise at ``[q, (blk _MQ + r) _BK + j]``.
+    """
+    nf, p = d0.shape
+    nblk = -(-nf // _BK)
+    nq = -(-p // _MQ)
+    Fp = np.zeros((nblk * _BK, _NFEAT, nq * _MQ))
+    Fp[:nf, :, :p] = F[:, :, :p]
+    Fq = Fp.reshape(nblk, _BK, _NFEAT, nq, _MQ).transpose(3, 0, 2, 4, 1)
+    dp = np.zeros((nblk * _BK, nq * _MQ))
+    dp[:nf, :p] = d0
+    d0q = dp.reshape(nblk, _BK, nq, _MQ).transpose(2, 0, 3, 1)
+    return (np.ascontiguousarray(Fq).reshape(nq, -1), np.ascontiguousarray(d0q).reshape(nq, -1))

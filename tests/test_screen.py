@@ -18,7 +18,7 @@ from ident.models.shocks import LinearShock
 from ident.sim.closedloop import pack_setups
 from ident.sim.metrics import METRIC_NAMES
 from planner import screen as screen_mod
-from planner import screen_codegen
+from planner import screen_codegen, screen_kernels
 from planner.errors import PlannerError
 from planner.objective import default_objective, score_setups
 from planner.plant import as_loop_plant
@@ -344,6 +344,33 @@ def test_band_inverse_is_its_generator_output():
     assert committed.count("dd = _recip(") == 4
     with pytest.raises(ValueError, match="markers"):
         screen_codegen.committed_source("def _band_inverse(h, d0, d1, d2, d3):\n")
+
+
+def test_metrics_pass_is_its_generator_output():
+    """The metrics' straight-line pass in planner/screen_kernels.py is exactly the text its
+    generator (planner.screen_codegen.metric_pass_source) writes."""
+    committed = screen_codegen.committed_source(metrics=True)
+    assert committed == screen_codegen.metric_pass_source()
+    assert committed.count("a2 += fq[x + ") == 48
+    with pytest.raises(ValueError, match="markers"):
+        screen_codegen.committed_source("def _metrics_of(Fq, d0q, V, G, out, PW, nf):\n",
+                                        metrics=True)
+
+
+def test_metric_blocks_layout_known_answer(rng):
+    """metric_blocks puts metric 3q + r's coefficient of feature i in band 16 blk + j at
+    [q, ((48 blk + i) 3 + r) 16 + j] and d0 at [q, (3 blk + r) 16 + j], zeros elsewhere."""
+    nf, p = 21, 5
+    F = rng.standard_normal((nf, 48, 8))  # columns past p (padding) are ignored
+    d0 = rng.random((nf, p))
+    Fq, d0q = screen_kernels.metric_blocks(F, d0)
+    assert Fq.shape == (2, 2 * 48 * 3 * 16) and d0q.shape == (2, 2 * 3 * 16)
+    for k, i, o in ((0, 0, 0), (20, 47, 4), (17, 5, 2), (3, 30, 3)):
+        blk, j, q, r = k // 16, k % 16, o // 3, o % 3
+        assert Fq[q, ((48 * blk + i) * 3 + r) * 16 + j] == F[k, i, o]
+        assert d0q[q, (3 * blk + r) * 16 + j] == d0[k, o]
+    assert np.count_nonzero(Fq) == np.count_nonzero(F[:, :, :p])
+    assert np.count_nonzero(d0q) == np.count_nonzero(d0)
 
 
 def _random_loop(rng, n):
