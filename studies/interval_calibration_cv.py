@@ -30,6 +30,10 @@ anew on the same identifications; a model identified before the noise bias was m
 gets it measured on its session, simulated again, and is saved with it).
 
     python studies/interval_calibration_cv.py --out DIR [--family held-out] [--seeds 2]
+
+``--recompute-cv`` measures the kept models' cross-validation again on their sessions
+(simulated again; the noise bias kept), as identification now does (the rotated halves of
+``ident.identify.crossval.split_session``); delete the cases' arrays (not the models) first.
 """
 
 from __future__ import annotations
