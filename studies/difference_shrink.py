@@ -16,7 +16,8 @@ the known car's (1 = no shrink). Responses compared (all on the model's FRF inpu
 - ``--simex``: the noise bias as ``ident.identify.crossval.noise_bias`` measures it, at the
   added noise's variance x1 and x3 (the estimate's at x2 and x4), and extrapolated to 0;
 - ``--variants``: the same session without response noise, without the rig inputs' noise,
-  with noise on the shock velocity and force only, and on every channel but those.
+  with noise on the shock velocity and force only (its variance x0.5, x1, x2, x4), and on
+  every channel but those.
 
 Results: docs/DESIGN.md, "What shrinks the GT cars' differences".
 
@@ -185,6 +186,10 @@ def main(argv=None):
             "noise on every channel but those": replace(
                 plan, channel_noise={"shock_velocity": 0.0, "shock_force": 0.0}),
         }
+        for v in (0.5, 2.0, 4.0):
+            level = plan.noise * np.sqrt(v)
+            variants[f"shock sensors' noise only, variance x{v:g}"] = replace(
+                plan, noise=0.0, channel_noise={"shock_velocity": level, "shock_force": level})
         for name, pl in variants.items():
             _, con = estimate_like(simulate_session(pl, vehicle), frf)
             Hb = on_bands(con)
