@@ -30,6 +30,10 @@ anew on the same identifications; a model identified before the noise bias was m
 gets it measured on its session, simulated again, and is saved with it).
 
     python studies/interval_calibration_cv.py --out DIR [--family held-out] [--seeds 2]
+
+``--recompute-cv`` measures the kept models' cross-validation again on their sessions
+(simulated again; the noise bias kept), as identification now does (the rotated halves of
+``ident.identify.crossval.split_session``); delete the cases' arrays (not the models) first.
 """
 
 from __future__ import annotations
@@ -46,7 +50,7 @@ import numpy as np
 import pandas as pd
 
 from ident.data.drive import make_track_drive
-from ident.identify.crossval import noise_bias
+from ident.identify.crossval import cross_validate_frf, noise_bias
 from ident.identify.model import load_model
 from ident.identify.pipeline import identify_session
 from ident.models.library import read_shock_library
@@ -153,9 +157,11 @@ def study_setups(library, n):
             + [pool[i] for i in idx])
 
 
-def run_case(name, spec, k, *, drive_s, n_setups, cache, formula=False):
+def run_case(name, spec, k, *, drive_s, n_setups, cache, formula=False, recompute_cv=False):
     """Identify car `name` with seed index `k`; the arrays of its intervals and truth
-    (`formula`: the intervals of before, ``random_error_scale``, on the same model)."""
+    (`formula`: the intervals of before, ``random_error_scale``, on the same model;
+    `recompute_cv`: a kept model's cross-validation measured again on its session,
+    simulated again, as identification now does; its noise bias kept)."""
     stem = f"{name.replace(' ', '_').replace('%', 'pct')}_seed{SEED0 + k}"
     path = cache / f"{stem}{'_formula' if formula else ''}.npz"
     if path.is_file():
@@ -168,7 +174,16 @@ def run_case(name, spec, k, *, drive_s, n_setups, cache, formula=False):
     if model_path.is_file():  # the identification of an earlier run (the intervals anew)
         model = load_model(model_path)
         t1 = t2 = time.perf_counter()
-        if model.frf.noise_bias is None and model.frf.cv_deviation is not None:
+        if recompute_cv and model.frf.cv_deviation is not None:
+            session = simulate_session(study_plan(spec, SEED0 + k), vehicle)
+            t1 = time.perf_counter()
+            frf = replace(cross_validate_frf(session, model.frf, noise=False),
+                          noise_bias=model.frf.noise_bias)
+            frf.settings["cross_validation"]["noise_bias"] = frf.noise_bias is not None
+            model = replace(model, frf=frf)
+            t2 = time.perf_counter()
+            model.save(model_path, overwrite=True)
+        elif model.frf.noise_bias is None and model.frf.cv_deviation is not None:
             # identified before the noise bias was measured: measure it on the same session
             # (seeded: simulated again) as identification now does, and keep it
             session = simulate_session(study_plan(spec, SEED0 + k), vehicle)
@@ -300,6 +315,9 @@ def main(argv=None):
     p.add_argument("--formula", action="store_true",
                    help="the intervals of before (random_error_scale's formula) on the same "
                         "identifications, for A/B")
+    p.add_argument("--recompute-cv", action="store_true",
+                   help="measure the kept models' cross-validation again (their sessions "
+                        "simulated again; delete the cases' arrays first)")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     for noisy in ("planner", "ident"):
@@ -318,7 +336,8 @@ def main(argv=None):
         for k in range(args.first_seed, args.first_seed + args.seeds):
             t0 = time.perf_counter()
             case = run_case(n, family[n], k, drive_s=args.drive_s, n_setups=args.setups,
-                            cache=out / "cases", formula=args.formula)
+                            cache=out / "cases", formula=args.formula,
+                            recompute_cv=args.recompute_cv)
             spec = family[n]
             row = {"car": n, "seed": SEED0 + k, "role": spec["role"], "noise": spec["noise"],
                    "run_s": spec["run_s"], "runs": spec["runs"], "fs_hz": spec["fs_hz"],

@@ -41,6 +41,21 @@ BODY_BAND_HZ = (2.0, 4.0)
 #: pooled (measured -0.84 %, error -0.92 %): the error holds a random part too (100 s runs;
 #: one column's: -0.2 to -1.5 %).
 BIAS_FACTOR = 1.5
+#: A rotated half's LPM window against the full estimate's, in Hz: the default half-width is
+#: an integer number of lines (paper plan: 24 lines of 1 / T against 13 of 2 / T, 10 % wider).
+WINDOW_RTOL = 0.15
+#: Run length of the short paper session [s] (the window's width in lines does not depend
+#: on it).
+SHORT_RUN_S = 60.0
+
+
+@pytest.fixture(scope="module")
+def short_paper_session(paper_plan):
+    """The paper's plan (one drive repeated in 5 runs) with short runs."""
+    from ident.sim.virtual_rig import simulate_session
+
+    runs = tuple(replace(r, duration_s=SHORT_RUN_S) for r in paper_plan.runs)
+    return simulate_session(replace(paper_plan, runs=runs))
 
 
 def _frf(H, sigma, f):
@@ -67,6 +82,35 @@ def test_split_session_halves_every_run(linear_session):
                         full.channels[key][:2 * n])
     with pytest.raises(ValueError, match="at least 2"):
         split_session(linear_session, 1)
+
+
+def test_split_session_rotates_the_stretches_over_the_runs(short_paper_session):
+    """Block k holds stretch (k + r) % K of run r: every stretch of every run in one block,
+    and a drive repeated in every run (the paper's plan) not repeated within a block, so the
+    block's LPM window (its default half-width, in its own lines of 2 / T) is about as wide
+    in Hz as the full estimate's (lines of 1 / T); without the rotation it is twice as wide."""
+    import warnings
+
+    from ident.identify.frf import estimate_frf
+
+    session = short_paper_session
+    for K in (2, 3):
+        blocks = split_session(session, K)
+        for r, run in enumerate(session.runs):
+            n = run.n_samples // K
+            key = next(iter(run.channels))
+            parts = {(k + r) % K: b.runs[r].channels[key] for k, b in enumerate(blocks)}
+            assert_allclose(np.concatenate([parts[j] for j in range(K)]), run.channels[key][:K * n])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        width = {name: estimate_frf(s).settings["lpm_half_width"]
+                 for name, s in (("full", session), ("rotated", split_session(session, 2)[0]),
+                                 ("plain", split_session(session, 2, rotate=False)[0]))}
+    # window in Hz, in units of 1 / T: (2 R + 1) lines of 1 / T, or of 2 / T on a half
+    full, rotated, plain = (2 * width["full"] + 1, 2 * (2 * width["rotated"] + 1),
+                            2 * (2 * width["plain"] + 1))
+    assert abs(rotated / full - 1) <= WINDOW_RTOL
+    assert plain / full >= 2 - WINDOW_RTOL
 
 
 def test_block_deviations_known_answer():

@@ -686,7 +686,10 @@ CV_CAR_MIN_DIFFERENCE_COVERAGE = 0.75
 def _held_out_car(name):
     """Cars of ``studies/interval_calibration_cv.py``'s held-out family: (vehicle, noise, run
     length [s], sample rate [Hz], track speed [m/s])."""
-    from ident.models.vehicle import example_vehicle
+    from ident.models.vehicle import example_gt_vehicle, example_vehicle
+
+    if name == "GT 4-post":
+        return example_gt_vehicle(), 0.02, 400.0, 100.0, 50.0
 
     p = example_vehicle()
 
@@ -705,9 +708,15 @@ def _held_out_car(name):
                                    0.01, 250.0, 200.0, 60.0)}[name]
 
 
-def _check_held_out_car(name, demo_library):
+#: Held-out cars on another rig than the paper plan's 7-post, with more runs: (rig, runs).
+#: The study's 8-run plan adds a second baseline and two diagonal swaps.
+HELD_OUT_RIGS = {"GT 4-post": ("4-post", 8)}
+
+
+def _check_held_out_car(name, demo_library, *, differences=True):
     """Identify a held-out car with the defaults (seed 301), predict 20 setups on a 60 s
-    track, and check its intervals against the known car (the CV_CAR_* bounds)."""
+    track, and check its intervals against the known car (the CV_CAR_* bounds; those of
+    the differences from the best with `differences`)."""
     import warnings
     from dataclasses import replace as dc_replace
 
@@ -722,8 +731,18 @@ def _check_held_out_car(name, demo_library):
 
     car, noise, run_s, fs_hz, speed = _held_out_car(name)
     plan = default_plan()
-    plan = dc_replace(plan, noise=noise, input_noise=noise / 4, fs_hz=fs_hz,
-                      runs=tuple(dc_replace(r, duration_s=run_s, seed=301) for r in plan.runs))
+    runs = [dc_replace(r, duration_s=run_s, seed=301) for r in plan.runs]
+    rig, n_runs = HELD_OUT_RIGS.get(name, (plan.rig, len(runs)))
+    if n_runs > len(runs):
+        from ident.sim.virtual_rig import PlanRun
+
+        base, soft = runs[0].setup, runs[1].setup["LF"]
+        runs += [PlanRun("baseline-2", dict(base), "baseline", 301, run_s),
+                 PlanRun("swap-LF-RR", {**base, "LF": soft, "RR": soft}, "swap", 301, run_s),
+                 PlanRun("swap-RF-LR", {**base, "RF": soft, "LR": soft}, "swap", 301,
+                         run_s)][:n_runs - len(runs)]
+    plan = dc_replace(plan, noise=noise, input_noise=noise / 4, fs_hz=fs_hz, rig=rig,
+                      runs=tuple(runs))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = identify_session(simulate_session(plan, car), diagnose=False, check_shocks=False)
@@ -751,8 +770,9 @@ def _check_held_out_car(name, demo_library):
     best = table.index[table["verdict"] == "best"][0]
     d = (true["score"] - true.loc[best, "score"]).drop(index=best)
     t = table.drop(index=best)
-    assert np.mean((t["diff_best_lo"] <= d) & (d <= t["diff_best_hi"])) >= \
-        CV_CAR_MIN_DIFFERENCE_COVERAGE
+    if differences:
+        assert np.mean((t["diff_best_lo"] <= d) & (d <= t["diff_best_hi"])) >= \
+            CV_CAR_MIN_DIFFERENCE_COVERAGE
     assert table.loc[true["score"][true["feasible"]].idxmin(), "verdict"] in ("best", "tied")
 
 
@@ -766,14 +786,23 @@ def test_cross_validated_intervals_cover_a_held_out_car(demo_library):
 
 @pytest.mark.slow
 @pytest.mark.heavy
-@pytest.mark.xfail(strict=True, reason="issue 37, open: against the known car on the drive the "
-                   "200 Hz model predicts on, the errors are 0.05 % and the intervals 0.8 % "
-                   "wide (the cross-validation's metric-level factor overstates 200 Hz "
-                   "sessions); docs/DESIGN.md, Uncertainty")
 def test_cross_validated_intervals_cover_a_second_held_out_car(demo_library):
-    """The same on the heavy car with a chassis twist, 200 Hz, 5 runs of 250 s (measured
-    91.4 %; about a minute of CPU)."""
+    """The same on the heavy car with a chassis twist, 200 Hz, 5 runs of 250 s (about a
+    minute of CPU). Its intervals were 0.8 % wide for errors of 0.05 % while the halves of
+    the cross-validation were cut plainly (their LPM window twice as wide in Hz as the full
+    estimate's: docs/DESIGN.md, "The 200 Hz cars"); the rotated halves size them."""
     _check_held_out_car("heavy twist 200 Hz", demo_library)
+
+
+@pytest.mark.slow
+@pytest.mark.heavy
+def test_cross_validated_intervals_cover_the_held_out_car_on_a_4_post_rig(demo_library):
+    """The same on the GT car on a 4-post rig (8 runs of 400 s, 2 % noise; the study's 90.4 %
+    on this identification, 94.6 % over two). Its differences from the best are not
+    checked: the model's differences are 1-2 % (relative) smaller than the true ones on the
+    GT cars, which no term carries yet (the study: 21 % on this identification, 95 % on the
+    next; docs/DESIGN.md, "The 200 Hz cars")."""
+    _check_held_out_car("GT 4-post", demo_library, differences=False)
 
 
 # ---------------------------------------------------------------- intervals of differences

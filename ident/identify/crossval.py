@@ -8,8 +8,9 @@ bias on a steep flank) is not in it, and how large it is depends on the car and
 the session. This module measures it on the session itself:
 
 1. Every run is cut into ``blocks`` contiguous time blocks; block ``k`` of the
-   session holds piece ``k`` of every run (the same swaps, a different stretch of
-   the drive and of the noise).
+   session holds piece ``(k + r) % blocks`` of run ``r`` (the same swaps, a different
+   stretch of the drive and of the noise; rotated over the runs so that a drive
+   repeated in every run is not repeated within a block: :func:`split_session`).
 2. The FRF is estimated and conditioned on each block with the settings of the
    full estimate (:func:`block_frfs`), and each block's estimate is put on the
    full estimate's frequency grid.
@@ -38,6 +39,20 @@ frequency band (pooled over the pairs), divided by the overall ratio
 ratio of relative errors (``|dH|^2 / |H|^2`` against ``sigma^2 / |H|^2``), so that
 no pair's scale dominates. Lines the conditioning replaced by residual fits
 (no measurement) do not count.
+
+Why rotated. The LPM's local window is a number of DFT lines, set by how many distinct
+realizations of each input the runs hold (:func:`ident.identify.frf.estimate_frf`). Cut
+in plain halves, a session whose runs repeat one drive (the paper's plan) gives blocks
+that repeat one drive too: the same number of lines, each twice as wide, so the blocks'
+window was twice as wide in Hz as the full estimate's, and the local polynomials' misfit
+at the body modes (an error of the window that grows steeply with its width) made the
+halves scatter far more than the full estimate errs: on the heavy car at 200 Hz (modes at
+3-4.5 Hz, 5 x 250 s) each half was 7-14 % off the true FRF there (rig columns, rms) where
+the full estimate was 2 %, and the full estimate at a twice-as-wide window 5.5 %; the
+metric-level factor came out at 3.6-9.6 on the two stiff 200 Hz cars (the same at
+100 Hz: not the rate). Rotated, a block holds two stretches of the drive, its default
+window is about half as many lines of twice the width, and its halves were 2.5-2.8 % off,
+their difference 1.4 % (the full estimate 2.0 %).
 
 Assumptions: the error of the estimate from ``K`` blocks is the mean of the
 blocks' errors (an estimator's variance falls as one over the record length;
@@ -106,7 +121,7 @@ CV_BAND_EDGES_HZ = (0.5, 1.0, 2.0, 4.0, 8.0, 14.0, 20.0)
 MIN_LINES = 8
 
 
-def split_session(session, blocks=CV_BLOCKS):
+def split_session(session, blocks=CV_BLOCKS, *, rotate=True):
     """Cut every run of `session` into `blocks` contiguous time blocks.
 
     Parameters
@@ -114,21 +129,33 @@ def split_session(session, blocks=CV_BLOCKS):
     session : ident.data.session.Session
     blocks : int
         Number of blocks (at least 2).
+    rotate : bool
+        Block ``k`` holds stretch ``(k + r) % blocks`` of run ``r`` (default), so that a
+        drive repeated in every run (the paper's plan) is not repeated within a block:
+        the block then has ``blocks`` distinct realizations of it, and its LPM's default
+        half-width (:func:`ident.identify.frf.estimate_frf`, a number of the block's DFT
+        lines, set by the distinct realizations) is about ``1 / blocks`` of the full
+        estimate's, so its local window is as wide in Hz as the full estimate's. Without
+        the rotation (False: stretch ``k`` of every run) the block's window is ``blocks``
+        times wider in Hz and the local polynomials' misfit at the body modes, which grows
+        steeply with the window, made the halves' scatter 4-6 times the full estimate's
+        error in the metrics of stiff cars (modes at 3-4.5 Hz): module notes.
 
     Returns
     -------
     list of ident.data.session.Session
-        ``blocks`` sessions; session ``k`` holds the ``k``-th stretch of every run
-        (the same run names, setups and libraries), of ``n // blocks`` samples.
+        ``blocks`` sessions of the same run names, setups and libraries, each run of
+        ``n // blocks`` samples; every stretch of every run is in exactly one block.
     """
     if blocks < 2:
         raise ValueError(f"blocks must be at least 2, got {blocks}")
     out = []
     for k in range(blocks):
         runs = []
-        for run in session.runs:
+        for r, run in enumerate(session.runs):
             n = run.n_samples // blocks
-            sl = slice(k * n, (k + 1) * n)
+            j = (k + r) % blocks if rotate else k
+            sl = slice(j * n, (j + 1) * n)
             runs.append(dataclasses.replace(
                 run, time_s=run.time_s[sl], channels={c: v[sl] for c, v in run.channels.items()}))
         out.append(dataclasses.replace(session, runs=tuple(runs)))
