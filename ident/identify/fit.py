@@ -1120,7 +1120,7 @@ def _polynomials(quad, lin, coef, n_num, w0, scale):
     n = polys.shape[1]
     den_n = np.array([1.0])
     for fac in factors:
-        den_n = np.polymul(den_n, fac)
+        den_n = np.convolve(den_n, fac)  # np.polymul of monic factors, without poly1d
     num_n = np.concatenate([[0.0], coef[:n] @ polys]) if n else np.zeros(1)
     if coef.size > n:
         num_n = num_n + coef[n] * den_n
