@@ -13,7 +13,9 @@ Notes
 -----
 The per-pair fits run on forked worker processes (:func:`_map_pairs`); each pair's fit
 is deterministic and the results come back in order, so the model does not depend on
-the number of processes.
+the number of processes. Meanwhile :func:`identify_session` cross-validates the FRF in
+this process (:func:`ident.identify.crossval.cross_validate_frf`: it adds to the FRF only
+what the fits do not read), so both cores stay busy through the two.
 """
 
 from __future__ import annotations
