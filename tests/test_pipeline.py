@@ -168,7 +168,24 @@ def test_map_pairs_returns_the_tasks_in_order_whatever_the_processes():
 
     tasks = list(range(101))
     serial = pipeline._map_pairs(_pair_task, 3, tasks, 1)
-    assert pipeline._map_pairs(_pair_task, 3, tasks, 2) == serial == _pair_task(3, tasks)
+    assert pipeline._map_pairs(_pair_task, 3, tasks, 2) == serial == (_pair_task(3, tasks), None)
+
+
+def test_map_pairs_runs_meanwhile_here_once_while_the_workers_fit():
+    """``meanwhile`` (identify_session's cross-validation) runs once, in this process, with one
+    or several worker processes, and its result comes back beside the tasks' results."""
+    import os
+
+    from ident.identify import pipeline
+
+    tasks = list(range(31))
+    for n_jobs in (1, 2):
+        calls = []
+        results, aside = pipeline._map_pairs(_pair_task, 5, tasks, n_jobs,
+                                             lambda: calls.append(os.getpid()) or "done")
+        assert results == _pair_task(5, tasks)
+        assert aside == "done"
+        assert calls == [os.getpid()]
 
 
 def test_frf_options_must_be_the_options_object(prototype_case):

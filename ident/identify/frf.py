@@ -105,6 +105,7 @@ from ident.errors import IdentificationError, LowCoherenceWarning
 from ident.identify.diagnose import rest_levels
 from ident.identify.instruments import (iv_lpm_solve, travel_from_velocity, travel_rows,
                                         travel_run)
+from ident.identify.serialdot import serial_dots
 from ident.identify.thirdforce import third_element_force
 from ident.models.lti import lag_coefficients
 from ident.models.shocks import LinearShock
@@ -438,7 +439,11 @@ def _distinct_realizations(records):
         if len(xs) == 1:
             count += 1
             continue
-        X = np.array([x / max(np.linalg.norm(x), 1e-300) for x in xs])
+        # the norms of records of 10^4-10^5 samples on one BLAS thread with the multithreaded
+        # sums' bits (serial_dots): OpenBLAS's thread hand-over costs more than the sums
+        with serial_dots() as dot:
+            norms = [np.sqrt(dot(x, x)) for x in xs]
+        X = np.array([x / max(nx, 1e-300) for x, nx in zip(xs, norms)])
         lam = np.linalg.eigvalsh(X @ X.T)
         count += int(np.sum(lam > LPM_DISTINCT_FRACTION * lam[-1]))
     return count

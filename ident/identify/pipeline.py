@@ -13,7 +13,9 @@ Notes
 -----
 The per-pair fits run on forked worker processes (:func:`_map_pairs`); each pair's fit
 is deterministic and the results come back in order, so the model does not depend on
-the number of processes.
+the number of processes. Meanwhile :func:`identify_session` cross-validates the FRF in
+this process (:func:`ident.identify.crossval.cross_validate_frf`: it adds to the FRF only
+what the fits do not read), so both cores stay busy through the two.
 """
 
 from __future__ import annotations
@@ -175,6 +177,16 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
     -------
     VehicleModel
     """
+    model, _ = _fit_model(frf, method=method, orders=orders, weighting=weighting,
+                          band_hz=band_hz, max_order=max_order, n_poles_vf=n_poles_vf,
+                          df_fit_hz=df_fit_hz, name=name, units=units, n_jobs=n_jobs)
+    return model
+
+
+def _fit_model(frf, *, method, orders, weighting, band_hz, max_order, n_poles_vf, df_fit_hz,
+               name, units, n_jobs, meanwhile=None):
+    """:func:`fit_model`, and ``meanwhile()`` called in this process while the workers fit
+    the pairs (None: nothing); returns ``(model, meanwhile's result)``."""
     if not isinstance(frf, Frf):
         raise TypeError(f"fit_model needs an Frf, got {type(frf).__name__}")
     if method not in ("invfreqs", "vf"):
@@ -233,7 +245,7 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
                               max(ORDER_FLOOR, NOISE_FLOOR_FACTOR * noise[o, i]),
                               _is_derivative(key[0])))
         common = (fb, Hb, W, max_order, f_max, f_min)
-        results = _map_pairs(_fit_pairs, common, tasks, n_jobs)
+        results, aside = _map_pairs(_fit_pairs, common, tasks, n_jobs, meanwhile)
         messages = []
         for (o, i, *_), (pk, rk, dk, n_den, e, changed, msgs) in zip(tasks, results):
             n_regularized += changed
@@ -250,6 +262,7 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
                           "shockplan identify writes it beside the model as "
                           "<name>_summary.csv)", FitWarning, stacklevel=2)
     else:
+        aside = None if meanwhile is None else meanwhile()
         with threadpool_limits(1):
             vf = _fit_vf(fitmod, fb, Hb, W, frf, n_poles_vf, max_order)
         settings["n_poles_vf"] = int(len(vf.poles))
@@ -282,12 +295,13 @@ def fit_model(frf, *, method="invfreqs", orders="auto", weighting="paper", band_
                       LowCoherenceWarning,
                       stacklevel=2)
     keep = max(1, int(n_poles.max()))
-    return VehicleModel(name=name or "identified model", input_names=tuple(frf.input_names),
-                        output_names=tuple(frf.output_names), poles=poles[:, :, :keep],
-                        residues=residues[:, :, :keep], direct=direct, n_poles=n_poles,
-                        order=order, fit_error=err, cbar_n_s_m=np.asarray(frf.cbar_n_s_m, float),
-                        fs_hz=frf.fs_hz, units=units, frf=frf, settings=settings,
-                        noise_level=noise)
+    model = VehicleModel(name=name or "identified model", input_names=tuple(frf.input_names),
+                         output_names=tuple(frf.output_names), poles=poles[:, :, :keep],
+                         residues=residues[:, :, :keep], direct=direct, n_poles=n_poles,
+                         order=order, fit_error=err, cbar_n_s_m=np.asarray(frf.cbar_n_s_m, float),
+                         fs_hz=frf.fs_hz, units=units, frf=frf, settings=settings,
+                         noise_level=noise)
+    return model, aside
 
 
 def pair_noise_level(frf, sel=None, weight=None):
@@ -491,8 +505,10 @@ def _fit_pairs(common, tasks):
 _BATCHES_PER_PROCESS = 16
 
 
-def _map_pairs(func, common, tasks, n_jobs):
-    """``func(common, batch)`` over batches of `tasks`, on up to `n_jobs` processes.
+def _map_pairs(func, common, tasks, n_jobs, meanwhile=None):
+    """``func(common, batch)`` over batches of `tasks`, on up to `n_jobs` processes; returns
+    ``(results, meanwhile())``: `meanwhile` (None: nothing) is called in this process while
+    the workers run (without workers: before the batches).
 
     Results come back in the order of `tasks`, and each pair's fit is deterministic, so the
     model does not depend on the number of processes. Workers are forked (POSIX; elsewhere the
@@ -503,7 +519,8 @@ def _map_pairs(func, common, tasks, n_jobs):
     n = (os.cpu_count() or 1) if n_jobs is None else int(n_jobs)
     n = max(1, min(n, len(tasks)))
     if n == 1 or "fork" not in multiprocessing.get_all_start_methods():
-        return func(common, tasks)
+        aside = None if meanwhile is None else meanwhile()
+        return func(common, tasks), aside
     # about _BATCHES_PER_PROCESS batches per process: the pairs' costs differ by 10x, and
     # small batches handed out in turn keep both cores busy to the end
     size = max(1, -(-len(tasks) // (_BATCHES_PER_PROCESS * n)))
@@ -516,10 +533,13 @@ def _map_pairs(func, common, tasks, n_jobs):
                                                   initializer=quiet_worker,
                                                   initargs=(os.getpid(),))
     try:
-        parts = list(pool.map(func, [common] * len(batches), batches))
+        # every batch is submitted (the workers forked) before `meanwhile` runs here
+        futures = [pool.submit(func, common, batch) for batch in batches]
+        aside = None if meanwhile is None else meanwhile()
+        parts = [fut.result() for fut in futures]
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
-    return [r for part in parts for r in part]
+    return [r for part in parts for r in part], aside
 
 
 #: ``vf``: poles added to the order at which the common-pole fit first reaches its data's noise
@@ -680,12 +700,18 @@ def identify_session(session, *, estimator="lpm", frf_method="global", cbar_n_s_
                        estimator=estimator, instruments=iv)
     frf = condition_frf(frf, coherence_min=coherence_min, smooth_width_hz=smooth_width_hz,
                         **cond)
-    if cross_validate:
-        frf = cross_validate_frf(session, frf)
+    # the cross-validation reads the session and the FRF and only adds to the FRF what the
+    # fits do not use (its deviations and noise bias, settings["cross_validation"]): it runs
+    # here while the worker processes fit the pairs, and its FRF replaces the fitted one
+    corrected = session
+    validate = (lambda: cross_validate_frf(corrected, frf)) if cross_validate else None
     session = measured
-    model = fit_model(frf, method=fit_method, orders=orders, weighting=weighting,
-                      band_hz=band_hz, max_order=max_order, name=session.name,
-                      units=session.units)
+    model, validated = _fit_model(frf, method=fit_method, orders=orders, weighting=weighting,
+                                  band_hz=band_hz, max_order=max_order, n_poles_vf=None,
+                                  df_fit_hz=0.1, name=session.name, units=session.units,
+                                  n_jobs=None, meanwhile=validate)
+    if validated is not None:
+        model = dataclasses.replace(model, frf=validated)
     settings = dict(model.settings, session=session.name,
                     runs=[r.name for r in session.runs], frf_method=frf_method,
                     estimator=estimator)
