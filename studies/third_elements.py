@@ -148,6 +148,139 @@ def read_proto(folder=EXAMPLES):
                     setups=read_setups(p["setups"], library, stops))
 
 
+#: The second prototype-like car (``--car second``), held back from all tuning: other
+#: masses, springs, motion ratios, heave-spring gaps and rates, downforce and balance than
+#: the example's; the same shock library and setups. File -> top-level keys replaced
+#: (``bump_stop``: id -> keys replaced), applied by :func:`write_second_car`.
+SECOND_CAR = {
+    "proto_car.toml": {
+        "name": "second prototype-like car (held back from tuning)",
+        "track_front": 1.58, "track_rear": 1.52, "cg_to_front_axle": 1.55,
+        "cg_to_rear_axle": 1.45, "sprung_mass": 960.0, "roll_inertia": 330.0,
+        "pitch_inertia": 1150.0, "front_unsprung_mass": 42.0, "rear_unsprung_mass": 48.0,
+        "front_spring_rate": 45000.0, "rear_spring_rate": 75000.0,
+        "front_arb_rate": 75000.0, "rear_arb_rate": 35000.0,
+        "front_tire_stiffness": 300000.0, "rear_tire_stiffness": 380000.0,
+        "third_elements": {"heave_front": 1.25, "heave_rear": 0.9, "roll_front": 0.7}},
+    "proto_aero.toml": {"cg_to_front_axle": 1.55, "cg_to_rear_axle": 1.45,
+                        "downforce": 19500.0, "balance": 0.45},
+    "proto_bumpstops.toml": {"bump_stop": {
+        "HS-F": {"gap": 0.003, "force": [0.0, 400.0, 1700.0, 9200.0]},
+        "HS-F2": {"gap": 0.003, "force": [0.0, 250.0, 1100.0, 5600.0]},
+        "HS-R": {"gap": 0.006, "force": [0.0, 300.0, 1300.0, 6550.0]}}},
+    "proto_plan.toml": {"third_elements": {"heave_front": 1.25, "heave_rear": 0.9,
+                                           "roll_front": 0.7}},
+}
+#: The second car's plan's aero actuator peak [N] (``[drive] peak_aero_heave``).
+SECOND_CAR_PEAK_AERO_HEAVE_N = 7500.0
+#: The aero runs' speed trace starts this far into :func:`planner.demo.proto_speed_trace`
+#: [s] (another stretch of the lap than the study's track drive, which starts at 0).
+AERO_RUN_SHIFT_S = 37.0
+#: Seed offset of the aero runs' noise drives (other drives than the plain runs').
+AERO_RUN_SEED_OFFSET = 1000
+
+
+def write_second_car(folder):
+    """Write the second car's files (:data:`SECOND_CAR` over the example's) into `folder`
+    (created; existing files kept) and return the folder, for :func:`read_proto`."""
+    import tomllib
+
+    import tomli_w
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in PROTO_FILES.values():
+        target = folder / name
+        if target.exists():
+            continue
+        source = Path(EXAMPLES) / name
+        changes = SECOND_CAR.get(name)
+        if changes is None:
+            target.write_bytes(source.read_bytes())
+            continue
+        doc = tomllib.loads(source.read_text())
+        for key, value in changes.items():
+            if key == "bump_stop":
+                for entry in doc["bump_stop"]:
+                    entry.update(value.get(entry["id"], {}))
+            else:
+                doc[key] = value
+        if name == "proto_plan.toml":
+            doc["drive"]["peak_aero_heave"] = SECOND_CAR_PEAK_AERO_HEAVE_N
+        target.write_text(tomli_w.dumps(doc))
+    return folder
+
+
+def aero_run_drive(car, plan, seed, duration_s, *, shift_s=AERO_RUN_SHIFT_S, ramp_s=3.0):
+    """A rig run's drive in the track's regime: the plan's noise drive (`seed`) with the
+    car's downforce on the aero actuators (the aero loads of
+    :func:`planner.demo.proto_speed_trace` from `shift_s` on, mean included, faded in and
+    out over `ramp_s`), so that the heave springs close as on the track (how a 7-post team
+    replays a lap's aero loads).
+
+    Returns
+    -------
+    ident.data.drive.Drive
+    """
+    from planner.demo import proto_speed_trace
+
+    d = make_plan_drive(plan, car.vehicle, seed=seed, duration_s=duration_s,
+                        name=f"{plan.name} seed {seed} with downforce")
+    t = np.arange(d.n_samples) / d.fs_hz
+    ramp = np.clip(np.minimum(t, t[-1] - t) / ramp_s, 0.0, 1.0)
+    ramp = 0.5 - 0.5 * np.cos(np.pi * ramp)
+    loads = car.aero.loads(proto_speed_trace(t + shift_s))
+    ch = dict(d.channels)
+    for name in ("aero_heave", "aero_roll", "aero_pitch"):
+        ch[name] = ch[name] + ramp * np.asarray(loads.channels[name])
+    return Drive(name=d.name, fs_hz=d.fs_hz, channels=ch)
+
+
+def session_plan(car, *, run_s=None, noise=None, seed=None, aero_runs="none"):
+    """The study's rig plan: the car's (``proto_plan.toml``) with every run `run_s` long,
+    the sensor `noise`, every run's `seed` (its drive and noise draw), and aero runs.
+
+    Parameters
+    ----------
+    car : ProtoCar
+    run_s, noise : float, optional
+        Default the plan's.
+    seed : int, optional
+        Every run's seed; default the plan's.
+    aero_runs : {"none", "all", "add"}
+        ``"all"``: every run on :func:`aero_run_drive` (the track's regime) instead of
+        the plain noise drive; ``"add"``: the plain runs, then each again on
+        :func:`aero_run_drive` (twice the rig time); ``"none"``: the plan as is.
+
+    Returns
+    -------
+    ident.sim.virtual_rig.RigPlan
+    """
+    plan = car.plan
+    runs = list(plan.runs)
+    if run_s:
+        runs = [replace(r, duration_s=float(run_s)) for r in runs]
+    if seed is not None:
+        runs = [replace(r, seed=int(seed)) for r in runs]
+    plan = replace(plan, runs=tuple(runs))
+    if noise is not None:
+        plan = replace(plan, noise=float(noise))
+    if aero_runs == "none":
+        return plan
+    if aero_runs not in ("all", "add"):
+        raise ValueError(f"aero_runs must be 'none', 'all' or 'add', got {aero_runs!r}")
+    drives = {}
+    aero = []
+    for r in runs:
+        key = (r.seed, r.duration_s)
+        if key not in drives:
+            drives[key] = aero_run_drive(car, plan, r.seed + AERO_RUN_SEED_OFFSET,
+                                         r.duration_s)
+        aero.append(replace(r, name=r.name if aero_runs == "all" else f"{r.name}-aero",
+                            drive=drives[key]))
+    return replace(plan, runs=tuple(aero if aero_runs == "all" else runs + aero))
+
+
 def make_setups():
     """The study's setups (``proto_setups.csv`` is this, written by :func:`write_setups`).
 
@@ -545,6 +678,19 @@ def main(argv=None):
                    help="only the first N setups of proto_setups.csv (default all)")
     p.add_argument("--truth-only", action="store_true",
                    help="the known car's metrics and ranking only (no session)")
+    p.add_argument("--car", default="example", choices=["example", "second"],
+                   help="the example car (ident/examples/proto_*) or the second car held back "
+                        "from tuning (SECOND_CAR, written into OUT/second_car)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="every run's seed: the session's drive and noise draw (default the "
+                        "plan's, 38)")
+    p.add_argument("--aero-runs", default="none", choices=["none", "all", "add"],
+                   help="runs with the car's downforce on the aero actuators: none (the "
+                        "plan's), all (every run), add (the plan's runs, then each again with "
+                        "downforce)")
+    p.add_argument("--cases", nargs="+", default=["after", "before"],
+                   choices=["after", "before"],
+                   help="after: the session as recorded; before: its third elements stripped")
     p.add_argument("--quick", action="store_true", help="20 s runs, 30 s drives, 12 setups")
     args = p.parse_args(argv)
     if args.noise is not None and not args.noise >= 0:
@@ -559,7 +705,8 @@ def main(argv=None):
         args.setups = args.setups or 12
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    car = read_proto()
+    car = read_proto(EXAMPLES if args.car == "example"
+                     else write_second_car(out / "second_car"))
     setups = car.setups[:args.setups] if args.setups else car.setups
     drives = {k: v for k, v in study_drives(car, drive_s=args.drive_s).items()
               if k in args.drives}
@@ -575,17 +722,14 @@ def main(argv=None):
                                   float_format="%.6g")
     rows = []
     if not args.truth_only:
-        plan = car.plan
-        if args.run_s:
-            plan = replace(plan, runs=tuple(replace(r, duration_s=args.run_s)
-                                            for r in plan.runs))
-        if args.noise is not None:
-            plan = replace(plan, noise=float(args.noise))
+        plan = session_plan(car, run_s=args.run_s, noise=args.noise, seed=args.seed,
+                            aero_runs=args.aero_runs)
         t0 = time.perf_counter()
         session = simulate_session(plan, car.vehicle)
         log.info("session: %d runs x %g s in %.1f s", len(session.runs),
                  session.runs[0].n_samples / session.fs_hz, time.perf_counter() - t0)
-        for case, sess in (("after", session), ("before", strip_third(session))):
+        cases = {"after": lambda: session, "before": lambda: strip_third(session)}
+        for case, sess in ((c, cases[c]()) for c in args.cases):
             t0 = time.perf_counter()
             try:
                 model = identify(sess)
@@ -603,7 +747,9 @@ def main(argv=None):
                        "model_third": getattr(model, "third", None) is not None,
                        "planner_third": planner_third, "identify_s": identify_s,
                        "run_s": session.runs[0].n_samples / session.fs_hz,
-                       "noise": plan.noise,
+                       "noise": plan.noise, "car": args.car,
+                       "seed": plan.runs[0].seed, "aero_runs": args.aero_runs,
+                       "n_runs": len(plan.runs),
                        "n_setups": len(setups)}
                 if pred is not None:
                     row.update(compare(pred, truths[label]))
