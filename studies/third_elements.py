@@ -732,8 +732,8 @@ def main(argv=None):
                                   float_format="%.6g")
     rows = []
     if not args.truth_only:
-        plan = session_plan(car, run_s=args.run_s or SESSION_RUN_S, noise=args.noise, seed=args.seed,
-                            aero_runs=args.aero_runs)
+        plan = session_plan(car, run_s=args.run_s or SESSION_RUN_S, noise=args.noise,
+                            seed=args.seed, aero_runs=args.aero_runs)
         t0 = time.perf_counter()
         session = simulate_session(plan, car.vehicle)
         log.info("session: %d runs x %g s in %.1f s", len(session.runs),
