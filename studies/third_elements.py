@@ -79,10 +79,10 @@ second    400    3     0.21 % / 1.89 % / 0.9959 / yes       0.15 % / 0.77 % / 0.
 
 Least squares (``FrfOptions(instruments=False)``): second car, 120 s, seed 38: 0.78 % /
 29.9 % / 0.9643 / **no** on the track, 0.235 % / 1.32 % / 0.9999 / yes on the rig; 400 s,
-seed 2: second car 0.166 % / 2.70 % / 0.9979 / yes and 0.35 % / 1.44 % / 1.0 / yes, example
-0.22 % / 1.73 % / 0.9972 / yes and 0.29 % / 1.15 % / 0.9992 / yes (on this draw least
-squares has no roll outlier on the track, the instruments do; the rig drive is better with
-the instruments).
+seeds 38, 2, 3: second car track 0.56, 0.17, 0.35 % / 6.0, 2.7, 5.6 % (instruments: 0.18,
+0.21, 0.21 % / 1.7, 13.7, 1.9 %), rig 0.39, 0.35, 0.24 % / 0.91, 1.44, 0.91 %; example, seed
+2: 0.22 % / 1.73 % track, 0.29 % / 1.15 % rig; Spearman >= 0.993 and the best right on every
+400 s row. The instruments win on two draws of three; each estimator has its outlier.
 Without noise (8 x 120 s): example 0.084 % / 0.92 % track, 0.034 % / 0.16 % rig; second car
 0.096 % / 2.76 % track, 0.097 % / 0.29 % rig (the bias floor). The track's largest errors
 are the front roll travel and velocity of the setups with the CD front shocks: the heave
