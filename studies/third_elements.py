@@ -283,7 +283,7 @@ def aero_run_drive(car, plan, seed, duration_s, *, shift_s=AERO_RUN_SHIFT_S, ram
     return Drive(name=d.name, fs_hz=d.fs_hz, channels=ch)
 
 
-def session_plan(car, *, run_s=None, noise=None, seed=None, aero_runs="none"):
+def session_plan(car, *, run_s=None, noise=None, seed=None, aero_runs="none", pair_swaps=()):
     """The study's rig plan: the car's (``proto_plan.toml``) with every run `run_s` long,
     the sensor `noise`, every run's `seed` (its drive and noise draw), and aero runs.
 
@@ -298,6 +298,10 @@ def session_plan(car, *, run_s=None, noise=None, seed=None, aero_runs="none"):
         ``"all"``: every run on :func:`aero_run_drive` (the track's regime) instead of
         the plain noise drive; ``"add"``: the plain runs, then each again on
         :func:`aero_run_drive` (twice the rig time); ``"none"``: the plan as is.
+    pair_swaps : sequence of {"front", "rear"}
+        Add a run per axle named with both corners of the axle swapped together
+        (``swap-front-pair``: the shock the plan's single-corner swap runs fit there, the
+        baseline elsewhere), a roll-symmetric swap.
 
     Returns
     -------
@@ -312,6 +316,17 @@ def session_plan(car, *, run_s=None, noise=None, seed=None, aero_runs="none"):
     plan = replace(plan, runs=tuple(runs))
     if noise is not None:
         plan = replace(plan, noise=float(noise))
+    base = next(r for r in runs if r.role == "baseline")
+    for axle in pair_swaps:
+        pair = _AXLE_CORNERS[axle]
+        swapped = {c: r.setup[c] for r in runs for c in pair if r.role == "swap"
+                   and r.setup[c] != base.setup[c] and r.third == base.third}
+        if len(swapped) != 2:
+            raise ValueError(f"pair_swaps {axle!r}: the plan has no single-corner swap run at "
+                             f"each of {pair}; give only axles whose corners the plan swaps")
+        runs.append(replace(base, name=f"swap-{axle}-pair", role="swap",
+                            setup=dict(base.setup, **swapped)))
+    plan = replace(plan, runs=tuple(runs))
     if aero_runs == "none":
         return plan
     if aero_runs not in ("all", "add"):
@@ -736,6 +751,9 @@ def main(argv=None):
                    help="runs with the car's downforce on the aero actuators: none (the "
                         "plan's), all (every run), add (the plan's runs, then each again with "
                         "downforce)")
+    p.add_argument("--pair-swap", nargs="*", default=[], choices=list(AXLES),
+                   help="add a run per axle with both of its corners swapped together "
+                        "(session_plan's pair_swaps)")
     p.add_argument("--cases", nargs="+", default=["after", "before"],
                    choices=["after", "before"],
                    help="after: the session as recorded; before: its third elements stripped")
@@ -773,7 +791,8 @@ def main(argv=None):
     rows = []
     if not args.truth_only:
         plan = session_plan(car, run_s=args.run_s or SESSION_RUN_S, noise=args.noise,
-                            seed=args.seed, aero_runs=args.aero_runs)
+                            seed=args.seed, aero_runs=args.aero_runs,
+                            pair_swaps=tuple(args.pair_swap))
         t0 = time.perf_counter()
         session = simulate_session(plan, car.vehicle)
         log.info("session: %d runs x %g s in %.1f s", len(session.runs),

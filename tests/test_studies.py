@@ -476,6 +476,9 @@ def test_third_elements_session_plan_and_second_car(tmp_path):
     heave = aero[0].drive.channels["aero_heave"]
     assert heave.mean() < -5000.0  # N: downforce of the order of the car's weight
     assert abs(heave[0]) < 1.0  # at rest at the start (the rest levels are taken there)
+    pair = study.session_plan(car, pair_swaps=("front",)).runs[-1]
+    assert pair.name == "swap-front-pair" and pair.role == "swap"
+    assert pair.setup == {"LF": "CD", "RF": "CD", "LR": "C2", "RR": "C2"}
     with pytest.raises(ValueError, match="aero_runs"):
         study.session_plan(car, aero_runs="some")
     second = study.read_proto(study.write_second_car(tmp_path / "second"))
