@@ -430,12 +430,73 @@ def test_third_elements_study_small(tmp_path):
             assert after.loc[drive, "median_error_pct"] < before.loc[drive, "median_error_pct"]
 
 
-#: The third-elements study at the example's size (8 x 120 s runs, 2 % noise, 44 setups,
-#: 120 s drives), identified with the defaults (instrumental variables on): measured
-#: 0.165 % median / 1.85 % max / Spearman 0.9965 on the track drive, 0.33 % / 0.91 % /
-#: 0.9989 on the rig drive, the best setup right on both; least squares (before) gave
-#: 0.51 % / 11.9 % / 0.982 and 0.43 % / 1.68 % / 0.9999. The bounds sit between (a
-#: regression to least squares' bias fails them; one noise realization's scatter does not).
+#: The third-elements study at CI size without sensor noise (the example car, 8 runs x 40 s,
+#: 8 setups, 30 s drives, no ranking): the identified model's bias alone (FRF estimate on
+#: short records, fit, reduction, the elements' forces), deterministic. Measured: track drive
+#: 3.24 % median / 7.97 % max / Spearman 0.857, rig drive 0.83 % / 2.90 % / 1.0, the best
+#: setup right on both (the short runs' leakage dominates; 8 x 120 s gives 0.084 % / 0.92 %
+#: and 0.034 % / 0.16 %). The bounds are about 1.5 x those: a broken element force, input
+#: or reduction gives tens of per cent.
+THIRD_CI_TRACK_MEDIAN_PCT = 5.0
+THIRD_CI_TRACK_MAX_PCT = 12.0
+THIRD_CI_RIG_MEDIAN_PCT = 1.3
+THIRD_CI_RIG_MAX_PCT = 4.5
+
+
+def test_third_elements_study_noise_free_accuracy(tmp_path):
+    """The third-elements study at CI size on a noise-free session: the identified model's
+    predictions within the measured bias (the heavy tests below hold the example's size with
+    noise)."""
+    study = _load("third_elements")
+    study.main(["--out", str(tmp_path), "--quick", "--setups", "8", "--cases", "after",
+                "--no-rank", "--noise", "0", "--run-s", "40", "--pair-swap"])
+    after = pd.read_csv(tmp_path / "third_elements.csv").set_index("drive")
+    assert list(after["case"]) == ["after", "after"]
+    assert after.loc["track", "median_error_pct"] < THIRD_CI_TRACK_MEDIAN_PCT
+    assert after.loc["track", "max_error_pct"] < THIRD_CI_TRACK_MAX_PCT
+    assert after.loc["rig", "median_error_pct"] < THIRD_CI_RIG_MEDIAN_PCT
+    assert after.loc["rig", "max_error_pct"] < THIRD_CI_RIG_MAX_PCT
+    assert after["same_best"].all()
+
+
+def test_third_elements_session_plan_and_second_car(tmp_path):
+    """The study's session designs: the plan's runs with another length, seed and noise; the
+    aero runs carry the car's downforce (mean below zero: the heave springs close) and keep
+    the plain runs' wheel inputs' kind; the second car differs from the example where
+    SECOND_CAR says and reads as a car."""
+    study = _load("third_elements")
+    car = study.read_proto()
+    plan = study.session_plan(car, run_s=30.0, noise=0.01, seed=5)
+    assert {r.duration_s for r in plan.runs} == {30.0} and {r.seed for r in plan.runs} == {5}
+    assert plan.noise == 0.01 and len(plan.runs) == len(car.plan.runs)
+    both = study.session_plan(car, run_s=30.0, seed=5, aero_runs="add")
+    assert len(both.runs) == 2 * len(car.plan.runs)
+    aero = [r for r in both.runs if r.drive is not None]
+    assert len(aero) == len(car.plan.runs) and all(r.name.endswith("-aero") for r in aero)
+    heave = aero[0].drive.channels["aero_heave"]
+    assert heave.mean() < -5000.0  # N: downforce of the order of the car's weight
+    assert abs(heave[0]) < 1.0  # at rest at the start (the rest levels are taken there)
+    pair = study.session_plan(car, pair_swaps=("front",)).runs[-1]
+    assert pair.name == "swap-front-pair" and pair.role == "swap"
+    assert pair.setup == {"LF": "CD", "RF": "CD", "LR": "C2", "RR": "C2"}
+    with pytest.raises(ValueError, match="aero_runs"):
+        study.session_plan(car, aero_runs="some")
+    second = study.read_proto(study.write_second_car(tmp_path / "second"))
+    assert second.vehicle.sprung_mass_kg == 960.0
+    assert second.plan.third_elements.motion_ratios == \
+        study.SECOND_CAR["proto_plan.toml"]["third_elements"]
+    assert second.bump_stops["HS-F"].gap_m == 0.003
+    assert [s.name for s in second.setups] == [s.name for s in car.setups]
+
+
+#: The third-elements study at its default size (8 x 400 s runs and a front pair swap, 2 %
+#: noise, 44 setups, 120 s drives, the plan's seed), identified with the defaults
+#: (instrumental variables on): measured 0.161 % median / 1.52 % max / Spearman 0.9965 on the
+#: track drive, 0.25 % / 1.07 % / 0.9989 on the rig drive, the best setup right on both
+#: (without the pair swap 0.22 % / 1.46 % and 0.30 % / 1.17 %; at 120 s runs: 0.165 % / 1.85 %
+#: and 0.33 % / 0.91 %; least squares at 120 s 0.51 % / 11.9 %). Other noise draws scatter
+#: the track's max to 2 % (13.7 % on one draw of the second car: the study's notes), so the
+#: bounds hold this draw only.
 THIRD_STUDY_TRACK_MEDIAN_PCT = 0.3
 THIRD_STUDY_MAX_PCT = 3.0
 THIRD_STUDY_SPEARMAN = 0.99
