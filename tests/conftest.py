@@ -393,3 +393,21 @@ def prototype_identified(prototype_case, tmp_path_factory):
             return identify_session(prototype_case[1])
 
     return built_once(tmp_path_factory, "prototype_identified", build)
+
+
+@pytest.fixture
+def as_another_process_without_compiler(monkeypatch):
+    """A callable that forgets the optimizer's compiled steps (as another process would) and
+    makes any compiler call fail the test: what was compiled ahead must be loaded."""
+    import subprocess
+
+    import planner.optimize.loop as pl
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("the compiler ran although compile_curves compiled the steps")
+
+    def apply():
+        monkeypatch.setattr(pl, "_STEP_CACHE", {})
+        monkeypatch.setattr(subprocess, "Popen", no_compiler)
+
+    return apply

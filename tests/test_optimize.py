@@ -667,11 +667,10 @@ def test_fold_chain_equals_a_loop(n_steps, base):
 @pytest.mark.skipif(not __import__("planner.optimize.cache").optimize.cache._compiler(),
                     reason="no C compiler")
 def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive, demo_library,
-                                                        tmp_path, monkeypatch):
+                                                        tmp_path, monkeypatch,
+                                                        as_another_process_without_compiler):
     """compile_curves (e.g. in a worker) puts the problem's library in the cache; the
     optimization with the same arguments then loads it without running the compiler."""
-    import subprocess
-
     import planner.optimize.cache as po
     import planner.optimize.loop as pl
     from planner.optimize import compile_curves
@@ -683,11 +682,7 @@ def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive
     libs = list(po.jit_cache_dir().glob("steps-*.so"))
     assert len(libs) == 1
 
-    def no_compiler(*args, **kwargs):
-        raise AssertionError("the compiler ran although compile_curves compiled the steps")
-
-    monkeypatch.setattr(pl, "_STEP_CACHE", {})  # as in another process
-    monkeypatch.setattr(subprocess, "Popen", no_compiler)
+    as_another_process_without_compiler()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",
@@ -704,12 +699,11 @@ def test_compile_curves_ahead_leaves_nothing_to_compile(paper_model, short_drive
                     reason="no C compiler")
 @pytest.mark.heavy  # two global stages (scans and verifications) and a C compile
 def test_compile_curves_ahead_on_quantile_knots_compiles_the_moved_problem(
-        paper_model, short_drive, demo_library, tmp_path, monkeypatch):
+        paper_model, short_drive, demo_library, tmp_path, monkeypatch,
+        as_another_process_without_compiler):
     """With knots on the quantiles (the default), the optimization moves them onto its
     scan's best curve before it compiles: compile_curves runs the same global stage, so the
     library it leaves is the one the optimization loads (it compiles nothing itself)."""
-    import subprocess
-
     import planner.optimize.cache as po
     import planner.optimize.loop as pl
     from planner.optimize import compile_curves
@@ -722,11 +716,7 @@ def test_compile_curves_ahead_on_quantile_knots_compiles_the_moved_problem(
     libs = list(po.jit_cache_dir().glob("steps-*.so"))
     assert len(libs) == 1
 
-    def no_compiler(*args, **kwargs):
-        raise AssertionError("the compiler ran although compile_curves compiled the steps")
-
-    monkeypatch.setattr(pl, "_STEP_CACHE", {})  # as in another process
-    monkeypatch.setattr(subprocess, "Popen", no_compiler)
+    as_another_process_without_compiler()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(paper_model, short_drive, demo_library, baseline="B20",

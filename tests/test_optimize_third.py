@@ -419,14 +419,12 @@ def test_free_heave_dampers_beat_the_crate_on_the_known_prototype():
 
 
 @pytest.mark.slow
-def test_compile_curves_compiles_the_loop_with_third_elements(plant, drive, tmp_path,
-                                                               monkeypatch):
+def test_compile_curves_compiles_the_loop_with_third_elements(
+        plant, drive, tmp_path, monkeypatch, as_another_process_without_compiler):
     """compile_curves on a car with third elements compiles the loop optimize_curves builds
     (the car's heave and roll dampers and heave spring, a free heave damper's curve group):
     the optimization with the same arguments then loads it without running the compiler;
     and it refuses what optimize refuses (lift-off with third elements)."""
-    import subprocess
-
     import planner.optimize.cache as po
     import planner.optimize.loop as pl
     from planner.optimize import compile_curves
@@ -444,11 +442,7 @@ def test_compile_curves_compiles_the_loop_with_third_elements(plant, drive, tmp_
     libs = list(po.jit_cache_dir().glob("steps-*.so"))
     assert len(libs) == 1
 
-    def no_compiler(*args, **kwargs):
-        raise AssertionError("the compiler ran although compile_curves compiled the steps")
-
-    monkeypatch.setattr(pl, "_STEP_CACHE", {})  # as in another process
-    monkeypatch.setattr(subprocess, "Popen", no_compiler)
+    as_another_process_without_compiler()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OptimizeWarning)
         opt = optimize_curves(plant, drive, LIB, baseline="S", elements=ELEMENTS, curves=curves,

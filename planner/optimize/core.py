@@ -723,21 +723,9 @@ def optimize_curves(model, drives, library, *, objective=None, baseline=None,
     need = rows[0]
     weights = _weights(drive_weights, drives)
     constraints = _check_constraints_arg(constraints)
-    stops, static = stop_tables, elements.static_corner_load_n
-    if elements.use_model is not False and stops is None and static is None:
-        own = model_setup_elements([base], model, elements, where="optimize")
-        if own is not None:
-            stops, static = own.tables[0], own.static_corner_load_n
-    free_third = check_free_third(curves.free_third, third)
-    if elements.vary_bump_stops or elements.vary_packers_m:
-        raise PlannerError("optimize: bump-stop and packer choices (vary_bump_stops, "
-                           "vary_packers_m) are not searched; free the packers instead "
-                           "(packers=..., --packers GROUP=LO:HI), or rank the choices "
-                           "(shockplan rank --try-bump-stops / --try-packers)")
-    choices = crate_choices(third, library, elements.vary_third, free_third)
-    if choices:
-        third = replace(third, choices=choices)
-    elements = _elements(plant, space, stops, packers, static, objective, third)
+    elements, free_third = _car_elements(model, library, plant, space, base, objective, third,
+                                         elements, stop_tables, packers, curves.free_third,
+                                         where="optimize")
     # the baseline's (verified) values per drive of the metrics the objective needs
     if elements.active:
         m_base = [element_predictions(model, d, [base], library, [elements.stops],
@@ -1012,6 +1000,29 @@ def _third_metric_rows(plant, third, objective, names, L):
     return names, np.vstack(rows)
 
 
+def _car_elements(model, library, plant, space, base, objective, third, elements,
+                  stop_tables, packers, free_third, *, where):
+    """The car's elements of an optimization as its loop holds them (:class:`_Elements`) and
+    its free third dampers, checked: the stops and static loads (the model's own unless
+    given), the third elements with the crate's third-element choices, the refusals
+    (`where` names the caller in them)."""
+    stops, static = stop_tables, elements.static_corner_load_n
+    if elements.use_model is not False and stops is None and static is None:
+        own = model_setup_elements([base], model, elements, where=where)
+        if own is not None:
+            stops, static = own.tables[0], own.static_corner_load_n
+    free = check_free_third(free_third, third)
+    if elements.vary_bump_stops or elements.vary_packers_m:
+        raise PlannerError(f"{where}: bump-stop and packer choices (vary_bump_stops, "
+                           "vary_packers_m) are not searched; free the packers instead "
+                           "(packers=..., --packers GROUP=LO:HI), or rank the choices "
+                           "(shockplan rank --try-bump-stops / --try-packers)")
+    choices = crate_choices(third, library, elements.vary_third, free)
+    if choices:
+        third = replace(third, choices=choices)
+    return _elements(plant, space, stops, packers, static, objective, third), free
+
+
 def compile_curves(model, drives, library, *, objective=None, baseline=None,
                    curves=CurveOptions(), constraints=None, drive_weights=None,
                    aggregate="sum", loop=LoopOptions(), elements=ElementOptions(),
@@ -1073,16 +1084,9 @@ def compile_curves(model, drives, library, *, objective=None, baseline=None,
     plant, drives, base, space, rows, third = _problem(
         model, drives, library, objective, baseline, curves.symmetry, curves.knots_m_s,
         curves.linear, curves.lag_s, oversample, elements=elements)
-    stops, static = stop_tables, elements.static_corner_load_n
-    if elements.use_model is not False and stops is None and static is None:
-        own = model_setup_elements([base], model, elements, where="compile_curves")
-        if own is not None:
-            stops, static = own.tables[0], own.static_corner_load_n
-    free_third = check_free_third(curves.free_third, third)
-    choices = crate_choices(third, library, elements.vary_third, free_third)
-    if choices:
-        third = replace(third, choices=choices)
-    elements = _elements(plant, space, stops, packers, static, objective, third)
+    elements, free_third = _car_elements(model, library, plant, space, base, objective, third,
+                                         elements, stop_tables, packers, curves.free_third,
+                                         where="compile_curves")
     if not jit_available():
         return False
     if _quantile_knots(curves.knots_m_s) and not space.linear:
