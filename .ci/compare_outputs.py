@@ -392,10 +392,17 @@ def write_rpc3(path, channels, fs_hz, group=1024, full_scale=32752):
     Path(path).write_bytes(head + b"".join(body))
 
 
-def _rpc_from_run(run_csv, dest, samples=RPC_SAMPLES):
+def _rpc_from_run(run_file, dest, samples=RPC_SAMPLES):
+    """An RPC III response file of a demo session's run (CSV or Parquet, imperial units)."""
     import pandas as pd
 
-    df = pd.read_csv(run_csv, nrows=samples, comment="#")  # '# units: ...' first (issue 23)
+    run_file = Path(run_file)
+    if not run_file.exists():  # the demo writes its runs as Parquet (the spec allows both)
+        run_file = run_file.with_suffix(".parquet")
+    if run_file.suffix == ".parquet":
+        df = pd.read_parquet(run_file).iloc[:samples]
+    else:
+        df = pd.read_csv(run_file, nrows=samples, comment="#")  # '# units: ...' first
     fs_hz = 1.0 / float(df["time"].iloc[1] - df["time"].iloc[0])
     fs_hz = round(fs_hz, 6)
     chans = {}
