@@ -327,42 +327,6 @@ def test_batch_metrics_of_a_setup_do_not_depend_on_its_batch(paper_model, rng,
                 assert pair.metrics.values[name][3 - i] == x[0]
 
 
-def test_loop_lanes_equal_the_one_setup_loop(paper_model, rng, monkeypatch, one_blas_thread):
-    """loop_lanes (LOOP_LANES setups in lockstep: the fused metrics' plain loop) gives every
-    lane loop_one's numbers to the last bit: outputs, solved shock velocities, shock forces
-    and Newton counts, on digressive shocks with a lag (segment changes every few steps),
-    with spare lanes repeating a setup and one setup in several lanes."""
-    from ident.sim import closedloop
-    from ident.sim.loop_kernels import LOOP_LANES, ShockSetups, loop_lanes, loop_one
-
-    drive = _drive(6.0, scale=1.5)
-    plant = paper_model.loop_plant(C20)
-    kinds = [_n8(), LinearShock("L", C20), LinearShock("S", 3 * C20, lag_s=0.008)]
-    setups = [[kinds[i] for i in rng.integers(0, len(kinds), 4)] for _ in range(3)]
-    setups[0] = [kinds[0]] * 4
-    captured = []
-    run = closedloop._run_parallel
-    monkeypatch.setattr(closedloop, "_run_parallel",
-                        lambda kernel, *args: captured.append(args) or run(kernel, *args))
-    simulate_batch(plant, drive, setups, oversample=2)
-    kplant, packed, kdrive = captured[0][:3]
-    p, n_out = kdrive.Cy.shape[1], kdrive.y_rig.shape[0]
-    idx = np.array([min(i, len(setups) - 1) for i in range(LOOP_LANES)], dtype=np.int64)
-    idx[-1] = 0
-    y = np.full((LOOP_LANES, p + 4, n_out), np.nan)
-    F = np.full((LOOP_LANES, n_out, 4), np.nan)
-    iters = np.zeros(LOOP_LANES, dtype=np.int64)
-    loop_lanes(kplant, packed, idx, kdrive, y, F, p, iters)
-    for lane, s in enumerate(idx):
-        y1 = np.full((p + 4, n_out), np.nan)
-        F1 = np.full((n_out, 4), np.nan)
-        row = ShockSetups(*(np.ascontiguousarray(a[s]) for a in packed))
-        it = loop_one(kplant, row, kdrive, y1, F1, p, None, None, None, None)
-        assert iters[lane] == it > 1  # segment changes solved
-        np.testing.assert_array_equal(y[lane], y1)
-        np.testing.assert_array_equal(F[lane], F1)
-
-
 def test_batch_metrics_of_a_too_short_drive_name_the_channel(paper_model):
     from ident.sim.closedloop import simulate_batch_metrics
 

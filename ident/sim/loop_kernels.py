@@ -28,9 +28,6 @@ Public kernels:
 - :func:`loop_one`: the time loop of one setup, with the elements or without
   (``elements=None``: numba compiles that case on its own and drops the elements' code
   from it at compile time, so the plain loop runs as fast as a loop without them);
-- :func:`loop_lanes`: the plain loop (no elements, no third elements) of
-  :data:`LOOP_LANES` setups in lockstep, each lane :func:`loop_one`'s numbers to the last
-  bit (the fused metrics worker's plain case);
 - :func:`loop_batch`, :func:`loop_serial`: the closed loop of a batch of setups (parallel
   over setups, or one after the other);
 - :func:`loop_metrics_worker`: a thread's share of the setups with their metrics computed
@@ -71,8 +68,6 @@ __all__ = [
     "invert_small",
     "shock_step",
     "loop_one",
-    "loop_lanes",
-    "LOOP_LANES",
     "loop_batch",
     "loop_serial",
     "loop_metrics_worker",
@@ -1951,366 +1946,6 @@ def loop_one(plant, setup, drive, y_out, F_out, v_row, elements, stats, third, t
     return -1 if failed else worst
 
 
-#: Setups :func:`loop_lanes` advances in lockstep (one SIMD lane each): the per-mode updates,
-#: the velocity sums, the lags and the corrector run as vectors across the setups, each lane
-#: with :func:`loop_one`'s operations in its order (no reassociation, no fused multiply-add),
-#: so every lane's numbers are the one-setup loop's to the last bit.
-LOOP_LANES = 4
-
-
-@_nb.njit(cache=True, error_model="numpy")
-def loop_lanes(plant, setups, idx, drive, y_out, F_out, v_row, iters):
-    """Time loop of :data:`LOOP_LANES` setups in lockstep: :func:`loop_one` without elements
-    and third elements, one setup per lane, the same numbers to the last bit.
-
-    Parameters
-    ----------
-    plant : ModalLoop
-    setups : ShockSetups
-        The batch's rows (a leading setup axis).
-    idx : ndarray of int64, shape (L,)
-        The setup of each lane (a batch's last group repeats a setup in its spare lanes).
-    drive : LoopDrive
-    y_out : ndarray, shape (L, p (+ 4), n_out)
-        Each lane's outputs, as :func:`loop_one`'s (with ``v_row >= 0`` the solved shock
-        velocities in rows ``v_row .. v_row + 3``).
-    F_out : ndarray, shape (L, n_out, 4)
-        Each lane's applied shock forces [N] per output sample.
-    v_row : int
-    iters : ndarray of int64, shape (L,)
-        Each lane's largest Newton iteration count (-1: no convergence).
-
-    Notes
-    -----
-    The states are held lane-minor (``xr[i * L + l]``): the mode loops' inner loop runs over the
-    lanes, whose operations are independent (each lane's sums keep their order), so the
-    compiler vectorizes across the setups; the velocity sums' chains run side by side
-    instead of one after the other. The shock solve's common case (every shock strictly
-    inside its segment, a valid cached inverse) is tested per lane and accepted as
-    :func:`_fast_solve` accepts it; a lane with a segment change is solved alone by
-    :func:`_fast_solve` (and :func:`shock_step`) on a copy of its state, as
-    :func:`loop_one` solves it.
-    """
-    L = LOOP_LANES
-    pr = plant.pr
-    pi = plant.pi
-    g1r = plant.g1r
-    g1i = plant.g1i
-    g0r = plant.g0r
-    g0i = plant.g0i
-    gmr = plant.gmr
-    gmi = plant.gmi
-    Br = plant.Br
-    Bi = plant.Bi
-    Cvr = plant.Cvr
-    Cvi = plant.Cvi
-    Deff = plant.Deff
-    cbar = plant.cbar
-    v_rig = drive.v_rig
-    r = drive.r
-    y_rig = drive.y_rig
-    Cy = drive.Cy
-    n = pr.size
-    m = 4
-    p = Cy.shape[1]
-    N = v_rig.shape[0]
-    n_out = y_out.shape[2]
-    K = setups.kv.shape[2]
-    # the lanes' setup coefficients, lane-minor; the curves' tables with the row
-    # ``l * 4 + c`` for lane l's corner c (indexed in place: no view in the time loop)
-    alpha = np.empty((m, L))
-    b0 = np.empty((m, L))
-    b1 = np.empty((m, L))
-    bm = np.empty((m, L))
-    kvF = np.empty((L * m, K))
-    nkF = np.empty(L * m, dtype=np.int64)
-    lines_s = np.empty((L * m, K + 1))
-    lines_a = np.empty((L * m, K + 1))
-    bounds = np.empty((2, L * m, K + 1))
-    seg = np.zeros((m, L), dtype=np.int64)
-    for l in range(L):
-        s = idx[l]
-        kv = setups.kv[s]
-        kf = setups.kf[s]
-        nk = setups.nk[s]
-        for c in range(m):
-            lc = l * m + c
-            alpha[c, l] = setups.alpha[s, c]
-            b0[c, l] = setups.b0[s, c]
-            b1[c, l] = setups.b1[s, c]
-            bm[c, l] = setups.bm[s, c]
-            seg[c, l] = _segment_of(0.0, kv, c, nk[c], 0)
-            nkF[lc] = nk[c]
-            for q in range(K):
-                kvF[lc, q] = kv[c, q]
-            for sg in range(nk[c] + 1):
-                lines_s[lc, sg], lines_a[lc, sg] = _segment_line(
-                    sg, kv, kf, c, nk[c], setups.slo[s, c], setups.shi[s, c])
-                bounds[0, lc, sg] = -np.inf if sg == 0 else kv[c, sg - 1]
-                bounds[1, lc, sg] = np.inf if sg == nk[c] else kv[c, sg]
-    # the solver's state per lane (SolverState's fields, lane-minor), and one setup's
-    # SolverState the lanes with a segment change are solved in
-    v = np.zeros((m, L))
-    fv = np.zeros((m, L))
-    sv = np.zeros((m, L))
-    av = np.zeros((m, L))
-    Jinv = np.zeros((m, m, L))
-    state = np.zeros(L, dtype=np.int64)
-    vfree = np.zeros((m, L))
-    c0 = np.zeros((m, L))
-    res = np.zeros((m, L))
-    vnew = np.zeros((m, L))
-    st = solver_state(ShockCurves(setups.kv[idx[0]], setups.kf[idx[0]], setups.nk[idx[0]],
-                                  setups.slo[idx[0]], setups.shi[idx[0]]))
-    b0l = np.empty(m)
-    u = np.empty(m)
-    wq = np.empty(m)
-    xr = np.zeros(n * L)
-    xi = np.zeros(n * L)
-    bdr = np.zeros(n * L)  # B dF of the last step
-    bdi = np.zeros(n * L)
-    bpr = np.zeros(n * L)  # B dF of the step before
-    bpi = np.zeros(n * L)
-    hr = np.empty(n)
-    hi = np.empty(n)
-    for i in range(n):
-        hr[i] = pr[i] * g1r[i] - pi[i] * g1i[i] + g0r[i]
-        hi[i] = pr[i] * g1i[i] + pi[i] * g1r[i] + g0i[i]
-    # the modes' coefficients once per lane, for the predictor's loop over i L + l
-    prR = np.empty(n * L)
-    piR = np.empty(n * L)
-    hrR = np.empty(n * L)
-    hiR = np.empty(n * L)
-    gmrR = np.empty(n * L)
-    gmiR = np.empty(n * L)
-    for i in range(n):
-        for l in range(L):
-            prR[i * L + l] = pr[i]
-            piR[i * L + l] = pi[i]
-            hrR[i * L + l] = hr[i]
-            hiR[i * L + l] = hi[i]
-            gmrR[i * L + l] = gmr[i]
-            gmiR[i * L + l] = gmi[i]
-    St = np.zeros((L, _OUT_BLOCK, 2 * n + m))  # each lane's output samples' [Re x, Im x, dF]
-    dF_prev = np.zeros((m, L))
-    F_prev = np.zeros((m, L))
-    f_prev = np.zeros((m, L))
-    f_prev2 = np.zeros((m, L))
-    acc = np.zeros((m, L))
-    worst = np.zeros(L, dtype=np.int64)
-    failed = np.zeros(L, dtype=np.bool_)
-    ok = np.zeros(L, dtype=np.bool_)
-    col = 0
-    kk0 = 0
-    phase = 0  # k % r
-    for k in range(N):
-        # predictor (as loop_one's): one loop over the modes' lanes (q = i L + l), which
-        # the compiler vectorizes as loop_one's loop over the modes
-        for q in range(n * L):
-            tr = (prR[q] * xr[q] - piR[q] * xi[q] + hrR[q] * bdr[q] - hiR[q] * bdi[q]
-                  + gmrR[q] * bpr[q] - gmiR[q] * bpi[q])
-            ti = (prR[q] * xi[q] + piR[q] * xr[q] + hrR[q] * bdi[q] + hiR[q] * bdr[q]
-                  + gmrR[q] * bpi[q] + gmiR[q] * bpr[q])
-            xr[q] = tr
-            xi[q] = ti
-        for c in range(m):
-            for l in range(L):
-                acc[c, l] = 0.0
-        for i in range(n):
-            for c in range(m):
-                cr = Cvr[c, i]
-                ci = Cvi[c, i]
-                for l in range(L):
-                    acc[c, l] += cr * xr[i * L + l] - ci * xi[i * L + l]
-        for c in range(m):
-            vr = v_rig[k, c]
-            for l in range(L):
-                vfree[c, l] = vr + acc[c, l]
-                c0[c, l] = alpha[c, l] * F_prev[c, l] + b1[c, l] * f_prev[c, l] \
-                    + bm[c, l] * f_prev2[c, l]
-        # the shock solve: _fast_solve's first pass for every lane
-        for c in range(m):
-            for l in range(L):
-                a = vfree[c, l]
-                for j in range(m):
-                    a += Deff[c, j] * (c0[j, l] + b0[j, l] * av[j, l])
-                res[c, l] = a
-        for c in range(m):
-            for l in range(L):
-                a = 0.0
-                for j in range(m):
-                    a += Jinv[c, j, l] * res[j, l]
-                vnew[c, l] = a
-        all_ok = True
-        for l in range(L):
-            inside = state[l] >= 1
-            for c in range(m):
-                x = vnew[c, l]
-                sg = seg[c, l]
-                inside &= (bounds[0, l * m + c, sg] < x) & (x < bounds[1, l * m + c, sg])
-            ok[l] = inside
-            all_ok &= inside
-        if all_ok:
-            for c in range(m):
-                for l in range(L):
-                    x = vnew[c, l]
-                    v[c, l] = x
-                    fv[c, l] = av[c, l] + sv[c, l] * x
-            for l in range(L):
-                if worst[l] < 1:
-                    worst[l] = 1
-        else:
-            for l in range(L):
-                if ok[l]:
-                    for c in range(m):
-                        x = vnew[c, l]
-                        v[c, l] = x
-                        fv[c, l] = av[c, l] + sv[c, l] * x
-                    if worst[l] < 1:
-                        worst[l] = 1
-                    continue
-                # this lane's segment changes: _fast_solve's passes after its first (the
-                # same operations in the same order, on the lane's state in place)
-                it = 0
-                if state[l] >= 1:
-                    for it_ in range(1, _FAST_ITERATIONS + 1):
-                        inside = True
-                        for c in range(m):
-                            x = vnew[c, l]
-                            sg = seg[c, l]
-                            inside &= ((bounds[0, l * m + c, sg] < x)
-                                       & (x < bounds[1, l * m + c, sg]))
-                        same = True
-                        for c in range(m):
-                            if inside:
-                                break
-                            lc = l * m + c
-                            s2 = _segment_of(vnew[c, l], kvF, lc, nkF[lc], seg[c, l])
-                            if s2 == seg[c, l]:
-                                continue
-                            same = False
-                            sl2 = lines_s[lc, s2]
-                            a2 = lines_a[lc, s2]
-                            dsl = sl2 - sv[c, l]
-                            dfc = b0[c, l] * ((a2 - av[c, l]) + dsl * vnew[c, l])
-                            for r_ in range(m):  # u = Jinv Deff[:, c]
-                                a = 0.0
-                                for j in range(m):
-                                    a += Jinv[r_, j, l] * Deff[j, c]
-                                u[r_] = a
-                            dsc = b0[c, l] * dsl
-                            den = 1.0 - dsc * u[c]
-                            if abs(den) < 1e-8:
-                                seg[c, l] = s2
-                                av[c, l] = a2
-                                state[l] = 0
-                                break
-                            g = dfc / den
-                            for r_ in range(m):
-                                vnew[r_, l] += u[r_] * g
-                            seg[c, l] = s2
-                            av[c, l] = a2
-                            if dsl != 0.0:
-                                q = dsc / den
-                                for j in range(m):
-                                    wq[j] = Jinv[c, j, l] * q
-                                for r_ in range(m):
-                                    for j in range(m):
-                                        Jinv[r_, j, l] += u[r_] * wq[j]
-                                sv[c, l] = sl2
-                                state[l] += 1
-                        if same:
-                            for c in range(m):
-                                v[c, l] = vnew[c, l]
-                                fv[c, l] = av[c, l] + sv[c, l] * vnew[c, l]
-                            it = it_
-                            if state[l] > _MAX_RANK1_UPDATES:
-                                state[l] = 0
-                            break
-                        if state[l] == 0 or state[l] > _MAX_RANK1_UPDATES:
-                            state[l] = 0
-                            break
-                if it == 0:
-                    # the rest (no valid inverse, cycling, a singular update): shock_step
-                    # on a copy of the lane's state, as loop_one calls it
-                    s = idx[l]
-                    curves = ShockCurves(setups.kv[s], setups.kf[s], setups.nk[s],
-                                         setups.slo[s], setups.shi[s])
-                    for c in range(m):
-                        st.v[c] = v[c, l]
-                        st.vfree[c] = vfree[c, l]
-                        st.c0[c] = c0[c, l]
-                        st.fv[c] = fv[c, l]
-                        st.sv[c] = sv[c, l]
-                        st.seg[c] = seg[c, l]
-                        st.av[c] = av[c, l]
-                        b0l[c] = b0[c, l]
-                        for j in range(m):
-                            st.Jinv[c, j] = Jinv[c, j, l]
-                    st.state[0] = state[l]
-                    it = shock_step(st.vfree, st.c0, Deff, cbar, b0l, curves, st)
-                    for c in range(m):
-                        v[c, l] = st.v[c]
-                        fv[c, l] = st.fv[c]
-                        sv[c, l] = st.sv[c]
-                        seg[c, l] = st.seg[c]
-                        av[c, l] = st.av[c]
-                        for j in range(m):
-                            Jinv[c, j, l] = st.Jinv[c, j]
-                    state[l] = st.state[0]
-                if it < 0:
-                    failed[l] = True
-                    it = 80
-                if it > worst[l]:
-                    worst[l] = it
-        for c in range(m):
-            cb = cbar[c]
-            for l in range(L):
-                F = c0[c, l] + b0[c, l] * fv[c, l]
-                F_prev[c, l] = F
-                f_prev2[c, l] = f_prev[c, l]
-                f_prev[c, l] = fv[c, l]
-                dF_prev[c, l] = F - cb * v[c, l]
-        # corrector: B dF[k] (folded into the predictor, as loop_one's)
-        for i in range(n):
-            for l in range(L):
-                d0 = dF_prev[0, l]
-                d1 = dF_prev[1, l]
-                d2 = dF_prev[2, l]
-                d3 = dF_prev[3, l]
-                bpr[i * L + l] = Br[0, i] * d0 + Br[1, i] * d1 + Br[2, i] * d2 + Br[3, i] * d3
-                bpi[i * L + l] = Bi[0, i] * d0 + Bi[1, i] * d1 + Bi[2, i] * d2 + Bi[3, i] * d3
-        bdr, bpr = bpr, bdr
-        bdi, bpi = bpi, bdi
-        if phase == 0:
-            kk = k // r
-            for l in range(L):
-                for c in range(m):
-                    F_out[l, kk, c] = F_prev[c, l]
-                    St[l, col, 2 * n + c] = dF_prev[c, l]
-                if v_row >= 0:
-                    for c in range(m):
-                        y_out[l, v_row + c, kk] = v[c, l]
-                for i in range(n):  # x[k] = xp[k] + g1 B dF[k]
-                    St[l, col, i] = xr[i * L + l] + (g1r[i] * bdr[i * L + l] - g1i[i] * bdi[i * L + l])
-                    St[l, col, n + i] = xi[i * L + l] + (g1r[i] * bdi[i * L + l] + g1i[i] * bdr[i * L + l])
-            col += 1
-            if col == _OUT_BLOCK or kk == n_out - 1:
-                for l in range(L):
-                    Y = np.dot(St[l, :col], Cy)  # (col, p)
-                    for j in range(col):
-                        for o in range(p):
-                            y_out[l, o, kk0 + j] = y_rig[kk0 + j, o] + Y[j, o]
-                kk0 += col
-                col = 0
-        phase += 1
-        if phase == r:
-            phase = 0
-    for l in range(L):
-        iters[l] = -1 if failed[l] else worst[l]
-    return
-
-
 @_nb.njit(cache=True, error_model="numpy", parallel=True)
 def loop_batch(plant, setups, drive, y_out, F_out, iters, elements, stats, third, tstats):
     """The closed loop of every setup (`setups` a :class:`ShockSetups` with one row per
@@ -2393,9 +2028,7 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
                         stats, hist_spec, hist_out, third, tstats):
     """Worker `w` of `n_workers` of :func:`ident.sim.closedloop.simulate_batch_metrics`:
     the setups ``w, w + n_workers, ...`` (interleaved, so that each worker gets a mix of
-    cheap and costly setups; in the plain case the groups of :data:`LOOP_LANES` setups
-    ``w, w + n_workers, ...``, each run by :func:`loop_lanes`), each simulated by
-    :func:`loop_one` and its metrics computed
+    cheap and costly setups), each simulated by :func:`loop_one` and its metrics computed
     right after (:func:`ident.sim.metric_kernels.setup_metric_rms`, per band of the
     :class:`MetricFilters` `metrics`) into ``out`` (n_setups, n_bands, n_metrics).
 
@@ -2418,9 +2051,14 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
     """
     p = drive.Cy.shape[1]
     n_out = drive.y_rig.shape[0]
+    ia = metrics.ia
+    sos = metrics.sos
+    zi = metrics.zi
     padlen = metrics.padlen
+    dmap = metrics.dmap
+    dw = metrics.dw
     L = METRIC_LANES
-    ns = metrics.sos.shape[1]
+    ns = sos.shape[1]
     S = setups.b0.shape[0]
     # the outputs, then the 4 shock velocities. Channel-major, as simulate_batch's: the
     # loop kernel is then the one-setup loop's compiled code (sample-major rows were about
@@ -2435,50 +2073,23 @@ def loop_metrics_worker(w, n_workers, plant, setups, drive, metrics, out, iters,
     z1 = np.empty((ns, L))
     stack = np.empty((METRIC_PW_LEVELS, 10, L))
     sums = np.empty(L)
-    if third is not None:
-        for s in range(w, S, n_workers):
+    for s in range(w, S, n_workers):
+        if third is not None:
             iters[s] = loop_one(plant, _setup_row(setups, s), drive, y, F, p, None, None,
                                 _third_row(third, s), tstats[s])
-            _setup_metrics(y, s, p, metrics, out, hist_spec, hist_out, buf, z0, z1, stack,
-                           sums)
-    elif elements is None:
-        # the plain loop: groups of LOOP_LANES setups in lockstep (loop_lanes), the groups
-        # interleaved between the workers; a last group short of setups repeats its last
-        # one in the spare lanes (their results are dropped)
-        yl = np.empty((LOOP_LANES, p + 4, n_out))
-        Fl = np.empty((LOOP_LANES, n_out, 4))
-        idx = np.empty(LOOP_LANES, dtype=np.int64)
-        itl = np.empty(LOOP_LANES, dtype=np.int64)
-        for g in range(w, (S + LOOP_LANES - 1) // LOOP_LANES, n_workers):
-            s0 = g * LOOP_LANES
-            for l in range(LOOP_LANES):
-                idx[l] = min(s0 + l, S - 1)
-            loop_lanes(plant, setups, idx, drive, yl, Fl, p, itl)
-            for l in range(min(LOOP_LANES, S - s0)):
-                iters[s0 + l] = itl[l]
-                _setup_metrics(yl[l], s0 + l, p, metrics, out, hist_spec, hist_out, buf, z0,
-                               z1, stack, sums)
-    else:
-        for s in range(w, S, n_workers):
+        elif elements is None:
+            iters[s] = loop_one(plant, _setup_row(setups, s), drive, y, F, p, None, None, None,
+                                None)
+        else:
             iters[s] = loop_one(plant, _setup_row(setups, s), drive, y, F, p,
                                 _element_row(elements, s), stats[s], None, None)
-            _setup_metrics(y, s, p, metrics, out, hist_spec, hist_out, buf, z0, z1, stack,
-                           sums)
+        if hist_out is not None:
+            for c in range(4):
+                row = hist_out[s, c]
+                for j in range(row.size):
+                    row[j] = 0.0
+                histogram_add(y[p + c], hist_spec[0], hist_spec[1], hist_spec[2], row)
+        for b in range(sos.shape[0]):
+            setup_metric_rms(y, ia, sos[b], zi[b], padlen, out[s, b], buf, z0, z1, stack, sums,
+                             dmap, dw)
     return
-
-
-@_nb.njit(cache=True, error_model="numpy", nogil=True)
-def _setup_metrics(y, s, p, metrics, out, hist_spec, hist_out, buf, z0, z1, stack, sums):
-    """Setup `s`'s histogram (when asked) and metrics from its buffer `y` (the outputs,
-    then the 4 shock velocities from row `p`), for :func:`loop_metrics_worker`."""
-    if hist_out is not None:
-        for c in range(4):
-            row = hist_out[s, c]
-            for j in range(row.size):
-                row[j] = 0.0
-            histogram_add(y[p + c], hist_spec[0], hist_spec[1], hist_spec[2], row)
-    sos = metrics.sos
-    zi = metrics.zi
-    for b in range(sos.shape[0]):
-        setup_metric_rms(y, metrics.ia, sos[b], zi[b], metrics.padlen, out[s, b], buf, z0, z1,
-                         stack, sums, metrics.dmap, metrics.dw)
