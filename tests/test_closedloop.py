@@ -1,5 +1,7 @@
 """Tests of ident.sim.closedloop: modal discretization and the shock loop."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import integrate, signal
@@ -418,6 +420,25 @@ def test_bad_setups(paper_model, make, exc, match):
     drive = _drive(2.0)
     with pytest.raises(exc, match=match):
         simulate(paper_model.loop_plant(), drive, make(LinearShock("B", C20)))
+
+
+def test_an_unstable_model_is_refused_as_such(paper_model):
+    """A model whose shock loop has a growing mode diverges at any step: refused saying the
+    model is unstable (identify again), not "raise oversample"; the plant as identified is
+    stable (growth 0)."""
+    from ident.models.lti import unstable_growth_rate
+
+    plant = paper_model.loop_plant()
+    assert unstable_growth_rate(plant) == 0.0
+    lam = plant.shock.lam.copy()
+    k = int(np.argmin(np.abs(lam)))  # the slowest mode (the body's), made to grow at 2 1/s
+    lam[k] = 2.0 + 1j * lam[k].imag
+    lam[np.isclose(lam, np.conj(plant.shock.lam[k]))] = np.conj(lam[k])
+    bad = replace(plant, shock=replace(plant.shock, lam=lam))
+    assert unstable_growth_rate(bad) == pytest.approx(2.0)
+    with pytest.raises(ValueError, match=r"diverged for setups \[0\].*model itself is "
+                                         r"unstable.*identify it again"):
+        simulate(bad, _drive(30.0), [LinearShock("B", C20)] * 4, oversample=2)
 
 
 def test_bad_options(paper_model):

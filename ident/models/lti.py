@@ -45,6 +45,8 @@ __all__ = [
     "balanced_reduce",
     "join_inputs",
     "GRAM_FACTOR_RTOL",
+    "UNSTABLE_REL_TOL",
+    "unstable_growth_rate",
 ]
 
 log = logging.getLogger(__name__)
@@ -577,3 +579,29 @@ def join_inputs(a, b, *, rtol=1e-9):
     B[where, ma:] = b.B
     C = np.concatenate([a.C, b.C[:, extra]], axis=1)
     return ModalSystem(lam, B, C, np.concatenate([a.D, b.D], axis=1))
+
+
+#: A pole counts as unstable when its real part exceeds this share of its size (round-off
+#: of an identified pole on the imaginary axis is not a growing mode).
+UNSTABLE_REL_TOL = 1e-9
+def unstable_growth_rate(plant):
+    """The largest growth rate of the plant's shock loop with the baseline damping in [1/s].
+
+    Parameters
+    ----------
+    plant : ident.models.lti.LoopPlant
+        A plant (an object without a modal shock part gives 0).
+
+    Returns
+    -------
+    float
+        ``max Re(lam)`` of the shock part's continuous poles where positive (beyond round-off
+        relative to the pole's size), else 0.0: a positive value means the model diverges
+        whatever the shocks' step.
+    """
+    lam = getattr(getattr(plant, "shock", None), "lam", None)
+    if lam is None or np.size(lam) == 0:
+        return 0.0
+    lam = np.asarray(lam, dtype=complex)
+    grow = lam.real - UNSTABLE_REL_TOL * np.abs(lam)
+    return float(max(np.max(lam.real[grow > 0.0], initial=0.0), 0.0))

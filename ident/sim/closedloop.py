@@ -61,7 +61,7 @@ from ident.data.channels import (CORNERS, RIG_INPUTS, SHOCK_FORCES, SHOCK_VELOCI
                                  WHEELLOADER_INPUTS, corner_table, kind_of)
 from ident.data.drive import FIR_HALF_LENGTH, check_drive_inputs, resample_bandlimited
 from ident.models.lti import (hold_coefficients, join_inputs, lag_coefficients,
-                              lag_hold_coefficients)
+                              lag_hold_coefficients, unstable_growth_rate)
 from ident.sim.loop_kernels import (ELEMENT_MAX_ITERATIONS, HISTOGRAM_COUNTERS, Elements,
                                     LoopDrive, MetricFilters, ModalLoop, RigModes, ShockSetups,
                                     ThirdLoop, histogram_add, loop_batch, loop_metrics_worker,
@@ -1032,10 +1032,15 @@ def _check_converged(plant, iters, values=None):
                                            < DIVERGED_VALUE)
     if not np.all(ok):
         bad = np.flatnonzero(~ok).tolist()
+        growth = unstable_growth_rate(plant)
+        why = (f"the model itself is unstable (a mode grows at {growth:.3g} 1/s), which no "
+               "oversample cures; identify it again (longer or more runs), check its fit"
+               if growth > 0.0 else f"forces or metrics not finite or beyond {DIVERGED_VALUE:g}"
+               " in SI units: the loop's time step is too coarse for their shocks (a very stiff "
+               "damper); raise oversample")
         raise ValueError(f"closed loop of plant {plant.name!r}: the response diverged for setups "
-                         f"{bad} (forces or metrics not finite or beyond {DIVERGED_VALUE:g} in SI "
-                         "units): the loop's time step is too coarse for their shocks (a very "
-                         "stiff damper); raise oversample")
+                         f"{bad} ({why})")
+
 
 
 def simulate(plant, drive, setup, *, oversample=4, outputs=None, rig=None, stop_tables=None,
